@@ -1,0 +1,77 @@
+"""The mesh type shared by every stage: grid vertices and counter-clockwise triangles.
+
+Conventions (docs/model.md, "Mesh conventions"):
+
+- A mesh triangulates the grid rectangle ``[0, W-1] x [0, H-1]`` of a height
+  field with W columns and H rows.  Every vertex is a grid sample: ``xy[i] =
+  (x, y)`` with ``x`` the column and ``y`` the row, 0-based integers.
+- Triangles index ``xy`` and are counter-clockwise in the (x, y) plane:
+  ``(x1-x0)*(y2-y0) - (x2-x0)*(y1-y0) > 0``.  With z up in a right-handed
+  frame their normals point to +z.
+- Heights are not part of the mesh: z of a vertex is the height field's value
+  at that sample, looked up when a file is written or an error is measured.
+- The canonical form (:meth:`Mesh.canonical`) orders vertices by (y, x), starts
+  each triangle at its smallest vertex index (keeping its orientation) and sorts
+  the triangles.  Two implementations agree "bit for bit" when their canonical
+  forms are equal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A triangulation of the W x H grid rectangle with grid-sample vertices."""
+
+    width: int  # W: number of grid columns (x runs 0..W-1)
+    height: int  # H: number of grid rows (y runs 0..H-1)
+    xy: np.ndarray  # (V, 2) int64, columns (x, y)
+    tris: np.ndarray  # (T, 3) int64, counter-clockwise vertex indices
+
+    def __post_init__(self):
+        object.__setattr__(self, "xy", np.asarray(self.xy, dtype=np.int64).reshape(-1, 2))
+        object.__setattr__(self, "tris", np.asarray(self.tris, dtype=np.int64).reshape(-1, 3))
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.xy.shape[0])
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.tris.shape[0])
+
+    def canonical(self) -> Mesh:
+        """The same mesh with vertices sorted by (y, x) and triangles in a fixed order."""
+        order = np.lexsort((self.xy[:, 0], self.xy[:, 1]))
+        remap = np.empty(len(order), dtype=np.int64)
+        remap[order] = np.arange(len(order))
+        xy = self.xy[order]
+        t = remap[self.tris] if self.n_triangles else self.tris.copy()
+        if len(t):
+            # Rotate each triangle so its smallest index comes first (orientation kept).
+            k = np.argmin(t, axis=1)
+            rows = np.arange(len(t))[:, None]
+            t = t[rows, (k[:, None] + np.arange(3)[None, :]) % 3]
+            t = t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
+        return Mesh(self.width, self.height, xy, t)
+
+    def same_as(self, other: Mesh) -> bool:
+        """True when both meshes are the same triangulation (canonical forms equal)."""
+        if (self.width, self.height) != (other.width, other.height):
+            return False
+        a, b = self.canonical(), other.canonical()
+        return np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris)
+
+    def z(self, heights: np.ndarray) -> np.ndarray:
+        """Heights of the vertices, looked up in a (H, W) array."""
+        return np.asarray(heights)[self.xy[:, 1], self.xy[:, 0]]
+
+    def border_count(self) -> int:
+        """Number of vertices on the border of the grid rectangle."""
+        x, y = self.xy[:, 0], self.xy[:, 1]
+        on = (x == 0) | (y == 0) | (x == self.width - 1) | (y == self.height - 1)
+        return int(np.count_nonzero(on))
