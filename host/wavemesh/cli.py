@@ -1,0 +1,104 @@
+"""The ``wavemesh`` command: a thin layer of argument parsing over :mod:`wavemesh.api`.
+
+Every error a user can cause ends in one line ``error: ...`` (and a ``hint:``
+line when there is one) on stderr and a non-zero exit status; a traceback means
+a bug in wavemesh.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from wavemesh import __version__, api
+from wavemesh.errors import WavemeshError
+from wavemesh.synth import ALIASES, DATASETS
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but its usage errors end in our one-line format too."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        raise WavemeshError(message, hint=f"see '{self.prog} --help'")
+
+
+def _input_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--key", help="array name inside an .npz file")
+    p.add_argument(
+        "--fill",
+        metavar="nearest|VALUE",
+        help="replace non-finite samples (no-data) by the nearest finite sample or by VALUE",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="wavemesh",
+        description="Wavelet-based multiresolution triangle meshes from height fields.",
+    )
+    parser.add_argument("--version", action="version", version=f"wavemesh {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("mesh", help="triangulate a height field", description=(
+        "Triangulate a height field (.npy .npz .pgm .png .tif .asc). "
+        "Writes the initial triangulation of the template stage."))
+    p.add_argument("input", help="height field file")
+    p.add_argument("-o", "--output", required=True, help="mesh file to write (.obj or .ply)")
+    p.add_argument("--levels", "-M", type=int, default=None,
+                   help="wavelet levels M (blocks of 2^M grid steps); default: log2(max(W, H)) - 3, "
+                        "within 1..8")
+    p.add_argument("--tau", type=float, default=None,
+                   help="threshold tau_M for a dominant coefficient, in height units "
+                        "(difference of half-block means); default: 1%% of the height range")
+    _input_options(p)
+    p.add_argument("--report", metavar="R.json", help="write a JSON report")
+    p.add_argument("--render", metavar="R.png", help="write a picture of the mesh")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+
+    p = sub.add_parser("check", help="check a mesh against its height field", description=(
+        "Check that MESH is a proper triangulation of the height field's grid rectangle and "
+        "measure its errors. Exit status 1 when it is not a proper triangulation."))
+    p.add_argument("mesh", help="mesh file (.obj or .ply)")
+    p.add_argument("--against", required=True, metavar="INPUT", help="the height field")
+    _input_options(p)
+    p.add_argument("--report", metavar="R.json", help="write the results as JSON")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+
+    p = sub.add_parser("render", help="draw a mesh", description="Draw a mesh as a flat-shaded picture.")
+    p.add_argument("mesh", help="mesh file (.obj or .ply)")
+    p.add_argument("-o", "--output", required=True, help="picture to write (.png, .svg, .pdf)")
+    p.add_argument("--view", choices=("3d", "top"), default="3d", help="oblique 3-D view or map view")
+    p.add_argument("--no-wireframe", action="store_true", help="do not draw triangle edges")
+    p.add_argument("--zscale", type=float, default=None, help="vertical exaggeration (default: automatic)")
+    p.add_argument("--title", help="caption")
+
+    names = sorted(DATASETS) + sorted(ALIASES)
+    p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
+        "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))
+    p.add_argument("name", choices=names, metavar="NAME", help=", ".join(names))
+    p.add_argument("-o", "--output", required=True, help="file to write (.npy)")
+    p.add_argument("--size", type=int, default=None, help="samples per side (default: the paper's)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        return api.run(args)
+    except WavemeshError as e:
+        print(f"error: {e.message}", file=sys.stderr)
+        if e.hint:
+            print(f"hint: {e.hint}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 141
+
+
+if __name__ == "__main__":
+    sys.exit(main())
