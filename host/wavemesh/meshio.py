@@ -254,68 +254,73 @@ def _parse_obj(data: bytes):
     text = text.replace("\\\r\n", " ").replace("\\\n", " ")  # OBJ line continuations
     verts: list[list[str]] = []
     vline: list[int] = []
-    faces: list[tuple[int, int, int]] = []
+    faces: list[list[str]] = []
+    fline: list[int] = []
+    fnv: list[int] = []  # vertices read before each face (for negative references)
     comments: list[str] = []
-    nv = 0
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.strip()
-        if not line:
-            continue
-        if line[0] == "#":
-            comments.append(line[1:].strip())
-            continue
+    for lineno, line in enumerate(text.splitlines(), 1):
         parts = line.split()
+        if not parts:
+            continue
         kw = parts[0]
         if kw == "v":
             if len(parts) < 4:
-                raise _Bad(f"line {lineno}: vertex {nv + 1} needs x, y and z")
+                raise _Bad(f"line {lineno}: vertex {len(verts) + 1} needs x, y and z")
             verts.append(parts[1:4])
             vline.append(lineno)
-            nv += 1
         elif kw == "f":
-            k = len(parts) - 1
-            if k != 3:
+            if len(parts) != 4:
                 raise _Bad(
-                    f"face {len(faces) + 1} has {k} vertices; only triangles are supported (line {lineno})"
+                    f"face {len(faces) + 1} has {len(parts) - 1} vertices; only triangles are supported "
+                    f"(line {lineno})"
                 )
-            face = []
-            for tok in parts[1:]:
-                ref = tok.split("/", 1)[0]
-                try:
-                    i = int(ref)
-                except ValueError:
-                    raise _Bad(f"line {lineno}: bad vertex reference {tok!r} in face {len(faces) + 1}") from None
-                if i > 0:
-                    face.append(i - 1)
-                elif i < 0:
-                    if -i > nv:
-                        raise _Bad(
-                            f"face {len(faces) + 1} refers to vertex {i} but only {nv} vertices "
-                            f"precede it (line {lineno})"
-                        )
-                    face.append(nv + i)
-                else:
-                    raise _Bad(f"line {lineno}: vertex index 0 in face {len(faces) + 1} (OBJ counts from 1)")
-            faces.append(tuple(face))
-        elif kw in _OBJ_IGNORED:
-            continue
-        else:
+            faces.append(parts[1:])
+            fline.append(lineno)
+            fnv.append(len(verts))
+        elif kw[0] == "#":
+            comments.append(line.strip()[1:].strip())
+        elif kw not in _OBJ_IGNORED:
             shown = kw if len(kw) <= 20 else kw[:20] + "..."
             raise _Bad(f"line {lineno}: {shown!r} is not an OBJ statement")
     if verts:
-        arr = np.array(verts)
         try:
-            xyz = arr.astype(np.float64)
+            xyz = np.array(verts).astype(np.float64)
         except ValueError:
             for i, row in enumerate(verts):
                 try:
-                    [float(s) for s in row]
+                    [float(v) for v in row]
                 except ValueError:
                     raise _Bad(f"line {vline[i]}: vertex {i + 1} has a bad coordinate") from None
             raise
     else:
         xyz = np.zeros((0, 3))
-    tris = np.array(faces, dtype=np.int64).reshape(-1, 3)
+    if faces:
+        refs = np.array(faces)
+        try:
+            idx = refs.astype(np.int64)  # the common case: plain vertex numbers
+        except (ValueError, OverflowError):
+            idx = np.zeros(refs.shape, dtype=np.int64)
+            for f, row in enumerate(faces):
+                for k, tok in enumerate(row):
+                    try:
+                        idx[f, k] = int(tok.split("/", 1)[0])
+                    except (ValueError, OverflowError):
+                        raise _Bad(f"line {fline[f]}: bad vertex reference {tok!r} in face {f + 1}") from None
+        zero = np.argwhere(idx == 0)
+        if len(zero):
+            f = int(zero[0][0])
+            raise _Bad(f"line {fline[f]}: vertex number 0 in face {f + 1} (OBJ counts from 1)")
+        nv = np.array(fnv, dtype=np.int64)[:, None]
+        back = (idx < 0) & (-idx > nv)
+        if back.any():
+            f, k = (int(v) for v in np.argwhere(back)[0])
+            raise _Bad(
+                f"face {f + 1} refers to vertex {int(idx[f, k])} but only {int(nv[f, 0])} vertices precede it "
+                f"(line {fline[f]})"
+            )
+        tris = np.where(idx > 0, idx - 1, nv + idx)
+    else:
+        tris = np.zeros((0, 3), dtype=np.int64)
     return xyz[:, 0], xyz[:, 1], xyz[:, 2], tris, comments, 1
 
 
