@@ -16,31 +16,33 @@ It checks
 6. Euler's relation for a triangulated disc, ``T = 2V - B - 2`` (B = vertices on
    the border of ``R``).
 
-Why 1-5 mean "covers R exactly once, without overlaps".  For a point p of R
-that is on no edge, let d(p) be the number of triangles containing p.  A
-counter-clockwise triangle lies to the left of each of its directed edges, so
-when a path crosses an edge e (away from vertices and from other edges'
-crossings, which a generic path avoids), only the triangles having e as an edge
-change whether they contain the point, and each changes d by one: +1 entering
-it, -1 leaving it.  By 4 an inner edge has exactly two triangles on it with
-opposite directions, hence (both counter-clockwise, by 2) one on each side: d
-gains one and loses one, so it does not change.  The only unmatched edges lie
-on the border of R, which a path inside R never crosses.  So d is constant,
-say c, on R minus the edges (R minus finitely many points is connected, and
-the edges are a null set).  All vertices are in R (1) and R is convex, so no
-triangle reaches outside R, and with every area positive (2) the sum of the
-triangle areas is the integral of d over R, i.e. c * area(R); by 3 that sum is
-area(R), so c = 1: almost every point of R is covered exactly once — full
-coverage and no overlap.  The triangles then form an edge-to-edge
-(conforming) triangulation: two triangles meet only along their boundaries,
-and a shared piece of boundary that is not a whole common edge would put a
-vertex inside the other triangle's edge, which 5 rules out (with 1, which
-forbids coincident vertices under different indices, so that matching edges
-by vertex index is matching them by position).  (5 actually follows from the
-rest, since a used vertex inside an edge shared by two triangles would make
-one of them overlap a triangle at that vertex; checking it directly gives a
-precise message.)  Euler's relation (6) then holds automatically; it is kept
-as a cheap independent cross-check.
+Why 1-5 mean "covers R exactly once, without overlaps".  For a point p of the
+interior of R that is on no edge, let d(p) be the number of triangles
+containing p.  A counter-clockwise triangle lies to the left of each of its
+directed edges, so when a path crosses an edge e (away from vertices and from
+points where two non-collinear edges cross: finitely many points, which a path
+can avoid), only the triangles having e as an edge change whether they contain
+the point, each changing d by one: +1 for a triangle entered, -1 for one left.
+By 4 an inner edge has exactly two triangles with opposite directions, hence
+(both counter-clockwise, by 2) one on each side: d gains one and loses one.
+Collinear edges lying on top of each other are crossed together, but each is
+balanced by itself.  The unmatched edges lie on the border of R, which a path
+through the interior never meets.  So d is unchanged across every edge, and
+since the interior of R minus finitely many points is connected, d is a
+constant c there (up to the null set of the edges).  All vertices are in R
+(1) and R is convex, so no triangle reaches outside R; with every area
+positive (2) the sum of the triangle areas is the integral of d over R, i.e.
+c * area(R), and by 3 that sum is area(R), so c = 1: almost every point of R
+is covered exactly once: full coverage and no overlap.  The triangles then
+form an edge-to-edge (conforming) triangulation: their interiors are
+disjoint, so two triangles meet only along their boundaries, and a shared
+piece of boundary that is not a whole common edge would put a vertex inside
+the other triangle's edge, which 5 rules out.  Matching edges by vertex index
+is matching them by position because 1 forbids two indices for one position.
+(5 in fact follows from the rest, since a used vertex inside an edge shared by
+two triangles would make one of them overlap a triangle at that vertex;
+checking it directly gives a precise message.)  Euler's relation (6) then
+holds automatically; it is kept as a cheap independent cross-check.
 
 :func:`mesh_errors` measures how well the piecewise-planar surface of a mesh
 approximates the height field at every grid sample.
@@ -61,7 +63,7 @@ __all__ = ["CheckResult", "check_mesh", "ErrorReport", "mesh_errors"]
 _MAX_PROBLEMS = 20  # problem lines kept in a CheckResult
 _EXAMPLES = 3  # examples shown per kind of problem before a summary line
 _COORD_LIMIT = 1 << 30  # beyond this, cross products could overflow int64
-_POINT_BUDGET = 1 << 22  # lattice points / samples handled per vectorised chunk
+_POINT_BUDGET = 1 << 20  # lattice points / samples handled per vectorised chunk
 _GRID_LOOKUP_LIMIT = 1 << 26  # use a boolean occupancy grid up to this many cells
 
 
@@ -126,7 +128,9 @@ def check_mesh(mesh: Mesh) -> CheckResult:
 
     def done() -> CheckResult:
         if not euler_ok:
-            probs.add(f"Euler's relation fails: {T} triangles, but 2V - B - 2 = 2*{V} - {B} - 2 = {2 * V - B - 2}")
+            probs.add(
+                f"Euler's relation fails: {T} triangles, but 2V - B - 2 = 2*{V} - {B} - 2 = {2 * V - B - 2}"
+            )
         lines = probs.result()
         return CheckResult(not lines, lines, V, T, B, euler_ok)
 
@@ -144,7 +148,10 @@ def check_mesh(mesh: Mesh) -> CheckResult:
     outside = np.flatnonzero((x < 0) | (x > W - 1) | (y < 0) | (y > H - 1))
     probs.group(
         len(outside),
-        (f"vertex {i} at {_pt(xy, i)} is outside the grid rectangle [0, {W - 1}] x [0, {H - 1}]" for i in outside),
+        (
+            f"vertex {i} at {_pt(xy, i)} is outside the grid rectangle [0, {W - 1}] x [0, {H - 1}]"
+            for i in outside
+        ),
         "vertices outside the grid rectangle",
     )
     order = np.lexsort((x, y))
@@ -160,7 +167,8 @@ def check_mesh(mesh: Mesh) -> CheckResult:
     probs.group(
         len(bad_rows),
         (
-            f"triangle {t} refers to vertex {int(tris[t][bad_idx[t]][0])}, which does not exist ({V} vertices)"
+            f"triangle {t} refers to vertex {int(tris[t][bad_idx[t]][0])}, which does not exist "
+            f"({V} vertices)"
             for t in bad_rows
         ),
         "triangles with vertex indices out of range",
@@ -195,7 +203,10 @@ def check_mesh(mesh: Mesh) -> CheckResult:
     )
     flat = np.flatnonzero(area2 == 0)
     probs.group(len(flat), (f"{tri_str(t)} is degenerate (zero area)" for t in flat), "degenerate triangles")
-    total = int(area2.sum(dtype=object)) if T * (np.abs(area2).max() + 1) >= 1 << 62 else int(area2.sum())
+    if T * (int(np.abs(area2).max()) + 1) < 1 << 62:
+        total = int(area2.sum())
+    else:  # an int64 sum could overflow
+        total = int(area2.sum(dtype=object))
     want = 2 * (W - 1) * (H - 1)
     if total != want:
         what = "holes" if total < want else "overlaps"
@@ -215,8 +226,9 @@ def check_mesh(mesh: Mesh) -> CheckResult:
     probs.group(
         len(dup),
         (
-            f"directed edge {src[dorder[k]]}->{dst[dorder[k]]} {_pt(xy, src[dorder[k]])}->{_pt(xy, dst[dorder[k]])} "
-            f"is used by triangles {etri[dorder[k]]} and {etri[dorder[k + 1]]} (overlap or inconsistent orientation)"
+            f"directed edge {src[dorder[k]]}->{dst[dorder[k]]} "
+            f"{_pt(xy, src[dorder[k]])}->{_pt(xy, dst[dorder[k]])} is used by triangles "
+            f"{etri[dorder[k]]} and {etri[dorder[k + 1]]} (overlap or inconsistent orientation)"
             for k in dup
         ),
         "repeated directed edges",
@@ -317,8 +329,9 @@ def _t_junctions(probs: _Problems, xy: np.ndarray, elo: np.ndarray, ehi: np.ndar
     probs.group(
         n_hits,
         (
-            f"vertex {v} at {_pt(v)} lies inside edge {elo[k]}-{ehi[k]} {_pt(elo[k])}-{_pt(ehi[k])} (T-junction)"
-            for v, k in zip(vs, he)
+            f"vertex {v} at {_pt(v)} lies inside edge {elo[k]}-{ehi[k]} {_pt(elo[k])}-{_pt(ehi[k])} "
+            "(T-junction)"
+            for v, k in zip(vs, he, strict=True)
         ),
         "T-junctions",
     )
@@ -378,8 +391,10 @@ def mesh_errors(
     every triangle containing it).  For the RMS each sample counts once, with
     the lowest-numbered triangle that contains it; samples in no triangle (only
     in an invalid mesh) are counted in ``n_uncovered`` and left out.
-    Degenerate triangles get E(T) = NaN.  Work is done in chunks of about
-    ``point_budget`` samples.
+    Degenerate triangles get E(T) = NaN.  Samples are enumerated as exact runs
+    per triangle row (so a long thin triangle costs its samples, not its
+    bounding box), in chunks of about ``point_budget`` samples, which bounds
+    the memory used.
     """
     W, H = int(mesh.width), int(mesh.height)
     h = np.asarray(heights, dtype=np.float64)
@@ -423,22 +438,18 @@ def mesh_errors(
     C0, C1, C2 = (x1 * y2 - x2 * y1) * sgn, (x2 * y0 - x0 * y2) * sgn, (x0 * y1 - x1 * y0) * sgn
     absD = np.abs(D).astype(np.float64)
 
-    # Bounding boxes clipped to the grid, cut into row bands of at most ~point_budget samples.
+    # Scanlines: for each triangle and each row of its bounding box (clipped to the grid), the
+    # exact run of samples in the closed triangle, from the edge functions by floor division.
     xmin = np.maximum(np.minimum(np.minimum(x0, x1), x2), 0)
     xmax = np.minimum(np.maximum(np.maximum(x0, x1), x2), W - 1)
     ymin = np.maximum(np.minimum(np.minimum(y0, y1), y2), 0)
     ymax = np.minimum(np.maximum(np.maximum(y0, y1), y2), H - 1)
-    bw = np.maximum(xmax - xmin + 1, 0)
-    bh = np.maximum(ymax - ymin + 1, 0)
-    live = (D != 0) & (bw > 0) & (bh > 0)
-    rows = np.maximum(point_budget // np.maximum(bw, 1), 1)
-    npieces = np.where(live, -(-bh // rows), 0)
-    ptri = np.repeat(np.arange(T, dtype=np.int64), npieces)
-    pk = np.arange(len(ptri), dtype=np.int64) - np.repeat(np.cumsum(npieces) - npieces, npieces)
-    py0 = ymin[ptri] + pk * rows[ptri]
-    py1 = np.minimum(py0 + rows[ptri] - 1, ymax[ptri])
-    pn = bw[ptri] * (py1 - py0 + 1)
-    pcum = np.cumsum(pn)
+    live = (D != 0) & (xmax >= xmin) & (ymax >= ymin)
+    nrows = np.where(live, ymax - ymin + 1, 0)
+    rcum = np.cumsum(nrows)
+    edges = ((A0, B0, C0), (A1, B1, C1), (A2, B2, C2))
+    hflat = h.ravel()
+    row_budget = max(point_budget // 4, 1)
 
     per_v = np.full(T, -np.inf)
     per_n = np.full(T, -np.inf)
@@ -446,49 +457,67 @@ def mesh_errors(
     n_cov = 0
     sum_v2 = 0.0
     sum_n2 = 0.0
-    s, P = 0, len(ptri)
-    while s < P:
-        base = int(pcum[s - 1]) if s else 0
-        e = max(int(np.searchsorted(pcum, base + point_budget, side="right")), s + 1)
-        t_p = ptri[s:e]
-        n_p = pn[s:e]
-        N = int(n_p.sum())
-        rep = np.repeat(np.arange(e - s, dtype=np.int64), n_p)
-        off = np.arange(N, dtype=np.int64) - np.repeat(np.cumsum(n_p) - n_p, n_p)
-        w = bw[t_p][rep]
-        px = xmin[t_p][rep] + off % w
-        py = py0[s:e][rep] + off // w
-        del off, w
-        t = t_p[rep]
-        del rep
-        E0 = A0[t] * px + B0[t] * py + C0[t]
-        E1 = A1[t] * px + B1[t] * py + C1[t]
-        E2 = A2[t] * px + B2[t] * py + C2[t]
-        inside = (E0 >= 0) & (E1 >= 0) & (E2 >= 0)
-        del E0
-        t, px, py, E1, E2 = t[inside], px[inside], py[inside], E1[inside], E2[inside]
-        del inside
-        plane = z0[t] + (E1 * dz1[t] + E2 * dz2[t]) / absD[t]
-        del E1, E2
-        gi = py * W + px
-        vert = np.abs(h.ravel()[gi] - plane)
-        norm = vert / nfac[t]
-        del plane, px, py
-        if len(t):
-            # t is non-decreasing here: per-triangle maxima by segments.
-            seg = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
-            ts = t[seg]
-            per_v[ts] = np.maximum(per_v[ts], np.maximum.reduceat(vert, seg))
-            per_n[ts] = np.maximum(per_n[ts], np.maximum.reduceat(norm, seg))
-            # Each sample once, with the lowest-numbered triangle containing it.
-            new = np.flatnonzero(~covered[gi])
-            u, firsts = np.unique(gi[new], return_index=True)
-            pick = new[firsts]
-            covered[u] = True
-            n_cov += len(u)
-            sum_v2 += float(np.dot(vert[pick], vert[pick]))
-            sum_n2 += float(np.dot(norm[pick], norm[pick]))
-        s = e
+    t_s = 0
+    while t_s < T:
+        # Triangles [t_s, t_e) with at most ~point_budget / 4 rows between them.
+        base = int(rcum[t_s - 1]) if t_s else 0
+        t_e = min(max(int(np.searchsorted(rcum, base + row_budget, side="right")), t_s + 1), T)
+        nr = nrows[t_s:t_e]
+        R = int(nr.sum())
+        if R == 0:
+            t_s = t_e
+            continue
+        rt = np.repeat(np.arange(t_s, t_e, dtype=np.int64), nr)
+        ry = ymin[rt] + np.arange(R, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr)
+        xl, xr = xmin[rt], xmax[rt]
+        empty = np.zeros(R, dtype=bool)
+        for Ak, Bk, Ck in edges:
+            ak = Ak[rt]
+            num = Bk[rt] * ry + Ck[rt]  # E_k(x, y) = ak x + num >= 0
+            q = num // np.maximum(np.abs(ak), 1)  # floor(num / |ak|)
+            xl = np.where(ak > 0, np.maximum(xl, -q), xl)  # x >= ceil(-num / ak) = -q
+            xr = np.where(ak < 0, np.minimum(xr, q), xr)  # x <= floor(num / -ak) = q
+            empty |= (ak == 0) & (num < 0)
+        cnt = np.where(empty, 0, np.maximum(xr - xl + 1, 0))
+        del empty, q, num, ak
+        ccum = np.cumsum(cnt)
+        r_s = 0
+        while r_s < R:
+            # Rows [r_s, r_e) with at most ~point_budget samples between them.
+            cbase = int(ccum[r_s - 1]) if r_s else 0
+            r_e = min(max(int(np.searchsorted(ccum, cbase + point_budget, side="right")), r_s + 1), R)
+            c = cnt[r_s:r_e]
+            N = int(c.sum())
+            if N:
+                rep = np.repeat(np.arange(r_e - r_s, dtype=np.int64), c)
+                px = xl[r_s:r_e][rep] + np.arange(N, dtype=np.int64) - np.repeat(np.cumsum(c) - c, c)
+                py = ry[r_s:r_e][rep]
+                t = rt[r_s:r_e][rep]
+                del rep
+                E1 = A1[t] * px + B1[t] * py + C1[t]
+                E2 = A2[t] * px + B2[t] * py + C2[t]
+                plane = z0[t] + (E1 * dz1[t] + E2 * dz2[t]) / absD[t]
+                del E1, E2
+                gi = py * W + px
+                del px, py
+                vert = np.abs(hflat[gi] - plane)
+                del plane
+                norm = vert / nfac[t]
+                # t is non-decreasing: per-triangle maxima by segments.
+                seg = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
+                ts = t[seg]
+                per_v[ts] = np.maximum(per_v[ts], np.maximum.reduceat(vert, seg))
+                per_n[ts] = np.maximum(per_n[ts], np.maximum.reduceat(norm, seg))
+                # Each sample once, with the lowest-numbered triangle containing it.
+                new = np.flatnonzero(~covered[gi])
+                u, firsts = np.unique(gi[new], return_index=True)
+                pick = new[firsts]
+                covered[u] = True
+                n_cov += len(u)
+                sum_v2 += float(np.dot(vert[pick], vert[pick]))
+                sum_n2 += float(np.dot(norm[pick], norm[pick]))
+            r_s = r_e
+        t_s = t_e
 
     measured = live & ~np.isneginf(per_v)  # every live triangle has its vertices as samples
     per_v[~measured] = np.nan

@@ -55,6 +55,7 @@ from __future__ import annotations
 import os
 import re
 import struct
+import tokenize
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -97,13 +98,18 @@ _ASC_KEYS = {
 _READ_ERRORS: tuple[type[BaseException], ...] = (
     OSError,
     ValueError,
+    TypeError,
     EOFError,
     KeyError,
     IndexError,
     SyntaxError,
+    ArithmeticError,  # e.g. ZeroDivisionError from a corrupt TIFF tag
+    RuntimeError,  # includes NotImplementedError (unsupported zip or TIFF features)
+    MemoryError,  # a corrupt header claiming an enormous array
     struct.error,
     zlib.error,
     zipfile.BadZipFile,
+    tokenize.TokenError,  # a corrupt .npy header
 )
 
 
@@ -242,7 +248,9 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
     filled = 0
     if n_bad:
         if n_bad == values.size:
-            raise InputError(f"{source}: all {n_bad} samples are NaN, infinite or no-data; nothing to fill from")
+            raise InputError(
+                f"{source}: all {n_bad} samples are NaN, infinite or no-data; nothing to fill from"
+            )
         if fill_mode is None:
             raise InputError(
                 f"{source}: {n_bad} of {values.size} samples are NaN, infinite or no-data; "
@@ -316,13 +324,13 @@ def fill_nearest(values: np.ndarray, bad: np.ndarray) -> np.ndarray:
     smallest column wins, then the smallest row.
 
     Small holes are resolved first by a local search: the offsets with
-    ``drow**2 + dcol**2 <= 16`` are tried in (distance, dcol, drow) order and the
+    ``drow**2 + dcol**2 <= 4**2`` are tried in (distance, dcol, drow) order and the
     first good sample found is the nearest (same tie rule).  Only rows holding
     samples farther than that from any good sample go through the two passes,
     whose cost is O(H*W) with one Python-level loop over columns per block of
     rows.  At least one sample must be good.  Returns a new array.
     """
-    values = np.asarray(values, dtype=np.float64)
+    values = np.ascontiguousarray(values, dtype=np.float64)
     bad = np.asarray(bad, dtype=bool)
     out = values.copy()
     if not bad.any():
@@ -332,14 +340,16 @@ def fill_nearest(values: np.ndarray, bad: np.ndarray) -> np.ndarray:
         raise InputError("all samples are NaN, infinite or no-data; nothing to fill from")
     h, w = values.shape
 
-    # Stage 1: look for a good sample among the offsets with drow**2 + dcol**2 <= _LOCAL_R2, in
-    # increasing (distance, dcol, drow) order; the first one found is the nearest.
-    hr, hc = np.nonzero(bad)
+    # Stage 1: look for a good sample among the offsets with drow**2 + dcol**2 <= _LOCAL_RADIUS**2,
+    # in increasing (distance, dcol, drow) order; the first one found is the nearest.  Only
+    # samples within _LOCAL_RADIUS rows and columns of a good sample can succeed.
+    near = _dilate(good, _LOCAL_RADIUS)
+    hr, hc = np.nonzero(bad & near)
     todo = np.ones(len(hr), dtype=bool)
     for dr, dc in _LOCAL_OFFSETS:
         idx = np.nonzero(todo)[0]
         if not idx.size:
-            return out
+            break
         r, c = hr[idx] + dr, hc[idx] + dc
         inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
         idx, r, c = idx[inside], r[inside], c[inside]
@@ -347,49 +357,107 @@ def fill_nearest(values: np.ndarray, bad: np.ndarray) -> np.ndarray:
         idx, r, c = idx[hit], r[hit], c[hit]
         out[hr[idx], hc[idx]] = values[r, c]
         todo[idx] = False
-    far = np.zeros_like(bad)
+    far = bad & ~near
     far[hr[todo], hc[todo]] = True
     if not far.any():
         return out
 
     # Stage 2: exact two-pass method for the rows still holding unresolved samples.
-    missing = 1 << 30  # row-distance sentinel for "no good sample on this side"
-
-    # Pass 1: nearest good row above (<= i) and below (>= i) in every column.
-    rows = np.arange(h, dtype=np.int32)[:, None]
-    up = np.where(good, rows, np.int32(-missing))
-    np.maximum.accumulate(up, axis=0, out=up)
-    down = np.where(good, rows, np.int32(missing))[::-1]
-    down = np.minimum.accumulate(down, axis=0)[::-1]
-
-    cols = np.nonzero(good.any(axis=0))[0].astype(np.int64)  # columns with a good sample
+    # Pass 1 (nearest good row in a column) runs on the columns that can matter only: first
+    # those of the unresolved samples, whose own column bounds their distance D, then every
+    # column within D of one of them.
+    rows_h = np.arange(h)[:, None]
+    far_cols = np.nonzero(far.any(axis=0))[0]
+    c0, c1 = int(far_cols[0]), int(far_cols[-1])
+    if 2 * (c1 - c0 + 1) > w:
+        c0, c1 = 0, w - 1  # narrowing would not pay for a second pass
+    up, down = _nearest_rows(good[:, c0 : c1 + 1])
+    lo, hi = (0, w - 1) if (c0, c1) == (0, w - 1) else _reach(far[:, c0 : c1 + 1], up, down, rows_h, c0, w)
+    if (lo, hi) != (c0, c1):
+        c0, c1 = lo, hi
+        up, down = _nearest_rows(good[:, c0 : c1 + 1])
+    all_cols = np.nonzero(good[:, c0 : c1 + 1].any(axis=0))[0].astype(np.int64) + c0
     hole_rows = np.nonzero(far.any(axis=1))[0]
-    block = max(1, (1 << 22) // max(len(cols), 1))  # bound the envelope arrays to ~4M entries each
+    flat = values.ravel()
+    block = max(1, (1 << 22) // max(len(all_cols), 1))  # bound the envelope arrays to ~4M entries each
     for start in range(0, len(hole_rows), block):
         rr = hole_rows[start : start + block]
-        i = rr[:, None].astype(np.int64)
-        du = i - up[rr][:, cols]
-        dd = down[rr][:, cols].astype(np.int64) - i
-        near_row = np.where(du <= dd, i - du, i + dd)  # nearest good row per (row, column); ties: above
-        dist = np.minimum(du, dd)
+        ri = rr[:, None].astype(np.int64)
+        fb = far[rr]
+        xs = np.nonzero(fb.any(axis=0))[0]
+        x0, x1 = int(xs[0]), int(xs[-1])
+        ub, db = up[rr], down[rr]
+        fbs = fb[:, x0 : x1 + 1]
+        lo, hi = _reach(fbs, ub[:, x0 - c0 : x1 - c0 + 1], db[:, x0 - c0 : x1 - c0 + 1], ri, x0, w)
+        cols = all_cols[(all_cols >= lo) & (all_cols <= hi)]
+        uc = ub[:, cols - c0].astype(np.int64)
+        dc = db[:, cols - c0].astype(np.int64)
+        near_row = np.where(ri - uc <= dc - ri, uc, dc)  # nearest good row per (row, column); ties: above
+        dist = np.abs(near_row - ri)
         cost = dist * dist + cols[None, :] ** 2  # f(c) + c**2 of each parabola
-        which = _envelope_argmin(cost, cols, w)  # (len(rr), w) index into cols
-        for j, r in enumerate(rr):
-            xs = np.nonzero(far[r])[0]
-            p = which[j, xs]
-            out[r, xs] = values[near_row[j, p], cols[p]]
+        which = _envelope_argmin(cost, cols, x0, x1)  # (len(rr), x1 - x0 + 1) index into cols
+        src = flat[np.take_along_axis(near_row, which, axis=1) * w + cols[which]]
+        out[rr, x0 : x1 + 1] = np.where(fbs, src, out[rr, x0 : x1 + 1])
     return out
 
 
-_LOCAL_R2 = 16
+_LOCAL_RADIUS = 4
 _LOCAL_OFFSETS = sorted(
-    ((dr, dc) for dr in range(-4, 5) for dc in range(-4, 5) if 0 < dr * dr + dc * dc <= _LOCAL_R2),
+    (
+        (dr, dc)
+        for dr in range(-_LOCAL_RADIUS, _LOCAL_RADIUS + 1)
+        for dc in range(-_LOCAL_RADIUS, _LOCAL_RADIUS + 1)
+        if 0 < dr * dr + dc * dc <= _LOCAL_RADIUS**2
+    ),
     key=lambda o: (o[0] * o[0] + o[1] * o[1], o[1], o[0]),
 )
 
 
-def _envelope_argmin(cost: np.ndarray, cols: np.ndarray, w: int) -> np.ndarray:
-    """For each row and x in 0..w-1, the index p minimising ``cost[:, p] - 2*x*cols[p]``.
+def _nearest_rows(good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, the nearest good row at or above it and at or below it in its column.
+
+    int32 arrays; a side without a good sample gives -2**30 (above) or 2**30 (below).
+    """
+    missing = np.int32(1 << 30)
+    rows = np.arange(good.shape[0], dtype=np.int32)[:, None]
+    up = np.where(good, rows, -missing)
+    np.maximum.accumulate(up, axis=0, out=up)
+    down = np.where(good, rows, missing)[::-1]
+    down = np.ascontiguousarray(np.minimum.accumulate(down, axis=0)[::-1])
+    return up, down
+
+
+def _reach(mask: np.ndarray, up: np.ndarray, down: np.ndarray, rows: np.ndarray, x0: int, w: int):
+    """Column range ``(lo, hi)`` holding the nearest good sample of every masked sample.
+
+    A masked sample at (row, x) has a good sample ``D = min(row - up, down - row)`` away in
+    its own column, so its nearest lies in columns ``x - D .. x + D``; clipped to 0..w-1.
+    """
+    reach = np.minimum(rows - up, down - rows)
+    x = np.arange(x0, x0 + mask.shape[1])[None, :]
+    lo = int(np.min(np.where(mask, x - reach, w)))
+    hi = int(np.max(np.where(mask, x + reach, -1)))
+    return max(0, lo), min(w - 1, hi)
+
+
+def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Samples within ``radius`` rows and ``radius`` columns of a True sample."""
+    out = mask.copy()
+    for axis in (0, 1):
+        src = out.copy()
+        n = src.shape[axis]
+        for d in range(1, min(radius, n - 1) + 1):
+            if axis == 0:
+                out[d:] |= src[:-d]
+                out[:-d] |= src[d:]
+            else:
+                out[:, d:] |= src[:, :-d]
+                out[:, :-d] |= src[:, d:]
+    return out
+
+
+def _envelope_argmin(cost: np.ndarray, cols: np.ndarray, x0: int, x1: int) -> np.ndarray:
+    """For each row and x in x0..x1, the index p minimising ``cost[:, p] - 2*x*cols[p]``.
 
     ``cost[:, p] = f(p) + cols[p]**2``, so this minimises ``(x - cols[p])**2 + f(p)``:
     the lower envelope of parabolas, built and queried for all rows at once.
@@ -427,16 +495,16 @@ def _envelope_argmin(cost: np.ndarray, cols: np.ndarray, w: int) -> np.ndarray:
                 zden[pb, kk + 1] = 1
             b = b[pop]
             k[b] -= 1
-    which = np.empty((n, w), dtype=np.int64)
+    which = np.empty((n, x1 - x0 + 1), dtype=np.int64)
     kq = np.zeros(n, dtype=np.int64)
-    for x in range(w):
+    for x in range(x0, x1 + 1):
         b = ar
         while b.size:
             nk = kq[b] + 1
             adv = znum[b, nk] < x * zden[b, nk]  # z[k+1] < x: move right
             b = b[adv]
             kq[b] += 1
-        which[:, x] = v[ar, kq]
+        which[:, x - x0] = v[ar, kq]
     return which
 
 
@@ -476,38 +544,50 @@ def _read_npy(path: str) -> np.ndarray:
     except _READ_ERRORS as e:
         raise InputError(f"cannot read {path}: not a valid .npy file ({_one_line(e)})") from None
     if not isinstance(arr, np.ndarray):
-        raise InputError(f"cannot read {path}: not a .npy array file")
+        if hasattr(arr, "close"):
+            arr.close()
+        raise InputError(f"cannot read {path}: not a .npy file (it is a .npz archive); rename it to .npz")
     return arr
 
 
 def _read_npz(path: str, key: str | None) -> np.ndarray:
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            if not isinstance(npz, np.lib.npyio.NpzFile):
-                raise InputError(f"cannot read {path}: not a .npz archive")
-            names = list(npz.files)
-            listed = ", ".join(names)
-            if not names:
-                raise InputError(f"{path}: the .npz archive holds no arrays")
-            if key is None:
-                if len(names) != 1:
-                    raise InputError(
-                        f"{path}: the .npz archive holds {len(names)} arrays ({listed}); choose one with --key NAME"
-                    )
-                key = names[0]
-            elif key not in names:
-                raise InputError(f"{path}: no array {key!r} in the .npz archive; its arrays are: {listed}")
-            return np.asarray(npz[key])
+        npz = np.load(path, allow_pickle=False)
     except _READ_ERRORS as e:
         raise InputError(f"cannot read {path}: not a valid .npz file ({_one_line(e)})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise InputError(f"cannot read {path}: not a .npz archive (it is a .npy file); rename it to .npy")
+    with npz:
+        names = list(npz.files)
+        listed = ", ".join(names)
+        if not names:
+            raise InputError(f"{path}: the .npz archive holds no arrays")
+        if key is None:
+            if len(names) != 1:
+                raise InputError(
+                    f"{path}: the .npz archive holds {len(names)} arrays ({listed}); "
+                    f"choose one with --key NAME"
+                )
+            key = names[0]
+        elif key not in names:
+            raise InputError(f"{path}: no array {key!r} in the .npz archive; its arrays are: {listed}")
+        try:
+            return np.asarray(npz[key])
+        except _READ_ERRORS as e:
+            raise InputError(f"cannot read {path}: array {key!r} is corrupt ({_one_line(e)})") from None
 
 
 def _pgm_header(data: bytes, path: str) -> tuple[bytes, int, int, int, int]:
     """Parse ``magic width height maxval``; return them and the offset after the header."""
     magic = data[:2]
     if magic not in (b"P2", b"P5"):
-        what = {b"P1": "a bitmap (PBM)", b"P4": "a bitmap (PBM)", b"P3": "a colour PPM", b"P6": "a colour PPM"}
-        kind = what.get(magic, "not a PGM file")
+        kinds = {
+            b"P1": "a bitmap (PBM)",
+            b"P4": "a bitmap (PBM)",
+            b"P3": "a colour PPM",
+            b"P6": "a colour PPM",
+        }
+        kind = kinds.get(magic, "not a PGM file")
         raise InputError(
             f"cannot read {path}: {kind} (magic {_short(magic.decode('latin-1'))}); "
             f"only P2/P5 graymaps are supported, convert it to 16-bit grayscale"
@@ -531,7 +611,8 @@ def _pgm_header(data: bytes, path: str) -> tuple[bytes, int, int, int, int]:
             pos += 1
         if start == pos:
             names = ("width", "height", "maxval")
-            raise InputError(f"cannot read {path}: PGM header is truncated or corrupt (no {names[len(fields)]})")
+            missing = names[len(fields)]
+            raise InputError(f"cannot read {path}: PGM header is truncated or corrupt (no {missing})")
         fields.append(int(data[start:pos]))
     width, height, maxval = fields
     if not 1 <= maxval <= 65535:
@@ -573,7 +654,9 @@ def _read_pgm(path: str) -> np.ndarray:
             raise InputError(f"cannot read {path}: PGM data holds a value that is not an integer") from None
     if arr.size and (arr.min() < 0 or arr.max() > maxval):
         bad = int(arr.max()) if arr.max() > maxval else int(arr.min())
-        raise InputError(f"cannot read {path}: PGM sample {bad} is outside 0..maxval ({maxval}); fix the header")
+        raise InputError(
+            f"cannot read {path}: PGM sample {bad} is outside 0..maxval ({maxval}); fix the header's maxval"
+        )
     return arr.reshape(height, width)
 
 
@@ -636,6 +719,7 @@ def _read_tiff(path: str) -> np.ndarray:
 
 def _read_asc(path: str) -> np.ndarray:
     text = _read_bytes(path).decode("latin-1")
+    where = f"cannot read {path}: ESRI ASCII grid"
     tokens = text.split()
     header: dict[str, str] = {}
     i = 0
@@ -643,38 +727,37 @@ def _read_asc(path: str) -> np.ndarray:
         name = tokens[i].lower()
         if name not in _ASC_KEYS:
             raise InputError(
-                f"cannot read {path}: unknown ESRI ASCII grid header key {_short(tokens[i])} "
+                f"{where}: unknown header key {_short(tokens[i])} "
                 f"(expected ncols, nrows, xllcorner, yllcorner, cellsize, NODATA_value)"
             )
         if name in header:
-            raise InputError(f"cannot read {path}: ESRI ASCII grid header repeats {tokens[i]}")
+            raise InputError(f"{where}: header repeats {tokens[i]}")
         if i + 1 >= len(tokens) or not _is_number(tokens[i + 1]):
-            raise InputError(f"cannot read {path}: ESRI ASCII grid header key {tokens[i]} has no numeric value")
+            raise InputError(f"{where}: header key {tokens[i]} has no numeric value")
         header[name] = tokens[i + 1]
         i += 2
     dims = []
     for name in ("ncols", "nrows"):
         if name not in header:
-            raise InputError(f"cannot read {path}: ESRI ASCII grid header has no {name}")
+            raise InputError(f"{where}: header has no {name}")
         try:
             dims.append(int(header[name]))
         except ValueError:
-            raise InputError(f"cannot read {path}: ESRI ASCII grid {name} {header[name]!r} is not an integer") from None
+            raise InputError(f"{where}: {name} {header[name]!r} is not an integer") from None
     ncols, nrows = dims
     if ncols < 1 or nrows < 1:
-        raise InputError(f"cannot read {path}: ESRI ASCII grid is {nrows} rows x {ncols} columns; both must be >= 1")
+        raise InputError(f"{where}: the grid is {nrows} rows x {ncols} columns; both must be >= 1")
     count = ncols * nrows
     data = tokens[i:]
     if len(data) != count:
         what = "truncated" if len(data) < count else "too long"
         raise InputError(
-            f"cannot read {path}: ESRI ASCII grid data is {what}: expected {nrows} x {ncols} = {count} values, "
-            f"found {len(data)}"
+            f"{where}: data is {what}: expected {nrows} x {ncols} = {count} values, found {len(data)}"
         )
     try:
         arr = np.array(data, dtype=np.float64)
     except ValueError:
-        raise InputError(f"cannot read {path}: ESRI ASCII grid data holds a value that is not a number") from None
+        raise InputError(f"{where}: data holds a value that is not a number") from None
     arr = arr.reshape(nrows, ncols)
     if "nodata_value" in header:
         nodata = float(header["nodata_value"])

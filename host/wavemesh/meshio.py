@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 import re
 import struct
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -103,7 +104,7 @@ def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None)
             for s in range(0, len(xy), _CHUNK):
                 pts = xy[s : s + _CHUNK].tolist()
                 zs = z[s : s + _CHUNK].tolist()
-                f.write("".join(f"v {p[0]} {p[1]} {zz!r}\n" for p, zz in zip(pts, zs)))
+                f.write("".join(f"v {p[0]} {p[1]} {zz!r}\n" for p, zz in zip(pts, zs, strict=True)))
             for s in range(0, len(tris), _CHUNK):
                 t = (tris[s : s + _CHUNK] + 1).tolist()
                 f.write("".join(f"f {a} {b} {c}\n" for a, b, c in t))
@@ -244,21 +245,64 @@ _OBJ_IGNORED = frozenset(
 )
 
 
+_OBJ_FACE_TEXT = re.compile(r"[0-9 ]*")
+
+
+def _numbers(text: str, dtype) -> np.ndarray | None:
+    """All whitespace-separated numbers of ``text``, or None when one does not parse."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        try:
+            return np.fromstring(text, sep=" ", dtype=dtype)
+        except (ValueError, DeprecationWarning):
+            return None
+
+
+def _parse_obj_fast(lines: list[str]):
+    """The common case in bulk: only ``v x y z``, ``f i j k`` (plain numbers), comments and
+    empty lines, single spaces.  Returns None for anything else; the line-by-line parser
+    then reads the file (and finds the errors, with line numbers)."""
+    vl = [line for line in lines if line[:2] == "v "]
+    fl = [line for line in lines if line[:2] == "f "]
+    cl = [line for line in lines if line[:1] == "#"]
+    if len(vl) + len(fl) + len(cl) + lines.count("") != len(lines):
+        return None
+    vtext = " ".join(line[2:] for line in vl)
+    ftext = " ".join(line[2:] for line in fl)
+    for block, text in ((vl, vtext), (fl, ftext)):
+        if "  " in text or text[:1] == " " or text[-1:] == " ":
+            return None
+        if not all(line.count(" ") == 3 for line in block):
+            return None
+    if not _OBJ_FACE_TEXT.fullmatch(ftext):
+        return None
+    xyz = _numbers(vtext, np.float64)
+    idx = _numbers(ftext, np.int64)
+    if xyz is None or idx is None or len(xyz) != 3 * len(vl) or len(idx) != 3 * len(fl):
+        return None
+    if (idx <= 0).any():
+        return None
+    xyz = xyz.reshape(-1, 3)
+    comments = [line[1:].strip() for line in cl]
+    return xyz[:, 0], xyz[:, 1], xyz[:, 2], idx.reshape(-1, 3) - 1, comments, 1
+
+
 def _parse_obj(data: bytes):
     if b"\0" in data:
         raise _Bad("not a mesh file (binary data, and not PLY)")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        raise _Bad("not a mesh file (not UTF-8 text, and not PLY)") from None
+    text = data.decode("utf-8", errors="replace")  # only comments and names may be non-ASCII
     text = text.replace("\\\r\n", " ").replace("\\\n", " ")  # OBJ line continuations
+    lines = text.splitlines()
+    fast = _parse_obj_fast(lines)
+    if fast is not None:
+        return fast
     verts: list[list[str]] = []
     vline: list[int] = []
     faces: list[list[str]] = []
     fline: list[int] = []
     fnv: list[int] = []  # vertices read before each face (for negative references)
     comments: list[str] = []
-    for lineno, line in enumerate(text.splitlines(), 1):
+    for lineno, line in enumerate(lines, 1):
         parts = line.split()
         if not parts:
             continue
@@ -315,8 +359,8 @@ def _parse_obj(data: bytes):
         if back.any():
             f, k = (int(v) for v in np.argwhere(back)[0])
             raise _Bad(
-                f"face {f + 1} refers to vertex {int(idx[f, k])} but only {int(nv[f, 0])} vertices precede it "
-                f"(line {fline[f]})"
+                f"face {f + 1} refers to vertex {int(idx[f, k])} but only {int(nv[f, 0])} vertices "
+                f"precede it (line {fline[f]})"
             )
         tris = np.where(idx > 0, idx - 1, nv + idx)
     else:

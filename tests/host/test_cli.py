@@ -1,0 +1,145 @@
+"""The `wavemesh` command end to end, as a user runs it, bad input included."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from wavemesh import api, synth
+from wavemesh.check import check_mesh
+from wavemesh.cli import main
+from wavemesh.heightfield import from_array
+from wavemesh.meshio import read_mesh
+
+
+def wavemesh(*args, cwd=None):
+    """Run the installed command in a subprocess: what a user sees, tracebacks included."""
+    return subprocess.run([sys.executable, "-m", "wavemesh", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+@pytest.fixture
+def parabolic(tmp_path):
+    path = tmp_path / "f2.npy"
+    np.save(path, synth.f2())
+    return path
+
+
+def test_mesh_writes_mesh_report_and_picture(tmp_path, parabolic):
+    out, rep, png = tmp_path / "m.obj", tmp_path / "r.json", tmp_path / "m.png"
+    r = wavemesh("mesh", parabolic, "-o", out, "--levels", "4", "--report", rep, "--render", png)
+    assert r.returncode == 0, r.stderr
+    assert "153 vertices, 256 triangles" in r.stdout
+    mesh, z = read_mesh(out)
+    assert (mesh.n_vertices, mesh.n_triangles) == (153, 256)
+    job = api.triangulate(from_array(synth.f2()), 4)
+    assert mesh.same_as(job.mesh)
+    np.testing.assert_array_equal(z, mesh.z(synth.f2()))
+    report = json.loads(rep.read_text())
+    assert report["initial"]["vertices"] == 153 and report["initial"]["triangles"] == 256
+    assert report["input"]["width"] == 128 and report["errors"]["e_max_normal"] >= 0
+    assert png.stat().st_size > 1000
+
+
+def test_mesh_ply_and_check_agree(tmp_path):
+    values = synth.ball()
+    np.save(tmp_path / "ball.npy", values)
+    assert main(["mesh", str(tmp_path / "ball.npy"), "-o", str(tmp_path / "b.ply"), "-q"]) == 0
+    mesh, _ = read_mesh(tmp_path / "b.ply")
+    assert check_mesh(mesh).valid
+    assert main(["check", str(tmp_path / "b.ply"), "--against", str(tmp_path / "ball.npy"),
+                 "--report", str(tmp_path / "c.json")]) == 0
+    report = json.loads((tmp_path / "c.json").read_text())
+    assert report["valid"] and report["triangles"] == mesh.n_triangles
+
+
+def test_check_rejects_a_broken_mesh(tmp_path, parabolic):
+    out = tmp_path / "m.obj"
+    assert main(["mesh", str(parabolic), "-o", str(out), "-q"]) == 0
+    lines = out.read_text().splitlines()
+    last_face = max(i for i, line in enumerate(lines) if line.startswith("f "))
+    (tmp_path / "holed.obj").write_text("\n".join(lines[:last_face] + lines[last_face + 1:]) + "\n")
+    r = wavemesh("check", tmp_path / "holed.obj", "--against", parabolic)
+    assert r.returncode == 1
+    assert "NOT a proper triangulation" in r.stdout
+    assert r.stderr.startswith("error:") and "Traceback" not in r.stderr
+
+
+def test_check_rejects_wrong_heights(tmp_path, parabolic):
+    out = tmp_path / "m.obj"
+    assert main(["mesh", str(parabolic), "-o", str(out), "-q"]) == 0
+    text = out.read_text().replace("v 0 0 ", "v 0 0 1", 1)
+    (tmp_path / "z.obj").write_text(text)
+    assert main(["check", str(tmp_path / "z.obj"), "--against", str(parabolic), "-q"]) == 1
+
+
+def test_fill_nearest_makes_nan_input_work(tmp_path):
+    values = synth.f5()
+    values[10:20, 30:40] = np.nan
+    np.save(tmp_path / "holes.npy", values)
+    r = wavemesh("mesh", tmp_path / "holes.npy", "-o", tmp_path / "m.obj")
+    assert r.returncode != 0 and r.stderr.startswith("error:") and "--fill" in r.stderr
+    r = wavemesh("mesh", tmp_path / "holes.npy", "-o", tmp_path / "m.obj", "--fill", "nearest")
+    assert r.returncode == 0, r.stderr
+
+
+def test_render_command(tmp_path, parabolic):
+    out = tmp_path / "m.obj"
+    assert main(["mesh", str(parabolic), "-o", str(out), "-q"]) == 0
+    r = wavemesh("render", out, "-o", tmp_path / "top.png", "--view", "top")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "top.png").stat().st_size > 1000
+
+
+def test_synth_command(tmp_path):
+    assert main(["synth", "box", "-o", str(tmp_path / "box.npy"), "--size", "64"]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "box.npy"), synth.box(64))
+
+
+def bad_inputs(tmp_path):
+    np.save(tmp_path / "ok.npy", synth.f2())
+    np.save(tmp_path / "line.npy", np.arange(10.0))
+    np.save(tmp_path / "empty.npy", np.zeros((0, 5)))
+    np.save(tmp_path / "nan.npy", np.full((4, 4), np.nan))
+    data = (tmp_path / "ok.npy").read_bytes()
+    (tmp_path / "cut.npy").write_bytes(data[: len(data) // 2])
+    (tmp_path / "junk.xyz").write_bytes(b"\x00\x01garbage" * 10)
+    (tmp_path / "text.png").write_text("not a png")
+    ok = tmp_path / "ok.npy"
+    o = str(tmp_path / "o.obj")
+    return {
+        "missing file": ["mesh", tmp_path / "nope.npy", "-o", o],
+        "truncated": ["mesh", tmp_path / "cut.npy", "-o", o],
+        "1-D": ["mesh", tmp_path / "line.npy", "-o", o],
+        "empty": ["mesh", tmp_path / "empty.npy", "-o", o],
+        "all NaN": ["mesh", tmp_path / "nan.npy", "-o", o],
+        "unknown format": ["mesh", tmp_path / "junk.xyz", "-o", o],
+        "corrupt png": ["mesh", tmp_path / "text.png", "-o", o],
+        "bad levels": ["mesh", ok, "-o", o, "--levels", "0"],
+        "levels not a number": ["mesh", ok, "-o", o, "--levels", "x"],
+        "negative tau": ["mesh", ok, "-o", o, "--tau", "-1"],
+        "bad output extension": ["mesh", ok, "-o", tmp_path / "o.stl"],
+        "output dir missing": ["mesh", ok, "-o", tmp_path / "no" / "o.obj"],
+        "bad fill": ["mesh", ok, "-o", o, "--fill", "sideways"],
+        "check missing mesh": ["check", tmp_path / "none.obj", "--against", ok],
+        "check garbage mesh": ["check", tmp_path / "junk.xyz", "--against", ok],
+        "no command": [],
+        "unknown command": ["frobnicate"],
+    }
+
+
+def test_bad_input_gives_one_line_and_no_traceback(tmp_path):
+    for name, args in bad_inputs(tmp_path).items():
+        r = wavemesh(*args)
+        assert r.returncode != 0, name
+        assert "Traceback" not in r.stderr, (name, r.stderr)
+        errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1, (name, r.stderr)
+        assert not (tmp_path / "o.obj").exists(), name
+
+
+def test_module_and_version():
+    r = wavemesh("--version")
+    assert r.returncode == 0 and r.stdout.startswith("wavemesh ")
