@@ -60,7 +60,7 @@ test-sim: $(SETUP_STAMP) gen
 	 else echo "test-sim: no simulated board yet (the SoC issue adds it)"; fi
 
 lint: $(SETUP_STAMP)
-	$(VPY) -m ruff check host tests
+	$(VPY) -m ruff check host tests tools
 
 # The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
 DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')

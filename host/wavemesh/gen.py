@@ -56,7 +56,8 @@ def c_header() -> str:
         "",
         "/* Label codes: kind << 1 | dual. */",
         "enum wm_label {",
-        *[f"    WM_LABEL_{'DUAL_' if ch.islower() else ''}{ch.upper()} = {i}," for i, ch in enumerate(LABELS)],
+        *[f"    WM_LABEL_{'DUAL_' if ch.islower() else ''}{ch.upper()} = {i},"
+          for i, ch in enumerate(LABELS)],
         "};",
         "",
         "/* Split mask bits. */",
@@ -106,7 +107,8 @@ def verilog_include() -> str:
         "        case (wm_id)",
     ]
     for t in ts.templates:
-        lines.append(f"            6'd{t.id}: wm_template_rom = {WORD_BITS}'h{rom_word(t.triangles):025x}; // {t.name}")
+        word = f"{WORD_BITS}'h{rom_word(t.triangles):025x}"
+        lines.append(f"            6'd{t.id}: wm_template_rom = {word}; // {t.name}")
     lines += [
         f"            default: wm_template_rom = {WORD_BITS}'h0;",
         "        endcase",

@@ -121,7 +121,10 @@ def label_blocks(level: HaarLevel, tau_q: int, width: int, height: int) -> Label
     vsplit[:, :-1] |= horiz
     vsplit[:, 1:] |= horiz
     mask = (
-        hsplit[:-1] * SIDE_TOP + vsplit[:, :-1] * SIDE_LEFT + vsplit[:, 1:] * SIDE_RIGHT + hsplit[1:] * SIDE_BOTTOM
+        hsplit[:-1] * SIDE_TOP
+        + vsplit[:, :-1] * SIDE_LEFT
+        + vsplit[:, 1:] * SIDE_RIGHT
+        + hsplit[1:] * SIDE_BOTTOM
     ).astype(np.int64)
 
     lut = np.asarray(template_set().lut, dtype=np.int64)

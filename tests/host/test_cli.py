@@ -6,7 +6,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from wavemesh import api, synth
 from wavemesh.check import check_mesh
 from wavemesh.cli import main

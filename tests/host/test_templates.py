@@ -4,7 +4,6 @@ import itertools
 
 import numpy as np
 import pytest
-
 from wavemesh import template_forms, templates
 from wavemesh.check import check_mesh
 from wavemesh.mesh import Mesh

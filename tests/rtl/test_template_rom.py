@@ -97,7 +97,8 @@ def test_c_header_matches_model(tmp_path):
 def test_json_matches_model(tmp_path):
     gen.write_all(tmp_path)
     data = json.loads((tmp_path / "templates.json").read_text())
-    assert [tuple(map(tuple, t["triangles"])) for t in data["templates"]] == [t.triangles for t in TS.templates]
+    got = [tuple(map(tuple, t["triangles"])) for t in data["templates"]]
+    assert got == [t.triangles for t in TS.templates]
     assert data["lut"] == list(TS.lut)
     assert sum(x != LUT_INVALID for x in data["lut"]) == 16 * 2 + 4 * 4 + 16  # F f, V v H h, D
 
