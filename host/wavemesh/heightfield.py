@@ -207,7 +207,7 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool]:
         samples = (v - offset).astype(np.uint16)
         return samples, 1.0, float(offset), True
     offset = vmin
-    if span == 0:
+    if span / SAMPLE_MAX == 0:  # constant (or a span so small the step underflows)
         scale = 1.0
         samples = np.zeros(v.shape, dtype=np.uint16)
     else:

@@ -540,3 +540,45 @@ def test_bad_fill_text_reported(tmp_path):
     one_line_error(from_array, np.zeros((2, 2)), fill="sideways", match=["'sideways'", "nearest"])
     np.save(tmp_path / "a.npy", np.zeros((2, 2)))
     one_line_error(load_heightfield, str(tmp_path / "a.npy"), fill="1e", match="--fill")
+
+
+def test_npy_npz_mixed_up(tmp_path):
+    np.save(tmp_path / "a.npy", np.zeros((2, 2)))
+    os.rename(tmp_path / "a.npy", tmp_path / "a.npz")
+    one_line_error(load_heightfield, str(tmp_path / "a.npz"), match="rename it to .npy")
+    np.savez(tmp_path / "b.npz", x=np.zeros((2, 2)))
+    os.rename(tmp_path / "b.npz", tmp_path / "b.npy")
+    one_line_error(load_heightfield, str(tmp_path / "b.npy"), match="rename it to .npz")
+
+
+def test_palette_png_rejected(tmp_path):
+    Image.fromarray(np.zeros((4, 4), dtype=np.uint8)).convert("P").save(tmp_path / "p.png")
+    one_line_error(load_heightfield, str(tmp_path / "p.png"), match=["palette", "16-bit grayscale"])
+
+
+def test_damaged_files_never_crash(tmp_path):
+    """Cut and scribbled-over files of every format: a height field or an InputError, nothing else."""
+    rng = np.random.default_rng(12)
+    a = (rng.random((9, 11)) * 60000).astype(np.uint16)
+    np.save(tmp_path / "a.npy", a)
+    np.savez_compressed(tmp_path / "a.npz", x=a)
+    Image.fromarray(a).save(tmp_path / "a.png")
+    tifffile.imwrite(tmp_path / "a.tif", a, compression="zlib")
+    write_pgm_p5(tmp_path / "a.pgm", a, maxval=65535)
+    grid = "ncols 11\nnrows 9\ncellsize 1\nNODATA_value 7\n" + " ".join(map(str, a.ravel()))
+    (tmp_path / "a.asc").write_text(grid)
+    for name in ("a.npy", "a.npz", "a.png", "a.tif", "a.pgm", "a.asc"):
+        data = (tmp_path / name).read_bytes()
+        damaged = tmp_path / ("damaged" + name[1:])
+        for trial in range(60):
+            m = bytearray(data[: rng.integers(0, len(data))] if trial % 2 else data)
+            if trial % 2 == 0:
+                for i in rng.integers(0, min(len(m), 300), size=4):
+                    m[i] = rng.integers(0, 256)
+            damaged.write_bytes(bytes(m))
+            try:
+                hf = load_heightfield(str(damaged), fill="nearest")
+            except InputError as e:
+                assert "\n" not in str(e)
+            else:
+                assert hf.samples.dtype == np.uint16 and hf.values.shape == hf.samples.shape
