@@ -30,6 +30,7 @@ help:
 	@echo "make docs           regenerate the pictures and tables in docs/"
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
+	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
 setup: $(SETUP_STAMP)
@@ -75,8 +76,11 @@ demo: $(SETUP_STAMP)
 docs: $(SETUP_STAMP)
 	$(VPY) tools/make_docs.py
 
-bench: $(SETUP_STAMP)
-	@echo "bench: no benchmarks yet (the RTL and SoC issues add them)"
+bench: $(SETUP_STAMP) gen
+	$(VPY) bench/run.py
+
+bench-%: $(SETUP_STAMP) gen
+	$(VPY) bench/run.py $*
 
 clean:
 	rm -rf build $(OUT) tests/**/sim_build

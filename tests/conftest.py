@@ -26,3 +26,9 @@ def verilator():
     if shutil.which("g++") is None or shutil.which("make") is None:
         pytest.fail("Verilator needs g++ and make: run `make setup`")
     return exe, env
+
+
+# tests/rtl imports its helpers (rtl_runner) by module name, as the cocotb test modules do.
+import sys  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "tests" / "rtl"))
