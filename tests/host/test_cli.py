@@ -28,7 +28,8 @@ def parabolic(tmp_path):
 
 def test_mesh_writes_mesh_report_and_picture(tmp_path, parabolic):
     out, rep, png = tmp_path / "m.obj", tmp_path / "r.json", tmp_path / "m.png"
-    r = wavemesh("mesh", parabolic, "-o", out, "--levels", "4", "--report", rep, "--render", png)
+    r = wavemesh("mesh", parabolic, "-o", out, "--levels", "4", "--stage", "initial", "--report", rep,
+                 "--render", png)
     assert r.returncode == 0, r.stderr
     assert "153 vertices, 256 triangles" in r.stdout
     mesh, z = read_mesh(out)
@@ -122,6 +123,12 @@ def bad_inputs(tmp_path):
         "bad output extension": ["mesh", ok, "-o", tmp_path / "o.stl"],
         "output dir missing": ["mesh", ok, "-o", tmp_path / "no" / "o.obj"],
         "bad fill": ["mesh", ok, "-o", o, "--fill", "sideways"],
+        "negative zeta": ["mesh", ok, "-o", o, "--zeta", "-1"],
+        "bad metric": ["mesh", ok, "-o", o, "--metric", "sideways"],
+        "too many iterations": ["mesh", ok, "-o", o, "--iterations", "5"],
+        "alpha above 1": ["mesh", ok, "-o", o, "--alpha", "2"],
+        "capacity too small": ["mesh", ok, "-o", o, "--zeta", "0", "--capacity", "300"],
+        "lod is a file": ["mesh", ok, "-o", o, "--lod", ok],
         "check missing mesh": ["check", tmp_path / "none.obj", "--against", ok],
         "check garbage mesh": ["check", tmp_path / "junk.xyz", "--against", ok],
         "no command": [],
@@ -142,3 +149,45 @@ def test_bad_input_gives_one_line_and_no_traceback(tmp_path):
 def test_module_and_version():
     r = wavemesh("--version")
     assert r.returncode == 0 and r.stdout.startswith("wavemesh ")
+
+
+def test_mesh_full_pipeline_levels_lod_and_report(tmp_path):
+    np.save(tmp_path / "box.npy", synth.box(96))
+    out, rep, lod = tmp_path / "m.ply", tmp_path / "r.json", tmp_path / "lod"
+    r = wavemesh("mesh", tmp_path / "box.npy", "-o", out, "--levels", "4", "--zeta", "0.5", "--metric",
+                 "vertical",
+                 "--iterations", "3", "--neighbourhood", "vertex", "--alpha", "0.8", "--delta-d", "1",
+                 "--delta-p", "0.8", "--delta-v", "1.5", "--report", rep, "--lod", lod)
+    assert r.returncode == 0, r.stderr
+    assert "level  vertices  triangles" in r.stdout
+    report = json.loads(rep.read_text())
+    rows = report["refiner"]["levels"]
+    assert [row["level"] for row in rows] == [3, 2, 1, 0]
+    assert rows[-1]["e_max_vertical"] <= 0.5 and report["refiner"]["bound_met"]
+    assert report["parameters"]["metric"] == "vertical" and report["parameters"]["neighbourhood"] == "vertex"
+    assert sorted(p.name for p in lod.iterdir()) == [f"level-{m}.ply" for m in range(4)]
+    final, _ = read_mesh(out)
+    level0, _ = read_mesh(lod / "level-0.ply")
+    assert final.same_as(level0) and check_mesh(final).valid
+    assert final.n_triangles == rows[-1]["triangles"]
+
+
+def test_mesh_is_the_same_byte_for_byte(tmp_path):
+    np.save(tmp_path / "ball.npy", synth.ball(128))
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"m{k}.obj"
+        assert main(["mesh", str(tmp_path / "ball.npy"), "-o", str(out), "-q", "--levels", "4"]) == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+
+
+def test_budget_exit_status_says_bound_not_met(tmp_path):
+    np.save(tmp_path / "box.npy", synth.box(96))
+    out = tmp_path / "m.obj"
+    r = wavemesh("mesh", tmp_path / "box.npy", "-o", out, "--levels", "3", "--zeta", "0.1",
+                 "--max-triangles", "500")
+    assert r.returncode == api.BOUND_NOT_MET
+    assert "warning: the error bound is not met" in r.stderr and "Traceback" not in r.stderr
+    mesh, _ = read_mesh(out)
+    assert check_mesh(mesh).valid and 400 < mesh.n_triangles <= 500

@@ -1,0 +1,258 @@
+/*
+ * wavemesh firmware: the refiner of Lee's "Wavelet-Based Multiresolution Surface Approximation from
+ * Height Fields" (chapter 4), in C99 with integer arithmetic only.
+ *
+ * One public header.  Conventions (firmware/README.md, docs/refiner.md):
+ *
+ * - Every public symbol starts with wm_ (types wm_*, macros WM_*), snake_case.
+ * - No malloc: the caller hands in storage sized by the *_bound() functions.  Running out of room is
+ *   the return code WM_ERR_CAPACITY, never a crash; the mesh stays valid.
+ * - No floating point anywhere: parameters arrive as fixed-point integers (formats below), so the
+ *   same sources give the same mesh, bit for bit, on x86-64 and on an rv32 soft CPU without FPU.
+ * - Freestanding: the core uses only <stdint.h> and <stddef.h> (no stdio, no libc calls).
+ * - Functions return WM_OK (0) or a negative WM_ERR_* code for anything data can cause; programmer
+ *   errors and invariants are asserts (compiled in with WM_CHECK=1, which also runs the full mesh
+ *   invariant check after every operator).
+ *
+ * Geometry: a height field has W columns and H rows (2 <= W, H <= WM_MAX_SIDE); sample (x, y) is
+ * column x, row y.  A mesh triangulates the rectangle [0, W-1] x [0, H-1], every vertex is a grid
+ * sample, triangles are counter-clockwise: (x1-x0)(y2-y0) - (x2-x0)(y1-y0) > 0.
+ *
+ * Half-edge mesh (hmm style): triangle t owns half-edges 3t, 3t+1, 3t+2; half-edge e starts at vertex
+ * hv[e] and ends at hv[next(e)], next(e) = e - e%3 + (e+1)%3; ho[e] is the opposite half-edge or -1
+ * on the border of the rectangle.  Free triangle slots have hv[3t] = -1 and are chained through
+ * ho[3t]; free vertex slots have vx = WM_FREE and are chained through vh.  (The refiner never frees;
+ * the reduction operators of a later issue will.)
+ */
+#ifndef WAVEMESH_H
+#define WAVEMESH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Return codes */
+
+#define WM_OK 0
+#define WM_ERR_ARG (-1)      /* an argument is out of range (size, count, index, parameter) */
+#define WM_ERR_MEMORY (-2)   /* the storage handed in is smaller than the *_bound() asks for */
+#define WM_ERR_CAPACITY (-3) /* the mesh needs more triangles or vertices than the storage holds */
+#define WM_ERR_MESH (-4)     /* the input is not a proper triangulation of the grid rectangle */
+#define WM_ERR_STATE (-5)    /* the refiner has finished (or was never initialised) */
+#define WM_ERR_REFUSED (-6)  /* an operator's precondition fails (it would not give a proper mesh) */
+
+#define WM_MAX_SIDE 32767  /* largest W or H: keeps every exact product within 64 bits */
+#define WM_MAX_LEVELS 12   /* largest M, as the reference model */
+#define WM_FREE 0xFFFFu    /* vx[] of a free vertex slot */
+
+/* A short text for a return code ("ok", "capacity exhausted", ...); never NULL. */
+const char *wm_strerror(int code);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The half-edge mesh */
+
+typedef struct wm_mesh {
+    int32_t width, height;     /* W, H of the grid */
+    int32_t tri_cap, vert_cap; /* slots in the arrays */
+    int32_t tri_end, vert_end; /* slots in use (live or free) are 0 .. end-1 */
+    int32_t n_tri, n_vert;     /* live triangles and vertices */
+    int32_t tri_free, vert_free; /* heads of the free lists, -1 when empty */
+    int32_t *hv;    /* [3 tri_cap] origin vertex of each half-edge; hv[3t] = -1: free slot */
+    int32_t *ho;    /* [3 tri_cap] opposite half-edge, -1 on the border */
+    uint8_t *tflag; /* [tri_cap] scratch flags for the algorithms (region, pairing) */
+    uint16_t *vx;   /* [vert_cap] column of each vertex; WM_FREE: free slot */
+    uint16_t *vy;   /* [vert_cap] row */
+    int32_t *vh;    /* [vert_cap] one half-edge leaving the vertex */
+} wm_mesh;
+
+#define WM_NEXT(e) ((e) - (e) % 3 + ((e) + 1) % 3)
+#define WM_PREV(e) ((e) - (e) % 3 + ((e) + 2) % 3)
+
+/* Bytes of storage wm_mesh_init needs for tri_cap triangles and vert_cap vertices (0 if too big). */
+size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap);
+
+/* Vertex slots enough for any triangulation of the W x H rectangle with tri_cap triangles
+ * (Euler: V = (T + B + 2) / 2 with B <= 2(W + H) - 4 border vertices). */
+int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap);
+
+/* Lays out an empty mesh of a W x H grid in mem (bytes >= wm_mesh_bound).
+ * WM_ERR_ARG: W or H outside 2..WM_MAX_SIDE or a capacity < 1; WM_ERR_MEMORY: bytes too small. */
+int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t height, int32_t tri_cap,
+                 int32_t vert_cap);
+
+/* Fills an empty mesh from triangle arrays as wavemesh.initial makes them: xy[2 nv] (x, y pairs),
+ * tris[3 nt] counter-clockwise vertex indices.  scratch: 3 nt words, clobbered.
+ * WM_ERR_CAPACITY: nt > tri_cap or nv > vert_cap; WM_ERR_ARG: an index or coordinate out of range;
+ * WM_ERR_MESH: not a proper triangulation (orientation, edges, border, area, unused vertex). */
+int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt,
+                  uint32_t *scratch);
+
+/* Writes the mesh out: xy[2 vert_end] per vertex slot (free slots get -1, -1) and tris[3 n_tri],
+ * the live triangles in slot order as vertex slot numbers.  Returns n_tri. */
+int32_t wm_mesh_export(const wm_mesh *m, int32_t *xy, int32_t *tris);
+
+/* The full invariant check, O(n): live indices, counter-clockwise triangles, opposite half-edges
+ * that match (same edge, reversed), border half-edges on the rectangle's border, vh consistent,
+ * free lists sound, doubled areas adding up to 2 (W-1)(H-1), Euler's T = 2V - B - 2.
+ * WM_OK or WM_ERR_MESH.  Together these imply a proper triangulation (host/wavemesh/check.py gives
+ * the proof), except for two vertices at one position, which no operator can create. */
+int wm_mesh_check(const wm_mesh *m);
+
+/* Twice the signed area of triangle t (> 0 in a valid mesh). */
+int64_t wm_tri_area2(const wm_mesh *m, int32_t t);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Local operators (one .c each).  Each returns WM_OK, WM_ERR_CAPACITY (nothing changed),
+ * WM_ERR_REFUSED (precondition fails, nothing changed) or WM_ERR_ARG.  touched[] receives the
+ * triangles that changed or were created (up to 4) and the function returns their count through
+ * *n_touched when it is not NULL. */
+
+/* Splits edge e at grid point (x, y), which must lie strictly inside the edge (4.4, fig. 2.7(c)):
+ * the two triangles at the edge become four (two on the border). */
+int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched);
+
+/* Ternary subdivision (fig. 4.15): triangle t becomes three around the grid point (x, y), which must
+ * lie strictly inside t. */
+int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched);
+
+/* 1 when the quadrilateral of the two triangles at e is strictly convex (no three corners collinear),
+ * the condition for an edge swap (4.5.1); 0 otherwise and on the border. */
+int wm_edge_swappable(const wm_mesh *m, int32_t e);
+
+/* Edge swap (4.5.1, fig. 2.7(d)): replaces the diagonal e of a strictly convex quadrilateral by the
+ * other one. */
+int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched);
+
+/* Vertex movement (4.4.3): moves vertex v to grid point (x, y) when every triangle around v stays
+ * counter-clockwise; a border vertex may only slide along its side, a corner never moves. */
+int wm_vertex_move(wm_mesh *m, int32_t v, int32_t x, int32_t y);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The height field, its wavelet details, the parameters */
+
+/* Detail coefficients as wavemesh.haar computes them (docs/model.md, "Filter bank"): for each level
+ * m = 1..M, ceil(H / 2^m) rows of ceil(W / 2^m) cells, each cell three int32 (d1, d2, d3), levels
+ * one after the other from m = 1.  d is twice the difference of half-block means in sample counts. */
+int64_t wm_details_offset(int32_t width, int32_t height, int32_t m); /* int32 index of level m */
+int64_t wm_details_size(int32_t width, int32_t height, int32_t levels); /* int32s for levels 1..M */
+
+/* The same filter bank in C (for tests and for a device without the FPGA stage).  details receives
+ * wm_details_size() int32s; scratch holds wm_haar_scratch() uint16s.  WM_ERR_ARG on bad sizes. */
+int64_t wm_haar_scratch(int32_t width, int32_t height);
+int wm_haar(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
+            uint16_t *scratch);
+
+typedef struct wm_field {
+    int32_t width, height;    /* W, H */
+    int32_t levels;           /* M >= 1: the initial triangulation used level M */
+    const uint16_t *samples;  /* [H W] row-major 16-bit samples */
+    const int32_t *details;   /* levels 1..M as above (level M is not used by the refiner) */
+} wm_field;
+
+#define WM_METRIC_NORMAL 0   /* distance along the triangle's normal (the dissertation's) */
+#define WM_METRIC_VERTICAL 1 /* vertical distance */
+#define WM_NEIGHBOURHOOD_FACE 0   /* face-based neighbourhood (4.10), coefficient at the barycentre */
+#define WM_NEIGHBOURHOOD_VERTEX 1 /* vertex-based neighbourhood (4.9), coefficient at the vertex */
+
+/* Parameters (Table 4.3) as fixed-point numbers.  The host converts them (host/wavemesh/native.py)
+ * with the rounding stated for each, and wm_params_check rejects values out of range. */
+typedef struct wm_params {
+    int32_t metric;         /* WM_METRIC_* */
+    int32_t neighbourhood;  /* WM_NEIGHBOURHOOD_* */
+    int32_t iterations;     /* k: refinement iterations per level, 0..3 (0: only the error bound) */
+    int32_t max_triangles;  /* triangle budget, 0 = none (the storage is the only limit) */
+    uint32_t zeta;          /* zeta in sample counts, Q16.16, rounded down (conservative) */
+    uint32_t scale_m;       /* height scale s (height units per sample count) = scale_m / 2^scale_e, */
+    int32_t scale_e;        /*   scale_m < 2^16, scale_e in 0..126, rounded down (conservative) */
+    uint32_t delta_p;       /* pairing threshold delta_p (4.16), Q0.16, 0..65535 */
+    uint32_t alpha;         /* mesh regularity factor alpha (4.22), Q0.16, 0..65536 */
+    uint32_t delta_v;       /* vertex movement threshold delta_v (4.21), 3-D distance, Q16.16 */
+    uint32_t reserved;      /* 0 */
+    uint64_t delta_d;       /* detail energy threshold: e = d1^2 + d2^2 + d3^2 > delta_d (4.12), in
+                               coefficient units: floor(4 delta_d[height^2] / s^2) */
+} wm_params;
+
+/* WM_OK, or WM_ERR_ARG when a parameter is out of its range. */
+int wm_params_check(const wm_params *p);
+
+/* sizeof of the structures a foreign-function interface fills in (host/wavemesh/native.py checks
+ * its own layout against these): WM_ABI_PARAMS, WM_ABI_FIELD, WM_ABI_STATS; 0 for anything else. */
+#define WM_ABI_PARAMS 0
+#define WM_ABI_FIELD 1
+#define WM_ABI_STATS 2
+size_t wm_abi_size(int which);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* E(T): the largest distance from the samples in the closed triangle to its plane */
+
+/* E(T) of the triangle (x0,y0), (x1,y1), (x2,y2) (counter-clockwise, inside the grid) in sample
+ * counts, Q16.16, an upper bound of the exact value that exceeds it by at most about 2^-15
+ * relative + 2^-16 (docs/refiner.md, "E(T) in integers").  E(T) <= zeta exactly when the result is
+ * <= p->zeta (vertical metric), and never <= zeta when the exact value is > zeta (normal).
+ * (*wx, *wy) receive the first sample (row by row) with the largest distance, when not NULL. */
+uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                      int32_t *wx, int32_t *wy);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The refiner (4.6, step 3, and the error bound) */
+
+typedef struct wm_level_stats {
+    int32_t level;            /* resolution level m of this mesh (M-1 initial ... 0) */
+    int32_t vertices, triangles;
+    int32_t iterations;       /* iterations run (stops early when nothing is active) */
+    int32_t active;           /* active triangles, summed over iterations */
+    int32_t dependent;        /* dependent-region triangles, summed */
+    int32_t pairs;            /* valid pairs split (or resolved by a vertex movement) */
+    int32_t quasi_pairs;      /* quasi-valid pairs on the border */
+    int32_t unpaired;         /* unpaired triangles (ternary subdivision) */
+    int32_t edge_splits;      /* edge splits done (pairs, quasi-valid pairs, fall-backs) */
+    int32_t ternary_splits;   /* ternary subdivisions done */
+    int32_t moves;            /* vertex movements done instead of a split */
+    int32_t swaps;            /* edge swaps (regularisation) */
+    int32_t bound_splits;     /* splits of the error-bound loop (level 0 only) */
+    int32_t budget_hit;       /* 1: the triangle budget stopped a split */
+    int32_t over;             /* triangles with E(T) > zeta */
+    uint32_t e_max;           /* max E(T), Q16.16 sample counts, chosen metric (upper bound) */
+    int32_t reserved;
+} wm_level_stats;
+
+typedef struct wm_refiner wm_refiner;
+
+/* Bytes the refiner needs for a W x H field and a mesh of up to tri_cap triangles (0: overflow). */
+size_t wm_refine_bound(int32_t width, int32_t height, int32_t tri_cap);
+
+/* The most triangles any triangulation of the W x H grid with grid-sample vertices can have,
+ * 2 (W-1) (H-1): a tri_cap that never runs out. */
+int32_t wm_tri_cap_max(int32_t width, int32_t height);
+
+/* Sets up a refiner in mem (bytes >= wm_refine_bound) from the initial triangulation (xy, tris as
+ * wm_mesh_build) and computes E(T) of every triangle.  *out points into mem.  The field and its
+ * arrays must stay alive and unchanged while the refiner is used.  Errors: WM_ERR_ARG (sizes,
+ * parameters), WM_ERR_MEMORY, WM_ERR_CAPACITY (nt > tri_cap), WM_ERR_MESH. */
+int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f, const wm_params *p,
+                   const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, int32_t tri_cap);
+
+/* Runs the next resolution level: level m = current - 1 with k iterations of region selection,
+ * pairing, shape-preserving split and regularisation on the details of decomposition level m + 1;
+ * at level 0 it then refines every triangle with E(T) > zeta until none is left (or the budget
+ * stops it).  With M = 1 the only step is the error bound at level 0.  Fills *st (may be NULL).
+ * Returns WM_OK, WM_ERR_STATE when already done, WM_ERR_CAPACITY when the storage ran out (the mesh
+ * is valid and can be exported; the refiner is then done). */
+int wm_refine_step(wm_refiner *r, wm_level_stats *st);
+
+/* Statistics of the current mesh (level, counts, E_max, over) without running anything. */
+void wm_refine_stats(const wm_refiner *r, wm_level_stats *st);
+
+int32_t wm_refine_level(const wm_refiner *r); /* current resolution level */
+int wm_refine_done(const wm_refiner *r);      /* 1 after level 0 and the error bound */
+const wm_mesh *wm_refine_mesh(const wm_refiner *r);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* WAVEMESH_H */

@@ -1,0 +1,84 @@
+/* Edge split (dissertation 2.5.1, fig. 2.7(c); used by the shape-preserving split of 4.4).
+ *
+ *          c                        c
+ *         / \                     / | \
+ *        / T1\                   /T1|T3\
+ *       a --e-> b       ->      a --p-- b        e = a->b in T1 = (a, b, c),
+ *        \ T2/                   \T4|T2/         f = b->a in T2 = (b, a, d)
+ *         \ /                     \ | /
+ *          d                        d
+ *
+ * p is a grid point strictly inside the edge, so the four triangles are counter-clockwise and no
+ * other vertex can sit there (it would be a T-junction of the valid mesh).  On the border (no T2)
+ * T1 becomes T1 and T3.  T1 and T2 keep their slots; T3 and T4 are new. */
+#include "wm_internal.h"
+
+int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
+{
+    int32_t t1, t2, t3, t4 = -1, f, a, b, c, d = -1, p;
+    int32_t o_bc, o_ca, o_ad = -1, o_db = -1;
+    int32_t ax, ay, bx, by;
+    int64_t dx, dy, px, py;
+    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    a = m->hv[e];
+    b = wm_dest(m, e);
+    ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
+    /* (x, y) strictly between a and b on the segment. */
+    dx = (int64_t)bx - ax, dy = (int64_t)by - ay, px = (int64_t)x - ax, py = (int64_t)y - ay;
+    if (px * dy - py * dx != 0) return WM_ERR_REFUSED;
+    if (px * dx + py * dy <= 0 || px * dx + py * dy >= dx * dx + dy * dy) return WM_ERR_REFUSED;
+    f = m->ho[e];
+    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < (f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
+    if (m->n_vert >= m->vert_cap) return WM_ERR_CAPACITY;
+
+    t1 = WM_TRI(e);
+    c = m->hv[WM_PREV(e)];
+    o_bc = m->ho[WM_NEXT(e)];
+    o_ca = m->ho[WM_PREV(e)];
+    if (f >= 0) {
+        d = m->hv[WM_PREV(f)];
+        o_ad = m->ho[WM_NEXT(f)];
+        o_db = m->ho[WM_PREV(f)];
+    }
+    p = wm_vert_alloc(m, x, y);
+    t3 = wm_tri_alloc(m);
+    WM_ASSERT(p >= 0 && t3 >= 0);
+    /* T1 = (a, p, c), T3 = (p, b, c) */
+    wm_tri_set(m, t1, a, p, c);
+    wm_tri_set(m, t3, p, b, c);
+    wm_link(m, 3 * t1 + 1, 3 * t3 + 2); /* p->c with c->p */
+    wm_link(m, 3 * t1 + 2, o_ca);       /* c->a */
+    wm_link(m, 3 * t3 + 1, o_bc);       /* b->c */
+    if (f >= 0) {
+        t2 = WM_TRI(f);
+        t4 = wm_tri_alloc(m);
+        WM_ASSERT(t4 >= 0);
+        /* T2 = (b, p, d), T4 = (p, a, d) */
+        wm_tri_set(m, t2, b, p, d);
+        wm_tri_set(m, t4, p, a, d);
+        wm_link(m, 3 * t2 + 0, 3 * t3 + 0); /* b->p with p->b */
+        wm_link(m, 3 * t2 + 1, 3 * t4 + 2); /* p->d with d->p */
+        wm_link(m, 3 * t2 + 2, o_db);       /* d->b */
+        wm_link(m, 3 * t4 + 0, 3 * t1 + 0); /* p->a with a->p */
+        wm_link(m, 3 * t4 + 1, o_ad);       /* a->d */
+        wm_tri_claim(m, t2);
+        wm_tri_claim(m, t4);
+    } else {
+        t2 = -1;
+        wm_link(m, 3 * t1 + 0, -1);
+        wm_link(m, 3 * t3 + 0, -1);
+    }
+    wm_tri_claim(m, t1);
+    wm_tri_claim(m, t3);
+    if (touched) {
+        touched[0] = t1;
+        touched[1] = t3;
+        if (f >= 0) {
+            touched[2] = t2;
+            touched[3] = t4;
+        }
+    }
+    if (n_touched) *n_touched = f >= 0 ? 4 : 2;
+    WM_CHECK_MESH(m);
+    return WM_OK;
+}

@@ -1,0 +1,67 @@
+/* Edge swap (dissertation 2.5.1, fig. 2.7(d); the regularisation of 4.5.1).
+ *
+ *          c                         c
+ *         / \                       /|\
+ *        / T1\                     / | \
+ *       a --e-> b       ->         a T1|T2 b      T1 = (a, d, c), T2 = (d, b, c)
+ *        \ T2/                     \ | /
+ *         \ /                       \|/
+ *          d                         d
+ *
+ *   e = a->b in T1 = (a, b, c), f = b->a in T2 = (b, a, d): the diagonal a-b becomes c-d.
+ *
+ * Only for a strictly convex quadrilateral a-d-b-c (no three corners collinear, 4.5.1): then both
+ * new triangles are counter-clockwise, and no vertex or edge outside the quadrilateral changes. */
+#include "wm_internal.h"
+
+int wm_edge_swappable(const wm_mesh *m, int32_t e)
+{
+    int32_t f, a, b, c, d;
+    int64_t s1, s2;
+    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return 0;
+    f = m->ho[e];
+    if (f < 0) return 0;
+    a = m->hv[e];
+    b = m->hv[f];
+    c = m->hv[WM_PREV(e)];
+    d = m->hv[WM_PREV(f)];
+    /* a and b strictly on opposite sides of the line c-d (c and d are on opposite sides of a-b,
+     * strictly, because both triangles are counter-clockwise). */
+    s1 = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[a], m->vy[a]);
+    s2 = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[b], m->vy[b]);
+    return (s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0);
+}
+
+int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
+{
+    int32_t f, t1, t2, a, b, c, d, o_bc, o_ca, o_ad, o_db;
+    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    if (!wm_edge_swappable(m, e)) return WM_ERR_REFUSED;
+    f = m->ho[e];
+    t1 = WM_TRI(e);
+    t2 = WM_TRI(f);
+    a = m->hv[e];
+    b = m->hv[f];
+    c = m->hv[WM_PREV(e)];
+    d = m->hv[WM_PREV(f)];
+    o_bc = m->ho[WM_NEXT(e)];
+    o_ca = m->ho[WM_PREV(e)];
+    o_ad = m->ho[WM_NEXT(f)];
+    o_db = m->ho[WM_PREV(f)];
+    wm_tri_set(m, t1, a, d, c);
+    wm_tri_set(m, t2, d, b, c);
+    wm_link(m, 3 * t1 + 0, o_ad);       /* a->d */
+    wm_link(m, 3 * t1 + 1, 3 * t2 + 2); /* d->c with c->d */
+    wm_link(m, 3 * t1 + 2, o_ca);       /* c->a */
+    wm_link(m, 3 * t2 + 0, o_db);       /* d->b */
+    wm_link(m, 3 * t2 + 1, o_bc);       /* b->c */
+    wm_tri_claim(m, t1);
+    wm_tri_claim(m, t2);
+    if (touched) {
+        touched[0] = t1;
+        touched[1] = t2;
+    }
+    if (n_touched) *n_touched = 2;
+    WM_CHECK_MESH(m);
+    return WM_OK;
+}

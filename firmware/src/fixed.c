@@ -1,0 +1,139 @@
+/* Exact integer and fixed-point helpers.  Everything here gives the same bits on any C99 target
+ * with 32- or 64-bit registers: no floating point, no signed right shifts, no division of negative
+ * numbers except through wm_floor_div / wm_ceil_div. */
+#include "wm_internal.h"
+
+uint64_t wm_isqrt64(uint64_t x)
+{
+    uint64_t r = 0, bit = (uint64_t)1 << 62;
+    while (bit > x) bit >>= 2;
+    while (bit) {
+        if (x >= r + bit) {
+            x -= r + bit;
+            r = (r >> 1) + bit;
+        } else {
+            r >>= 1;
+        }
+        bit >>= 2;
+    }
+    return r;
+}
+
+int32_t wm_gcd(int32_t a, int32_t b)
+{
+    uint32_t x = (uint32_t)(a < 0 ? -(int64_t)a : a), y = (uint32_t)(b < 0 ? -(int64_t)b : b);
+    while (y) {
+        uint32_t t = x % y;
+        x = y;
+        y = t;
+    }
+    return (int32_t)x;
+}
+
+int64_t wm_floor_div(int64_t a, int64_t b)
+{
+    WM_ASSERT(b > 0);
+    return a >= 0 ? a / b : -((-a + b - 1) / b);
+}
+
+int64_t wm_ceil_div(int64_t a, int64_t b)
+{
+    WM_ASSERT(b > 0);
+    return a >= 0 ? (a + b - 1) / b : -((-a) / b);
+}
+
+/* The 128-bit product a b as (hi, lo), from 32-bit halves. */
+static void mul128(uint64_t a, uint64_t b, uint64_t *hi, uint64_t *lo)
+{
+    uint64_t a0 = a & 0xFFFFFFFFu, a1 = a >> 32, b0 = b & 0xFFFFFFFFu, b1 = b >> 32;
+    uint64_t p00 = a0 * b0, p01 = a0 * b1, p10 = a1 * b0, p11 = a1 * b1;
+    uint64_t mid = (p00 >> 32) + (p01 & 0xFFFFFFFFu) + (p10 & 0xFFFFFFFFu);
+    *lo = (mid << 32) | (p00 & 0xFFFFFFFFu);
+    *hi = p11 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+}
+
+int wm_cmp_mul(uint64_t a, uint64_t b, uint64_t c, uint64_t d)
+{
+    uint64_t h1, l1, h2, l2;
+    mul128(a, b, &h1, &l1);
+    mul128(c, d, &h2, &l2);
+    if (h1 != h2) return h1 < h2 ? -1 : 1;
+    if (l1 != l2) return l1 < l2 ? -1 : 1;
+    return 0;
+}
+
+/* Shift toward zero, the same on every target (no implementation-defined signed shift). */
+static int64_t shr0(int64_t v, int s) { return v >= 0 ? (int64_t)((uint64_t)v >> s) : -(int64_t)((uint64_t)(-v) >> s); }
+
+/* atan(2^-i) in Q16 radians, i = 0..16. */
+static const int32_t atan_q16[17] = {51472, 30386, 16055, 8150, 4091, 2047, 1024, 512, 256,
+                                     128,   64,    32,    16,   8,    4,    2,    1};
+#define WM_HALF_PI_Q16 102944
+
+int32_t wm_angle_q16(int64_t x, int64_t y)
+{
+    int32_t z = 0;
+    WM_ASSERT(y >= 0);
+    /* Scale both down (toward zero, exactly the same everywhere) below 2^28: CORDIC grows them by
+     * 1.65 and adds shifted copies, all inside int64. */
+    while (x > ((int64_t)1 << 28) || x < -((int64_t)1 << 28) || y > ((int64_t)1 << 28)) {
+        x = shr0(x, 1);
+        y = shr0(y, 1);
+    }
+    if (x < 0) { /* rotate by -90 degrees: (x, y) -> (y, -x), angle - 90 */
+        int64_t t = x;
+        x = y;
+        y = -t;
+        z = WM_HALF_PI_Q16;
+    }
+    /* Scale small vectors up (exactly) for precision: CORDIC's shifts then keep 27 bits. */
+    while (x < ((int64_t)1 << 27) && x > -((int64_t)1 << 27) && y < ((int64_t)1 << 27) && (x | y) != 0) {
+        x *= 2;
+        y *= 2;
+    }
+    for (int i = 0; i < 17; i++) {
+        int64_t xs = shr0(x, i), ys = shr0(y, i);
+        if (y > 0) {
+            x += ys;
+            y -= xs;
+            z += atan_q16[i];
+        } else if (y < 0) {
+            x -= ys;
+            y += xs;
+            z -= atan_q16[i];
+        } else {
+            break;
+        }
+    }
+    return z < 0 ? 0 : z;
+}
+
+int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
+{
+    int32_t best = 0x7FFFFFFF;
+    for (int k = 0; k < 3; k++) {
+        int a = k, b = (k + 1) % 3, c = (k + 2) % 3;
+        int64_t ux = x[b] - x[a], uy = y[b] - y[a], vx = x[c] - x[a], vy = y[c] - y[a];
+        int64_t cross = ux * vy - uy * vx, dot = ux * vx + uy * vy;
+        int32_t ang = wm_angle_q16(dot, cross < 0 ? -cross : cross);
+        if (ang < best) best = ang;
+    }
+    return best;
+}
+
+uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap)
+{
+    uint64_t prod, q, r, res;
+    int k = sh - p->scale_e;
+    WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && p->scale_m < 65536u && sh <= 16);
+    prod = n * p->scale_m; /* < 2^63 */
+    q = prod / d;
+    r = prod % d;
+    if (k <= 0) {
+        res = (-k >= 64) ? 0 : q >> (-k);
+    } else {
+        if (q > (cap >> k)) return cap;
+        res = (q << k) + ((r << k) / d); /* r < d <= 2^47 / ... and k <= 16: no overflow */
+    }
+    return res > cap ? cap : res;
+}

@@ -1,0 +1,251 @@
+/* The index-based half-edge mesh: layout, building from triangle arrays, export, invariant check,
+ * slot allocation with free lists (room for the reduction operators of a later issue). */
+#include "wm_internal.h"
+
+const char *wm_strerror(int code)
+{
+    switch (code) {
+    case WM_OK: return "ok";
+    case WM_ERR_ARG: return "argument out of range";
+    case WM_ERR_MEMORY: return "storage smaller than the bound";
+    case WM_ERR_CAPACITY: return "capacity exhausted";
+    case WM_ERR_MESH: return "not a proper triangulation of the grid rectangle";
+    case WM_ERR_STATE: return "refiner finished or not initialised";
+    case WM_ERR_REFUSED: return "operator precondition fails";
+    default: return "unknown error";
+    }
+}
+
+#define ALIGN8(n) (((n) + 7u) & ~(uint64_t)7u)
+
+static uint64_t mesh_bytes(int32_t tri_cap, int32_t vert_cap)
+{
+    uint64_t t = (uint64_t)tri_cap, v = (uint64_t)vert_cap;
+    return ALIGN8(12 * t) + ALIGN8(12 * t) + ALIGN8(4 * v) + ALIGN8(2 * v) + ALIGN8(2 * v) + ALIGN8(t);
+}
+
+size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap)
+{
+    uint64_t b;
+    if (tri_cap < 1 || vert_cap < 3 || tri_cap > 0x15555554 || vert_cap > 0x3FFFFFFF) return 0;
+    b = mesh_bytes(tri_cap, vert_cap);
+    if (b > (uint64_t)(size_t)-1) return 0;
+    return (size_t)b;
+}
+
+int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap)
+{
+    int64_t v = (int64_t)tri_cap / 2 + (int64_t)width + (int64_t)height + 2;
+    return v > 0x3FFFFFFF ? 0x3FFFFFFF : (int32_t)v;
+}
+
+int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t height, int32_t tri_cap,
+                 int32_t vert_cap)
+{
+    uint8_t *p = (uint8_t *)mem;
+    size_t need;
+    if (width < 2 || height < 2 || width > WM_MAX_SIDE || height > WM_MAX_SIDE) return WM_ERR_ARG;
+    need = wm_mesh_bound(tri_cap, vert_cap);
+    if (need == 0) return WM_ERR_ARG;
+    if (mem == NULL || bytes < need) return WM_ERR_MEMORY;
+    m->width = width;
+    m->height = height;
+    m->tri_cap = tri_cap;
+    m->vert_cap = vert_cap;
+    m->tri_end = m->vert_end = m->n_tri = m->n_vert = 0;
+    m->tri_free = m->vert_free = -1;
+    m->hv = (int32_t *)(void *)p;
+    p += ALIGN8(12 * (uint64_t)tri_cap);
+    m->ho = (int32_t *)(void *)p;
+    p += ALIGN8(12 * (uint64_t)tri_cap);
+    m->vh = (int32_t *)(void *)p;
+    p += ALIGN8(4 * (uint64_t)vert_cap);
+    m->vx = (uint16_t *)(void *)p;
+    p += ALIGN8(2 * (uint64_t)vert_cap);
+    m->vy = (uint16_t *)(void *)p;
+    p += ALIGN8(2 * (uint64_t)vert_cap);
+    m->tflag = p;
+    return WM_OK;
+}
+
+int32_t wm_tri_alloc(wm_mesh *m)
+{
+    int32_t t;
+    if (m->tri_free >= 0) {
+        t = m->tri_free;
+        m->tri_free = m->ho[3 * t];
+    } else {
+        if (m->tri_end >= m->tri_cap) return -1;
+        t = m->tri_end++;
+    }
+    m->n_tri++;
+    m->tflag[t] = 0;
+    m->hv[3 * t] = m->hv[3 * t + 1] = m->hv[3 * t + 2] = 0;
+    m->ho[3 * t] = m->ho[3 * t + 1] = m->ho[3 * t + 2] = -1;
+    return t;
+}
+
+int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y)
+{
+    int32_t v;
+    if (m->vert_free >= 0) {
+        v = m->vert_free;
+        m->vert_free = m->vh[v];
+    } else {
+        if (m->vert_end >= m->vert_cap) return -1;
+        v = m->vert_end++;
+    }
+    m->n_vert++;
+    m->vx[v] = (uint16_t)x;
+    m->vy[v] = (uint16_t)y;
+    m->vh[v] = -1;
+    return v;
+}
+
+void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
+{
+    m->hv[3 * t] = a;
+    m->hv[3 * t + 1] = b;
+    m->hv[3 * t + 2] = c;
+}
+
+void wm_tri_claim(wm_mesh *m, int32_t t)
+{
+    for (int32_t e = 3 * t; e < 3 * t + 3; e++) m->vh[m->hv[e]] = e;
+}
+
+int32_t wm_fan_first(const wm_mesh *m, int32_t v)
+{
+    int32_t start = m->vh[v], e = start;
+    for (;;) {
+        int32_t c = wm_rot_cw(m, e);
+        if (c < 0) return e;
+        if (c == start) return start;
+        e = c;
+    }
+}
+
+int64_t wm_tri_area2(const wm_mesh *m, int32_t t)
+{
+    int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2];
+    return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
+}
+
+int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt,
+                  uint32_t *scratch)
+{
+    const uint32_t nil = 0xFFFFFFFFu;
+    if (m->tri_end != 0 || m->vert_end != 0) return WM_ERR_ARG;
+    if (nv < 3 || nt < 1 || xy == NULL || tris == NULL || scratch == NULL) return WM_ERR_ARG;
+    if (nt > m->tri_cap || nv > m->vert_cap) return WM_ERR_CAPACITY;
+    for (int32_t v = 0; v < nv; v++) {
+        int32_t x = xy[2 * v], y = xy[2 * v + 1];
+        if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_ARG;
+        m->vx[v] = (uint16_t)x;
+        m->vy[v] = (uint16_t)y;
+        m->vh[v] = -1;
+    }
+    for (int32_t e = 0; e < 3 * nt; e++) {
+        if (tris[e] < 0 || tris[e] >= nv) return WM_ERR_ARG;
+        m->hv[e] = tris[e];
+        m->ho[e] = -1;
+    }
+    for (int32_t t = 0; t < nt; t++) m->tflag[t] = 0;
+    m->vert_end = m->n_vert = nv;
+    m->tri_end = m->n_tri = nt;
+    /* Buckets of half-edges by origin vertex: heads in vh, links in scratch. */
+    for (int32_t e = 0; e < 3 * nt; e++) {
+        int32_t a = m->hv[e];
+        scratch[e] = m->vh[a] < 0 ? nil : (uint32_t)m->vh[a];
+        m->vh[a] = e;
+    }
+    for (int32_t e = 0; e < 3 * nt; e++) {
+        int32_t a = m->hv[e], b = wm_dest(m, e), found = -1;
+        if (m->vh[b] < 0) continue;
+        for (uint32_t f = (uint32_t)m->vh[b]; f != nil; f = scratch[f]) {
+            if (wm_dest(m, (int32_t)f) != a) continue;
+            if (found >= 0) return WM_ERR_MESH; /* edge used by more than two triangles */
+            found = (int32_t)f;
+        }
+        m->ho[e] = found;
+    }
+    for (int32_t v = 0; v < nv; v++) m->vh[v] = -1;
+    for (int32_t e = 3 * nt - 1; e >= 0; e--) m->vh[m->hv[e]] = e; /* the lowest half-edge */
+    for (int32_t v = 0; v < nv; v++)
+        if (m->vh[v] < 0) return WM_ERR_MESH; /* unused vertex */
+    for (int32_t e = 0; e < 3 * nt; e++) /* a repeated directed edge breaks the symmetry */
+        if (m->ho[e] >= 0 && m->ho[m->ho[e]] != e) return WM_ERR_MESH;
+    return wm_mesh_check(m);
+}
+
+int32_t wm_mesh_export(const wm_mesh *m, int32_t *xy, int32_t *tris)
+{
+    int32_t n = 0;
+    for (int32_t v = 0; v < m->vert_end; v++) {
+        int free_slot = m->vx[v] == WM_FREE;
+        xy[2 * v] = free_slot ? -1 : m->vx[v];
+        xy[2 * v + 1] = free_slot ? -1 : m->vy[v];
+    }
+    for (int32_t t = 0; t < m->tri_end; t++) {
+        if (m->hv[3 * t] < 0) continue;
+        tris[3 * n] = m->hv[3 * t];
+        tris[3 * n + 1] = m->hv[3 * t + 1];
+        tris[3 * n + 2] = m->hv[3 * t + 2];
+        n++;
+    }
+    return n;
+}
+
+int wm_mesh_check_line(const wm_mesh *m)
+{
+    int64_t area = 0;
+    int32_t live_t = 0, live_v = 0, border_v = 0, nfree = 0;
+    if (m->tri_end < 0 || m->tri_end > m->tri_cap || m->vert_end < 0 || m->vert_end > m->vert_cap)
+        return __LINE__;
+    /* Free lists: every entry a free slot, no cycle longer than the slots. */
+    for (int32_t t = m->tri_free; t >= 0; t = m->ho[3 * t]) {
+        if (t >= m->tri_end || m->hv[3 * t] >= 0 || ++nfree > m->tri_end) return __LINE__;
+    }
+    nfree = 0;
+    for (int32_t v = m->vert_free; v >= 0; v = m->vh[v]) {
+        if (v >= m->vert_end || m->vx[v] != WM_FREE || ++nfree > m->vert_end) return __LINE__;
+    }
+    for (int32_t v = 0; v < m->vert_end; v++) {
+        int32_t e = m->vh[v];
+        if (m->vx[v] == WM_FREE) continue;
+        live_v++;
+        if (m->vx[v] >= m->width || m->vy[v] >= m->height) return __LINE__;
+        if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0 || m->hv[e] != v) return __LINE__;
+        if (wm_on_border(m, m->vx[v], m->vy[v])) border_v++;
+    }
+    for (int32_t t = 0; t < m->tri_end; t++) {
+        int64_t a2;
+        if (m->hv[3 * t] < 0) continue;
+        live_t++;
+        for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
+            int32_t a = m->hv[e], b, o = m->ho[e];
+            if (a < 0 || a >= m->vert_end || m->vx[a] == WM_FREE) return __LINE__;
+            b = wm_dest(m, e);
+            if (b < 0 || b >= m->vert_end || m->vx[b] == WM_FREE) return __LINE__;
+            if (o >= 0) {
+                if (o >= 3 * m->tri_end || m->hv[3 * WM_TRI(o)] < 0 || WM_TRI(o) == t) return __LINE__;
+                if (m->ho[o] != e || m->hv[o] != b || wm_dest(m, o) != a) return __LINE__;
+            } else {
+                int32_t ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
+                int on = (ax == bx && (ax == 0 || ax == m->width - 1)) ||
+                         (ay == by && (ay == 0 || ay == m->height - 1));
+                if (!on) return __LINE__;
+            }
+        }
+        a2 = wm_tri_area2(m, t);
+        if (a2 <= 0) return __LINE__;
+        area += a2;
+    }
+    if (live_t != m->n_tri || live_v != m->n_vert) return __LINE__;
+    if (area != 2 * (int64_t)(m->width - 1) * (int64_t)(m->height - 1)) return __LINE__;
+    if (live_t != 2 * live_v - border_v - 2) return __LINE__;
+    return 0;
+}
+
+int wm_mesh_check(const wm_mesh *m) { return wm_mesh_check_line(m) == 0 ? WM_OK : WM_ERR_MESH; }
+

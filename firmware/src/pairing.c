@@ -1,0 +1,302 @@
+/* Shape-preserving edge split (dissertation 4.4): gradient-consistent pairing (eq. 4.16) with
+ * quasi-valid pairs on the border, the split point (eq. 4.17-4.20) snapped to a grid sample, vertex
+ * movement (eq. 4.21) and the ternary subdivision of unpaired triangles.
+ *
+ *          c                      The gradient g of a triangle is (d1, d2) of its barycentre's
+ *         /|\   g1 -->            coefficient (eq. 4.15: d ~ -2^m grad f; the sign does not
+ *        / | \                    matter).  T1 and T2 pair across c = b - a when
+ *       a  |  b   l1: through         |g_i . c| > delta_p |g_i| |c|,  i = 1, 2        (4.16)
+ *        \ | /    T1's barycentre  and a-d-b-c is convex.  Each triangle's line through its
+ *         \|/     along g1-perp    barycentre along g-perp (4.19) meets the common edge at t_i
+ *          d      meets a-b at t1  (4.20); the split point is at t = (t1 + t2) / 2, snapped. */
+#include "wm_internal.h"
+
+/* (d1, d2) of triangle t's barycentre cell at level m, scaled down (toward zero) below 2^12 so
+ * that every product below fits in 64 bits; (0, 0) when there is no gradient. */
+static void gradient(const wm_refiner *r, int32_t m, int32_t t, int64_t g[2])
+{
+    int32_t x[3], y[3];
+    const int32_t *d;
+    wm_tri_xy(&r->mesh, t, x, y);
+    d = wm_detail_at(&r->field, m, (x[0] + x[1] + x[2]) / 3, (y[0] + y[1] + y[2]) / 3);
+    g[0] = d[0];
+    g[1] = d[1];
+    while (g[0] >= 4096 || g[0] <= -4096 || g[1] >= 4096 || g[1] <= -4096) {
+        g[0] /= 2; /* C99: truncation toward zero, the same everywhere */
+        g[1] /= 2;
+    }
+}
+
+/* Criterion (4.16) for one triangle: |g . c| > delta_p |g| |c|, exactly:
+ * (g . c)^2 2^32 > delta_p^2 |g|^2 |c|^2 with delta_p in Q0.16. */
+static int consistent(const wm_refiner *r, const int64_t g[2], int64_t cx, int64_t cy)
+{
+    int64_t dot = g[0] * cx + g[1] * cy;
+    uint64_t gg = (uint64_t)(g[0] * g[0] + g[1] * g[1]), cc = (uint64_t)(cx * cx + cy * cy);
+    uint64_t P = r->params.delta_p;
+    if (gg == 0 || cc == 0) return 0;
+    return wm_cmp_mul((uint64_t)(dot * dot), (uint64_t)1 << 32, P * P, gg * cc) > 0;
+}
+
+static void edge_vec(const wm_mesh *me, int32_t e, int64_t *cx, int64_t *cy)
+{
+    int32_t a = me->hv[e], b = wm_dest(me, e);
+    *cx = (int64_t)me->vx[b] - me->vx[a];
+    *cy = (int64_t)me->vy[b] - me->vy[a];
+}
+
+/* Quadrilateral a-d-b-c of the two triangles at e convex (strictly or not, fig. 4.10). */
+static int convex(const wm_mesh *me, int32_t e)
+{
+    int32_t f = me->ho[e], a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
+    int64_t s1 = wm_orient(me->vx[c], me->vy[c], me->vx[d], me->vy[d], me->vx[a], me->vy[a]);
+    int64_t s2 = wm_orient(me->vx[c], me->vy[c], me->vx[d], me->vy[d], me->vx[b], me->vy[b]);
+    return !((s1 > 0 && s2 > 0) || (s1 < 0 && s2 < 0));
+}
+
+/* The best edge of active triangle t for a pair with a partner having flag `want` (0: the border,
+ * a quasi-valid pair with an imaginary triangle of t's gradient): the longest consistent edge,
+ * the first slot on ties.  -1 when none. */
+static int32_t best_edge(const wm_refiner *r, int32_t m, int32_t t, uint8_t want)
+{
+    const wm_mesh *me = &r->mesh;
+    int64_t g[2], best_len = -1;
+    int32_t best = -1;
+    gradient(r, m, t, g);
+    for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
+        int32_t o = me->ho[e];
+        int64_t cx, cy, len;
+        edge_vec(me, e, &cx, &cy);
+        len = cx * cx + cy * cy;
+        if (len <= best_len || !consistent(r, g, cx, cy)) continue;
+        if (want == 0) {
+            if (o >= 0) continue;
+        } else {
+            int64_t g2[2];
+            int32_t u;
+            if (o < 0) continue;
+            u = WM_TRI(o);
+            if (!(me->tflag[u] & want) || (me->tflag[u] & WM_F_PLAN) || !convex(me, e)) continue;
+            gradient(r, m, u, g2);
+            if (!consistent(r, g2, cx, cy)) continue;
+        }
+        best = e;
+        best_len = len;
+    }
+    return best;
+}
+
+int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t n = 0;
+    /* Pass 1: active with active; pass 2: leftovers with the dependent region (N1); pass 3:
+     * quasi-valid pairs on the border; pass 4: unpaired (ternary subdivision). */
+    static const uint8_t partner[3] = {WM_F_ACTIVE, WM_F_DEP, 0};
+    for (int pass = 0; pass < 3; pass++) {
+        for (int32_t t = 0; t < me->tri_end; t++) {
+            int32_t e;
+            if ((me->tflag[t] & (WM_F_ACTIVE | WM_F_PLAN)) != WM_F_ACTIVE) continue;
+            e = best_edge(r, m, t, partner[pass]);
+            if (e < 0) continue;
+            me->tflag[t] |= WM_F_PLAN;
+            if (me->ho[e] >= 0) me->tflag[WM_TRI(me->ho[e])] |= WM_F_PLAN;
+            r->list[n++] = e;
+            if (st) {
+                if (pass < 2) st->pairs++;
+                else st->quasi_pairs++;
+            }
+        }
+    }
+    for (int32_t t = 0; t < me->tri_end; t++) {
+        if ((me->tflag[t] & (WM_F_ACTIVE | WM_F_PLAN)) != WM_F_ACTIVE) continue;
+        me->tflag[t] |= WM_F_PLAN;
+        r->list[n++] = -(t + 1);
+        if (st) st->unpaired++;
+    }
+    return n;
+}
+
+/* Where triangle t's line through its barycentre along g-perp (4.19) meets the line of edge e
+ * (a -> b), as t in [0, 1] along the edge, Q16: t = g . (3 c_t - 3 a) / (3 g . (b - a)), clamped
+ * (4.20 solved in the edge's parameter).  One half when g is parallel to the edge. */
+static int64_t crossing(const wm_refiner *r, int32_t m, int32_t t, int32_t e)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t x[3], y[3], a = me->hv[e];
+    int64_t g[2], cx, cy, num, den;
+    gradient(r, m, t, g);
+    wm_tri_xy(me, t, x, y);
+    edge_vec(me, e, &cx, &cy);
+    num = g[0] * ((int64_t)x[0] + x[1] + x[2] - 3 * (int64_t)me->vx[a]) +
+          g[1] * ((int64_t)y[0] + y[1] + y[2] - 3 * (int64_t)me->vy[a]);
+    den = 3 * (g[0] * cx + g[1] * cy);
+    if (den == 0) return 32768;
+    if (den < 0) {
+        num = -num;
+        den = -den;
+    }
+    if (num <= 0) return 0;
+    if (num >= den) return 65536;
+    return (num * 65536) / den;
+}
+
+/* 3-D distance of grid points p and q below delta_v (4.21): dx^2 + dy^2 + (s dz)^2 < delta_v^2,
+ * in Q32 (height difference s dz rounded down to Q16.16). */
+static uint64_t dist2_q32(const wm_refiner *r, int32_t px, int32_t py, int32_t qx, int32_t qy)
+{
+    const wm_field *f = &r->field;
+    int64_t dx = (int64_t)px - qx, dy = (int64_t)py - qy;
+    int64_t dz = (int64_t)f->samples[(int64_t)py * f->width + px] - f->samples[(int64_t)qy * f->width + qx];
+    uint64_t hz = wm_scale_mul(&r->params, (uint64_t)(dz < 0 ? -dz : dz), 1, 16, 0xFFFFFFFFu);
+    uint64_t planar = (uint64_t)(dx * dx + dy * dy) << 32, vert = hz * hz;
+    return planar > UINT64_MAX - vert ? UINT64_MAX : planar + vert;
+}
+
+static void touch_fan(wm_refiner *r, int32_t v)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t first = wm_fan_first(me, v), e = first;
+    do {
+        wm_touch(r, WM_TRI(e));
+        e = wm_rot_ccw(me, e);
+    } while (e >= 0 && e != first);
+}
+
+static int split_edge_at(wm_refiner *r, int32_t e, int32_t x, int32_t y, wm_level_stats *st)
+{
+    int32_t touched[4], nt = 0;
+    int room = wm_room(r, r->mesh.ho[e] >= 0 ? 2 : 1), rc;
+    if (room != 0) return room < 0 ? room : WM_OK;
+    rc = wm_edge_split(&r->mesh, e, x, y, touched, &nt);
+    if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_OK;
+    for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
+    if (st) st->edge_splits++;
+    return WM_OK;
+}
+
+int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t x[3], y[3], bx = -1, by = -1, ymin, ymax, best_e = -1;
+    int64_t A[3], B[3], C[3], sx, sy, best = -1, best_len = -1;
+    wm_tri_xy(me, t, x, y);
+    sx = (int64_t)x[0] + x[1] + x[2];
+    sy = (int64_t)y[0] + y[1] + y[2];
+    ymin = ymax = y[0];
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        A[k] = -((int64_t)y[k2] - y[k1]);
+        B[k] = (int64_t)x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        if (y[k] < ymin) ymin = y[k];
+        if (y[k] > ymax) ymax = y[k];
+    }
+    /* The interior grid point nearest the barycentre: |3p - (v0 + v1 + v2)|^2 smallest, the first
+     * row and then the smaller x on ties.  Per row the interior run is E_k >= 1 for all k. */
+    for (int32_t py = ymin; py <= ymax; py++) {
+        int64_t lo = INT64_MIN / 4, hi = INT64_MAX / 4, px, d;
+        int empty = 0;
+        for (int k = 0; k < 3; k++) {
+            int64_t num = B[k] * py + C[k] - 1; /* A x + num >= 0 */
+            if (A[k] > 0) {
+                int64_t l = wm_ceil_div(-num, A[k]);
+                if (l > lo) lo = l;
+            } else if (A[k] < 0) {
+                int64_t h = wm_floor_div(num, -A[k]);
+                if (h < hi) hi = h;
+            } else if (num < 0) {
+                empty = 1;
+            }
+        }
+        if (empty || lo > hi) continue;
+        px = wm_floor_div(sx, 3);
+        if (sx - 3 * px > 1) px++; /* nearest to sx / 3, the smaller on a tie (never: thirds) */
+        if (px < lo) px = lo;
+        if (px > hi) px = hi;
+        d = (3 * px - sx) * (3 * px - sx) + (3 * (int64_t)py - sy) * (3 * (int64_t)py - sy);
+        if (best < 0 || d < best) {
+            best = d;
+            bx = (int32_t)px;
+            by = py;
+        }
+    }
+    if (best >= 0) {
+        int32_t touched[3], nt = 0;
+        int room = wm_room(r, 2), rc;
+        if (room != 0) return room < 0 ? room : WM_OK;
+        rc = wm_tri_split(me, t, bx, by, touched, &nt);
+        if (rc == WM_ERR_CAPACITY) return rc;
+        if (rc != WM_OK) return WM_OK;
+        for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
+        if (st) st->ternary_splits++;
+        return WM_OK;
+    }
+    /* No interior grid point: split the longest edge that has one (by Pick's theorem there is one
+     * when twice the area exceeds 1), at the grid point nearest its middle, unless the triangle on
+     * the other side belongs to another planned operation. */
+    for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
+        int32_t o = me->ho[e];
+        int64_t cx, cy, len;
+        edge_vec(me, e, &cx, &cy);
+        len = cx * cx + cy * cy;
+        if (len <= best_len || wm_gcd((int32_t)cx, (int32_t)cy) < 2) continue;
+        if (o >= 0 && (me->tflag[WM_TRI(o)] & WM_F_PLAN)) continue;
+        best_e = e;
+        best_len = len;
+    }
+    if (best_e >= 0) {
+        int64_t cx, cy;
+        int32_t a = me->hv[best_e], G, k;
+        edge_vec(me, best_e, &cx, &cy);
+        G = wm_gcd((int32_t)cx, (int32_t)cy);
+        k = G / 2;
+        return split_edge_at(r, best_e, me->vx[a] + (int32_t)(k * (cx / G)), me->vy[a] + (int32_t)(k * (cy / G)),
+                             st);
+    }
+    return WM_OK;
+}
+
+int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t e = op, f, a, b, G, k, px, py;
+    int64_t cx, cy, tq;
+    uint64_t lim, da, db;
+    if (op < 0) return wm_split_unpaired(r, -op - 1, st);
+    f = me->ho[e];
+    a = me->hv[e];
+    b = wm_dest(me, e);
+    edge_vec(me, e, &cx, &cy);
+    G = wm_gcd((int32_t)cx, (int32_t)cy);
+    if (G < 2) {
+        /* No grid sample inside the common edge: the pair cannot be split there; each triangle is
+         * subdivided as an unpaired one. */
+        int32_t t2 = f >= 0 ? WM_TRI(f) : -1, rc = wm_split_unpaired(r, WM_TRI(e), st);
+        if (rc == WM_OK && t2 >= 0) rc = wm_split_unpaired(r, t2, st);
+        return rc;
+    }
+    /* Split point: the mean of the two crossings (one for a quasi-valid pair), snapped to the grid
+     * sample of the edge nearest to it, never an end point: k = round(t G) in 1 .. G-1. */
+    tq = crossing(r, m, WM_TRI(e), e);
+    if (f >= 0) tq = (tq + (65536 - crossing(r, m, WM_TRI(f), f))) / 2; /* f runs b -> a */
+    k = (int32_t)((tq * G + 32768) >> 16);
+    if (k < 1) k = 1;
+    if (k > G - 1) k = G - 1;
+    px = me->vx[a] + (int32_t)(k * (cx / G));
+    py = me->vy[a] + (int32_t)(k * (cy / G));
+    /* Vertex movement (4.21): when the split point is within delta_v (3-D) of an end of the edge,
+     * move that end (the nearer, a on ties) there instead, if the mesh stays proper. */
+    lim = (uint64_t)r->params.delta_v * r->params.delta_v;
+    da = dist2_q32(r, px, py, me->vx[a], me->vy[a]);
+    db = dist2_q32(r, px, py, me->vx[b], me->vy[b]);
+    if (da < lim || db < lim) {
+        int32_t v = da <= db ? a : b;
+        if (wm_vertex_move(me, v, px, py) == WM_OK) {
+            touch_fan(r, v);
+            if (st) st->moves++;
+            return WM_OK;
+        }
+    }
+    return split_edge_at(r, e, px, py, st);
+}

@@ -1,0 +1,388 @@
+/* The refinement loop (dissertation 4.6, step 3) and the error bound.
+ *
+ *   level M-1: the initial triangulation (templates)
+ *   for m = M-2 .. 0, on the details of decomposition level m + 1 (table 4.2):
+ *       k times: select (4.3) -> pair (4.4.1) -> split / move / ternary (4.4.2, 4.4.3)
+ *                -> regularise by edge swaps (4.5.1)
+ *   at level 0: while some E(T) > zeta: split the worst triangle at its worst sample
+ *
+ * Determinism: triangles are visited in slot order, the plan of an iteration is fixed before it is
+ * carried out, the heap breaks ties by slot, and all arithmetic is integer. */
+#include "wm_internal.h"
+
+#define SWAP_PASSES 3 /* regularisation sweeps per iteration (a swap can undo another: bounded) */
+
+#define ALIGN8(n) (((n) + 7u) & ~(uint64_t)7u)
+
+int32_t wm_tri_cap_max(int32_t width, int32_t height)
+{
+    int64_t t = 2 * (int64_t)(width - 1) * (int64_t)(height - 1);
+    if (width < 2 || height < 2) return 0;
+    return t > 0x15555554 ? 0x15555554 : (int32_t)t;
+}
+
+static uint64_t refine_bytes(int32_t width, int32_t height, int32_t tri_cap)
+{
+    int32_t vc = wm_vert_cap_for(width, height, tri_cap);
+    size_t mb = wm_mesh_bound(tri_cap, vc);
+    if (mb == 0) return 0;
+    return ALIGN8(sizeof(struct wm_refiner)) + ALIGN8((uint64_t)mb) + ALIGN8(12 * (uint64_t)tri_cap);
+}
+
+size_t wm_refine_bound(int32_t width, int32_t height, int32_t tri_cap)
+{
+    uint64_t b;
+    if (width < 2 || height < 2 || width > WM_MAX_SIDE || height > WM_MAX_SIDE || tri_cap < 1) return 0;
+    b = refine_bytes(width, height, tri_cap);
+    if (b == 0 || b > (uint64_t)(size_t)-1) return 0;
+    return (size_t)b;
+}
+
+int wm_params_check(const wm_params *p)
+{
+    if (p->metric != WM_METRIC_NORMAL && p->metric != WM_METRIC_VERTICAL) return WM_ERR_ARG;
+    if (p->neighbourhood != WM_NEIGHBOURHOOD_FACE && p->neighbourhood != WM_NEIGHBOURHOOD_VERTEX)
+        return WM_ERR_ARG;
+    if (p->iterations < 0 || p->iterations > 3 || p->max_triangles < 0) return WM_ERR_ARG;
+    if (p->scale_m > 65535u || p->scale_e < 0 || p->scale_e > 126) return WM_ERR_ARG;
+    if (p->delta_p > 65535u || p->alpha > 65536u || p->reserved != 0) return WM_ERR_ARG;
+    return WM_OK;
+}
+
+size_t wm_abi_size(int which)
+{
+    switch (which) {
+    case WM_ABI_PARAMS: return sizeof(wm_params);
+    case WM_ABI_FIELD: return sizeof(wm_field);
+    case WM_ABI_STATS: return sizeof(wm_level_stats);
+    default: return 0;
+    }
+}
+
+void wm_touch(wm_refiner *r, int32_t t)
+{
+    int32_t x[3], y[3];
+    wm_tri_xy(&r->mesh, t, x, y);
+    r->err[t] = wm_tri_error(&r->field, &r->params, x, y, NULL, NULL);
+    r->mesh.tflag[t] |= WM_F_NEW;
+}
+
+int wm_room(wm_refiner *r, int32_t added)
+{
+    if (r->mesh.n_tri + added <= r->limit) return 0;
+    if (r->limit_is_budget) {
+        r->budget_hit = 1;
+        return 1;
+    }
+    return WM_ERR_CAPACITY;
+}
+
+int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f, const wm_params *p,
+                   const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, int32_t tri_cap)
+{
+    wm_refiner *r;
+    uint8_t *q = (uint8_t *)mem;
+    size_t need, mb;
+    int32_t vc;
+    int rc;
+    if (out == NULL || f == NULL || p == NULL || f->samples == NULL) return WM_ERR_ARG;
+    *out = NULL;
+    if (f->levels < 1 || f->levels > WM_MAX_LEVELS || (f->levels > 1 && f->details == NULL)) return WM_ERR_ARG;
+    if (wm_params_check(p) != WM_OK) return WM_ERR_ARG;
+    need = wm_refine_bound(f->width, f->height, tri_cap);
+    if (need == 0) return WM_ERR_ARG;
+    if (mem == NULL || bytes < need) return WM_ERR_MEMORY;
+    if (nt > tri_cap) return WM_ERR_CAPACITY;
+    r = (wm_refiner *)mem;
+    q += ALIGN8(sizeof(struct wm_refiner));
+    vc = wm_vert_cap_for(f->width, f->height, tri_cap);
+    mb = wm_mesh_bound(tri_cap, vc);
+    rc = wm_mesh_init(&r->mesh, q, mb, f->width, f->height, tri_cap, vc);
+    if (rc != WM_OK) return rc;
+    q += ALIGN8((uint64_t)mb);
+    r->err = (uint32_t *)(void *)q;
+    r->list = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
+    r->pos = (int32_t *)(void *)(q + 8 * (uint64_t)tri_cap);
+    r->field = *f;
+    r->params = *p;
+    r->level = f->levels - 1;
+    r->done = 0;
+    r->failed = 0;
+    r->budget_hit = 0;
+    r->limit = tri_cap;
+    r->limit_is_budget = 0;
+    if (p->max_triangles > 0 && p->max_triangles < tri_cap) {
+        r->limit = p->max_triangles;
+        r->limit_is_budget = 1;
+    }
+    /* err, list and pos are one run of 3 tri_cap words: the build's scratch. */
+    rc = wm_mesh_build(&r->mesh, xy, nv, tris, nt, r->err);
+    if (rc != WM_OK) return rc;
+    for (int32_t t = 0; t < r->mesh.tri_end; t++) {
+        wm_touch(r, t);
+        r->mesh.tflag[t] = 0;
+    }
+    *out = r;
+    return WM_OK;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Regularisation (4.5.1): swap the diagonal of a strictly convex quadrilateral in the region when
+ *     xi = alpha R_A + (1 - alpha) R_E > 1,
+ *     R_A = min angle(new) / min angle(old),  R_E = (E(T_i) + E(T_j) + 1) / (E(t_i) + E(t_j) + 1)
+ * with angles in Q16 radians (integer CORDIC), E in height units Q16.16, ratios Q16.16. */
+
+static uint32_t ratio_q16(uint64_t num, uint64_t den)
+{
+    uint64_t q;
+    if (den == 0) return num ? 0xFFFFFFFFu : 65536u;
+    q = (num << 16) / den;
+    return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
+}
+
+static int try_swap(wm_refiner *r, int32_t e)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
+    int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
+    int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
+    int32_t ang_old, ang_new, a1;
+    uint32_t e1 = 0, e2 = 0, ra, re = 65536u, alpha = r->params.alpha;
+    uint64_t xi;
+    if (!wm_edge_swappable(me, e)) return 0;
+    wm_tri_xy(me, t1, ox, oy);
+    wm_tri_xy(me, t2, px, py);
+    ang_old = wm_min_angle(ox, oy);
+    a1 = wm_min_angle(px, py);
+    if (a1 < ang_old) ang_old = a1;
+    /* new triangles (a, d, c) and (d, b, c) */
+    n1x[0] = me->vx[a], n1y[0] = me->vy[a], n1x[1] = me->vx[d], n1y[1] = me->vy[d];
+    n1x[2] = me->vx[c], n1y[2] = me->vy[c];
+    qx[0] = me->vx[d], qy[0] = me->vy[d], qx[1] = me->vx[b], qy[1] = me->vy[b];
+    qx[2] = me->vx[c], qy[2] = me->vy[c];
+    ang_new = wm_min_angle(n1x, n1y);
+    a1 = wm_min_angle(qx, qy);
+    if (a1 < ang_new) ang_new = a1;
+    ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
+    if (alpha < 65536u) {
+        const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
+        uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
+        uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
+        e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, NULL, NULL);
+        e2 = wm_tri_error(&r->field, &r->params, qx, qy, NULL, NULL);
+        re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, e1, 1, 0, cap) +
+                                          wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
+    }
+    xi = ((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16;
+    if (xi <= 65536u) return 0;
+    if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
+    /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
+    if (alpha < 65536u) {
+        r->err[t1] = e1;
+        r->err[t2] = e2;
+        me->tflag[t1] |= WM_F_NEW;
+        me->tflag[t2] |= WM_F_NEW;
+    } else {
+        wm_touch(r, t1);
+        wm_touch(r, t2);
+    }
+    return 1;
+}
+
+static void regularise(wm_refiner *r, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    for (int pass = 0; pass < SWAP_PASSES; pass++) {
+        int32_t swaps = 0;
+        for (int32_t t = 0; t < me->tri_end; t++) {
+            if (me->hv[3 * t] < 0 || !(me->tflag[t] & WM_F_SWAP)) continue;
+            for (int32_t i = 0; i < 3; i++) {
+                int32_t e = 3 * t + i, o = me->ho[e];
+                if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
+                swaps += try_swap(r, e);
+            }
+        }
+        if (st) st->swaps += swaps;
+        if (swaps == 0) break;
+    }
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot. */
+
+static int heap_before(const wm_refiner *r, int32_t a, int32_t b)
+{
+    return r->err[a] > r->err[b] || (r->err[a] == r->err[b] && a < b);
+}
+
+static void heap_put(wm_refiner *r, int32_t i, int32_t t)
+{
+    r->list[i] = t;
+    r->pos[t] = i;
+}
+
+static void heap_up(wm_refiner *r, int32_t i)
+{
+    int32_t t = r->list[i];
+    while (i > 0) {
+        int32_t p = (i - 1) / 2;
+        if (!heap_before(r, t, r->list[p])) break;
+        heap_put(r, i, r->list[p]);
+        i = p;
+    }
+    heap_put(r, i, t);
+}
+
+static void heap_down(wm_refiner *r, int32_t i, int32_t n)
+{
+    int32_t t = r->list[i];
+    for (;;) {
+        int32_t c = 2 * i + 1;
+        if (c >= n) break;
+        if (c + 1 < n && heap_before(r, r->list[c + 1], r->list[c])) c++;
+        if (!heap_before(r, r->list[c], t)) break;
+        heap_put(r, i, r->list[c]);
+        i = c;
+    }
+    heap_put(r, i, t);
+}
+
+static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
+{
+    int32_t i = r->pos[t];
+    if (i < 0) return;
+    r->pos[t] = -1;
+    (*n)--;
+    if (i == *n) return;
+    {
+        int32_t moved = r->list[*n];
+        heap_put(r, i, moved);
+        heap_up(r, i);
+        heap_down(r, r->pos[moved], *n);
+    }
+}
+
+static void heap_update(wm_refiner *r, int32_t t, int32_t *n)
+{
+    heap_remove(r, t, n);
+    if (r->err[t] > r->params.zeta) {
+        r->pos[t] = *n;
+        r->list[(*n)++] = t;
+        heap_up(r, *n - 1);
+    }
+}
+
+static int error_bound(wm_refiner *r, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t n = 0;
+    for (int32_t t = 0; t < me->tri_cap; t++) r->pos[t] = -1;
+    for (int32_t t = 0; t < me->tri_end; t++)
+        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) heap_update(r, t, &n);
+    while (n > 0) {
+        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room;
+        int64_t E[3];
+        wm_tri_xy(me, t, x, y);
+        (void)wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+        /* Which edge holds the worst sample (E_k = 0: the edge from corner k+1 to k+2)?  Never a
+         * corner: the distance is 0 there and E(T) > zeta >= 0. */
+        for (k = 0; k < 3; k++) {
+            int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+            E[k] = wm_orient(x[k1], y[k1], x[k2], y[k2], wx, wy);
+            if (E[k] == 0) on = 3 * t + k1;
+        }
+        room = wm_room(r, on < 0 ? 2 : (me->ho[on] >= 0 ? 2 : 1));
+        if (room < 0) return room;
+        if (room > 0) break; /* the budget: stop with E_max > zeta */
+        rc = on < 0 ? wm_tri_split(me, t, wx, wy, touched, &nt) : wm_edge_split(me, on, wx, wy, touched, &nt);
+        if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH; /* cannot happen */
+        for (int32_t i = 0; i < nt; i++) {
+            if (touched[i] >= 0) {
+                wm_touch(r, touched[i]);
+                heap_update(r, touched[i], &n);
+            }
+        }
+        if (st) st->bound_splits++;
+    }
+    return WM_OK;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+
+void wm_refine_stats(const wm_refiner *r, wm_level_stats *st)
+{
+    const wm_mesh *me = &r->mesh;
+    uint32_t emax = 0;
+    int32_t over = 0;
+    for (int32_t t = 0; t < me->tri_end; t++) {
+        if (me->hv[3 * t] < 0) continue;
+        if (r->err[t] > emax) emax = r->err[t];
+        if (r->err[t] > r->params.zeta) over++;
+    }
+    st->level = r->level;
+    st->vertices = me->n_vert;
+    st->triangles = me->n_tri;
+    st->e_max = emax;
+    st->over = over;
+    st->budget_hit = r->budget_hit;
+}
+
+static void clear_stats(wm_level_stats *st)
+{
+    st->level = st->vertices = st->triangles = st->iterations = st->active = st->dependent = 0;
+    st->pairs = st->quasi_pairs = st->unpaired = st->edge_splits = st->ternary_splits = 0;
+    st->moves = st->swaps = st->bound_splits = st->budget_hit = st->over = st->reserved = 0;
+    st->e_max = 0;
+}
+
+static int iterate(wm_refiner *r, int32_t m, wm_level_stats *st)
+{
+    int32_t nops;
+    if (wm_select(r, m, st) == 0) return 1; /* nothing active: the level is done */
+    st->iterations++;
+    nops = wm_plan(r, m, st);
+    for (int32_t i = 0; i < nops; i++) {
+        int rc = wm_execute(r, m, r->list[i], st);
+        if (rc != WM_OK) return rc;
+    }
+    regularise(r, st);
+    return 0;
+}
+
+int wm_refine_step(wm_refiner *r, wm_level_stats *st)
+{
+    wm_level_stats local;
+    int rc = WM_OK;
+    if (st == NULL) st = &local;
+    clear_stats(st);
+    if (r == NULL || r->done) return WM_ERR_STATE;
+    r->budget_hit = 0;
+    if (r->level > 0) {
+        int32_t m;
+        r->level--;
+        m = r->level + 1; /* decomposition level of the details (table 4.2) */
+        for (int32_t it = 0; it < r->params.iterations; it++) {
+            int done;
+            done = iterate(r, m, st);
+            if (done < 0) {
+                rc = done;
+                break;
+            }
+            if (done) break;
+        }
+    }
+    if (rc == WM_OK && r->level == 0) {
+        rc = error_bound(r, st);
+        r->done = 1;
+    }
+    if (rc != WM_OK) {
+        r->done = 1;
+        r->failed = rc;
+    }
+    wm_refine_stats(r, st);
+    return rc;
+}
+
+int32_t wm_refine_level(const wm_refiner *r) { return r->level; }
+int wm_refine_done(const wm_refiner *r) { return r->done; }
+const wm_mesh *wm_refine_mesh(const wm_refiner *r) { return &r->mesh; }

@@ -1,0 +1,53 @@
+/* Ternary subdivision (dissertation 4.4.3, fig. 4.15) of an unpaired triangle.
+ *
+ *            c                          c
+ *           / \                       / | \
+ *          /   \                     / N2|N1\
+ *         /  T  \         ->        /  .p.  \        p strictly inside T = (a, b, c)
+ *        /       \                 / .  T  . \
+ *       a---------b               a-----------b
+ *
+ * T keeps its slot as (a, b, p); N1 = (b, c, p) and N2 = (c, a, p) are new. */
+#include "wm_internal.h"
+
+int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
+{
+    int32_t a, b, c, p, n1, n2, o_ab, o_bc, o_ca;
+    if (!wm_tri_live(m, t)) return WM_ERR_ARG;
+    a = m->hv[3 * t];
+    b = m->hv[3 * t + 1];
+    c = m->hv[3 * t + 2];
+    if (wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) <= 0 ||
+        wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
+        wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)
+        return WM_ERR_REFUSED;
+    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < 2 || m->n_vert >= m->vert_cap)
+        return WM_ERR_CAPACITY;
+    o_ab = m->ho[3 * t];
+    o_bc = m->ho[3 * t + 1];
+    o_ca = m->ho[3 * t + 2];
+    p = wm_vert_alloc(m, x, y);
+    n1 = wm_tri_alloc(m);
+    n2 = wm_tri_alloc(m);
+    WM_ASSERT(p >= 0 && n1 >= 0 && n2 >= 0);
+    wm_tri_set(m, t, a, b, p);
+    wm_tri_set(m, n1, b, c, p);
+    wm_tri_set(m, n2, c, a, p);
+    wm_link(m, 3 * t + 0, o_ab);
+    wm_link(m, 3 * n1 + 0, o_bc);
+    wm_link(m, 3 * n2 + 0, o_ca);
+    wm_link(m, 3 * t + 1, 3 * n1 + 2);  /* b->p with p->b */
+    wm_link(m, 3 * n1 + 1, 3 * n2 + 2); /* c->p with p->c */
+    wm_link(m, 3 * n2 + 1, 3 * t + 2);  /* a->p with p->a */
+    wm_tri_claim(m, t);
+    wm_tri_claim(m, n1);
+    wm_tri_claim(m, n2);
+    if (touched) {
+        touched[0] = t;
+        touched[1] = n1;
+        touched[2] = n2;
+    }
+    if (n_touched) *n_touched = 3;
+    WM_CHECK_MESH(m);
+    return WM_OK;
+}

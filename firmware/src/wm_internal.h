@@ -1,0 +1,143 @@
+/* Internal helpers shared by the firmware sources (not part of the public API). */
+#ifndef WM_INTERNAL_H
+#define WM_INTERNAL_H
+
+#include "wavemesh.h"
+
+/* Asserts: on with WM_CHECK=1 (debug and sanitizer builds), off otherwise.  A hosted build uses
+ * <assert.h>; a freestanding one (the soft CPU) traps. */
+#ifndef WM_CHECK
+#define WM_CHECK 0
+#endif
+#if WM_CHECK
+#if defined(__STDC_HOSTED__) && __STDC_HOSTED__
+#include <assert.h>
+#define WM_ASSERT(c) assert(c)
+#else
+#define WM_ASSERT(c) ((c) ? (void)0 : __builtin_trap())
+#endif
+/* The full invariant check after every operator. */
+#define WM_CHECK_MESH(m) WM_ASSERT(wm_mesh_check(m) == WM_OK)
+#else
+#define WM_ASSERT(c) ((void)0)
+#define WM_CHECK_MESH(m) ((void)0)
+#endif
+
+#define WM_TRI(e) ((e) / 3)
+
+/* wm_mesh_check, returning 0 or the source line of the first failed invariant (for debugging). */
+int wm_mesh_check_line(const wm_mesh *m);
+
+/* Twice the signed area of (a, b, c): > 0 counter-clockwise. */
+static inline int64_t wm_orient(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy)
+{
+    return (int64_t)(bx - ax) * (int64_t)(cy - ay) - (int64_t)(cx - ax) * (int64_t)(by - ay);
+}
+
+static inline int32_t wm_dest(const wm_mesh *m, int32_t e) { return m->hv[WM_NEXT(e)]; }
+
+static inline int wm_tri_live(const wm_mesh *m, int32_t t)
+{
+    return t >= 0 && t < m->tri_end && m->hv[3 * t] >= 0;
+}
+
+static inline int wm_on_border(const wm_mesh *m, int32_t x, int32_t y)
+{
+    return x == 0 || y == 0 || x == m->width - 1 || y == m->height - 1;
+}
+
+/* Allocation of slots (free list first, then the end); -1 when full. */
+int32_t wm_tri_alloc(wm_mesh *m);
+int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
+/* Writes triangle t's three vertices (its half-edges' origins). */
+void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c);
+/* Makes e and f opposite (f may be -1: e on the border). */
+static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
+{
+    m->ho[e] = f;
+    if (f >= 0) m->ho[f] = e;
+}
+/* Points vh of triangle t's vertices at t's half-edges. */
+void wm_tri_claim(wm_mesh *m, int32_t t);
+
+/* Rotation around a vertex: e is a half-edge leaving v.  Counter-clockwise: the next half-edge
+ * leaving v, or -1 at the border.  wm_fan_first: the most clockwise half-edge leaving v (vh[v] for an
+ * interior vertex). */
+static inline int32_t wm_rot_ccw(const wm_mesh *m, int32_t e) { return m->ho[WM_PREV(e)]; }
+static inline int32_t wm_rot_cw(const wm_mesh *m, int32_t e)
+{
+    int32_t o = m->ho[e];
+    return o < 0 ? -1 : WM_NEXT(o);
+}
+int32_t wm_fan_first(const wm_mesh *m, int32_t v);
+
+/* Fixed-point and exact integer helpers (fixed.c). */
+uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
+int32_t wm_gcd(int32_t a, int32_t b);                   /* gcd(|a|, |b|), gcd(0, 0) = 0 */
+int64_t wm_floor_div(int64_t a, int64_t b);             /* floor(a / b), b > 0 */
+int64_t wm_ceil_div(int64_t a, int64_t b);              /* ceil(a / b), b > 0 */
+int wm_cmp_mul(uint64_t a, uint64_t b, uint64_t c, uint64_t d); /* sign(a b - c d), exact */
+int32_t wm_angle_q16(int64_t x, int64_t y);             /* atan2(y, x) for y >= 0, Q16 radians */
+/* floor(n * s * 2^sh / d) with the height scale s = scale_m / 2^scale_e, saturated at cap. */
+uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap);
+/* The smallest angle of a triangle, Q16 radians. */
+int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
+
+/* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
+const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The refiner's state (refine.c, region.c, pairing.c) */
+
+/* Triangle flags (wm_mesh.tflag), rebuilt at every iteration. */
+#define WM_F_ACTIVE 1u /* in the active region, union of N0 (4.3.1) */
+#define WM_F_DEP 2u    /* in the dependent region, union of N1 */
+#define WM_F_NEAR 4u   /* in the union of N2: only regularised */
+#define WM_F_PLAN 8u   /* belongs to a planned operation of this iteration */
+#define WM_F_NEW 16u   /* created or changed by this iteration (counts as N0 for the swaps) */
+#define WM_F_SWAP (WM_F_ACTIVE | WM_F_DEP | WM_F_NEAR | WM_F_NEW)
+
+struct wm_refiner {
+    wm_mesh mesh;
+    wm_field field;
+    wm_params params;
+    int32_t level;       /* current resolution level */
+    int32_t done;        /* 1 after the error bound at level 0 */
+    int32_t limit;       /* most triangles allowed: the budget or the capacity */
+    int32_t limit_is_budget;
+    int32_t budget_hit;  /* set when the budget stopped an operation (this step) */
+    int32_t failed;      /* a WM_ERR_* code that ended the refinement, or 0 */
+    uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
+    int32_t *list;       /* [tri_cap] the plan of an iteration, the heap of the error bound */
+    int32_t *pos;        /* [tri_cap] heap position of each triangle, -1 when not in the heap */
+};
+
+/* Triangle t's corner coordinates. */
+static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t y[3])
+{
+    for (int k = 0; k < 3; k++) {
+        int32_t v = m->hv[3 * t + k];
+        x[k] = m->vx[v];
+        y[k] = m->vy[v];
+    }
+}
+
+/* Recomputes E(T) of t and marks it new. */
+void wm_touch(wm_refiner *r, int32_t t);
+/* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
+ * small; 1 when the budget forbids it (and records that). */
+int wm_room(wm_refiner *r, int32_t added);
+
+/* The detail energy test (4.12) for the cell of level m at (x, y). */
+int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y);
+/* Region selection (4.3): sets the flags, returns the number of active triangles. */
+int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st);
+/* Gradient-consistent pairing (4.4.1): fills r->list, returns the number of operations. */
+int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st);
+/* Carries out one planned operation (4.4.2, 4.4.3); WM_OK or WM_ERR_CAPACITY. */
+int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st);
+/* Ternary subdivision of t at the interior grid point nearest its barycentre, or the fall-back
+ * edge split when t has no interior grid point.  WM_OK (also when nothing could be done). */
+int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st);
+
+#endif /* WM_INTERNAL_H */

@@ -1,0 +1,325 @@
+/* Native unit tests of the firmware: tiny hand-built meshes for every operator, the exact helpers,
+ * E(T), the filter bank and small refinements.  Run by ctest and by tests/firmware (also under
+ * AddressSanitizer and UndefinedBehaviorSanitizer with the invariant check after every operator).
+ * Prints one line per failure and "N passed, N failed". */
+#include <stdio.h>
+#include <string.h>
+
+#include "wavemesh.h"
+#include "wm_internal.h"
+
+static int passed, failed;
+
+#define CHECK(c)                                                                    \
+    do {                                                                            \
+        if (c) {                                                                    \
+            passed++;                                                               \
+        } else {                                                                    \
+            failed++;                                                               \
+            printf("FAIL %s:%d: %s\n", __FILE__, __LINE__, #c);                     \
+        }                                                                           \
+    } while (0)
+
+static unsigned char mem[1 << 22];
+static uint32_t scratch[3 * 4096];
+
+/* A W x H grid cut into two triangles by the diagonal (0,0)-(W-1,H-1):
+ *   0 ---- 1          vertices 0 (0,0), 1 (W-1,0), 2 (0,H-1), 3 (W-1,H-1)  (y grows downwards)
+ *   |  \   |          triangles (0, 1, 3) and (0, 3, 2): orient > 0
+ *   2 ---- 3 */
+static int square(wm_mesh *m, int32_t w, int32_t h, int32_t cap)
+{
+    int32_t xy[8] = {0, 0, w - 1, 0, 0, h - 1, w - 1, h - 1};
+    int32_t tris[6] = {0, 1, 3, 0, 3, 2};
+    int rc = wm_mesh_init(m, mem, sizeof mem, w, h, cap, wm_vert_cap_for(w, h, cap));
+    if (rc != WM_OK) return rc;
+    return wm_mesh_build(m, xy, 4, tris, 2, scratch);
+}
+
+static int32_t find_edge(const wm_mesh *m, int32_t ax, int32_t ay, int32_t bx, int32_t by)
+{
+    for (int32_t e = 0; e < 3 * m->tri_end; e++) {
+        int32_t a, b;
+        if (m->hv[3 * WM_TRI(e)] < 0) continue;
+        a = m->hv[e];
+        b = m->hv[WM_NEXT(e)];
+        if (m->vx[a] == ax && m->vy[a] == ay && m->vx[b] == bx && m->vy[b] == by) return e;
+    }
+    return -1;
+}
+
+static int32_t find_vertex(const wm_mesh *m, int32_t x, int32_t y)
+{
+    for (int32_t v = 0; v < m->vert_end; v++)
+        if (m->vx[v] == x && m->vy[v] == y) return v;
+    return -1;
+}
+
+static void test_build(void)
+{
+    wm_mesh m;
+    int32_t xy[8] = {0, 0, 4, 0, 0, 4, 4, 4};
+    int32_t cw[6] = {0, 3, 1, 0, 2, 3};     /* clockwise */
+    int32_t hole[3] = {0, 1, 3};             /* half the square */
+    int32_t bad[6] = {0, 1, 3, 0, 3, 9};     /* index out of range */
+    int32_t out_xy[8], out_t[6];
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    CHECK(m.n_tri == 2 && m.n_vert == 4);
+    CHECK(wm_mesh_check(&m) == WM_OK);
+    CHECK(m.ho[find_edge(&m, 0, 0, 4, 4)] == find_edge(&m, 4, 4, 0, 0));
+    CHECK(m.ho[find_edge(&m, 4, 0, 4, 4)] == -1);
+    CHECK(wm_mesh_export(&m, out_xy, out_t) == 2);
+    CHECK(memcmp(out_xy, xy, sizeof xy) == 0 && out_t[0] == 0 && out_t[1] == 1 && out_t[5] == 2);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, 5, 5, 8, 8) == WM_OK);
+    CHECK(wm_mesh_build(&m, xy, 4, cw, 2, scratch) == WM_ERR_MESH);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, 5, 5, 8, 8) == WM_OK);
+    CHECK(wm_mesh_build(&m, xy, 4, hole, 1, scratch) == WM_ERR_MESH);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, 5, 5, 8, 8) == WM_OK);
+    CHECK(wm_mesh_build(&m, xy, 4, bad, 2, scratch) == WM_ERR_ARG);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, 5, 5, 1, 8) == WM_OK);
+    CHECK(wm_mesh_build(&m, xy, 4, bad, 2, scratch) == WM_ERR_CAPACITY);
+    CHECK(wm_mesh_init(&m, mem, 16, 5, 5, 8, 8) == WM_ERR_MEMORY);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, 1, 5, 8, 8) == WM_ERR_ARG);
+    CHECK(wm_mesh_init(&m, mem, sizeof mem, WM_MAX_SIDE + 1, 5, 8, 8) == WM_ERR_ARG);
+    /* a corrupted mesh fails the check */
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    m.vx[3] = 3;
+    CHECK(wm_mesh_check(&m) == WM_ERR_MESH);
+}
+
+static void test_edge_split(void)
+{
+    wm_mesh m;
+    int32_t touched[4], n = 0, e;
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    e = find_edge(&m, 0, 0, 4, 4);
+    CHECK(wm_edge_split(&m, e, 1, 2, touched, &n) == WM_ERR_REFUSED); /* off the edge */
+    CHECK(wm_edge_split(&m, e, 0, 0, touched, &n) == WM_ERR_REFUSED); /* an end point */
+    CHECK(wm_edge_split(&m, e, 2, 2, touched, &n) == WM_OK);
+    CHECK(n == 4 && m.n_tri == 4 && m.n_vert == 5);
+    CHECK(wm_mesh_check(&m) == WM_OK);
+    CHECK(find_edge(&m, 2, 2, 4, 0) >= 0 && find_edge(&m, 0, 4, 2, 2) >= 0);
+    /* border edge: one triangle becomes two */
+    e = find_edge(&m, 4, 0, 4, 4);
+    CHECK(e >= 0 && wm_edge_split(&m, e, 4, 1, touched, &n) == WM_OK);
+    CHECK(n == 2 && m.n_tri == 5 && wm_mesh_check(&m) == WM_OK);
+    /* capacity: no slot left for two more triangles */
+    CHECK(square(&m, 5, 5, 3) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 4, 4), 2, 2, touched, &n) == WM_ERR_CAPACITY);
+    CHECK(m.n_tri == 2 && wm_mesh_check(&m) == WM_OK);
+}
+
+static void test_tri_split(void)
+{
+    wm_mesh m;
+    int32_t touched[3], n = 0, e, t;
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    e = find_edge(&m, 0, 0, 4, 4);
+    t = WM_TRI(e); /* (0,0) (4,4) (0,4) */
+    CHECK(wm_tri_split(&m, t, 2, 2, touched, &n) == WM_ERR_REFUSED); /* on an edge */
+    CHECK(wm_tri_split(&m, t, 3, 1, touched, &n) == WM_ERR_REFUSED); /* in the other triangle */
+    CHECK(wm_tri_split(&m, t, 1, 3, touched, &n) == WM_OK);
+    CHECK(n == 3 && m.n_tri == 4 && m.n_vert == 5 && wm_mesh_check(&m) == WM_OK);
+    CHECK(find_edge(&m, 1, 3, 0, 0) >= 0 || find_edge(&m, 0, 0, 1, 3) >= 0);
+    CHECK(square(&m, 5, 5, 3) == WM_OK);
+    CHECK(wm_tri_split(&m, 1, 1, 3, touched, &n) == WM_ERR_CAPACITY && wm_mesh_check(&m) == WM_OK);
+}
+
+static void test_edge_swap(void)
+{
+    wm_mesh m;
+    int32_t e, touched[4], n;
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    e = find_edge(&m, 0, 0, 4, 4);
+    CHECK(wm_edge_swappable(&m, e) == 1);
+    CHECK(wm_edge_swap(&m, e, touched, &n) == WM_OK && n == 2);
+    CHECK(wm_mesh_check(&m) == WM_OK);
+    CHECK(find_edge(&m, 0, 0, 4, 4) < 0 && (find_edge(&m, 4, 0, 0, 4) >= 0 || find_edge(&m, 0, 4, 4, 0) >= 0));
+    CHECK(wm_edge_swap(&m, find_edge(&m, 0, 0, 4, 0), touched, &n) == WM_ERR_REFUSED); /* border */
+    /* a non-convex quadrilateral: after a ternary split at (1,3), the edge (1,3)-(0,4) has the
+     * quadrilateral (4,4) (0,4) (0,0) (1,3), with (1,3) inside the hull of the other three */
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    CHECK(wm_tri_split(&m, WM_TRI(find_edge(&m, 0, 0, 4, 4)), 1, 3, touched, &n) == WM_OK);
+    e = find_edge(&m, 1, 3, 0, 4);
+    if (e < 0) e = find_edge(&m, 0, 4, 1, 3);
+    CHECK(e >= 0 && wm_edge_swappable(&m, e) == 0);
+    CHECK(wm_edge_swap(&m, e, touched, &n) == WM_ERR_REFUSED && wm_mesh_check(&m) == WM_OK);
+    /* collinear corners (non-strict convex) are refused too */
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 4, 4), 2, 2, touched, &n) == WM_OK);
+    e = find_edge(&m, 2, 2, 4, 0);
+    CHECK(e >= 0 && wm_edge_swappable(&m, e) == 0);
+}
+
+static void test_vertex_move(void)
+{
+    wm_mesh m;
+    int32_t touched[4], n, v;
+    CHECK(square(&m, 5, 5, 8) == WM_OK);
+    CHECK(wm_vertex_move(&m, 0, 1, 1) == WM_ERR_REFUSED); /* a corner */
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 4, 4), 2, 2, touched, &n) == WM_OK);
+    v = find_vertex(&m, 2, 2);
+    CHECK(wm_vertex_move(&m, v, 3, 3) == WM_OK && wm_mesh_check(&m) == WM_OK);
+    CHECK(wm_vertex_move(&m, v, 4, 3) == WM_ERR_REFUSED); /* onto the border */
+    CHECK(wm_vertex_move(&m, v, 1, 1) == WM_OK && wm_mesh_check(&m) == WM_OK);
+    /* a border vertex slides along its side only */
+    CHECK(wm_edge_split(&m, find_edge(&m, 4, 0, 4, 4), 4, 2, touched, &n) == WM_OK);
+    v = find_vertex(&m, 4, 2);
+    CHECK(wm_vertex_move(&m, v, 3, 2) == WM_ERR_REFUSED);
+    CHECK(wm_vertex_move(&m, v, 4, 3) == WM_OK && wm_mesh_check(&m) == WM_OK);
+    CHECK(wm_vertex_move(&m, v, 4, 4) == WM_ERR_REFUSED); /* onto a corner: triangle flat */
+    CHECK(wm_mesh_check(&m) == WM_OK);
+}
+
+static void test_fixed(void)
+{
+    CHECK(wm_isqrt64(0) == 0 && wm_isqrt64(15) == 3 && wm_isqrt64(16) == 4);
+    CHECK(wm_isqrt64(UINT64_MAX) == 0xFFFFFFFFu);
+    CHECK(wm_gcd(12, -18) == 6 && wm_gcd(0, 5) == 5 && wm_gcd(7, 0) == 7);
+    CHECK(wm_floor_div(-7, 2) == -4 && wm_floor_div(7, 2) == 3 && wm_ceil_div(-7, 2) == -3);
+    CHECK(wm_ceil_div(7, 2) == 4 && wm_floor_div(-8, 2) == -4);
+    CHECK(wm_cmp_mul(UINT64_MAX, UINT64_MAX, UINT64_MAX, UINT64_MAX - 1) > 0);
+    CHECK(wm_cmp_mul((uint64_t)1 << 40, (uint64_t)1 << 40, (uint64_t)1 << 50, (uint64_t)1 << 30) == 0);
+    CHECK(wm_cmp_mul(3, (uint64_t)1 << 63, 1, UINT64_MAX) > 0);
+    /* atan2 in Q16 radians: pi/4 = 51472, pi/2 = 102944, pi = 205887 (within a few units) */
+    CHECK(wm_angle_q16(1, 1) >= 51469 && wm_angle_q16(1, 1) <= 51475);
+    CHECK(wm_angle_q16(0, 5) >= 102940 && wm_angle_q16(0, 5) <= 102948);
+    CHECK(wm_angle_q16(-1000000000, 1) >= 205880 && wm_angle_q16(-1000000000, 1) <= 205890);
+    CHECK(wm_angle_q16(7, 0) == 0);
+    CHECK(wm_angle_q16(1, 2) > wm_angle_q16(2, 1));
+}
+
+static void test_error(void)
+{
+    /* 5 x 5 field, zero but for one sample; triangle (0,0) (4,0) (0,4) */
+    uint16_t h[25];
+    int32_t x[3] = {0, 4, 0}, y[3] = {0, 0, 4}, wx, wy;
+    wm_field f = {5, 5, 1, h, NULL};
+    wm_params p;
+    memset(h, 0, sizeof h);
+    memset(&p, 0, sizeof p);
+    p.metric = WM_METRIC_VERTICAL;
+    p.scale_m = 32768;
+    p.scale_e = 15; /* s = 1 */
+    h[1 * 5 + 1] = 7;
+    CHECK(wm_tri_error(&f, &p, x, y, &wx, &wy) == 7u * 65536u && wx == 1 && wy == 1);
+    p.metric = WM_METRIC_NORMAL; /* flat plane: the same */
+    CHECK(wm_tri_error(&f, &p, x, y, NULL, NULL) == 7u * 65536u);
+    /* a sample on the hypotenuse counts (closed triangle) */
+    h[1 * 5 + 1] = 0;
+    h[2 * 5 + 2] = 3;
+    CHECK(wm_tri_error(&f, &p, x, y, &wx, &wy) == 3u * 65536u && wx == 2 && wy == 2);
+    /* tilted plane z = 4 x: normal = vertical / sqrt(17) */
+    for (int i = 0; i < 25; i++) h[i] = (uint16_t)(4 * (i % 5));
+    h[1 * 5 + 1] = 4 + 10;
+    p.metric = WM_METRIC_VERTICAL;
+    CHECK(wm_tri_error(&f, &p, x, y, NULL, NULL) == 10u * 65536u);
+    p.metric = WM_METRIC_NORMAL;
+    {
+        uint32_t e = wm_tri_error(&f, &p, x, y, NULL, NULL);
+        /* 10 / sqrt(17) = 2.42535625...; Q16.16 = 158948.4: an upper bound within 2^-15 */
+        CHECK(e >= 158949u && e <= 158949u + 8u);
+    }
+    /* half the scale: slope 2 -> 10 / sqrt(5) in samples... s = 0.5: g = 2 */
+    p.scale_e = 16;
+    {
+        uint32_t e = wm_tri_error(&f, &p, x, y, NULL, NULL);
+        /* 10 / sqrt(1 + 4) = 4.47213595 samples: 293086.8 */
+        CHECK(e >= 293087u && e <= 293087u + 12u);
+    }
+}
+
+static void test_haar(void)
+{
+    /* 3 x 3: the last row and column repeat; level 1 has 2 x 2 cells */
+    uint16_t s[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9}, sc[64];
+    int32_t d[64];
+    CHECK(wm_details_size(3, 3, 2) == 3 * 4 + 3 * 1);
+    CHECK(wm_haar(s, 3, 3, 2, d, sc) == WM_OK);
+    /* cell (0,0): p00=1 p01=2 p10=4 p11=5: d1 = 7-5 = 2, d2 = 9-3 = 6, d3 = 6-6 = 0 */
+    CHECK(d[0] == 2 && d[1] == 6 && d[2] == 0);
+    /* cell (0,1): p00=3 p01=3 p10=6 p11=6: d1 = 0, d2 = 6 */
+    CHECK(d[3] == 0 && d[4] == 6 && d[5] == 0);
+    /* level 2 from a = [[3, 5], [8, 9]] (rounded half up): d1 = 14-11 = 3, d2 = 17-8 = 9, d3 = 12-13 = -1 */
+    CHECK(d[12] == 3 && d[13] == 9 && d[14] == -1);
+}
+
+/* A field with a step and a bump, refined from two triangles with zeta = 0: every sample ends
+ * exactly on the mesh. */
+static void test_refine(void)
+{
+    enum { W = 17, H = 13, M = 3 };
+    static uint16_t h[W * H], sc[W * H];
+    static int32_t d[4096];
+    int32_t xy[8] = {0, 0, W - 1, 0, 0, H - 1, W - 1, H - 1}, tris[6] = {0, 1, 3, 0, 3, 2};
+    wm_field f = {W, H, M, h, d};
+    wm_params p;
+    wm_refiner *r = NULL;
+    wm_level_stats st;
+    int32_t cap = wm_tri_cap_max(W, H), levels = 0;
+    for (int yy = 0; yy < H; yy++)
+        for (int xx = 0; xx < W; xx++)
+            h[yy * W + xx] = (uint16_t)((xx > 8 ? 300 : 0) + (yy - 6) * (yy - 6) + xx);
+    CHECK(wm_haar(h, W, H, M, d, sc) == WM_OK);
+    memset(&p, 0, sizeof p);
+    p.metric = WM_METRIC_NORMAL;
+    p.iterations = 2;
+    p.scale_m = 32768;
+    p.scale_e = 15;
+    p.delta_p = 58982; /* 0.9 */
+    p.alpha = 39322;   /* 0.6 */
+    p.delta_v = 2u << 16;
+    p.delta_d = 0;
+    p.zeta = 0;
+    CHECK(wm_refine_bound(W, H, cap) <= sizeof mem);
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
+    CHECK(wm_refine_level(r) == M - 1);
+    while (!wm_refine_done(r)) {
+        CHECK(wm_refine_step(r, &st) == WM_OK);
+        CHECK(wm_mesh_check(wm_refine_mesh(r)) == WM_OK);
+        levels++;
+    }
+    CHECK(levels == M - 1 && st.level == 0 && st.e_max == 0 && st.over == 0);
+    CHECK(wm_refine_step(r, &st) == WM_ERR_STATE);
+    /* the budget stops the error bound early */
+    p.max_triangles = 20;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
+    while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
+    CHECK(st.triangles <= 20 && st.budget_hit == 1 && st.over > 0);
+    /* a capacity too small is a return code, and the mesh stays valid */
+    p.max_triangles = 0;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, 12) == WM_OK);
+    {
+        int rc = WM_OK;
+        while (!wm_refine_done(r) && rc == WM_OK) rc = wm_refine_step(r, &st);
+        CHECK(rc == WM_ERR_CAPACITY);
+    }
+    CHECK(wm_mesh_check(wm_refine_mesh(r)) == WM_OK && wm_refine_mesh(r)->n_tri <= 12);
+    /* vertex-based neighbourhood and vertical metric */
+    p.neighbourhood = WM_NEIGHBOURHOOD_VERTEX;
+    p.metric = WM_METRIC_VERTICAL;
+    p.zeta = 3u << 16;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
+    while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
+    CHECK(st.over == 0 && st.e_max <= p.zeta && wm_mesh_check(wm_refine_mesh(r)) == WM_OK);
+    /* bad parameters */
+    p.iterations = 4;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_ERR_ARG);
+    p.iterations = 1;
+    CHECK(wm_refine_init(&r, mem, 64, &f, &p, xy, 4, tris, 2, cap) == WM_ERR_MEMORY);
+}
+
+int main(void)
+{
+    test_build();
+    test_edge_split();
+    test_tri_split();
+    test_edge_swap();
+    test_vertex_move();
+    test_fixed();
+    test_error();
+    test_haar();
+    test_refine();
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed ? 1 : 0;
+}

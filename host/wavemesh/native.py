@@ -1,0 +1,427 @@
+"""The firmware refiner, loaded natively through ctypes.
+
+The C library (``firmware/``, built by CMake into ``build/firmware-native``) is the same source that
+will run on the soft CPU.  :func:`load` builds it on first use and again whenever a source is newer
+than the library (so a fresh clone needs nothing but cmake and a C compiler); ``WAVEMESH_FIRMWARE_LIB``
+names a prebuilt library instead.
+
+:func:`refine` takes a height field's 16-bit samples, the filter bank's details (as
+:mod:`wavemesh.haar` computes them: the hardware will hand over exactly these), the initial
+triangulation and the parameters, and returns the mesh of every resolution level with the
+library's statistics.  Parameters are converted to the library's fixed-point formats here, each
+with the rounding docs/refiner.md states (exactly, through :class:`fractions.Fraction`).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass, field
+from fractions import Fraction
+from math import floor
+from pathlib import Path
+
+import numpy as np
+
+from wavemesh.errors import WavemeshError
+from wavemesh.haar import HaarLevel
+from wavemesh.mesh import Mesh
+
+ROOT = Path(__file__).resolve().parents[2]
+FIRMWARE = ROOT / "firmware"
+BUILD = ROOT / "build" / "firmware-native"
+LIB_NAME = "libwavemesh.so"
+
+WM_OK, WM_ERR_CAPACITY = 0, -3
+ERRORS = {
+    -1: "an argument is out of range",
+    -2: "the storage is smaller than the library's bound",
+    -3: "the triangle capacity is exhausted",
+    -4: "the initial triangulation is not a proper triangulation of the grid rectangle",
+    -5: "the refiner has already finished",
+    -6: "an operator's precondition fails",
+}
+METRICS = {"normal": 0, "vertical": 1}
+NEIGHBOURHOODS = {"face": 0, "vertex": 1}
+MAX_SIDE = 32767  # WM_MAX_SIDE
+U32 = (1 << 32) - 1
+U64 = (1 << 64) - 1
+
+
+class NativeError(WavemeshError):
+    """The library could not be built or loaded, or it returned an error code."""
+
+
+class Params(ctypes.Structure):
+    _fields_ = [
+        ("metric", ctypes.c_int32),
+        ("neighbourhood", ctypes.c_int32),
+        ("iterations", ctypes.c_int32),
+        ("max_triangles", ctypes.c_int32),
+        ("zeta", ctypes.c_uint32),
+        ("scale_m", ctypes.c_uint32),
+        ("scale_e", ctypes.c_int32),
+        ("delta_p", ctypes.c_uint32),
+        ("alpha", ctypes.c_uint32),
+        ("delta_v", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("delta_d", ctypes.c_uint64),
+    ]
+
+
+class Field(ctypes.Structure):
+    _fields_ = [
+        ("width", ctypes.c_int32),
+        ("height", ctypes.c_int32),
+        ("levels", ctypes.c_int32),
+        ("samples", ctypes.POINTER(ctypes.c_uint16)),
+        ("details", ctypes.POINTER(ctypes.c_int32)),
+    ]
+
+
+STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "dependent", "pairs", "quasi_pairs",
+               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "budget_hit",
+               "over")
+
+
+class LevelStats(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_int32) for name in STAT_FIELDS] + [
+        ("e_max", ctypes.c_uint32),
+        ("reserved", ctypes.c_int32),
+    ]
+
+    def to_dict(self) -> dict:
+        return {name: int(getattr(self, name)) for name in STAT_FIELDS} | {"e_max_q16": int(self.e_max)}
+
+
+# ---------------------------------------------------------------------------------------------
+# Building and loading
+
+
+def _sources() -> list[Path]:
+    return sorted(p for d in ("src", "include") for p in (FIRMWARE / d).glob("*.[ch]")) + [
+        FIRMWARE / "CMakeLists.txt"]
+
+
+def _stale(lib: Path) -> bool:
+    if not lib.exists():
+        return True
+    built = lib.stat().st_mtime
+    return any(p.stat().st_mtime > built for p in _sources())
+
+
+def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str, ...] = (),
+          targets: tuple[str, ...] = ("wavemesh_shared",)) -> Path:
+    """Configure (once) and build the firmware with CMake into build_dir; returns build_dir."""
+    cmake = shutil.which("cmake")
+    if cmake is None:
+        raise NativeError("cannot build the firmware library: cmake is not installed",
+                          hint="run `make setup`")
+    build_dir.mkdir(parents=True, exist_ok=True)
+    with open(build_dir / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # concurrent first uses build once
+        try:
+            if not (build_dir / "CMakeCache.txt").exists():
+                _run([cmake, "-S", str(FIRMWARE), "-B", str(build_dir), f"-DCMAKE_BUILD_TYPE={build_type}",
+                      *extra])
+            _run([cmake, "--build", str(build_dir), "-j", str(min(4, os.cpu_count() or 1)), "--target",
+                  *targets])
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+    return build_dir
+
+
+def _run(cmd: list[str]) -> None:
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        tail = (r.stdout + r.stderr).strip().splitlines()[-15:]
+        raise NativeError("building the firmware library failed:\n" + "\n".join(tail),
+                          hint="run `make firmware` to see the whole build")
+
+
+_LIB: ctypes.CDLL | None = None
+
+
+def load() -> ctypes.CDLL:
+    """The firmware library, built first when it is missing or older than its sources."""
+    global _LIB
+    if _LIB is not None:
+        return _LIB
+    override = os.environ.get("WAVEMESH_FIRMWARE_LIB")
+    if override:
+        path = Path(override)
+    else:
+        path = BUILD / LIB_NAME
+        if _stale(path):
+            build()
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError as e:
+        raise NativeError(f"cannot load the firmware library {path}: {e}") from None
+    _declare(lib)
+    for which, cls in ((0, Params), (1, Field), (2, LevelStats)):
+        if lib.wm_abi_size(which) != ctypes.sizeof(cls):
+            raise NativeError(f"{path} does not match native.py ({cls.__name__} layout); rebuild it")
+    _LIB = lib
+    return lib
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    i32, u32, sz, vp = ctypes.c_int32, ctypes.c_uint32, ctypes.c_size_t, ctypes.c_void_p
+    pi32 = ctypes.POINTER(ctypes.c_int32)
+    sig = {
+        "wm_abi_size": (sz, [ctypes.c_int]),
+        "wm_refine_bound": (sz, [i32, i32, i32]),
+        "wm_tri_cap_max": (i32, [i32, i32]),
+        "wm_refine_init": (ctypes.c_int, [ctypes.POINTER(vp), vp, sz, ctypes.POINTER(Field),
+                                          ctypes.POINTER(Params),
+                                          pi32, i32, pi32, i32, i32]),
+        "wm_refine_step": (ctypes.c_int, [vp, ctypes.POINTER(LevelStats)]),
+        "wm_refine_stats": (None, [vp, ctypes.POINTER(LevelStats)]),
+        "wm_refine_done": (ctypes.c_int, [vp]),
+        "wm_refine_mesh": (vp, [vp]),
+        "wm_mesh_export": (i32, [vp, pi32, pi32]),
+        "wm_tri_error": (u32, [ctypes.POINTER(Field), ctypes.POINTER(Params), pi32, pi32, pi32, pi32]),
+        "wm_haar": (ctypes.c_int, [ctypes.POINTER(ctypes.c_uint16), i32, i32, i32, pi32,
+                                   ctypes.POINTER(ctypes.c_uint16)]),
+        "wm_details_size": (ctypes.c_int64, [i32, i32, i32]),
+        "wm_haar_scratch": (ctypes.c_int64, [i32, i32]),
+    }
+    for name, (res, args) in sig.items():
+        fn = getattr(lib, name)
+        fn.restype = res
+        fn.argtypes = args
+
+
+# ---------------------------------------------------------------------------------------------
+# Parameters
+
+
+@dataclass
+class RefineParams:
+    """Table 4.3's parameters in user units (height units, grid steps), dissertation defaults.
+
+    delta_lambda and delta_c belong to the reduction operators (vertex removal, edge collapse) of a
+    later issue: accepted and reported, not used yet.
+    """
+
+    zeta: float = 1.0  # E(T) <= zeta at level 0, height units (5.3: 1 unit synthetic, 2 m terrain)
+    metric: str = "normal"  # "normal" (the dissertation's) or "vertical"
+    delta_d: float = 0.1  # detail energy threshold, height units^2 (table 5.6)
+    delta_p: float = 0.9  # pairing criterion, 0.5 < delta_p < 1
+    delta_v: float = 2.0  # vertex movement threshold, 3-D distance (grid steps and height units)
+    alpha: float = 0.6  # mesh regularity factor, 0..1 (5.2.3: "most of the later experiments")
+    delta_lambda: float = 0.01  # vertex removal criterion (reduction issue)
+    delta_c: float = 0.98  # edge collapsing criterion (reduction issue)
+    iterations: int = 2  # k, 1..3 (0: only the error bound)
+    neighbourhood: str = "face"  # "face" (5.2.2) or "vertex"
+    max_triangles: int | None = None  # triangle budget
+    capacity: int | None = None  # triangle storage, as on a device (default: grown as needed)
+    extra: dict = field(default_factory=dict)
+
+    def check(self) -> None:
+        def bad(name, value, want):
+            raise WavemeshError(f"--{name.replace('_', '-')} {value} is out of range", hint=want)
+
+        for name in ("zeta", "delta_d", "delta_v", "delta_lambda", "delta_c", "delta_p", "alpha"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or v != v or v in (float("inf"), float("-inf")) or v < 0:
+                bad(name, v, "give a finite number >= 0")
+        if not 0 <= self.delta_p < 1:
+            bad("delta_p", self.delta_p, "use 0 <= delta_p < 1 (the dissertation: 0.5 < delta_p < 1)")
+        if not 0 <= self.alpha <= 1:
+            bad("alpha", self.alpha, "use 0 <= alpha <= 1")
+        if self.metric not in METRICS:
+            bad("metric", self.metric, "use normal or vertical")
+        if self.neighbourhood not in NEIGHBOURHOODS:
+            bad("neighbourhood", self.neighbourhood, "use face or vertex")
+        if not 0 <= self.iterations <= 3:
+            bad("iterations", self.iterations, "use 0..3 (the dissertation: 1..3)")
+        if self.max_triangles is not None and not 2 <= self.max_triangles < 2**31:
+            bad("max_triangles", self.max_triangles, "use at least 2")
+        if self.capacity is not None and not 2 <= self.capacity < 2**31:
+            bad("capacity", self.capacity, "use at least 2")
+
+    def to_report(self) -> dict:
+        return {k: getattr(self, k) for k in ("zeta", "metric", "delta_d", "delta_p", "delta_v", "alpha",
+                                              "delta_lambda", "delta_c", "iterations", "neighbourhood",
+                                              "max_triangles", "capacity")}
+
+
+def scale_fixed(scale: float) -> tuple[int, int]:
+    """s = m / 2^e, rounded down, m < 2^16 (in 2^15..2^16-1 unless s is out of range), e in 0..126."""
+    s = Fraction(scale)
+    if s <= 0:
+        raise ValueError("the height scale must be positive")
+    if s >= 65535:
+        return 65535, 0  # smaller than s: conservative (the normal factor is estimated too large)
+    e = 0
+    while s * 2**e < 2**15 and e < 126:
+        e += 1
+    return floor(s * 2**e), e
+
+
+def fixed_params(p: RefineParams, scale: float, zeta: float | None = None) -> Params:
+    """The library's wm_params for p and the height scale (docs/refiner.md, "Fixed-point formats")."""
+    s = Fraction(scale)
+    z = Fraction(p.zeta if zeta is None else zeta)
+    m, e = scale_fixed(scale)
+    out = Params()
+    out.metric = METRICS[p.metric]
+    out.neighbourhood = NEIGHBOURHOODS[p.neighbourhood]
+    out.iterations = p.iterations
+    out.max_triangles = p.max_triangles or 0
+    out.zeta = max(0, min(U32, floor(z / s * 2**16)))  # rounded down: conservative
+    out.scale_m, out.scale_e = m, e
+    out.delta_p = min(65535, round(Fraction(p.delta_p) * 2**16))
+    out.alpha = min(65536, round(Fraction(p.alpha) * 2**16))
+    out.delta_v = min(U32, round(Fraction(p.delta_v) * 2**16))
+    out.reserved = 0
+    # e = d1^2 + d2^2 + d3^2 in coefficient units; (d / 2) s is a height difference, so
+    # e (s / 2)^2 > delta_d  <=>  e > 4 delta_d / s^2  <=>  e > floor(4 delta_d / s^2) (e an integer).
+    out.delta_d = min(U64, floor(4 * Fraction(p.delta_d) / (s * s)))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def details_array(levels: list[HaarLevel]) -> np.ndarray:
+    """wavemesh.haar's levels 1..M as the library's layout: per level, cells row by row, (d1, d2, d3)."""
+    parts = [np.stack([lv.d1, lv.d2, lv.d3], axis=-1).astype(np.int32).ravel() for lv in levels]
+    return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros(0, np.int32), dtype=np.int32)
+
+
+def _ptr(a: np.ndarray, ctype):
+    return a.ctypes.data_as(ctypes.POINTER(ctype))
+
+
+@dataclass
+class Level:
+    """One resolution level's mesh and the library's statistics for it."""
+
+    level: int
+    mesh: Mesh
+    stats: dict
+
+
+@dataclass
+class RefineOutput:
+    levels: list[Level]  # from the initial triangulation (level M-1) down to level 0
+    capacity: int  # the triangle storage used
+    params: Params
+
+    @property
+    def final(self) -> Level:
+        return self.levels[-1]
+
+
+def _export(lib, handle, width: int, height: int) -> Mesh:
+    mesh_ptr = lib.wm_refine_mesh(handle)
+    # wm_mesh's first eight int32 fields: width, height, tri_cap, vert_cap, tri_end, vert_end, n_tri, n_vert
+    hdr = (ctypes.c_int32 * 8).from_address(mesh_ptr)
+    vert_end, n_tri = hdr[5], hdr[6]
+    xy = np.empty((vert_end, 2), dtype=np.int32)
+    tris = np.empty((n_tri, 3), dtype=np.int32)
+    n = lib.wm_mesh_export(mesh_ptr, _ptr(xy, ctypes.c_int32), _ptr(tris, ctypes.c_int32))
+    assert n == n_tri
+    live = xy[:, 0] >= 0
+    if not live.all():  # free vertex slots (the reduction operators will make them)
+        remap = np.cumsum(live) - 1
+        xy, tris = xy[live], remap[tris]
+    return Mesh(width, height, xy.astype(np.int64), tris.astype(np.int64))
+
+
+def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,
+           scale: float = 1.0, zeta: float | None = None) -> RefineOutput:
+    """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
+
+    ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation).  Without an
+    explicit capacity the storage starts small and doubles whenever the library reports it full
+    (the result does not depend on the capacity, only on the budget).
+    """
+    params.check()
+    lib = load()
+    samples = np.ascontiguousarray(samples, dtype=np.uint16)
+    height, width = samples.shape
+    if width > MAX_SIDE or height > MAX_SIDE:
+        raise WavemeshError(f"the grid is {width} x {height}; the refiner takes at most {MAX_SIDE} per side",
+                            hint="crop or subsample the height field, or use --stage initial")
+    det = details_array(levels)
+    fld = Field(width, height, len(levels), _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
+    fp = fixed_params(params, scale, zeta)
+    xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
+    tris = np.ascontiguousarray(initial.tris, dtype=np.int32)
+    worst = lib.wm_tri_cap_max(width, height)
+    if params.capacity is not None:
+        cap, grow = params.capacity, False
+    else:
+        cap = min(worst, max(65536, 8 * len(tris), 2 * (params.max_triangles or 0)))
+        grow = True
+    while True:
+        out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height)
+        if code == WM_ERR_CAPACITY and grow and cap < worst:
+            cap = min(worst, 2 * cap)
+            continue
+        if code != WM_OK:
+            what = ERRORS.get(code, f"error {code}")
+            if code == WM_ERR_CAPACITY:
+                raise WavemeshError(f"refiner: {what} (storage for {cap} triangles)",
+                                    hint="raise --capacity or set --max-triangles")
+            raise WavemeshError(f"refiner: {what}")
+        return RefineOutput(out, cap, fp)
+
+
+def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], int]:
+    nbytes = lib.wm_refine_bound(width, height, cap)
+    if nbytes == 0:
+        return [], -1
+    mem = np.empty(nbytes + 16, dtype=np.uint8)
+    base = mem.ctypes.data + (-mem.ctypes.data) % 16
+    handle = ctypes.c_void_p()
+    code = lib.wm_refine_init(ctypes.byref(handle), ctypes.c_void_p(base), nbytes, ctypes.byref(fld),
+                              ctypes.byref(fp),
+                              _ptr(xy, ctypes.c_int32), len(xy), _ptr(tris, ctypes.c_int32), len(tris), cap)
+    if code != WM_OK:
+        return [], code
+    st = LevelStats()
+    lib.wm_refine_stats(handle, ctypes.byref(st))
+    levels = [Level(st.level, _export(lib, handle, width, height), st.to_dict())]
+    while not lib.wm_refine_done(handle):
+        code = lib.wm_refine_step(handle, ctypes.byref(st))
+        if code != WM_OK:
+            return levels, code
+        levels.append(Level(st.level, _export(lib, handle, width, height), st.to_dict()))
+    del mem
+    return levels, WM_OK
+
+
+def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 1.0) -> float:
+    """The library's E(T) of one triangle, in height units (an upper bound; docs/refiner.md)."""
+    lib = load()
+    samples = np.ascontiguousarray(samples, dtype=np.uint16)
+    height, width = samples.shape
+    fld = Field(width, height, 1, _ptr(samples, ctypes.c_uint16), None)
+    fp = fixed_params(RefineParams(metric=metric), scale)
+    xs = (ctypes.c_int32 * 3)(*map(int, x))
+    ys = (ctypes.c_int32 * 3)(*map(int, y))
+    q = lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, None, None)
+    return q / 65536 * scale
+
+
+def haar_details(samples: np.ndarray, levels: int) -> np.ndarray:
+    """The C filter bank's details (the layout of details_array), for tests."""
+    lib = load()
+    samples = np.ascontiguousarray(samples, dtype=np.uint16)
+    height, width = samples.shape
+    out = np.empty(lib.wm_details_size(width, height, levels), dtype=np.int32)
+    scratch = np.empty(max(1, lib.wm_haar_scratch(width, height)), dtype=np.uint16)
+    code = lib.wm_haar(_ptr(samples, ctypes.c_uint16), width, height, levels, _ptr(out, ctypes.c_int32),
+                       _ptr(scratch, ctypes.c_uint16))
+    if code != WM_OK:
+        raise WavemeshError(f"wm_haar: {ERRORS.get(code, code)}")
+    return out
