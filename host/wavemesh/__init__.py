@@ -10,6 +10,8 @@ model the RTL and the firmware are tested against) and the host tool.  Modules:
 - ``initial``: assembly of the initial triangulation
 - ``mesh``, ``check``, ``render``: the mesh type, its files, validity, errors, pictures
 - ``cli``: the ``wavemesh`` command
+- ``memmap``: the SoC memory map (source of the generated C header, Verilog include, docs tables)
+- ``board``: the host side of the board's stand-in exchange, over any pyserial URL
 """
 
 __version__ = "0.1.0"

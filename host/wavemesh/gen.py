@@ -5,6 +5,8 @@
 - ``wm_templates.h``: C header for the firmware (template triangles, look-up table)
 - ``wm_templates.vh``: Verilog include for the RTL template ROM and look-up table
 - ``templates.json``: the same data for anything else
+- ``wm_memmap.h``, ``wm_memmap.vh``, ``wm_memmap.ld``, ``memmap.md``: the SoC memory map
+  (``wavemesh.memmap``, the one source of addresses, sizes and register bits)
 
 They are build products (DEVELOPERS.md: nothing built is committed); the tests
 regenerate them and compare with the Python model.
@@ -26,6 +28,7 @@ import json
 import sys
 from pathlib import Path
 
+from wavemesh import memmap
 from wavemesh.templates import LABELS, LUT_INVALID, LUT_SIZE, MAX_TRIANGLES, template_set
 
 WORD_BITS = 4 + 12 * MAX_TRIANGLES
@@ -156,6 +159,7 @@ def write_all(outdir: str | Path) -> list[Path]:
         "wm_templates.h": c_header(),
         "wm_templates.vh": verilog_include(),
         "templates.json": json.dumps(json_data(), indent=1) + "\n",
+        **memmap.files(),
     }
     written = []
     for name, text in files.items():

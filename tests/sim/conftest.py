@@ -1,0 +1,53 @@
+"""Fixtures of the simulated-board tests: the simulator, the firmware, a running board.
+
+The simulator (sim/build.py, Verilator) and the firmware (firmware/board, riscv64-unknown-elf-gcc)
+are built once per session; a missing cross compiler fails the tests that need it with the hint to
+run `make setup` (which installs it), never skips them.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))  # simboard.py, rv32.py
+
+from simboard import SimBoard, build  # noqa: E402
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "sim: needs the simulated board (Verilator model of the SoC)")
+
+
+@pytest.fixture(scope="session")
+def sim_exe(verilator) -> Path:
+    try:
+        return build.build_sim()
+    except RuntimeError as e:
+        pytest.fail(str(e))
+
+
+@pytest.fixture(scope="session")
+def firmware_hex() -> Path:
+    try:
+        return build.build_firmware()
+    except RuntimeError as e:  # MissingToolchain too: its message says to run `make setup`
+        pytest.fail(str(e))
+
+
+@pytest.fixture
+def start_sim(sim_exe):
+    """start_sim(firmware, *options) -> SimBoard on a free port (or --no-socket); stopped afterwards."""
+    boards = []
+
+    def start(firmware: Path, *args: str) -> SimBoard:
+        extra = () if "--no-socket" in args else ("--port", "0")
+        b = SimBoard(sim_exe, firmware, *extra, *args)
+        boards.append(b)
+        return b
+
+    yield start
+    for b in boards:
+        b.stop()

@@ -1,0 +1,149 @@
+"""The memory map (host/wavemesh/memmap.py) is consistent, fits the ECP5, and every consumer agrees.
+
+- regions and registers do not overlap and fit their address windows;
+- the default sizes hold what docs/soc.md says they support (256 x 256 samples, levels 1..8 of
+  details, the blocks of M >= 2) and fit an LFE5U-85F's block RAM with room for the filter bank;
+- the generated C header, compiled with the host's gcc, and the Verilog include, elaborated by
+  Verilator, give the same numbers as the Python module;
+- docs/soc.md embeds the current generated tables.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from pathlib import Path
+
+import pytest
+from wavemesh import gen, memmap
+from wavemesh.memmap import BLOCKS, COEF, HEIGHT, REGIONS, TOUT
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_regions_and_registers_are_disjoint():
+    codes = [r.code for r in REGIONS] + [memmap.IO_CODE]
+    assert len(set(codes)) == len(codes)
+    for r in REGIONS:
+        assert 0 < r.bytes <= 1 << memmap.REGION_SHIFT
+        assert r.base % 4 == 0
+    assert len({b.index for b in BLOCKS}) == len(BLOCKS)
+    for b in BLOCKS:
+        offsets = [r.offset for r in b.registers]
+        assert len(set(offsets)) == len(offsets), b.name
+        assert all(o % 4 == 0 and o < 256 for o in offsets)
+        for reg in b.registers:
+            used = 0
+            for f in reg.fields:
+                assert 0 <= f.lsb <= f.msb <= 31
+                assert not used & f.mask, (b.name, reg.name, f.name)
+                used |= f.mask
+
+
+def test_default_sizes_hold_what_they_promise():
+    w, h = memmap.GRID_MAX_W, memmap.GRID_MAX_H
+    assert HEIGHT.entries >= w * h
+    # details of every level 1..8 of any grid up to 256 x 256 (ceil sizes per level)
+    for gw, gh in ((w, h), (w - 1, h), (w, 2), (129, 255)):
+        assert memmap._coef_entries(gw, gh, memmap.MAX_LEVELS) <= COEF.entries
+    # one template-stage entry per block for M >= MIN_BLOCK_LEVEL
+    s = 1 << memmap.MIN_BLOCK_LEVEL
+    assert -(-(w - 1) // s) * -(-(h - 1) // s) <= TOUT.entries
+    assert (memmap.TRI_CAPACITY * memmap.REFINER_TRI_BYTES + memmap.REFINER_GRID_BYTES
+            + memmap.FW_RESERVED_BYTES <= memmap.FW_RAM_BYTES)
+    assert memmap.UART_DIV_RESET >= memmap.UART_DIV_MIN
+    assert abs(memmap.CLK_HZ / memmap.UART_DIV_RESET / memmap.UART_BAUD - 1) < 0.02
+
+
+def test_triangle_capacity_fits_the_refiner():
+    """The refiner (native build of firmware/src; 64-bit, so its state is if anything larger than on
+    the rv32) needs no more than the firmware RAM left after code, data and stack for TRI_CAPACITY
+    triangles of the largest grid, and not much less (the capacity is not understated)."""
+    from wavemesh import native
+
+    lib = native.load()
+    room = memmap.FW_RAM_BYTES - memmap.FW_RESERVED_BYTES
+    need = lib.wm_refine_bound(memmap.GRID_MAX_W, memmap.GRID_MAX_H, memmap.TRI_CAPACITY)
+    assert 0 < need <= room
+    assert lib.wm_refine_bound(memmap.GRID_MAX_W, memmap.GRID_MAX_H, memmap.TRI_CAPACITY + 10) > room
+
+
+def test_fits_the_ecp5_with_room_to_spare():
+    total = sum(memmap.ebr_estimate().values())
+    assert total <= memmap.ECP5_85F_EBR - 16  # at least 16 blocks left for the filter bank's line buffers
+
+
+def test_c_header_agrees(tmp_path):
+    gen.write_all(tmp_path)
+    names = ["WM_CLK_HZ", "WM_UART_DIV_RESET", "WM_GRID_MAX_W", "WM_TRI_CAPACITY"]
+    values = [memmap.CLK_HZ, memmap.UART_DIV_RESET, memmap.GRID_MAX_W, memmap.TRI_CAPACITY]
+    for r in REGIONS:
+        names += [f"WM_{r.name}_BASE", f"WM_{r.name}_BYTES", f"WM_{r.name}_ENTRIES"]
+        values += [r.base, r.bytes, r.entries]
+    for b in BLOCKS:
+        for reg in b.registers:
+            names.append(f"WM_{b.name}_{reg.name}_ADDR")
+            values.append(b.base + reg.offset)
+            for f in reg.fields:
+                if f.msb == f.lsb:
+                    names.append(f"WM_{b.name}_{reg.name}_{f.name}")
+                    values.append(f.mask)
+    body = "\n".join(f'    printf("%lu\\n", (unsigned long)({n}));' for n in names)
+    src = tmp_path / "t.c"
+    src.write_text(f'#include <stdio.h>\n#include "wm_memmap.h"\n'
+                   f'int main(void) {{\n{body}\n    return 0;\n}}\n')
+    exe = tmp_path / "t"
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Werror", f"-I{tmp_path}", str(src), "-o", str(exe)],
+                   check=True)
+    out = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout.split()
+    assert [int(v) for v in out] == values
+
+
+def verilog_checks() -> list[tuple[str, int]]:
+    checks = [("WM_CLK_HZ", memmap.CLK_HZ), ("WM_UART_DIV_RESET", memmap.UART_DIV_RESET),
+              ("WM_LED_COUNT", memmap.LED_COUNT), ("WM_REGION_IO", memmap.IO_CODE)]
+    for r in REGIONS:
+        checks += [(f"WM_REGION_{r.name}", r.code), (f"WM_{r.name}_ENTRIES", r.entries)]
+    for b in BLOCKS:
+        checks.append((f"WM_IO_{b.name}", b.index))
+        checks += [(f"WM_{b.name}_{reg.name}", reg.offset) for reg in b.registers]
+    return checks
+
+
+def elaborate_checks(tmp_path: Path, verilator, checks) -> subprocess.CompletedProcess:
+    """Verilator elaborates one generate-time $error per macro whose value differs (lint only: fast)."""
+    exe, env = verilator
+    gen.write_all(tmp_path)
+    body = "\n".join(f"if ((`{n}) != {v}) begin : g_{i} $error(\"{n} is not {v}\"); end"
+                     for i, (n, v) in enumerate(checks))
+    (tmp_path / "tb.v").write_text(f'`include "wm_memmap.vh"\nmodule tb;\ngenerate\n{body}\nendgenerate\n'
+                                   "endmodule\n")
+    return subprocess.run([exe, "--lint-only", "-I" + str(tmp_path), str(tmp_path / "tb.v")],
+                          env=env, capture_output=True, text=True)
+
+
+def test_verilog_include_agrees(tmp_path, verilator):
+    r = elaborate_checks(tmp_path, verilator, verilog_checks())
+    assert r.returncode == 0 and "is not" not in r.stderr, r.stderr
+    # and the check does catch a difference
+    r = elaborate_checks(tmp_path, verilator, [("WM_CLK_HZ", memmap.CLK_HZ + 1)])
+    assert r.returncode != 0 and "WM_CLK_HZ is not" in r.stderr
+
+
+def test_linker_script_fragment_agrees():
+    text = memmap.linker_script()
+    m = re.search(r"ORIGIN = 0x([0-9A-F]+), LENGTH = (\d+)", text)
+    assert (int(m.group(1), 16), int(m.group(2))) == (memmap.FW_RAM.base, memmap.FW_RAM.bytes)
+    assert f"__wm_stack_bytes = {memmap.STACK_BYTES};" in text
+
+
+def test_docs_embed_the_current_tables():
+    text = (ROOT / "docs" / "soc.md").read_text()
+    assert memmap.doc_section(text) == memmap.markdown(), (
+        "docs/soc.md is stale: run `.venv/bin/python -m wavemesh.memmap --update docs/soc.md`")
+
+
+@pytest.mark.parametrize("name", ["wm_memmap.h", "wm_memmap.vh", "wm_memmap.ld", "memmap.md"])
+def test_gen_writes_the_memmap_files(tmp_path, name):
+    gen.write_all(tmp_path)
+    assert (tmp_path / name).read_text() == memmap.files()[name]
