@@ -16,7 +16,7 @@ VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
 SETUP_STAMP := $(VENV)/.installed
 
 .PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean \
-        firmware-board sim firmware
+        firmware-board sim firmware native-device native-device-build demo-native
 
 help:
 	@echo "make setup          install Debian packages (as root) and .venv from requirements.txt"
@@ -33,6 +33,8 @@ help:
 	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
 	@echo "make sim            build firmware and simulator, run the simulated board on 127.0.0.1:$(PORT)"
 	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
+	@echo "make native-device  build and run the native stand-in device on 127.0.0.1:$(DEV_PORT) (DEV_FLAGS=...)"
+	@echo "make demo-native    stream the DEM through the native stand-in device into $(OUT)/"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
@@ -88,6 +90,25 @@ firmware-board: $(SETUP_STAMP)
 sim: firmware-board
 	$(VPY) sim/build.py $(if $(TRACE),--trace)
 	$(SIM_EXE) --firmware $(FW_BUILD)/wavemesh_board.hex --port $(PORT) $(SIM_FLAGS)
+
+# The native stand-in device (firmware/board/native): the board's protocol engine and the refiner on the
+# host CPU, serving the wire protocol (docs/protocol.md) on 127.0.0.1:$(DEV_PORT), e.g.
+# `wavemesh stream in.npy --port socket://127.0.0.1:7721 -o out.obj`.  DEV_FLAGS: see `wmdev --help`
+# (--baud 115200 paces it like the board's UART, --tri-capacity N, --max-width N, ...).
+DEV_PORT  ?= 7721
+DEV_FLAGS ?=
+NATIVE_DEV := build/native-device/wmdev
+
+native-device-build: gen
+	cmake -S firmware/board/native -B build/native-device -DCMAKE_BUILD_TYPE=Release \
+	    -DWM_GEN_DIR=$(CURDIR)/$(GEN) >/dev/null
+	cmake --build build/native-device -j2 --target wmdev
+
+native-device: native-device-build
+	$(NATIVE_DEV) --port $(DEV_PORT) $(DEV_FLAGS)
+
+demo-native: $(SETUP_STAMP) gen
+	$(VPY) tools/stream_demo.py --device native --out $(OUT)
 
 lint: $(SETUP_STAMP)
 	$(VPY) -m ruff check host tests tools

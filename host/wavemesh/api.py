@@ -6,7 +6,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +15,7 @@ from wavemesh import __version__
 from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.haar import decompose
-from wavemesh.heightfield import HeightField, load_heightfield, parse_fill
+from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, initial_triangulation
 from wavemesh.label import tau_counts
 from wavemesh.mesh import Mesh
@@ -84,6 +84,45 @@ def _write_json(path: str, data: dict) -> None:
 
 def _load(path: str, key: str | None, fill: str | None) -> HeightField:
     return load_heightfield(path, key=key, fill=parse_fill(fill) if fill is not None else None)
+
+
+def parse_crop(text: str) -> tuple[int, int, int, int]:
+    """--crop X,Y,W,H: the top-left sample (column, row) and the size in samples."""
+    try:
+        x, y, w, h = (int(v) for v in text.replace(":", ",").split(","))
+    except ValueError:
+        raise InputError(f"--crop {text}: not four integers",
+                         hint="give --crop X,Y,W,H, e.g. 0,0,256,256") from None
+    return x, y, w, h
+
+
+def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | None = None) -> HeightField:
+    """The part of a height field --crop and --decimate select, quantised afresh (as if it were the file)."""
+    if crop is None and decimate in (None, 1):
+        return hf
+    v, what = hf.values, []
+    if crop is not None:
+        x, y, w, h = parse_crop(crop)
+        if x < 0 or y < 0 or w < 2 or h < 2 or x + w > hf.width or y + h > hf.height:
+            raise InputError(f"--crop {crop} does not fit the {hf.width} x {hf.height} input",
+                             hint="X + W <= width, Y + H <= height, W and H at least 2")
+        v = v[y:y + h, x:x + w]
+        what.append(f"crop {x},{y},{w},{h}")
+    if decimate is not None:
+        if decimate < 1:
+            raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
+        v = v[::decimate, ::decimate]
+        if min(v.shape) < 2:
+            raise InputError(f"--decimate {decimate} leaves {v.shape[1]} x {v.shape[0]} samples",
+                             hint="a height field needs at least 2 x 2")
+        what.append(f"decimate {decimate}")
+    out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
+    return replace(out, filled=hf.filled)
+
+
+def _load_input(args) -> HeightField:
+    hf = _load(args.input, args.key, args.fill)
+    return shape_heightfield(hf, getattr(args, "crop", None), getattr(args, "decimate", None))
 
 
 @dataclass
@@ -156,7 +195,8 @@ def _params_from_args(args) -> RefineParams:
                         max_triangles=args.max_triangles, capacity=args.capacity)
 
 
-def mesh_command(args) -> int:
+def _check_mesh_outputs(args) -> tuple[Path, Path | None]:
+    """The output paths of `mesh` and `stream`, checked before any work: (mesh file, --lod folder)."""
     out = _check_output(args.output, MESH_SUFFIXES, "mesh")
     if args.render:
         _check_output(args.render, (".png", ".svg", ".pdf"), "picture")
@@ -169,11 +209,16 @@ def mesh_command(args) -> int:
             raise InputError(f"--lod {args.lod} is not a directory")
         if not lod.parent.exists():
             raise InputError(f"cannot write --lod {args.lod}: directory {lod.parent} does not exist")
+    return out, lod
+
+
+def mesh_command(args) -> int:
+    out, lod = _check_mesh_outputs(args)
     stage = getattr(args, "stage", "initial")
     params = _params_from_args(args) if stage == "full" else None
     if params is not None:
         params.check()
-    hf = _load(args.input, args.key, args.fill)
+    hf = _load_input(args)
     if stage == "full":
         rjob = refine(hf, args.levels, args.tau, params)
         job, mesh = rjob.initial, rjob.mesh
@@ -248,7 +293,8 @@ def mesh_command(args) -> int:
 
 
 def check_command(args) -> int:
-    hf = _load(args.against, args.key, args.fill)
+    hf = shape_heightfield(_load(args.against, args.key, args.fill), getattr(args, "crop", None),
+                           getattr(args, "decimate", None))
     mesh, z = read_mesh(args.mesh, hf.width, hf.height)
     if (mesh.width, mesh.height) != (hf.width, hf.height):
         raise InputError(f"{args.mesh} is for a {mesh.width} x {mesh.height} grid but {args.against} "
@@ -314,7 +360,193 @@ def synth_command(args) -> int:
     return 0
 
 
-COMMANDS = {"mesh": mesh_command, "check": check_command, "render": render_command, "synth": synth_command}
+def _fits(hf: HeightField, info) -> str | None:
+    """None when the device holds the height field, else a hint: the --decimate that makes it fit."""
+    w, h = hf.width, hf.height
+    if w <= info.max_width and h <= info.max_height and w * h <= info.max_samples:
+        return None
+    for n in range(2, 1 + max(w, h)):
+        dw, dh = -(-w // n), -(-h // n)
+        if dw <= info.max_width and dh <= info.max_height and dw * dh <= info.max_samples:
+            return (f"--decimate {n} makes it {dw} x {dh}; or --crop X,Y,W,H with W <= {info.max_width}, "
+                    f"H <= {info.max_height}")
+    return "crop it with --crop X,Y,W,H"
+
+
+STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 4: "sending", 5: "done"}
+
+
+def stream_command(args) -> int:
+    """`wavemesh stream`: the job on a device over the wire protocol; the outputs of `wavemesh mesh`."""
+    from wavemesh import protocol as P
+    from wavemesh import stream as S
+    from wavemesh.native import fixed_params
+
+    out, lod = _check_mesh_outputs(args)
+    full = args.stage == "full"
+    params = _params_from_args(args)
+    params.check()
+    if not 0 <= params.delta_c <= 1:
+        raise WavemeshError(f"--delta-c {params.delta_c} is out of range", hint="use 0 <= delta_c <= 1")
+    if args.timeout is not None and not args.timeout > 0:
+        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
+    hf = _load_input(args)
+    m = default_levels(hf.width, hf.height) if args.levels is None else args.levels
+    if not 1 <= m <= MAX_LEVELS:
+        raise WavemeshError(f"--levels {m} is out of range", hint=f"use 1..{MAX_LEVELS}")
+    tau = default_tau(hf) if args.tau is None else args.tau
+    if not math.isfinite(tau) or tau < 0:
+        raise WavemeshError(f"--tau {tau} is not a finite number >= 0", hint="give tau in height units")
+    tau_q = tau_counts(tau, hf.scale)
+    q = hf.max_quantisation_error  # as refine(): zeta - 2q on the samples for lossy quantisation
+    zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
+    timeouts = S.DEFAULT_TIMEOUTS if args.timeout is None else replace(S.DEFAULT_TIMEOUTS, job=args.timeout)
+
+    def say(text: str) -> None:
+        if not args.quiet:
+            print(text, flush=True)
+
+    with S.Device(args.port, args.baud, trace=sys.stderr if args.trace else None, timeouts=timeouts) as dev:
+        info = dev.sync()
+        say(f"device: {info.summary()}")
+        hint = _fits(hf, info)
+        if hint:
+            raise S.DeviceError(f"{args.input} is {hf.width} x {hf.height} samples; the device holds at most "
+                                f"{info.max_width} x {info.max_height} ({info.max_samples} samples)", hint)
+        if m > info.max_levels:
+            raise S.DeviceError(f"--levels {m}: the device makes at most {info.max_levels}",
+                                hint=f"use --levels {info.max_levels} or fewer")
+        if not full and not info.features & P.FEATURE_INITIAL_ONLY:
+            raise S.DeviceError("the device cannot stop after the template stage", hint="use --stage full")
+        storage = params.capacity or info.tri_capacity
+        if storage > info.tri_capacity:
+            raise S.DeviceError(f"--capacity {storage}: the device has storage for {info.tri_capacity} "
+                                "triangles",
+                                hint=f"use --capacity {info.tri_capacity} or less")
+        budget_note = ""
+        if params.max_triangles is None:
+            params = replace(params, max_triangles=storage - 1)
+            budget_note = " (the device's capacity less one)"
+        elif params.max_triangles >= storage:
+            raise S.DeviceError(f"--max-triangles {params.max_triangles}: the device honours a budget of "
+                                f"at most {storage - 1} (storage for {storage} triangles)",
+                                hint=f"use --max-triangles {storage - 1} or less")
+        fp = fixed_params(params, hf.scale, zeta)
+        dev.configure(S.config_payload(hf.width, hf.height, m, tau_q, fp, capacity=params.capacity or 0,
+                                       initial_only=not full, delta_lambda=params.delta_lambda,
+                                       delta_c=params.delta_c))
+        if full:
+            say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {params.zeta:g} ({params.metric}), "
+                f"budget {params.max_triangles} triangles{budget_note}")
+        kib = 2 * hf.width * hf.height / 1024
+        bar = S.Bar("heights", hf.width * hf.height, enabled=not args.quiet)
+        t0 = time.monotonic()
+        sent = dev.upload(hf.samples, bar)
+        upload_s = time.monotonic() - t0
+        bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
+        work = S.Bar("device", m if full else 1, enabled=not args.quiet)
+        got: list = []
+
+        def on_progress(x: dict) -> None:
+            name = STAGE_NAMES.get(x["stage"], "?")
+            lvl = f" level {x['level']}" if x["stage"] in (P.Stage.REFINE, P.Stage.EMIT) else ""
+            work.update(len(got), f"{name}{lvl}")
+
+        def on_level(lv) -> None:
+            got.append(lv)
+            work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
+
+        t1 = time.monotonic()
+        levels, done = dev.run(S.samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
+        job_s = time.monotonic() - t1
+        work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
+        link = dev.link.stats
+
+    for lv in levels:
+        verdict = check_mesh(lv.mesh)
+        if not verdict.valid:
+            raise S.ProtocolError(f"the device's level {lv.level} is not a proper triangulation: "
+                                  + "; ".join(verdict.problems[:3]))
+    final = levels[-1]
+    mesh = final.mesh
+    if full:
+        comment = (f"wavemesh {__version__} refined mesh, M={m} tau={tau:g} zeta={params.zeta:g} "
+                   f"metric={params.metric}")
+        rows = [level_report(lv, hf, params.metric) | {"device_cycles": lv.cycles, "stream_bytes": lv.nbytes,
+                                                        "arrived_s": lv.seconds} for lv in levels]
+    else:
+        comment = f"wavemesh {__version__} initial triangulation, M={m} tau={tau:g}"
+        rows = []
+    write_mesh(str(out), mesh, hf.values, comment=comment)
+    written = []
+    if lod is not None:
+        lod.mkdir(exist_ok=True)
+        for lv in levels:
+            path = lod / f"level-{lv.level}{out.suffix.lower()}"
+            write_mesh(str(path), lv.mesh, hf.values, comment=f"{comment} level={lv.level}")
+            written.append(str(path))
+    errors = mesh_errors(mesh, hf.values)
+    clk = info.clk_hz
+    cycles = {name: done[f"cycles_{name}"] for name in ("receive", "filter", "template", "refine", "emit")}
+    mesh_bytes = sum(lv.nbytes for lv in levels)
+    parameters = {"levels": m, "tau": tau, "stage": args.stage}
+    report = {
+        "wavemesh": __version__,
+        "input": hf.to_report(),
+        "parameters": parameters,
+        "initial": {"levels": m, "block_size": 1 << m, "tau_counts": tau_q,
+                    "vertices": levels[0].mesh.n_vertices, "triangles": levels[0].mesh.n_triangles},
+        "errors": errors.to_report(),
+        "output": str(out),
+        "device": info.to_report(),
+        "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},
+        "transfer": {"port": args.port, "baud": args.baud, "height_bytes": 2 * hf.width * hf.height,
+                     "bytes_sent": sent, "upload_seconds": upload_s, "mesh_bytes": mesh_bytes,
+                     "job_seconds": job_s, "frames_out": link.frames_out, "frames_in": link.frames_in,
+                     "bytes_out": link.bytes_out, "bytes_in": link.bytes_in, "damaged_frames": link.damaged},
+    }
+    if full:
+        parameters.update(params.to_report())
+        parameters["zeta_refiner"] = zeta
+        report["refiner"] = {
+            "levels": rows,
+            "bound_met": final.stats["over"] == 0,
+            "seconds": cycles["refine"] / clk,
+            "capacity": storage,
+            "fixed_point": {name: int(getattr(fp, name)) for name, _ in fp._fields_},
+        }
+    if written:
+        report["lod"] = written
+    if args.report:
+        _write_json(args.report, report)
+    if args.render:
+        from wavemesh.render import render_mesh
+
+        render_mesh(mesh, mesh.z(hf.values), args.render, title=Path(args.input).name)
+    if not args.quiet:
+        print(f"{args.input}: {hf.width} x {hf.height}, M={m}, tau={tau:g}: "
+              f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
+              f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
+        if full:
+            print("  level  vertices  triangles       E_max  splits  swaps   device ms")
+            for row in rows:
+                print(f"  {row['level']:>5}  {row['vertices']:>8}  {row['triangles']:>9}  "
+                      f"{row['e_max']:>10.4g}  {row['splits']:>6}  {row['swaps']:>5}  "
+                      f"{1000 * row['device_cycles'] / clk:>10.2f}")
+        print("  device: " + ", ".join(f"{k} {1000 * v / clk:.2f} ms" for k, v in cycles.items())
+              + f"; link: {link.frames_out} frames out, {link.frames_in} in, {link.damaged} damaged")
+        print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
+              + (f", {len(written)} levels in {args.lod}" if written else ""))
+    if full and final.stats["over"] != 0:
+        print(f"warning: the error bound is not met: E_max {rows[-1]['e_max']:.6g} > zeta {params.zeta:g} "
+              f"({final.stats['over']} triangles over) at the triangle budget (--max-triangles "
+              f"{params.max_triangles})", file=sys.stderr)
+        return BOUND_NOT_MET
+    return 0
+
+
+COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_command, "render": render_command,
+            "synth": synth_command}
 
 
 def run(args) -> int:

@@ -33,20 +33,8 @@ def _input_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="wavemesh",
-        description="Wavelet-based multiresolution triangle meshes from height fields.",
-    )
-    parser.add_argument("--version", action="version", version=f"wavemesh {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    sub.required = True
-
-    p = sub.add_parser("mesh", help="triangulate a height field", description=(
-        "Triangulate a height field (.npy .npz .pgm .png .tif .asc): the filter bank and templates give "
-        "the initial triangulation, the firmware refiner (built natively) refines it level by level and "
-        "then until every triangle's error E(T) is at most zeta (docs/refiner.md). Exit status 3 when "
-        "--max-triangles stopped it above zeta (the mesh is still written)."))
+def _mesh_options(p: argparse.ArgumentParser) -> None:
+    """The options `mesh` and `stream` share: the job, the input, the outputs."""
     p.add_argument("input", help="height field file")
     p.add_argument("-o", "--output", required=True, help="mesh file to write (.obj or .ply)")
     p.add_argument("--levels", "-M", type=int, default=None,
@@ -90,9 +78,51 @@ def build_parser() -> argparse.ArgumentParser:
                    help="triangle storage of the refiner, as on a device (default: grown as needed)")
     p.add_argument("--lod", metavar="DIR", help="also write each level's mesh to DIR/level-M.obj (or .ply)")
     _input_options(p)
+    _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write a JSON report")
     p.add_argument("--render", metavar="R.png", help="write a picture of the mesh")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+
+
+def _shape_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--crop", metavar="X,Y,W,H",
+                   help="use only the W x H samples whose top-left sample is column X, row Y")
+    p.add_argument("--decimate", type=int, metavar="N",
+                   help="use every N-th sample of every N-th row (after --crop)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="wavemesh",
+        description="Wavelet-based multiresolution triangle meshes from height fields.",
+    )
+    parser.add_argument("--version", action="version", version=f"wavemesh {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("mesh", help="triangulate a height field", description=(
+        "Triangulate a height field (.npy .npz .pgm .png .tif .asc): the filter bank and templates give "
+        "the initial triangulation, the firmware refiner (built natively) refines it level by level and "
+        "then until every triangle's error E(T) is at most zeta (docs/refiner.md). Exit status 3 when "
+        "--max-triangles stopped it above zeta (the mesh is still written)."))
+    _mesh_options(p)
+
+    p = sub.add_parser("stream", help="triangulate a height field on a device (board or simulated board)",
+                       description=(
+        "Send a height field to a wavemesh device over a serial port (a board on /dev/ttyUSB1, the "
+        "simulated board or the native stand-in on socket://127.0.0.1:PORT; any pyserial URL) and collect "
+        "the mesh of every level as the device makes it, the coarsest first (docs/protocol.md). The "
+        "options and outputs are those of `wavemesh mesh`, whose result it equals. Without "
+        "--max-triangles the budget is the device's triangle capacity less one. Exit status 3 when the "
+        "budget stopped the run above zeta."))
+    _mesh_options(p)
+    p.add_argument("--port", "-p", required=True, metavar="URL",
+                   help="the device: /dev/ttyUSB1, socket://127.0.0.1:7720 (make sim), rfc2217://..., loop://")
+    p.add_argument("--baud", "-b", type=int, default=115200,
+                   help="baud rate of a serial port (default 115200, the board's; a socket ignores it)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="seconds the device may compute without sending anything (default 120)")
+    p.add_argument("--trace", action="store_true", help="hex dump of every frame on stderr")
 
     p = sub.add_parser("check", help="check a mesh against its height field", description=(
         "Check that MESH is a proper triangulation of the height field's grid rectangle and "
@@ -100,6 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("mesh", help="mesh file (.obj or .ply)")
     p.add_argument("--against", required=True, metavar="INPUT", help="the height field")
     _input_options(p)
+    _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write the results as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 

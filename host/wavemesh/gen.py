@@ -7,6 +7,8 @@
 - ``templates.json``: the same data for anything else
 - ``wm_memmap.h``, ``wm_memmap.vh``, ``wm_memmap.ld``, ``memmap.md``: the SoC memory map
   (``wavemesh.memmap``, the one source of addresses, sizes and register bits)
+- ``wm_protocol.h``: the wire protocol's frame types, error codes, limits and field offsets
+  (``wavemesh.protocol``, the one source of both sides of the protocol)
 
 They are build products (DEVELOPERS.md: nothing built is committed); the tests
 regenerate them and compare with the Python model.
@@ -28,7 +30,7 @@ import json
 import sys
 from pathlib import Path
 
-from wavemesh import memmap
+from wavemesh import memmap, protocol
 from wavemesh.templates import LABELS, LUT_INVALID, LUT_SIZE, MAX_TRIANGLES, template_set
 
 WORD_BITS = 4 + 12 * MAX_TRIANGLES
@@ -160,6 +162,7 @@ def write_all(outdir: str | Path) -> list[Path]:
         "wm_templates.vh": verilog_include(),
         "templates.json": json.dumps(json_data(), indent=1) + "\n",
         **memmap.files(),
+        **protocol.files(),
     }
     written = []
     for name, text in files.items():

@@ -1,0 +1,171 @@
+/*
+ * wavemesh wire protocol, device side: a transport-agnostic engine (docs/protocol.md).
+ *
+ * The engine speaks the protocol over two byte callbacks (read one byte with a timeout, write bytes)
+ * and a cycle counter; it touches no hardware, allocates nothing and never waits without a timeout.
+ * The board program (firmware/board/app/main.c) gives it the UART; the native stand-in device
+ * (firmware/board/native/) gives it a TCP socket.  Both hand in a job function that turns the
+ * received heights and parameters into meshes, level by level:
+ *
+ *     static wm_proto eng;                                  (about 2.5 KiB: buffers inside)
+ *     wm_proto_init(&eng, &io, &caps, heights, job, job_ctx);
+ *     wm_proto_serve(&eng);                                 (returns only when the link closes)
+ *
+ *     int job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail) {
+ *         wm_proto_stage(p, WM_PROTO_STAGE_FILTER, j->levels);   ... filter bank ...
+ *         wm_proto_stage(p, WM_PROTO_STAGE_TEMPLATE, j->levels); ... initial triangulation ...
+ *         wm_proto_stage(p, WM_PROTO_STAGE_REFINE, m);           ... refiner ...
+ *         rc = wm_proto_emit_level(p, mesh, &stats, last);  if (rc) return rc;
+ *         ...
+ *         return WM_PROTO_E_NONE;        (or WM_PROTO_E_CAPACITY / WM_PROTO_E_JOB with *detail)
+ *     }
+ *
+ * Every public symbol starts with wm_proto_.  Frame types, error codes, limits and field offsets
+ * come from the generated wm_protocol.h (host/wavemesh/protocol.py is their one source).
+ */
+#ifndef WM_PROTO_H
+#define WM_PROTO_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "wavemesh.h"
+#include "wm_protocol.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* getc results besides a byte 0..255 */
+#define WM_PROTO_RX_TIMEOUT (-1) /* no byte within the timeout */
+#define WM_PROTO_RX_CLOSED (-2)  /* the link is gone (a socket closed): wm_proto_serve returns */
+
+/* The transport.  All three are required. */
+typedef struct wm_proto_io {
+    void *ctx;
+    /* The next received byte, waiting up to timeout_ms milliseconds (0: do not wait);
+     * WM_PROTO_RX_TIMEOUT or WM_PROTO_RX_CLOSED otherwise. */
+    int (*getc)(void *ctx, uint32_t timeout_ms);
+    /* Send n bytes (may block while a FIFO drains; must not block forever). */
+    void (*write)(void *ctx, const uint8_t *data, size_t n);
+    /* A free-running counter at caps.clk_hz (wraps after 2^64). */
+    uint64_t (*cycles)(void *ctx);
+} wm_proto_io;
+
+/* What the device states in HELLO_REPLY (docs/protocol.md, HELLO_REPLY). */
+typedef struct wm_proto_caps {
+    char name[8];            /* e.g. "wm-board", NUL-padded */
+    uint8_t fw_major, fw_minor;
+    uint16_t max_width, max_height; /* 2..WM_PROTO_MAX_SIDE */
+    uint32_t max_samples;    /* <= the heights array handed to wm_proto_init */
+    uint32_t tri_capacity;   /* triangle storage the job can give the refiner */
+    uint8_t max_levels;      /* 1..WM_PROTO_MAX_LEVELS */
+    uint8_t window;          /* 1..WM_PROTO_MAX_WINDOW */
+    uint16_t max_payload;    /* 64..WM_PROTO_MAX_PAYLOAD */
+    uint32_t clk_hz;         /* >= 1000 */
+    uint32_t baud;           /* reported only (0: not a UART) */
+    uint32_t features;       /* WM_PROTO_FEATURE_* */
+} wm_proto_caps;
+
+/* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */
+typedef struct wm_proto_job {
+    int32_t width, height;   /* 2..max */
+    int32_t levels;          /* M, 1..max_levels */
+    uint32_t tau;            /* tau_M in coefficient units, 0..WM_PROTO_TAU_MAX */
+    uint32_t flags;          /* WM_PROTO_CONFIG_* */
+    int32_t capacity;        /* triangle storage to use: 2..caps.tri_capacity (never 0 here) */
+    wm_params params;        /* checked with wm_params_check; max_triangles < capacity or 0 */
+    uint32_t delta_lambda;   /* Q16.16, for the reduction operators */
+    uint32_t delta_c;        /* Q16.16, 0..65536 */
+    const uint16_t *heights;
+} wm_proto_job;
+
+struct wm_proto;
+
+/* The job: run the filter bank, the template stage and the refiner on job->heights, call
+ * wm_proto_stage at each stage and wm_proto_emit_level for each level's mesh (the initial
+ * triangulation first).  Returns WM_PROTO_E_NONE, the non-zero code wm_proto_emit_level returned
+ * (stop at once), or an error code of its own (WM_PROTO_E_CAPACITY, WM_PROTO_E_JOB) with *detail. */
+typedef int (*wm_proto_job_fn)(void *ctx, const wm_proto_job *job, struct wm_proto *p, uint32_t *detail);
+
+/* The engine's state.  Opaque: use the functions below. */
+typedef struct wm_proto {
+    wm_proto_io io;
+    wm_proto_caps caps;
+    uint16_t *heights;
+    wm_proto_job_fn job_fn;
+    void *job_ctx;
+    uint32_t ms_cycles;      /* cycles per millisecond */
+
+    /* reception */
+    uint8_t rx[WM_PROTO_MAX_FRAME];
+    uint32_t rx_len;
+    uint8_t rx_esc, rx_bad;
+    uint32_t rx_crc;         /* running CRC-32 (inverted) of the frame's bytes but its last four */
+    uint64_t rx_last;        /* cycles of the last byte of the frame being received */
+    uint8_t f_type, f_seq;   /* the frame just received */
+    uint16_t f_len;
+    const uint8_t *f_pay;
+    uint32_t bad_frames;     /* damaged frames dropped (counter, for tests) */
+
+    /* transmission */
+    uint8_t tx[WM_PROTO_MAX_PAYLOAD];
+    uint8_t out[64];
+    uint32_t out_len;
+    uint8_t seq;             /* the device's own frames */
+
+    /* reply cache: the answer to the last CONFIG, RUN or ABORT, sent again for a duplicate */
+    uint8_t cache[16];
+    uint8_t cache_type, cache_len, cache_req, cache_seq, cache_valid;
+
+    /* session */
+    uint8_t state;           /* WM_PROTO_STATE_* */
+    uint8_t last_error, nak_sent, abort;
+    uint32_t last_detail;
+    uint64_t last_valid;     /* cycles of the last valid frame of the session */
+    wm_proto_job job;
+    uint32_t total, next;    /* samples expected, samples stored in order */
+
+    /* job accounting */
+    int32_t stage;           /* current stage, -1 none */
+    uint64_t stage_t0, run_t0, level_mark;
+    uint64_t cycles[WM_PROTO_STAGE_COUNT];
+    uint8_t level, levels_sent;
+    uint32_t e_max, triangles, vertices;
+    uint8_t done[WM_PROTO_DONE_BYTES]; /* the DONE payload, kept for its repeats */
+
+    /* the level being sent */
+    const wm_mesh *lm;
+    uint8_t lhdr[WM_PROTO_LEVEL_HEADER_BYTES];
+    uint8_t lib;             /* index bytes */
+    uint8_t llast;           /* no level follows */
+    uint32_t ltotal, lcrc;
+    int32_t cur_k, cur_slot; /* triangle cursor: k-th live triangle is in slot cur_slot */
+} wm_proto;
+
+/* Sets up the engine.  heights must hold caps->max_samples samples.  Nothing is sent. */
+void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps, uint16_t *heights,
+                   wm_proto_job_fn job, void *job_ctx);
+
+/* Serves requests until io->getc returns WM_PROTO_RX_CLOSED (never, on a UART).  Returns 0. */
+int wm_proto_serve(wm_proto *p);
+
+/* For the job: a stage begins (WM_PROTO_STAGE_FILTER, _TEMPLATE, _REFINE with the level being made).
+ * Sends a PROGRESS frame and accounts the cycles since the previous stage. */
+void wm_proto_stage(wm_proto *p, int stage, int level);
+
+/* For the job: sends a level's mesh (wm_mesh_export's order: vertex slots, live triangles in slot
+ * order) with the refiner's statistics, and waits until the host has all of it.  The mesh must not
+ * change until this returns.  last: no level follows.  Returns WM_PROTO_E_NONE, or non-zero when the
+ * job must stop (WM_PROTO_E_ABORTED: the host aborted or started again; WM_PROTO_E_NO_ACK: the host
+ * stopped answering; the link closed). */
+int wm_proto_emit_level(wm_proto *p, const wm_mesh *mesh, const wm_level_stats *st, int last);
+
+/* CRC-32 (zlib's): start with 0, pass the result back in to continue. */
+uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* WM_PROTO_H */

@@ -1,0 +1,854 @@
+/*
+ * wavemesh wire protocol, device side (proto.h; docs/protocol.md has every byte table).
+ *
+ * Frame, both ways (SLIP-delimited; 0xC0 and 0xDB inside escaped as 0xDB 0xDC and 0xDB 0xDD):
+ *
+ *   byte  0      type   WM_PROTO_T_*
+ *   byte  1      seq    the host's request number; replies carry it back
+ *   bytes 2..3   len    payload bytes, 0..WM_PROTO_MAX_PAYLOAD
+ *   bytes 4..    payload
+ *   last 4       CRC-32 (zlib's) of bytes 0 .. 3+len
+ *
+ * A run of bytes between two 0xC0 that is not such a frame (short, long, bad escape, wrong length
+ * field, wrong CRC) is dropped without an answer; so is a frame whose next byte does not come within
+ * WM_PROTO_BYTE_TIMEOUT_MS.  The host finds out by its own timeout and sends again.  Everything
+ * else a valid frame can get wrong (type, length, state, value) gets an ERROR frame with its code.
+ *
+ * States (host requests in brackets):
+ *
+ *   IDLE --[CONFIG ok]--> RECEIVING --[DATA .. last sample]--> READY --[RUN, CRC ok]--> RUNNING
+ *     ^                       |  silence > SESSION_TIMEOUT: ERROR TIMEOUT                  |
+ *     +-----------------------+------------------- [HELLO], [ABORT] ----------------------+
+ *     +---------------- job done: DONE (repeated until ACK, at most ACK_RETRIES times) ---+
+ *
+ * During RUNNING the job has the CPU; the engine reads frames only inside wm_proto_emit_level and
+ * while it waits for DONE's ACK: ACK, HELLO (ends the job), ABORT (ends the job), STATUS, and
+ * duplicates of the RUN request are handled there, anything else gets BAD_STATE.
+ */
+#include "proto.h"
+
+#define CACHED_MAX 16u /* largest reply kept for duplicate requests (OK: 4, ERROR: 8) */
+#define SERVE_POLL_MS 100u /* how often the idle loop looks at the session clock */
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Little-endian fields */
+
+static uint16_t get16(const uint8_t *b) { return (uint16_t)(b[0] | (uint16_t)b[1] << 8); }
+
+static uint32_t get32(const uint8_t *b) {
+    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+}
+
+static uint64_t get64(const uint8_t *b) { return (uint64_t)get32(b) | (uint64_t)get32(b + 4) << 32; }
+
+static void put16(uint8_t *b, uint32_t v) {
+    b[0] = (uint8_t)v;
+    b[1] = (uint8_t)(v >> 8);
+}
+
+static void put32(uint8_t *b, uint32_t v) {
+    put16(b, v);
+    put16(b + 2, v >> 16);
+}
+
+static void put64(uint8_t *b, uint64_t v) {
+    put32(b, (uint32_t)v);
+    put32(b + 4, (uint32_t)(v >> 32));
+}
+
+static void zero(uint8_t *b, size_t n) {
+    for (size_t i = 0; i < n; i++) b[i] = 0;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* CRC-32, four bits at a time (a 64-byte table) */
+
+static const uint32_t crc_nibble[16] = {
+    0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu, 0x76DC4190u, 0x6B6B51F4u, 0x4DB26158u, 0x5005713Cu,
+    0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu, 0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu,
+};
+
+static uint32_t crc_update(uint32_t c, uint8_t byte) {
+    c ^= byte;
+    c = crc_nibble[c & 15u] ^ (c >> 4);
+    return crc_nibble[c & 15u] ^ (c >> 4);
+}
+
+uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n) {
+    uint32_t c = ~crc;
+    for (size_t i = 0; i < n; i++) c = crc_update(c, data[i]);
+    return ~c;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Time */
+
+static uint64_t now(const wm_proto *p) { return p->io.cycles(p->io.ctx); }
+
+static uint64_t ms_to_cycles(const wm_proto *p, uint32_t ms) { return (uint64_t)ms * p->ms_cycles; }
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Sending: SLIP-encode into a small buffer, written out when full and before every read */
+
+static void out_flush(wm_proto *p) {
+    if (p->out_len) {
+        p->io.write(p->io.ctx, p->out, p->out_len);
+        p->out_len = 0;
+    }
+}
+
+static void out_raw(wm_proto *p, uint8_t b) {
+    if (p->out_len == sizeof p->out) out_flush(p);
+    p->out[p->out_len++] = b;
+}
+
+static void out_byte(wm_proto *p, uint8_t b) {
+    if (b == WM_PROTO_SLIP_END) {
+        out_raw(p, WM_PROTO_SLIP_ESC);
+        out_raw(p, WM_PROTO_SLIP_ESC_END);
+    } else if (b == WM_PROTO_SLIP_ESC) {
+        out_raw(p, WM_PROTO_SLIP_ESC);
+        out_raw(p, WM_PROTO_SLIP_ESC_ESC);
+    } else {
+        out_raw(p, b);
+    }
+}
+
+/* One frame: header, payload (two pieces, either may be empty), CRC. */
+static void send_frame2(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *a, uint32_t na, const uint8_t *b,
+                        uint32_t nb) {
+    uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
+    uint32_t crc, i;
+    head[0] = type;
+    head[1] = seq;
+    put16(head + 2, na + nb);
+    crc = wm_proto_crc32(0, head, sizeof head);
+    crc = wm_proto_crc32(crc, a, na);
+    crc = wm_proto_crc32(crc, b, nb);
+    put32(tail, crc);
+    out_raw(p, WM_PROTO_SLIP_END);
+    for (i = 0; i < sizeof head; i++) out_byte(p, head[i]);
+    for (i = 0; i < na; i++) out_byte(p, a[i]);
+    for (i = 0; i < nb; i++) out_byte(p, b[i]);
+    for (i = 0; i < sizeof tail; i++) out_byte(p, tail[i]);
+    out_raw(p, WM_PROTO_SLIP_END);
+}
+
+static void send_frame(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *payload, uint32_t n) {
+    send_frame2(p, type, seq, payload, n, 0, 0);
+}
+
+/* A frame of the device's own (not a reply): the device's sequence number. */
+static void send_own(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n) {
+    send_frame(p, type, p->seq++, payload, n);
+}
+
+/* A reply to the frame just received; kept for a duplicate of it when it answers CONFIG/RUN/ABORT. */
+static void reply(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n) {
+    send_frame(p, type, p->f_seq, payload, n);
+    if ((p->f_type == WM_PROTO_T_CONFIG || p->f_type == WM_PROTO_T_RUN || p->f_type == WM_PROTO_T_ABORT) &&
+        n <= CACHED_MAX) {
+        for (uint32_t i = 0; i < n; i++) p->cache[i] = payload[i];
+        p->cache_type = type;
+        p->cache_len = (uint8_t)n;
+        p->cache_req = p->f_type;
+        p->cache_seq = p->f_seq;
+        p->cache_valid = 1;
+    }
+}
+
+/* A duplicate of the last CONFIG, RUN or ABORT (the host sent it again: our reply was lost). */
+static int duplicate(wm_proto *p) {
+    if (!p->cache_valid || p->cache_req != p->f_type || p->cache_seq != p->f_seq) return 0;
+    send_frame(p, p->cache_type, p->f_seq, p->cache, p->cache_len);
+    return 1;
+}
+
+static void reply_ok(wm_proto *p) {
+    uint8_t b[WM_PROTO_OK_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_OK_REQUEST] = p->f_type;
+    reply(p, WM_PROTO_T_OK, b, sizeof b);
+}
+
+static void error_payload(wm_proto *p, uint8_t b[WM_PROTO_ERROR_BYTES], uint8_t code, uint8_t req,
+                          uint32_t detail) {
+    zero(b, WM_PROTO_ERROR_BYTES);
+    b[WM_PROTO_ERROR_CODE] = code;
+    b[WM_PROTO_ERROR_REQUEST] = req;
+    b[WM_PROTO_ERROR_STATE] = p->state;
+    put32(b + WM_PROTO_ERROR_DETAIL, detail);
+    p->last_error = code;
+    p->last_detail = detail;
+}
+
+/* ERROR in answer to the frame just received. */
+static void reply_error(wm_proto *p, uint8_t code, uint32_t detail) {
+    uint8_t b[WM_PROTO_ERROR_BYTES];
+    error_payload(p, b, code, p->f_type, detail);
+    reply(p, WM_PROTO_T_ERROR, b, sizeof b);
+}
+
+/* ERROR of the device's own (the session was dropped). */
+static void send_error(wm_proto *p, uint8_t code, uint32_t detail) {
+    uint8_t b[WM_PROTO_ERROR_BYTES];
+    error_payload(p, b, code, 0, detail);
+    send_own(p, WM_PROTO_T_ERROR, b, sizeof b);
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Receiving */
+
+static void rx_reset(wm_proto *p) {
+    p->rx_len = 0;
+    p->rx_esc = 0;
+    p->rx_bad = 0;
+    p->rx_crc = 0xFFFFFFFFu;
+}
+
+/* The bytes between two delimiters: a frame with the right length field and CRC? */
+static int rx_check(wm_proto *p) {
+    uint32_t n;
+    if (p->rx_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) return 0;
+    n = get16(p->rx + 2);
+    if (p->rx_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES) return 0;
+    if (~p->rx_crc != get32(p->rx + p->rx_len - WM_PROTO_CRC_BYTES)) return 0;
+    p->f_type = p->rx[0];
+    p->f_seq = p->rx[1];
+    p->f_len = (uint16_t)n;
+    p->f_pay = p->rx + WM_PROTO_HEADER_BYTES;
+    return 1;
+}
+
+/* Waits up to wait_ms for a valid frame: 1 (in f_type, f_seq, f_len, f_pay until the next call),
+ * 0 when the time is up, -1 when the link closed.  Damaged frames are dropped and counted. */
+static int rx_frame(wm_proto *p, uint32_t wait_ms) {
+    uint64_t t0 = now(p), limit = ms_to_cycles(p, wait_ms), bt = ms_to_cycles(p, WM_PROTO_BYTE_TIMEOUT_MS);
+    for (;;) {
+        uint64_t t = now(p), spent = t - t0;
+        int in_frame = p->rx_len || p->rx_esc || p->rx_bad;
+        uint32_t to;
+        int c;
+        if (in_frame && t - p->rx_last >= bt) { /* the rest of this frame is not coming */
+            p->bad_frames++;
+            rx_reset(p);
+            in_frame = 0;
+        }
+        if (spent >= limit) return 0;
+        /* milliseconds left, rounded up (a 32-bit division where it fits: no libgcc call per byte) */
+        to = limit - spent > 0xFFFFFFFFu ? wait_ms : (uint32_t)(limit - spent) / p->ms_cycles + 1u;
+        if (in_frame && to > WM_PROTO_BYTE_TIMEOUT_MS) to = WM_PROTO_BYTE_TIMEOUT_MS;
+        out_flush(p);
+        c = p->io.getc(p->io.ctx, to);
+        if (c == WM_PROTO_RX_CLOSED) return -1;
+        if (c < 0) continue;
+        p->rx_last = now(p);
+        if (c == WM_PROTO_SLIP_END) {
+            /* the end of a frame (or a delimiter before one) */
+            int ok = !p->rx_bad && !p->rx_esc && p->rx_len && rx_check(p);
+            if (!ok && (p->rx_len || p->rx_bad || p->rx_esc)) p->bad_frames++;
+            rx_reset(p);
+            if (ok) return 1;
+            continue;
+        }
+        if (p->rx_bad) continue; /* discarding until the next delimiter */
+        if (p->rx_esc) {
+            p->rx_esc = 0;
+            if (c == WM_PROTO_SLIP_ESC_END) {
+                c = WM_PROTO_SLIP_END;
+            } else if (c == WM_PROTO_SLIP_ESC_ESC) {
+                c = WM_PROTO_SLIP_ESC;
+            } else {
+                p->rx_bad = 1; /* an escape of nothing */
+                continue;
+            }
+        } else if (c == WM_PROTO_SLIP_ESC) {
+            p->rx_esc = 1;
+            continue;
+        }
+        if (p->rx_len >= sizeof p->rx) {
+            p->rx_bad = 1; /* longer than any frame */
+            continue;
+        }
+        /* the CRC runs four bytes behind: at the delimiter it covers all but the frame's own CRC
+         * (byte by byte, so no frame end costs more than a byte time of a UART) */
+        if (p->rx_len >= WM_PROTO_CRC_BYTES)
+            p->rx_crc = crc_update(p->rx_crc, p->rx[p->rx_len - WM_PROTO_CRC_BYTES]);
+        p->rx[p->rx_len++] = (uint8_t)c;
+    }
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Stage accounting and progress */
+
+static void stage_enter(wm_proto *p, int stage) {
+    uint64_t t = now(p);
+    if (p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT) p->cycles[p->stage] += t - p->stage_t0;
+    p->stage = stage;
+    p->stage_t0 = t;
+}
+
+static void send_progress(wm_proto *p, int stage, int level) {
+    uint8_t b[WM_PROTO_PROGRESS_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_PROGRESS_STAGE] = (uint8_t)stage;
+    b[WM_PROTO_PROGRESS_LEVEL] = (uint8_t)level;
+    b[WM_PROTO_PROGRESS_LEVELS] = (uint8_t)p->job.levels;
+    put64(b + WM_PROTO_PROGRESS_CYCLES, now(p) - p->run_t0);
+    send_own(p, WM_PROTO_T_PROGRESS, b, sizeof b);
+    out_flush(p);
+}
+
+void wm_proto_stage(wm_proto *p, int stage, int level) {
+    if (stage == WM_PROTO_STAGE_REFINE) p->level = (uint8_t)level;
+    stage_enter(p, stage);
+    send_progress(p, stage, level);
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* Requests outside a job */
+
+static void status_reply(wm_proto *p) {
+    uint8_t b[WM_PROTO_STATUS_REPLY_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_STATUS_REPLY_STATE] = p->state;
+    b[WM_PROTO_STATUS_REPLY_LAST_ERROR] = p->last_error;
+    b[WM_PROTO_STATUS_REPLY_LEVEL] = p->level;
+    put32(b + WM_PROTO_STATUS_REPLY_SAMPLES, p->next);
+    put32(b + WM_PROTO_STATUS_REPLY_EXPECTED, p->total);
+    put32(b + WM_PROTO_STATUS_REPLY_LAST_DETAIL, p->last_detail);
+    reply(p, WM_PROTO_T_STATUS_REPLY, b, sizeof b);
+}
+
+static void session_end(wm_proto *p) {
+    p->state = WM_PROTO_STATE_IDLE;
+    p->total = p->next = 0;
+}
+
+static void do_hello(wm_proto *p) {
+    uint8_t b[WM_PROTO_HELLO_REPLY_BYTES];
+    const wm_proto_caps *c = &p->caps;
+    session_end(p); /* a HELLO starts afresh, whatever was going on */
+    p->cache_valid = 0;
+    if (p->f_len != WM_PROTO_HELLO_BYTES) {
+        reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return;
+    }
+    if ((get16(p->f_pay + WM_PROTO_HELLO_VERSION) >> 8) != WM_PROTO_VERSION_MAJOR) {
+        reply_error(p, WM_PROTO_E_VERSION, WM_PROTO_VERSION);
+        return;
+    }
+    zero(b, sizeof b);
+    put16(b + WM_PROTO_HELLO_REPLY_VERSION, WM_PROTO_VERSION);
+    b[WM_PROTO_HELLO_REPLY_FW_MAJOR] = c->fw_major;
+    b[WM_PROTO_HELLO_REPLY_FW_MINOR] = c->fw_minor;
+    for (int i = 0; i < 8; i++) b[WM_PROTO_HELLO_REPLY_NAME + i] = (uint8_t)c->name[i];
+    put16(b + WM_PROTO_HELLO_REPLY_MAX_WIDTH, c->max_width);
+    put16(b + WM_PROTO_HELLO_REPLY_MAX_HEIGHT, c->max_height);
+    put32(b + WM_PROTO_HELLO_REPLY_MAX_SAMPLES, c->max_samples);
+    put32(b + WM_PROTO_HELLO_REPLY_TRI_CAPACITY, c->tri_capacity);
+    b[WM_PROTO_HELLO_REPLY_MAX_LEVELS] = c->max_levels;
+    b[WM_PROTO_HELLO_REPLY_WINDOW] = c->window;
+    put16(b + WM_PROTO_HELLO_REPLY_MAX_PAYLOAD, c->max_payload);
+    put32(b + WM_PROTO_HELLO_REPLY_CLK_HZ, c->clk_hz);
+    put32(b + WM_PROTO_HELLO_REPLY_BAUD, c->baud);
+    put32(b + WM_PROTO_HELLO_REPLY_FEATURES, c->features);
+    put16(b + WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS, WM_PROTO_BYTE_TIMEOUT_MS);
+    put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
+    put32(b + WM_PROTO_HELLO_REPLY_SESSION_TIMEOUT_MS, WM_PROTO_SESSION_TIMEOUT_MS);
+    reply(p, WM_PROTO_T_HELLO_REPLY, b, sizeof b);
+}
+
+/* CONFIG's fields, checked one by one: 0, or the error code with *detail. */
+static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
+    const uint8_t *c = p->f_pay;
+    const wm_proto_caps *cap = &p->caps;
+    uint32_t w = get16(c + WM_PROTO_CONFIG_WIDTH), h = get16(c + WM_PROTO_CONFIG_HEIGHT);
+    uint32_t levels = c[WM_PROTO_CONFIG_LEVELS], metric = c[WM_PROTO_CONFIG_METRIC];
+    uint32_t nb = c[WM_PROTO_CONFIG_NEIGHBOURHOOD], k = c[WM_PROTO_CONFIG_ITERATIONS];
+    uint32_t flags = get32(c + WM_PROTO_CONFIG_FLAGS), tau = get32(c + WM_PROTO_CONFIG_TAU);
+    uint32_t budget = get32(c + WM_PROTO_CONFIG_MAX_TRIANGLES), cap_tri = get32(c + WM_PROTO_CONFIG_CAPACITY);
+    uint32_t scale_m = get32(c + WM_PROTO_CONFIG_SCALE_M), scale_e = get32(c + WM_PROTO_CONFIG_SCALE_E);
+    uint32_t delta_p = get32(c + WM_PROTO_CONFIG_DELTA_P), alpha = get32(c + WM_PROTO_CONFIG_ALPHA);
+    uint32_t delta_c = get32(c + WM_PROTO_CONFIG_DELTA_C);
+#define BAD(field)                            \
+    do {                                      \
+        *detail = WM_PROTO_CONFIG_##field;    \
+        return WM_PROTO_E_BAD_VALUE;          \
+    } while (0)
+    if (w < 2) BAD(WIDTH);
+    if (h < 2) BAD(HEIGHT);
+    if (w > cap->max_width || h > cap->max_height || w * h > cap->max_samples) {
+        *detail = w << 16 | h;
+        return WM_PROTO_E_TOO_LARGE;
+    }
+    if (levels < 1 || levels > cap->max_levels) BAD(LEVELS);
+    if (metric != WM_METRIC_NORMAL && metric != WM_METRIC_VERTICAL) BAD(METRIC);
+    if (nb != WM_NEIGHBOURHOOD_FACE && nb != WM_NEIGHBOURHOOD_VERTEX) BAD(NEIGHBOURHOOD);
+    if (k > 3) BAD(ITERATIONS);
+    if ((flags & ~WM_PROTO_CONFIG_KNOWN_FLAGS) ||
+        ((flags & WM_PROTO_CONFIG_INITIAL_ONLY) && !(cap->features & WM_PROTO_FEATURE_INITIAL_ONLY)))
+        BAD(FLAGS);
+    if (tau > WM_PROTO_TAU_MAX) BAD(TAU);
+    if (cap_tri == 0) cap_tri = cap->tri_capacity;
+    if (cap_tri < 2 || cap_tri > cap->tri_capacity) BAD(CAPACITY);
+    if (budget != 0 && (budget < 2 || budget >= cap_tri)) BAD(MAX_TRIANGLES);
+    if (scale_m > 65535u) BAD(SCALE_M);
+    if (scale_e > 126u) BAD(SCALE_E);
+    if (delta_p > 65535u) BAD(DELTA_P);
+    if (alpha > 65536u) BAD(ALPHA);
+    if (delta_c > 65536u) BAD(DELTA_C);
+#undef BAD
+    j->width = (int32_t)w;
+    j->height = (int32_t)h;
+    j->levels = (int32_t)levels;
+    j->tau = tau;
+    j->flags = flags;
+    j->capacity = (int32_t)cap_tri;
+    j->params.metric = (int32_t)metric;
+    j->params.neighbourhood = (int32_t)nb;
+    j->params.iterations = (int32_t)k;
+    j->params.max_triangles = (int32_t)budget;
+    j->params.zeta = get32(c + WM_PROTO_CONFIG_ZETA);
+    j->params.scale_m = scale_m;
+    j->params.scale_e = (int32_t)scale_e;
+    j->params.delta_p = delta_p;
+    j->params.alpha = alpha;
+    j->params.delta_v = get32(c + WM_PROTO_CONFIG_DELTA_V);
+    j->params.reserved = 0;
+    j->params.delta_d = get64(c + WM_PROTO_CONFIG_DELTA_D);
+    j->delta_lambda = get32(c + WM_PROTO_CONFIG_DELTA_LAMBDA);
+    j->delta_c = delta_c;
+    j->heights = p->heights;
+    if (wm_params_check(&j->params) != WM_OK) { /* cannot happen after the checks above */
+        *detail = WM_PROTO_CONFIG_ZETA;
+        return WM_PROTO_E_BAD_VALUE;
+    }
+    return 0;
+}
+
+static void do_config(wm_proto *p) {
+    uint32_t detail = 0;
+    int code;
+    if (duplicate(p)) return;
+    if (p->f_len != WM_PROTO_CONFIG_BYTES) {
+        reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return;
+    }
+    session_end(p); /* a new CONFIG replaces the session */
+    code = parse_config(p, &p->job, &detail);
+    if (code) {
+        reply_error(p, (uint8_t)code, detail);
+        return;
+    }
+    p->total = (uint32_t)p->job.width * (uint32_t)p->job.height;
+    p->next = 0;
+    p->nak_sent = 0;
+    p->state = WM_PROTO_STATE_RECEIVING;
+    for (int s = 0; s < WM_PROTO_STAGE_COUNT; s++) p->cycles[s] = 0;
+    p->stage = -1;
+    stage_enter(p, WM_PROTO_STAGE_RECEIVE);
+    reply_ok(p);
+}
+
+static void do_data(wm_proto *p) {
+    uint8_t b[WM_PROTO_DATA_ACK_BYTES];
+    uint32_t off, n, i;
+    const uint8_t *s;
+    if (p->state != WM_PROTO_STATE_RECEIVING && p->state != WM_PROTO_STATE_READY) {
+        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return;
+    }
+    if (p->f_len < WM_PROTO_DATA_BYTES + 2 || (p->f_len - WM_PROTO_DATA_BYTES) % 2 != 0) {
+        reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return;
+    }
+    off = get32(p->f_pay + WM_PROTO_DATA_OFFSET);
+    n = (uint32_t)(p->f_len - WM_PROTO_DATA_BYTES) / 2;
+    if (off > p->total || n > p->total - off) {
+        reply_error(p, WM_PROTO_E_BAD_OFFSET, off);
+        return;
+    }
+    zero(b, sizeof b);
+    if (off <= p->next) {
+        /* in order, or a repeat that may reach beyond what is stored */
+        s = p->f_pay + WM_PROTO_DATA_BYTES;
+        for (i = 0; i < n; i++) p->heights[off + i] = get16(s + 2 * i);
+        if (off + n > p->next) {
+            p->next = off + n;
+            p->nak_sent = 0;
+        }
+    } else if (!p->nak_sent) {
+        /* a gap: a frame before this one was lost; ask once per gap for everything from next */
+        p->nak_sent = 1;
+        b[WM_PROTO_DATA_ACK_FLAGS] = WM_PROTO_ACK_NAK;
+    }
+    if (p->next == p->total) p->state = WM_PROTO_STATE_READY;
+    put32(b + WM_PROTO_DATA_ACK_NEXT, p->next);
+    reply(p, WM_PROTO_T_DATA_ACK, b, sizeof b);
+}
+
+static void run_job(wm_proto *p);
+
+static void do_run(wm_proto *p) {
+    uint32_t crc = 0;
+    if (duplicate(p)) return;
+    if (p->f_len != WM_PROTO_RUN_BYTES) {
+        reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return;
+    }
+    if (p->state != WM_PROTO_STATE_READY) {
+        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return;
+    }
+    for (uint32_t i = 0; i < p->total; i++) {
+        uint8_t le[2];
+        put16(le, p->heights[i]);
+        crc = wm_proto_crc32(crc, le, 2);
+    }
+    if (crc != get32(p->f_pay + WM_PROTO_RUN_CRC)) {
+        session_end(p);
+        reply_error(p, WM_PROTO_E_DATA_CRC, crc);
+        return;
+    }
+    reply_ok(p);
+    out_flush(p);
+    run_job(p);
+}
+
+/* A frame outside a job. */
+static void handle(wm_proto *p) {
+    switch (p->f_type) {
+    case WM_PROTO_T_HELLO:
+        do_hello(p);
+        break;
+    case WM_PROTO_T_STATUS:
+        if (p->f_len != 0) reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        else status_reply(p);
+        break;
+    case WM_PROTO_T_ABORT:
+        if (duplicate(p)) break;
+        if (p->f_len != 0) {
+            reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+            break;
+        }
+        session_end(p);
+        reply_ok(p);
+        break;
+    case WM_PROTO_T_CONFIG:
+        do_config(p);
+        break;
+    case WM_PROTO_T_DATA:
+        do_data(p);
+        break;
+    case WM_PROTO_T_RUN:
+        do_run(p);
+        break;
+    case WM_PROTO_T_ACK:
+        break; /* a late answer to a job that is over */
+    default:
+        /* the device's own types (an echo on the line) are ignored; anything else is unknown */
+        if (p->f_type < 0x80u) reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
+        break;
+    }
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* During the job */
+
+#define ABORT_HOST 1u   /* ABORT or HELLO: already answered, no DONE */
+#define ABORT_NO_ACK 2u /* the host stopped answering */
+#define ABORT_CLOSED 3u /* the link closed */
+
+/* A frame that arrived while the job waits: 1 when it is the ACK of (kind, index), with *have. */
+static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have) {
+    switch (p->f_type) {
+    case WM_PROTO_T_ACK:
+        if (p->f_len == WM_PROTO_ACK_BYTES && p->f_pay[WM_PROTO_ACK_KIND] == kind &&
+            p->f_pay[WM_PROTO_ACK_INDEX] == index) {
+            *have = get32(p->f_pay + WM_PROTO_ACK_HAVE);
+            return 1;
+        }
+        return 0; /* an ACK of something earlier */
+    case WM_PROTO_T_HELLO:
+        p->abort = ABORT_HOST;
+        do_hello(p);
+        return 0;
+    case WM_PROTO_T_ABORT:
+        if (duplicate(p)) return 0;
+        p->abort = ABORT_HOST;
+        session_end(p);
+        reply_ok(p);
+        return 0;
+    case WM_PROTO_T_STATUS:
+        if (p->f_len == 0) status_reply(p);
+        return 0;
+    case WM_PROTO_T_RUN:
+    case WM_PROTO_T_CONFIG:
+        if (duplicate(p)) return 0;
+        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return 0;
+    case WM_PROTO_T_DATA:
+        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return 0;
+    default:
+        if (p->f_type < 0x80u) reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
+        return 0;
+    }
+}
+
+/* Waits for the ACK of (kind, index), sending `again` each time ACK_TIMEOUT passes without one.
+ * Returns 1 with *have, or 0 when the job must stop (p->abort says why). */
+static int wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, int *tries,
+                    void (*again)(wm_proto *)) {
+    for (;;) {
+        int r = rx_frame(p, WM_PROTO_ACK_TIMEOUT_MS);
+        if (r < 0) {
+            p->abort = ABORT_CLOSED;
+            return 0;
+        }
+        if (r == 0) {
+            if (++*tries > WM_PROTO_ACK_RETRIES) {
+                p->abort = ABORT_NO_ACK;
+                return 0;
+            }
+            again(p);
+            continue;
+        }
+        if (job_frame(p, kind, index, have)) return 1;
+        if (p->abort) return 0;
+    }
+}
+
+/* --- the level stream: LEVEL_HEADER, vertex slots, triangles (docs/protocol.md) --- */
+
+/* The k-th live triangle's slot (sequential calls are O(1) each). */
+static int32_t tri_slot(wm_proto *p, int32_t k) {
+    const wm_mesh *m = p->lm;
+    if (k < p->cur_k) {
+        p->cur_k = 0;
+        p->cur_slot = 0;
+        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+    }
+    while (p->cur_k < k) {
+        p->cur_slot++;
+        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+        p->cur_k++;
+    }
+    return p->cur_slot;
+}
+
+/* Bytes [off, off + n) of the level stream into dst. */
+static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n) {
+    const wm_mesh *m = p->lm;
+    uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES, vb = 4u * (uint32_t)m->vert_end, tb = 3u * p->lib;
+    for (uint32_t i = 0; i < n; i++, off++) {
+        if (off < hb) {
+            dst[i] = p->lhdr[off];
+        } else if (off < hb + vb) {
+            uint32_t v = (off - hb) / 4, part = (off - hb) % 4;
+            uint32_t c = part < 2 ? m->vx[v] : m->vy[v];
+            if (m->vx[v] == WM_FREE) c = WM_PROTO_FREE_VERTEX;
+            dst[i] = (uint8_t)(c >> (8 * (part & 1)));
+        } else {
+            uint32_t r = off - hb - vb, k = r / tb, q = r % tb, corner = q / p->lib, byte = q % p->lib;
+            int32_t t = tri_slot(p, (int32_t)k);
+            uint32_t v = (uint32_t)m->hv[3 * t + (int32_t)corner];
+            dst[i] = (uint8_t)(v >> (8 * byte));
+        }
+    }
+}
+
+/* MESH frames for bytes [from, ltotal); the CRC is taken on the way when from is 0. */
+static void send_level_from(wm_proto *p, uint32_t from) {
+    uint32_t chunk = (uint32_t)p->caps.max_payload - WM_PROTO_MESH_BYTES;
+    int first = from == 0;
+    if (first) p->lcrc = 0;
+    while (from < p->ltotal) {
+        uint32_t n = p->ltotal - from < chunk ? p->ltotal - from : chunk;
+        uint8_t *b = p->tx;
+        zero(b, WM_PROTO_MESH_BYTES);
+        b[WM_PROTO_MESH_LEVEL] = p->level;
+        b[WM_PROTO_MESH_INDEX] = p->levels_sent;
+        put32(b + WM_PROTO_MESH_OFFSET, from);
+        level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        if (first) p->lcrc = wm_proto_crc32(p->lcrc, b + WM_PROTO_MESH_BYTES, n);
+        send_own(p, WM_PROTO_T_MESH, b, WM_PROTO_MESH_BYTES + n);
+        from += n;
+    }
+}
+
+static void send_level_end(wm_proto *p) {
+    uint8_t b[WM_PROTO_LEVEL_END_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_LEVEL_END_LEVEL] = p->level;
+    b[WM_PROTO_LEVEL_END_INDEX] = p->levels_sent;
+    b[WM_PROTO_LEVEL_END_FLAGS] = p->llast ? WM_PROTO_LEVEL_LAST : 0;
+    put32(b + WM_PROTO_LEVEL_END_TOTAL, p->ltotal);
+    put32(b + WM_PROTO_LEVEL_END_CRC, p->lcrc);
+    send_own(p, WM_PROTO_T_LEVEL_END, b, sizeof b);
+    out_flush(p);
+}
+
+static int abort_code(const wm_proto *p) {
+    return p->abort == ABORT_NO_ACK ? WM_PROTO_E_NO_ACK : WM_PROTO_E_ABORTED;
+}
+
+int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st, int last) {
+    static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = {
+        WM_PROTO_LEVEL_HEADER_ST_LEVEL, WM_PROTO_LEVEL_HEADER_ST_VERTICES, WM_PROTO_LEVEL_HEADER_ST_TRIANGLES,
+        WM_PROTO_LEVEL_HEADER_ST_ITERATIONS, WM_PROTO_LEVEL_HEADER_ST_ACTIVE, WM_PROTO_LEVEL_HEADER_ST_DEPENDENT,
+        WM_PROTO_LEVEL_HEADER_ST_PAIRS, WM_PROTO_LEVEL_HEADER_ST_QUASI_PAIRS, WM_PROTO_LEVEL_HEADER_ST_UNPAIRED,
+        WM_PROTO_LEVEL_HEADER_ST_EDGE_SPLITS, WM_PROTO_LEVEL_HEADER_ST_TERNARY_SPLITS,
+        WM_PROTO_LEVEL_HEADER_ST_MOVES, WM_PROTO_LEVEL_HEADER_ST_SWAPS, WM_PROTO_LEVEL_HEADER_ST_BOUND_SPLITS,
+        WM_PROTO_LEVEL_HEADER_ST_BUDGET_HIT, WM_PROTO_LEVEL_HEADER_ST_OVER};
+    const int32_t stat_val[WM_PROTO_STAT_FIELDS] = {
+        st->level, st->vertices, st->triangles, st->iterations, st->active, st->dependent, st->pairs,
+        st->quasi_pairs, st->unpaired, st->edge_splits, st->ternary_splits, st->moves, st->swaps,
+        st->bound_splits, st->budget_hit, st->over};
+    uint64_t t = now(p);
+    int prev = p->stage, tries = 0;
+    uint32_t have = 0, best = 0;
+    if (p->abort) return abort_code(p);
+
+    /* the header of the level stream */
+    p->lm = m;
+    p->level = (uint8_t)st->level;
+    p->lib = m->vert_end > 0xFFFF ? 4 : 2;
+    zero(p->lhdr, sizeof p->lhdr);
+    p->lhdr[WM_PROTO_LEVEL_HEADER_LEVEL] = (uint8_t)st->level;
+    p->lhdr[WM_PROTO_LEVEL_HEADER_INDEX_BYTES] = p->lib;
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_VERTEX_SLOTS, (uint32_t)m->vert_end);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_TRIANGLES, (uint32_t)m->n_tri);
+    put64(p->lhdr + WM_PROTO_LEVEL_HEADER_CYCLES, t - p->level_mark);
+    for (int i = 0; i < WM_PROTO_STAT_FIELDS; i++) put32(p->lhdr + stat_off[i], (uint32_t)stat_val[i]);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_E_MAX, st->e_max);
+    p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
+    p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
+    p->llast = (uint8_t)(last != 0);
+
+    wm_proto_stage(p, WM_PROTO_STAGE_EMIT, st->level);
+    send_level_from(p, 0);
+    send_level_end(p);
+    for (;;) {
+        if (!wait_ack(p, WM_PROTO_T_LEVEL_END, p->levels_sent, &have, &tries, send_level_end)) break;
+        if (have >= p->ltotal) break;
+        if (have > best) {
+            best = have; /* progress: the retry budget starts again */
+            tries = 0;
+        } else if (++tries > WM_PROTO_ACK_RETRIES) {
+            p->abort = ABORT_NO_ACK;
+            break;
+        }
+        send_level_from(p, have);
+        send_level_end(p);
+    }
+    if (p->abort) return abort_code(p);
+    p->levels_sent++;
+    p->e_max = st->e_max;
+    p->triangles = (uint32_t)m->n_tri;
+    p->vertices = (uint32_t)m->n_vert;
+    stage_enter(p, prev);
+    p->level_mark = now(p);
+    return WM_PROTO_E_NONE;
+}
+
+static void send_done(wm_proto *p) {
+    send_own(p, WM_PROTO_T_DONE, p->done, sizeof p->done);
+    out_flush(p);
+}
+
+static void run_job(wm_proto *p) {
+    uint32_t detail = 0, have = 0;
+    int rc, tries = 0;
+    uint8_t *b = p->done;
+    p->state = WM_PROTO_STATE_RUNNING;
+    p->abort = 0;
+    p->levels_sent = 0;
+    p->e_max = p->triangles = p->vertices = 0;
+    p->level = (uint8_t)(p->job.levels - 1);
+    p->run_t0 = now(p);
+    p->level_mark = p->run_t0;
+    stage_enter(p, -1); /* the receive stage ends */
+
+    rc = p->job_fn(p->job_ctx, &p->job, p, &detail);
+    stage_enter(p, -1);
+    if (p->abort == ABORT_HOST || p->abort == ABORT_CLOSED) {
+        session_end(p); /* already answered (HELLO, ABORT), or nobody is listening */
+        if (p->abort == ABORT_HOST) p->last_error = WM_PROTO_E_ABORTED;
+        return;
+    }
+    if (p->abort == ABORT_NO_ACK) {
+        rc = WM_PROTO_E_NO_ACK;
+        detail = p->level;
+    }
+    zero(b, WM_PROTO_DONE_BYTES);
+    b[WM_PROTO_DONE_STATUS] = (uint8_t)rc;
+    b[WM_PROTO_DONE_LEVELS] = p->levels_sent;
+    put32(b + WM_PROTO_DONE_DETAIL, detail);
+    put32(b + WM_PROTO_DONE_E_MAX, p->e_max);
+    put32(b + WM_PROTO_DONE_TRIANGLES, p->triangles);
+    put32(b + WM_PROTO_DONE_VERTICES, p->vertices);
+    put64(b + WM_PROTO_DONE_CYCLES_RECEIVE, p->cycles[WM_PROTO_STAGE_RECEIVE]);
+    put64(b + WM_PROTO_DONE_CYCLES_FILTER, p->cycles[WM_PROTO_STAGE_FILTER]);
+    put64(b + WM_PROTO_DONE_CYCLES_TEMPLATE, p->cycles[WM_PROTO_STAGE_TEMPLATE]);
+    put64(b + WM_PROTO_DONE_CYCLES_REFINE, p->cycles[WM_PROTO_STAGE_REFINE]);
+    put64(b + WM_PROTO_DONE_CYCLES_EMIT, p->cycles[WM_PROTO_STAGE_EMIT]);
+    if (rc) {
+        p->last_error = (uint8_t)rc;
+        p->last_detail = detail;
+    }
+    send_progress(p, WM_PROTO_STAGE_DONE, 0);
+    if (p->abort != ABORT_NO_ACK) { /* a host that stopped answering gets one DONE, no wait */
+        send_done(p);
+        wait_ack(p, WM_PROTO_T_DONE, 0, &have, &tries, send_done);
+    } else {
+        send_done(p);
+    }
+    session_end(p);
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+
+void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps, uint16_t *heights,
+                   wm_proto_job_fn job, void *job_ctx) {
+    zero((uint8_t *)p, sizeof *p);
+    p->io = *io;
+    p->caps = *caps;
+    if (p->caps.window < 1) p->caps.window = 1;
+    if (p->caps.window > WM_PROTO_MAX_WINDOW) p->caps.window = WM_PROTO_MAX_WINDOW;
+    if (p->caps.max_payload < 64 || p->caps.max_payload > WM_PROTO_MAX_PAYLOAD)
+        p->caps.max_payload = WM_PROTO_MAX_PAYLOAD;
+    if (p->caps.max_levels > WM_PROTO_MAX_LEVELS) p->caps.max_levels = WM_PROTO_MAX_LEVELS;
+    p->heights = heights;
+    p->job_fn = job;
+    p->job_ctx = job_ctx;
+    p->ms_cycles = caps->clk_hz / 1000u ? caps->clk_hz / 1000u : 1u;
+    p->stage = -1;
+    p->state = WM_PROTO_STATE_IDLE;
+    rx_reset(p);
+}
+
+int wm_proto_serve(wm_proto *p) {
+    for (;;) {
+        int r = rx_frame(p, SERVE_POLL_MS);
+        if (r < 0) {
+            session_end(p);
+            out_flush(p);
+            return 0;
+        }
+        if (r > 0) {
+            handle(p);
+            p->last_valid = now(p); /* the session clock restarts with every valid frame */
+            out_flush(p);
+            continue;
+        }
+        if ((p->state == WM_PROTO_STATE_RECEIVING || p->state == WM_PROTO_STATE_READY) &&
+            now(p) - p->last_valid >= ms_to_cycles(p, WM_PROTO_SESSION_TIMEOUT_MS)) {
+            uint32_t got = p->next;
+            session_end(p);
+            send_error(p, WM_PROTO_E_TIMEOUT, got);
+            out_flush(p);
+        }
+    }
+}

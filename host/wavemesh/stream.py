@@ -1,0 +1,515 @@
+"""A session with a wavemesh device over the wire protocol (docs/protocol.md): the host's side.
+
+:class:`Device` is to the protocol what esptool's loader is to the ROM's: it syncs (HELLO with
+retries), sends requests and waits for their answers with bounded retries, streams the samples under
+a window of DATA frames with go-back-N retransmission, and collects the levels the device sends,
+asking again for whatever arrived damaged.  Every wait has a timeout and every retry loop a bound,
+so a session ends with the meshes or with one :class:`~wavemesh.errors.WavemeshError` in bounded
+time, never with a hang or a silently different mesh (every frame and every level carries a CRC-32).
+
+    with Device("socket://127.0.0.1:7721") as dev:
+        info = dev.sync()
+        dev.configure(config_payload(...))
+        dev.upload(samples)
+        levels, done = dev.run(samples_crc(samples), on_level=show)
+
+:func:`wavemesh.api.stream_command` (``wavemesh stream``) drives it.
+"""
+
+from __future__ import annotations
+
+import random
+import sys
+import time
+import zlib
+from dataclasses import dataclass, field, replace
+from fractions import Fraction
+
+import numpy as np
+
+from wavemesh import protocol as P
+from wavemesh.errors import WavemeshError
+from wavemesh.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
+from wavemesh.mesh import Mesh
+
+# --- timeouts and retries (host side; seconds of wall time) -------------------------------------------
+# A simulated board runs about ten times slower than a board, so these are generous; the tests that
+# use the fast native stand-in device shorten them through Timeouts.
+
+
+@dataclass(frozen=True)
+class Timeouts:
+    sync: float = 1.0  # s to wait for the answer to one HELLO
+    sync_attempts: int = 5  # HELLOs before "no device answers"
+    reply: float = 2.0  # s to wait for the answer to CONFIG, RUN, STATUS, ABORT
+    attempts: int = 5  # sends of one request before giving up
+    ack: float = 3.0  # s without DATA_ACK progress before the window is sent again ...
+    per_byte: float = 0.002  # ... plus this per byte in flight (20 byte times at 115200 baud)
+    data_retries: int = 8  # window resends without progress before giving up
+    level_retries: int = 16  # requests for the rest of one level without progress before giving up
+    job: float = 120.0  # s the device may stay silent while it computes
+
+
+DEFAULT_TIMEOUTS = Timeouts()
+
+
+class DeviceError(WavemeshError):
+    """The device refused a request or its job failed: an ERROR frame or a DONE with an error code."""
+
+    def __init__(self, message: str, hint: str | None = None, code: int = 0, detail: int = 0):
+        super().__init__(message, hint)
+        self.code = code
+        self.detail = detail
+
+
+class ProtocolError(WavemeshError):
+    """The device sent something the protocol does not allow (a firmware bug, or another protocol)."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """HELLO_REPLY: what the device is and can do."""
+
+    version: int
+    fw_version: tuple[int, int]
+    name: str
+    max_width: int
+    max_height: int
+    max_samples: int
+    tri_capacity: int
+    max_levels: int
+    window: int
+    max_payload: int
+    clk_hz: int
+    baud: int
+    features: int
+    byte_timeout_ms: int
+    ack_timeout_ms: int
+    session_timeout_ms: int
+
+    @classmethod
+    def from_fields(cls, f: dict) -> DeviceInfo:
+        name = f["name"].rstrip(b"\0").decode("ascii", "replace")
+        return cls(f["version"], (f["fw_major"], f["fw_minor"]), name,
+                   f["max_width"], f["max_height"], f["max_samples"], f["tri_capacity"], f["max_levels"],
+                   f["window"], f["max_payload"], f["clk_hz"], f["baud"], f["features"], f["byte_timeout_ms"],
+                   f["ack_timeout_ms"], f["session_timeout_ms"])
+
+    @property
+    def max_budget(self) -> int:
+        """The largest triangle budget the device honours (a budget equal to the storage is none)."""
+        return self.tri_capacity - 1
+
+    def summary(self) -> str:
+        clock = f"{self.clk_hz / 1e6:g} MHz" if self.clk_hz != 10**9 else "ns clock"
+        return (f"{self.name} firmware {self.fw_version[0]}.{self.fw_version[1]}, protocol "
+                f"{self.version >> 8}.{self.version & 0xFF}: up to {self.max_width} x {self.max_height} "
+                f"({self.max_samples} samples), {self.tri_capacity} triangles, M <= {self.max_levels}, "
+                f"{clock}")
+
+    def to_report(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class LevelResult:
+    """One level as the device sent it."""
+
+    level: int
+    index: int  # order of arrival, 0 first
+    mesh: Mesh
+    stats: dict  # wm_level_stats (STAT_FIELDS) and e_max_q16, as wavemesh.native.Level.stats
+    cycles: int  # device cycles spent making it
+    nbytes: int  # size of its level stream
+    seconds: float  # host time when it arrived, from RUN
+
+
+@dataclass
+class JobResult:
+    info: DeviceInfo
+    levels: list[LevelResult]
+    done: dict  # DONE's fields
+    upload_seconds: float = 0.0
+    job_seconds: float = 0.0
+    upload_bytes: int = 0
+    link: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Payloads
+
+
+def samples_crc(samples: np.ndarray) -> int:
+    """CRC-32 of the samples as they go on the wire (little-endian u16, row-major): RUN's field."""
+    return zlib.crc32(np.ascontiguousarray(samples, dtype="<u2").tobytes())
+
+
+def q16(x: float) -> int:
+    return round(Fraction(x) * 2**16)
+
+
+def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, capacity: int = 0,
+                   initial_only: bool = False, delta_lambda: float = 0.0, delta_c: float = 0.0) -> bytes:
+    """CONFIG from the refiner's fixed-point parameters (wavemesh.native.fixed_params: the same
+    conversion `wavemesh mesh` uses, so both paths give the library the same numbers)."""
+    return P.CONFIG.pack(
+        width=width, height=height, levels=levels, metric=fixed.metric, neighbourhood=fixed.neighbourhood,
+        iterations=fixed.iterations, flags=P.CONFIG_INITIAL_ONLY if initial_only else 0, tau=tau_q,
+        max_triangles=fixed.max_triangles, capacity=capacity, zeta=fixed.zeta, scale_m=fixed.scale_m,
+        scale_e=fixed.scale_e, delta_p=fixed.delta_p, alpha=fixed.alpha, delta_v=fixed.delta_v,
+        delta_lambda=min(2**32 - 1, q16(delta_lambda)), delta_c=min(2**32 - 1, q16(delta_c)),
+        delta_d=fixed.delta_d)
+
+
+def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, int]:
+    """A level stream -> (header fields, mesh, stats, cycles).  ProtocolError when inconsistent."""
+    if len(buf) < P.LEVEL_HEADER.size:
+        raise ProtocolError(f"level stream of {len(buf)} bytes")
+    h = P.LEVEL_HEADER.unpack(buf)
+    nv, nt, ib = h["vertex_slots"], h["triangles"], h["index_bytes"]
+    if ib not in (2, 4) or len(buf) != P.level_stream_size(nv, nt, ib):
+        raise ProtocolError(f"level {h['level']}: {nv} vertex slots, {nt} triangles, {ib}-byte indices "
+                            f"do not make {len(buf)} bytes")
+    off = P.LEVEL_HEADER.size
+    xy = np.frombuffer(buf, "<u2", count=2 * nv, offset=off).reshape(nv, 2).astype(np.int64)
+    tris = np.frombuffer(buf, "<u2" if ib == 2 else "<u4", count=3 * nt,
+                         offset=off + 4 * nv).reshape(nt, 3).astype(np.int64)
+    free = xy[:, 0] == P.FREE_VERTEX
+    live = ~free
+    if np.any(xy[live, 0] >= width) or np.any(xy[live, 1] >= height):
+        raise ProtocolError(f"level {h['level']}: a vertex outside the {width} x {height} grid")
+    if nt and (tris.max() >= nv or np.any(free[tris])):
+        raise ProtocolError(f"level {h['level']}: a triangle refers to a missing vertex")
+    if not live.all():  # free vertex slots: dropped, as wavemesh.native does
+        remap = np.cumsum(live) - 1
+        xy, tris = xy[live], remap[tris]
+    stats = {name: h[f"st_{name}"] for name in P.STAT_FIELDS} | {"e_max_q16": h["st_e_max"]}
+    return h, Mesh(width, height, xy, tris), stats, h["cycles"]
+
+
+# ---------------------------------------------------------------------------------------------------
+# Progress
+
+
+class Bar:
+    """A one-line text progress bar on stderr: redrawn in place on a terminal; elsewhere (logs, tests)
+    only its final line is written."""
+
+    WIDTH = 28
+
+    def __init__(self, label: str, total: float, enabled: bool = True, stream=None, unit: str = ""):
+        self.label, self.total, self.unit = label, max(total, 1e-9), unit
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = enabled and hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.t0 = time.monotonic()
+        self.last = 0.0
+        self.done = 0.0
+        self.note = ""
+
+    def _line(self) -> str:
+        frac = min(1.0, self.done / self.total)
+        fill = int(round(frac * self.WIDTH))
+        return (f"{self.label:<9} [{'#' * fill}{'.' * (self.WIDTH - fill)}] {100 * frac:5.1f}% "
+                f"{self.note}")
+
+    def update(self, done: float, note: str | None = None) -> None:
+        self.done = done
+        if note is not None:
+            self.note = note
+        if not self.tty:
+            return
+        now = time.monotonic()
+        if now - self.last >= 0.1 or done >= self.total:
+            self.last = now
+            self.stream.write("\r" + self._line()[:120].ljust(79))
+            self.stream.flush()
+
+    def finish(self, note: str | None = None) -> None:
+        if note is not None:
+            self.note = note
+        if not self.enabled:
+            return
+        line = self._line()
+        self.stream.write(("\r" + line.ljust(79) if self.tty else line) + "\n")
+        self.stream.flush()
+
+
+# ---------------------------------------------------------------------------------------------------
+# The device
+
+
+ERROR_HINTS = {
+    P.ErrorCode.VERSION: "update the device's firmware (or the host tool): both must speak protocol "
+                         f"{P.VERSION_MAJOR}.x",
+    P.ErrorCode.TOO_LARGE: "crop or decimate the input (--crop, --decimate) to what the device holds",
+    P.ErrorCode.BAD_VALUE: "see `wavemesh stream --help` for the ranges",
+    P.ErrorCode.TIMEOUT: "the link stalled for seconds; try again (a lower --baud on a serial line)",
+    P.ErrorCode.CAPACITY: "set a smaller --max-triangles, raise --zeta, or use more --levels",
+    P.ErrorCode.DATA_CRC: "the link corrupts data that the frame checks did not catch; try again",
+    P.ErrorCode.NO_ACK: "the link dropped the host's acknowledgements; try again",
+}
+
+
+def device_error(code: int, detail: int, request: int = 0) -> DeviceError:
+    try:
+        c = P.ErrorCode(code)
+        text = P.ERROR_TEXT.get(c, c.name)
+    except ValueError:
+        c, text = None, f"unknown error code {code}"
+    if c == P.ErrorCode.BAD_VALUE:
+        text += f" ({P.config_field_at(detail)})"
+    elif c == P.ErrorCode.TOO_LARGE:
+        text += f" ({detail >> 16} x {detail & 0xFFFF})"
+    elif c == P.ErrorCode.CAPACITY:
+        text += f" at level {detail}"
+    elif c == P.ErrorCode.JOB:
+        text += f" (refiner code {detail - 2**32 if detail >= 2**31 else detail})"
+    elif c == P.ErrorCode.BAD_STATE:
+        try:
+            text += f" (state {P.State(detail).name})"
+        except ValueError:
+            pass
+    if request:
+        try:
+            text += f" in answer to {P.FrameType(request).name}"
+        except ValueError:
+            pass
+    return DeviceError(f"device error {code} {c.name if c else ''}: {text}".replace("  ", " "),
+                       ERROR_HINTS.get(c), code, detail)
+
+
+class Device:
+    """A wavemesh device behind a pyserial URL or an open port object."""
+
+    def __init__(self, port, baud: int = DEFAULT_BAUD, trace=None, timeouts: Timeouts = DEFAULT_TIMEOUTS):
+        self.link = Link(port, baud, trace)
+        self.t = timeouts
+        self.seq = random.randrange(256)  # a fresh session never looks like a repeat of the last one
+        self.info: DeviceInfo | None = None
+
+    def close(self) -> None:
+        self.link.close()
+
+    def __enter__(self) -> Device:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _next_seq(self) -> int:
+        self.seq = (self.seq + 1) & 0xFF
+        return self.seq
+
+    def _raise_if_error(self, f: Frame, request: int) -> None:
+        if f.type == P.FrameType.ERROR:
+            e = f.fields()
+            if e["request"] in (request, 0):
+                raise device_error(e["code"], e["detail"], e["request"])
+
+    # --- requests ---------------------------------------------------------------------------------------
+    def request(self, ftype: int, payload: bytes, expect: int, timeout: float | None = None,
+                attempts: int | None = None) -> Frame:
+        """Send a request until its answer comes (the same seq: the device answers a repeat from its
+        cache without doing it twice); ERROR answers raise DeviceError."""
+        seq = self._next_seq()
+        timeout = self.t.reply if timeout is None else timeout
+        attempts = self.t.attempts if attempts is None else attempts
+        for _ in range(attempts):
+            self.link.write_frame(ftype, seq, payload)
+            deadline = time.monotonic() + timeout
+            while True:
+                try:
+                    f = self.link.read_frame(max(0.0, deadline - time.monotonic()))
+                except LinkTimeout:
+                    break
+                if f.seq != seq:
+                    continue  # an answer to something earlier
+                self._raise_if_error(f, ftype)
+                if f.type == expect:
+                    return f
+        raise LinkTimeout(f"no answer to {P.FrameType(ftype).name} from {self.link.url} after {attempts} "
+                          "attempts", "the device stopped answering: is it still running?")
+
+    def sync(self) -> DeviceInfo:
+        """HELLO until the device answers (esptool's sync): its capabilities."""
+        self.link.discard_input()
+        payload = P.HELLO.pack(version=P.VERSION)
+        for _ in range(self.t.sync_attempts):
+            try:
+                f = self.request(P.FrameType.HELLO, payload, P.FrameType.HELLO_REPLY, self.t.sync, 1)
+            except LinkTimeout:
+                continue
+            info = DeviceInfo.from_fields(f.fields())
+            if info.version >> 8 != P.VERSION_MAJOR:
+                raise DeviceError(f"the device speaks protocol {info.version >> 8}.{info.version & 0xFF}, "
+                                  f"this host {P.VERSION_MAJOR}.{P.VERSION_MINOR}",
+                                  ERROR_HINTS[P.ErrorCode.VERSION], P.ErrorCode.VERSION)
+            if not (2 <= info.max_width <= P.MAX_SIDE and 2 <= info.max_height <= P.MAX_SIDE
+                    and 1 <= info.window <= P.MAX_WINDOW and 64 <= info.max_payload <= P.MAX_PAYLOAD
+                    and 1 <= info.max_levels <= P.MAX_LEVELS and info.clk_hz >= 1000):
+                raise ProtocolError(f"the device states impossible capabilities: {info}")
+            self.info = info
+            return info
+        raise LinkTimeout(f"no device answers on {self.link.url} ({self.t.sync_attempts} HELLOs, "
+                          f"{self.t.sync:g} s each)",
+                          "is the device running wavemesh firmware with protocol 2 (`make sim`, "
+                          "`make native-device`), at this --baud, and not serving another client?")
+
+    def status(self) -> dict:
+        return self.request(P.FrameType.STATUS, b"", P.FrameType.STATUS_REPLY).fields()
+
+    def abort(self) -> None:
+        self.request(P.FrameType.ABORT, b"", P.FrameType.OK)
+
+    def configure(self, payload: bytes) -> None:
+        self.request(P.FrameType.CONFIG, payload, P.FrameType.OK)
+
+    # --- samples ------------------------------------------------------------------------------------------
+    def upload(self, samples: np.ndarray, bar: Bar | None = None) -> int:
+        """Send the (H, W) samples in DATA frames, a window at a time; returns the bytes sent (frames
+        repeated after a loss included)."""
+        info = self.info
+        a = np.ascontiguousarray(samples, dtype="<u2")
+        height, width = a.shape
+        data = a.tobytes()
+        total = a.size
+        per_frame = (min(info.max_payload, P.MAX_PAYLOAD) - P.DATA.size) // 2
+        if width <= per_frame:
+            per_frame = (per_frame // width) * width  # whole rows per frame
+        window = per_frame * info.window
+        ack_timeout = self.t.ack + self.t.per_byte * 2 * window
+        acked = sent = 0
+        rewinds = 0
+        bytes_out0 = self.link.stats.bytes_out
+        deadline = time.monotonic() + ack_timeout
+        while acked < total:
+            while sent < total and sent - acked < window:
+                n = min(per_frame, total - sent)
+                self.link.write_frame(P.FrameType.DATA, self._next_seq(),
+                                      P.DATA.pack(offset=sent) + data[2 * sent:2 * (sent + n)])
+                sent += n
+            try:
+                f = self.link.read_frame(max(0.0, deadline - time.monotonic()))
+            except LinkTimeout:
+                rewinds += 1
+                if rewinds > self.t.data_retries:
+                    raise LinkTimeout(f"the device stopped acknowledging samples at {acked} of {total} "
+                                      f"({rewinds - 1} resends)",
+                                      "the link loses too much; check the cable and --baud") from None
+                sent = acked  # go back: everything after the last acknowledged sample again
+                deadline = time.monotonic() + ack_timeout
+                continue
+            if f.type == P.FrameType.ERROR:
+                self._raise_if_error(f, P.FrameType.DATA)
+                continue
+            if f.type != P.FrameType.DATA_ACK:
+                continue  # a late answer to something earlier
+            ack = f.fields()
+            if ack["next"] > total:
+                raise ProtocolError(f"DATA_ACK for {ack['next']} of {total} samples")
+            if ack["next"] > acked:
+                acked = ack["next"]
+                rewinds = 0
+                deadline = time.monotonic() + ack_timeout
+                if bar:
+                    bar.update(acked, f"{2 * acked // 1024} of {2 * total // 1024} KiB")
+            if ack["flags"] & P.ACK_NAK and sent > acked:
+                sent = acked  # the device saw a gap: go back at once
+        return self.link.stats.bytes_out - bytes_out0
+
+    # --- the job -------------------------------------------------------------------------------------------
+    def _ack(self, kind: int, index: int, have: int) -> None:
+        payload = P.ACK.pack(kind=kind, index=index, have=have)
+        self.link.write_frame(P.FrameType.ACK, self._next_seq(), payload)
+
+    def run(self, crc: int, width: int, height: int, on_level=None, on_progress=None) -> tuple[list, dict]:
+        """RUN, then the levels as they come (on_level(LevelResult) for each) until DONE.
+        Returns (levels, DONE's fields); DeviceError when the job failed."""
+        seq = self._next_seq()
+        payload = P.RUN.pack(crc=crc)
+        self.link.write_frame(P.FrameType.RUN, seq, payload)
+        t0 = last = time.monotonic()
+        started, runs = False, 1
+        levels: list[LevelResult] = []
+        buf = bytearray()
+        stale_asks = 0  # ACKs asking for more of the current level without getting any
+        last_have = -1
+        while True:
+            wait = (self.t.reply if not started else self.t.job) - (time.monotonic() - last)
+            try:
+                f = self.link.read_frame(max(0.0, wait))
+            except LinkTimeout:
+                if not started and runs < self.t.attempts:
+                    runs += 1
+                    self.link.write_frame(P.FrameType.RUN, seq, payload)  # same seq: not run twice
+                    last = time.monotonic()
+                    continue
+                if not started:
+                    raise LinkTimeout(f"no answer to RUN from {self.link.url} after {runs} attempts",
+                                      "the device stopped answering") from None
+                where = f"after level {levels[-1].level}" if levels else "before the first level"
+                raise LinkTimeout(f"the device sent nothing for {self.t.job:g} s {where}",
+                                  "a slow device (a simulated board) may need a longer --timeout") from None
+            last = time.monotonic()
+            t = f.type
+            if t == P.FrameType.OK and f.seq == seq:
+                started = True
+                continue
+            if t == P.FrameType.ERROR:
+                e = f.fields()
+                if (e["request"] == P.FrameType.RUN and f.seq == seq) or e["request"] == 0:
+                    raise device_error(e["code"], e["detail"], e["request"])
+                continue
+            if t not in (P.FrameType.PROGRESS, P.FrameType.MESH, P.FrameType.LEVEL_END, P.FrameType.DONE):
+                continue
+            started = True
+            x = f.fields()
+            if t == P.FrameType.PROGRESS:
+                if on_progress:
+                    on_progress(x)
+            elif t == P.FrameType.MESH:
+                if x["index"] == len(levels):
+                    off, data = x["offset"], f.tail()
+                    if off <= len(buf) < off + len(data):
+                        buf += data[len(buf) - off:]
+            elif t == P.FrameType.LEVEL_END:
+                idx = x["index"]
+                if idx < len(levels):
+                    self._ack(P.FrameType.LEVEL_END, idx, x["total"])  # our ACK was lost: again
+                    continue
+                if idx > len(levels):
+                    raise ProtocolError(f"level index {idx} after {len(levels)} levels")
+                total = x["total"]
+                if len(buf) == total and zlib.crc32(buf) == x["crc"]:
+                    hdr, mesh, stats, cycles = parse_level(bytes(buf), width, height)
+                    lv = LevelResult(hdr["level"], idx, mesh, stats, cycles, total, time.monotonic() - t0)
+                    levels.append(lv)
+                    self._ack(P.FrameType.LEVEL_END, idx, total)
+                    buf = bytearray()
+                    stale_asks, last_have = 0, -1
+                    if on_level:
+                        on_level(lv)
+                    continue
+                if len(buf) >= total:  # all there but not right: everything again
+                    buf = bytearray()
+                if len(buf) > last_have:
+                    last_have, stale_asks = len(buf), 0
+                else:
+                    stale_asks += 1
+                    if stale_asks > self.t.level_retries:
+                        raise LinkTimeout(f"level {x['level']} does not get through: {len(buf)} of {total} "
+                                          f"bytes after {stale_asks} requests",
+                                          "the link loses too much; check the cable and --baud")
+                self._ack(P.FrameType.LEVEL_END, idx, len(buf))
+            else:  # DONE
+                self._ack(P.FrameType.DONE, 0, 0)
+                if x["status"] != 0:
+                    raise device_error(x["status"], x["detail"])
+                if x["levels"] != len(levels):
+                    raise ProtocolError(f"DONE says {x['levels']} levels, {len(levels)} arrived")
+                return levels, x
+
+
+def with_timeouts(t: Timeouts, **kw) -> Timeouts:
+    return replace(t, **kw)

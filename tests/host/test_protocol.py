@@ -1,0 +1,157 @@
+"""The protocol's single source (host/wavemesh/protocol.py): formats, the generated C header, the docs.
+
+The C header is compiled and its every constant and offset compared with the module; docs/protocol.md's
+byte tables must be the generated ones; the refiner's statistics and parameters keep the layout the
+library has.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from wavemesh import gen, native
+from wavemesh import protocol as P
+from wavemesh.stream import DeviceInfo, config_payload, parse_level, samples_crc
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def header_defines() -> dict[str, str]:
+    return dict(re.findall(r"^#define (\w+) (\S+)", P.c_header(), re.M))
+
+
+def test_header_constants_match_the_module():
+    d = header_defines()
+    assert int(d["WM_PROTO_VERSION"].rstrip("u"), 16) == P.VERSION
+    assert int(d["WM_PROTO_MAX_PAYLOAD"]) == P.MAX_PAYLOAD
+    for t in P.FrameType:
+        assert int(d[f"WM_PROTO_T_{t.name}"].rstrip("u"), 16) == t.value
+    for e in P.ErrorCode:
+        assert int(d[f"WM_PROTO_E_{e.name}"]) == e.value
+    for s in P.Stage:
+        assert int(d[f"WM_PROTO_STAGE_{s.name}"]) == s.value
+    for m in P.MESSAGES:
+        assert int(d[f"WM_PROTO_{m.name}_BYTES"]) == m.size
+        for name, off in m.offsets().items():
+            assert int(d[f"WM_PROTO_{m.name}_{name.upper()}"]) == off
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+def test_header_compiles_and_agrees_with_struct(tmp_path):
+    """Compile the header and print a few offsets from C: the same numbers as struct gives."""
+    (tmp_path / "wm_protocol.h").write_text(P.c_header())
+    fields = [("CONFIG", "DELTA_D"), ("DONE", "CYCLES_EMIT"), ("HELLO_REPLY", "SESSION_TIMEOUT_MS"),
+              ("LEVEL_HEADER", "ST_E_MAX")]
+    src = "#include <stdio.h>\n#include \"wm_protocol.h\"\nint main(void){\n" + "".join(
+        f'printf("%d\\n", WM_PROTO_{m}_{f});\n' for m, f in fields) + "return 0;}\n"
+    (tmp_path / "t.c").write_text(src)
+    subprocess.run(["gcc", "-std=c99", "-Wall", "-Werror", "-o", str(tmp_path / "t"), str(tmp_path / "t.c")],
+                   check=True, cwd=tmp_path)
+    out = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, check=True).stdout.split()
+    msgs = {m.name: m for m in P.MESSAGES}
+    assert [int(v) for v in out] == [msgs[m].offsets()[f.lower()] for m, f in fields]
+
+
+def test_gen_writes_the_protocol_header(tmp_path):
+    written = {p.name for p in gen.write_all(tmp_path)}
+    assert "wm_protocol.h" in written
+    assert (tmp_path / "wm_protocol.h").read_text() == P.c_header()
+
+
+def test_docs_tables_are_current():
+    assert P.doc_is_current(ROOT / "docs" / "protocol.md"), \
+        "run `python -m wavemesh.protocol --update docs/protocol.md`"
+
+
+def test_every_frame_type_has_a_payload_and_fits():
+    assert set(P.PAYLOAD) == set(P.FrameType)
+    for m in P.MESSAGES:
+        assert m.size <= P.MAX_PAYLOAD
+    assert all(t < 0x80 for t in (P.FrameType.HELLO, P.FrameType.CONFIG, P.FrameType.DATA, P.FrameType.RUN,
+                                  P.FrameType.ACK, P.FrameType.STATUS, P.FrameType.ABORT))
+    assert all(t >= 0x80 for t in P.FrameType if t.name in {"OK", "HELLO_REPLY", "DATA_ACK", "STATUS_REPLY",
+                                                            "PROGRESS", "MESH", "LEVEL_END", "DONE", "ERROR"})
+
+
+def test_pack_unpack_round_trip_and_checks():
+    b = P.DONE.pack(status=0, levels=5, detail=0, e_max=123, triangles=7, vertices=6, cycles_receive=1,
+                    cycles_filter=2, cycles_template=3, cycles_refine=4, cycles_emit=2**40)
+    f = P.DONE.unpack(b)
+    assert f["cycles_emit"] == 2**40 and f["levels"] == 5 and f["reserved"] == 0
+    with pytest.raises(TypeError):
+        P.DONE.pack(status=0)  # missing fields
+    with pytest.raises(TypeError):
+        P.OK.pack(request=1, nonsense=2)
+
+
+def test_stats_layout_is_the_librarys():
+    assert P.STAT_FIELDS == native.STAT_FIELDS
+    stats = [f.name for f in P.LEVEL_HEADER.fields if f.name.startswith("st_")]
+    assert stats[:-2] == [f"st_{n}" for n in native.STAT_FIELDS]
+    assert stats[-2:] == ["st_e_max", "st_reserved"]
+    assert [n for n, _ in native.LevelStats._fields_] == list(native.STAT_FIELDS) + ["e_max", "reserved"]
+
+
+def test_config_carries_the_refiners_fixed_point_parameters():
+    p = native.RefineParams(zeta=2.5, metric="vertical", delta_d=0.3, delta_p=0.75, delta_v=1.5, alpha=0.25,
+                            iterations=3, neighbourhood="vertex", max_triangles=999)
+    fp = native.fixed_params(p, 0.5)
+    c = P.CONFIG.unpack(config_payload(100, 50, 4, 77, fp, capacity=1000, initial_only=True,
+                                       delta_lambda=0.01, delta_c=0.98))
+    assert (c["width"], c["height"], c["levels"], c["tau"], c["capacity"]) == (100, 50, 4, 77, 1000)
+    assert c["flags"] == P.CONFIG_INITIAL_ONLY
+    for name, _ in native.Params._fields_:
+        if name != "reserved":
+            assert c[name] == getattr(fp, name), name
+    assert c["delta_lambda"] == round(0.01 * 65536) and c["delta_c"] == round(0.98 * 65536)
+
+
+def test_config_field_names_for_bad_value_details():
+    off = P.CONFIG.offsets()
+    assert P.config_field_at(off["alpha"]) == "alpha"
+    assert P.config_field_at(999) == "byte 999"
+
+
+def test_level_stream_parsing_rejects_inconsistent_streams():
+    import struct
+
+    hdr = dict(level=0, index_bytes=2, vertex_slots=3, triangles=1, cycles=5,
+               **{f"st_{n}": 0 for n in P.STAT_FIELDS}, st_e_max=0)
+    body = struct.pack("<6H", 0, 0, 1, 0, 0, 1) + struct.pack("<3H", 0, 1, 2)
+    h, mesh, stats, cycles = parse_level(P.LEVEL_HEADER.pack(**hdr) + body, 2, 2)
+    assert mesh.n_triangles == 1 and mesh.n_vertices == 3 and cycles == 5 and stats["e_max_q16"] == 0
+    from wavemesh.stream import ProtocolError
+
+    with pytest.raises(ProtocolError):  # one byte short
+        parse_level(P.LEVEL_HEADER.pack(**hdr) + body[:-1], 2, 2)
+    with pytest.raises(ProtocolError):  # a vertex outside the grid
+        parse_level(P.LEVEL_HEADER.pack(**hdr) + struct.pack("<6H", 0, 0, 5, 0, 0, 1) + body[12:], 2, 2)
+    with pytest.raises(ProtocolError):  # a triangle refers to vertex 3 of 3
+        parse_level(P.LEVEL_HEADER.pack(**hdr) + body[:12] + struct.pack("<3H", 0, 1, 3), 2, 2)
+    # a free vertex slot is dropped and the indices renumbered, as wavemesh.native does
+    hdr4 = dict(hdr, vertex_slots=4)
+    body4 = struct.pack("<8H", 0, 0, 0xFFFF, 0xFFFF, 1, 0, 0, 1) + struct.pack("<3H", 0, 2, 3)
+    _, mesh, _, _ = parse_level(P.LEVEL_HEADER.pack(**hdr4) + body4, 2, 2)
+    assert mesh.xy.tolist() == [[0, 0], [1, 0], [0, 1]] and mesh.tris.tolist() == [[0, 1, 2]]
+
+
+def test_hello_reply_parses_into_device_info():
+    b = P.HELLO_REPLY.pack(version=P.VERSION, fw_major=1, fw_minor=2, name=b"wm-board", max_width=256,
+                           max_height=256, max_samples=65536, tri_capacity=1492, max_levels=8, window=4,
+                           max_payload=1024, clk_hz=25_000_000, baud=115200, features=0, byte_timeout_ms=100,
+                           ack_timeout_ms=500, session_timeout_ms=5000)
+    info = DeviceInfo.from_fields(P.HELLO_REPLY.unpack(b))
+    assert info.name == "wm-board" and info.max_budget == 1491 and "25 MHz" in info.summary()
+
+
+def test_samples_crc_is_zlib_of_little_endian_samples():
+    import zlib
+
+    import numpy as np
+
+    a = np.arange(12, dtype=np.uint16).reshape(3, 4) * 4099
+    assert samples_crc(a) == zlib.crc32(a.astype("<u2").tobytes())

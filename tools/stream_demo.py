@@ -1,0 +1,122 @@
+#!/usr/bin/env python3
+"""`make demo`'s device half: start a device, stream a real DEM through it, stop it, say what was written.
+
+    python tools/stream_demo.py --device sim|native [--out out] [--mode fast|pin]
+
+Builds what it needs (the simulated board: board firmware and Verilator model, sim/build.py; the
+native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
+
+    wavemesh stream jacksboro_fault_dem.npz --key elevation --decimate 2 --zeta 15 ... --port socket://...
+
+(the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples at 10 m: decimated by two to
+202 x 172, inside the board's 256 x 256; zeta 15 m keeps the final mesh within the board's 1492
+triangles), writes the mesh, every level's mesh, a picture and a report into --out, checks the mesh,
+and stops the device.  Exit status: that of `wavemesh stream` (0, or 3 when the budget stopped it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import re
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+VENV_BIN = Path(sys.executable).parent
+STREAM_OPTS = ["--key", "elevation", "--decimate", "2", "--zeta", "15"]
+START_TIMEOUT = 20.0  # s for the device to say it is listening
+
+
+def dem() -> str:
+    import matplotlib.cbook as cbook
+
+    return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
+
+
+def _sim_build():
+    spec = importlib.util.spec_from_file_location("wm_sim_build", ROOT / "sim" / "build.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def device_command(kind: str, mode: str) -> list[str]:
+    if kind == "native":
+        sys.path.insert(0, str(ROOT / "tests" / "sim"))
+        from nativedev import build_wmdev
+
+        print("demo: building the native stand-in device (firmware/board/native)", flush=True)
+        return [str(build_wmdev()), "--port", "0"]
+    build = _sim_build()
+    print("demo: building the board firmware and the simulated board (about a minute the first time)",
+          flush=True)
+    hexfile = build.build_firmware()
+    exe = build.build_sim()
+    return [str(exe), "--firmware", str(hexfile), "--port", "0", *(["--fast"] if mode == "fast" else [])]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--device", choices=("sim", "native"), default="sim")
+    ap.add_argument("--mode", choices=("fast", "pin"), default="fast",
+                    help="simulated board: fast UART mode (default) or pin-accurate at 115200 baud")
+    ap.add_argument("--out", default=str(ROOT / "out"))
+    ap.add_argument("--timeout", default="1800", help="wavemesh stream --timeout (the simulated CPU is slow)")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    name = "jacksboro-board" if args.device == "sim" else "jacksboro-native"
+
+    cmd = device_command(args.device, args.mode)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    listening = threading.Event()
+
+    def reader():
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+            if "listening on" in line:
+                listening.set()
+
+    threading.Thread(target=reader, daemon=True).start()
+    try:
+        if not listening.wait(START_TIMEOUT):
+            print("demo: the device did not start:\n" + "\n".join(lines), file=sys.stderr)
+            return 1
+        port = int(re.search(r"listening on 127\.0\.0\.1:(\d+)", "\n".join(lines)).group(1))
+        url = f"socket://127.0.0.1:{port}"
+        print(f"demo: {lines[0]}", flush=True)
+        src = dem()
+        print(f"demo: streaming {src} (403 x 344, decimated to 202 x 172 for the board's 256 x 256) "
+              f"to {url}", flush=True)
+        t0 = time.monotonic()
+        stream = [str(VENV_BIN / "wavemesh"), "stream", src, *STREAM_OPTS, "--port", url, "--timeout",
+                  args.timeout, "-o", str(out / f"{name}.obj"), "--lod", str(out / f"{name}-lod"), "--report",
+                  str(out / f"{name}.json"), "--render", str(out / f"{name}.png")]
+        rc = subprocess.run(stream).returncode
+        took = time.monotonic() - t0
+        if rc not in (0, 3):
+            return rc
+        check = [str(VENV_BIN / "wavemesh"), "check", str(out / f"{name}.obj"), "--against", src,
+                 *STREAM_OPTS[:4]]  # the same input: --key elevation --decimate 2
+        if subprocess.run(check).returncode != 0:
+            return 1
+        print(f"demo: {args.device} device done in {took:.1f} s: mesh {out / name}.obj, levels in "
+              f"{out / name}-lod/, picture {out / name}.png, report {out / name}.json", flush=True)
+        return rc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
