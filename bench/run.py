@@ -53,7 +53,8 @@ def main(argv: list[str]) -> int:
     names = argv or available()
     unknown = [n for n in names if n not in available()]
     if unknown:
-        print(f"error: unknown benchmark {', '.join(unknown)}; have: {', '.join(available())}", file=sys.stderr)
+        print(f"error: unknown benchmark {', '.join(unknown)}; have: {', '.join(available())}",
+              file=sys.stderr)
         return 2
     RESULTS.mkdir(parents=True, exist_ok=True)
     for name in names:
