@@ -74,7 +74,7 @@ test-sim: $(SETUP_STAMP) gen
 	 else echo "test-sim: no simulated board yet (the SoC issue adds it)"; fi
 
 # The board firmware (firmware/board) and the simulated board (sim/): `make sim` then talk to it with
-# socket://127.0.0.1:$(PORT), e.g. `.venv/bin/python -m wavemesh.board socket://127.0.0.1:7720 hello`.
+# socket://127.0.0.1:$(PORT), e.g. `.venv/bin/wavemesh stream in.npy --port socket://127.0.0.1:7720 -o out.obj`.
 PORT      ?= 7720
 SIM_FLAGS ?=
 TRACE     ?=
@@ -111,7 +111,7 @@ demo-native: $(SETUP_STAMP) gen
 	$(VPY) tools/stream_demo.py --device native --out $(OUT)
 
 lint: $(SETUP_STAMP)
-	$(VPY) -m ruff check host tests tools
+	$(VPY) -m ruff check host tests tools bench
 
 # The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
 DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')

@@ -10,6 +10,10 @@
  *   0x3000_0000  TOUT    template-stage output, TOUT_ENTRIES x 16 bit, one per word
  *   0x4000_0000  UART    soc_uart registers
  *   0x4000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
+ *   0x4000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
+ *
+ * The FPGA stage (soc_accel) reads HEIGHT and writes COEF and TOUT while it is busy: it then owns
+ * those three memories' ports, and CPU accesses to them are dropped (reads return stale data).
  *
  * Address bits 31..28 select the region; an offset beyond a region's size, or any other address,
  * reads 0 and ignores writes.  Every access completes in two cycles (request, then mem_ready with
@@ -192,7 +196,8 @@ localparam [2:0]
     SEL_COEF   = 3'd3,
     SEL_TOUT   = 3'd4,
     SEL_UART   = 3'd5,
-    SEL_SYS    = 3'd6;
+    SEL_SYS    = 3'd6,
+    SEL_ACCEL  = 3'd7;
 
 reg [2:0] sel_reg = SEL_NONE;
 
@@ -208,6 +213,7 @@ wire coef_hit = region == `WM_REGION_COEF && offset < COEF_LIMIT;
 wire tout_hit = region == `WM_REGION_TOUT && offset < TOUT_LIMIT;
 wire uart_hit = io_page && mem_addr[11:8] == `WM_IO_UART;
 wire sys_hit = io_page && mem_addr[11:8] == `WM_IO_SYS;
+wire accel_hit = io_page && mem_addr[11:8] == `WM_IO_ACCEL;
 
 reg [2:0] sel;
 always @* begin
@@ -217,6 +223,7 @@ always @* begin
     else if (tout_hit) sel = SEL_TOUT;
     else if (uart_hit) sel = SEL_UART;
     else if (sys_hit) sel = SEL_SYS;
+    else if (accel_hit) sel = SEL_ACCEL;
     else sel = SEL_NONE;
 end
 
@@ -239,6 +246,7 @@ wire [31:0] coef_rdata;
 wire [31:0] tout_rdata;
 wire [31:0] uart_rdata;
 wire [31:0] sys_rdata;
+wire [31:0] accel_rdata;
 
 always @* begin
     case (sel_reg)
@@ -248,9 +256,60 @@ always @* begin
         SEL_TOUT: mem_rdata = tout_rdata;
         SEL_UART: mem_rdata = uart_rdata;
         SEL_SYS: mem_rdata = sys_rdata;
+        SEL_ACCEL: mem_rdata = accel_rdata;
         default: mem_rdata = 32'd0;
     endcase
 end
+
+/*
+ * The FPGA stage and its ports into HEIGHT, COEF and TOUT (it owns them while busy)
+ */
+wire                accel_busy;
+wire                accel_height_en;
+wire [HEIGHT_AW-1:0] accel_height_addr;
+wire                accel_coef_en;
+wire [COEF_AW-1:0]  accel_coef_addr;
+wire [17:0]         accel_coef_wdata;
+wire                accel_tout_en;
+wire [TOUT_AW-1:0]  accel_tout_addr;
+wire [15:0]         accel_tout_wdata;
+
+soc_accel #(
+    .HEIGHT_SAMPLES(HEIGHT_SAMPLES),
+    .COEF_ENTRIES(COEF_ENTRIES),
+    .TOUT_ENTRIES(TOUT_ENTRIES)
+) accel_inst (
+    .clk(clk),
+    .rst(rst),
+    .bus_valid(req && accel_hit),
+    .bus_addr(mem_addr[7:0]),
+    .bus_wdata(mem_wdata),
+    .bus_wstrb(mem_wstrb),
+    .bus_rdata(accel_rdata),
+    .busy(accel_busy),
+    .height_en(accel_height_en),
+    .height_addr(accel_height_addr),
+    .height_rdata(height_rdata),
+    .coef_en(accel_coef_en),
+    .coef_addr(accel_coef_addr),
+    .coef_wdata(accel_coef_wdata),
+    .tout_en(accel_tout_en),
+    .tout_addr(accel_tout_addr),
+    .tout_wdata(accel_tout_wdata)
+);
+
+// port multiplexers: the stage while busy, else the CPU
+wire                 height_en = accel_busy ? accel_height_en : req && height_hit;
+wire [3:0]           height_wstrb = accel_busy ? 4'b0000 : mem_wstrb;
+wire [HEIGHT_AW-1:0] height_addr = accel_busy ? accel_height_addr : mem_addr[HEIGHT_AW+1:2];
+wire                 coef_en = accel_busy ? accel_coef_en : req && coef_hit;
+wire [3:0]           coef_wstrb = accel_busy ? 4'b1111 : mem_wstrb;
+wire [COEF_AW-1:0]   coef_addr = accel_busy ? accel_coef_addr : mem_addr[COEF_AW+1:2];
+wire [31:0]          coef_wdata = accel_busy ? {{14{accel_coef_wdata[17]}}, accel_coef_wdata} : mem_wdata;
+wire                 tout_en = accel_busy ? accel_tout_en : req && tout_hit;
+wire [3:0]           tout_wstrb = accel_busy ? 4'b1111 : mem_wstrb;
+wire [TOUT_AW-1:0]   tout_addr = accel_busy ? accel_tout_addr : mem_addr[TOUT_AW+1:2];
+wire [31:0]          tout_wdata = accel_busy ? {16'd0, accel_tout_wdata} : mem_wdata;
 
 /*
  * Memories
@@ -273,9 +332,9 @@ soc_ram #(
     .DEPTH(HEIGHT_WORDS)
 ) height_ram_inst (
     .clk(clk),
-    .en(req && height_hit),
-    .wstrb(mem_wstrb),
-    .addr(mem_addr[HEIGHT_AW+1:2]),
+    .en(height_en),
+    .wstrb(height_wstrb),
+    .addr(height_addr),
     .wdata(mem_wdata),
     .rdata(height_rdata)
 );
@@ -286,10 +345,10 @@ soc_ram #(
     .SIGNED(1)
 ) coef_ram_inst (
     .clk(clk),
-    .en(req && coef_hit),
-    .wstrb(mem_wstrb),
-    .addr(mem_addr[COEF_AW+1:2]),
-    .wdata(mem_wdata),
+    .en(coef_en),
+    .wstrb(coef_wstrb),
+    .addr(coef_addr),
+    .wdata(coef_wdata),
     .rdata(coef_rdata)
 );
 
@@ -298,10 +357,10 @@ soc_ram #(
     .DEPTH(TOUT_ENTRIES)
 ) tout_ram_inst (
     .clk(clk),
-    .en(req && tout_hit),
-    .wstrb(mem_wstrb),
-    .addr(mem_addr[TOUT_AW+1:2]),
-    .wdata(mem_wdata),
+    .en(tout_en),
+    .wstrb(tout_wstrb),
+    .addr(tout_addr),
+    .wdata(tout_wdata),
     .rdata(tout_rdata)
 );
 

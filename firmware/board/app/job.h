@@ -1,0 +1,21 @@
+/*
+ * The board's job (firmware/board/app/job.c): the FPGA stage, the initial triangulation from its
+ * template entries, and the refiner, behind the protocol engine's job interface (proto.h).
+ */
+#ifndef WM_BOARD_JOB_H
+#define WM_BOARD_JOB_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "proto.h"
+
+/* The largest triangle capacity whose refiner storage and staging of the initial triangulation
+ * (job_need) fit heap_bytes for a W x H grid; 0 when not even 2 fit. */
+uint32_t board_job_capacity(size_t heap_bytes, int32_t width, int32_t height);
+
+/* The job (wm_proto_job_fn).  ctx is unused.  The heights are in the height memory already (the
+ * engine's heights array is WM_HEIGHT_BASE); the heap is the linker's __heap_start .. __heap_end. */
+int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail);
+
+#endif /* WM_BOARD_JOB_H */
