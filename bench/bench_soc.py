@@ -1,0 +1,159 @@
+"""The whole job on the simulated board: device cycles per stage and per output triangle.
+
+`wavemesh stream` through the simulated board (sim/, the cycle-accurate Verilator model of soc_top:
+the PicoRV32 with the real firmware and the FPGA stage) in fast UART mode, on three inputs that fit
+the board's grid and triangle capacity: Ball and Box (wavemesh.synth, 256 x 256 decimated by 8) and a
+real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
+tests/sim/test_stream_board.py).  The device's cycles per stage come from `--report` (`device_cycles`:
+receive, filter bank, templates, refiner, emit).  The simulator and the firmware are built and started
+with tests/sim's helpers (simboard.py) and driven as tests/sim/test_stream_board.py does (its host
+timeouts for the simulated board and its in-process CLI runner).  Each mesh is also compared with
+`wavemesh mesh` (reported, not asserted).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parent
+ROOT = BENCH.parent
+sys.path.insert(0, str(ROOT / "tests" / "sim"))
+
+TITLE = "The whole job on the simulated board (SoC, fast mode)"
+GOAL = 10_000  # cycles per output triangle, the whole job (docs/soc.md)
+STAGES = ("receive", "filter", "template", "refine", "emit")
+BAUD = 115200  # the board's UART: 10 bits per byte on the wire
+
+# name -> (input, options of `wavemesh stream` and `wavemesh mesh`); "JACKSBORO" is matplotlib's DEM
+CASES = {
+    "Ball 256 / 8": ("ball.npy", ["--decimate", "8"]),
+    "Box 256 / 8": ("box.npy", ["--decimate", "8"]),
+    "Jacksboro / 16": ("JACKSBORO", ["--key", "elevation", "--decimate", "16", "--zeta", "15"]),
+}
+
+
+def _inputs(folder: Path) -> None:
+    import numpy as np
+    from wavemesh.synth import ball, box
+
+    np.save(folder / "ball.npy", ball(256))
+    np.save(folder / "box.npy", box(256))
+
+
+def _case(board, name: str, tmp: Path) -> dict:
+    import json
+
+    from test_stream_board import jacksboro, run_cli
+
+    file, opts = CASES[name]
+    src = jacksboro() if file == "JACKSBORO" else str(tmp / file)
+    d = tmp / name.replace(" ", "_").replace("/", "")
+    d.mkdir()
+    t0 = time.monotonic()
+    rc, _, err = run_cli("stream", src, *opts, "--port", board.url, "-o", str(d / "board.obj"),
+                         "--report", str(d / "board.json"), "--quiet")
+    wall = time.monotonic() - t0
+    if rc != 0:
+        return {"name": name, "options": opts, "error": err.strip()[-500:]}
+    rep = json.loads((d / "board.json").read_text())
+    rc, _, err = run_cli("mesh", src, *opts, "-o", str(d / "soft.obj"), "-q")
+    same = rc == 0 and (d / "board.obj").read_bytes() == (d / "soft.obj").read_bytes()
+    cyc = rep["device_cycles"]
+    levels = rep["refiner"]["levels"]
+    out_tris = levels[-1]["triangles"]
+    total = sum(cyc[k] for k in STAGES)
+    return {
+        "name": name, "options": opts, "width": rep["input"]["width"], "height": rep["input"]["height"],
+        "levels": rep["parameters"]["levels"], "zeta": rep["parameters"]["zeta"],
+        "initial_triangles": rep["initial"]["triangles"], "output_triangles": out_tris,
+        "cycles": {k: cyc[k] for k in STAGES}, "total_cycles": total,
+        "cycles_per_triangle": total / out_tris, "refine_cycles_per_triangle": cyc["refine"] / out_tris,
+        "board_seconds": total / rep["device"]["clk_hz"], "clk_hz": rep["device"]["clk_hz"],
+        "refiner_levels": [{k: lv[k] for k in ("level", "triangles", "splits", "swaps", "device_cycles")}
+                           for lv in levels],
+        "link_bytes": rep["transfer"]["bytes_out"] + rep["transfer"]["bytes_in"],
+        "same_as_mesh": same, "wall_seconds": round(wall, 1),
+    }
+
+
+def run() -> dict:
+    import re
+
+    from simboard import SimBoard, build
+    from test_stream_board import SIM_TIMEOUTS
+    from wavemesh import stream as S
+
+    exe, fw = build.build_sim(), build.build_firmware()
+    saved = S.DEFAULT_TIMEOUTS
+    S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS  # read when the CLI opens the device
+    board = SimBoard(exe, fw, "--port", "0", "--fast", "--quiet")
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            _inputs(Path(tmp))
+            cases = [_case(board, name, Path(tmp)) for name in CASES]
+    finally:
+        S.DEFAULT_TIMEOUTS = saved
+        board.stop()
+    m = re.search(r"summary cycles (\d+) wall ([\d.]+) s rate (\d+) kHz", "\n".join(board.lines))
+    sim = {}
+    if m:
+        sim = {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3))}
+    return {"goal_cycles_per_triangle": GOAL, "cases": cases, "simulator": sim}
+
+
+def markdown(results: dict) -> str:
+    goal = results["goal_cycles_per_triangle"]
+    cases = [c for c in results["cases"] if "error" not in c]
+    clk = cases[0]["clk_hz"] if cases else 25_000_000
+    lines = [
+        "`wavemesh stream` through the simulated board (Verilator model of soc_top: PicoRV32 + firmware + "
+        "FPGA stage, docs/soc.md) in fast UART mode; device cycles per stage from `--report` "
+        "(`device_cycles`).  Inputs: wavemesh.synth's Ball and Box at 256 x 256 with `--decimate 8`, "
+        "matplotlib's Jacksboro DEM (`--key elevation --decimate 16 --zeta 15`, metres); other options "
+        "`wavemesh stream`'s defaults.",
+        "",
+        f"**Goal: at most {goal:,} cycles per output triangle for the whole job.**  The simulated clock is "
+        f"the board's, {clk / 1e6:g} MHz: 1,000,000 cycles = {1e6 / clk * 1e3:g} ms on a board, and "
+        f"the goal is {goal / clk * 1e3:g} ms per triangle.",
+        "",
+        "| input | grid | M | triangles (initial -> output) | receive | filter | template | refine | emit "
+        "| total | board s | per output triangle | refine per triangle | vs goal | = `mesh` |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c in cases:
+        cy = c["cycles"]
+        lines.append(
+            f"| {c['name']} | {c['width']} x {c['height']} | {c['levels']} "
+            f"| {c['initial_triangles']} -> {c['output_triangles']} "
+            + "".join(f"| {cy[k]:,} " for k in STAGES)
+            + f"| {c['total_cycles']:,} | {c['board_seconds']:.2f} | {c['cycles_per_triangle']:,.0f} "
+            f"| {c['refine_cycles_per_triangle']:,.0f} | {c['cycles_per_triangle'] / goal:.1f} x "
+            f"| {'yes' if c['same_as_mesh'] else 'NO'} |")
+    lines.append("")
+    for c in results["cases"]:
+        if "error" in c:
+            lines += [f"{c['name']}: the run failed: `{(c['error'] or '?').splitlines()[-1]}`", ""]
+    lines += [
+        "*filter* is the FPGA stage (a few hundred cycles) plus the progress frame; *template* counts the "
+        "triangles from the stage's output and builds the initial triangulation on the CPU; *refine* is "
+        "the refiner on the PicoRV32.  *board s* = total cycles / clock.  *receive* and *emit* are "
+        "fast-mode figures (bytes go straight into and out of the UART FIFOs, about 80 cycles per byte); "
+        f"on a board the {BAUD} baud link (2170 cycles per byte) sets their pace instead.",
+        "",
+        "Refiner cycles per level (level: output triangles, splits, swaps, cycles):",
+        "",
+    ]
+    for c in cases:
+        per = "; ".join(f"{lv['level']}: {lv['triangles']}, {lv['splits']}, {lv['swaps']}, "
+                        f"{lv['device_cycles']:,}" for lv in c["refiner_levels"])
+        link = c["link_bytes"] * 10 / BAUD
+        lines.append(f"- {c['name']}: {per}.  Link: {c['link_bytes']} bytes both ways, "
+                     f"{link:.2f} s at {BAUD} baud.")
+    sim = results.get("simulator") or {}
+    if sim:
+        lines += ["", f"Simulator: {sim['cycles']:,} cycles in {sim['wall_seconds']:.0f} s of wall time "
+                      f"({sim['rate_khz']:,} kHz, about 1/{clk / 1e3 / sim['rate_khz']:.0f} of the board)."]
+    return "\n".join(lines) + "\n"
