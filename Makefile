@@ -26,7 +26,7 @@ help:
 	@echo "make test-firmware  native firmware tests"
 	@echo "make test-sim       simulated-board tests"
 	@echo "make lint           ruff over host/ and tests/"
-	@echo "make demo           mesh a real DEM and write mesh, picture and report to $(OUT)/"
+	@echo "make demo           stream a real DEM through the simulated board, and mesh it in software, into $(OUT)/"
 	@echo "make docs           regenerate the pictures and tables in docs/"
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
 	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
@@ -116,12 +116,17 @@ lint: $(SETUP_STAMP)
 # The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
 DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')
 
-demo: $(SETUP_STAMP)
+# 1) through the simulated board: builds the board firmware and the Verilator model, starts it, streams
+#    the DEM (decimated to fit the board) with `wavemesh stream`, checks the mesh (tools/stream_demo.py);
+# 2) the whole DEM through the software path (`wavemesh mesh`: reference model + native refiner).
+demo: $(SETUP_STAMP) gen
 	@mkdir -p $(OUT)
+	$(VPY) tools/stream_demo.py --device sim --out $(OUT)
 	$(VENV)/bin/wavemesh mesh $(DEMO_DEM) --key elevation -o $(OUT)/jacksboro.obj \
 	    --report $(OUT)/jacksboro.json --render $(OUT)/jacksboro.png
 	$(VENV)/bin/wavemesh check $(OUT)/jacksboro.obj --against $(DEMO_DEM) --key elevation
-	@echo "demo: mesh $(OUT)/jacksboro.obj, picture $(OUT)/jacksboro.png, report $(OUT)/jacksboro.json"
+	@echo "demo: board: $(OUT)/jacksboro-board.obj (.png, .json, -lod/); software path:" \
+	      "$(OUT)/jacksboro.obj, $(OUT)/jacksboro.png, $(OUT)/jacksboro.json"
 
 docs: $(SETUP_STAMP)
 	$(VPY) tools/make_docs.py

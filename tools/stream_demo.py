@@ -6,12 +6,15 @@
 Builds what it needs (the simulated board: board firmware and Verilator model, sim/build.py; the
 native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 
-    wavemesh stream jacksboro_fault_dem.npz --key elevation --decimate 2 --zeta 15 ... --port socket://...
+    wavemesh stream jacksboro_fault_dem.npz --key elevation --decimate N --zeta Z ... --port socket://...
 
-(the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples at 10 m: decimated by two to
-202 x 172, inside the board's 256 x 256; zeta 15 m keeps the final mesh within the board's 1492
-triangles), writes the mesh, every level's mesh, a picture and a report into --out, checks the mesh,
-and stops the device.  Exit status: that of `wavemesh stream` (0, or 3 when the budget stopped it).
+(the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples at 10 m.  The simulated board
+gets it decimated by 8 to 51 x 43 with zeta 10 m, within the board's 1364 triangles: the refiner on
+the soft CPU costs about 10^5 cycles per triangle today (docs/benchmarks.md) and the simulator runs
+a few million cycles per second, so this takes a minute or two.  The native stand-in device gets it
+decimated by 2 to 202 x 172 with zeta 15 m.)  It writes the mesh, every level's mesh, a picture and
+a report into --out, checks the mesh, and stops the device.  Exit status: that of `wavemesh stream`
+(0, or 3 when the budget stopped it).
 """
 
 from __future__ import annotations
@@ -27,7 +30,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
-STREAM_OPTS = ["--key", "elevation", "--decimate", "2", "--zeta", "15"]
+# Per device: the input and bound (see the docstring for why)
+STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "8", "--zeta", "10"],
+               "native": ["--key", "elevation", "--decimate", "2", "--zeta", "15"]}
 START_TIMEOUT = 20.0  # s for the device to say it is listening
 
 
@@ -91,10 +96,10 @@ def main(argv=None) -> int:
         url = f"socket://127.0.0.1:{port}"
         print(f"demo: {lines[0]}", flush=True)
         src = dem()
-        print(f"demo: streaming {src} (403 x 344, decimated to 202 x 172 for the board's 256 x 256) "
-              f"to {url}", flush=True)
+        opts = STREAM_OPTS[args.device]
+        print(f"demo: streaming {src} (403 x 344, {' '.join(opts[2:])}) to {url}", flush=True)
         t0 = time.monotonic()
-        stream = [str(VENV_BIN / "wavemesh"), "stream", src, *STREAM_OPTS, "--port", url, "--timeout",
+        stream = [str(VENV_BIN / "wavemesh"), "stream", src, *opts, "--port", url, "--timeout",
                   args.timeout, "-o", str(out / f"{name}.obj"), "--lod", str(out / f"{name}-lod"), "--report",
                   str(out / f"{name}.json"), "--render", str(out / f"{name}.png")]
         rc = subprocess.run(stream).returncode
@@ -102,7 +107,7 @@ def main(argv=None) -> int:
         if rc not in (0, 3):
             return rc
         check = [str(VENV_BIN / "wavemesh"), "check", str(out / f"{name}.obj"), "--against", src,
-                 *STREAM_OPTS[:4]]  # the same input: --key elevation --decimate 2
+                 *opts[:4]]  # the same input: --key elevation --decimate N
         if subprocess.run(check).returncode != 0:
             return 1
         print(f"demo: {args.device} device done in {took:.1f} s: mesh {out / name}.obj, levels in "
