@@ -212,6 +212,24 @@ def _check_mesh_outputs(args) -> tuple[Path, Path | None]:
     return out, lod
 
 
+
+def _write_outputs(args, hf: HeightField, mesh: Mesh, report: dict, written) -> None:
+    """The report and the picture of `mesh` and `stream` (the meshes are written by the caller)."""
+    if written:
+        report["lod"] = written
+    if args.report:
+        _write_json(args.report, report)
+    if args.render:
+        from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
+
+        render_mesh(mesh, mesh.z(hf.values), args.render, title=Path(args.input).name)
+
+
+def _print_summary(args, hf: HeightField, mesh: Mesh, levels: int, tau: float, errors) -> None:
+    print(f"{args.input}: {hf.width} x {hf.height}, M={levels}, tau={tau:g}: "
+          f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
+          f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
+
 def mesh_command(args) -> int:
     out, lod = _check_mesh_outputs(args)
     stage = getattr(args, "stage", "initial")
@@ -261,18 +279,9 @@ def mesh_command(args) -> int:
             "fixed_point": {name: int(getattr(rjob.output.params, name)) for name,
                             _ in rjob.output.params._fields_},
         }
-    if written:
-        report["lod"] = written
-    if args.report:
-        _write_json(args.report, report)
-    if args.render:
-        from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
-
-        render_mesh(mesh, mesh.z(hf.values), args.render, title=Path(args.input).name)
+    _write_outputs(args, hf, mesh, report, written)
     if not args.quiet:
-        print(f"{args.input}: {hf.width} x {hf.height}, M={job.levels}, tau={job.tau:g}: "
-              f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
-              f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
+        _print_summary(args, hf, mesh, job.levels, job.tau, errors)
         if rjob is not None:
             print(f"  refiner: zeta {params.zeta:g} ({params.metric}), k={params.iterations}, "
                   f"{params.neighbourhood}-based, {rjob.seconds:.3f} s")
@@ -515,18 +524,9 @@ def stream_command(args) -> int:
             "capacity": storage,
             "fixed_point": {name: int(getattr(fp, name)) for name, _ in fp._fields_},
         }
-    if written:
-        report["lod"] = written
-    if args.report:
-        _write_json(args.report, report)
-    if args.render:
-        from wavemesh.render import render_mesh
-
-        render_mesh(mesh, mesh.z(hf.values), args.render, title=Path(args.input).name)
+    _write_outputs(args, hf, mesh, report, written)
     if not args.quiet:
-        print(f"{args.input}: {hf.width} x {hf.height}, M={m}, tau={tau:g}: "
-              f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
-              f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
+        _print_summary(args, hf, mesh, m, tau, errors)
         if full:
             print("  level  vertices  triangles       E_max  splits  swaps   device ms")
             for row in rows:
