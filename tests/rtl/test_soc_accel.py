@@ -3,7 +3,6 @@ template-entry writer, registers) against the reference model; the bench is soc_
 
 Built small (64 x 64, 5 levels, 32 block columns, small memories) so the refusals are reachable."""
 
-import os
 
 from rtl_runner import RTL, run
 
@@ -11,9 +10,6 @@ PARAMS = {"MAX_WIDTH": 64, "MAX_HEIGHT": 64, "MAX_LEVELS": 5, "MAX_COLS": 24,
           "HEIGHT_SAMPLES": 4000, "COEF_ENTRIES": 8192, "TOUT_ENTRIES": 512}
 
 
-def test_soc_accel(monkeypatch):
+def test_soc_accel():
     sources = [RTL / "soc_accel.v", *sorted(RTL.glob("haar_*.v")), *sorted(RTL.glob("tlut_*.v"))]
-    # as test_tlut_chain.py: the wheel's verilated.mk needs the PCH flag for designs split into files
-    flags = os.environ.get("MAKEFLAGS", "") + " CFG_CXXFLAGS_PCH_I=-include"
-    monkeypatch.setenv("MAKEFLAGS", flags.strip())
     run("soc_accel", sources, "soc_accel_tb", parameters=PARAMS)
