@@ -20,15 +20,16 @@ a report into --out, checks the mesh, and stops the device.  Exit status: that o
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import re
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "sim"))  # the device-process helper the tests use
+
+from devproc import DeviceProcess  # noqa: E402
+
 VENV_BIN = Path(sys.executable).parent
 # Per device: the input and bound (see the docstring for why)
 STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "8", "--zeta", "10"],
@@ -42,21 +43,14 @@ def dem() -> str:
     return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
 
 
-def _sim_build():
-    spec = importlib.util.spec_from_file_location("wm_sim_build", ROOT / "sim" / "build.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def device_command(kind: str, mode: str) -> list[str]:
     if kind == "native":
-        sys.path.insert(0, str(ROOT / "tests" / "sim"))
         from nativedev import build_wmdev
 
         print("demo: building the native stand-in device (firmware/board/native)", flush=True)
         return [str(build_wmdev()), "--port", "0"]
-    build = _sim_build()
+    from simboard import build  # sim/build.py as a module
+
     print("demo: building the board firmware and the simulated board (about a minute the first time)",
           flush=True)
     hexfile = build.build_firmware()
@@ -77,24 +71,14 @@ def main(argv=None) -> int:
     name = "jacksboro-board" if args.device == "sim" else "jacksboro-native"
 
     cmd = device_command(args.device, args.mode)
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines: list[str] = []
-    listening = threading.Event()
-
-    def reader():
-        for line in proc.stdout:
-            lines.append(line.rstrip("\n"))
-            if "listening on" in line:
-                listening.set()
-
-    threading.Thread(target=reader, daemon=True).start()
     try:
-        if not listening.wait(START_TIMEOUT):
-            print("demo: the device did not start:\n" + "\n".join(lines), file=sys.stderr)
-            return 1
-        port = int(re.search(r"listening on 127\.0\.0\.1:(\d+)", "\n".join(lines)).group(1))
-        url = f"socket://127.0.0.1:{port}"
-        print(f"demo: {lines[0]}", flush=True)
+        device = DeviceProcess(cmd, start_timeout=START_TIMEOUT)
+    except AssertionError as e:
+        print(f"demo: {e}", file=sys.stderr)
+        return 1
+    try:
+        url = device.url
+        print(f"demo: {device.lines[0]}", flush=True)
         src = dem()
         opts = STREAM_OPTS[args.device]
         print(f"demo: streaming {src} (403 x 344, {' '.join(opts[2:])}) to {url}", flush=True)
@@ -114,13 +98,7 @@ def main(argv=None) -> int:
               f"{out / name}-lod/, picture {out / name}.png, report {out / name}.json", flush=True)
         return rc
     finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        device.stop()
 
 
 if __name__ == "__main__":

@@ -8,15 +8,13 @@
 from __future__ import annotations
 
 import fcntl
-import re
 import subprocess
-import threading
-import time
 from pathlib import Path
+
+from devproc import DeviceProcess
 
 ROOT = Path(__file__).resolve().parents[2]
 SOURCE = ROOT / "firmware" / "board" / "native"
-START_TIMEOUT = 10.0  # s for wmdev to say it is listening
 
 
 def build_wmdev(sanitize: bool = False) -> Path:
@@ -46,48 +44,10 @@ def build_wmdev(sanitize: bool = False) -> Path:
     return out / "wmdev"
 
 
-class NativeDevice:
+class NativeDevice(DeviceProcess):
     """A running wmdev: its URL and everything it printed."""
 
+    name = "wmdev"
+
     def __init__(self, exe: Path, *args: str):
-        self.proc = subprocess.Popen([str(exe), "--port", "0", *args], stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
-        self.lines: list[str] = []
-        self._listening = threading.Event()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-        if not self._listening.wait(START_TIMEOUT):
-            self.stop()
-            raise AssertionError("wmdev did not start listening:\n" + "\n".join(self.lines))
-        m = re.search(r"listening on 127\.0\.0\.1:(\d+)", "\n".join(self.lines))
-        self.port = int(m.group(1))
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
-            if "listening on" in line:
-                self._listening.set()
-
-    @property
-    def url(self) -> str:
-        return f"socket://127.0.0.1:{self.port}"
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def wait_for_line(self, text: str, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not any(text in ln for ln in self.lines):
-            if time.monotonic() > deadline:
-                raise AssertionError(f"no '{text}' from wmdev:\n" + "\n".join(self.lines))
-            time.sleep(0.01)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self._reader.join(5)
+        super().__init__([str(exe), "--port", "0", *args])
