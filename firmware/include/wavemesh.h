@@ -21,8 +21,7 @@
  * Half-edge mesh (hmm style): triangle t owns half-edges 3t, 3t+1, 3t+2; half-edge e starts at vertex
  * hv[e] and ends at hv[next(e)], next(e) = e - e%3 + (e+1)%3; ho[e] is the opposite half-edge or -1
  * on the border of the rectangle.  Free triangle slots have hv[3t] = -1 and are chained through
- * ho[3t]; free vertex slots have vx = WM_FREE and are chained through vh.  (The refiner never frees;
- * the reduction operators of a later issue will.)
+ * ho[3t]; free vertex slots have vx = WM_FREE and are chained through vh (vertex removal frees both).
  */
 #ifndef WAVEMESH_H
 #define WAVEMESH_H
@@ -131,6 +130,31 @@ int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched);
  * counter-clockwise; a border vertex may only slide along its side, a corner never moves. */
 int wm_vertex_move(wm_mesh *m, int32_t v, int32_t x, int32_t y);
 
+/* Vertex removal (4.5.2), in two steps so that the caller can judge the new triangles before
+ * anything changes.  The ring of v is the polygon of its neighbours in counter-clockwise order,
+ * WM_MAX_RING of them at most; for a vertex on a side of the rectangle it starts and ends with its
+ * two neighbours on that side.  Corners are never removed. */
+#define WM_MAX_RING 32
+
+/* The ring of v into ring[] (vertex numbers); returns its size n (>= 3), or WM_ERR_REFUSED (a corner,
+ * or more than WM_MAX_RING neighbours), WM_ERR_ARG (not a live vertex). */
+int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING]);
+
+/* A triangulation of the hole v leaves: n - 2 triangles into tris[] (counter-clockwise vertex
+ * numbers), covering the ring polygon exactly.  apex = -1: ear clipping that takes the ear with the
+ * largest smallest angle first (a Delaunay-like choice); apex = i (0 <= i < n): the fan from ring
+ * vertex i, which is the half-edge collapse of v into that neighbour (4.5.3 with the collapse
+ * point at a grid vertex).  WM_ERR_REFUSED when that triangulation does not exist (a fan whose
+ * triangles are not all strictly counter-clockwise); WM_OK otherwise. */
+int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
+                          int32_t *n_tris);
+
+/* Removes v and fills its hole with the planned triangles (made by wm_vertex_remove_plan on this
+ * mesh as it is).  The triangles reuse v's fan's slots; the one or two slots left over and v's slot
+ * go to the free lists.  touched[] receives the new triangles' slots (n_tris of them). */
+int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
+                     int32_t *n_touched);
+
 /* ---------------------------------------------------------------------------------------------- */
 /* The height field, its wavelet details, the parameters */
 
@@ -171,10 +195,17 @@ typedef struct wm_params {
     uint32_t delta_p;       /* pairing threshold delta_p (4.16), Q0.16, 0..65535 */
     uint32_t alpha;         /* mesh regularity factor alpha (4.22), Q0.16, 0..65536 */
     uint32_t delta_v;       /* vertex movement threshold delta_v (4.21), 3-D distance, Q16.16 */
-    uint32_t reserved;      /* 0 */
+    uint32_t flags;         /* WM_FLAG_*: 0 is the default pipeline */
     uint64_t delta_d;       /* detail energy threshold: e = d1^2 + d2^2 + d3^2 > delta_d (4.12), in
                                coefficient units: floor(4 delta_d[height^2] / s^2) */
 } wm_params;
+
+/* wm_params.flags.  The default (0) runs the levels, the error bound with Delaunay legalisation and
+ * the final decimation. */
+#define WM_FLAG_NO_BOUND 1u    /* the dissertation's stopping rule: the levels alone, no error bound */
+#define WM_FLAG_NO_LEGALISE 2u /* the error bound splits without Lawson flips */
+#define WM_FLAG_NO_DECIMATE 4u /* no final decimation */
+#define WM_FLAG_ALL 7u
 
 /* WM_OK, or WM_ERR_ARG when a parameter is out of its range. */
 int wm_params_check(const wm_params *p);
@@ -214,10 +245,11 @@ typedef struct wm_level_stats {
     int32_t moves;            /* vertex movements done instead of a split */
     int32_t swaps;            /* edge swaps (regularisation) */
     int32_t bound_splits;     /* splits of the error-bound loop (level 0 only) */
+    int32_t flips;            /* Lawson flips of the error bound's legalisation */
     int32_t budget_hit;       /* 1: the triangle budget stopped a split */
     int32_t over;             /* triangles with E(T) > zeta */
     uint32_t e_max;           /* max E(T), Q16.16 sample counts, chosen metric (upper bound) */
-    int32_t reserved;
+    int32_t removals;         /* vertices removed (decimation, reduction) */
 } wm_level_stats;
 
 typedef struct wm_refiner wm_refiner;

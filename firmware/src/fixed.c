@@ -137,3 +137,17 @@ uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64
     }
     return res > cap ? cap : res;
 }
+
+int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy)
+{
+    /* Relative to d every difference is below 2^15 in magnitude, so each squared length is below
+     * 2^31, each cross product below 2^31, each term below 2^62, the sum of two below 2^63: the
+     * sign of the third sum is a comparison, exact in 64 bits. */
+    int64_t adx = (int64_t)ax - dx, ady = (int64_t)ay - dy, bdx = (int64_t)bx - dx, bdy = (int64_t)by - dy;
+    int64_t cdx = (int64_t)cx - dx, cdy = (int64_t)cy - dy;
+    int64_t t1 = (adx * adx + ady * ady) * (bdx * cdy - cdx * bdy);
+    int64_t t2 = (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy);
+    int64_t t3 = (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
+    int64_t s = t1 + t2;
+    return s > -t3 ? 1 : (s < -t3 ? -1 : 0);
+}

@@ -21,12 +21,20 @@ int32_t wm_tri_cap_max(int32_t width, int32_t height)
     return t > 0x15555554 ? 0x15555554 : (int32_t)t;
 }
 
+/* Storage after the mesh: err and worst (per triangle slot), list and pos (per triangle or vertex
+ * slot, whichever is more), vkey and vapex (per vertex slot). */
+static uint64_t state_bytes(int32_t tri_cap, int32_t vert_cap)
+{
+    uint64_t items = (uint64_t)(tri_cap > vert_cap ? tri_cap : vert_cap);
+    return ALIGN8(8 * (uint64_t)tri_cap) + ALIGN8(8 * items) + ALIGN8(5 * (uint64_t)vert_cap);
+}
+
 static uint64_t refine_bytes(int32_t width, int32_t height, int32_t tri_cap)
 {
     int32_t vc = wm_vert_cap_for(width, height, tri_cap);
     size_t mb = wm_mesh_bound(tri_cap, vc);
     if (mb == 0) return 0;
-    return ALIGN8(sizeof(struct wm_refiner)) + ALIGN8((uint64_t)mb) + ALIGN8(12 * (uint64_t)tri_cap);
+    return ALIGN8(sizeof(struct wm_refiner)) + ALIGN8((uint64_t)mb) + state_bytes(tri_cap, vc);
 }
 
 size_t wm_refine_bound(int32_t width, int32_t height, int32_t tri_cap)
@@ -45,7 +53,7 @@ int wm_params_check(const wm_params *p)
         return WM_ERR_ARG;
     if (p->iterations < 0 || p->iterations > 3 || p->max_triangles < 0) return WM_ERR_ARG;
     if (p->scale_m > 65535u || p->scale_e < 0 || p->scale_e > 126) return WM_ERR_ARG;
-    if (p->delta_p > 65535u || p->alpha > 65536u || p->reserved != 0) return WM_ERR_ARG;
+    if (p->delta_p > 65535u || p->alpha > 65536u || (p->flags & ~WM_FLAG_ALL) != 0) return WM_ERR_ARG;
     return WM_OK;
 }
 
@@ -61,9 +69,10 @@ size_t wm_abi_size(int which)
 
 void wm_touch(wm_refiner *r, int32_t t)
 {
-    int32_t x[3], y[3];
+    int32_t x[3], y[3], wx, wy;
     wm_tri_xy(&r->mesh, t, x, y);
-    r->err[t] = wm_tri_error(&r->field, &r->params, x, y, NULL, NULL);
+    r->err[t] = wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+    r->worst[t] = wy * r->field.width + wx;
     r->mesh.tflag[t] |= WM_F_NEW;
 }
 
@@ -100,23 +109,32 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
     rc = wm_mesh_init(&r->mesh, q, mb, f->width, f->height, tri_cap, vc);
     if (rc != WM_OK) return rc;
     q += ALIGN8((uint64_t)mb);
-    r->err = (uint32_t *)(void *)q;
-    r->list = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
-    r->pos = (int32_t *)(void *)(q + 8 * (uint64_t)tri_cap);
+    {
+        uint64_t items = (uint64_t)(tri_cap > vc ? tri_cap : vc);
+        r->err = (uint32_t *)(void *)q;
+        r->worst = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
+        q += ALIGN8(8 * (uint64_t)tri_cap);
+        r->list = (int32_t *)(void *)q;
+        r->pos = (int32_t *)(void *)(q + 4 * items);
+        q += ALIGN8(8 * items);
+        r->vkey = (uint32_t *)(void *)q;
+        r->vapex = (int8_t *)(void *)(q + 4 * (uint64_t)vc);
+    }
     r->field = *f;
     r->params = *p;
     r->level = f->levels - 1;
     r->done = 0;
     r->failed = 0;
     r->budget_hit = 0;
+    r->flips = r->removals = 0;
     r->limit = tri_cap;
     r->limit_is_budget = 0;
     if (p->max_triangles > 0 && p->max_triangles < tri_cap) {
         r->limit = p->max_triangles;
         r->limit_is_budget = 1;
     }
-    /* err, list and pos are one run of 3 tri_cap words: the build's scratch. */
-    rc = wm_mesh_build(&r->mesh, xy, nv, tris, nt, r->err);
+    /* err and worst, then list: at least 3 tri_cap words in one run, the build's scratch. */
+    rc = wm_mesh_build(&r->mesh, xy, nv, tris, nt, (uint32_t *)r->err);
     if (rc != WM_OK) return rc;
     for (int32_t t = 0; t < r->mesh.tri_end; t++) {
         wm_touch(r, t);
@@ -148,6 +166,7 @@ static int try_swap(wm_refiner *r, int32_t e)
     int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old, ang_new, a1;
     uint32_t e1 = 0, e2 = 0, ra, re = 65536u, alpha = r->params.alpha;
+    int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t xi;
     if (!wm_edge_swappable(me, e)) return 0;
     wm_tri_xy(me, t1, ox, oy);
@@ -168,8 +187,8 @@ static int try_swap(wm_refiner *r, int32_t e)
         const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
         uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
         uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
-        e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, NULL, NULL);
-        e2 = wm_tri_error(&r->field, &r->params, qx, qy, NULL, NULL);
+        e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
+        e2 = wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
         re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, e1, 1, 0, cap) +
                                           wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
     }
@@ -180,6 +199,8 @@ static int try_swap(wm_refiner *r, int32_t e)
     if (alpha < 65536u) {
         r->err[t1] = e1;
         r->err[t2] = e2;
+        r->worst[t1] = w1y * r->field.width + w1x;
+        r->worst[t2] = w2y * r->field.width + w2x;
         me->tflag[t1] |= WM_F_NEW;
         me->tflag[t2] |= WM_F_NEW;
     } else {
@@ -262,7 +283,7 @@ static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
     }
 }
 
-static void heap_update(wm_refiner *r, int32_t t, int32_t *n)
+void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
 {
     heap_remove(r, t, n);
     if (r->err[t] > r->params.zeta) {
@@ -272,18 +293,70 @@ static void heap_update(wm_refiner *r, int32_t t, int32_t *n)
     }
 }
 
+/* Legalisation after inserting p (Lawson; hmm's design).  An edge a -> b opposite p, in triangle
+ * (a, b, p), is flipped when the far vertex d of the triangle across it lies strictly inside the
+ * circle through a, b, p; the two edges that then face p are examined in turn.
+ *
+ *          p                     p
+ *         / \                   /|\
+ *        a---b       ->        a | b
+ *         \ /                   \|/
+ *          d                     d
+ *
+ * Each flip makes p adjacent to one more vertex, so the loop ends; the stack is bounded and an edge
+ * that does not fit is simply left as it is (the mesh stays proper either way). */
+#define LEGAL_STACK 64
+
+void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t stack[LEGAL_STACK], top = 0;
+    for (int32_t i = 0; i < n; i++) {
+        int32_t t = touched[i];
+        for (int32_t e = 3 * t; e < 3 * t + 3; e++)
+            if (me->hv[e] != p && wm_dest(me, e) != p && top < LEGAL_STACK) stack[top++] = e;
+    }
+    while (top > 0) {
+        int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
+        if (o < 0 || me->hv[WM_PREV(e)] != p) continue;
+        a = me->hv[e];
+        b = me->hv[o];
+        d = me->hv[WM_PREV(o)];
+        if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d],
+                        me->vy[d]) <= 0)
+            continue;
+        if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) continue; /* not strictly convex */
+        /* wm_edge_swap: T1 = (a, d, p), T2 = (d, b, p) in the same slots. */
+        t1 = WM_TRI(e);
+        t2 = WM_TRI(o);
+        wm_touch(r, t1);
+        wm_touch(r, t2);
+        if (heap_n) {
+            wm_heap_update(r, t1, heap_n);
+            wm_heap_update(r, t2, heap_n);
+        }
+        r->flips++;
+        if (top + 2 <= LEGAL_STACK) {
+            stack[top++] = 3 * t1;
+            stack[top++] = 3 * t2;
+        }
+    }
+}
+
 static int error_bound(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
+    int legal = !(r->params.flags & WM_FLAG_NO_LEGALISE);
     for (int32_t t = 0; t < me->tri_cap; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
-        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) heap_update(r, t, &n);
+        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, &n);
     while (n > 0) {
-        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room;
+        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p;
         int64_t E[3];
         wm_tri_xy(me, t, x, y);
-        (void)wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+        wx = r->worst[t] % r->field.width;
+        wy = r->worst[t] / r->field.width;
         /* Which edge holds the worst sample (E_k = 0: the edge from corner k+1 to k+2)?  Never a
          * corner: the distance is 0 there and E(T) > zeta >= 0. */
         for (k = 0; k < 3; k++) {
@@ -296,12 +369,17 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         if (room > 0) break; /* the budget: stop with E_max > zeta */
         rc = on < 0 ? wm_tri_split(me, t, wx, wy, touched, &nt) : wm_edge_split(me, on, wx, wy, touched, &nt);
         if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH; /* cannot happen */
+        p = -1;
         for (int32_t i = 0; i < nt; i++) {
-            if (touched[i] >= 0) {
-                wm_touch(r, touched[i]);
-                heap_update(r, touched[i], &n);
-            }
+            wm_touch(r, touched[i]);
+            wm_heap_update(r, touched[i], &n);
         }
+        /* the new vertex: the corner of touched[0] at (wx, wy) */
+        for (k = 0; k < 3; k++) {
+            int32_t v = me->hv[3 * touched[0] + k];
+            if (me->vx[v] == wx && me->vy[v] == wy) p = v;
+        }
+        if (legal) wm_legalise(r, p, touched, nt, &n);
         if (st) st->bound_splits++;
     }
     return WM_OK;
@@ -325,13 +403,15 @@ void wm_refine_stats(const wm_refiner *r, wm_level_stats *st)
     st->e_max = emax;
     st->over = over;
     st->budget_hit = r->budget_hit;
+    st->flips = r->flips;
+    st->removals = r->removals;
 }
 
 static void clear_stats(wm_level_stats *st)
 {
     st->level = st->vertices = st->triangles = st->iterations = st->active = st->dependent = 0;
     st->pairs = st->quasi_pairs = st->unpaired = st->edge_splits = st->ternary_splits = 0;
-    st->moves = st->swaps = st->bound_splits = st->budget_hit = st->over = st->reserved = 0;
+    st->moves = st->swaps = st->bound_splits = st->budget_hit = st->over = st->removals = st->flips = 0;
     st->e_max = 0;
 }
 
@@ -357,6 +437,7 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
     clear_stats(st);
     if (r == NULL || r->done) return WM_ERR_STATE;
     r->budget_hit = 0;
+    r->flips = r->removals = 0;
     if (r->level > 0) {
         int32_t m;
         r->level--;
@@ -372,7 +453,13 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
         }
     }
     if (rc == WM_OK && r->level == 0) {
-        rc = error_bound(r, st);
+        if (!(r->params.flags & WM_FLAG_NO_BOUND)) {
+            rc = error_bound(r, st);
+            /* A budget that stopped the bound keeps its triangles: removing vertices would leave
+             * fewer than asked for, at the same E_max. */
+            if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE))
+                rc = wm_decimate(r, st);
+        }
         r->done = 1;
     }
     if (rc != WM_OK) {

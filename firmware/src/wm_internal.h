@@ -82,6 +82,9 @@ int32_t wm_angle_q16(int64_t x, int64_t y);             /* atan2(y, x) for y >= 
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap);
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
+/* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside
+ * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
+int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy);
 
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
@@ -107,9 +110,13 @@ struct wm_refiner {
     int32_t limit_is_budget;
     int32_t budget_hit;  /* set when the budget stopped an operation (this step) */
     int32_t failed;      /* a WM_ERR_* code that ended the refinement, or 0 */
+    int32_t flips, removals; /* this step's legalisation flips and vertex removals */
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
-    int32_t *list;       /* [tri_cap] the plan of an iteration, the heap of the error bound */
-    int32_t *pos;        /* [tri_cap] heap position of each triangle, -1 when not in the heap */
+    int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
+    int32_t *list;       /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
+    int32_t *pos;        /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
+    uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
+    int8_t *vapex;       /* [vert_cap] decimation: the triangulation that cost belongs to */
 };
 
 /* Triangle t's corner coordinates. */
@@ -122,8 +129,17 @@ static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t 
     }
 }
 
-/* Recomputes E(T) of t and marks it new. */
+/* Recomputes E(T) of t (and its worst sample) and marks it new. */
 void wm_touch(wm_refiner *r, int32_t t);
+/* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles
+ * touched[0..n) until every such edge is locally Delaunay (hmm's design), recomputing E(T) of the
+ * flipped triangles.  heap_n: the error bound's heap (updated), or NULL. */
+void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n);
+/* The error bound's heap (refine.c): re-files t after its E(T) changed. */
+void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n);
+/* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
+ * E(T) <= zeta; returns WM_OK. */
+int wm_decimate(wm_refiner *r, wm_level_stats *st);
 /* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
  * small; 1 when the budget forbids it (and records that). */
 int wm_room(wm_refiner *r, int32_t added);

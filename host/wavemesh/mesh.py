@@ -44,6 +44,18 @@ class Mesh:
     def n_triangles(self) -> int:
         return int(self.tris.shape[0])
 
+    @classmethod
+    def from_slots(cls, width: int, height: int, xy: np.ndarray, tris: np.ndarray) -> Mesh:
+        """A mesh from the refiner's slot arrays (wm_mesh_export): vertex slots whose x is negative
+        are free (vertex removal leaves them) and are dropped, the triangles renumbered."""
+        xy = np.asarray(xy, dtype=np.int64).reshape(-1, 2)
+        tris = np.asarray(tris, dtype=np.int64).reshape(-1, 3)
+        live = xy[:, 0] >= 0
+        if not live.all():
+            remap = np.cumsum(live) - 1
+            xy, tris = xy[live], remap[tris]
+        return cls(width, height, xy, tris)
+
     def canonical(self) -> Mesh:
         """The same mesh with vertices sorted by (y, x) and triangles in a fixed order."""
         order = np.lexsort((self.xy[:, 0], self.xy[:, 1]))

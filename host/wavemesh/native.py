@@ -67,7 +67,7 @@ class Params(ctypes.Structure):
         ("delta_p", ctypes.c_uint32),
         ("alpha", ctypes.c_uint32),
         ("delta_v", ctypes.c_uint32),
-        ("reserved", ctypes.c_uint32),
+        ("flags", ctypes.c_uint32),
         ("delta_d", ctypes.c_uint64),
     ]
 
@@ -83,18 +83,21 @@ class Field(ctypes.Structure):
 
 
 STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "dependent", "pairs", "quasi_pairs",
-               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "budget_hit",
-               "over")
+               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "flips",
+               "budget_hit", "over")
+# wm_params.flags (WM_FLAG_* in wavemesh.h); 0 is the default pipeline.
+FLAG_NO_BOUND, FLAG_NO_LEGALISE, FLAG_NO_DECIMATE = 1, 2, 4
 
 
 class LevelStats(ctypes.Structure):
     _fields_ = [(name, ctypes.c_int32) for name in STAT_FIELDS] + [
         ("e_max", ctypes.c_uint32),
-        ("reserved", ctypes.c_int32),
+        ("removals", ctypes.c_int32),
     ]
 
     def to_dict(self) -> dict:
-        return {name: int(getattr(self, name)) for name in STAT_FIELDS} | {"e_max_q16": int(self.e_max)}
+        return {name: int(getattr(self, name)) for name in STAT_FIELDS} | {"e_max_q16": int(self.e_max),
+                                                                          "removals": int(self.removals)}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -103,7 +106,7 @@ class LevelStats(ctypes.Structure):
 
 def _sources() -> list[Path]:
     return sorted(p for d in ("src", "include") for p in (FIRMWARE / d).glob("*.[ch]")) + [
-        FIRMWARE / "CMakeLists.txt"]
+        FIRMWARE / "CMakeLists.txt", FIRMWARE / "sources.cmake"]
 
 
 def _stale(lib: Path) -> bool:
@@ -218,6 +221,9 @@ class RefineParams:
     delta_c: float = 0.98  # edge collapsing criterion (reduction issue)
     iterations: int = 2  # k, 1..3 (0: only the error bound)
     neighbourhood: str = "face"  # "face" (5.2.2) or "vertex"
+    bound: bool = True  # the error bound at level 0 (False: the dissertation's levels alone)
+    legalise: bool = True  # Lawson flips after each split of the error bound
+    decimate: bool = True  # the final decimation within zeta after the error bound
     max_triangles: int | None = None  # triangle budget
     capacity: int | None = None  # triangle storage, as on a device (default: grown as needed)
     extra: dict = field(default_factory=dict)
@@ -279,7 +285,8 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None) -> Pa
     out.delta_p = min(65535, round(Fraction(p.delta_p) * 2**16))
     out.alpha = min(65536, round(Fraction(p.alpha) * 2**16))
     out.delta_v = min(U32, round(Fraction(p.delta_v) * 2**16))
-    out.reserved = 0
+    out.flags = ((0 if p.bound else FLAG_NO_BOUND) | (0 if p.legalise else FLAG_NO_LEGALISE)
+                 | (0 if p.decimate else FLAG_NO_DECIMATE))
     # e = d1^2 + d2^2 + d3^2 in coefficient units; (d / 2) s is a height difference, so
     # e (s / 2)^2 > delta_d  <=>  e > 4 delta_d / s^2  <=>  e > floor(4 delta_d / s^2) (e an integer).
     out.delta_d = min(U64, floor(4 * Fraction(p.delta_d) / (s * s)))
@@ -329,11 +336,7 @@ def _export(lib, handle, width: int, height: int) -> Mesh:
     tris = np.empty((n_tri, 3), dtype=np.int32)
     n = lib.wm_mesh_export(mesh_ptr, _ptr(xy, ctypes.c_int32), _ptr(tris, ctypes.c_int32))
     assert n == n_tri
-    live = xy[:, 0] >= 0
-    if not live.all():  # free vertex slots (the reduction operators will make them)
-        remap = np.cumsum(live) - 1
-        xy, tris = xy[live], remap[tris]
-    return Mesh(width, height, xy.astype(np.int64), tris.astype(np.int64))
+    return Mesh.from_slots(width, height, xy, tris)
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,

@@ -31,4 +31,4 @@ def read_output(path: Path, width: int, height: int) -> Mesh:
     nv, nt = struct.unpack_from("=2i", data)
     xy = np.frombuffer(data, dtype=np.int32, count=2 * nv, offset=8).reshape(-1, 2)
     tris = np.frombuffer(data, dtype=np.int32, count=3 * nt, offset=8 + 8 * nv).reshape(-1, 3)
-    return Mesh(width, height, xy.astype(np.int64), tris.astype(np.int64))
+    return Mesh.from_slots(width, height, xy, tris)

@@ -415,7 +415,7 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     j->params.delta_p = delta_p;
     j->params.alpha = alpha;
     j->params.delta_v = get32(c + WM_PROTO_CONFIG_DELTA_V);
-    j->params.reserved = 0;
+    j->params.flags = 0; /* the default pipeline (no CONFIG field for the flags yet) */
     j->params.delta_d = get64(c + WM_PROTO_CONFIG_DELTA_D);
     j->delta_lambda = get32(c + WM_PROTO_CONFIG_DELTA_LAMBDA);
     j->delta_c = delta_c;

@@ -1,0 +1,134 @@
+/* The final decimation, after the error bound (beyond the dissertation: docs/refiner.md).
+ *
+ *   cost(v) = the smallest, over the triangulations of the hole v would leave (ear clipping, and
+ *             the fan from each ring vertex: the half-edge collapses of v), of the largest E(T) of
+ *             its triangles; a vertex is removable when cost(v) <= zeta
+ *   repeat: remove the vertex of least cost (ties: the lower slot), with its triangulation;
+ *           the costs of its ring vertices change (their stars did), nothing else's
+ *
+ * Every new triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes
+ * one or two triangles away.  The heap is a binary min-heap on (cost, slot) over r->list/r->pos;
+ * all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
+#include "wm_internal.h"
+
+#define NONE 0xFFFFFFFFu
+
+/* The cheapest triangulation of v's hole that keeps every E(T) <= zeta: its cost and kind (apex,
+ * as wm_vertex_remove_plan takes it).  NONE when there is none. */
+static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt;
+    uint32_t best = NONE;
+    n = wm_vertex_ring(me, v, ring);
+    if (n < 0) return NONE;
+    for (int32_t a = -1; a < n; a++) {
+        uint32_t worst = 0;
+        int32_t j;
+        if (wm_vertex_remove_plan(me, v, a, tris, &nt) != WM_OK) continue;
+        for (j = 0; j < nt; j++) {
+            int32_t x[3], y[3];
+            uint32_t e;
+            for (int c = 0; c < 3; c++) {
+                x[c] = me->vx[tris[3 * j + c]];
+                y[c] = me->vy[tris[3 * j + c]];
+            }
+            e = wm_tri_error(&r->field, &r->params, x, y, NULL, NULL);
+            if (e > worst) worst = e;
+            if (worst > r->params.zeta || (best != NONE && worst >= best)) break;
+        }
+        if (j < nt) continue;
+        best = worst;
+        *apex = a;
+        if (best == 0) break;
+    }
+    return best;
+}
+
+static int before(const wm_refiner *r, int32_t a, int32_t b)
+{
+    return r->vkey[a] < r->vkey[b] || (r->vkey[a] == r->vkey[b] && a < b);
+}
+
+static void put(wm_refiner *r, int32_t i, int32_t v)
+{
+    r->list[i] = v;
+    r->pos[v] = i;
+}
+
+static void up(wm_refiner *r, int32_t i)
+{
+    int32_t v = r->list[i];
+    while (i > 0) {
+        int32_t p = (i - 1) / 2;
+        if (!before(r, v, r->list[p])) break;
+        put(r, i, r->list[p]);
+        i = p;
+    }
+    put(r, i, v);
+}
+
+static void down(wm_refiner *r, int32_t i, int32_t n)
+{
+    int32_t v = r->list[i];
+    for (;;) {
+        int32_t c = 2 * i + 1;
+        if (c >= n) break;
+        if (c + 1 < n && before(r, r->list[c + 1], r->list[c])) c++;
+        if (!before(r, r->list[c], v)) break;
+        put(r, i, r->list[c]);
+        i = c;
+    }
+    put(r, i, v);
+}
+
+static void take_out(wm_refiner *r, int32_t v, int32_t *n)
+{
+    int32_t i = r->pos[v];
+    if (i < 0) return;
+    r->pos[v] = -1;
+    (*n)--;
+    if (i == *n) return;
+    {
+        int32_t moved = r->list[*n];
+        put(r, i, moved);
+        up(r, i);
+        down(r, r->pos[moved], *n);
+    }
+}
+
+/* Re-files v with its current cost (out of the heap when it cannot go). */
+static void refile(wm_refiner *r, int32_t v, int32_t *n)
+{
+    int32_t apex = -1;
+    uint32_t cost = cheapest(r, v, &apex);
+    take_out(r, v, n);
+    if (cost == NONE) return;
+    r->vkey[v] = cost;
+    r->vapex[v] = (int8_t)apex;
+    put(r, *n, v);
+    (*n)++;
+    up(r, *n - 1);
+}
+
+int wm_decimate(wm_refiner *r, wm_level_stats *st)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t n = 0;
+    (void)st;
+    for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
+    for (int32_t v = 0; v < me->vert_end; v++)
+        if (me->vx[v] != WM_FREE) refile(r, v, &n);
+    while (n > 0) {
+        int32_t v = r->list[0], ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], nr, nt, k;
+        take_out(r, v, &n);
+        nr = wm_vertex_ring(me, v, ring);
+        if (nr < 0 || wm_vertex_remove_plan(me, v, r->vapex[v], tris, &nt) != WM_OK ||
+            wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK)
+            continue; /* cannot happen: the plan was made on this star */
+        for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);
+        r->removals++;
+        for (int32_t i = 0; i < nr; i++) refile(r, ring[i], &n);
+    }
+    return WM_OK;
+}

@@ -1,0 +1,176 @@
+/* Vertex removal (dissertation 4.5.2) and, as a fan from one neighbour, the half-edge collapse
+ * (4.5.3 with the collapse point at a grid vertex).
+ *
+ *        p3-----p2                 p3-----p2
+ *        / \   / \                 / \_    \          the fan of v (h triangles, or h - 1 on a
+ *       /   \ /   \               /    \_   \         side of the rectangle) becomes n - 2
+ *      p4----v-----p1     ->     p4------\_--p1       triangles over the ring p0 .. p(n-1)
+ *       \   / \   /               \        \_ /       (here an ear-clipped choice); v and the
+ *        \ /   \ /                 \         p0       one or two slots left over are freed
+ *        p5-----p0                 p5-------/
+ *
+ * Why the result is proper: the ring polygon is simple (it is the boundary of v's star), and a set
+ * of strictly counter-clockwise triangles whose signed areas add up to the polygon's and that meet
+ * edge to edge covers every point of it exactly once (the winding number of a point is the number of
+ * triangles holding it).  Ear clipping keeps that by taking only strictly convex ears with no other
+ * remaining ring vertex in the closed ear; a fan from p_i by requiring each triangle strictly
+ * counter-clockwise, which also rules out a ring vertex on a diagonal.  On a side of the rectangle
+ * v lies on the segment p(n-1) -> p0, which becomes a border edge. */
+#include "wm_internal.h"
+
+/* The fan of v, counter-clockwise: the half-edges leaving v into e[], their count into *k; the ring
+ * vertices p_i = dest(e_i), plus the last triangle's third vertex on a side.  n or an error. */
+static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING])
+{
+    int32_t first, h, n = 0;
+    if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
+    {
+        int32_t x = m->vx[v], y = m->vy[v];
+        if ((x == 0 || x == m->width - 1) && (y == 0 || y == m->height - 1)) return WM_ERR_REFUSED;
+    }
+    first = wm_fan_first(m, v);
+    h = first;
+    do {
+        if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
+        e[n] = h;
+        ring[n++] = wm_dest(m, h);
+        h = wm_rot_ccw(m, h);
+    } while (h >= 0 && h != first);
+    *k = n;
+    if (h < 0) { /* on a side: the last triangle's far corner closes the ring */
+        if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
+        ring[n] = m->hv[WM_PREV(e[n - 1])];
+        n++;
+    }
+    return n;
+}
+
+int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING])
+{
+    int32_t e[WM_MAX_RING], k;
+    return (int)fan(m, v, e, &k, ring);
+}
+
+static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
+{
+    return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
+}
+
+/* p in the closed triangle (a, b, c), counter-clockwise. */
+static int in_closed(const wm_mesh *m, int32_t a, int32_t b, int32_t c, int32_t p)
+{
+    return orient3(m, a, b, p) >= 0 && orient3(m, b, c, p) >= 0 && orient3(m, c, a, p) >= 0;
+}
+
+static int32_t smallest_angle(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
+{
+    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
+    return wm_min_angle(x, y);
+}
+
+int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
+                          int32_t *n_tris)
+{
+    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], poly[WM_MAX_RING], k, n, nt = 0;
+    n = fan(m, v, e, &k, ring);
+    if (n < 0) return (int)n;
+    WM_ASSERT(n >= 3);
+    if (apex >= n) return WM_ERR_ARG;
+    if (apex >= 0) {
+        for (int32_t j = 1; j + 1 < n; j++) {
+            int32_t a = ring[apex], b = ring[(apex + j) % n], c = ring[(apex + j + 1) % n];
+            if (orient3(m, a, b, c) <= 0) return WM_ERR_REFUSED;
+            tris[3 * nt] = a, tris[3 * nt + 1] = b, tris[3 * nt + 2] = c;
+            nt++;
+        }
+        *n_tris = nt;
+        return WM_OK;
+    }
+    for (int32_t i = 0; i < n; i++) poly[i] = ring[i];
+    while (n > 3) {
+        int32_t best = -1, best_ang = -1;
+        for (int32_t i = 0; i < n; i++) {
+            int32_t a = poly[(i + n - 1) % n], b = poly[i], c = poly[(i + 1) % n], ang, j;
+            if (orient3(m, a, b, c) <= 0) continue;
+            for (j = 0; j < n; j++) {
+                int32_t p = poly[j];
+                if (p != a && p != b && p != c && in_closed(m, a, b, c, p)) break;
+            }
+            if (j < n) continue;
+            ang = smallest_angle(m, a, b, c);
+            if (ang > best_ang) {
+                best_ang = ang;
+                best = i;
+            }
+        }
+        /* A simple polygon always has an ear (two, in fact). */
+        WM_ASSERT(best >= 0);
+        if (best < 0) return WM_ERR_REFUSED;
+        tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best], tris[3 * nt + 2] = poly[(best + 1) % n];
+        nt++;
+        for (int32_t i = best; i + 1 < n; i++) poly[i] = poly[i + 1];
+        n--;
+    }
+    if (orient3(m, poly[0], poly[1], poly[2]) <= 0) return WM_ERR_REFUSED;
+    tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
+    *n_tris = nt + 1;
+    return WM_OK;
+}
+
+int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
+                     int32_t *n_touched)
+{
+    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], slot[WM_MAX_RING], out[WM_MAX_RING], k, n;
+    n = fan(m, v, e, &k, ring);
+    if (n < 0) return (int)n;
+    if (n_tris != n - 2) return WM_ERR_ARG;
+    /* Remember the outside: out[i] is the half-edge across ring edge p_i -> p_i+1 of fan triangle i. */
+    for (int32_t i = 0; i < k; i++) {
+        slot[i] = WM_TRI(e[i]);
+        out[i] = m->ho[WM_NEXT(e[i])];
+    }
+    /* Free what is not reused: fan slots n_tris .. k-1 and v. */
+    for (int32_t i = n_tris; i < k; i++) {
+        int32_t t = slot[i];
+        m->hv[3 * t] = m->hv[3 * t + 1] = m->hv[3 * t + 2] = -1;
+        m->ho[3 * t] = m->tri_free;
+        m->tri_free = t;
+        m->n_tri--;
+    }
+    m->vx[v] = WM_FREE;
+    m->vy[v] = WM_FREE;
+    m->vh[v] = m->vert_free;
+    m->vert_free = v;
+    m->n_vert--;
+    for (int32_t j = 0; j < n_tris; j++) wm_tri_set(m, slot[j], tris[3 * j], tris[3 * j + 1], tris[3 * j + 2]);
+    /* Link every new half-edge a -> b: to the outside across a ring edge, to -1 on the new border
+     * edge p(n-1) -> p0 (a side of the rectangle), else to its twin b -> a inside the hole. */
+    for (int32_t j = 0; j < n_tris; j++) {
+        for (int32_t c = 0; c < 3; c++) {
+            int32_t h = 3 * slot[j] + c, a = m->hv[h], b = m->hv[WM_NEXT(h)], i, f = -2;
+            for (i = 0; i < k && f == -2; i++)
+                if (a == ring[i] && b == ring[(i + 1) % n]) f = out[i];
+            if (f == -2 && k < n && a == ring[n - 1] && b == ring[0]) f = -1;
+            if (f == -2) {
+                for (int32_t jj = 0; jj < n_tris && f == -2; jj++)
+                    for (int32_t cc = 0; cc < 3; cc++) {
+                        int32_t g = 3 * slot[jj] + cc;
+                        if (m->hv[g] == b && m->hv[WM_NEXT(g)] == a) {
+                            f = g;
+                            break;
+                        }
+                    }
+            }
+            WM_ASSERT(f != -2);
+            if (f == -2) f = -1; /* cannot happen for a plan of this mesh */
+            wm_link(m, h, f);
+        }
+    }
+    for (int32_t j = 0; j < n_tris; j++) {
+        wm_tri_claim(m, slot[j]);
+        if (touched) touched[j] = slot[j];
+    }
+    if (n_touched) *n_touched = n_tris;
+    WM_CHECK_MESH(m);
+    return WM_OK;
+}
