@@ -1,0 +1,342 @@
+"""Quality and speed against pydelatin and pymartini at the same max vertical error (issues 10 and 11).
+
+Grids (bench/datasets.py, sources and licences in bench/README.md): real height fields that ship inside
+packages installed here (terrain DEMs, a stereo disparity map, intensity images) and the dissertation's
+synthetic sets, each whole.  Errors: fractions of each grid's height range, fine to coarse
+(FRACTIONS); on Jacksboro the issue's 5 m and 10 m take the place of the two finest.
+
+Per grid/error pair:
+
+- wavemesh in process: api.refine (defaults of `wavemesh mesh`, --metric vertical, --zeta E): its mesh,
+  the native refine time (RefineJob.seconds: the Haar details and the C refiner) and the whole call
+  (filter bank, templates, refiner, the API's own checks);
+- pydelatin in process: Delatin(z, width, height, max_error=E) then .vertices and .triangles, timed;
+  its output mapped with y_grid = (H - 1) - y (bench/peers.py);
+- pymartini in process: Martini(2^k + 1) on the grid padded by edge replication, create_tile, get_mesh;
+- whole processes, run alternately: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` against
+  a `python -c` that loads the same .npy, runs pydelatin and writes the same kind of OBJ;
+- every mesh (also the OBJ files both processes wrote) checked with wavemesh.check: a proper
+  triangulation of the grid rectangle with grid-sample vertices, and E_max vertical and normal measured
+  with wavemesh's own metrics.  A mesh that is not proper or exceeds E is flagged in the table.
+
+Times are medians of several runs (a call slower than a few seconds runs once); the machine is shared,
+so the ratios (measured back to back) are the figures to read.  HELD_OUT names the grids kept aside:
+they are reported in their own table and medians and are not for tuning.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+
+import datasets as D  # noqa: E402
+import peers as P  # noqa: E402
+
+TITLE = "Quality: triangles and time against pydelatin and pymartini (issues 10, 11)"
+FRACTIONS = (0.005, 0.01, 0.02, 0.05)  # of each grid's height range, fine to coarse
+ABSOLUTE = {"jacksboro": {0.005: 5.0, 0.01: 10.0}}  # the issue's examples (metres) replace these fractions
+# A third of the grids, kept aside: not used for tuning, reported on their own.  Chosen among the grids
+# this benchmark brought in (the project's docs and tests had never used them; Jacksboro and the
+# synthetic sets had), one per kind and a second terrain, before any result was seen.
+HELD_OUT = ("topobathy", "lidar_dem", "motorcycle", "moon")
+GRIDS = tuple(D.SETS)
+TARGET_MEDIAN, TARGET_MAX = 1.0, 1.3  # issue 10: triangles vs pydelatin
+TARGET_NATIVE, TARGET_PROCESS = 1.0, 1.5  # issue 11: native refine vs pydelatin call, process vs process
+WM_BUDGET = 3.0  # seconds of repeats for one wavemesh timing (a slower call runs once)
+PEER_BUDGET = 2.0
+
+
+def zetas(grid: D.Grid) -> list[tuple[str, float]]:
+    """(label, E) for a grid, fine to coarse."""
+    out = []
+    for f in FRACTIONS:
+        absolute = ABSOLUTE.get(grid.name, {}).get(f)
+        if absolute is not None:
+            out.append((f"{absolute:g} {grid.units}", absolute))
+        else:
+            out.append((f"{100 * f:g}%", f * grid.height_range))
+    return out
+
+
+def _ratio(a, b):
+    return None if a is None or b is None or b == 0 else a / b
+
+
+def wavemesh_mesh(z: np.ndarray, zeta: float):
+    from wavemesh import api
+    from wavemesh.heightfield import from_array
+    from wavemesh.native import RefineParams
+
+    return api.refine(from_array(z), params=RefineParams(zeta=float(zeta), metric="vertical"))
+
+
+def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: float = 6.0) -> dict:
+    """Both whole processes, alternately, up to `runs` times each within about `budget` seconds."""
+    wm_out, pd_out = tmp / "wavemesh.obj", tmp / "pydelatin.obj"
+    wm_cmd = P.wavemesh_argv(str(npy), zeta, str(wm_out))
+    pd_cmd = P.peer_argv(str(npy), zeta, str(pd_out))
+    tw, tp, start, fail = [], [], time.perf_counter(), None
+    while len(tw) < runs and (not tw or time.perf_counter() - start < budget):
+        for cmd, times in ((wm_cmd, tw), (pd_cmd, tp)):
+            t0 = time.perf_counter()
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            times.append(time.perf_counter() - t0)
+            if r.returncode != 0 and fail is None:
+                fail = f"{Path(cmd[0]).name} exit {r.returncode}: {r.stderr.strip()[-300:]}"
+    return {"wavemesh_s": P.median(tw), "pydelatin_s": P.median(tp), "runs": len(tw), "error": fail,
+            "wavemesh_obj": wm_out, "pydelatin_obj": pd_out}
+
+
+def _check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
+    from wavemesh.meshio import read_mesh
+
+    h, w = heights.shape
+    try:
+        mesh, z = read_mesh(str(path), w, h)
+    except Exception as e:  # noqa: BLE001 - a file the peer wrote badly is a finding, not a crash
+        return {"triangles": None, "proper": False, "within": False, "problems": [str(e)[:200]]}
+    v = P.verdict(mesh, heights, zeta, z)
+    return {"triangles": v.triangles, "proper": v.proper and v.heights_ok,
+            "within": v.within and v.heights_ok, "problems": v.problems}
+
+
+def run_pair(grid: D.Grid, label: str, zeta: float, npy: Path | None = None, *,
+             wm_budget: float = WM_BUDGET, peer_budget: float = PEER_BUDGET) -> dict:
+    """Every measurement of one grid/error pair; whole processes too when npy (the grid saved) is given."""
+    z = grid.values
+    h, w = z.shape
+    # wavemesh in process (RefineJob.seconds is the native part of each call)
+    natives = []
+
+    def wm():
+        job = wavemesh_mesh(z, zeta)
+        natives.append(job.seconds)
+        return job
+
+    job, wm_call, wm_runs = P.timed(wm, budget=wm_budget)
+    wm_v = P.verdict(job.mesh, z, zeta)
+    wavemesh = {**wm_v.to_json(), "native_s": P.median(natives), "call_s": wm_call, "runs": wm_runs,
+                "bound_met": bool(job.bound_met)}
+    # pydelatin in process (one untimed call first: its first call in a process pays for page faults)
+    P.delatin_call(z, zeta)
+    (verts, tris), pd_call, pd_runs = P.timed(lambda: P.delatin_call(z, zeta), budget=peer_budget)
+    mesh, vz, problems = P.from_delatin(verts, tris, w, h)
+    pydelatin = {**P.verdict(mesh, z, zeta, vz, problems).to_json(), "call_s": pd_call, "runs": pd_runs}
+    # pymartini on the padded grid
+    size = P.martini_size(w, h)
+    zp = P.pad_edge(z, size)
+    (mv, mt), pm_call, pm_runs = P.timed(lambda: P.martini_call(zp, zeta), budget=peer_budget)
+    pymartini = {**P.verdict(P.from_martini(mv, mt, size), zp, zeta).to_json(), "call_s": pm_call,
+                 "runs": pm_runs, "grid": size}
+    pair = {"grid": grid.name, "kind": grid.kind, "held_out": grid.name in HELD_OUT, "width": w, "height": h,
+            "height_range": grid.height_range, "units": grid.units, "label": label, "zeta": zeta,
+            "wavemesh": wavemesh, "pydelatin": pydelatin, "pymartini": pymartini}
+    ratios = {"triangles": _ratio(wm_v.triangles, pydelatin["triangles"]),
+              "native_time": _ratio(wavemesh["native_s"], pd_call),
+              "call_time": _ratio(wm_call, pd_call),
+              "martini_triangles": _ratio(wm_v.triangles, pymartini["triangles"])}
+    if npy is not None:
+        with tempfile.TemporaryDirectory(dir=npy.parent) as t:
+            proc = _run_processes(npy, zeta, Path(t))
+            proc["wavemesh_file"] = _check_obj(proc.pop("wavemesh_obj"), z, zeta)
+            proc["pydelatin_file"] = _check_obj(proc.pop("pydelatin_obj"), z, zeta)
+        pair["process"] = proc
+        ratios["process_time"] = _ratio(proc["wavemesh_s"], proc["pydelatin_s"])
+    pair["ratios"] = ratios
+    return pair
+
+
+def summarise(pairs: list[dict]) -> dict:
+    def col(key):
+        return [p["ratios"].get(key) for p in pairs if p["ratios"].get(key) is not None]
+
+    tri = col("triangles")
+    return {
+        "pairs": len(pairs),
+        "grids": len({p["grid"] for p in pairs}),
+        "median_triangles": P.median(tri),
+        "max_triangles": max(tri) if tri else None,
+        "over_max": sum(1 for r in tri if r > TARGET_MAX),
+        "median_native_time": P.median(col("native_time")),
+        "median_call_time": P.median(col("call_time")),
+        "median_process_time": P.median(col("process_time")),
+        "median_martini_triangles": P.median(col("martini_triangles")),
+        "wavemesh_all_ok": all(p["wavemesh"]["within"] for p in pairs),
+        "pydelatin_flagged": sum(1 for p in pairs if not p["pydelatin"]["within"]),
+        "pymartini_flagged": sum(1 for p in pairs if not p["pymartini"]["within"]),
+    }
+
+
+def run(names: tuple[str, ...] = GRIDS) -> dict:
+    from importlib.metadata import version
+
+    pairs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in names:
+            grid = D.load(name)
+            npy = Path(tmp) / f"{name}.npy"
+            np.save(npy, grid.values)
+            for label, zeta in zetas(grid):
+                t0 = time.perf_counter()
+                pair = run_pair(grid, label, zeta, npy)
+                pairs.append(pair)
+                r = pair["ratios"]
+                print(f"  {name} {label}: triangles x{r['triangles']:.3f}, "
+                      f"native time x{r['native_time']:.2f}, process x{r['process_time']:.2f} "
+                      f"({time.perf_counter() - t0:.1f} s)", flush=True)
+    sets = {"tuning": [p for p in pairs if not p["held_out"]],
+            "held_out": [p for p in pairs if p["held_out"]], "all": pairs}
+    return {
+        "versions": {k: version(k) for k in ("pydelatin", "pymartini", "numpy")},
+        "fractions": list(FRACTIONS), "held_out": list(HELD_OUT),
+        "grids": {n: {"kind": D.SETS[n][0], "source": D.SETS[n][1], "units": D.SETS[n][2]} for n in names},
+        "pairs": pairs,
+        "summary": {k: summarise(v) for k, v in sets.items() if v},
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# The document section
+
+
+def _f(v, nd=2) -> str:
+    return "-" if v is None or v != v else f"{v:.{nd}f}"
+
+
+def _flags(p: dict) -> str:
+    out = []
+    for who, short in (("wavemesh", "wm"), ("pydelatin", "pd"), ("pymartini", "pm")):
+        m = p[who]
+        if not m["proper"]:
+            out.append(f"{short}: NOT PROPER")
+        elif not m.get("heights_ok", True):
+            out.append(f"{short}: wrong heights")
+        elif not m["within"]:
+            ev, en = m["e_max_vertical"], m["e_max_normal"]
+            worst = max(ev, en)
+            out.append(f"{short}: E_max {worst / p['zeta']:.3g} zeta")
+    proc = p.get("process") or {}
+    for who, short in (("wavemesh_file", "wm file"), ("pydelatin_file", "pd file")):
+        f = proc.get(who)
+        if f is not None and not f["within"]:
+            out.append(f"{short}: {'not proper' if not f['proper'] else 'over zeta'}")
+    if proc.get("error"):
+        out.append("process failed")
+    return "; ".join(out) or "ok"
+
+
+def _pair_table(pairs: list[dict], s: dict) -> list[str]:
+    lines = [
+        "| grid | W x H | E | wavemesh triangles | pydelatin | **ratio** | pymartini (grid) | ratio | "
+        "native refine / pydelatin call | `mesh` process / peer process | checks |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for p in pairs:
+        r, wm, pd, pm = p["ratios"], p["wavemesh"], p["pydelatin"], p["pymartini"]
+        lines.append(
+            f"| {p['grid']} | {p['width']} x {p['height']} | {p['label']} ({p['zeta']:.4g}) "
+            f"| {wm['triangles']} | {pd['triangles']} | **{_f(r['triangles'], 3)}** "
+            f"| {pm['triangles']} ({pm['grid']}) "
+            f"| {_f(r['martini_triangles'], 3)} | {_f(r['native_time'])} | {_f(r.get('process_time'))} "
+            f"| {_flags(p)} |")
+    lines.append(
+        f"| **median** ({s['pairs']} pairs) | | | | | **{_f(s['median_triangles'], 3)}** | | "
+        f"{_f(s['median_martini_triangles'], 3)} | {_f(s['median_native_time'])} | "
+        f"{_f(s['median_process_time'])} | |")
+    return lines
+
+
+def _meets(ok: bool) -> str:
+    return "met" if ok else "**not met**"
+
+
+def markdown(results: dict) -> str:
+    v = results["versions"]
+    S = results["summary"]
+    fr = ", ".join(f"{100 * f:g}%" for f in results["fractions"])
+    lines = [
+        f"wavemesh (`--metric vertical --zeta E`, other options at their defaults) against pydelatin "
+        f"{v['pydelatin']} and pymartini {v['pymartini']} at the same max vertical error E, on "
+        f"{S['all']['grids']} whole grids (bench/datasets.py; sources and licences in bench/README.md) at "
+        f"E = {fr} of each grid's height range (Jacksboro: 5 m and 10 m for the two finest).  Every mesh is "
+        "checked by wavemesh's own checker (proper triangulation of the grid rectangle, grid-sample vertices "
+        "with the grid's heights) and its E_max vertical and normal measured by wavemesh.check.mesh_errors; "
+        "*checks* says `ok` or names "
+        "the mesh that is not proper or exceeds E (wm = wavemesh, pd = pydelatin, pm = pymartini; *file*: "
+        "the OBJ a whole process wrote).  pydelatin's y is flipped (y_grid = (H - 1) - y).  pymartini meshes "
+        "the grid padded by edge replication to 2^k + 1 square (the *grid* column); its triangles in the "
+        "padding count.",
+        "",
+        "*ratio* = wavemesh triangles / peer triangles (below 1: wavemesh is smaller).  *native refine / "
+        "pydelatin call*: RefineJob.seconds (Haar details + the C refiner) over Delatin(...) with .vertices "
+        "and .triangles, in one process; *`mesh` process / peer process*: `wavemesh mesh IN.npy -o x.obj "
+        "--metric vertical --zeta E` over a `python -c` that loads the same .npy, runs pydelatin and writes "
+        "an OBJ, run alternately.  Times are medians of up to 3 runs (a call slower than a few seconds runs "
+        "once) on a 2-core machine shared with other work: read the ratios, not the seconds (in "
+        "bench/results/quality.json).",
+        "",
+        "**Summary** (issue 10: median triangle ratio at most 1.0, no pair above 1.3, the held-out set "
+        "included; issue 11: median native refine / pydelatin call at most 1.0, median process / process at "
+        "most 1.5):",
+        "",
+        "| set | grids | pairs | median triangle ratio | max | pairs > 1.3 | median native / call | "
+        "median process / process | median ratio vs pymartini | wavemesh meshes all proper and within E "
+        "| pydelatin / pymartini meshes flagged |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    names = {"tuning": "tuning set", "held_out": "**held-out set**", "all": "all pairs"}
+    for key in ("tuning", "held_out", "all"):
+        s = S.get(key)
+        if s is None:
+            continue
+        lines.append(
+            f"| {names[key]} | {s['grids']} | {s['pairs']} | {_f(s['median_triangles'], 3)} "
+            f"| {_f(s['max_triangles'], 3)} | {s['over_max']} | {_f(s['median_native_time'])} "
+            f"| {_f(s['median_process_time'])} | {_f(s['median_martini_triangles'], 3)} "
+            f"| {'yes' if s['wavemesh_all_ok'] else '**no**'} "
+            f"| {s['pydelatin_flagged']} / {s['pymartini_flagged']} |")
+    a = S["all"]
+    held = S.get("held_out", a)
+    tri_ok = (a["median_triangles"] <= TARGET_MEDIAN and held["median_triangles"] <= TARGET_MEDIAN
+              and a["over_max"] == 0)
+    lines += [
+        "",
+        f"Targets on this run: triangles (median <= {TARGET_MEDIAN}, none > {TARGET_MAX}, held-out "
+        f"included): {_meets(tri_ok)}; every wavemesh mesh proper and within E in both metrics: "
+        f"{_meets(a['wavemesh_all_ok'])}; native refine <= pydelatin call (median): "
+        f"{_meets(a['median_native_time'] <= TARGET_NATIVE)}; `wavemesh mesh` process <= {TARGET_PROCESS} x "
+        f"pydelatin's (median): {_meets(a['median_process_time'] <= TARGET_PROCESS)}.",
+        "",
+        f"**Tuning set** ({', '.join(g for g in results['grids'] if g not in results['held_out'])}):",
+        "",
+        *_pair_table([p for p in results["pairs"] if not p["held_out"]], S["tuning"]),
+    ]
+    if "held_out" in S:
+        lines += [
+            "",
+            f"**Held-out set** ({', '.join(results['held_out'])}; never used for tuning):",
+            "",
+            *_pair_table([p for p in results["pairs"] if p["held_out"]], S["held_out"]),
+        ]
+    lines += ["", "Grids:", ""]
+    for n, g in results["grids"].items():
+        p = next(p for p in results["pairs"] if p["grid"] == n)
+        lines.append(f"- {n} ({g['kind']}, {p['width']} x {p['height']}, range {p['height_range']:.4g} "
+                     f"{g['units']}): {g['source']}" + (" (held out)" if n in results["held_out"] else ""))
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # a quick look at some grids: python bench/bench_quality.py f1 ball
+    import json
+
+    res = run(tuple(sys.argv[1:]) or GRIDS)
+    print(json.dumps(res["summary"], indent=1))
+    print(markdown(res))
