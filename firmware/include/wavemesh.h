@@ -141,13 +141,17 @@ int wm_vertex_move(wm_mesh *m, int32_t v, int32_t x, int32_t y);
 int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING]);
 
 /* A triangulation of the hole v leaves: n - 2 triangles into tris[] (counter-clockwise vertex
- * numbers), covering the ring polygon exactly.  apex = -1: ear clipping that takes the ear with the
- * largest smallest angle first (a Delaunay-like choice); apex = i (0 <= i < n): the fan from ring
+ * numbers), covering the ring polygon exactly.  apex = -1: ear clipping that takes the first ear
+ * whose circumcircle holds no other ring vertex (else the first ear); apex = i (0 <= i < n): the fan from ring
  * vertex i, which is the half-edge collapse of v into that neighbour (4.5.3 with the collapse
  * point at a grid vertex).  WM_ERR_REFUSED when that triangulation does not exist (a fan whose
  * triangles are not all strictly counter-clockwise); WM_OK otherwise. */
 int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
                           int32_t *n_tris);
+
+/* The same from a ring as wm_vertex_ring returns it (n vertices), without walking the fan again. */
+int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
+                 int32_t *n_tris);
 
 /* Removes v and fills its hole with the planned triangles (made by wm_vertex_remove_plan on this
  * mesh as it is).  The triangles reuse v's fan's slots; the one or two slots left over and v's slot

@@ -20,12 +20,30 @@ static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
     const wm_mesh *me = &r->mesh;
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt;
     uint32_t best = NONE;
+    int32_t vx = me->vx[v], vy = me->vy[v];
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
     for (int32_t a = -1; a < n; a++) {
         uint32_t worst = 0;
         int32_t j;
-        if (wm_vertex_remove_plan(me, v, a, tris, &nt) != WM_OK) continue;
+        if (wm_ring_plan(me, ring, n, a, tris, &nt) != WM_OK) continue;
+        /* First the cheap test: v's own sample against the new triangle that holds it (a lower
+         * bound of that triangle's E(T), rounded the same way); most candidates stop here. */
+        for (j = 0; j < nt; j++) {
+            int32_t x[3], y[3];
+            uint32_t e;
+            for (int c = 0; c < 3; c++) {
+                x[c] = me->vx[tris[3 * j + c]];
+                y[c] = me->vy[tris[3 * j + c]];
+            }
+            if (wm_orient(x[0], y[0], x[1], y[1], vx, vy) < 0 || wm_orient(x[1], y[1], x[2], y[2], vx, vy) < 0 ||
+                wm_orient(x[2], y[2], x[0], y[0], vx, vy) < 0)
+                continue;
+            e = wm_point_error(&r->field, &r->params, x, y, vx, vy);
+            if (e > r->params.zeta || (best != NONE && e >= best)) j = -1;
+            break;
+        }
+        if (j < 0) continue;
         for (j = 0; j < nt; j++) {
             int32_t x[3], y[3];
             uint32_t e;
@@ -123,7 +141,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
         int32_t v = r->list[0], ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], nr, nt, k;
         take_out(r, v, &n);
         nr = wm_vertex_ring(me, v, ring);
-        if (nr < 0 || wm_vertex_remove_plan(me, v, r->vapex[v], tris, &nt) != WM_OK ||
+        if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK ||
             wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK)
             continue; /* cannot happen: the plan was made on this star */
         for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);

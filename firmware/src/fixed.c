@@ -110,15 +110,25 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
 
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
 {
-    int32_t best = 0x7FFFFFFF;
-    for (int k = 0; k < 3; k++) {
-        int a = k, b = (k + 1) % 3, c = (k + 2) % 3;
-        int64_t ux = x[b] - x[a], uy = y[b] - y[a], vx = x[c] - x[a], vy = y[c] - y[a];
-        int64_t cross = ux * vy - uy * vx, dot = ux * vx + uy * vy;
-        int32_t ang = wm_angle_q16(dot, cross < 0 ? -cross : cross);
-        if (ang < best) best = ang;
+    /* The smallest angle is the one opposite the shortest side (law of sines), so one atan2 does.
+     * Two equally short sides have equal angles opposite them, and those corners have the same dot
+     * and cross products (the cross product is twice the area at every corner, the dot product
+     * |u||v| cos): the same integers, the same CORDIC result, whichever corner is taken. */
+    int k = 0;
+    int64_t len[3], ux, uy, vx, vy, cross, dot;
+    for (int i = 0; i < 3; i++) {
+        int b = (i + 1) % 3, c = (i + 2) % 3; /* the side opposite corner i */
+        int64_t dx = (int64_t)x[c] - x[b], dy = (int64_t)y[c] - y[b];
+        len[i] = dx * dx + dy * dy;
+        if (len[i] < len[k]) k = i;
     }
-    return best;
+    ux = (int64_t)x[(k + 1) % 3] - x[k];
+    uy = (int64_t)y[(k + 1) % 3] - y[k];
+    vx = (int64_t)x[(k + 2) % 3] - x[k];
+    vy = (int64_t)y[(k + 2) % 3] - y[k];
+    cross = ux * vy - uy * vx;
+    dot = ux * vx + uy * vy;
+    return wm_angle_q16(dot, cross < 0 ? -cross : cross);
 }
 
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap)

@@ -117,6 +117,7 @@ void wm_tri_claim(wm_mesh *m, int32_t t)
 int32_t wm_fan_first(const wm_mesh *m, int32_t v)
 {
     int32_t start = m->vh[v], e = start;
+    if (!wm_on_border(m, m->vx[v], m->vy[v])) return start; /* a full fan: any half-edge is first */
     for (;;) {
         int32_t c = wm_rot_cw(m, e);
         if (c < 0) return e;

@@ -210,21 +210,37 @@ static int try_swap(wm_refiner *r, int32_t e)
     return 1;
 }
 
+/* try_swap's answer depends on the two triangles alone (corners, E(T)), so an edge whose triangles
+ * did not change since it was last examined is skipped: it would give the same "no".  A triangle is
+ * marked when it is swapped; the marks of this pass and the one before decide (an edge examined in
+ * pass p is examined again in p + 1 only if a triangle of it changed after that, in p or p + 1). */
 static void regularise(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
+    const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
+    for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
             if (me->hv[3 * t] < 0 || !(me->tflag[t] & WM_F_SWAP)) continue;
             for (int32_t i = 0; i < 3; i++) {
-                int32_t e = 3 * t + i, o = me->ho[e];
+                int32_t e = 3 * t + i, o = me->ho[e], u;
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
-                swaps += try_swap(r, e);
+                u = WM_TRI(o);
+                if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
+                if (try_swap(r, e)) {
+                    me->tflag[t] |= WM_F_CHANGED;
+                    me->tflag[u] |= WM_F_CHANGED;
+                    swaps++;
+                }
             }
         }
         if (st) st->swaps += swaps;
         if (swaps == 0) break;
+        for (int32_t t = 0; t < me->tri_end; t++) {
+            uint8_t f = me->tflag[t];
+            me->tflag[t] = (uint8_t)((f & ~changed) | ((f & WM_F_CHANGED) ? WM_F_CHANGED0 : 0));
+        }
     }
 }
 

@@ -17,14 +17,30 @@ int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y)
         uint64_t a = (uint64_t)(d[k] < 0 ? -(int64_t)d[k] : d[k]);
         e += a * a;
     }
-    return e > r->params.delta_d;
+    /* The detail of a slope g grows as 2^m g with the level (d = 2 x half-block mean difference over
+     * a block of side 2^m): the energy is compared at the scale of level 1, e / 4^(m-1) > delta_d,
+     * so that delta_d means the same at every level (docs/refiner.md, "Detail energy"). */
+    {
+        int sh = 2 * (m - 1);
+        uint64_t th = r->params.delta_d;
+        if (sh > 0) th = th > (UINT64_MAX >> sh) ? UINT64_MAX : th << sh;
+        return e > th;
+    }
+}
+
+/* The tolerance of the resolution level m - 1 the details of level m refine toward: zeta 2^(m-1),
+ * so that each level of detail stops where its own, coarser, bound holds. */
+static uint32_t level_zeta(const wm_refiner *r, int32_t m)
+{
+    uint64_t z = (uint64_t)r->params.zeta << (m - 1);
+    return z > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)z;
 }
 
 static int candidate(const wm_refiner *r, int32_t m, int32_t t)
 {
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3];
-    if (r->err[t] <= r->params.zeta || wm_tri_area2(me, t) <= 1) return 0;
+    if (r->err[t] <= level_zeta(r, m) || wm_tri_area2(me, t) <= 1) return 0;
     wm_tri_xy(me, t, x, y);
     if (r->params.neighbourhood == WM_NEIGHBOURHOOD_VERTEX) {
         /* N0(v) of every vertex v whose nearest coefficient (the cell containing v) is energetic. */

@@ -85,15 +85,12 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
     return vmax;
 }
 
-uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                      int32_t *wx, int32_t *wy)
+/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax. */
+static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
+                       uint64_t vmax)
 {
-    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
-    uint64_t vmax, ev, ga, gb, r, en;
+    uint64_t ev, ga, gb, r, en;
     int64_t z0, dz1, dz2, Na, Nb;
-    WM_ASSERT(D > 0);
-    if (D <= 0) return 0xFFFFFFFFu;
-    vmax = scan(f, x, y, D, wx, wy);
     ev = (vmax * 65536u + (uint64_t)D - 1) / (uint64_t)D; /* vmax < 2^47 */
     if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
@@ -117,4 +114,26 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
     }
     en = (ev * 65536u + r - 1) / r;
     return (uint32_t)en;
+}
+
+uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                      int32_t *wx, int32_t *wy)
+{
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    WM_ASSERT(D > 0);
+    if (D <= 0) return 0xFFFFFFFFu;
+    return finish(f, p, x, y, D, scan(f, x, y, D, wx, wy));
+}
+
+uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                        int32_t py)
+{
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
+    if (D <= 0) return 0xFFFFFFFFu;
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
+    }
+    v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
+    return finish(f, p, x, y, D, (uint64_t)(v < 0 ? -v : v));
 }

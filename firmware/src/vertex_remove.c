@@ -62,20 +62,24 @@ static int in_closed(const wm_mesh *m, int32_t a, int32_t b, int32_t c, int32_t 
     return orient3(m, a, b, p) >= 0 && orient3(m, b, c, p) >= 0 && orient3(m, c, a, p) >= 0;
 }
 
-static int32_t smallest_angle(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
+/* An ear (a, b, c) is Delaunay within the polygon when no other remaining ring vertex lies strictly
+ * inside its circumcircle. */
+static int delaunay_ear(const wm_mesh *m, const int32_t *poly, int32_t n, int32_t a, int32_t b, int32_t c)
 {
-    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
-    return wm_min_angle(x, y);
+    for (int32_t j = 0; j < n; j++) {
+        int32_t p = poly[j];
+        if (p != a && p != b && p != c &&
+            wm_incircle(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c], m->vx[p], m->vy[p]) > 0)
+            return 0;
+    }
+    return 1;
 }
 
-int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
-                          int32_t *n_tris)
+int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
+                 int32_t *n_tris)
 {
-    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], poly[WM_MAX_RING], k, n, nt = 0;
-    n = fan(m, v, e, &k, ring);
-    if (n < 0) return (int)n;
-    WM_ASSERT(n >= 3);
-    if (apex >= n) return WM_ERR_ARG;
+    int32_t poly[WM_MAX_RING], nt = 0;
+    if (n < 3 || n > WM_MAX_RING || apex >= n) return WM_ERR_ARG;
     if (apex >= 0) {
         for (int32_t j = 1; j + 1 < n; j++) {
             int32_t a = ring[apex], b = ring[(apex + j) % n], c = ring[(apex + j + 1) % n];
@@ -88,19 +92,19 @@ int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tri
     }
     for (int32_t i = 0; i < n; i++) poly[i] = ring[i];
     while (n > 3) {
-        int32_t best = -1, best_ang = -1;
+        int32_t best = -1;
         for (int32_t i = 0; i < n; i++) {
-            int32_t a = poly[(i + n - 1) % n], b = poly[i], c = poly[(i + 1) % n], ang, j;
+            int32_t a = poly[(i + n - 1) % n], b = poly[i], c = poly[(i + 1) % n], j;
             if (orient3(m, a, b, c) <= 0) continue;
             for (j = 0; j < n; j++) {
                 int32_t p = poly[j];
                 if (p != a && p != b && p != c && in_closed(m, a, b, c, p)) break;
             }
             if (j < n) continue;
-            ang = smallest_angle(m, a, b, c);
-            if (ang > best_ang) {
-                best_ang = ang;
+            if (best < 0) best = i; /* the first valid ear, unless a Delaunay one follows */
+            if (delaunay_ear(m, poly, n, a, b, c)) {
                 best = i;
+                break;
             }
         }
         /* A simple polygon always has an ear (two, in fact). */
@@ -115,6 +119,15 @@ int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tri
     tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
     *n_tris = nt + 1;
     return WM_OK;
+}
+
+int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
+                          int32_t *n_tris)
+{
+    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], k, n;
+    n = fan(m, v, e, &k, ring);
+    if (n < 0) return (int)n;
+    return wm_ring_plan(m, ring, n, apex, tris, n_tris);
 }
 
 int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],

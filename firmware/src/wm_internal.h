@@ -86,6 +86,11 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
  * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
 int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy);
 
+/* E(T)'s measure at the one sample (px, py) of the closed triangle, rounded as E(T) is: never more
+ * than wm_tri_error of the same triangle, so a value above zeta rules the triangle out cheaply. */
+uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                        int32_t py);
+
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 
@@ -99,6 +104,8 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 #define WM_F_PLAN 8u   /* belongs to a planned operation of this iteration */
 #define WM_F_NEW 16u   /* created or changed by this iteration (counts as N0 for the swaps) */
 #define WM_F_SWAP (WM_F_ACTIVE | WM_F_DEP | WM_F_NEAR | WM_F_NEW)
+#define WM_F_CHANGED 32u  /* regularisation: swapped in this pass */
+#define WM_F_CHANGED0 64u /* regularisation: swapped in the pass before (or the first pass) */
 
 struct wm_refiner {
     wm_mesh mesh;

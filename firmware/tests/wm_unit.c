@@ -309,6 +309,92 @@ static void test_refine(void)
     CHECK(wm_refine_init(&r, mem, 64, &f, &p, xy, 4, tris, 2, cap) == WM_ERR_MEMORY);
 }
 
+/* Vertex removal: an interior and a border vertex go back to the two triangles; corners are
+ * refused; then random splits and removals (every plan kind) keep the mesh proper throughout. */
+static void test_vertex_remove(void)
+{
+    wm_mesh m;
+    int32_t touched[WM_MAX_RING], tris[3 * WM_MAX_RING], ring[WM_MAX_RING], nt = 0, nk = 0, v, e;
+    uint32_t seed = 12345u;
+    CHECK(square(&m, 9, 9, 4096) == WM_OK);
+    CHECK(wm_tri_split(&m, 0, 6, 3, touched, &nt) == WM_OK);
+    v = find_vertex(&m, 6, 3);
+    CHECK(wm_vertex_ring(&m, v, ring) == 3);
+    CHECK(wm_vertex_remove_plan(&m, v, -1, tris, &nt) == WM_OK && nt == 1);
+    CHECK(wm_vertex_remove(&m, v, tris, nt, touched, &nk) == WM_OK && nk == 1);
+    CHECK(m.n_tri == 2 && m.n_vert == 4 && wm_mesh_check(&m) == WM_OK);
+    e = find_edge(&m, 0, 0, 8, 0);
+    if (e < 0) e = find_edge(&m, 8, 0, 0, 0);
+    CHECK(e >= 0 && wm_edge_split(&m, e, 4, 0, touched, &nt) == WM_OK);
+    v = find_vertex(&m, 4, 0);
+    CHECK(v >= 0 && wm_vertex_ring(&m, v, ring) == 3);
+    CHECK(wm_vertex_remove_plan(&m, v, 0, tris, &nt) == WM_OK && nt == 1);
+    CHECK(wm_vertex_remove(&m, v, tris, nt, NULL, NULL) == WM_OK);
+    CHECK(m.n_tri == 2 && m.n_vert == 4 && wm_mesh_check(&m) == WM_OK);
+    CHECK(wm_vertex_ring(&m, find_vertex(&m, 0, 0), ring) == WM_ERR_REFUSED);
+    /* Random: split at random grid points, remove random vertices with random plans. */
+    CHECK(square(&m, 33, 29, 4096) == WM_OK);
+    for (int step = 0; step < 3000; step++) {
+        int32_t x, y, t, a, rc, n;
+        seed = seed * 1103515245u + 12345u;
+        x = (int32_t)((seed >> 8) % 33u);
+        seed = seed * 1103515245u + 12345u;
+        y = (int32_t)((seed >> 8) % 29u);
+        if ((seed >> 20) % 3u != 0 || m.n_vert < 8) { /* split the triangle holding (x, y) */
+            for (t = 0; t < m.tri_end; t++) {
+                int32_t tx[3], ty[3], s0, s1, s2;
+                if (m.hv[3 * t] < 0) continue;
+                for (int k = 0; k < 3; k++) tx[k] = m.vx[m.hv[3 * t + k]], ty[k] = m.vy[m.hv[3 * t + k]];
+                s0 = (int32_t)wm_orient(tx[1], ty[1], tx[2], ty[2], x, y);
+                s1 = (int32_t)wm_orient(tx[2], ty[2], tx[0], ty[0], x, y);
+                s2 = (int32_t)wm_orient(tx[0], ty[0], tx[1], ty[1], x, y);
+                if (s0 > 0 && s1 > 0 && s2 > 0) {
+                    if (m.n_tri + 2 <= m.tri_cap) CHECK(wm_tri_split(&m, t, x, y, touched, &nt) == WM_OK);
+                    break;
+                }
+            }
+            continue;
+        }
+        v = find_vertex(&m, x, y);
+        if (v < 0) continue;
+        n = wm_vertex_ring(&m, v, ring);
+        if (n < 0) {
+            CHECK(n == WM_ERR_REFUSED);
+            continue;
+        }
+        a = (int32_t)((seed >> 4) % (uint32_t)(n + 1)) - 1;
+        rc = wm_vertex_remove_plan(&m, v, a, tris, &nt);
+        CHECK(rc == WM_OK || (rc == WM_ERR_REFUSED && a >= 0));
+        if (rc != WM_OK) continue;
+        {
+            int32_t before = m.n_tri, border = wm_on_border(&m, x, y);
+            CHECK(nt == n - 2);
+            CHECK(wm_vertex_remove(&m, v, tris, nt, touched, &nk) == WM_OK && nk == nt);
+            CHECK(m.n_tri == before - (border ? 1 : 2));
+            CHECK(wm_mesh_check(&m) == WM_OK);
+        }
+    }
+    CHECK(wm_mesh_check(&m) == WM_OK);
+}
+
+/* The in-circle predicate at the extremes of the coordinate range, and the smallest angle taken
+ * opposite the shortest side. */
+static void test_incircle(void)
+{
+    const int32_t M = WM_MAX_SIDE - 1;
+    int32_t x[3] = {0, 4, 0}, y[3] = {0, 0, 3};
+    CHECK(wm_incircle(0, 0, 2, 0, 0, 2, 1, 1) > 0);
+    CHECK(wm_incircle(0, 0, 2, 0, 0, 2, 2, 2) == 0);
+    CHECK(wm_incircle(0, 0, 2, 0, 0, 2, 3, 3) < 0);
+    CHECK(wm_incircle(0, 0, M, 0, 0, M, M, M) == 0);
+    CHECK(wm_incircle(0, 0, M, 0, 0, M, M - 1, M - 1) > 0);
+    CHECK(wm_incircle(0, 0, M, 0, 0, M, M, M - 1) > 0);
+    CHECK(wm_incircle(M, 0, M, M, 0, M, 0, 0) == 0);
+    CHECK(wm_incircle(M, 0, M, M, 0, M, 0, 1) > 0);
+    /* atan2(3, 4) = 0.6435 rad, the angle at (4, 0) opposite the shortest side */
+    CHECK(wm_min_angle(x, y) > 42100 && wm_min_angle(x, y) < 42200);
+}
+
 int main(void)
 {
     test_build();
@@ -320,6 +406,8 @@ int main(void)
     test_error();
     test_haar();
     test_refine();
+    test_vertex_remove();
+    test_incircle();
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }
