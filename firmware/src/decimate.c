@@ -103,7 +103,7 @@ static void down(wm_refiner *r, int32_t i, int32_t n)
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 {
     int32_t i = r->pos[v];
-    if (i < 0) return;
+    if (i < 0 || i >= *n || r->list[i] != v) return;
     r->pos[v] = -1;
     (*n)--;
     if (i == *n) return;

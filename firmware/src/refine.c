@@ -287,7 +287,7 @@ static void heap_down(wm_refiner *r, int32_t i, int32_t n)
 static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
 {
     int32_t i = r->pos[t];
-    if (i < 0) return;
+    if (i < 0 || i >= *n || r->list[i] != t) return; /* not in the heap (pos may be stale) */
     r->pos[t] = -1;
     (*n)--;
     if (i == *n) return;
@@ -364,7 +364,9 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
     int legal = !(r->params.flags & WM_FLAG_NO_LEGALISE);
-    for (int32_t t = 0; t < me->tri_cap; t++) r->pos[t] = -1;
+    /* Only the slots in use: pos[] of a slot allocated later is never trusted before it is filed
+     * (heap_remove checks membership), so storage beyond tri_end is never touched. */
+    for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
         if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, &n);
     while (n > 0) {

@@ -225,7 +225,7 @@ class RefineParams:
     legalise: bool = True  # Lawson flips after each split of the error bound
     decimate: bool = True  # the final decimation within zeta after the error bound
     max_triangles: int | None = None  # triangle budget
-    capacity: int | None = None  # triangle storage, as on a device (default: grown as needed)
+    capacity: int | None = None  # triangle storage, as on a device (default: 2 (W-1)(H-1), never short)
     extra: dict = field(default_factory=dict)
 
     def check(self) -> None:
@@ -344,8 +344,9 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
     ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation).  Without an
-    explicit capacity the storage starts small and doubles whenever the library reports it full
-    (the result does not depend on the capacity, only on the budget).
+    explicit capacity the storage is sized once for the most triangles any triangulation of the grid
+    can have, 2 (W-1) (H-1): the refiner never runs out and runs once.  The library touches only the
+    slots it uses, so the operating system commits only those pages of the (lazily mapped) buffer.
     """
     params.check()
     lib = load()
@@ -359,31 +360,22 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     fp = fixed_params(params, scale, zeta)
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
     tris = np.ascontiguousarray(initial.tris, dtype=np.int32)
-    worst = lib.wm_tri_cap_max(width, height)
-    if params.capacity is not None:
-        cap, grow = params.capacity, False
-    else:
-        cap = min(worst, max(65536, 8 * len(tris), 2 * (params.max_triangles or 0)))
-        grow = True
-    while True:
-        out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height)
-        if code == WM_ERR_CAPACITY and grow and cap < worst:
-            cap = min(worst, 2 * cap)
-            continue
-        if code != WM_OK:
-            what = ERRORS.get(code, f"error {code}")
-            if code == WM_ERR_CAPACITY:
-                raise WavemeshError(f"refiner: {what} (storage for {cap} triangles)",
-                                    hint="raise --capacity or set --max-triangles")
-            raise WavemeshError(f"refiner: {what}")
-        return RefineOutput(out, cap, fp)
+    cap = params.capacity if params.capacity is not None else lib.wm_tri_cap_max(width, height)
+    out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height)
+    if code != WM_OK:
+        what = ERRORS.get(code, f"error {code}")
+        if code == WM_ERR_CAPACITY:
+            raise WavemeshError(f"refiner: {what} (storage for {cap} triangles)",
+                                hint="raise --capacity or set --max-triangles")
+        raise WavemeshError(f"refiner: {what}")
+    return RefineOutput(out, cap, fp)
 
 
 def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], int]:
     nbytes = lib.wm_refine_bound(width, height, cap)
     if nbytes == 0:
         return [], -1
-    mem = np.empty(nbytes + 16, dtype=np.uint8)
+    mem = np.empty(nbytes + 16, dtype=np.uint8)  # malloc: large blocks are mapped lazily
     base = mem.ctypes.data + (-mem.ctypes.data) % 16
     handle = ctypes.c_void_p()
     code = lib.wm_refine_init(ctypes.byref(handle), ctypes.c_void_p(base), nbytes, ctypes.byref(fld),
