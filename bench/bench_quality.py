@@ -176,8 +176,6 @@ def summarise(pairs: list[dict]) -> dict:
 
 
 def run(names: tuple[str, ...] = GRIDS) -> dict:
-    from importlib.metadata import version
-
     pairs = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
@@ -192,12 +190,20 @@ def run(names: tuple[str, ...] = GRIDS) -> dict:
                 print(f"  {name} {label}: triangles x{r['triangles']:.3f}, "
                       f"native time x{r['native_time']:.2f}, process x{r['process_time']:.2f} "
                       f"({time.perf_counter() - t0:.1f} s)", flush=True)
+    return assemble(pairs, names)
+
+
+def assemble(pairs: list[dict], names) -> dict:
+    """The results file: versions, the split, the grids' sources, every pair, the medians per set."""
+    from importlib.metadata import version
+
     sets = {"tuning": [p for p in pairs if not p["held_out"]],
             "held_out": [p for p in pairs if p["held_out"]], "all": pairs}
     return {
         "versions": {k: version(k) for k in ("pydelatin", "pymartini", "numpy")},
         "fractions": list(FRACTIONS), "held_out": list(HELD_OUT),
-        "grids": {n: {"kind": D.SETS[n][0], "source": D.SETS[n][1], "units": D.SETS[n][2]} for n in names},
+        "grids": {n: {"kind": D.SETS[n][0], "source": D.SETS[n][1], "units": D.SETS[n][2]}
+                  if n in D.SETS else {"kind": "test", "source": "-", "units": "-"} for n in names},
         "pairs": pairs,
         "summary": {k: summarise(v) for k, v in sets.items() if v},
     }
@@ -314,11 +320,14 @@ def markdown(results: dict) -> str:
         f"{_meets(a['wavemesh_all_ok'])}; native refine <= pydelatin call (median): "
         f"{_meets(a['median_native_time'] <= TARGET_NATIVE)}; `wavemesh mesh` process <= {TARGET_PROCESS} x "
         f"pydelatin's (median): {_meets(a['median_process_time'] <= TARGET_PROCESS)}.",
-        "",
-        f"**Tuning set** ({', '.join(g for g in results['grids'] if g not in results['held_out'])}):",
-        "",
-        *_pair_table([p for p in results["pairs"] if not p["held_out"]], S["tuning"]),
     ]
+    if "tuning" in S:
+        lines += [
+            "",
+            f"**Tuning set** ({', '.join(g for g in results['grids'] if g not in results['held_out'])}):",
+            "",
+            *_pair_table([p for p in results["pairs"] if not p["held_out"]], S["tuning"]),
+        ]
     if "held_out" in S:
         lines += [
             "",

@@ -1,0 +1,99 @@
+"""The quality benchmark's harness (bench/bench_quality.py, bench/peers.py, bench/bench_cost.py) on one
+tiny grid, so that it cannot rot: the peers' output mapped onto wavemesh's conventions and judged by
+wavemesh's checker, one whole pair (in process and as whole processes), the table written from it."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+
+import bench_cost as C  # noqa: E402
+import bench_quality as Q  # noqa: E402
+import datasets as D  # noqa: E402
+import peers as P  # noqa: E402
+from wavemesh.mesh import Mesh  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def tiny() -> D.Grid:
+    """Rough and not square (37 x 23), so a lost flip or a transposition shows."""
+    z = D.terrain(40, 0.6)[:23, :37].copy()
+    return D.Grid("tiny", "synthetic", "bench/datasets.py terrain", "m", z)
+
+
+def test_delatin_y_flip_gives_a_proper_mesh_within_zeta(tiny):
+    z = tiny.values
+    h, w = z.shape
+    zeta = 0.02 * tiny.height_range
+    verts, tris = P.delatin_call(z, zeta)
+    mesh, vz, problems = P.from_delatin(verts, tris, w, h)
+    v = P.verdict(mesh, z, zeta, vz, problems)
+    assert v.proper and v.heights_ok, v.problems
+    assert v.within and v.e_max_vertical <= zeta * (1 + P.ZETA_SLACK)
+    assert v.triangles == len(tris) > 2
+    # The same output without the flip: pydelatin's own heights no longer sit on their samples, and
+    # the checker must say so (this is what the mapping is for).
+    raw = Mesh(w, h, np.asarray(verts)[:, :2].astype(np.int64), np.asarray(tris, dtype=np.int64))
+    bad = P.verdict(raw, z, zeta, vz)
+    assert not (bad.heights_ok and bad.within)
+    # ... and without turning the triangles round it is not a proper triangulation (clockwise)
+    turned = Mesh(w, h, mesh.xy, mesh.tris[:, ::-1])
+    assert not P.verdict(turned, z, zeta).proper
+
+
+def test_martini_padding_and_mapping(tiny):
+    assert [P.martini_size(*s) for s in ((129, 129), (128, 128), (130, 10), (37, 23), (2, 2))] == \
+        [129, 129, 257, 65, 3]
+    z = tiny.values
+    size = P.martini_size(*z.shape[::-1])
+    zp = P.pad_edge(z, size)
+    assert zp.shape == (size, size)
+    assert np.array_equal(zp[: z.shape[0], : z.shape[1]], z)
+    assert np.array_equal(zp[-1, : z.shape[1]], z[-1]) and np.array_equal(zp[: z.shape[0], -1], z[:, -1])
+    zeta = 0.02 * tiny.height_range
+    v, t = P.martini_call(zp, zeta)
+    ver = P.verdict(P.from_martini(v, t, size), zp, zeta)
+    assert ver.proper, ver.problems
+    assert ver.e_max_vertical is not None
+
+
+def test_one_pair_end_to_end(tiny, tmp_path):
+    npy = tmp_path / "tiny.npy"
+    np.save(npy, tiny.values)
+    zeta = 0.02 * tiny.height_range
+    pair = Q.run_pair(tiny, "2%", zeta, npy, wm_budget=0.5, peer_budget=0.2)
+    assert pair["wavemesh"]["proper"] and pair["wavemesh"]["within"], pair["wavemesh"]["problems"]
+    assert pair["pydelatin"]["proper"] and pair["pydelatin"]["within"], pair["pydelatin"]["problems"]
+    assert pair["pymartini"]["proper"]
+    proc = pair["process"]
+    assert proc["error"] is None, proc["error"]
+    # the OBJ files both whole processes wrote, read back and checked: the same meshes as in process
+    assert proc["wavemesh_file"]["within"] and proc["pydelatin_file"]["within"]
+    assert proc["wavemesh_file"]["triangles"] == pair["wavemesh"]["triangles"]
+    assert proc["pydelatin_file"]["triangles"] == pair["pydelatin"]["triangles"]
+    r = pair["ratios"]
+    assert r["triangles"] == pair["wavemesh"]["triangles"] / pair["pydelatin"]["triangles"]
+    assert all(r[k] > 0 for k in ("native_time", "call_time", "process_time", "martini_triangles"))
+    results = Q.assemble([pair], ["tiny"])
+    assert results["summary"]["all"]["pairs"] == 1 and "held_out" not in results["summary"]
+    text = Q.markdown(results)
+    assert "| tiny | 37 x 23 | 2%" in text and "**median** (1 pairs)" in text
+
+
+def test_split_and_errors():
+    assert set(Q.HELD_OUT) <= set(Q.GRIDS)
+    assert abs(len(Q.HELD_OUT) - len(Q.GRIDS) / 3) < 1  # a third of the grids, not of the pairs
+    jb = D.Grid("jacksboro", "terrain", "-", "m", np.array([[236.0, 1076.0], [500.0, 600.0]]))
+    assert Q.zetas(jb) == [("5 m", 5.0), ("10 m", 10.0), ("2%", 0.02 * 840), ("5%", 0.05 * 840)]
+
+
+def test_cost_slope():
+    n = [256**2, 512**2, 1024**2, 2048**2]
+    assert C.slope(n, [x**1.2 for x in n]) == pytest.approx(1.2)
+    assert C.slope(n, [3 * x for x in n]) == pytest.approx(1.0)
