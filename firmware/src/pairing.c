@@ -271,9 +271,10 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
     G = wm_gcd((int32_t)cx, (int32_t)cy);
     if (G < 2) {
         /* No grid sample inside the common edge: the pair cannot be split there; each triangle is
-         * subdivided as an unpaired one. */
+         * subdivided as an unpaired one, the partner only when it is not yet within the level's
+         * tolerance (a dependent partner often is: splitting it adds a vertex the bound never needs). */
         int32_t t2 = f >= 0 ? WM_TRI(f) : -1, rc = wm_split_unpaired(r, WM_TRI(e), st);
-        if (rc == WM_OK && t2 >= 0) rc = wm_split_unpaired(r, t2, st);
+        if (rc == WM_OK && t2 >= 0 && r->err[t2] > wm_level_zeta(r, m)) rc = wm_split_unpaired(r, t2, st);
         return rc;
     }
     /* Split point: the mean of the two crossings (one for a quasi-valid pair), snapped to the grid

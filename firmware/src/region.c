@@ -30,7 +30,7 @@ int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y)
 
 /* The tolerance of the resolution level m - 1 the details of level m refine toward: zeta 2^(m-1),
  * so that each level of detail stops where its own, coarser, bound holds. */
-static uint32_t level_zeta(const wm_refiner *r, int32_t m)
+uint32_t wm_level_zeta(const wm_refiner *r, int32_t m)
 {
     uint64_t z = (uint64_t)r->params.zeta << (m - 1);
     return z > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)z;
@@ -40,7 +40,7 @@ static int candidate(const wm_refiner *r, int32_t m, int32_t t)
 {
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3];
-    if (r->err[t] <= level_zeta(r, m) || wm_tri_area2(me, t) <= 1) return 0;
+    if (r->err[t] <= wm_level_zeta(r, m) || wm_tri_area2(me, t) <= 1) return 0;
     wm_tri_xy(me, t, x, y);
     if (r->params.neighbourhood == WM_NEIGHBOURHOOD_VERTEX) {
         /* N0(v) of every vertex v whose nearest coefficient (the cell containing v) is energetic. */

@@ -153,6 +153,8 @@ int wm_room(wm_refiner *r, int32_t added);
 
 /* The detail energy test (4.12) for the cell of level m at (x, y). */
 int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y);
+/* The tolerance the details of level m refine toward: zeta 2^(m-1) (region.c). */
+uint32_t wm_level_zeta(const wm_refiner *r, int32_t m);
 /* Region selection (4.3): sets the flags, returns the number of active triangles. */
 int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st);
 /* Gradient-consistent pairing (4.4.1): fills r->list, returns the number of operations. */

@@ -219,7 +219,7 @@ class RefineParams:
     alpha: float = 0.6  # mesh regularity factor, 0..1 (5.2.3: "most of the later experiments")
     delta_lambda: float = 0.01  # vertex removal criterion (reduction issue)
     delta_c: float = 0.98  # edge collapsing criterion (reduction issue)
-    iterations: int = 2  # k, 1..3 (0: only the error bound)
+    iterations: int = 1  # k, 1..3 (0: only the error bound); 1 measured best (docs/refiner.md)
     neighbourhood: str = "face"  # "face" (5.2.2) or "vertex"
     bound: bool = True  # the error bound at level 0 (False: the dissertation's levels alone)
     legalise: bool = True  # Lawson flips after each split of the error bound
