@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh import __version__
-from wavemesh.check import check_mesh, mesh_errors
+from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.haar import decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
@@ -134,6 +134,7 @@ class RefineJob:
     zeta_used: float  # zeta given to the refiner (less 2 x the quantisation error for lossy input)
     output: RefineOutput
     seconds: float  # time spent in the refiner
+    errors: ErrorReport | None = None  # the final mesh's errors against the input (check.mesh_errors)
 
     @property
     def mesh(self) -> Mesh:
@@ -144,9 +145,50 @@ class RefineJob:
         return self.output.final.stats["over"] == 0
 
 
+BUG_HINT = "this is a bug in wavemesh's refiner: please report it with the input and the options"
+
+
+def require_proper(mesh: Mesh, what: str) -> None:
+    """MeshInvalid (one line, exit status 1) unless ``mesh`` is a proper triangulation (check_mesh)."""
+    verdict = check_mesh(mesh)
+    if not verdict.valid:
+        raise MeshInvalid(f"{what} is not a proper triangulation: " + "; ".join(verdict.problems[:3]),
+                          hint=BUG_HINT)
+
+
+def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str | None:
+    """None when the final mesh is within zeta where the bound applies, else what is wrong.
+
+    The bound applies when the refiner reports every triangle within zeta (not when the triangle budget
+    stopped it).  Lossless input: E_max by the chosen metric <= zeta on the input.  Lossy quantisation
+    (docs/refiner.md): vertically on the input when zeta >= 2q, else E_max <= the zeta the refiner was
+    given on the 16-bit samples it saw.  The float metric's own rounding is allowed (1e-9 relative)."""
+    if not rjob.bound_met:
+        return None
+    p = rjob.params
+    eps = BOUND_EPS * max(1.0, p.zeta)
+    metric = "e_max_normal" if p.metric == "normal" else "e_max_vertical"
+    if hf.lossless or (p.metric == "vertical" and p.zeta >= 2 * hf.max_quantisation_error):
+        e, zeta, on = getattr(errors, metric), p.zeta, "the input"
+    else:
+        quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
+        e, zeta, on = getattr(mesh_errors(rjob.mesh, quantised), metric), rjob.zeta_used, "the 16-bit samples"
+    if e <= zeta + eps:
+        return None
+    return (f"the refined mesh is not within zeta: E_max {p.metric} {e:.9g} > zeta {zeta:g} on {on}, though "
+            f"the refiner reported every triangle within it")
+
+
+BOUND_EPS = 1e-9  # the float metric's own rounding, relative (docs/refiner.md)
+
+
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
-           params: RefineParams | None = None) -> RefineJob:
-    """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta."""
+           params: RefineParams | None = None, *, check_levels: bool = False) -> RefineJob:
+    """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
+
+    The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
+    the bound met, within zeta (mesh_errors, kept in ``errors``); otherwise MeshInvalid.
+    ``check_levels`` also checks every coarser level's mesh."""
     from wavemesh import native  # loads (and if needed builds) the C library
 
     params = params or RefineParams()
@@ -161,17 +203,21 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     out = native.refine(hf.samples, decompose(hf.samples, job.levels), job.mesh, params, scale=hf.scale,
                         zeta=zeta)
     seconds = time.perf_counter() - start
-    for lv in out.levels:
-        verdict = check_mesh(lv.mesh)
-        if not verdict.valid:  # the operators keep the mesh proper: a failure here is a bug
-            raise AssertionError(f"refined mesh at level {lv.level} is not proper: "
-                                 + "; ".join(verdict.problems[:3]))
-    return RefineJob(job, params, zeta, out, seconds)
+    # The operators keep the mesh proper and within zeta: a failure here is a bug.
+    for lv in out.levels if check_levels else out.levels[-1:]:
+        require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
+    rjob = RefineJob(job, params, zeta, out, seconds)
+    rjob.errors = mesh_errors(rjob.mesh, hf.values)
+    excess = bound_excess(hf, rjob, rjob.errors)
+    if excess:
+        raise MeshInvalid(excess, hint=BUG_HINT)
+    return rjob
 
 
-def level_report(lv, hf: HeightField, metric: str) -> dict:
-    """One level's row: counts, the firmware's E_max and the independent float E_max."""
-    errors = mesh_errors(lv.mesh, hf.values)
+def level_report(lv, hf: HeightField, metric: str, errors: ErrorReport | None = None) -> dict:
+    """One level's row: counts, the firmware's E_max and the independent float E_max (``errors``: the
+    level's mesh_errors when already measured)."""
+    errors = errors if errors is not None else mesh_errors(lv.mesh, hf.values)
     st = lv.stats
     return {
         "level": lv.level,
@@ -185,6 +231,20 @@ def level_report(lv, hf: HeightField, metric: str) -> dict:
         "splits": st["edge_splits"] + st["ternary_splits"] + st["bound_splits"],
         "swaps": st["swaps"],
         "firmware": st,
+    }
+
+
+def level_counts(lv, hf: HeightField) -> dict:
+    """A level's row without measuring it: counts and the refiner's own E_max (never below the exact)."""
+    st = lv.stats
+    return {
+        "level": lv.level,
+        "vertices": lv.mesh.n_vertices,
+        "triangles": lv.mesh.n_triangles,
+        "e_max_firmware": st["e_max_q16"] / 65536 * hf.scale,
+        "over_zeta": st["over"],
+        "splits": st["edge_splits"] + st["ternary_splits"] + st["bound_splits"],
+        "swaps": st["swaps"],
     }
 
 
@@ -213,11 +273,11 @@ def _check_mesh_outputs(args) -> tuple[Path, Path | None]:
 
 
 
-def _write_outputs(args, hf: HeightField, mesh: Mesh, report: dict, written) -> None:
+def _write_outputs(args, hf: HeightField, mesh: Mesh, report: dict | None, written) -> None:
     """The report and the picture of `mesh` and `stream` (the meshes are written by the caller)."""
-    if written:
-        report["lod"] = written
     if args.report:
+        if written:
+            report["lod"] = written
         _write_json(args.report, report)
     if args.render:
         from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
@@ -230,6 +290,12 @@ def _print_summary(args, hf: HeightField, mesh: Mesh, levels: int, tau: float, e
           f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
           f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
 
+def measures_levels(args) -> bool:
+    """Whether `mesh` checks and measures every level: only when asked, by --report, --lod or
+    --check-levels (the final mesh is always checked and measured)."""
+    return bool(args.report or getattr(args, "lod", None) or getattr(args, "check_levels", False))
+
+
 def mesh_command(args) -> int:
     out, lod = _check_mesh_outputs(args)
     stage = getattr(args, "stage", "initial")
@@ -237,16 +303,23 @@ def mesh_command(args) -> int:
     if params is not None:
         params.check()
     hf = _load_input(args)
+    measure = measures_levels(args)
     if stage == "full":
-        rjob = refine(hf, args.levels, args.tau, params)
-        job, mesh = rjob.initial, rjob.mesh
+        rjob = refine(hf, args.levels, args.tau, params, check_levels=measure)
+        job, mesh, errors = rjob.initial, rjob.mesh, rjob.errors
         comment = (f"wavemesh {__version__} refined mesh, M={job.levels} tau={job.tau:g} "
                    f"zeta={params.zeta:g} "
                    f"metric={params.metric}")
-        levels = [level_report(lv, hf, params.metric) for lv in rjob.output.levels]
+        final = rjob.output.final
+        if measure:
+            levels = [level_report(lv, hf, params.metric, errors if lv is final else None)
+                      for lv in rjob.output.levels]
+        else:
+            levels = [level_counts(lv, hf) for lv in rjob.output.levels]
     else:
-        rjob, job = None, triangulate(hf, args.levels, args.tau)
+        rjob, job = None, triangulate(hf, args.levels, args.tau)  # triangulate checks the mesh
         mesh = job.mesh
+        errors = mesh_errors(mesh, hf.values)
         comment = f"wavemesh {__version__} initial triangulation, M={job.levels} tau={job.tau:g}"
         levels = []
     write_mesh(str(out), mesh, hf.values, comment=comment)
@@ -258,44 +331,48 @@ def mesh_command(args) -> int:
             path = lod / f"level-{level}{out.suffix.lower()}"
             write_mesh(str(path), m, hf.values, comment=f"{comment} level={level}")
             written.append(str(path))
-    errors = mesh_errors(mesh, hf.values)
-    parameters = {"levels": job.levels, "tau": job.tau, "stage": stage}
-    report = {
-        "wavemesh": __version__,
-        "input": hf.to_report(),
-        "parameters": parameters,
-        "initial": job.result.to_report(),
-        "errors": errors.to_report(),
-        "output": str(out),
-    }
-    if rjob is not None:
-        parameters.update(rjob.params.to_report())
-        parameters["zeta_refiner"] = rjob.zeta_used
-        report["refiner"] = {
-            "levels": levels,
-            "bound_met": rjob.bound_met,
-            "seconds": rjob.seconds,
-            "capacity": rjob.output.capacity,
-            "fixed_point": {name: int(getattr(rjob.output.params, name)) for name,
-                            _ in rjob.output.params._fields_},
+    report = None
+    if args.report:
+        parameters = {"levels": job.levels, "tau": job.tau, "stage": stage}
+        report = {
+            "wavemesh": __version__,
+            "input": hf.to_report(),
+            "parameters": parameters,
+            "initial": job.result.to_report(),
+            "errors": errors.to_report(),
+            "output": str(out),
         }
+        if rjob is not None:
+            parameters.update(rjob.params.to_report())
+            parameters["zeta_refiner"] = rjob.zeta_used
+            report["refiner"] = {
+                "levels": levels,
+                "bound_met": rjob.bound_met,
+                "seconds": rjob.seconds,
+                "capacity": rjob.output.capacity,
+                "fixed_point": {name: int(getattr(rjob.output.params, name)) for name,
+                                _ in rjob.output.params._fields_},
+            }
     _write_outputs(args, hf, mesh, report, written)
+    e_final = None
+    if rjob is not None:
+        e_final = errors.e_max_normal if params.metric == "normal" else errors.e_max_vertical
     if not args.quiet:
         _print_summary(args, hf, mesh, job.levels, job.tau, errors)
         if rjob is not None:
             print(f"  refiner: zeta {params.zeta:g} ({params.metric}), k={params.iterations}, "
                   f"{params.neighbourhood}-based, {rjob.seconds:.3f} s")
-            print("  level  vertices  triangles       E_max  splits  swaps")
+            # Unmeasured levels show the refiner's own E_max (never below the exact value).
+            print(f"  level  vertices  triangles  {'E_max' if measure else 'E_max(ref)':>10}  splits  swaps")
             for row in levels:
                 print(f"  {row['level']:>5}  {row['vertices']:>8}  {row['triangles']:>9}  "
-                      f"{row['e_max']:>10.4g}  "
+                      f"{row['e_max'] if measure else row['e_max_firmware']:>10.4g}  "
                       f"{row['splits']:>6}  {row['swaps']:>5}")
         print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
               + (f", {len(written)} levels in {args.lod}" if written else ""))
     if rjob is not None and not rjob.bound_met:
-        final = levels[-1]
-        print(f"warning: the error bound is not met: E_max {final['e_max']:.6g} > zeta {params.zeta:g} "
-              f"({final['over_zeta']} triangles over) at the triangle budget (--max-triangles "
+        print(f"warning: the error bound is not met: E_max {e_final:.6g} > zeta {params.zeta:g} "
+              f"({levels[-1]['over_zeta']} triangles over) at the triangle budget (--max-triangles "
               f"{params.max_triangles})", file=sys.stderr)
         return BOUND_NOT_MET
     return 0
@@ -496,7 +573,7 @@ def stream_command(args) -> int:
             written.append(str(path))
     errors = mesh_errors(mesh, hf.values)
     clk = info.clk_hz
-    cycles = {name: done[f"cycles_{name}"] for name in ("receive", "filter", "template", "refine", "emit")}
+    cycles = {f.name[len("cycles_"):]: done[f.name] for f in P.DONE.fields if f.name.startswith("cycles_")}
     mesh_bytes = sum(lv.nbytes for lv in levels)
     parameters = {"levels": m, "tau": tau, "stage": args.stage}
     report = {

@@ -65,6 +65,9 @@ _EXAMPLES = 3  # examples shown per kind of problem before a summary line
 _COORD_LIMIT = 1 << 30  # beyond this, cross products could overflow int64
 _POINT_BUDGET = 1 << 20  # lattice points / samples handled per vectorised chunk
 _GRID_LOOKUP_LIMIT = 1 << 26  # use a boolean occupancy grid up to this many cells
+_KEY_LIMIT = 1 << 30  # up to this many vertices (or grid steps a side) a sort key fits int64 with room
+_FLOAT_FLOOR_LIMIT = 1 << 53  # integers below this are exact doubles: their quotient floors exactly
+_SAMPLE_KEY_LIMIT = 1 << 63  # (sample index, occurrence) packed in one int64 key below this
 
 
 @dataclass
@@ -118,7 +121,11 @@ def _pt(xy: np.ndarray, i) -> str:
 
 
 def check_mesh(mesh: Mesh) -> CheckResult:
-    """Check that ``mesh`` is a proper triangulation of its W x H grid rectangle (see module doc)."""
+    """Check that ``mesh`` is a proper triangulation of its W x H grid rectangle (see module doc).
+
+    Each check first counts its failures with sorts of exact integer keys; only a check that fails
+    goes on to find the examples for its problem lines (with stable sorts, so the examples are the
+    same ones whatever the sorting algorithm)."""
     W, H = int(mesh.width), int(mesh.height)
     xy, tris = mesh.xy, mesh.tris
     V, T = mesh.n_vertices, mesh.n_triangles
@@ -142,7 +149,7 @@ def check_mesh(mesh: Mesh) -> CheckResult:
         probs.add("the mesh has no triangles")
     if V == 0 or T == 0:
         return done()
-    x, y = xy[:, 0], xy[:, 1]
+    x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
 
     # 1. vertices: inside, distinct, used; indices in range.
     outside = np.flatnonzero((x < 0) | (x > W - 1) | (y < 0) | (y > H - 1))
@@ -154,56 +161,57 @@ def check_mesh(mesh: Mesh) -> CheckResult:
         ),
         "vertices outside the grid rectangle",
     )
-    order = np.lexsort((x, y))
-    sx, sy = x[order], y[order]
-    same = np.flatnonzero((sx[1:] == sx[:-1]) & (sy[1:] == sy[:-1]))
-    probs.group(
-        len(same),
-        (f"vertices {order[k]} and {order[k + 1]} coincide at {_pt(xy, order[k])}" for k in same),
-        "coincident vertex pairs",
-    )
-    bad_idx = (tris < 0) | (tris >= V)
-    bad_rows = np.flatnonzero(bad_idx.any(axis=1))
-    probs.group(
-        len(bad_rows),
-        (
-            f"triangle {t} refers to vertex {int(tris[t][bad_idx[t]][0])}, which does not exist "
-            f"({V} vertices)"
-            for t in bad_rows
-        ),
-        "triangles with vertex indices out of range",
-    )
-    ok_tris = tris[~bad_idx.any(axis=1)] if len(bad_rows) else tris
+    _coincident(probs, xy, x, y)
+    if int(tris.min()) < 0 or int(tris.max()) >= V:
+        bad_idx = (tris < 0) | (tris >= V)
+        bad_rows = np.flatnonzero(bad_idx.any(axis=1))
+        probs.group(
+            len(bad_rows),
+            (
+                f"triangle {t} refers to vertex {int(tris[t][bad_idx[t]][0])}, which does not exist "
+                f"({V} vertices)"
+                for t in bad_rows
+            ),
+            "triangles with vertex indices out of range",
+        )
+        ok_tris = tris[~bad_idx.any(axis=1)]
+    else:
+        bad_rows, ok_tris = (), tris
     used = np.zeros(V, dtype=bool)
     used[ok_tris.ravel()] = True
-    unused = np.flatnonzero(~used)
-    probs.group(
-        len(unused),
-        (f"vertex {i} at {_pt(xy, i)} is not used by any triangle" for i in unused),
-        "unused vertices",
-    )
+    if not used.all():
+        unused = np.flatnonzero(~used)
+        probs.group(
+            len(unused),
+            (f"vertex {i} at {_pt(xy, i)} is not used by any triangle" for i in unused),
+            "unused vertices",
+        )
     if len(bad_rows):
         return done()  # the geometry of triangles with missing vertices is meaningless
     if np.abs(xy).max() > _COORD_LIMIT:
         return done()  # coordinates this far outside could overflow the exact arithmetic
 
     # 2. orientation, 3. total area.
-    p0, p1, p2 = xy[tris[:, 0]], xy[tris[:, 1]], xy[tris[:, 2]]
-    area2 = (p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p2[:, 0] - p0[:, 0]) * (p1[:, 1] - p0[:, 1])
+    i0, i1, i2 = tris[:, 0], tris[:, 1], tris[:, 2]
+    x0, y0 = x[i0], y[i0]
+    area2 = (x[i1] - x0) * (y[i2] - y0) - (x[i2] - x0) * (y[i1] - y0)
 
     def tri_str(t) -> str:
         a, b, c = (int(v) for v in tris[t])
         return f"triangle {t} (vertices {a}, {b}, {c} at {_pt(xy, a)}, {_pt(xy, b)}, {_pt(xy, c)})"
 
-    cw = np.flatnonzero(area2 < 0)
-    probs.group(
-        len(cw),
-        (f"{tri_str(t)} is clockwise (doubled area {int(area2[t])})" for t in cw),
-        "clockwise triangles",
-    )
-    flat = np.flatnonzero(area2 == 0)
-    probs.group(len(flat), (f"{tri_str(t)} is degenerate (zero area)" for t in flat), "degenerate triangles")
-    if T * (int(np.abs(area2).max()) + 1) < 1 << 62:
+    amin, amax = int(area2.min()), int(area2.max())
+    if amin <= 0:
+        cw = np.flatnonzero(area2 < 0)
+        probs.group(
+            len(cw),
+            (f"{tri_str(t)} is clockwise (doubled area {int(area2[t])})" for t in cw),
+            "clockwise triangles",
+        )
+        flat = np.flatnonzero(area2 == 0)
+        probs.group(len(flat), (f"{tri_str(t)} is degenerate (zero area)" for t in flat),
+                    "degenerate triangles")
+    if T * (max(amax, -amin) + 1) < 1 << 62:
         total = int(area2.sum())
     else:  # an int64 sum could overflow
         total = int(area2.sum(dtype=object))
@@ -215,44 +223,57 @@ def check_mesh(mesh: Mesh) -> CheckResult:
             f"2*({W}-1)*({H}-1) = {want} ({what})"
         )
 
-    # 4. edges.
+    # 4. edges.  Every directed edge src->dst as one key, (undirected key lo*V+hi, direction): sorted,
+    # equal neighbours are repeated directed edges and runs of one undirected key are its uses.
     src = tris.ravel()
-    dst = tris[:, [1, 2, 0]].ravel()
-    etri = np.repeat(np.arange(T, dtype=np.int64), 3)
-    dkey = src * V + dst
-    dorder = np.argsort(dkey, kind="stable")
-    dk = dkey[dorder]
-    dup = np.flatnonzero(dk[1:] == dk[:-1])
-    probs.group(
-        len(dup),
-        (
-            f"directed edge {src[dorder[k]]}->{dst[dorder[k]]} "
-            f"{_pt(xy, src[dorder[k]])}->{_pt(xy, dst[dorder[k]])} is used by triangles "
-            f"{etri[dorder[k]]} and {etri[dorder[k + 1]]} (overlap or inconsistent orientation)"
-            for k in dup
-        ),
-        "repeated directed edges",
-    )
+    dst = np.stack((i1, i2, i0), axis=1).ravel()
     lo, hi = np.minimum(src, dst), np.maximum(src, dst)
     ukey = lo * V + hi
-    uorder = np.argsort(ukey, kind="stable")
-    uk = ukey[uorder]
+    if V < _KEY_LIMIT:
+        sk = np.sort(ukey * 2 + (src > dst))
+        n_dup = int(np.count_nonzero(sk[1:] == sk[:-1]))
+        uk = sk >> 1
+    else:  # the doubled key could overflow: sort the undirected keys and the directed ones apart
+        n_dup = -1
+        uk = np.sort(ukey)
+    etri = None
+    if n_dup:
+        etri = np.repeat(np.arange(T, dtype=np.int64), 3)
+        dkey = src * V + dst
+        dorder = np.argsort(dkey, kind="stable")
+        dk = dkey[dorder]
+        dup = np.flatnonzero(dk[1:] == dk[:-1])
+        probs.group(
+            len(dup),
+            (
+                f"directed edge {src[dorder[k]]}->{dst[dorder[k]]} "
+                f"{_pt(xy, src[dorder[k]])}->{_pt(xy, dst[dorder[k]])} is used by triangles "
+                f"{etri[dorder[k]]} and {etri[dorder[k + 1]]} (overlap or inconsistent orientation)"
+                for k in dup
+            ),
+            "repeated directed edges",
+        )
     starts = np.flatnonzero(np.r_[True, uk[1:] != uk[:-1]])
     counts = np.diff(np.r_[starts, len(uk)])
-    first = uorder[starts]  # one directed occurrence per undirected edge
-    elo, ehi = lo[first], hi[first]
+    ue = uk[starts]  # each undirected edge once, in key order
+    elo = ue // V
+    ehi = ue - elo * V
     xl, yl, xh, yh = x[elo], y[elo], x[ehi], y[ehi]
     on_border = ((xl == xh) & ((xl == 0) | (xl == W - 1))) | ((yl == yh) & ((yl == 0) | (yl == H - 1)))
     lonely = np.flatnonzero((counts == 1) & ~on_border)
-    probs.group(
-        len(lonely),
-        (
-            f"edge {elo[k]}-{ehi[k]} {_pt(xy, elo[k])}-{_pt(xy, ehi[k])} is used only by triangle "
-            f"{etri[first[k]]} but is not on the border (hole, crack or T-junction)"
-            for k in lonely
-        ),
-        "unmatched inner edges",
-    )
+    if len(lonely):
+        if etri is None:
+            etri = np.repeat(np.arange(T, dtype=np.int64), 3)
+        first = np.argsort(ukey, kind="stable")[starts]  # the first use of each undirected edge
+        probs.group(
+            len(lonely),
+            (
+                f"edge {elo[k]}-{ehi[k]} {_pt(xy, elo[k])}-{_pt(xy, ehi[k])} is used only by triangle "
+                f"{etri[first[k]]} but is not on the border (hole, crack or T-junction)"
+                for k in lonely
+            ),
+            "unmatched inner edges",
+        )
     crowded = np.flatnonzero(counts > 2)
     probs.group(
         len(crowded),
@@ -265,29 +286,51 @@ def check_mesh(mesh: Mesh) -> CheckResult:
     )
 
     # 5. T-junctions: lattice points strictly inside edges that are vertices.
-    _t_junctions(probs, xy, elo, ehi)
+    _t_junctions(probs, x, y, elo, ehi)
 
     return done()
 
 
-def _t_junctions(probs: _Problems, xy: np.ndarray, elo: np.ndarray, ehi: np.ndarray) -> None:
-    x, y = xy[:, 0], xy[:, 1]
+def _coincident(probs: _Problems, xy: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    """Vertices at the same position: counted with a sort of position keys, shown in (y, x) order."""
+    x0, y0 = int(x.min()), int(y.min())
+    bw, bh = int(x.max()) - x0 + 1, int(y.max()) - y0 + 1
+    if bw * bh < _KEY_LIMIT**2:
+        key = np.sort((y - y0) * bw + (x - x0))
+        if not (key[1:] == key[:-1]).any():
+            return
+    order = np.lexsort((x, y))
+    sx, sy = x[order], y[order]
+    same = np.flatnonzero((sx[1:] == sx[:-1]) & (sy[1:] == sy[:-1]))
+    probs.group(
+        len(same),
+        (f"vertices {order[k]} and {order[k + 1]} coincide at {_pt(xy, order[k])}" for k in same),
+        "coincident vertex pairs",
+    )
+
+
+def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray, ehi: np.ndarray) -> None:
     dx, dy = x[ehi] - x[elo], y[ehi] - y[elo]
-    g = np.gcd(np.abs(dx), np.abs(dy))
-    sel = np.flatnonzero(g > 1)
+    adx, ady = np.abs(dx), np.abs(dy)
+    long = np.flatnonzero((adx > 1) | (ady > 1))  # the others have gcd(|dx|, |dy|) <= 1
+    g_long = np.gcd(adx[long], ady[long])
+    sel = long[g_long > 1]  # edges through inner lattice points (gcd - 1 of them), in edge order
     if len(sel) == 0:
         return
+    g = np.zeros(len(dx), dtype=np.int64)
+    g[long] = g_long
     # Positions as keys over the vertices' bounding box.
     x0, y0 = int(x.min()), int(y.min())
     bw = int(x.max()) - x0 + 1
     bh = int(y.max()) - y0 + 1
     vkey = (y - y0) * bw + (x - x0)
-    korder = np.argsort(vkey, kind="stable")
-    skey = vkey[korder]
-    grid = None
+    grid = skey = korder = None
     if bw * bh <= _GRID_LOOKUP_LIMIT:
         grid = np.zeros(bw * bh, dtype=bool)
         grid[vkey] = True
+    else:
+        korder = np.argsort(vkey, kind="stable")
+        skey = vkey[korder]
     inner = g[sel] - 1
     cum = np.cumsum(inner)
     hits_edge: list[np.ndarray] = []
@@ -321,6 +364,9 @@ def _t_junctions(probs: _Problems, xy: np.ndarray, elo: np.ndarray, ehi: np.ndar
         return
     he = np.concatenate(hits_edge)
     hk = np.concatenate(hits_key)
+    if korder is None:
+        korder = np.argsort(vkey, kind="stable")
+        skey = vkey[korder]
     vs = korder[np.searchsorted(skey, hk)]
 
     def _pt(i) -> str:
@@ -450,9 +496,13 @@ def mesh_errors(
     edges = ((A0, B0, C0), (A1, B1, C1), (A2, B2, C2))
     hflat = h.ravel()
     row_budget = max(point_budget // 4, 1)
+    # A numerator B_k y + C_k is at most 4 c^2 in size (c: the largest coordinate or side); below 2^53
+    # the float quotient of two exact integers floors to the exact floor (its rounding error is below
+    # 1/|A_k|, the least distance from a non-integral quotient to an integer).
+    c_max = max(W, H, int(np.abs(xy).max()))
+    float_floor = 4 * c_max * c_max < _FLOAT_FLOOR_LIMIT
 
     per_v = np.full(T, -np.inf)
-    per_n = np.full(T, -np.inf)
     covered = np.zeros(W * H, dtype=bool)
     n_cov = 0
     sum_v2 = 0.0
@@ -471,15 +521,18 @@ def mesh_errors(
         ry = ymin[rt] + np.arange(R, dtype=np.int64) - np.repeat(np.cumsum(nr) - nr, nr)
         xl, xr = xmin[rt], xmax[rt]
         empty = np.zeros(R, dtype=bool)
+        row_terms = []  # B_k y + C_k per row: E_k(x, y) = A_k x + row term
         for Ak, Bk, Ck in edges:
             ak = Ak[rt]
             num = Bk[rt] * ry + Ck[rt]  # E_k(x, y) = ak x + num >= 0
-            q = num // np.maximum(np.abs(ak), 1)  # floor(num / |ak|)
+            d = np.maximum(np.abs(ak), 1)
+            q = np.floor(num / d).astype(np.int64) if float_floor else num // d  # floor(num / |ak|)
             xl = np.where(ak > 0, np.maximum(xl, -q), xl)  # x >= ceil(-num / ak) = -q
             xr = np.where(ak < 0, np.minimum(xr, q), xr)  # x <= floor(num / -ak) = q
             empty |= (ak == 0) & (num < 0)
+            row_terms.append(num)
         cnt = np.where(empty, 0, np.maximum(xr - xl + 1, 0))
-        del empty, q, num, ak
+        del empty, q, d, ak
         ccum = np.cumsum(cnt)
         r_s = 0
         while r_s < R:
@@ -489,38 +542,50 @@ def mesh_errors(
             c = cnt[r_s:r_e]
             N = int(c.sum())
             if N:
+                rows = slice(r_s, r_e)
                 rep = np.repeat(np.arange(r_e - r_s, dtype=np.int64), c)
-                px = xl[r_s:r_e][rep] + np.arange(N, dtype=np.int64) - np.repeat(np.cumsum(c) - c, c)
-                py = ry[r_s:r_e][rep]
-                t = rt[r_s:r_e][rep]
-                del rep
-                E1 = A1[t] * px + B1[t] * py + C1[t]
-                E2 = A2[t] * px + B2[t] * py + C2[t]
+                px = np.arange(N, dtype=np.int64) + (xl[rows] - (np.cumsum(c) - c))[rep]
+                t = rt[rows][rep]
+                E1 = A1[t] * px + row_terms[1][rows][rep]
+                E2 = A2[t] * px + row_terms[2][rows][rep]
                 plane = z0[t] + (E1 * dz1[t] + E2 * dz2[t]) / absD[t]
                 del E1, E2
-                gi = py * W + px
-                del px, py
+                gi = (ry[rows] * W)[rep] + px
+                del px, rep
                 vert = np.abs(hflat[gi] - plane)
                 del plane
-                norm = vert / nfac[t]
-                # t is non-decreasing: per-triangle maxima by segments.
+                # t is non-decreasing: per-triangle maxima by segments.  The normal distances are
+                # vert / nfac, and a division by a positive number keeps the order, so their maxima
+                # are the vertical maxima / nfac (bit for bit), taken at the end.
                 seg = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
                 ts = t[seg]
                 per_v[ts] = np.maximum(per_v[ts], np.maximum.reduceat(vert, seg))
-                per_n[ts] = np.maximum(per_n[ts], np.maximum.reduceat(norm, seg))
-                # Each sample once, with the lowest-numbered triangle containing it.
+                # Each sample once, with the lowest-numbered triangle containing it (the first of
+                # its occurrences here), in sample order.
                 new = np.flatnonzero(~covered[gi])
-                u, firsts = np.unique(gi[new], return_index=True)
-                pick = new[firsts]
-                covered[u] = True
-                n_cov += len(u)
-                sum_v2 += float(np.dot(vert[pick], vert[pick]))
-                sum_n2 += float(np.dot(norm[pick], norm[pick]))
+                if len(new):
+                    shift = max(N - 1, 1).bit_length()  # occurrences numbered below 2^shift
+                    if (W * H) << shift < _SAMPLE_KEY_LIMIT:
+                        key = np.sort((gi[new] << shift) | new)
+                        kg = key >> shift
+                        firsts = np.r_[True, kg[1:] != kg[:-1]]
+                        u, pick = kg[firsts], key[firsts] & ((1 << shift) - 1)
+                    else:  # the key would overflow
+                        u, firsts = np.unique(gi[new], return_index=True)
+                        pick = new[firsts]
+                    covered[u] = True
+                    n_cov += len(u)
+                    vp = vert[pick]
+                    npk = vp / nfac[t[pick]]
+                    sum_v2 += float(np.dot(vp, vp))
+                    sum_n2 += float(np.dot(npk, npk))
             r_s = r_e
         t_s = t_e
 
     measured = live & ~np.isneginf(per_v)  # every live triangle has its vertices as samples
     per_v[~measured] = np.nan
+    with np.errstate(invalid="ignore"):
+        per_n = per_v / nfac
     per_n[~measured] = np.nan
     mv, mn = per_v[measured], per_n[measured]
     e_max_v = float(mv.max()) if len(mv) else math.nan

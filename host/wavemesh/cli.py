@@ -104,8 +104,14 @@ def build_parser() -> argparse.ArgumentParser:
         "Triangulate a height field (.npy .npz .pgm .png .tif .asc): the filter bank and templates give "
         "the initial triangulation, the firmware refiner (built natively) refines it level by level and "
         "then until every triangle's error E(T) is at most zeta (docs/refiner.md). Exit status 3 when "
-        "--max-triangles stopped it above zeta (the mesh is still written)."))
+        "--max-triangles stopped it above zeta (the mesh is still written). The final mesh is always "
+        "checked (a proper triangulation, within zeta when the bound is met; exit status 1 if not); "
+        "the coarser levels only with --check-levels, --report or --lod."))
     _mesh_options(p)
+    p.add_argument("--check-levels", action="store_true",
+                   help="also check every level's mesh (proper triangulation) and measure its errors, "
+                        "shown in the level table (--report and --lod do this too; without them the table "
+                        "shows the refiner's own E_max)")
 
     p = sub.add_parser("stream", help="triangulate a height field on a device (board or simulated board)",
                        description=(

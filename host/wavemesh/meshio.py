@@ -92,6 +92,20 @@ def _open_for_writing(path, binary: bool):
         raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
+def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
+    """``v x y z`` lines, z as ``repr(float(z))``; formatted by one %-format in C, not line by line."""
+    n = len(xy)
+    flat: list = [None] * (3 * n)
+    flat[0::3] = xy[:, 0].tolist()
+    flat[1::3] = xy[:, 1].tolist()
+    # repr of an integral double below 1e16 is its integer and ".0" (-0.0 is the exception)
+    if np.all((z == np.trunc(z)) & (np.abs(z) < 1e16) & ~((z == 0) & np.signbit(z))):
+        flat[2::3] = z.astype(np.int64).tolist()
+        return ("v %d %d %d.0\n" * n) % tuple(flat)
+    flat[2::3] = z.tolist()
+    return ("v %d %d %r\n" * n) % tuple(flat)
+
+
 def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None) -> None:
     """Write ``mesh`` as a Wavefront OBJ file with z from ``heights`` ((H, W), or (V,) per vertex)."""
     z = _vertex_z(mesh, heights)
@@ -102,12 +116,10 @@ def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None)
         try:
             f.write("\n".join(head) + "\n")
             for s in range(0, len(xy), _CHUNK):
-                pts = xy[s : s + _CHUNK].tolist()
-                zs = z[s : s + _CHUNK].tolist()
-                f.write("".join(f"v {p[0]} {p[1]} {zz!r}\n" for p, zz in zip(pts, zs, strict=True)))
+                f.write(_obj_vertex_lines(xy[s : s + _CHUNK], z[s : s + _CHUNK]))
             for s in range(0, len(tris), _CHUNK):
-                t = (tris[s : s + _CHUNK] + 1).tolist()
-                f.write("".join(f"f {a} {b} {c}\n" for a, b, c in t))
+                t = tris[s : s + _CHUNK] + 1
+                f.write(("f %d %d %d\n" * len(t)) % tuple(t.ravel().tolist()))
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
