@@ -228,7 +228,7 @@ def _flags(p: dict) -> str:
         elif not m["within"]:
             ev, en = m["e_max_vertical"], m["e_max_normal"]
             worst = max(ev, en)
-            out.append(f"{short}: E_max {worst / p['zeta']:.3g} zeta")
+            out.append(f"{short}: E_max {worst / p['zeta']:.3f} zeta")
     proc = p.get("process") or {}
     for who, short in (("wavemesh_file", "wm file"), ("pydelatin_file", "pd file")):
         f = proc.get(who)
@@ -309,6 +309,9 @@ def markdown(results: dict) -> str:
             f"| {_f(s['median_process_time'])} | {_f(s['median_martini_triangles'], 3)} "
             f"| {'yes' if s['wavemesh_all_ok'] else '**no**'} "
             f"| {s['pydelatin_flagged']} / {s['pymartini_flagged']} |")
+    calls = "; ".join(f"{names[k].strip('*')} {_f(S[k]['median_call_time'])}" for k in names if k in S)
+    lines += ["", "The whole api.refine call (filter bank, templates, refiner, its checks) over pydelatin's "
+              f"call, median: {calls}."]
     a = S["all"]
     held = S.get("held_out", a)
     tri_ok = (a["median_triangles"] <= TARGET_MEDIAN and held["median_triangles"] <= TARGET_MEDIAN
