@@ -121,10 +121,16 @@ def run_pair(grid: D.Grid, label: str, zeta: float, npy: Path | None = None, *,
         natives.append(job.seconds)
         return job
 
-    job, wm_call, wm_runs = P.timed(wm, budget=wm_budget)
-    wm_v = P.verdict(job.mesh, z, zeta)
-    wavemesh = {**wm_v.to_json(), "native_s": P.median(natives), "call_s": wm_call, "runs": wm_runs,
-                "bound_met": bool(job.bound_met)}
+    try:
+        job, wm_call, wm_runs = P.timed(wm, budget=wm_budget)
+    except Exception as e:  # noqa: BLE001 - a refiner failure is a finding of the benchmark: flagged
+        wm_v = P.Verdict(None, None, False, False, None, None, False, [f"{type(e).__name__}: {e}"[:300]])
+        wavemesh = {**wm_v.to_json(), "native_s": None, "call_s": None, "runs": 0, "bound_met": False,
+                    "error": wm_v.problems[0]}
+    else:
+        wm_v = P.verdict(job.mesh, z, zeta)
+        wavemesh = {**wm_v.to_json(), "native_s": P.median(natives), "call_s": wm_call, "runs": wm_runs,
+                    "bound_met": bool(job.bound_met)}
     # pydelatin in process (one untimed call first: its first call in a process pays for page faults)
     P.delatin_call(z, zeta)
     (verts, tris), pd_call, pd_runs = P.timed(lambda: P.delatin_call(z, zeta), budget=peer_budget)
@@ -170,6 +176,7 @@ def summarise(pairs: list[dict]) -> dict:
         "median_process_time": P.median(col("process_time")),
         "median_martini_triangles": P.median(col("martini_triangles")),
         "wavemesh_all_ok": all(p["wavemesh"]["within"] for p in pairs),
+        "wavemesh_failed": sum(1 for p in pairs if p["wavemesh"].get("error")),
         "pydelatin_flagged": sum(1 for p in pairs if not p["pydelatin"]["within"]),
         "pymartini_flagged": sum(1 for p in pairs if not p["pymartini"]["within"]),
     }
@@ -187,9 +194,9 @@ def run(names: tuple[str, ...] = GRIDS) -> dict:
                 pair = run_pair(grid, label, zeta, npy)
                 pairs.append(pair)
                 r = pair["ratios"]
-                print(f"  {name} {label}: triangles x{r['triangles']:.3f}, "
-                      f"native time x{r['native_time']:.2f}, process x{r['process_time']:.2f} "
-                      f"({time.perf_counter() - t0:.1f} s)", flush=True)
+                print(f"  {name} {label}: triangles x{_f(r['triangles'], 3)}, "
+                      f"native time x{_f(r['native_time'])}, process x{_f(r.get('process_time'))}; "
+                      f"{_flags(pair)} ({time.perf_counter() - t0:.1f} s)", flush=True)
     return assemble(pairs, names)
 
 
@@ -221,7 +228,9 @@ def _flags(p: dict) -> str:
     out = []
     for who, short in (("wavemesh", "wm"), ("pydelatin", "pd"), ("pymartini", "pm")):
         m = p[who]
-        if not m["proper"]:
+        if m.get("error"):
+            out.append(f"{short}: FAILED ({m['error'][:80]})")
+        elif not m["proper"]:
             out.append(f"{short}: NOT PROPER")
         elif not m.get("heights_ok", True):
             out.append(f"{short}: wrong heights")
@@ -249,7 +258,8 @@ def _pair_table(pairs: list[dict], s: dict) -> list[str]:
         r, wm, pd, pm = p["ratios"], p["wavemesh"], p["pydelatin"], p["pymartini"]
         lines.append(
             f"| {p['grid']} | {p['width']} x {p['height']} | {p['label']} ({p['zeta']:.4g}) "
-            f"| {wm['triangles']} | {pd['triangles']} | **{_f(r['triangles'], 3)}** "
+            f"| {wm['triangles'] if wm['triangles'] is not None else '-'} | {pd['triangles']} "
+            f"| **{_f(r['triangles'], 3)}** "
             f"| {pm['triangles']} ({pm['grid']}) "
             f"| {_f(r['martini_triangles'], 3)} | {_f(r['native_time'])} | {_f(r.get('process_time'))} "
             f"| {_flags(p)} |")
@@ -307,11 +317,12 @@ def markdown(results: dict) -> str:
             f"| {names[key]} | {s['grids']} | {s['pairs']} | {_f(s['median_triangles'], 3)} "
             f"| {_f(s['max_triangles'], 3)} | {s['over_max']} | {_f(s['median_native_time'])} "
             f"| {_f(s['median_process_time'])} | {_f(s['median_martini_triangles'], 3)} "
-            f"| {'yes' if s['wavemesh_all_ok'] else '**no**'} "
+            f"| {'yes' if s['wavemesh_all_ok'] else '**no**'}"
+            f"{f' ({n} failed)' if (n := s.get('wavemesh_failed')) else ''} "
             f"| {s['pydelatin_flagged']} / {s['pymartini_flagged']} |")
     calls = "; ".join(f"{names[k].strip('*')} {_f(S[k]['median_call_time'])}" for k in names if k in S)
-    lines += ["", "The whole api.refine call (filter bank, templates, refiner, its checks) over pydelatin's "
-              f"call, median: {calls}."]
+    lines += ["", "The whole wavemesh call (from_array and api.refine: quantisation, filter bank, templates, "
+              f"refiner, its checks) over pydelatin's call, median: {calls}."]
     a = S["all"]
     held = S.get("held_out", a)
     tri_ok = (a["median_triangles"] <= TARGET_MEDIAN and held["median_triangles"] <= TARGET_MEDIAN
