@@ -72,7 +72,7 @@ def measure(n: int, extent: float, zeta: float = ZETA, budget: float = 3.0) -> d
 
 
 def run() -> dict:
-    out = {"sizes": list(SIZES), "zeta": ZETA, "series": {}}
+    out = {"code": P.code_state(), "sizes": list(SIZES), "zeta": ZETA, "series": {}}
     for name, ext in SERIES.items():
         rows = []
         for n in SIZES:
@@ -118,6 +118,8 @@ def markdown(results: dict) -> str:
         "are medians of up to 3 runs (slow calls run once) on a shared 2-core machine; every mesh checked "
         "by wavemesh.check (*checks*: wavemesh / pydelatin).  Slope: least-squares fit of log(time) on "
         "log(samples) over the four sizes.",
+        "",
+        P.code_line(results.get("code")),
         "",
         "| series | grid | wavemesh triangles | pydelatin triangles | ratio | wavemesh native s "
         "| wavemesh call s | pydelatin s | native / pydelatin | checks |",

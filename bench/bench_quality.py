@@ -207,6 +207,7 @@ def assemble(pairs: list[dict], names) -> dict:
     sets = {"tuning": [p for p in pairs if not p["held_out"]],
             "held_out": [p for p in pairs if p["held_out"]], "all": pairs}
     return {
+        "code": P.code_state(),
         "versions": {k: version(k) for k in ("pydelatin", "pymartini", "numpy")},
         "fractions": list(FRACTIONS), "held_out": list(HELD_OUT),
         "grids": {n: {"kind": D.SETS[n][0], "source": D.SETS[n][1], "units": D.SETS[n][2]}
@@ -290,6 +291,8 @@ def markdown(results: dict) -> str:
         "the OBJ a whole process wrote).  pydelatin's y is flipped (y_grid = (H - 1) - y).  pymartini meshes "
         "the grid padded by edge replication to 2^k + 1 square (the *grid* column); its triangles in the "
         "padding count.",
+        "",
+        P.code_line(results.get("code")),
         "",
         "*ratio* = wavemesh triangles / peer triangles (below 1: wavemesh is smaller).  *native refine / "
         "pydelatin call*: RefineJob.seconds (Haar details + the C refiner) over Delatin(...) with .vertices "

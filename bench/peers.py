@@ -178,3 +178,28 @@ def wavemesh_argv(npy: str, zeta: float, out: str) -> list[str]:
 
 def peer_argv(npy: str, zeta: float, out: str) -> list[str]:
     return [sys.executable, "-c", PEER_SCRIPT, npy, repr(float(zeta)), out]
+
+
+def code_state() -> dict:
+    """The commit the measured code is at, and the files of host/ and firmware/ that differ from it (the
+    work tree is shared while the refiner is being worked on: the results say what they measured)."""
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+
+    def git(*args) -> str:
+        r = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+        return r.stdout if r.returncode == 0 else ""
+
+    dirty = [line[3:] for line in git("status", "--porcelain", "--", "host", "firmware").splitlines() if line]
+    return {"commit": git("rev-parse", "--short", "HEAD").strip() or None, "uncommitted": dirty}
+
+
+def code_line(state: dict | None) -> str:
+    if not state or not state.get("commit"):
+        return ""
+    n = len(state.get("uncommitted") or [])
+    return (f"Code measured: commit {state['commit']}"
+            + (f" with uncommitted changes in {n} files of host/ and firmware/ (listed in the results file)."
+               if n else " (host/ and firmware/ as committed)."))
