@@ -4,4 +4,5 @@
 set(WM_REFINER_SOURCE_NAMES
   mesh.c fixed.c tri_error.c haar.c
   edge_split.c tri_split.c edge_swap.c vertex_move.c vertex_remove.c
-  region.c pairing.c refine.c decimate.c)
+  region.c pairing.c refine.c decimate.c
+  autocorr.c edge_collapse.c reduce.c)

@@ -159,6 +159,27 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
 int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
                      int32_t *n_touched);
 
+/* Edge collapse (4.5.3): the edge e = v1 -> v2 becomes one vertex at grid point (x, y), which is
+ * v1's position, v2's position (a half-edge collapse) or a grid point strictly inside the edge (the
+ * dissertation's midpoint, snapped).  Every triangle around v1 or v2 but the one or two on the edge
+ * keeps its other corners and takes (x, y) for v1 or v2.  Refused (nothing changes) when a new
+ * triangle is not strictly counter-clockwise, when v1 and v2 have a common neighbour that is not a
+ * corner of a triangle on the edge (the link condition), when a border vertex would leave its side
+ * of the rectangle (a corner never moves), or when a ring has more than WM_MAX_RING vertices.
+ *
+ * The plan, without changing anything: the new triangles into tris[] (counter-clockwise), with
+ * WM_COLLAPSE_POINT standing for the vertex at (x, y); their count into *n_tris (for a half-edge
+ * collapse only the removed end's triangles: the kept end's do not change). */
+#define WM_COLLAPSE_POINT (-2)
+int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t tris[6 * WM_MAX_RING],
+                          int32_t *n_tris);
+
+/* Carries the collapse out (an edge split at (x, y) when it is inside the edge, then the half-edge
+ * collapses of v1 and v2 into it).  touched[] receives the new triangles' slots; *vertex (may be NULL)
+ * the vertex at (x, y).  WM_ERR_CAPACITY (nothing changed) when the split finds no free slot. */
+int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[6 * WM_MAX_RING],
+                     int32_t *n_touched, int32_t *vertex);
+
 /* ---------------------------------------------------------------------------------------------- */
 /* The height field, its wavelet details, the parameters */
 
@@ -202,6 +223,10 @@ typedef struct wm_params {
     uint32_t flags;         /* WM_FLAG_*: 0 is the default pipeline */
     uint64_t delta_d;       /* detail energy threshold: e = d1^2 + d2^2 + d3^2 > delta_d (4.12), in
                                coefficient units: floor(4 delta_d[height^2] / s^2) */
+    uint32_t delta_lambda;  /* vertex removal criterion delta_lambda (4.32, 4.33): eigenvalues of R(v)
+                               (unit normals, so in 0..1), Q16.16, rounded */
+    uint32_t delta_c;       /* edge collapse criterion delta_c (4.34), |e21 . e22| > delta_c, Q16.16,
+                               0..65536, rounded */
 } wm_params;
 
 /* wm_params.flags.  The default (0) runs the levels, the error bound with Delaunay legalisation and
@@ -209,7 +234,8 @@ typedef struct wm_params {
 #define WM_FLAG_NO_BOUND 1u    /* the dissertation's stopping rule: the levels alone, no error bound */
 #define WM_FLAG_NO_LEGALISE 2u /* the error bound splits without Lawson flips */
 #define WM_FLAG_NO_DECIMATE 4u /* no final decimation */
-#define WM_FLAG_ALL 7u
+#define WM_FLAG_NO_REDUCE 8u   /* no reduction at 2(d) and 3(b) (vertex removal, edge collapse) */
+#define WM_FLAG_ALL 15u
 
 /* WM_OK, or WM_ERR_ARG when a parameter is out of its range. */
 int wm_params_check(const wm_params *p);
@@ -231,6 +257,24 @@ size_t wm_abi_size(int which);
  * (*wx, *wy) receive the first sample (row by row) with the largest distance, when not NULL. */
 uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                       int32_t *wx, int32_t *wy);
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The reduction criteria (4.31-4.34): the autocorrelation matrix R(v) of the unit normals around a
+ * vertex and its eigen-decomposition, in fixed point (firmware/src/autocorr.c) */
+
+/* Eigenvalues and eigenvectors of the symmetric 3 x 3 matrix a (a00, a01, a02, a11, a12, a22, Q30,
+ * entries within [-2, 2]) by cyclic Jacobi rotations, a fixed number of sweeps: lambda[0] <= lambda[1]
+ * <= lambda[2] (Q30) and vec[3 i .. 3 i + 2] the unit eigenvector of lambda[i] (Q30). */
+void wm_sym3_eigen(const int64_t a[6], int64_t lambda[3], int64_t vec[9]);
+
+/* The unit normal (Q28) of the triangle (x, y, z = samples there) with the height scale of p:
+ * the cross product (s A, s B, D) of its edges in grid steps and height units, normalised. */
+void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t n[3]);
+
+/* R(v) = (1/k) sum n_i n_i^T over the k triangles around vertex v (4.31), as wm_sym3_eigen takes it
+ * (Q30), then its eigen-decomposition.  Returns k, or WM_ERR_ARG for a free vertex. */
+int wm_vertex_autocorr(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
+                       int64_t lambda[3], int64_t vec[9]);
 
 /* ---------------------------------------------------------------------------------------------- */
 /* The refiner (4.6, step 3, and the error bound) */

@@ -1,8 +1,8 @@
 /* The final decimation, after the error bound (beyond the dissertation: docs/refiner.md).
  *
- *   cost(v) = the smallest, over the triangulations of the hole v would leave (ear clipping, and
- *             the fan from each ring vertex: the half-edge collapses of v), of the largest E(T) of
- *             its triangles; a vertex is removable when cost(v) <= zeta
+ *   cost(v) = the largest E(T) of the first triangulation of the hole v would leave that keeps
+ *             every E(T) <= zeta, trying ear clipping and then the fan from each ring vertex (the
+ *             half-edge collapses of v); a vertex without one is not removable
  *   repeat: remove the vertex of least cost (ties: the lower slot), with its triangulation;
  *           the costs of its ring vertices change (their stars did), nothing else's
  *
@@ -13,9 +13,12 @@
 
 #define NONE 0xFFFFFFFFu
 
-/* The cheapest triangulation of v's hole that keeps every E(T) <= zeta: its cost and kind (apex,
- * as wm_vertex_remove_plan takes it).  NONE when there is none. */
-static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
+/* The first triangulation of v's hole that keeps every E(T) <= zeta, in the order ear clipping
+ * (Delaunay ears first), then the fans from ring vertex 0, 1, ...: its largest E(T) (the vertex's
+ * cost) and its kind (apex, as wm_vertex_remove_plan takes it).  NONE when there is none.  Taking the
+ * first rather than the cheapest of them measured as good (Jacksboro, Ball: 1-2 % fewer triangles)
+ * at 9 % fewer instructions. */
+static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
 {
     const wm_mesh *me = &r->mesh;
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt;
@@ -23,7 +26,9 @@ static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
     int32_t vx = me->vx[v], vy = me->vy[v];
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
-    for (int32_t a = -1; a < n; a++) {
+    /* Three ring vertices have one triangulation, four have two (the fans from 0 and 2 are the same,
+     * and those from 1 and 3): the duplicates are not tried again. */
+    for (int32_t a = -1; a < (n == 3 ? 0 : n == 4 ? 2 : n); a++) {
         uint32_t worst = 0;
         int32_t j;
         if (wm_ring_plan(me, ring, n, a, tris, &nt) != WM_OK) continue;
@@ -40,7 +45,7 @@ static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
                 wm_orient(x[2], y[2], x[0], y[0], vx, vy) < 0)
                 continue;
             e = wm_point_error(&r->field, &r->params, x, y, vx, vy);
-            if (e > r->params.zeta || (best != NONE && e >= best)) j = -1;
+            if (e > r->params.zeta) j = -1;
             break;
         }
         if (j < 0) continue;
@@ -53,12 +58,12 @@ static uint32_t cheapest(const wm_refiner *r, int32_t v, int32_t *apex)
             }
             e = wm_tri_error(&r->field, &r->params, x, y, NULL, NULL);
             if (e > worst) worst = e;
-            if (worst > r->params.zeta || (best != NONE && worst >= best)) break;
+            if (worst > r->params.zeta) break;
         }
         if (j < nt) continue;
         best = worst;
         *apex = a;
-        if (best == 0) break;
+        break;
     }
     return best;
 }
@@ -119,7 +124,7 @@ static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 static void refile(wm_refiner *r, int32_t v, int32_t *n)
 {
     int32_t apex = -1;
-    uint32_t cost = cheapest(r, v, &apex);
+    uint32_t cost = first_fit(r, v, &apex);
     take_out(r, v, n);
     if (cost == NONE) return;
     r->vkey[v] = cost;

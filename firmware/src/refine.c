@@ -158,6 +158,13 @@ static uint32_t ratio_q16(uint64_t num, uint64_t den)
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
+/* (px, py) in the closed counter-clockwise triangle. */
+static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
+{
+    return wm_orient(x[0], y[0], x[1], y[1], px, py) >= 0 && wm_orient(x[1], y[1], x[2], y[2], px, py) >= 0 &&
+           wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
+}
+
 static int try_swap(wm_refiner *r, int32_t e)
 {
     wm_mesh *me = &r->mesh;
@@ -187,6 +194,26 @@ static int try_swap(wm_refiner *r, int32_t e)
         const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
         uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
         uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
+        /* First an upper bound of xi without a scan: the old triangles' worst samples, measured
+         * against the new triangle(s) holding them, bound the new E(T) from below (rounded as E(T)
+         * is), so R_E from above; every step is monotone, so xi_ub <= 1 means xi <= 1. */
+        {
+            uint32_t lb1 = 0, lb2 = 0;
+            for (int k = 0; k < 2; k++) {
+                int32_t s = r->worst[k ? t2 : t1], sx = s % r->field.width, sy = s / r->field.width;
+                if (in_tri(n1x, n1y, sx, sy)) {
+                    uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy);
+                    if (v > lb1) lb1 = v;
+                }
+                if (in_tri(qx, qy, sx, sy)) {
+                    uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy);
+                    if (v > lb2) lb2 = v;
+                }
+            }
+            re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, lb1, 1, 0, cap) +
+                                              wm_scale_mul(&r->params, lb2, 1, 0, cap) + one);
+            if ((((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) <= 65536u) return 0;
+        }
         e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
         e2 = wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
         re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, e1, 1, 0, cap) +

@@ -95,9 +95,21 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
         int32_t best = -1;
         for (int32_t i = 0; i < n; i++) {
             int32_t a = poly[(i + n - 1) % n], b = poly[i], c = poly[(i + 1) % n], j;
+            int32_t x0, x1, y0, y1;
             if (orient3(m, a, b, c) <= 0) continue;
+            x0 = x1 = m->vx[a];
+            y0 = y1 = m->vy[a];
+            if (m->vx[b] < x0) x0 = m->vx[b];
+            if (m->vx[b] > x1) x1 = m->vx[b];
+            if (m->vx[c] < x0) x0 = m->vx[c];
+            if (m->vx[c] > x1) x1 = m->vx[c];
+            if (m->vy[b] < y0) y0 = m->vy[b];
+            if (m->vy[b] > y1) y1 = m->vy[b];
+            if (m->vy[c] < y0) y0 = m->vy[c];
+            if (m->vy[c] > y1) y1 = m->vy[c];
             for (j = 0; j < n; j++) {
                 int32_t p = poly[j];
+                if (m->vx[p] < x0 || m->vx[p] > x1 || m->vy[p] < y0 || m->vy[p] > y1) continue; /* outside */
                 if (p != a && p != b && p != c && in_closed(m, a, b, c, p)) break;
             }
             if (j < n) continue;

@@ -147,6 +147,22 @@ void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n);
 /* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
  * E(T) <= zeta; returns WM_OK. */
 int wm_decimate(wm_refiner *r, wm_level_stats *st);
+/* The reduction of 4.6 steps 2(d) and 3(b) (reduce.c): one pass over the vertices in slot order,
+ * vertex removal where both small eigenvalues of R(v) are below delta_lambda (4.32), else edge
+ * collapse where 4.33 and 4.34 hold; each only when every new triangle's E(T) is at most
+ * max(zeta, the largest E(T) of the triangles it replaces).  Returns the vertices removed. */
+int32_t wm_reduce(wm_refiner *r);
+/* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition, and the sum of the Q28 unit
+ * normals around v (below 2^33); the triangle count or an error. */
+int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3]);
+/* The hole of a removed vertex triangulated by ear clipping with a heap of ears (O(h log h)): the
+ * ring (n vertices, counter-clockwise, as wm_vertex_ring gives it) is star-shaped from (kx, ky),
+ * the removed vertex, and an ear (a, b, c) is cut only when it is strictly convex and (kx, ky) is
+ * not strictly on b's side of a-c, which makes it lie inside the polygon; the ear with the largest
+ * smallest angle first (ties: the lower ring position).  n - 2 triangles into tris[]; WM_OK, or
+ * WM_ERR_REFUSED when no such ear is left (the caller falls back to wm_vertex_remove_plan). */
+int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, int32_t ky,
+                 int32_t tris[3 * WM_MAX_RING], int32_t *n_tris);
 /* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
  * small; 1 when the budget forbids it (and records that). */
 int wm_room(wm_refiner *r, int32_t added);

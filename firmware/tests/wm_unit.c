@@ -395,6 +395,119 @@ static void test_incircle(void)
     CHECK(wm_min_angle(x, y) > 42100 && wm_min_angle(x, y) < 42200);
 }
 
+/* R(v)'s eigen-decomposition (autocorr.c): a rank-one matrix n n^T, a diagonal one, a rotated one. */
+static void test_eigen(void)
+{
+    int64_t a[6], lam[3], vec[9];
+    const int64_t one = (int64_t)1 << 30;
+    /* n = (0.6, 0, 0.8): n n^T has eigenvalues 0, 0, 1 and n as the third eigenvector */
+    a[0] = one * 36 / 100, a[1] = 0, a[2] = one * 48 / 100, a[3] = 0, a[4] = 0, a[5] = one * 64 / 100;
+    wm_sym3_eigen(a, lam, vec);
+    CHECK(lam[0] > -64 && lam[0] < 64 && lam[1] > -64 && lam[1] < 64 && lam[2] > one - 64 && lam[2] < one + 64);
+    CHECK((vec[6] > one * 6 / 10 - 64 && vec[6] < one * 6 / 10 + 64) || (vec[6] < -one * 6 / 10 + 64 && vec[6] > -one * 6 / 10 - 64));
+    /* diag(0.5, 0.125, 0.375): sorted, the vectors are the axes */
+    a[0] = one / 2, a[1] = a[2] = a[4] = 0, a[3] = one / 8, a[5] = 3 * one / 8;
+    wm_sym3_eigen(a, lam, vec);
+    CHECK(lam[0] == one / 8 && lam[1] == 3 * one / 8 && lam[2] == one / 2);
+    CHECK(vec[1] == one && vec[5] == one && vec[6] == one);
+    /* [[0.5, 0.25], [0.25, 0.5]] (+ 0 on the third axis): 0, 0.25, 0.75 */
+    a[0] = one / 2, a[1] = one / 4, a[2] = 0, a[3] = one / 2, a[4] = 0, a[5] = 0;
+    wm_sym3_eigen(a, lam, vec);
+    CHECK(lam[0] > -64 && lam[0] < 64 && lam[1] > one / 4 - 64 && lam[1] < one / 4 + 64);
+    CHECK(lam[2] > 3 * one / 4 - 64 && lam[2] < 3 * one / 4 + 64);
+}
+
+/* Edge collapse (4.5.3) on a 9 x 9 square: the diagonal split at (4, 4) and (6, 6); the edge
+ * (4, 4) - (6, 6) collapses at its midpoint (5, 5); corners never move; a half-edge collapse. */
+static void test_edge_collapse(void)
+{
+    wm_mesh m;
+    int32_t touched[6 * WM_MAX_RING], tris[6 * WM_MAX_RING], nt, n, p, e;
+    CHECK(square(&m, 9, 9, 64) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 8, 8), 4, 4, NULL, NULL) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 4, 4, 8, 8), 6, 6, NULL, NULL) == WM_OK);
+    CHECK(m.n_tri == 6 && m.n_vert == 6);
+    e = find_edge(&m, 4, 4, 6, 6);
+    CHECK(wm_edge_collapse_plan(&m, e, 5, 5, tris, &nt) == WM_OK && nt == 4);
+    CHECK(wm_edge_collapse_plan(&m, e, 5, 4, tris, &nt) == WM_ERR_ARG); /* not on the edge */
+    CHECK(wm_edge_collapse(&m, e, 5, 5, touched, &n, &p) == WM_OK && n == 4);
+    CHECK(m.n_tri == 4 && m.n_vert == 5 && m.vx[p] == 5 && m.vy[p] == 5 && wm_mesh_check(&m) == WM_OK);
+    CHECK(find_vertex(&m, 4, 4) < 0 && find_vertex(&m, 6, 6) < 0);
+    /* (5, 5) - (8, 0): a corner does not move, so only the half-edge collapse into it */
+    e = find_edge(&m, 5, 5, 8, 0);
+    CHECK(e >= 0 && wm_edge_collapse_plan(&m, e, 5, 5, tris, &nt) == WM_ERR_REFUSED);
+    CHECK(wm_edge_collapse(&m, e, 8, 0, touched, &n, NULL) == WM_OK && n == 2);
+    CHECK(m.n_tri == 2 && m.n_vert == 4 && wm_mesh_check(&m) == WM_OK);
+}
+
+/* The O(h log h) hole triangulation (reduce.c) against the polygon: n - 2 counter-clockwise
+ * triangles whose doubled areas add up to the ring's. */
+static void test_star_plan(void)
+{
+    wm_mesh m;
+    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt, v;
+    int64_t area = 0, ring_area = 0;
+    CHECK(square(&m, 9, 9, 64) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 8, 8), 4, 4, NULL, NULL) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 0, 0, 8, 0), 4, 0, NULL, NULL) == WM_OK);
+    CHECK(wm_edge_split(&m, find_edge(&m, 8, 0, 8, 8), 8, 5, NULL, NULL) == WM_OK);
+    v = find_vertex(&m, 4, 4);
+    n = wm_vertex_ring(&m, v, ring);
+    CHECK(n == 6);
+    CHECK(wm_star_plan(&m, ring, n, 4, 4, tris, &nt) == WM_OK && nt == n - 2);
+    for (int32_t j = 0; j < nt; j++) {
+        int32_t a = tris[3 * j], b = tris[3 * j + 1], c = tris[3 * j + 2];
+        int64_t o = wm_orient(m.vx[a], m.vy[a], m.vx[b], m.vy[b], m.vx[c], m.vy[c]);
+        CHECK(o > 0);
+        area += o;
+    }
+    for (int32_t i = 1; i + 1 < n; i++)
+        ring_area += wm_orient(m.vx[ring[0]], m.vy[ring[0]], m.vx[ring[i]], m.vy[ring[i]], m.vx[ring[i + 1]],
+                               m.vy[ring[i + 1]]);
+    CHECK(area == ring_area);
+    CHECK(wm_vertex_remove(&m, v, tris, nt, NULL, NULL) == WM_OK && wm_mesh_check(&m) == WM_OK);
+}
+
+/* Step 2(d) on a plane: every vertex but the corners goes (4.32 holds everywhere, E(T) = 0). */
+static void test_reduce_plane(void)
+{
+    static uint16_t z[17 * 17];
+    static int32_t det[3 * 9 * 9 + 3 * 5 * 5];
+    wm_field f;
+    wm_params p;
+    wm_refiner *r;
+    wm_level_stats st;
+    int32_t xy[2 * 9], tris[3 * 8], k = 0;
+    for (int32_t y = 0; y < 17; y++)
+        for (int32_t x = 0; x < 17; x++) z[y * 17 + x] = (uint16_t)(1000 + 7 * x + 3 * y);
+    /* a 3 x 3 lattice of vertices at 0, 8, 16, each square cut by the same diagonal */
+    for (int32_t y = 0; y < 3; y++)
+        for (int32_t x = 0; x < 3; x++) xy[2 * (3 * y + x)] = 8 * x, xy[2 * (3 * y + x) + 1] = 8 * y;
+    for (int32_t y = 0; y < 2; y++)
+        for (int32_t x = 0; x < 2; x++) {
+            int32_t a = 3 * y + x, b = a + 1, c = a + 3, d = a + 4;
+            tris[k++] = a, tris[k++] = b, tris[k++] = d;
+            tris[k++] = a, tris[k++] = d, tris[k++] = c;
+        }
+    CHECK(wm_haar(z, 17, 17, 2, det, (uint16_t *)scratch) == WM_OK);
+    f.width = f.height = 17, f.levels = 2, f.samples = z, f.details = det;
+    memset(&p, 0, sizeof p);
+    p.metric = WM_METRIC_NORMAL, p.iterations = 1, p.scale_m = 32768, p.scale_e = 15;
+    p.delta_p = 58982, p.alpha = 39322, p.delta_v = 2u << 16, p.delta_lambda = 655, p.delta_c = 64225;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 9, tris, 8, 600) == WM_OK);
+    wm_refine_stats(r, &st);
+    CHECK(st.removals == 5 && st.triangles == 2 && st.vertices == 4 && st.e_max == 0);
+    CHECK(wm_mesh_check(wm_refine_mesh(r)) == WM_OK);
+    /* without the reduction nothing goes */
+    p.flags = WM_FLAG_NO_REDUCE;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 9, tris, 8, 600) == WM_OK);
+    wm_refine_stats(r, &st);
+    CHECK(st.removals == 0 && st.triangles == 8);
+    /* delta_c out of range */
+    p.delta_c = 65537;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 9, tris, 8, 600) == WM_ERR_ARG);
+}
+
 int main(void)
 {
     test_build();
@@ -408,6 +521,10 @@ int main(void)
     test_refine();
     test_vertex_remove();
     test_incircle();
+    test_eigen();
+    test_edge_collapse();
+    test_star_plan();
+    test_reduce_plane();
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

@@ -252,7 +252,9 @@ def _params_from_args(args) -> RefineParams:
     return RefineParams(zeta=args.zeta, metric=args.metric, delta_d=args.delta_d, delta_p=args.delta_p,
                         delta_v=args.delta_v, alpha=args.alpha, delta_lambda=args.delta_lambda,
                         delta_c=args.delta_c, iterations=args.iterations, neighbourhood=args.neighbourhood,
-                        max_triangles=args.max_triangles, capacity=args.capacity)
+                        max_triangles=args.max_triangles, capacity=args.capacity,
+                        bound=getattr(args, "bound", "on") == "on",
+                        reduce=getattr(args, "reduce", "on") == "on")
 
 
 def _check_mesh_outputs(args) -> tuple[Path, Path | None]:
@@ -370,7 +372,7 @@ def mesh_command(args) -> int:
                       f"{row['splits']:>6}  {row['swaps']:>5}")
         print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
               + (f", {len(written)} levels in {args.lod}" if written else ""))
-    if rjob is not None and not rjob.bound_met:
+    if rjob is not None and params.bound and not rjob.bound_met:
         print(f"warning: the error bound is not met: E_max {e_final:.6g} > zeta {params.zeta:g} "
               f"({levels[-1]['over_zeta']} triangles over) at the triangle budget (--max-triangles "
               f"{params.max_triangles})", file=sys.stderr)
@@ -614,7 +616,7 @@ def stream_command(args) -> int:
               + f"; link: {link.frames_out} frames out, {link.frames_in} in, {link.damaged} damaged")
         print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
               + (f", {len(written)} levels in {args.lod}" if written else ""))
-    if full and final.stats["over"] != 0:
+    if full and params.bound and final.stats["over"] != 0:
         print(f"warning: the error bound is not met: E_max {rows[-1]['e_max']:.6g} > zeta {params.zeta:g} "
               f"({final.stats['over']} triangles over) at the triangle budget (--max-triangles "
               f"{params.max_triangles})", file=sys.stderr)

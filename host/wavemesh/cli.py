@@ -67,11 +67,16 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--alpha", type=float, default=d.alpha,
                    help=f"mesh regularity factor alpha, 0..1 (4.22; default {d.alpha:g})")
     p.add_argument("--delta-lambda", type=float, default=d.delta_lambda,
-                   help=f"vertex removal criterion delta_lambda (4.32; for the reduction operators, "
-                        f"not used yet; default {d.delta_lambda:g})")
+                   help=f"vertex removal criterion delta_lambda: the eigenvalues of R(v) (4.32, 4.33; "
+                        f"default {d.delta_lambda:g})")
     p.add_argument("--delta-c", type=float, default=d.delta_c,
-                   help=f"edge collapsing criterion delta_c (4.34; for the reduction operators, "
-                        f"not used yet; default {d.delta_c:g})")
+                   help=f"edge collapsing criterion delta_c, 0..1 (4.34; default {d.delta_c:g})")
+    p.add_argument("--bound", choices=("on", "off"), default="on" if d.bound else "off",
+                   help="on (default): refine until every E(T) <= zeta at level 0; off: the dissertation's "
+                        "stopping rule, the levels alone, E_max reported")
+    p.add_argument("--reduce", choices=("on", "off"), default="on" if d.reduce else "off",
+                   help=f"vertex removal and edge collapse after the initial mesh and every level (4.6 "
+                        f"steps 2(d), 3(b); default {'on' if d.reduce else 'off'})")
     p.add_argument("--max-triangles", type=int, default=None,
                    help="triangle budget: stop refining there (exit status 3 when E_max is still above zeta)")
     p.add_argument("--capacity", type=int, default=None,

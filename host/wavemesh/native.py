@@ -69,6 +69,8 @@ class Params(ctypes.Structure):
         ("delta_v", ctypes.c_uint32),
         ("flags", ctypes.c_uint32),
         ("delta_d", ctypes.c_uint64),
+        ("delta_lambda", ctypes.c_uint32),
+        ("delta_c", ctypes.c_uint32),
     ]
 
 
@@ -86,7 +88,7 @@ STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "depend
                "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "flips",
                "budget_hit", "over")
 # wm_params.flags (WM_FLAG_* in wavemesh.h); 0 is the default pipeline.
-FLAG_NO_BOUND, FLAG_NO_LEGALISE, FLAG_NO_DECIMATE = 1, 2, 4
+FLAG_NO_BOUND, FLAG_NO_LEGALISE, FLAG_NO_DECIMATE, FLAG_NO_REDUCE = 1, 2, 4, 8
 
 
 class LevelStats(ctypes.Structure):
@@ -207,8 +209,8 @@ def _declare(lib: ctypes.CDLL) -> None:
 class RefineParams:
     """Table 4.3's parameters in user units (height units, grid steps), dissertation defaults.
 
-    delta_lambda and delta_c belong to the reduction operators (vertex removal, edge collapse) of a
-    later issue: accepted and reported, not used yet.
+    delta_lambda and delta_c drive the reduction of steps 2(d) and 3(b) (vertex removal 4.32, edge
+    collapse 4.33-4.34); ``reduce=False`` turns it off.
     """
 
     zeta: float = 1.0  # E(T) <= zeta at level 0, height units (5.3: 1 unit synthetic, 2 m terrain)
@@ -217,13 +219,14 @@ class RefineParams:
     delta_p: float = 0.9  # pairing criterion, 0.5 < delta_p < 1
     delta_v: float = 2.0  # vertex movement threshold, 3-D distance (grid steps and height units)
     alpha: float = 0.6  # mesh regularity factor, 0..1 (5.2.3: "most of the later experiments")
-    delta_lambda: float = 0.01  # vertex removal criterion (reduction issue)
-    delta_c: float = 0.98  # edge collapsing criterion (reduction issue)
+    delta_lambda: float = 0.01  # vertex removal criterion, eigenvalues of R(v) (4.32)
+    delta_c: float = 0.98  # edge collapsing criterion, |e21 . e22| > delta_c (4.34), 0..1
     iterations: int = 1  # k, 1..3 (0: only the error bound); 1 measured best (docs/refiner.md)
     neighbourhood: str = "face"  # "face" (5.2.2) or "vertex"
     bound: bool = True  # the error bound at level 0 (False: the dissertation's levels alone)
     legalise: bool = True  # Lawson flips after each split of the error bound
     decimate: bool = True  # the final decimation within zeta after the error bound
+    reduce: bool = True  # vertex removal and edge collapse at 2(d) and 3(b)
     max_triangles: int | None = None  # triangle budget
     capacity: int | None = None  # triangle storage, as on a device (default: 2 (W-1)(H-1), never short)
     extra: dict = field(default_factory=dict)
@@ -240,6 +243,10 @@ class RefineParams:
             bad("delta_p", self.delta_p, "use 0 <= delta_p < 1 (the dissertation: 0.5 < delta_p < 1)")
         if not 0 <= self.alpha <= 1:
             bad("alpha", self.alpha, "use 0 <= alpha <= 1")
+        if not 0 <= self.delta_c <= 1:
+            bad("delta_c", self.delta_c, "use 0 <= delta_c <= 1")
+        if self.delta_lambda >= 65536:
+            bad("delta_lambda", self.delta_lambda, "use 0 <= delta_lambda < 65536 (eigenvalues are in 0..1)")
         if self.metric not in METRICS:
             bad("metric", self.metric, "use normal or vertical")
         if self.neighbourhood not in NEIGHBOURHOODS:
@@ -254,7 +261,7 @@ class RefineParams:
     def to_report(self) -> dict:
         return {k: getattr(self, k) for k in ("zeta", "metric", "delta_d", "delta_p", "delta_v", "alpha",
                                               "delta_lambda", "delta_c", "iterations", "neighbourhood",
-                                              "max_triangles", "capacity")}
+                                              "max_triangles", "capacity", "bound", "reduce")}
 
 
 def scale_fixed(scale: float) -> tuple[int, int]:
@@ -286,10 +293,12 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None) -> Pa
     out.alpha = min(65536, round(Fraction(p.alpha) * 2**16))
     out.delta_v = min(U32, round(Fraction(p.delta_v) * 2**16))
     out.flags = ((0 if p.bound else FLAG_NO_BOUND) | (0 if p.legalise else FLAG_NO_LEGALISE)
-                 | (0 if p.decimate else FLAG_NO_DECIMATE))
+                 | (0 if p.decimate else FLAG_NO_DECIMATE) | (0 if p.reduce else FLAG_NO_REDUCE))
     # e = d1^2 + d2^2 + d3^2 in coefficient units; (d / 2) s is a height difference, so
     # e (s / 2)^2 > delta_d  <=>  e > 4 delta_d / s^2  <=>  e > floor(4 delta_d / s^2) (e an integer).
     out.delta_d = min(U64, floor(4 * Fraction(p.delta_d) / (s * s)))
+    out.delta_lambda = min(U32, round(Fraction(p.delta_lambda) * 2**16))  # Q16.16, as CONFIG carries it
+    out.delta_c = min(65536, round(Fraction(p.delta_c) * 2**16))
     return out
 
 

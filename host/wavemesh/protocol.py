@@ -141,7 +141,13 @@ FEATURE_INITIAL_ONLY = 1 << 1  # honours CONFIG_INITIAL_ONLY
 
 # Bits of CONFIG.flags
 CONFIG_INITIAL_ONLY = 1 << 0  # stop after the template stage: one level, the initial triangulation
-CONFIG_KNOWN_FLAGS = CONFIG_INITIAL_ONLY  # every defined bit; a device refuses any other
+CONFIG_REFINER_SHIFT = 1  # bits 1..4 are wm_params.flags (WM_FLAG_*) shifted left by this
+CONFIG_NO_BOUND = 1 << 1  # WM_FLAG_NO_BOUND: the levels alone, no error bound (--bound off)
+CONFIG_NO_LEGALISE = 1 << 2  # WM_FLAG_NO_LEGALISE: the error bound's splits without Lawson flips
+CONFIG_NO_DECIMATE = 1 << 3  # WM_FLAG_NO_DECIMATE: no final decimation
+CONFIG_NO_REDUCE = 1 << 4  # WM_FLAG_NO_REDUCE: no vertex removal / edge collapse at 2(d), 3(b)
+CONFIG_KNOWN_FLAGS = (CONFIG_INITIAL_ONLY | CONFIG_NO_BOUND | CONFIG_NO_LEGALISE | CONFIG_NO_DECIMATE
+                      | CONFIG_NO_REDUCE)  # every defined bit; a device refuses any other
 
 # Bits of DATA_ACK.flags and LEVEL_END.flags
 ACK_NAK = 1 << 0  # DATA_ACK: a DATA frame came after a gap: send again from `next`
@@ -253,8 +259,8 @@ CONFIG = _m("CONFIG", "host to device: the job (docs/refiner.md has the fixed-po
             ("delta_p", "I", "delta_p, Q0.16, 0..65535"),
             ("alpha", "I", "alpha, Q0.16, 0..65536"),
             ("delta_v", "I", "delta_v, Q16.16"),
-            ("delta_lambda", "I", "delta_lambda, Q16.16 (reduction operators; checked, unused today)"),
-            ("delta_c", "I", "delta_c, Q16.16, 0..65536 (reduction operators; checked, unused today)"),
+            ("delta_lambda", "I", "delta_lambda, Q16.16 (vertex removal 4.32, edge collapse 4.33)"),
+            ("delta_c", "I", "delta_c, Q16.16, 0..65536 (edge collapse 4.34)"),
             ("delta_d", "Q", "delta_d, coefficient units: floor(4 delta_d / s^2)"))
 
 DATA = _m("DATA", "host to device: samples",
@@ -447,6 +453,7 @@ def c_header() -> str:
         f"#define WM_PROTO_LEVEL_LAST 0x{LEVEL_LAST:X}u",
         "",
         "/* Payload layouts: byte offsets of the fields, size of the fixed part */",
+        f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
     ]
     for m in MESSAGES:
         lines.append(f"/* {m.name}: {m.doc} */")

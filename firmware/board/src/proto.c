@@ -415,7 +415,7 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     j->params.delta_p = delta_p;
     j->params.alpha = alpha;
     j->params.delta_v = get32(c + WM_PROTO_CONFIG_DELTA_V);
-    j->params.flags = 0; /* the default pipeline (no CONFIG field for the flags yet) */
+    j->params.flags = (flags >> WM_PROTO_CONFIG_REFINER_SHIFT) & WM_FLAG_ALL; /* WM_FLAG_* */
     j->params.delta_d = get64(c + WM_PROTO_CONFIG_DELTA_D);
     j->delta_lambda = get32(c + WM_PROTO_CONFIG_DELTA_LAMBDA);
     j->delta_c = delta_c;
@@ -448,6 +448,8 @@ static void do_config(wm_proto *p) {
     for (int s = 0; s < WM_PROTO_STAGE_COUNT; s++) p->cycles[s] = 0;
     p->stage = -1;
     stage_enter(p, WM_PROTO_STAGE_RECEIVE);
+    j->params.delta_lambda = j->delta_lambda;
+    j->params.delta_c = delta_c;
     reply_ok(p);
 }
 

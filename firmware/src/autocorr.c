@@ -1,0 +1,196 @@
+/* The reduction criteria (dissertation 4.5.2, 4.5.3): unit normals, the autocorrelation matrix
+ *
+ *     R(v) = (1/k) sum_{i=1..k} n_i n_i^T                                          (4.31)
+ *
+ * over the k triangles around v, and its eigen-decomposition.  Both small eigenvalues below
+ * delta_lambda (4.32) select v for removal; lambda1 < delta_lambda < lambda2 at both ends of an edge
+ * with |e21 . e22| > delta_c (4.33, 4.34) selects the edge for a collapse (reduce.c).
+ *
+ *        n_i  (Gauss map: the normals of N0(v) as points on the unit sphere)
+ *         \  |  /
+ *          \ | /            lambda3 ~ 1: the mean direction; lambda1, lambda2: the spread across it
+ *      ---- (v) ----        (a flat star: 0, 0, 1; a crease: 0, > 0, < 1, e2 across the crease)
+ *
+ * Fixed point, identical on every machine:
+ *   normal   (s A, s B, D) exact in integers (A, B < 2^32, D < 2^31, s = scale_m / 2^scale_e), the
+ *            three brought to one binary scale below 2^31 by right shifts of their magnitudes, the
+ *            length by an exact integer square root, each component rounded to Q28 (error a few 2^-28)
+ *   R(v)     sums of Q56 products (k <= 32: below 2^61), rounded to Q30
+ *   eigen    cyclic Jacobi rotations (t = sgn(theta) / (|theta| + sqrt(theta^2 + 1)),
+ *            theta = (a_qq - a_pp) / (2 a_pq), all in Q30 with products rounded half away from
+ *            zero), at most JACOBI_SWEEPS sweeps of the three pairs (an off-diagonal entry of at most
+ *            SETTLED 2^-30 is not rotated): the off-diagonal falls quadratically,
+ *            so the eigenvalues are within a few 2^-30 of R's (tests: against numpy's eigvalsh)
+ * No product leaves 64 bits: every matrix entry is within [-1, 1] (Frobenius norm <= 1 for
+ * R(v), whose eigenvalues are >= 0 and add up to 1), t, c, s within [-1, 1]. */
+#include "wm_internal.h"
+
+#define JACOBI_SWEEPS 8
+#define ONE30 ((int64_t)1 << 30)
+#define SETTLED 4u /* an off-diagonal entry this small (4 2^-30) is left alone: it moves an eigenvalue by
+                      less than 2^-28 */
+
+/* floor(sqrt(x)) by Newton's iteration from a power of two above the root (a handful of divisions
+ * instead of wm_isqrt64's 32 bit steps; the same exact result). */
+static uint64_t isqrt(uint64_t x)
+{
+    uint64_t r, y;
+    int b = 0;
+    if (x < 2) return x;
+    while (b < 32 && ((uint64_t)1 << (2 * b)) <= x) b++; /* 4^(b-1) <= x < 4^b (or b = 32) */
+    r = (uint64_t)1 << b;                                 /* > sqrt(x) */
+    if (b == 32) r = 0xFFFFFFFFu;                         /* floor(sqrt(2^64 - 1)) >= every root */
+    for (;;) {
+        y = (r + x / r) >> 1;
+        if (y >= r) return r;
+        r = y;
+    }
+}
+
+static uint64_t mag(int64_t a) { return a < 0 ? (uint64_t)0 - (uint64_t)a : (uint64_t)a; }
+
+/* round(a b / 2^30), half away from zero (|a b| < 2^63). */
+static int64_t mulq(int64_t a, int64_t b)
+{
+    uint64_t p = (mag(a) * mag(b) + ((uint64_t)1 << 29)) >> 30;
+    return ((a < 0) != (b < 0)) ? -(int64_t)p : (int64_t)p;
+}
+
+static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
+{
+    int64_t apq = a[p][q], num = a[q][q] - a[p][p], t, c, s;
+    uint64_t den = 2 * mag(apq), sq, tt;
+    int neg;
+    if (mag(apq) <= SETTLED) return;
+    /* t = sgn(theta) |2 a_pq| / (|a_qq - a_pp| + sqrt((a_qq - a_pp)^2 + (2 a_pq)^2)), |t| <= 1 */
+    sq = isqrt(mag(num) * mag(num) + den * den);
+    tt = (den << 30) / (mag(num) + sq);
+    neg = (num < 0) != (apq < 0);
+    t = neg ? -(int64_t)tt : (int64_t)tt;
+    /* c = 1 / sqrt(1 + t^2), s = t c */
+    sq = isqrt(((uint64_t)1 << 60) + tt * tt);
+    c = (int64_t)((((uint64_t)1 << 60) + sq / 2) / sq);
+    s = mulq(t, c);
+    {
+        int64_t tq = mulq(t, apq);
+        a[p][p] -= tq;
+        a[q][q] += tq;
+        a[p][q] = a[q][p] = 0;
+    }
+    for (int r = 0; r < 3; r++) {
+        int64_t g, h;
+        if (r != p && r != q) {
+            g = a[r][p];
+            h = a[r][q];
+            a[r][p] = a[p][r] = mulq(c, g) - mulq(s, h);
+            a[r][q] = a[q][r] = mulq(s, g) + mulq(c, h);
+        }
+        g = v[r][p];
+        h = v[r][q];
+        v[r][p] = mulq(c, g) - mulq(s, h);
+        v[r][q] = mulq(s, g) + mulq(c, h);
+    }
+}
+
+void wm_sym3_eigen(const int64_t in[6], int64_t lambda[3], int64_t vec[9])
+{
+    int64_t a[3][3], v[3][3];
+    int order[3] = {0, 1, 2};
+    a[0][0] = in[0], a[0][1] = a[1][0] = in[1], a[0][2] = a[2][0] = in[2];
+    a[1][1] = in[3], a[1][2] = a[2][1] = in[4], a[2][2] = in[5];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) v[i][j] = i == j ? ONE30 : 0;
+    for (int sweep = 0; sweep < JACOBI_SWEEPS; sweep++) {
+        if (mag(a[0][1]) <= SETTLED && mag(a[0][2]) <= SETTLED && mag(a[1][2]) <= SETTLED) break;
+        rotate(a, v, 0, 1);
+        rotate(a, v, 0, 2);
+        rotate(a, v, 1, 2);
+    }
+    /* ascending, ties in column order (a stable insertion sort) */
+    for (int i = 1; i < 3; i++)
+        for (int j = i; j > 0 && a[order[j]][order[j]] < a[order[j - 1]][order[j - 1]]; j--) {
+            int o = order[j];
+            order[j] = order[j - 1];
+            order[j - 1] = o;
+        }
+    for (int i = 0; i < 3; i++) {
+        lambda[i] = a[order[i]][order[i]];
+        for (int r = 0; r < 3; r++) vec[3 * i + r] = v[r][order[i]];
+    }
+}
+
+void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t n[3])
+{
+    const uint16_t *h = f->samples;
+    int64_t z0 = h[(int64_t)y[0] * f->width + x[0]], z1 = h[(int64_t)y[1] * f->width + x[1]];
+    int64_t z2 = h[(int64_t)y[2] * f->width + x[2]];
+    int64_t dx1 = (int64_t)x[1] - x[0], dy1 = (int64_t)y[1] - y[0], dz1 = z1 - z0;
+    int64_t dx2 = (int64_t)x[2] - x[0], dy2 = (int64_t)y[2] - y[0], dz2 = z2 - z0;
+    int64_t A = dy1 * dz2 - dz1 * dy2, B = dz1 * dx2 - dx1 * dz2, D = dx1 * dy2 - dx2 * dy1;
+    uint64_t c[3], m, len;
+    int e = p->scale_e, sh = 0;
+    /* (s A, s B, D) 2^e = (scale_m A, scale_m B, D 2^e): magnitudes below 2^48, 2^48, 2^63 */
+    c[0] = mag(A) * p->scale_m;
+    c[1] = mag(B) * p->scale_m;
+    c[2] = mag(D);
+    if (e <= 32) {
+        c[2] <<= e;
+    } else {
+        c[0] = e - 32 >= 64 ? 0 : c[0] >> (e - 32);
+        c[1] = e - 32 >= 64 ? 0 : c[1] >> (e - 32);
+        c[2] <<= 32;
+    }
+    m = c[0] > c[1] ? c[0] : c[1];
+    if (c[2] > m) m = c[2];
+    while ((m >> sh) >= ((uint64_t)1 << 31)) sh++;
+    for (int k = 0; k < 3; k++) c[k] >>= sh;
+    len = isqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]); /* < 3 2^62 */
+    if (len == 0) { /* a degenerate triangle (not in a valid mesh) */
+        n[0] = n[1] = 0;
+        n[2] = 1 << 28;
+        return;
+    }
+    for (int k = 0; k < 3; k++) {
+        int64_t q = (int64_t)(((c[k] << 28) + len / 2) / len);
+        int neg = k == 0 ? A < 0 : k == 1 ? B < 0 : D < 0;
+        n[k] = (int32_t)(neg ? -q : q);
+    }
+}
+
+int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3])
+{
+    int64_t sum[6] = {0, 0, 0, 0, 0, 0};
+    int32_t first, h, k = 0;
+    if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
+    mean[0] = mean[1] = mean[2] = 0;
+    first = wm_fan_first(m, v);
+    h = first;
+    do {
+        int32_t x[3], y[3], n[3];
+        if (k >= WM_MAX_RING) return WM_ERR_REFUSED; /* keeps the sums below 2^61 */
+        wm_tri_xy(m, WM_TRI(h), x, y);
+        wm_unit_normal(f, p, x, y, n);
+        sum[0] += (int64_t)n[0] * n[0];
+        sum[1] += (int64_t)n[0] * n[1];
+        sum[2] += (int64_t)n[0] * n[2];
+        sum[3] += (int64_t)n[1] * n[1];
+        sum[4] += (int64_t)n[1] * n[2];
+        sum[5] += (int64_t)n[2] * n[2];
+        for (int c = 0; c < 3; c++) mean[c] += n[c];
+        k++;
+        h = wm_rot_ccw(m, h);
+    } while (h >= 0 && h != first);
+    /* Q56 sums / k -> Q30, rounded (half up) */
+    for (int i = 0; i < 6; i++) r[i] = wm_floor_div(sum[i] + ((int64_t)k << 25), (int64_t)k << 26);
+    return (int)k;
+}
+
+int wm_vertex_autocorr(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
+                       int64_t lambda[3], int64_t vec[9])
+{
+    int64_t mean[3];
+    int k = wm_vertex_r(m, f, p, v, r, mean);
+    if (k < 0) return k;
+    wm_sym3_eigen(r, lambda, vec);
+    return k;
+}

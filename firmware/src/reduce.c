@@ -1,0 +1,336 @@
+/* The reduction of 4.6 steps 2(d) and 3(b): vertex removal (4.5.2) and edge collapse (4.5.3) where
+ * the autocorrelation matrix R(v) of the normals around a vertex (autocorr.c) says the surface is
+ * flat (both small eigenvalues below delta_lambda) or a crease shared by both ends of an edge.
+ *
+ *   for v in slot order (vertices made on the way are visited when their slot comes):
+ *       lambda1 <= lambda2 < delta_lambda (4.32):  remove v, the hole re-triangulated by
+ *                                                  wm_star_plan (O(h log h)), if within the bound
+ *       lambda1 < delta_lambda < lambda2 (4.33):   for each neighbour w (counter-clockwise) with
+ *                                                  4.33 too and |e2(v) . e2(w)| > delta_c (4.34):
+ *                                                  collapse v - w at the first collapse point that
+ *                                                  is valid and within the bound; stop at the first
+ *
+ *   the bound: every new triangle's E(T) <= max(zeta, the largest E(T) of the triangles it
+ *   replaces), so E_max never grows and no part of the mesh gets worse than it was
+ *
+ *        p3------p2           p3------p2
+ *        / \    / \           / \_     \         removal: the star of v (here flat) becomes the
+ *       /   \  /   \         /    \_    \        ring's ear triangulation, h - 2 triangles
+ *     p4-----v------p1  ->  p4-------\_--p1
+ *       \   /  \   /         \         \_/       collapse: see edge_collapse.c
+ *        \ /    \ /           \         /
+ *        p5------p0           p5-------p0
+ *
+ * The collapse point (4.5.3: "a midpoint of the edge"): every vertex is a grid sample, so the
+ * midpoint when it is one (both coordinate differences even); otherwise the edge's inner grid
+ * samples nearest the midpoint (for G = gcd(|dx|, |dy|) odd, the two at (G -+ 1) / 2 of G, the one
+ * nearer v first); then, when the edge has no inner sample (G = 1) or those fail, a half-edge
+ * collapse into v's position and then into w's.  The first candidate that gives a proper mesh and
+ * keeps the bound is taken.
+ *
+ * Determinism: slot order, ring order, integer arithmetic: the same mesh on every machine. */
+#include "wm_internal.h"
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The hole of a removed vertex: ear clipping over a binary heap of ears, O(h log h) */
+
+struct ears {
+    int32_t prev[WM_MAX_RING], next[WM_MAX_RING], key[WM_MAX_RING], heap[WM_MAX_RING], pos[WM_MAX_RING];
+    int32_t n;
+};
+
+static int better(const struct ears *s, int32_t i, int32_t j)
+{
+    return s->key[i] > s->key[j] || (s->key[i] == s->key[j] && i < j);
+}
+
+static void ear_put(struct ears *s, int32_t at, int32_t i)
+{
+    s->heap[at] = i;
+    s->pos[i] = at;
+}
+
+static void ear_up(struct ears *s, int32_t at)
+{
+    int32_t i = s->heap[at];
+    while (at > 0 && better(s, i, s->heap[(at - 1) / 2])) {
+        ear_put(s, at, s->heap[(at - 1) / 2]);
+        at = (at - 1) / 2;
+    }
+    ear_put(s, at, i);
+}
+
+static void ear_down(struct ears *s, int32_t at)
+{
+    int32_t i = s->heap[at];
+    for (;;) {
+        int32_t c = 2 * at + 1;
+        if (c >= s->n) break;
+        if (c + 1 < s->n && better(s, s->heap[c + 1], s->heap[c])) c++;
+        if (!better(s, s->heap[c], i)) break;
+        ear_put(s, at, s->heap[c]);
+        at = c;
+    }
+    ear_put(s, at, i);
+}
+
+/* The key of the ear at ring position i: its smallest angle (Q16 radians) when it may be cut, else -1. */
+static int32_t ear_key(const wm_mesh *m, const int32_t *ring, const struct ears *s, int32_t i, int32_t kx,
+                       int32_t ky)
+{
+    int32_t a = ring[s->prev[i]], b = ring[i], c = ring[s->next[i]];
+    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
+    if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0) return -1;
+    if (wm_orient(x[0], y[0], x[2], y[2], kx, ky) < 0) return -1; /* k strictly on b's side of a-c */
+    return wm_min_angle(x, y);
+}
+
+int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, int32_t ky,
+                 int32_t tris[3 * WM_MAX_RING], int32_t *n_tris)
+{
+    struct ears s;
+    int32_t left = n, nt = 0;
+    if (n < 3 || n > WM_MAX_RING) return WM_ERR_ARG;
+    for (int32_t i = 0; i < n; i++) {
+        s.prev[i] = (i + n - 1) % n;
+        s.next[i] = (i + 1) % n;
+    }
+    for (int32_t i = 0; i < n; i++) {
+        s.key[i] = ear_key(m, ring, &s, i, kx, ky);
+        s.heap[i] = i;
+        s.pos[i] = i;
+    }
+    s.n = n;
+    for (int32_t at = n / 2 - 1; at >= 0; at--) ear_down(&s, at);
+    while (left > 3) {
+        int32_t b = s.heap[0], a = s.prev[b], c = s.next[b];
+        if (s.key[b] < 0) return WM_ERR_REFUSED; /* no ear may be cut */
+        tris[3 * nt] = ring[a], tris[3 * nt + 1] = ring[b], tris[3 * nt + 2] = ring[c];
+        nt++;
+        /* b leaves the heap (the last entry takes its place) and the polygon */
+        s.n--;
+        ear_put(&s, 0, s.heap[s.n]);
+        ear_down(&s, 0);
+        s.next[a] = c;
+        s.prev[c] = a;
+        left--;
+        for (int q = 0; q < 2; q++) {
+            int32_t i = q == 0 ? a : c, old = s.key[i];
+            s.key[i] = ear_key(m, ring, &s, i, kx, ky);
+            if (s.key[i] > old) ear_up(&s, s.pos[i]);
+            else ear_down(&s, s.pos[i]);
+        }
+    }
+    {
+        int32_t b = s.heap[0], a = s.prev[b], c = s.next[b];
+        if (wm_orient(m->vx[ring[a]], m->vy[ring[a]], m->vx[ring[b]], m->vy[ring[b]], m->vx[ring[c]],
+                      m->vy[ring[c]]) <= 0)
+            return WM_ERR_REFUSED;
+        tris[3 * nt] = ring[a], tris[3 * nt + 1] = ring[b], tris[3 * nt + 2] = ring[c];
+        nt++;
+    }
+    *n_tris = nt;
+    return WM_OK;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The pass */
+
+#define CLS_UNKNOWN (-1)
+#define CLS_NONE 0
+#define CLS_REMOVE 1   /* 4.32 */
+#define CLS_COLLAPSE 2 /* 4.33 */
+
+struct eig {
+    int64_t r[6], lambda[3], vec[9];
+};
+
+static int64_t shift_round(int64_t a, int sh)
+{
+    uint64_t u = a < 0 ? (uint64_t)0 - (uint64_t)a : (uint64_t)a;
+    u = (u + ((uint64_t)1 << (sh - 1))) >> sh;
+    return a < 0 ? -(int64_t)u : (int64_t)u;
+}
+
+/* Two sufficient tests decide most vertices without the eigen-decomposition; each claims only what
+ * holds with a margin of 2^-12 over its rounding (a few 2^-14), so the class is the one the
+ * eigenvalues give (the shortcuts save time, they change nothing):
+ *   lambda1 >= 4 det R   (det R = lambda1 lambda2 lambda3, lambda2 lambda3 <= ((1 - lambda1) / 2)^2
+ *                         <= 1/4): 4 det R > delta_lambda means neither 4.32 nor 4.33 holds;
+ *   lambda1 + lambda2 = tr R - lambda3 <= tr R - mu^T R mu for the unit mean normal mu (lambda3 is
+ *                         the largest Rayleigh quotient): below delta_lambda means 4.32 holds. */
+static int8_t shortcut(const int64_t r[6], const int64_t mean[3], uint32_t delta_lambda)
+{
+    const int64_t margin57 = (int64_t)1 << 45, margin28 = (int64_t)1 << 16;
+    int64_t a = shift_round(r[0], 11), b = shift_round(r[1], 11), c = shift_round(r[2], 11); /* Q19 */
+    int64_t d = shift_round(r[3], 11), e = shift_round(r[4], 11), f = shift_round(r[5], 11);
+    int64_t det = a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - d * c); /* Q57, below 2^60 */
+    int64_t mm[3], q28[6], num = 0, den = 0, mx = 0, q;
+    int sh = 0;
+    if (delta_lambda >= 65536u) return CLS_UNKNOWN; /* every eigenvalue is below 1: let them decide */
+    if (det > 0 && 4 * det > ((int64_t)delta_lambda << 41) + margin57) return CLS_NONE;
+    for (int i = 0; i < 3; i++) {
+        int64_t u = mean[i] < 0 ? -mean[i] : mean[i];
+        if (u > mx) mx = u;
+    }
+    while ((mx >> sh) >= ((int64_t)1 << 15)) sh++;
+    for (int i = 0; i < 3; i++) mm[i] = sh ? shift_round(mean[i], sh) : mean[i];
+    for (int i = 0; i < 6; i++) q28[i] = shift_round(r[i], 2);
+    num = q28[0] * mm[0] * mm[0] + q28[3] * mm[1] * mm[1] + q28[5] * mm[2] * mm[2] +
+          2 * (q28[1] * mm[0] * mm[1] + q28[2] * mm[0] * mm[2] + q28[4] * mm[1] * mm[2]);
+    den = mm[0] * mm[0] + mm[1] * mm[1] + mm[2] * mm[2];
+    if (den == 0) return CLS_UNKNOWN;
+    q = wm_floor_div(num, den);
+    if (q28[0] + q28[3] + q28[5] - q < ((int64_t)delta_lambda << 12) - margin28) return CLS_REMOVE;
+    return CLS_UNKNOWN;
+}
+
+/* The class of v (4.32, 4.33); with need_vec the eigen-decomposition is always made (into g). */
+static int8_t classify(const wm_refiner *r, int32_t v, struct eig *g, int need_vec)
+{
+    int64_t dl = (int64_t)r->params.delta_lambda << 14; /* Q16.16 -> Q30 */
+    int64_t mean[3];
+    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean) < 0) return CLS_NONE;
+    if (!need_vec) {
+        int8_t c = shortcut(g->r, mean, r->params.delta_lambda);
+        if (c != CLS_UNKNOWN) return c;
+    }
+    wm_sym3_eigen(g->r, g->lambda, g->vec);
+    if (g->lambda[1] < dl) return CLS_REMOVE;
+    if (g->lambda[0] < dl && dl < g->lambda[1]) return CLS_COLLAPSE;
+    return CLS_NONE;
+}
+
+/* The largest E(T) around v, at least zeta. */
+static uint32_t star_bound(const wm_refiner *r, int32_t v, uint32_t b)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t first = wm_fan_first(me, v), h = first;
+    if (b < r->params.zeta) b = r->params.zeta;
+    do {
+        if (r->err[WM_TRI(h)] > b) b = r->err[WM_TRI(h)];
+        h = wm_rot_ccw(me, h);
+    } while (h >= 0 && h != first);
+    return b;
+}
+
+/* 1 when every triangle of tris (WM_COLLAPSE_POINT standing for (px, py)) has E(T) <= bound. */
+static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t px, int32_t py, uint32_t bound)
+{
+    const wm_mesh *me = &r->mesh;
+    for (int32_t j = 0; j < nt; j++) {
+        int32_t x[3], y[3];
+        for (int c = 0; c < 3; c++) {
+            int32_t w = tris[3 * j + c];
+            x[c] = w < 0 ? px : me->vx[w];
+            y[c] = w < 0 ? py : me->vy[w];
+        }
+        if (wm_tri_error(&r->field, &r->params, x, y, NULL, NULL) > bound) return 0;
+    }
+    return 1;
+}
+
+/* Marks the classes of v's neighbours unknown (their stars changed). */
+static void forget_ring(wm_refiner *r, int32_t v)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t first = wm_fan_first(me, v), h = first;
+    r->vapex[v] = CLS_UNKNOWN;
+    do {
+        r->vapex[wm_dest(me, h)] = CLS_UNKNOWN;
+        r->vapex[me->hv[WM_PREV(h)]] = CLS_UNKNOWN;
+        h = wm_rot_ccw(me, h);
+    } while (h >= 0 && h != first);
+}
+
+static int try_remove(wm_refiner *r, int32_t v)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], n, nt, k;
+    n = wm_vertex_ring(me, v, ring);
+    if (n < 0) return 0; /* a corner, or too many neighbours */
+    if (wm_star_plan(me, ring, n, me->vx[v], me->vy[v], tris, &nt) != WM_OK &&
+        wm_vertex_remove_plan(me, v, -1, tris, &nt) != WM_OK)
+        return 0;
+    if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0))) return 0;
+    if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) return 0;
+    for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);
+    for (int32_t i = 0; i < n; i++) r->vapex[ring[i]] = CLS_UNKNOWN;
+    return 1;
+}
+
+/* Collapses the edge e = v -> w (see the head of this file for the collapse point). */
+static int try_collapse(wm_refiner *r, int32_t e)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t v = me->hv[e], w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
+    int32_t ax = me->vx[v], ay = me->vy[v], bx = me->vx[w], by = me->vy[w];
+    int32_t dx = bx - ax, dy = by - ay, g = wm_gcd(dx, dy), cx[4], cy[4], nc = 0;
+    uint32_t bound = star_bound(r, w, star_bound(r, v, 0));
+    if (g >= 2) {
+        int32_t k0 = g / 2, k1 = (g + 1) / 2; /* equal for an even g: the midpoint itself */
+        cx[nc] = ax + dx / g * k0, cy[nc++] = ay + dy / g * k0;
+        if (k1 != k0) cx[nc] = ax + dx / g * k1, cy[nc++] = ay + dy / g * k1;
+    }
+    cx[nc] = ax, cy[nc++] = ay;
+    cx[nc] = bx, cy[nc++] = by;
+    for (int32_t i = 0; i < nc; i++) {
+        if (wm_edge_collapse_plan(me, e, cx[i], cy[i], tris, &nt) != WM_OK) continue;
+        if (!within(r, tris, nt, cx[i], cy[i], bound)) continue;
+        if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return 0; /* capacity */
+        for (int32_t j = 0; j < k; j++) wm_touch(r, touched[j]);
+        forget_ring(r, p);
+        return 1;
+    }
+    return 0;
+}
+
+int32_t wm_reduce(wm_refiner *r)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t removed = 0;
+    uint64_t dc = (uint64_t)r->params.delta_c << 44; /* Q16.16 -> Q60, the scale of e21 . e22 */
+    for (int32_t v = 0; v < me->vert_end; v++) r->vapex[v] = CLS_UNKNOWN;
+    for (int32_t v = 0; v < me->vert_end; v++) {
+        struct eig gv, gw;
+        int32_t out[WM_MAX_RING + 1], k = 0, first, h;
+        int8_t cls;
+        if (me->vx[v] == WM_FREE) continue;
+        cls = classify(r, v, &gv, 0);
+        r->vapex[v] = cls;
+        if (cls == CLS_REMOVE) {
+            removed += try_remove(r, v);
+            continue;
+        }
+        if (cls != CLS_COLLAPSE) continue;
+        /* the edges at v, counter-clockwise (on a side, the last one arrives at v) */
+        first = wm_fan_first(me, v);
+        h = first;
+        do {
+            out[k++] = h;
+            h = wm_rot_ccw(me, h);
+        } while (h >= 0 && h != first && k < WM_MAX_RING);
+        if (h < 0) {
+            out[k] = WM_PREV(out[k - 1]);
+            k++;
+        }
+        for (int32_t i = 0; i < k; i++) {
+            int32_t e = out[i], u = me->hv[e] == v ? wm_dest(me, e) : me->hv[e];
+            int64_t dot = 0;
+            uint64_t adot;
+            if (r->vapex[u] == CLS_NONE || r->vapex[u] == CLS_REMOVE) continue;
+            cls = classify(r, u, &gw, 1);
+            r->vapex[u] = cls;
+            if (cls != CLS_COLLAPSE) continue;
+            for (int c = 0; c < 3; c++) dot += gv.vec[3 + c] * gw.vec[3 + c]; /* Q60, below 3 2^60 */
+            adot = dot < 0 ? (uint64_t)0 - (uint64_t)dot : (uint64_t)dot;
+            if (adot <= dc) continue;
+            if (try_collapse(r, e)) {
+                removed++;
+                break;
+            }
+        }
+    }
+    r->removals += removed;
+    return removed;
+}
