@@ -183,12 +183,12 @@ BOUND_EPS = 1e-9  # the float metric's own rounding, relative (docs/refiner.md)
 
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
-           params: RefineParams | None = None, *, check_levels: bool = False) -> RefineJob:
+           params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = True) -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
-    the bound met, within zeta (mesh_errors, kept in ``errors``); otherwise MeshInvalid.
-    ``check_levels`` also checks every coarser level's mesh."""
+    the bound met, within zeta (mesh_errors, kept in ``errors``; ``rms=False``: its maxima alone);
+    otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh."""
     from wavemesh import native  # loads (and if needed builds) the C library
 
     params = params or RefineParams()
@@ -207,7 +207,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     for lv in out.levels if check_levels else out.levels[-1:]:
         require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
     rjob = RefineJob(job, params, zeta, out, seconds)
-    rjob.errors = mesh_errors(rjob.mesh, hf.values)
+    rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms)
     excess = bound_excess(hf, rjob, rjob.errors)
     if excess:
         raise MeshInvalid(excess, hint=BUG_HINT)
@@ -217,7 +217,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 def level_report(lv, hf: HeightField, metric: str, errors: ErrorReport | None = None) -> dict:
     """One level's row: counts, the firmware's E_max and the independent float E_max (``errors``: the
     level's mesh_errors when already measured)."""
-    errors = errors if errors is not None else mesh_errors(lv.mesh, hf.values)
+    errors = errors if errors is not None else mesh_errors(lv.mesh, hf.values, rms=False)  # maxima
     st = lv.stats
     return {
         "level": lv.level,
@@ -307,7 +307,7 @@ def mesh_command(args) -> int:
     hf = _load_input(args)
     measure = measures_levels(args)
     if stage == "full":
-        rjob = refine(hf, args.levels, args.tau, params, check_levels=measure)
+        rjob = refine(hf, args.levels, args.tau, params, check_levels=measure, rms=bool(args.report))
         job, mesh, errors = rjob.initial, rjob.mesh, rjob.errors
         comment = (f"wavemesh {__version__} refined mesh, M={job.levels} tau={job.tau:g} "
                    f"zeta={params.zeta:g} "
@@ -321,7 +321,7 @@ def mesh_command(args) -> int:
     else:
         rjob, job = None, triangulate(hf, args.levels, args.tau)  # triangulate checks the mesh
         mesh = job.mesh
-        errors = mesh_errors(mesh, hf.values)
+        errors = mesh_errors(mesh, hf.values, rms=bool(args.report))  # the RMS only for the report
         comment = f"wavemesh {__version__} initial triangulation, M={job.levels} tau={job.tau:g}"
         levels = []
     write_mesh(str(out), mesh, hf.values, comment=comment)

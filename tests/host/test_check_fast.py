@@ -37,6 +37,12 @@ def assert_same_errors(mesh: Mesh, heights: np.ndarray, z=None, **kw) -> check.E
     np.testing.assert_array_equal(new.per_triangle_vertical, old.per_triangle_vertical)
     np.testing.assert_array_equal(new.per_triangle_normal, old.per_triangle_normal)
     assert new.to_report() == old.to_report()
+    maxima = check.mesh_errors(mesh, heights, z, rms=False, **kw)  # the maxima alone: the same numbers
+    for name in ("e_max_vertical", "e_max_normal", "e_total_normal", "e_mean_normal"):
+        assert _same(getattr(maxima, name), getattr(old, name)), name
+    np.testing.assert_array_equal(maxima.per_triangle_vertical, old.per_triangle_vertical)
+    np.testing.assert_array_equal(maxima.per_triangle_normal, old.per_triangle_normal)
+    assert math.isnan(maxima.rms_vertical) and math.isnan(maxima.rms_normal) and maxima.n_uncovered == -1
     return new
 
 

@@ -24,12 +24,14 @@ def ball(tmp_path):
 
 def count_calls(monkeypatch) -> dict:
     """Count api's calls of check_mesh and mesh_errors (and the meshes they were given)."""
-    calls = {"check_mesh": [], "mesh_errors": []}
-    for name in calls:
+    calls = {"check_mesh": [], "mesh_errors": [], "rms": []}
+    for name in ("check_mesh", "mesh_errors"):
         real = getattr(api, name)
 
         def wrapper(mesh, *a, _real=real, _name=name, **kw):
             calls[_name].append(mesh)
+            if _name == "mesh_errors":
+                calls["rms"].append(kw.get("rms", True))
             return _real(mesh, *a, **kw)
 
         monkeypatch.setattr(api, name, wrapper)
@@ -48,6 +50,7 @@ def test_without_report_only_the_final_mesh_is_measured(tmp_path, ball, monkeypa
     # the final mesh once
     assert len(calls["check_mesh"]) == 2 and calls["check_mesh"][1].same_as(final)
     assert len(calls["mesh_errors"]) == 1 and calls["mesh_errors"][0].same_as(final)
+    assert calls["rms"] == [False]  # its maxima: the RMS is for the report
 
 
 @pytest.mark.parametrize("flag", ["--check-levels", "--report", "--lod"])
@@ -58,6 +61,7 @@ def test_report_lod_and_check_levels_measure_every_level(tmp_path, ball, monkeyp
     levels = 4  # levels 3..0
     assert len(calls["check_mesh"]) == 1 + levels
     assert len(calls["mesh_errors"]) == levels  # the final level's errors are measured once
+    assert calls["rms"] == [flag == "--report"] + [False] * (levels - 1)  # a level's row: its maxima
 
 
 def broken(mesh: Mesh) -> Mesh:
