@@ -54,6 +54,7 @@ int wm_params_check(const wm_params *p)
     if (p->iterations < 0 || p->iterations > 3 || p->max_triangles < 0) return WM_ERR_ARG;
     if (p->scale_m > 65535u || p->scale_e < 0 || p->scale_e > 126) return WM_ERR_ARG;
     if (p->delta_p > 65535u || p->alpha > 65536u || (p->flags & ~WM_FLAG_ALL) != 0) return WM_ERR_ARG;
+    if (p->delta_c > 65536u) return WM_ERR_ARG;
     return WM_OK;
 }
 
@@ -140,6 +141,8 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         wm_touch(r, t);
         r->mesh.tflag[t] = 0;
     }
+    /* 4.6 step 2(d): the initial mesh enhanced by the reduction (its removals are level M-1's) */
+    if (!(p->flags & WM_FLAG_NO_REDUCE)) wm_reduce(r);
     *out = r;
     return WM_OK;
 }
@@ -496,6 +499,8 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
             }
             if (done) break;
         }
+        /* 4.6 step 3(b): remove redundant vertices (reduce.c) */
+        if (rc == WM_OK && !(r->params.flags & WM_FLAG_NO_REDUCE)) wm_reduce(r);
     }
     if (rc == WM_OK && r->level == 0) {
         if (!(r->params.flags & WM_FLAG_NO_BOUND)) {
