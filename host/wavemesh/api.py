@@ -183,11 +183,11 @@ BOUND_EPS = 1e-9  # the float metric's own rounding, relative (docs/refiner.md)
 
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
-           params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = True) -> RefineJob:
+           params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False) -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
-    the bound met, within zeta (mesh_errors, kept in ``errors``; ``rms=False``: its maxima alone);
+    the bound met, within zeta (mesh_errors, kept in ``errors``: its maxima, and its RMS when ``rms``);
     otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh."""
     from wavemesh import native  # loads (and if needed builds) the C library
 

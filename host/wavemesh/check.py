@@ -345,9 +345,9 @@ def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray
         n = inner[s:e]
         rep = np.repeat(np.arange(len(edges)), n)
         k = np.arange(1, int(n.sum()) + 1) - np.repeat(np.cumsum(n) - n, n)
-        ge = g[edges][rep]
-        px = x[elo[edges]][rep] + k * (dx[edges][rep] // ge)
-        py = y[elo[edges]][rep] + k * (dy[edges][rep] // ge)
+        ge = g[edges]  # per edge: the first point and the step between lattice points
+        px = x[elo[edges]][rep] + k * (dx[edges] // ge)[rep]
+        py = y[elo[edges]][rep] + k * (dy[edges] // ge)[rep]
         key = (py - y0) * bw + (px - x0)
         if grid is not None:
             hit = grid[key]
