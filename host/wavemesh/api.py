@@ -58,9 +58,7 @@ def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = 
     if not math.isfinite(t) or t < 0:
         raise WavemeshError(f"--tau {t} is not a finite number >= 0", hint="give tau in height units")
     result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale))
-    verdict = check_mesh(result.mesh)
-    if not verdict.valid:  # the templates guarantee validity: this is a bug, not a user error
-        raise AssertionError("initial triangulation is not proper: " + "; ".join(verdict.problems[:3]))
+    require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
     return MeshJob(hf, m, t, result)
 
 
@@ -145,7 +143,7 @@ class RefineJob:
         return self.output.final.stats["over"] == 0
 
 
-BUG_HINT = "this is a bug in wavemesh's refiner: please report it with the input and the options"
+BUG_HINT = "this is a bug in wavemesh: please report it with the input and the options"
 
 
 def require_proper(mesh: Mesh, what: str) -> None:

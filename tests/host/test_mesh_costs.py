@@ -100,6 +100,16 @@ def test_a_broken_final_mesh_is_always_found(tmp_path, ball, monkeypatch, capsys
     assert "Traceback" not in err and not (tmp_path / "m.obj").exists()
 
 
+def test_a_broken_initial_triangulation_is_found(tmp_path, ball, monkeypatch, capsys):
+    real = api.initial_triangulation
+    monkeypatch.setattr(api, "initial_triangulation",
+                        lambda *a: replace(r := real(*a), mesh=broken(r.mesh)))
+    assert run_mesh(ball, tmp_path / "m.obj", "--stage", "initial") == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: the initial triangulation is not a proper triangulation: ")
+    assert "Traceback" not in err and not (tmp_path / "m.obj").exists()
+
+
 def test_a_final_mesh_above_zeta_is_always_found(tmp_path, ball, monkeypatch, capsys):
     """The refiner claims every triangle within zeta, but the host measures more: a clear error."""
     real = native.refine
