@@ -82,6 +82,10 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--capacity", type=int, default=None,
                    help="triangle storage of the refiner, as on a device (default: grown as needed)")
     p.add_argument("--lod", metavar="DIR", help="also write each level's mesh to DIR/level-M.obj (or .ply)")
+    p.add_argument("--check-levels", action="store_true",
+                   help="also check every level's mesh (a proper triangulation) and measure its errors for "
+                        "the level table; --report and --lod do this too, and `stream` always does (without "
+                        "them `mesh` checks the final mesh only and its table shows the refiner's own E_max)")
     _input_options(p)
     _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write a JSON report")
@@ -113,10 +117,6 @@ def build_parser() -> argparse.ArgumentParser:
         "checked (a proper triangulation, within zeta when the bound is met; exit status 1 if not); "
         "the coarser levels only with --check-levels, --report or --lod."))
     _mesh_options(p)
-    p.add_argument("--check-levels", action="store_true",
-                   help="also check every level's mesh (proper triangulation) and measure its errors, "
-                        "shown in the level table (--report and --lod do this too; without them the table "
-                        "shows the refiner's own E_max)")
 
     p = sub.add_parser("stream", help="triangulate a height field on a device (board or simulated board)",
                        description=(

@@ -173,8 +173,10 @@ def test_the_level_table_says_where_its_e_max_comes_from(tmp_path, ball, capsys)
 
 
 def test_help_documents_check_levels():
-    text = build_parser()._subparsers._group_actions[0].choices["mesh"].format_help()
+    commands = build_parser()._subparsers._group_actions[0].choices
+    text = commands["mesh"].format_help()
     assert "--check-levels" in text and "every level" in text
+    assert "--check-levels" in commands["stream"].format_help()  # stream takes mesh's options
 
 
 # ---------------------------------------------------------------------------------------------
