@@ -48,6 +48,23 @@ extern "C" {
 #define WM_MAX_LEVELS 12   /* largest M, as the reference model */
 #define WM_FREE 0xFFFFu    /* vx[] of a free vertex slot */
 
+/* Index storage: vertex and half-edge numbers in the mesh and the refiner's lists are wm_index.
+ * 32-bit by default; a device with little memory builds with -DWM_INDEX_BITS=16 (the board does), which
+ * halves them and limits a mesh to WM_INDEX_MAX / 3 triangles and WM_INDEX_MAX vertices
+ * (wm_mesh_bound says 0 beyond).  Arithmetic stays 32-bit: the same mesh either way. */
+#ifndef WM_INDEX_BITS
+#define WM_INDEX_BITS 32
+#endif
+#if WM_INDEX_BITS == 16
+typedef int16_t wm_index;
+#define WM_INDEX_MAX 32767
+#elif WM_INDEX_BITS == 32
+typedef int32_t wm_index;
+#define WM_INDEX_MAX 0x7FFFFFFF
+#else
+#error "WM_INDEX_BITS is 16 or 32"
+#endif
+
 /* A short text for a return code ("ok", "capacity exhausted", ...); never NULL. */
 const char *wm_strerror(int code);
 
@@ -60,12 +77,12 @@ typedef struct wm_mesh {
     int32_t tri_end, vert_end; /* slots in use (live or free) are 0 .. end-1 */
     int32_t n_tri, n_vert;     /* live triangles and vertices */
     int32_t tri_free, vert_free; /* heads of the free lists, -1 when empty */
-    int32_t *hv;    /* [3 tri_cap] origin vertex of each half-edge; hv[3t] = -1: free slot */
-    int32_t *ho;    /* [3 tri_cap] opposite half-edge, -1 on the border */
+    wm_index *hv;   /* [3 tri_cap] origin vertex of each half-edge; hv[3t] = -1: free slot */
+    wm_index *ho;   /* [3 tri_cap] opposite half-edge, -1 on the border */
     uint8_t *tflag; /* [tri_cap] scratch flags for the algorithms (region, pairing) */
     uint16_t *vx;   /* [vert_cap] column of each vertex; WM_FREE: free slot */
     uint16_t *vy;   /* [vert_cap] row */
-    int32_t *vh;    /* [vert_cap] one half-edge leaving the vertex */
+    wm_index *vh;   /* [vert_cap] one half-edge leaving the vertex */
 } wm_mesh;
 
 #define WM_NEXT(e) ((e) - (e) % 3 + ((e) + 1) % 3)

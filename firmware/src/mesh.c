@@ -20,14 +20,17 @@ const char *wm_strerror(int code)
 
 static uint64_t mesh_bytes(int32_t tri_cap, int32_t vert_cap)
 {
-    uint64_t t = (uint64_t)tri_cap, v = (uint64_t)vert_cap;
-    return ALIGN8(12 * t) + ALIGN8(12 * t) + ALIGN8(4 * v) + ALIGN8(2 * v) + ALIGN8(2 * v) + ALIGN8(t);
+    uint64_t t = (uint64_t)tri_cap, v = (uint64_t)vert_cap, w = sizeof(wm_index);
+    return ALIGN8(3 * w * t) + ALIGN8(3 * w * t) + ALIGN8(w * v) + ALIGN8(2 * v) + ALIGN8(2 * v) + ALIGN8(t);
 }
 
 size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap)
 {
     uint64_t b;
     if (tri_cap < 1 || vert_cap < 3 || tri_cap > 0x15555554 || vert_cap > 0x3FFFFFFF) return 0;
+#if WM_INDEX_BITS == 16
+    if (tri_cap > WM_INDEX_MAX / 3 || vert_cap > WM_INDEX_MAX) return 0; /* half-edge and vertex numbers */
+#endif
     b = mesh_bytes(tri_cap, vert_cap);
     if (b > (uint64_t)(size_t)-1) return 0;
     return (size_t)b;
@@ -54,12 +57,12 @@ int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t hei
     m->vert_cap = vert_cap;
     m->tri_end = m->vert_end = m->n_tri = m->n_vert = 0;
     m->tri_free = m->vert_free = -1;
-    m->hv = (int32_t *)(void *)p;
-    p += ALIGN8(12 * (uint64_t)tri_cap);
-    m->ho = (int32_t *)(void *)p;
-    p += ALIGN8(12 * (uint64_t)tri_cap);
-    m->vh = (int32_t *)(void *)p;
-    p += ALIGN8(4 * (uint64_t)vert_cap);
+    m->hv = (wm_index *)(void *)p;
+    p += ALIGN8(3 * sizeof(wm_index) * (uint64_t)tri_cap);
+    m->ho = (wm_index *)(void *)p;
+    p += ALIGN8(3 * sizeof(wm_index) * (uint64_t)tri_cap);
+    m->vh = (wm_index *)(void *)p;
+    p += ALIGN8(sizeof(wm_index) * (uint64_t)vert_cap);
     m->vx = (uint16_t *)(void *)p;
     p += ALIGN8(2 * (uint64_t)vert_cap);
     m->vy = (uint16_t *)(void *)p;

@@ -26,7 +26,7 @@ int32_t wm_tri_cap_max(int32_t width, int32_t height)
 static uint64_t state_bytes(int32_t tri_cap, int32_t vert_cap)
 {
     uint64_t items = (uint64_t)(tri_cap > vert_cap ? tri_cap : vert_cap);
-    return ALIGN8(8 * (uint64_t)tri_cap) + ALIGN8(8 * items) + ALIGN8(5 * (uint64_t)vert_cap);
+    return ALIGN8(8 * (uint64_t)tri_cap) + ALIGN8(2 * sizeof(wm_index) * items) + ALIGN8(5 * (uint64_t)vert_cap);
 }
 
 static uint64_t refine_bytes(int32_t width, int32_t height, int32_t tri_cap)
@@ -115,9 +115,9 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->err = (uint32_t *)(void *)q;
         r->worst = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
         q += ALIGN8(8 * (uint64_t)tri_cap);
-        r->list = (int32_t *)(void *)q;
-        r->pos = (int32_t *)(void *)(q + 4 * items);
-        q += ALIGN8(8 * items);
+        r->list = (wm_index *)(void *)q;
+        r->pos = (wm_index *)(void *)(q + sizeof(wm_index) * items);
+        q += ALIGN8(2 * sizeof(wm_index) * items);
         r->vkey = (uint32_t *)(void *)q;
         r->vapex = (int8_t *)(void *)(q + 4 * (uint64_t)vc);
     }
@@ -134,7 +134,8 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->limit = p->max_triangles;
         r->limit_is_budget = 1;
     }
-    /* err and worst, then list: at least 3 tri_cap words in one run, the build's scratch. */
+    /* err and worst, then list and pos: at least 3 tri_cap words in one run (8 + 2 x 2 bytes per
+     * slot with 16-bit indices), the build's scratch. */
     rc = wm_mesh_build(&r->mesh, xy, nv, tris, nt, (uint32_t *)r->err);
     if (rc != WM_OK) return rc;
     for (int32_t t = 0; t < r->mesh.tri_end; t++) {

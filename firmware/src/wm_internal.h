@@ -120,8 +120,8 @@ struct wm_refiner {
     int32_t flips, removals; /* this step's legalisation flips and vertex removals */
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
-    int32_t *list;       /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
-    int32_t *pos;        /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
+    wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
+    wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
     int8_t *vapex;       /* [vert_cap] decimation: the triangulation that cost belongs to */
 };

@@ -7,8 +7,9 @@ from wavemesh import native
 
 ROOT = Path(__file__).resolve().parents[2]
 # Debug (WM_CHECK: asserts and the invariant check after every operator) with AddressSanitizer and
-# UndefinedBehaviorSanitizer.
-CHECK_BUILD = ROOT / "build" / "firmware-check"
+# UndefinedBehaviorSanitizer, and 16-bit indices as on the board: the tests that compare its meshes with
+# the release library's (32-bit indices) also prove the two index widths give the same mesh.
+CHECK_BUILD = ROOT / "build" / "firmware-check16"
 
 
 @pytest.fixture(scope="session")
@@ -24,5 +25,6 @@ def release_build():
 
 @pytest.fixture(scope="session")
 def check_build():
-    """build/firmware-check: Debug + WM_CHECK + ASan + UBSan."""
-    return native.build(CHECK_BUILD, "Debug", ("-DWM_SANITIZE=ON",), targets=("wm_unit", "wm_run"))
+    """build/firmware-check16: Debug + WM_CHECK + ASan + UBSan + 16-bit indices."""
+    return native.build(CHECK_BUILD, "Debug", ("-DWM_SANITIZE=ON", "-DWM_INDEX_BITS=16"),
+                        targets=("wm_unit", "wm_run"))
