@@ -44,6 +44,16 @@ two triangles would make one of them overlap a triangle at that vertex;
 checking it directly gives a precise message.)  Euler's relation (6) then
 holds automatically; it is kept as a cheap independent cross-check.
 
+How the checks are computed: over all vertices, triangles and edges at once, in
+int64 with no overflow (coordinates beyond 2^30 stop the check after 1).
+Repeated positions and edges are found by sorting exact integer keys: a vertex's
+position in its bounding box; a directed edge src->dst as ``(lo V + hi) 2 +
+[src > dst]`` (lo, hi the smaller and larger index), so equal neighbours are
+repeated directed edges and runs of one ``lo V + hi`` are the uses of one
+undirected edge.  A check that fails then finds its example lines the way the
+first version did (stable sorts), so the lines are the same; that version is
+kept in tests/host/check_reference.py and the tests require equal results.
+
 :func:`mesh_errors` measures how well the piecewise-planar surface of a mesh
 approximates the height field at every grid sample.
 """
