@@ -10,7 +10,7 @@
 - ``wm_protocol.h``: the wire protocol's frame types, error codes, limits and field offsets
   (``wavemesh.protocol``, the one source of both sides of the protocol)
 
-They are build products (DEVELOPERS.md: nothing built is committed); the tests
+They are build products (README.md: nothing built is committed); the tests
 regenerate them and compare with the Python model.
 
 Template ROM word (``WM_TPL_WORD_BITS`` = 100 bits, one per template id)::
