@@ -6,8 +6,11 @@ column.  :func:`load_heightfield` reads a file, :func:`from_array` takes an
 array; both return a :class:`HeightField` holding the heights (float64) and
 their quantised 16-bit samples.
 
-Formats (chosen by the file extension, case-insensitive; when the extension is
-not one of these, by the first bytes of the file):
+Formats.  NumPy files, PGM and PNG have thin readers here (numpy, Pillow); every
+other raster is read by rasterio, that is by GDAL.  The extension chooses a thin
+reader (case-insensitive); a file with another extension whose first bytes are
+those of a NumPy file, a PGM or a PNG goes to that reader, and anything else to
+GDAL.
 
 - ``.npy``: a NumPy array (``allow_pickle=False``).
 - ``.npz``: a NumPy archive; ``key`` names the array.  Without a key the archive
@@ -18,22 +21,26 @@ not one of these, by the first bytes of the file):
 - ``.png``: one-channel PNG (modes 1, L, I;16, I;16B, I;16L, I, F) read with
   Pillow; 16-bit PNGs keep their full 16-bit values.  Colour, palette or alpha
   images are rejected.
-- ``.tif``/``.tiff``: TIFF or GeoTIFF with one band (a 3-D array with a
-  singleton band axis is squeezed).  Samples equal to the GDAL_NODATA tag
-  (42113) become NaN.
-- ``.asc``: ESRI ASCII grid.  Header lines ``key value`` (keys case-insensitive,
-  any order): ``ncols`` and ``nrows`` are required; ``xllcorner``/``xllcenter``,
-  ``yllcorner``/``yllcenter``, ``cellsize``, ``dx``, ``dy`` are accepted and
-  ignored (the georeference plays no part in the mesh); samples equal to
-  ``NODATA_value`` become NaN.  Then nrows*ncols numbers, row by row, separated
-  by any whitespace.
+- GDAL rasters (:func:`_read_raster`): GeoTIFF and plain TIFF (``.tif``,
+  ``.tiff``), ESRI ASCII grids (``.asc``, GDAL's AAIGrid: a header with ``ncols``,
+  ``nrows``, ``xllcorner``/``xllcenter``, ``yllcorner``/``yllcenter``, ``cellsize``
+  or ``dx``/``dy``, optionally ``NODATA_value``; read as float64), SRTM tiles
+  (``.hgt`` under the tile's own name, e.g. ``N36W084.hgt``: GDAL knows the
+  tile's place and size from it), Erdas Imagine (``.img``), ESRI ``.bil``/``.flt``
+  with their ``.hdr``, GDAL virtual rasters (``.vrt``) and GDAL's other raster
+  formats.  The raster must hold one band and one image.  Samples GDAL masks
+  (equal to the band's no-data value, or masked by the file's mask band) become
+  NaN; a band scale and offset are applied.  The georeference is kept in
+  ``HeightField.transform`` and ``HeightField.crs``; it plays no part in the mesh.
+  An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers (GDAL itself
+  would read missing samples or text as 0 without a word).
 
 Accepted data: a 2-D array of bool, integer or float samples, at least 2 x 2.
 Non-finite samples (NaN, +-inf, no-data) are an error unless ``fill`` is given:
-``fill="nearest"`` replaces each by the value of the nearest finite sample and
-a number replaces them by that number (see :func:`fill_nearest`).  Every problem
-a user can cause is an :class:`~wavemesh.errors.InputError` with a one-line
-message.
+``fill="nearest"`` replaces each by the value of a nearest finite sample
+(exact Euclidean distance, :func:`fill_nearest`) and a number replaces them by
+that number.  Every problem a user can cause is an
+:class:`~wavemesh.errors.InputError` with a one-line message.
 
 Quantisation (the contract the RTL and the firmware rely on; ``quantise``):
 
@@ -52,13 +59,16 @@ Quantisation (the contract the RTL and the firmware rely on; ``quantise``):
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import struct
+import sys
 import tokenize
+import warnings
 import zipfile
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -66,45 +76,43 @@ from wavemesh.errors import InputError
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
 
-SUPPORTED_FORMATS = ".npy, .npz, .pgm (P2/P5), .png, .tif/.tiff (GeoTIFF), .asc (ESRI ASCII grid)"
+SUPPORTED_FORMATS = (
+    ".npy, .npz, .pgm (P2/P5), .png, and through GDAL: .tif/.tiff (GeoTIFF), .asc (ESRI ASCII grid), "
+    ".hgt (SRTM), .img (Erdas Imagine), .bil/.flt (ESRI), .vrt and GDAL's other rasters"
+)
 
+# The thin readers, by extension; every other file goes to GDAL (after a look at its first bytes).
 _EXTENSIONS = {
     ".npy": "npy",
     ".npz": "npz",
     ".pgm": "pgm",
     ".png": "png",
-    ".tif": "tiff",
-    ".tiff": "tiff",
-    ".asc": "asc",
 }
 
-_GDAL_NODATA_TAG = 42113
-
-_ASC_KEYS = {
-    "ncols",
-    "nrows",
-    "xllcorner",
-    "xllcenter",
-    "yllcorner",
-    "yllcenter",
-    "cellsize",
-    "dx",
-    "dy",
-    "nodata_value",
+# What GDAL files are called in messages, by extension.
+_RASTER_KINDS = {
+    ".tif": "TIFF",
+    ".tiff": "TIFF",
+    ".asc": "ESRI ASCII grid",
+    ".hgt": "SRTM .hgt",
+    ".img": "Erdas Imagine .img",
+    ".bil": "ESRI .bil",
+    ".flt": "ESRI .flt",
+    ".vrt": "GDAL VRT",
 }
 
-# Exceptions the file readers (numpy, zipfile, zlib, Pillow, tifffile) raise for
+# Exceptions the thin readers (numpy, zipfile, zlib, Pillow) and rasterio raise for
 # unreadable, truncated or corrupt files.  Only caught around library calls.
 _READ_ERRORS: tuple[type[BaseException], ...] = (
-    OSError,
+    OSError,  # includes rasterio's RasterioIOError
     ValueError,
     TypeError,
     EOFError,
     KeyError,
     IndexError,
     SyntaxError,
-    ArithmeticError,  # e.g. ZeroDivisionError from a corrupt TIFF tag
-    RuntimeError,  # includes NotImplementedError (unsupported zip or TIFF features)
+    ArithmeticError,
+    RuntimeError,  # includes NotImplementedError (unsupported zip features)
     MemoryError,  # a corrupt header claiming an enormous array
     struct.error,
     zlib.error,
@@ -124,6 +132,11 @@ class HeightField:
     lossless: bool  # offset + scale * samples == values exactly
     source: str  # path or description, for reports
     filled: int = 0  # number of non-finite samples replaced by fill
+    # The georeference of a GDAL raster (None otherwise, and after --crop/--decimate): the affine
+    # (a, b, c, d, e, f) with x = a*col + b*row + c, y = d*col + e*row + f, (0, 0) the outer corner of
+    # sample (0, 0)'s cell (samples sit at cell centres); and the CRS ("EPSG:4326" or WKT).
+    transform: tuple[float, ...] | None = None
+    crs: str | None = None
 
     @property
     def width(self) -> int:
@@ -273,8 +286,9 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
     )
 
 
+
 def load_heightfield(path: str, key: str | None = None, fill: str | float | None = None) -> HeightField:
-    """Read a height field file (format by extension, else by content) and quantise it."""
+    """Read a height field file (a thin reader by extension or first bytes, else GDAL) and quantise it."""
     path = os.fspath(path)
     fill_mode = parse_fill(fill)  # a bad --fill is reported before the file is read
     try:
@@ -283,21 +297,19 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
     except OSError as e:
         raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
     ext = os.path.splitext(path)[1].lower()
-    fmt = _EXTENSIONS.get(ext) or _sniff(head)
-    if fmt is None:
-        raise InputError(
-            f"cannot read {path}: unknown format (extension {ext or 'none'!r}, content not recognised); "
-            f"supported formats: {SUPPORTED_FORMATS}"
-        )
+    fmt = _EXTENSIONS.get(ext) or _sniff(head) or "raster"
     if key is not None and fmt != "npz":
-        raise InputError(f"{path}: --key applies only to .npz files, this is a {fmt} file")
+        what = "GDAL raster" if fmt == "raster" else fmt
+        raise InputError(f"{path}: --key applies only to .npz files, this is a {what} file")
+    if fmt == "raster":
+        array, transform, crs = _read_raster(path, ext)
+        hf = from_array(array, source=path, fill=fill_mode)
+        return replace(hf, transform=transform, crs=crs)
     reader = {
         "npy": _read_npy,
         "npz": lambda p: _read_npz(p, key),
         "pgm": _read_pgm,
         "png": _read_png,
-        "tiff": _read_tiff,
-        "asc": _read_asc,
     }[fmt]
     return from_array(reader(path), source=path, fill=fill_mode)
 
@@ -307,226 +319,50 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
 
 
 def fill_nearest(values: np.ndarray, bad: np.ndarray) -> np.ndarray:
-    """Replace ``values[bad]`` by the value of the nearest sample that is not bad.
+    """Replace ``values[bad]`` by the value of a nearest sample that is not bad.
 
-    Exact Euclidean nearest (squared distance ``drow**2 + dcol**2``), computed
-    with the two-pass separable method of Felzenszwalb and Huttenlocher
-    ("Distance transforms of sampled functions", 2012), vectorised over rows
-    with NumPy:
+    Nearest by exact Euclidean distance on the grid (``drow**2 + dcol**2``):
+    ``scipy.ndimage.distance_transform_edt`` with ``return_indices=True`` gives,
+    for every bad sample, the row and column of a nearest good one.
 
-    1. for every sample and every column, the nearest good row in that column
-       (cumulative max/min of row indices; equally near above and below: above);
-    2. for every row containing bad samples, the lower envelope of the parabolas
-       ``(x - c)**2 + drow(c)**2`` over the columns ``c`` holding a good sample,
-       evaluated at each column ``x`` (exact integer arithmetic).
+    Ties (several good samples equally near): the choice is scipy's.  Its
+    algorithm is a fixed computation on the mask alone, so the choice depends on
+    which samples are bad, never on the heights, and is the same on every run;
+    scipy documents no rule, and wavemesh promises none beyond "a nearest good
+    sample".  (Measured on scipy 1.17: the smallest column, then the smallest
+    row, which is also what the hand-written fill it replaced did.)
 
-    Ties are deterministic: among equally near good samples the one with the
-    smallest column wins, then the smallest row.
-
-    Small holes are resolved first by a local search: the offsets with
-    ``drow**2 + dcol**2 <= 4**2`` are tried in (distance, dcol, drow) order and the
-    first good sample found is the nearest (same tie rule).  Only rows holding
-    samples farther than that from any good sample go through the two passes,
-    whose cost is O(H*W) with one Python-level loop over columns per block of
-    rows.  At least one sample must be good.  Returns a new array.
+    At least one sample must be good.  Returns a new float64 array; costs
+    O(H*W) time and two int32 index arrays of H*W.
     """
-    values = np.ascontiguousarray(values, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
     bad = np.asarray(bad, dtype=bool)
     out = values.copy()
     if not bad.any():
         return out
-    good = ~bad
-    if not good.any():
+    if bad.all():
         raise InputError("all samples are NaN, infinite or no-data; nothing to fill from")
-    h, w = values.shape
+    from scipy import ndimage  # imported here: only --fill nearest needs scipy
 
-    # Stage 1: look for a good sample among the offsets with drow**2 + dcol**2 <= _LOCAL_RADIUS**2,
-    # in increasing (distance, dcol, drow) order; the first one found is the nearest.  Only
-    # samples within _LOCAL_RADIUS rows and columns of a good sample can succeed.
-    near = _dilate(good, _LOCAL_RADIUS)
-    hr, hc = np.nonzero(bad & near)
-    todo = np.ones(len(hr), dtype=bool)
-    for dr, dc in _LOCAL_OFFSETS:
-        idx = np.nonzero(todo)[0]
-        if not idx.size:
-            break
-        r, c = hr[idx] + dr, hc[idx] + dc
-        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        idx, r, c = idx[inside], r[inside], c[inside]
-        hit = good[r, c]
-        idx, r, c = idx[hit], r[hit], c[hit]
-        out[hr[idx], hc[idx]] = values[r, c]
-        todo[idx] = False
-    far = bad & ~near
-    far[hr[todo], hc[todo]] = True
-    if not far.any():
-        return out
-
-    # Stage 2: exact two-pass method for the rows still holding unresolved samples.
-    # Pass 1 (nearest good row in a column) runs on the columns that can matter only: first
-    # those of the unresolved samples, whose own column bounds their distance D, then every
-    # column within D of one of them.
-    rows_h = np.arange(h)[:, None]
-    far_cols = np.nonzero(far.any(axis=0))[0]
-    c0, c1 = int(far_cols[0]), int(far_cols[-1])
-    if 2 * (c1 - c0 + 1) > w:
-        c0, c1 = 0, w - 1  # narrowing would not pay for a second pass
-    up, down = _nearest_rows(good[:, c0 : c1 + 1])
-    lo, hi = (0, w - 1) if (c0, c1) == (0, w - 1) else _reach(far[:, c0 : c1 + 1], up, down, rows_h, c0, w)
-    if (lo, hi) != (c0, c1):
-        c0, c1 = lo, hi
-        up, down = _nearest_rows(good[:, c0 : c1 + 1])
-    all_cols = np.nonzero(good[:, c0 : c1 + 1].any(axis=0))[0].astype(np.int64) + c0
-    hole_rows = np.nonzero(far.any(axis=1))[0]
-    flat = values.ravel()
-    block = max(1, (1 << 22) // max(len(all_cols), 1))  # bound the envelope arrays to ~4M entries each
-    for start in range(0, len(hole_rows), block):
-        rr = hole_rows[start : start + block]
-        ri = rr[:, None].astype(np.int64)
-        fb = far[rr]
-        xs = np.nonzero(fb.any(axis=0))[0]
-        x0, x1 = int(xs[0]), int(xs[-1])
-        ub, db = up[rr], down[rr]
-        fbs = fb[:, x0 : x1 + 1]
-        lo, hi = _reach(fbs, ub[:, x0 - c0 : x1 - c0 + 1], db[:, x0 - c0 : x1 - c0 + 1], ri, x0, w)
-        cols = all_cols[(all_cols >= lo) & (all_cols <= hi)]
-        uc = ub[:, cols - c0].astype(np.int64)
-        dc = db[:, cols - c0].astype(np.int64)
-        near_row = np.where(ri - uc <= dc - ri, uc, dc)  # nearest good row per (row, column); ties: above
-        dist = np.abs(near_row - ri)
-        cost = dist * dist + cols[None, :] ** 2  # f(c) + c**2 of each parabola
-        which = _envelope_argmin(cost, cols, x0, x1)  # (len(rr), x1 - x0 + 1) index into cols
-        src = flat[np.take_along_axis(near_row, which, axis=1) * w + cols[which]]
-        out[rr, x0 : x1 + 1] = np.where(fbs, src, out[rr, x0 : x1 + 1])
+    rows, cols = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    out[bad] = values[rows[bad], cols[bad]]
     return out
-
-
-_LOCAL_RADIUS = 4
-_LOCAL_OFFSETS = sorted(
-    (
-        (dr, dc)
-        for dr in range(-_LOCAL_RADIUS, _LOCAL_RADIUS + 1)
-        for dc in range(-_LOCAL_RADIUS, _LOCAL_RADIUS + 1)
-        if 0 < dr * dr + dc * dc <= _LOCAL_RADIUS**2
-    ),
-    key=lambda o: (o[0] * o[0] + o[1] * o[1], o[1], o[0]),
-)
-
-
-def _nearest_rows(good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample, the nearest good row at or above it and at or below it in its column.
-
-    int32 arrays; a side without a good sample gives -2**30 (above) or 2**30 (below).
-    """
-    missing = np.int32(1 << 30)
-    rows = np.arange(good.shape[0], dtype=np.int32)[:, None]
-    up = np.where(good, rows, -missing)
-    np.maximum.accumulate(up, axis=0, out=up)
-    down = np.where(good, rows, missing)[::-1]
-    down = np.ascontiguousarray(np.minimum.accumulate(down, axis=0)[::-1])
-    return up, down
-
-
-def _reach(mask: np.ndarray, up: np.ndarray, down: np.ndarray, rows: np.ndarray, x0: int, w: int):
-    """Column range ``(lo, hi)`` holding the nearest good sample of every masked sample.
-
-    A masked sample at (row, x) has a good sample ``D = min(row - up, down - row)`` away in
-    its own column, so its nearest lies in columns ``x - D .. x + D``; clipped to 0..w-1.
-    """
-    reach = np.minimum(rows - up, down - rows)
-    x = np.arange(x0, x0 + mask.shape[1])[None, :]
-    lo = int(np.min(np.where(mask, x - reach, w)))
-    hi = int(np.max(np.where(mask, x + reach, -1)))
-    return max(0, lo), min(w - 1, hi)
-
-
-def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    """Samples within ``radius`` rows and ``radius`` columns of a True sample."""
-    out = mask.copy()
-    for axis in (0, 1):
-        src = out.copy()
-        n = src.shape[axis]
-        for d in range(1, min(radius, n - 1) + 1):
-            if axis == 0:
-                out[d:] |= src[:-d]
-                out[:-d] |= src[d:]
-            else:
-                out[:, d:] |= src[:, :-d]
-                out[:, :-d] |= src[:, d:]
-    return out
-
-
-def _envelope_argmin(cost: np.ndarray, cols: np.ndarray, x0: int, x1: int) -> np.ndarray:
-    """For each row and x in x0..x1, the index p minimising ``cost[:, p] - 2*x*cols[p]``.
-
-    ``cost[:, p] = f(p) + cols[p]**2``, so this minimises ``(x - cols[p])**2 + f(p)``:
-    the lower envelope of parabolas, built and queried for all rows at once.
-    Breakpoints ``z = num / den`` are exact integer fractions (den > 0); ties go to
-    the smaller column.
-    """
-    n, m = cost.shape
-    big = np.int64(1) << 40  # stands for +-infinity in breakpoints
-    ar = np.arange(n)
-    v = np.zeros((n, m), dtype=np.int64)  # envelope parabolas (index into cols)
-    znum = np.zeros((n, m + 1), dtype=np.int64)
-    zden = np.ones((n, m + 1), dtype=np.int64)
-    k = np.zeros(n, dtype=np.int64)  # index of the last parabola in each envelope
-    znum[:, 0] = -big
-    znum[:, 1] = big
-    for p in range(1, m):
-        q = cols[p]
-        fq = cost[:, p]
-        b = ar
-        while b.size:
-            kb = k[b]
-            vp = v[b, kb]
-            num = fq[b] - cost[b, vp]
-            den = 2 * (q - cols[vp])
-            pop = num * zden[b, kb] <= znum[b, kb] * den  # new breakpoint s <= z[k]
-            keep = ~pop
-            if keep.any():
-                pb = b[keep]
-                kk = kb[keep] + 1
-                k[pb] = kk
-                v[pb, kk] = p
-                znum[pb, kk] = num[keep]
-                zden[pb, kk] = den[keep]
-                znum[pb, kk + 1] = big
-                zden[pb, kk + 1] = 1
-            b = b[pop]
-            k[b] -= 1
-    which = np.empty((n, x1 - x0 + 1), dtype=np.int64)
-    kq = np.zeros(n, dtype=np.int64)
-    for x in range(x0, x1 + 1):
-        b = ar
-        while b.size:
-            nk = kq[b] + 1
-            adv = znum[b, nk] < x * zden[b, nk]  # z[k+1] < x: move right
-            b = b[adv]
-            kq[b] += 1
-        which[:, x - x0] = v[ar, kq]
-    return which
 
 
 # ---------------------------------------------------------------------------
-# Format readers: each returns an array (validated later by from_array)
+# Thin format readers: each returns an array (validated later by from_array)
 
 
 def _sniff(head: bytes) -> str | None:
-    """Identify a format from the first bytes of a file, or None."""
+    """A thin reader's format from the first bytes of a file, or None (then GDAL tries)."""
     if head.startswith(b"\x93NUMPY"):
         return "npy"
     if head.startswith((b"PK\x03\x04", b"PK\x05\x06")):
         return "npz"
     if head.startswith(b"\x89PNG\r\n\x1a\n"):
         return "png"
-    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
-        return "tiff"
     if re.match(rb"P[25]\s", head):
         return "pgm"
-    m = re.match(rb"\s*([A-Za-z_]+)\s", head)
-    if m and m.group(1).decode("ascii").lower() in _ASC_KEYS:
-        return "asc"
     return None
 
 
@@ -682,116 +518,159 @@ def _read_png(path: str) -> np.ndarray:
     return arr
 
 
-def _read_tiff(path: str) -> np.ndarray:
-    import tifffile  # imported here: only TIFF needs tifffile
+# ---------------------------------------------------------------------------
+# GDAL rasters, through rasterio
 
+
+def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, ...] | None, str | None]:
+    """Read band 1 of a raster GDAL can open: ``(masked heights, transform, crs)``.
+
+    The mask is GDAL's (no-data value, mask band); the band's scale and offset
+    are applied.  ``transform`` is the affine ``(a, b, c, d, e, f)`` mapping a
+    (column, row) position to ``x = a*col + b*row + c``, ``y = d*col + e*row + f``,
+    with (0, 0) the outer corner of the first sample's cell, so sample (col, row)
+    sits at (col + 0.5, row + 0.5); None when the file has no georeference, and
+    ``crs`` then also None.
+    """
+    import rasterio  # imported here: only GDAL rasters need rasterio (and its start-up cost)
+    from rasterio._err import CPLE_BaseError
+    from rasterio.errors import NotGeoreferencedWarning, RasterioError
+
+    _quiet_rasterio_logs()
+    kind = _RASTER_KINDS.get(ext)
+    errors = (RasterioError, CPLE_BaseError, *_READ_ERRORS)
     try:
-        with tifffile.TiffFile(path) as tif:
-            if not tif.series or not tif.pages:
-                raise InputError(f"cannot read {path}: the TIFF file holds no image")
-            arr = tif.series[0].asarray()
-            tag = tif.pages[0].tags.get(_GDAL_NODATA_TAG)
-            nodata_text = tag.value if tag is not None else None
-    except _READ_ERRORS as e:
-        raise InputError(f"cannot read {path}: not a valid TIFF file ({_one_line(e)})") from None
-    arr = np.asarray(arr)
-    if arr.ndim == 3 and arr.shape[0] == 1:
-        arr = arr[0]
-    elif arr.ndim == 3 and arr.shape[2] == 1:
-        arr = arr[:, :, 0]
-    elif arr.ndim == 3:
+        # AAIGRID_DATATYPE: ESRI ASCII grids as float64, not float32 (their text holds any precision)
+        env = rasterio.Env(AAIGRID_DATATYPE="Float64")
+        with env, warnings.catch_warnings(), _undecodable_gdal_messages():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            try:
+                ds = rasterio.open(path)
+            except errors as e:
+                if kind is None:
+                    raise InputError(
+                        f"cannot read {path}: unknown format (extension {ext or 'none'!r}, content not "
+                        f"recognised); supported formats: {SUPPORTED_FORMATS}"
+                    ) from None
+                hint = " (an SRTM tile keeps its own name, e.g. N36W084.hgt)" if ext == ".hgt" else ""
+                raise InputError(
+                    f"cannot read {path}: not a valid {kind} file{hint} (GDAL: {_gdal_message(e, path)})"
+                ) from None
+            with ds:
+                what = f"{path}: {ds.driver} raster"
+                if len(ds.subdatasets) > 1 or (ds.count == 0 and ds.subdatasets):
+                    raise InputError(
+                        f"{what} holds {len(ds.subdatasets)} images; a height field needs one, "
+                        f"extract it (e.g. gdal_translate {ds.subdatasets[0]} one.tif)"
+                    )
+                if ds.count != 1:
+                    raise InputError(
+                        f"{what} has {ds.count} bands ({ds.height} x {ds.width}); a height field needs "
+                        f"a single band, extract one (e.g. gdal_translate -b 1)"
+                    )
+                if ds.driver == "AAIGrid":
+                    _check_ascii_grid(path, ds.height, ds.width)
+                if ds.driver in _RAW_DRIVERS:
+                    _check_raw_size(path, ds)
+                array = ds.read(1, masked=True)
+                scale, offset = ds.scales[0], ds.offsets[0]
+                georeferenced = ds.crs is not None or not ds.transform.is_identity
+                transform = tuple(float(t) for t in ds.transform[:6]) if georeferenced else None
+                crs = ds.crs.to_string() if ds.crs is not None else None
+    except errors as e:
         raise InputError(
-            f"{path}: TIFF has shape {tuple(arr.shape)} (several bands or pages); "
-            f"a height field needs a single band, extract one (e.g. gdal_translate -b 1)"
-        )
-    if nodata_text is not None and arr.dtype.kind in "biuf":
-        if isinstance(nodata_text, bytes):
-            nodata_text = nodata_text.decode("latin-1")
-        text = str(nodata_text).strip().strip("\x00").strip()
-        try:
-            nodata = float(text)
-        except ValueError:
-            raise InputError(f"{path}: GDAL_NODATA tag {_short(text)} is not a number") from None
-        if not np.isnan(nodata):
-            arr = _mark_nodata(arr, nodata)
-    return arr
+            f"cannot read {path}: {kind or 'raster'} data is corrupt ({_gdal_message(e, path)})"
+        ) from None
+    if (scale, offset) != (1.0, 0.0):
+        array = array.astype(np.float64) * scale + offset
+    return array, transform, crs
 
 
-def _read_asc(path: str) -> np.ndarray:
-    text = _read_bytes(path).decode("latin-1")
+def _check_ascii_grid(path: str, nrows: int, ncols: int) -> None:
+    """An ESRI ASCII grid's data: exactly nrows * ncols numbers after the header.
+
+    GDAL's AAIGrid driver reads a short last row's missing samples and
+    non-numeric text as 0 and ignores surplus values.
+    """
+    text = _read_bytes(path)
+    header = _ASC_HEADER.match(text)
+    data = text[header.end() if header else 0 :].split()
     where = f"cannot read {path}: ESRI ASCII grid"
-    tokens = text.split()
-    header: dict[str, str] = {}
-    i = 0
-    while i < len(tokens) and not _is_number(tokens[i]):
-        name = tokens[i].lower()
-        if name not in _ASC_KEYS:
-            raise InputError(
-                f"{where}: unknown header key {_short(tokens[i])} "
-                f"(expected ncols, nrows, xllcorner, yllcorner, cellsize, NODATA_value)"
-            )
-        if name in header:
-            raise InputError(f"{where}: header repeats {tokens[i]}")
-        if i + 1 >= len(tokens) or not _is_number(tokens[i + 1]):
-            raise InputError(f"{where}: header key {tokens[i]} has no numeric value")
-        header[name] = tokens[i + 1]
-        i += 2
-    dims = []
-    for name in ("ncols", "nrows"):
-        if name not in header:
-            raise InputError(f"{where}: header has no {name}")
-        try:
-            dims.append(int(header[name]))
-        except ValueError:
-            raise InputError(f"{where}: {name} {header[name]!r} is not an integer") from None
-    ncols, nrows = dims
-    if ncols < 1 or nrows < 1:
-        raise InputError(f"{where}: the grid is {nrows} rows x {ncols} columns; both must be >= 1")
-    count = ncols * nrows
-    data = tokens[i:]
+    count = nrows * ncols
     if len(data) != count:
         what = "truncated" if len(data) < count else "too long"
         raise InputError(
             f"{where}: data is {what}: expected {nrows} x {ncols} = {count} values, found {len(data)}"
         )
     try:
-        arr = np.array(data, dtype=np.float64)
+        np.array(data, dtype=np.float64)
     except ValueError:
         raise InputError(f"{where}: data holds a value that is not a number") from None
-    arr = arr.reshape(nrows, ncols)
-    if "nodata_value" in header:
-        nodata = float(header["nodata_value"])
-        if not np.isnan(nodata):
-            arr = _mark_nodata(arr, nodata)
-    return arr
+
+
+# GDAL's drivers of raw sample files, which read the missing end of a short file as 0 without a word.
+_RAW_DRIVERS = frozenset({"EHdr", "ENVI", "BT"})
+
+
+def _check_raw_size(path: str, ds) -> None:
+    """A raw file holding one band of H x W samples: at least H*W samples' bytes, whatever the layout
+    (header, row padding) its header describes."""
+    bits = ds.tags(1, ns="IMAGE_STRUCTURE").get("NBITS")
+    if bits is not None and bits.isdigit() and int(bits) < 8:
+        return  # packed samples: the bound does not apply
+    need = ds.height * ds.width * np.dtype(ds.dtypes[0]).itemsize
+    size = os.path.getsize(path)
+    if size < need:
+        raise InputError(
+            f"cannot read {path}: {ds.driver} data is truncated: {ds.height} x {ds.width} {ds.dtypes[0]} "
+            f"samples need at least {need} bytes, the file has {size}"
+        )
+
+
+# The header of an ESRI ASCII grid: lines ``key value`` whose key starts with a letter.
+_ASC_HEADER = re.compile(rb"(?:\s*[A-Za-z_]\w*[ \t]+\S+)*")
+
+
+def _gdal_message(e: BaseException, path: str) -> str:
+    """The one line that says what GDAL found wrong (rasterio chains it as the cause)."""
+    cause = e.__cause__ if e.__cause__ is not None and "previous exception" in str(e) else e
+    text = _one_line(cause).rstrip(".")
+    for name in (f"'{path}' ", f"{path}: ", f"{path}, "):
+        text = text.replace(name, "")
+    return text
+
+
+@contextlib.contextmanager
+def _undecodable_gdal_messages():
+    """rasterio hands GDAL's messages to logging as UTF-8; a damaged file can put other bytes in them,
+    and the UnicodeDecodeError would end as a traceback on stderr ("Exception ignored in
+    rasterio._env.log_error").  The message is lost either way; the error it reports is raised."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable):
+        undecodable = isinstance(unraisable.exc_value, UnicodeDecodeError)
+        if not (undecodable and "rasterio" in repr(unraisable.object)):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = previous
+
+
+def _quiet_rasterio_logs() -> None:
+    """GDAL's warnings reach Python's logging through rasterio; without a handler of the
+    application's, they would be printed on stderr by logging's last resort."""
+    import logging  # imported here: rasterio imports it anyway, the rest of wavemesh does not
+
+    logger = logging.getLogger("rasterio")
+    if not any(isinstance(h, logging.NullHandler) for h in logger.handlers):
+        logger.addHandler(logging.NullHandler())
 
 
 # ---------------------------------------------------------------------------
 # Helpers
-
-
-def _mark_nodata(arr: np.ndarray, nodata: float) -> np.ndarray:
-    """A float64 copy of ``arr`` with samples equal to ``nodata`` set to NaN.
-
-    For float arrays a sample also matches when it equals ``nodata`` converted
-    to the array's type (GDAL casts the no-data value to the band type).
-    """
-    values = arr.astype(np.float64)
-    mask = values == nodata
-    if arr.dtype.kind == "f":
-        with np.errstate(over="ignore", invalid="ignore"):
-            mask |= arr == arr.dtype.type(nodata)
-    if mask.any():
-        values[mask] = np.nan
-    return values
-
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def _one_line(e: BaseException | str) -> str:

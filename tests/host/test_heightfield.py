@@ -1,12 +1,21 @@
-"""Height field reading (every format), validation, --fill and 16-bit quantisation."""
+"""Height field reading (every format), validation, --fill and 16-bit quantisation.
+
+The GDAL formats beyond TIFF and ESRI ASCII (SRTM .hgt, .img, .bil, .vrt) and `wavemesh mesh` on
+them are in test_heightfield_gdal.py.
+"""
 
 import json
 import os
 
 import numpy as np
 import pytest
+import rasterio
 import tifffile
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from PIL import Image
+from rasterio.transform import Affine
 from wavemesh.errors import InputError
 from wavemesh.heightfield import (
     HeightField,
@@ -54,15 +63,32 @@ def one_line_error(func, *args, match=None, **kw):
     return msg
 
 
-def brute_nearest(values, bad):
-    """Reference: nearest good sample by (squared distance, column, row)."""
-    out = values.copy()
+def brute_nearest_sets(bad):
+    """Reference, by brute force: for every bad sample, the set of good samples nearest to it
+    (exact squared Euclidean distance in integers), as {(row, col): {(row, col), ...}}."""
     gr, gc = np.nonzero(~bad)
+    nearest = {}
     for r, c in zip(*np.nonzero(bad), strict=True):
         d2 = (gr - r) ** 2 + (gc - c) ** 2
-        k = np.lexsort((gr, gc, d2))[0]
-        out[r, c] = values[gr[k], gc[k]]
-    return out
+        k = np.nonzero(d2 == d2.min())[0]
+        nearest[(int(r), int(c))] = set(zip(gr[k].tolist(), gc[k].tolist(), strict=True))
+    return nearest
+
+
+def assert_nearest_fill(values, bad, filled):
+    """Every good sample kept; every bad one holds the value of one of its nearest good samples.
+
+    ``values`` must be distinct, so a filled value names the sample it was taken from; that sample
+    is returned per bad sample, {(row, col): (row, col)}."""
+    assert len(np.unique(values)) == values.size
+    assert np.array_equal(filled[~bad], values[~bad])
+    where = {float(v): (int(r), int(c)) for (r, c), v in np.ndenumerate(values)}
+    taken = {}
+    for (r, c), nearest in brute_nearest_sets(bad).items():
+        src = where[float(filled[r, c])]
+        assert src in nearest, ((r, c), src, nearest)
+        taken[(r, c)] = src
+    return taken
 
 
 # ---------------------------------------------------------------------------
@@ -164,6 +190,7 @@ def test_png_colour_and_alpha_rejected(tmp_path):
 
 
 def test_tiff_float32(tmp_path):
+    # a plain TIFF (no georeference), written by tifffile: read through GDAL all the same
     rng = np.random.default_rng(4)
     a = (rng.random((13, 29)) * 1000 - 200).astype(np.float32)
     tifffile.imwrite(tmp_path / "f.tif", a)
@@ -171,6 +198,7 @@ def test_tiff_float32(tmp_path):
     assert np.array_equal(hf.values, a.astype(np.float64))
     assert not hf.lossless
     assert hf.max_quantisation_error <= hf.scale / 2 * (1 + 1e-9)
+    assert hf.transform is None and hf.crs is None
 
 
 def test_tiff_int16_gdal_nodata(tmp_path):
@@ -185,16 +213,25 @@ def test_tiff_int16_gdal_nodata(tmp_path):
     expected[a == -9999] = 0
     assert np.array_equal(hf.values, expected)
     hf = load_heightfield(str(path), fill="nearest")
-    # equally near neighbours: the smaller column wins ((0, 0) over (1, 1) and (0, 2); (2, 1) over (1, 2))
-    assert hf.values[0, 1] == 10 and hf.values[2, 2] == 80
+    # equally near neighbours: any of them ((0, 0), (1, 1) or (0, 2); (2, 1) or (1, 2))
+    assert hf.values[0, 1] in (10, 50, 30) and hf.values[2, 2] in (80, 60)
+    assert hf.filled == 2 and np.array_equal(hf.values[a != -9999], a[a != -9999])
 
 
-def test_tiff_singleton_band_squeezed_and_multiband_rejected(tmp_path):
-    a = np.arange(12, dtype=np.uint16).reshape(1, 3, 4)
-    tifffile.imwrite(tmp_path / "one.tif", a)
-    assert np.array_equal(load_heightfield(str(tmp_path / "one.tif")).values, a[0])
+def test_tiff_one_band_read_several_bands_or_images_rejected(tmp_path):
+    a = np.arange(12, dtype=np.uint16).reshape(3, 4)
+    utm = {"crs": "EPSG:32617", "transform": Affine(30, 0, 500000, 0, -30, 4100000)}
+    with rasterio.open(tmp_path / "one.tif", "w", driver="GTiff", width=4, height=3, count=1,
+                       dtype="uint16", **utm) as ds:
+        ds.write(a, 1)
+    hf = load_heightfield(str(tmp_path / "one.tif"))
+    assert np.array_equal(hf.values, a)
+    assert hf.transform == (30.0, 0.0, 500000.0, 0.0, -30.0, 4100000.0) and hf.crs == "EPSG:32617"
     tifffile.imwrite(tmp_path / "rgb.tif", np.zeros((5, 6, 3), dtype=np.uint8), photometric="rgb")
-    one_line_error(load_heightfield, str(tmp_path / "rgb.tif"), match=["single band", "(5, 6, 3)"])
+    one_line_error(load_heightfield, str(tmp_path / "rgb.tif"), match=["single band", "3 bands", "5 x 6"])
+    tifffile.imwrite(tmp_path / "pages.tif", np.zeros((5, 6), dtype=np.uint16))
+    tifffile.imwrite(tmp_path / "pages.tif", np.ones((5, 6), dtype=np.uint16), append=True)
+    one_line_error(load_heightfield, str(tmp_path / "pages.tif"), match=["2 images", "needs one"])
 
 
 def test_asc_with_nodata(tmp_path):
@@ -217,10 +254,26 @@ def test_asc_any_header_order_dx_dy(tmp_path):
 
 
 def test_asc_wrong_count(tmp_path):
-    (tmp_path / "g.asc").write_text("ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2 3 4 5\n")
+    # GDAL alone would read the short grid's missing sample and the text as 0 and ignore the surplus
+    header = "ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n"
+    (tmp_path / "g.asc").write_text(header + "1 2 3 4 5\n")
     one_line_error(load_heightfield, str(tmp_path / "g.asc"), match=["expected 2 x 3 = 6", "found 5"])
-    (tmp_path / "h.asc").write_text("ncols 2\nnrows 2\ncellsize 1\n1 2 3 4 5\n")
-    one_line_error(load_heightfield, str(tmp_path / "h.asc"), match=["expected 2 x 2 = 4", "found 5"])
+    (tmp_path / "h.asc").write_text(header + "1 2 3 4 5 6 7\n")
+    words = ["too long", "expected 2 x 3 = 6", "found 7"]
+    one_line_error(load_heightfield, str(tmp_path / "h.asc"), match=words)
+    (tmp_path / "i.asc").write_text(header + "1 2 3\n4 x 6\n")
+    one_line_error(load_heightfield, str(tmp_path / "i.asc"), match=["not a number"])
+    (tmp_path / "j.asc").write_text(header + "1 2 3\n4 5 6\n")
+    assert load_heightfield(str(tmp_path / "j.asc")).values.tolist() == [[1, 2, 3], [4, 5, 6]]
+
+
+def test_asc_keeps_float64_precision(tmp_path):
+    values = np.array([[1234.5678901, -0.1], [3.25, 1e-7]])
+    rows = "\n".join(" ".join(repr(float(v)) for v in row) for row in values)
+    (tmp_path / "p.asc").write_text(f"ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 10\n{rows}\n")
+    hf = load_heightfield(str(tmp_path / "p.asc"))
+    assert np.array_equal(hf.values, values)  # float32 would not hold these
+    assert hf.transform == (10.0, 0.0, 0.0, 0.0, -10.0, 20.0)
 
 
 def test_unknown_extension_sniffed_by_content(tmp_path):
@@ -233,7 +286,8 @@ def test_unknown_extension_sniffed_by_content(tmp_path):
     Image.fromarray(a.astype(np.uint16)).save(tmp_path / "i.png")
     os.rename(tmp_path / "i.png", tmp_path / "i.bin")
     assert np.array_equal(load_heightfield(str(tmp_path / "i.bin")).values, a)
-    (tmp_path / "g.txt").write_text("ncols 2\nnrows 2\n1 2\n3 4\n")
+    # anything else goes to GDAL, which recognises an ESRI ASCII grid by its content
+    (tmp_path / "g.txt").write_text("ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n1 2\n3 4\n")
     assert np.array_equal(load_heightfield(str(tmp_path / "g.txt")).values, [[1, 2], [3, 4]])
 
 
@@ -360,31 +414,66 @@ def test_fill_nearest_hand_checked():
     n = np.nan
     a = np.array([[1, n, n, 4], [n, n, n, n], [9, n, n, 12]])
     hf = from_array(a, fill="nearest")
-    # (1,1) is equally near (0,0) and (2,0): same column, smaller row wins; (1,2) likewise takes (0,3)
-    assert hf.values.tolist() == [[1, 1, 4, 4], [1, 1, 4, 4], [9, 9, 12, 12]]
+    v = hf.values
+    # one nearest good sample each: (0,1)->(0,0), (0,2)->(0,3), (1,0)->(0,0) or (2,0), ...
+    assert v[0].tolist() == [1, 1, 4, 4] and v[2].tolist() == [9, 9, 12, 12]
+    # (1,0) and (1,1) are equally near (0,0) and (2,0); (1,2) and (1,3) equally near (0,3) and (2,3)
+    assert v[1, 0] in (1, 9) and v[1, 1] in (1, 9) and v[1, 2] in (4, 12) and v[1, 3] in (4, 12)
     assert hf.filled == 8
 
 
 def test_fill_nearest_far_from_good_samples():
     # Two good samples in opposite corners of an 11 x 11 field: every sample takes the nearer one,
-    # a tie (the anti-diagonal) goes to the smaller column, i.e. to (0, 0).
+    # a tie (the anti-diagonal) either.
     a = np.full((11, 11), np.nan)
     a[0, 0], a[10, 10] = 5.0, 7.0
     hf = from_array(a, fill="nearest")
     r, c = np.mgrid[0:11, 0:11]
-    expected = np.where(r**2 + c**2 <= (10 - r) ** 2 + (10 - c) ** 2, 5.0, 7.0)
-    assert np.array_equal(hf.values, expected)
+    d_first, d_last = r**2 + c**2, (10 - r) ** 2 + (10 - c) ** 2
+    assert np.array_equal(hf.values[d_first < d_last], np.full(np.count_nonzero(d_first < d_last), 5.0))
+    assert np.array_equal(hf.values[d_first > d_last], np.full(np.count_nonzero(d_first > d_last), 7.0))
+    assert set(hf.values[d_first == d_last].tolist()) <= {5.0, 7.0}
     assert hf.filled == 119
 
 
-def test_fill_nearest_matches_brute_force():
+def test_fill_nearest_is_a_nearest_sample_random_masks():
     rng = np.random.default_rng(11)
     for _ in range(150):
         h, w = (int(x) for x in rng.integers(2, 30, size=2))
         values = rng.permutation(h * w).reshape(h, w).astype(float)
         bad = rng.random((h, w)) < rng.choice([0.2, 0.7, 0.97])
         bad[rng.integers(h), rng.integers(w)] = False
-        assert np.array_equal(fill_nearest(values, bad), brute_nearest(values, bad))
+        assert_nearest_fill(values, bad, fill_nearest(values, bad))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(bad=arrays(bool, st.tuples(st.integers(1, 14), st.integers(1, 14))), seed=st.integers(0, 2**32 - 1))
+def test_fill_nearest_property(bad, seed):
+    """Any mask: each filled sample takes the value of a nearest valid sample (exact Euclidean
+    distance, found by brute force), valid samples are kept, and the choice among equally near
+    ones depends on the mask alone (the same for other heights, and on every run)."""
+    if bad.all():
+        with pytest.raises(InputError):
+            fill_nearest(np.zeros(bad.shape), bad)
+        return
+    rng = np.random.default_rng(seed)
+    values = rng.permutation(bad.size).reshape(bad.shape).astype(float) - bad.size / 2
+    taken = assert_nearest_fill(values, bad, fill_nearest(values, bad))
+    other = rng.permutation(bad.size).reshape(bad.shape).astype(float) * 0.5 + 1000
+    assert assert_nearest_fill(other, bad, fill_nearest(other, bad)) == taken
+    assert np.array_equal(fill_nearest(values, bad), fill_nearest(values, bad))
+
+
+def test_fill_nearest_symmetric_ties_deterministic():
+    # A lattice of valid samples: most holes are equally near 2 or 4 of them.  Whatever scipy picks,
+    # it is a nearest sample and the same every time.
+    bad = np.ones((40, 40), dtype=bool)
+    bad[::6, ::6] = False
+    values = np.arange(bad.size, dtype=float).reshape(bad.shape)
+    first = fill_nearest(values, bad)
+    assert_nearest_fill(values, bad, first)
+    for _ in range(3):
+        assert np.array_equal(fill_nearest(values, bad), first)
 
 
 def test_fill_value_and_inf():
@@ -401,7 +490,7 @@ def test_fill_nearest_large_with_small_holes():
     a[500:520, 300:330] = np.nan
     hf = from_array(a, fill="nearest")
     assert np.isfinite(hf.values).all()
-    assert hf.values[510, 301] == a[510, 299]
+    assert hf.values[510, 301] == a[510, 299]  # the only sample at distance 2
 
 
 # ---------------------------------------------------------------------------
@@ -494,7 +583,7 @@ def test_garbage_tif(tmp_path):
 def test_unknown_extension_random_bytes(tmp_path):
     rng = np.random.default_rng(9)
     (tmp_path / "x.xyz").write_bytes(b"\x01\x02" + rng.integers(0, 256, 500).astype(np.uint8).tobytes())
-    formats = [".npy", ".npz", ".pgm", ".png", ".tif", ".asc"]
+    formats = [".npy", ".npz", ".pgm", ".png", ".tif", ".asc", ".hgt", ".img", ".bil", ".vrt"]
     one_line_error(load_heightfield, str(tmp_path / "x.xyz"), match=["unknown format", *formats])
 
 
