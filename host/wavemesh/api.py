@@ -144,6 +144,7 @@ class RefineJob:
 
 
 BUG_HINT = "this is a bug in wavemesh: please report it with the input and the options"
+BOUND_EPS = 1e-9  # the float metric's own rounding, relative (docs/refiner.md)
 
 
 def require_proper(mesh: Mesh, what: str) -> None:
@@ -175,9 +176,6 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
         return None
     return (f"the refined mesh is not within zeta: E_max {p.metric} {e:.9g} > zeta {zeta:g} on {on}, though "
             f"the refiner reported every triangle within it")
-
-
-BOUND_EPS = 1e-9  # the float metric's own rounding, relative (docs/refiner.md)
 
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
