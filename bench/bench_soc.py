@@ -5,7 +5,8 @@ the PicoRV32 with the real firmware and the FPGA stage) in fast UART mode, on th
 the board's grid and triangle capacity: Ball and Box (wavemesh.synth, 256 x 256 decimated by 8) and a
 real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
 tests/sim/test_stream_board.py).  The device's cycles per stage come from `--report` (`device_cycles`:
-receive, filter bank, templates, refiner, emit).  The simulator and the firmware are built and started
+receive, filter bank, templates, refiner, emit, and the link I/O of the job apart; docs/protocol.md,
+"Cycle accounting").  The simulator and the firmware are built and started
 with tests/sim's helpers (simboard.py) and driven as tests/sim/test_stream_board.py does (its host
 timeouts for the simulated board and its in-process CLI runner).  Each mesh is also compared with
 `wavemesh mesh` (reported, not asserted).
@@ -24,7 +25,8 @@ sys.path.insert(0, str(ROOT / "tests" / "sim"))
 
 TITLE = "The whole job on the simulated board (SoC, fast mode)"
 GOAL = 10_000  # cycles per output triangle, the whole job (docs/soc.md)
-STAGES = ("receive", "filter", "template", "refine", "emit")
+STAGES = ("receive", "filter", "template", "refine", "emit", "link")  # DONE's counters
+WORK = ("filter", "template", "refine", "emit")  # the device's work: cycles that depend only on the job
 BAUD = 115200  # the board's UART: 10 bits per byte on the wire
 
 # name -> (input, options of `wavemesh stream` and `wavemesh mesh`); "JACKSBORO" is matplotlib's DEM
@@ -65,12 +67,14 @@ def _case(board, name: str, tmp: Path) -> dict:
     levels = rep["refiner"]["levels"]
     out_tris = levels[-1]["triangles"]
     total = sum(cyc[k] for k in STAGES)
+    work = sum(cyc[k] for k in WORK)
     return {
         "name": name, "options": opts, "width": rep["input"]["width"], "height": rep["input"]["height"],
         "levels": rep["parameters"]["levels"], "zeta": rep["parameters"]["zeta"],
         "initial_triangles": rep["initial"]["triangles"], "output_triangles": out_tris,
-        "cycles": {k: cyc[k] for k in STAGES}, "total_cycles": total,
-        "cycles_per_triangle": total / out_tris, "refine_cycles_per_triangle": cyc["refine"] / out_tris,
+        "cycles": {k: cyc[k] for k in STAGES}, "total_cycles": total, "work_cycles": work,
+        "cycles_per_triangle": total / out_tris, "work_cycles_per_triangle": work / out_tris,
+        "refine_cycles_per_triangle": cyc["refine"] / out_tris,
         "board_seconds": total / rep["device"]["clk_hz"], "clk_hz": rep["device"]["clk_hz"],
         "refiner_levels": [{k: lv[k] for k in ("level", "triangles", "splits", "swaps", "device_cycles")}
                            for lv in levels],
@@ -82,10 +86,12 @@ def _case(board, name: str, tmp: Path) -> dict:
 def run() -> dict:
     import re
 
+    from peers import code_state
     from simboard import SimBoard, build
     from test_stream_board import SIM_TIMEOUTS
     from wavemesh import stream as S
 
+    code = code_state()  # the work tree is shared: what the firmware was built from
     exe, fw = build.build_sim(), build.build_firmware()
     saved = S.DEFAULT_TIMEOUTS
     S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS  # read when the CLI opens the device
@@ -101,10 +107,12 @@ def run() -> dict:
     sim = {}
     if m:
         sim = {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3))}
-    return {"goal_cycles_per_triangle": GOAL, "cases": cases, "simulator": sim}
+    return {"goal_cycles_per_triangle": GOAL, "cases": cases, "simulator": sim, "code": code}
 
 
 def markdown(results: dict) -> str:
+    from peers import code_line
+
     goal = results["goal_cycles_per_triangle"]
     cases = [c for c in results["cases"] if "error" not in c]
     clk = cases[0]["clk_hz"] if cases else 25_000_000
@@ -113,15 +121,16 @@ def markdown(results: dict) -> str:
         "FPGA stage, docs/soc.md) in fast UART mode; device cycles per stage from `--report` "
         "(`device_cycles`).  Inputs: wavemesh.synth's Ball and Box at 256 x 256 with `--decimate 8`, "
         "matplotlib's Jacksboro DEM (`--key elevation --decimate 16 --zeta 15`, metres); other options "
-        "`wavemesh stream`'s defaults.",
+        "`wavemesh stream`'s defaults.  " + code_line(results.get("code")),
         "",
         f"**Goal: at most {goal:,} cycles per output triangle for the whole job.**  The simulated clock is "
         f"the board's, {clk / 1e6:g} MHz: 1,000,000 cycles = {1e6 / clk * 1e3:g} ms on a board, and "
         f"the goal is {goal / clk * 1e3:g} ms per triangle.",
         "",
         "| input | grid | M | triangles (initial -> output) | receive | filter | template | refine | emit "
-        "| total | board s | per output triangle | refine per triangle | vs goal | = `mesh` |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| link | work | total | board s | work per triangle | total per triangle | refine per triangle "
+        "| total vs goal | = `mesh` |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in cases:
         cy = c["cycles"]
@@ -129,7 +138,8 @@ def markdown(results: dict) -> str:
             f"| {c['name']} | {c['width']} x {c['height']} | {c['levels']} "
             f"| {c['initial_triangles']} -> {c['output_triangles']} "
             + "".join(f"| {cy[k]:,} " for k in STAGES)
-            + f"| {c['total_cycles']:,} | {c['board_seconds']:.2f} | {c['cycles_per_triangle']:,.0f} "
+            + f"| {c['work_cycles']:,} | {c['total_cycles']:,} | {c['board_seconds']:.2f} "
+            f"| {c['work_cycles_per_triangle']:,.0f} | {c['cycles_per_triangle']:,.0f} "
             f"| {c['refine_cycles_per_triangle']:,.0f} | {c['cycles_per_triangle'] / goal:.1f} x "
             f"| {'yes' if c['same_as_mesh'] else 'NO'} |")
     lines.append("")
@@ -137,11 +147,18 @@ def markdown(results: dict) -> str:
         if "error" in c:
             lines += [f"{c['name']}: the run failed: `{(c['error'] or '?').splitlines()[-1]}`", ""]
     lines += [
-        "*filter* is the FPGA stage (a few hundred cycles) plus the progress frame; *template* counts the "
-        "triangles from the stage's output and builds the initial triangulation on the CPU; *refine* is "
-        "the refiner on the PicoRV32.  *board s* = total cycles / clock.  *receive* and *emit* are "
-        "fast-mode figures (bytes go straight into and out of the UART FIFOs, about 80 cycles per byte); "
-        f"on a board the {BAUD} baud link (2170 cycles per byte) sets their pace instead.",
+        "*filter* is the FPGA stage (about 1.4 cycles per sample, its registers and the wait for it); "
+        "*template* counts the triangles from the stage's output and builds the initial triangulation on "
+        "the CPU; *refine* is the refiner on the PicoRV32 (its storage cleared, set up, level by level); "
+        "*emit* builds each level stream once (header, vertices, triangles, CRC-32).  These four, *work*, "
+        "count no link I/O and depend only on the job: a second run, the pin-accurate UART mode or a "
+        "loaded host give the same numbers (tests/sim/test_stream_board.py).  *link* is the job's link "
+        "I/O (PROGRESS frames, framing and writing the level streams, waiting for ACKs) and *receive* the "
+        "upload: fast-mode figures here (bytes go straight into and out of the UART FIFOs), which "
+        f"depend on the host; on a board the {BAUD} baud line (2170 cycles per byte) sets their pace.  "
+        "*total* = all six, *board s* = total / clock; the goal is for the total.  The counts are "
+        "those of this firmware image: moving code (any change to the firmware) can shift them by about "
+        "1 % (docs/soc.md, \"Cycle accounting\").",
         "",
         "Refiner cycles per level (level: output triangles, splits, swaps, cycles):",
         "",

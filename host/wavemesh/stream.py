@@ -355,8 +355,9 @@ class Device:
             return info
         raise LinkTimeout(f"no device answers on {self.link.url} ({self.t.sync_attempts} HELLOs, "
                           f"{self.t.sync:g} s each)",
-                          "is the device running wavemesh firmware with protocol 2 (`make sim`, "
-                          "`make native-device`), at this --baud, and not serving another client?")
+                          f"is the device running wavemesh firmware with protocol {P.VERSION_MAJOR} "
+                          "(`make sim`, `make native-device`), at this --baud, and not serving another "
+                          "client?")
 
     def status(self) -> dict:
         return self.request(P.FrameType.STATUS, b"", P.FrameType.STATUS_REPLY).fields()

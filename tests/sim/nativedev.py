@@ -2,6 +2,7 @@
 
 ``build_wmdev()`` configures and builds it with CMake into build/native-device (or, with
 ``sanitize=True``, build/native-device-asan: AddressSanitizer and UndefinedBehaviorSanitizer);
+``build_wmdev(target="wm_clocktest")`` builds the engine's accounting test program there too;
 ``NativeDevice`` runs one wmdev process on a free port and collects its output lines.
 """
 
@@ -17,8 +18,9 @@ ROOT = Path(__file__).resolve().parents[2]
 SOURCE = ROOT / "firmware" / "board" / "native"
 
 
-def build_wmdev(sanitize: bool = False) -> Path:
-    """Build wmdev (once per tree; cmake --build is a no-op when nothing changed); returns its path."""
+def build_wmdev(sanitize: bool = False, target: str = "wmdev") -> Path:
+    """Build wmdev, or another target of firmware/board/native (wm_clocktest), once per tree (cmake
+    --build is a no-op when nothing changed); returns its path."""
     from wavemesh.gen import write_all
 
     gen = ROOT / "build" / "gen"
@@ -33,15 +35,15 @@ def build_wmdev(sanitize: bool = False) -> Path:
                 steps.append(["cmake", "-S", str(SOURCE), "-B", str(out), f"-DWM_GEN_DIR={gen}",
                               f"-DCMAKE_BUILD_TYPE={'Debug' if sanitize else 'Release'}",
                               f"-DWM_SANITIZE={'ON' if sanitize else 'OFF'}"])
-            steps.append(["cmake", "--build", str(out), "-j2", "--target", "wmdev"])
+            steps.append(["cmake", "--build", str(out), "-j2", "--target", target])
             for cmd in steps:
                 r = subprocess.run(cmd, capture_output=True, text=True)
                 if r.returncode != 0:
                     tail = r.stdout[-3000:] + r.stderr[-3000:]
-                    raise RuntimeError(f"building wmdev failed: {' '.join(cmd)}\n{tail}")
+                    raise RuntimeError(f"building {target} failed: {' '.join(cmd)}\n{tail}")
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
-    return out / "wmdev"
+    return out / target
 
 
 class NativeDevice(DeviceProcess):

@@ -125,7 +125,7 @@ def test_stream_equals_mesh(case, device, inputs, tmp_path):
         assert rm["refiner"]["fixed_point"] | {"max_triangles": 0} == rs["refiner"]["fixed_point"] | {
             "max_triangles": 0}
     assert rs["device"]["name"] == "wm-nativ" and rs["transfer"]["damaged_frames"] == 0
-    assert set(rs["device_cycles"]) >= {"receive", "filter", "template", "refine", "emit"}
+    assert set(rs["device_cycles"]) >= {"receive", "filter", "template", "refine", "emit", "link"}
 
 
 def test_budget_stops_both_the_same_way(device, inputs, tmp_path):

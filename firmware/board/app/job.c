@@ -19,6 +19,13 @@
  *               xy[2 nv], the lattice bitmap and its row bases
  *   heap end    tris[3 nt] (the packed sort keys share its upper two thirds)
  *
+ * Nothing an earlier job left behind reaches a stage (its cycle counts depend only on this job): the
+ * staging is written before it is read (the bitmap cleared, the row bases, xy, the keys and the
+ * triangles filled in full), COEF, TOUT and HEIGHT are read only where this job's FPGA stage and
+ * upload wrote them, and the storage handed to the refiner (or to the mesh of an initial-only job) is
+ * cleared first: the refiner may read entries it has not written (a heap position it then checks),
+ * and what such a read finds must not be the last job's data.
+ *
  * Vertices sit on the block lattice: lattice column 2i is block column i's left edge, 2i + 1 its
  * middle (when the block is at least 2 wide; a 1-wide last block has no middle of its own); rows
  * likewise.  Positions grow with the lattice index, so numbering the occupied lattice points row by
@@ -77,6 +84,16 @@ uint32_t board_job_capacity(size_t heap_bytes, int32_t width, int32_t height) {
         else hi = c - 1;
     }
     return lo < 2 ? 0 : lo;
+}
+
+/* Zero the words of [mem, mem + bytes) (word-aligned), eight stores per turn. */
+static void clear_storage(void *mem, size_t bytes) {
+    volatile uint32_t *w = mem, *end = w + bytes / 4u;
+    while (end - w >= 8) {
+        w[0] = 0, w[1] = 0, w[2] = 0, w[3] = 0, w[4] = 0, w[5] = 0, w[6] = 0, w[7] = 0;
+        w += 8;
+    }
+    while (w < end) *w++ = 0;
 }
 
 /* In-place heap sort of packed triangle keys. */
@@ -242,6 +259,7 @@ int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail) {
             *detail = (uint32_t)(m - 1);
             return WM_PROTO_E_CAPACITY;
         }
+        clear_storage(heap, (size_t)((uint8_t *)(scratch + 3 * nt) - heap));
         rc = wm_mesh_init(&mesh, heap, mb, w, h, nt, nv);
         if (rc == WM_OK) rc = wm_mesh_build(&mesh, xy, nv, tris, nt, scratch);
         if (rc != WM_OK) {
@@ -256,6 +274,7 @@ int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail) {
     }
 
     wm_proto_stage(p, WM_PROTO_STAGE_REFINE, m - 1);
+    clear_storage(heap, ALIGN8(main_bytes)); /* (below the staging: checked above) */
     {
         wm_field f = {w, h, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE};
         lib = wm_refine_init(&r, heap, main_bytes, &f, &j->params, xy, nv, tris, nt, j->capacity);

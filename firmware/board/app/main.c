@@ -9,8 +9,10 @@
  * capacity the heap holds (app/job.c, board_job_capacity: the refiner's storage and the staging of
  * the initial triangulation for the largest grid) and the name "wm-board".
  *
- * Stage markers (SYS.STAGE, logged by the simulator): 0x00010000 the engine starts serving.
- * LEDs: 0 alive.
+ * Stage markers (SYS.STAGE, logged by the simulator): 0x00010000 the engine starts serving;
+ * 0x00020000 | clock whenever another of the engine's cycle clocks starts to run (proto.h,
+ * WM_PROTO_CLOCK_*: the stage 0..4, 0xFF none, 0x100 | stage inside link I/O), so the simulator's log
+ * shows what each clock counted.  LEDs: 0 alive.
  */
 #include <string.h>
 
@@ -27,6 +29,7 @@
 #endif
 
 #define STAGE_SERVE 0x00010000u
+#define STAGE_CLOCK 0x00020000u
 #define LED_ALIVE 1u
 #define WINDOW 4u            /* DATA frames in flight (the RX FIFO absorbs none of them: polled) */
 #define GETC_CHUNK_MS 1000u  /* longest single wait: 25 M cycles at 25 MHz, far below 2^31 */
@@ -54,6 +57,11 @@ static void io_write(void *ctx, const uint8_t *data, size_t n) {
 static uint64_t io_cycles(void *ctx) {
     (void)ctx;
     return board_cycles();
+}
+
+static void io_mark(void *ctx, uint32_t clock) {
+    (void)ctx;
+    board_stage(STAGE_CLOCK | clock);
 }
 
 int main(void) {
@@ -88,6 +96,7 @@ int main(void) {
     io.getc = io_getc;
     io.write = io_write;
     io.cycles = io_cycles;
+    io.mark = io_mark;
 
     board_stage(STAGE_SERVE);
     for (;;) {

@@ -20,6 +20,12 @@
  *         return WM_PROTO_E_NONE;        (or WM_PROTO_E_CAPACITY / WM_PROTO_E_JOB with *detail)
  *     }
  *
+ * Cycle accounting (DONE): from RUN on, exactly one clock runs at a time: the current stage's
+ * (filter, template, refine, emit: work that depends only on the job) or, inside link I/O (every
+ * frame the job sends, every wait for the host), the link's.  So a stage's count never holds a
+ * cycle that the host's timing, the line's speed or the frames' contents (sequence numbers,
+ * timestamps, SLIP escapes) can change.
+ *
  * Every public symbol starts with wm_proto_.  Frame types, error codes, limits and field offsets
  * come from the generated wm_protocol.h (host/wavemesh/protocol.py is their one source).
  */
@@ -40,7 +46,12 @@ extern "C" {
 #define WM_PROTO_RX_TIMEOUT (-1) /* no byte within the timeout */
 #define WM_PROTO_RX_CLOSED (-2)  /* the link is gone (a socket closed): wm_proto_serve returns */
 
-/* The transport.  All three are required. */
+/* Which clock runs (wm_proto_io.mark): a stage WM_PROTO_STAGE_*, WM_PROTO_CLOCK_NONE (between jobs,
+ * before the job's first stage), or WM_PROTO_CLOCK_LINK | the stage that link I/O interrupted. */
+#define WM_PROTO_CLOCK_NONE 0xFFu
+#define WM_PROTO_CLOCK_LINK 0x100u
+
+/* The transport.  getc, write and cycles are required; mark may be NULL. */
 typedef struct wm_proto_io {
     void *ctx;
     /* The next received byte, waiting up to timeout_ms milliseconds (0: do not wait);
@@ -50,6 +61,9 @@ typedef struct wm_proto_io {
     void (*write)(void *ctx, const uint8_t *data, size_t n);
     /* A free-running counter at caps.clk_hz (wraps after 2^64). */
     uint64_t (*cycles)(void *ctx);
+    /* Optional: called whenever another clock starts to run (WM_PROTO_CLOCK_*), right after the
+     * engine read the counter, so that a trace of the calls shows what each clock counted. */
+    void (*mark)(void *ctx, uint32_t clock);
 } wm_proto_io;
 
 /* What the device states in HELLO_REPLY (docs/protocol.md, HELLO_REPLY). */
@@ -126,10 +140,13 @@ typedef struct wm_proto {
     wm_proto_job job;
     uint32_t total, next;    /* samples expected, samples stored in order */
 
-    /* job accounting */
+    /* job accounting: one clock runs at a time, the current stage's or, inside link I/O, the link's */
     int32_t stage;           /* current stage, -1 none */
-    uint64_t stage_t0, run_t0, level_mark;
+    uint32_t link_depth;     /* > 0: inside link I/O (the stage's clock stands still) */
+    uint64_t t_mark, run_t0;
     uint64_t cycles[WM_PROTO_STAGE_COUNT];
+    uint64_t link;           /* cycles of link I/O during the job */
+    uint64_t work_mark;      /* filter + template + refine cycles when the last level was sent */
     uint8_t level, levels_sent;
     uint32_t e_max, triangles, vertices;
     uint8_t done[WM_PROTO_DONE_BYTES]; /* the DONE payload, kept for its repeats */
@@ -151,14 +168,17 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
 int wm_proto_serve(wm_proto *p);
 
 /* For the job: a stage begins (WM_PROTO_STAGE_FILTER, _TEMPLATE, _REFINE with the level being made).
- * Sends a PROGRESS frame and accounts the cycles since the previous stage. */
+ * Accounts the cycles since the previous stage to that stage, then sends a PROGRESS frame (link I/O:
+ * its cycles count as link cycles, not the stage's). */
 void wm_proto_stage(wm_proto *p, int stage, int level);
 
 /* For the job: sends a level's mesh (wm_mesh_export's order: vertex slots, live triangles in slot
  * order) with the refiner's statistics, and waits until the host has all of it.  The mesh must not
  * change until this returns.  last: no level follows.  Returns WM_PROTO_E_NONE, or non-zero when the
  * job must stop (WM_PROTO_E_ABORTED: the host aborted or started again; WM_PROTO_E_NO_ACK: the host
- * stopped answering; the link closed). */
+ * stopped answering; the link closed).  Building the level stream (its header, vertex slots,
+ * triangles and CRC-32) once counts as the EMIT stage; the PROGRESS frame, the framing, writing,
+ * waiting for the ACK and any resending count as link cycles. */
 int wm_proto_emit_level(wm_proto *p, const wm_mesh *mesh, const wm_level_stats *st, int last);
 
 /* CRC-32 (zlib's): start with 0, pass the result back in to continue. */

@@ -245,6 +245,7 @@ int main(int argc, char **argv) {
     io.getc = io_getc;
     io.write = io_write;
     io.cycles = io_cycles;
+    io.mark = NULL;
     for (;;) {
         c.cfd = accept(c.lfd, NULL, NULL);
         if (c.cfd < 0) {

@@ -279,13 +279,49 @@ static int rx_frame(wm_proto *p, uint32_t wait_ms) {
 }
 
 /* ---------------------------------------------------------------------------------------------- */
-/* Stage accounting and progress */
+/* Cycle accounting and progress
+ *
+ * One clock runs at a time: the current stage's, or, while link_depth > 0, the link's.  Link I/O is
+ * everything whose duration or work depends on something other than the job: every frame the job
+ * sends (PROGRESS carries a timestamp, every frame the device's sequence number, the CRC and the
+ * SLIP escapes follow from both), every write to the transport (a UART's FIFO may be full), every
+ * wait for the host and every resend it asks for.  What is left to the stages (filter, template,
+ * refine, and emit: building each level stream once) depends only on the job, so a job gives the same
+ * stage counts on every run, over any link, at any host speed. */
 
-static void stage_enter(wm_proto *p, int stage) {
+/* The cycles since the last mark go to the clock that ran: the link's or the current stage's. */
+static void charge(wm_proto *p) {
     uint64_t t = now(p);
-    if (p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT) p->cycles[p->stage] += t - p->stage_t0;
+    if (p->link_depth) p->link += t - p->t_mark;
+    else if (p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT) p->cycles[p->stage] += t - p->t_mark;
+    p->t_mark = t;
+}
+
+/* Tells the transport which clock runs from now on (io.mark, for traces). */
+static void mark(wm_proto *p) {
+    if (p->io.mark) {
+        uint32_t c = p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT ? (uint32_t)p->stage : WM_PROTO_CLOCK_NONE;
+        p->io.mark(p->io.ctx, p->link_depth ? c | WM_PROTO_CLOCK_LINK : c);
+    }
+}
+
+/* Another stage begins (not inside link I/O). */
+static void stage_enter(wm_proto *p, int stage) {
+    charge(p);
     p->stage = stage;
-    p->stage_t0 = t;
+    mark(p);
+}
+
+/* Link I/O begins: the stage's clock stops, the link's runs (nested calls count once). */
+static void link_begin(wm_proto *p) {
+    if (p->link_depth == 0) charge(p); /* to the stage */
+    if (++p->link_depth == 1) mark(p);
+}
+
+/* Link I/O ends: the stage's clock runs again. */
+static void link_end(wm_proto *p) {
+    if (p->link_depth == 1) charge(p); /* to the link */
+    if (--p->link_depth == 0) mark(p);
 }
 
 static void send_progress(wm_proto *p, int stage, int level) {
@@ -302,7 +338,9 @@ static void send_progress(wm_proto *p, int stage, int level) {
 void wm_proto_stage(wm_proto *p, int stage, int level) {
     if (stage == WM_PROTO_STAGE_REFINE) p->level = (uint8_t)level;
     stage_enter(p, stage);
+    link_begin(p);
     send_progress(p, stage, level);
+    link_end(p);
 }
 
 /* ---------------------------------------------------------------------------------------------- */
@@ -419,6 +457,8 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     j->params.delta_d = get64(c + WM_PROTO_CONFIG_DELTA_D);
     j->delta_lambda = get32(c + WM_PROTO_CONFIG_DELTA_LAMBDA);
     j->delta_c = delta_c;
+    j->params.delta_lambda = j->delta_lambda;
+    j->params.delta_c = delta_c;
     j->heights = p->heights;
     if (wm_params_check(&j->params) != WM_OK) { /* cannot happen after the checks above */
         *detail = WM_PROTO_CONFIG_ZETA;
@@ -446,10 +486,10 @@ static void do_config(wm_proto *p) {
     p->nak_sent = 0;
     p->state = WM_PROTO_STATE_RECEIVING;
     for (int s = 0; s < WM_PROTO_STAGE_COUNT; s++) p->cycles[s] = 0;
+    p->link = 0;
+    p->link_depth = 0;
     p->stage = -1;
     stage_enter(p, WM_PROTO_STAGE_RECEIVE);
-    j->params.delta_lambda = j->delta_lambda;
-    j->params.delta_c = delta_c;
     reply_ok(p);
 }
 
@@ -661,10 +701,11 @@ static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n) {
     }
 }
 
-/* MESH frames for bytes [from, ltotal); the CRC is taken on the way when from is 0. */
-static void send_level_from(wm_proto *p, uint32_t from) {
+/* MESH frames for bytes [from, ltotal).  The first sending (first: from is 0) takes the stream's CRC
+ * on the way, and only its frames are link I/O: building the stream is the EMIT stage's work.  A
+ * resend happens inside link I/O (the host asked for it). */
+static void send_level_from(wm_proto *p, uint32_t from, int first) {
     uint32_t chunk = (uint32_t)p->caps.max_payload - WM_PROTO_MESH_BYTES;
-    int first = from == 0;
     if (first) p->lcrc = 0;
     while (from < p->ltotal) {
         uint32_t n = p->ltotal - from < chunk ? p->ltotal - from : chunk;
@@ -675,7 +716,9 @@ static void send_level_from(wm_proto *p, uint32_t from) {
         put32(b + WM_PROTO_MESH_OFFSET, from);
         level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
         if (first) p->lcrc = wm_proto_crc32(p->lcrc, b + WM_PROTO_MESH_BYTES, n);
+        link_begin(p);
         send_own(p, WM_PROTO_T_MESH, b, WM_PROTO_MESH_BYTES + n);
+        link_end(p);
         from += n;
     }
 }
@@ -708,10 +751,14 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
         st->level, st->vertices, st->triangles, st->iterations, st->active, st->dependent, st->pairs,
         st->quasi_pairs, st->unpaired, st->edge_splits, st->ternary_splits, st->moves, st->swaps,
         st->bound_splits, st->budget_hit, st->over};
-    uint64_t t = now(p);
     int prev = p->stage, tries = 0;
     uint32_t have = 0, best = 0;
+    uint64_t work;
     if (p->abort) return abort_code(p);
+
+    /* the stage that made this level ends; its cycles (link I/O excluded) since the last level */
+    stage_enter(p, WM_PROTO_STAGE_EMIT);
+    work = p->cycles[WM_PROTO_STAGE_FILTER] + p->cycles[WM_PROTO_STAGE_TEMPLATE] + p->cycles[WM_PROTO_STAGE_REFINE];
 
     /* the header of the level stream */
     p->lm = m;
@@ -722,15 +769,19 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->lhdr[WM_PROTO_LEVEL_HEADER_INDEX_BYTES] = p->lib;
     put32(p->lhdr + WM_PROTO_LEVEL_HEADER_VERTEX_SLOTS, (uint32_t)m->vert_end);
     put32(p->lhdr + WM_PROTO_LEVEL_HEADER_TRIANGLES, (uint32_t)m->n_tri);
-    put64(p->lhdr + WM_PROTO_LEVEL_HEADER_CYCLES, t - p->level_mark);
+    put64(p->lhdr + WM_PROTO_LEVEL_HEADER_CYCLES, work - p->work_mark);
+    p->work_mark = work;
     for (int i = 0; i < WM_PROTO_STAT_FIELDS; i++) put32(p->lhdr + stat_off[i], (uint32_t)stat_val[i]);
     put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_E_MAX, st->e_max);
     p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
     p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
     p->llast = (uint8_t)(last != 0);
 
-    wm_proto_stage(p, WM_PROTO_STAGE_EMIT, st->level);
-    send_level_from(p, 0);
+    link_begin(p);
+    send_progress(p, WM_PROTO_STAGE_EMIT, st->level);
+    link_end(p);
+    send_level_from(p, 0, 1);
+    link_begin(p); /* from here on everything waits for, or answers, the host */
     send_level_end(p);
     for (;;) {
         if (!wait_ack(p, WM_PROTO_T_LEVEL_END, p->levels_sent, &have, &tries, send_level_end)) break;
@@ -742,16 +793,16 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
             p->abort = ABORT_NO_ACK;
             break;
         }
-        send_level_from(p, have);
+        send_level_from(p, have, 0);
         send_level_end(p);
     }
+    link_end(p);
     if (p->abort) return abort_code(p);
     p->levels_sent++;
     p->e_max = st->e_max;
     p->triangles = (uint32_t)m->n_tri;
     p->vertices = (uint32_t)m->n_vert;
     stage_enter(p, prev);
-    p->level_mark = now(p);
     return WM_PROTO_E_NONE;
 }
 
@@ -770,7 +821,9 @@ static void run_job(wm_proto *p) {
     p->e_max = p->triangles = p->vertices = 0;
     p->level = (uint8_t)(p->job.levels - 1);
     p->run_t0 = now(p);
-    p->level_mark = p->run_t0;
+    p->link = 0;
+    p->link_depth = 0;
+    p->work_mark = 0;
     stage_enter(p, -1); /* the receive stage ends */
 
     rc = p->job_fn(p->job_ctx, &p->job, p, &detail);
@@ -796,6 +849,7 @@ static void run_job(wm_proto *p) {
     put64(b + WM_PROTO_DONE_CYCLES_TEMPLATE, p->cycles[WM_PROTO_STAGE_TEMPLATE]);
     put64(b + WM_PROTO_DONE_CYCLES_REFINE, p->cycles[WM_PROTO_STAGE_REFINE]);
     put64(b + WM_PROTO_DONE_CYCLES_EMIT, p->cycles[WM_PROTO_STAGE_EMIT]);
+    put64(b + WM_PROTO_DONE_CYCLES_LINK, p->link);
     if (rc) {
         p->last_error = (uint8_t)rc;
         p->last_detail = detail;
