@@ -25,7 +25,7 @@ help:
 	@echo "make test-rtl       RTL tests (cocotb on Verilator) and generated-ROM checks"
 	@echo "make test-firmware  native firmware tests"
 	@echo "make test-sim       simulated-board tests"
-	@echo "make lint           ruff over host/ and tests/"
+	@echo "make lint           ruff over the Python, verilator --lint-only -Wall over rtl/"
 	@echo "make demo           stream a real DEM through the simulated board, and mesh it in software, into $(OUT)/"
 	@echo "make docs           regenerate the pictures and tables in docs/"
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
@@ -110,8 +110,16 @@ native-device: native-device-build
 demo-native: $(SETUP_STAMP) gen
 	$(VPY) tools/stream_demo.py --device native --out $(OUT)
 
-lint: $(SETUP_STAMP)
+# ruff over the Python; `verilator --lint-only -Wall` on every module of rtl/, one by one as
+# tests/rtl/test_lint.py does (waivers, each with its reason, only in rtl/lint.vlt); a few seconds.
+PICORV32_DIR = $(shell $(VPY) -c 'import pythondata_cpu_picorv32 as p; print(p.data_location)')
+
+lint: $(SETUP_STAMP) gen
 	$(VPY) -m ruff check host tests tools bench
+	@for f in rtl/*.v; do \
+	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y $(PICORV32_DIR) rtl/lint.vlt \
+	        $$f --top-module $$(basename $$f .v) || { echo "lint: $$f"; exit 1; }; \
+	done; echo "verilator --lint-only -Wall: rtl/*.v clean"
 
 # The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
 DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')

@@ -23,6 +23,7 @@ sys.path.insert(0, str(ROOT / "tests" / "rtl"))
 TITLE = "Template stage (tlut_stage)"
 PARAMS = {"MAX_COLS": 1024, "FIFO_DEPTH": 4}  # the defaults: up to 1024 block columns
 TARGETS = ("ecp5-85k", "up5k")
+SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 
 
 def cycles() -> list[dict]:
@@ -30,7 +31,7 @@ def cycles() -> list[dict]:
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cycles.json"
-        run_rtl("tlut_stage", sorted(RTL.glob("tlut_*.v")), "tlut_stage_tb", parameters=PARAMS,
+        run_rtl("tlut_stage", SOURCES, "tlut_stage_tb", parameters=PARAMS,
                 testcase="test_bench_cycles", extra_env={"TLUT_BENCH_OUT": str(out)})
         return json.loads(out.read_text())
 
@@ -42,7 +43,7 @@ def fpga(target: str) -> dict:
     # synth_pnr reads the sources with no include path; Yosys also looks in its working directory,
     # so the generated wm_templates.vh is written there (generated, as `make gen` does, not copied)
     write_all(fp.BUILD / f"tlut_stage_{target}_{fp._tag(PARAMS)}")
-    r = fp.synth_pnr("tlut_stage", sorted(RTL.glob("tlut_*.v")), PARAMS, target)
+    r = fp.synth_pnr("tlut_stage", SOURCES, PARAMS, target)
     r.pop("yosys_cells", None)
     return r
 

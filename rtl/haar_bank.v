@@ -59,9 +59,9 @@ module haar_bank #
     parameter MAX_HEIGHT = 512,
     // Levels built (largest cfg_levels); 1 .. 15
     parameter MAX_LEVELS = 7,
-    // Records buffered per level between its pipeline and the output merge; power of two >= 2
+    // Records buffered per level between its pipeline and the output merge; >= 2 (any number)
     parameter FIFO_DEPTH = 2,
-    // Approximations buffered in front of each level from the second on; power of two >= 2
+    // Approximations buffered in front of each level from the second on; >= 2 (any number)
     parameter APPROX_FIFO_DEPTH = 2
 )
 (
@@ -143,11 +143,11 @@ reg m_axis_tlast_reg = 1'b0, m_axis_tlast_next;
 
 reg frame_done_reg = 1'b0, frame_done_next;
 
-// per level
+// per level (the FIFOs are wm_fifo: s_ready is "not full", m_valid "not empty", both registers)
 wire frame_in_last;  // level 1's next input is the frame's last sample
-wire [MAX_LEVELS-1:0] fifo_full;     // record FIFOs
-wire [MAX_LEVELS-1:0] fifo_empty;
-wire [MAX_LEVELS:1] afifo_full;      // approximation FIFO in front of level i+1 (none: 0)
+wire [MAX_LEVELS-1:0] fifo_s_ready;  // record FIFOs
+wire [MAX_LEVELS-1:0] fifo_m_valid;
+wire [MAX_LEVELS:1] afifo_s_ready;   // approximation FIFO in front of level i+1 (none: 1)
 wire [MAX_LEVELS*REC_WIDTH-1:0] fifo_rd_data;
 wire [MAX_LEVELS-1:0] fifo_rd_en;
 
@@ -167,7 +167,7 @@ wire start = state_reg == STATE_INIT;
 wire in_fire = s_axis_tvalid && s_axis_tready;
 
 assign s_axis_tready = (state_reg == STATE_RUN) && lvl[0].en;
-assign afifo_full[MAX_LEVELS] = 1'b0;
+assign afifo_s_ready[MAX_LEVELS] = 1'b1;
 
 assign m_axis_tdata = m_axis_tdata_reg;
 assign m_axis_tuser = m_axis_tuser_reg;
@@ -204,7 +204,7 @@ generate
         end
 
         // the level advances when both FIFOs it writes have room
-        wire en = !fifo_full[i] && !afifo_full[i+1];
+        wire en = fifo_s_ready[i] && afifo_s_ready[i+1];
 
         wire in_valid;
         wire [15:0] in_data;
@@ -212,25 +212,25 @@ generate
             assign in_valid = s_axis_tvalid && state_reg == STATE_RUN;
             assign in_data = s_axis_tdata;
         end else begin : gen_in_cascade
-            // the previous level's approximations, when this level is on
-            wire afifo_empty;
+            // the previous level's approximations, when this level is on (the previous level
+            // writes only when en, which includes s_ready; this level reads only when en)
+            wire [$clog2(APPROX_FIFO_DEPTH+1)-1:0] afifo_count_unused;
 
-            haar_fifo #(
-                .WIDTH(16),
+            wm_fifo #(
+                .DATA_WIDTH(16),
                 .DEPTH(APPROX_FIFO_DEPTH)
             )
             afifo_inst (
                 .clk(clk),
                 .rst(rst),
-                .wr_en(lvl[i-1].en && lvl[i-1].rec_valid && lvl_on_reg[i]),
-                .wr_data(lvl[i-1].rec_a),
-                .full(afifo_full[i]),
-                .rd_en(en),
-                .rd_data(in_data),
-                .empty(afifo_empty)
+                .s_data(lvl[i-1].rec_a),
+                .s_valid(lvl[i-1].en && lvl[i-1].rec_valid && lvl_on_reg[i]),
+                .s_ready(afifo_s_ready[i]),
+                .m_data(in_data),
+                .m_valid(in_valid),
+                .m_ready(en),
+                .count(afifo_count_unused)
             );
-
-            assign in_valid = !afifo_empty;
         end
 
         wire in_last;
@@ -269,20 +269,23 @@ generate
         end
 
         wire [69:0] entry;
+        wire [$clog2(FIFO_DEPTH+1)-1:0] fifo_count_unused;
 
-        haar_fifo #(
-            .WIDTH(70),
+        // written only when en (which includes s_ready); read only when granted (m_valid)
+        wm_fifo #(
+            .DATA_WIDTH(70),
             .DEPTH(FIFO_DEPTH)
         )
         fifo_inst (
             .clk(clk),
             .rst(rst),
-            .wr_en(en && rec_valid),
-            .wr_data({rec_d3, rec_d2, rec_d1, rec_a}),
-            .full(fifo_full[i]),
-            .rd_en(fifo_rd_en[i]),
-            .rd_data(entry),
-            .empty(fifo_empty[i])
+            .s_data({rec_d3, rec_d2, rec_d1, rec_a}),
+            .s_valid(en && rec_valid),
+            .s_ready(fifo_s_ready[i]),
+            .m_data(entry),
+            .m_valid(fifo_m_valid[i]),
+            .m_ready(fifo_rd_en[i]),
+            .count(fifo_count_unused)
         );
 
         // block position of the record at the head of the FIFO: records leave in raster order, so
@@ -356,7 +359,7 @@ always @* begin
     sel_top = 1'b0;
     for (k = 0; k < MAX_LEVELS; k = k + 1) begin
         // level k+1 wins when it has a record and no lower level has one
-        grant[k] = !fifo_empty[k] && ((fifo_empty & ((1 << k) - 1)) == ((1 << k) - 1));
+        grant[k] = fifo_m_valid[k] && ((fifo_m_valid & ((1 << k) - 1)) == 0);
         if (grant[k]) begin
             sel_rec = sel_rec | fifo_rd_data[k*REC_WIDTH +: REC_WIDTH];
             sel_level = sel_level | (k[3:0] + 4'd1);
@@ -365,7 +368,7 @@ always @* begin
     end
 end
 
-wire pop = !(&fifo_empty) && out_ready;
+wire pop = (|fifo_m_valid) && out_ready;
 assign fifo_rd_en = grant & {MAX_LEVELS{out_ready}};
 
 always @* begin

@@ -25,9 +25,9 @@
 
 module soc_uart #
 (
-    // RX FIFO depth in bytes; a power of two >= 2
+    // RX FIFO depth in bytes; 2 .. 65535 (any number)
     parameter RX_DEPTH = 64,
-    // TX FIFO depth in bytes; a power of two >= 2
+    // TX FIFO depth in bytes; 2 .. 65535 (any number)
     parameter TX_DEPTH = 64,
     // baud divisor after reset, clock cycles per bit; DIV_MIN..65535
     parameter DIV_RESET = 217,
@@ -99,14 +99,14 @@ wire rx_fifo_in_tvalid = bypass ? s_axis_rx_tvalid : rx_pin_tvalid;
 wire rx_fifo_in_tready;
 wire [7:0] rx_fifo_out_tdata;
 wire rx_fifo_out_tvalid;
-wire [$clog2(RX_DEPTH):0] rx_count;
+wire [$clog2(RX_DEPTH+1)-1:0] rx_count;
 
 // transmitter and TX FIFO
 wire tx_fifo_in_tready;
 wire [7:0] tx_fifo_out_tdata;
 wire tx_fifo_out_tvalid;
 wire tx_fifo_out_tready;
-wire [$clog2(TX_DEPTH):0] tx_count_unused;
+wire [$clog2(TX_DEPTH+1)-1:0] tx_count_unused;
 wire tx_pin_tready;
 wire tx_busy;
 
@@ -126,7 +126,7 @@ assign div = div_reg;
 
 wire tx_empty = !tx_fifo_out_tvalid;
 wire [31:0] status = {
-    {(16 - $clog2(RX_DEPTH) - 1){1'b0}}, rx_count,      // 31:16 RX_COUNT
+    {(16 - $clog2(RX_DEPTH+1)){1'b0}}, rx_count,        // 31:16 RX_COUNT
     5'd0, tx_overrun_reg, rx_frame_err_reg, rx_overrun_reg, // 10 TX_OVERRUN, 9 FRAME_ERR, 8 RX_OVERRUN
     3'd0,
     tx_empty && !tx_busy,                                 // 4 TX_IDLE
@@ -211,33 +211,33 @@ uart_rx uart_rx_inst (
     .frame_error(rx_pin_frame_error)
 );
 
-uart_fifo #(
-    .WIDTH(8),
+wm_fifo #(
+    .DATA_WIDTH(8),
     .DEPTH(RX_DEPTH)
 ) rx_fifo_inst (
     .clk(clk),
     .rst(rst),
-    .s_axis_tdata(rx_fifo_in_tdata),
-    .s_axis_tvalid(rx_fifo_in_tvalid),
-    .s_axis_tready(rx_fifo_in_tready),
-    .m_axis_tdata(rx_fifo_out_tdata),
-    .m_axis_tvalid(rx_fifo_out_tvalid),
-    .m_axis_tready(data_read),
+    .s_data(rx_fifo_in_tdata),
+    .s_valid(rx_fifo_in_tvalid),
+    .s_ready(rx_fifo_in_tready),
+    .m_data(rx_fifo_out_tdata),
+    .m_valid(rx_fifo_out_tvalid),
+    .m_ready(data_read),
     .count(rx_count)
 );
 
-uart_fifo #(
-    .WIDTH(8),
+wm_fifo #(
+    .DATA_WIDTH(8),
     .DEPTH(TX_DEPTH)
 ) tx_fifo_inst (
     .clk(clk),
     .rst(rst),
-    .s_axis_tdata(bus_wdata[7:0]),
-    .s_axis_tvalid(data_write),
-    .s_axis_tready(tx_fifo_in_tready),
-    .m_axis_tdata(tx_fifo_out_tdata),
-    .m_axis_tvalid(tx_fifo_out_tvalid),
-    .m_axis_tready(tx_fifo_out_tready),
+    .s_data(bus_wdata[7:0]),
+    .s_valid(data_write),
+    .s_ready(tx_fifo_in_tready),
+    .m_data(tx_fifo_out_tdata),
+    .m_valid(tx_fifo_out_tvalid),
+    .m_ready(tx_fifo_out_tready),
     .count(tx_count_unused)
 );
 

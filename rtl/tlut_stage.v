@@ -3,7 +3,7 @@
  * (docs/model.md "Blocks", "Labeller", "Templates", "Initial triangulation"; rtl/README.md).
  *
  *   haar_bank records -> [filter, input register] -> tlut_label -> tlut_resolve -> [template
- *   table] -> tlut_fifo -> tlut_expand -> triangles
+ *   table] -> block FIFO (wm_fifo) -> tlut_expand -> triangles
  *
  * With S = 2^M there are ceil((W - 1) / S) x ceil((H - 1) / S) blocks; block (j, i) spans
  * x in [iS, min((i + 1)S, W - 1)] (likewise y) and takes its label from level M's coefficients
@@ -70,7 +70,7 @@
 module tlut_stage #(
     // Row-buffer depth: the most block columns a frame may have, ceil((W - 1) / 2^M) <= MAX_COLS
     parameter MAX_COLS = 1024,
-    // Blocks buffered between resolver and expander (a power of two, >= 2)
+    // Blocks buffered between resolver and expander (>= 2, any number)
     parameter FIFO_DEPTH = 4
 ) (
     input  wire         clk,
@@ -370,25 +370,41 @@ end
 
 wire [9:0] res_template = template_table[{res_label, res_mask}];
 
+wire                  fifo_ready;
 wire                  fifo_valid;
 wire [FIFO_WIDTH-1:0] fifo_data;
+wire [$clog2(FIFO_DEPTH+1)-1:0] fifo_count_unused;
 wire                  exp_ready;
 
 assign fifo_pop = fifo_valid && exp_ready;
 
-tlut_fifo #(
-    .DEPTH(FIFO_DEPTH),
-    .DATA_WIDTH(FIFO_WIDTH)
+// The resolver cannot wait: the credits guarantee the FIFO room for every block it writes
+// (credits count blocks from the labeller's input to the FIFO's output, at most FIFO_DEPTH, so
+// the FIFO holds at most FIFO_DEPTH - 1 when a block arrives and s_ready is high).
+wm_fifo #(
+    .DATA_WIDTH(FIFO_WIDTH),
+    .DEPTH(FIFO_DEPTH)
 )
 fifo_inst (
     .clk(clk),
     .rst(rst),
-    .s_valid(res_valid),
     .s_data({res_user, res_label, res_template}),
+    .s_valid(res_valid),
+    .s_ready(fifo_ready),
+    .m_data(fifo_data),
     .m_valid(fifo_valid),
     .m_ready(exp_ready),
-    .m_data(fifo_data)
+    .count(fifo_count_unused)
 );
+
+`ifndef SYNTHESIS
+// simulation only: a block the FIFO refused would be lost (a credit-accounting error)
+always @(posedge clk) begin
+    if (!rst && res_valid && !fifo_ready) begin
+        $error("Error: block FIFO full when the resolver wrote (instance %m)");
+    end
+end
+`endif
 
 tlut_expand
 expand_inst (

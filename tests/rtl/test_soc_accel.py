@@ -11,5 +11,6 @@ PARAMS = {"MAX_WIDTH": 64, "MAX_HEIGHT": 64, "MAX_LEVELS": 5, "MAX_COLS": 24,
 
 
 def test_soc_accel():
-    sources = [RTL / "soc_accel.v", *sorted(RTL.glob("haar_*.v")), *sorted(RTL.glob("tlut_*.v"))]
+    sources = [RTL / "soc_accel.v", *sorted(RTL.glob("haar_*.v")), *sorted(RTL.glob("tlut_*.v")),
+               RTL / "wm_fifo.v"]
     run("soc_accel", sources, "soc_accel_tb", parameters=PARAMS)

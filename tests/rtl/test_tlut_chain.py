@@ -57,5 +57,5 @@ def test_haar_bank_into_tlut_stage():
     wrapper = src / "tlut_chain.v"
     if not wrapper.exists() or wrapper.read_text() != WRAPPER:
         wrapper.write_text(WRAPPER)
-    sources = sorted(RTL.glob("haar_*.v")) + sorted(RTL.glob("tlut_*.v")) + [wrapper]
+    sources = sorted(RTL.glob("haar_*.v")) + sorted(RTL.glob("tlut_*.v")) + [RTL / "wm_fifo.v", wrapper]
     run("tlut_chain", sources, "tlut_chain_tb")

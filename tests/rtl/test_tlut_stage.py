@@ -21,7 +21,7 @@ from wavemesh import synth
 from wavemesh.check import check_mesh
 from wavemesh.haar import decompose
 
-SOURCES = sorted(RTL.glob("tlut_*.v"))
+SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 # cocotb test names; test_sizes is crossed with idle input cycles and output back-pressure
 TESTS = ["test_synthetic_sets", "test_random_stress", "test_lut_coverage", "test_throughput",
          "test_dropped_records_never_stall", "test_bad_configuration"] + [

@@ -1,4 +1,4 @@
-"""rtl/soc_uart.v (uart_rx, uart_tx, uart_fifo) at its pins with cocotbext-uart, under Verilator.
+"""rtl/soc_uart.v (uart_rx, uart_tx, two wm_fifo) at its pins with cocotbext-uart, under Verilator.
 
 The cocotb side is uart_soc_tb.py: reset state, bytes both ways at two baud divisors, RX and TX
 FIFOs full, a framing error and a glitch, the simulator's FIFO bypass.  Small FIFOs make the full
@@ -7,7 +7,7 @@ cases quick.
 
 from rtl_runner import RTL, run
 
-SOURCES = [RTL / f"{m}.v" for m in ("uart_rx", "uart_tx", "uart_fifo", "soc_uart")]
+SOURCES = [RTL / f"{m}.v" for m in ("uart_rx", "uart_tx", "wm_fifo", "soc_uart")]
 
 
 def test_uart_at_the_pins():

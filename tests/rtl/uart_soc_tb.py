@@ -1,4 +1,4 @@
-"""cocotb bench of rtl/soc_uart.v (uart_rx, uart_tx, two uart_fifo): the UART at its pins.
+"""cocotb bench of rtl/soc_uart.v (uart_rx, uart_tx, two wm_fifo): the UART at its pins.
 
 cocotbext-uart's UartSource drives the RX pin and its UartSink reads the TX pin; the register bus
 (DATA, STATUS, DIV) is driven as the CPU would.  Run by tests/rtl/test_uart_soc.py with small
