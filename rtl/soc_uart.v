@@ -25,9 +25,9 @@
 
 module soc_uart #
 (
-    // RX FIFO depth in bytes; 2 .. 65535 (any number)
+    // RX FIFO depth in bytes; 2 .. 32767 (any number: RX_COUNT is 16 bits)
     parameter RX_DEPTH = 64,
-    // TX FIFO depth in bytes; 2 .. 65535 (any number)
+    // TX FIFO depth in bytes; 2 .. 32767 (any number)
     parameter TX_DEPTH = 64,
     // baud divisor after reset, clock cycles per bit; DIV_MIN..65535
     parameter DIV_RESET = 217,

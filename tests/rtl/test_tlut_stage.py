@@ -67,7 +67,9 @@ def test_tlut_stage(testcase):
         testcase=testcase)
 
 
-def test_tlut_stage_small_buffers():
-    """The smallest FIFO and a row buffer whose depth is not a power of two, on random frames."""
-    run("tlut_stage", SOURCES, "tlut_stage_tb", parameters={"MAX_COLS": 59, "FIFO_DEPTH": 2},
+@pytest.mark.parametrize("fifo_depth", [2, 3])
+def test_tlut_stage_small_buffers(fifo_depth):
+    """The smallest block FIFO and one whose depth is not a power of two, with a row buffer whose
+    depth is not one either, on random frames."""
+    run("tlut_stage", SOURCES, "tlut_stage_tb", parameters={"MAX_COLS": 59, "FIFO_DEPTH": fifo_depth},
         testcase="test_random_stress", extra_env={"TLUT_SEED": "9", "TLUT_STRESS": "12"})
