@@ -29,6 +29,7 @@ import numpy as np
 from wavemesh.errors import WavemeshError
 from wavemesh.haar import HaarLevel
 from wavemesh.mesh import Mesh
+from wavemesh.protocol import STAT_FIELDS  # wm_level_stats' int32 fields, one list for both sides
 
 ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
@@ -84,9 +85,6 @@ class Field(ctypes.Structure):
     ]
 
 
-STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "dependent", "pairs", "quasi_pairs",
-               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "flips",
-               "budget_hit", "over")
 # wm_params.flags (WM_FLAG_* in wavemesh.h); 0 is the default pipeline.
 FLAG_NO_BOUND, FLAG_NO_LEGALISE, FLAG_NO_DECIMATE, FLAG_NO_REDUCE = 1, 2, 4, 8
 

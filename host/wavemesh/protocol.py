@@ -345,10 +345,12 @@ DONE = _m("DONE", "device to host: the job ended (repeated until acknowledged)",
           ("cycles_link", "Q", "cycles of link I/O from RUN to the last level: PROGRESS frames, framing and "
                                "writing the level streams, waiting for ACKs, resends", 0))
 
-# The refiner's per-level statistics (wm_level_stats of firmware/include/wavemesh.h, in order).
+# The refiner's per-level statistics: the int32 fields of wm_level_stats (firmware/include/wavemesh.h)
+# before e_max, in order.  The one list: wavemesh.native builds its ctypes structure from it, and the
+# generated header gives proto.c the level header's offsets and values in this order.
 STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "dependent", "pairs", "quasi_pairs",
-               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "budget_hit",
-               "over")
+               "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "flips",
+               "budget_hit", "over")
 
 LEVEL_HEADER = _m("LEVEL_HEADER", "the start of a level stream (the MESH frames' bytes joined)",
                   ("level", "B", "resolution level m (M-1: the initial triangulation .. 0)"),
@@ -360,7 +362,7 @@ LEVEL_HEADER = _m("LEVEL_HEADER", "the start of a level stream (the MESH frames'
                                   "(the first level: filter, template and the refiner's set-up)"),
                   *((f"st_{n}", "i", f"wm_level_stats.{n}") for n in STAT_FIELDS),
                   ("st_e_max", "I", "wm_level_stats.e_max: E_max, Q16.16 sample counts (upper bound)"),
-                  ("st_reserved", "i", "0"),
+                  ("st_removals", "i", "wm_level_stats.removals: vertices removed (reduction, decimation)"),
                   tail="V vertex slots (x u16, y u16; 0xFFFF 0xFFFF a free slot), then T triangles "
                        "(three vertex slot numbers of index_bytes each, counter-clockwise), in slot order "
                        "as wm_mesh_export writes them")
@@ -453,11 +455,11 @@ def c_header() -> str:
         f"#define WM_PROTO_FEATURE_INITIAL_ONLY 0x{FEATURE_INITIAL_ONLY:X}u",
         f"#define WM_PROTO_CONFIG_INITIAL_ONLY 0x{CONFIG_INITIAL_ONLY:X}u",
         f"#define WM_PROTO_CONFIG_KNOWN_FLAGS 0x{CONFIG_KNOWN_FLAGS:X}u",
+        f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
         f"#define WM_PROTO_ACK_NAK 0x{ACK_NAK:X}u",
         f"#define WM_PROTO_LEVEL_LAST 0x{LEVEL_LAST:X}u",
         "",
         "/* Payload layouts: byte offsets of the fields, size of the fixed part */",
-        f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
     ]
     for m in MESSAGES:
         lines.append(f"/* {m.name}: {m.doc} */")
@@ -465,7 +467,12 @@ def c_header() -> str:
             f = next(f for f in m.fields if f.name == name)
             lines.append(f"#define WM_PROTO_{m.name}_{_cname(name)} {off} /* {f.ctype} */")
         lines.append(f"#define WM_PROTO_{m.name}_BYTES {m.size}")
-    lines += [f"#define WM_PROTO_STAT_FIELDS {len(STAT_FIELDS)}", "", "#endif /* WM_PROTOCOL_H */", ""]
+    lines += [f"#define WM_PROTO_STAT_FIELDS {len(STAT_FIELDS)}",
+              "/* wm_level_stats' int32 fields before e_max: their offsets in LEVEL_HEADER, their values */",
+              "#define WM_PROTO_STAT_OFFSETS {" + ", ".join(f"WM_PROTO_LEVEL_HEADER_ST_{_cname(n)}"
+                                                          for n in STAT_FIELDS) + "}",
+              "#define WM_PROTO_STAT_VALUES(st) {" + ", ".join(f"(st)->{n}" for n in STAT_FIELDS) + "}",
+              "", "#endif /* WM_PROTOCOL_H */", ""]
     names = [ln.split()[1] for ln in lines if ln.startswith("#define ")]
     assert len(names) == len(set(names)), "a macro name is defined twice"
     return "\n".join(lines)

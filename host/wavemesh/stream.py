@@ -185,7 +185,8 @@ def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, 
     if not live.all():  # free vertex slots: dropped, as wavemesh.native does
         remap = np.cumsum(live) - 1
         xy, tris = xy[live], remap[tris]
-    stats = {name: h[f"st_{name}"] for name in P.STAT_FIELDS} | {"e_max_q16": h["st_e_max"]}
+    stats = {name: h[f"st_{name}"] for name in P.STAT_FIELDS} | {"e_max_q16": h["st_e_max"],
+                                                                 "removals": h["st_removals"]}
     return h, Mesh(width, height, xy, tris), stats, h["cycles"]
 
 

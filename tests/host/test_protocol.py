@@ -89,11 +89,15 @@ def test_pack_unpack_round_trip_and_checks():
 
 
 def test_stats_layout_is_the_librarys():
-    assert P.STAT_FIELDS == native.STAT_FIELDS
+    # The C header is the truth for the library: wm_level_stats' fields, in order, from its text.
+    header = (Path(__file__).resolve().parents[2] / "firmware" / "include" / "wavemesh.h").read_text()
+    body = re.search(r"typedef struct wm_level_stats \{(.*?)\} wm_level_stats;", header, re.S).group(1)
+    c_fields = re.findall(r"^\s*u?int32_t\s+([^;]+);", body, re.M)
+    c_names = [n.strip() for decl in c_fields for n in decl.split(",")]
+    assert c_names == list(P.STAT_FIELDS) + ["e_max", "removals"]
     stats = [f.name for f in P.LEVEL_HEADER.fields if f.name.startswith("st_")]
-    assert stats[:-2] == [f"st_{n}" for n in native.STAT_FIELDS]
-    assert stats[-2:] == ["st_e_max", "st_reserved"]
-    assert [n for n, _ in native.LevelStats._fields_] == list(native.STAT_FIELDS) + ["e_max", "reserved"]
+    assert stats == [f"st_{n}" for n in c_names]
+    assert [n for n, _ in native.LevelStats._fields_] == c_names
 
 
 def test_config_carries_the_refiners_fixed_point_parameters():
@@ -120,7 +124,7 @@ def test_level_stream_parsing_rejects_inconsistent_streams():
     import struct
 
     hdr = dict(level=0, index_bytes=2, vertex_slots=3, triangles=1, cycles=5,
-               **{f"st_{n}": 0 for n in P.STAT_FIELDS}, st_e_max=0)
+               **{f"st_{n}": 0 for n in P.STAT_FIELDS}, st_e_max=0, st_removals=0)
     body = struct.pack("<6H", 0, 0, 1, 0, 0, 1) + struct.pack("<3H", 0, 1, 2)
     h, mesh, stats, cycles = parse_level(P.LEVEL_HEADER.pack(**hdr) + body, 2, 2)
     assert mesh.n_triangles == 1 and mesh.n_vertices == 3 and cycles == 5 and stats["e_max_q16"] == 0

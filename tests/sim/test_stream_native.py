@@ -130,8 +130,8 @@ def test_stream_equals_mesh(case, device, inputs, tmp_path):
 
 def test_budget_stops_both_the_same_way(device, inputs, tmp_path):
     src = str(inputs / "ball64.npy")
-    rc1, _, err1 = run_cli("mesh", src, "--max-triangles", "250", "-o", str(tmp_path / "m.obj"), "-q")
-    rc2, _, err2 = run_cli("stream", src, "--max-triangles", "250", "--port", device.url, "-o",
+    rc1, _, err1 = run_cli("mesh", src, "--max-triangles", "150", "-o", str(tmp_path / "m.obj"), "-q")
+    rc2, _, err2 = run_cli("stream", src, "--max-triangles", "150", "--port", device.url, "-o",
                            str(tmp_path / "s.obj"), "-q")
     assert rc1 == rc2 == 3
     assert "error bound is not met" in err1 and "error bound is not met" in err2

@@ -740,17 +740,8 @@ static int abort_code(const wm_proto *p) {
 }
 
 int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st, int last) {
-    static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = {
-        WM_PROTO_LEVEL_HEADER_ST_LEVEL, WM_PROTO_LEVEL_HEADER_ST_VERTICES, WM_PROTO_LEVEL_HEADER_ST_TRIANGLES,
-        WM_PROTO_LEVEL_HEADER_ST_ITERATIONS, WM_PROTO_LEVEL_HEADER_ST_ACTIVE, WM_PROTO_LEVEL_HEADER_ST_DEPENDENT,
-        WM_PROTO_LEVEL_HEADER_ST_PAIRS, WM_PROTO_LEVEL_HEADER_ST_QUASI_PAIRS, WM_PROTO_LEVEL_HEADER_ST_UNPAIRED,
-        WM_PROTO_LEVEL_HEADER_ST_EDGE_SPLITS, WM_PROTO_LEVEL_HEADER_ST_TERNARY_SPLITS,
-        WM_PROTO_LEVEL_HEADER_ST_MOVES, WM_PROTO_LEVEL_HEADER_ST_SWAPS, WM_PROTO_LEVEL_HEADER_ST_BOUND_SPLITS,
-        WM_PROTO_LEVEL_HEADER_ST_BUDGET_HIT, WM_PROTO_LEVEL_HEADER_ST_OVER};
-    const int32_t stat_val[WM_PROTO_STAT_FIELDS] = {
-        st->level, st->vertices, st->triangles, st->iterations, st->active, st->dependent, st->pairs,
-        st->quasi_pairs, st->unpaired, st->edge_splits, st->ternary_splits, st->moves, st->swaps,
-        st->bound_splits, st->budget_hit, st->over};
+    static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_OFFSETS;
+    const int32_t stat_val[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_VALUES(st);
     int prev = p->stage, tries = 0;
     uint32_t have = 0, best = 0;
     uint64_t work;
@@ -773,6 +764,7 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->work_mark = work;
     for (int i = 0; i < WM_PROTO_STAT_FIELDS; i++) put32(p->lhdr + stat_off[i], (uint32_t)stat_val[i]);
     put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_E_MAX, st->e_max);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_REMOVALS, (uint32_t)st->removals);
     p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
     p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
     p->llast = (uint8_t)(last != 0);
