@@ -38,13 +38,17 @@ LED_COUNT = 8  # LED outputs
 # --- what the default configuration supports ---------------------------------------------------
 GRID_MAX_W = 256  # largest height field, columns
 GRID_MAX_H = 256  # largest height field, rows
-FW_RESERVED_BYTES = 40 * 1024  # firmware RAM kept for code, data and stack; the rest is the job's heap
-# The refiner's storage (firmware/src, wm_refine_bound) as it is today: per triangle 3 half-edges of
-# vertex, opposite and refiner state (int32 each, 36 B) and its share of the vertex arrays; per grid
-# the vertex arrays' fixed part and the refiner's state.  tests/sim/test_memmap.py checks the
-# capacity below against the native build of wm_refine_bound.
-REFINER_TRI_BYTES = 41
-REFINER_GRID_BYTES = 4352  # for the largest grid
+# Firmware RAM kept for code, data and stack; the rest is the job's heap.  The image is about 56 KB
+# (text 45.5 KB with the reduction and the decimation, bss, an 8 KB stack; `make firmware-board`
+# prints it); tests/sim/test_board.py checks the heap the linker leaves against the capacity below.
+FW_RESERVED_BYTES = 60 * 1024
+# The refiner's storage (firmware/src, wm_refine_bound) with the board's 16-bit indices
+# (WM_INDEX_BITS=16): per triangle half-edges, error, worst sample, heap entries, flags and its share
+# of the vertex arrays (30 B more per triangle at this capacity); per grid the vertex arrays' fixed
+# part and the refiner's state (about 6.3 KB).  tests/sim/test_memmap.py checks the capacity below
+# against a 16-bit build of wm_refine_bound: it fits, within 10 triangles of the most that would.
+REFINER_TRI_BYTES = 30
+REFINER_GRID_BYTES = 6656  # for the largest grid
 STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmware RAM
 # The board job stages the initial triangulation in the heap beside the refiner's storage
 # (firmware/board/app/job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
@@ -120,7 +124,7 @@ REGIONS = (FW_RAM, HEIGHT, COEF, TOUT)
 FW_RAM_BYTES = FW_RAM.bytes
 HEIGHT_SAMPLES = HEIGHT.entries
 TRI_CAPACITY = ((FW_RAM_BYTES - FW_RESERVED_BYTES - REFINER_GRID_BYTES - STAGING_GRID_BYTES)
-                // (REFINER_TRI_BYTES + STAGING_TRI_BYTES))  # 1337
+                // (REFINER_TRI_BYTES + STAGING_TRI_BYTES))  # 1165
 
 # The FPGA stage (rtl/soc_accel.v): what its filter bank and template stage are built for.
 ACCEL_MAX_LEVELS = MAX_LEVELS  # haar_bank MAX_LEVELS

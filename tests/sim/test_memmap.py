@@ -57,12 +57,18 @@ def test_default_sizes_hold_what_they_promise():
 
 
 def test_triangle_capacity_fits_the_refiner():
-    """The refiner (native build of firmware/src; 64-bit, so its state is if anything larger than on
-    the rv32) needs no more than the firmware RAM left after code, data and stack for TRI_CAPACITY
-    triangles of the largest grid, and not much less (the capacity is not understated)."""
+    """The refiner (a native build of firmware/src with the board's 16-bit indices; 64-bit pointers,
+    so its state is if anything larger than on the rv32) needs no more than the firmware RAM left
+    after code, data and stack for TRI_CAPACITY triangles of the largest grid, and not much less (the
+    capacity is not understated)."""
+    import ctypes
+
     from wavemesh import native
 
-    lib = native.load()
+    build = native.build(native.ROOT / "build" / "firmware-native16", "Release", ("-DWM_INDEX_BITS=16",))
+    lib = ctypes.CDLL(str(build / native.LIB_NAME))
+    lib.wm_refine_bound.restype = ctypes.c_size_t
+    lib.wm_refine_bound.argtypes = [ctypes.c_int32] * 3
     def staging(cap):  # the board job's staging of the initial triangulation beside the refiner
         return memmap.STAGING_TRI_BYTES * cap + memmap.STAGING_GRID_BYTES
 
