@@ -250,7 +250,8 @@ def _params_from_args(args) -> RefineParams:
                         delta_c=args.delta_c, iterations=args.iterations, neighbourhood=args.neighbourhood,
                         max_triangles=args.max_triangles, capacity=args.capacity,
                         bound=getattr(args, "bound", "on") == "on",
-                        reduce=getattr(args, "reduce", "on") == "on")
+                        reduce=getattr(args, "reduce", "on") == "on",
+                        decimate=getattr(args, "simplify", "on") == "on")
 
 
 def _check_mesh_outputs(args) -> tuple[Path, Path | None]:

@@ -182,6 +182,24 @@ def test_mesh_is_the_same_byte_for_byte(tmp_path):
     assert outs[0] == outs[1]
 
 
+def test_simplify_off_keeps_the_vertices_the_bound_does_not_need(tmp_path):
+    """--simplify off skips the final decimation: more triangles, the same bound; both proper."""
+    from wavemesh.check import mesh_errors
+
+    np.save(tmp_path / "ball.npy", synth.ball(64))
+    counts = {}
+    for mode in ("on", "off"):
+        out = tmp_path / f"{mode}.obj"
+        r = wavemesh("mesh", tmp_path / "ball.npy", "-o", out, "-q", "--metric", "vertical", "--zeta", "0.5",
+                     "--simplify", mode)
+        assert r.returncode == 0, r.stderr
+        mesh, _ = read_mesh(out)
+        assert check_mesh(mesh).valid
+        assert mesh_errors(mesh, synth.ball(64).astype(float), rms=False).e_max_vertical <= 0.5 + 1e-9
+        counts[mode] = mesh.n_triangles
+    assert counts["on"] < counts["off"]
+
+
 def test_budget_exit_status_says_bound_not_met(tmp_path):
     np.save(tmp_path / "box.npy", synth.box(96))
     out = tmp_path / "m.obj"

@@ -88,6 +88,7 @@ def inputs(tmp_path_factory):
 
 CASES = {
     "ball-levels-lod": ("ball64.npy", ["--levels", "3"], ".obj"),
+    "ball-no-simplify": ("ball64.npy", ["--simplify", "off", "--reduce", "off"], ".obj"),
     "box-initial": ("box64.npy", ["--stage", "initial"], ".obj"),
     "lossy-odd-ply": ("lossy.npy", ["--zeta", "0.5", "--levels", "2"], ".ply"),
     "vertical-vertex-k3": ("ball64.npy", ["--metric", "vertical", "--neighbourhood", "vertex", "-k", "3",
