@@ -78,8 +78,8 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                    help=f"vertex removal and edge collapse after the initial mesh and every level (4.6 "
                         f"steps 2(d), 3(b); default {'on' if d.reduce else 'off'})")
     p.add_argument("--simplify", choices=("on", "off"), default="on" if d.decimate else "off",
-                   help=f"after the error bound, remove every vertex whose neighbourhood re-triangulates within "
-                        f"zeta (the final decimation; default {'on' if d.decimate else 'off'})")
+                   help=f"after the error bound, remove every vertex whose neighbourhood re-triangulates "
+                        f"within zeta (the final decimation; default {'on' if d.decimate else 'off'})")
     p.add_argument("--max-triangles", type=int, default=None,
                    help="triangle budget: stop refining there (exit status 3 when E_max is still above zeta)")
     p.add_argument("--capacity", type=int, default=None,
