@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wavemesh.spline import spline_step
+
 MAX_LEVELS = 12  # 16-bit samples: a' stays 16 bits, details 18 bits at every level
 DETAIL_BITS = 18  # signed width of d1, d2, d3 (|d| <= 2 * 65535)
 APPROX_BITS = 16  # unsigned width of a
@@ -73,8 +75,11 @@ def haar_step(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     return approx, d1, d2, d3
 
 
-def decompose(samples: np.ndarray, levels: int) -> list[HaarLevel]:
-    """Levels 1..M of the filter bank on (H, W) 16-bit samples; element m-1 is level m."""
+def decompose(samples: np.ndarray, levels: int, wavelet: str = "haar") -> list[HaarLevel]:
+    """Levels 1..M of the filter bank on (H, W) 16-bit samples; element m-1 is level m.
+
+    ``wavelet`` picks the filters (WAVELETS): "haar" (this module) or "spline" (wavemesh.spline, the
+    dissertation's spline wavelet); both give records of the same shapes, widths and scale."""
     samples = np.asarray(samples)
     if samples.ndim != 2 or min(samples.shape) < 1:
         raise ValueError(f"decompose needs a non-empty 2-D array, got shape {samples.shape}")
@@ -82,12 +87,18 @@ def decompose(samples: np.ndarray, levels: int) -> list[HaarLevel]:
         raise ValueError(f"levels must be 1..{MAX_LEVELS}, got {levels}")
     if samples.min() < 0 or samples.max() > 0xFFFF:
         raise ValueError("samples must be 16-bit unsigned")
+    if wavelet not in WAVELETS:
+        raise ValueError(f"wavelet must be one of {', '.join(WAVELETS)}, got {wavelet!r}")
+    step = WAVELETS[wavelet]
     out = []
     a = samples.astype(np.int64)
     for m in range(1, levels + 1):
-        a, d1, d2, d3 = haar_step(a)
+        a, d1, d2, d3 = step(a)
         out.append(HaarLevel(m, a, d1, d2, d3))
     return out
+
+
+WAVELETS = {"haar": haar_step, "spline": spline_step}  # --wavelet: name -> one level's step
 
 
 def level_shape(height: int, width: int, m: int) -> tuple[int, int]:

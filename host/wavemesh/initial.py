@@ -61,10 +61,11 @@ def assemble(lab: Labelling, width: int, height: int) -> Mesh:
     return Mesh(width, height, xy, inverse.reshape(-1, 3)).canonical()
 
 
-def initial_triangulation(samples: np.ndarray, levels: int, tau_q: int) -> InitialResult:
-    """Filter bank, labeller and templates on (H, W) 16-bit samples."""
+def initial_triangulation(samples: np.ndarray, levels: int, tau_q: int,
+                          wavelet: str = "haar") -> InitialResult:
+    """Filter bank (``wavelet``: wavemesh.haar.WAVELETS), labeller and templates on (H, W) 16-bit samples."""
     height, width = samples.shape
-    level = decompose(samples, levels)[-1]
+    level = decompose(samples, levels, wavelet)[-1]
     lab = label_blocks(level, tau_q, width, height)
     return InitialResult(assemble(lab, width, height), lab, tau_q, levels)
 
