@@ -244,6 +244,10 @@ typedef struct wm_params {
                                (unit normals, so in 0..1), Q16.16, rounded */
     uint32_t delta_c;       /* edge collapse criterion delta_c (4.34), |e21 . e22| > delta_c, Q16.16,
                                0..65536, rounded */
+    uint32_t slope_x_m;     /* the normal metric's slope scales s / dx and s / dy (dx, dy: the ground */
+    int32_t slope_x_e;      /*   distance between neighbouring samples along a row and along a column, */
+    uint32_t slope_y_m;     /*   in height units) = m / 2^e in scale_m's format, rounded down */
+    int32_t slope_y_e;      /*   (conservative); m = 0: a cell of 1 (s / dx = s), as a zeroed struct */
 } wm_params;
 
 /* wm_params.flags.  The default (0) runs the levels, the error bound with Delaunay legalisation and

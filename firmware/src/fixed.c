@@ -133,10 +133,22 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
 
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap)
 {
+    return wm_frac_mul(n, d, p->scale_m, p->scale_e, sh, cap);
+}
+
+void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int32_t *e)
+{
+    uint32_t sm = axis ? p->slope_y_m : p->slope_x_m;
+    *m = sm ? sm : p->scale_m;
+    *e = sm ? (axis ? p->slope_y_e : p->slope_x_e) : p->scale_e;
+}
+
+uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint64_t cap)
+{
     uint64_t prod, q, r, res;
-    int k = sh - p->scale_e;
-    WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && p->scale_m < 65536u && sh <= 16);
-    prod = n * p->scale_m; /* < 2^63 */
+    int k = sh - e;
+    WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && m < 65536u && sh <= 16);
+    prod = n * m; /* < 2^63 */
     q = prod / d;
     r = prod % d;
     if (k <= 0) {

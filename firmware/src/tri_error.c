@@ -7,11 +7,12 @@
  *     V(p) = | E_0 z_0 + E_1 z_1 + E_2 z_2 - D h(p) |       (exact, < 2^16 D < 2^47)
  *
  * is D times the vertical distance in sample counts.  Vertical E(T) = Vmax / D; normal E(T) =
- * Vmax / D / sqrt(1 + g^2) where g = s |(Na, Nb)| / D is the plane's slope in height units per grid
- * step (s the height scale; Na, Nb the exact gradient numerators).  Rounding (docs/refiner.md):
+ * Vmax / D / sqrt(1 + g^2) where g = |(s Na / dx, s Nb / dy)| / D is the plane's slope in height
+ * units per ground unit (s the height scale; dx, dy the cell size, 1 by default; Na, Nb the exact
+ * gradient numerators).  Rounding (docs/refiner.md):
  *
  *     ev = ceil(2^16 Vmax / D)                           Q16.16 samples, exact ceiling
- *     ga = floor(2^16 s |Na| / D)                        Q16.16, rounded down (g smaller)
+ *     ga = floor(2^16 (s / dx) |Na| / D)                 Q16.16, rounded down (g smaller), gb alike
  *     r  = floor(sqrt(2^32 + ga^2 + gb^2))              Q16.16 sqrt(1 + g^2), rounded down
  *          (for ga or gb >= 2^31 both are shifted right by k first and r back left by k)
  *     en = ceil(2^16 ev / r)                             Q16.16, rounded up
@@ -91,6 +92,8 @@ static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3]
 {
     uint64_t ev, ga, gb, r, en;
     int64_t z0, dz1, dz2, Na, Nb;
+    uint32_t sm;
+    int32_t se;
     ev = (vmax * 65536u + (uint64_t)D - 1) / (uint64_t)D; /* vmax < 2^47 */
     if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
@@ -99,8 +102,10 @@ static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3]
     dz2 = (int64_t)f->samples[(int64_t)y[2] * f->width + x[2]] - z0;
     Na = dz1 * ((int64_t)y[2] - y[0]) - dz2 * ((int64_t)y[1] - y[0]);
     Nb = ((int64_t)x[1] - x[0]) * dz2 - ((int64_t)x[2] - x[0]) * dz1;
-    ga = wm_scale_mul(p, (uint64_t)(Na < 0 ? -Na : Na), (uint64_t)D, 16, GCAP);
-    gb = wm_scale_mul(p, (uint64_t)(Nb < 0 ? -Nb : Nb), (uint64_t)D, 16, GCAP);
+    wm_slope_scale(p, 0, &sm, &se);
+    ga = wm_frac_mul((uint64_t)(Na < 0 ? -Na : Na), (uint64_t)D, sm, se, 16, GCAP);
+    wm_slope_scale(p, 1, &sm, &se);
+    gb = wm_frac_mul((uint64_t)(Nb < 0 ? -Nb : Nb), (uint64_t)D, sm, se, 16, GCAP);
     /* sqrt(1 + g^2) in Q16.16, rounded down: steep slopes are shifted right by k first (ga, gb
      * keep >= 30 significant bits), and the root shifted back. */
     {

@@ -80,6 +80,11 @@ int wm_cmp_mul(uint64_t a, uint64_t b, uint64_t c, uint64_t d); /* sign(a b - c 
 int32_t wm_angle_q16(int64_t x, int64_t y);             /* atan2(y, x) for y >= 0, Q16 radians */
 /* floor(n * s * 2^sh / d) with the height scale s = scale_m / 2^scale_e, saturated at cap. */
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap);
+/* The same with the scale m / 2^e (m < 2^16, e in 0..126). */
+uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint64_t cap);
+/* The normal metric's slope scale s / dx (axis 0) or s / dy (axis 1) as (m, e): the slope_* fields,
+ * or the height scale when their m is 0 (a cell of 1). */
+void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int32_t *e);
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
 /* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside

@@ -227,6 +227,16 @@ static void test_error(void)
         /* 10 / sqrt(1 + 4) = 4.47213595 samples: 293086.8 */
         CHECK(e >= 293087u && e <= 293087u + 12u);
     }
+    /* s = 1 on cells 2 wide (s / dx = 0.5): the same slope 2, the same bits; dy plays no part here */
+    p.scale_e = 15;
+    p.slope_x_m = 32768, p.slope_x_e = 16;
+    p.slope_y_m = 40000, p.slope_y_e = 3;
+    {
+        uint32_t e = wm_tri_error(&f, &p, x, y, NULL, NULL);
+        CHECK(e >= 293087u && e <= 293087u + 12u);
+        p.scale_e = 16, p.slope_x_m = p.slope_y_m = 0; /* m = 0: the height scale, a cell of 1 */
+        CHECK(wm_tri_error(&f, &p, x, y, NULL, NULL) == e);
+    }
 }
 
 static void test_haar(void)

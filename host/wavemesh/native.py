@@ -72,6 +72,10 @@ class Params(ctypes.Structure):
         ("delta_d", ctypes.c_uint64),
         ("delta_lambda", ctypes.c_uint32),
         ("delta_c", ctypes.c_uint32),
+        ("slope_x_m", ctypes.c_uint32),
+        ("slope_x_e", ctypes.c_int32),
+        ("slope_y_m", ctypes.c_uint32),
+        ("slope_y_e", ctypes.c_int32),
     ]
 
 
@@ -262,7 +266,7 @@ class RefineParams:
                                               "max_triangles", "capacity", "bound", "reduce")}
 
 
-def scale_fixed(scale: float) -> tuple[int, int]:
+def scale_fixed(scale: float | Fraction) -> tuple[int, int]:
     """s = m / 2^e, rounded down, m < 2^16 (in 2^15..2^16-1 unless s is out of range), e in 0..126."""
     s = Fraction(scale)
     if s <= 0:
@@ -275,8 +279,11 @@ def scale_fixed(scale: float) -> tuple[int, int]:
     return floor(s * 2**e), e
 
 
-def fixed_params(p: RefineParams, scale: float, zeta: float | None = None) -> Params:
-    """The library's wm_params for p and the height scale (docs/refiner.md, "Fixed-point formats")."""
+def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
+                 spacing: tuple[float, float] = (1.0, 1.0)) -> Params:
+    """The library's wm_params for p, the height scale and the cell size ``spacing`` = (dx, dy), the
+    ground distance between neighbouring samples in height units (docs/refiner.md, "Fixed-point
+    formats")."""
     s = Fraction(scale)
     z = Fraction(p.zeta if zeta is None else zeta)
     m, e = scale_fixed(scale)
@@ -297,7 +304,16 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None) -> Pa
     out.delta_d = min(U64, floor(4 * Fraction(p.delta_d) / (s * s)))
     out.delta_lambda = min(U32, round(Fraction(p.delta_lambda) * 2**16))  # Q16.16, as CONFIG carries it
     out.delta_c = min(65536, round(Fraction(p.delta_c) * 2**16))
+    # The normal metric's slope scales s / dx, s / dy, rounded down as s (a smaller slope: conservative);
+    # never 0, which the library reads as a cell of 1.
+    (out.slope_x_m, out.slope_x_e), (out.slope_y_m, out.slope_y_e) = (
+        _nonzero(scale_fixed(s / Fraction(d))) for d in spacing)
     return out
+
+
+def _nonzero(me: tuple[int, int]) -> tuple[int, int]:
+    # below 2^-126 the slope term is 0 in every Q16.16 product either way
+    return me if me[0] else (1, 126)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -347,10 +363,12 @@ def _export(lib, handle, width: int, height: int) -> Mesh:
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,
-           scale: float = 1.0, zeta: float | None = None) -> RefineOutput:
+           scale: float = 1.0, zeta: float | None = None,
+           spacing: tuple[float, float] = (1.0, 1.0)) -> RefineOutput:
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
-    ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation).  Without an
+    ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation); ``spacing`` is the
+    cell size (dx, dy) the normal metric measures slopes with (fixed_params).  Without an
     explicit capacity the storage is sized once for the most triangles any triangulation of the grid
     can have, 2 (W-1) (H-1): the refiner never runs out and runs once.  The library touches only the
     slots it uses, so the operating system commits only those pages of the (lazily mapped) buffer.
@@ -364,7 +382,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
                             hint="crop or subsample the height field, or use --stage initial")
     det = details_array(levels)
     fld = Field(width, height, len(levels), _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
-    fp = fixed_params(params, scale, zeta)
+    fp = fixed_params(params, scale, zeta, spacing)
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
     tris = np.ascontiguousarray(initial.tris, dtype=np.int32)
     cap = params.capacity if params.capacity is not None else lib.wm_tri_cap_max(width, height)
@@ -402,13 +420,14 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], 
     return levels, WM_OK
 
 
-def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 1.0) -> float:
+def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 1.0,
+              spacing: tuple[float, float] = (1.0, 1.0)) -> float:
     """The library's E(T) of one triangle, in height units (an upper bound; docs/refiner.md)."""
     lib = load()
     samples = np.ascontiguousarray(samples, dtype=np.uint16)
     height, width = samples.shape
     fld = Field(width, height, 1, _ptr(samples, ctypes.c_uint16), None)
-    fp = fixed_params(RefineParams(metric=metric), scale)
+    fp = fixed_params(RefineParams(metric=metric), scale, spacing=spacing)
     xs = (ctypes.c_int32 * 3)(*map(int, x))
     ys = (ctypes.c_int32 * 3)(*map(int, y))
     q = lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, None, None)

@@ -160,7 +160,8 @@ def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, c
         max_triangles=fixed.max_triangles, capacity=capacity, zeta=fixed.zeta, scale_m=fixed.scale_m,
         scale_e=fixed.scale_e, delta_p=fixed.delta_p, alpha=fixed.alpha, delta_v=fixed.delta_v,
         delta_lambda=fixed.delta_lambda, delta_c=fixed.delta_c,
-        delta_d=fixed.delta_d)
+        delta_d=fixed.delta_d, slope_x_m=fixed.slope_x_m, slope_x_e=fixed.slope_x_e, slope_y_m=fixed.slope_y_m,
+        slope_y_e=fixed.slope_y_e)
 
 
 def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, int]:

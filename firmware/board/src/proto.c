@@ -409,6 +409,8 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     uint32_t scale_m = get32(c + WM_PROTO_CONFIG_SCALE_M), scale_e = get32(c + WM_PROTO_CONFIG_SCALE_E);
     uint32_t delta_p = get32(c + WM_PROTO_CONFIG_DELTA_P), alpha = get32(c + WM_PROTO_CONFIG_ALPHA);
     uint32_t delta_c = get32(c + WM_PROTO_CONFIG_DELTA_C);
+    uint32_t slope_x_m = get32(c + WM_PROTO_CONFIG_SLOPE_X_M), slope_x_e = get32(c + WM_PROTO_CONFIG_SLOPE_X_E);
+    uint32_t slope_y_m = get32(c + WM_PROTO_CONFIG_SLOPE_Y_M), slope_y_e = get32(c + WM_PROTO_CONFIG_SLOPE_Y_E);
 #define BAD(field)                            \
     do {                                      \
         *detail = WM_PROTO_CONFIG_##field;    \
@@ -436,6 +438,10 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     if (delta_p > 65535u) BAD(DELTA_P);
     if (alpha > 65536u) BAD(ALPHA);
     if (delta_c > 65536u) BAD(DELTA_C);
+    if (slope_x_m > 65535u) BAD(SLOPE_X_M);
+    if (slope_x_e > 126u) BAD(SLOPE_X_E);
+    if (slope_y_m > 65535u) BAD(SLOPE_Y_M);
+    if (slope_y_e > 126u) BAD(SLOPE_Y_E);
 #undef BAD
     j->width = (int32_t)w;
     j->height = (int32_t)h;
@@ -459,6 +465,10 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     j->delta_c = delta_c;
     j->params.delta_lambda = j->delta_lambda;
     j->params.delta_c = delta_c;
+    j->params.slope_x_m = slope_x_m;
+    j->params.slope_x_e = (int32_t)slope_x_e;
+    j->params.slope_y_m = slope_y_m;
+    j->params.slope_y_e = (int32_t)slope_y_e;
     j->heights = p->heights;
     if (wm_params_check(&j->params) != WM_OK) { /* cannot happen after the checks above */
         *detail = WM_PROTO_CONFIG_ZETA;
