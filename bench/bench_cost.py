@@ -18,15 +18,13 @@ log(time) on log(samples) over the four sizes.
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
+import datasets as D  # bench/ is on the path: the folder of bench/run.py and of this script
+import peers as P
 
-import datasets as D  # noqa: E402
-import peers as P  # noqa: E402
+BENCH = Path(__file__).resolve().parent
 
 TITLE = "Cost growth: 256^2 to 2048^2 (issue 11)"
 SIZES = (256, 512, 1024, 2048)

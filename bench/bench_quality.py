@@ -32,13 +32,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import datasets as D  # bench/ is on the path: the folder of bench/run.py and of this script
 import numpy as np
+import peers as P
 
 BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-
-import datasets as D  # noqa: E402
-import peers as P  # noqa: E402
 
 TITLE = "Quality: triangles and time against pydelatin and pymartini (issues 10, 11)"
 FRACTIONS = (0.005, 0.01, 0.02, 0.05)  # of each grid's height range, fine to coarse

@@ -15,15 +15,12 @@ levels, to show what fits it.
 from __future__ import annotations
 
 import json
-import sys
 import tempfile
 from pathlib import Path
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 RTL = ROOT / "rtl"
-sys.path.insert(0, str(BENCH))
-sys.path.insert(0, str(ROOT / "tests" / "rtl"))
 
 TITLE = "Filter bank (haar_bank)"
 PARAMS = {"MAX_WIDTH": 512, "MAX_HEIGHT": 512, "MAX_LEVELS": 7}  # the defaults
@@ -35,7 +32,7 @@ SYNTH = [("ecp5-85k", PARAMS), ("up5k", PARAMS), ("up5k", {**PARAMS, "MAX_LEVELS
 
 def simulate(frames: list[list[int]], idle: str, bp: str) -> list[dict]:
     """Per-frame cycle counts from haar_bank_tb.run_frames (which also checks every record)."""
-    from rtl_runner import run as run_rtl
+    from wavemesh.harness.rtl_runner import run as run_rtl
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cycles.json"

@@ -7,21 +7,19 @@ real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
 tests/sim/test_stream_board.py).  The device's cycles per stage come from `--report` (`device_cycles`:
 receive, filter bank, templates, refiner, emit, and the link I/O of the job apart; docs/protocol.md,
 "Cycle accounting").  The simulator and the firmware are built and started
-with tests/sim's helpers (simboard.py) and driven as tests/sim/test_stream_board.py does (its host
+with wavemesh.harness.simboard and driven as tests/sim/test_stream_board.py does (its host
 timeouts for the simulated board and its in-process CLI runner).  Each mesh is also compared with
 `wavemesh mesh` (reported, not asserted).
 """
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
-sys.path.insert(0, str(ROOT / "tests" / "sim"))
 
 TITLE = "The whole job on the simulated board (SoC, fast mode)"
 GOAL = 10_000  # cycles per output triangle, the whole job (docs/soc.md)
@@ -48,7 +46,7 @@ def _inputs(folder: Path) -> None:
 def _case(board, name: str, tmp: Path) -> dict:
     import json
 
-    from test_stream_board import jacksboro, run_cli
+    from wavemesh.harness import jacksboro, run_cli
 
     file, opts = CASES[name]
     src = jacksboro() if file == "JACKSBORO" else str(tmp / file)
@@ -87,9 +85,8 @@ def run() -> dict:
     import re
 
     from peers import code_state
-    from simboard import SimBoard, build
-    from test_stream_board import SIM_TIMEOUTS
     from wavemesh import stream as S
+    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
 
     code = code_state()  # the work tree is shared: what the firmware was built from
     exe, fw = build.build_sim(), build.build_firmware()

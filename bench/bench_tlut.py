@@ -10,15 +10,12 @@ UP5K, with the stage inside fpga.py's pin harness (its flip-flops and LUTs are l
 from __future__ import annotations
 
 import json
-import sys
 import tempfile
 from pathlib import Path
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 RTL = ROOT / "rtl"
-sys.path.insert(0, str(BENCH))
-sys.path.insert(0, str(ROOT / "tests" / "rtl"))
 
 TITLE = "Template stage (tlut_stage)"
 PARAMS = {"MAX_COLS": 1024, "FIFO_DEPTH": 4}  # the defaults: up to 1024 block columns
@@ -27,7 +24,7 @@ SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 
 
 def cycles() -> list[dict]:
-    from rtl_runner import run as run_rtl
+    from wavemesh.harness.rtl_runner import run as run_rtl
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "cycles.json"

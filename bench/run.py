@@ -32,7 +32,7 @@ def available() -> list[str]:
 
 
 def load(name: str):
-    sys.path.insert(0, str(BENCH))
+    # bench/ is on the path as this script's folder: the benchmarks and their helpers import by name
     return importlib.import_module(f"bench_{name}")
 
 

@@ -27,8 +27,3 @@ def verilator():
         pytest.fail("Verilator needs g++ and make: run `make setup`")
     return exe, env
 
-
-# tests/rtl imports its helpers (rtl_runner) by module name, as the cocotb test modules do.
-import sys  # noqa: E402
-
-sys.path.insert(0, str(ROOT / "tests" / "rtl"))

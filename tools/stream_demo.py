@@ -25,10 +25,10 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "sim"))  # the device-process helper the tests use
+from wavemesh.harness import jacksboro
+from wavemesh.harness.devproc import DeviceProcess  # the device-process helper the tests use
 
-from devproc import DeviceProcess  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 VENV_BIN = Path(sys.executable).parent
 # Per device: the input and bound (see the docstring for why)
@@ -37,19 +37,13 @@ STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "8", "--zeta", "10"],
 START_TIMEOUT = 20.0  # s for the device to say it is listening
 
 
-def dem() -> str:
-    import matplotlib.cbook as cbook
-
-    return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
-
-
 def device_command(kind: str, mode: str) -> list[str]:
     if kind == "native":
-        from nativedev import build_wmdev
+        from wavemesh.harness.nativedev import build_wmdev
 
         print("demo: building the native stand-in device (firmware/board/native)", flush=True)
         return [str(build_wmdev()), "--port", "0"]
-    from simboard import build  # sim/build.py as a module
+    from wavemesh.harness.simboard import build  # sim/build.py as a module
 
     print("demo: building the board firmware and the simulated board (about a minute the first time)",
           flush=True)
@@ -79,7 +73,7 @@ def main(argv=None) -> int:
     try:
         url = device.url
         print(f"demo: {device.lines[0]}", flush=True)
-        src = dem()
+        src = jacksboro()
         opts = STREAM_OPTS[args.device]
         print(f"demo: streaming {src} (403 x 344, {' '.join(opts[2:])}) to {url}", flush=True)
         t0 = time.monotonic()

@@ -8,10 +8,15 @@ model the RTL and the firmware are tested against) and the host tool.  Modules:
 - ``templates``: the template set, generated from ``template_forms``
 - ``label``: the dominant-coefficient labeller and the variant resolver
 - ``initial``: assembly of the initial triangulation
-- ``mesh``, ``check``, ``render``: the mesh type, its files, validity, errors, pictures
-- ``cli``: the ``wavemesh`` command
-- ``memmap``: the SoC memory map (source of the generated C header, Verilog include, docs tables)
-- ``board``: the host side of the board's stand-in exchange, over any pyserial URL
+- ``native``: the firmware refiner, built natively and loaded through ctypes
+- ``mesh``, ``meshio``, ``check``, ``render``: the mesh type, its files, validity, errors, pictures
+- ``protocol``, ``link``, ``stream``: the wire protocol, its frames, a session with a device
+- ``memmap``, ``gen``: the SoC memory map and the files generated from the single sources
+- ``api``: the typed functions: ``api.mesh(hf, params)`` and ``api.stream(hf, port, params)`` return a
+  ``MeshResult``, ``api.write_result`` writes its files
+- ``cli``: the ``wavemesh`` command, argument parsing over ``api``
+- ``harness``: what the tests, the benchmarks and the demo share (device processes, the simulated
+  board, the cocotb runner); not imported by the command
 """
 
 __version__ = "0.1.0"

@@ -1,26 +1,47 @@
-"""What the ``wavemesh`` commands do, as functions scripts can call."""
+"""What the ``wavemesh`` commands do, as typed functions scripts can call: :func:`mesh` and
+:func:`stream` run a job (in process, or on a device over the wire protocol) and return a
+:class:`MeshResult`; :func:`write_result` writes its files.  The CLI (wavemesh.cli) is argument
+parsing and printing over them.
+
+    hf = load_input("dem.tif", fill="nearest")
+    result = mesh(hf, MeshParams(refine=RefineParams(zeta=2.0)))
+    write_result(result, "dem.obj", report="dem.json")
+"""
 
 from __future__ import annotations
 
 import json
 import math
-import sys
 import time
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from wavemesh import __version__
+from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.haar import decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, initial_triangulation
 from wavemesh.label import tau_counts
+from wavemesh.link import DEFAULT_BAUD, LinkStats
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import read_mesh, write_mesh
-from wavemesh.native import RefineOutput, RefineParams
+from wavemesh.native import RefineOutput, RefineParams, fixed_params
+from wavemesh.stream import (
+    DEFAULT_TIMEOUTS,
+    Bar,
+    Device,
+    DeviceError,
+    DeviceInfo,
+    ProtocolError,
+    Timeouts,
+    config_payload,
+    samples_crc,
+)
 
 MAX_LEVELS = 12  # the model's limit (16-bit approximations, 18-bit details at every level)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
@@ -51,15 +72,21 @@ class MeshJob:
 
 def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = None) -> MeshJob:
     """The initial triangulation of a height field (filter bank, labeller, templates)."""
+    m, t = _levels_and_tau(hf, levels, tau)
+    result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale))
+    require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
+    return MeshJob(hf, m, t, result)
+
+
+def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> tuple[int, float]:
+    """M and tau_M as given, or their defaults; WavemeshError when out of range."""
     m = default_levels(hf.width, hf.height) if levels is None else levels
     if not 1 <= m <= MAX_LEVELS:
         raise WavemeshError(f"--levels {m} is out of range", hint=f"use 1..{MAX_LEVELS}")
     t = default_tau(hf) if tau is None else tau
     if not math.isfinite(t) or t < 0:
         raise WavemeshError(f"--tau {t} is not a finite number >= 0", hint="give tau in height units")
-    result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale))
-    require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
-    return MeshJob(hf, m, t, result)
+    return m, t
 
 
 def _check_output(path: str, suffixes: tuple[str, ...], what: str) -> Path:
@@ -118,9 +145,10 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
     return replace(out, filled=hf.filled)
 
 
-def _load_input(args) -> HeightField:
-    hf = _load(args.input, args.key, args.fill)
-    return shape_heightfield(hf, getattr(args, "crop", None), getattr(args, "decimate", None))
+def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
+               decimate: int | None = None) -> HeightField:
+    """A height field file as the commands read it: --key, --fill, then --crop and --decimate."""
+    return shape_heightfield(_load(path, key, fill), crop, decimate)
 
 
 @dataclass
@@ -244,150 +272,322 @@ def level_counts(lv, hf: HeightField) -> dict:
     }
 
 
-def _params_from_args(args) -> RefineParams:
-    return RefineParams(zeta=args.zeta, metric=args.metric, delta_d=args.delta_d, delta_p=args.delta_p,
-                        delta_v=args.delta_v, alpha=args.alpha, delta_lambda=args.delta_lambda,
-                        delta_c=args.delta_c, iterations=args.iterations, neighbourhood=args.neighbourhood,
-                        max_triangles=args.max_triangles, capacity=args.capacity,
-                        bound=getattr(args, "bound", "on") == "on",
-                        reduce=getattr(args, "reduce", "on") == "on",
-                        decimate=getattr(args, "simplify", "on") == "on")
+# ---------------------------------------------------------------------------------------------------
+# The typed API: `wavemesh mesh` and `wavemesh stream` as functions (the CLI is argument parsing over
+# them, wavemesh.cli).
 
 
-def _check_mesh_outputs(args) -> tuple[Path, Path | None]:
+@dataclass(frozen=True)
+class MeshParams:
+    """The job of `wavemesh mesh` and `wavemesh stream`: every option that is not a file."""
+
+    levels: int | None = None  # M, 1..MAX_LEVELS; None: default_levels
+    tau: float | None = None  # tau_M in height units; None: default_tau
+    initial_only: bool = False  # stop after the template stage (--stage initial)
+    refine: RefineParams = field(default_factory=RefineParams)  # the refiner's (ignored when initial_only)
+    check_levels: bool = False  # also check and measure every coarser level (stream always does)
+    rms: bool = False  # RMS errors too (the report's), not only the maxima
+
+
+@dataclass(kw_only=True)
+class MeshResult:
+    """What a job made: the final mesh, every level's, their errors, and the JSON report's content."""
+
+    heightfield: HeightField
+    params: MeshParams
+    refine_params: RefineParams | None  # as run (stream: the device's budget filled in); None: initial only
+    levels: int  # M as used
+    tau: float  # tau_M as used
+    mesh: Mesh  # the final mesh
+    errors: ErrorReport  # the final mesh's against the input
+    level_meshes: list[tuple[int, Mesh]]  # (level, mesh), the coarsest first; the last is ``mesh``
+    rows: list[dict]  # the level table (level_report or level_counts rows); empty for initial only
+    bound_met: bool  # the refiner reports every triangle within zeta (True for initial only)
+    comment: str  # the mesh files' comment line
+    report: dict  # the JSON report, less its file names (write_result adds them)
+    refined: RefineJob | None = None  # mesh(): the refiner's job
+
+    @property
+    def e_max(self) -> float:
+        """The final mesh's E_max by the run's metric."""
+        metric = self.refine_params.metric if self.refine_params else "normal"
+        return self.errors.e_max_normal if metric == "normal" else self.errors.e_max_vertical
+
+    @property
+    def exit_status(self) -> int:
+        """0, or BOUND_NOT_MET when the triangle budget stopped the run above zeta."""
+        p = self.refine_params
+        return BOUND_NOT_MET if p is not None and p.bound and not self.bound_met else 0
+
+    def bound_warning(self) -> str | None:
+        """The warning when the triangle budget stopped the run above zeta, else None."""
+        if not self.exit_status:
+            return None
+        p = self.refine_params
+        return (f"the error bound is not met: E_max {self.e_max:.6g} > zeta {p.zeta:g} "
+                f"({self.rows[-1]['over_zeta']} triangles over) at the triangle budget (--max-triangles "
+                f"{p.max_triangles})")
+
+
+@dataclass(kw_only=True)
+class StreamResult(MeshResult):
+    """A job done on a device: MeshResult, and what the device and the link reported."""
+
+    device: DeviceInfo
+    cycles: dict  # the device's cycles per stage (DONE's cycles_* fields, the prefix dropped)
+    link: LinkStats
+    upload_seconds: float
+    job_seconds: float
+
+
+def _comment(m: int, tau: float, p: RefineParams | None) -> str:
+    if p is None:
+        return f"wavemesh {__version__} initial triangulation, M={m} tau={tau:g}"
+    return f"wavemesh {__version__} refined mesh, M={m} tau={tau:g} zeta={p.zeta:g} metric={p.metric}"
+
+
+def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
+    """`wavemesh mesh` without the files: the filter bank and the templates, then (unless
+    ``initial_only``) the native refiner.  The final mesh is always checked (a proper triangulation,
+    within zeta when the refiner reports the bound met; else MeshInvalid); the coarser levels are
+    checked and measured only with ``check_levels``."""
+    params = params or MeshParams()
+    m, t = _levels_and_tau(hf, params.levels, params.tau)
+    if params.initial_only:
+        job = triangulate(hf, m, t)  # checks the mesh
+        errors = mesh_errors(job.mesh, hf.values, rms=params.rms)
+        report = {"wavemesh": __version__, "input": hf.to_report(),
+                  "parameters": {"levels": m, "tau": t, "stage": "initial"},
+                  "initial": job.result.to_report(), "errors": errors.to_report()}
+        return MeshResult(heightfield=hf, params=params, refine_params=None, levels=m, tau=t, mesh=job.mesh,
+                          errors=errors, level_meshes=[(m - 1, job.mesh)], rows=[], bound_met=True,
+                          comment=_comment(m, t, None), report=report)
+    p = params.refine
+    rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms)
+    final = rjob.output.final
+    if params.check_levels:
+        rows = [level_report(lv, hf, p.metric, rjob.errors if lv is final else None)
+                for lv in rjob.output.levels]
+    else:
+        rows = [level_counts(lv, hf) for lv in rjob.output.levels]
+    parameters = {"levels": m, "tau": t, "stage": "full"} | p.to_report() | {"zeta_refiner": rjob.zeta_used}
+    report = {
+        "wavemesh": __version__,
+        "input": hf.to_report(),
+        "parameters": parameters,
+        "initial": rjob.initial.result.to_report(),
+        "errors": rjob.errors.to_report(),
+        "refiner": {
+            "levels": rows,
+            "bound_met": rjob.bound_met,
+            "seconds": rjob.seconds,
+            "capacity": rjob.output.capacity,
+            "fixed_point": {name: int(getattr(rjob.output.params, name))
+                            for name, _ in rjob.output.params._fields_},
+        },
+    }
+    return MeshResult(heightfield=hf, params=params, refine_params=p, levels=m, tau=t, mesh=rjob.mesh,
+                      errors=rjob.errors, level_meshes=[(lv.level, lv.mesh) for lv in rjob.output.levels],
+                      rows=rows, bound_met=rjob.bound_met, comment=_comment(m, t, p), report=report,
+                      refined=rjob)
+
+
+def device_fit_hint(hf: HeightField, info: DeviceInfo) -> str | None:
+    """None when the device holds the height field, else a hint: the --decimate that makes it fit."""
+    w, h = hf.width, hf.height
+    if w <= info.max_width and h <= info.max_height and w * h <= info.max_samples:
+        return None
+    for n in range(2, 1 + max(w, h)):
+        dw, dh = -(-w // n), -(-h // n)
+        if dw <= info.max_width and dh <= info.max_height and dw * dh <= info.max_samples:
+            return (f"--decimate {n} makes it {dw} x {dh}; or --crop X,Y,W,H with W <= {info.max_width}, "
+                    f"H <= {info.max_height}")
+    return "crop it with --crop X,Y,W,H"
+
+
+STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 4: "sending", 5: "done"}
+
+
+def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int = DEFAULT_BAUD,
+           timeouts: Timeouts = DEFAULT_TIMEOUTS, trace=None, progress: bool = False,
+           log: Callable[[str], None] | None = None) -> StreamResult:
+    """`wavemesh stream` without the files: the job of :func:`mesh` on a device behind ``port`` (a
+    pyserial URL or an open port object) over the wire protocol (wavemesh.stream.Device).
+
+    The device's capacity bounds the job: an input larger than it holds, more levels than it makes, a
+    --capacity or --max-triangles beyond its storage are DeviceErrors with a hint; without
+    ``max_triangles`` the budget is its storage less one.  Every level is checked (a proper
+    triangulation, else ProtocolError) and measured.  ``trace``: a text stream for the frames' hex
+    dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user."""
+    params = params or MeshParams()
+    p = params.refine
+    p.check()
+    m, tau = _levels_and_tau(hf, params.levels, params.tau)
+    full = not params.initial_only
+    tau_q = tau_counts(tau, hf.scale)
+    q = hf.max_quantisation_error  # as refine(): zeta - 2q on the samples for lossy quantisation
+    zeta = max(0.0, p.zeta - 2 * q) if q > 0 else p.zeta
+    say = log or (lambda text: None)
+
+    with Device(port, baud, trace=trace, timeouts=timeouts) as dev:
+        info = dev.sync()
+        say(f"device: {info.summary()}")
+        hint = device_fit_hint(hf, info)
+        if hint:
+            raise DeviceError(f"{hf.source} is {hf.width} x {hf.height} samples; the device holds at most "
+                              f"{info.max_width} x {info.max_height} ({info.max_samples} samples)", hint)
+        if m > info.max_levels:
+            raise DeviceError(f"--levels {m}: the device makes at most {info.max_levels}",
+                              hint=f"use --levels {info.max_levels} or fewer")
+        if not full and not info.features & P.FEATURE_INITIAL_ONLY:
+            raise DeviceError("the device cannot stop after the template stage", hint="use --stage full")
+        storage = p.capacity or info.tri_capacity
+        if storage > info.tri_capacity:
+            raise DeviceError(f"--capacity {storage}: the device has storage for {info.tri_capacity} "
+                              "triangles",
+                              hint=f"use --capacity {info.tri_capacity} or less")
+        budget_note = ""
+        if p.max_triangles is None:
+            p = replace(p, max_triangles=storage - 1)
+            budget_note = " (the device's capacity less one)"
+        elif p.max_triangles >= storage:
+            raise DeviceError(f"--max-triangles {p.max_triangles}: the device honours a budget of "
+                              f"at most {storage - 1} (storage for {storage} triangles)",
+                              hint=f"use --max-triangles {storage - 1} or less")
+        fp = fixed_params(p, hf.scale, zeta)
+        dev.configure(config_payload(hf.width, hf.height, m, tau_q, fp, capacity=p.capacity or 0,
+                                     initial_only=not full))
+        if full:
+            say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {p.zeta:g} ({p.metric}), "
+                f"budget {p.max_triangles} triangles{budget_note}")
+        kib = 2 * hf.width * hf.height / 1024
+        bar = Bar("heights", hf.width * hf.height, enabled=progress)
+        t0 = time.monotonic()
+        sent = dev.upload(hf.samples, bar)
+        upload_s = time.monotonic() - t0
+        bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
+        work = Bar("device", m if full else 1, enabled=progress)
+        got: list = []
+
+        def on_progress(x: dict) -> None:
+            name = STAGE_NAMES.get(x["stage"], "?")
+            lvl = f" level {x['level']}" if x["stage"] in (P.Stage.REFINE, P.Stage.EMIT) else ""
+            work.update(len(got), f"{name}{lvl}")
+
+        def on_level(lv) -> None:
+            got.append(lv)
+            work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
+
+        t1 = time.monotonic()
+        levels, done = dev.run(samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
+        job_s = time.monotonic() - t1
+        work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
+        link = dev.link.stats
+
+    for lv in levels:
+        verdict = check_mesh(lv.mesh)
+        if not verdict.valid:
+            raise ProtocolError(f"the device's level {lv.level} is not a proper triangulation: "
+                                + "; ".join(verdict.problems[:3]))
+    final = levels[-1]
+    rows = [level_report(lv, hf, p.metric) | {"device_cycles": lv.cycles, "stream_bytes": lv.nbytes,
+                                              "arrived_s": lv.seconds} for lv in levels] if full else []
+    errors = mesh_errors(final.mesh, hf.values, rms=params.rms)
+    clk = info.clk_hz
+    cycles = {f.name[len("cycles_"):]: done[f.name] for f in P.DONE.fields if f.name.startswith("cycles_")}
+    parameters = {"levels": m, "tau": tau, "stage": "full" if full else "initial"}
+    report = {
+        "wavemesh": __version__,
+        "input": hf.to_report(),
+        "parameters": parameters,
+        "initial": {"levels": m, "block_size": 1 << m, "tau_counts": tau_q,
+                    "vertices": levels[0].mesh.n_vertices, "triangles": levels[0].mesh.n_triangles},
+        "errors": errors.to_report(),
+        "device": info.to_report(),
+        "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},
+        "transfer": {"port": port if isinstance(port, str) else repr(port), "baud": baud,
+                     "height_bytes": 2 * hf.width * hf.height, "bytes_sent": sent, "upload_seconds": upload_s,
+                     "mesh_bytes": sum(lv.nbytes for lv in levels), "job_seconds": job_s,
+                     "frames_out": link.frames_out, "frames_in": link.frames_in, "bytes_out": link.bytes_out,
+                     "bytes_in": link.bytes_in, "damaged_frames": link.damaged},
+    }
+    bound_met = final.stats["over"] == 0
+    if full:
+        parameters.update(p.to_report())
+        parameters["zeta_refiner"] = zeta
+        report["refiner"] = {
+            "levels": rows,
+            "bound_met": bound_met,
+            "seconds": cycles["refine"] / clk,
+            "capacity": storage,
+            "fixed_point": {name: int(getattr(fp, name)) for name, _ in fp._fields_},
+        }
+    run = p if full else None
+    return StreamResult(heightfield=hf, params=params, refine_params=run, levels=m, tau=tau,
+                        mesh=final.mesh, errors=errors, level_meshes=[(lv.level, lv.mesh) for lv in levels],
+                        rows=rows, bound_met=bound_met or not full, comment=_comment(m, tau, run),
+                        report=report, device=info, cycles=cycles, link=link, upload_seconds=upload_s,
+                        job_seconds=job_s)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Files
+
+
+def check_outputs(output: str, *, lod: str | None = None, report: str | None = None,
+                  render: str | None = None) -> tuple[Path, Path | None]:
     """The output paths of `mesh` and `stream`, checked before any work: (mesh file, --lod folder)."""
-    out = _check_output(args.output, MESH_SUFFIXES, "mesh")
-    if args.render:
-        _check_output(args.render, (".png", ".svg", ".pdf"), "picture")
-    if args.report:
-        _check_output(args.report, (".json",), "report")
-    lod = None
-    if getattr(args, "lod", None):
-        lod = Path(args.lod)
-        if lod.exists() and not lod.is_dir():
-            raise InputError(f"--lod {args.lod} is not a directory")
-        if not lod.parent.exists():
-            raise InputError(f"cannot write --lod {args.lod}: directory {lod.parent} does not exist")
-    return out, lod
+    out = _check_output(output, MESH_SUFFIXES, "mesh")
+    if render:
+        _check_output(render, (".png", ".svg", ".pdf"), "picture")
+    if report:
+        _check_output(report, (".json",), "report")
+    folder = None
+    if lod:
+        folder = Path(lod)
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"--lod {lod} is not a directory")
+        if not folder.parent.exists():
+            raise InputError(f"cannot write --lod {lod}: directory {folder.parent} does not exist")
+    return out, folder
 
 
-
-def _write_outputs(args, hf: HeightField, mesh: Mesh, report: dict | None, written) -> None:
-    """The report and the picture of `mesh` and `stream` (the meshes are written by the caller)."""
-    if args.report:
+def write_result(result: MeshResult, output: str, *, lod: str | None = None, report: str | None = None,
+                 render: str | None = None, title: str | None = None) -> list[str]:
+    """Write a result's files: the mesh (.obj or .ply), each level's into ``lod``, the JSON report and
+    a picture.  Returns the level files written."""
+    out, folder = check_outputs(output, lod=lod, report=report, render=render)
+    hf = result.heightfield
+    write_mesh(str(out), result.mesh, hf.values, comment=result.comment)
+    written = []
+    if folder is not None:
+        folder.mkdir(exist_ok=True)
+        for level, m in result.level_meshes:
+            path = folder / f"level-{level}{out.suffix.lower()}"
+            write_mesh(str(path), m, hf.values, comment=f"{result.comment} level={level}")
+            written.append(str(path))
+    if report:
+        data = result.report | {"output": str(out)}
         if written:
-            report["lod"] = written
-        _write_json(args.report, report)
-    if args.render:
+            data["lod"] = written
+        _write_json(report, data)
+    if render:
         from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
 
-        render_mesh(mesh, mesh.z(hf.values), args.render, title=Path(args.input).name)
+        render_mesh(result.mesh, result.mesh.z(hf.values), render, title=title)
+    return written
 
 
-def _print_summary(args, hf: HeightField, mesh: Mesh, levels: int, tau: float, errors) -> None:
-    print(f"{args.input}: {hf.width} x {hf.height}, M={levels}, tau={tau:g}: "
-          f"{mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
-          f"E_max normal {errors.e_max_normal:.6g}, vertical {errors.e_max_vertical:.6g}")
-
-def measures_levels(args) -> bool:
-    """Whether `mesh` checks and measures every level: only when asked, by --report, --lod or
-    --check-levels (the final mesh is always checked and measured)."""
-    return bool(args.report or getattr(args, "lod", None) or getattr(args, "check_levels", False))
-
-
-def mesh_command(args) -> int:
-    out, lod = _check_mesh_outputs(args)
-    stage = getattr(args, "stage", "initial")
-    params = _params_from_args(args) if stage == "full" else None
-    if params is not None:
-        params.check()
-    hf = _load_input(args)
-    measure = measures_levels(args)
-    if stage == "full":
-        rjob = refine(hf, args.levels, args.tau, params, check_levels=measure, rms=bool(args.report))
-        job, mesh, errors = rjob.initial, rjob.mesh, rjob.errors
-        comment = (f"wavemesh {__version__} refined mesh, M={job.levels} tau={job.tau:g} "
-                   f"zeta={params.zeta:g} "
-                   f"metric={params.metric}")
-        final = rjob.output.final
-        if measure:
-            levels = [level_report(lv, hf, params.metric, errors if lv is final else None)
-                      for lv in rjob.output.levels]
-        else:
-            levels = [level_counts(lv, hf) for lv in rjob.output.levels]
-    else:
-        rjob, job = None, triangulate(hf, args.levels, args.tau)  # triangulate checks the mesh
-        mesh = job.mesh
-        errors = mesh_errors(mesh, hf.values, rms=bool(args.report))  # the RMS only for the report
-        comment = f"wavemesh {__version__} initial triangulation, M={job.levels} tau={job.tau:g}"
-        levels = []
-    write_mesh(str(out), mesh, hf.values, comment=comment)
-    written = []
-    if lod is not None:
-        lod.mkdir(exist_ok=True)
-        meshes = [(lv.level, lv.mesh) for lv in rjob.output.levels] if rjob else [(job.levels - 1, job.mesh)]
-        for level, m in meshes:
-            path = lod / f"level-{level}{out.suffix.lower()}"
-            write_mesh(str(path), m, hf.values, comment=f"{comment} level={level}")
-            written.append(str(path))
-    report = None
-    if args.report:
-        parameters = {"levels": job.levels, "tau": job.tau, "stage": stage}
-        report = {
-            "wavemesh": __version__,
-            "input": hf.to_report(),
-            "parameters": parameters,
-            "initial": job.result.to_report(),
-            "errors": errors.to_report(),
-            "output": str(out),
-        }
-        if rjob is not None:
-            parameters.update(rjob.params.to_report())
-            parameters["zeta_refiner"] = rjob.zeta_used
-            report["refiner"] = {
-                "levels": levels,
-                "bound_met": rjob.bound_met,
-                "seconds": rjob.seconds,
-                "capacity": rjob.output.capacity,
-                "fixed_point": {name: int(getattr(rjob.output.params, name)) for name,
-                                _ in rjob.output.params._fields_},
-            }
-    _write_outputs(args, hf, mesh, report, written)
-    e_final = None
-    if rjob is not None:
-        e_final = errors.e_max_normal if params.metric == "normal" else errors.e_max_vertical
-    if not args.quiet:
-        _print_summary(args, hf, mesh, job.levels, job.tau, errors)
-        if rjob is not None:
-            print(f"  refiner: zeta {params.zeta:g} ({params.metric}), k={params.iterations}, "
-                  f"{params.neighbourhood}-based, {rjob.seconds:.3f} s")
-            # Unmeasured levels show the refiner's own E_max (never below the exact value).
-            print(f"  level  vertices  triangles  {'E_max' if measure else 'E_max(ref)':>10}  splits  swaps")
-            for row in levels:
-                print(f"  {row['level']:>5}  {row['vertices']:>8}  {row['triangles']:>9}  "
-                      f"{row['e_max'] if measure else row['e_max_firmware']:>10.4g}  "
-                      f"{row['splits']:>6}  {row['swaps']:>5}")
-        print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
-              + (f", {len(written)} levels in {args.lod}" if written else ""))
-    if rjob is not None and params.bound and not rjob.bound_met:
-        print(f"warning: the error bound is not met: E_max {e_final:.6g} > zeta {params.zeta:g} "
-              f"({levels[-1]['over_zeta']} triangles over) at the triangle budget (--max-triangles "
-              f"{params.max_triangles})", file=sys.stderr)
-        return BOUND_NOT_MET
-    return 0
-
-
-def check_command(args) -> int:
-    hf = shape_heightfield(_load(args.against, args.key, args.fill), getattr(args, "crop", None),
-                           getattr(args, "decimate", None))
-    mesh, z = read_mesh(args.mesh, hf.width, hf.height)
+def check_file(path: str, hf: HeightField) -> dict:
+    """`wavemesh check`: whether the mesh file ``path`` is a proper triangulation of ``hf``'s grid whose
+    vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...)."""
+    mesh, z = read_mesh(path, hf.width, hf.height)
     if (mesh.width, mesh.height) != (hf.width, hf.height):
-        raise InputError(f"{args.mesh} is for a {mesh.width} x {mesh.height} grid but {args.against} "
+        raise InputError(f"{path} is for a {mesh.width} x {mesh.height} grid but the height field "
                          f"is {hf.width} x {hf.height}")
     verdict = check_mesh(mesh)
     report = {
-        "mesh": args.mesh,
-        "against": args.against,
+        "mesh": path,
         "valid": verdict.valid,
         "problems": verdict.problems,
         "vertices": verdict.n_vertices,
@@ -405,225 +605,30 @@ def check_command(args) -> int:
                                       f"first at ({mesh.xy[i, 0]}, {mesh.xy[i, 1]}): {z[i]!r} != {want[i]!r}")
         else:
             report["errors"] = mesh_errors(mesh, hf.values).to_report()
-    if args.report:
-        _write_json(args.report, report)
-    if not args.quiet:
-        state = "a proper triangulation" if report["valid"] else "NOT a proper triangulation"
-        print(f"{args.mesh}: {mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
-              f"{hf.width} x {hf.height} grid: {state}")
-        for problem in report["problems"][:20]:
-            print(f"  {problem}")
-        if "errors" in report:
-            e = report["errors"]
-            print(f"  E_max normal {e['e_max_normal']:.6g}, vertical {e['e_max_vertical']:.6g}; "
-                  f"RMS normal {e['rms_normal']:.6g}, vertical {e['rms_vertical']:.6g}")
-    if not report["valid"]:
-        raise MeshInvalid(f"{args.mesh} is not a proper triangulation of the {hf.width} x {hf.height} grid"
-                          + (f": {report['problems'][0]}" if report["problems"] else ""))
-    return 0
+    return report
 
 
-def render_command(args) -> int:
-    _check_output(args.output, (".png", ".svg", ".pdf"), "picture")
-    mesh, z = read_mesh(args.mesh)
-    from wavemesh.render import render_mesh
-
-    render_mesh(mesh, z, args.output, view=args.view, wireframe=not args.no_wireframe,
-                zscale=args.zscale, title=args.title)
-    print(f"wrote {args.output}")
-    return 0
+def write_json(path: str, data: dict) -> None:
+    """A JSON file (.json), or InputError."""
+    _write_json(path, data)
 
 
-def synth_command(args) -> int:
+def write_synth(name: str, output: str, size: int | None = None) -> Path:
+    """`wavemesh synth`: one of the dissertation's synthetic sets into an .npy file."""
     from wavemesh.synth import make
 
-    out = _check_output(args.output, (".npy",), "height field")
-    if args.size is not None and not 2 <= args.size <= 16384:
-        raise WavemeshError(f"--size {args.size} is out of range", hint="use 2..16384")
-    np.save(out, make(args.name, args.size))
-    print(f"wrote {out}")
-    return 0
+    out = _check_output(output, (".npy",), "height field")
+    if size is not None and not 2 <= size <= 16384:
+        raise WavemeshError(f"--size {size} is out of range", hint="use 2..16384")
+    np.save(out, make(name, size))
+    return out
 
 
-def _fits(hf: HeightField, info) -> str | None:
-    """None when the device holds the height field, else a hint: the --decimate that makes it fit."""
-    w, h = hf.width, hf.height
-    if w <= info.max_width and h <= info.max_height and w * h <= info.max_samples:
-        return None
-    for n in range(2, 1 + max(w, h)):
-        dw, dh = -(-w // n), -(-h // n)
-        if dw <= info.max_width and dh <= info.max_height and dw * dh <= info.max_samples:
-            return (f"--decimate {n} makes it {dw} x {dh}; or --crop X,Y,W,H with W <= {info.max_width}, "
-                    f"H <= {info.max_height}")
-    return "crop it with --crop X,Y,W,H"
+def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: bool = True,
+                zscale: float | None = None, title: str | None = None) -> None:
+    """`wavemesh render`: a picture of a mesh file."""
+    _check_output(output, (".png", ".svg", ".pdf"), "picture")
+    m, z = read_mesh(mesh_path)
+    from wavemesh.render import render_mesh
 
-
-STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 4: "sending", 5: "done"}
-
-
-def stream_command(args) -> int:
-    """`wavemesh stream`: the job on a device over the wire protocol; the outputs of `wavemesh mesh`."""
-    from wavemesh import protocol as P
-    from wavemesh import stream as S
-    from wavemesh.native import fixed_params
-
-    out, lod = _check_mesh_outputs(args)
-    full = args.stage == "full"
-    params = _params_from_args(args)
-    params.check()
-    if not 0 <= params.delta_c <= 1:
-        raise WavemeshError(f"--delta-c {params.delta_c} is out of range", hint="use 0 <= delta_c <= 1")
-    if args.timeout is not None and not args.timeout > 0:
-        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
-    hf = _load_input(args)
-    m = default_levels(hf.width, hf.height) if args.levels is None else args.levels
-    if not 1 <= m <= MAX_LEVELS:
-        raise WavemeshError(f"--levels {m} is out of range", hint=f"use 1..{MAX_LEVELS}")
-    tau = default_tau(hf) if args.tau is None else args.tau
-    if not math.isfinite(tau) or tau < 0:
-        raise WavemeshError(f"--tau {tau} is not a finite number >= 0", hint="give tau in height units")
-    tau_q = tau_counts(tau, hf.scale)
-    q = hf.max_quantisation_error  # as refine(): zeta - 2q on the samples for lossy quantisation
-    zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
-    timeouts = S.DEFAULT_TIMEOUTS if args.timeout is None else replace(S.DEFAULT_TIMEOUTS, job=args.timeout)
-
-    def say(text: str) -> None:
-        if not args.quiet:
-            print(text, flush=True)
-
-    with S.Device(args.port, args.baud, trace=sys.stderr if args.trace else None, timeouts=timeouts) as dev:
-        info = dev.sync()
-        say(f"device: {info.summary()}")
-        hint = _fits(hf, info)
-        if hint:
-            raise S.DeviceError(f"{args.input} is {hf.width} x {hf.height} samples; the device holds at most "
-                                f"{info.max_width} x {info.max_height} ({info.max_samples} samples)", hint)
-        if m > info.max_levels:
-            raise S.DeviceError(f"--levels {m}: the device makes at most {info.max_levels}",
-                                hint=f"use --levels {info.max_levels} or fewer")
-        if not full and not info.features & P.FEATURE_INITIAL_ONLY:
-            raise S.DeviceError("the device cannot stop after the template stage", hint="use --stage full")
-        storage = params.capacity or info.tri_capacity
-        if storage > info.tri_capacity:
-            raise S.DeviceError(f"--capacity {storage}: the device has storage for {info.tri_capacity} "
-                                "triangles",
-                                hint=f"use --capacity {info.tri_capacity} or less")
-        budget_note = ""
-        if params.max_triangles is None:
-            params = replace(params, max_triangles=storage - 1)
-            budget_note = " (the device's capacity less one)"
-        elif params.max_triangles >= storage:
-            raise S.DeviceError(f"--max-triangles {params.max_triangles}: the device honours a budget of "
-                                f"at most {storage - 1} (storage for {storage} triangles)",
-                                hint=f"use --max-triangles {storage - 1} or less")
-        fp = fixed_params(params, hf.scale, zeta)
-        dev.configure(S.config_payload(hf.width, hf.height, m, tau_q, fp, capacity=params.capacity or 0,
-                                       initial_only=not full, delta_lambda=params.delta_lambda,
-                                       delta_c=params.delta_c))
-        if full:
-            say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {params.zeta:g} ({params.metric}), "
-                f"budget {params.max_triangles} triangles{budget_note}")
-        kib = 2 * hf.width * hf.height / 1024
-        bar = S.Bar("heights", hf.width * hf.height, enabled=not args.quiet)
-        t0 = time.monotonic()
-        sent = dev.upload(hf.samples, bar)
-        upload_s = time.monotonic() - t0
-        bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
-        work = S.Bar("device", m if full else 1, enabled=not args.quiet)
-        got: list = []
-
-        def on_progress(x: dict) -> None:
-            name = STAGE_NAMES.get(x["stage"], "?")
-            lvl = f" level {x['level']}" if x["stage"] in (P.Stage.REFINE, P.Stage.EMIT) else ""
-            work.update(len(got), f"{name}{lvl}")
-
-        def on_level(lv) -> None:
-            got.append(lv)
-            work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
-
-        t1 = time.monotonic()
-        levels, done = dev.run(S.samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
-        job_s = time.monotonic() - t1
-        work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
-        link = dev.link.stats
-
-    for lv in levels:
-        verdict = check_mesh(lv.mesh)
-        if not verdict.valid:
-            raise S.ProtocolError(f"the device's level {lv.level} is not a proper triangulation: "
-                                  + "; ".join(verdict.problems[:3]))
-    final = levels[-1]
-    mesh = final.mesh
-    if full:
-        comment = (f"wavemesh {__version__} refined mesh, M={m} tau={tau:g} zeta={params.zeta:g} "
-                   f"metric={params.metric}")
-        rows = [level_report(lv, hf, params.metric) | {"device_cycles": lv.cycles, "stream_bytes": lv.nbytes,
-                                                        "arrived_s": lv.seconds} for lv in levels]
-    else:
-        comment = f"wavemesh {__version__} initial triangulation, M={m} tau={tau:g}"
-        rows = []
-    write_mesh(str(out), mesh, hf.values, comment=comment)
-    written = []
-    if lod is not None:
-        lod.mkdir(exist_ok=True)
-        for lv in levels:
-            path = lod / f"level-{lv.level}{out.suffix.lower()}"
-            write_mesh(str(path), lv.mesh, hf.values, comment=f"{comment} level={lv.level}")
-            written.append(str(path))
-    errors = mesh_errors(mesh, hf.values)
-    clk = info.clk_hz
-    cycles = {f.name[len("cycles_"):]: done[f.name] for f in P.DONE.fields if f.name.startswith("cycles_")}
-    mesh_bytes = sum(lv.nbytes for lv in levels)
-    parameters = {"levels": m, "tau": tau, "stage": args.stage}
-    report = {
-        "wavemesh": __version__,
-        "input": hf.to_report(),
-        "parameters": parameters,
-        "initial": {"levels": m, "block_size": 1 << m, "tau_counts": tau_q,
-                    "vertices": levels[0].mesh.n_vertices, "triangles": levels[0].mesh.n_triangles},
-        "errors": errors.to_report(),
-        "output": str(out),
-        "device": info.to_report(),
-        "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},
-        "transfer": {"port": args.port, "baud": args.baud, "height_bytes": 2 * hf.width * hf.height,
-                     "bytes_sent": sent, "upload_seconds": upload_s, "mesh_bytes": mesh_bytes,
-                     "job_seconds": job_s, "frames_out": link.frames_out, "frames_in": link.frames_in,
-                     "bytes_out": link.bytes_out, "bytes_in": link.bytes_in, "damaged_frames": link.damaged},
-    }
-    if full:
-        parameters.update(params.to_report())
-        parameters["zeta_refiner"] = zeta
-        report["refiner"] = {
-            "levels": rows,
-            "bound_met": final.stats["over"] == 0,
-            "seconds": cycles["refine"] / clk,
-            "capacity": storage,
-            "fixed_point": {name: int(getattr(fp, name)) for name, _ in fp._fields_},
-        }
-    _write_outputs(args, hf, mesh, report, written)
-    if not args.quiet:
-        _print_summary(args, hf, mesh, m, tau, errors)
-        if full:
-            print("  level  vertices  triangles       E_max  splits  swaps   device ms")
-            for row in rows:
-                print(f"  {row['level']:>5}  {row['vertices']:>8}  {row['triangles']:>9}  "
-                      f"{row['e_max']:>10.4g}  {row['splits']:>6}  {row['swaps']:>5}  "
-                      f"{1000 * row['device_cycles'] / clk:>10.2f}")
-        print("  device: " + ", ".join(f"{k} {1000 * v / clk:.2f} ms" for k, v in cycles.items())
-              + f"; link: {link.frames_out} frames out, {link.frames_in} in, {link.damaged} damaged")
-        print(f"wrote {out}" + "".join(f", {p}" for p in (args.report, args.render) if p)
-              + (f", {len(written)} levels in {args.lod}" if written else ""))
-    if full and params.bound and final.stats["over"] != 0:
-        print(f"warning: the error bound is not met: E_max {rows[-1]['e_max']:.6g} > zeta {params.zeta:g} "
-              f"({final.stats['over']} triangles over) at the triangle budget (--max-triangles "
-              f"{params.max_triangles})", file=sys.stderr)
-        return BOUND_NOT_MET
-    return 0
-
-
-COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_command, "render": render_command,
-            "synth": synth_command}
-
-
-def run(args) -> int:
-    return COMMANDS[args.command](args)
+    render_mesh(m, z, output, view=view, wireframe=wireframe, zscale=zscale, title=title)

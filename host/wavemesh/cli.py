@@ -1,4 +1,5 @@
-"""The ``wavemesh`` command: a thin layer of argument parsing over :mod:`wavemesh.api`.
+"""The ``wavemesh`` command: a thin layer of argument parsing and printing over :mod:`wavemesh.api`
+(``api.mesh``, ``api.stream``, ``api.write_result``, ...).
 
 Every error a user can cause ends in one line ``error: ...`` (and a ``hint:``
 line when there is one) on stderr and a non-zero exit status; a traceback means
@@ -9,9 +10,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
+from pathlib import Path
 
 from wavemesh import __version__, api
-from wavemesh.errors import WavemeshError
+from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.native import RefineParams
 from wavemesh.synth import ALIASES, DATASETS
 
@@ -165,11 +168,131 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# ---------------------------------------------------------------------------------------------------
+# The commands: options -> typed parameters -> wavemesh.api -> files and lines on the terminal
+
+
+def _mesh_params(args) -> api.MeshParams:
+    """The job of `mesh` and `stream` from their options."""
+    refine = RefineParams(zeta=args.zeta, metric=args.metric, delta_d=args.delta_d, delta_p=args.delta_p,
+                          delta_v=args.delta_v, alpha=args.alpha, delta_lambda=args.delta_lambda,
+                          delta_c=args.delta_c, iterations=args.iterations, neighbourhood=args.neighbourhood,
+                          max_triangles=args.max_triangles, capacity=args.capacity, bound=args.bound == "on",
+                          reduce=args.reduce == "on", decimate=args.simplify == "on")
+    if args.stage == "full":
+        refine.check()  # before reading the input
+    # --report and --lod show every level's errors: they check and measure every level
+    return api.MeshParams(levels=args.levels, tau=args.tau, initial_only=args.stage == "initial",
+                          refine=refine, check_levels=bool(args.check_levels or args.report or args.lod),
+                          rms=bool(args.report))
+
+
+def _load(args, path: str):
+    return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)
+
+
+def _finish(args, result: api.MeshResult, table: list[str]) -> int:
+    """Write the files of `mesh` and `stream`, print the summary and the level table, return the status."""
+    written = api.write_result(result, args.output, lod=args.lod, report=args.report, render=args.render,
+                               title=Path(args.input).name)
+    if not args.quiet:
+        hf, m, e = result.heightfield, result.mesh, result.errors
+        print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
+              f"{m.n_vertices} vertices, {m.n_triangles} triangles, "
+              f"E_max normal {e.e_max_normal:.6g}, vertical {e.e_max_vertical:.6g}")
+        for line in table:
+            print(line)
+        print(f"wrote {args.output}" + "".join(f", {p}" for p in (args.report, args.render) if p)
+              + (f", {len(written)} levels in {args.lod}" if written else ""))
+    warning = result.bound_warning()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
+    return result.exit_status
+
+
+def mesh_command(args) -> int:
+    api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
+    params = _mesh_params(args)
+    result = api.mesh(_load(args, args.input), params)
+    table = []
+    if result.refined is not None:
+        p = result.refine_params
+        measured = params.check_levels  # else the refiner's own E_max (never below the exact value)
+        table.append(f"  refiner: zeta {p.zeta:g} ({p.metric}), k={p.iterations}, {p.neighbourhood}-based, "
+                     f"{result.refined.seconds:.3f} s")
+        e_max, head = ("e_max", "E_max") if measured else ("e_max_firmware", "E_max(ref)")
+        table.append(f"  level  vertices  triangles  {head:>10}  splits  swaps")
+        table += [f"  {r['level']:>5}  {r['vertices']:>8}  {r['triangles']:>9}  {r[e_max]:>10.4g}  "
+                  f"{r['splits']:>6}  {r['swaps']:>5}" for r in result.rows]
+    return _finish(args, result, table)
+
+
+def stream_command(args) -> int:
+    from wavemesh.stream import DEFAULT_TIMEOUTS
+
+    api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
+    params = _mesh_params(args)
+    if args.timeout is not None and not args.timeout > 0:
+        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
+    timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
+    result = api.stream(_load(args, args.input), args.port, params, baud=args.baud, timeouts=timeouts,
+                        trace=sys.stderr if args.trace else None, progress=not args.quiet,
+                        log=None if args.quiet else lambda text: print(text, flush=True))
+    clk = result.device.clk_hz
+    table = []
+    if result.rows:
+        table.append("  level  vertices  triangles       E_max  splits  swaps   device ms")
+        table += [f"  {r['level']:>5}  {r['vertices']:>8}  {r['triangles']:>9}  {r['e_max']:>10.4g}  "
+                  f"{r['splits']:>6}  {r['swaps']:>5}  {1000 * r['device_cycles'] / clk:>10.2f}"
+                  for r in result.rows]
+    link = result.link
+    table.append("  device: " + ", ".join(f"{k} {1000 * v / clk:.2f} ms" for k, v in result.cycles.items())
+                 + f"; link: {link.frames_out} frames out, {link.frames_in} in, {link.damaged} damaged")
+    return _finish(args, result, table)
+
+
+def check_command(args) -> int:
+    hf = _load(args, args.against)
+    report = api.check_file(args.mesh, hf) | {"against": args.against}
+    if args.report:
+        api.write_json(args.report, report)
+    if not args.quiet:
+        state = "a proper triangulation" if report["valid"] else "NOT a proper triangulation"
+        print(f"{args.mesh}: {report['vertices']} vertices, {report['triangles']} triangles, "
+              f"{hf.width} x {hf.height} grid: {state}")
+        for problem in report["problems"][:20]:
+            print(f"  {problem}")
+        if "errors" in report:
+            e = report["errors"]
+            print(f"  E_max normal {e['e_max_normal']:.6g}, vertical {e['e_max_vertical']:.6g}; "
+                  f"RMS normal {e['rms_normal']:.6g}, vertical {e['rms_vertical']:.6g}")
+    if not report["valid"]:
+        raise MeshInvalid(f"{args.mesh} is not a proper triangulation of the {hf.width} x {hf.height} grid"
+                          + (f": {report['problems'][0]}" if report["problems"] else ""))
+    return 0
+
+
+def render_command(args) -> int:
+    api.render_file(args.mesh, args.output, view=args.view, wireframe=not args.no_wireframe,
+                    zscale=args.zscale, title=args.title)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def synth_command(args) -> int:
+    print(f"wrote {api.write_synth(args.name, args.output, args.size)}")
+    return 0
+
+
+COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_command, "render": render_command,
+            "synth": synth_command}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-        return api.run(args)
+        return COMMANDS[args.command](args)
     except WavemeshError as e:
         print(f"error: {e.message}", file=sys.stderr)
         if e.hint:

@@ -4,20 +4,17 @@ wavemesh's checker, one whole pair (in process and as whole processes), the tabl
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
+import bench_cost as C  # bench/ is on pytest's path (pytest.ini)
+import bench_quality as Q
+import datasets as D
 import numpy as np
+import peers as P
 import pytest
+from wavemesh.mesh import Mesh
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "bench"))
-
-import bench_cost as C  # noqa: E402
-import bench_quality as Q  # noqa: E402
-import datasets as D  # noqa: E402
-import peers as P  # noqa: E402
-from wavemesh.mesh import Mesh  # noqa: E402
 
 
 @pytest.fixture(scope="module")

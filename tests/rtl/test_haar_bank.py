@@ -13,7 +13,7 @@ import json
 import random
 
 import pytest
-from rtl_runner import RTL, run
+from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "haar_linebuf", "haar_level", "wm_fifo", "haar_bank")]
 

@@ -4,7 +4,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from rtl_runner import GEN, RTL
+from wavemesh.harness.rtl_runner import GEN, RTL
 
 MODULES = sorted(RTL.glob("*.v"))
 

@@ -4,7 +4,7 @@ template-entry writer, registers) against the reference model; the bench is soc_
 Built small (64 x 64, 5 levels, 32 block columns, small memories) so the refusals are reachable."""
 
 
-from rtl_runner import RTL, run
+from wavemesh.harness.rtl_runner import RTL, run
 
 PARAMS = {"MAX_WIDTH": 64, "MAX_HEIGHT": 64, "MAX_LEVELS": 5, "MAX_COLS": 24,
           "HEIGHT_SAMPLES": 4000, "COEF_ENTRIES": 8192, "TOUT_ENTRIES": 512}

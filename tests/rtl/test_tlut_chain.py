@@ -6,7 +6,7 @@ The two-module wrapper is generated into build/ (it is test scaffolding, not a d
 
 
 import pytest
-from rtl_runner import BUILD, RTL, run
+from wavemesh.harness.rtl_runner import BUILD, RTL, run
 
 WRAPPER = """`resetall
 `timescale 1ns / 1ps

@@ -1,8 +1,8 @@
 """rtl/tlut_label.v (the dominant-coefficient labeller) against wavemesh.label (bench: tlut_label_tb.py)."""
 
 import numpy as np
-from rtl_runner import RTL, run
 from tlut_label_tb import expected_labels, random_details
+from wavemesh.harness.rtl_runner import RTL, run
 
 
 def test_bench_expectations_cover_every_label_and_demotion():

@@ -6,7 +6,6 @@ simulator, so a failure in the simulation is the RTL's, not the bench's.
 
 import numpy as np
 import pytest
-from rtl_runner import RTL, run
 from tlut_stage_tb import (
     TS,
     assemble_beats,
@@ -20,6 +19,7 @@ from tlut_stage_tb import (
 from wavemesh import synth
 from wavemesh.check import check_mesh
 from wavemesh.haar import decompose
+from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 # cocotb test names; test_sizes is crossed with idle input cycles and output back-pressure

@@ -5,7 +5,7 @@ FIFOs full, a framing error and a glitch, the simulator's FIFO bypass.  Small FI
 cases quick.
 """
 
-from rtl_runner import RTL, run
+from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / f"{m}.v" for m in ("uart_rx", "uart_tx", "wm_fifo", "soc_uart")]
 

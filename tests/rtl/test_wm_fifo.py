@@ -6,7 +6,7 @@ on depths of 1, a power of two (2, 64) and not (3, 5), and widths from 1 to the 
 """
 
 import pytest
-from rtl_runner import RTL, run
+from wavemesh.harness.rtl_runner import RTL, run
 
 # (DEPTH, DATA_WIDTH): the filter bank's default record FIFO (2 x 70), the UART's (64 x 8), the
 # smallest, and depths that are not powers of two

@@ -7,14 +7,10 @@ run `make setup` (which installs it), never skips them.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))  # simboard.py, rv32.py
-
-from simboard import SimBoard, build  # noqa: E402
+from wavemesh.harness.simboard import SimBoard, build
 
 
 def pytest_configure(config):

@@ -15,14 +15,11 @@ from __future__ import annotations
 
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from wavemesh import protocol as P
-
-sys.path.insert(0, str(Path(__file__).parent))
-from nativedev import build_wmdev  # noqa: E402
+from wavemesh.harness.nativedev import build_wmdev
 
 JOB = re.compile(r"job (\d+) filter (\d+) template (\d+) refine (\d+) emit (\d+) link (\d+) span (\d+) "
                  r"levels (\d+),(\d+) resent (\d+) status (\d+)")

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import pytest
 from rv32 import Program, addi, beq, bne, hex_words, jal, lhu, li, lw, sh, sw
-from simboard import SimBoard, build
 from wavemesh import memmap
+from wavemesh.harness.simboard import SimBoard, build
 from wavemesh.memmap import COEF, FW_RAM, HEIGHT, SYS, TOUT, UART, reg_addr
 
 pytestmark = pytest.mark.sim

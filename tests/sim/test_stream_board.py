@@ -19,8 +19,6 @@ hundred triangles, so the inputs are small and only the smallest runs the whole 
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import random
 import socket
@@ -31,28 +29,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import cli
+from faultproxy import FaultProxy, Faults
 from wavemesh import protocol as P
 from wavemesh import stream as S
+from wavemesh.harness import jacksboro, run_cli
+from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
 from wavemesh.synth import make
-
-sys.path.insert(0, str(Path(__file__).parent))
-from faultproxy import FaultProxy, Faults  # noqa: E402
-from simboard import SimBoard  # noqa: E402
 
 pytestmark = pytest.mark.sim
 
-# Host timeouts for the simulated board: it runs at a tenth of the board's speed, far less on a loaded
-# machine, and a level of the refiner takes it minutes then (job: the longest silence, not a bound on
-# the job).
-SIM_TIMEOUTS = S.Timeouts(sync=2.0, sync_attempts=5, reply=5.0, attempts=3, ack=5.0, per_byte=0.0, job=900.0)
 STAGES = ("filter", "template", "refine", "emit")  # the device's stages: their cycles depend only on the job
-
-
-def jacksboro() -> str:
-    import matplotlib.cbook as cbook
-
-    return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
 
 
 @pytest.fixture(scope="module")
@@ -91,13 +77,6 @@ def fast_board(sim_exe, firmware_hex):
 @pytest.fixture
 def sim_timeouts(monkeypatch):
     monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", SIM_TIMEOUTS)
-
-
-def run_cli(*argv: str) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli.main(list(argv))
-    return rc, out.getvalue(), err.getvalue()
 
 
 def stream_and_mesh(src: str, opts: list[str], url: str, tmp: Path) -> dict:

@@ -11,20 +11,17 @@ from __future__ import annotations
 import contextlib
 import filecmp
 import io
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from faultproxy import FaultProxy, Faults
 from wavemesh import cli
 from wavemesh import stream as S
+from wavemesh.harness.nativedev import NativeDevice, build_wmdev
 from wavemesh.synth import make
-
-sys.path.insert(0, str(Path(__file__).parent))
-from faultproxy import FaultProxy, Faults  # noqa: E402
-from nativedev import NativeDevice, build_wmdev  # noqa: E402
 
 # Short host timeouts: the stand-in device answers in microseconds.  The bound on one run follows from
 # them: sync 3 x 0.5 s, each request 3 x 0.5 s, 9 upload windows x 0.5 s, 17 level requests each

@@ -9,33 +9,23 @@ keeps it from serving the next request; duplicates, aborts and departures mid-jo
 
 from __future__ import annotations
 
-import contextlib
 import filecmp
-import io
 import json
 import random
 import socket
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import cli
 from wavemesh import protocol as P
 from wavemesh import stream as S
+from wavemesh.harness import jacksboro, run_cli
+from wavemesh.harness.nativedev import NativeDevice, build_wmdev
 from wavemesh.link import Link, encode_frame
 from wavemesh.synth import make
 
-sys.path.insert(0, str(Path(__file__).parent))
-from nativedev import NativeDevice, build_wmdev  # noqa: E402
-
 FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, per_byte=0.0, job=5.0)
-
-def jacksboro() -> str:
-    import matplotlib.cbook as cbook
-
-    return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
 
 
 @pytest.fixture(scope="module")
@@ -64,13 +54,6 @@ def asan_device():
 @pytest.fixture
 def fast_timeouts(monkeypatch):
     monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", FAST)
-
-
-def run_cli(*argv: str) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = cli.main(list(argv))
-    return rc, out.getvalue(), err.getvalue()
 
 
 @pytest.fixture(scope="module")

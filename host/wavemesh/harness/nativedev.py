@@ -1,4 +1,5 @@
-"""The native stand-in device for tests: building wmdev (firmware/board/native) and running it.
+"""The native stand-in device for the tests, the demo and the benchmarks: building wmdev
+(firmware/board/native) and running it.
 
 ``build_wmdev()`` configures and builds it with CMake into build/native-device (or, with
 ``sanitize=True``, build/native-device-asan: AddressSanitizer and UndefinedBehaviorSanitizer);
@@ -12,9 +13,9 @@ import fcntl
 import subprocess
 from pathlib import Path
 
-from devproc import DeviceProcess
+from wavemesh.harness.devproc import DeviceProcess
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SOURCE = ROOT / "firmware" / "board" / "native"
 
 

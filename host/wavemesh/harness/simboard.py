@@ -1,7 +1,8 @@
-"""The simulated board for tests: building it (sim/build.py) and running wmsim processes.
+"""The simulated board for tests, the demo and the benchmarks: building it (sim/build.py) and running
+wmsim processes.
 
 ``build`` is sim/build.py as a module (``build_sim()``, ``build_firmware()``); ``SimBoard`` runs one
-simulator and collects its log lines.
+simulator and collects its log lines; ``SIM_TIMEOUTS`` are the host's timeouts for it.
 """
 
 from __future__ import annotations
@@ -10,9 +11,10 @@ import importlib.util
 import re
 from pathlib import Path
 
-from devproc import DeviceProcess
+from wavemesh.harness.devproc import DeviceProcess
+from wavemesh.stream import Timeouts
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _load_sim_build():
@@ -23,6 +25,11 @@ def _load_sim_build():
 
 
 build = _load_sim_build()
+
+# Host timeouts for the simulated board: it runs at a tenth of the board's speed, far less on a loaded
+# machine, and a level of the refiner takes it minutes then (job: the longest silence, not a bound on
+# the job).
+SIM_TIMEOUTS = Timeouts(sync=2.0, sync_attempts=5, reply=5.0, attempts=3, ack=5.0, job=900.0)
 
 
 class SimBoard(DeviceProcess):

@@ -11,10 +11,11 @@ import os
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 RTL = ROOT / "rtl"
 GEN = ROOT / "build" / "gen"
 BUILD = ROOT / "build" / "rtl"
+BENCHES = ROOT / "tests" / "rtl"  # the cocotb test benches (*_tb.py) and their test modules
 PCH_FLAG = "CFG_CXXFLAGS_PCH_I=-include"
 
 
@@ -43,7 +44,7 @@ def run(toplevel: str, sources: list[Path], test_module: str, parameters: dict |
         extra_env: dict | None = None, testcase: str | None = None, waves: bool = False) -> None:
     """Build `toplevel` from `sources` with `parameters` and run the cocotb tests in `test_module`.
 
-    test_module is a module name importable from tests/rtl (e.g. "test_haar_bank"); each parameter set
+    test_module is a module name in tests/rtl (e.g. "test_haar_bank"); each parameter set
     gets its own build directory so parametrized tests do not rebuild each other's simulators.
     Fails (raises) when any cocotb test fails.
     """
@@ -69,9 +70,9 @@ def run(toplevel: str, sources: list[Path], test_module: str, parameters: dict |
     results = runner.test(
         test_module=test_module,
         hdl_toplevel=toplevel,
-        test_dir=str(Path(__file__).parent),
+        test_dir=str(BENCHES),
         build_dir=str(build_dir),
-        extra_env={"PYTHONPATH": str(Path(__file__).parent), **(extra_env or {})},
+        extra_env={"PYTHONPATH": str(BENCHES), **(extra_env or {})},
         testcase=testcase,
         waves=waves,
         results_xml=str(build_dir / "results.xml"),  # absolute: keeps *.result.xml out of tests/rtl
