@@ -22,7 +22,7 @@ from wavemesh import stream as S
 
 pytestmark = pytest.mark.sim
 
-TIMEOUTS = S.Timeouts(sync=2.0, sync_attempts=5, reply=5.0, attempts=3, ack=5.0, per_byte=0.0, job=60.0)
+TIMEOUTS = S.Timeouts(sync=2.0, sync_attempts=5, reply=5.0, attempts=3, ack=5.0, job=60.0)
 STAGE_SERVE = 0x00010000  # app/main.c: the engine starts serving
 
 

@@ -26,7 +26,7 @@ from wavemesh.synth import make
 # Short host timeouts: the stand-in device answers in microseconds.  The bound on one run follows from
 # them: sync 3 x 0.5 s, each request 3 x 0.5 s, 9 upload windows x 0.5 s, 17 level requests each
 # prompted by a LEVEL_END repeat (0.5 s device time), 5 s of silence during the job.
-FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, per_byte=0.0, job=5.0)
+FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, job=5.0)
 RUN_LIMIT = 40.0  # s: a run that takes longer counts as a hang
 OPTS = ["--levels", "3", "--max-triangles", "19999"]
 

@@ -22,11 +22,10 @@ from wavemesh import protocol as P
 from wavemesh import stream as S
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.link import Link, encode_frame
+from wavemesh.link import Link, SlipDecoder, encode_frame, parse_frame
 from wavemesh.synth import make
 
-FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, per_byte=0.0, job=5.0)
-
+FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, job=5.0)
 
 @pytest.fixture(scope="module")
 def wmdev_exe() -> Path:
@@ -180,12 +179,40 @@ def test_device_busy_with_another_client(device, inputs, tmp_path, fast_timeouts
     with Link(device.url) as other:  # holds the device
         other.write_frame(P.FrameType.STATUS, 1)
         other.read_frame(2.0)
+        t0 = time.monotonic()
         rc, _, err = run_cli("stream", str(inputs / "ball64.npy"), "--port", device.url, "-o",
                              str(tmp_path / "x.obj"))
-    assert rc == 2
-    line = one_error(err)
-    assert "broke" in line or "no device answers" in line
-    assert "one client at a time" in err or "another client" in err
+        took = time.monotonic() - t0
+        # the first client is still served
+        other.write_frame(P.FrameType.STATUS, 2)
+        assert other.read_frame(2.0).type == P.FrameType.STATUS_REPLY
+    assert rc == 2 and not (tmp_path / "x.obj").exists()
+    assert "device error 14 BUSY: the device is serving another client" in one_error(err)
+    assert "wait until it is done" in err
+    assert took < 1.0  # refused at once (the device answers the connection's first frame)
+
+
+def test_a_silent_second_connection_gets_busy_too(wmdev_exe):
+    """A connection that sends nothing while another is served gets ERROR BUSY within a second too."""
+    dev = NativeDevice(wmdev_exe, "--quiet")
+    try:
+        with S.Device(dev.url, timeouts=FAST) as first:
+            first.sync()
+            with socket.create_connection(("127.0.0.1", dev.port)) as s:
+                s.settimeout(2.0)
+                t0 = time.monotonic()
+                dec, frames = SlipDecoder(), []
+                while not frames:
+                    chunk = s.recv(64)
+                    assert chunk, "closed without ERROR BUSY"
+                    frames = dec.feed(chunk)
+                took = time.monotonic() - t0
+                assert s.recv(64) == b""  # then closed
+            f = parse_frame(frames[0])
+            assert f.type == P.FrameType.ERROR and f.fields()["code"] == P.ErrorCode.BUSY and took < 1.0
+            assert first.status()["state"] == P.State.IDLE  # the first client is still served
+    finally:
+        dev.stop()
 
 
 def test_input_larger_than_the_device(device, tmp_path, fast_timeouts):
@@ -258,7 +285,8 @@ class Raw:
     def config(**over) -> bytes:
         c = dict(width=16, height=12, levels=2, metric=0, neighbourhood=0, iterations=2, flags=0, tau=10,
                  max_triangles=0, capacity=0, zeta=65536, scale_m=32768, scale_e=15, delta_p=58982,
-                 alpha=39322, delta_v=131072, delta_lambda=655, delta_c=64225, delta_d=0)
+                 alpha=39322, delta_v=131072, delta_lambda=655, delta_c=64225, delta_d=0, slope_x_m=0,
+                 slope_x_e=0, slope_y_m=0, slope_y_e=0)
         c.update(over)
         return P.CONFIG.pack(**c)
 
@@ -278,22 +306,43 @@ def full_job_works(url: str) -> None:
     assert done["status"] == 0 and len(levels) == 2 and levels[-1].level == 0
 
 
-BAD_VALUES = [("width", 1), ("height", 0), ("levels", 0), ("levels", 9), ("metric", 2),
-              ("neighbourhood", 5), ("iterations", 4), ("flags", 0x80), ("tau", P.TAU_MAX + 1),
-              ("capacity", 1), ("capacity", 10**9), ("max_triangles", 1), ("max_triangles", 20000),
-              ("scale_m", 70000), ("scale_e", 127), ("delta_p", 65536), ("alpha", 65537), ("delta_c", 65537)]
+# Beyond this device's capabilities (wmdev's defaults, max_levels 8), within the protocol's ranges
+BAD_FOR_THE_DEVICE = [("levels", 9), ("capacity", 1), ("capacity", 10**9), ("max_triangles", 1),
+                      ("max_triangles", 20000)]
+
+
+def out_of_range() -> list[tuple[str, int]]:
+    """Just outside every CONFIG field's range, both ends where the field's type can say it
+    (protocol.CONFIG's limits: the host's table, the one the device compiles in)."""
+    out = []
+    for f in P.CONFIG.fields:
+        lo, hi = f.limits
+        top = (1 << (8 * f.size)) - 1
+        out += [(f.name, lo - 1)] if lo > 0 else []
+        out += [(f.name, hi + 1), (f.name, top)] if hi < top else []
+    return out
 
 
 def test_every_config_field_is_checked(asan_device):
+    cases = out_of_range()
+    every_value = ("zeta", "delta_v", "delta_lambda", "delta_d")  # the refiner takes any value of these
+    assert {n for n, _ in cases} == {f.name for f in P.CONFIG.fields} - set(every_value)
     raw = Raw(asan_device.url)
     try:
         raw.hello()
         off = P.CONFIG.offsets()
-        for name, value in BAD_VALUES:
+        for name, value in cases + BAD_FOR_THE_DEVICE:
             raw.send(P.FrameType.CONFIG, raw.config(**{name: value}))
             e = raw.error()
             want = (P.ErrorCode.BAD_VALUE, off[name], P.FrameType.CONFIG)
-            assert (e["code"], e["detail"], e["request"]) == want, name
+            assert (e["code"], e["detail"], e["request"]) == want, (name, value)
+            # the host checks the same ranges before it sends (config_payload)
+            problem = P.config_problem(P.CONFIG.unpack(raw.config(**{name: value})))
+            assert (problem is not None and f"CONFIG.{name} =" in problem) == ((name, value) in cases)
+        for name in every_value:
+            top = (1 << (8 * P.CONFIG.fields[list(off).index(name)].size)) - 1
+            raw.send(P.FrameType.CONFIG, raw.config(**{name: top}))
+            assert raw.expect(P.FrameType.OK).fields()["request"] == P.FrameType.CONFIG, name
         raw.send(P.FrameType.CONFIG, raw.config(width=300, height=300))
         e = raw.error()
         assert e["code"] == P.ErrorCode.TOO_LARGE and e["detail"] == 300 << 16 | 300

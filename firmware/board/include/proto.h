@@ -46,6 +46,13 @@ extern "C" {
 #define WM_PROTO_RX_TIMEOUT (-1) /* no byte within the timeout */
 #define WM_PROTO_RX_CLOSED (-2)  /* the link is gone (a socket closed): wm_proto_serve returns */
 
+/* wm_proto_serve's results */
+#define WM_PROTO_SERVE_CLOSED 0 /* the link closed */
+#define WM_PROTO_SERVE_IDLE 1   /* no valid frame for caps.idle_timeout_ms outside a session: close it */
+
+/* Room for wm_proto_busy_frame's frame: every byte of the header, payload and CRC escaped, two ENDs */
+#define WM_PROTO_BUSY_FRAME_MAX (2 * (WM_PROTO_HEADER_BYTES + WM_PROTO_ERROR_BYTES + WM_PROTO_CRC_BYTES) + 2)
+
 /* Which clock runs (wm_proto_io.mark): a stage WM_PROTO_STAGE_*, WM_PROTO_CLOCK_NONE (between jobs,
  * before the job's first stage), or WM_PROTO_CLOCK_LINK | the stage that link I/O interrupted. */
 #define WM_PROTO_CLOCK_NONE 0xFFu
@@ -75,10 +82,15 @@ typedef struct wm_proto_caps {
     uint32_t tri_capacity;   /* triangle storage the job can give the refiner */
     uint8_t max_levels;      /* 1..WM_PROTO_MAX_LEVELS */
     uint8_t window;          /* 1..WM_PROTO_MAX_WINDOW */
-    uint16_t max_payload;    /* 64..WM_PROTO_MAX_PAYLOAD */
+    uint16_t max_payload;    /* WM_PROTO_MIN_PAYLOAD..WM_PROTO_MAX_PAYLOAD */
     uint32_t clk_hz;         /* >= 1000 */
     uint32_t baud;           /* reported only (0: not a UART) */
     uint32_t features;       /* WM_PROTO_FEATURE_* */
+    /* A transport with connections (a socket; 0 on a UART: never): wm_proto_serve returns
+     * WM_PROTO_SERVE_IDLE after idle_timeout_ms without a valid frame outside a session and a job;
+     * write_timeout_ms is the transport's own (its write gives up on a peer that does not read).
+     * Both are stated in HELLO_REPLY. */
+    uint32_t idle_timeout_ms, write_timeout_ms;
 } wm_proto_caps;
 
 /* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */
@@ -164,8 +176,15 @@ typedef struct wm_proto {
 void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps, uint16_t *heights,
                    wm_proto_job_fn job, void *job_ctx);
 
-/* Serves requests until io->getc returns WM_PROTO_RX_CLOSED (never, on a UART).  Returns 0. */
+/* Serves requests until io->getc returns WM_PROTO_RX_CLOSED (WM_PROTO_SERVE_CLOSED) or, with
+ * caps.idle_timeout_ms, until the connection was idle that long (WM_PROTO_SERVE_IDLE).  On a UART
+ * (getc never closes, no idle timeout) it never returns. */
 int wm_proto_serve(wm_proto *p);
+
+/* For a transport with connections: the ERROR BUSY frame (request 0, seq 0) to send to a connection
+ * that comes while another is served, before closing it.  Writes at most WM_PROTO_BUSY_FRAME_MAX
+ * bytes into dst; returns their number (0 when cap is smaller). */
+size_t wm_proto_busy_frame(uint8_t *dst, size_t cap);
 
 /* For the job: a stage begins (WM_PROTO_STAGE_FILTER, _TEMPLATE, _REFINE with the level being made).
  * Accounts the cycles since the previous stage to that stage, then sends a PROGRESS frame (link I/O:

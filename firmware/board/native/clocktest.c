@@ -311,7 +311,7 @@ int main(int argc, char **argv) {
     caps.tri_capacity = 16;
     caps.max_levels = 2;
     caps.window = 1;
-    caps.max_payload = 64; /* several MESH frames per level */
+    caps.max_payload = WM_PROTO_MIN_PAYLOAD; /* several MESH frames per level */
     caps.clk_hz = CLK_HZ;
     io.ctx = &h;
     io.getc = io_getc;

@@ -5,15 +5,23 @@
  * A fast device for protocol and fault-injection tests; the simulated board (sim/) is the exact one.
  *
  *   wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] [--tri-capacity N]
- *         [--max-levels N] [--window N] [--max-payload N] [--baud N] [--exit-on-close] [--quiet]
+ *         [--max-levels N] [--window N] [--max-payload N] [--baud N] [--idle-timeout-ms N]
+ *         [--write-timeout-ms N] [--exit-on-close] [--quiet]
  *
- * Defaults are the board's (wm_memmap.h): 256 x 256, 1492 triangles, 8 levels.  --port 0 picks a
- * free port.  --baud N paces both directions at N baud (8N1: ten bit times per byte), as a UART
- * would; 0 (the default) runs at socket speed.  One client at a time: a second one is accepted and
- * closed at once (as the simulated board does); the next may connect when the previous left.
+ * Defaults are the board's sizes (wm_memmap.h: WM_GRID_MAX_W x WM_GRID_MAX_H, WM_TRI_CAPACITY
+ * triangles) and 8 levels.  --port 0 picks a free port.  --baud N paces both directions at N baud
+ * (8N1: ten bit times per byte), as a UART would; 0 (the default) runs at socket speed.
+ *
+ * One client at a time, and no client can hold the device: a connection that sends no valid frame
+ * for --idle-timeout-ms outside a session and a job (default WM_PROTO_IDLE_TIMEOUT_MS), or that
+ * takes none of the device's bytes for --write-timeout-ms (default WM_PROTO_WRITE_TIMEOUT_MS), is
+ * closed; HELLO states both.  A connection that comes while another is served gets ERROR BUSY (after
+ * its first bytes, or at once when it sends none within BUSY_WAIT_MS) and is closed: a thread
+ * accepts every connection, so this happens within a second even while a job computes.
  *
  * Output lines on stdout: "wmdev: listening on 127.0.0.1:PORT", "wmdev: client connected",
- * "wmdev: client left bytes-in N bytes-out N bad-frames N".
+ * "wmdev: second client refused (busy)", "wmdev: client idle, closed", "wmdev: client not reading,
+ * closed", "wmdev: client left bytes-in N bytes-out N bad-frames N".
  * Exit status: 0 after --exit-on-close, 4 socket error, 64 bad command line.
  */
 #define _POSIX_C_SOURCE 200809L
@@ -22,6 +30,7 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -38,9 +47,11 @@
 #define FW_MINOR 2
 #define DEFAULT_LEVELS 8 /* the board's coefficient memory holds levels 1..8 */
 #define DEFAULT_WINDOW 4
+#define BUSY_WAIT_MS 500 /* a refused connection: how long to wait for its first bytes (its HELLO) */
 
 typedef struct conn {
-    int lfd, cfd, closed, quiet;
+    int lfd, cfd, closed, quiet, stalled;
+    uint32_t write_timeout_ms;
     uint8_t in[4096];
     size_t in_len, in_pos;
     uint8_t out[8192];
@@ -73,8 +84,11 @@ static void pace(uint64_t *clock, uint64_t byte_ns, size_t n) {
     if (*clock > t + 2000000u) sleep_until(*clock);
 }
 
+/* Sends the buffered bytes.  A client that takes none of them for write_timeout_ms (it does not
+ * read: its socket buffers are full) is given up: the connection counts as closed. */
 static void conn_flush(conn *c) {
     size_t done = 0;
+    uint64_t deadline = mono_ns() + (uint64_t)c->write_timeout_ms * 1000000u;
     if (c->closed) {
         c->out_len = 0;
         return;
@@ -83,12 +97,23 @@ static void conn_flush(conn *c) {
         size_t n = c->out_len - done;
         ssize_t k;
         if (c->byte_ns && n > 64) n = 64;
-        k = send(c->cfd, c->out + done, n, MSG_NOSIGNAL);
+        k = send(c->cfd, c->out + done, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (k < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+            struct pollfd pf = {c->cfd, POLLOUT, 0};
+            uint64_t t = mono_ns();
+            if (c->write_timeout_ms && t >= deadline) {
+                c->closed = c->stalled = 1;
+                break;
+            }
+            poll(&pf, 1, c->write_timeout_ms ? (int)((deadline - t + 999999u) / 1000000u) : -1);
+            continue;
+        }
         if (k < 0) {
             if (errno == EINTR) continue;
             c->closed = 1;
             break;
         }
+        deadline = mono_ns() + (uint64_t)c->write_timeout_ms * 1000000u; /* progress: the clock restarts */
         if (c->byte_ns) pace(&c->tx_clock, c->byte_ns, (size_t)k);
         done += (size_t)k;
     }
@@ -108,13 +133,79 @@ static void io_write(void *ctx, const uint8_t *data, size_t n) {
     }
 }
 
-/* A second client while one is served: accept it and close it at once. */
-static void refuse_extra(conn *c) {
-    int fd = accept(c->lfd, NULL, NULL);
-    if (fd >= 0) {
-        close(fd);
-        if (!c->quiet) printf("wmdev: second client refused\n"), fflush(stdout);
+/* --- the doorman: a thread that accepts every connection ------------------------------------------
+ * It hands a connection to the main thread when none is served, and refuses it with ERROR BUSY
+ * otherwise.  The refusal waits up to BUSY_WAIT_MS for the client's first bytes (a host empties its
+ * input before its HELLO, so an answer that came before would be lost), sends the frame, ends its
+ * side of the connection and reads until the client closes (at most BUSY_WAIT_MS more), so that the
+ * close does not reset the connection under the frame. */
+
+static pthread_mutex_t door_lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t door_cond = PTHREAD_COND_INITIALIZER;
+static int door_fd = -1; /* a connection handed over, not yet taken */
+static int door_busy;    /* a connection is handed over or being served */
+
+static void drain(int fd, int ms) {
+    uint8_t junk[256];
+    uint64_t deadline = mono_ns() + (uint64_t)ms * 1000000u;
+    for (;;) {
+        struct pollfd pf = {fd, POLLIN, 0};
+        uint64_t t = mono_ns();
+        if (t >= deadline || poll(&pf, 1, (int)((deadline - t) / 1000000u) + 1) <= 0) return;
+        if (recv(fd, junk, sizeof junk, 0) <= 0) return;
     }
+}
+
+static void refuse(int fd, int quiet) {
+    uint8_t frame[WM_PROTO_BUSY_FRAME_MAX];
+    size_t n = wm_proto_busy_frame(frame, sizeof frame);
+    struct pollfd pf = {fd, POLLIN, 0};
+    poll(&pf, 1, BUSY_WAIT_MS); /* its first bytes, or the wait ends */
+    if (send(fd, frame, n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) { /* nothing more to do for it */
+    }
+    shutdown(fd, SHUT_WR);
+    drain(fd, BUSY_WAIT_MS);
+    close(fd);
+    if (!quiet) printf("wmdev: second client refused (busy)\n"), fflush(stdout);
+}
+
+static void *doorman(void *arg) {
+    conn *c = arg;
+    for (;;) {
+        int fd = accept(c->lfd, NULL, NULL), take;
+        if (fd < 0) {
+            if (errno == EINTR || errno == ECONNABORTED) continue;
+            fprintf(stderr, "wmdev: accept: %s\n", strerror(errno));
+            exit(4);
+        }
+        pthread_mutex_lock(&door_lock);
+        take = !door_busy;
+        if (take) {
+            door_busy = 1;
+            door_fd = fd;
+            pthread_cond_signal(&door_cond);
+        }
+        pthread_mutex_unlock(&door_lock);
+        if (!take) refuse(fd, c->quiet);
+    }
+    return NULL;
+}
+
+/* The next client (the main thread waits here); door_done() when it left. */
+static int door_next(void) {
+    int fd;
+    pthread_mutex_lock(&door_lock);
+    while (door_fd < 0) pthread_cond_wait(&door_cond, &door_lock);
+    fd = door_fd;
+    door_fd = -1;
+    pthread_mutex_unlock(&door_lock);
+    return fd;
+}
+
+static void door_done(void) {
+    pthread_mutex_lock(&door_lock);
+    door_busy = 0;
+    pthread_mutex_unlock(&door_lock);
 }
 
 static int io_getc(void *ctx, uint32_t timeout_ms) {
@@ -122,17 +213,16 @@ static int io_getc(void *ctx, uint32_t timeout_ms) {
     uint64_t deadline = mono_ns() + (uint64_t)timeout_ms * 1000000u;
     conn_flush(c);
     while (c->in_pos == c->in_len) {
-        struct pollfd fds[2] = {{c->cfd, POLLIN, 0}, {c->lfd, POLLIN, 0}};
+        struct pollfd fds[1] = {{c->cfd, POLLIN, 0}};
         uint64_t t = mono_ns();
         int left = t >= deadline ? 0 : (int)((deadline - t + 999999u) / 1000000u), r;
         ssize_t k;
         if (c->closed) return WM_PROTO_RX_CLOSED;
-        r = poll(fds, 2, left);
+        r = poll(fds, 1, left);
         if (r < 0) {
             if (errno == EINTR) continue;
             return WM_PROTO_RX_CLOSED;
         }
-        if (fds[1].revents & POLLIN) refuse_extra(c);
         if (fds[0].revents & (POLLIN | POLLHUP | POLLERR)) {
             k = recv(c->cfd, c->in, sizeof c->in, 0);
             if (k < 0 && errno == EINTR) continue;
@@ -159,7 +249,7 @@ static uint64_t io_cycles(void *ctx) {
 static int usage(const char *why) {
     fprintf(stderr, "wmdev: %s\nusage: wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] "
                     "[--tri-capacity N] [--max-levels N] [--window N] [--max-payload N] [--baud N] "
-                    "[--exit-on-close] [--quiet]\n", why);
+                    "[--idle-timeout-ms N] [--write-timeout-ms N] [--exit-on-close] [--quiet]\n", why);
     return 64;
 }
 
@@ -180,6 +270,8 @@ int main(int argc, char **argv) {
     conn c;
     long port = 7721, max_w = WM_GRID_MAX_W, max_h = WM_GRID_MAX_H, max_samples = -1, tri_cap = WM_TRI_CAPACITY;
     long levels = DEFAULT_LEVELS, window = DEFAULT_WINDOW, payload = WM_PROTO_MAX_PAYLOAD, baud = 0;
+    long idle_ms = WM_PROTO_IDLE_TIMEOUT_MS, write_ms = WM_PROTO_WRITE_TIMEOUT_MS;
+    pthread_t door;
     int exit_on_close = 0, quiet = 0;
     uint16_t *heights;
     struct sockaddr_in addr;
@@ -198,8 +290,10 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--tri-capacity")) dst = &tri_cap, lo = 2, hi = 1L << 30;
         else if (!strcmp(a, "--max-levels")) dst = &levels, lo = 1, hi = WM_PROTO_MAX_LEVELS;
         else if (!strcmp(a, "--window")) dst = &window, lo = 1, hi = WM_PROTO_MAX_WINDOW;
-        else if (!strcmp(a, "--max-payload")) dst = &payload, lo = 64, hi = WM_PROTO_MAX_PAYLOAD;
+        else if (!strcmp(a, "--max-payload")) dst = &payload, lo = WM_PROTO_MIN_PAYLOAD, hi = WM_PROTO_MAX_PAYLOAD;
         else if (!strcmp(a, "--baud")) dst = &baud, lo = 0, hi = 100000000;
+        else if (!strcmp(a, "--idle-timeout-ms")) dst = &idle_ms, lo = 1, hi = 86400000;
+        else if (!strcmp(a, "--write-timeout-ms")) dst = &write_ms, lo = 1, hi = 86400000;
         else return usage("unknown option");
         if (i + 1 >= argc || !number(argv[++i], lo, hi, dst)) return usage("bad or missing number");
     }
@@ -219,12 +313,15 @@ int main(int argc, char **argv) {
     caps.clk_hz = 1000000000u; /* cycle counters count nanoseconds */
     caps.baud = (uint32_t)baud;
     caps.features = WM_PROTO_FEATURE_INITIAL_ONLY;
+    caps.idle_timeout_ms = (uint32_t)idle_ms;
+    caps.write_timeout_ms = (uint32_t)write_ms;
     heights = calloc((size_t)max_samples, sizeof *heights);
     if (!heights) return usage("cannot allocate the height memory");
 
     signal(SIGPIPE, SIG_IGN);
     memset(&c, 0, sizeof c);
     c.quiet = quiet;
+    c.write_timeout_ms = (uint32_t)write_ms;
     c.byte_ns = baud ? 10000000000ull / (uint64_t)baud : 0;
     c.lfd = socket(AF_INET, SOCK_STREAM, 0);
     memset(&addr, 0, sizeof addr);
@@ -246,22 +343,25 @@ int main(int argc, char **argv) {
     io.write = io_write;
     io.cycles = io_cycles;
     io.mark = NULL;
+    if (pthread_create(&door, NULL, doorman, &c) != 0) {
+        fprintf(stderr, "wmdev: cannot start the accepting thread\n");
+        return 4;
+    }
     for (;;) {
-        c.cfd = accept(c.lfd, NULL, NULL);
-        if (c.cfd < 0) {
-            if (errno == EINTR) continue;
-            fprintf(stderr, "wmdev: accept: %s\n", strerror(errno));
-            return 4;
-        }
+        int how;
+        c.cfd = door_next();
         setsockopt(c.cfd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-        c.closed = 0;
+        c.closed = c.stalled = 0;
         c.in_len = c.in_pos = c.out_len = 0;
         c.bytes_in = c.bytes_out = 0;
         c.rx_clock = c.tx_clock = 0;
         if (!quiet) printf("wmdev: client connected\n"), fflush(stdout);
         wm_proto_init(&eng, &io, &caps, heights, wm_native_job, NULL);
-        wm_proto_serve(&eng);
+        how = wm_proto_serve(&eng);
+        if (!quiet && how == WM_PROTO_SERVE_IDLE) printf("wmdev: client idle, closed\n"), fflush(stdout);
+        if (!quiet && c.stalled) printf("wmdev: client not reading, closed\n"), fflush(stdout);
         close(c.cfd);
+        door_done();
         if (!quiet)
             printf("wmdev: client left bytes-in %llu bytes-out %llu bad-frames %lu\n",
                    (unsigned long long)c.bytes_in, (unsigned long long)c.bytes_out, (unsigned long)eng.bad_frames),

@@ -248,6 +248,11 @@ static int rx_frame(wm_proto *p, uint32_t wait_ms) {
             int ok = !p->rx_bad && !p->rx_esc && p->rx_len && rx_check(p);
             if (!ok && (p->rx_len || p->rx_bad || p->rx_esc)) p->bad_frames++;
             rx_reset(p);
+            if (ok && p->f_len > p->caps.max_payload) {
+                /* a whole frame, but longer than this device said it takes (HELLO's max_payload) */
+                reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+                continue;
+            }
             if (ok) return 1;
             continue;
         }
@@ -366,12 +371,12 @@ static void session_end(wm_proto *p) {
 static void do_hello(wm_proto *p) {
     uint8_t b[WM_PROTO_HELLO_REPLY_BYTES];
     const wm_proto_caps *c = &p->caps;
-    session_end(p); /* a HELLO starts afresh, whatever was going on */
-    p->cache_valid = 0;
-    if (p->f_len != WM_PROTO_HELLO_BYTES) {
+    if (p->f_len != WM_PROTO_HELLO_BYTES) { /* not a HELLO: nothing ends */
         reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
         return;
     }
+    session_end(p); /* a HELLO starts afresh, whatever was going on */
+    p->cache_valid = 0;
     if ((get16(p->f_pay + WM_PROTO_HELLO_VERSION) >> 8) != WM_PROTO_VERSION_MAJOR) {
         reply_error(p, WM_PROTO_E_VERSION, WM_PROTO_VERSION);
         return;
@@ -394,8 +399,19 @@ static void do_hello(wm_proto *p) {
     put16(b + WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS, WM_PROTO_BYTE_TIMEOUT_MS);
     put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
     put32(b + WM_PROTO_HELLO_REPLY_SESSION_TIMEOUT_MS, WM_PROTO_SESSION_TIMEOUT_MS);
+    put16(b + WM_PROTO_HELLO_REPLY_ACK_RETRIES, WM_PROTO_ACK_RETRIES);
+    put32(b + WM_PROTO_HELLO_REPLY_IDLE_TIMEOUT_MS, c->idle_timeout_ms);
+    put32(b + WM_PROTO_HELLO_REPLY_WRITE_TIMEOUT_MS, c->write_timeout_ms);
     reply(p, WM_PROTO_T_HELLO_REPLY, b, sizeof b);
 }
+
+/* CONFIG's field ranges (host/wavemesh/protocol.py, CONFIG: the ones the host checks before sending) */
+typedef struct config_range {
+    uint8_t off, bytes;
+    uint64_t lo, hi;
+} config_range;
+
+static const config_range config_ranges[WM_PROTO_CONFIG_RANGES] = WM_PROTO_CONFIG_RANGE_TABLE;
 
 /* CONFIG's fields, checked one by one: 0, or the error code with *detail. */
 static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
@@ -416,32 +432,26 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
         *detail = WM_PROTO_CONFIG_##field;    \
         return WM_PROTO_E_BAD_VALUE;          \
     } while (0)
-    if (w < 2) BAD(WIDTH);
-    if (h < 2) BAD(HEIGHT);
+    /* every field within the protocol's range (the first one out of it is named), ... */
+    for (int i = 0; i < WM_PROTO_CONFIG_RANGES; i++) {
+        const config_range *r = &config_ranges[i];
+        uint64_t v = r->bytes == 8 ? get64(c + r->off) : r->bytes == 4 ? get32(c + r->off)
+                   : r->bytes == 2 ? get16(c + r->off) : c[r->off];
+        if (v < r->lo || v > r->hi) {
+            *detail = r->off;
+            return WM_PROTO_E_BAD_VALUE;
+        }
+    }
+    /* ... then within this device's capabilities */
     if (w > cap->max_width || h > cap->max_height || w * h > cap->max_samples) {
         *detail = w << 16 | h;
         return WM_PROTO_E_TOO_LARGE;
     }
-    if (levels < 1 || levels > cap->max_levels) BAD(LEVELS);
-    if (metric != WM_METRIC_NORMAL && metric != WM_METRIC_VERTICAL) BAD(METRIC);
-    if (nb != WM_NEIGHBOURHOOD_FACE && nb != WM_NEIGHBOURHOOD_VERTEX) BAD(NEIGHBOURHOOD);
-    if (k > 3) BAD(ITERATIONS);
-    if ((flags & ~WM_PROTO_CONFIG_KNOWN_FLAGS) ||
-        ((flags & WM_PROTO_CONFIG_INITIAL_ONLY) && !(cap->features & WM_PROTO_FEATURE_INITIAL_ONLY)))
-        BAD(FLAGS);
-    if (tau > WM_PROTO_TAU_MAX) BAD(TAU);
+    if (levels > cap->max_levels) BAD(LEVELS);
+    if ((flags & WM_PROTO_CONFIG_INITIAL_ONLY) && !(cap->features & WM_PROTO_FEATURE_INITIAL_ONLY)) BAD(FLAGS);
     if (cap_tri == 0) cap_tri = cap->tri_capacity;
     if (cap_tri < 2 || cap_tri > cap->tri_capacity) BAD(CAPACITY);
     if (budget != 0 && (budget < 2 || budget >= cap_tri)) BAD(MAX_TRIANGLES);
-    if (scale_m > 65535u) BAD(SCALE_M);
-    if (scale_e > 126u) BAD(SCALE_E);
-    if (delta_p > 65535u) BAD(DELTA_P);
-    if (alpha > 65536u) BAD(ALPHA);
-    if (delta_c > 65536u) BAD(DELTA_C);
-    if (slope_x_m > 65535u) BAD(SLOPE_X_M);
-    if (slope_x_e > 126u) BAD(SLOPE_X_E);
-    if (slope_y_m > 65535u) BAD(SLOPE_Y_M);
-    if (slope_y_e > 126u) BAD(SLOPE_Y_E);
 #undef BAD
     j->width = (int32_t)w;
     j->height = (int32_t)h;
@@ -616,24 +626,32 @@ static void handle(wm_proto *p) {
 static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have) {
     switch (p->f_type) {
     case WM_PROTO_T_ACK:
-        if (p->f_len == WM_PROTO_ACK_BYTES && p->f_pay[WM_PROTO_ACK_KIND] == kind &&
-            p->f_pay[WM_PROTO_ACK_INDEX] == index) {
+        if (p->f_len != WM_PROTO_ACK_BYTES) {
+            reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+            return 0;
+        }
+        if (p->f_pay[WM_PROTO_ACK_KIND] == kind && p->f_pay[WM_PROTO_ACK_INDEX] == index) {
             *have = get32(p->f_pay + WM_PROTO_ACK_HAVE);
             return 1;
         }
         return 0; /* an ACK of something earlier */
     case WM_PROTO_T_HELLO:
-        p->abort = ABORT_HOST;
+        if (p->f_len == WM_PROTO_HELLO_BYTES) p->abort = ABORT_HOST; /* else BAD_LENGTH, the job goes on */
         do_hello(p);
         return 0;
     case WM_PROTO_T_ABORT:
         if (duplicate(p)) return 0;
+        if (p->f_len != 0) {
+            reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+            return 0;
+        }
         p->abort = ABORT_HOST;
         session_end(p);
         reply_ok(p);
         return 0;
     case WM_PROTO_T_STATUS:
-        if (p->f_len == 0) status_reply(p);
+        if (p->f_len != 0) reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        else status_reply(p);
         return 0;
     case WM_PROTO_T_RUN:
     case WM_PROTO_T_CONFIG:
@@ -875,7 +893,7 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->caps = *caps;
     if (p->caps.window < 1) p->caps.window = 1;
     if (p->caps.window > WM_PROTO_MAX_WINDOW) p->caps.window = WM_PROTO_MAX_WINDOW;
-    if (p->caps.max_payload < 64 || p->caps.max_payload > WM_PROTO_MAX_PAYLOAD)
+    if (p->caps.max_payload < WM_PROTO_MIN_PAYLOAD || p->caps.max_payload > WM_PROTO_MAX_PAYLOAD)
         p->caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     if (p->caps.max_levels > WM_PROTO_MAX_LEVELS) p->caps.max_levels = WM_PROTO_MAX_LEVELS;
     p->heights = heights;
@@ -884,6 +902,7 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->ms_cycles = caps->clk_hz / 1000u ? caps->clk_hz / 1000u : 1u;
     p->stage = -1;
     p->state = WM_PROTO_STATE_IDLE;
+    p->last_valid = now(p); /* the idle clock starts when the connection does */
     rx_reset(p);
 }
 
@@ -893,7 +912,7 @@ int wm_proto_serve(wm_proto *p) {
         if (r < 0) {
             session_end(p);
             out_flush(p);
-            return 0;
+            return WM_PROTO_SERVE_CLOSED;
         }
         if (r > 0) {
             handle(p);
@@ -908,5 +927,43 @@ int wm_proto_serve(wm_proto *p) {
             send_error(p, WM_PROTO_E_TIMEOUT, got);
             out_flush(p);
         }
+        if (p->state == WM_PROTO_STATE_IDLE && p->caps.idle_timeout_ms &&
+            now(p) - p->last_valid >= ms_to_cycles(p, p->caps.idle_timeout_ms)) {
+            out_flush(p);
+            return WM_PROTO_SERVE_IDLE; /* the transport closes the connection: another client may come */
+        }
     }
+}
+
+/* A frame with at most WM_PROTO_ERROR_BYTES of payload, SLIP-encoded into dst (for a connection the
+ * engine does not serve); its length, 0 when cap is too small. */
+static size_t encode_small(uint8_t *dst, size_t cap, uint8_t type, uint8_t seq, const uint8_t *payload,
+                           uint32_t n) {
+    uint8_t raw[WM_PROTO_HEADER_BYTES + WM_PROTO_ERROR_BYTES + WM_PROTO_CRC_BYTES];
+    size_t len = 0, k;
+    if (n > WM_PROTO_ERROR_BYTES || cap < WM_PROTO_BUSY_FRAME_MAX) return 0;
+    raw[0] = type;
+    raw[1] = seq;
+    put16(raw + 2, n);
+    for (k = 0; k < n; k++) raw[WM_PROTO_HEADER_BYTES + k] = payload[k];
+    put32(raw + WM_PROTO_HEADER_BYTES + n, wm_proto_crc32(0, raw, WM_PROTO_HEADER_BYTES + n));
+    dst[len++] = WM_PROTO_SLIP_END;
+    for (k = 0; k < WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES; k++) {
+        if (raw[k] == WM_PROTO_SLIP_END || raw[k] == WM_PROTO_SLIP_ESC) {
+            dst[len++] = WM_PROTO_SLIP_ESC;
+            dst[len++] = raw[k] == WM_PROTO_SLIP_END ? WM_PROTO_SLIP_ESC_END : WM_PROTO_SLIP_ESC_ESC;
+        } else {
+            dst[len++] = raw[k];
+        }
+    }
+    dst[len++] = WM_PROTO_SLIP_END;
+    return len;
+}
+
+size_t wm_proto_busy_frame(uint8_t *dst, size_t cap) {
+    uint8_t b[WM_PROTO_ERROR_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_ERROR_CODE] = WM_PROTO_E_BUSY;
+    b[WM_PROTO_ERROR_STATE] = WM_PROTO_STATE_IDLE; /* nothing starts on this connection */
+    return encode_small(dst, cap, WM_PROTO_T_ERROR, 0, b, sizeof b);
 }
