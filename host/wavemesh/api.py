@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -33,7 +34,6 @@ from wavemesh.meshio import read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
 from wavemesh.stream import (
     DEFAULT_TIMEOUTS,
-    Bar,
     Device,
     DeviceError,
     DeviceInfo,
@@ -392,6 +392,29 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
                       refined=rjob)
 
 
+class _Progress:
+    """A progress bar on stderr (tqdm) fed absolute counts with a note, as Device.upload feeds it: redrawn
+    in place on a terminal; elsewhere (logs, tests) only its first and last lines are written."""
+
+    def __init__(self, label: str, total: int, enabled: bool):
+        from tqdm import tqdm  # only when a bar is drawn
+
+        tty = sys.stderr.isatty()
+        self.bar = tqdm(total=total, desc=label, file=sys.stderr, disable=not enabled, ascii=".#",
+                        bar_format="{desc:<9} [{bar:28}] {percentage:5.1f}%{postfix}",
+                        mininterval=0.1 if tty else float("inf"), dynamic_ncols=tty)
+
+    def update(self, done: int, note: str | None = None) -> None:
+        if note is not None:
+            self.bar.set_postfix_str(note, refresh=False)
+        self.bar.update(done - self.bar.n)
+
+    def finish(self, note: str | None = None) -> None:
+        if note is not None:
+            self.bar.set_postfix_str(note, refresh=False)
+        self.bar.close()
+
+
 def device_fit_hint(hf: HeightField, info: DeviceInfo) -> str | None:
     """None when the device holds the height field, else a hint: the --decimate that makes it fit."""
     w, h = hf.width, hf.height
@@ -461,12 +484,12 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
             say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {p.zeta:g} ({p.metric}), "
                 f"budget {p.max_triangles} triangles{budget_note}")
         kib = 2 * hf.width * hf.height / 1024
-        bar = Bar("heights", hf.width * hf.height, enabled=progress)
+        bar = _Progress("heights", hf.width * hf.height, progress)
         t0 = time.monotonic()
         sent = dev.upload(hf.samples, bar)
         upload_s = time.monotonic() - t0
         bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
-        work = Bar("device", m if full else 1, enabled=progress)
+        work = _Progress("device", m if full else 1, progress)
         got: list = []
 
         def on_progress(x: dict) -> None:

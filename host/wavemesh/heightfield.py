@@ -236,7 +236,8 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
     fill_mode = parse_fill(fill)
     ma = sys.modules.get("numpy.ma")  # a masked array means numpy.ma is loaded; np.ma would load it (~15 ms)
     if ma is not None and isinstance(array, ma.MaskedArray):
-        array = ma.filled(array.astype(np.float64), np.nan)
+        with np.errstate(invalid="ignore"):  # a signalling NaN is cast quietly: a NaN like any other
+            array = ma.filled(array.astype(np.float64), np.nan)
     try:
         arr = np.asarray(array)
     except (ValueError, TypeError) as e:
@@ -256,7 +257,8 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
             f"{source}: a height field needs at least 2 x 2 samples, found shape {tuple(arr.shape)} "
             f"({h} rows x {w} columns)"
         )
-    values = np.array(arr, dtype=np.float64)  # a fresh copy, never a view of the caller's array
+    with np.errstate(invalid="ignore"):  # a signalling NaN (float32 input) raises no warning: reported below
+        values = np.array(arr, dtype=np.float64)  # a fresh copy, never a view of the caller's array
     bad = ~np.isfinite(values)
     n_bad = int(np.count_nonzero(bad))
     filled = 0
@@ -312,7 +314,9 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
         "pgm": _read_pgm,
         "png": _read_png,
     }[fmt]
-    return from_array(reader(path), source=path, fill=fill_mode)
+    with _library_warnings_quiet():
+        array = reader(path)
+    return from_array(array, source=path, fill=fill_mode)
 
 
 # ---------------------------------------------------------------------------
@@ -396,7 +400,9 @@ def _read_npz(path: str, key: str | None) -> np.ndarray:
         raise InputError(f"cannot read {path}: not a .npz archive (it is a .npy file); rename it to .npy")
     with npz:
         names = list(npz.files)
-        listed = ", ".join(names)
+        # a name from the file is shown as is only when printable (else as a short repr: one line)
+        listed = ", ".join(n if n.isprintable() and len(n) <= 40 else _short(n) for n in names[:20])
+        listed += f" and {len(names) - 20} more" if len(names) > 20 else ""
         if not names:
             raise InputError(f"{path}: the .npz archive holds no arrays")
         if key is None:
@@ -639,6 +645,15 @@ def _gdal_message(e: BaseException, path: str) -> str:
     for name in (f"'{path}' ", f"{path}: ", f"{path}, "):
         text = text.replace(name, "")
     return text
+
+
+@contextlib.contextmanager
+def _library_warnings_quiet():
+    """numpy and Pillow warn on stderr about files they still read (a .npy header written by Python 2, a
+    large PNG): a stray line before wavemesh's own output.  A file is read, or refused with one error."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 @contextlib.contextmanager
