@@ -32,19 +32,20 @@ from wavemesh.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
 from wavemesh.mesh import Mesh
 
 # --- timeouts and retries (host side; seconds of wall time) -------------------------------------------
-# A simulated board runs about ten times slower than a board, so these are generous; the tests that
-# use the fast native stand-in device shorten them through Timeouts.
+# Inside a session the device drops everything after its stated session timeout without a valid frame,
+# so the host never stays silent that long: it writes again (a repeated request, or during the upload
+# a STATUS probe) after protocol.host_resend_s(...) of the device's HELLO, the one rule both sides
+# follow.  The rest bounds how long the host waits for a device that does not answer at all.
 
 
 @dataclass(frozen=True)
 class Timeouts:
     sync: float = 1.0  # s to wait for the answer to one HELLO
     sync_attempts: int = 5  # HELLOs before "no device answers"
-    reply: float = 2.0  # s to wait for the answer to CONFIG, RUN, STATUS, ABORT
-    attempts: int = 5  # sends of one request before giving up
-    ack: float = 3.0  # s without DATA_ACK progress before the window is sent again ...
-    per_byte: float = 0.002  # ... plus this per byte in flight (20 byte times at 115200 baud)
-    data_retries: int = 8  # window resends without progress before giving up
+    reply: float = 2.0  # s to wait for the answer to a request (CONFIG, RUN, STATUS, ABORT) ...
+    attempts: int = 5  # ... this many times over (repeated every resend interval) before giving up
+    ack: float | None = None  # s: the resend interval; None: protocol.host_resend_s of the device's HELLO
+    data_retries: int = 8  # upload: rewinds (a NAK, a probe finding a loss) without progress, then give up
     level_retries: int = 16  # requests for the rest of one level without progress before giving up
     job: float = 120.0  # s the device may stay silent while it computes
 
@@ -85,6 +86,9 @@ class DeviceInfo:
     byte_timeout_ms: int
     ack_timeout_ms: int
     session_timeout_ms: int
+    ack_retries: int
+    idle_timeout_ms: int  # 0: the device never closes an idle connection (a UART)
+    write_timeout_ms: int  # 0: the device never gives up on a peer that does not read (a UART)
 
     @classmethod
     def from_fields(cls, f: dict) -> DeviceInfo:
@@ -92,7 +96,13 @@ class DeviceInfo:
         return cls(f["version"], (f["fw_major"], f["fw_minor"]), name,
                    f["max_width"], f["max_height"], f["max_samples"], f["tri_capacity"], f["max_levels"],
                    f["window"], f["max_payload"], f["clk_hz"], f["baud"], f["features"], f["byte_timeout_ms"],
-                   f["ack_timeout_ms"], f["session_timeout_ms"])
+                   f["ack_timeout_ms"], f["session_timeout_ms"], f["ack_retries"], f["idle_timeout_ms"],
+                   f["write_timeout_ms"])
+
+    @property
+    def resend_s(self) -> float:
+        """The longest the host may stay silent inside a session with this device (protocol.py)."""
+        return P.host_resend_s(self.session_timeout_ms, self.baud, self.max_payload)
 
     @property
     def max_budget(self) -> int:
@@ -151,16 +161,23 @@ def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, c
                    initial_only: bool = False, delta_lambda: float = 0.0, delta_c: float = 0.0) -> bytes:
     """CONFIG from the refiner's fixed-point parameters (wavemesh.native.fixed_params: the same
     conversion `wavemesh mesh` uses, so both paths give the library the same numbers, delta_lambda,
-    delta_c and the WM_FLAG_* bits included; the delta_lambda and delta_c arguments are ignored)."""
-    return P.CONFIG.pack(
+    delta_c and the WM_FLAG_* bits included; the delta_lambda and delta_c arguments are ignored).
+    Every field is checked against the range the device checks (protocol.CONFIG) before it is sent."""
+    values = dict(
         width=width, height=height, levels=levels, metric=fixed.metric, neighbourhood=fixed.neighbourhood,
         iterations=fixed.iterations, tau=tau_q,
         flags=(P.CONFIG_INITIAL_ONLY if initial_only else 0) | fixed.flags << P.CONFIG_REFINER_SHIFT,
         max_triangles=fixed.max_triangles, capacity=capacity, zeta=fixed.zeta, scale_m=fixed.scale_m,
         scale_e=fixed.scale_e, delta_p=fixed.delta_p, alpha=fixed.alpha, delta_v=fixed.delta_v,
         delta_lambda=fixed.delta_lambda, delta_c=fixed.delta_c,
-        delta_d=fixed.delta_d, slope_x_m=fixed.slope_x_m, slope_x_e=fixed.slope_x_e, slope_y_m=fixed.slope_y_m,
-        slope_y_e=fixed.slope_y_e)
+        delta_d=fixed.delta_d, slope_x_m=fixed.slope_x_m, slope_x_e=fixed.slope_x_e,
+        slope_y_m=fixed.slope_y_m, slope_y_e=fixed.slope_y_e)
+    values = {k: int(v) for k, v in values.items()}
+    problem = P.config_problem(values)
+    if problem:
+        raise WavemeshError(f"the job cannot be sent: {problem}",
+                            "a parameter is beyond what the protocol carries; see `wavemesh stream --help`")
+    return P.CONFIG.pack(**values)
 
 
 def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, int]:
@@ -203,6 +220,8 @@ ERROR_HINTS = {
     P.ErrorCode.CAPACITY: "set a smaller --max-triangles, raise --zeta, or use more --levels",
     P.ErrorCode.DATA_CRC: "the link corrupts data that the frame checks did not catch; try again",
     P.ErrorCode.NO_ACK: "the link dropped the host's acknowledgements; try again",
+    P.ErrorCode.BUSY: "another program (another wavemesh) is using the device: wait until it is done, "
+                      "then try again",
 }
 
 
@@ -262,29 +281,48 @@ class Device:
             if e["request"] in (request, 0):
                 raise device_error(e["code"], e["detail"], e["request"])
 
+    @property
+    def resend_s(self) -> float:
+        """The host's longest silence inside a session: from the device's HELLO (protocol.host_resend_s),
+        or Timeouts.ack when that is shorter; before HELLO, the reply timeout."""
+        if self.info is None:
+            return self.t.reply if self.t.ack is None else min(self.t.ack, self.t.reply)
+        return self.info.resend_s if self.t.ack is None else min(self.t.ack, self.info.resend_s)
+
     # --- requests ---------------------------------------------------------------------------------------
     def request(self, ftype: int, payload: bytes, expect: int, timeout: float | None = None,
                 attempts: int | None = None) -> Frame:
-        """Send a request until its answer comes (the same seq: the device answers a repeat from its
-        cache without doing it twice); ERROR answers raise DeviceError."""
+        """Send a request until its answer comes, again after every resend interval (the same seq: the
+        device answers a repeat from its cache without doing it twice), for timeout x attempts seconds
+        in all; ERROR answers (and the device's own, request 0: the session is gone) raise DeviceError."""
         seq = self._next_seq()
         timeout = self.t.reply if timeout is None else timeout
         attempts = self.t.attempts if attempts is None else attempts
-        for _ in range(attempts):
+        every = min(timeout, self.resend_s)
+        give_up = time.monotonic() + timeout * attempts
+        sends = 0
+        while True:
+            now = time.monotonic()
+            if now >= give_up - 1e-3 and sends:
+                break
             self.link.write_frame(ftype, seq, payload)
-            deadline = time.monotonic() + timeout
+            sends += 1
+            deadline = min(now + every, give_up)
             while True:
                 try:
                     f = self.link.read_frame(max(0.0, deadline - time.monotonic()))
                 except LinkTimeout:
                     break
+                if f.type == P.FrameType.ERROR and f.fields()["request"] == 0:
+                    self._raise_if_error(f, ftype)  # unasked: the device dropped the session, or is busy
                 if f.seq != seq:
                     continue  # an answer to something earlier
                 self._raise_if_error(f, ftype)
                 if f.type == expect:
                     return f
-        raise LinkTimeout(f"no answer to {P.FrameType(ftype).name} from {self.link.url} after {attempts} "
-                          "attempts", "the device stopped answering: is it still running?")
+        raise LinkTimeout(f"no answer to {P.FrameType(ftype).name} from {self.link.url} after {sends} "
+                          f"attempts in {timeout * attempts:g} s",
+                          "the device stopped answering: is it still running?")
 
     def sync(self) -> DeviceInfo:
         """HELLO until the device answers (esptool's sync): its capabilities."""
@@ -301,8 +339,10 @@ class Device:
                                   f"this host {P.VERSION_MAJOR}.{P.VERSION_MINOR}",
                                   ERROR_HINTS[P.ErrorCode.VERSION], P.ErrorCode.VERSION)
             if not (2 <= info.max_width <= P.MAX_SIDE and 2 <= info.max_height <= P.MAX_SIDE
-                    and 1 <= info.window <= P.MAX_WINDOW and 64 <= info.max_payload <= P.MAX_PAYLOAD
-                    and 1 <= info.max_levels <= P.MAX_LEVELS and info.clk_hz >= 1000):
+                    and 1 <= info.window <= P.MAX_WINDOW
+                    and P.MIN_PAYLOAD <= info.max_payload <= P.MAX_PAYLOAD
+                    and 1 <= info.max_levels <= P.MAX_LEVELS and info.clk_hz >= 1000
+                    and info.session_timeout_ms >= 100):
                 raise ProtocolError(f"the device states impossible capabilities: {info}")
             self.info = info
             return info
@@ -324,7 +364,15 @@ class Device:
     # --- samples ------------------------------------------------------------------------------------------
     def upload(self, samples: np.ndarray, bar=None) -> int:
         """Send the (H, W) samples in DATA frames, a window at a time; returns the bytes sent (frames
-        repeated after a loss included)."""
+        repeated after a loss included).
+
+        The device answers every DATA frame with DATA_ACK(next) and flags a gap (NAK): the host goes
+        back to `next` (go-back-N).  A loss that leaves no later frame to show it (the window's last
+        frame, or the DATA_ACKs after it) is found by a STATUS probe: when the device has been silent
+        for the resend interval the host asks how many samples it stored.  The line keeps its order,
+        so the answer comes after every frame sent before the probe was taken in: fewer samples than
+        were sent before it means a loss, and the host goes back to them.  A slow device (a simulated
+        board) only answers later; nothing is sent twice because of it."""
         info = self.info
         a = np.ascontiguousarray(samples, dtype="<u2")
         height, width = a.shape
@@ -334,44 +382,73 @@ class Device:
         if width <= per_frame:
             per_frame = (per_frame // width) * width  # whole rows per frame
         window = per_frame * info.window
-        ack_timeout = self.t.ack + self.t.per_byte * 2 * window
+        every = self.resend_s
         acked = sent = 0
-        rewinds = 0
+        rewinds = 0  # go-backs since the last progress
+        epoch = 0  # go-backs so far: a probe taken before the last one says nothing new
+        probes: dict[int, tuple[int, int]] = {}  # seq -> (epoch, samples sent) when it was sent
         bytes_out0 = self.link.stats.bytes_out
-        deadline = time.monotonic() + ack_timeout
+        heard = time.monotonic()  # the last frame from the device
+        write_by = heard + every  # the host writes again by then
+        silence = self.t.reply * self.t.attempts
+
+        def go_back(to: int) -> None:
+            nonlocal sent, epoch, rewinds
+            sent, epoch = to, epoch + 1
+            rewinds += 1
+            if rewinds > self.t.data_retries:
+                raise LinkTimeout(f"the samples do not get through: stored {acked} of {total} after "
+                                  f"{rewinds - 1} resends",
+                                  "the link loses too much; check the cable and --baud")
+
         while acked < total:
             while sent < total and sent - acked < window:
                 n = min(per_frame, total - sent)
                 self.link.write_frame(P.FrameType.DATA, self._next_seq(),
                                       P.DATA.pack(offset=sent) + data[2 * sent:2 * (sent + n)])
                 sent += n
+                write_by = time.monotonic() + every
             try:
-                f = self.link.read_frame(max(0.0, deadline - time.monotonic()))
+                f = self.link.read_frame(max(0.0, write_by - time.monotonic()))
             except LinkTimeout:
-                rewinds += 1
-                if rewinds > self.t.data_retries:
-                    raise LinkTimeout(f"the device stopped acknowledging samples at {acked} of {total} "
-                                      f"({rewinds - 1} resends)",
-                                      "the link loses too much; check the cable and --baud") from None
-                sent = acked  # go back: everything after the last acknowledged sample again
-                deadline = time.monotonic() + ack_timeout
+                if time.monotonic() - heard >= silence:
+                    raise LinkTimeout(f"the device stopped answering during the upload ({acked} of {total} "
+                                      f"samples stored, nothing heard for {silence:g} s)",
+                                      "is it still running? check the cable and --baud") from None
+                seq = self._next_seq()
+                self.link.write_frame(P.FrameType.STATUS, seq)
+                probes[seq] = (epoch, sent)
+                write_by = time.monotonic() + every
                 continue
+            heard = time.monotonic()
             if f.type == P.FrameType.ERROR:
-                self._raise_if_error(f, P.FrameType.DATA)
+                e = f.fields()
+                if e["request"] in (P.FrameType.DATA, P.FrameType.STATUS, 0):
+                    raise device_error(e["code"], e["detail"], e["request"])
                 continue
-            if f.type != P.FrameType.DATA_ACK:
+            if f.type == P.FrameType.STATUS_REPLY and f.seq in probes:
+                taken, before = probes.pop(f.seq)
+                st = f.fields()
+                if st["state"] not in (P.State.RECEIVING, P.State.READY) or st["expected"] != total:
+                    code = st["last_error"] or P.ErrorCode.TIMEOUT
+                    raise device_error(code, st["last_detail"])  # the session is gone
+                got = st["samples"]
+            elif f.type == P.FrameType.DATA_ACK:
+                ack = f.fields()
+                got, taken, before = ack["next"], None, None
+                if ack["flags"] & P.ACK_NAK and sent > got:
+                    taken, before = epoch, sent  # the device saw a gap: go back at once
+            else:
                 continue  # a late answer to something earlier
-            ack = f.fields()
-            if ack["next"] > total:
-                raise ProtocolError(f"DATA_ACK for {ack['next']} of {total} samples")
-            if ack["next"] > acked:
-                acked = ack["next"]
+            if got > total:
+                raise ProtocolError(f"the device says it stored {got} of {total} samples")
+            if got > acked:
+                acked = got
                 rewinds = 0
-                deadline = time.monotonic() + ack_timeout
                 if bar:
                     bar.update(acked, f"{2 * acked // 1024} of {2 * total // 1024} KiB")
-            if ack["flags"] & P.ACK_NAK and sent > acked:
-                sent = acked  # the device saw a gap: go back at once
+            if taken == epoch and got < before and sent > got:
+                go_back(max(got, acked))
         return self.link.stats.bytes_out - bytes_out0
 
     # --- the job -------------------------------------------------------------------------------------------
@@ -391,12 +468,14 @@ class Device:
         buf = bytearray()
         stale_asks = 0  # ACKs asking for more of the current level without getting any
         last_have = -1
+        every = min(self.t.reply, self.resend_s)  # RUN again (the device waits for it in a session)
+        give_up = t0 + self.t.reply * self.t.attempts
         while True:
-            wait = (self.t.reply if not started else self.t.job) - (time.monotonic() - last)
+            wait = (min(every, give_up - last) if not started else self.t.job) - (time.monotonic() - last)
             try:
                 f = self.link.read_frame(max(0.0, wait))
             except LinkTimeout:
-                if not started and runs < self.t.attempts:
+                if not started and time.monotonic() < give_up - 1e-3:
                     runs += 1
                     self.link.write_frame(P.FrameType.RUN, seq, payload)  # same seq: not run twice
                     last = time.monotonic()
