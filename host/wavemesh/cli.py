@@ -159,6 +159,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--zscale", type=float, default=None, help="vertical exaggeration (default: automatic)")
     p.add_argument("--title", help="caption")
 
+    p = sub.add_parser("devices", help="list serial ports and the wavemesh devices on them", description=(
+        "List the serial ports (pyserial's list_ports) and send HELLO on each: the ones a wavemesh device "
+        "answers on are shown with its capabilities."))
+    p.add_argument("--port", "-p", action="append", default=[], metavar="URL",
+                   help="also probe this pyserial URL (socket://127.0.0.1:7720 for `make sim`); repeatable")
+    p.add_argument("--baud", "-b", type=int, default=115200, help="baud rate for the probe (default 115200)")
+    p.add_argument("--no-probe", action="store_true", help="only list the ports, send nothing")
+    p.add_argument("--json", action="store_true", help="print the list as JSON")
+
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
         "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))
@@ -279,13 +288,30 @@ def render_command(args) -> int:
     return 0
 
 
+def devices_command(args) -> int:
+    from wavemesh.devices import scan
+
+    reports = scan(args.port, args.baud, do_probe=not args.no_probe)
+    if args.json:
+        import json
+
+        print(json.dumps([r.__dict__ for r in reports], indent=1))
+    else:
+        for r in reports:
+            print(r.line())
+        if not reports:
+            print("no serial ports (plug in a board, or probe the simulated board with --port "
+                  "socket://127.0.0.1:7720)")
+    return 0
+
+
 def synth_command(args) -> int:
     print(f"wrote {api.write_synth(args.name, args.output, args.size)}")
     return 0
 
 
 COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_command, "render": render_command,
-            "synth": synth_command}
+            "synth": synth_command, "devices": devices_command}
 
 
 def main(argv: list[str] | None = None) -> int:
