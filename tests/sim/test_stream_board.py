@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from faultproxy import FaultProxy, Faults
 from wavemesh import protocol as P
 from wavemesh import stream as S
 from wavemesh.harness import jacksboro, run_cli
+from wavemesh.harness.faultproxy import FaultProxy, Faults
 from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
 from wavemesh.synth import make
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from faultproxy import FaultProxy, Faults
 from wavemesh import cli
 from wavemesh import stream as S
+from wavemesh.harness.faultproxy import FaultProxy, Faults
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
 from wavemesh.synth import make
 
@@ -117,7 +117,10 @@ def test_moderate_faults_both_ways(device, reference, tmp_path, fast):
 def test_faults_one_way(direction, device, reference, tmp_path, fast):
     runs = [Faults(seed=100 + s, rate=0.01, limit=12, run=64, directions=(direction,)) for s in range(6)]
     tally = campaign(device, reference, tmp_path, runs)
-    assert tally["same"] + tally["error"] == len(runs)
+    assert tally["faults"] >= len(runs)  # faults went in (one direction only: Faults.directions)
+    # each run is counted once, as the identical mesh or one clear error (classify), and faults one way
+    # mostly get through (6 runs: 5 identical meshes each way when measured)
+    assert tally["same"] + tally["error"] == len(runs) and tally["same"] >= len(runs) // 2
 
 
 def test_heavy_faults_end_in_clear_errors_in_bounded_time(device, reference, tmp_path, fast):
