@@ -1,4 +1,6 @@
-"""A fault-injecting TCP proxy between the host and a device (the native stand-in or the simulated board).
+"""A fault-injecting TCP proxy between the host and a device (the native stand-in or the simulated
+board), and a campaign of `wavemesh stream` runs through it (tests/sim/test_stream_faults.py,
+bench/bench_faults.py).
 
     with FaultProxy(("127.0.0.1", device_port), Faults(seed=7, rate=0.002, limit=6)) as proxy:
         run `wavemesh stream ... --port socket://127.0.0.1:{proxy.port}`
@@ -7,18 +9,30 @@ One client connection at a time is forwarded to the device; each direction passe
 seeded random generator that, byte by byte with probability ``rate``, corrupts a byte (XOR with a
 non-zero mask), drops a run of 1..``run`` bytes, duplicates a run of 1..``run`` bytes, or delays
 the stream by up to ``max_delay`` seconds; at most ``limit`` faults per direction and connection
-(bounded, so a session can always get through in the end).  ``log`` records every fault injected.
+(bounded, so a session can always get through in the end).  ``log`` records every fault injected,
+``frames`` counts the frames that came to the proxy (SLIP delimiters / 2, before any fault).
 Closing the proxy (or the client leaving) closes both sides.
+
+:func:`campaign` runs `wavemesh stream` (in this process, on a thread, with the host's default
+timeouts unless told otherwise) once per :class:`Faults` and classifies every run: ``identical``
+(exit 0 and the reference mesh byte for byte), ``error`` (exit 2, one ``error:`` line and a hint, no
+traceback, no output file), ``different`` (a mesh that is not the reference: the one outcome a
+checksummed protocol must never give), ``unclear`` (any other ending: a traceback, several error
+lines, a file left behind) and ``hang`` (still running after ``run_limit`` seconds).
 """
 
 from __future__ import annotations
 
+import contextlib
+import filecmp
+import io
 import random
 import select
 import socket
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 KINDS = ("corrupt", "drop", "duplicate", "delay")
 
@@ -49,10 +63,12 @@ class _Pump:
         self.name, self.f, self.rng, self.log = name, faults, rng, log
         self.pos = 0
         self.count = 0
+        self.ends = 0  # SLIP delimiters that came (two per frame)
         self.active = name in faults.directions and faults.rate > 0
 
     def apply(self, data: bytes) -> tuple[bytes, float]:
         """The bytes to forward and a delay before them."""
+        self.ends += data.count(0xC0)
         if not self.active or self.count >= self.f.limit:
             self.pos += len(data)
             return data, 0.0
@@ -95,6 +111,7 @@ class FaultProxy:
         self.faults = faults or Faults(rate=0)
         self.log: list[Injected] = []
         self.connections = 0
+        self.pumps: list[_Pump] = []
         self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.listener.bind(("127.0.0.1", 0))
@@ -130,6 +147,7 @@ class FaultProxy:
             self.connections += 1
             up = _Pump("up", self.faults, random.Random(seed * 2), self.log)
             down = _Pump("down", self.faults, random.Random(seed * 2 + 1), self.log)
+            self.pumps += [up, down]
             done = threading.Event()
             threads = [threading.Thread(target=self._pump, args=(client, dev, up, done), daemon=True),
                        threading.Thread(target=self._pump, args=(dev, client, down, done), daemon=True)]
@@ -179,6 +197,115 @@ class FaultProxy:
             out[f.kind] += 1
         return out
 
+    @property
+    def frames(self) -> int:
+        """Frames that came to the proxy, both ways (before the faults)."""
+        return sum(p.ends for p in self.pumps) // 2
+
+
+# ---------------------------------------------------------------------------------------------------
+# A campaign of `wavemesh stream` runs
+
+OUTCOMES = ("identical", "error", "different", "unclear", "hang")
+
+
+@dataclass
+class Run:
+    faults: Faults
+    outcome: str  # one of OUTCOMES
+    seconds: float
+    injected: int  # faults injected, both ways
+    frames: int  # frames through the proxy, both ways
+    message: str = ""  # the error line, or what was wrong
+
+
+def stream_once(argv: list[str], out: Path, ref: Path, run_limit: float) -> tuple[str, float, str]:
+    """`wavemesh ARGV` (a stream command writing `out`) on a thread: (outcome, seconds, message)."""
+    from wavemesh import cli
+
+    result: dict = {}
+
+    def work():
+        err = io.StringIO()
+        t0 = time.monotonic()
+        try:
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                result["rc"] = cli.main(argv)
+        except BaseException as e:  # noqa: BLE001 - a traceback is an outcome (unclear), not a crash here
+            result["exc"] = repr(e)
+        result["err"] = err.getvalue()
+        result["t"] = time.monotonic() - t0
+
+    t0 = time.monotonic()
+    th = threading.Thread(target=work, daemon=True)
+    th.start()
+    th.join(run_limit)
+    if th.is_alive():
+        return "hang", time.monotonic() - t0, f"still running after {run_limit:g} s"
+    t, err = result["t"], result["err"]
+    if "exc" in result:
+        return "unclear", t, f"raised {result['exc']}"
+    rc = result["rc"]
+    if rc in (0, 3) and out.exists():  # 3: the triangle budget stopped the run (as it did the reference)
+        if filecmp.cmp(out, ref, shallow=False):
+            return "identical", t, ""
+        return "different", t, f"exit {rc} with a mesh that is not the reference"
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    if rc == 2 and len(lines) == 1 and "hint:" in err and "Traceback" not in err and not out.exists():
+        return "error", t, lines[0]
+    return "unclear", t, f"exit {rc}: {err.strip()[-300:]}"
+
+
+def campaign(upstream: tuple[str, int], src: Path, opts: list[str], ref: Path, faults: list[Faults],
+             workdir: Path, run_limit: float = 150.0, on_run=None) -> list[Run]:
+    """`wavemesh stream SRC OPTS` through a FaultProxy in front of `upstream`, once per Faults."""
+    runs = []
+    for i, f in enumerate(faults):
+        out = workdir / f"run{i}{ref.suffix}"
+        if out.exists():
+            out.unlink()
+        with FaultProxy(upstream, f) as proxy:
+            argv = ["stream", str(src), *opts, "--port", proxy.url, "-o", str(out), "-q"]
+            outcome, t, msg = stream_once(argv, out, ref, run_limit)
+            run = Run(f, outcome, t, len(proxy.log), proxy.frames, msg)
+        runs.append(run)
+        if on_run:
+            on_run(run)
+    return runs
+
+
+@dataclass
+class Tally:
+    runs: int = 0
+    outcomes: dict = field(default_factory=lambda: {k: 0 for k in OUTCOMES})
+    injected: int = 0
+    frames: int = 0
+    faulted_runs: int = 0  # runs with at least one fault injected
+    slowest: float = 0.0
+    slowest_error: float = 0.0
+    errors: dict = field(default_factory=dict)  # error line -> count
+
+    @classmethod
+    def of(cls, runs: list[Run]) -> Tally:
+        t = cls()
+        for r in runs:
+            t.runs += 1
+            t.outcomes[r.outcome] += 1
+            t.injected += r.injected
+            t.frames += r.frames
+            t.faulted_runs += r.injected > 0
+            t.slowest = max(t.slowest, r.seconds)
+            if r.outcome == "error":
+                t.slowest_error = max(t.slowest_error, r.seconds)
+                key = r.message.split(":")[1].strip() if ":" in r.message else r.message
+                t.errors[key] = t.errors.get(key, 0) + 1
+        return t
+
+    def line(self) -> str:
+        return (f"{self.runs} runs, {self.frames} frames, {self.injected} faults in {self.faulted_runs} "
+                "runs: " + ", ".join(f"{v} {k}" for k, v in self.outcomes.items())
+                + f"; slowest run {self.slowest:.1f} s, slowest error {self.slowest_error:.1f} s")
+
 
 def _close(s: socket.socket) -> None:
     try:
@@ -191,4 +318,4 @@ def _close(s: socket.socket) -> None:
         pass
 
 
-__all__ = ["FaultProxy", "Faults", "Injected", "KINDS"]
+__all__ = ["FaultProxy", "Faults", "Injected", "KINDS", "OUTCOMES", "Run", "Tally", "campaign", "stream_once"]
