@@ -96,15 +96,4 @@ void board_read_config(struct board_config *config);
 /* The height memory as an array of samples (row-major, W per row). */
 #define BOARD_HEIGHTS ((volatile uint16_t *)WM_HEIGHT_BASE)
 
-/* ---- CRC-32 ----------------------------------------------------------------------------------- */
-
-/*
- * CRC-32 (IEEE 802.3, reflected, as zlib's crc32 and Python's zlib.crc32): start with crc = 0 and
- * pass each result back in to continue over more data.
- */
-uint32_t board_crc32(uint32_t crc, const void *data, size_t n);
-
-/* Continue a CRC-32 over one byte (crc as board_crc32 returns it). */
-uint32_t board_crc32_byte(uint32_t crc, uint8_t byte);
-
 #endif /* BOARD_H */
