@@ -16,7 +16,7 @@ VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
 SETUP_STAMP := $(VENV)/.installed
 
 .PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean \
-        firmware-board sim firmware native-device native-device-build demo-native
+        firmware-board sim firmware native-device native-device-build demo-native fuzz
 
 help:
 	@echo "make setup          install Debian packages (as root) and .venv from requirements.txt"
@@ -35,6 +35,7 @@ help:
 	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
 	@echo "make native-device  build and run the native stand-in device on 127.0.0.1:$(DEV_PORT) (DEV_FLAGS=...)"
 	@echo "make demo-native    stream the DEM through the native stand-in device into $(OUT)/"
+	@echo "make fuzz           libFuzzer/atheris harnesses (fuzz/README.md), FUZZ_SECONDS=$(FUZZ_SECONDS) each"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
@@ -109,6 +110,13 @@ native-device: native-device-build
 
 demo-native: $(SETUP_STAMP) gen
 	$(VPY) tools/stream_demo.py --device native --out $(OUT)
+
+# The fuzz harnesses (fuzz/README.md): clang, ASan + UBSan, into build/fuzz/; the corpus in fuzz/corpus/.
+# `make bench-fuzz` is the CPU-hour campaign (FUZZ_CPU seconds each; run it under nice -n 19).
+FUZZ_SECONDS ?= 60
+
+fuzz: $(SETUP_STAMP) gen
+	$(VPY) fuzz/run.py run --seconds $(FUZZ_SECONDS)
 
 # ruff over the Python; `verilator --lint-only -Wall` on every module of rtl/, one by one as
 # tests/rtl/test_lint.py does (waivers, each with its reason, only in rtl/lint.vlt); a few seconds.
