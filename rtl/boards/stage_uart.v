@@ -1,0 +1,373 @@
+/*
+ * wavemesh: the FPGA stage alone behind a UART (the iCEBreaker configuration, docs/boards.md)
+ *
+ * No CPU and no frame buffer: the host streams a job's samples over the UART, they go straight
+ * into the filter bank (haar_bank) and the template stage (tlut_stage), and every block's TOUT
+ * entry (template id, label) goes straight back, in raster order.  The host builds the initial
+ * triangulation from those entries and refines it itself.
+ *
+ * Wire format (little-endian; docs/boards.md, "The iCEBreaker's stream"):
+ *
+ *   host -> device   header: W (u16), H (u16), M (u8), tau (u24)           8 bytes
+ *   device -> host   "OK" (0x4F 0x4B), or "E" and a reason byte when the header is out of range
+ *                    (then the device waits for the next header)
+ *   host -> device   W x H samples (u16), row-major
+ *   device -> host   one u16 per block in raster order: bits 5..0 template id, 8..6 label
+ *                    (the TOUT entry of docs/soc.md), ceil((W-1)/2^M) x ceil((H-1)/2^M) of them
+ *
+ * The device is then ready for the next header.  Reasons: "W" W or H out of 2..MAX_WIDTH /
+ * 2..MAX_HEIGHT, "M" M out of 1..MAX_LEVELS, "C" too many block columns for the template stage.
+ *
+ * Flow: the receiver has no back-pressure, so the stage must keep up with the line.  It does: the
+ * filter bank takes a sample per clock, and the only stall, the template stage waiting for the
+ * transmitter, lasts at most one block row's entries (2 ceil((W-1)/2^M) bytes, sent while the next
+ * sample row, 2 W bytes at the same baud rate, comes in); RX_DEPTH bytes absorb the rest.
+ */
+
+`resetall
+`timescale 1ns / 1ps
+`default_nettype none
+
+module stage_uart #
+(
+    // baud divisor: clock cycles per bit
+    parameter DIV = 104,
+    // the filter bank's maxima
+    parameter MAX_WIDTH = 256,
+    parameter MAX_HEIGHT = 4096,
+    parameter MAX_LEVELS = 4,
+    // the template stage's row buffer: block columns of the finest M, ceil((MAX_WIDTH - 1) / 2)
+    parameter MAX_COLS = 128,
+    // byte FIFOs (flip-flops on the iCE40: keep them small)
+    parameter RX_DEPTH = 16,
+    parameter TX_DEPTH = 8
+)
+(
+    input  wire        clk,
+    input  wire        rst,
+    input  wire        rxd,
+    output wire        txd,
+    output wire        busy,       // a job is in progress (header accepted, entries outstanding)
+    output wire        rx_overrun  // sticky: a received byte found the RX FIFO full (the job is lost)
+);
+
+localparam [15:0] DIV16 = DIV;
+
+/*
+ * Receiver and its FIFO
+ */
+wire [7:0] rx_pin_tdata;
+wire       rx_pin_tvalid;
+wire       rx_busy_unused;
+wire       rx_frame_error_unused;
+
+uart_rx rx_inst (
+    .clk(clk),
+    .rst(rst),
+    .rxd(rxd),
+    .div(DIV16),
+    .m_axis_tdata(rx_pin_tdata),
+    .m_axis_tvalid(rx_pin_tvalid),
+    .busy(rx_busy_unused),
+    .frame_error(rx_frame_error_unused)
+);
+
+wire [7:0] rx_tdata;
+wire       rx_tvalid;
+reg        rx_tready;
+wire       rx_fifo_ready;
+wire [$clog2(RX_DEPTH + 1)-1:0] rx_count_unused;
+
+wm_fifo #(
+    .DATA_WIDTH(8),
+    .DEPTH(RX_DEPTH)
+) rx_fifo_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_data(rx_pin_tdata),
+    .s_valid(rx_pin_tvalid),
+    .s_ready(rx_fifo_ready),
+    .m_data(rx_tdata),
+    .m_valid(rx_tvalid),
+    .m_ready(rx_tready),
+    .count(rx_count_unused)
+);
+
+reg overrun_reg = 1'b0;
+
+/*
+ * Header, samples, state
+ */
+localparam [1:0]
+    STATE_HEADER = 2'd0,
+    STATE_REPLY = 2'd1,
+    STATE_SAMPLES = 2'd2,
+    STATE_DRAIN = 2'd3;
+
+reg [1:0]  state_reg = STATE_HEADER;
+reg [2:0]  hdr_count_reg = 3'd0;
+reg [63:0] hdr_reg = 64'd0;
+reg [15:0] width_reg = 16'd2;
+reg [15:0] height_reg = 16'd2;
+reg [3:0]  levels_reg = 4'd1;
+reg [17:0] tau_reg = 18'd0;
+reg [7:0]  reason_reg = 8'd0;     // 0: OK
+reg [1:0]  reply_count_reg = 2'd0;
+reg        checked_reg = 1'b0;     // the header has been checked (reply bytes may go)
+reg [31:0] samples_left_reg = 32'd0;
+reg [31:0] blocks_left_reg = 32'd0;
+reg        low_valid_reg = 1'b0;   // the sample's low byte is in
+reg [7:0]  low_reg = 8'd0;
+
+wire [15:0] hdr_w = hdr_reg[15:0];
+wire [15:0] hdr_h = hdr_reg[31:16];
+wire [7:0]  hdr_m = hdr_reg[39:32];
+wire [23:0] hdr_tau = hdr_reg[63:40];
+
+// blocks per row and column for a header: ceil((n - 1) / 2^M)
+function [15:0] blocks;
+    input [15:0] n;
+    input [3:0] m;
+    begin
+        blocks = ((n - 16'd1) + ((16'd1 << m) - 16'd1)) >> m;
+    end
+endfunction
+
+/*
+ * The stage: haar_bank -> tlut_stage, the block-end beats to the transmitter
+ */
+wire [15:0] bank_s_tdata = {rx_tdata, low_reg};
+wire        bank_s_tvalid = state_reg == STATE_SAMPLES && rx_tvalid && low_valid_reg;
+wire        bank_s_tready;
+
+wire [69:0] rec_tdata;
+wire [35:0] rec_tuser;
+wire        rec_tvalid;
+wire        rec_tready;
+wire        rec_tlast;
+wire        bank_busy_unused;
+wire        bank_done_unused;
+
+haar_bank #(
+    .MAX_WIDTH(MAX_WIDTH),
+    .MAX_HEIGHT(MAX_HEIGHT),
+    .MAX_LEVELS(MAX_LEVELS)
+) bank_inst (
+    .clk(clk),
+    .rst(rst),
+    .cfg_width(width_reg),
+    .cfg_height(height_reg),
+    .cfg_levels(levels_reg),
+    .s_axis_tdata(bank_s_tdata),
+    .s_axis_tvalid(bank_s_tvalid),
+    .s_axis_tready(bank_s_tready),
+    .m_axis_tdata(rec_tdata),
+    .m_axis_tuser(rec_tuser),
+    .m_axis_tvalid(rec_tvalid),
+    .m_axis_tready(rec_tready),
+    .m_axis_tlast(rec_tlast),
+    .busy(bank_busy_unused),
+    .frame_done(bank_done_unused)
+);
+
+wire [95:0] tri_tdata_unused;
+wire [44:0] tri_tuser;
+wire        tri_tvalid;
+wire        tri_tready;
+wire        tri_tlast_unused;
+wire        cfg_error;
+
+tlut_stage #(
+    .MAX_COLS(MAX_COLS)
+) stage_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_axis_tdata(rec_tdata),
+    .s_axis_tuser(rec_tuser),
+    .s_axis_tvalid(rec_tvalid),
+    .s_axis_tready(rec_tready),
+    .s_axis_tlast(rec_tlast),
+    .m_axis_tdata(tri_tdata_unused),
+    .m_axis_tuser(tri_tuser),
+    .m_axis_tvalid(tri_tvalid),
+    .m_axis_tready(tri_tready),
+    .m_axis_tlast(tri_tlast_unused),
+    .cfg_width(width_reg),
+    .cfg_height(height_reg),
+    .cfg_levels(levels_reg),
+    .cfg_tau(tau_reg),
+    .status_cfg_error(cfg_error)
+);
+
+/*
+ * Transmitter: the reply bytes, then two bytes per block-end beat
+ */
+wire [15:0] entry = {7'd0, tri_tuser[11:9], tri_tuser[8:3]};
+wire        block_end = tri_tuser[44];
+
+reg        tx_hi_reg = 1'b0;       // the entry's high byte is next
+reg [7:0]  tx_tdata;
+reg        tx_tvalid;
+wire       tx_tready;
+
+always @* begin
+    tx_tdata = 8'd0;
+    tx_tvalid = 1'b0;
+    if (state_reg == STATE_REPLY) begin
+        tx_tvalid = checked_reg;
+        if (reason_reg == 8'd0) begin
+            tx_tdata = reply_count_reg == 2'd0 ? "O" : "K";
+        end else begin
+            tx_tdata = reply_count_reg == 2'd0 ? "E" : reason_reg;
+        end
+    end else if (tri_tvalid && block_end) begin
+        tx_tvalid = 1'b1;
+        tx_tdata = tx_hi_reg ? entry[15:8] : entry[7:0];
+    end
+end
+
+// triangles that are not a block's last are taken at once; a block's last after its second byte
+assign tri_tready = !block_end || (state_reg != STATE_REPLY && tx_tready && tx_hi_reg);
+
+wire [7:0] txf_tdata;
+wire       txf_tvalid;
+wire       txf_tready;
+wire [$clog2(TX_DEPTH + 1)-1:0] tx_count_unused;
+
+wm_fifo #(
+    .DATA_WIDTH(8),
+    .DEPTH(TX_DEPTH)
+) tx_fifo_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_data(tx_tdata),
+    .s_valid(tx_tvalid),
+    .s_ready(tx_tready),
+    .m_data(txf_tdata),
+    .m_valid(txf_tvalid),
+    .m_ready(txf_tready),
+    .count(tx_count_unused)
+);
+
+wire tx_busy_unused;
+
+uart_tx tx_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_axis_tdata(txf_tdata),
+    .s_axis_tvalid(txf_tvalid),
+    .s_axis_tready(txf_tready),
+    .txd(txd),
+    .div(DIV16),
+    .busy(tx_busy_unused)
+);
+
+/*
+ * Control
+ */
+always @* begin
+    rx_tready = 1'b0;
+    case (state_reg)
+        STATE_HEADER: rx_tready = 1'b1;
+        STATE_SAMPLES: rx_tready = !low_valid_reg || bank_s_tready;
+        default: rx_tready = 1'b0;
+    endcase
+end
+
+always @(posedge clk) begin
+    if (rx_pin_tvalid && !rx_fifo_ready) begin
+        overrun_reg <= 1'b1;
+    end
+
+    case (state_reg)
+        STATE_HEADER: begin
+            if (rx_tvalid) begin
+                hdr_reg <= {rx_tdata, hdr_reg[63:8]};
+                hdr_count_reg <= hdr_count_reg + 3'd1;
+                if (hdr_count_reg == 3'd7) begin
+                    state_reg <= STATE_REPLY;
+                    reply_count_reg <= 2'd0;
+                end
+            end
+        end
+        STATE_REPLY: begin
+            // the header is complete in hdr_reg: check it while the first reply byte waits
+            if (!checked_reg) begin
+                width_reg <= hdr_w;
+                height_reg <= hdr_h;
+                levels_reg <= hdr_m[3:0];
+                tau_reg <= hdr_tau > 24'h3FFFF ? 18'h3FFFF : hdr_tau[17:0];
+                if (hdr_w < 16'd2 || hdr_w > MAX_WIDTH || hdr_h < 16'd2 || hdr_h > MAX_HEIGHT) begin
+                    reason_reg <= "W";
+                end else if (hdr_m < 8'd1 || hdr_m > MAX_LEVELS) begin
+                    reason_reg <= "M";
+                end else if (blocks(hdr_w, hdr_m[3:0]) > MAX_COLS) begin
+                    reason_reg <= "C";
+                end else begin
+                    reason_reg <= 8'd0;
+                end
+                samples_left_reg <= hdr_w * hdr_h;
+                blocks_left_reg <= blocks(hdr_w, hdr_m[3:0]) * blocks(hdr_h, hdr_m[3:0]);
+                checked_reg <= 1'b1;
+            end else if (tx_tready) begin
+                reply_count_reg <= reply_count_reg + 2'd1;
+                if (reply_count_reg == 2'd1) begin
+                    checked_reg <= 1'b0;
+                    tx_hi_reg <= 1'b0;
+                    state_reg <= reason_reg == 8'd0 ? STATE_SAMPLES : STATE_HEADER;
+                    low_valid_reg <= 1'b0;
+                end
+            end
+        end
+        STATE_SAMPLES, STATE_DRAIN: begin
+            if (state_reg == STATE_SAMPLES && rx_tvalid && rx_tready) begin
+                if (!low_valid_reg) begin
+                    low_reg <= rx_tdata;
+                    low_valid_reg <= 1'b1;
+                end else begin
+                    low_valid_reg <= 1'b0;
+                    samples_left_reg <= samples_left_reg - 32'd1;
+                    if (samples_left_reg == 32'd1) begin
+                        state_reg <= STATE_DRAIN;
+                    end
+                end
+            end
+            if (tri_tvalid && block_end && tx_tready) begin
+                tx_hi_reg <= !tx_hi_reg;
+                if (tx_hi_reg) begin
+                    blocks_left_reg <= blocks_left_reg - 32'd1;
+                end
+            end
+            if (state_reg == STATE_DRAIN && blocks_left_reg == 32'd0) begin
+                state_reg <= STATE_HEADER;
+            end
+        end
+        default: state_reg <= STATE_HEADER;
+    endcase
+
+    if (state_reg != STATE_HEADER) begin
+        hdr_count_reg <= 3'd0;
+    end
+
+    if (rst) begin
+        state_reg <= STATE_HEADER;
+        hdr_count_reg <= 3'd0;
+        reply_count_reg <= 2'd0;
+        checked_reg <= 1'b0;
+        low_valid_reg <= 1'b0;
+        tx_hi_reg <= 1'b0;
+        overrun_reg <= 1'b0;
+        samples_left_reg <= 32'd0;
+        blocks_left_reg <= 32'd0;
+    end
+end
+
+wire cfg_error_unused = cfg_error;
+wire [34:0] tri_tuser_unused = {tri_tuser[43:12], tri_tuser[2:0]};
+
+assign busy = state_reg != STATE_HEADER;
+assign rx_overrun = overrun_reg;
+
+endmodule
+
+`resetall

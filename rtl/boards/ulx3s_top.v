@@ -1,0 +1,80 @@
+/*
+ * wavemesh: the ULX3S board top (Lattice ECP5-85F, CABGA381; 25 MHz oscillator)
+ *
+ * The whole SoC (rtl/soc_top.v: PicoRV32, firmware image in block RAM, FPGA stage) on the board's
+ * 25 MHz clock without a PLL; its UART on the FT231X's serial port (ftdi_txd in, ftdi_rxd out: the
+ * names are the FTDI chip's), the eight LEDs, FIRE1 (btn[1]) as the reset button.  wifi_gpio0 is
+ * driven high: the ESP32 holds the board in reset or reconfigures it when this pin floats low.
+ * Pins: ulx3s.lpf.  `make bitstream BOARD=ulx3s` builds it with the firmware image as FW_HEX.
+ */
+
+`resetall
+`timescale 1ns / 1ps
+`default_nettype none
+
+`include "wm_memmap.vh"
+
+module ulx3s_top #
+(
+    // $readmemh image of the firmware RAM (set by tools/boards.mk)
+    parameter FW_HEX = ""
+)
+(
+    input  wire        clk_25mhz,
+    input  wire        ftdi_txd,    // FTDI transmits, FPGA receives
+    output wire        ftdi_rxd,    // FPGA transmits, FTDI receives
+    input  wire [1:1]  btn,         // FIRE1, high when pressed
+    output wire [7:0]  led,
+    output wire        wifi_gpio0
+);
+
+wire rst;
+
+wm_por #(
+    .BUTTON_ACTIVE_HIGH(1)
+) por_inst (
+    .clk(clk_25mhz),
+    .button(btn[1]),
+    .rst(rst)
+);
+
+assign wifi_gpio0 = 1'b1;
+
+wire [7:0]  tx_tdata_unused;
+wire        tx_tvalid_unused;
+wire        rx_tready_unused;
+wire [15:0] uart_div_unused;
+wire        stage_valid_unused;
+wire [31:0] stage_unused;
+wire        halt_valid_unused;
+wire [31:0] halt_code_unused;
+wire        trap_unused;
+
+soc_top #(
+    .CLK_HZ(25000000),
+    .FW_HEX(FW_HEX),
+    .LED_COUNT(8)
+) soc_inst (
+    .clk(clk_25mhz),
+    .rst(rst),
+    .uart_rxd(ftdi_txd),
+    .uart_txd(ftdi_rxd),
+    .led(led),
+    .uart_bypass(1'b0),
+    .s_axis_uart_rx_tdata(8'd0),
+    .s_axis_uart_rx_tvalid(1'b0),
+    .s_axis_uart_rx_tready(rx_tready_unused),
+    .m_axis_uart_tx_tdata(tx_tdata_unused),
+    .m_axis_uart_tx_tvalid(tx_tvalid_unused),
+    .m_axis_uart_tx_tready(1'b0),
+    .uart_div(uart_div_unused),
+    .stage_valid(stage_valid_unused),
+    .stage(stage_unused),
+    .halt_valid(halt_valid_unused),
+    .halt_code(halt_code_unused),
+    .trap(trap_unused)
+);
+
+endmodule
+
+`resetall

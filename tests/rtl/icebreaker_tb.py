@@ -1,0 +1,106 @@
+"""cocotb bench: the iCEBreaker board top (rtl/boards/icebreaker_top.v: stage_uart behind the UART pins).
+
+The bench is the host's end of the serial line, bit by bit on the RX and TX pins at the top's DIV: it
+sends a job's header and samples as UART frames and reads the bytes the board sends back, and every
+block's entry must be the reference model's TOUT entry (wavemesh.label, as tests/rtl/soc_accel_tb.py
+computes them).  Jobs run back to back on one reset, with a refused header between them.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import cocotb
+import numpy as np
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge
+from soc_accel_tb import expected
+from wavemesh import synth
+from wavemesh.heightfield import from_array
+
+
+class Line:
+    """The host's end of the UART: frames onto RX, frames from TX (8N1, DIV clocks per bit)."""
+
+    def __init__(self, dut):
+        self.dut = dut
+        self.div = int(dut.DIV.value)
+        self.received: list[int] = []
+        dut.RX.value = 1
+        cocotb.start_soon(self._receive())
+
+    async def send(self, data: bytes) -> None:
+        for byte in data:
+            bits = [0] + [(byte >> k) & 1 for k in range(8)] + [1]
+            for b in bits:
+                self.dut.RX.value = b
+                await ClockCycles(self.dut.CLK, self.div)
+
+    async def _receive(self) -> None:
+        while True:
+            await FallingEdge(self.dut.TX)
+            await ClockCycles(self.dut.CLK, self.div // 2)
+            assert int(self.dut.TX.value) == 0, "a glitch on TX, not a start bit"
+            byte = 0
+            for k in range(8):
+                await ClockCycles(self.dut.CLK, self.div)
+                byte |= int(self.dut.TX.value) << k
+            await ClockCycles(self.dut.CLK, self.div)
+            assert int(self.dut.TX.value) == 1, "stop bit"
+            self.received.append(byte)
+
+    async def read(self, n: int, timeout_bytes: int = 64) -> bytes:
+        """The next n bytes from the board (fails when they do not come within a generous time)."""
+        limit = (n + timeout_bytes) * 12 * self.div
+        for _ in range(limit):
+            if len(self.received) >= n:
+                break
+            await RisingEdge(self.dut.CLK)
+        assert len(self.received) >= n, f"expected {n} bytes, got {len(self.received)}"
+        out, self.received = bytes(self.received[:n]), self.received[n:]
+        return out
+
+
+def header(w: int, h: int, m: int, tau: int) -> bytes:
+    return struct.pack("<HHB", w, h, m) + tau.to_bytes(3, "little")
+
+
+CASES = [
+    ("ball 32x32 M=3", lambda: synth.ball(32), 3, 40),
+    ("random 37x23 M=2 tau=0", lambda: np.random.default_rng(3).integers(0, 65536, (23, 37)), 2, 0),
+    ("box 2x2 M=1", lambda: np.array([[0, 9], [65535, 3]]), 1, 1),
+    ("f3 45x19 M=1", lambda: synth.f3(45)[:19], 1, 10),
+    ("f1 40x40 M=4, tau above 18 bits", lambda: synth.f1(40), 4, 1 << 20),
+]
+
+
+@cocotb.test()
+async def test_jobs_over_the_uart(dut):
+    """Each job: "OK", then the reference TOUT entries in raster order; bad headers get "E" + reason."""
+    cocotb.start_soon(Clock(dut.CLK, 10, unit="ns").start())
+    dut.BTN_N.value = 1
+    line = Line(dut)
+    await ClockCycles(dut.CLK, 40)  # the power-on reset
+    assert int(dut.LEDR_N.value) == 1, "busy right after reset"
+
+    for name, make, m, tau in CASES:
+        samples = from_array(np.asarray(make())).samples
+        h, w = samples.shape
+        await line.send(header(w, h, m, tau))
+        assert await line.read(2) == b"OK", name
+        await line.send(samples.astype("<u2").tobytes())
+        _, tout = expected(samples, m, min(tau, (1 << 18) - 1))
+        got = await line.read(2 * len(tout))
+        assert list(struct.unpack(f"<{len(tout)}H", got)) == tout, f"{name}: template entries differ"
+        await ClockCycles(dut.CLK, 4)
+        assert int(dut.LEDR_N.value) == 1, f"{name}: still busy after the last entry"
+        assert int(dut.LEDG_N.value) == 1, f"{name}: RX overrun"
+
+        # a refused header between jobs: the board answers and waits for the next header
+        max_w, max_m = int(dut.stage_inst.MAX_WIDTH.value), int(dut.stage_inst.MAX_LEVELS.value)
+        bad = [header(1, 5, 1, 0), header(max_w + 1, 5, 1, 0), header(8, 8, 0, 0), header(8, 8, max_m + 1, 0)]
+        reasons = [b"EW", b"EW", b"EM", b"EM"]
+        k = CASES.index((name, make, m, tau)) % len(bad)
+        await line.send(bad[k])
+        assert await line.read(2) == reasons[k], f"after {name}"
+    assert not line.received, "bytes nobody asked for"

@@ -1,0 +1,26 @@
+# The real boards (docs/boards.md): bitstreams and flashing through tools/boards.py.  Included by the
+# Makefile.
+#   make bitstream BOARD=ulx3s|icebreaker   synthesis, place and route, packing into build/boards/BOARD/;
+#                                           the firmware image (ULX3S) is built first and built in; the
+#                                           board's utilisation and fmax go to docs/boards.md
+#   make bitstreams                         both
+#   make flash BOARD=...                    openFPGALoader: the FPGA's SRAM (FLASH=1: the SPI flash)
+BOARD ?=
+BOARDS := ulx3s icebreaker
+SEED ?= 1
+FLASH ?=
+
+.PHONY: bitstream bitstreams flash
+
+bitstream: $(SETUP_STAMP) gen
+	@case " $(BOARDS) " in *" $(BOARD) "*) ;; \
+	 *) echo "error: BOARD=$(BOARD) is not a board: make bitstream BOARD=<one of: $(BOARDS)>" >&2; exit 2;; esac
+	$(VPY) tools/boards.py bitstream $(BOARD) --seed $(SEED)
+
+bitstreams:
+	@for b in $(BOARDS); do $(MAKE) --no-print-directory bitstream BOARD=$$b || exit 1; done
+
+flash: $(SETUP_STAMP)
+	@case " $(BOARDS) " in *" $(BOARD) "*) ;; \
+	 *) echo "error: BOARD=$(BOARD) is not a board: make flash BOARD=<one of: $(BOARDS)>" >&2; exit 2;; esac
+	@$(VPY) tools/boards.py flash $(BOARD) $(if $(FLASH),--flash)
