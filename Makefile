@@ -15,7 +15,7 @@ VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
 
 SETUP_STAMP := $(VENV)/.installed
 
-.PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint demo docs bench clean distclean \
+.PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint format demo docs bench clean distclean \
         firmware-board sim firmware native-device native-device-build demo-native fuzz
 
 help:
@@ -25,7 +25,8 @@ help:
 	@echo "make test-rtl       RTL tests (cocotb on Verilator) and generated-ROM checks"
 	@echo "make test-firmware  native firmware tests"
 	@echo "make test-sim       simulated-board tests"
-	@echo "make lint           ruff over the Python, verilator --lint-only -Wall over rtl/"
+	@echo "make lint           ruff over the Python, clang-format over the C, verilator --lint-only -Wall over rtl/"
+	@echo "make format         clang-format -i every C file (the style of .clang-format)"
 	@echo "make demo           stream a real DEM through the simulated board, and mesh it in software, into $(OUT)/"
 	@echo "make docs           regenerate the pictures and tables in docs/"
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
@@ -118,12 +119,21 @@ FUZZ_SECONDS ?= 60
 fuzz: $(SETUP_STAMP) gen
 	$(VPY) fuzz/run.py run --seconds $(FUZZ_SECONDS)
 
-# ruff over the Python; `verilator --lint-only -Wall` on every module of rtl/, one by one as
+# The C files clang-format keeps in the style of .clang-format (the pinned PyPI clang-format).
+C_SOURCES = $(shell find firmware fuzz -name '*.[ch]' 2>/dev/null | sort)
+CLANG_FORMAT ?= $(VENV)/bin/clang-format
+
+format: $(SETUP_STAMP)
+	$(CLANG_FORMAT) -i $(C_SOURCES)
+
+# ruff over the Python; clang-format over the C (`make format` fixes what it finds);
+# `verilator --lint-only -Wall` on every module of rtl/, one by one as
 # tests/rtl/test_lint.py does (waivers, each with its reason, only in rtl/lint.vlt); a few seconds.
 PICORV32_DIR = $(shell $(VPY) -c 'import pythondata_cpu_picorv32 as p; print(p.data_location)')
 
 lint: $(SETUP_STAMP) gen
 	$(VPY) -m ruff check host tests tools bench
+	$(CLANG_FORMAT) --dry-run -Werror $(C_SOURCES)
 	@for f in rtl/*.v; do \
 	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y $(PICORV32_DIR) rtl/lint.vlt \
 	        $$f --top-module $$(basename $$f .v) || { echo "lint: $$f"; exit 1; }; \

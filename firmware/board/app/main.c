@@ -38,7 +38,8 @@ extern uint8_t __heap_start[], __heap_end[];
 
 static uint32_t ms_cycles;
 
-static int io_getc(void *ctx, uint32_t timeout_ms) {
+static int io_getc(void *ctx, uint32_t timeout_ms)
+{
     (void)ctx;
     for (;;) {
         uint32_t ms = timeout_ms > GETC_CHUNK_MS ? GETC_CHUNK_MS : timeout_ms;
@@ -49,22 +50,26 @@ static int io_getc(void *ctx, uint32_t timeout_ms) {
     }
 }
 
-static void io_write(void *ctx, const uint8_t *data, size_t n) {
+static void io_write(void *ctx, const uint8_t *data, size_t n)
+{
     (void)ctx;
     board_uart_write(data, n);
 }
 
-static uint64_t io_cycles(void *ctx) {
+static uint64_t io_cycles(void *ctx)
+{
     (void)ctx;
     return board_cycles();
 }
 
-static void io_mark(void *ctx, uint32_t clock) {
+static void io_mark(void *ctx, uint32_t clock)
+{
     (void)ctx;
     board_stage(STAGE_CLOCK | clock);
 }
 
-int main(void) {
+int main(void)
+{
     static wm_proto eng;
     struct board_config config;
     wm_proto_caps caps;
@@ -85,7 +90,8 @@ int main(void) {
     caps.max_height = (uint16_t)max_h;
     caps.max_samples = config.height_samples;
     caps.tri_capacity = board_job_capacity((size_t)(__heap_end - __heap_start), (int32_t)max_w, (int32_t)max_h);
-    caps.max_levels = (uint8_t)(WM_ACCEL_MAX_LEVELS < WM_PROTO_MAX_LEVELS ? WM_ACCEL_MAX_LEVELS : WM_PROTO_MAX_LEVELS);
+    caps.max_levels =
+        (uint8_t)(WM_ACCEL_MAX_LEVELS < WM_PROTO_MAX_LEVELS ? WM_ACCEL_MAX_LEVELS : WM_PROTO_MAX_LEVELS);
     caps.window = WINDOW;
     caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     caps.clk_hz = config.clk_hz;

@@ -55,23 +55,27 @@ typedef struct host {
     int level_end_seen[2];
 } host;
 
-static void put16(uint8_t *b, uint32_t v) {
+static void put16(uint8_t *b, uint32_t v)
+{
     b[0] = (uint8_t)v;
     b[1] = (uint8_t)(v >> 8);
 }
 
-static void put32(uint8_t *b, uint32_t v) {
+static void put32(uint8_t *b, uint32_t v)
+{
     put16(b, v);
     put16(b + 2, v >> 16);
 }
 
-static uint32_t get32(const uint8_t *b) {
+static uint32_t get32(const uint8_t *b)
+{
     return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
 }
 
 static uint64_t get64(const uint8_t *b) { return (uint64_t)get32(b) | (uint64_t)get32(b + 4) << 32; }
 
-static void q_byte(host *h, uint8_t b) {
+static void q_byte(host *h, uint8_t b)
+{
     if (h->q_len >= sizeof h->q) {
         fprintf(stderr, "wm_clocktest: host queue full\n");
         exit(1);
@@ -80,7 +84,8 @@ static void q_byte(host *h, uint8_t b) {
 }
 
 /* A host frame onto the queue (SLIP, CRC-32). */
-static void q_frame(host *h, uint8_t type, const uint8_t *payload, uint32_t n) {
+static void q_frame(host *h, uint8_t type, const uint8_t *payload, uint32_t n)
+{
     uint8_t raw[WM_PROTO_MAX_FRAME];
     uint32_t len = 0, crc;
     raw[len++] = type;
@@ -109,7 +114,8 @@ static void q_frame(host *h, uint8_t type, const uint8_t *payload, uint32_t n) {
 }
 
 /* CONFIG (a SIDE x SIDE grid, M = 2, zeros elsewhere), the samples, RUN. */
-static void q_job(host *h) {
+static void q_job(host *h)
+{
     uint8_t cfg[WM_PROTO_CONFIG_BYTES], data[WM_PROTO_DATA_BYTES + 2 * SIDE * SIDE], run[WM_PROTO_RUN_BYTES];
     uint8_t le[2 * SIDE * SIDE];
     memset(cfg, 0, sizeof cfg);
@@ -131,7 +137,8 @@ static void q_job(host *h) {
     h->level_cycles[0] = h->level_cycles[1] = 0;
 }
 
-static void q_ack(host *h, uint8_t kind, uint8_t index, uint32_t have) {
+static void q_ack(host *h, uint8_t kind, uint8_t index, uint32_t have)
+{
     uint8_t b[WM_PROTO_ACK_BYTES];
     memset(b, 0, sizeof b);
     b[WM_PROTO_ACK_KIND] = kind;
@@ -141,7 +148,8 @@ static void q_ack(host *h, uint8_t kind, uint8_t index, uint32_t have) {
 }
 
 /* A complete frame from the device. */
-static void device_frame(host *h) {
+static void device_frame(host *h)
+{
     const uint8_t *pay = h->f + WM_PROTO_HEADER_BYTES;
     uint32_t n = (uint32_t)h->f[2] | (uint32_t)h->f[3] << 8;
     if (h->f_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES ||
@@ -192,14 +200,14 @@ static void device_frame(host *h) {
         if (++h->job < h->jobs) q_job(h);
         break;
     }
-    default:
-        break; /* PROGRESS, replies to CONFIG and DATA */
+    default: break; /* PROGRESS, replies to CONFIG and DATA */
     }
 }
 
 /* --- the transport of the engine ---------------------------------------------------------------- */
 
-static void io_write(void *ctx, const uint8_t *data, size_t n) {
+static void io_write(void *ctx, const uint8_t *data, size_t n)
+{
     host *h = ctx;
     h->t += h->tx_cost * n;
     for (size_t i = 0; i < n; i++) {
@@ -218,7 +226,8 @@ static void io_write(void *ctx, const uint8_t *data, size_t n) {
     }
 }
 
-static int io_getc(void *ctx, uint32_t timeout_ms) {
+static int io_getc(void *ctx, uint32_t timeout_ms)
+{
     host *h = ctx;
     uint64_t limit = h->t + (uint64_t)timeout_ms * (CLK_HZ / 1000);
     if (h->failed) return WM_PROTO_RX_CLOSED;
@@ -240,7 +249,8 @@ static uint64_t io_cycles(void *ctx) { return ((host *)ctx)->t; }
 
 /* --- the fake job: stages of known cost, two levels of a two-triangle mesh ---------------------- */
 
-static int fake_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail) {
+static int fake_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
+{
     static const int32_t xy[8] = {0, 0, SIDE - 1, 0, 0, SIDE - 1, SIDE - 1, SIDE - 1};
     static const int32_t tris[6] = {0, 1, 3, 0, 3, 2};
     static uint8_t mem[4096];
@@ -254,7 +264,8 @@ static int fake_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *det
     h->t += WORK_FILTER;
     wm_proto_stage(p, WM_PROTO_STAGE_TEMPLATE, j->levels);
     h->t += WORK_TEMPLATE;
-    if (wm_mesh_bound(2, 4) > sizeof mem || wm_mesh_init(&m, mem, sizeof mem, j->width, j->height, 2, 4) != WM_OK ||
+    if (wm_mesh_bound(2, 4) > sizeof mem ||
+        wm_mesh_init(&m, mem, sizeof mem, j->width, j->height, 2, 4) != WM_OK ||
         wm_mesh_build(&m, xy, 4, tris, 2, scratch) != WM_OK) {
         fprintf(stderr, "wm_clocktest: cannot build the mesh\n");
         h->failed = 1;
@@ -274,7 +285,8 @@ static int fake_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *det
     return wm_proto_emit_level(p, &m, &st, 1);
 }
 
-int main(int argc, char **argv) {
+int main(int argc, char **argv)
+{
     static wm_proto eng;
     static host h;
     static uint16_t heights[SIDE * SIDE];
@@ -298,7 +310,8 @@ int main(int argc, char **argv) {
                 if (*s == ',') s++;
             }
         } else {
-            fprintf(stderr, "usage: wm_clocktest [--jobs N] [--tx-cost N] [--ack-delay D1,D2,...] [--short-ack]\n");
+            fprintf(stderr,
+                    "usage: wm_clocktest [--jobs N] [--tx-cost N] [--ack-delay D1,D2,...] [--short-ack]\n");
             return 64;
         }
     }

@@ -1,7 +1,8 @@
 /* wavemesh board firmware: cycle counter, timer, LEDs, halt, configuration (see board.h). */
 #include "board.h"
 
-uint64_t board_cycles(void) {
+uint64_t board_cycles(void)
+{
     uint32_t lo = WM_SYS_CYCLE_LO; /* latches the high word */
     uint32_t hi = WM_SYS_CYCLE_HI;
     return (uint64_t)hi << 32 | lo;
@@ -11,7 +12,8 @@ void board_timer_start(uint32_t cycles) { WM_SYS_TIMER = cycles; }
 
 uint32_t board_timer_left(void) { return WM_SYS_TIMER; }
 
-void board_delay_cycles(uint32_t cycles) {
+void board_delay_cycles(uint32_t cycles)
+{
     uint32_t start = board_cycles32();
     while (board_cycles32() - start < cycles) {
         /* wait */
@@ -22,14 +24,16 @@ void board_leds_set(uint32_t leds) { WM_SYS_LEDS = leds; }
 
 uint32_t board_leds(void) { return WM_SYS_LEDS; }
 
-void board_halt(uint32_t code) {
+void board_halt(uint32_t code)
+{
     WM_SYS_HALT = code;
     for (;;) {
         /* a board has nowhere to go */
     }
 }
 
-void board_read_config(struct board_config *config) {
+void board_read_config(struct board_config *config)
+{
     config->clk_hz = WM_SYS_CLK_HZ;
     config->fw_ram_bytes = WM_SYS_FW_RAM_BYTES;
     config->height_samples = WM_SYS_HEIGHT_SAMPLES;

@@ -5,30 +5,35 @@ void board_uart_set_div(uint32_t div) { WM_UART_DIV = div & WM_UART_DIV_MASK; }
 
 uint32_t board_uart_div(void) { return WM_UART_DIV & WM_UART_DIV_MASK; }
 
-void board_uart_putc(uint8_t byte) {
+void board_uart_putc(uint8_t byte)
+{
     while (WM_UART_STATUS & WM_UART_STATUS_TX_FULL) {
         /* the transmitter empties the FIFO at the baud rate */
     }
     WM_UART_DATA = byte;
 }
 
-void board_uart_write(const void *data, size_t n) {
+void board_uart_write(const void *data, size_t n)
+{
     const uint8_t *p = data;
     for (size_t i = 0; i < n; i++) board_uart_putc(p[i]);
 }
 
-void board_uart_flush(void) {
+void board_uart_flush(void)
+{
     while (!(WM_UART_STATUS & WM_UART_STATUS_TX_IDLE)) {
         /* the last frame is still on the line */
     }
 }
 
-int board_uart_getc(void) {
+int board_uart_getc(void)
+{
     uint32_t data = WM_UART_DATA;
     return (data & WM_UART_DATA_EMPTY) ? -1 : (int)(data & WM_UART_DATA_BYTE_MASK);
 }
 
-int board_uart_getc_timeout(uint32_t cycles) {
+int board_uart_getc_timeout(uint32_t cycles)
+{
     uint32_t start = board_cycles32();
     for (;;) {
         uint32_t data = WM_UART_DATA;
@@ -37,7 +42,8 @@ int board_uart_getc_timeout(uint32_t cycles) {
     }
 }
 
-uint32_t board_uart_take_errors(void) {
+uint32_t board_uart_take_errors(void)
+{
     const uint32_t sticky = WM_UART_STATUS_RX_OVERRUN | WM_UART_STATUS_RX_FRAME_ERR | WM_UART_STATUS_TX_OVERRUN;
     uint32_t errors = WM_UART_STATUS & sticky;
     WM_UART_STATUS = errors; /* write 1 to clear */
