@@ -37,6 +37,7 @@ help:
 	@echo "make native-device  build and run the native stand-in device on 127.0.0.1:$(DEV_PORT) (DEV_FLAGS=...)"
 	@echo "make demo-native    stream the DEM through the native stand-in device into $(OUT)/"
 	@echo "make fuzz           libFuzzer/atheris harnesses (fuzz/README.md), FUZZ_SECONDS=$(FUZZ_SECONDS) each"
+	@echo "make bitstream BOARD=ulx3s|icebreaker  a board's bitstream (docs/boards.md); make flash BOARD=... loads it"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
@@ -134,10 +135,10 @@ PICORV32_DIR = $(shell $(VPY) -c 'import pythondata_cpu_picorv32 as p; print(p.d
 lint: $(SETUP_STAMP) gen
 	$(VPY) -m ruff check host tests tools bench
 	$(CLANG_FORMAT) --dry-run -Werror $(C_SOURCES)
-	@for f in rtl/*.v; do \
-	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y $(PICORV32_DIR) rtl/lint.vlt \
+	@for f in rtl/*.v rtl/boards/*.v; do \
+	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y rtl/boards -y $(PICORV32_DIR) rtl/lint.vlt \
 	        $$f --top-module $$(basename $$f .v) || { echo "lint: $$f"; exit 1; }; \
-	done; echo "verilator --lint-only -Wall: rtl/*.v clean"
+	done; echo "verilator --lint-only -Wall: rtl/*.v rtl/boards/*.v clean"
 
 # The real DEM that ships with matplotlib (Jacksboro fault, Tennessee; 403 x 344, metres).
 DEMO_DEM = $(shell $(VPY) -c 'import matplotlib.cbook as c; print(c.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))')
@@ -172,6 +173,8 @@ $(BENCH_STAMP): $(SETUP_STAMP) bench/requirements-data.txt
 	touch $@
 
 bench bench-quality bench-cost: $(BENCH_STAMP)
+
+include tools/boards.mk
 
 clean:
 	rm -rf build $(OUT) tests/**/sim_build

@@ -1,0 +1,326 @@
+/*
+ * fuzz_proto: the device's frame decoder and protocol engine (firmware/board/src/proto.c) with the
+ * native device's job (firmware/board/native/job.c: filter bank, template stage, refiner), under ASan
+ * and UBSan, on a virtual clock.
+ *
+ * The input is a script for a host: a run of operations, each a byte and its arguments.
+ *
+ *   raw bytes        any bytes on the line (broken frames, stray delimiters, bad escapes, noise)
+ *   silence          the host says nothing for the whole wait the engine asked for, or part of it
+ *   a frame          HELLO, CONFIG, DATA, RUN, ACK, STATUS, ABORT or an unknown type, with a valid
+ *                    CRC; its fields drawn from the input, mostly within range so that sessions get
+ *                    far (CONFIG of a small job, DATA at the offset the device last acknowledged,
+ *                    RUN with the CRC of the heights sent, ACK of the level the device last ended);
+ *                    sometimes with a wrong length, sometimes with one byte damaged on the line
+ *
+ * The device's capabilities (sizes, window, max_payload, features) come from the first bytes.  When
+ * the script ends the link closes, and wm_proto_serve must return.  Every frame the device sends is
+ * checked: SLIP well formed, length field and CRC right, a device type, payload at most its stated
+ * max_payload (an abort is a finding).  Each getc without a byte in hand consumes input, so every
+ * input ends.
+ *
+ *   build/fuzz/fuzz_proto CORPUS...        (make fuzz; fuzz/README.md)
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "job.h"
+#include "proto.h"
+
+#define MAX_SIDE 24
+#define CLK_HZ 1000000u
+#define MIN_PAYLOAD (WM_PROTO_CONFIG_BYTES > 64 ? WM_PROTO_CONFIG_BYTES : 64)
+#define BYTE_CYCLES 10u /* 10 us per byte on the line (about 1 Mbaud) */
+
+#define FAIL(...)                                                              \
+    do {                                                                       \
+        fprintf(stderr, "fuzz_proto: " __VA_ARGS__);                           \
+        fprintf(stderr, "\n");                                                 \
+        abort();                                                               \
+    } while (0)
+
+typedef struct host {
+    const uint8_t *d;
+    size_t n, pos;
+    uint64_t t;                          /* the virtual clock, CLK_HZ */
+    uint8_t q[2 * WM_PROTO_MAX_FRAME + 64]; /* bytes on their way to the device */
+    size_t q_len, q_pos;
+    uint8_t seq;
+    wm_proto_caps caps;
+    /* the device's frames, decoded as they are written */
+    uint8_t f[WM_PROTO_MAX_FRAME + 64];
+    size_t f_len;
+    int f_esc, f_bad;
+    /* what the host learnt from them */
+    uint32_t data_next;                  /* DATA_ACK's next */
+    uint8_t le_index;                    /* the last LEVEL_END's index and total */
+    uint32_t le_total;
+    /* the job the host last configured, and the heights it sent */
+    uint32_t total;
+    uint16_t mirror[MAX_SIDE * MAX_SIDE];
+} host;
+
+static int more(const host *h) { return h->pos < h->n; }
+
+static uint32_t take(host *h, int bytes) {
+    uint32_t v = 0;
+    for (int i = 0; i < bytes; i++) v = v << 8 | (h->pos < h->n ? h->d[h->pos++] : 0);
+    return v;
+}
+
+static uint32_t pick(host *h, uint32_t lo, uint32_t hi) {
+    uint32_t span = hi - lo + 1;
+    if (span == 0) return take(h, 4);
+    return lo + (span > 255 ? (span > 65535 ? take(h, 4) : take(h, 2)) : take(h, 1)) % span;
+}
+
+static void put16(uint8_t *b, uint32_t v) {
+    b[0] = (uint8_t)v;
+    b[1] = (uint8_t)(v >> 8);
+}
+
+static void put32(uint8_t *b, uint32_t v) {
+    put16(b, v);
+    put16(b + 2, v >> 16);
+}
+
+static uint32_t get32(const uint8_t *b) {
+    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+}
+
+static void q_raw(host *h, uint8_t b) {
+    if (h->q_len < sizeof h->q) h->q[h->q_len++] = b;
+}
+
+static void q_byte(host *h, uint8_t b) {
+    if (b == WM_PROTO_SLIP_END || b == WM_PROTO_SLIP_ESC) {
+        q_raw(h, WM_PROTO_SLIP_ESC);
+        q_raw(h, b == WM_PROTO_SLIP_END ? WM_PROTO_SLIP_ESC_END : WM_PROTO_SLIP_ESC_ESC);
+    } else {
+        q_raw(h, b);
+    }
+}
+
+/* A frame with a valid CRC, SLIP-encoded onto the queue; damage: one byte of it changed on the line. */
+static void q_frame(host *h, uint8_t type, const uint8_t *pay, uint32_t n, int damage) {
+    uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
+    size_t start = h->q_len;
+    uint32_t crc;
+    head[0] = type;
+    head[1] = h->seq++;
+    put16(head + 2, n);
+    crc = wm_proto_crc32(0, head, sizeof head);
+    crc = wm_proto_crc32(crc, pay, n);
+    put32(tail, crc);
+    q_raw(h, WM_PROTO_SLIP_END);
+    for (int i = 0; i < WM_PROTO_HEADER_BYTES; i++) q_byte(h, head[i]);
+    for (uint32_t i = 0; i < n; i++) q_byte(h, pay[i]);
+    for (int i = 0; i < WM_PROTO_CRC_BYTES; i++) q_byte(h, tail[i]);
+    q_raw(h, WM_PROTO_SLIP_END);
+    if (damage && h->q_len > start) h->q[start + pick(h, 0, (uint32_t)(h->q_len - start - 1))] ^= (uint8_t)pick(h, 1, 255);
+}
+
+/* One operation of the script onto the queue (module comment). */
+static void next_op(host *h) {
+    uint8_t pay[WM_PROTO_MAX_PAYLOAD + 16];
+    uint32_t op = take(h, 1), n = 0, i;
+    uint8_t type;
+    int damage = (op & 0xE0u) == 0xE0u, odd_length = (op & 0xE0u) == 0xC0u;
+    memset(pay, 0, sizeof pay);
+    switch (op % 10) {
+    case 0: /* raw bytes */
+        n = pick(h, 1, 48);
+        for (i = 0; i < n && more(h); i++) q_raw(h, (uint8_t)take(h, 1));
+        return;
+    case 1:
+        type = WM_PROTO_T_HELLO;
+        n = WM_PROTO_HELLO_BYTES;
+        put16(pay + WM_PROTO_HELLO_VERSION, pick(h, 0, 7) ? WM_PROTO_VERSION : take(h, 2));
+        break;
+    case 2: { /* CONFIG of a small job, a field now and then out of range */
+        uint32_t w = pick(h, 2, MAX_SIDE), ht = pick(h, 2, MAX_SIDE), wild = pick(h, 0, 15);
+        type = WM_PROTO_T_CONFIG;
+        n = WM_PROTO_CONFIG_BYTES;
+        put16(pay + WM_PROTO_CONFIG_WIDTH, wild == 1 ? take(h, 2) : w);
+        put16(pay + WM_PROTO_CONFIG_HEIGHT, wild == 2 ? take(h, 2) : ht);
+        pay[WM_PROTO_CONFIG_LEVELS] = (uint8_t)(wild == 3 ? take(h, 1) : pick(h, 1, 5));
+        pay[WM_PROTO_CONFIG_METRIC] = (uint8_t)(wild == 4 ? take(h, 1) : pick(h, 0, 1));
+        pay[WM_PROTO_CONFIG_NEIGHBOURHOOD] = (uint8_t)(wild == 5 ? take(h, 1) : pick(h, 0, 1));
+        pay[WM_PROTO_CONFIG_ITERATIONS] = (uint8_t)(wild == 6 ? take(h, 1) : pick(h, 0, 3));
+        put32(pay + WM_PROTO_CONFIG_FLAGS, wild == 7 ? take(h, 4) : pick(h, 0, WM_PROTO_CONFIG_KNOWN_FLAGS));
+        put32(pay + WM_PROTO_CONFIG_TAU, wild == 8 ? take(h, 4) : pick(h, 0, 3000));
+        put32(pay + WM_PROTO_CONFIG_MAX_TRIANGLES, wild == 9 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 600));
+        put32(pay + WM_PROTO_CONFIG_CAPACITY, wild == 10 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 1200));
+        put32(pay + WM_PROTO_CONFIG_ZETA, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_SCALE_M, wild == 11 ? take(h, 4) : pick(h, 0, 65535));
+        put32(pay + WM_PROTO_CONFIG_SCALE_E, wild == 12 ? take(h, 4) : pick(h, 0, 40));
+        put32(pay + WM_PROTO_CONFIG_DELTA_P, wild == 13 ? take(h, 4) : pick(h, 0, 65535));
+        put32(pay + WM_PROTO_CONFIG_ALPHA, wild == 14 ? take(h, 4) : pick(h, 0, 65536));
+        put32(pay + WM_PROTO_CONFIG_DELTA_V, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_DELTA_LAMBDA, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_DELTA_C, wild == 15 ? take(h, 4) : pick(h, 0, 65536));
+        put32(pay + WM_PROTO_CONFIG_DELTA_D, take(h, 4) >> pick(h, 0, 31));
+        /* fields after DELTA_D (the generated header may add some) stay 0: their defaults */
+        h->total = w * ht;
+        h->data_next = 0;
+        break;
+    }
+    case 3: { /* DATA: at the device's next offset (or anywhere), heights in one of three shapes */
+        uint32_t limit = (h->caps.max_payload - WM_PROTO_DATA_BYTES) / 2, off, shape = pick(h, 0, 2);
+        uint32_t base = take(h, 2), step = take(h, 1);
+        type = WM_PROTO_T_DATA;
+        off = pick(h, 0, 7) ? h->data_next : pick(h, 0, h->total + 4);
+        n = pick(h, 1, pick(h, 0, 15) ? limit : (WM_PROTO_MAX_PAYLOAD - WM_PROTO_DATA_BYTES) / 2 + 2);
+        put32(pay + WM_PROTO_DATA_OFFSET, off);
+        for (i = 0; i < n; i++) {
+            uint16_t v = (uint16_t)(shape == 0 ? base : shape == 1 ? base + step * (off + i) : take(h, 2));
+            put16(pay + WM_PROTO_DATA_BYTES + 2 * i, v);
+            if (off + i < sizeof h->mirror / sizeof h->mirror[0]) h->mirror[off + i] = v;
+        }
+        n = WM_PROTO_DATA_BYTES + 2 * n;
+        break;
+    }
+    case 4: { /* RUN with the CRC of what the host sent (or not) */
+        uint32_t crc = 0;
+        type = WM_PROTO_T_RUN;
+        n = WM_PROTO_RUN_BYTES;
+        for (i = 0; i < h->total && i < sizeof h->mirror / sizeof h->mirror[0]; i++) {
+            uint8_t le[2];
+            put16(le, h->mirror[i]);
+            crc = wm_proto_crc32(crc, le, 2);
+        }
+        put32(pay + WM_PROTO_RUN_CRC, pick(h, 0, 7) ? crc : take(h, 4));
+        break;
+    }
+    case 5:
+    case 6: { /* ACK of the last LEVEL_END (all of it, or part), or of DONE, or of something else */
+        uint32_t which = pick(h, 0, 7);
+        type = WM_PROTO_T_ACK;
+        n = WM_PROTO_ACK_BYTES;
+        pay[WM_PROTO_ACK_KIND] = which < 5 ? WM_PROTO_T_LEVEL_END : which < 7 ? WM_PROTO_T_DONE : (uint8_t)take(h, 1);
+        pay[WM_PROTO_ACK_INDEX] = which < 5 ? h->le_index : which < 7 ? 0 : (uint8_t)take(h, 1);
+        put32(pay + WM_PROTO_ACK_HAVE, which < 3 || which > 4 ? h->le_total : pick(h, 0, h->le_total + 8));
+        break;
+    }
+    case 8:
+        type = WM_PROTO_T_ABORT;
+        break;
+    default: /* 7 (9, silence, is h_getc's) */
+        type = WM_PROTO_T_STATUS;
+        break;
+    }
+    if (odd_length) { /* a length the type does not have */
+        n = pick(h, 0, 16);
+        for (i = 0; i < n; i++) pay[i] = (uint8_t)take(h, 1);
+    }
+    if ((op & 0xE0u) == 0xA0u && pick(h, 0, 3) == 0) type = (uint8_t)take(h, 1); /* any type at all */
+    q_frame(h, type, pay, n, damage);
+}
+
+static int h_getc(void *ctx, uint32_t timeout_ms) {
+    host *h = ctx;
+    while (h->q_pos == h->q_len) {
+        size_t before = h->pos;
+        h->q_pos = h->q_len = 0;
+        if (!more(h)) return WM_PROTO_RX_CLOSED;
+        if (h->d[h->pos] % 10 == 9) { /* silence */
+            h->pos++;
+            h->t += (uint64_t)(pick(h, 0, 3) ? timeout_ms : pick(h, 0, timeout_ms)) * (CLK_HZ / 1000u) + 1u;
+            return WM_PROTO_RX_TIMEOUT;
+        }
+        next_op(h);
+        if (h->pos == before) h->pos++; /* never stand still */
+    }
+    h->t += BYTE_CYCLES;
+    return h->q[h->q_pos++];
+}
+
+static int is_device_type(uint8_t t) {
+    return t == WM_PROTO_T_OK || t == WM_PROTO_T_HELLO_REPLY || t == WM_PROTO_T_DATA_ACK ||
+           t == WM_PROTO_T_STATUS_REPLY || t == WM_PROTO_T_PROGRESS || t == WM_PROTO_T_MESH ||
+           t == WM_PROTO_T_LEVEL_END || t == WM_PROTO_T_DONE || t == WM_PROTO_T_ERROR;
+}
+
+/* A whole frame from the device: well formed, or a finding. */
+static void device_frame(host *h) {
+    uint32_t n;
+    if (h->f_bad) FAIL("the device sent a bad SLIP escape");
+    if (h->f_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) FAIL("the device sent a %zu-byte frame", h->f_len);
+    n = (uint32_t)h->f[2] | (uint32_t)h->f[3] << 8;
+    if (h->f_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES)
+        FAIL("the device's frame says %u payload bytes and has %zu", n, h->f_len - 8);
+    if (wm_proto_crc32(0, h->f, h->f_len - WM_PROTO_CRC_BYTES) != get32(h->f + h->f_len - WM_PROTO_CRC_BYTES))
+        FAIL("the device sent a frame with a wrong CRC");
+    if (!is_device_type(h->f[0])) FAIL("the device sent frame type 0x%02x", h->f[0]);
+    if (n > h->caps.max_payload) FAIL("the device sent %u payload bytes, above its max_payload %u", n, h->caps.max_payload);
+    if (h->f[0] == WM_PROTO_T_DATA_ACK && n >= WM_PROTO_DATA_ACK_BYTES) h->data_next = get32(h->f + 4);
+    if (h->f[0] == WM_PROTO_T_LEVEL_END && n >= WM_PROTO_LEVEL_END_BYTES) {
+        h->le_index = h->f[4 + WM_PROTO_LEVEL_END_INDEX];
+        h->le_total = get32(h->f + 4 + WM_PROTO_LEVEL_END_TOTAL);
+    }
+}
+
+static void h_write(void *ctx, const uint8_t *data, size_t n) {
+    host *h = ctx;
+    for (size_t i = 0; i < n; i++) {
+        uint8_t c = data[i];
+        h->t += BYTE_CYCLES;
+        if (c == WM_PROTO_SLIP_END) {
+            if (h->f_len || h->f_esc || h->f_bad) device_frame(h);
+            h->f_len = 0;
+            h->f_esc = h->f_bad = 0;
+            continue;
+        }
+        if (h->f_esc) {
+            h->f_esc = 0;
+            if (c == WM_PROTO_SLIP_ESC_END) c = WM_PROTO_SLIP_END;
+            else if (c == WM_PROTO_SLIP_ESC_ESC) c = WM_PROTO_SLIP_ESC;
+            else h->f_bad = 1;
+        } else if (c == WM_PROTO_SLIP_ESC) {
+            h->f_esc = 1;
+            continue;
+        }
+        if (h->f_len >= sizeof h->f) FAIL("the device sent a frame longer than %zu bytes", sizeof h->f);
+        h->f[h->f_len++] = c;
+    }
+}
+
+static uint64_t h_cycles(void *ctx) { return ((host *)ctx)->t; }
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+    static host h;
+    static wm_proto eng;
+    static uint16_t heights[MAX_SIDE * MAX_SIDE];
+    wm_proto_io io;
+    uint32_t w, ht;
+    memset(&h, 0, sizeof h);
+    h.d = data;
+    h.n = size;
+    w = pick(&h, 2, MAX_SIDE);
+    ht = pick(&h, 2, MAX_SIDE);
+    memcpy(h.caps.name, "wm-fuzz", 8);
+    h.caps.fw_major = 1;
+    h.caps.max_width = (uint16_t)w;
+    h.caps.max_height = (uint16_t)ht;
+    h.caps.max_samples = pick(&h, 4, w * ht);
+    h.caps.tri_capacity = pick(&h, 2, 2 * (MAX_SIDE - 1) * (MAX_SIDE - 1));
+    h.caps.max_levels = (uint8_t)pick(&h, 1, WM_PROTO_MAX_LEVELS);
+    h.caps.window = (uint8_t)pick(&h, 1, WM_PROTO_MAX_WINDOW);
+    /* at least CONFIG's length: a device that states less could never be configured */
+    h.caps.max_payload = (uint16_t)pick(&h, MIN_PAYLOAD, WM_PROTO_MAX_PAYLOAD);
+    h.caps.clk_hz = CLK_HZ;
+    h.caps.features = pick(&h, 0, 3);
+    io.ctx = &h;
+    io.getc = h_getc;
+    io.write = h_write;
+    io.cycles = h_cycles;
+    io.mark = NULL;
+    wm_proto_init(&eng, &io, &h.caps, heights, wm_native_job, NULL);
+    if (wm_proto_serve(&eng) != 0) FAIL("wm_proto_serve returned non-zero");
+    if (h.f_len) FAIL("the device left a frame unfinished");
+    return 0;
+}
