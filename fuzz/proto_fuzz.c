@@ -34,11 +34,11 @@
 #define MIN_PAYLOAD (WM_PROTO_CONFIG_BYTES > 64 ? WM_PROTO_CONFIG_BYTES : 64)
 #define BYTE_CYCLES 10u /* 10 us per byte on the line (about 1 Mbaud) */
 
-#define FAIL(...)                                                              \
-    do {                                                                       \
-        fprintf(stderr, "fuzz_proto: " __VA_ARGS__);                           \
-        fprintf(stderr, "\n");                                                 \
-        abort();                                                               \
+#define FAIL(...)                                    \
+    do {                                             \
+        fprintf(stderr, "fuzz_proto: " __VA_ARGS__); \
+        fprintf(stderr, "\n");                       \
+        abort();                                     \
     } while (0)
 
 typedef struct host {
@@ -64,37 +64,44 @@ typedef struct host {
 
 static int more(const host *h) { return h->pos < h->n; }
 
-static uint32_t take(host *h, int bytes) {
+static uint32_t take(host *h, int bytes)
+{
     uint32_t v = 0;
     for (int i = 0; i < bytes; i++) v = v << 8 | (h->pos < h->n ? h->d[h->pos++] : 0);
     return v;
 }
 
-static uint32_t pick(host *h, uint32_t lo, uint32_t hi) {
+static uint32_t pick(host *h, uint32_t lo, uint32_t hi)
+{
     uint32_t span = hi - lo + 1;
     if (span == 0) return take(h, 4);
     return lo + (span > 255 ? (span > 65535 ? take(h, 4) : take(h, 2)) : take(h, 1)) % span;
 }
 
-static void put16(uint8_t *b, uint32_t v) {
+static void put16(uint8_t *b, uint32_t v)
+{
     b[0] = (uint8_t)v;
     b[1] = (uint8_t)(v >> 8);
 }
 
-static void put32(uint8_t *b, uint32_t v) {
+static void put32(uint8_t *b, uint32_t v)
+{
     put16(b, v);
     put16(b + 2, v >> 16);
 }
 
-static uint32_t get32(const uint8_t *b) {
+static uint32_t get32(const uint8_t *b)
+{
     return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
 }
 
-static void q_raw(host *h, uint8_t b) {
+static void q_raw(host *h, uint8_t b)
+{
     if (h->q_len < sizeof h->q) h->q[h->q_len++] = b;
 }
 
-static void q_byte(host *h, uint8_t b) {
+static void q_byte(host *h, uint8_t b)
+{
     if (b == WM_PROTO_SLIP_END || b == WM_PROTO_SLIP_ESC) {
         q_raw(h, WM_PROTO_SLIP_ESC);
         q_raw(h, b == WM_PROTO_SLIP_END ? WM_PROTO_SLIP_ESC_END : WM_PROTO_SLIP_ESC_ESC);
@@ -104,7 +111,8 @@ static void q_byte(host *h, uint8_t b) {
 }
 
 /* A frame with a valid CRC, SLIP-encoded onto the queue; damage: one byte of it changed on the line. */
-static void q_frame(host *h, uint8_t type, const uint8_t *pay, uint32_t n, int damage) {
+static void q_frame(host *h, uint8_t type, const uint8_t *pay, uint32_t n, int damage)
+{
     uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
     size_t start = h->q_len;
     uint32_t crc;
@@ -119,11 +127,13 @@ static void q_frame(host *h, uint8_t type, const uint8_t *pay, uint32_t n, int d
     for (uint32_t i = 0; i < n; i++) q_byte(h, pay[i]);
     for (int i = 0; i < WM_PROTO_CRC_BYTES; i++) q_byte(h, tail[i]);
     q_raw(h, WM_PROTO_SLIP_END);
-    if (damage && h->q_len > start) h->q[start + pick(h, 0, (uint32_t)(h->q_len - start - 1))] ^= (uint8_t)pick(h, 1, 255);
+    if (damage && h->q_len > start)
+        h->q[start + pick(h, 0, (uint32_t)(h->q_len - start - 1))] ^= (uint8_t)pick(h, 1, 255);
 }
 
 /* One operation of the script onto the queue (module comment). */
-static void next_op(host *h) {
+static void next_op(host *h)
+{
     uint8_t pay[WM_PROTO_MAX_PAYLOAD + 16];
     uint32_t op = take(h, 1), n = 0, i;
     uint8_t type;
@@ -199,17 +209,15 @@ static void next_op(host *h) {
         uint32_t which = pick(h, 0, 7);
         type = WM_PROTO_T_ACK;
         n = WM_PROTO_ACK_BYTES;
-        pay[WM_PROTO_ACK_KIND] = which < 5 ? WM_PROTO_T_LEVEL_END : which < 7 ? WM_PROTO_T_DONE : (uint8_t)take(h, 1);
+        pay[WM_PROTO_ACK_KIND] = which < 5   ? WM_PROTO_T_LEVEL_END
+                                 : which < 7 ? WM_PROTO_T_DONE
+                                             : (uint8_t)take(h, 1);
         pay[WM_PROTO_ACK_INDEX] = which < 5 ? h->le_index : which < 7 ? 0 : (uint8_t)take(h, 1);
         put32(pay + WM_PROTO_ACK_HAVE, which < 3 || which > 4 ? h->le_total : pick(h, 0, h->le_total + 8));
         break;
     }
-    case 8:
-        type = WM_PROTO_T_ABORT;
-        break;
-    default: /* 7 (9, silence, is h_getc's) */
-        type = WM_PROTO_T_STATUS;
-        break;
+    case 8: type = WM_PROTO_T_ABORT; break;
+    default: /* 7 (9, silence, is h_getc's) */ type = WM_PROTO_T_STATUS; break;
     }
     if (odd_length) { /* a length the type does not have */
         n = pick(h, 0, 16);
@@ -219,7 +227,8 @@ static void next_op(host *h) {
     q_frame(h, type, pay, n, damage);
 }
 
-static int h_getc(void *ctx, uint32_t timeout_ms) {
+static int h_getc(void *ctx, uint32_t timeout_ms)
+{
     host *h = ctx;
     while (h->q_pos == h->q_len) {
         size_t before = h->pos;
@@ -237,14 +246,16 @@ static int h_getc(void *ctx, uint32_t timeout_ms) {
     return h->q[h->q_pos++];
 }
 
-static int is_device_type(uint8_t t) {
+static int is_device_type(uint8_t t)
+{
     return t == WM_PROTO_T_OK || t == WM_PROTO_T_HELLO_REPLY || t == WM_PROTO_T_DATA_ACK ||
            t == WM_PROTO_T_STATUS_REPLY || t == WM_PROTO_T_PROGRESS || t == WM_PROTO_T_MESH ||
            t == WM_PROTO_T_LEVEL_END || t == WM_PROTO_T_DONE || t == WM_PROTO_T_ERROR;
 }
 
 /* A whole frame from the device: well formed, or a finding. */
-static void device_frame(host *h) {
+static void device_frame(host *h)
+{
     uint32_t n;
     if (h->f_bad) FAIL("the device sent a bad SLIP escape");
     if (h->f_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) FAIL("the device sent a %zu-byte frame", h->f_len);
@@ -254,7 +265,8 @@ static void device_frame(host *h) {
     if (wm_proto_crc32(0, h->f, h->f_len - WM_PROTO_CRC_BYTES) != get32(h->f + h->f_len - WM_PROTO_CRC_BYTES))
         FAIL("the device sent a frame with a wrong CRC");
     if (!is_device_type(h->f[0])) FAIL("the device sent frame type 0x%02x", h->f[0]);
-    if (n > h->caps.max_payload) FAIL("the device sent %u payload bytes, above its max_payload %u", n, h->caps.max_payload);
+    if (n > h->caps.max_payload)
+        FAIL("the device sent %u payload bytes, above its max_payload %u", n, h->caps.max_payload);
     if (h->f[0] == WM_PROTO_T_DATA_ACK && n >= WM_PROTO_DATA_ACK_BYTES) h->data_next = get32(h->f + 4);
     if (h->f[0] == WM_PROTO_T_LEVEL_END && n >= WM_PROTO_LEVEL_END_BYTES) {
         h->le_index = h->f[4 + WM_PROTO_LEVEL_END_INDEX];
@@ -262,7 +274,8 @@ static void device_frame(host *h) {
     }
 }
 
-static void h_write(void *ctx, const uint8_t *data, size_t n) {
+static void h_write(void *ctx, const uint8_t *data, size_t n)
+{
     host *h = ctx;
     for (size_t i = 0; i < n; i++) {
         uint8_t c = data[i];
@@ -291,7 +304,8 @@ static uint64_t h_cycles(void *ctx) { return ((host *)ctx)->t; }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
     static host h;
     static wm_proto eng;
     static uint16_t heights[MAX_SIDE * MAX_SIDE];

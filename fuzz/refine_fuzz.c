@@ -35,25 +35,28 @@ typedef struct {
     size_t n, pos;
 } src;
 
-static uint32_t take(src *s, int bytes) {
+static uint32_t take(src *s, int bytes)
+{
     uint32_t v = 0;
     for (int i = 0; i < bytes; i++) v = v << 8 | (s->pos < s->n ? s->d[s->pos++] : 0);
     return v;
 }
 
-static uint32_t pick(src *s, uint32_t lo, uint32_t hi) { /* lo..hi inclusive */
+static uint32_t pick(src *s, uint32_t lo, uint32_t hi)
+{ /* lo..hi inclusive */
     uint32_t span = hi - lo + 1;
     return lo + (span > 255 ? (span > 65535 ? take(s, 4) : take(s, 2)) : take(s, 1)) % span;
 }
 
-#define FAIL(...)                                                              \
-    do {                                                                       \
-        fprintf(stderr, "fuzz_refine: " __VA_ARGS__);                          \
-        fprintf(stderr, "\n");                                                 \
-        abort();                                                               \
+#define FAIL(...)                                     \
+    do {                                              \
+        fprintf(stderr, "fuzz_refine: " __VA_ARGS__); \
+        fprintf(stderr, "\n");                        \
+        abort();                                      \
     } while (0)
 
-static void heights(src *s, uint16_t *h, int32_t w, int32_t ht) {
+static void heights(src *s, uint16_t *h, int32_t w, int32_t ht)
+{
     uint32_t shape = pick(s, 0, 5), amp = pick(s, 0, 65535);
     int32_t n = w * ht;
     switch (shape) {
@@ -99,7 +102,8 @@ static void heights(src *s, uint16_t *h, int32_t w, int32_t ht) {
 /* Exact E(T) in sample counts (double: the products are exact below 2^53), as docs/refiner.md
  * defines it, by a scan of every sample of the closed triangle written apart from tri_error.c. */
 static double exact_error(const uint16_t *h, int32_t w, const int32_t x[3], const int32_t y[3], int normal,
-                          double s) {
+                          double s)
+{
     double z[3], D, na, nb, vmax = 0;
     int32_t xmin = x[0], xmax = x[0], ymin = y[0], ymax = y[0];
     for (int k = 0; k < 3; k++) {
@@ -134,13 +138,15 @@ static double exact_error(const uint16_t *h, int32_t w, const int32_t x[3], cons
 
 static int64_t edge_key(int32_t a, int32_t b) { return (int64_t)a << 32 | (uint32_t)b; }
 
-static int cmp_i64(const void *a, const void *b) {
+static int cmp_i64(const void *a, const void *b)
+{
     int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
     return (x > y) - (x < y);
 }
 
 /* A proper triangulation of the W x H rectangle (module comment), from wm_mesh_export's arrays. */
-static void check_proper(const wm_mesh *m, const char *when) {
+static void check_proper(const wm_mesh *m, const char *when)
+{
     int32_t w = m->width, h = m->height, nt;
     int32_t *xy = malloc(sizeof(int32_t) * 2 * (size_t)(m->vert_end + 1));
     int32_t *tris = malloc(sizeof(int32_t) * 3 * (size_t)(m->n_tri + 1));
@@ -152,14 +158,16 @@ static void check_proper(const wm_mesh *m, const char *when) {
     for (int32_t v = 0; v < m->vert_end; v++) {
         int32_t vx = xy[2 * v], vy = xy[2 * v + 1];
         if (vx == -1 && vy == -1) continue;
-        if (vx < 0 || vy < 0 || vx >= w || vy >= h) FAIL("%s: vertex %d at (%d, %d) off the grid", when, v, vx, vy);
+        if (vx < 0 || vy < 0 || vx >= w || vy >= h)
+            FAIL("%s: vertex %d at (%d, %d) off the grid", when, v, vx, vy);
         if (at[vy * w + vx]++) FAIL("%s: two vertices at (%d, %d)", when, vx, vy);
     }
     for (int32_t t = 0; t < nt; t++) {
         const int32_t *v = tris + 3 * t;
         int64_t a;
         for (int k = 0; k < 3; k++)
-            if (v[k] < 0 || v[k] >= m->vert_end || xy[2 * v[k]] < 0) FAIL("%s: triangle %d uses a free vertex", when, t);
+            if (v[k] < 0 || v[k] >= m->vert_end || xy[2 * v[k]] < 0)
+                FAIL("%s: triangle %d uses a free vertex", when, t);
         a = (int64_t)(xy[2 * v[1]] - xy[2 * v[0]]) * (xy[2 * v[2] + 1] - xy[2 * v[0] + 1]) -
             (int64_t)(xy[2 * v[2]] - xy[2 * v[0]]) * (xy[2 * v[1] + 1] - xy[2 * v[0] + 1]);
         if (a <= 0) FAIL("%s: triangle %d is not counter-clockwise (doubled area %lld)", when, t, (long long)a);
@@ -195,7 +203,8 @@ static void check_proper(const wm_mesh *m, const char *when) {
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
     src s = {data, size, 0};
     int32_t w = (int32_t)pick(&s, 2, MAX_SIDE), h = (int32_t)pick(&s, 2, MAX_SIDE);
     int32_t levels = (int32_t)pick(&s, 1, pick(&s, 0, 3) ? 6 : WM_MAX_LEVELS);
@@ -294,11 +303,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
                 if (e > worst) worst = e;
                 if (e > zeta * (1 + 1e-12) + 1e-12)
                     FAIL("E(T) %.9g > zeta %.9g (triangle (%d,%d) (%d,%d) (%d,%d), %s metric), though the "
-                         "refiner reports every triangle within zeta", e, zeta, x[0], y[0], x[1], y[1], x[2], y[2],
+                         "refiner reports every triangle within zeta",
+                         e, zeta, x[0], y[0], x[1], y[1], x[2], y[2],
                          p.metric == WM_METRIC_NORMAL ? "normal" : "vertical");
             }
-            if (st.e_max / 65536.0 + 1e-9 < worst) FAIL("the refiner's E_max %.9g is below the exact %.9g",
-                                                          st.e_max / 65536.0, worst);
+            if (st.e_max / 65536.0 + 1e-9 < worst)
+                FAIL("the refiner's E_max %.9g is below the exact %.9g", st.e_max / 65536.0, worst);
         }
     }
 out:
