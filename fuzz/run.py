@@ -98,7 +98,7 @@ def start(target: str, seconds: float | None, extra: list[str]) -> tuple[subproc
     findings = BUILD / "findings"
     for d in (work, seeds, findings):
         d.mkdir(parents=True, exist_ok=True)
-    log = BUILD / f"{target}.log"
+    log = BUILD / f"{target}-{os.getpid()}.log"  # per run: a `make test` beside a campaign keeps its own
     args = command(target) + COMMON + [f"-artifact_prefix={findings}/{target}-"]
     if seconds is not None:
         args.append(f"-max_total_time={int(max(1, seconds))}")
