@@ -62,7 +62,9 @@ module haar_bank #
     // Records buffered per level between its pipeline and the output merge; >= 2 (any number)
     parameter FIFO_DEPTH = 2,
     // Approximations buffered in front of each level from the second on; >= 2 (any number)
-    parameter APPROX_FIFO_DEPTH = 2
+    parameter APPROX_FIFO_DEPTH = 2,
+    // The filters: 0 Haar (haar_level), 1 the spline wavelet (spline_level, host/wavemesh/spline.py)
+    parameter WAVELET = 0
 )
 (
     input  wire         clk,
@@ -112,6 +114,10 @@ localparam REC_WIDTH = 1 + 16 + 16 + 70;
 initial begin
     if (MAX_WIDTH < 2 || MAX_WIDTH > 65535 || MAX_HEIGHT < 2 || MAX_HEIGHT > 65535) begin
         $error("Error: MAX_WIDTH and MAX_HEIGHT must be 2 .. 65535 (instance %m)");
+        $finish;
+    end
+    if (WAVELET != 0 && WAVELET != 1) begin
+        $error("Error: WAVELET must be 0 (Haar) or 1 (spline) (instance %m)");
         $finish;
     end
     if (MAX_LEVELS < 1 || MAX_LEVELS > 15) begin
@@ -238,28 +244,53 @@ generate
         wire [15:0] rec_a;
         wire [17:0] rec_d1, rec_d2, rec_d3;
 
-        haar_level #(
-            .MAX_WIDTH(LMAX_W),
-            .MAX_HEIGHT(LMAX_H),
-            .X_WIDTH(LX_WIDTH),
-            .Y_WIDTH(LY_WIDTH)
-        )
-        level_inst (
-            .clk(clk),
-            .rst(rst),
-            .en(en),
-            .start(start),
-            .cfg_wm1(cfg_wm1),
-            .cfg_hm1(cfg_hm1),
-            .in_valid(in_valid),
-            .in_data(in_data),
-            .in_last(in_last),
-            .rec_valid(rec_valid),
-            .rec_a(rec_a),
-            .rec_d1(rec_d1),
-            .rec_d2(rec_d2),
-            .rec_d3(rec_d3)
-        );
+        if (WAVELET == 1) begin : gen_spline
+            spline_level #(
+                .MAX_WIDTH(LMAX_W),
+                .MAX_HEIGHT(LMAX_H),
+                .X_WIDTH(LX_WIDTH),
+                .Y_WIDTH(LY_WIDTH)
+            )
+            level_inst (
+                .clk(clk),
+                .rst(rst),
+                .en(en),
+                .start(start),
+                .cfg_wm1(cfg_wm1),
+                .cfg_hm1(cfg_hm1),
+                .in_valid(in_valid),
+                .in_data(in_data),
+                .in_last(in_last),
+                .rec_valid(rec_valid),
+                .rec_a(rec_a),
+                .rec_d1(rec_d1),
+                .rec_d2(rec_d2),
+                .rec_d3(rec_d3)
+            );
+        end else begin : gen_haar
+            haar_level #(
+                .MAX_WIDTH(LMAX_W),
+                .MAX_HEIGHT(LMAX_H),
+                .X_WIDTH(LX_WIDTH),
+                .Y_WIDTH(LY_WIDTH)
+            )
+            level_inst (
+                .clk(clk),
+                .rst(rst),
+                .en(en),
+                .start(start),
+                .cfg_wm1(cfg_wm1),
+                .cfg_hm1(cfg_hm1),
+                .in_valid(in_valid),
+                .in_data(in_data),
+                .in_last(in_last),
+                .rec_valid(rec_valid),
+                .rec_a(rec_a),
+                .rec_d1(rec_d1),
+                .rec_d2(rec_d2),
+                .rec_d3(rec_d3)
+            );
+        end
 
         if (i == 0) begin : gen_frame_last
             assign frame_in_last = in_last;

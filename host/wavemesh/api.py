@@ -24,7 +24,7 @@ from wavemesh import __version__
 from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
-from wavemesh.haar import decompose
+from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, initial_triangulation
 from wavemesh.label import tau_counts
@@ -64,18 +64,22 @@ class MeshJob:
     levels: int
     tau: float
     result: InitialResult
+    wavelet: str = "haar"  # the filter bank's (wavemesh.haar.WAVELETS)
 
     @property
     def mesh(self) -> Mesh:
         return self.result.mesh
 
 
-def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = None) -> MeshJob:
+def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = None,
+                wavelet: str = "haar") -> MeshJob:
     """The initial triangulation of a height field (filter bank, labeller, templates)."""
     m, t = _levels_and_tau(hf, levels, tau)
-    result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale))
+    if wavelet not in WAVELETS:
+        raise WavemeshError(f"--wavelet {wavelet} is not a wavelet here", hint=f"use {' or '.join(WAVELETS)}")
+    result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet)
     require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
-    return MeshJob(hf, m, t, result)
+    return MeshJob(hf, m, t, result, wavelet)
 
 
 def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> tuple[int, float]:
@@ -207,7 +211,8 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
 
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
-           params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False) -> RefineJob:
+           params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False,
+           wavelet: str = "haar") -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
@@ -217,15 +222,15 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 
     params = params or RefineParams()
     params.check()
-    job = triangulate(hf, levels, tau)
+    job = triangulate(hf, levels, tau, wavelet)
     # The refiner sees the 16-bit samples.  For lossy quantisation a sample is off the input by at
     # most q, a plane through three samples by at most q too: zeta - 2q on the samples keeps the
     # vertical bound on the input values (docs/refiner.md, "Quantised input").
     q = hf.max_quantisation_error
     zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
     start = time.perf_counter()
-    out = native.refine(hf.samples, decompose(hf.samples, job.levels), job.mesh, params, scale=hf.scale,
-                        zeta=zeta)
+    details = decompose(hf.samples, job.levels, job.wavelet)
+    out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
@@ -283,6 +288,7 @@ class MeshParams:
 
     levels: int | None = None  # M, 1..MAX_LEVELS; None: default_levels
     tau: float | None = None  # tau_M in height units; None: default_tau
+    wavelet: str = "haar"  # the filter bank (--wavelet): wavemesh.haar.WAVELETS
     initial_only: bool = False  # stop after the template stage (--stage initial)
     refine: RefineParams = field(default_factory=RefineParams)  # the refiner's (ignored when initial_only)
     check_levels: bool = False  # also check and measure every coarser level (stream always does)
@@ -354,23 +360,24 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
     params = params or MeshParams()
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     if params.initial_only:
-        job = triangulate(hf, m, t)  # checks the mesh
+        job = triangulate(hf, m, t, params.wavelet)  # checks the mesh
         errors = mesh_errors(job.mesh, hf.values, rms=params.rms)
         report = {"wavemesh": __version__, "input": hf.to_report(),
-                  "parameters": {"levels": m, "tau": t, "stage": "initial"},
+                  "parameters": {"levels": m, "tau": t, "wavelet": params.wavelet, "stage": "initial"},
                   "initial": job.result.to_report(), "errors": errors.to_report()}
         return MeshResult(heightfield=hf, params=params, refine_params=None, levels=m, tau=t, mesh=job.mesh,
                           errors=errors, level_meshes=[(m - 1, job.mesh)], rows=[], bound_met=True,
                           comment=_comment(m, t, None), report=report)
     p = params.refine
-    rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms)
+    rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms, wavelet=params.wavelet)
     final = rjob.output.final
     if params.check_levels:
         rows = [level_report(lv, hf, p.metric, rjob.errors if lv is final else None)
                 for lv in rjob.output.levels]
     else:
         rows = [level_counts(lv, hf) for lv in rjob.output.levels]
-    parameters = {"levels": m, "tau": t, "stage": "full"} | p.to_report() | {"zeta_refiner": rjob.zeta_used}
+    parameters = ({"levels": m, "tau": t, "wavelet": params.wavelet, "stage": "full"} | p.to_report()
+                  | {"zeta_refiner": rjob.zeta_used})
     report = {
         "wavemesh": __version__,
         "input": hf.to_report(),
@@ -464,6 +471,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                               hint=f"use --levels {info.max_levels} or fewer")
         if not full and not info.features & P.FEATURE_INITIAL_ONLY:
             raise DeviceError("the device cannot stop after the template stage", hint="use --stage full")
+        if params.wavelet != "haar" and not info.features & P.FEATURE_SPLINE:
+            raise DeviceError(f"--wavelet {params.wavelet}: the device's filter bank makes Haar's only",
+                              hint="use --wavelet haar, or `wavemesh mesh` on the host")
         storage = p.capacity or info.tri_capacity
         if storage > info.tri_capacity:
             raise DeviceError(f"--capacity {storage}: the device has storage for {info.tri_capacity} "
@@ -479,7 +489,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                               hint=f"use --max-triangles {storage - 1} or less")
         fp = fixed_params(p, hf.scale, zeta)
         dev.configure(config_payload(hf.width, hf.height, m, tau_q, fp, capacity=p.capacity or 0,
-                                     initial_only=not full))
+                                     initial_only=not full, spline=params.wavelet == "spline"))
         if full:
             say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {p.zeta:g} ({p.metric}), "
                 f"budget {p.max_triangles} triangles{budget_note}")
@@ -518,7 +528,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     errors = mesh_errors(final.mesh, hf.values, rms=params.rms)
     clk = info.clk_hz
     cycles = {f.name[len("cycles_"):]: done[f.name] for f in P.DONE.fields if f.name.startswith("cycles_")}
-    parameters = {"levels": m, "tau": tau, "stage": "full" if full else "initial"}
+    parameters = {"levels": m, "tau": tau, "wavelet": params.wavelet, "stage": "full" if full else "initial"}
     report = {
         "wavemesh": __version__,
         "input": hf.to_report(),

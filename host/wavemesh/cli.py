@@ -15,6 +15,7 @@ from pathlib import Path
 
 from wavemesh import __version__, api
 from wavemesh.errors import MeshInvalid, WavemeshError
+from wavemesh.haar import WAVELETS
 from wavemesh.native import RefineParams
 from wavemesh.synth import ALIASES, DATASETS
 
@@ -46,6 +47,9 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tau", type=float, default=None,
                    help="threshold tau_M for a dominant coefficient, in height units "
                         "(difference of half-block means); default: 1%% of the height range")
+    p.add_argument("--wavelet", choices=tuple(WAVELETS), default="haar",
+                   help="the filter bank: haar (default) or spline, the dissertation's spline wavelet "
+                        "(cubic B-spline scaling function, quadratic-spline wavelet; docs/model.md)")
     d = RefineParams()
     p.add_argument("--stage", choices=("initial", "full"), default="full",
                    help="initial: the template stage only; full (default): also the refiner")
@@ -191,7 +195,8 @@ def _mesh_params(args) -> api.MeshParams:
     if args.stage == "full":
         refine.check()  # before reading the input
     # --report and --lod show every level's errors: they check and measure every level
-    return api.MeshParams(levels=args.levels, tau=args.tau, initial_only=args.stage == "initial",
+    return api.MeshParams(levels=args.levels, tau=args.tau, wavelet=args.wavelet,
+                          initial_only=args.stage == "initial",
                           refine=refine, check_levels=bool(args.check_levels or args.report or args.lod),
                           rms=bool(args.report))
 

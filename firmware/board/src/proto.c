@@ -449,6 +449,7 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     }
     if (levels > cap->max_levels) BAD(LEVELS);
     if ((flags & WM_PROTO_CONFIG_INITIAL_ONLY) && !(cap->features & WM_PROTO_FEATURE_INITIAL_ONLY)) BAD(FLAGS);
+    if ((flags & WM_PROTO_CONFIG_SPLINE) && !(cap->features & WM_PROTO_FEATURE_SPLINE)) BAD(FLAGS);
     if (cap_tri == 0) cap_tri = cap->tri_capacity;
     if (cap_tri < 2 || cap_tri > cap->tri_capacity) BAD(CAPACITY);
     if (budget != 0 && (budget < 2 || budget >= cap_tri)) BAD(MAX_TRIANGLES);
