@@ -14,17 +14,14 @@ request.
 from __future__ import annotations
 
 import filecmp
-import socket
-import threading
 
 import numpy as np
 import pytest
 from wavemesh import cli
 from wavemesh import protocol as P
 from wavemesh import stream as S
-from wavemesh.harness.faultproxy import Faults, Tally, campaign, stream_once
+from wavemesh.harness.faultproxy import Faults, FrameTap, Tally, campaign, stream_once
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.link import SlipDecoder, parse_frame
 from wavemesh.synth import make
 
 RUN_LIMIT = 150.0  # s: a run that takes longer counts as a hang (the host's longest wait is 120 s)
@@ -84,46 +81,6 @@ def test_heavy_faults_end_in_clear_errors(device, reference, tmp_path, monkeypat
     assert tally.outcomes["error"] >= 1
 
 
-class DropFrame:
-    """A proxy that forwards whole frames and drops the first one `drop(direction, frame)` picks."""
-
-    def __init__(self, port: int, drop):
-        self.drop, self.dropped = drop, []
-        self.lsock = socket.create_server(("127.0.0.1", 0))
-        self.url = f"socket://127.0.0.1:{self.lsock.getsockname()[1]}"
-        self.port = port
-        threading.Thread(target=self._serve, daemon=True).start()
-
-    def _serve(self):
-        client, _ = self.lsock.accept()
-        dev = socket.create_connection(("127.0.0.1", self.port))
-        for a, b, name in ((client, dev, "up"), (dev, client, "down")):
-            threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
-
-    def _pump(self, src, dst, name):
-        dec = SlipDecoder()
-        try:
-            while data := src.recv(65536):
-                for raw in dec.feed(data):
-                    f = parse_frame(raw)
-                    if not self.dropped and self.drop(name, f):
-                        self.dropped.append((name, f.name))
-                        continue
-                    dst.sendall(bytes([P.SLIP_END]) + raw.replace(b"\xdb", b"\xdb\xdd").replace(
-                        b"\xc0", b"\xdb\xdc") + bytes([P.SLIP_END]))
-        except OSError:
-            pass
-        finally:
-            for s in (src, dst):
-                try:
-                    s.shutdown(socket.SHUT_RDWR)
-                except OSError:
-                    pass
-
-    def close(self):
-        self.lsock.close()
-
-
 def last_data(total: int):
     def pick(direction, f):
         if direction == "up" and f.type == P.FrameType.DATA:
@@ -138,15 +95,19 @@ def test_a_lost_last_frame_of_the_upload_is_resent_in_time(lost, device, referen
     the host must find it (a STATUS probe) before the device's session timeout, with the defaults."""
     src, ref = reference
     total = int(np.load(src).size)
-    pick = last_data(total)
-    proxy = DropFrame(device.port, lambda d, f: pick(d, f) and f.name == lost)
-    try:
-        out = tmp_path / "out.obj"
+    pick, dropped = last_data(total), []
+
+    def on_frame(direction, f) -> bool:
+        if not dropped and pick(direction, f) and f.name == lost:
+            dropped.append(f.name)
+            return False
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", device.port), on_frame) as proxy:
         outcome, _, msg = stream_once(["stream", str(src), *OPTS, "--port", proxy.url, "-o", str(out), "-q"],
                                       out, ref, RUN_LIMIT)
-    finally:
-        proxy.close()
-    assert [name for _, name in proxy.dropped] == [lost]
+    assert dropped == [lost]
     assert outcome == "identical", msg
 
 

@@ -358,10 +358,10 @@ int main(int argc, char **argv) {
         if (!quiet) printf("wmdev: client connected\n"), fflush(stdout);
         wm_proto_init(&eng, &io, &caps, heights, wm_native_job, NULL);
         how = wm_proto_serve(&eng);
+        close(c.cfd);
+        door_done(); /* before the lines below: whoever reads them may connect at once */
         if (!quiet && how == WM_PROTO_SERVE_IDLE) printf("wmdev: client idle, closed\n"), fflush(stdout);
         if (!quiet && c.stalled) printf("wmdev: client not reading, closed\n"), fflush(stdout);
-        close(c.cfd);
-        door_done();
         if (!quiet)
             printf("wmdev: client left bytes-in %llu bytes-out %llu bad-frames %lu\n",
                    (unsigned long long)c.bytes_in, (unsigned long long)c.bytes_out, (unsigned long)eng.bad_frames),

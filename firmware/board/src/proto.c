@@ -927,6 +927,7 @@ int wm_proto_serve(wm_proto *p) {
             session_end(p);
             send_error(p, WM_PROTO_E_TIMEOUT, got);
             out_flush(p);
+            p->last_valid = now(p); /* the idle clock counts from the session's end */
         }
         if (p->state == WM_PROTO_STATE_IDLE && p->caps.idle_timeout_ms &&
             now(p) - p->last_valid >= ms_to_cycles(p, p->caps.idle_timeout_ms)) {

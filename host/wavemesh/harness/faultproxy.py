@@ -203,6 +203,67 @@ class FaultProxy:
         return sum(p.ends for p in self.pumps) // 2
 
 
+class FrameTap:
+    """A proxy for one connection that forwards whole frames, each after ``on_frame(direction, frame)``
+    (direction "up": host to device, "down"; a wavemesh.link.Frame) said True: a scripted fault (drop
+    one chosen frame) or a trigger (stop the device when the first MESH frame passes).  Bytes that are
+    not a valid frame are dropped."""
+
+    def __init__(self, upstream: tuple[str, int], on_frame):
+        self.upstream, self.on_frame = upstream, on_frame
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        self._socks: list[socket.socket] = []
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    @property
+    def url(self) -> str:
+        return f"socket://127.0.0.1:{self.port}"
+
+    def _serve(self) -> None:
+        try:
+            client, _ = self.listener.accept()
+            dev = socket.create_connection(self.upstream, timeout=5)
+        except OSError:
+            return
+        dev.settimeout(None)
+        self._socks += [client, dev]
+        for a, b, name in ((client, dev, "up"), (dev, client, "down")):
+            threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
+
+    def _pump(self, src: socket.socket, dst: socket.socket, name: str) -> None:
+        from wavemesh.link import FrameError, SlipDecoder, parse_frame, slip_encode
+
+        dec = SlipDecoder()
+        try:
+            while data := src.recv(65536):
+                for raw in dec.feed(data):
+                    if isinstance(raw, FrameError):
+                        continue
+                    try:
+                        f = parse_frame(raw)
+                    except FrameError:
+                        continue
+                    if self.on_frame(name, f):
+                        dst.sendall(slip_encode(raw))
+        except OSError:
+            pass
+        finally:
+            for s in (src, dst):
+                _close(s)
+
+    def close(self) -> None:
+        _close(self.listener)
+        for s in self._socks:
+            _close(s)
+
+    def __enter__(self) -> FrameTap:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 # ---------------------------------------------------------------------------------------------------
 # A campaign of `wavemesh stream` runs
 
@@ -318,4 +379,5 @@ def _close(s: socket.socket) -> None:
         pass
 
 
-__all__ = ["FaultProxy", "Faults", "Injected", "KINDS", "OUTCOMES", "Run", "Tally", "campaign", "stream_once"]
+__all__ = ["FaultProxy", "Faults", "FrameTap", "Injected", "KINDS", "OUTCOMES", "Run", "Tally", "campaign",
+           "stream_once"]
