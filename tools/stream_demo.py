@@ -9,9 +9,10 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
     wavemesh stream jacksboro_fault_dem.npz --key elevation --decimate N --zeta Z ... --port socket://...
 
 (the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples at 10 m.  The simulated board
-gets it decimated by 8 to 51 x 43 with zeta 10 m, within the board's 1364 triangles: the refiner on
-the soft CPU costs about 10^5 cycles per triangle today (docs/benchmarks.md) and the simulator runs
-a few million cycles per second, so this takes a minute or two.  The native stand-in device gets it
+gets it decimated by 8 to 51 x 43 with zeta 10 m, within the board's triangle storage (docs/soc.md,
+"Default sizes"): the refiner on the soft CPU costs about 10^5 cycles per triangle today
+(docs/benchmarks.md) and the simulator runs a few million cycles per second, so this takes a minute
+or two.  The native stand-in device gets it
 decimated by 2 to 202 x 172 with zeta 15 m.)  It writes the mesh, every level's mesh, a picture and
 a report into --out, checks the mesh, and stops the device.  Exit status: that of `wavemesh stream`
 (0, or 3 when the budget stopped it).
