@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -32,6 +33,7 @@ from wavemesh.link import DEFAULT_BAUD, LinkStats
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
+from wavemesh.outputs import Outputs, check_path
 from wavemesh.stream import (
     DEFAULT_TIMEOUTS,
     Device,
@@ -94,21 +96,13 @@ def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> t
 
 
 def _check_output(path: str, suffixes: tuple[str, ...], what: str) -> Path:
-    p = Path(path)
-    if p.suffix.lower() not in suffixes:
-        raise InputError(f"cannot write {what} {path}: unknown extension '{p.suffix}'",
-                         hint="use " + " or ".join(suffixes))
-    if not p.parent.exists():
-        raise InputError(f"cannot write {path}: directory {p.parent} does not exist")
-    return p
+    return check_path(path, suffixes, what)  # extension, directory, writable (wavemesh.outputs)
 
 
 def _write_json(path: str, data: dict) -> None:
     p = _check_output(path, (".json",), "report")
-    try:
-        p.write_text(json.dumps(data, indent=2) + "\n")
-    except OSError as e:
-        raise InputError(f"cannot write {path}: {e.strerror}") from e
+    with Outputs() as staged:  # whole or not at all
+        staged.path(p).write_text(json.dumps(data, indent=2) + "\n")
 
 
 def _load(path: str, key: str | None, fill: str | None) -> HeightField:
@@ -575,13 +569,9 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
         _check_output(render, (".png", ".svg", ".pdf"), "picture")
     if report:
         _check_output(report, (".json",), "report")
-    folder = None
-    if lod:
-        folder = Path(lod)
-        if folder.exists() and not folder.is_dir():
-            raise InputError(f"--lod {lod} is not a directory")
-        if not folder.parent.exists():
-            raise InputError(f"cannot write --lod {lod}: directory {folder.parent} does not exist")
+    folder = check_path(lod, None, "--lod") if lod else None
+    if folder is not None and folder.resolve() in {Path(p).resolve() for p in (output, report, render) if p}:
+        raise InputError(f"--lod {lod} names a file the run also writes", hint="give --lod its own folder")
     return out, folder
 
 
@@ -591,23 +581,23 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
     a picture.  Returns the level files written."""
     out, folder = check_outputs(output, lod=lod, report=report, render=render)
     hf = result.heightfield
-    write_mesh(str(out), result.mesh, hf.values, comment=result.comment)
     written = []
-    if folder is not None:
-        folder.mkdir(exist_ok=True)
-        for level, m in result.level_meshes:
-            path = folder / f"level-{level}{out.suffix.lower()}"
-            write_mesh(str(path), m, hf.values, comment=f"{result.comment} level={level}")
-            written.append(str(path))
-    if report:
-        data = result.report | {"output": str(out)}
-        if written:
-            data["lod"] = written
-        _write_json(report, data)
-    if render:
-        from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
+    with Outputs() as staged:  # every file whole, or none of them (wavemesh.outputs)
+        write_mesh(str(staged.path(out)), result.mesh, hf.values, comment=result.comment)
+        if folder is not None:
+            for level, m in result.level_meshes:
+                path = folder / f"level-{level}{out.suffix.lower()}"
+                write_mesh(str(staged.path(path)), m, hf.values, comment=f"{result.comment} level={level}")
+                written.append(str(path))
+        if report:
+            data = result.report | {"output": str(out)}
+            if written:
+                data["lod"] = written
+            staged.path(report).write_text(json.dumps(data, indent=2) + "\n")
+        if render:
+            from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
 
-        render_mesh(result.mesh, result.mesh.z(hf.values), render, title=title)
+            render_mesh(result.mesh, result.mesh.z(hf.values), str(staged.path(render)), title=title)
     return written
 
 
@@ -641,6 +631,24 @@ def check_file(path: str, hf: HeightField) -> dict:
     return report
 
 
+def check_port(url: str) -> None:
+    """A port URL's TCP port, checked before any work: pyserial's own message for a bad one misleads
+    (``socket://127.0.0.1:99999`` gives "'debug|info|warning|error'")."""
+    m = re.match(r"(socket|rfc2217)://(\[[^]]*\]|[^:/?]*)(?::([^/?]*))?", url)
+    if m is None:
+        return
+    port = m.group(3) or ""
+    if not (port.isdigit() and 0 < int(port) < 65536):
+        what = f"port {port!r} is not a TCP port number" if port else "no TCP port given"
+        raise InputError(f"--port {url}: {what}",
+                         hint=f"use {m.group(1)}://HOST:PORT, PORT in 1..65535 (e.g. {m.group(1)}://127.0.0.1:7721)")
+
+
+def check_report(path: str) -> Path:
+    """A JSON report's path, checked before any work."""
+    return _check_output(path, (".json",), "report")
+
+
 def write_json(path: str, data: dict) -> None:
     """A JSON file (.json), or InputError."""
     _write_json(path, data)
@@ -653,7 +661,8 @@ def write_synth(name: str, output: str, size: int | None = None) -> Path:
     out = _check_output(output, (".npy",), "height field")
     if size is not None and not 2 <= size <= 16384:
         raise WavemeshError(f"--size {size} is out of range", hint="use 2..16384")
-    np.save(out, make(name, size))
+    with Outputs() as staged:
+        np.save(staged.path(out), make(name, size))
     return out
 
 
@@ -661,7 +670,11 @@ def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: boo
                 zscale: float | None = None, title: str | None = None) -> None:
     """`wavemesh render`: a picture of a mesh file."""
     _check_output(output, (".png", ".svg", ".pdf"), "picture")
+    if zscale is not None and not (math.isfinite(zscale) and zscale > 0):
+        raise InputError(f"vertical exaggeration {zscale} is out of range", hint="give a number > 0")
     m, z = read_mesh(mesh_path)
     from wavemesh.render import render_mesh
 
-    render_mesh(m, z, output, view=view, wireframe=wireframe, zscale=zscale, title=title)
+    with Outputs() as staged:
+        render_mesh(m, z, str(staged.path(output)), view=view, wireframe=wireframe, zscale=zscale,
+                    title=title)

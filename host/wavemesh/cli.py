@@ -21,11 +21,38 @@ from wavemesh.synth import ALIASES, DATASETS
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse, but its usage errors end in our one-line format too."""
+    """argparse, but its usage errors end in our one-line format too (no usage dump: the hint says where)."""
 
     def error(self, message):
-        self.print_usage(sys.stderr)
         raise WavemeshError(message, hint=f"see '{self.prog} --help'")
+
+
+def _glue_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """``--crop -5,0,10,10`` as ``--crop=-5,0,10,10``: argparse takes a value that starts with '-' (and is not
+    a plain negative number) for an option and says "expected one argument"; the option's own check then
+    says what is wrong with the value."""
+    takes_value, known = set(), set()
+    todo = [parser]
+    while todo:
+        p = todo.pop()
+        for action in p._actions:
+            known.update(action.option_strings)
+            if action.option_strings and action.nargs is None and not isinstance(
+                    action, (argparse._StoreConstAction, argparse._HelpAction, argparse._VersionAction)):
+                takes_value.update(s for s in action.option_strings if s.startswith("--"))
+            if isinstance(action, argparse._SubParsersAction):
+                todo += list(action.choices.values())
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else ""
+        if a in takes_value and nxt.startswith("-") and nxt not in known:
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out
 
 
 def _input_options(p: argparse.ArgumentParser) -> None:
@@ -245,6 +272,7 @@ def stream_command(args) -> int:
     from wavemesh.stream import DEFAULT_TIMEOUTS
 
     api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
+    api.check_port(args.port)
     params = _mesh_params(args)
     if args.timeout is not None and not args.timeout > 0:
         raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
@@ -266,6 +294,8 @@ def stream_command(args) -> int:
 
 
 def check_command(args) -> int:
+    if args.report:
+        api.check_report(args.report)
     hf = _load(args, args.against)
     report = api.check_file(args.mesh, hf) | {"against": args.against}
     if args.report:
@@ -322,7 +352,7 @@ COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_comma
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_glue_dash_values(parser, sys.argv[1:] if argv is None else list(argv)))
         return COMMANDS[args.command](args)
     except WavemeshError as e:
         print(f"error: {e.message}", file=sys.stderr)

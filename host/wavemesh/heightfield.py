@@ -35,7 +35,10 @@ GDAL.
   An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers (GDAL itself
   would read missing samples or text as 0 without a word).
 
-Accepted data: a 2-D array of bool, integer or float samples, at least 2 x 2.
+Accepted data: a 2-D array of bool, integer or float samples, at least 2 x 2; a
+constant field too (two triangles).  Heights become float64: 64-bit integers
+must fit one exactly (at most 53 significant bits, e.g. any |v| <= 2^53, or
++-2^62), else they are refused rather than changed.
 Non-finite samples (NaN, +-inf, no-data) are an error unless ``fill`` is given:
 ``fill="nearest"`` replaces each by the value of a nearest finite sample
 (exact Euclidean distance, :func:`fill_nearest`) and a number replaces them by
@@ -259,6 +262,8 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
         )
     with np.errstate(invalid="ignore"):  # a signalling NaN (float32 input) raises no warning: reported below
         values = np.array(arr, dtype=np.float64)  # a fresh copy, never a view of the caller's array
+    if kind in "iu" and arr.dtype.itemsize == 8:
+        _check_exact_integers(arr, values, source)
     bad = ~np.isfinite(values)
     n_bad = int(np.count_nonzero(bad))
     filled = 0
@@ -288,6 +293,25 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
         filled=filled,
     )
 
+
+
+def _check_exact_integers(arr: np.ndarray, values: np.ndarray, source: str) -> None:
+    """64-bit integer heights must convert to float64 exactly (every integer up to 2^53 does, larger ones
+    only some, e.g. +-2^62): the heights written into the mesh are the float64 ones, and an input
+    silently changed by up to 2^10 per sample would not be the input."""
+    if arr.size == 0 or (int(arr.min()) >= -(1 << 53) and int(arr.max()) <= 1 << 53):
+        return
+    limit = float(1 << 63) if arr.dtype.kind == "i" else float(1 << 64)
+    outside = (values >= limit) | (values < -limit)  # rounded up to 2^63 (2^64): not the integer given
+    back = np.where(outside, 0, values).astype(arr.dtype)
+    inexact = outside | (back != arr)
+    if inexact.any():
+        row, col = (int(i) for i in np.argwhere(inexact)[0])
+        raise InputError(
+            f"{source}: {int(np.count_nonzero(inexact))} integer heights have more than 53 significant bits, "
+            f"which a float64 cannot hold (e.g. {int(arr[row, col])} at row {row}, column {col})",
+            hint="divide the heights down, or give them as float64",
+        )
 
 
 def load_heightfield(path: str, key: str | None = None, fill: str | float | None = None) -> HeightField:
