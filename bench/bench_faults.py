@@ -1,0 +1,139 @@
+"""Fault campaign (issue 13): `wavemesh stream` through a proxy that corrupts, drops, duplicates and
+delays bytes, with the host's default timeouts, against the native stand-in device.
+
+Each run streams the Jacksboro DEM (decimated by 4: 101 x 86 samples, zeta 5 m) through
+wavemesh.harness.faultproxy in front of wmdev and is classified (faultproxy.campaign): identical
+(the very file `wavemesh mesh` writes), a clear error (exit 2, one `error:` line and a hint, no
+output), a silently different mesh, an unclear ending, or a hang (still running after RUN_LIMIT s).
+The sets: the bounded campaign at 0.2 % faults per byte (at most LIMIT faults per direction and
+connection, the proxy's default) until it has passed FRAMES frames; the same bound at other rates;
+and 0.2 % per byte without a bound, where most 1 KiB frames are hit and the point is only that the
+host gives up clearly.  `make bench-faults`; the short seeded version is tests/sim/test_stream_faults.py.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+TITLE = "Fault campaign (wavemesh stream through a fault-injecting proxy)"
+DECIMATE = 4
+# zeta 5 m: some 6,000 triangles; the budget and the device's storage set large enough that neither
+# stops the job (the reference, `wavemesh mesh`, has no budget of its own)
+OPTS = ["--key", "elevation", "--decimate", str(DECIMATE), "--zeta", "5", "--max-triangles", "19999"]
+DEVICE = ["--tri-capacity", "20000", "--quiet"]
+FRAMES = 10_000  # the bounded 0.2 % set runs until this many frames went through the proxy
+LIMIT = 8  # faults per direction and connection in the bounded sets
+RUN_LIMIT = 150.0  # s: longer counts as a hang (the host's longest single wait is 120 s)
+SWEEP = (0.0005, 0.01)  # other rates with the same bound, RUNS_SWEEP runs each
+RUNS_SWEEP = 20
+RUNS_UNBOUNDED = 10
+
+
+def _set(name: str, upstream, src, ref, work: Path, faults) -> dict:
+    from wavemesh.harness.faultproxy import Tally, campaign
+
+    runs = campaign(upstream, src, OPTS, ref, faults, work, RUN_LIMIT)
+    tally = Tally.of(runs)
+    print(f"bench faults: {name}: {tally.line()}", flush=True)
+    if tally.injected == 0:
+        raise RuntimeError(f"{name}: no fault was injected; the proxy is broken")
+    return {"name": name, "tally": asdict(tally),
+            "runs": [{"seed": r.faults.seed, "rate": r.faults.rate, "limit": r.faults.limit,
+                      "outcome": r.outcome, "seconds": round(r.seconds, 3), "faults": r.injected,
+                      "frames": r.frames, "message": r.message} for r in runs]}
+
+
+def run() -> dict:
+    import numpy as np
+    from wavemesh import cli
+    from wavemesh import protocol as P
+    from wavemesh.harness import jacksboro
+    from wavemesh.harness.faultproxy import Faults
+    from wavemesh.harness.nativedev import NativeDevice, build_wmdev
+
+    dev = NativeDevice(build_wmdev(), *DEVICE)
+    sets = []
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            work = Path(tmp)
+            src = Path(jacksboro())
+            ref = work / "ref.obj"
+            rc = cli.main(["mesh", str(src), *OPTS, "-o", str(ref), "-q"])
+            if rc not in (0, 3):
+                raise RuntimeError(f"wavemesh mesh failed ({rc})")
+            up = ("127.0.0.1", dev.port)
+            # the bounded 0.2 % set: in batches until FRAMES frames went through
+            runs: list = []
+            seed = 0
+            while sum(r["frames"] for r in runs) < FRAMES:
+                batch = _set("bounded 0.2 %", up, src, ref, work,
+                             [Faults(seed=s, rate=0.002, limit=LIMIT) for s in range(seed, seed + 20)])
+                runs += batch["runs"]
+                seed += 20
+            sets.append(_summarise("bounded 0.2 %", runs))
+            for rate in SWEEP:
+                sets.append(_set(f"bounded {100 * rate:g} %", up, src, ref, work,
+                                 [Faults(seed=1000 + s, rate=rate, limit=LIMIT) for s in range(RUNS_SWEEP)]))
+            sets.append(_set("unbounded 0.2 %", up, src, ref, work,
+                             [Faults(seed=2000 + s, rate=0.002, limit=10**9) for s in range(RUNS_UNBOUNDED)]))
+    finally:
+        dev.stop()
+    h, w = np.load(jacksboro())["elevation"][::DECIMATE, ::DECIMATE].shape
+    return {"input": f"Jacksboro DEM /{DECIMATE}: {w} x {h}", "limit": LIMIT, "frames_target": FRAMES,
+            "host_resend_s": P.host_resend_s(P.SESSION_TIMEOUT_MS, 0),
+            "session_timeout_ms": P.SESSION_TIMEOUT_MS, "sets": sets}
+
+
+def _summarise(name: str, runs: list[dict]) -> dict:
+    from wavemesh.harness.faultproxy import OUTCOMES
+
+    outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
+    errors: dict = {}
+    for r in runs:
+        if r["outcome"] == "error":
+            key = r["message"].split(":")[1].strip() if ":" in r["message"] else r["message"]
+            errors[key] = errors.get(key, 0) + 1
+    tally = {"runs": len(runs), "outcomes": outcomes, "injected": sum(r["faults"] for r in runs),
+             "frames": sum(r["frames"] for r in runs), "faulted_runs": sum(r["faults"] > 0 for r in runs),
+             "slowest": max(r["seconds"] for r in runs),
+             "slowest_error": max([r["seconds"] for r in runs if r["outcome"] == "error"], default=0.0),
+             "errors": errors}
+    return {"name": name, "tally": tally, "runs": runs}
+
+
+def markdown(results: dict) -> str:
+    sets = results["sets"]
+    frames = sum(s["tally"]["frames"] for s in sets)
+    bad = sum(s["tally"]["outcomes"][k] for s in sets for k in ("different", "unclear", "hang"))
+    main = sets[0]["tally"]
+    share = main["outcomes"]["identical"] / main["runs"]
+    lines = [
+        f"`wavemesh stream` of {results['input']} samples (zeta 5 m) through "
+        "wavemesh.harness.faultproxy to the native stand-in device, with the host's default timeouts "
+        f"(it writes again after {results['host_resend_s']:.2f} s of silence in a session: "
+        f"protocol.host_resend_s of the device's {results['session_timeout_ms']} ms session timeout).  "
+        f"Faults per byte and direction; *bounded*: at most {results['limit']} per direction and "
+        "connection.  Frames: SLIP frames that came to the proxy, both ways.",
+        "",
+        "| set | runs | frames | faults (runs with any) | identical | clear error | different | unclear "
+        "| hang | slowest run | slowest error |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in sets:
+        t, o = s["tally"], s["tally"]["outcomes"]
+        lines.append(f"| {s['name']} | {t['runs']} | {t['frames']} | {t['injected']} ({t['faulted_runs']}) "
+                     f"| {o['identical']} | {o['error']} | {o['different']} | {o['unclear']} | {o['hang']} "
+                     f"| {t['slowest']:.1f} s | {t['slowest_error']:.1f} s |")
+    lines += ["", f"In all: {frames} frames, {bad} runs silently different, unclear or hung.  Bounded "
+              f"0.2 %: {100 * share:.1f} % of the runs ended with the identical mesh (issue 13 asks for at "
+              "least 95 %)."]
+    kinds = {}
+    for s in sets:
+        for k, v in s["tally"]["errors"].items():
+            kinds[k] = kinds.get(k, 0) + v
+    if kinds:
+        lines += ["", "The clear errors, by message:", ""]
+        lines += [f"- {v} x `{k}`" for k, v in sorted(kinds.items(), key=lambda kv: -kv[1])]
+    return "\n".join(lines) + "\n"
