@@ -8,7 +8,8 @@
  *   read hit    2 cycles, like the SoC's block RAMs (request, then cpu_ready with the registered
  *               word): tag and data are LUT RAM, read asynchronously in the request cycle
  *   read miss   the line is filled from its first halfword (2 * LINE_WORDS column reads, issued
- *               after any posted write), then the word is answered from the filled line
+ *               after any posted write); the word is answered as soon as its two halfwords are in
+ *               (early restart), and the CPU's next access waits for the rest of the line
  *   write       taken in 2 cycles into the write buffer when it is empty (else it waits for it);
  *               a hit also updates the line's bytes; the buffer then writes the word's halfwords
  *               that have strobes, with the others' bytes masked by DQM
@@ -121,6 +122,11 @@ reg [31:0] rdata_reg = 32'd0, rdata_next;
 reg [CNT_BITS-1:0] fill_issue_reg = {CNT_BITS{1'b0}}, fill_issue_next;   // halfwords requested
 reg [CNT_BITS-1:0] fill_recv_reg = {CNT_BITS{1'b0}}, fill_recv_next;     // halfwords received
 reg fill_stale_reg = 1'b0, fill_stale_next;
+reg fill_answered_reg = 1'b0, fill_answered_next;                         // the CPU has its word
+reg [WADDR_BITS-OFF_BITS-1:0] fill_line_reg = {(WADDR_BITS-OFF_BITS){1'b0}};  // {tag, index}
+wire [IDX_BITS-1:0] fill_index = fill_line_reg[IDX_BITS-1:0];
+// halfwords in when the CPU's word is complete: 2 * offset + 2
+wire [CNT_BITS-1:0] fill_word_in;
 
 // posted write: the word, its strobes, the halfwords still to write {hi, lo}
 reg [WADDR_BITS-1:0] wb_word_reg = {WADDR_BITS{1'b0}};
@@ -141,9 +147,11 @@ wire fill_write = state_reg == S_FILL && s_rvalid;
 wire [IDX_BITS+OFF_BITS-1:0] fill_slot;
 generate
     if (OFF_BITS > 0) begin : g_fill_slot
-        assign fill_slot = {cpu_index, fill_recv_reg[OFF_BITS:1]};
+        assign fill_slot = {fill_index, fill_recv_reg[OFF_BITS:1]};
+        assign fill_word_in = {1'b0, cpu_word[OFF_BITS-1:0], 1'b0} + {{(CNT_BITS-2){1'b0}}, 2'd2};
     end else begin : g_fill_slot_one
-        assign fill_slot = cpu_index;
+        assign fill_slot = fill_index;
+        assign fill_word_in = CNT_FULL;   // one word per line: answered when the line is in
     end
 endgenerate
 wire [IDX_BITS+OFF_BITS-1:0] wr_slot = fill_write ? fill_slot : cpu_slot;
@@ -158,9 +166,9 @@ assign m_we = wb_pend_reg != 2'b00;
 generate
     if (OFF_BITS > 0) begin : g_fill_addr
         assign m_addr = m_we ? {wb_word_reg, !wb_lo}
-                             : {cpu_word[WADDR_BITS-1:OFF_BITS], fill_issue_reg[OFF_BITS:0]};
+                             : {fill_line_reg, fill_issue_reg[OFF_BITS:0]};
     end else begin : g_fill_addr_one
-        assign m_addr = m_we ? {wb_word_reg, !wb_lo} : {cpu_word, fill_issue_reg[0]};
+        assign m_addr = m_we ? {wb_word_reg, !wb_lo} : {fill_line_reg, fill_issue_reg[0]};
     end
 endgenerate
 assign m_wdata = wb_lo ? wb_data_reg[15:0] : wb_data_reg[31:16];
@@ -177,6 +185,7 @@ always @* begin
     fill_issue_next = fill_issue_reg;
     fill_recv_next = fill_recv_reg;
     fill_stale_next = fill_stale_reg;
+    fill_answered_next = fill_answered_reg;
     wb_pend_next = wb_pend_reg;
 
     // the posted write: one halfword per acknowledged beat, low first
@@ -198,6 +207,7 @@ always @* begin
                     fill_issue_next = {CNT_BITS{1'b0}};
                     fill_recv_next = {CNT_BITS{1'b0}};
                     fill_stale_next = 1'b0;
+                    fill_answered_next = 1'b0;
                 end
             end else if (take_write) begin
                 // write: into the buffer (and the line, on a hit); the halfwords with strobes
@@ -210,12 +220,19 @@ always @* begin
                 // one more halfword requested
                 fill_issue_next = fill_issue_reg + 1'b1;
             end
+            if (!fill_answered_reg && fill_recv_reg == fill_word_in) begin
+                // early restart: the CPU's word is in (written at the last edge); the fill goes on
+                rdata_next = line_word;
+                ready_next = 1'b1;
+                fill_answered_next = 1'b1;
+            end
             if (s_rvalid) begin
-                // one more halfword in; the last completes the line
+                // one more halfword in; the last completes the line (and answers the CPU if the
+                // word was the line's last)
                 fill_recv_next = fill_recv_reg + 1'b1;
                 if (fill_recv_reg == CNT_LAST) begin
-                    state_next = S_DONE;
-                    valid_next[cpu_index] = !fill_stale_reg;
+                    state_next = fill_answered_reg ? S_IDLE : S_DONE;
+                    valid_next[fill_index] = !fill_stale_reg;
                 end
             end
         end
@@ -230,7 +247,7 @@ always @* begin
     // coherence: the stream's writes win over a fill's completion
     if (snoop_valid) begin
         valid_next[snoop_index] = 1'b0;
-        if (state_reg == S_FILL && snoop_index == cpu_index) begin
+        if (state_reg == S_FILL && snoop_index == fill_index) begin
             fill_stale_next = 1'b1;
         end
     end
@@ -264,7 +281,11 @@ always @(posedge clk) begin
     fill_issue_reg <= fill_issue_next;
     fill_recv_reg <= fill_recv_next;
     fill_stale_reg <= fill_stale_next;
+    fill_answered_reg <= fill_answered_next;
     wb_pend_reg <= wb_pend_next;
+    if (state_reg == S_IDLE) begin
+        fill_line_reg <= cpu_word[WADDR_BITS-1:OFF_BITS];
+    end
     if (take_write) begin
         wb_word_reg <= cpu_word;
         wb_data_reg <= cpu_wdata;
