@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 import tifffile
-from wavemesh import api, synth
+from wavemesh import synth
 from wavemesh.check import check_mesh
 from wavemesh.errors import InputError
 from wavemesh.harness import run_cli
@@ -42,7 +42,11 @@ def entries(folder) -> list[str]:
 
 @pytest.fixture(scope="module")
 def terrain(tmp_path_factory):
-    """A 129 x 129 height field whose outputs run to some hundred KiB."""
+    """A 129 x 129 height field whose outputs run to some hundred KiB.  The native library is built
+    here if it has to be (not inside a run under a file size limit)."""
+    from wavemesh import native
+
+    native.load()
     path = tmp_path_factory.mktemp("in") / "t.npy"
     np.save(path, synth.make("ball", 129) + synth.make("f2", 129))
     return path
@@ -98,10 +102,12 @@ def test_output_paths_checked_before_any_work(tmp_path, terrain):
 
 def test_a_failure_late_in_the_run_leaves_nothing(tmp_path, terrain, monkeypatch):
     """The picture fails after the mesh, the levels and the report were written: none of them stays."""
+    from wavemesh import render
+
     def broken(*a, **k):
         raise InputError("cannot draw")
 
-    monkeypatch.setattr(api, "_render", broken)
+    monkeypatch.setattr(render, "render_mesh", broken)
     rc, _, err = run_cli("mesh", str(terrain), "-o", str(tmp_path / "m.obj"), "--lod", str(tmp_path / "lod"),
                          "--report", str(tmp_path / "m.json"), "--render", str(tmp_path / "m.png"))
     assert rc == 2 and one_error(err) == "error: cannot draw"
