@@ -83,7 +83,8 @@ def markdown(results: dict) -> str:
         f"| read miss, row closed (another row of the bank) | {statistics.median(cpu['row_miss']):g} |",
         f"| sequential reads, mean over {len(seq)} words (a miss per 4-word line) "
         f"| {sum(seq) / len(seq):.2f} |",
-        f"| write (posted; back to back, each waits for the one before) | {statistics.median(cpu['write']):g} |",
+        "| write (posted; back to back, each waits for the one before) "
+        f"| {statistics.median(cpu['write']):g} |",
         "",
     ]
     if r.get("fits"):
