@@ -153,9 +153,9 @@ def test_bound_off_on_the_command_line(tmp_path):
 DELTA_D = [0.1, 0.5, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10]  # Table 5.7
 
 
-@pytest.mark.xfail(reason="delta_d does not discriminate with the model's detail scale: on Jacksboro "
-                          "93-100 % of the cells of every level exceed delta_d = 10 (docs/refiner.md, "
-                          "Table 5.7)",
+@pytest.mark.xfail(reason="delta_d does not discriminate with the model's detail scale, with Haar or the "
+                          "spline wavelet: on Jacksboro 74-100 % of the cells of every level exceed "
+                          "delta_d = 10; the trend appears at 100 x Table 5.7's range (docs/refiner.md)",
                    strict=False)
 @pytest.mark.parametrize("name", ["Ball", "Jacksboro"])
 def test_table_5_7_counts_fall_with_delta_d(name):
@@ -165,7 +165,8 @@ def test_table_5_7_counts_fall_with_delta_d(name):
         cbook = pytest.importorskip("matplotlib.cbook")
         with np.load(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False)) as z:
             hf, kw = from_array(z["elevation"]), dict(iterations=3, zeta=2.0)
-    counts = [api.refine(hf, 5, None, native.RefineParams(delta_d=d, bound=False, **kw)).mesh.n_triangles
-              for d in DELTA_D]
+    # the spline wavelet, as chapter 5 decomposed ("with the spline wavelet for the most experiments")
+    counts = [api.refine(hf, 5, None, native.RefineParams(delta_d=d, bound=False, **kw),
+                         wavelet="spline").mesh.n_triangles for d in DELTA_D]
     assert np.all(np.diff(counts) <= 0), counts
     assert counts[0] >= 3 * counts[-1], counts
