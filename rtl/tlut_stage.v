@@ -71,7 +71,13 @@ module tlut_stage #(
     // Row-buffer depth: the most block columns a frame may have, ceil((W - 1) / 2^M) <= MAX_COLS
     parameter MAX_COLS = 1024,
     // Blocks buffered between resolver and expander (>= 2, any number)
-    parameter FIFO_DEPTH = 4
+    parameter FIFO_DEPTH = 4,
+    // 1: the expander puts every block's template on the grid (one beat per triangle, as above);
+    // 0: no expander (no triangle ROM, no site arithmetic): one beat per block, the block-end beat
+    //    alone, with tuser's template id and label, tri_index 0, bx = by = 0 (not counted) and
+    //    tdata 0; tlast on the frame's last block.  For a consumer that wants only the templates
+    //    (the SoC's TOUT writer, rtl/boards/stage_uart.v).
+    parameter EXPAND = 1
 ) (
     input  wire         clk,
     input  wire         rst,
@@ -406,6 +412,9 @@ always @(posedge clk) begin
 end
 `endif
 
+generate
+if (EXPAND) begin : g_expand
+
 tlut_expand
 expand_inst (
     .clk(clk),
@@ -430,6 +439,22 @@ expand_inst (
     .cfg_last_xm(last_xm_reg),
     .cfg_last_ym(last_ym_reg)
 );
+
+end else begin : g_blocks
+
+// one beat per block, straight from the block FIFO (its flags are registers, its data the FIFO's
+// read port)
+assign exp_ready = m_axis_tready;
+assign m_axis_tvalid = fifo_valid;
+assign m_axis_tdata = 96'd0;
+assign m_axis_tuser = {1'b1, 32'd0, fifo_data[12:10], fifo_data[9:4], 3'd0};
+assign m_axis_tlast = fifo_data[14] && fifo_data[13];
+
+// the expander's inputs that are not needed: the other flags, the triangle count, the geometry
+wire unused_blocks = &{1'b0, fifo_data[16:15], fifo_data[3:0], last_xm_reg, last_ym_reg};
+
+end
+endgenerate
 
 // the approximation and the input tlast are not needed
 wire unused_in = &{1'b0, s_axis_tdata[15:0], s_axis_tlast};

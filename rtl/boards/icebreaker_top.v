@@ -17,7 +17,9 @@ module icebreaker_top #
     // clock cycles per UART bit: 104 is 115200 baud at 12 MHz (0.16 % off); the test bench's is smaller
     parameter DIV = 104,
     // reset lasts 2^POR_BITS clocks (5.5 ms at 12 MHz)
-    parameter POR_BITS = 16
+    parameter POR_BITS = 16,
+    // a header or job is dropped after 2^TIMEOUT_BITS clocks without a byte (0.7 s at 12 MHz)
+    parameter TIMEOUT_BITS = 23
 )
 (
     input  wire  CLK,      // 12 MHz
@@ -43,7 +45,8 @@ wire busy;
 wire overrun;
 
 stage_uart #(
-    .DIV(DIV)
+    .DIV(DIV),
+    .TIMEOUT_BITS(TIMEOUT_BITS)
 ) stage_inst (
     .clk(CLK),
     .rst(rst),

@@ -8,7 +8,7 @@
  *
  * Wire format (little-endian; docs/boards.md, "The iCEBreaker's stream"):
  *
- *   host -> device   header: W (u16), H (u16), M (u8), tau (u24)           8 bytes
+ *   host -> device   header: "WM", W (u16), H (u16), M (u8), tau (u24)     10 bytes
  *   device -> host   "OK" (0x4F 0x4B), or "E" and a reason byte when the header is out of range
  *                    (then the device waits for the next header)
  *   host -> device   W x H samples (u16), row-major
@@ -17,6 +17,12 @@
  *
  * The device is then ready for the next header.  Reasons: "W" W or H out of 2..MAX_WIDTH /
  * 2..MAX_HEIGHT, "M" M out of 1..MAX_LEVELS, "C" too many block columns for the template stage.
+ *
+ * Nothing a host sends can hang it: before a header the device skips every byte until "WM" (so a
+ * wire-protocol HELLO, or any garbage, is passed over; a header with a bad field is answered and
+ * dropped), and a header or a job whose next byte does not come within 2^TIMEOUT_BITS clocks (0.7 s
+ * at 12 MHz) is dropped: the filter bank and the template stage are reset and the device waits for
+ * the next "WM".
  *
  * Flow: the receiver has no back-pressure, so the stage must keep up with the line.  It does: the
  * filter bank takes a sample per clock, and the only stall, the template stage waiting for the
@@ -40,7 +46,9 @@ module stage_uart #
     parameter MAX_COLS = 128,
     // byte FIFOs (flip-flops on the iCE40: keep them small)
     parameter RX_DEPTH = 16,
-    parameter TX_DEPTH = 8
+    parameter TX_DEPTH = 8,
+    // a header or job is dropped after 2^TIMEOUT_BITS clocks without a received byte
+    parameter TIMEOUT_BITS = 23
 )
 (
     input  wire        clk,
@@ -105,7 +113,7 @@ localparam [1:0]
     STATE_DRAIN = 2'd3;
 
 reg [1:0]  state_reg = STATE_HEADER;
-reg [2:0]  hdr_count_reg = 3'd0;
+reg [3:0]  hdr_count_reg = 4'd0;     // header bytes in, the two of "WM" included
 reg [63:0] hdr_reg = 64'd0;
 reg [15:0] width_reg = 16'd2;
 reg [15:0] height_reg = 16'd2;
@@ -134,6 +142,14 @@ function [15:0] blocks;
 endfunction
 
 /*
+ * Silence timeout: a header or job that stops mid-way is dropped, the stage reset
+ */
+reg [TIMEOUT_BITS:0] silence_reg = {(TIMEOUT_BITS + 1){1'b0}};
+reg                  stage_rst_reg = 1'b0;
+wire                 timed_out = silence_reg[TIMEOUT_BITS];
+wire                 stage_rst = rst || stage_rst_reg;
+
+/*
  * The stage: haar_bank -> tlut_stage, the block-end beats to the transmitter
  */
 wire [15:0] bank_s_tdata = {rx_tdata, low_reg};
@@ -154,7 +170,7 @@ haar_bank #(
     .MAX_LEVELS(MAX_LEVELS)
 ) bank_inst (
     .clk(clk),
-    .rst(rst),
+    .rst(stage_rst),
     .cfg_width(width_reg),
     .cfg_height(height_reg),
     .cfg_levels(levels_reg),
@@ -170,6 +186,7 @@ haar_bank #(
     .frame_done(bank_done_unused)
 );
 
+// the template stage without its expander: one beat per block
 wire [95:0] tri_tdata_unused;
 wire [44:0] tri_tuser;
 wire        tri_tvalid;
@@ -178,10 +195,11 @@ wire        tri_tlast_unused;
 wire        cfg_error;
 
 tlut_stage #(
-    .MAX_COLS(MAX_COLS)
+    .MAX_COLS(MAX_COLS),
+    .EXPAND(0)
 ) stage_inst (
     .clk(clk),
-    .rst(rst),
+    .rst(stage_rst),
     .s_axis_tdata(rec_tdata),
     .s_axis_tuser(rec_tuser),
     .s_axis_tvalid(rec_tvalid),
@@ -282,11 +300,18 @@ always @(posedge clk) begin
     case (state_reg)
         STATE_HEADER: begin
             if (rx_tvalid) begin
-                hdr_reg <= {rx_tdata, hdr_reg[63:8]};
-                hdr_count_reg <= hdr_count_reg + 3'd1;
-                if (hdr_count_reg == 3'd7) begin
-                    state_reg <= STATE_REPLY;
-                    reply_count_reg <= 2'd0;
+                if (hdr_count_reg == 4'd0) begin
+                    // skip to the "W" of "WM"
+                    hdr_count_reg <= rx_tdata == "W" ? 4'd1 : 4'd0;
+                end else if (hdr_count_reg == 4'd1) begin
+                    hdr_count_reg <= rx_tdata == "M" ? 4'd2 : (rx_tdata == "W" ? 4'd1 : 4'd0);
+                end else begin
+                    hdr_reg <= {rx_tdata, hdr_reg[63:8]};
+                    hdr_count_reg <= hdr_count_reg + 4'd1;
+                    if (hdr_count_reg == 4'd9) begin
+                        state_reg <= STATE_REPLY;
+                        reply_count_reg <= 2'd0;
+                    end
                 end
             end
         end
@@ -346,13 +371,33 @@ always @(posedge clk) begin
     endcase
 
     if (state_reg != STATE_HEADER) begin
-        hdr_count_reg <= 3'd0;
+        hdr_count_reg <= 4'd0;
+    end
+
+    // silence: counted while a header is partly in or samples are due; any received byte restarts it
+    stage_rst_reg <= 1'b0;
+    if (rx_pin_tvalid || !(state_reg == STATE_SAMPLES
+                           || (state_reg == STATE_HEADER && hdr_count_reg != 4'd0))) begin
+        silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
+    end else if (!timed_out) begin
+        silence_reg <= silence_reg + 1'b1;
+    end
+    if (timed_out) begin
+        // drop the header or job: back to looking for "WM", the stage reset for a cycle
+        silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
+        state_reg <= STATE_HEADER;
+        hdr_count_reg <= 4'd0;
+        low_valid_reg <= 1'b0;
+        tx_hi_reg <= 1'b0;
+        stage_rst_reg <= 1'b1;
     end
 
     if (rst) begin
         state_reg <= STATE_HEADER;
-        hdr_count_reg <= 3'd0;
+        hdr_count_reg <= 4'd0;
         reply_count_reg <= 2'd0;
+        silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
+        stage_rst_reg <= 1'b0;
         checked_reg <= 1'b0;
         low_valid_reg <= 1'b0;
         tx_hi_reg <= 1'b0;

@@ -24,7 +24,7 @@ module ulx3s_top #
     input  wire        ftdi_txd,    // FTDI transmits, FPGA receives
     output wire        ftdi_rxd,    // FPGA transmits, FTDI receives
     input  wire [1:1]  btn,         // FIRE1, high when pressed
-    output wire [7:0]  led,
+    output wire [`WM_LED_COUNT-1:0] led,  // D0..D7
     output wire        wifi_gpio0
 );
 
@@ -50,10 +50,13 @@ wire        halt_valid_unused;
 wire [31:0] halt_code_unused;
 wire        trap_unused;
 
+// the simulated board's configuration (sim/board_sim.v): the memory map's clock (the board's 25 MHz
+// oscillator; tests/host/test_boards_flow.py checks they agree), sizes and LEDs; only the firmware
+// comes in differently (here built in, there loaded at start-up from the same image)
 soc_top #(
-    .CLK_HZ(25000000),
+    .CLK_HZ(`WM_CLK_HZ),
     .FW_HEX(FW_HEX),
-    .LED_COUNT(8)
+    .LED_COUNT(`WM_LED_COUNT)
 ) soc_inst (
     .clk(clk_25mhz),
     .rst(rst),

@@ -3,7 +3,9 @@
 The bench is the host's end of the serial line, bit by bit on the RX and TX pins at the top's DIV: it
 sends a job's header and samples as UART frames and reads the bytes the board sends back, and every
 block's entry must be the reference model's TOUT entry (wavemesh.label, as tests/rtl/soc_accel_tb.py
-computes them).  Jobs run back to back on one reset, with a refused header between them.
+computes them).  Jobs run back to back on one reset, with a refused header between them; garbage
+(a wire-protocol HELLO frame, stray bytes) before a header is skipped, and a header or job the host
+abandons is dropped after the silence timeout, the next job unharmed.
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge
 from soc_accel_tb import expected
+from wavemesh import protocol as P
 from wavemesh import synth
 from wavemesh.heightfield import from_array
+from wavemesh.link import encode_frame
 
 
 class Line:
@@ -62,7 +66,7 @@ class Line:
 
 
 def header(w: int, h: int, m: int, tau: int) -> bytes:
-    return struct.pack("<HHB", w, h, m) + tau.to_bytes(3, "little")
+    return b"WM" + struct.pack("<HHB", w, h, m) + tau.to_bytes(3, "little")
 
 
 CASES = [
@@ -83,10 +87,12 @@ async def test_jobs_over_the_uart(dut):
     await ClockCycles(dut.CLK, 40)  # the power-on reset
     assert int(dut.LEDR_N.value) == 1, "busy right after reset"
 
-    for name, make, m, tau in CASES:
+    hello = encode_frame(P.FrameType.HELLO, 7, P.HELLO.pack(version=P.VERSION))
+    garbage = [hello, b"W", b"WW\x00M", b"", b"\xc0WX"]  # (none holds "WM": that starts a header)
+    for k, (name, make, m, tau) in enumerate(CASES):
         samples = from_array(np.asarray(make())).samples
         h, w = samples.shape
-        await line.send(header(w, h, m, tau))
+        await line.send(garbage[k % len(garbage)] + header(w, h, m, tau))
         assert await line.read(2) == b"OK", name
         await line.send(samples.astype("<u2").tobytes())
         _, tout = expected(samples, m, min(tau, (1 << 18) - 1))
@@ -100,7 +106,35 @@ async def test_jobs_over_the_uart(dut):
         max_w, max_m = int(dut.stage_inst.MAX_WIDTH.value), int(dut.stage_inst.MAX_LEVELS.value)
         bad = [header(1, 5, 1, 0), header(max_w + 1, 5, 1, 0), header(8, 8, 0, 0), header(8, 8, max_m + 1, 0)]
         reasons = [b"EW", b"EW", b"EM", b"EM"]
-        k = CASES.index((name, make, m, tau)) % len(bad)
-        await line.send(bad[k])
-        assert await line.read(2) == reasons[k], f"after {name}"
+        await line.send(bad[k % len(bad)])
+        assert await line.read(2) == reasons[k % len(bad)], f"after {name}"
     assert not line.received, "bytes nobody asked for"
+
+
+@cocotb.test()
+async def test_abandoned_header_and_job_are_dropped(dut):
+    """A header cut short, and a job whose samples stop, are dropped after the silence timeout (the
+    stage reset); the next job gives the reference entries."""
+    cocotb.start_soon(Clock(dut.CLK, 10, unit="ns").start())
+    dut.BTN_N.value = 1
+    line = Line(dut)
+    await ClockCycles(dut.CLK, 40)
+    silence = 1 << int(dut.stage_inst.TIMEOUT_BITS.value)
+    samples = from_array(synth.ball(24)).samples
+    _, tout = expected(samples, 2, 30)
+    good = header(24, 24, 2, 30)
+
+    await line.send(good[:6])  # a header cut short
+    await ClockCycles(dut.CLK, silence + 100)
+    await line.send(good)
+    assert await line.read(2) == b"OK"
+    await line.send(samples.astype("<u2").tobytes()[:301])  # a job cut short (an odd byte count)
+    await ClockCycles(dut.CLK, silence + 100)
+    assert int(dut.LEDR_N.value) == 1, "still busy after the timeout"
+    line.received.clear()  # entries of the dropped job's first rows
+
+    await line.send(good)
+    assert await line.read(2) == b"OK"
+    await line.send(samples.astype("<u2").tobytes())
+    got = await line.read(2 * len(tout))
+    assert list(struct.unpack(f"<{len(tout)}H", got)) == tout

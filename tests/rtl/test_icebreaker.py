@@ -12,4 +12,4 @@ def test_icebreaker_top():
     sources = [boards / "icebreaker_top.v", boards / "stage_uart.v", boards / "wm_por.v",
                *sorted(RTL.glob("haar_*.v")), *sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v",
                RTL / "uart_rx.v", RTL / "uart_tx.v"]
-    run("icebreaker_top", sources, "icebreaker_tb", parameters={"DIV": 8, "POR_BITS": 4})
+    run("icebreaker_top", sources, "icebreaker_tb", parameters={"DIV": 8, "POR_BITS": 4, "TIMEOUT_BITS": 12})
