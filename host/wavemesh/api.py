@@ -25,6 +25,8 @@ from wavemesh import __version__
 from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
+from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
+from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, to_grid
 from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, initial_triangulation
@@ -123,7 +125,7 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
     """The part of a height field --crop and --decimate select, quantised afresh (as if it were the file)."""
     if crop is None and decimate in (None, 1):
         return hf
-    v, what = hf.values, []
+    v, what, x0, y0, step = hf.values, [], 0, 0, 1
     if crop is not None:
         x, y, w, h = parse_crop(crop)
         if x < 0 or y < 0 or w < 2 or h < 2 or x + w > hf.width or y + h > hf.height:
@@ -131,6 +133,7 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
                              hint="X + W <= width, Y + H <= height, W and H at least 2")
         v = v[y:y + h, x:x + w]
         what.append(f"crop {x},{y},{w},{h}")
+        x0, y0 = x, y
     if decimate is not None:
         if decimate < 1:
             raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
@@ -139,14 +142,19 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
             raise InputError(f"--decimate {decimate} leaves {v.shape[1]} x {v.shape[0]} samples",
                              hint="a height field needs at least 2 x 2")
         what.append(f"decimate {decimate}")
+        step = decimate
     out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
-    return replace(out, filled=hf.filled)
+    spacing = hf.spacing and (hf.spacing[0] * step, hf.spacing[1] * step)
+    return replace(out, filled=hf.filled, transform=cropped(hf.transform, x0, y0, step), crs=hf.crs,
+                   spacing=spacing)
 
 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
-               decimate: int | None = None) -> HeightField:
-    """A height field file as the commands read it: --key, --fill, then --crop and --decimate."""
-    return shape_heightfield(_load(path, key, fill), crop, decimate)
+               decimate: int | None = None, spacing: str | None = None,
+               origin: str | None = None) -> HeightField:
+    """A height field file as the commands read it: --key, --fill, --spacing and --origin (of the file's
+    grid), then --crop and --decimate."""
+    return shape_heightfield(apply_overrides(_load(path, key, fill), spacing, origin), crop, decimate)
 
 
 @dataclass
@@ -197,7 +205,8 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
         e, zeta, on = getattr(errors, metric), p.zeta, "the input"
     else:
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
-        e, zeta, on = getattr(mesh_errors(rjob.mesh, quantised), metric), rjob.zeta_used, "the 16-bit samples"
+        e = getattr(mesh_errors(rjob.mesh, quantised, spacing=ground(hf).spacing), metric)
+        zeta, on = rjob.zeta_used, "the 16-bit samples"
     if e <= zeta + eps:
         return None
     return (f"the refined mesh is not within zeta: E_max {p.metric} {e:.9g} > zeta {zeta:g} on {on}, though "
@@ -223,14 +232,15 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     q = hf.max_quantisation_error
     zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
     start = time.perf_counter()
+    spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
     details = decompose(hf.samples, job.levels, job.wavelet)
-    out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta)
+    out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
         require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
     rjob = RefineJob(job, params, zeta, out, seconds)
-    rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms)
+    rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms, spacing=spacing)
     excess = bound_excess(hf, rjob, rjob.errors)
     if excess:
         raise MeshInvalid(excess, hint=BUG_HINT)
@@ -240,7 +250,8 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 def level_report(lv, hf: HeightField, metric: str, errors: ErrorReport | None = None) -> dict:
     """One level's row: counts, the firmware's E_max and the independent float E_max (``errors``: the
     level's mesh_errors when already measured)."""
-    errors = errors if errors is not None else mesh_errors(lv.mesh, hf.values, rms=False)  # maxima
+    errors = errors if errors is not None else mesh_errors(lv.mesh, hf.values, rms=False,  # maxima
+                                                           spacing=ground(hf).spacing)
     st = lv.stats
     return {
         "level": lv.level,
@@ -355,8 +366,8 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     if params.initial_only:
         job = triangulate(hf, m, t, params.wavelet)  # checks the mesh
-        errors = mesh_errors(job.mesh, hf.values, rms=params.rms)
-        report = {"wavemesh": __version__, "input": hf.to_report(),
+        errors = mesh_errors(job.mesh, hf.values, rms=params.rms, spacing=ground(hf).spacing)
+        report = {"wavemesh": __version__, "input": hf.to_report(), "ground": ground(hf).to_report(),
                   "parameters": {"levels": m, "tau": t, "wavelet": params.wavelet, "stage": "initial"},
                   "initial": job.result.to_report(), "errors": errors.to_report()}
         return MeshResult(heightfield=hf, params=params, refine_params=None, levels=m, tau=t, mesh=job.mesh,
@@ -375,6 +386,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
     report = {
         "wavemesh": __version__,
         "input": hf.to_report(),
+        "ground": ground(hf).to_report(),
         "parameters": parameters,
         "initial": rjob.initial.result.to_report(),
         "errors": rjob.errors.to_report(),
@@ -481,7 +493,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
             raise DeviceError(f"--max-triangles {p.max_triangles}: the device honours a budget of "
                               f"at most {storage - 1} (storage for {storage} triangles)",
                               hint=f"use --max-triangles {storage - 1} or less")
-        fp = fixed_params(p, hf.scale, zeta)
+        fp = fixed_params(p, hf.scale, zeta, ground(hf).spacing)
         dev.configure(config_payload(hf.width, hf.height, m, tau_q, fp, capacity=p.capacity or 0,
                                      initial_only=not full, spline=params.wavelet == "spline"))
         if full:
@@ -519,13 +531,14 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     final = levels[-1]
     rows = [level_report(lv, hf, p.metric) | {"device_cycles": lv.cycles, "stream_bytes": lv.nbytes,
                                               "arrived_s": lv.seconds} for lv in levels] if full else []
-    errors = mesh_errors(final.mesh, hf.values, rms=params.rms)
+    errors = mesh_errors(final.mesh, hf.values, rms=params.rms, spacing=ground(hf).spacing)
     clk = info.clk_hz
     cycles = {f.name[len("cycles_"):]: done[f.name] for f in P.DONE.fields if f.name.startswith("cycles_")}
     parameters = {"levels": m, "tau": tau, "wavelet": params.wavelet, "stage": "full" if full else "initial"}
     report = {
         "wavemesh": __version__,
         "input": hf.to_report(),
+        "ground": ground(hf).to_report(),
         "parameters": parameters,
         "initial": {"levels": m, "block_size": 1 << m, "tau_counts": tau_q,
                     "vertices": levels[0].mesh.n_vertices, "triangles": levels[0].mesh.n_triangles},
@@ -576,18 +589,24 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
 
 
 def write_result(result: MeshResult, output: str, *, lod: str | None = None, report: str | None = None,
-                 render: str | None = None, title: str | None = None) -> list[str]:
-    """Write a result's files: the mesh (.obj or .ply), each level's into ``lod``, the JSON report and
-    a picture.  Returns the level files written."""
+                 render: str | None = None, title: str | None = None, local: bool = False,
+                 exaggeration: float | None = None) -> list[str]:
+    """Write a result's files: the mesh (.obj, .ply in map units, less sample (0, 0)'s position when
+    ``local``, with its sidecar; or .glb), each level's into ``lod``, the JSON report and a picture
+    (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in grid steps).
+    Returns the level files written."""
     out, folder = check_outputs(output, lod=lod, report=report, render=render)
     hf = result.heightfield
+    g = ground(hf)
     written = []
     with Outputs() as staged:  # every file whole, or none of them (wavemesh.outputs)
-        write_mesh(str(staged.path(out)), result.mesh, hf.values, comment=result.comment)
+        write_mesh(str(staged.path(out, (SIDECAR,))), result.mesh, hf.values, comment=result.comment,
+                   ground=g, local=local)
         if folder is not None:
             for level, m in result.level_meshes:
                 path = folder / f"level-{level}{out.suffix.lower()}"
-                write_mesh(str(staged.path(path)), m, hf.values, comment=f"{result.comment} level={level}")
+                write_mesh(str(staged.path(path, (SIDECAR,))), m, hf.values,
+                           comment=f"{result.comment} level={level}", ground=g, local=local)
                 written.append(str(path))
         if report:
             data = result.report | {"output": str(out)}
@@ -595,16 +614,31 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                 data["lod"] = written
             staged.path(report).write_text(json.dumps(data, indent=2) + "\n")
         if render:
-            from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
-
-            render_mesh(result.mesh, result.mesh.z(hf.values), str(staged.path(render)), title=title)
+            _render(result.mesh, result.mesh.z(hf.values), str(staged.path(render)), g, exaggeration,
+                    title=title)
     return written
+
+
+def _render(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> None:
+    """A picture in true aspect: (east, north) in ground units; the exaggeration stated in it."""
+    from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
+
+    if exaggeration is not None and not (math.isfinite(exaggeration) and exaggeration > 0):
+        raise InputError(f"--exaggeration {exaggeration} is out of range", hint="give a number > 0")
+    if exaggeration is None and g.georeferenced:
+        exaggeration = 1.0  # ground units: true aspect
+    east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
+    render_mesh(mesh, z, output, zscale=exaggeration, en=np.column_stack([east, north]), label=True, **kw)
 
 
 def check_file(path: str, hf: HeightField) -> dict:
     """`wavemesh check`: whether the mesh file ``path`` is a proper triangulation of ``hf``'s grid whose
-    vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...)."""
-    mesh, z = read_mesh(path, hf.width, hf.height)
+    vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...).
+    A mesh in map units is placed on the grid by its sidecar (PATH.georef.json), whose cell size the
+    normal metric then uses; else by the height field's georeference."""
+    placed = read_sidecar(path)
+    g = placed[0] if placed else ground(hf)
+    mesh, z = read_mesh(path, hf.width, hf.height, to_grid=to_grid(*placed) if placed else None)
     if (mesh.width, mesh.height) != (hf.width, hf.height):
         raise InputError(f"{path} is for a {mesh.width} x {mesh.height} grid but the height field "
                          f"is {hf.width} x {hf.height}")
@@ -617,6 +651,7 @@ def check_file(path: str, hf: HeightField) -> dict:
         "triangles": verdict.n_triangles,
         "border_vertices": verdict.n_border,
         "euler_ok": verdict.euler_ok,
+        "ground": g.to_report(),
     }
     if verdict.valid:
         want = mesh.z(hf.values)
@@ -627,7 +662,7 @@ def check_file(path: str, hf: HeightField) -> dict:
             report["problems"].append(f"{int(np.count_nonzero(off))} vertices do not carry the input height, "
                                       f"first at ({mesh.xy[i, 0]}, {mesh.xy[i, 1]}): {z[i]!r} != {want[i]!r}")
         else:
-            report["errors"] = mesh_errors(mesh, hf.values).to_report()
+            report["errors"] = mesh_errors(mesh, hf.values, spacing=g.spacing).to_report()
     return report
 
 
@@ -668,13 +703,13 @@ def write_synth(name: str, output: str, size: int | None = None) -> Path:
 
 def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: bool = True,
                 zscale: float | None = None, title: str | None = None) -> None:
-    """`wavemesh render`: a picture of a mesh file."""
+    """`wavemesh render`: a picture of a mesh file, in true aspect when its sidecar places it
+    (``zscale``: the vertical exaggeration, stated in the picture)."""
     _check_output(output, (".png", ".svg", ".pdf"), "picture")
     if zscale is not None and not (math.isfinite(zscale) and zscale > 0):
         raise InputError(f"vertical exaggeration {zscale} is out of range", hint="give a number > 0")
-    m, z = read_mesh(mesh_path)
-    from wavemesh.render import render_mesh
-
+    placed = read_sidecar(mesh_path)
+    m, z = read_mesh(mesh_path, to_grid=to_grid(*placed) if placed else None)
+    g = placed[0] if placed else grid_ground(m.width, m.height)
     with Outputs() as staged:
-        render_mesh(m, z, str(staged.path(output)), view=view, wireframe=wireframe, zscale=zscale,
-                    title=title)
+        _render(m, z, str(staged.path(output)), g, zscale, view=view, wireframe=wireframe, title=title)

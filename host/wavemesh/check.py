@@ -433,7 +433,7 @@ class ErrorReport:
 
 def mesh_errors(
     mesh: Mesh, heights: np.ndarray, z: np.ndarray | None = None, *, point_budget: int = _POINT_BUDGET,
-    rms: bool = True,
+    rms: bool = True, spacing: tuple[float, float] = (1.0, 1.0),
 ) -> ErrorReport:
     """Vertical and normal distances between the height field and the mesh's triangle planes.
 
@@ -444,7 +444,9 @@ def mesh_errors(
     ``z0 + (E1(s) (z1 - z0) + E2(s) (z2 - z0)) / D`` with the exact integer
     edge functions E1, E2 (barycentric weights times D) and the doubled area D,
     and ``a``, ``b`` (for the normal factor ``sqrt(1 + a^2 + b^2)``) come from
-    Cramer's rule with D as the denominator.  E(T) is the largest distance over
+    Cramer's rule with D as the denominator, divided by the cell size ``spacing``
+    = (dx, dy) in height units (the slope per ground unit; 1: per grid step).
+    E(T) is the largest distance over
     the samples in the closed triangle (a sample on a shared edge counts for
     every triangle containing it).  For the RMS each sample counts once, with
     the lowest-numbered triangle that contains it; samples in no triangle (only
@@ -487,8 +489,8 @@ def mesh_errors(
     dz1, dz2 = zv[i1] - z0, zv[i2] - z0
     Df = D.astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        a = (dz1 * (y2 - y0) - dz2 * (y1 - y0)) / Df
-        b = ((x1 - x0) * dz2 - (x2 - x0) * dz1) / Df
+        a = (dz1 * (y2 - y0) - dz2 * (y1 - y0)) / Df / spacing[0]
+        b = ((x1 - x0) * dz2 - (x2 - x0) * dz1) / Df / spacing[1]
         nfac = np.hypot(1.0, np.hypot(a, b))  # sqrt(1 + a^2 + b^2)
     # Edge functions E_k(s) = A_k x + B_k y + C_k, E_k = D * (barycentric weight of vertex k),
     # multiplied by sign(D) so that "inside the closed triangle" is "all three >= 0".

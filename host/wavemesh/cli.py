@@ -62,6 +62,11 @@ def _input_options(p: argparse.ArgumentParser) -> None:
         metavar="nearest|VALUE",
         help="replace non-finite samples (no-data) by the nearest finite sample or by VALUE",
     )
+    p.add_argument("--spacing", metavar="DX[,DY]",
+                   help="ground distance between neighbouring samples along a row (and a column), in height "
+                        "units (default: from the georeference, degrees in metres; else 1 grid step)")
+    p.add_argument("--origin", metavar="X,Y",
+                   help="map position of sample (0, 0) (default: the georeference's)")
 
 
 def _mesh_options(p: argparse.ArgumentParser) -> None:
@@ -127,6 +132,11 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write a JSON report")
     p.add_argument("--render", metavar="R.png", help="write a picture of the mesh")
+    p.add_argument("--local", action="store_true",
+                   help="OBJ/PLY vertices less the map position of sample (0, 0) (named in the sidecar)")
+    p.add_argument("--exaggeration", type=float, default=None, metavar="Z",
+                   help="vertical exaggeration of --render (default: 1 in ground units, automatic in grid "
+                        "steps)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
 
@@ -187,7 +197,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="picture to write (.png, .svg, .pdf)")
     p.add_argument("--view", choices=("3d", "top"), default="3d", help="oblique 3-D view or map view")
     p.add_argument("--no-wireframe", action="store_true", help="do not draw triangle edges")
-    p.add_argument("--zscale", type=float, default=None, help="vertical exaggeration (default: automatic)")
+    p.add_argument("--exaggeration", "--zscale", dest="zscale", type=float, default=None, metavar="Z",
+                   help="vertical exaggeration (default: 1 when the mesh's sidecar places it on the ground, "
+                        "else automatic)")
     p.add_argument("--title", help="caption")
 
     p = sub.add_parser("devices", help="list serial ports and the wavemesh devices on them", description=(
@@ -229,18 +241,22 @@ def _mesh_params(args) -> api.MeshParams:
 
 
 def _load(args, path: str):
-    return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)
+    return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
+                          spacing=args.spacing, origin=args.origin)
 
 
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:
     """Write the files of `mesh` and `stream`, print the summary and the level table, return the status."""
     written = api.write_result(result, args.output, lod=args.lod, report=args.report, render=args.render,
-                               title=Path(args.input).name)
+                               title=Path(args.input).name, local=args.local, exaggeration=args.exaggeration)
     if not args.quiet:
         hf, m, e = result.heightfield, result.mesh, result.errors
         print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
               f"{m.n_vertices} vertices, {m.n_triangles} triangles, "
               f"E_max normal {e.e_max_normal:.6g}, vertical {e.e_max_vertical:.6g}")
+        g = api.ground(hf)
+        if g.georeferenced:
+            print(f"  {g.summary()}; x, y in {g.map_unit}s{' (CRS ' + g.crs[:40] + ')' if g.crs else ''}")
         for line in table:
             print(line)
         print(f"wrote {args.output}" + "".join(f", {p}" for p in (args.report, args.render) if p)

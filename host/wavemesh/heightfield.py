@@ -135,11 +135,14 @@ class HeightField:
     lossless: bool  # offset + scale * samples == values exactly
     source: str  # path or description, for reports
     filled: int = 0  # number of non-finite samples replaced by fill
-    # The georeference of a GDAL raster (None otherwise, and after --crop/--decimate): the affine
+    # The georeference of a GDAL raster or an .npz with dx, dy, xmin, ymin (None otherwise): the affine
     # (a, b, c, d, e, f) with x = a*col + b*row + c, y = d*col + e*row + f, (0, 0) the outer corner of
     # sample (0, 0)'s cell (samples sit at cell centres); and the CRS ("EPSG:4326" or WKT).
     transform: tuple[float, ...] | None = None
     crs: str | None = None
+    # The cell size (dx, dy) in ground units when --spacing gave it (None: from the transform, or 1 without
+    # one); wavemesh.georef.ground tells the cell size and the coordinates of every height field.
+    spacing: tuple[float, float] | None = None
 
     @property
     def width(self) -> int:
@@ -332,9 +335,12 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
         array, transform, crs = _read_raster(path, ext)
         hf = from_array(array, source=path, fill=fill_mode)
         return replace(hf, transform=transform, crs=crs)
+    if fmt == "npz":
+        with _library_warnings_quiet():
+            array, transform = _read_npz(path, key)
+        return replace(from_array(array, source=path, fill=fill_mode), transform=transform)
     reader = {
         "npy": _read_npy,
-        "npz": lambda p: _read_npz(p, key),
         "pgm": _read_pgm,
         "png": _read_png,
     }[fmt]
@@ -415,7 +421,7 @@ def _read_npy(path: str) -> np.ndarray:
     return arr
 
 
-def _read_npz(path: str, key: str | None) -> np.ndarray:
+def _read_npz(path: str, key: str | None) -> tuple[np.ndarray, tuple[float, ...] | None]:
     try:
         npz = np.load(path, allow_pickle=False)
     except _READ_ERRORS as e:
@@ -439,9 +445,48 @@ def _read_npz(path: str, key: str | None) -> np.ndarray:
         elif key not in names:
             raise InputError(f"{path}: no array {key!r} in the .npz archive; its arrays are: {listed}")
         try:
-            return np.asarray(npz[key])
+            array = np.asarray(npz[key])
+            return array, _npz_transform(path, npz, array.shape)
         except _READ_ERRORS as e:
             raise InputError(f"cannot read {path}: array {key!r} is corrupt ({_one_line(e)})") from None
+
+
+def _npz_transform(path: str, npz, shape: tuple[int, ...]) -> tuple[float, ...] | None:
+    """The georeference of an .npz as matplotlib's sample DEMs give it: scalars dx, dy (the cell) and xmin,
+    ymin, optionally xmax, ymax.  With xmax (ymax) the columns (rows) run from xmin to xmax (ymin to ymax),
+    the extent being the cells' outer edges (|xmax - xmin| = W dx) or their centres ((W - 1) dx); without,
+    xmin is the west edge and ymin the south edge of a grid whose row 0 is north.  None without dx, dy,
+    xmin and ymin."""
+    names = ("dx", "dy", "xmin", "ymin")
+    if len(shape) != 2 or not all(n in npz.files for n in names):
+        return None
+    g = {}
+    for n in (*names, "xmax", "ymax"):
+        if n in npz.files:
+            v = np.asarray(npz[n])
+            if v.shape != () or v.dtype.kind not in "iuf" or not np.isfinite(v):
+                raise InputError(f"{path}: the georeference {n!r} is not a finite number",
+                                 hint="fix the archive, or give --spacing DX[,DY] and --origin X,Y")
+            g[n] = float(v)
+    if g["dx"] <= 0 or g["dy"] <= 0:
+        raise InputError(f"{path}: the cell size dx {g['dx']:g}, dy {g['dy']:g} is not positive")
+    h, w = shape
+
+    def axis(lo: float, hi: float | None, cell: float, n: int, default_sign: int,
+             name: str) -> tuple[float, float]:
+        """(step, position of the outer edge of sample 0) along one axis."""
+        if hi is None:
+            return default_sign * cell, lo if default_sign > 0 else lo + n * cell
+        span, sign = abs(hi - lo), (1.0 if hi >= lo else -1.0)
+        for count, shift in ((n, 0.0), (n - 1, 0.5)):  # cell edges, or sample centres
+            if abs(span - count * cell) <= 1e-6 * max(span, cell):
+                return sign * cell, lo - sign * shift * cell
+        raise InputError(f"{path}: {name}min .. {name}max spans {span:g}, which is neither {n} nor {n - 1} "
+                         f"cells of d{name} {cell:g}", hint="fix the archive, or give --spacing and --origin")
+
+    a, c = axis(g["xmin"], g.get("xmax"), g["dx"], w, 1, "x")
+    e, f = axis(g["ymin"], g.get("ymax"), g["dy"], h, -1, "y")
+    return (a, 0.0, c, 0.0, e, f)
 
 
 def _pgm_header(data: bytes, path: str) -> tuple[bytes, int, int, int, int]:

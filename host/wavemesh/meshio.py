@@ -93,8 +93,11 @@ def _open_for_writing(path, binary: bool):
 
 
 def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
-    """``v x y z`` lines, z as ``repr(float(z))``; formatted by one %-format in C, not line by line."""
+    """``v x y z`` lines, z as ``repr(float(z))``; formatted by one %-format in C, not line by line.
+    Float x, y (map coordinates) are written as ``repr`` too."""
     n = len(xy)
+    if xy.dtype.kind == "f":
+        return ("v %r %r %r\n" * n) % tuple(np.column_stack([xy, z]).ravel().tolist())
     flat: list = [None] * (3 * n)
     flat[0::3] = xy[:, 0].tolist()
     flat[1::3] = xy[:, 1].tolist()
@@ -106,12 +109,14 @@ def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
     return ("v %d %d %r\n" * n) % tuple(flat)
 
 
-def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None) -> None:
-    """Write ``mesh`` as a Wavefront OBJ file with z from ``heights`` ((H, W), or (V,) per vertex)."""
+def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
+              xy: np.ndarray | None = None) -> None:
+    """Write ``mesh`` as a Wavefront OBJ file with z from ``heights`` ((H, W), or (V,) per vertex); x and y
+    are the grid positions, or ``xy`` ((V, 2) floats: map coordinates) when given."""
     z = _vertex_z(mesh, heights)
     head = [f"# {_TAG} {mesh.width} {mesh.height}"]
     head += [f"# {c}" if c else "#" for c in _comment_lines(comment)]
-    xy, tris = mesh.xy, mesh.tris
+    xy, tris = (mesh.xy if xy is None else np.asarray(xy, dtype=np.float64)), mesh.tris
     with _open_for_writing(path, binary=False) as f:
         try:
             f.write("\n".join(head) + "\n")
@@ -124,8 +129,9 @@ def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None)
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
-def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None) -> None:
-    """Write ``mesh`` as a binary little-endian PLY file with z from ``heights``."""
+def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
+              xy: np.ndarray | None = None) -> None:
+    """Write ``mesh`` as a binary little-endian PLY file with z from ``heights`` (x, y as write_obj)."""
     z = _vertex_z(mesh, heights)
     V, T = mesh.n_vertices, mesh.n_triangles
     if V >= 1 << 31:
@@ -142,8 +148,8 @@ def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None)
         "end_header",
     ]
     verts = np.empty(V, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
-    verts["x"] = mesh.xy[:, 0]
-    verts["y"] = mesh.xy[:, 1]
+    verts["x"] = mesh.xy[:, 0] if xy is None else xy[:, 0]
+    verts["y"] = mesh.xy[:, 1] if xy is None else xy[:, 1]
     verts["z"] = z
     faces = np.empty(T, dtype=[("n", "u1"), ("v", "<i4", (3,))])
     faces["n"] = 3
@@ -157,30 +163,94 @@ def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None)
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
-def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None) -> None:
-    """Write ``mesh`` as OBJ or PLY, chosen by the extension of ``path`` (``.obj`` / ``.ply``)."""
+def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None, *,
+               ground=None, local: bool = False) -> None:
+    """Write ``mesh`` as OBJ, PLY or glTF binary, chosen by the extension of ``path`` (``.obj`` / ``.ply`` /
+    ``.glb``).  ``ground`` (a wavemesh.georef.Ground) with a georeference puts an OBJ's or PLY's
+    vertices at their map coordinates (less the origin, sample (0, 0)'s, when ``local``) and writes the
+    sidecar ``PATH.georef.json`` naming the CRS and the origin; without one x and y are grid positions."""
     ext = Path(os.fspath(path)).suffix.lower()
+    xy = None
+    if ground is not None and ground.georeferenced and ext in (".obj", ".ply"):
+        from .georef import write_sidecar
+
+        x, y = ground.map_xy(mesh.xy[:, 0], mesh.xy[:, 1])
+        if local:
+            x0, y0 = ground.origin
+            x, y = x - x0, y - y0
+        xy = np.column_stack([x, y])
     if ext == ".obj":
-        write_obj(path, mesh, heights, comment)
+        write_obj(path, mesh, heights, comment, xy)
     elif ext == ".ply":
-        write_ply(path, mesh, heights, comment)
+        write_ply(path, mesh, heights, comment, xy)
+    elif ext == ".glb":
+        write_glb(path, mesh, heights, ground, comment)
+        return
     else:
         raise InputError(
-            f"cannot tell the mesh format of {os.fspath(path)}: the name must end in .obj or .ply",
+            f"cannot tell the mesh format of {os.fspath(path)}: the name must end in .obj, .ply or .glb",
         )
+    if xy is not None:
+        write_sidecar(ground, path, local)
+    else:  # grid coordinates: a sidecar left by an earlier run would misplace them
+        from .georef import sidecar_path
+
+        sidecar_path(path).unlink(missing_ok=True)
+
+
+def write_glb(path, mesh: Mesh, heights: np.ndarray, ground=None, comment: str | None = None) -> None:
+    """Write ``mesh`` as a glTF 2.0 binary (.glb) through trimesh: glTF's frame (metres, +Y up, +Z toward
+    the viewer: east, up, south) relative to sample (0, 0), positions as float32.  ``ground`` (a
+    wavemesh.georef.Ground; None: the grid in grid steps) gives (east, north); the scene's ``extras``
+    (trimesh writes a scene's metadata there) name the CRS, the origin and the grid, as the sidecar does."""
+    import trimesh  # imported here: only .glb needs it
+
+    from .georef import grid_ground
+
+    z = _vertex_z(mesh, heights)
+    g = ground or grid_ground(mesh.width, mesh.height)
+    east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
+    # glTF triangles are counter-clockwise seen from their front (above, in (east, north)): the grid's are
+    # counter-clockwise in (col, row), whose row 0 (east, north) always puts north: a mirror, so reversed.
+    tris = mesh.tris[:, ::-1]
+    verts = np.column_stack([east, z, -north])
+    tm = trimesh.Trimesh(vertices=verts, faces=tris, process=False, validate=False)
+    x0, y0 = g.origin
+    extras = {"wavemesh": {"grid": [mesh.width, mesh.height], "crs": g.crs, "map_unit": g.map_unit,
+                           "origin_map": [x0, y0], "transform": list(g.transform),
+                           "frame": "x east, y up, z south, in ground units from sample (0, 0)",
+                           "comment": comment or ""}}
+    try:
+        data = trimesh.exchange.gltf.export_glb(trimesh.Scene(tm, metadata=extras), include_normals=False)
+    except (ValueError, TypeError) as e:
+        raise InputError(f"cannot write {os.fspath(path)}: {e}") from None
+    with _open_for_writing(path, binary=True) as f:
+        try:
+            f.write(data)
+        except OSError as e:
+            raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
 # --------------------------------------------------------------------------------------------
 # Reading
 
 
-def read_mesh(path, width: int | None = None, height: int | None = None) -> tuple[Mesh, np.ndarray]:
+def read_mesh(path, width: int | None = None, height: int | None = None,
+              to_grid=None) -> tuple[Mesh, np.ndarray]:
     """Read an OBJ or PLY mesh file; return the mesh and the z of each vertex (float64).
 
     The grid size is taken from the ``wavemesh W H`` comment when the file has one
     (``width``/``height``, when given, must then agree), else from ``width`` and
     ``height``, else from the largest vertex coordinates (max x + 1, max y + 1).
+    ``to_grid(x, y) -> (col, row)`` maps vertex coordinates in map units to grid positions
+    (wavemesh.georef.to_grid); by default the sidecar ``PATH.georef.json``, when there is one, does.
     """
+    if to_grid is None:
+        from .georef import read_sidecar
+        from .georef import to_grid as placing
+
+        placed = read_sidecar(path)
+        to_grid = placing(*placed) if placed else None
     name = os.fspath(path)
     try:
         data = Path(name).read_bytes()
@@ -193,6 +263,8 @@ def read_mesh(path, width: int | None = None, height: int | None = None) -> tupl
             raise _Bad("not a PLY file (it does not start with a 'ply' line)")
         else:
             x, y, z, tris, comments, base = _parse_obj(data)
+        if to_grid is not None:
+            x, y = to_grid(x, y)
         return _finish(x, y, z, tris, comments, base, width, height)
     except _Bad as e:
         raise InputError(f"{name}: {e}") from None

@@ -94,11 +94,11 @@ def _check_view(view: str) -> None:
         raise InputError(f"unknown view '{view}' (choose from {', '.join(_VIEWS)})")
 
 
-def _default_zscale(width: int, height: int, zrange: float) -> float:
-    """Vertical scale that makes the z extent 0.25 * max(W-1, H-1) grid units (1 for flat data)."""
+def _default_zscale(extent: float, zrange: float) -> float:
+    """Vertical scale that makes the z extent 0.25 * the larger horizontal extent (1 for flat data)."""
     if not (zrange > 0) or not math.isfinite(zrange):
         return 1.0
-    return 0.25 * max(width - 1, height - 1, 1) / zrange
+    return 0.25 * max(extent, 1.0) / zrange
 
 
 def _edge_width(n_tris: int, base: float = 0.5) -> float:
@@ -126,8 +126,9 @@ def _fit_limits(ax, x0, x1, y0, y1, box_w: float, box_h: float) -> None:
 
 
 def _draw(ax, box_w: float, box_h: float, mesh: Mesh, z, *, view: str, wireframe: bool,
-          zscale: float | None, elev: float, azim: float, edge_base: float = 0.5) -> None:
-    """Draw the shaded mesh into ``ax`` (axes box of box_w x box_h pixels)."""
+          zscale: float | None, elev: float, azim: float, edge_base: float = 0.5, en=None) -> float:
+    """Draw the shaded mesh into ``ax`` (axes box of box_w x box_h pixels); returns the zscale used.
+    ``en``: per-vertex (east, north) in the heights' unit (true aspect); default (col, -row)."""
     ax.set_axis_off()
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     if z.shape[0] != mesh.n_vertices:
@@ -141,12 +142,15 @@ def _draw(ax, box_w: float, box_h: float, mesh: Mesh, z, *, view: str, wireframe
     zmin = float(zf.min()) if zf.size else 0.0
     zmax = float(zf.max()) if zf.size else 0.0
     zrange = zmax - zmin
+    if en is None:
+        en = np.column_stack([xy[:, 0], -xy[:, 1]])
+    en = np.asarray(en, dtype=np.float64)
     if zscale is None:
-        zscale = _default_zscale(mesh.width, mesh.height, zrange)
+        zscale = _default_zscale(float(np.ptp(en, axis=0).max()) if len(en) else 0.0, zrange)
     zz = np.where(finite, z - zmin, 0.0) * float(zscale)
 
-    # Physical right-handed frame: east = x, north = -row, up = z * zscale.
-    P = np.column_stack([xy[:, 0], -xy[:, 1], zz])
+    # Physical right-handed frame: east, north, up = z * zscale.
+    P = np.column_stack([en[:, 0], en[:, 1], zz])
 
     if view == "top":
         sx, sy = P[:, 0], P[:, 1]
@@ -165,10 +169,14 @@ def _draw(ax, box_w: float, box_h: float, mesh: Mesh, z, *, view: str, wireframe
     if len(tris):
         sx_t, sy_t = sx[tris], sy[tris]
         if depth is not None and elev > 0:
-            # Front faces are clockwise on screen (the mesh is CCW in (x, row), mirrored by north = -row).
+            # Front faces keep on screen the turn they have seen from above in (east, north) (the grid's
+            # CCW in (x, row) is clockwise there when north = -row, as without a georeference).
             area = ((sx_t[:, 1] - sx_t[:, 0]) * (sy_t[:, 2] - sy_t[:, 0])
                     - (sx_t[:, 2] - sx_t[:, 0]) * (sy_t[:, 1] - sy_t[:, 0]))
-            keep = area < 0
+            e0, e1, e2 = P[tris[:, 0], :2], P[tris[:, 1], :2], P[tris[:, 2], :2]
+            turn = ((e1[:, 0] - e0[:, 0]) * (e2[:, 1] - e0[:, 1])
+                    - (e2[:, 0] - e0[:, 0]) * (e1[:, 1] - e0[:, 1]))
+            keep = area * turn > 0
             tris, sx_t, sy_t = tris[keep], sx_t[keep], sy_t[keep]
         if depth is not None:
             order = np.argsort(depth[tris].mean(axis=1), kind="stable")  # far first
@@ -201,6 +209,7 @@ def _draw(ax, box_w: float, box_h: float, mesh: Mesh, z, *, view: str, wireframe
     else:
         _fit_limits(ax, 0.0, float(max(mesh.width - 1, 1)), -float(max(mesh.height - 1, 1)), 0.0,
                     box_w, box_h)
+    return float(zscale)
 
 
 # ----------------------------------------------------------------------------- public API
@@ -226,11 +235,14 @@ def grid_mesh(xs: np.ndarray, ys: np.ndarray, width: int, height: int) -> Mesh:
 
 def render_mesh(mesh: Mesh, z: np.ndarray, path, *, view: str = "3d", wireframe: bool = True,
                 zscale: float | None = None, size: tuple[int, int] = (800, 600), title: str | None = None,
-                elev: float = 35.0, azim: float = -60.0) -> None:
+                elev: float = 35.0, azim: float = -60.0, en=None, label: bool = False) -> None:
     """Render ``mesh`` with per-vertex heights ``z`` to a picture file (.png, .svg, .pdf, ...).
 
-    ``zscale`` multiplies heights for the 3d view and the shading; by default the z
-    extent becomes 0.25 * max(W-1, H-1) grid units (1 when all heights are equal).
+    ``en`` is each vertex's (east, north) in the heights' unit (wavemesh.georef.Ground.ground_xy: true
+    aspect); by default (col, -row), one grid step a height unit.  ``zscale`` (the vertical
+    exaggeration) multiplies heights for the 3d view and the shading; by default the z extent becomes
+    a quarter of the larger horizontal extent (1 when all heights are equal).  ``label`` writes the
+    exaggeration used into the picture's lower left corner.
     """
     _check_view(view)
     p = _check_path(path)
@@ -242,7 +254,12 @@ def render_mesh(mesh: Mesh, z: np.ndarray, path, *, view: str = "3d", wireframe:
         fig.text(0.5, 1.0 - 4.0 / h_px, title, ha="center", va="top", fontsize=11)
     ax_h = max(h_px - title_px, 1)
     ax = fig.add_axes((0.0, 0.0, 1.0, ax_h / h_px))
-    _draw(ax, w_px, ax_h, mesh, z, view=view, wireframe=wireframe, zscale=zscale, elev=elev, azim=azim)
+    used = _draw(ax, w_px, ax_h, mesh, z, view=view, wireframe=wireframe, zscale=zscale, elev=elev, azim=azim,
+                 en=en)
+    if label and view == "3d":
+        how = "true aspect" if used == 1 else ("automatic" if zscale is None else "--exaggeration")
+        fig.text(4.0 / w_px, 4.0 / h_px, f"vertical exaggeration {used:.3g}x ({how})", ha="left", va="bottom",
+                 fontsize=9, color="0.25")
     _save(fig, p)
 
 
