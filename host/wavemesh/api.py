@@ -47,7 +47,7 @@ from wavemesh.stream import (
     samples_crc,
 )
 
-MAX_LEVELS = 12  # the model's limit (16-bit approximations, 18-bit details at every level)
+MAX_LEVELS = P.MAX_LEVELS  # the model's limit (protocol.py, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
 MESH_SUFFIXES = (".obj", ".ply")
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
@@ -407,25 +407,47 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
 
 class _Progress:
     """A progress bar on stderr (tqdm) fed absolute counts with a note, as Device.upload feeds it: redrawn
-    in place on a terminal; elsewhere (logs, tests) only its first and last lines are written."""
+    in place on a terminal; elsewhere (logs, tests) only its last line, when it finishes.  A context
+    manager: leaving it early (an error) ends a terminal's bar with a newline, so the error line starts
+    a line of its own."""
+
+    FORMAT = "{desc:<9} [{bar:28}] {percentage:5.1f}%{postfix}"
 
     def __init__(self, label: str, total: int, enabled: bool):
         from tqdm import tqdm  # only when a bar is drawn
 
-        tty = sys.stderr.isatty()
-        self.bar = tqdm(total=total, desc=label, file=sys.stderr, disable=not enabled, ascii=".#",
-                        bar_format="{desc:<9} [{bar:28}] {percentage:5.1f}%{postfix}",
-                        mininterval=0.1 if tty else float("inf"), dynamic_ncols=tty)
+        self.tqdm, self.label, self.total, self.enabled = tqdm, label, total, enabled
+        self.done, self.note, self.t0 = 0, "", time.monotonic()
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            self.bar = tqdm(total=total, desc=label, file=sys.stderr, ascii=".#", bar_format=self.FORMAT,
+                            mininterval=0.1, dynamic_ncols=True)
+
+    def __enter__(self) -> _Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+        self.enabled = False
 
     def update(self, done: int, note: str | None = None) -> None:
+        self.done = done
         if note is not None:
-            self.bar.set_postfix_str(note, refresh=False)
-        self.bar.update(done - self.bar.n)
+            self.note = note
+        if self.bar is not None:
+            self.bar.set_postfix_str(self.note, refresh=False)
+            self.bar.update(done - self.bar.n)
 
     def finish(self, note: str | None = None) -> None:
         if note is not None:
-            self.bar.set_postfix_str(note, refresh=False)
-        self.bar.close()
+            self.update(self.done, note)
+        if self.bar is None and self.enabled:  # not a terminal: the last line alone
+            print(self.tqdm.format_meter(self.done, self.total, time.monotonic() - self.t0, prefix=self.label,
+                                         ascii=".#", bar_format=self.FORMAT, postfix=self.note),
+                  file=sys.stderr, flush=True)
+        self.__exit__()
 
 
 def device_fit_hint(hf: HeightField, info: DeviceInfo) -> str | None:
@@ -500,27 +522,27 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
             say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {p.zeta:g} ({p.metric}), "
                 f"budget {p.max_triangles} triangles{budget_note}")
         kib = 2 * hf.width * hf.height / 1024
-        bar = _Progress("heights", hf.width * hf.height, progress)
-        t0 = time.monotonic()
-        sent = dev.upload(hf.samples, bar)
-        upload_s = time.monotonic() - t0
-        bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
-        work = _Progress("device", m if full else 1, progress)
+        with _Progress("heights", hf.width * hf.height, progress) as bar:
+            t0 = time.monotonic()
+            sent = dev.upload(hf.samples, bar)
+            upload_s = time.monotonic() - t0
+            bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
         got: list = []
+        with _Progress("device", m if full else 1, progress) as work:
 
-        def on_progress(x: dict) -> None:
-            name = STAGE_NAMES.get(x["stage"], "?")
-            lvl = f" level {x['level']}" if x["stage"] in (P.Stage.REFINE, P.Stage.EMIT) else ""
-            work.update(len(got), f"{name}{lvl}")
+            def on_progress(x: dict) -> None:
+                name = STAGE_NAMES.get(x["stage"], "?")
+                lvl = f" level {x['level']}" if x["stage"] in (P.Stage.REFINE, P.Stage.EMIT) else ""
+                work.update(len(got), f"{name}{lvl}")
 
-        def on_level(lv) -> None:
-            got.append(lv)
-            work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
+            def on_level(lv) -> None:
+                got.append(lv)
+                work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
 
-        t1 = time.monotonic()
-        levels, done = dev.run(samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
-        job_s = time.monotonic() - t1
-        work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
+            t1 = time.monotonic()
+            levels, done = dev.run(samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
+            job_s = time.monotonic() - t1
+            work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
         link = dev.link.stats
 
     for lv in levels:

@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wavemesh.protocol import MAX_LEVELS  # one source: the protocol's limits, wm_protocol.h
 from wavemesh.spline import spline_step
 
-MAX_LEVELS = 12  # 16-bit samples: a' stays 16 bits, details 18 bits at every level
 DETAIL_BITS = 18  # signed width of d1, d2, d3 (|d| <= 2 * 65535)
 APPROX_BITS = 16  # unsigned width of a
 

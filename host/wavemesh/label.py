@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wavemesh.haar import HaarLevel
+from wavemesh.protocol import TAU_MAX  # one source: the wire protocol's CONFIG range, wm_protocol.h
 from wavemesh.templates import (
     KIND_DIAGONAL,
     KIND_FLAT,
@@ -43,8 +44,6 @@ from wavemesh.templates import (
     SIDE_TOP,
     template_set,
 )
-
-TAU_MAX = (1 << 18) - 1  # a threshold no 18-bit detail exceeds: every block flat
 
 
 def block_edges(n: int, size: int) -> np.ndarray:

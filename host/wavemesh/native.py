@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wavemesh import protocol as P
 from wavemesh.errors import WavemeshError
 from wavemesh.haar import HaarLevel
 from wavemesh.mesh import Mesh
@@ -36,18 +37,10 @@ FIRMWARE = ROOT / "firmware"
 BUILD = ROOT / "build" / "firmware-native"
 LIB_NAME = "libwavemesh.so"
 
-WM_OK, WM_ERR_CAPACITY = 0, -3
-ERRORS = {
-    -1: "an argument is out of range",
-    -2: "the storage is smaller than the library's bound",
-    -3: "the triangle capacity is exhausted",
-    -4: "the initial triangulation is not a proper triangulation of the grid rectangle",
-    -5: "the refiner has already finished",
-    -6: "an operator's precondition fails",
-}
+WM_OK, WM_ERR_CAPACITY = 0, -3  # wavemesh.h's (tests/host/test_native_abi.py); the texts: wm_strerror
 METRICS = {"normal": 0, "vertical": 1}
 NEIGHBOURHOODS = {"face": 0, "vertex": 1}
-MAX_SIDE = 32767  # WM_MAX_SIDE
+MAX_SIDE = P.MAX_SIDE  # WM_MAX_SIDE (protocol.py is the one source; src/job.c checks the header)
 U32 = (1 << 32) - 1
 U64 = (1 << 64) - 1
 
@@ -181,6 +174,7 @@ def _declare(lib: ctypes.CDLL) -> None:
     pi32 = ctypes.POINTER(ctypes.c_int32)
     sig = {
         "wm_abi_size": (sz, [ctypes.c_int]),
+        "wm_strerror": (ctypes.c_char_p, [ctypes.c_int]),
         "wm_refine_bound": (sz, [i32, i32, i32]),
         "wm_tri_cap_max": (i32, [i32, i32]),
         "wm_refine_init": (ctypes.c_int, [ctypes.POINTER(vp), vp, sz, ctypes.POINTER(Field),
@@ -201,6 +195,11 @@ def _declare(lib: ctypes.CDLL) -> None:
         fn = getattr(lib, name)
         fn.restype = res
         fn.argtypes = args
+
+
+def error_text(code: int) -> str:
+    """The library's own text for one of its error codes (wm_strerror)."""
+    return load().wm_strerror(code).decode("ascii", "replace")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -388,7 +387,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     cap = params.capacity if params.capacity is not None else lib.wm_tri_cap_max(width, height)
     out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height)
     if code != WM_OK:
-        what = ERRORS.get(code, f"error {code}")
+        what = error_text(code)
         if code == WM_ERR_CAPACITY:
             raise WavemeshError(f"refiner: {what} (storage for {cap} triangles)",
                                 hint="raise --capacity or set --max-triangles")
@@ -444,5 +443,5 @@ def haar_details(samples: np.ndarray, levels: int) -> np.ndarray:
     code = lib.wm_haar(_ptr(samples, ctypes.c_uint16), width, height, levels, _ptr(out, ctypes.c_int32),
                        _ptr(scratch, ctypes.c_uint16))
     if code != WM_OK:
-        raise WavemeshError(f"wm_haar: {ERRORS.get(code, code)}")
+        raise WavemeshError(f"wm_haar: {error_text(code)}")
     return out

@@ -40,8 +40,10 @@ MAX_PAYLOAD = 1024  # largest payload of any frame, both ways (the device's rece
 MAX_FRAME = HEADER_BYTES + MAX_PAYLOAD + CRC_BYTES  # largest frame before SLIP encoding
 
 # --- limits a device may not exceed (HELLO states its own, at most these) -------------------------
-MAX_SIDE = 32767  # largest W or H (the refiner's WM_MAX_SIDE)
-MAX_LEVELS = 12  # largest M (the refiner's WM_MAX_LEVELS)
+# The model's limits too: wavemesh.haar, label, api and native take them from here, and the device
+# code checks at compile time that the refiner's WM_MAX_SIDE, WM_MAX_LEVELS equal these (src/job.c).
+MAX_SIDE = 32767  # largest W or H (every exact product of the refiner within 64 bits)
+MAX_LEVELS = 12  # largest M (16-bit approximations, 18-bit details at every level)
 MAX_WINDOW = 16  # most DATA frames a host may have unacknowledged
 TAU_MAX = (1 << 18) - 1  # largest tau in coefficient units (every 18-bit detail below it: all flat)
 
