@@ -31,7 +31,8 @@ GDAL.
   formats.  The raster must hold one band and one image.  Samples GDAL masks
   (equal to the band's no-data value, or masked by the file's mask band) become
   NaN; a band scale and offset are applied.  The georeference is kept in
-  ``HeightField.transform`` and ``HeightField.crs``; it plays no part in the mesh.
+  ``HeightField.transform`` and ``HeightField.crs`` (an .npz's ``dx``, ``dy``, ``xmin``, ``ymin``
+  too, :func:`_npz_transform`); :mod:`wavemesh.georef` derives the cell size and the coordinates.
   An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers (GDAL itself
   would read missing samples or text as 0 without a word).
 
