@@ -5,8 +5,10 @@
  * engine.  Direct mapped, LINES lines of LINE_WORDS 32-bit words; write through with no write
  * allocate, through a one-word posted write buffer.
  *
- *   read hit    2 cycles, like the SoC's block RAMs (request, then cpu_ready with the registered
- *               word): tag and data are LUT RAM, read asynchronously in the request cycle
+ *   read hit    2 cycles, like the SoC's block RAMs (request, then cpu_ready with the word): the
+ *               tags are LUT RAM, read asynchronously in the request cycle; the data are read at
+ *               the CPU's address at every edge (synchronous: LUT RAM and a register when small,
+ *               block RAM when large)
  *   read miss   the line is filled from its first halfword (2 * LINE_WORDS column reads, issued
  *               after any posted write); the word is answered as soon as its two halfwords are in
  *               (early restart), and the CPU's next access waits for the rest of the line
@@ -106,7 +108,7 @@ wire [IDX_BITS+OFF_BITS-1:0] cpu_slot = cpu_word[IDX_BITS+OFF_BITS-1:0];   // {i
 wire [IDX_BITS-1:0] snoop_index = snoop_addr[1+OFF_BITS +: IDX_BITS];
 wire [HW_ADDR_BITS-1:0] snoop_addr_unused = snoop_addr;   // only its index bits matter
 
-// storage: LUT RAM, read asynchronously at the CPU's address (no reset)
+// storage (no reset): tags read asynchronously, data synchronously, both at the CPU's address
 reg [TAG_BITS-1:0] tag_mem[0:LINES-1];
 reg [7:0] lane0_mem[0:DEPTH-1];
 reg [7:0] lane1_mem[0:DEPTH-1];
@@ -116,7 +118,6 @@ reg [7:0] lane3_mem[0:DEPTH-1];
 reg [1:0] state_reg = S_IDLE, state_next;
 reg [LINES-1:0] valid_reg = {LINES{1'b0}}, valid_next;
 reg ready_reg = 1'b0, ready_next;
-reg [31:0] rdata_reg = 32'd0, rdata_next;
 
 // the line being filled
 reg [CNT_BITS-1:0] fill_issue_reg = {CNT_BITS{1'b0}}, fill_issue_next;   // halfwords requested
@@ -136,8 +137,8 @@ reg [1:0] wb_pend_reg = 2'b00, wb_pend_next;
 
 wire request = cpu_valid && !ready_reg;
 wire hit = valid_reg[cpu_index] && tag_mem[cpu_index] == cpu_tag;
-wire [31:0] line_word = {lane3_mem[cpu_slot], lane2_mem[cpu_slot], lane1_mem[cpu_slot],
-                         lane0_mem[cpu_slot]};
+// the word at the CPU's address, read at every edge (synchronous: block RAM when the cache is large)
+reg [31:0] line_word_reg = 32'd0;
 
 // a write is taken when the buffer is empty; a hit also goes into the line
 wire take_write = state_reg == S_IDLE && request && cpu_wstrb != 4'd0 && wb_pend_reg == 2'b00;
@@ -175,13 +176,12 @@ assign m_wdata = wb_lo ? wb_data_reg[15:0] : wb_data_reg[31:16];
 assign m_wmask = wb_lo ? ~wb_strb_reg[1:0] : ~wb_strb_reg[3:2];
 
 assign cpu_ready = ready_reg;
-assign cpu_rdata = rdata_reg;
+assign cpu_rdata = line_word_reg;   // read at the edge that raised cpu_ready
 
 always @* begin
     state_next = state_reg;
     valid_next = valid_reg;
     ready_next = 1'b0;
-    rdata_next = rdata_reg;
     fill_issue_next = fill_issue_reg;
     fill_recv_next = fill_recv_reg;
     fill_stale_next = fill_stale_reg;
@@ -197,8 +197,7 @@ always @* begin
         S_IDLE: begin
             if (request && cpu_wstrb == 4'd0) begin
                 if (hit) begin
-                    // read hit: the word now
-                    rdata_next = line_word;
+                    // read hit: the word, read at this edge
                     ready_next = 1'b1;
                 end else begin
                     // read miss: fill the line (after the posted write, which goes first)
@@ -221,8 +220,8 @@ always @* begin
                 fill_issue_next = fill_issue_reg + 1'b1;
             end
             if (!fill_answered_reg && fill_recv_reg == fill_word_in) begin
-                // early restart: the CPU's word is in (written at the last edge); the fill goes on
-                rdata_next = line_word;
+                // early restart: the CPU's word is in (its halfwords written at earlier edges), read
+                // at this one; the fill goes on
                 ready_next = 1'b1;
                 fill_answered_next = 1'b1;
             end
@@ -238,7 +237,6 @@ always @* begin
         end
         default: begin
             // S_DONE: answer from the filled line (its last halfword was written at the last edge)
-            rdata_next = line_word;
             ready_next = 1'b1;
             state_next = S_IDLE;
         end
@@ -255,6 +253,7 @@ end
 
 // storage
 always @(posedge clk) begin
+    line_word_reg <= {lane3_mem[cpu_slot], lane2_mem[cpu_slot], lane1_mem[cpu_slot], lane0_mem[cpu_slot]};
     if (wr_lanes[0]) begin
         lane0_mem[wr_slot] <= wr_bytes[7:0];
     end
@@ -277,7 +276,6 @@ always @(posedge clk) begin
     state_reg <= state_next;
     valid_reg <= valid_next;
     ready_reg <= ready_next;
-    rdata_reg <= rdata_next;
     fill_issue_reg <= fill_issue_next;
     fill_recv_reg <= fill_recv_next;
     fill_stale_reg <= fill_stale_next;

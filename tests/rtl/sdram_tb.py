@@ -14,7 +14,8 @@ datum).  A violation is recorded, not raised, so the negative test can count the
 The scoreboard is separate: the bench keeps what each port wrote (halfword -> value, the chip's
 power-up contents from `initial_value`) and compares every CPU word and every stream halfword read.
 
-Environment: SDRAM_CLK_HZ, SDRAM_CL, SDRAM_SEED; SDRAM_BENCH_OUT (bench/bench_sdram.py's cycles).
+Environment: SDRAM_CLK_HZ, SDRAM_CL, SDRAM_SEED, SDRAM_LINE_WORDS (the build's parameters);
+SDRAM_BENCH_OUT (bench/bench_sdram.py's cycles).
 Run through tests/rtl/test_sdram.py, never directly.
 """
 
@@ -35,7 +36,7 @@ SEED = int(os.environ.get("SDRAM_SEED", "1"))
 T_PS = 10**12 // CLK_HZ
 ROW_BITS, COL_BITS = 13, 9
 ADDR_BITS = ROW_BITS + 2 + COL_BITS      # halfword address {row, bank, column}
-LINE_HW = 8                              # the cache's line: 4 words
+LINE_HW = 2 * int(os.environ.get("SDRAM_LINE_WORDS", "4"))   # the cache's line in halfwords
 
 # the ULX3S's parts, worst case (datasheets: MT48LC16M16A2-75, IS42S16160G-7, AS4C32M16SB-7), in ps
 DATASHEET = {
@@ -434,10 +435,10 @@ async def test_cpu_port(dut):
     # last word when it is; the line's other words then hit
     first, last = [], []
     for k in range(4):
-        first.append((await tb.cpu(join(5, 2, 64 + 8 * k) << 1))[1])
+        first.append((await tb.cpu(join(5, 2, 64 + LINE_HW * k) << 1))[1])
         await tb.cycles(LINE_HW + 4)
     for k in range(4):
-        last.append((await tb.cpu(join(6, 2, 8 * k + 6) << 1))[1])   # other lines
+        last.append((await tb.cpu(join(6, 2, LINE_HW * k + LINE_HW - 2) << 1))[1])   # other lines
         await tb.cycles(LINE_HW + 4)
     assert max(first[1:]) + 4 <= min(last[1:]), (first, last)          # [0]: the row was closed
     await tb.cycles(LINE_HW + 4)
