@@ -8,14 +8,15 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 
     wavemesh stream jacksboro_fault_dem.npz --key elevation --decimate N --zeta Z ... --port socket://...
 
-(the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples at 10 m.  The simulated board
-gets it decimated by 8 to 51 x 43 with zeta 10 m, within the board's triangle storage (docs/soc.md,
-"Default sizes"): the refiner on the soft CPU costs about 10^5 cycles per triangle today
-(docs/benchmarks.md) and the simulator runs a few million cycles per second, so this takes a minute
-or two.  The native stand-in device gets it
-decimated by 2 to 202 x 172 with zeta 15 m.)  It writes the mesh, every level's mesh, a picture and
-a report into --out, checks the mesh, and stops the device.  Exit status: that of `wavemesh stream`
-(0, or 3 when the budget stopped it).
+(the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples of 3 arc-seconds, 74.6 m x
+92.5 m, whose ridges the normal metric now sees in ground units.  The simulated board gets it
+decimated by 16 to 26 x 22 with zeta 10 m, 825 triangles, within the board's triangle storage
+(docs/soc.md, "Default sizes"; decimated by 8 it needs 3037): the refiner on the soft CPU costs about
+10^5 cycles per triangle today (docs/benchmarks.md) and the simulator runs a few million cycles per
+second, so this takes a minute or two.  The native stand-in device, given storage for 65536
+triangles, gets it decimated by 2 to 202 x 172 with zeta 15 m, 14694 triangles.)  It writes the mesh,
+every level's mesh, a picture and a report into --out, checks the mesh, and stops the device.  Exit
+status: that of `wavemesh stream` (0, or 3 when the budget stopped it).
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 VENV_BIN = Path(sys.executable).parent
 # Per device: the input and bound (see the docstring for why)
-STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "8", "--zeta", "10"],
+STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "16", "--zeta", "10"],
                "native": ["--key", "elevation", "--decimate", "2", "--zeta", "15"]}
 START_TIMEOUT = 20.0  # s for the device to say it is listening
+NATIVE_TRIANGLES = 65536  # the native stand-in's storage: Jacksboro / 2 at 15 m ends at 14694 triangles
 
 
 def device_command(kind: str, mode: str) -> list[str]:
@@ -43,7 +45,7 @@ def device_command(kind: str, mode: str) -> list[str]:
         from wavemesh.harness.nativedev import build_wmdev
 
         print("demo: building the native stand-in device (firmware/board/native)", flush=True)
-        return [str(build_wmdev()), "--port", "0"]
+        return [str(build_wmdev()), "--port", "0", "--tri-capacity", str(NATIVE_TRIANGLES)]
     from wavemesh.harness.simboard import build  # sim/build.py as a module
 
     print("demo: building the board firmware and the simulated board (about a minute the first time)",
