@@ -77,8 +77,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from wavemesh.errors import InputError
+from wavemesh.protocol import MAX_SIDE
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
+# A raster's header can claim any size (300 bytes of TIFF saying 6 x 1.6e9 samples): one larger than the
+# refiner's largest grid is refused before GDAL reads it into memory.
+MAX_SAMPLES = MAX_SIDE * MAX_SIDE
 
 SUPPORTED_FORMATS = (
     ".npy, .npz, .pgm (P2/P5), .png, and through GDAL: .tif/.tiff (GeoTIFF), .asc (ESRI ASCII grid), "
@@ -644,6 +648,12 @@ def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, .
                     raise InputError(
                         f"{what} has {ds.count} bands ({ds.height} x {ds.width}); a height field needs "
                         f"a single band, extract one (e.g. gdal_translate -b 1)"
+                    )
+                if ds.width * ds.height > MAX_SAMPLES:
+                    raise InputError(
+                        f"{what} is {ds.width} x {ds.height} samples, more than any grid wavemesh meshes "
+                        f"({MAX_SAMPLES} samples: {MAX_SIDE} x {MAX_SIDE})",
+                        hint="cut a window or shrink it first (gdal_translate -srcwin or -outsize)",
                     )
                 if ds.driver == "AAIGrid":
                     _check_ascii_grid(path, ds.height, ds.width)

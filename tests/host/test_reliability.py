@@ -20,10 +20,14 @@ from wavemesh.meshio import read_mesh
 from wavemesh.outputs import Outputs
 
 
-def wavemesh(*args, fsize=None, cwd=None):
+def wavemesh(*args, fsize=None, memory=None, cwd=None):
     """The command in a subprocess (what a user sees on stderr, GDAL's and numpy's lines included),
-    with a file size limit (ulimit -f, bytes) when given."""
-    limit = None if fsize is None else (lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize)))
+    with a file size limit (ulimit -f, bytes) and an address space limit (ulimit -v, bytes) when given."""
+    def limit():
+        for what, value in ((resource.RLIMIT_FSIZE, fsize), (resource.RLIMIT_AS, memory)):
+            if value is not None:
+                resource.setrlimit(what, (value, value))
+
     return subprocess.run([sys.executable, "-m", "wavemesh", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, timeout=300, preexec_fn=limit)
 
@@ -158,6 +162,21 @@ def test_garbage_tiff_gives_one_error_line(tmp_path):
     (tmp_path / "r.tif").write_bytes(b"II*\x00" + bytes(range(256)) * 4)
     r = wavemesh("mesh", tmp_path / "r.tif", "-o", tmp_path / "r.obj")
     assert r.returncode == 2 and "r.tif" in one_error(r.stderr)
+
+
+def test_a_raster_claiming_billions_of_samples_is_refused_before_reading(tmp_path):
+    """300 bytes of TIFF saying 6 x 1.6e9 samples once took GDAL 11 GB and minutes (found by the fuzzer)."""
+    tifffile.imwrite(tmp_path / "h.tif", np.zeros((8, 6), np.uint8))
+    data = bytearray((tmp_path / "h.tif").read_bytes())
+    ifd = int.from_bytes(data[4:8], "little")
+    for k in range(int.from_bytes(data[ifd:ifd + 2], "little")):
+        entry = ifd + 2 + 12 * k
+        if int.from_bytes(data[entry:entry + 2], "little") == 257:  # ImageLength, a LONG in place
+            data[entry + 2:entry + 4] = (4).to_bytes(2, "little")
+            data[entry + 8:entry + 12] = (1_660_944_389).to_bytes(4, "little")
+    (tmp_path / "h.tif").write_bytes(bytes(data))
+    r = wavemesh("mesh", tmp_path / "h.tif", "-o", tmp_path / "h.obj", memory=4 << 30)
+    assert r.returncode == 2 and "6 x 1660944389 samples, more than any grid" in one_error(r.stderr)
 
 
 def test_library_warnings_stay_off_stderr(tmp_path):
