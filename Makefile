@@ -133,7 +133,7 @@ format: $(SETUP_STAMP)
 PICORV32_DIR = $(shell $(VPY) -c 'import pythondata_cpu_picorv32 as p; print(p.data_location)')
 
 lint: $(SETUP_STAMP) gen
-	$(VPY) -m ruff check host tests tools bench
+	$(VPY) -m ruff check host tests tools bench fuzz
 	$(CLANG_FORMAT) --dry-run -Werror $(C_SOURCES)
 	@for f in rtl/*.v rtl/boards/*.v; do \
 	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y rtl/boards -y $(PICORV32_DIR) rtl/lint.vlt \
