@@ -26,7 +26,7 @@ from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
-from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, to_grid
+from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, sidecar_path, to_grid
 from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, initial_triangulation
@@ -49,7 +49,7 @@ from wavemesh.stream import (
 
 MAX_LEVELS = P.MAX_LEVELS  # the model's limit (protocol.py, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
-MESH_SUFFIXES = (".obj", ".ply")
+MESH_SUFFIXES = (".obj", ".ply", ".glb")
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
 
 
@@ -638,6 +638,9 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
         if render:
             _render(result.mesh, result.mesh.z(hf.values), str(staged.path(render)), g, exaggeration,
                     title=title)
+    if not g.georeferenced:  # grid coordinates: a sidecar an earlier run left would misplace them
+        for path in (out, *written):
+            sidecar_path(path).unlink(missing_ok=True)
     return written
 
 

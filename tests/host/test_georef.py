@@ -99,6 +99,12 @@ def test_plain_input_stays_in_grid_steps(tmp_path):
     assert np.array_equal(raw[:, :2], np.round(raw[:, :2])) and not (tmp_path / "h.obj.georef.json").exists()
     g = georef.ground(load_heightfield(tmp_path / "h.npy"))
     assert not g.georeferenced and g.spacing == (1.0, 1.0)
+    # a sidecar left by a georeferenced run goes when the file is rewritten in grid steps
+    assert run("mesh", tmp_path / "h.npy", "-o", out, "--spacing", "30", "-q") == 0
+    assert (tmp_path / "h.obj.georef.json").exists()
+    assert run("mesh", tmp_path / "h.npy", "-o", out, "-q") == 0
+    assert not (tmp_path / "h.obj.georef.json").exists()
+    assert run("check", out, "--against", tmp_path / "h.npy") == 0
 
 
 def test_npz_georeference_as_matplotlib_gives_it(tmp_path):
