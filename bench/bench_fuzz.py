@@ -58,9 +58,13 @@ def markdown(data: dict) -> str:
         total_exec += r["execs"]
         total_crash += r["crashes"]
     found = [f for r in data["targets"] for f in r["findings"]]
+    short = [r["target"] for r in data["targets"] if r["cpu_seconds"] < 0.98 * data["cpu_per_target"]]
     return "\n".join([
-        f"On {data['commit']}, at nice {data['nice']}, {data['cpu_per_target']:.0f} CPU seconds per harness "
-        f"(`FUZZ_CPU`): {total_cpu / 3600:.2f} CPU hours, {total_exec:,} executions, {total_crash} crashes"
+        f"On {data['commit']}, at nice {data['nice']}, a budget of {data['cpu_per_target']:.0f} CPU seconds "
+        f"per harness (`FUZZ_CPU`)"
+        + (f", stopped before it was spent ({', '.join(short)}: the machine's other work left nice 19 little)"
+           if short else "")
+        + f": {total_cpu / 3600:.2f} CPU hours in all, {total_exec:,} executions, {total_crash} crashes"
         + (f" ({', '.join(found)})" if found else "") + ".  Harnesses, corpus and checks: fuzz/README.md.",
         "",
         *rows,

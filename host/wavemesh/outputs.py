@@ -5,7 +5,9 @@ picture, a synthetic height field) are written under their own names inside a hi
 beside their final place, ``.wavemesh-partial-PID-XXXXXX``, and moved into place by :meth:`Outputs.commit`
 only when every one of them is complete: ``os.replace`` within one directory, so each file appears
 whole, and a failed run (an exception, a full disk, ``ulimit -f``, Ctrl-C) removes the staging folder
-and leaves nothing of its outputs behind, not even a folder --lod would have created.  Writers need no
+and leaves nothing of its outputs behind, not even a folder --lod would have created (only a process
+killed outright, SIGKILL or power loss, can leave a staging folder; never a part of a file under its
+final name).  Writers need no
 change: they write the path :meth:`Outputs.path` hands them, under its final name (a sidecar that names
 its mesh, a format chosen by extension, all stay right).
 
