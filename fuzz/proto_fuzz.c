@@ -78,6 +78,13 @@ static uint32_t pick(host *h, uint32_t lo, uint32_t hi)
     return lo + (span > 255 ? (span > 65535 ? take(h, 4) : take(h, 2)) : take(h, 1)) % span;
 }
 
+/* A 32-bit value over many magnitudes: 4 bytes, then a right shift of 0..31 (read in that order). */
+static uint32_t scaled(host *h)
+{
+    uint32_t v = take(h, 4);
+    return v >> pick(h, 0, 31);
+}
+
 static void put16(uint8_t *b, uint32_t v)
 {
     b[0] = (uint8_t)v;
@@ -163,15 +170,15 @@ static void next_op(host *h)
         put32(pay + WM_PROTO_CONFIG_TAU, wild == 8 ? take(h, 4) : pick(h, 0, 3000));
         put32(pay + WM_PROTO_CONFIG_MAX_TRIANGLES, wild == 9 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 600));
         put32(pay + WM_PROTO_CONFIG_CAPACITY, wild == 10 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 1200));
-        put32(pay + WM_PROTO_CONFIG_ZETA, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_ZETA, scaled(h));
         put32(pay + WM_PROTO_CONFIG_SCALE_M, wild == 11 ? take(h, 4) : pick(h, 0, 65535));
         put32(pay + WM_PROTO_CONFIG_SCALE_E, wild == 12 ? take(h, 4) : pick(h, 0, 40));
         put32(pay + WM_PROTO_CONFIG_DELTA_P, wild == 13 ? take(h, 4) : pick(h, 0, 65535));
         put32(pay + WM_PROTO_CONFIG_ALPHA, wild == 14 ? take(h, 4) : pick(h, 0, 65536));
-        put32(pay + WM_PROTO_CONFIG_DELTA_V, take(h, 4) >> pick(h, 0, 31));
-        put32(pay + WM_PROTO_CONFIG_DELTA_LAMBDA, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_DELTA_V, scaled(h));
+        put32(pay + WM_PROTO_CONFIG_DELTA_LAMBDA, scaled(h));
         put32(pay + WM_PROTO_CONFIG_DELTA_C, wild == 15 ? take(h, 4) : pick(h, 0, 65536));
-        put32(pay + WM_PROTO_CONFIG_DELTA_D, take(h, 4) >> pick(h, 0, 31));
+        put32(pay + WM_PROTO_CONFIG_DELTA_D, scaled(h));
         /* fields after DELTA_D (the generated header may add some) stay 0: their defaults */
         h->total = w * ht;
         h->data_next = 0;

@@ -48,6 +48,14 @@ static uint32_t pick(src *s, uint32_t lo, uint32_t hi)
     return lo + (span > 255 ? (span > 65535 ? take(s, 4) : take(s, 2)) : take(s, 1)) % span;
 }
 
+/* A 32-bit value over many magnitudes: 4 bytes, then a right shift of 0..31 (read in that order: the
+ * input means the same whatever order a compiler evaluates operands in). */
+static uint32_t scaled(src *s)
+{
+    uint32_t v = take(s, 4);
+    return v >> pick(s, 0, 31);
+}
+
 #define FAIL(...)                                     \
     do {                                              \
         fprintf(stderr, "fuzz_refine: " __VA_ARGS__); \
@@ -224,15 +232,17 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     p.metric = (int32_t)pick(&s, 0, 1);
     p.neighbourhood = (int32_t)pick(&s, 0, 1);
     p.iterations = (int32_t)pick(&s, 0, 3);
-    p.zeta = take(&s, 4) >> pick(&s, 0, 31);
+    p.zeta = scaled(&s);
     p.scale_m = pick(&s, 0, 65535);
     p.scale_e = (int32_t)(pick(&s, 0, 1) ? pick(&s, 8, 24) : pick(&s, 0, 126));
     p.delta_p = pick(&s, 0, 65535);
     p.alpha = pick(&s, 0, 65536);
-    p.delta_v = take(&s, 4) >> pick(&s, 0, 31);
+    p.delta_v = scaled(&s);
     p.flags = pick(&s, 0, WM_FLAG_ALL);
-    p.delta_d = ((uint64_t)take(&s, 4) << 32 | take(&s, 4)) >> pick(&s, 0, 63);
-    p.delta_lambda = take(&s, 4) >> pick(&s, 0, 31);
+    p.delta_d = (uint64_t)take(&s, 4) << 32;
+    p.delta_d |= take(&s, 4);
+    p.delta_d >>= pick(&s, 0, 63);
+    p.delta_lambda = scaled(&s);
     p.delta_c = pick(&s, 0, 65536);
     if (wm_params_check(&p) != WM_OK) FAIL("wm_params_check refuses parameters within its documented ranges");
     if (!hs) abort();

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""Write the hand-made seed inputs: whole sessions for fuzz_proto, small valid files for fuzz_readers.
+"""Write the hand-made seed inputs: whole sessions for fuzz_proto, jobs with the host's default
+parameters for fuzz_refine, small valid files for fuzz_readers.
 
-    .venv/bin/python fuzz/seeds.py      (writes fuzz/corpus/{proto,readers}/seed-*; the fuzzers' own
-                                         finds sit beside them)
+    .venv/bin/python fuzz/seeds.py      (writes fuzz/corpus/{proto,refine,readers}/seed-*; the fuzzers'
+                                         own finds sit beside them)
 
 The encoding mirrors proto_fuzz.c's reading: ``pick(lo, hi)`` takes 1 byte when hi - lo < 256, 2 when
 < 65536, else 4 (big-endian), modulo the span; ``take(n)`` n bytes big-endian.  A seed is the device's
@@ -115,6 +116,64 @@ SEEDS = {
 }
 
 
+def refine_job(w: int, h: int, levels: int, zeta_q: int, shape: int, amp: int, metric: int = 0,
+               flags: int = 0,
+               iterations: int = 1, budget: int = 0) -> bytes:
+    """A refine_fuzz.c input: a job with the host's default parameters (wavemesh.native.fixed_params of
+    RefineParams() at a height scale of 1) but those given."""
+    s = Script()
+    s.pick(w, 2, 40)
+    s.pick(h, 2, 40)
+    s.pick(1, 0, 3)                # M up to 6
+    s.pick(levels, 1, 6)
+    s.pick(1, 0, 3)                # tau up to 2000
+    s.pick(100, 0, 2000)
+    s.pick(metric, 0, 1)
+    s.pick(0, 0, 1)                # face neighbourhood
+    s.pick(iterations, 0, 3)
+    s.take(zeta_q, 4)
+    s.pick(0, 0, 31)
+    s.pick(32768, 0, 65535)        # scale_m, scale_e: s = 1
+    s.pick(1, 0, 1)
+    s.pick(15, 8, 24)
+    s.pick(58982, 0, 65535)        # delta_p 0.9
+    s.pick(39322, 0, 65536)        # alpha 0.6
+    s.take(131072, 4)              # delta_v 2
+    s.pick(0, 0, 31)
+    s.pick(flags, 0, 15)
+    s.take(0, 4)                   # delta_d 0
+    s.take(0, 4)
+    s.pick(0, 0, 63)
+    s.take(655, 4)                 # delta_lambda 0.01
+    s.pick(0, 0, 31)
+    s.pick(64225, 0, 65536)        # delta_c 0.98
+    s.pick(shape, 0, 5)
+    s.pick(amp, 0, 65535)
+    if shape == 2:                 # plane and cliff
+        s.pick(1300, 0, 2000)
+        s.pick(700, 0, 2000)
+        s.pick(w // 2, 0, w)
+        s.pick(50000, 0, 65535)
+    elif shape in (0, 1):          # noise from the rest of the input
+        s.b += bytes((x * 37 + 11) % 256 for x in range(2 * w * h))
+    s.pick(3, 0, 3)                # storage: never runs out
+    s.pick(0 if budget else 1, 0, 2)
+    if budget:
+        s.pick(budget, 2, 2 * (w - 1) * (h - 1) - 1)
+    return bytes(s.b)
+
+
+REFINE_SEEDS = {
+    "seed-bumps": refine_job(33, 33, 3, 1 << 16, 5, 40000),
+    "seed-bumps-vertical": refine_job(40, 29, 4, 1 << 15, 5, 60000, metric=1, iterations=2),
+    "seed-cliff": refine_job(40, 40, 4, 1 << 16, 2, 0),
+    "seed-noise-exact": refine_job(16, 12, 2, 0, 0, 0),
+    "seed-no-bound": refine_job(25, 31, 3, 0, 5, 30000, flags=1),
+    "seed-no-reduce-no-decimate": refine_job(30, 30, 3, 1 << 17, 5, 50000, flags=8 | 4),
+    "seed-budget": refine_job(32, 32, 3, 0, 0, 0, budget=300),
+}
+
+
 def reader_seeds() -> dict[str, bytes]:
     """One small valid file per reader, as readers_fuzz.py takes them: kind byte, options byte, bytes."""
     import io
@@ -159,7 +218,7 @@ def reader_seeds() -> dict[str, bytes]:
 
 
 def main() -> int:
-    for target, seeds in (("proto", SEEDS), ("readers", reader_seeds())):
+    for target, seeds in (("proto", SEEDS), ("refine", REFINE_SEEDS), ("readers", reader_seeds())):
         (CORPUS / target).mkdir(parents=True, exist_ok=True)
         for name, data in seeds.items():
             (CORPUS / target / name).write_bytes(data)
