@@ -68,7 +68,7 @@ module sdram_ctrl #
     // stream FIFOs in halfwords, >= 2
     parameter RD_FIFO_DEPTH = 16,
     parameter WR_FIFO_DEPTH = 16,
-    // beats a client may issue while another waits, >= 1
+    // beats a client may issue while another waits, 1..256
     parameter MAX_RUN = 16,
     // CPU cache: lines (power of two >= 2) of LINE_WORDS 32-bit words (power of two)
     parameter CACHE_LINES = 16,
@@ -179,7 +179,7 @@ localparam RL = CAS_LATENCY;                                  // READ to the dat
 initial begin
     if (CAS_LATENCY < 2 || CAS_LATENCY > 3 || ROW_BITS < 11 || ROW_BITS > 13 || COL_BITS < 8
             || COL_BITS > 10 || INIT_REFRESHES < 2 || RD_FIFO_DEPTH < 2 || WR_FIFO_DEPTH < 2
-            || MAX_RUN < 1) begin
+            || MAX_RUN < 1 || MAX_RUN > 256) begin
         $error("Error: unsupported SDRAM geometry or controller parameters (instance %m)");
         $finish;
     end
@@ -209,7 +209,7 @@ localparam [WAIT_BITS-1:0] N_INIT = C_INIT[WAIT_BITS-1:0] - 1'b1, N_RFC = C_RFC[
                            N_MRD = C_MRD[WAIT_BITS-1:0] - 1'b1;
 localparam [REF_BITS-1:0] N_REF_DUE = C_REF_DUE[REF_BITS-1:0];
 localparam [INIT_REF_BITS-1:0] N_INIT_REFS = INIT_REFRESHES;
-localparam [7:0] N_RUN = MAX_RUN > 255 ? 8'd254 : MAX_RUN - 1;
+localparam [7:0] N_RUN = MAX_RUN[7:0] - 1'b1;                 // 256 -> 255
 
 /*
  * Engine state
