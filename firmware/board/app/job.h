@@ -10,8 +10,9 @@
 
 #include "proto.h"
 
-/* The largest triangle capacity whose refiner storage and staging of the initial triangulation
- * (job_need) fit heap_bytes for a W x H grid; 0 when not even 2 fit. */
+/* The largest triangle capacity whose refiner storage (wm_refine_bound) and the worst staging of the
+ * initial triangulation (wm_job_initial, for any block size) fit heap_bytes for a W x H grid; 0 when
+ * not even 2 fit. */
 uint32_t board_job_capacity(size_t heap_bytes, int32_t width, int32_t height);
 
 /* The job (wm_proto_job_fn).  ctx is unused.  The heights are in the height memory already (the

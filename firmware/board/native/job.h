@@ -9,11 +9,10 @@
 
 #include "proto.h"
 
-/* The initial triangulation of a W x H field from level M's details (the layout of wm_haar): the
- * labeller, the variant resolver and the template assembly of host/wavemesh/{label,initial}.py, in
- * the canonical form of host/wavemesh/mesh.py (vertices by (y, x), each triangle from its smallest
- * vertex, triangles sorted).  *xy (2 nv int32) and *tris (3 nt int32) are malloc'ed.
- * Returns 0, or -1 when memory runs out or the look-up table has no template (a bug). */
+/* The initial triangulation of a W x H field from the details of levels 1..M (the layout of wm_haar):
+ * the job library's labeller and assembly (wm_job.h) with malloc'ed storage.  *xy (2 nv int32) and
+ * *tris (3 nt int32) are malloc'ed.  Returns 0, or -1 when memory runs out or the look-up table has
+ * no template (a bug). */
 int wm_native_initial(int32_t width, int32_t height, int32_t levels, uint32_t tau, const int32_t *details,
                       int32_t **xy, int32_t *nv, int32_t **tris, int32_t *nt);
 
