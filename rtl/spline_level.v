@@ -36,9 +36,13 @@
  * Pipeline (stage registers advance together with en):
  *
  *   in -> line buffer read (address: input column, or the flush column)
- *      -> stage 1: the word (forwarded from the write of the same cycle when the level is one
- *                  column wide); vertical filter; line buffer write
- *      -> stage 2: L, D of a column; horizontal filter
+ *      -> stage 1: the token (sample, position flags); the block RAM's own read register
+ *      -> stage r: the word registered; the writes of the two enabled cycles the read could not
+ *                  see (at its own edge and the next: only a level one or two columns wide reads
+ *                  a column again that soon) forwarded through registered selects; vertical
+ *                  filter; line buffer write
+ *      -> stage 2: L, D of a column; 3 L, 7 L, 3 D, 7 D
+ *      -> stage t: the same; horizontal filter (one adder deep)
  *      -> stage 3: the record's sums; rounding and narrowing, combinational, into the bank's FIFOs
  *
  * Widths: P, L <= 8 * 65535 (19 bits unsigned); D, Q-differences 17 bits signed; the horizontal
@@ -121,14 +125,39 @@ reg [15:0] s1_v_reg = 16'd0;
 reg [X_WIDTH-1:0] s1_addr_reg = {X_WIDTH{1'b0}};
 reg s1_xfirst_reg = 1'b0, s1_xlast_reg = 1'b0, s1_xodd_reg = 1'b0;
 reg s1_yfirst_reg = 1'b0, s1_ylast_reg = 1'b0, s1_yodd_reg = 1'b0;
-reg s1_fwd_reg = 1'b0;                 // the word was written in the read's cycle: use s1_fwd_word_reg
-reg [WORD-1:0] s1_fwd_word_reg = {WORD{1'b0}};
+
+// stage r: the same with the line buffer's word registered (block RAM output is slow on ECP5), and
+// the two writes its read could not see (the one at the read's edge and the next): forwarded
+reg r_valid_reg = 1'b0;
+reg r_flush_reg = 1'b0;
+reg [15:0] r_v_reg = 16'd0;
+reg [X_WIDTH-1:0] r_addr_reg = {X_WIDTH{1'b0}};
+reg r_xfirst_reg = 1'b0, r_xlast_reg = 1'b0, r_xodd_reg = 1'b0;
+reg r_yfirst_reg = 1'b0, r_ylast_reg = 1'b0, r_yodd_reg = 1'b0;
+reg [WORD-1:0] r_word_reg = {WORD{1'b0}};
+reg r_fwd_a_reg = 1'b0, r_fwd_b_reg = 1'b0;   // the newer (a) or older (b) missed write is to this column
+reg [WORD-1:0] r_fwd_a_word_reg = {WORD{1'b0}}, r_fwd_b_word_reg = {WORD{1'b0}};
+
+// the line buffer write of the previous enabled cycle
+reg wp_valid_reg = 1'b0;
+reg [X_WIDTH-1:0] wp_addr_reg = {X_WIDTH{1'b0}};
+reg [WORD-1:0] wp_word_reg = {WORD{1'b0}};
 
 // stage 2: one column of the vertical filter
 reg s2_valid_reg = 1'b0;
 reg [18:0] s2_l_reg = 19'd0;
 reg signed [16:0] s2_d_reg = 17'sd0;
 reg s2_xfirst_reg = 1'b0, s2_xlast_reg = 1'b0, s2_xodd_reg = 1'b0;
+
+// stage t: the same column with 3 L, 7 L, 3 D, 7 D
+reg t_valid_reg = 1'b0;
+reg [18:0] t_l_reg = 19'd0;
+reg signed [16:0] t_d_reg = 17'sd0;
+reg [20:0] t_l3_reg = 21'd0;
+reg [21:0] t_l7_reg = 22'd0;
+reg signed [19:0] t_d3_reg = 20'sd0;
+reg signed [20:0] t_d7_reg = 21'sd0;
+reg t_xfirst_reg = 1'b0, t_xlast_reg = 1'b0, t_xodd_reg = 1'b0;
 
 // horizontal filter state (the recursion over a record row's columns)
 reg [21:0] h_pl_reg = 22'd0;           // L[2j-1] + 3 L[2j] (+ 3 L[2j+1])
@@ -204,13 +233,13 @@ always @* begin
     end
 end
 
-// stage 1: the vertical filter
+// stage r: the vertical filter
 wire [WORD-1:0] rd_word;
-wire [WORD-1:0] word = s1_fwd_reg ? s1_fwd_word_reg : rd_word;
+wire [WORD-1:0] word = r_fwd_a_reg ? r_fwd_a_word_reg : r_fwd_b_reg ? r_fwd_b_word_reg : r_word_reg;
 wire [18:0] p_old = word[50:32];
 wire [15:0] q_old = word[31:16];
 wire [15:0] r_old = word[15:0];
-wire [18:0] v19 = {3'd0, s1_v_reg};
+wire [18:0] v19 = {3'd0, r_v_reg};
 wire [18:0] r19 = {3'd0, r_old};
 wire [18:0] v3 = (v19 << 1) + v19;
 
@@ -227,13 +256,13 @@ always @* begin
     w_p = p_old;
     w_q = q_old;
     w_r = r_old;
-    if (s1_flush_reg) begin
+    if (r_flush_reg) begin
         // record row k of an even last row: L = a[2k-1] + 7 a[2k] was stored as P, D = 0
         v_valid = 1'b1;
-    end else if (!s1_yodd_reg) begin
-        if (s1_yfirst_reg) begin
+    end else if (!r_yodd_reg) begin
+        if (r_yfirst_reg) begin
             // row 0: a[-1] = a[0]; a level of one row ends here with every tap clamped to it
-            v_valid = s1_ylast_reg;
+            v_valid = r_ylast_reg;
             v_l = v19 << 3;
             w_p = v19 << 2;
         end else begin
@@ -242,23 +271,23 @@ always @* begin
             v_l = p_old + v19;
             v_d = $signed({1'b0, r_old}) - $signed({1'b0, q_old});
             // the next record row's partial sum; on the last row its whole sum (taps below clamped)
-            w_p = r19 + (s1_ylast_reg ? (v19 << 3) - v19 : v3);
+            w_p = r19 + (r_ylast_reg ? (v19 << 3) - v19 : v3);
         end
-        w_q = s1_v_reg;
+        w_q = r_v_reg;
     end else begin
         // row 2k+1
         w_p = p_old + v3;
-        w_r = s1_v_reg;
-        if (s1_ylast_reg) begin
+        w_r = r_v_reg;
+        if (r_ylast_reg) begin
             // the last row: both taps below clamped to it
             v_valid = 1'b1;
             v_l = p_old + (v19 << 2);
-            v_d = $signed({1'b0, s1_v_reg}) - $signed({1'b0, q_old});
+            v_d = $signed({1'b0, r_v_reg}) - $signed({1'b0, q_old});
         end
     end
 end
 
-wire wr_en = en && s1_valid_reg && !s1_flush_reg;
+wire wr_en = en && r_valid_reg && !r_flush_reg;
 wire [WORD-1:0] wr_word = {w_p, w_q, w_r};
 
 spline_linebuf #(
@@ -269,20 +298,32 @@ spline_linebuf #(
 linebuf_inst (
     .clk(clk),
     .wr_en(wr_en),
-    .wr_addr(s1_addr_reg),
+    .wr_addr(r_addr_reg),
     .wr_data(wr_word),
     .rd_en(rd_en),
     .rd_addr(rd_addr),
     .rd_data(rd_word)
 );
 
-// stage 2: the horizontal filter
-wire [21:0] l22 = {3'd0, s2_l_reg};
+// stage 2: the column's multiples (shifts and one adder each)
+wire [21:0] s2_l22 = {3'd0, s2_l_reg};
+wire signed [20:0] s2_d21 = {{4{s2_d_reg[16]}}, s2_d_reg};
+wire [21:0] s2_l3w = (s2_l22 << 1) + s2_l22;
+wire signed [20:0] s2_d3w = (s2_d21 <<< 1) + s2_d21;
+wire [20:0] s2_l3 = s2_l3w[20:0];
+wire [21:0] s2_l7 = (s2_l22 << 3) - s2_l22;
+wire signed [19:0] s2_d3 = s2_d3w[19:0];
+wire signed [20:0] s2_d7 = (s2_d21 <<< 3) - s2_d21;
+wire unused_s2_l3w = s2_l3w[21];
+wire unused_s2_d3w = s2_d3w[20];
+
+// stage t: the horizontal filter (the column's 3 L, 7 L, 3 D, 7 D made in stage 2: one adder deep)
+wire [21:0] l22 = {3'd0, t_l_reg};
 wire [21:0] rl22 = {3'd0, h_rl_reg};
-wire [21:0] l3 = (l22 << 1) + l22;
-wire signed [20:0] d21 = {{4{s2_d_reg[16]}}, s2_d_reg};
+wire [21:0] l3 = {1'b0, t_l3_reg};
+wire signed [20:0] d21 = {{4{t_d_reg[16]}}, t_d_reg};
 wire signed [20:0] rd21 = {{4{h_rd_reg[16]}}, h_rd_reg};
-wire signed [20:0] d3x = (d21 <<< 1) + d21;
+wire signed [20:0] d3x = {t_d3_reg[19], t_d3_reg};
 
 reg r1_valid, r2_valid;
 reg [21:0] r1_sl;
@@ -299,13 +340,13 @@ always @* begin
     r1_sd = h_pd_reg + d21;
     r1_e1 = h_e1_reg;
     r1_e3 = h_e3_reg;
-    r2_sl = rl22 + (l22 << 3) - l22;
-    r2_sd = rd21 + (d21 <<< 3) - d21;
-    if (s2_valid_reg) begin
-        if (!s2_xodd_reg) begin
-            if (s2_xfirst_reg) begin
+    r2_sl = rl22 + t_l7_reg;
+    r2_sd = rd21 + t_d7_reg;
+    if (t_valid_reg) begin
+        if (!t_xodd_reg) begin
+            if (t_xfirst_reg) begin
                 // column 0: a level of one column ends here with every tap clamped to it
-                r1_valid = s2_xlast_reg;
+                r1_valid = t_xlast_reg;
                 r1_sl = l22 << 3;
                 r1_sd = d21 <<< 3;
                 r1_e1 = 20'sd0;
@@ -313,15 +354,15 @@ always @* begin
             end else begin
                 // column 2j: record j - 1 is complete; on the last column record j too
                 r1_valid = 1'b1;
-                r2_valid = s2_xlast_reg;
+                r2_valid = t_xlast_reg;
             end
-        end else if (s2_xlast_reg) begin
+        end else if (t_xlast_reg) begin
             // column 2j+1, the last: both taps to the right clamped to it
             r1_valid = 1'b1;
-            r1_sl = h_pl_reg + l3 + l22;
-            r1_sd = h_pd_reg + d3x + d21;
-            r1_e1 = $signed({1'b0, s2_l_reg}) - $signed({1'b0, h_ql_reg});
-            r1_e3 = $signed({s2_d_reg[16], s2_d_reg}) - $signed({h_qd_reg[16], h_qd_reg});
+            r1_sl = h_pl_reg + (l22 << 2);
+            r1_sd = h_pd_reg + (d21 <<< 2);
+            r1_e1 = $signed({1'b0, t_l_reg}) - $signed({1'b0, h_ql_reg});
+            r1_e3 = $signed({t_d_reg[16], t_d_reg}) - $signed({h_qd_reg[16], h_qd_reg});
         end
     end
 end
@@ -355,33 +396,64 @@ always @(posedge clk) begin
         s1_yfirst_reg <= y == {Y_WIDTH{1'b0}};
         s1_ylast_reg <= y_last;
         s1_yodd_reg <= y[0];
-        s1_fwd_reg <= wr_en && rd_en && s1_addr_reg == rd_addr;
-        s1_fwd_word_reg <= wr_word;
+
+        // stage r
+        r_valid_reg <= s1_valid_reg;
+        r_flush_reg <= s1_flush_reg;
+        r_v_reg <= s1_v_reg;
+        r_addr_reg <= s1_addr_reg;
+        r_xfirst_reg <= s1_xfirst_reg;
+        r_xlast_reg <= s1_xlast_reg;
+        r_xodd_reg <= s1_xodd_reg;
+        r_yfirst_reg <= s1_yfirst_reg;
+        r_ylast_reg <= s1_ylast_reg;
+        r_yodd_reg <= s1_yodd_reg;
+        r_word_reg <= rd_word;
+        // the read (at the last edge) missed the write at its own edge (wp) and the one at this edge
+        r_fwd_a_reg <= wr_en && r_addr_reg == s1_addr_reg;
+        r_fwd_a_word_reg <= wr_word;
+        r_fwd_b_reg <= wp_valid_reg && wp_addr_reg == s1_addr_reg;
+        r_fwd_b_word_reg <= wp_word_reg;
+        wp_valid_reg <= wr_en;
+        wp_addr_reg <= r_addr_reg;
+        wp_word_reg <= wr_word;
 
         // stage 2
-        s2_valid_reg <= s1_valid_reg && v_valid;
+        s2_valid_reg <= r_valid_reg && v_valid;
         s2_l_reg <= v_l;
         s2_d_reg <= v_d;
-        s2_xfirst_reg <= s1_xfirst_reg;
-        s2_xlast_reg <= s1_xlast_reg;
-        s2_xodd_reg <= s1_xodd_reg;
+        s2_xfirst_reg <= r_xfirst_reg;
+        s2_xlast_reg <= r_xlast_reg;
+        s2_xodd_reg <= r_xodd_reg;
+
+        // stage t: the multiples of the column's L and D the horizontal sums take
+        t_valid_reg <= s2_valid_reg;
+        t_l_reg <= s2_l_reg;
+        t_d_reg <= s2_d_reg;
+        t_l3_reg <= s2_l3;
+        t_l7_reg <= s2_l7;
+        t_d3_reg <= s2_d3;
+        t_d7_reg <= s2_d7;
+        t_xfirst_reg <= s2_xfirst_reg;
+        t_xlast_reg <= s2_xlast_reg;
+        t_xodd_reg <= s2_xodd_reg;
 
         // horizontal filter state
-        if (s2_valid_reg) begin
-            if (!s2_xodd_reg) begin
+        if (t_valid_reg) begin
+            if (!t_xodd_reg) begin
                 // column 2j: start record j's sums
-                h_pl_reg <= s2_xfirst_reg ? l22 << 2 : rl22 + l3;
-                h_pd_reg <= s2_xfirst_reg ? d21 <<< 2 : rd21 + d3x;
-                h_ql_reg <= s2_l_reg;
-                h_qd_reg <= s2_d_reg;
+                h_pl_reg <= t_xfirst_reg ? l22 << 2 : rl22 + l3;
+                h_pd_reg <= t_xfirst_reg ? d21 <<< 2 : rd21 + d3x;
+                h_ql_reg <= t_l_reg;
+                h_qd_reg <= t_d_reg;
             end else begin
                 // column 2j+1
                 h_pl_reg <= h_pl_reg + l3;
                 h_pd_reg <= h_pd_reg + d3x;
-                h_rl_reg <= s2_l_reg;
-                h_rd_reg <= s2_d_reg;
-                h_e1_reg <= $signed({1'b0, s2_l_reg}) - $signed({1'b0, h_ql_reg});
-                h_e3_reg <= $signed({s2_d_reg[16], s2_d_reg}) - $signed({h_qd_reg[16], h_qd_reg});
+                h_rl_reg <= t_l_reg;
+                h_rd_reg <= t_d_reg;
+                h_e1_reg <= $signed({1'b0, t_l_reg}) - $signed({1'b0, h_ql_reg});
+                h_e3_reg <= $signed({t_d_reg[16], t_d_reg}) - $signed({h_qd_reg[16], h_qd_reg});
             end
         end
 
@@ -406,8 +478,12 @@ always @(posedge clk) begin
     if (rst) begin
         flush_reg <= 1'b0;
         s1_valid_reg <= 1'b0;
-        s1_fwd_reg <= 1'b0;
+        r_valid_reg <= 1'b0;
+        r_fwd_a_reg <= 1'b0;
+        r_fwd_b_reg <= 1'b0;
+        wp_valid_reg <= 1'b0;
         s2_valid_reg <= 1'b0;
+        t_valid_reg <= 1'b0;
         s3_valid_reg <= 1'b0;
         hold_valid_reg <= 1'b0;
     end

@@ -2,11 +2,12 @@
  * wavemesh: line buffer of one spline filter-bank level (simple dual-port RAM, registered read)
  *
  * One word per column of the level's input: the vertical filter's partial sums, read back and
- * rewritten on every row (spline_level.v).  A column is read in one cycle and written two cycles
+ * rewritten on every row (spline_level.v).  A column is read at one edge and written two edges
  * later, while the next columns are read: one read port and one write port, so simple dual-port
- * block RAM (ECP5 DP16KD, iCE40 SB_RAM40_4K) or LUT RAM.  A read of the address written in the
- * same cycle returns the old word; spline_level forwards the new one itself (only a one-column level
- * can do that).  The read data stays on rd_data until the next read.
+ * block RAM (ECP5 DP16KD, iCE40 SB_RAM40_4K) or LUT RAM.  A read at the edge of a write to the same
+ * address returns the old word; spline_level forwards the newer words itself (only a level one or
+ * two columns wide reads a column again that soon).  The read data stays on rd_data until the next
+ * read.
  */
 
 `resetall
