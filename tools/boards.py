@@ -190,7 +190,7 @@ def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool =
               "fmax_mhz": worst, "fmax_by_clock": fmax, "margin": round(worst / board.clock_mhz - 1, 3),
               "seed": seed, "utilization": util, "firmware": rel(fw_hex, ROOT) if fw_hex else None,
               "firmware_words": len(fw_hex.read_text().split()) if fw_hex else 0,
-              "tools": _versions(work)}
+              "tools": _versions(work), "commit": _commit()}
     if worst < MARGIN * board.clock_mhz:
         (work / "report-failed.json").write_text(json.dumps(report, indent=1) + "\n")
         raise FlowError(f"{board.name}: fmax {worst:.1f} MHz is below {MARGIN:g} x the "
@@ -206,6 +206,12 @@ def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool =
     report_file.write_text(json.dumps(report, indent=1) + "\n")
     (work / "stamp").write_text(stamp)
     return report
+
+
+def _commit() -> str:
+    """The source's commit (`git describe --always --dirty`), or "" outside a git checkout."""
+    r = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, cwd=ROOT)
+    return r.stdout.strip() if r.returncode == 0 else ""
 
 
 def _versions(work: Path) -> dict[str, str]:
@@ -225,7 +231,8 @@ def _versions(work: Path) -> dict[str, str]:
 def section(report: dict) -> str:
     """The board's generated section of docs/boards.md (between its markers)."""
     board = BOARDS[report["board"]]
-    lines = [f"From `make bitstream BOARD={board.name}` (nextpnr seed {report['seed']}; "
+    built = f" on {report['commit']}" if report.get("commit") else ""
+    lines = [f"From `make bitstream BOARD={board.name}`{built} (nextpnr seed {report['seed']}; "
              + ", ".join(f"{k} {v}" for k, v in report["tools"].items()) + "):", "",
              "| resource | used | available | share |", "|---|---:|---:|---:|"]
     for cell, what in board.cells.items():

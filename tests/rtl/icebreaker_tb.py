@@ -23,12 +23,20 @@ from wavemesh.heightfield import from_array
 from wavemesh.link import encode_frame
 
 
+def param(dut, path: str) -> int:
+    """A parameter of the design, e.g. "stage_inst.MAX_WIDTH"."""
+    obj = dut
+    for part in path.split("."):
+        obj = getattr(obj, part)
+    return int(obj.value)
+
+
 class Line:
     """The host's end of the UART: frames onto RX, frames from TX (8N1, DIV clocks per bit)."""
 
     def __init__(self, dut):
         self.dut = dut
-        self.div = int(dut.DIV.value)
+        self.div = param(dut, "DIV")
         self.received: list[int] = []
         dut.RX.value = 1
         cocotb.start_soon(self._receive())
@@ -103,7 +111,7 @@ async def test_jobs_over_the_uart(dut):
         assert int(dut.LEDG_N.value) == 1, f"{name}: RX overrun"
 
         # a refused header between jobs: the board answers and waits for the next header
-        max_w, max_m = int(dut.stage_inst.MAX_WIDTH.value), int(dut.stage_inst.MAX_LEVELS.value)
+        max_w, max_m = param(dut, "stage_inst.MAX_WIDTH"), param(dut, "stage_inst.MAX_LEVELS")
         bad = [header(1, 5, 1, 0), header(max_w + 1, 5, 1, 0), header(8, 8, 0, 0), header(8, 8, max_m + 1, 0)]
         reasons = [b"EW", b"EW", b"EM", b"EM"]
         await line.send(bad[k % len(bad)])
@@ -119,7 +127,7 @@ async def test_abandoned_header_and_job_are_dropped(dut):
     dut.BTN_N.value = 1
     line = Line(dut)
     await ClockCycles(dut.CLK, 40)
-    silence = 1 << int(dut.stage_inst.TIMEOUT_BITS.value)
+    silence = 1 << param(dut, "stage_inst.TIMEOUT_BITS")
     samples = from_array(synth.ball(24)).samples
     _, tout = expected(samples, 2, 30)
     good = header(24, 24, 2, 30)
