@@ -57,7 +57,6 @@ class Board:
     ext: str  # bitstream file extension
     loader: tuple[str, ...]  # openFPGALoader options naming the board
     cells: dict[str, str] = field(default_factory=dict)  # nextpnr cell type -> what docs/boards.md calls it
-    extra: tuple[str, ...] = ()  # files of rtl/boards/ besides the top and wm_por.v
     sram: bool = True  # openFPGALoader can load the FPGA's SRAM (else it always writes the SPI flash)
     firmware: bool = True  # the top takes the firmware image (FW_HEX)
 
@@ -77,7 +76,7 @@ BOARDS = {
         {"ICESTORM_LC": "logic cells (LUT4 + FF)", "ICESTORM_RAM": "block RAM (SB_RAM40_4K, 4 Kbit)",
          "ICESTORM_SPRAM": "single-port RAM (SB_SPRAM256KA, 256 Kbit)", "ICESTORM_DSP": "DSP (SB_MAC16)",
          "SB_IO": "I/O pins"},
-        ("stage_uart.v",), sram=False, firmware=False),
+        sram=False, firmware=False),
 }
 
 
@@ -92,9 +91,20 @@ def picorv32() -> Path:
 
 
 def sources(board: Board) -> list[Path]:
-    """Every Verilog file of the board's design: rtl/*.v, its files of rtl/boards/, the PicoRV32."""
-    own = ["wm_por.v", f"{board.top}.v", *board.extra]
-    return [*sorted(RTL.glob("*.v")), *(BOARDS_RTL / f for f in own), picorv32()]
+    """The Verilog files of the board's design: its top and the files of every module it instantiates,
+    transitively (one module per file, named after it, in rtl/boards/ or rtl/, and the PicoRV32), so a
+    module of rtl/ the board does not use is never read."""
+    files = {f.stem: f for f in [*RTL.glob("*.v"), *BOARDS_RTL.glob("*.v"), picorv32()]}
+    inst = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:#\s*\(|[A-Za-z_]\w*\s*\()", re.M)
+    todo, found = [board.top], {}
+    while todo:
+        name = todo.pop()
+        if name in found or name not in files:
+            continue
+        found[name] = files[name]
+        text = re.sub(r"/\*.*?\*/|//[^\n]*", "", files[name].read_text(), flags=re.S)
+        todo += [m for m in inst.findall(text) if m in files and m not in found]
+    return sorted(found.values())
 
 
 def _last_error(text: str) -> str:
