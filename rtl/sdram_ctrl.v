@@ -19,11 +19,11 @@
  * number of cycles after the last one, chosen so that the longest possible wait for the banks
  * still keeps every gap between two REFRESH commands within tREFI.
  *
- * Clients: 0 the CPU port (sdram_cache), 1 the stream reader, 2 the stream writer.  A client
- * raises req when it can issue a beat; the engine serves the granted client beat by beat (ACTIVATE
- * and PRECHARGE as its addresses need them) until its req drops or, when another client waits, it
- * has issued MAX_RUN beats.  The CPU port wins every arbitration it takes part in (its accesses
- * are short and the CPU waits for them); the two streams alternate.
+ * Clients: 0 the CPU port (sdram_cache), 1 the stream reader, 2 the stream writer, 3 the addressed
+ * writer.  A client raises req when it can issue a beat; the engine serves the granted client beat
+ * by beat (ACTIVATE and PRECHARGE as its addresses need them) until its req drops or, when another
+ * client waits, it has issued MAX_RUN beats.  The CPU port wins every arbitration it takes part in
+ * (its accesses are short and the CPU waits for them); the streams take turns.
  *
  * Stream reader: a command (halfword address, length) starts it; it issues reads while its FIFO
  * has room for every read in flight (credits: the SDRAM cannot be stalled once a READ is out) and
@@ -31,7 +31,9 @@
  * (address, length) takes the next `length` halfwords of the write stream, which may arrive before
  * or after it (they wait in a FIFO); each is written as it is issued, and every written halfword
  * clears its line in the CPU port's cache.  Each side takes a new command once the last one is done
- * (s_*_cmd_ready, *_busy).
+ * (s_*_cmd_ready, *_busy).  Addressed writer: every beat carries its own halfword address (tuser),
+ * for writers with several interleaved sequences (the filter bank's levels); the beats wait in a
+ * FIFO and are written in order, each clearing its cache line too; wa_busy while any waits.
  *
  * Reset (synchronous, active high) restarts the chip's initialisation without the power-up wait
  * once it has been done (powered_reg is never reset) and drops every stream command and read in
@@ -68,6 +70,7 @@ module sdram_ctrl #
     // stream FIFOs in halfwords, >= 2
     parameter RD_FIFO_DEPTH = 16,
     parameter WR_FIFO_DEPTH = 16,
+    parameter WA_FIFO_DEPTH = 16,
     // beats a client may issue while another waits, 1..256
     parameter MAX_RUN = 16,
     // CPU cache: lines (power of two >= 2) of LINE_WORDS 32-bit words (power of two)
@@ -112,11 +115,20 @@ module sdram_ctrl #
     output wire                            s_axis_wr_tready,
 
     /*
+     * Addressed writer: halfword and its address per beat
+     */
+    input  wire [15:0]                     s_axis_wa_tdata,
+    input  wire [ROW_BITS+COL_BITS+1:0]    s_axis_wa_tuser,
+    input  wire                            s_axis_wa_tvalid,
+    output wire                            s_axis_wa_tready,
+
+    /*
      * Status
      */
     output wire                            init_done,
     output wire                            rd_busy,
     output wire                            wr_busy,
+    output wire                            wa_busy,
 
     /*
      * SDRAM pins (the tristate DQ buffer is at the board's top)
@@ -179,6 +191,7 @@ localparam RL = CAS_LATENCY;                                  // READ to the dat
 initial begin
     if (CAS_LATENCY < 2 || CAS_LATENCY > 3 || ROW_BITS < 11 || ROW_BITS > 13 || COL_BITS < 8
             || COL_BITS > 10 || INIT_REFRESHES < 2 || RD_FIFO_DEPTH < 2 || WR_FIFO_DEPTH < 2
+            || WA_FIFO_DEPTH < 2
             || MAX_RUN < 1 || MAX_RUN > 256) begin
         $error("Error: unsupported SDRAM geometry or controller parameters (instance %m)");
         $finish;
@@ -235,7 +248,7 @@ reg [CNT_BITS-1:0] turn_reg = {CNT_BITS{1'b0}}, turn_next;    // READ -> WRITE
 // arbitration
 reg granted_reg = 1'b0, granted_next;
 reg [1:0] grant_reg = 2'd0, grant_next;
-reg last_wr_reg = 1'b0, last_wr_next;                         // the writer had the last stream turn
+reg [1:0] last_reg = 2'd3, last_next;                         // the stream with the last turn
 reg [7:0] run_reg = 8'd0, run_next;
 
 // reads in flight: valid and client per cycle since the READ
@@ -254,15 +267,16 @@ reg [15:0] dq_in_reg = 16'd0;
 /*
  * Clients
  */
-wire [2:0] req;
-wire [2:0] we;
-wire [3*ADDR_BITS-1:0] addr;
-wire [47:0] wdata;
-wire [5:0] wmask;
-reg [2:0] ack;
+wire [3:0] req;
+wire [3:0] we;
+wire [4*ADDR_BITS-1:0] addr;
+wire [63:0] wdata;
+wire [7:0] wmask;
+reg [3:0] ack;
 reg do_act, do_pre, do_write;   // the engine's command for the granted bank this cycle
 wire rvalid = rd_pipe_reg[RL];
 reg [ADDR_BITS-1:0] wr_addr_reg = {ADDR_BITS{1'b0}};           // the stream writer's next halfword
+wire [ADDR_BITS-1:0] wa_fifo_addr;                              // the addressed writer's next one
 wire [1:0] rclient = rd_client_reg[2*RL +: 2];
 
 // client 0: the CPU port
@@ -279,8 +293,8 @@ sdram_cache #(
     .cpu_wstrb(cpu_wstrb),
     .cpu_ready(cpu_ready),
     .cpu_rdata(cpu_rdata),
-    .snoop_valid(ack[2]),
-    .snoop_addr(wr_addr_reg),
+    .snoop_valid(ack[2] || ack[3]),
+    .snoop_addr(ack[3] ? wa_fifo_addr : wr_addr_reg),
     .m_req(req[0]),
     .m_we(we[0]),
     .m_addr(addr[0 +: ADDR_BITS]),
@@ -402,6 +416,33 @@ always @(posedge clk) begin
     end
 end
 
+// client 3: the addressed writer
+wire wa_fifo_valid;
+wire [15:0] wa_fifo_data;
+wire [$clog2(WA_FIFO_DEPTH+1)-1:0] wa_count_unused;
+
+assign req[3] = wa_fifo_valid;
+assign we[3] = 1'b1;
+assign addr[3*ADDR_BITS +: ADDR_BITS] = wa_fifo_addr;
+assign wdata[48 +: 16] = wa_fifo_data;
+assign wmask[6 +: 2] = 2'b00;
+assign wa_busy = wa_fifo_valid;
+
+wm_fifo #(
+    .DATA_WIDTH(16 + ADDR_BITS),
+    .DEPTH(WA_FIFO_DEPTH)
+) wa_fifo_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_data({s_axis_wa_tuser, s_axis_wa_tdata}),
+    .s_valid(s_axis_wa_tvalid),
+    .s_ready(s_axis_wa_tready),
+    .m_data({wa_fifo_addr, wa_fifo_data}),
+    .m_valid(wa_fifo_valid),
+    .m_ready(ack[3]),
+    .count(wa_count_unused)
+);
+
 /*
  * Engine
  */
@@ -414,7 +455,8 @@ always @* begin
     case (grant_reg)
         2'd0: {g_addr, g_wdata, g_wmask} = {addr[0 +: ADDR_BITS], wdata[0 +: 16], wmask[0 +: 2]};
         2'd1: {g_addr, g_wdata, g_wmask} = {addr[ADDR_BITS +: ADDR_BITS], wdata[16 +: 16], wmask[2 +: 2]};
-        default: {g_addr, g_wdata, g_wmask} = {addr[2*ADDR_BITS +: ADDR_BITS], wdata[32 +: 16], wmask[4 +: 2]};
+        2'd2: {g_addr, g_wdata, g_wmask} = {addr[2*ADDR_BITS +: ADDR_BITS], wdata[32 +: 16], wmask[4 +: 2]};
+        default: {g_addr, g_wdata, g_wmask} = {addr[3*ADDR_BITS +: ADDR_BITS], wdata[48 +: 16], wmask[6 +: 2]};
     endcase
 end
 wire g_we = we[grant_reg];
@@ -451,7 +493,16 @@ always @* begin
 end
 wire g_hit = g_open && g_open_row == g_row;
 // another client waits (for the run limit)
-wire others = (req & ~(3'b001 << grant_reg)) != 3'b000;
+wire others = (req & ~(4'b0001 << grant_reg)) != 4'b0000;
+// the streams in turn: the first one asking after the one that had the last turn
+reg [1:0] next_stream;
+always @* begin
+    case (last_reg)
+        2'd1: next_stream = req[2] ? 2'd2 : (req[3] ? 2'd3 : 2'd1);
+        2'd2: next_stream = req[3] ? 2'd3 : (req[1] ? 2'd1 : 2'd2);
+        default: next_stream = req[1] ? 2'd1 : (req[2] ? 2'd2 : 2'd3);
+    endcase
+end
 
 always @* begin
     state_next = state_reg;
@@ -473,7 +524,7 @@ always @* begin
     turn_next = turn_reg == {CNT_BITS{1'b0}} ? turn_reg : turn_reg - 1'b1;
     granted_next = granted_reg;
     grant_next = grant_reg;
-    last_wr_next = last_wr_reg;
+    last_next = last_reg;
     run_next = run_reg;
     rd_pipe_next = {rd_pipe_reg[RL-1:0], 1'b0};
     rd_client_next = {rd_client_reg[2*RL-1:0], 2'b00};
@@ -483,7 +534,7 @@ always @* begin
     dqm_next = 2'b00;
     dq_o_next = dq_o_reg;
     dq_oe_next = 1'b0;
-    ack = 3'b000;
+    ack = 4'b0000;
     do_act = 1'b0;
     do_pre = 1'b0;
     do_write = 1'b0;
@@ -545,16 +596,13 @@ always @* begin
                 state_next = S_REF;
             end else if (!g_req || (run_reg == 8'd0 && others)) begin
                 // arbitrate (no command this cycle): the CPU port first, the streams in turn
-                granted_next = req != 3'b000;
+                granted_next = req != 4'b0000;
                 run_next = N_RUN;
                 if (req[0]) begin
                     grant_next = 2'd0;
-                end else if (req[1] && (!req[2] || last_wr_reg)) begin
-                    grant_next = 2'd1;
-                    last_wr_next = 1'b0;
-                end else begin
-                    grant_next = 2'd2;
-                    last_wr_next = 1'b1;
+                end else if (req != 4'b0000) begin
+                    grant_next = next_stream;
+                    last_next = next_stream;
                 end
             end else if (wait_ok) begin
                 if (g_hit) begin
@@ -657,7 +705,7 @@ always @(posedge clk) begin
     turn_reg <= turn_next;
     granted_reg <= granted_next;
     grant_reg <= grant_next;
-    last_wr_reg <= last_wr_next;
+    last_reg <= last_next;
     run_reg <= run_next;
     rd_pipe_reg <= rd_pipe_next;
     rd_client_reg <= rd_client_next;

@@ -264,7 +264,8 @@ class TB:
         d = self.dut
         for name in ("cpu_valid", "cpu_addr", "cpu_wdata", "cpu_wstrb", "s_rd_cmd_valid", "s_rd_cmd_addr",
                      "s_rd_cmd_len", "m_axis_rd_tready", "s_wr_cmd_valid", "s_wr_cmd_addr", "s_wr_cmd_len",
-                     "s_axis_wr_tvalid", "s_axis_wr_tdata"):
+                     "s_axis_wr_tvalid", "s_axis_wr_tdata", "s_axis_wa_tvalid", "s_axis_wa_tdata",
+                     "s_axis_wa_tuser"):
             getattr(d, name).value = 0
 
     async def start(self, chip_timing: dict | None = None, force_cl: int | None = None):
@@ -401,11 +402,55 @@ class TB:
             self.ref[hw + i] = v
         return cycles
 
-    def finish(self, *, refreshes: int = 0):
+    async def scatter_write(self, beats: list[tuple[int, int]], p_valid: float = 1.0) -> int:
+        """(halfword address, value) beats through the addressed writer, tvalid raised with
+        probability p_valid and held until taken; returns the cycles until the last is written
+        (wa_busy low); the scoreboard then holds the new values (later beats win)."""
+        d = self.dut
+        k, cycles, offer = 0, 0, False
+        while k < len(beats):
+            offer = offer or self.rng.random() < p_valid
+            d.s_axis_wa_tvalid.value = int(offer)
+            if offer:
+                d.s_axis_wa_tuser.value, d.s_axis_wa_tdata.value = beats[k]
+            await ReadOnly()
+            cycles += 1
+            if offer and int(d.s_axis_wa_tready.value):
+                k, offer = k + 1, False
+            await FallingEdge(d.clk)
+        d.s_axis_wa_tvalid.value = 0
+        await ReadOnly()
+        while int(d.wa_busy.value):
+            await FallingEdge(d.clk)
+            cycles += 1
+            await ReadOnly()
+        await FallingEdge(d.clk)
+        for hw, v in beats:
+            self.ref[hw] = v
+        return cycles
+
+    async def finish(self):
+        """No violation, and the chip holds exactly what the ports wrote (every halfword, read back
+        or not; checked after a few cycles for the posted write)."""
+        await self.cycles(20)
         chip = self.chip
         assert not chip.errors, chip.report()
+        wrong = [hw for hw, v in self.ref.items() if chip.mem.get(hw, initial_value(hw)) != v]
+        assert not wrong, f"{len(wrong)} halfwords differ in the chip, first at {wrong[0]:#x}"
         self.dut._log.info("chip: %s, %d refreshes (%d while a stream was busy), longest gap %.1f ns",
                            dict(chip.counts), len(chip.ref_edges), chip.ref_busy, chip.max_ref_gap / 1000)
+
+
+def interleaved(rng: random.Random, bases: list[int], n: int) -> list[tuple[int, int]]:
+    """n (address, value) beats of len(bases) sequences, each advancing from its base, interleaved
+    at random (sequence k twice as likely as k + 1, as a filter bank's levels)."""
+    pos = [0] * len(bases)
+    out = []
+    for _ in range(n):
+        k = rng.choices(range(len(bases)), weights=[2 ** -i for i in range(len(bases))])[0]
+        out.append((bases[k] + pos[k], rng.getrandbits(16)))
+        pos[k] += 1
+    return out
 
 
 def random_region(rng: random.Random, n: int, rows: int = 3) -> list[int]:
@@ -444,7 +489,7 @@ async def test_cpu_port(dut):
     await tb.cycles(LINE_HW + 4)
     hits = [(await tb.cpu((join(5, 2, 64) + 2 * w) << 1))[1] for w in range(4)]
     assert hits == [2, 2, 2, 2], hits
-    tb.finish()
+    await tb.finish()
 
 
 @cocotb.test()
@@ -463,7 +508,18 @@ async def test_streams_backpressure(dut):
             await tb.stream_write(hw, [tb.rng.getrandbits(16) for _ in range(n)], p_valid)
             await tb.stream_read(hw - 2, n + 2, p_ready)
     await tb.stream_read((1 << ADDR_BITS) - 5, 5, 0.5)      # power-up contents, up to the last address
-    tb.finish()
+    # the addressed writer: three interleaved sequences (a filter bank's levels), then random beats
+    for p_valid in (1.0, 0.4):
+        beats = interleaved(tb.rng, [join(tb.rng.randrange(1 << ROW_BITS), b, tb.rng.randrange(64)) for b in
+                                     (0, 1, 1)], 300)
+        await tb.scatter_write(beats, p_valid)
+        for base in sorted({hw for hw, _ in beats})[::97]:
+            await tb.stream_read(base, 8, 0.7)
+        rand = [(tb.rng.randrange(1 << ADDR_BITS), tb.rng.getrandbits(16)) for _ in range(200)]
+        await tb.scatter_write(rand, p_valid)
+        for hw, _ in rand[::10]:
+            await tb.cpu((hw & ~1) << 1)
+    await tb.finish()
 
 
 @cocotb.test()
@@ -487,13 +543,19 @@ async def test_refresh_under_load(dut):
         for k in range(3):
             await tb.stream_write(dst + k * n, [rng.getrandbits(16) for _ in range(n)], 0.7)
 
+    scatter = interleaved(rng, [join(6000, 3, 0), join(6001, 3, 0), join(6002, 0, 0)], 600)
+
     r, w = cocotb.start_soon(reader()), cocotb.start_soon(writer())
+    a = cocotb.start_soon(tb.scatter_write(scatter, 0.5))
     await tb.cpu_traffic(300, cpu_region, p_idle=0.5)
     await r
     await w
+    await a
     await tb.stream_read(dst, 3 * n, 0.8)
+    for base in (join(6000, 3, 0), join(6001, 3, 0), join(6002, 0, 0)):
+        await tb.stream_read(base, 80, 0.9)
     assert tb.chip.ref_busy - busy0 >= 3, f"{tb.chip.ref_busy - busy0} refreshes while a stream was busy"
-    tb.finish()
+    await tb.finish()
 
 
 @cocotb.test()
@@ -508,6 +570,9 @@ async def test_coherence(dut):
     await tb.stream_write(base + 3, [tb.rng.getrandbits(16) for _ in range(6)])
     for w in range(8):
         await tb.cpu((base + 2 * w) << 1)                       # checked against the new values
+    await tb.scatter_write([(base + 9, 0x1234), (base + 2, 0x5678)])
+    for w in range(8):
+        await tb.cpu((base + 2 * w) << 1)                       # and the addressed writer's
     # a fill racing a stream write of the same line: whatever the order, later reads are fresh
     for trial in range(8):
         hw = join(45 + trial, trial & 3, 8 * trial)
@@ -518,7 +583,7 @@ async def test_coherence(dut):
         await read
         for k in range(LINE_HW // 2):
             await tb.cpu((hw + 2 * k) << 1)
-    tb.finish()
+    await tb.finish()
 
 
 @cocotb.test()
@@ -540,7 +605,7 @@ async def test_reset_mid_traffic(dut):
         await tb.start()                     # reset now, mid-stream
         await tb.stream_read(keep, 64, 0.5)
     await tb.cpu_traffic(40, [keep + 2 * w for w in range(32)])
-    tb.finish()
+    await tb.finish()
 
 
 @cocotb.test(skip=CLK_HZ < 100_000_000)
@@ -578,7 +643,7 @@ async def test_chip_model_catches_violations(dut):
         raise AssertionError("a chip one cycle late went unnoticed")
     await tb.start()                         # the datasheet's chip again
     await tb.cpu(join(51, 3, 0) << 1)
-    tb.finish()
+    await tb.finish()
 
 
 @cocotb.test(skip=not os.environ.get("SDRAM_BENCH_OUT"))
@@ -595,6 +660,12 @@ async def test_bench_cycles(dut):
     refs = len(tb.chip.ref_edges)
     cycles = await tb.stream_read(join(1000, 0, 0), n)
     out["stream_read"] = {"halfwords": n, "cycles": cycles, "refreshes": len(tb.chip.ref_edges) - refs}
+    # the addressed writer: three interleaved sequences in three banks, then in three rows of one bank
+    for name, banks in (("scatter_3_banks", (0, 1, 2)), ("scatter_1_bank", (3, 3, 3))):
+        bases = [join(4000 + k, b, 0) for k, b in enumerate(banks)]
+        beats = interleaved(tb.rng, bases, 4096)
+        cycles = await tb.scatter_write(beats)
+        out[name] = {"halfwords": len(beats), "cycles": cycles}
     # CPU: sequential words (a miss per line), the last line again (hits), a row miss each, writes
     seq = join(2000, 1, 0)
     out["cpu"] = {
@@ -603,6 +674,6 @@ async def test_bench_cycles(dut):
         "row_miss": [(await tb.cpu(join(3000 + k, 1, 0) << 1))[1] for k in range(16)],
         "write": [(await tb.cpu((seq + 2 * w) << 1, 0b1111, w))[1] for w in range(64)],
     }
-    tb.finish()
+    await tb.finish()
     with open(os.environ["SDRAM_BENCH_OUT"], "w") as f:
         json.dump(out, f, indent=1)
