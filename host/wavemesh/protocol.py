@@ -319,11 +319,11 @@ CONFIG = _m("CONFIG", "host to device: the job (docs/refiner.md has the fixed-po
             ("delta_d", "Q", "delta_d, coefficient units: floor(4 delta_d / s^2) (every value)", None,
              (0, U64)),
             ("slope_x_m", "I", "the normal metric's s / dx (dx: the cell's width in height units) as "
-                               "scale_m; 0: dx = 1", None, (0, 65535)),
-            ("slope_x_e", "I", "its exponent", None, (0, 126)),
-            ("slope_y_m", "I", "s / dy (dy: the cell's height in height units) as scale_m; 0: dy = 1", None,
+                               "scale_m; 0: dx = 1", 0, (0, 65535)),
+            ("slope_x_e", "I", "its exponent", 0, (0, 126)),
+            ("slope_y_m", "I", "s / dy (dy: the cell's height in height units) as scale_m; 0: dy = 1", 0,
              (0, 65535)),
-            ("slope_y_e", "I", "its exponent", None, (0, 126)))
+            ("slope_y_e", "I", "its exponent", 0, (0, 126)))
 
 DATA = _m("DATA", "host to device: samples",
           ("offset", "I", "index of the first sample (row-major, W per row)"),
