@@ -1,7 +1,7 @@
 // wavemesh simulated board: the Verilator model of soc_top with its UART bridged to TCP.
 //
 //   wmsim --firmware FILE.hex [--port N] [--fast] [--exit-on-close] [--no-socket]
-//         [--max-cycles N] [--trace FILE.fst] [--quiet]
+//         [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--quiet]
 //
 // A host talks to it as to a board: pyserial's serial_for_url("socket://127.0.0.1:N").  Bytes
 // from the client are driven onto the UART RX pin bit by bit at the board's current baud divisor,
@@ -21,6 +21,10 @@
 //   wmsim: halt 0xCODE cycle N                wmsim: trap cycle N
 //   wmsim: summary cycles N wall S.SSS s rate K kHz bytes-in N bytes-out N
 //
+// --profile FILE writes, at exit, "PC CYCLES" lines (hex, decimal): every cycle is counted against the
+// address of the last instruction fetched (the CPU is not pipelined: the cycles an instruction takes,
+// its memory accesses included, follow its fetch).  tools/board_profile.py maps them to functions.
+//
 // Exit status: 0 halt with code 0 (or the client left with --exit-on-close); 1 halt with another
 // code; 2 CPU trap; 3 --max-cycles reached; 4 socket error; 64 bad command line; 130 interrupted.
 #include <chrono>
@@ -32,6 +36,7 @@
 #include <cstring>
 #include <deque>
 #include <memory>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -55,6 +60,7 @@ struct Options {
     int port = DEFAULT_PORT;
     std::string firmware;
     std::string trace;
+    std::string profile;
     bool fast = false;
     bool exit_on_close = false;
     bool no_socket = false;
@@ -105,6 +111,10 @@ bool parse(int argc, char **argv, Options *o) {
             const char *v = value("--trace");
             if (!v) return false;
             o->trace = v;
+        } else if (a == "--profile") {
+            const char *v = value("--profile");
+            if (!v) return false;
+            o->profile = v;
         } else if (a == "--fast") {
             o->fast = true;
         } else if (a == "--exit-on-close") {
@@ -214,11 +224,23 @@ public:
             log("trap cycle %" PRIu64, cycles_);
             status = 2;
         }
+        if (profiling_) {
+            if (top_->prof_fetch) pc_ = top_->prof_pc;
+            ++profile_[pc_];
+        }
         top_->clk = 1;
         top_->eval();
         dump();
         ++cycles_;
         return status;
+    }
+
+    // The --profile histogram, "PC CYCLES" per line in address order; false when it cannot be written.
+    bool write_profile(const std::string &path) const {
+        FILE *f = fopen(path.c_str(), "w");
+        if (!f) return false;
+        for (const auto &kv : profile_) fprintf(f, "%08x %" PRIu64 "\n", kv.first, kv.second);
+        return fclose(f) == 0;
     }
 
     uint64_t cycles() const { return cycles_; }
@@ -259,6 +281,9 @@ private:
     UartLineSampler line_in_;
     uint64_t cycles_ = 0;
     uint32_t leds_ = 0;
+    bool profiling_ = !opt_.profile.empty();
+    uint32_t pc_ = 0;
+    std::map<uint32_t, uint64_t> profile_;
 };
 
 }  // namespace
@@ -325,6 +350,8 @@ int main(int argc, char **argv) {
         bridge.service();
         bridge.flush(FLUSH_MS);
     }
+    if (!opt.profile.empty() && !board.write_profile(opt.profile))
+        fprintf(stderr, "wmsim: error: cannot write profile '%s'\n", opt.profile.c_str());
     double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - waited;
     double khz = wall > 0 ? board.cycles() / wall / 1000.0 : 0.0;
     printf("wmsim: summary cycles %" PRIu64 " wall %.3f s rate %.0f kHz bytes-in %" PRIu64 " bytes-out %" PRIu64 "\n",

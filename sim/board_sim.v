@@ -33,8 +33,15 @@ module board_sim
     output wire [31:0]  stage,
     output wire         halt_valid,
     output wire [31:0]  halt_code,
-    output wire         trap
+    output wire         trap,
+
+    // for wmsim --profile: an instruction fetch completes this cycle, and its address (the PC)
+    output wire         prof_fetch,
+    output wire [31:0]  prof_pc
 );
+
+assign prof_fetch = soc_inst.mem_valid && soc_inst.mem_instr_unused && soc_inst.mem_ready_reg;
+assign prof_pc = soc_inst.mem_addr;
 
 soc_top #(
     .FW_HEX(""),
