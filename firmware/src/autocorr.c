@@ -30,22 +30,7 @@
 #define SETTLED 4u /* an off-diagonal entry this small (4 2^-30) is left alone: it moves an eigenvalue by
                       less than 2^-28 */
 
-/* floor(sqrt(x)) by Newton's iteration from a power of two above the root (a handful of divisions
- * instead of wm_isqrt64's 32 bit steps; the same exact result). */
-static uint64_t isqrt(uint64_t x)
-{
-    uint64_t r, y;
-    int b = 0;
-    if (x < 2) return x;
-    while (b < 32 && ((uint64_t)1 << (2 * b)) <= x) b++; /* 4^(b-1) <= x < 4^b (or b = 32) */
-    r = (uint64_t)1 << b;                                 /* > sqrt(x) */
-    if (b == 32) r = 0xFFFFFFFFu;                         /* floor(sqrt(2^64 - 1)) >= every root */
-    for (;;) {
-        y = (r + x / r) >> 1;
-        if (y >= r) return r;
-        r = y;
-    }
-}
+#define isqrt wm_isqrt64 /* exact floor(sqrt(x)), fixed.c */
 
 static uint64_t mag(int64_t a) { return a < 0 ? (uint64_t)0 - (uint64_t)a : (uint64_t)a; }
 
@@ -142,8 +127,9 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     }
     m = c[0] > c[1] ? c[0] : c[1];
     if (c[2] > m) m = c[2];
-    while ((m >> sh) >= ((uint64_t)1 << 31)) sh++;
-    for (int k = 0; k < 3; k++) c[k] >>= sh;
+    sh = wm_bit_length64(m) - 31; /* the least shift that brings m below 2^31 */
+    if (sh > 0)
+        for (int k = 0; k < 3; k++) c[k] >>= sh;
     len = isqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]); /* < 3 2^62 */
     if (len == 0) { /* a degenerate triangle (not in a valid mesh) */
         n[0] = n[1] = 0;

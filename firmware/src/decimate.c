@@ -56,7 +56,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
                 x[c] = me->vx[tris[3 * j + c]];
                 y[c] = me->vy[tris[3 * j + c]];
             }
-            e = wm_tri_error(&r->field, &r->params, x, y, NULL, NULL);
+            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta);
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }

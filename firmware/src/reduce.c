@@ -136,10 +136,15 @@ int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, i
 /* ---------------------------------------------------------------------------------------------- */
 /* The pass */
 
-#define CLS_UNKNOWN (-1)
+/* A vertex's class, kept in r->vapex from pass to pass: wm_touch forgets it (CLS_UNKNOWN) for the
+ * three vertices of every triangle an operator makes or changes, so a class that is still there
+ * belongs to the star the vertex has now.  A removal that failed fails again on the same star (its
+ * plan and its bound depend on nothing else): CLS_REMOVE_FAILED skips it until the star changes. */
+#define CLS_UNKNOWN WM_CLASS_UNKNOWN
 #define CLS_NONE 0
-#define CLS_REMOVE 1   /* 4.32 */
-#define CLS_COLLAPSE 2 /* 4.33 */
+#define CLS_REMOVE 1        /* 4.32 */
+#define CLS_COLLAPSE 2      /* 4.33 */
+#define CLS_REMOVE_FAILED 3 /* 4.32, and its removal was refused on this star */
 
 struct eig {
     int64_t r[6], lambda[3], vec[9];
@@ -152,53 +157,55 @@ static int64_t shift_round(int64_t a, int sh)
     return a < 0 ? -(int64_t)u : (int64_t)u;
 }
 
-/* Two sufficient tests decide most vertices without the eigen-decomposition; each claims only what
- * holds with a margin of 2^-12 over its rounding (a few 2^-14), so the class is the one the
- * eigenvalues give (the shortcuts save time, they change nothing):
- *   lambda1 >= 4 det R   (det R = lambda1 lambda2 lambda3, lambda2 lambda3 <= ((1 - lambda1) / 2)^2
- *                         <= 1/4): 4 det R > delta_lambda means neither 4.32 nor 4.33 holds;
- *   lambda1 + lambda2 = tr R - lambda3 <= tr R - mu^T R mu for the unit mean normal mu (lambda3 is
- *                         the largest Rayleigh quotient): below delta_lambda means 4.32 holds. */
-static int8_t shortcut(const int64_t r[6], const int64_t mean[3], uint32_t delta_lambda)
+/* The class of R (4.32, 4.33) from the number of its eigenvalues below, and equal to, t = delta_lambda,
+ * without the eigenvalues: R's characteristic polynomial p(x) = x^3 - T x^2 + S x - det R has only real
+ * roots (R is symmetric), so by Descartes' rule, exact for such polynomials, the number of roots above
+ * t is the number of sign changes in the coefficients of
+ *
+ *     q(u) = p(t + u) = u^3 + (3t - T) u^2 + (3t^2 - 2Tt + S) u + p(t)
+ *
+ * (a root at t itself first divided out: p(t) = 0).  In integers on R and t rounded to Q19 (entries
+ * and t within [-1, 1]: every term below 2^61), so the class is exact for that matrix: it differs from
+ * one made with R's exact eigenvalues only when one of them lies within a few 2^-19 of delta_lambda. */
+static int8_t class_of(const int64_t r[6], uint32_t delta_lambda)
 {
-    const int64_t margin57 = (int64_t)1 << 45, margin28 = (int64_t)1 << 16;
     int64_t a = shift_round(r[0], 11), b = shift_round(r[1], 11), c = shift_round(r[2], 11); /* Q19 */
     int64_t d = shift_round(r[3], 11), e = shift_round(r[4], 11), f = shift_round(r[5], 11);
-    int64_t det = a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - d * c); /* Q57, below 2^60 */
-    int64_t mm[3], q28[6], num = 0, den = 0, mx = 0, q;
-    int sh = 0;
-    if (delta_lambda >= 65536u) return CLS_UNKNOWN; /* every eigenvalue is below 1: let them decide */
-    if (det > 0 && 4 * det > ((int64_t)delta_lambda << 41) + margin57) return CLS_NONE;
-    for (int i = 0; i < 3; i++) {
-        int64_t u = mean[i] < 0 ? -mean[i] : mean[i];
-        if (u > mx) mx = u;
+    int64_t t = (int64_t)delta_lambda << 3;                                                    /* Q19 */
+    int64_t T = a + d + f, S = a * d - b * b + a * f - c * c + d * f - e * e;                  /* Q19, Q38 */
+    int64_t det = a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - d * c);             /* Q57 */
+    int64_t k[4], prev = 1;
+    int n = 4, above = 0, at = 0, below;
+    if (delta_lambda >= 65536u) return CLS_REMOVE; /* every eigenvalue of R is at most 1 */
+    k[0] = 1;
+    k[1] = 3 * t - T;
+    k[2] = 3 * t * t - 2 * T * t + S;
+    k[3] = ((t - T) * t + S) * t - det; /* p(t), Q57: t^3 - T t^2 + S t - det */
+    while (n > 1 && k[n - 1] == 0) {
+        n--;
+        at++;
     }
-    while ((mx >> sh) >= ((int64_t)1 << 15)) sh++;
-    for (int i = 0; i < 3; i++) mm[i] = sh ? shift_round(mean[i], sh) : mean[i];
-    for (int i = 0; i < 6; i++) q28[i] = shift_round(r[i], 2);
-    num = q28[0] * mm[0] * mm[0] + q28[3] * mm[1] * mm[1] + q28[5] * mm[2] * mm[2] +
-          2 * (q28[1] * mm[0] * mm[1] + q28[2] * mm[0] * mm[2] + q28[4] * mm[1] * mm[2]);
-    den = mm[0] * mm[0] + mm[1] * mm[1] + mm[2] * mm[2];
-    if (den == 0) return CLS_UNKNOWN;
-    q = wm_floor_div(num, den);
-    if (q28[0] + q28[3] + q28[5] - q < ((int64_t)delta_lambda << 12) - margin28) return CLS_REMOVE;
-    return CLS_UNKNOWN;
+    for (int i = 1; i < n; i++) {
+        if (k[i] == 0) continue;
+        if ((k[i] < 0) != (prev < 0)) above++;
+        prev = k[i];
+    }
+    below = 3 - above - at;
+    if (below >= 2) return CLS_REMOVE;                /* lambda1 <= lambda2 < delta_lambda */
+    if (below == 1 && at == 0) return CLS_COLLAPSE;   /* lambda1 < delta_lambda < lambda2 */
+    return CLS_NONE;
 }
 
-/* The class of v (4.32, 4.33); with need_vec the eigen-decomposition is always made (into g). */
-static int8_t classify(const wm_refiner *r, int32_t v, struct eig *g, int need_vec)
+/* The class of v (4.32, 4.33); for a collapse also the eigen-decomposition (into g), whose middle
+ * eigenvector the collapse test compares (4.34). */
+static int8_t classify(const wm_refiner *r, int32_t v, struct eig *g)
 {
-    int64_t dl = (int64_t)r->params.delta_lambda << 14; /* Q16.16 -> Q30 */
     int64_t mean[3];
+    int8_t cls;
     if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean) < 0) return CLS_NONE;
-    if (!need_vec) {
-        int8_t c = shortcut(g->r, mean, r->params.delta_lambda);
-        if (c != CLS_UNKNOWN) return c;
-    }
-    wm_sym3_eigen(g->r, g->lambda, g->vec);
-    if (g->lambda[1] < dl) return CLS_REMOVE;
-    if (g->lambda[0] < dl && dl < g->lambda[1]) return CLS_COLLAPSE;
-    return CLS_NONE;
+    cls = class_of(g->r, r->params.delta_lambda);
+    if (cls == CLS_COLLAPSE) wm_sym3_eigen(g->r, g->lambda, g->vec);
+    return cls;
 }
 
 /* The largest E(T) around v, at least zeta. */
@@ -225,7 +232,7 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
             x[c] = w < 0 ? px : me->vx[w];
             y[c] = w < 0 ? py : me->vy[w];
         }
-        if (wm_tri_error(&r->field, &r->params, x, y, NULL, NULL) > bound) return 0;
+        if (wm_tri_error_upto(&r->field, &r->params, x, y, bound) > bound) return 0;
     }
     return 1;
 }
@@ -285,21 +292,50 @@ static int try_collapse(wm_refiner *r, int32_t e)
     return 0;
 }
 
+/* The middle eigenvectors of the pass's latest collapse-class vertices, by slot (direct-mapped, on the
+ * stack of one pass): a vertex of class 4.33 is tested once as v and again as a neighbour of each of
+ * its collapse-class neighbours, and its star has not changed in between unless its class was
+ * forgotten (wm_forget_class), so while vapex still says 4.33 the vector kept is the one classify
+ * would compute again. */
+#define ECACHE 16
+struct ecache {
+    int32_t v;
+    int64_t e2[3];
+};
+
+static int8_t classify_cached(const wm_refiner *r, int32_t v, struct eig *g, struct ecache *cache)
+{
+    struct ecache *c = &cache[v & (ECACHE - 1)];
+    int8_t cls;
+    if (r->vapex[v] == CLS_COLLAPSE && c->v == v) {
+        for (int i = 0; i < 3; i++) g->vec[3 + i] = c->e2[i];
+        return CLS_COLLAPSE;
+    }
+    cls = classify(r, v, g);
+    if (cls == CLS_COLLAPSE) {
+        c->v = v;
+        for (int i = 0; i < 3; i++) c->e2[i] = g->vec[3 + i];
+    }
+    return cls;
+}
+
 int32_t wm_reduce(wm_refiner *r)
 {
+    struct ecache cache[ECACHE];
     wm_mesh *me = &r->mesh;
     int32_t removed = 0;
     uint64_t dc = (uint64_t)r->params.delta_c << 44; /* Q16.16 -> Q60, the scale of e21 . e22 */
-    for (int32_t v = 0; v < me->vert_end; v++) r->vapex[v] = CLS_UNKNOWN;
+    for (int i = 0; i < ECACHE; i++) cache[i].v = -1;
     for (int32_t v = 0; v < me->vert_end; v++) {
         struct eig gv, gw;
         int32_t out[WM_MAX_RING + 1], k = 0, first, h;
         int8_t cls;
-        if (me->vx[v] == WM_FREE) continue;
-        cls = classify(r, v, &gv, 0);
+        if (me->vx[v] == WM_FREE || r->vapex[v] == CLS_NONE || r->vapex[v] == CLS_REMOVE_FAILED) continue;
+        cls = classify_cached(r, v, &gv, cache);
         r->vapex[v] = cls;
         if (cls == CLS_REMOVE) {
-            removed += try_remove(r, v);
+            if (try_remove(r, v)) removed++;
+            else r->vapex[v] = CLS_REMOVE_FAILED;
             continue;
         }
         if (cls != CLS_COLLAPSE) continue;
@@ -318,8 +354,8 @@ int32_t wm_reduce(wm_refiner *r)
             int32_t e = out[i], u = me->hv[e] == v ? wm_dest(me, e) : me->hv[e];
             int64_t dot = 0;
             uint64_t adot;
-            if (r->vapex[u] == CLS_NONE || r->vapex[u] == CLS_REMOVE) continue;
-            cls = classify(r, u, &gw, 1);
+            if (r->vapex[u] == CLS_NONE || r->vapex[u] == CLS_REMOVE || r->vapex[u] == CLS_REMOVE_FAILED) continue;
+            cls = classify_cached(r, u, &gw, cache);
             r->vapex[u] = cls;
             if (cls != CLS_COLLAPSE) continue;
             for (int c = 0; c < 3; c++) dot += gv.vec[3 + c] * gw.vec[3 + c]; /* Q60, below 3 2^60 */

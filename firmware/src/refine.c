@@ -75,6 +75,7 @@ void wm_touch(wm_refiner *r, int32_t t)
     r->err[t] = wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
     r->worst[t] = wy * r->field.width + wx;
     r->mesh.tflag[t] |= WM_F_NEW;
+    wm_forget_class(r, t);
 }
 
 int wm_room(wm_refiner *r, int32_t added)
@@ -234,6 +235,8 @@ static int try_swap(wm_refiner *r, int32_t e)
         r->worst[t2] = w2y * r->field.width + w2x;
         me->tflag[t1] |= WM_F_NEW;
         me->tflag[t2] |= WM_F_NEW;
+        wm_forget_class(r, t1);
+        wm_forget_class(r, t2);
     } else {
         wm_touch(r, t1);
         wm_touch(r, t2);

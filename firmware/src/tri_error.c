@@ -30,73 +30,127 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y)
     return f->details + off + 3 * ((int64_t)(y >> m) * cw + (x >> m));
 }
 
-/* Scans the closed triangle row by row; returns Vmax and the first sample reaching it. */
-static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, int32_t *wx,
-                     int32_t *wy)
-{
-    const uint16_t *h = f->samples;
+/* The edge functions and heights of a triangle, for the scans. */
+struct tri_setup {
     int64_t z[3], A[3], B[3], C[3], dS;
-    int32_t ymin = y[0], ymax = y[0], xmin = x[0], xmax = x[0];
-    uint64_t vmax = 0;
-    int32_t bx = x[0], by = y[0];
+    int32_t xmin, xmax, ymin, ymax;
+};
+
+static void setup(const wm_field *f, const int32_t x[3], const int32_t y[3], struct tri_setup *t)
+{
+    t->ymin = t->ymax = y[0];
+    t->xmin = t->xmax = x[0];
     for (int k = 0; k < 3; k++) {
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-        z[k] = h[(int64_t)y[k] * f->width + x[k]];
+        t->z[k] = f->samples[(int64_t)y[k] * f->width + x[k]];
         /* E_k(px, py) = (x_k2 - x_k1)(py - y_k1) - (y_k2 - y_k1)(px - x_k1) = A px + B py + C */
-        A[k] = -((int64_t)y[k2] - y[k1]);
-        B[k] = (int64_t)x[k2] - x[k1];
-        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
-        if (y[k] < ymin) ymin = y[k];
-        if (y[k] > ymax) ymax = y[k];
-        if (x[k] < xmin) xmin = x[k];
-        if (x[k] > xmax) xmax = x[k];
+        t->A[k] = -((int64_t)y[k2] - y[k1]);
+        t->B[k] = (int64_t)x[k2] - x[k1];
+        t->C[k] = -(t->B[k] * y[k1]) - t->A[k] * x[k1];
+        if (y[k] < t->ymin) t->ymin = y[k];
+        if (y[k] > t->ymax) t->ymax = y[k];
+        if (x[k] < t->xmin) t->xmin = x[k];
+        if (x[k] > t->xmax) t->xmax = x[k];
     }
-    dS = A[0] * z[0] + A[1] * z[1] + A[2] * z[2];
-    for (int32_t py = ymin; py <= ymax; py++) {
-        int64_t lo = xmin, hi = xmax, S;
+    t->dS = t->A[0] * t->z[0] + t->A[1] * t->z[1] + t->A[2] * t->z[2];
+}
+
+/* floor(a / b) and ceil(a / b) for b > 0 in 32 bits (the soft CPU divides 32-bit numbers in hardware,
+ * 64-bit ones in a library routine many times slower). */
+static int32_t floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
+
+/* Scans the closed triangle row by row; returns Vmax and the first sample reaching it, or, as soon as
+ * a sample's V exceeds limit, that V (the caller only learns that E(T) is above its bound).
+ *
+ * Two exact paths, the same results: on grids of at most 2^14 a side every E_k fits 30 bits, so the
+ * span of each row comes from 32-bit divisions; when also D < 2^15, S = sum E_k z_k <= D (2^16 - 1)
+ * and V fit 32 bits, and the row itself runs in 32-bit arithmetic.  Otherwise 64 bits throughout. */
+static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
+                     int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    struct tri_setup t;
+    uint64_t vmax = 0;
+    int32_t bx = x[0], by = y[0];
+    int small = f->width <= (1 << 14) && f->height <= (1 << 14), narrow = small && D < (1 << 15);
+    setup(f, x, y, &t);
+    for (int32_t py = t.ymin; py <= t.ymax; py++) {
+        int64_t lo = t.xmin, hi = t.xmax;
         const uint16_t *row = h + (int64_t)py * f->width;
         int empty = 0;
         for (int k = 0; k < 3; k++) {
-            int64_t num = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
-            if (A[k] > 0) {
-                int64_t l = wm_ceil_div(-num, A[k]);
+            int64_t num = t.B[k] * py + t.C[k]; /* E_k = A x + num >= 0 */
+            if (t.A[k] > 0) {
+                int64_t l = small ? ceil_div32((int32_t)-num, (int32_t)t.A[k]) : wm_ceil_div(-num, t.A[k]);
                 if (l > lo) lo = l;
-            } else if (A[k] < 0) {
-                int64_t r = wm_floor_div(num, -A[k]);
+            } else if (t.A[k] < 0) {
+                int64_t r = small ? floor_div32((int32_t)num, (int32_t)-t.A[k]) : wm_floor_div(num, -t.A[k]);
                 if (r < hi) hi = r;
             } else if (num < 0) {
                 empty = 1;
             }
         }
         if (empty || lo > hi) continue;
-        S = 0;
-        for (int k = 0; k < 3; k++) S += (A[k] * lo + B[k] * py + C[k]) * z[k];
-        for (int64_t px = lo; px <= hi; px++, S += dS) {
-            int64_t v = S - D * (int64_t)row[px];
-            uint64_t av = (uint64_t)(v < 0 ? -v : v);
-            if (av > vmax) {
-                vmax = av;
-                bx = (int32_t)px;
-                by = py;
+        if (narrow) {
+            /* modulo 2^32 (unsigned: no overflow), exact where it matters: S and D h lie in [0, 2^31)
+             * at every sample of the span, so their difference is V's sign and size */
+            uint32_t S = 0, dS = (uint32_t)t.dS, d = (uint32_t)D, vm = (uint32_t)vmax;
+            int32_t px;
+            for (int k = 0; k < 3; k++)
+                S += (uint32_t)(t.A[k] * lo + t.B[k] * py + t.C[k]) * (uint32_t)t.z[k];
+            for (px = (int32_t)lo; px <= (int32_t)hi; px++, S += dS) {
+                uint32_t u = S - d * row[px], v = u >> 31 ? 0u - u : u;
+                if (v > vm) {
+                    vm = v;
+                    bx = px;
+                    by = py;
+                    if (vm > limit) break;
+                }
+            }
+            vmax = (uint64_t)vm;
+        } else {
+            int64_t S = 0;
+            for (int k = 0; k < 3; k++) S += (t.A[k] * lo + t.B[k] * py + t.C[k]) * t.z[k];
+            for (int64_t px = lo; px <= hi; px++, S += t.dS) {
+                int64_t v = S - D * (int64_t)row[px];
+                uint64_t av = (uint64_t)(v < 0 ? -v : v);
+                if (av > vmax) {
+                    vmax = av;
+                    bx = (int32_t)px;
+                    by = py;
+                    if (av > limit) break;
+                }
             }
         }
+        if (vmax > limit) break;
     }
     if (wx) *wx = bx;
     if (wy) *wy = by;
     return vmax;
 }
 
-/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax. */
-static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
-                       uint64_t vmax)
+/* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
+ * n < 2^32 and d < 2^16, as on the board's grids (n = q d + rem, rem < d, so 2^16 rem < 2^32). */
+static uint64_t ceil_q16_div(uint64_t n, uint64_t d)
 {
-    uint64_t ev, ga, gb, r, en;
+    if (n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 16)) {
+        uint32_t q = (uint32_t)n / (uint32_t)d, rem = (uint32_t)n - q * (uint32_t)d;
+        return ((uint64_t)q << 16) + ((rem << 16) + (uint32_t)d - 1u) / (uint32_t)d;
+    }
+    return (n * 65536u + d - 1) / d;
+}
+
+/* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric. */
+static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                             int64_t D)
+{
+    uint64_t ga, gb;
     int64_t z0, dz1, dz2, Na, Nb;
     uint32_t sm;
     int32_t se;
-    ev = (vmax * 65536u + (uint64_t)D - 1) / (uint64_t)D; /* vmax < 2^47 */
-    if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
-    if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
+    int k = 0;
+    uint64_t one;
     z0 = f->samples[(int64_t)y[0] * f->width + x[0]];
     dz1 = (int64_t)f->samples[(int64_t)y[1] * f->width + x[1]] - z0;
     dz2 = (int64_t)f->samples[(int64_t)y[2] * f->width + x[2]] - z0;
@@ -106,19 +160,25 @@ static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3]
     ga = wm_frac_mul((uint64_t)(Na < 0 ? -Na : Na), (uint64_t)D, sm, se, 16, GCAP);
     wm_slope_scale(p, 1, &sm, &se);
     gb = wm_frac_mul((uint64_t)(Nb < 0 ? -Nb : Nb), (uint64_t)D, sm, se, 16, GCAP);
-    /* sqrt(1 + g^2) in Q16.16, rounded down: steep slopes are shifted right by k first (ga, gb
-     * keep >= 30 significant bits), and the root shifted back. */
-    {
-        int k = 0;
-        uint64_t one;
-        while ((ga >> k) >= ((uint64_t)1 << 31) || (gb >> k) >= ((uint64_t)1 << 31)) k++;
-        one = 2 * k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * k);
-        ga >>= k;
-        gb >>= k;
-        r = wm_isqrt64(one + ga * ga + gb * gb) << k;
-    }
-    en = (ev * 65536u + r - 1) / r;
-    return (uint32_t)en;
+    /* steep slopes are shifted right by k first (ga, gb keep >= 30 significant bits), and the root
+     * shifted back */
+    while ((ga >> k) >= ((uint64_t)1 << 31) || (gb >> k) >= ((uint64_t)1 << 31)) k++;
+    one = 2 * k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * k);
+    ga >>= k;
+    gb >>= k;
+    return wm_isqrt64(one + ga * ga + gb * gb) << k;
+}
+
+/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  r: the slope factor,
+ * 0 when not yet computed. */
+static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
+                       uint64_t vmax, uint64_t r)
+{
+    uint64_t ev = ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
+    if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
+    if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
+    if (r == 0) r = slope_factor(f, p, x, y, D);
+    return (uint32_t)((ev * 65536u + r - 1) / r);
 }
 
 uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
@@ -127,7 +187,24 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
-    return finish(f, p, x, y, D, scan(f, x, y, D, wx, wy));
+    return finish(f, p, x, y, D, scan(f, x, y, D, UINT64_MAX, wx, wy), 0);
+}
+
+uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           uint32_t bound)
+{
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    uint64_t r = 0, evm = bound, limit = UINT64_MAX;
+    WM_ASSERT(D > 0);
+    if (D <= 0) return 0xFFFFFFFFu;
+    /* the largest Vmax whose E(T) is <= bound: E = ceil(2^16 ev / r) <= bound iff
+     * ev <= floor(bound r / 2^16), and ev = ceil(2^16 V / D) <= evm iff V <= floor(evm D / 2^16) */
+    if (p->metric != WM_METRIC_VERTICAL) {
+        r = slope_factor(f, p, x, y, D);
+        evm = r < ((uint64_t)1 << 31) ? ((uint64_t)bound * r) >> 16 : 0xFFFFFFFFu;
+    }
+    if (evm < 0xFFFFFFFFu && D < ((int64_t)1 << 31)) limit = (evm * (uint64_t)D) >> 16;
+    return finish(f, p, x, y, D, scan(f, x, y, D, limit, NULL, NULL), r);
 }
 
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
@@ -140,5 +217,5 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
         S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
     }
     v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
-    return finish(f, p, x, y, D, (uint64_t)(v < 0 ? -v : v));
+    return finish(f, p, x, y, D, (uint64_t)(v < 0 ? -v : v), 0);
 }

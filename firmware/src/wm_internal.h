@@ -72,7 +72,9 @@ static inline int32_t wm_rot_cw(const wm_mesh *m, int32_t e)
 int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 
 /* Fixed-point and exact integer helpers (fixed.c). */
+#define WM_CLASS_UNKNOWN (-1) /* r->vapex: no class known for the vertex's current star (reduce.c) */
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
+int wm_bit_length64(uint64_t x);                        /* bits of x: 0 for 0, 64 for 2^63 and above */
 int32_t wm_gcd(int32_t a, int32_t b);                   /* gcd(|a|, |b|), gcd(0, 0) = 0 */
 int64_t wm_floor_div(int64_t a, int64_t b);             /* floor(a / b), b > 0 */
 int64_t wm_ceil_div(int64_t a, int64_t b);              /* ceil(a / b), b > 0 */
@@ -95,6 +97,10 @@ int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int3
  * than wm_tri_error of the same triangle, so a value above zeta rules the triangle out cheaply. */
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                         int32_t py);
+/* E(T) when it is at most bound; otherwise some value above bound, found with the scan stopped at the
+ * first sample that puts E(T) over it (the tests of the reduction and the decimation need no more). */
+uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           uint32_t bound);
 
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
@@ -128,7 +134,8 @@ struct wm_refiner {
     wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
     wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
-    int8_t *vapex;       /* [vert_cap] decimation: the triangulation that cost belongs to */
+    int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
+                            changed); decimation: the triangulation that cost belongs to */
 };
 
 /* Triangle t's corner coordinates. */
@@ -141,8 +148,14 @@ static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t 
     }
 }
 
-/* Recomputes E(T) of t (and its worst sample) and marks it new. */
+/* Recomputes E(T) of t (and its worst sample) and marks it new; forgets its corners' classes. */
 void wm_touch(wm_refiner *r, int32_t t);
+/* t was made or changed: the stars of its corners changed, and the reduction's class of each, kept in
+ * vapex from pass to pass, is forgotten (reduce.c).  Every operator's new triangles come through here. */
+static inline void wm_forget_class(wm_refiner *r, int32_t t)
+{
+    for (int c = 0; c < 3; c++) r->vapex[r->mesh.hv[3 * t + c]] = WM_CLASS_UNKNOWN;
+}
 /* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles
  * touched[0..n) until every such edge is locally Delaunay (hmm's design), recomputing E(T) of the
  * flipped triangles.  heap_n: the error bound's heap (updated), or NULL. */
