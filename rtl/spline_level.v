@@ -131,6 +131,8 @@ reg s1_yfirst_reg = 1'b0, s1_ylast_reg = 1'b0, s1_yodd_reg = 1'b0;
 reg r_valid_reg = 1'b0;
 reg r_flush_reg = 1'b0;
 reg [15:0] r_v_reg = 16'd0;
+reg [17:0] r_v3_reg = 18'd0;           // 3 v
+reg [18:0] r_v7_reg = 19'd0;           // 7 v
 reg [X_WIDTH-1:0] r_addr_reg = {X_WIDTH{1'b0}};
 reg r_xfirst_reg = 1'b0, r_xlast_reg = 1'b0, r_xodd_reg = 1'b0;
 reg r_yfirst_reg = 1'b0, r_ylast_reg = 1'b0, r_yodd_reg = 1'b0;
@@ -241,7 +243,7 @@ wire [15:0] q_old = word[31:16];
 wire [15:0] r_old = word[15:0];
 wire [18:0] v19 = {3'd0, r_v_reg};
 wire [18:0] r19 = {3'd0, r_old};
-wire [18:0] v3 = (v19 << 1) + v19;
+wire [18:0] v3 = {1'b0, r_v3_reg};
 
 reg v_valid;
 reg [18:0] v_l;
@@ -271,7 +273,7 @@ always @* begin
             v_l = p_old + v19;
             v_d = $signed({1'b0, r_old}) - $signed({1'b0, q_old});
             // the next record row's partial sum; on the last row its whole sum (taps below clamped)
-            w_p = r19 + (r_ylast_reg ? (v19 << 3) - v19 : v3);
+            w_p = r19 + (r_ylast_reg ? r_v7_reg : v3);
         end
         w_q = r_v_reg;
     end else begin
@@ -401,6 +403,8 @@ always @(posedge clk) begin
         r_valid_reg <= s1_valid_reg;
         r_flush_reg <= s1_flush_reg;
         r_v_reg <= s1_v_reg;
+        r_v3_reg <= ({2'd0, s1_v_reg} << 1) + {2'd0, s1_v_reg};
+        r_v7_reg <= ({3'd0, s1_v_reg} << 3) - {3'd0, s1_v_reg};
         r_addr_reg <= s1_addr_reg;
         r_xfirst_reg <= s1_xfirst_reg;
         r_xlast_reg <= s1_xlast_reg;
