@@ -80,9 +80,8 @@ from wavemesh.errors import InputError
 from wavemesh.protocol import MAX_SIDE
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
-# A raster's header can claim any size (300 bytes of TIFF saying 6 x 1.6e9 samples): one larger than the
-# refiner's largest grid is refused before GDAL reads it into memory.
-MAX_SAMPLES = MAX_SIDE * MAX_SIDE
+# A raster's header can claim any size (300 bytes of TIFF saying 6 x 16777221 samples took GDAL and the
+# fill 3.7 GB and minutes): a side longer than the refiner's (MAX_SIDE) is refused before GDAL reads it.
 
 SUPPORTED_FORMATS = (
     ".npy, .npz, .pgm (P2/P5), .png, and through GDAL: .tif/.tiff (GeoTIFF), .asc (ESRI ASCII grid), "
@@ -649,10 +648,10 @@ def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, .
                         f"{what} has {ds.count} bands ({ds.height} x {ds.width}); a height field needs "
                         f"a single band, extract one (e.g. gdal_translate -b 1)"
                     )
-                if ds.width * ds.height > MAX_SAMPLES:
+                if max(ds.width, ds.height) > MAX_SIDE:
                     raise InputError(
-                        f"{what} is {ds.width} x {ds.height} samples, more than any grid wavemesh meshes "
-                        f"({MAX_SAMPLES} samples: {MAX_SIDE} x {MAX_SIDE})",
+                        f"{what} is {ds.width} x {ds.height} samples; wavemesh meshes at most {MAX_SIDE} per "
+                        f"side (--crop and --decimate apply after reading)",
                         hint="cut a window or shrink it first (gdal_translate -srcwin or -outsize)",
                     )
                 if ds.driver == "AAIGrid":
