@@ -56,25 +56,6 @@ static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
     return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
 }
 
-/* p in the closed triangle (a, b, c), counter-clockwise. */
-static int in_closed(const wm_mesh *m, int32_t a, int32_t b, int32_t c, int32_t p)
-{
-    return orient3(m, a, b, p) >= 0 && orient3(m, b, c, p) >= 0 && orient3(m, c, a, p) >= 0;
-}
-
-/* An ear (a, b, c) is Delaunay within the polygon when no other remaining ring vertex lies strictly
- * inside its circumcircle. */
-static int delaunay_ear(const wm_mesh *m, const int32_t *poly, int32_t n, int32_t a, int32_t b, int32_t c)
-{
-    for (int32_t j = 0; j < n; j++) {
-        int32_t p = poly[j];
-        if (p != a && p != b && p != c &&
-            wm_incircle(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c], m->vx[p], m->vy[p]) > 0)
-            return 0;
-    }
-    return 1;
-}
-
 int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
                  int32_t *n_tris)
 {
@@ -90,42 +71,75 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
         *n_tris = nt;
         return WM_OK;
     }
-    for (int32_t i = 0; i < n; i++) poly[i] = ring[i];
-    while (n > 3) {
-        int32_t best = -1;
+    /* The polygon's coordinates in local arrays, removed from as ears are cut.  An ear's status only
+     * improves as other vertices go (fewer points to contain or to lie in its circle), so an ear once
+     * found valid stays valid and a Delaunay ear stays Delaunay until a neighbour of it is cut: ok[]
+     * keeps that (0 unknown, 1 valid, 2 valid and Delaunay) and only unknown ears are tested again.  The
+     * choice is the same as testing every ear each round: the first Delaunay ear in polygon order, else
+     * the first valid one. */
+    {
+        int32_t px[WM_MAX_RING], py[WM_MAX_RING];
+        int8_t ok[WM_MAX_RING];
         for (int32_t i = 0; i < n; i++) {
-            int32_t a = poly[(i + n - 1) % n], b = poly[i], c = poly[(i + 1) % n], j;
-            int32_t x0, x1, y0, y1;
-            if (orient3(m, a, b, c) <= 0) continue;
-            x0 = x1 = m->vx[a];
-            y0 = y1 = m->vy[a];
-            if (m->vx[b] < x0) x0 = m->vx[b];
-            if (m->vx[b] > x1) x1 = m->vx[b];
-            if (m->vx[c] < x0) x0 = m->vx[c];
-            if (m->vx[c] > x1) x1 = m->vx[c];
-            if (m->vy[b] < y0) y0 = m->vy[b];
-            if (m->vy[b] > y1) y1 = m->vy[b];
-            if (m->vy[c] < y0) y0 = m->vy[c];
-            if (m->vy[c] > y1) y1 = m->vy[c];
-            for (j = 0; j < n; j++) {
-                int32_t p = poly[j];
-                if (m->vx[p] < x0 || m->vx[p] > x1 || m->vy[p] < y0 || m->vy[p] > y1) continue; /* outside */
-                if (p != a && p != b && p != c && in_closed(m, a, b, c, p)) break;
-            }
-            if (j < n) continue;
-            if (best < 0) best = i; /* the first valid ear, unless a Delaunay one follows */
-            if (delaunay_ear(m, poly, n, a, b, c)) {
-                best = i;
-                break;
-            }
+            poly[i] = ring[i];
+            px[i] = m->vx[ring[i]];
+            py[i] = m->vy[ring[i]];
+            ok[i] = 0;
         }
-        /* A simple polygon always has an ear (two, in fact). */
-        WM_ASSERT(best >= 0);
-        if (best < 0) return WM_ERR_REFUSED;
-        tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best], tris[3 * nt + 2] = poly[(best + 1) % n];
-        nt++;
-        for (int32_t i = best; i + 1 < n; i++) poly[i] = poly[i + 1];
-        n--;
+        while (n > 3) {
+            int32_t best = -1, valid = -1;
+            for (int32_t i = 0; i < n; i++) {
+                int32_t ia = (i + n - 1) % n, ic = (i + 1) % n, j;
+                int32_t ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
+                int32_t x0, x1, y0, y1;
+                if (ok[i] == 0) {
+                    if (wm_orient(ax, ay, bx, by, cx, cy) <= 0) continue;
+                    x0 = ax < bx ? ax : bx;
+                    if (cx < x0) x0 = cx;
+                    x1 = ax > bx ? ax : bx;
+                    if (cx > x1) x1 = cx;
+                    y0 = ay < by ? ay : by;
+                    if (cy < y0) y0 = cy;
+                    y1 = ay > by ? ay : by;
+                    if (cy > y1) y1 = cy;
+                    for (j = 0; j < n; j++) {
+                        if (j == ia || j == i || j == ic) continue;
+                        if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
+                        if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 &&
+                            wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
+                            wm_orient(cx, cy, ax, ay, px[j], py[j]) >= 0)
+                            break;
+                    }
+                    if (j < n) continue;
+                    ok[i] = 1;
+                }
+                if (valid < 0) valid = i; /* the first valid ear, unless a Delaunay one follows */
+                if (ok[i] == 1) {
+                    for (j = 0; j < n; j++)
+                        if (j != ia && j != i && j != ic && wm_incircle(ax, ay, bx, by, cx, cy, px[j], py[j]) > 0)
+                            break;
+                    if (j == n) ok[i] = 2;
+                }
+                if (ok[i] == 2) {
+                    best = i;
+                    break;
+                }
+            }
+            if (best < 0) best = valid;
+            /* A simple polygon always has an ear (two, in fact). */
+            WM_ASSERT(best >= 0);
+            if (best < 0) return WM_ERR_REFUSED;
+            tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best], tris[3 * nt + 2] = poly[(best + 1) % n];
+            nt++;
+            ok[(best + n - 1) % n] = ok[(best + 1) % n] = 0; /* its neighbours' ears changed shape */
+            for (int32_t i = best; i + 1 < n; i++) {
+                poly[i] = poly[i + 1];
+                px[i] = px[i + 1];
+                py[i] = py[i + 1];
+                ok[i] = ok[i + 1];
+            }
+            n--;
+        }
     }
     if (orient3(m, poly[0], poly[1], poly[2]) <= 0) return WM_ERR_REFUSED;
     tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
