@@ -104,8 +104,7 @@ int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t hei
  * tris[3 nt] counter-clockwise vertex indices.  scratch: 3 nt words, clobbered.
  * WM_ERR_CAPACITY: nt > tri_cap or nv > vert_cap; WM_ERR_ARG: an index or coordinate out of range;
  * WM_ERR_MESH: not a proper triangulation (orientation, edges, border, area, unused vertex). */
-int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt,
-                  uint32_t *scratch);
+int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, uint32_t *scratch);
 
 /* Writes the mesh out: xy[2 vert_end] per vertex slot (free slots get -1, -1) and tris[3 n_tri],
  * the live triangles in slot order as vertex slot numbers.  Returns n_tri. */
@@ -276,8 +275,8 @@ size_t wm_abi_size(int which);
  * relative + 2^-16 (docs/refiner.md, "E(T) in integers").  E(T) <= zeta exactly when the result is
  * <= p->zeta (vertical metric), and never <= zeta when the exact value is > zeta (normal).
  * (*wx, *wy) receive the first sample (row by row) with the largest distance, when not NULL. */
-uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                      int32_t *wx, int32_t *wy);
+uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,
+                      int32_t *wy);
 
 /* ---------------------------------------------------------------------------------------------- */
 /* The reduction criteria (4.31-4.34): the autocorrelation matrix R(v) of the unit normals around a

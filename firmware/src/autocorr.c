@@ -27,7 +27,8 @@
 
 #define JACOBI_SWEEPS 8
 #define ONE30 ((int64_t)1 << 30)
-#define SETTLED 4u /* an off-diagonal entry this small (4 2^-30) is left alone: it moves an eigenvalue by
+#define SETTLED \
+    4u /* an off-diagonal entry this small (4 2^-30) is left alone: it moves an eigenvalue by
                       less than 2^-28 */
 
 #define isqrt wm_isqrt64 /* exact floor(sqrt(x)), fixed.c */

@@ -88,7 +88,10 @@ int wm_cmp_mul(uint64_t a, uint64_t b, uint64_t c, uint64_t d)
 }
 
 /* Shift toward zero, the same on every target (no implementation-defined signed shift). */
-static int64_t shr0(int64_t v, int s) { return v >= 0 ? (int64_t)((uint64_t)v >> s) : -(int64_t)((uint64_t)(-v) >> s); }
+static int64_t shr0(int64_t v, int s)
+{
+    return v >= 0 ? (int64_t)((uint64_t)v >> s) : -(int64_t)((uint64_t)(-v) >> s);
+}
 
 /* atan(2^-i) in Q16 radians, i = 0..16. */
 static const int32_t atan_q16[17] = {51472, 30386, 16055, 8150, 4091, 2047, 1024, 512, 256,

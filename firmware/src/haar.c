@@ -25,10 +25,7 @@ int64_t wm_details_size(int32_t width, int32_t height, int32_t levels)
     return wm_details_offset(width, height, levels + 1);
 }
 
-int64_t wm_haar_scratch(int32_t width, int32_t height)
-{
-    return 2 * cells(width, height, 1);
-}
+int64_t wm_haar_scratch(int32_t width, int32_t height) { return 2 * cells(width, height, 1); }
 
 int wm_haar(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
             uint16_t *scratch)

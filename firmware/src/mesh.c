@@ -135,8 +135,7 @@ int64_t wm_tri_area2(const wm_mesh *m, int32_t t)
     return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
 }
 
-int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt,
-                  uint32_t *scratch)
+int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, uint32_t *scratch)
 {
     const uint32_t nil = 0xFFFFFFFFu;
     if (m->tri_end != 0 || m->vert_end != 0) return WM_ERR_ARG;
@@ -204,8 +203,7 @@ int wm_mesh_check_line(const wm_mesh *m)
 {
     int64_t area = 0;
     int32_t live_t = 0, live_v = 0, border_v = 0, nfree = 0;
-    if (m->tri_end < 0 || m->tri_end > m->tri_cap || m->vert_end < 0 || m->vert_end > m->vert_cap)
-        return __LINE__;
+    if (m->tri_end < 0 || m->tri_end > m->tri_cap || m->vert_end < 0 || m->vert_end > m->vert_cap) return __LINE__;
     /* Free lists: every entry a free slot, no cycle longer than the slots. */
     for (int32_t t = m->tri_free; t >= 0; t = m->ho[3 * t]) {
         if (t >= m->tri_end || m->hv[3 * t] >= 0 || ++nfree > m->tri_end) return __LINE__;
@@ -252,4 +250,3 @@ int wm_mesh_check_line(const wm_mesh *m)
 }
 
 int wm_mesh_check(const wm_mesh *m) { return wm_mesh_check_line(m) == 0 ? WM_OK : WM_ERR_MESH; }
-

@@ -221,8 +221,8 @@ static int try_swap(wm_refiner *r, int32_t e)
         }
         e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
         e2 = wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
-        re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, e1, 1, 0, cap) +
-                                          wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
+        re = ratio_q16(o1 + o2 + one,
+                       wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
     }
     xi = ((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16;
     if (xi <= 65536u) return 0;
@@ -252,7 +252,8 @@ static void regularise(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
-    for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
+    for (int32_t t = 0; t < me->tri_end; t++)
+        me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
@@ -372,8 +373,8 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
         a = me->hv[e];
         b = me->hv[o];
         d = me->hv[WM_PREV(o)];
-        if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d],
-                        me->vy[d]) <= 0)
+        if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
+            0)
             continue;
         if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) continue; /* not strictly convex */
         /* wm_edge_swap: T1 = (a, d, p), T2 = (d, b, p) in the same slots. */
@@ -511,8 +512,7 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
             rc = error_bound(r, st);
             /* A budget that stopped the bound keeps its triangles: removing vertices would leave
              * fewer than asked for, at the same E_max. */
-            if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE))
-                rc = wm_decimate(r, st);
+            if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE)) rc = wm_decimate(r, st);
         }
         r->done = 1;
     }

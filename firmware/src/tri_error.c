@@ -97,8 +97,7 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
              * at every sample of the span, so their difference is V's sign and size */
             uint32_t S = 0, dS = (uint32_t)t.dS, d = (uint32_t)D, vm = (uint32_t)vmax;
             int32_t px;
-            for (int k = 0; k < 3; k++)
-                S += (uint32_t)(t.A[k] * lo + t.B[k] * py + t.C[k]) * (uint32_t)t.z[k];
+            for (int k = 0; k < 3; k++) S += (uint32_t)(t.A[k] * lo + t.B[k] * py + t.C[k]) * (uint32_t)t.z[k];
             for (px = (int32_t)lo; px <= (int32_t)hi; px++, S += dS) {
                 uint32_t u = S - d * row[px], v = u >> 31 ? 0u - u : u;
                 if (v > vm) {
@@ -181,8 +180,8 @@ static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3]
     return (uint32_t)((ev * 65536u + r - 1) / r);
 }
 
-uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                      int32_t *wx, int32_t *wy)
+uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,
+                      int32_t *wy)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     WM_ASSERT(D > 0);

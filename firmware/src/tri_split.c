@@ -21,8 +21,7 @@ int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3]
         wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
         wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)
         return WM_ERR_REFUSED;
-    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < 2 || m->n_vert >= m->vert_cap)
-        return WM_ERR_CAPACITY;
+    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < 2 || m->n_vert >= m->vert_cap) return WM_ERR_CAPACITY;
     o_ab = m->ho[3 * t];
     o_bc = m->ho[3 * t + 1];
     o_ca = m->ho[3 * t + 2];

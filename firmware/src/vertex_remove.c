@@ -129,7 +129,8 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
             /* A simple polygon always has an ear (two, in fact). */
             WM_ASSERT(best >= 0);
             if (best < 0) return WM_ERR_REFUSED;
-            tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best], tris[3 * nt + 2] = poly[(best + 1) % n];
+            tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best],
+                     tris[3 * nt + 2] = poly[(best + 1) % n];
             nt++;
             ok[(best + n - 1) % n] = ok[(best + 1) % n] = 0; /* its neighbours' ears changed shape */
             for (int32_t i = best; i + 1 < n; i++) {

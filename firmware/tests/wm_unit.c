@@ -10,14 +10,14 @@
 
 static int passed, failed;
 
-#define CHECK(c)                                                                    \
-    do {                                                                            \
-        if (c) {                                                                    \
-            passed++;                                                               \
-        } else {                                                                    \
-            failed++;                                                               \
-            printf("FAIL %s:%d: %s\n", __FILE__, __LINE__, #c);                     \
-        }                                                                           \
+#define CHECK(c)                                                \
+    do {                                                        \
+        if (c) {                                                \
+            passed++;                                           \
+        } else {                                                \
+            failed++;                                           \
+            printf("FAIL %s:%d: %s\n", __FILE__, __LINE__, #c); \
+        }                                                       \
     } while (0)
 
 static unsigned char mem[1 << 22];
@@ -268,8 +268,7 @@ static void test_refine(void)
     wm_level_stats st;
     int32_t cap = wm_tri_cap_max(W, H), levels = 0;
     for (int yy = 0; yy < H; yy++)
-        for (int xx = 0; xx < W; xx++)
-            h[yy * W + xx] = (uint16_t)((xx > 8 ? 300 : 0) + (yy - 6) * (yy - 6) + xx);
+        for (int xx = 0; xx < W; xx++) h[yy * W + xx] = (uint16_t)((xx > 8 ? 300 : 0) + (yy - 6) * (yy - 6) + xx);
     CHECK(wm_haar(h, W, H, M, d, sc) == WM_OK);
     memset(&p, 0, sizeof p);
     p.metric = WM_METRIC_NORMAL;
@@ -414,7 +413,8 @@ static void test_eigen(void)
     a[0] = one * 36 / 100, a[1] = 0, a[2] = one * 48 / 100, a[3] = 0, a[4] = 0, a[5] = one * 64 / 100;
     wm_sym3_eigen(a, lam, vec);
     CHECK(lam[0] > -64 && lam[0] < 64 && lam[1] > -64 && lam[1] < 64 && lam[2] > one - 64 && lam[2] < one + 64);
-    CHECK((vec[6] > one * 6 / 10 - 64 && vec[6] < one * 6 / 10 + 64) || (vec[6] < -one * 6 / 10 + 64 && vec[6] > -one * 6 / 10 - 64));
+    CHECK((vec[6] > one * 6 / 10 - 64 && vec[6] < one * 6 / 10 + 64) ||
+          (vec[6] < -one * 6 / 10 + 64 && vec[6] > -one * 6 / 10 - 64));
     /* diag(0.5, 0.125, 0.375): sorted, the vectors are the axes */
     a[0] = one / 2, a[1] = a[2] = a[4] = 0, a[3] = one / 8, a[5] = 3 * one / 8;
     wm_sym3_eigen(a, lam, vec);

@@ -61,13 +61,15 @@ typedef struct conn {
     uint64_t bytes_in, bytes_out;
 } conn;
 
-static uint64_t mono_ns(void) {
+static uint64_t mono_ns(void)
+{
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
 }
 
-static void sleep_until(uint64_t t) {
+static void sleep_until(uint64_t t)
+{
     uint64_t n = mono_ns();
     if (t > n) {
         struct timespec ts = {(time_t)((t - n) / 1000000000u), (long)((t - n) % 1000000000u)};
@@ -77,7 +79,8 @@ static void sleep_until(uint64_t t) {
 
 /* A UART of the given rate: a byte may not go out (come in) before the line has carried the ones
  * before it.  Sleeping only when 2 ms ahead keeps the number of system calls down. */
-static void pace(uint64_t *clock, uint64_t byte_ns, size_t n) {
+static void pace(uint64_t *clock, uint64_t byte_ns, size_t n)
+{
     uint64_t t = mono_ns();
     if (*clock < t) *clock = t;
     *clock += byte_ns * n;
@@ -86,7 +89,8 @@ static void pace(uint64_t *clock, uint64_t byte_ns, size_t n) {
 
 /* Sends the buffered bytes.  A client that takes none of them for write_timeout_ms (it does not
  * read: its socket buffers are full) is given up: the connection counts as closed. */
-static void conn_flush(conn *c) {
+static void conn_flush(conn *c)
+{
     size_t done = 0;
     uint64_t deadline = mono_ns() + (uint64_t)c->write_timeout_ms * 1000000u;
     if (c->closed) {
@@ -121,7 +125,8 @@ static void conn_flush(conn *c) {
     c->out_len = 0;
 }
 
-static void io_write(void *ctx, const uint8_t *data, size_t n) {
+static void io_write(void *ctx, const uint8_t *data, size_t n)
+{
     conn *c = ctx;
     while (n) {
         size_t k = sizeof c->out - c->out_len < n ? sizeof c->out - c->out_len : n;
@@ -145,7 +150,8 @@ static pthread_cond_t door_cond = PTHREAD_COND_INITIALIZER;
 static int door_fd = -1; /* a connection handed over, not yet taken */
 static int door_busy;    /* a connection is handed over or being served */
 
-static void drain(int fd, int ms) {
+static void drain(int fd, int ms)
+{
     uint8_t junk[256];
     uint64_t deadline = mono_ns() + (uint64_t)ms * 1000000u;
     for (;;) {
@@ -156,7 +162,8 @@ static void drain(int fd, int ms) {
     }
 }
 
-static void refuse(int fd, int quiet) {
+static void refuse(int fd, int quiet)
+{
     uint8_t frame[WM_PROTO_BUSY_FRAME_MAX];
     size_t n = wm_proto_busy_frame(frame, sizeof frame);
     struct pollfd pf = {fd, POLLIN, 0};
@@ -169,7 +176,8 @@ static void refuse(int fd, int quiet) {
     if (!quiet) printf("wmdev: second client refused (busy)\n"), fflush(stdout);
 }
 
-static void *doorman(void *arg) {
+static void *doorman(void *arg)
+{
     conn *c = arg;
     for (;;) {
         int fd = accept(c->lfd, NULL, NULL), take;
@@ -192,7 +200,8 @@ static void *doorman(void *arg) {
 }
 
 /* The next client (the main thread waits here); door_done() when it left. */
-static int door_next(void) {
+static int door_next(void)
+{
     int fd;
     pthread_mutex_lock(&door_lock);
     while (door_fd < 0) pthread_cond_wait(&door_cond, &door_lock);
@@ -202,13 +211,15 @@ static int door_next(void) {
     return fd;
 }
 
-static void door_done(void) {
+static void door_done(void)
+{
     pthread_mutex_lock(&door_lock);
     door_busy = 0;
     pthread_mutex_unlock(&door_lock);
 }
 
-static int io_getc(void *ctx, uint32_t timeout_ms) {
+static int io_getc(void *ctx, uint32_t timeout_ms)
+{
     conn *c = ctx;
     uint64_t deadline = mono_ns() + (uint64_t)timeout_ms * 1000000u;
     conn_flush(c);
@@ -241,19 +252,24 @@ static int io_getc(void *ctx, uint32_t timeout_ms) {
     return c->in[c->in_pos++];
 }
 
-static uint64_t io_cycles(void *ctx) {
+static uint64_t io_cycles(void *ctx)
+{
     (void)ctx;
     return mono_ns();
 }
 
-static int usage(const char *why) {
-    fprintf(stderr, "wmdev: %s\nusage: wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] "
-                    "[--tri-capacity N] [--max-levels N] [--window N] [--max-payload N] [--baud N] "
-                    "[--idle-timeout-ms N] [--write-timeout-ms N] [--exit-on-close] [--quiet]\n", why);
+static int usage(const char *why)
+{
+    fprintf(stderr,
+            "wmdev: %s\nusage: wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] "
+            "[--tri-capacity N] [--max-levels N] [--window N] [--max-payload N] [--baud N] "
+            "[--idle-timeout-ms N] [--write-timeout-ms N] [--exit-on-close] [--quiet]\n",
+            why);
     return 64;
 }
 
-static int number(const char *s, long lo, long hi, long *out) {
+static int number(const char *s, long lo, long hi, long *out)
+{
     char *end;
     long v;
     errno = 0;
@@ -263,7 +279,8 @@ static int number(const char *s, long lo, long hi, long *out) {
     return 1;
 }
 
-int main(int argc, char **argv) {
+int main(int argc, char **argv)
+{
     static wm_proto eng;
     wm_proto_caps caps;
     wm_proto_io io;
@@ -281,8 +298,14 @@ int main(int argc, char **argv) {
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         long *dst = NULL, lo = 0, hi = 0;
-        if (!strcmp(a, "--exit-on-close")) { exit_on_close = 1; continue; }
-        if (!strcmp(a, "--quiet")) { quiet = 1; continue; }
+        if (!strcmp(a, "--exit-on-close")) {
+            exit_on_close = 1;
+            continue;
+        }
+        if (!strcmp(a, "--quiet")) {
+            quiet = 1;
+            continue;
+        }
         if (!strcmp(a, "--port")) dst = &port, lo = 0, hi = 65535;
         else if (!strcmp(a, "--max-width")) dst = &max_w, lo = 2, hi = WM_PROTO_MAX_SIDE;
         else if (!strcmp(a, "--max-height")) dst = &max_h, lo = 2, hi = WM_PROTO_MAX_SIDE;
@@ -334,8 +357,8 @@ int main(int argc, char **argv) {
         fprintf(stderr, "wmdev: cannot listen on 127.0.0.1:%ld: %s\n", port, strerror(errno));
         return 4;
     }
-    printf("wmdev: listening on 127.0.0.1:%d (%ld x %ld, %ld triangles, %ld levels, %s)\n",
-           ntohs(addr.sin_port), max_w, max_h, tri_cap, levels, baud ? "paced" : "unpaced");
+    printf("wmdev: listening on 127.0.0.1:%d (%ld x %ld, %ld triangles, %ld levels, %s)\n", ntohs(addr.sin_port),
+           max_w, max_h, tri_cap, levels, baud ? "paced" : "unpaced");
     fflush(stdout);
 
     io.ctx = &c;

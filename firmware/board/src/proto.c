@@ -35,28 +35,33 @@
 
 static uint16_t get16(const uint8_t *b) { return (uint16_t)(b[0] | (uint16_t)b[1] << 8); }
 
-static uint32_t get32(const uint8_t *b) {
+static uint32_t get32(const uint8_t *b)
+{
     return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
 }
 
 static uint64_t get64(const uint8_t *b) { return (uint64_t)get32(b) | (uint64_t)get32(b + 4) << 32; }
 
-static void put16(uint8_t *b, uint32_t v) {
+static void put16(uint8_t *b, uint32_t v)
+{
     b[0] = (uint8_t)v;
     b[1] = (uint8_t)(v >> 8);
 }
 
-static void put32(uint8_t *b, uint32_t v) {
+static void put32(uint8_t *b, uint32_t v)
+{
     put16(b, v);
     put16(b + 2, v >> 16);
 }
 
-static void put64(uint8_t *b, uint64_t v) {
+static void put64(uint8_t *b, uint64_t v)
+{
     put32(b, (uint32_t)v);
     put32(b + 4, (uint32_t)(v >> 32));
 }
 
-static void zero(uint8_t *b, size_t n) {
+static void zero(uint8_t *b, size_t n)
+{
     for (size_t i = 0; i < n; i++) b[i] = 0;
 }
 
@@ -68,13 +73,15 @@ static const uint32_t crc_nibble[16] = {
     0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu, 0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu,
 };
 
-static uint32_t crc_update(uint32_t c, uint8_t byte) {
+static uint32_t crc_update(uint32_t c, uint8_t byte)
+{
     c ^= byte;
     c = crc_nibble[c & 15u] ^ (c >> 4);
     return crc_nibble[c & 15u] ^ (c >> 4);
 }
 
-uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n) {
+uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n)
+{
     uint32_t c = ~crc;
     for (size_t i = 0; i < n; i++) c = crc_update(c, data[i]);
     return ~c;
@@ -90,19 +97,22 @@ static uint64_t ms_to_cycles(const wm_proto *p, uint32_t ms) { return (uint64_t)
 /* ---------------------------------------------------------------------------------------------- */
 /* Sending: SLIP-encode into a small buffer, written out when full and before every read */
 
-static void out_flush(wm_proto *p) {
+static void out_flush(wm_proto *p)
+{
     if (p->out_len) {
         p->io.write(p->io.ctx, p->out, p->out_len);
         p->out_len = 0;
     }
 }
 
-static void out_raw(wm_proto *p, uint8_t b) {
+static void out_raw(wm_proto *p, uint8_t b)
+{
     if (p->out_len == sizeof p->out) out_flush(p);
     p->out[p->out_len++] = b;
 }
 
-static void out_byte(wm_proto *p, uint8_t b) {
+static void out_byte(wm_proto *p, uint8_t b)
+{
     if (b == WM_PROTO_SLIP_END) {
         out_raw(p, WM_PROTO_SLIP_ESC);
         out_raw(p, WM_PROTO_SLIP_ESC_END);
@@ -116,7 +126,8 @@ static void out_byte(wm_proto *p, uint8_t b) {
 
 /* One frame: header, payload (two pieces, either may be empty), CRC. */
 static void send_frame2(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *a, uint32_t na, const uint8_t *b,
-                        uint32_t nb) {
+                        uint32_t nb)
+{
     uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
     uint32_t crc, i;
     head[0] = type;
@@ -134,17 +145,20 @@ static void send_frame2(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *a
     out_raw(p, WM_PROTO_SLIP_END);
 }
 
-static void send_frame(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *payload, uint32_t n) {
+static void send_frame(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *payload, uint32_t n)
+{
     send_frame2(p, type, seq, payload, n, 0, 0);
 }
 
 /* A frame of the device's own (not a reply): the device's sequence number. */
-static void send_own(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n) {
+static void send_own(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n)
+{
     send_frame(p, type, p->seq++, payload, n);
 }
 
 /* A reply to the frame just received; kept for a duplicate of it when it answers CONFIG/RUN/ABORT. */
-static void reply(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n) {
+static void reply(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n)
+{
     send_frame(p, type, p->f_seq, payload, n);
     if ((p->f_type == WM_PROTO_T_CONFIG || p->f_type == WM_PROTO_T_RUN || p->f_type == WM_PROTO_T_ABORT) &&
         n <= CACHED_MAX) {
@@ -158,21 +172,23 @@ static void reply(wm_proto *p, uint8_t type, const uint8_t *payload, uint32_t n)
 }
 
 /* A duplicate of the last CONFIG, RUN or ABORT (the host sent it again: our reply was lost). */
-static int duplicate(wm_proto *p) {
+static int duplicate(wm_proto *p)
+{
     if (!p->cache_valid || p->cache_req != p->f_type || p->cache_seq != p->f_seq) return 0;
     send_frame(p, p->cache_type, p->f_seq, p->cache, p->cache_len);
     return 1;
 }
 
-static void reply_ok(wm_proto *p) {
+static void reply_ok(wm_proto *p)
+{
     uint8_t b[WM_PROTO_OK_BYTES];
     zero(b, sizeof b);
     b[WM_PROTO_OK_REQUEST] = p->f_type;
     reply(p, WM_PROTO_T_OK, b, sizeof b);
 }
 
-static void error_payload(wm_proto *p, uint8_t b[WM_PROTO_ERROR_BYTES], uint8_t code, uint8_t req,
-                          uint32_t detail) {
+static void error_payload(wm_proto *p, uint8_t b[WM_PROTO_ERROR_BYTES], uint8_t code, uint8_t req, uint32_t detail)
+{
     zero(b, WM_PROTO_ERROR_BYTES);
     b[WM_PROTO_ERROR_CODE] = code;
     b[WM_PROTO_ERROR_REQUEST] = req;
@@ -183,14 +199,16 @@ static void error_payload(wm_proto *p, uint8_t b[WM_PROTO_ERROR_BYTES], uint8_t 
 }
 
 /* ERROR in answer to the frame just received. */
-static void reply_error(wm_proto *p, uint8_t code, uint32_t detail) {
+static void reply_error(wm_proto *p, uint8_t code, uint32_t detail)
+{
     uint8_t b[WM_PROTO_ERROR_BYTES];
     error_payload(p, b, code, p->f_type, detail);
     reply(p, WM_PROTO_T_ERROR, b, sizeof b);
 }
 
 /* ERROR of the device's own (the session was dropped). */
-static void send_error(wm_proto *p, uint8_t code, uint32_t detail) {
+static void send_error(wm_proto *p, uint8_t code, uint32_t detail)
+{
     uint8_t b[WM_PROTO_ERROR_BYTES];
     error_payload(p, b, code, 0, detail);
     send_own(p, WM_PROTO_T_ERROR, b, sizeof b);
@@ -199,7 +217,8 @@ static void send_error(wm_proto *p, uint8_t code, uint32_t detail) {
 /* ---------------------------------------------------------------------------------------------- */
 /* Receiving */
 
-static void rx_reset(wm_proto *p) {
+static void rx_reset(wm_proto *p)
+{
     p->rx_len = 0;
     p->rx_esc = 0;
     p->rx_bad = 0;
@@ -207,7 +226,8 @@ static void rx_reset(wm_proto *p) {
 }
 
 /* The bytes between two delimiters: a frame with the right length field and CRC? */
-static int rx_check(wm_proto *p) {
+static int rx_check(wm_proto *p)
+{
     uint32_t n;
     if (p->rx_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) return 0;
     n = get16(p->rx + 2);
@@ -222,7 +242,8 @@ static int rx_check(wm_proto *p) {
 
 /* Waits up to wait_ms for a valid frame: 1 (in f_type, f_seq, f_len, f_pay until the next call),
  * 0 when the time is up, -1 when the link closed.  Damaged frames are dropped and counted. */
-static int rx_frame(wm_proto *p, uint32_t wait_ms) {
+static int rx_frame(wm_proto *p, uint32_t wait_ms)
+{
     uint64_t t0 = now(p), limit = ms_to_cycles(p, wait_ms), bt = ms_to_cycles(p, WM_PROTO_BYTE_TIMEOUT_MS);
     for (;;) {
         uint64_t t = now(p), spent = t - t0;
@@ -295,7 +316,8 @@ static int rx_frame(wm_proto *p, uint32_t wait_ms) {
  * stage counts on every run, over any link, at any host speed. */
 
 /* The cycles since the last mark go to the clock that ran: the link's or the current stage's. */
-static void charge(wm_proto *p) {
+static void charge(wm_proto *p)
+{
     uint64_t t = now(p);
     if (p->link_depth) p->link += t - p->t_mark;
     else if (p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT) p->cycles[p->stage] += t - p->t_mark;
@@ -303,7 +325,8 @@ static void charge(wm_proto *p) {
 }
 
 /* Tells the transport which clock runs from now on (io.mark, for traces). */
-static void mark(wm_proto *p) {
+static void mark(wm_proto *p)
+{
     if (p->io.mark) {
         uint32_t c = p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT ? (uint32_t)p->stage : WM_PROTO_CLOCK_NONE;
         p->io.mark(p->io.ctx, p->link_depth ? c | WM_PROTO_CLOCK_LINK : c);
@@ -311,25 +334,29 @@ static void mark(wm_proto *p) {
 }
 
 /* Another stage begins (not inside link I/O). */
-static void stage_enter(wm_proto *p, int stage) {
+static void stage_enter(wm_proto *p, int stage)
+{
     charge(p);
     p->stage = stage;
     mark(p);
 }
 
 /* Link I/O begins: the stage's clock stops, the link's runs (nested calls count once). */
-static void link_begin(wm_proto *p) {
+static void link_begin(wm_proto *p)
+{
     if (p->link_depth == 0) charge(p); /* to the stage */
     if (++p->link_depth == 1) mark(p);
 }
 
 /* Link I/O ends: the stage's clock runs again. */
-static void link_end(wm_proto *p) {
+static void link_end(wm_proto *p)
+{
     if (p->link_depth == 1) charge(p); /* to the link */
     if (--p->link_depth == 0) mark(p);
 }
 
-static void send_progress(wm_proto *p, int stage, int level) {
+static void send_progress(wm_proto *p, int stage, int level)
+{
     uint8_t b[WM_PROTO_PROGRESS_BYTES];
     zero(b, sizeof b);
     b[WM_PROTO_PROGRESS_STAGE] = (uint8_t)stage;
@@ -340,7 +367,8 @@ static void send_progress(wm_proto *p, int stage, int level) {
     out_flush(p);
 }
 
-void wm_proto_stage(wm_proto *p, int stage, int level) {
+void wm_proto_stage(wm_proto *p, int stage, int level)
+{
     if (stage == WM_PROTO_STAGE_REFINE) p->level = (uint8_t)level;
     stage_enter(p, stage);
     link_begin(p);
@@ -351,7 +379,8 @@ void wm_proto_stage(wm_proto *p, int stage, int level) {
 /* ---------------------------------------------------------------------------------------------- */
 /* Requests outside a job */
 
-static void status_reply(wm_proto *p) {
+static void status_reply(wm_proto *p)
+{
     uint8_t b[WM_PROTO_STATUS_REPLY_BYTES];
     zero(b, sizeof b);
     b[WM_PROTO_STATUS_REPLY_STATE] = p->state;
@@ -363,12 +392,14 @@ static void status_reply(wm_proto *p) {
     reply(p, WM_PROTO_T_STATUS_REPLY, b, sizeof b);
 }
 
-static void session_end(wm_proto *p) {
+static void session_end(wm_proto *p)
+{
     p->state = WM_PROTO_STATE_IDLE;
     p->total = p->next = 0;
 }
 
-static void do_hello(wm_proto *p) {
+static void do_hello(wm_proto *p)
+{
     uint8_t b[WM_PROTO_HELLO_REPLY_BYTES];
     const wm_proto_caps *c = &p->caps;
     if (p->f_len != WM_PROTO_HELLO_BYTES) { /* not a HELLO: nothing ends */
@@ -414,7 +445,8 @@ typedef struct config_range {
 static const config_range config_ranges[WM_PROTO_CONFIG_RANGES] = WM_PROTO_CONFIG_RANGE_TABLE;
 
 /* CONFIG's fields, checked one by one: 0, or the error code with *detail. */
-static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
+static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
+{
     const uint8_t *c = p->f_pay;
     const wm_proto_caps *cap = &p->caps;
     uint32_t w = get16(c + WM_PROTO_CONFIG_WIDTH), h = get16(c + WM_PROTO_CONFIG_HEIGHT);
@@ -427,16 +459,18 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     uint32_t delta_c = get32(c + WM_PROTO_CONFIG_DELTA_C);
     uint32_t slope_x_m = get32(c + WM_PROTO_CONFIG_SLOPE_X_M), slope_x_e = get32(c + WM_PROTO_CONFIG_SLOPE_X_E);
     uint32_t slope_y_m = get32(c + WM_PROTO_CONFIG_SLOPE_Y_M), slope_y_e = get32(c + WM_PROTO_CONFIG_SLOPE_Y_E);
-#define BAD(field)                            \
-    do {                                      \
-        *detail = WM_PROTO_CONFIG_##field;    \
-        return WM_PROTO_E_BAD_VALUE;          \
+#define BAD(field)                         \
+    do {                                   \
+        *detail = WM_PROTO_CONFIG_##field; \
+        return WM_PROTO_E_BAD_VALUE;       \
     } while (0)
     /* every field within the protocol's range (the first one out of it is named), ... */
     for (int i = 0; i < WM_PROTO_CONFIG_RANGES; i++) {
         const config_range *r = &config_ranges[i];
-        uint64_t v = r->bytes == 8 ? get64(c + r->off) : r->bytes == 4 ? get32(c + r->off)
-                   : r->bytes == 2 ? get16(c + r->off) : c[r->off];
+        uint64_t v = r->bytes == 8   ? get64(c + r->off)
+                     : r->bytes == 4 ? get32(c + r->off)
+                     : r->bytes == 2 ? get16(c + r->off)
+                                     : c[r->off];
         if (v < r->lo || v > r->hi) {
             *detail = r->off;
             return WM_PROTO_E_BAD_VALUE;
@@ -488,7 +522,8 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail) {
     return 0;
 }
 
-static void do_config(wm_proto *p) {
+static void do_config(wm_proto *p)
+{
     uint32_t detail = 0;
     int code;
     if (duplicate(p)) return;
@@ -514,7 +549,8 @@ static void do_config(wm_proto *p) {
     reply_ok(p);
 }
 
-static void do_data(wm_proto *p) {
+static void do_data(wm_proto *p)
+{
     uint8_t b[WM_PROTO_DATA_ACK_BYTES];
     uint32_t off, n, i;
     const uint8_t *s;
@@ -553,7 +589,8 @@ static void do_data(wm_proto *p) {
 
 static void run_job(wm_proto *p);
 
-static void do_run(wm_proto *p) {
+static void do_run(wm_proto *p)
+{
     uint32_t crc = 0;
     if (duplicate(p)) return;
     if (p->f_len != WM_PROTO_RUN_BYTES) {
@@ -580,11 +617,10 @@ static void do_run(wm_proto *p) {
 }
 
 /* A frame outside a job. */
-static void handle(wm_proto *p) {
+static void handle(wm_proto *p)
+{
     switch (p->f_type) {
-    case WM_PROTO_T_HELLO:
-        do_hello(p);
-        break;
+    case WM_PROTO_T_HELLO: do_hello(p); break;
     case WM_PROTO_T_STATUS:
         if (p->f_len != 0) reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
         else status_reply(p);
@@ -598,17 +634,10 @@ static void handle(wm_proto *p) {
         session_end(p);
         reply_ok(p);
         break;
-    case WM_PROTO_T_CONFIG:
-        do_config(p);
-        break;
-    case WM_PROTO_T_DATA:
-        do_data(p);
-        break;
-    case WM_PROTO_T_RUN:
-        do_run(p);
-        break;
-    case WM_PROTO_T_ACK:
-        break; /* a late answer to a job that is over */
+    case WM_PROTO_T_CONFIG: do_config(p); break;
+    case WM_PROTO_T_DATA: do_data(p); break;
+    case WM_PROTO_T_RUN: do_run(p); break;
+    case WM_PROTO_T_ACK: break; /* a late answer to a job that is over */
     default:
         /* the device's own types (an echo on the line) are ignored; anything else is unknown */
         if (p->f_type < 0x80u) reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
@@ -624,7 +653,8 @@ static void handle(wm_proto *p) {
 #define ABORT_CLOSED 3u /* the link closed */
 
 /* A frame that arrived while the job waits: 1 when it is the ACK of (kind, index), with *have. */
-static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have) {
+static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
+{
     switch (p->f_type) {
     case WM_PROTO_T_ACK:
         if (p->f_len != WM_PROTO_ACK_BYTES) {
@@ -659,9 +689,7 @@ static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have) {
         if (duplicate(p)) return 0;
         reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
         return 0;
-    case WM_PROTO_T_DATA:
-        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
-        return 0;
+    case WM_PROTO_T_DATA: reply_error(p, WM_PROTO_E_BAD_STATE, p->state); return 0;
     default:
         if (p->f_type < 0x80u) reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
         return 0;
@@ -671,7 +699,8 @@ static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have) {
 /* Waits for the ACK of (kind, index), sending `again` each time ACK_TIMEOUT passes without one.
  * Returns 1 with *have, or 0 when the job must stop (p->abort says why). */
 static int wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, int *tries,
-                    void (*again)(wm_proto *)) {
+                    void (*again)(wm_proto *))
+{
     for (;;) {
         int r = rx_frame(p, WM_PROTO_ACK_TIMEOUT_MS);
         if (r < 0) {
@@ -694,7 +723,8 @@ static int wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, in
 /* --- the level stream: LEVEL_HEADER, vertex slots, triangles (docs/protocol.md) --- */
 
 /* The k-th live triangle's slot (sequential calls are O(1) each). */
-static int32_t tri_slot(wm_proto *p, int32_t k) {
+static int32_t tri_slot(wm_proto *p, int32_t k)
+{
     const wm_mesh *m = p->lm;
     if (k < p->cur_k) {
         p->cur_k = 0;
@@ -710,7 +740,8 @@ static int32_t tri_slot(wm_proto *p, int32_t k) {
 }
 
 /* Bytes [off, off + n) of the level stream into dst. */
-static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n) {
+static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
+{
     const wm_mesh *m = p->lm;
     uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES, vb = 4u * (uint32_t)m->vert_end, tb = 3u * p->lib;
     for (uint32_t i = 0; i < n; i++, off++) {
@@ -733,7 +764,8 @@ static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n) {
 /* MESH frames for bytes [from, ltotal).  The first sending (first: from is 0) takes the stream's CRC
  * on the way, and only its frames are link I/O: building the stream is the EMIT stage's work.  A
  * resend happens inside link I/O (the host asked for it). */
-static void send_level_from(wm_proto *p, uint32_t from, int first) {
+static void send_level_from(wm_proto *p, uint32_t from, int first)
+{
     uint32_t chunk = (uint32_t)p->caps.max_payload - WM_PROTO_MESH_BYTES;
     if (first) p->lcrc = 0;
     while (from < p->ltotal) {
@@ -752,7 +784,8 @@ static void send_level_from(wm_proto *p, uint32_t from, int first) {
     }
 }
 
-static void send_level_end(wm_proto *p) {
+static void send_level_end(wm_proto *p)
+{
     uint8_t b[WM_PROTO_LEVEL_END_BYTES];
     zero(b, sizeof b);
     b[WM_PROTO_LEVEL_END_LEVEL] = p->level;
@@ -764,11 +797,13 @@ static void send_level_end(wm_proto *p) {
     out_flush(p);
 }
 
-static int abort_code(const wm_proto *p) {
+static int abort_code(const wm_proto *p)
+{
     return p->abort == ABORT_NO_ACK ? WM_PROTO_E_NO_ACK : WM_PROTO_E_ABORTED;
 }
 
-int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st, int last) {
+int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st, int last)
+{
     static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_OFFSETS;
     const int32_t stat_val[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_VALUES(st);
     int prev = p->stage, tries = 0;
@@ -778,7 +813,8 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
 
     /* the stage that made this level ends; its cycles (link I/O excluded) since the last level */
     stage_enter(p, WM_PROTO_STAGE_EMIT);
-    work = p->cycles[WM_PROTO_STAGE_FILTER] + p->cycles[WM_PROTO_STAGE_TEMPLATE] + p->cycles[WM_PROTO_STAGE_REFINE];
+    work =
+        p->cycles[WM_PROTO_STAGE_FILTER] + p->cycles[WM_PROTO_STAGE_TEMPLATE] + p->cycles[WM_PROTO_STAGE_REFINE];
 
     /* the header of the level stream */
     p->lm = m;
@@ -827,12 +863,14 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     return WM_PROTO_E_NONE;
 }
 
-static void send_done(wm_proto *p) {
+static void send_done(wm_proto *p)
+{
     send_own(p, WM_PROTO_T_DONE, p->done, sizeof p->done);
     out_flush(p);
 }
 
-static void run_job(wm_proto *p) {
+static void run_job(wm_proto *p)
+{
     uint32_t detail = 0, have = 0;
     int rc, tries = 0;
     uint8_t *b = p->done;
@@ -888,7 +926,8 @@ static void run_job(wm_proto *p) {
 /* ---------------------------------------------------------------------------------------------- */
 
 void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps, uint16_t *heights,
-                   wm_proto_job_fn job, void *job_ctx) {
+                   wm_proto_job_fn job, void *job_ctx)
+{
     zero((uint8_t *)p, sizeof *p);
     p->io = *io;
     p->caps = *caps;
@@ -907,7 +946,8 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     rx_reset(p);
 }
 
-int wm_proto_serve(wm_proto *p) {
+int wm_proto_serve(wm_proto *p)
+{
     for (;;) {
         int r = rx_frame(p, SERVE_POLL_MS);
         if (r < 0) {
@@ -939,8 +979,8 @@ int wm_proto_serve(wm_proto *p) {
 
 /* A frame with at most WM_PROTO_ERROR_BYTES of payload, SLIP-encoded into dst (for a connection the
  * engine does not serve); its length, 0 when cap is too small. */
-static size_t encode_small(uint8_t *dst, size_t cap, uint8_t type, uint8_t seq, const uint8_t *payload,
-                           uint32_t n) {
+static size_t encode_small(uint8_t *dst, size_t cap, uint8_t type, uint8_t seq, const uint8_t *payload, uint32_t n)
+{
     uint8_t raw[WM_PROTO_HEADER_BYTES + WM_PROTO_ERROR_BYTES + WM_PROTO_CRC_BYTES];
     size_t len = 0, k;
     if (n > WM_PROTO_ERROR_BYTES || cap < WM_PROTO_BUSY_FRAME_MAX) return 0;
@@ -962,7 +1002,8 @@ static size_t encode_small(uint8_t *dst, size_t cap, uint8_t type, uint8_t seq, 
     return len;
 }
 
-size_t wm_proto_busy_frame(uint8_t *dst, size_t cap) {
+size_t wm_proto_busy_frame(uint8_t *dst, size_t cap)
+{
     uint8_t b[WM_PROTO_ERROR_BYTES];
     zero(b, sizeof b);
     b[WM_PROTO_ERROR_CODE] = WM_PROTO_E_BUSY;
