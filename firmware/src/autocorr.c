@@ -114,10 +114,19 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     int64_t dx2 = (int64_t)x[2] - x[0], dy2 = (int64_t)y[2] - y[0], dz2 = z2 - z0;
     int64_t A = dy1 * dz2 - dz1 * dy2, B = dz1 * dx2 - dx1 * dz2, D = dx1 * dy2 - dx2 * dy1;
     uint64_t c[3], m, len;
-    int e = p->scale_e, sh = 0;
-    /* (s A, s B, D) 2^e = (scale_m A, scale_m B, D 2^e): magnitudes below 2^48, 2^48, 2^63 */
-    c[0] = mag(A) * p->scale_m;
-    c[1] = mag(B) * p->scale_m;
+    uint32_t mx, my;
+    int32_t ex, ey;
+    int e, sh = 0;
+    /* In ground units (cells dx x dy) the normal is (s A / dx, s B / dy, D): the slope scales of the
+     * normal metric (wm_slope_scale; with a cell of 1 both are s, and nothing changes).  Brought to the
+     * smaller exponent e: (sx A, sy B, D) 2^e = (mx A 2^(e - ex), my B 2^(e - ey), D 2^e), magnitudes
+     * below 2^48, 2^48, 2^63 (the right shift of the finer scale truncates toward zero, the same bits
+     * everywhere). */
+    wm_slope_scale(p, 0, &mx, &ex);
+    wm_slope_scale(p, 1, &my, &ey);
+    e = ex < ey ? ex : ey;
+    c[0] = ex - e >= 64 ? 0 : (mag(A) * mx) >> (ex - e);
+    c[1] = ey - e >= 64 ? 0 : (mag(B) * my) >> (ey - e);
     c[2] = mag(D);
     if (e <= 32) {
         c[2] <<= e;

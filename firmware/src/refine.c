@@ -55,6 +55,9 @@ int wm_params_check(const wm_params *p)
     if (p->scale_m > 65535u || p->scale_e < 0 || p->scale_e > 126) return WM_ERR_ARG;
     if (p->delta_p > 65535u || p->alpha > 65536u || (p->flags & ~WM_FLAG_ALL) != 0) return WM_ERR_ARG;
     if (p->delta_c > 65536u) return WM_ERR_ARG;
+    if (p->slope_x_m > 65535u || p->slope_y_m > 65535u || p->slope_x_e < 0 || p->slope_x_e > 126 ||
+        p->slope_y_e < 0 || p->slope_y_e > 126)
+        return WM_ERR_ARG;
     return WM_OK;
 }
 
