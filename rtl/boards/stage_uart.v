@@ -41,7 +41,7 @@ module stage_uart #
     // the filter bank's maxima
     parameter MAX_WIDTH = 256,
     parameter MAX_HEIGHT = 4096,
-    parameter MAX_LEVELS = 4,
+    parameter MAX_LEVELS = 3,
     // the template stage's row buffer: block columns of the finest M, ceil((MAX_WIDTH - 1) / 2)
     parameter MAX_COLS = 128,
     // byte FIFOs (flip-flops on the iCE40: keep them small)

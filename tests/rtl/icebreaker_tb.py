@@ -82,7 +82,7 @@ CASES = [
     ("random 37x23 M=2 tau=0", lambda: np.random.default_rng(3).integers(0, 65536, (23, 37)), 2, 0),
     ("box 2x2 M=1", lambda: np.array([[0, 9], [65535, 3]]), 1, 1),
     ("f3 45x19 M=1", lambda: synth.f3(45)[:19], 1, 10),
-    ("f1 40x40 M=4, tau above 18 bits", lambda: synth.f1(40), 4, 1 << 20),
+    ("f1 40x40 M=3, tau above 18 bits", lambda: synth.f1(40), 3, 1 << 20),
 ]
 
 
