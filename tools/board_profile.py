@@ -54,8 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     elf = hexfile.with_suffix(".elf")
     with tempfile.TemporaryDirectory() as tmp:
         prof = Path(args.raw) if args.raw else Path(tmp) / "profile.txt"
-        proc = subprocess.Popen([str(sim), "--firmware", str(hexfile), "--port", "0", "--fast", "--exit-on-close",
-                                 "--quiet", "--profile", str(prof)], stdout=subprocess.PIPE, text=True)
+        proc = subprocess.Popen([str(sim), "--firmware", str(hexfile), "--port", "0", "--fast",
+                                 "--exit-on-close", "--quiet", "--profile", str(prof)],
+                                stdout=subprocess.PIPE, text=True)
         line = proc.stdout.readline()
         m = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
         if not m:
