@@ -81,9 +81,22 @@ def run() -> dict:
     finally:
         dev.stop()
     h, w = np.load(jacksboro())["elevation"][::DECIMATE, ::DECIMATE].shape
-    return {"input": f"Jacksboro DEM /{DECIMATE}: {w} x {h}", "limit": LIMIT, "frames_target": FRAMES,
+    return {"commit": _commit(), "input": f"Jacksboro DEM /{DECIMATE}: {w} x {h}", "limit": LIMIT,
+            "frames_target": FRAMES,
             "host_resend_s": P.host_resend_s(P.SESSION_TIMEOUT_MS, 0),
             "session_timeout_ms": P.SESSION_TIMEOUT_MS, "sets": sets}
+
+
+def _commit() -> str:
+    """The commit measured, and whether the host or the device code differed from it."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                          text=True).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "--", "host/wavemesh", "firmware/board"],
+                           cwd=root, capture_output=True, text=True).stdout.strip()
+    return head + (" with uncommitted changes in host/wavemesh or firmware/board" if dirty else "")
 
 
 def _summarise(name: str, runs: list[dict]) -> dict:
@@ -110,6 +123,8 @@ def markdown(results: dict) -> str:
     main = sets[0]["tally"]
     share = main["outcomes"]["identical"] / main["runs"]
     lines = [
+        f"Code measured: {results.get('commit', 'not recorded')}.",
+        "",
         f"`wavemesh stream` of {results['input']} samples (zeta 5 m) through "
         "wavemesh.harness.faultproxy to the native stand-in device, with the host's default timeouts "
         f"(it writes again after {results['host_resend_s']:.2f} s of silence in a session: "
