@@ -233,6 +233,9 @@ def test_options_beyond_the_device(device, inputs, tmp_path, fast_timeouts):
     rc, _, err = run_cli("stream", src, "--crop", "0,0,100,10", "--port", device.url, "-o",
                          str(tmp_path / "x.obj"))
     assert rc == 2 and "does not fit" in one_error(err)
+    rc, _, err = run_cli("stream", src, "--wavelet", "spline", "--port", device.url, "-o",
+                         str(tmp_path / "x.obj"))
+    assert rc == 2 and "Haar's only" in one_error(err) and not (tmp_path / "x.obj").exists()
 
 
 def test_device_error_code_capacity(wmdev_exe, inputs, tmp_path, fast_timeouts):
@@ -308,7 +311,8 @@ def full_job_works(url: str) -> None:
 
 # Beyond this device's capabilities (wmdev's defaults, max_levels 8), within the protocol's ranges
 BAD_FOR_THE_DEVICE = [("levels", 9), ("capacity", 1), ("capacity", 10**9), ("max_triangles", 1),
-                      ("max_triangles", 20000)]
+                      ("max_triangles", 20000),
+                      ("flags", P.CONFIG_SPLINE)]  # no FEATURE_SPLINE: its filter bank is Haar's
 
 
 def out_of_range() -> list[tuple[str, int]]:
