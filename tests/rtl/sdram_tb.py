@@ -441,14 +441,16 @@ class TB:
                            dict(chip.counts), len(chip.ref_edges), chip.ref_busy, chip.max_ref_gap / 1000)
 
 
-def interleaved(rng: random.Random, bases: list[int], n: int) -> list[tuple[int, int]]:
-    """n (address, value) beats of len(bases) sequences, each advancing from its base, interleaved
-    at random (sequence k twice as likely as k + 1, as a filter bank's levels)."""
+def interleaved(rng: random.Random, bases: list[int], n: int, place=None) -> list[tuple[int, int]]:
+    """n (address, value) beats of len(bases) sequences interleaved at random (sequence k twice as
+    likely as k + 1, as a filter bank's levels); beat i of sequence k goes to place(k, i), by default
+    bases[k] + i."""
+    place = place or (lambda k, i: bases[k] + i)
     pos = [0] * len(bases)
     out = []
     for _ in range(n):
         k = rng.choices(range(len(bases)), weights=[2 ** -i for i in range(len(bases))])[0]
-        out.append((bases[k] + pos[k], rng.getrandbits(16)))
+        out.append((place(k, pos[k]), rng.getrandbits(16)))
         pos[k] += 1
     return out
 
@@ -660,10 +662,13 @@ async def test_bench_cycles(dut):
     refs = len(tb.chip.ref_edges)
     cycles = await tb.stream_read(join(1000, 0, 0), n)
     out["stream_read"] = {"halfwords": n, "cycles": cycles, "refreshes": len(tb.chip.ref_edges) - refs}
-    # the addressed writer: three interleaved sequences in three banks, then in three rows of one bank
-    for name, banks in (("scatter_3_banks", (0, 1, 2)), ("scatter_1_bank", (3, 3, 3))):
-        bases = [join(4000 + k, b, 0) for k, b in enumerate(banks)]
-        beats = interleaved(tb.rng, bases, 4096)
+    # the addressed writer: three interleaved sequences, each in a linear area of its own (they run
+    # through the banks at different rates and meet in them), or each kept in a bank of its own
+    # (beat i of sequence k at {row 4000 + i / 512, bank k, column i % 512})
+    cases = {"scatter_linear": lambda k, i: join(4000 + 8 * k, 0, 0) + i,
+             "scatter_own_banks": lambda k, i: join(4100 + i // (1 << COL_BITS), k, i % (1 << COL_BITS))}
+    for name, place in cases.items():
+        beats = interleaved(tb.rng, [0, 0, 0], 4096, place)
         cycles = await tb.scatter_write(beats)
         out[name] = {"halfwords": len(beats), "cycles": cycles}
     # CPU: sequential words (a miss per line), the last line again (hits), a row miss each, writes
