@@ -625,7 +625,8 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
         write_mesh(str(staged.path(out, (SIDECAR,))), result.mesh, hf.values, comment=result.comment,
                    ground=g, local=local)
         if folder is not None:
-            for level, m in result.level_meshes:
+            # M = 1: the initial triangulation and the refined mesh are both level 0; the refined one is kept
+            for level, m in dict(result.level_meshes).items():
                 path = folder / f"level-{level}{out.suffix.lower()}"
                 write_mesh(str(staged.path(path, (SIDECAR,))), m, hf.values,
                            comment=f"{result.comment} level={level}", ground=g, local=local)

@@ -107,6 +107,16 @@ def test_plain_input_stays_in_grid_steps(tmp_path):
     assert run("check", out, "--against", tmp_path / "h.npy") == 0
 
 
+def test_one_level_with_lod(tmp_path):
+    """M = 1 (a small grid, as `make demo`'s board run): the initial and the refined mesh are both level 0;
+    --lod writes the refined one once (staging it twice made the outputs' commit fail)."""
+    np.save(tmp_path / "h.npy", hills(12, 10))
+    assert run("mesh", tmp_path / "h.npy", "-o", tmp_path / "h.obj", "--lod", tmp_path / "lod", "-q") == 0
+    assert sorted(p.name for p in (tmp_path / "lod").iterdir()) == ["level-0.obj"]
+    (lod, _), (final, _) = read_mesh(tmp_path / "lod" / "level-0.obj"), read_mesh(tmp_path / "h.obj")
+    assert np.array_equal(lod.xy, final.xy) and np.array_equal(lod.tris, final.tris)
+
+
 def test_npz_georeference_as_matplotlib_gives_it(tmp_path):
     """Jacksboro's convention: xmin..xmax and ymin..ymax are the cells' outer edges, row 0 at ymin."""
     z = hills(30, 40)
