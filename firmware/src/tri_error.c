@@ -60,6 +60,24 @@ static void setup(const wm_field *f, const int32_t x[3], const int32_t y[3], str
 static int32_t floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
 
+/* One row of the 32-bit path (scan): the largest V = |S - d h| over the samples [q, end) with S
+ * growing by dS per sample, above vm, and where it is first reached (*at; untouched when no sample
+ * beats vm); it stops at the first sample above limit.  A function of its own so that the few values of
+ * the loop stay in registers on the soft CPU. */
+WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS, uint32_t d,
+                                      uint32_t vm, uint64_t limit, const uint16_t **at)
+{
+    for (; q < end; q++, S += dS) {
+        uint32_t u = S - d * *q, v = u >> 31 ? 0u - u : u;
+        if (v > vm) {
+            vm = v;
+            *at = q;
+            if (vm > limit) break;
+        }
+    }
+    return vm;
+}
+
 /* Scans the closed triangle row by row; returns Vmax and the first sample reaching it, or, as soon as
  * a sample's V exceeds limit, that V (the caller only learns that E(T) is above its bound).
  *
@@ -96,16 +114,12 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
             /* modulo 2^32 (unsigned: no overflow), exact where it matters: S and D h lie in [0, 2^31)
              * at every sample of the span, so their difference is V's sign and size */
             uint32_t S = 0, dS = (uint32_t)t.dS, d = (uint32_t)D, vm = (uint32_t)vmax;
-            int32_t px;
+            const uint16_t *at = NULL;
             for (int k = 0; k < 3; k++) S += (uint32_t)(t.A[k] * lo + t.B[k] * py + t.C[k]) * (uint32_t)t.z[k];
-            for (px = (int32_t)lo; px <= (int32_t)hi; px++, S += dS) {
-                uint32_t u = S - d * row[px], v = u >> 31 ? 0u - u : u;
-                if (v > vm) {
-                    vm = v;
-                    bx = px;
-                    by = py;
-                    if (vm > limit) break;
-                }
+            vm = row_max32(row + lo, row + hi + 1, S, dS, d, vm, limit, &at);
+            if (at) {
+                bx = (int32_t)(at - row);
+                by = py;
             }
             vmax = (uint64_t)vm;
         } else {

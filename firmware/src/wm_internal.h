@@ -72,6 +72,13 @@ static inline int32_t wm_rot_cw(const wm_mesh *m, int32_t e)
 int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 
 /* Fixed-point and exact integer helpers (fixed.c). */
+/* Keeps a small hot function out of its caller on a 32-bit CPU (GCC, Clang), so that its loop gets the
+ * registers there (the soft CPU); a 64-bit host has registers enough and saves the call. */
+#if defined(__GNUC__) && UINTPTR_MAX == 0xFFFFFFFFu
+#define WM_NOINLINE __attribute__((noinline))
+#else
+#define WM_NOINLINE
+#endif
 #define WM_CLASS_UNKNOWN (-1) /* r->vapex: no class known for the vertex's current star (reduce.c) */
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 int wm_bit_length64(uint64_t x);                        /* bits of x: 0 for 0, 64 for 2^63 and above */
