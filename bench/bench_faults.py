@@ -5,10 +5,10 @@ Each run streams the Jacksboro DEM (decimated by 4: 101 x 86 samples, zeta 5 m) 
 wavemesh.harness.faultproxy in front of wmdev and is classified (faultproxy.campaign): identical
 (the very file `wavemesh mesh` writes), a clear error (exit 2, one `error:` line and a hint, no
 output), a silently different mesh, an unclear ending, or a hang (still running after RUN_LIMIT s).
-The sets: the bounded campaign at 0.2 % faults per byte (at most LIMIT faults per direction and
-connection, the proxy's default) until it has passed FRAMES frames; the same bound at other rates;
-and 0.2 % per byte without a bound, where most 1 KiB frames are hit and the point is only that the
-host gives up clearly.  `make bench-faults`; the short seeded version is tests/sim/test_stream_faults.py.
+The sets: 0.2 % faults per byte without a bound, as on a real lossy line (issue 13's bar: at least
+95 % of these runs end with the identical mesh; the host shrinks its frames, see wavemesh.stream),
+RUNS_LOSSY runs; then with at most LIMIT faults per direction and connection at 0.2 % and at other
+rates.  `make bench-faults`; the short seeded version is tests/sim/test_stream_faults.py.
 """
 
 from __future__ import annotations
@@ -23,12 +23,12 @@ DECIMATE = 4
 # stops the job (the reference, `wavemesh mesh`, has no budget of its own)
 OPTS = ["--key", "elevation", "--decimate", str(DECIMATE), "--zeta", "5", "--max-triangles", "19999"]
 DEVICE = ["--tri-capacity", "20000", "--quiet"]
-FRAMES = 10_000  # the bounded 0.2 % set runs until this many frames went through the proxy
+FRAMES = 10_000  # issue 13: at least this many frames through the proxy in all
 LIMIT = 8  # faults per direction and connection in the bounded sets
 RUN_LIMIT = 150.0  # s: longer counts as a hang (the host's longest single wait is 120 s)
-SWEEP = (0.0005, 0.01)  # other rates with the same bound, RUNS_SWEEP runs each
-RUNS_SWEEP = 20
-RUNS_UNBOUNDED = 10
+RUNS_LOSSY = 20  # runs at 0.2 % without a bound (the bar)
+RATES_BOUNDED = (0.002, 0.0005, 0.01)  # rates with the bound, RUNS_BOUNDED runs each
+RUNS_BOUNDED = 20
 
 
 def _set(name: str, upstream, src, ref, work: Path, faults) -> dict:
@@ -64,20 +64,15 @@ def run() -> dict:
             if rc not in (0, 3):
                 raise RuntimeError(f"wavemesh mesh failed ({rc})")
             up = ("127.0.0.1", dev.port)
-            # the bounded 0.2 % set: in batches until FRAMES frames went through
-            runs: list = []
-            seed = 0
-            while sum(r["frames"] for r in runs) < FRAMES:
-                batch = _set("bounded 0.2 %", up, src, ref, work,
-                             [Faults(seed=s, rate=0.002, limit=LIMIT) for s in range(seed, seed + 20)])
-                runs += batch["runs"]
-                seed += 20
-            sets.append(_summarise("bounded 0.2 %", runs))
-            for rate in SWEEP:
+            sets.append(_set("0.2 %, no bound", up, src, ref, work,
+                             [Faults(seed=2000 + s, rate=0.002, limit=None) for s in range(RUNS_LOSSY)]))
+            for i, rate in enumerate(RATES_BOUNDED):
                 sets.append(_set(f"bounded {100 * rate:g} %", up, src, ref, work,
-                                 [Faults(seed=1000 + s, rate=rate, limit=LIMIT) for s in range(RUNS_SWEEP)]))
-            sets.append(_set("unbounded 0.2 %", up, src, ref, work,
-                             [Faults(seed=2000 + s, rate=0.002, limit=10**9) for s in range(RUNS_UNBOUNDED)]))
+                                 [Faults(seed=1000 * i + s, rate=rate, limit=LIMIT)
+                                  for s in range(RUNS_BOUNDED)]))
+            frames = sum(s["tally"]["frames"] for s in sets)
+            if frames < FRAMES:
+                raise RuntimeError(f"only {frames} frames went through the proxy; issue 13 asks for {FRAMES}")
     finally:
         dev.stop()
     h, w = np.load(jacksboro())["elevation"][::DECIMATE, ::DECIMATE].shape
@@ -99,23 +94,6 @@ def _commit() -> str:
     return head + (" with uncommitted changes in host/wavemesh or firmware/board" if dirty else "")
 
 
-def _summarise(name: str, runs: list[dict]) -> dict:
-    from wavemesh.harness.faultproxy import OUTCOMES
-
-    outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
-    errors: dict = {}
-    for r in runs:
-        if r["outcome"] == "error":
-            key = r["message"].split(":")[1].strip() if ":" in r["message"] else r["message"]
-            errors[key] = errors.get(key, 0) + 1
-    tally = {"runs": len(runs), "outcomes": outcomes, "injected": sum(r["faults"] for r in runs),
-             "frames": sum(r["frames"] for r in runs), "faulted_runs": sum(r["faults"] > 0 for r in runs),
-             "slowest": max(r["seconds"] for r in runs),
-             "slowest_error": max([r["seconds"] for r in runs if r["outcome"] == "error"], default=0.0),
-             "errors": errors}
-    return {"name": name, "tally": tally, "runs": runs}
-
-
 def markdown(results: dict) -> str:
     sets = results["sets"]
     frames = sum(s["tally"]["frames"] for s in sets)
@@ -129,8 +107,9 @@ def markdown(results: dict) -> str:
         "wavemesh.harness.faultproxy to the native stand-in device, with the host's default timeouts "
         f"(it writes again after {results['host_resend_s']:.2f} s of silence in a session: "
         f"protocol.host_resend_s of the device's {results['session_timeout_ms']} ms session timeout).  "
-        f"Faults per byte and direction; *bounded*: at most {results['limit']} per direction and "
-        "connection.  Frames: SLIP frames that came to the proxy, both ways.",
+        f"Faults per byte and direction; *no bound*: as on a real lossy line; *bounded*: at most "
+        f"{results['limit']} per direction and connection.  A delay holds the stream back at the byte "
+        "it strikes.  Frames: SLIP frames that came to the proxy, both ways.",
         "",
         "| set | runs | frames | faults (runs with any) | identical | clear error | different | unclear "
         "| hang | slowest run | slowest error |",
@@ -141,8 +120,8 @@ def markdown(results: dict) -> str:
         lines.append(f"| {s['name']} | {t['runs']} | {t['frames']} | {t['injected']} ({t['faulted_runs']}) "
                      f"| {o['identical']} | {o['error']} | {o['different']} | {o['unclear']} | {o['hang']} "
                      f"| {t['slowest']:.1f} s | {t['slowest_error']:.1f} s |")
-    lines += ["", f"In all: {frames} frames, {bad} runs silently different, unclear or hung.  Bounded "
-              f"0.2 %: {100 * share:.1f} % of the runs ended with the identical mesh (issue 13 asks for at "
+    lines += ["", f"In all: {frames} frames, {bad} runs silently different, unclear or hung.  0.2 % without "
+              f"a bound: {100 * share:.1f} % of the runs ended with the identical mesh (issue 13 asks for at "
               "least 95 %)."]
     kinds = {}
     for s in sets:

@@ -52,6 +52,22 @@ class Timeouts:
 
 DEFAULT_TIMEOUTS = Timeouts()
 
+# --- frame sizes on a lossy line ----------------------------------------------------------------------
+# A frame is lost when any of its bytes is, so on a line that loses a byte in every few hundred most
+# 1 KiB frames never get through.  Like XMODEM-1K falling back to 128-byte blocks, the host halves its
+# DATA frames after every go-back and asks the device (ACK.chunk) for half-size MESH frames after every
+# level pass with a hole, down to SMALLEST_TAIL bytes, and doubles them again after clean stretches.
+# Near 64 bytes the framing (some 20 bytes a frame) and the losses (0.2 % a byte: 15 % of the frames)
+# cost about the same.
+SMALLEST_TAIL = 64  # bytes of samples or level stream in one frame, at the least
+GROW_AFTER = 2  # windows (DATA) or levels (MESH) without a loss before frames double again
+WANT_SPAN = 8  # holes of a level within this many frames of the first are asked for in one ACK
+# The device has written a level long before its bytes arrive when the line buffers (a socket, a USB
+# bridge) and stalls; it waits ACK_TIMEOUT_MS for the ACK, then repeats LEVEL_END, and gives up after
+# ACK_RETRIES.  So while MESH frames still come the host writes a STATUS (its answer is ignored) every
+# KEEPALIVE_S: the device, reading again, hears it and restarts its wait.
+KEEPALIVE_S = P.ACK_TIMEOUT_MS / 2000
+
 
 class DeviceError(WavemeshError):
     """The device refused a request or its job failed: an ERROR frame or a DONE with an error code."""
@@ -381,10 +397,12 @@ class Device:
         height, width = a.shape
         data = a.tobytes()
         total = a.size
-        per_frame = (min(info.max_payload, P.MAX_PAYLOAD) - P.DATA.size) // 2
-        if width <= per_frame:
-            per_frame = (per_frame // width) * width  # whole rows per frame
-        window = per_frame * info.window
+        largest = (min(info.max_payload, P.MAX_PAYLOAD) - P.DATA.size) // 2
+        if width <= largest:
+            largest = (largest // width) * width  # whole rows per frame
+        smallest = min(largest, SMALLEST_TAIL // 2)
+        per_frame = largest  # samples a frame: halved after a go-back, doubled after clean windows
+        clean = 0  # samples stored since the last go-back (or the last growth)
         every = self.resend_s
         acked = sent = 0
         rewinds = 0  # go-backs since the last progress
@@ -396,16 +414,17 @@ class Device:
         silence = self.t.reply * self.t.attempts
 
         def go_back(to: int) -> None:
-            nonlocal sent, epoch, rewinds
+            nonlocal sent, epoch, rewinds, per_frame, clean
             sent, epoch = to, epoch + 1
             rewinds += 1
+            per_frame, clean = max(smallest, per_frame // 2), 0
             if rewinds > self.t.data_retries:
                 raise LinkTimeout(f"the samples do not get through: stored {acked} of {total} after "
                                   f"{rewinds - 1} resends",
                                   "the link loses too much; check the cable and --baud")
 
         while acked < total:
-            while sent < total and sent - acked < window:
+            while sent < total and sent - acked < per_frame * info.window:
                 n = min(per_frame, total - sent)
                 self.link.write_frame(P.FrameType.DATA, self._next_seq(),
                                       P.DATA.pack(offset=sent) + data[2 * sent:2 * (sent + n)])
@@ -446,8 +465,11 @@ class Device:
             if got > total:
                 raise ProtocolError(f"the device says it stored {got} of {total} samples")
             if got > acked:
+                clean += got - acked
                 acked = got
                 rewinds = 0
+                if clean >= GROW_AFTER * info.window * per_frame and per_frame < largest:
+                    per_frame, clean = min(largest, 2 * per_frame), 0
                 if bar:
                     bar.update(acked, f"{2 * acked // 1024} of {2 * total // 1024} KiB")
             if taken == epoch and got < before and sent > got:
@@ -455,8 +477,13 @@ class Device:
         return self.link.stats.bytes_out - bytes_out0
 
     # --- the job -------------------------------------------------------------------------------------------
-    def _ack(self, kind: int, index: int, have: int) -> None:
-        payload = P.ACK.pack(kind=kind, index=index, have=have)
+    def _ack(self, kind: int, index: int, have: int, chunk: int = 0, want: int = 0) -> None:
+        payload = P.ACK.pack(kind=kind, index=index, have=have, chunk=chunk, want=want)
+        now = time.monotonic()
+        if payload == self._last_ack[0] and now - self._last_ack[1] < KEEPALIVE_S:
+            return  # a LEVEL_END repeated while the first was on its way: this answer is on its way too
+        self._last_ack = (payload, now)
+        self._wrote = now
         self.link.write_frame(P.FrameType.ACK, self._next_seq(), payload)
 
     def run(self, crc: int, width: int, height: int, on_level=None, on_progress=None) -> tuple[list, dict]:
@@ -465,10 +492,19 @@ class Device:
         seq = self._next_seq()
         payload = P.RUN.pack(crc=crc)
         self.link.write_frame(P.FrameType.RUN, seq, payload)
-        t0 = last = time.monotonic()
+        t0 = last = self._wrote = time.monotonic()
+        self._last_ack = (b"", 0.0)
         started, runs = False, 1
         levels: list[LevelResult] = []
-        buf = bytearray()
+        # the current level's bytes as they came, and a 1 for every byte that came: pieces after a lost
+        # MESH frame are kept, and the ACK asks for the holes only
+        buf, got = bytearray(), bytearray()
+        largest = self.info.max_payload - P.MESH.size
+        chunk = largest  # MESH tail bytes asked for (ACK.chunk): halved after a pass with a hole
+        lossless = 0  # levels in a row that came whole in their first pass
+        first_pass = True
+        cap = self.info.tri_capacity  # a level of this device is at most this long (MESH beyond: ignored)
+        limit = P.level_stream_size(self.info.max_samples + cap + 3, cap, 4)
         stale_asks = 0  # ACKs asking for more of the current level without getting any
         last_have = -1
         every = min(self.t.reply, self.resend_s)  # RUN again (the device waits for it in a session)
@@ -507,39 +543,66 @@ class Device:
                 if on_progress:
                     on_progress(x)
             elif t == P.FrameType.MESH:
+                if last - self._wrote >= KEEPALIVE_S:
+                    self.link.write_frame(P.FrameType.STATUS, self._next_seq())
+                    self._wrote = last
                 if x["index"] == len(levels):
                     off, data = x["offset"], f.tail()
-                    if off <= len(buf) < off + len(data):
-                        buf += data[len(buf) - off:]
+                    end = off + len(data)
+                    if end <= limit:  # else not a level of this device: never asked for, ignored
+                        if end > len(buf):
+                            buf += bytes(end - len(buf))
+                            got += bytes(end - len(got))
+                        buf[off:end] = data
+                        got[off:end] = b"\1" * len(data)
             elif t == P.FrameType.LEVEL_END:
                 idx = x["index"]
-                if idx < len(levels):
-                    self._ack(P.FrameType.LEVEL_END, idx, x["total"])  # our ACK was lost: again
+                if idx < len(levels):  # our ACK was lost: again
+                    self._ack(P.FrameType.LEVEL_END, idx, x["total"], chunk)
                     continue
                 if idx > len(levels):
                     raise ProtocolError(f"level index {idx} after {len(levels)} levels")
                 total = x["total"]
-                if len(buf) == total and zlib.crc32(buf) == x["crc"]:
-                    hdr, mesh, stats, cycles = parse_level(bytes(buf), width, height)
+                if total > limit:
+                    raise ProtocolError(f"level {x['level']}: a stream of {total} bytes from a device of "
+                                        f"{self.info.tri_capacity} triangles")
+                if len(buf) < total:
+                    buf += bytes(total - len(buf))
+                    got += bytes(total - len(got))
+                have = got.find(0, 0, total)
+                if have < 0 and zlib.crc32(buf[:total]) == x["crc"]:
+                    hdr, mesh, stats, cycles = parse_level(bytes(buf[:total]), width, height)
                     lv = LevelResult(hdr["level"], idx, mesh, stats, cycles, total, time.monotonic() - t0)
                     levels.append(lv)
-                    self._ack(P.FrameType.LEVEL_END, idx, total)
-                    buf = bytearray()
-                    stale_asks, last_have = 0, -1
+                    lossless = lossless + 1 if first_pass else 0
+                    if lossless >= GROW_AFTER and chunk < largest:
+                        chunk, lossless = min(largest, 2 * chunk), 0
+                    self._ack(P.FrameType.LEVEL_END, idx, total, chunk)
+                    buf, got = bytearray(), bytearray()
+                    stale_asks, last_have, first_pass = 0, -1, True
                     if on_level:
                         on_level(lv)
                     continue
-                if len(buf) >= total:  # all there but not right: everything again
-                    buf = bytearray()
-                if len(buf) > last_have:
-                    last_have, stale_asks = len(buf), 0
+                if have < 0:  # all there but not right: everything again
+                    got[:] = bytes(len(got))
+                    have = 0
+                first_pass, lossless = False, 0
+                chunk = max(min(SMALLEST_TAIL, largest), chunk // 2)
+                if have > last_have:
+                    last_have, stale_asks = have, 0
                 else:
                     stale_asks += 1
                     if stale_asks > self.t.level_retries:
-                        raise LinkTimeout(f"level {x['level']} does not get through: {len(buf)} of {total} "
+                        raise LinkTimeout(f"level {x['level']} does not get through: {have} of {total} "
                                           f"bytes after {stale_asks} requests",
                                           "the link loses too much; check the cable and --baud")
-                self._ack(P.FrameType.LEVEL_END, idx, len(buf))
+                # the holes that start within WANT_SPAN frames of the first, in one request
+                end, start = have, have
+                while 0 <= start < min(total, have + WANT_SPAN * chunk):
+                    end = got.find(1, start, total)
+                    end = total if end < 0 else end
+                    start = got.find(0, end, total)
+                self._ack(P.FrameType.LEVEL_END, idx, have, chunk, end - have)
             else:  # DONE
                 self._ack(P.FrameType.DONE, 0, 0)
                 if x["status"] != 0:

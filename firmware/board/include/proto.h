@@ -169,6 +169,8 @@ typedef struct wm_proto {
     uint8_t lib;             /* index bytes */
     uint8_t llast;           /* no level follows */
     uint32_t ltotal, lcrc;
+    uint32_t lwant;          /* the last ACK's want: bytes from have to send again (0: all) */
+    uint16_t chunk;          /* MESH tail bytes (the host's ACK.chunk; max_payload - 8 at RUN) */
     int32_t cur_k, cur_slot; /* triangle cursor: k-th live triangle is in slot cur_slot */
 } wm_proto;
 

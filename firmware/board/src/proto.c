@@ -662,7 +662,13 @@ static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
             return 0;
         }
         if (p->f_pay[WM_PROTO_ACK_KIND] == kind && p->f_pay[WM_PROTO_ACK_INDEX] == index) {
+            uint32_t c = get16(p->f_pay + WM_PROTO_ACK_CHUNK), most = p->caps.max_payload - WM_PROTO_MESH_BYTES;
             *have = get32(p->f_pay + WM_PROTO_ACK_HAVE);
+            if (kind == WM_PROTO_T_LEVEL_END) {
+                /* a host on a lossy line asks for smaller frames (and only the bytes it misses) */
+                p->lwant = get32(p->f_pay + WM_PROTO_ACK_WANT);
+                p->chunk = (uint16_t)(c == 0 || c > most ? most : c < WM_PROTO_MIN_CHUNK ? WM_PROTO_MIN_CHUNK : c);
+            }
             return 1;
         }
         return 0; /* an ACK of something earlier */
@@ -761,15 +767,15 @@ static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
     }
 }
 
-/* MESH frames for bytes [from, ltotal).  The first sending (first: from is 0) takes the stream's CRC
- * on the way, and only its frames are link I/O: building the stream is the EMIT stage's work.  A
- * resend happens inside link I/O (the host asked for it). */
-static void send_level_from(wm_proto *p, uint32_t from, int first)
+/* MESH frames of p->chunk bytes for bytes [from, end) (end <= ltotal).  The first sending (first: from
+ * is 0) takes the stream's CRC on the way, and only its frames are link I/O: building the stream is
+ * the EMIT stage's work.  A resend happens inside link I/O (the host asked for it). */
+static void send_level_from(wm_proto *p, uint32_t from, uint32_t end, int first)
 {
-    uint32_t chunk = (uint32_t)p->caps.max_payload - WM_PROTO_MESH_BYTES;
+    uint32_t chunk = p->chunk;
     if (first) p->lcrc = 0;
-    while (from < p->ltotal) {
-        uint32_t n = p->ltotal - from < chunk ? p->ltotal - from : chunk;
+    while (from < end) {
+        uint32_t n = end - from < chunk ? end - from : chunk;
         uint8_t *b = p->tx;
         zero(b, WM_PROTO_MESH_BYTES);
         b[WM_PROTO_MESH_LEVEL] = p->level;
@@ -837,7 +843,7 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     link_begin(p);
     send_progress(p, WM_PROTO_STAGE_EMIT, st->level);
     link_end(p);
-    send_level_from(p, 0, 1);
+    send_level_from(p, 0, p->ltotal, 1);
     link_begin(p); /* from here on everything waits for, or answers, the host */
     send_level_end(p);
     for (;;) {
@@ -850,7 +856,7 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
             p->abort = ABORT_NO_ACK;
             break;
         }
-        send_level_from(p, have, 0);
+        send_level_from(p, have, p->lwant && p->lwant < p->ltotal - have ? have + p->lwant : p->ltotal, 0);
         send_level_end(p);
     }
     link_end(p);
@@ -877,6 +883,7 @@ static void run_job(wm_proto *p)
     p->state = WM_PROTO_STATE_RUNNING;
     p->abort = 0;
     p->levels_sent = 0;
+    p->chunk = (uint16_t)(p->caps.max_payload - WM_PROTO_MESH_BYTES); /* until the host asks for less */
     p->e_max = p->triangles = p->vertices = 0;
     p->level = (uint8_t)(p->job.levels - 1);
     p->run_t0 = now(p);

@@ -7,9 +7,9 @@ bench/bench_faults.py).
 
 One client connection at a time is forwarded to the device; each direction passes through its own
 seeded random generator that, byte by byte with probability ``rate``, corrupts a byte (XOR with a
-non-zero mask), drops a run of 1..``run`` bytes, duplicates a run of 1..``run`` bytes, or delays
-the stream by up to ``max_delay`` seconds; at most ``limit`` faults per direction and connection
-(bounded, so a session can always get through in the end).  ``log`` records every fault injected,
+non-zero mask), drops a run of 1..``run`` bytes, duplicates a run of 1..``run`` bytes, or holds the
+stream back at that byte for up to ``max_delay`` seconds; at most ``limit`` faults per direction and
+connection (``limit=None``: no bound, as on a real lossy line).  ``log`` records every fault injected,
 ``frames`` counts the frames that came to the proxy (SLIP delimiters / 2, before any fault).
 Closing the proxy (or the client leaving) closes both sides.
 
@@ -41,7 +41,7 @@ KINDS = ("corrupt", "drop", "duplicate", "delay")
 class Faults:
     seed: int = 0
     rate: float = 0.001  # probability per byte of a fault
-    limit: int = 8  # faults per direction and connection
+    limit: int | None = 8  # faults per direction and connection (None: no bound)
     run: int = 64  # longest run of bytes dropped or duplicated
     max_delay: float = 0.3  # s, longest delay
     kinds: tuple[str, ...] = KINDS
@@ -66,17 +66,21 @@ class _Pump:
         self.ends = 0  # SLIP delimiters that came (two per frame)
         self.active = name in faults.directions and faults.rate > 0
 
-    def apply(self, data: bytes) -> tuple[bytes, float]:
-        """The bytes to forward and a delay before them."""
+    def _may(self) -> bool:
+        return self.f.limit is None or self.count < self.f.limit
+
+    def apply(self, data: bytes) -> list[tuple[bytes, float]]:
+        """The bytes to forward, in pieces each followed by a delay: a delay holds the stream back at
+        the byte where it struck (the bytes before it go on at once), as a line that stalls would."""
         self.ends += data.count(0xC0)
-        if not self.active or self.count >= self.f.limit:
+        if not self.active or not self._may():
             self.pos += len(data)
-            return data, 0.0
+            return [(data, 0.0)]
+        pieces = []
         out = bytearray()
-        delay = 0.0
         i = 0
         while i < len(data):
-            if self.count < self.f.limit and self.rng.random() < self.f.rate:
+            if self._may() and self.rng.random() < self.f.rate:
                 kind = self.rng.choice(self.f.kinds)
                 self.count += 1
                 if kind == "corrupt":
@@ -97,12 +101,13 @@ class _Pump:
                     i += len(piece)
                     continue
                 d = self.rng.uniform(0.0, self.f.max_delay)
-                delay += d
+                pieces.append((bytes(out), d))
+                out = bytearray()
                 self.log.append(Injected(self.name, kind, self.pos + i, int(d * 1000)))
             out.append(data[i])
             i += 1
         self.pos += len(data)
-        return bytes(out), delay
+        return [*pieces, (bytes(out), 0.0)]
 
 
 class FaultProxy:
@@ -168,11 +173,11 @@ class FaultProxy:
                 data = src.recv(65536)
                 if not data:
                     break
-                out, delay = pump.apply(data)
-                if delay:
-                    time.sleep(delay)
-                if out:
-                    dst.sendall(out)
+                for out, delay in pump.apply(data):
+                    if out:
+                        dst.sendall(out)
+                    if delay:
+                        time.sleep(delay)
         except OSError:
             pass
         finally:
