@@ -210,6 +210,11 @@ int64_t wm_details_size(int32_t width, int32_t height, int32_t levels); /* int32
 int64_t wm_haar_scratch(int32_t width, int32_t height);
 int wm_haar(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
             uint16_t *scratch);
+/* The spline wavelet's filter bank (host/wavemesh/spline.py), the same detail layout as wm_haar;
+ * scratch holds wm_spline_scratch() uint16s and must be 4-byte aligned. */
+int64_t wm_spline_scratch(int32_t width, int32_t height);
+int wm_spline(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
+              uint16_t *scratch);
 
 typedef struct wm_field {
     int32_t width, height;    /* W, H */
