@@ -233,9 +233,21 @@ def test_options_beyond_the_device(device, inputs, tmp_path, fast_timeouts):
     rc, _, err = run_cli("stream", src, "--crop", "0,0,100,10", "--port", device.url, "-o",
                          str(tmp_path / "x.obj"))
     assert rc == 2 and "does not fit" in one_error(err)
-    rc, _, err = run_cli("stream", src, "--wavelet", "spline", "--port", device.url, "-o",
-                         str(tmp_path / "x.obj"))
-    assert rc == 2 and "Haar's only" in one_error(err) and not (tmp_path / "x.obj").exists()
+
+
+def test_spline_wavelet_equals_mesh(device, inputs, tmp_path):
+    """The native device runs the spline filter bank (wm_spline) when CONFIG asks for it: the same mesh
+    as `wavemesh mesh --wavelet spline`, byte for byte (and not Haar's)."""
+    src = str(inputs / "ball64.npy")
+    out = {}
+    for kind, extra in (("stream", ["--port", device.url]), ("mesh", [])):
+        rc, _, err = run_cli(kind, src, "--wavelet", "spline", *extra, "-o", str(tmp_path / f"{kind}.obj"),
+                             "-q")
+        assert rc == 0, err
+        out[kind] = (tmp_path / f"{kind}.obj").read_bytes()
+    rc, _, err = run_cli("mesh", src, "-o", str(tmp_path / "haar.obj"), "-q")
+    assert rc == 0, err
+    assert out["stream"] == out["mesh"] and out["mesh"] != (tmp_path / "haar.obj").read_bytes()
 
 
 def test_device_error_code_capacity(wmdev_exe, inputs, tmp_path, fast_timeouts):

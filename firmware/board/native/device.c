@@ -335,7 +335,7 @@ int main(int argc, char **argv)
     caps.max_payload = (uint16_t)payload;
     caps.clk_hz = 1000000000u; /* cycle counters count nanoseconds */
     caps.baud = (uint32_t)baud;
-    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY;
+    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_SPLINE; /* wm_spline, as the host's model */
     caps.idle_timeout_ms = (uint32_t)idle_ms;
     caps.write_timeout_ms = (uint32_t)write_ms;
     heights = calloc((size_t)max_samples, sizeof *heights);

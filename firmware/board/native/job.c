@@ -1,7 +1,7 @@
 /*
  * The native stand-in device's job: what the board's FPGA stage and CPU do, on the host CPU.
  *
- *   heights --wm_haar--> details --wm_job_label--> template entries --wm_job_initial--> initial mesh
+ *   heights --wm_haar (or wm_spline)--> details --wm_job_label--> template entries --wm_job_initial--> initial mesh
  *           --wm_job_refine--> levels
  *
  * The filter bank is the firmware library's (firmware/src), the labeller, the assembly and the
@@ -58,7 +58,8 @@ out:
 int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
 {
     int32_t w = j->width, h = j->height, m = j->levels;
-    int64_t nd = wm_details_size(w, h, m), ns = wm_haar_scratch(w, h);
+    int spline = (j->flags & WM_PROTO_CONFIG_SPLINE) != 0; /* the filter bank CONFIG chose */
+    int64_t nd = wm_details_size(w, h, m), ns = spline ? wm_spline_scratch(w, h) : wm_haar_scratch(w, h);
     int32_t *details = malloc(sizeof(int32_t) * (size_t)(nd > 0 ? nd : 1));
     uint16_t *scratch = malloc(sizeof(uint16_t) * (size_t)(ns > 0 ? ns : 1));
     uint32_t *entries = NULL;
@@ -72,7 +73,8 @@ int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detai
     if (!details || !scratch) goto out;
 
     wm_proto_stage(p, WM_PROTO_STAGE_FILTER, m);
-    lib = wm_haar(j->heights, w, h, m, details, scratch);
+    lib =
+        spline ? wm_spline(j->heights, w, h, m, details, scratch) : wm_haar(j->heights, w, h, m, details, scratch);
     if (lib != WM_OK) {
         *detail = (uint32_t)lib;
         goto out;
