@@ -190,6 +190,9 @@ def _declare(lib: ctypes.CDLL) -> None:
                                    ctypes.POINTER(ctypes.c_uint16)]),
         "wm_details_size": (ctypes.c_int64, [i32, i32, i32]),
         "wm_haar_scratch": (ctypes.c_int64, [i32, i32]),
+        "wm_spline": (ctypes.c_int, [ctypes.POINTER(ctypes.c_uint16), i32, i32, i32, pi32,
+                                     ctypes.POINTER(ctypes.c_uint16)]),
+        "wm_spline_scratch": (ctypes.c_int64, [i32, i32]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -433,15 +436,18 @@ def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 
     return q / 65536 * scale
 
 
-def haar_details(samples: np.ndarray, levels: int) -> np.ndarray:
-    """The C filter bank's details (the layout of details_array), for tests."""
+def haar_details(samples: np.ndarray, levels: int, wavelet: str = "haar") -> np.ndarray:
+    """The C filter bank's details (the layout of details_array): wm_haar, or wm_spline for the spline
+    wavelet (the native device's filter banks), for tests."""
     lib = load()
+    spline = wavelet == "spline"
+    bank, size = (lib.wm_spline, lib.wm_spline_scratch) if spline else (lib.wm_haar, lib.wm_haar_scratch)
     samples = np.ascontiguousarray(samples, dtype=np.uint16)
     height, width = samples.shape
     out = np.empty(lib.wm_details_size(width, height, levels), dtype=np.int32)
-    scratch = np.empty(max(1, lib.wm_haar_scratch(width, height)), dtype=np.uint16)
-    code = lib.wm_haar(_ptr(samples, ctypes.c_uint16), width, height, levels, _ptr(out, ctypes.c_int32),
-                       _ptr(scratch, ctypes.c_uint16))
+    scratch = np.empty(max(2, size(width, height)), dtype=np.uint32).view(np.uint16)  # 4-byte aligned
+    code = bank(_ptr(samples, ctypes.c_uint16), width, height, levels, _ptr(out, ctypes.c_int32),
+                _ptr(scratch, ctypes.c_uint16))
     if code != WM_OK:
-        raise WavemeshError(f"wm_haar: {error_text(code)}")
+        raise WavemeshError(f"{'wm_spline' if spline else 'wm_haar'}: {error_text(code)}")
     return out
