@@ -79,11 +79,9 @@ WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, ui
 }
 
 /* Scans the closed triangle row by row; returns Vmax and the first sample reaching it, or, as soon as
- * a sample's V exceeds limit, that V (the caller only learns that E(T) is above its bound).
- *
- * Two exact paths, the same results: on grids of at most 2^14 a side every E_k fits 30 bits, so the
- * span of each row comes from 32-bit divisions; when also D < 2^15, S = sum E_k z_k <= D (2^16 - 1)
- * and V fit 32 bits, and the row itself runs in 32-bit arithmetic.  Otherwise 64 bits throughout. */
+ * a sample's V exceeds limit, that V (the caller only learns that E(T) is above its bound).  64-bit
+ * arithmetic (the span of each row from 32-bit divisions on grids of at most 2^14 a side, where every
+ * E_k fits 30 bits); scan32 below is the same scan for small triangles. */
 static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
                      int32_t *wx, int32_t *wy)
 {
@@ -91,10 +89,10 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
     struct tri_setup t;
     uint64_t vmax = 0;
     int32_t bx = x[0], by = y[0];
-    int small = f->width <= (1 << 14) && f->height <= (1 << 14), narrow = small && D < (1 << 15);
+    int small = f->width <= (1 << 14) && f->height <= (1 << 14);
     setup(f, x, y, &t);
     for (int32_t py = t.ymin; py <= t.ymax; py++) {
-        int64_t lo = t.xmin, hi = t.xmax;
+        int64_t lo = t.xmin, hi = t.xmax, S = 0;
         const uint16_t *row = h + (int64_t)py * f->width;
         int empty = 0;
         for (int k = 0; k < 3; k++) {
@@ -110,30 +108,15 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
             }
         }
         if (empty || lo > hi) continue;
-        if (narrow) {
-            /* modulo 2^32 (unsigned: no overflow), exact where it matters: S and D h lie in [0, 2^31)
-             * at every sample of the span, so their difference is V's sign and size */
-            uint32_t S = 0, dS = (uint32_t)t.dS, d = (uint32_t)D, vm = (uint32_t)vmax;
-            const uint16_t *at = NULL;
-            for (int k = 0; k < 3; k++) S += (uint32_t)(t.A[k] * lo + t.B[k] * py + t.C[k]) * (uint32_t)t.z[k];
-            vm = row_max32(row + lo, row + hi + 1, S, dS, d, vm, limit, &at);
-            if (at) {
-                bx = (int32_t)(at - row);
+        for (int k = 0; k < 3; k++) S += (t.A[k] * lo + t.B[k] * py + t.C[k]) * t.z[k];
+        for (int64_t px = lo; px <= hi; px++, S += t.dS) {
+            int64_t v = S - D * (int64_t)row[px];
+            uint64_t av = (uint64_t)(v < 0 ? -v : v);
+            if (av > vmax) {
+                vmax = av;
+                bx = (int32_t)px;
                 by = py;
-            }
-            vmax = (uint64_t)vm;
-        } else {
-            int64_t S = 0;
-            for (int k = 0; k < 3; k++) S += (t.A[k] * lo + t.B[k] * py + t.C[k]) * t.z[k];
-            for (int64_t px = lo; px <= hi; px++, S += t.dS) {
-                int64_t v = S - D * (int64_t)row[px];
-                uint64_t av = (uint64_t)(v < 0 ? -v : v);
-                if (av > vmax) {
-                    vmax = av;
-                    bx = (int32_t)px;
-                    by = py;
-                    if (av > limit) break;
-                }
+                if (av > limit) break;
             }
         }
         if (vmax > limit) break;
@@ -141,6 +124,69 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
     if (wx) *wx = bx;
     if (wy) *wy = by;
     return vmax;
+}
+
+/* scan in 32-bit arithmetic, exact on grids of at most 2^14 a side for D < 2^15: every E_k and its row
+ * part B y + C fit 30 bits, and S = sum E_k z_k <= D (2^16 - 1) and D h lie in [0, 2^31) at every
+ * sample of a span, so S - D h taken modulo 2^32 (unsigned: no overflow) is V with its sign.  Most
+ * triangles of a board job and of a fine mesh take this path: a few 32-bit operations and three
+ * hardware divisions per row on the soft CPU instead of 64-bit library calls. */
+static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d, uint64_t limit,
+                       int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    int32_t A[3], B[3], C[3], xmin = x[0], xmax = x[0], ymin = y[0], ymax = y[0], bx = x[0], by = y[0];
+    uint32_t z[3], dS = 0, vm = 0;
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        z[k] = h[y[k] * f->width + x[k]];
+        A[k] = y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C, as setup's */
+        B[k] = x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        if (y[k] < ymin) ymin = y[k];
+        if (y[k] > ymax) ymax = y[k];
+        if (x[k] < xmin) xmin = x[k];
+        if (x[k] > xmax) xmax = x[k];
+    }
+    for (int k = 0; k < 3; k++) dS += (uint32_t)A[k] * z[k];
+    for (int32_t py = ymin; py <= ymax; py++) {
+        int32_t lo = xmin, hi = xmax, num[3];
+        const uint16_t *row = h + py * f->width, *at = NULL;
+        uint32_t S = 0;
+        int empty = 0;
+        for (int k = 0; k < 3; k++) {
+            num[k] = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
+            if (A[k] > 0) {
+                int32_t l = ceil_div32(-num[k], A[k]);
+                if (l > lo) lo = l;
+            } else if (A[k] < 0) {
+                int32_t r = floor_div32(num[k], -A[k]);
+                if (r < hi) hi = r;
+            } else if (num[k] < 0) {
+                empty = 1;
+            }
+        }
+        if (empty || lo > hi) continue;
+        for (int k = 0; k < 3; k++) S += (uint32_t)(A[k] * lo + num[k]) * z[k];
+        vm = row_max32(row + lo, row + hi + 1, S, dS, d, vm, limit, &at);
+        if (at) {
+            bx = (int32_t)(at - row);
+            by = py;
+        }
+        if (vm > limit) break;
+    }
+    if (wx) *wx = bx;
+    if (wy) *wy = by;
+    return vm;
+}
+
+/* The scan that fits the triangle (the same result either way). */
+static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
+                         int32_t *wx, int32_t *wy)
+{
+    if (f->width <= (1 << 14) && f->height <= (1 << 14) && D < (1 << 15))
+        return scan32(f, x, y, (uint32_t)D, limit, wx, wy);
+    return scan(f, x, y, D, limit, wx, wy);
 }
 
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
@@ -200,7 +246,7 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
-    return finish(f, p, x, y, D, scan(f, x, y, D, UINT64_MAX, wx, wy), 0);
+    return finish(f, p, x, y, D, scan_any(f, x, y, D, UINT64_MAX, wx, wy), 0);
 }
 
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
@@ -217,7 +263,7 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
         evm = r < ((uint64_t)1 << 31) ? ((uint64_t)bound * r) >> 16 : 0xFFFFFFFFu;
     }
     if (evm < 0xFFFFFFFFu && D < ((int64_t)1 << 31)) limit = (evm * (uint64_t)D) >> 16;
-    return finish(f, p, x, y, D, scan(f, x, y, D, limit, NULL, NULL), r);
+    return finish(f, p, x, y, D, scan_any(f, x, y, D, limit, NULL, NULL), r);
 }
 
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
