@@ -10,7 +10,7 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 
 (the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples of 3 arc-seconds, 74.6 m x
 92.5 m, whose ridges the normal metric now sees in ground units.  The simulated board gets it
-decimated by 16 to 26 x 22 with zeta 10 m, 825 triangles, within the board's triangle storage
+decimated by 16 to 26 x 22 with zeta 10 m, about 820 triangles, within the board's triangle storage
 (docs/soc.md, "Default sizes"; decimated by 8 it needs 3037): the refiner on the soft CPU costs about
 10^5 cycles per triangle today (docs/benchmarks.md) and the simulator runs a few million cycles per
 second, so this takes a minute or two.  The native stand-in device, given storage for 65536
