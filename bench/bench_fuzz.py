@@ -58,14 +58,18 @@ def markdown(data: dict) -> str:
         total_exec += r["execs"]
         total_crash += r["crashes"]
     found = [f for r in data["targets"] for f in r["findings"]]
-    short = [r["target"] for r in data["targets"] if r["cpu_seconds"] < 0.98 * data["cpu_per_target"]]
+    short = [r["target"] for r in data["targets"]
+             if r["cpu_seconds"] < 0.98 * data["cpu_per_target"] and not r["crashes"]]  # a crash stops one
     return "\n".join([
         f"On {data['commit']}, at nice {data['nice']}, a budget of {data['cpu_per_target']:.0f} CPU seconds "
         f"per harness (`FUZZ_CPU`)"
-        + (f", stopped before it was spent ({', '.join(short)}: the machine's other work left nice 19 little)"
+        + (f", stopped by hand before it was spent ({', '.join(short)}: at nice 19 the machine's other work "
+           f"left them a fraction of a core)"
            if short else "")
-        + f": {total_cpu / 3600:.2f} CPU hours in all, {total_exec:,} executions, {total_crash} crashes"
-        + (f" ({', '.join(found)})" if found else "") + ".  Harnesses, corpus and checks: fuzz/README.md.",
+        + f": {total_cpu / 3600:.2f} CPU hours in all, {total_exec:,} executions, "
+        f"{total_crash} crash{'' if total_crash == 1 else 'es'}"
+        + (f" ({', '.join(found)}: a harness stops at its first)" if found else "")
+        + ".  Harnesses, corpus, checks and what the findings were: fuzz/README.md.",
         "",
         *rows,
         "",

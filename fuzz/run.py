@@ -94,9 +94,18 @@ def _stats(log: str) -> dict:
     return out
 
 
-def start(target: str, seconds: float | None, extra: list[str]) -> tuple[subprocess.Popen, Path]:
+def start(target: str, seconds: float | None, extra: list[str], seeds_only: bool = False
+          ) -> tuple[subprocess.Popen, Path]:
     work = BUILD / "corpus" / target
     seeds = FUZZ / "corpus" / target
+    if seeds_only:  # the hand-made seeds and past findings alone, into a fresh folder (make test's smoke run)
+        work, picked = BUILD / "smoke" / target / "work", BUILD / "smoke" / target / "seeds"
+        shutil.rmtree(BUILD / "smoke" / target, ignore_errors=True)
+        picked.mkdir(parents=True)
+        for f in seeds.iterdir():
+            if f.name.startswith(("seed-", "regress-")):
+                shutil.copy(f, picked / f.name)
+        seeds = picked
     findings = BUILD / "findings"
     for d in (work, seeds, findings):
         d.mkdir(parents=True, exist_ok=True)
@@ -109,8 +118,10 @@ def start(target: str, seconds: float | None, extra: list[str]) -> tuple[subproc
     return subprocess.Popen(args, stdout=f, stderr=subprocess.STDOUT, cwd=ROOT), log
 
 
-def run(targets: list[str], seconds: float | None, cpu: float | None, extra: list[str]) -> list[dict]:
-    procs = {t: start(t, seconds, extra) for t in targets}
+def run(targets: list[str], seconds: float | None, cpu: float | None, extra: list[str],
+        seeds_only: bool = False) -> list[dict]:
+    began = time.time()  # findings of this run only: build/fuzz/findings keeps earlier runs' too
+    procs = {t: start(t, seconds, extra, seeds_only) for t in targets}
     used = {t: 0.0 for t in targets}
     t0 = time.monotonic()
     while any(p.poll() is None for p, _ in procs.values()):
@@ -125,7 +136,8 @@ def run(targets: list[str], seconds: float | None, cpu: float | None, extra: lis
     for t, (p, log) in procs.items():
         text = log.read_text(errors="replace")
         found = sorted(str(f.relative_to(ROOT)) for f in findings.glob(f"{t}-*")
-                       if not f.name.startswith(f"{t}-slow-unit-"))  # slow, not wrong: libFuzzer's note
+                       if not f.name.startswith(f"{t}-slow-unit-")  # slow, not wrong: libFuzzer's note
+                       and f.stat().st_mtime >= began)
         crashed = bool(re.search(r"ERROR: (AddressSanitizer|UndefinedBehaviorSanitizer|libFuzzer)|"
                                  r"runtime error:|deadly signal|Uncaught Python exception", text))
         results.append({"target": t, "cpu_seconds": round(used[t], 1),

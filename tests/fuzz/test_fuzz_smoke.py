@@ -1,7 +1,8 @@
-"""The fuzz harnesses in `make test` (fuzz/README.md): built with clang under ASan + UBSan, every input of
-the corpus in the repository run once (the inputs of past findings stay fixed), then a few seconds of
-fuzzing each.  Any crash, sanitizer report or broken check fails the test and names the input that did
-it; the long campaign is `make bench-fuzz`."""
+"""The fuzz harnesses in `make test` (fuzz/README.md): built with clang under ASan + UBSan, the hand-made
+seeds and the inputs of past findings (fuzz/corpus/*/seed-*, regress-*) run once, then a few seconds of
+fuzzing each from them (the whole corpus, grown by campaigns, is `make fuzz`'s: minutes to replay).
+Any crash, sanitizer report or broken check fails the test and names the input that did it; the long
+campaign is `make bench-fuzz`."""
 
 import importlib.util
 import shutil
@@ -30,8 +31,8 @@ def _report(results) -> str:
 
 
 def test_corpus_replays_clean(built):
-    """Every stored input once (libFuzzer -runs=0): no finding comes back."""
-    results = fuzz_run.run(list(fuzz_run.TARGETS), None, None, ["-runs=0"])
+    """Every seed and past finding once (libFuzzer -runs=0): no finding comes back."""
+    results = fuzz_run.run(list(fuzz_run.TARGETS), None, None, ["-runs=0"], seeds_only=True)
     assert all(r["crashes"] == 0 and r["exit"] == 0 for r in results), _report(results)
     for r in results:
         stored = len(list((ROOT / "fuzz" / "corpus" / r["target"]).iterdir()))
@@ -41,6 +42,6 @@ def test_corpus_replays_clean(built):
 
 def test_fuzz_seconds(built):
     """A few seconds of fuzzing per harness, side by side: executions happen, nothing crashes."""
-    results = fuzz_run.run(list(fuzz_run.TARGETS), SMOKE_SECONDS, None, [])
+    results = fuzz_run.run(list(fuzz_run.TARGETS), SMOKE_SECONDS, None, [], seeds_only=True)
     assert all(r["crashes"] == 0 for r in results), _report(results)
     assert all(r["execs"] > 0 and r["cov"] > 0 for r in results), results
