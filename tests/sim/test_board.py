@@ -42,6 +42,16 @@ def test_hello_reports_capabilities(fast_board):
     # the heap the linker leaves holds at least the documented capacity (memmap.TRI_CAPACITY)
     assert memmap.TRI_CAPACITY <= info.tri_capacity < memmap.TRI_CAPACITY + 200
     assert fast_board.events("stage")[0][0] == STAGE_SERVE
+    # the board's FPGA stage is built with Haar's filter bank: no FEATURE_SPLINE, and CONFIG_SPLINE refused
+    assert not info.features & P.FEATURE_SPLINE
+    with S.Device(fast_board.url, timeouts=TIMEOUTS) as dev:
+        dev.sync()
+        with pytest.raises(S.DeviceError) as e:
+            dev.configure(P.CONFIG.pack(
+                width=16, height=16, levels=1, metric=0, neighbourhood=0, iterations=2, flags=P.CONFIG_SPLINE,
+                tau=10, max_triangles=0, capacity=0, zeta=65536, scale_m=32768, scale_e=15, delta_p=58982,
+                alpha=39322, delta_v=131072, delta_lambda=655, delta_c=64225, delta_d=0))
+    assert e.value.code == P.ErrorCode.BAD_VALUE
 
 
 def upload(url: str, a: np.ndarray) -> dict:

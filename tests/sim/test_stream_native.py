@@ -323,8 +323,7 @@ def full_job_works(url: str) -> None:
 
 # Beyond this device's capabilities (wmdev's defaults, max_levels 8), within the protocol's ranges
 BAD_FOR_THE_DEVICE = [("levels", 9), ("capacity", 1), ("capacity", 10**9), ("max_triangles", 1),
-                      ("max_triangles", 20000),
-                      ("flags", P.CONFIG_SPLINE)]  # no FEATURE_SPLINE: its filter bank is Haar's
+                      ("max_triangles", 20000)]  # (CONFIG_SPLINE is not here: wmdev states FEATURE_SPLINE)
 
 
 def out_of_range() -> list[tuple[str, int]]:
