@@ -31,8 +31,6 @@
     4u /* an off-diagonal entry this small (4 2^-30) is left alone: it moves an eigenvalue by
                       less than 2^-28 */
 
-#define isqrt wm_isqrt64 /* exact floor(sqrt(x)), fixed.c */
-
 static uint64_t mag(int64_t a) { return a < 0 ? (uint64_t)0 - (uint64_t)a : (uint64_t)a; }
 
 /* round(a b / 2^30), half away from zero (|a b| < 2^63). */
@@ -49,12 +47,12 @@ static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
     int neg;
     if (mag(apq) <= SETTLED) return;
     /* t = sgn(theta) |2 a_pq| / (|a_qq - a_pp| + sqrt((a_qq - a_pp)^2 + (2 a_pq)^2)), |t| <= 1 */
-    sq = isqrt(mag(num) * mag(num) + den * den);
+    sq = wm_isqrt64(mag(num) * mag(num) + den * den);
     tt = (den << 30) / (mag(num) + sq);
     neg = (num < 0) != (apq < 0);
     t = neg ? -(int64_t)tt : (int64_t)tt;
     /* c = 1 / sqrt(1 + t^2), s = t c */
-    sq = isqrt(((uint64_t)1 << 60) + tt * tt);
+    sq = wm_isqrt64(((uint64_t)1 << 60) + tt * tt);
     c = (int64_t)((((uint64_t)1 << 60) + sq / 2) / sq);
     s = mulq(t, c);
     {
@@ -140,7 +138,7 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     sh = wm_bit_length64(m) - 31; /* the least shift that brings m below 2^31 */
     if (sh > 0)
         for (int k = 0; k < 3; k++) c[k] >>= sh;
-    len = isqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]); /* < 3 2^62 */
+    len = wm_isqrt64(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]); /* < 3 2^62 */
     if (len == 0) { /* a degenerate triangle (not in a valid mesh) */
         n[0] = n[1] = 0;
         n[2] = 1 << 28;

@@ -237,19 +237,6 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
     return 1;
 }
 
-/* Marks the classes of v's neighbours unknown (their stars changed). */
-static void forget_ring(wm_refiner *r, int32_t v)
-{
-    const wm_mesh *me = &r->mesh;
-    int32_t first = wm_fan_first(me, v), h = first;
-    r->vapex[v] = CLS_UNKNOWN;
-    do {
-        r->vapex[wm_dest(me, h)] = CLS_UNKNOWN;
-        r->vapex[me->hv[WM_PREV(h)]] = CLS_UNKNOWN;
-        h = wm_rot_ccw(me, h);
-    } while (h >= 0 && h != first);
-}
-
 static int try_remove(wm_refiner *r, int32_t v)
 {
     wm_mesh *me = &r->mesh;
@@ -262,7 +249,6 @@ static int try_remove(wm_refiner *r, int32_t v)
     if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0))) return 0;
     if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) return 0;
     for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);
-    for (int32_t i = 0; i < n; i++) r->vapex[ring[i]] = CLS_UNKNOWN;
     return 1;
 }
 
@@ -286,7 +272,6 @@ static int try_collapse(wm_refiner *r, int32_t e)
         if (!within(r, tris, nt, cx[i], cy[i], bound)) continue;
         if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return 0; /* capacity */
         for (int32_t j = 0; j < k; j++) wm_touch(r, touched[j]);
-        forget_ring(r, p);
         return 1;
     }
     return 0;
