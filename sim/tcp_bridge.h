@@ -1,14 +1,18 @@
 // wavemesh simulated board: the TCP side of the UART bridge.
 //
-// A non-blocking listening socket on 127.0.0.1 that serves one client at a time: a second client
-// is accepted and closed at once; a new client may connect after the previous one has left.
+// A non-blocking listening socket on 127.0.0.1 that serves one client at a time: a connection that
+// comes while a client is served gets the protocol's ERROR BUSY frame and is closed, as the native
+// device does (proto.h: wm_proto_busy_frame, WM_PROTO_BUSY_WAIT_MS), without holding up the simulation
+// or the served client; a new client may connect after the previous one has left.
 // Bytes the client sends queue in `rx` for the UART model; bytes the board sends are appended to
 // `tx` and written out by service().  Nothing here blocks except wait_for_client().
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <deque>
 #include <string>
+#include <vector>
 
 class TcpBridge {
 public:
@@ -38,8 +42,20 @@ public:
     uint64_t bytes_out = 0;
 
 private:
+    using Clock = std::chrono::steady_clock;
+    // A connection being refused: waiting for its first bytes (then the BUSY frame goes out and our
+    // side ends), then waiting for it to close; closed by `until` either way.
+    struct Refused {
+        int fd;
+        bool sent;
+        Clock::time_point until;
+    };
+
     void accept_pending();
+    void refuse_pending();
     void drop_client();
+
+    std::vector<Refused> refused_;
 
     int listen_ = -1;
     int client_ = -1;

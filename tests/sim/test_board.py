@@ -19,6 +19,7 @@ import pytest
 from wavemesh import memmap
 from wavemesh import protocol as P
 from wavemesh import stream as S
+from wavemesh.link import SlipDecoder, encode_frame, parse_frame
 
 pytestmark = pytest.mark.sim
 
@@ -96,14 +97,37 @@ def test_cycle_log_is_deterministic(start_sim, firmware_hex):
     assert logs[0] == logs[1] and logs[0]
 
 
+def busy_answer(port: int, send: bytes) -> tuple[list, float]:
+    """Connect while another client is served, send `send`: the frames until the board closes, and
+    how long the first took."""
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+        s.settimeout(5)
+        t0 = time.monotonic()
+        s.sendall(send)
+        dec, frames, took = SlipDecoder(), [], None
+        while chunk := s.recv(64):
+            frames += dec.feed(chunk)
+            if frames and took is None:
+                took = time.monotonic() - t0
+    return [parse_frame(f) for f in frames], took
+
+
 def test_one_client_at_a_time(start_sim, firmware_hex):
+    """A second client gets ERROR BUSY within a second and is closed, as from the native device (the
+    bridge sends proto.c's frame); the first is still served; later clients are served in turn."""
     board = start_sim(firmware_hex, "--fast")
     with S.Device(board.url, timeouts=TIMEOUTS) as first:
         first.sync()
-        with socket.create_connection(("127.0.0.1", board.port), timeout=5) as second:
-            second.settimeout(10)
-            assert second.recv(16) == b""  # closed by the board at once
-        board.wait_for_line("refused a second client")
+        hello = encode_frame(P.FrameType.HELLO, 1)
+        for send in (hello, b""):  # a host's HELLO; a connection that sends nothing
+            frames, took = busy_answer(board.port, send)
+            assert [(f.type, f.fields()["code"]) for f in frames] == [(P.FrameType.ERROR, P.ErrorCode.BUSY)]
+            assert took < 1.0
+            board.wait_for_line("second client refused (busy)")
+        t0 = time.monotonic()
+        with S.Device(board.url, timeouts=TIMEOUTS) as second, pytest.raises(S.DeviceError) as e:
+            second.sync()
+        assert e.value.code == P.ErrorCode.BUSY and time.monotonic() - t0 < 1.0
         assert first.sync().name == "wm-board"
     board.wait_for_line("client left")
     for _ in range(2):  # later clients, one after the other

@@ -188,6 +188,13 @@ int wm_proto_serve(wm_proto *p);
  * bytes into dst; returns their number (0 when cap is smaller). */
 size_t wm_proto_busy_frame(uint8_t *dst, size_t cap);
 
+/* How a transport refuses such a connection: it waits up to WM_PROTO_BUSY_WAIT_MS for the connection's
+ * first bytes (a host empties its input before its HELLO, so a frame sent before would be lost), sends
+ * the frame, ends its side and reads until the client closes, at most WM_PROTO_BUSY_WAIT_MS more (so
+ * that the close does not reset the connection under the frame).  The native device's accepting thread
+ * and the simulated board's TCP bridge (sim/tcp_bridge.cpp) both do this. */
+#define WM_PROTO_BUSY_WAIT_MS 500
+
 /* For the job: a stage begins (WM_PROTO_STAGE_FILTER, _TEMPLATE, _REFINE with the level being made).
  * Accounts the cycles since the previous stage to that stage, then sends a PROGRESS frame (link I/O:
  * its cycles count as link cycles, not the stage's). */

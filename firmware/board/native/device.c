@@ -16,7 +16,7 @@
  * for --idle-timeout-ms outside a session and a job (default WM_PROTO_IDLE_TIMEOUT_MS), or that
  * takes none of the device's bytes for --write-timeout-ms (default WM_PROTO_WRITE_TIMEOUT_MS), is
  * closed; HELLO states both.  A connection that comes while another is served gets ERROR BUSY (after
- * its first bytes, or at once when it sends none within BUSY_WAIT_MS) and is closed: a thread
+ * its first bytes, or when it sends none within WM_PROTO_BUSY_WAIT_MS) and is closed: a thread
  * accepts every connection, so this happens within a second even while a job computes.
  *
  * Output lines on stdout: "wmdev: listening on 127.0.0.1:PORT", "wmdev: client connected",
@@ -47,7 +47,6 @@
 #define FW_MINOR 2
 #define DEFAULT_LEVELS 8 /* the board's coefficient memory holds levels 1..8 */
 #define DEFAULT_WINDOW 4
-#define BUSY_WAIT_MS 500 /* a refused connection: how long to wait for its first bytes (its HELLO) */
 
 typedef struct conn {
     int lfd, cfd, closed, quiet, stalled;
@@ -140,10 +139,9 @@ static void io_write(void *ctx, const uint8_t *data, size_t n)
 
 /* --- the doorman: a thread that accepts every connection ------------------------------------------
  * It hands a connection to the main thread when none is served, and refuses it with ERROR BUSY
- * otherwise.  The refusal waits up to BUSY_WAIT_MS for the client's first bytes (a host empties its
- * input before its HELLO, so an answer that came before would be lost), sends the frame, ends its
- * side of the connection and reads until the client closes (at most BUSY_WAIT_MS more), so that the
- * close does not reset the connection under the frame. */
+ * otherwise, as proto.h's WM_PROTO_BUSY_WAIT_MS says: after the client's first bytes (or the wait),
+ * the frame, then reading until the client closes, so that the close does not reset the connection
+ * under the frame. */
 
 static pthread_mutex_t door_lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t door_cond = PTHREAD_COND_INITIALIZER;
@@ -167,11 +165,11 @@ static void refuse(int fd, int quiet)
     uint8_t frame[WM_PROTO_BUSY_FRAME_MAX];
     size_t n = wm_proto_busy_frame(frame, sizeof frame);
     struct pollfd pf = {fd, POLLIN, 0};
-    poll(&pf, 1, BUSY_WAIT_MS); /* its first bytes, or the wait ends */
+    poll(&pf, 1, WM_PROTO_BUSY_WAIT_MS); /* its first bytes, or the wait ends */
     if (send(fd, frame, n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0) { /* nothing more to do for it */
     }
     shutdown(fd, SHUT_WR);
-    drain(fd, BUSY_WAIT_MS);
+    drain(fd, WM_PROTO_BUSY_WAIT_MS);
     close(fd);
     if (!quiet) printf("wmdev: second client refused (busy)\n"), fflush(stdout);
 }
