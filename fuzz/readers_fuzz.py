@@ -76,11 +76,9 @@ def _check_mesh(mesh, z) -> None:
     if len(tris) and (tris.min() < 0 or tris.max() >= len(xy)):
         raise Finding("a triangle indexes no vertex")
     # Whether it is a proper triangulation is the checker's to say (read_mesh leaves it open): it must
-    # say so, whatever the file held.  Only for grids up to 2^24 samples: check_mesh's memory grows with
-    # the grid, and a file's coordinates can state any grid (123 bytes saying 55555551 x 3 took it past
-    # 2.5 GB, the campaign's finding); the CLI checks against the height field's grid instead.
-    if mesh.width * mesh.height <= 1 << 24:
-        check_mesh(mesh)
+    # say so, whatever the file held, and whatever grid its coordinates state (123 bytes stating
+    # 55555551 x 3 once took check_mesh past 2.5 GB: corpus/readers/regress-obj-wide-grid).
+    check_mesh(mesh)
 
 
 def _call(fn):

@@ -75,6 +75,7 @@ _EXAMPLES = 3  # examples shown per kind of problem before a summary line
 _COORD_LIMIT = 1 << 30  # beyond this, cross products could overflow int64
 _POINT_BUDGET = 1 << 20  # lattice points / samples handled per vectorised chunk
 _GRID_LOOKUP_LIMIT = 1 << 26  # use a boolean occupancy grid up to this many cells
+_LATTICE_PER_VERTEX = 1  # edges through more inner lattice points than this per vertex: test the vertices
 _KEY_LIMIT = 1 << 30  # up to this many vertices (or grid steps a side) a sort key fits int64 with room
 _FLOAT_FLOOR_LIMIT = 1 << 53  # integers below this are exact doubles: their quotient floors exactly
 _SAMPLE_KEY_LIMIT = 1 << 63  # (sample index, occurrence) packed in one int64 key below this
@@ -320,6 +321,13 @@ def _coincident(probs: _Problems, xy: np.ndarray, x: np.ndarray, y: np.ndarray) 
 
 
 def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray, ehi: np.ndarray) -> None:
+    """Vertices strictly inside edges.  An edge through fewer inner lattice points than the mesh has
+    vertices is checked point by point (each looked up among the vertices); a longer one, vertex by
+    vertex (collinear and strictly between its ends).  So the work per edge is at most
+    min(lattice points, V), never W or H: a mesh whose coordinates state a grid of 55555551 x 3 (one
+    edge through 55 million lattice points) is as quick as any, and every chunk holds at most
+    _POINT_BUDGET points or (edge, vertex) pairs.  Examples: the first hits in edge order, then along
+    the edge, whichever way they were found."""
     dx, dy = x[ehi] - x[elo], y[ehi] - y[elo]
     adx, ady = np.abs(dx), np.abs(dy)
     long = np.flatnonzero((adx > 1) | (ady > 1))  # the others have gcd(|dx|, |dy|) <= 1
@@ -334,50 +342,78 @@ def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray
     bw = int(x.max()) - x0 + 1
     bh = int(y.max()) - y0 + 1
     vkey = (y - y0) * bw + (x - x0)
-    grid = skey = korder = None
-    if bw * bh <= _GRID_LOOKUP_LIMIT:
-        grid = np.zeros(bw * bh, dtype=bool)
-        grid[vkey] = True
-    else:
-        korder = np.argsort(vkey, kind="stable")
-        skey = vkey[korder]
+    korder = np.argsort(vkey, kind="stable")
+    skey = vkey[korder]
     inner = g[sel] - 1
-    cum = np.cumsum(inner)
-    hits_edge: list[np.ndarray] = []
-    hits_key: list[np.ndarray] = []
+    by_vertex = inner > _LATTICE_PER_VERTEX * len(x)
     n_hits = 0
-    s = 0
-    while s < len(sel):
-        base = cum[s - 1] if s else 0
-        e = int(np.searchsorted(cum, base + _POINT_BUDGET, side="right"))
-        e = max(e, s + 1)
-        edges = sel[s:e]
-        n = inner[s:e]
-        rep = np.repeat(np.arange(len(edges)), n)
-        k = np.arange(1, int(n.sum()) + 1) - np.repeat(np.cumsum(n) - n, n)
-        ge = g[edges]  # per edge: the first point and the step between lattice points
-        px = x[elo[edges]][rep] + k * (dx[edges] // ge)[rep]
-        py = y[elo[edges]][rep] + k * (dy[edges] // ge)[rep]
-        key = (py - y0) * bw + (px - x0)
-        if grid is not None:
-            hit = grid[key]
-        else:
-            pos = np.minimum(np.searchsorted(skey, key), len(skey) - 1)
-            hit = skey[pos] == key
-        if hit.any():
-            n_hits += int(hit.sum())
-            if sum(len(h) for h in hits_edge) < _EXAMPLES:
-                hits_edge.append(edges[rep[hit]][:_EXAMPLES])
-                hits_key.append(key[hit][:_EXAMPLES])
-        s = e
+    found: list[tuple[int, int, int]] = []  # (position in sel, steps from the edge's first end, vertex)
+
+    def keep(pos: np.ndarray, steps: np.ndarray, verts: np.ndarray) -> None:
+        nonlocal found
+        order = np.lexsort((steps, pos))[:_EXAMPLES]
+        found = sorted(found + [(int(pos[i]), int(steps[i]), int(verts[i])) for i in order])[:_EXAMPLES]
+
+    # Short edges: their inner lattice points, looked up among the vertices.
+    lat = np.flatnonzero(~by_vertex)
+    if len(lat):
+        grid = None
+        if bw * bh <= _GRID_LOOKUP_LIMIT:
+            grid = np.zeros(bw * bh, dtype=bool)
+            grid[vkey] = True
+        cum = np.cumsum(inner[lat])
+        s = 0
+        while s < len(lat):
+            base = cum[s - 1] if s else 0
+            e = max(int(np.searchsorted(cum, base + _POINT_BUDGET, side="right")), s + 1)
+            pos = lat[s:e]
+            edges = sel[pos]
+            n = inner[pos]
+            rep = np.repeat(np.arange(len(edges)), n)
+            k = np.arange(1, int(n.sum()) + 1) - np.repeat(np.cumsum(n) - n, n)
+            ge = g[edges]  # per edge: the first point and the step between lattice points
+            px = x[elo[edges]][rep] + k * (dx[edges] // ge)[rep]
+            py = y[elo[edges]][rep] + k * (dy[edges] // ge)[rep]
+            key = (py - y0) * bw + (px - x0)
+            if grid is not None:
+                hit = grid[key]
+            else:
+                at = np.minimum(np.searchsorted(skey, key), len(skey) - 1)
+                hit = skey[at] == key
+            if hit.any():
+                n_hits += int(hit.sum())
+                first = np.flatnonzero(hit)[:_EXAMPLES]  # already in (edge, step) order
+                keep(pos[rep[first]], k[first], korder[np.searchsorted(skey, key[first])])
+            s = e
+
+    # Long edges: every vertex, the first of each position (as the lookup above finds), against them.
+    far = np.flatnonzero(by_vertex)
+    if len(far):
+        vs = korder[np.r_[True, skey[1:] != skey[:-1]]]
+        vx, vy = x[vs], y[vs]
+        per = max(1, _POINT_BUDGET // len(vs))  # edges per chunk
+        vchunk = min(len(vs), _POINT_BUDGET)  # vertices per chunk
+        for a in range(0, len(far), per):
+            pos = far[a:a + per]
+            edges = sel[pos]
+            lx, ly, hx, hy = x[elo[edges]], y[elo[edges]], x[ehi[edges]], y[ehi[edges]]
+            ex, ey = dx[edges][:, None], dy[edges][:, None]
+            for b in range(0, len(vs), vchunk):
+                ox = vx[None, b:b + vchunk] - lx[:, None]  # from the edge's first end; products < 2^62
+                oy = vy[None, b:b + vchunk] - ly[:, None]
+                hit = ((ex * oy == ey * ox)
+                       & (np.minimum(lx, hx)[:, None] <= vx[None, b:b + vchunk])
+                       & (vx[None, b:b + vchunk] <= np.maximum(lx, hx)[:, None])
+                       & (np.minimum(ly, hy)[:, None] <= vy[None, b:b + vchunk])
+                       & (vy[None, b:b + vchunk] <= np.maximum(ly, hy)[:, None])
+                       & ((ox != 0) | (oy != 0)) & ((ox != ex) | (oy != ey)))
+                if hit.any():
+                    n_hits += int(np.count_nonzero(hit))
+                    ei, vi = np.nonzero(hit)
+                    keep(pos[ei], np.maximum(np.abs(ox[ei, vi]), np.abs(oy[ei, vi])), vs[b + vi])
+
     if not n_hits:
         return
-    he = np.concatenate(hits_edge)
-    hk = np.concatenate(hits_key)
-    if korder is None:
-        korder = np.argsort(vkey, kind="stable")
-        skey = vkey[korder]
-    vs = korder[np.searchsorted(skey, hk)]
 
     def _pt(i) -> str:
         return f"({int(x[i])}, {int(y[i])})"
@@ -387,7 +423,7 @@ def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray
         (
             f"vertex {v} at {_pt(v)} lies inside edge {elo[k]}-{ehi[k]} {_pt(elo[k])}-{_pt(ehi[k])} "
             "(T-junction)"
-            for v, k in zip(vs, he, strict=True)
+            for v, k in ((v, sel[p]) for p, _, v in found)
         ),
         "T-junctions",
     )

@@ -161,6 +161,51 @@ def test_t_junction():
     assert not problems_with(r, "add up")  # the area is right
 
 
+def test_t_junctions_on_edges_longer_than_the_mesh(monkeypatch):
+    """An edge through more lattice points than the mesh has vertices is tested vertex by vertex: the
+    same verdicts and lines as the lattice-point search (forced here for every edge)."""
+    from wavemesh import check
+
+    xy = [(0, 0), (1, 0), (2, 0), (0, 2), (1, 2), (2, 2), (1, 1), (2, 1), (1, 1)]  # 8: a second (1, 1)
+    tris = [(0, 1, 4), (0, 4, 3), (1, 2, 7), (1, 7, 6), (6, 7, 5), (6, 5, 4), (8, 7, 6)]
+    meshes = [Mesh(3, 3, xy[:8], tris[:6]), Mesh(3, 3, xy, tris), fan_mesh(31, 17, (12, 5)),
+              fan_mesh(9, 40, (3, 30))]
+    expected = [check_mesh(m).problems for m in meshes]
+    monkeypatch.setattr(check, "_LATTICE_PER_VERTEX", 0)
+    for budget in (check._POINT_BUDGET, 5, 1):
+        monkeypatch.setattr(check, "_POINT_BUDGET", budget)
+        assert [check_mesh(m).problems for m in meshes] == expected
+
+
+def test_a_grid_of_any_size_is_checked_in_little_memory():
+    """Coordinates may state any grid (a mesh file's do): 123 bytes of OBJ stating 55555551 x 3 once
+    took check_mesh past 2.5 GB (the readers fuzzer's finding).  Checked here under a 1.5 GiB address
+    space limit (numpy's own needs are far below), on the 2^30-wide grid the arithmetic allows."""
+    import subprocess
+    import sys
+
+    code = """if 1:
+        import resource
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 29, 3 << 29))
+        from wavemesh.check import check_mesh
+        from wavemesh.mesh import Mesh
+        W = (1 << 30) + 1
+        corners = [(0, 0), (W - 1, 0), (W - 1, 2), (0, 2)]
+        print(check_mesh(Mesh(W, 3, corners, [(0, 1, 2), (0, 2, 3)])).problems)
+        # a vertex inside the long bottom edge, and a triangle on it: a T-junction
+        print(check_mesh(Mesh(W, 3, corners + [(7, 0)], [(0, 1, 2), (0, 2, 3), (0, 4, 2)])).problems)
+        # the fuzzer's input: a degenerate triangle along a 55555551-wide, 1-high grid
+        print(check_mesh(Mesh(55555551, 1, [(0, 0), (2, 0), (55555550, 0)], [(0, 1, 2)])).problems)
+    """
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    valid, junction, fuzz = r.stdout.splitlines()
+    assert valid == "[]"
+    assert "vertex 4 at (7, 0) lies inside edge 0-1 (0, 0)-(1073741824, 0) (T-junction)" in junction
+    assert "vertex 1 at (2, 0) lies inside edge 0-2 (0, 0)-(55555550, 0) (T-junction)" in fuzz
+    assert "the grid is 55555551 x 1; a mesh needs at least 2 x 2 samples" in fuzz
+
+
 def test_duplicate_vertex():
     # Vertex 4 is a second copy of (1, 1).
     mesh = Mesh(2, 2, [(0, 0), (1, 0), (1, 1), (0, 1), (1, 1)], [(0, 1, 2), (0, 4, 3)])

@@ -187,3 +187,16 @@ def test_fallback_paths_equal_reference(monkeypatch):
             assert_same_errors(mesh, heights)
             assert_same_errors(mesh, heights, point_budget=7)
 
+
+
+def test_vertex_by_vertex_t_junctions_equal_reference(monkeypatch):
+    """Edges checked vertex by vertex (as edges through more lattice points than the mesh has vertices
+    are), forced here for every edge: the same results as the reference."""
+    rng = np.random.default_rng(7)
+    meshes = [m for _ in range(3) for m in valid_meshes(rng)]
+    meshes += [damaged(m, rng) for m in meshes for _ in range(4)]
+    monkeypatch.setattr(check, "_LATTICE_PER_VERTEX", 0)
+    for budget in (check._POINT_BUDGET, 7):
+        monkeypatch.setattr(check, "_POINT_BUDGET", budget)
+        for mesh in meshes:
+            assert_same_check(mesh)
