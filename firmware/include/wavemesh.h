@@ -221,7 +221,30 @@ typedef struct wm_field {
     int32_t levels;           /* M >= 1: the initial triangulation used level M */
     const uint16_t *samples;  /* [H W] row-major 16-bit samples */
     const int32_t *details;   /* levels 1..M as above (level M is not used by the refiner) */
+    const uint8_t *mask;      /* NULL, or a bit per sample, set where the sample is invalid (a hole):
+                                 sample (x, y) is bit i % 8 of byte i / 8, i = y W + x (WM_MASK_BYTES);
+                                 see wm_tri_cover for what E(T) then measures */
 } wm_field;
+
+/* Bytes of a validity mask for W x H samples. */
+#define WM_MASK_BYTES(w, h) (((int64_t)(w) * (int64_t)(h) + 7) / 8)
+
+/* What the closed triangle covers of a field with a mask (holes.c):
+ * WM_COVER_VALID   only valid samples: E(T) measures them as without a mask;
+ * WM_COVER_HOLE    only invalid samples: E(T) = 0 (a hole: the host drops it, wavemesh/holes.py);
+ * WM_COVER_THIN    both, but no sample besides its corners (twice its area is 1): it cannot be split,
+ *                  E(T) = 0 and it is dropped with the holes;
+ * WM_COVER_MIXED   both, and a sample besides its corners: E(T) = 0xFFFFFFFF, so every stage refines it,
+ *                  and its worst sample (*sx, *sy) is a non-corner sample to split at: the valid sample
+ *                  next to an invalid one (else any) nearest the barycentre.
+ * The refiner therefore splits every triangle that covers both until it covers one kind (or is thin);
+ * the error bound then holds over the valid samples of the triangles kept. */
+#define WM_COVER_VALID 0
+#define WM_COVER_HOLE 1
+#define WM_COVER_THIN 2
+#define WM_COVER_MIXED 3
+int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t *sx, int32_t *sy);
+
 
 #define WM_METRIC_NORMAL 0   /* distance along the triangle's normal (the dissertation's) */
 #define WM_METRIC_VERTICAL 1 /* vertical distance */

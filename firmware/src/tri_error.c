@@ -19,6 +19,7 @@
  *
  * Every rounding makes the result larger, never smaller: the firmware never calls a triangle
  * within zeta when the exact distance is above it.  The slack is below 2^-15 relative + 2^-16. */
+#include "wm_holes.h"
 #include "wm_internal.h"
 
 #define GCAP ((uint64_t)1 << 62)
@@ -244,8 +245,10 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
                       int32_t *wy)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    uint32_t e;
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
+    if (f->mask && wm_hole_error(f, x, y, &e, wx, wy)) return e; /* holes.c */
     return finish(f, p, x, y, D, scan_any(f, x, y, D, UINT64_MAX, wx, wy), 0);
 }
 
@@ -254,8 +257,10 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     uint64_t r = 0, evm = bound, limit = UINT64_MAX;
+    uint32_t e;
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
+    if (f->mask && wm_hole_error(f, x, y, &e, NULL, NULL)) return e; /* holes.c */
     /* the largest Vmax whose E(T) is <= bound: E = ceil(2^16 ev / r) <= bound iff
      * ev <= floor(bound r / 2^16), and ev = ceil(2^16 V / D) <= evm iff V <= floor(evm D / 2^16) */
     if (p->metric != WM_METRIC_VERTICAL) {
@@ -271,6 +276,7 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
     if (D <= 0) return 0xFFFFFFFFu;
+    if (f->mask && wm_hole_at(f, px, py)) return 0; /* never above E(T) (holes.c) */
     for (int k = 0; k < 3; k++) {
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
         S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wavemesh import __version__
+from wavemesh import __version__, holes
 from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
@@ -107,8 +107,17 @@ def _write_json(path: str, data: dict) -> None:
         staged.path(p).write_text(json.dumps(data, indent=2) + "\n")
 
 
-def _load(path: str, key: str | None, fill: str | None) -> HeightField:
-    return load_heightfield(path, key=key, fill=parse_fill(fill) if fill is not None else None)
+def _load(path: str, key: str | None, fill: str | None, nodata: str | None = None,
+          invalid: float | None = None) -> HeightField:
+    if nodata not in (None, "error", "hole"):
+        raise InputError(f"--nodata {nodata}: not a way to treat invalid samples", hint="use hole or error")
+    if nodata == "hole" and fill is not None:
+        raise InputError("--fill and --nodata hole both say what to do with invalid samples",
+                         hint="give one of them")
+    if invalid is not None and not math.isfinite(invalid):
+        raise InputError(f"--invalid {invalid}: NaN and infinities are invalid anyway", hint="give a number")
+    return load_heightfield(path, key=key, fill=parse_fill(fill) if fill is not None else None,
+                            invalid=invalid, holes=nodata == "hole")
 
 
 def parse_crop(text: str) -> tuple[int, int, int, int]:
@@ -145,16 +154,23 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
         step = decimate
     out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
     spacing = hf.spacing and (hf.spacing[0] * step, hf.spacing[1] * step)
+    mask = None
+    if hf.mask is not None:  # the part of the mask the samples came from
+        mask = hf.mask[y0:y0 + v.shape[0] * step:step, x0:x0 + v.shape[1] * step:step]
+        if mask.all():
+            raise InputError(f"{out.source}: every sample is invalid; there is nothing to mesh")
+        mask = np.ascontiguousarray(mask) if mask.any() else None
     return replace(out, filled=hf.filled, transform=cropped(hf.transform, x0, y0, step), crs=hf.crs,
-                   spacing=spacing)
+                   spacing=spacing, mask=mask)
 
 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
-               origin: str | None = None) -> HeightField:
-    """A height field file as the commands read it: --key, --fill, --spacing and --origin (of the file's
-    grid), then --crop and --decimate."""
-    return shape_heightfield(apply_overrides(_load(path, key, fill), spacing, origin), crop, decimate)
+               origin: str | None = None, nodata: str | None = None, invalid: float | None = None) -> HeightField:
+    """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
+    and --origin (of the file's grid), then --crop and --decimate."""
+    return shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
+                             decimate)
 
 
 @dataclass
@@ -167,6 +183,7 @@ class RefineJob:
     output: RefineOutput
     seconds: float  # time spent in the refiner
     errors: ErrorReport | None = None  # the final mesh's errors against the input (check.mesh_errors)
+    holes: holes.HoleCheck | None = None  # with holes (--nodata hole): the final mesh's check (drop_holes)
 
     @property
     def mesh(self) -> Mesh:
@@ -215,7 +232,7 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
            params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False,
-           wavelet: str = "haar") -> RefineJob:
+           wavelet: str = "haar", min_area: float = 0.0) -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
@@ -234,17 +251,38 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     start = time.perf_counter()
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
     details = decompose(hf.samples, job.levels, job.wavelet)
-    out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing)
+    out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
+                        mask=hf.mask)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
         require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
-    rjob = RefineJob(job, params, zeta, out, seconds)
+    hole_check = drop_holes(out.levels, hf, min_area)
+    rjob = RefineJob(job, params, zeta, out, seconds, holes=hole_check)
     rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms, spacing=spacing)
     excess = bound_excess(hf, rjob, rjob.errors)
     if excess:
         raise MeshInvalid(excess, hint=BUG_HINT)
     return rjob
+
+
+def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0) -> holes.HoleCheck | None:
+    """With holes (hf.mask): every level's mesh less the triangles over invalid samples, the final one
+    also less the pieces under ``min_area`` and checked (wavemesh.holes: the refiner's full meshes were
+    proper triangulations of the rectangle); MeshInvalid when it is not a mesh of the valid samples."""
+    if hf.mask is None:
+        if min_area > 0:
+            raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
+        return None
+    for lv in levels:
+        lv.mesh = holes.drop(lv.mesh, hf.mask)
+    final = levels[-1]
+    final.mesh = holes.drop_islands(final.mesh, min_area)
+    verdict = holes.check(final.mesh, hf.mask)
+    if final.stats["over"] == 0 and min_area <= 0 and not verdict.valid_mesh:
+        raise MeshInvalid("the mesh with holes is not a proper mesh of the valid samples: "
+                          + "; ".join(verdict.problems[:3]), hint=BUG_HINT)
+    return verdict
 
 
 def level_report(lv, hf: HeightField, metric: str, errors: ErrorReport | None = None) -> dict:
@@ -298,6 +336,7 @@ class MeshParams:
     refine: RefineParams = field(default_factory=RefineParams)  # the refiner's (ignored when initial_only)
     check_levels: bool = False  # also check and measure every coarser level (stream always does)
     rms: bool = False  # RMS errors too (the report's), not only the maxima
+    min_area: float = 0.0  # --min-area: with holes, drop pieces of the mesh smaller (square grid steps)
 
 
 @dataclass(kw_only=True)
@@ -374,7 +413,8 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
                           errors=errors, level_meshes=[(m - 1, job.mesh)], rows=[], bound_met=True,
                           comment=_comment(m, t, None), report=report)
     p = params.refine
-    rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms, wavelet=params.wavelet)
+    rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms, wavelet=params.wavelet,
+                  min_area=params.min_area)
     final = rjob.output.final
     if params.check_levels:
         rows = [level_report(lv, hf, p.metric, rjob.errors if lv is final else None)
@@ -399,6 +439,9 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
                             for name, _ in rjob.output.params._fields_},
         },
     }
+    if rjob.holes is not None:
+        parameters["min_area"] = params.min_area
+        report["holes"] = rjob.holes.to_report()
     return MeshResult(heightfield=hf, params=params, refine_params=p, levels=m, tau=t, mesh=rjob.mesh,
                       errors=rjob.errors, level_meshes=[(lv.level, lv.mesh) for lv in rjob.output.levels],
                       rows=rows, bound_met=rjob.bound_met, comment=_comment(m, t, p), report=report,
@@ -668,18 +711,24 @@ def check_file(path: str, hf: HeightField) -> dict:
     if (mesh.width, mesh.height) != (hf.width, hf.height):
         raise InputError(f"{path} is for a {mesh.width} x {mesh.height} grid but the height field "
                          f"is {hf.width} x {hf.height}")
-    verdict = check_mesh(mesh)
-    report = {
-        "mesh": path,
-        "valid": verdict.valid,
-        "problems": verdict.problems,
-        "vertices": verdict.n_vertices,
-        "triangles": verdict.n_triangles,
-        "border_vertices": verdict.n_border,
-        "euler_ok": verdict.euler_ok,
-        "ground": g.to_report(),
-    }
-    if verdict.valid:
+    if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.holes)
+        hc = holes.check(mesh, hf.mask)
+        report = {"mesh": path, "valid": hc.valid_mesh, "problems": hc.problems, "vertices": mesh.n_vertices,
+                  "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(), "holes": hc.to_report(),
+                  "ground": g.to_report()}
+    else:
+        verdict = check_mesh(mesh)
+        report = {
+            "mesh": path,
+            "valid": verdict.valid,
+            "problems": verdict.problems,
+            "vertices": verdict.n_vertices,
+            "triangles": verdict.n_triangles,
+            "border_vertices": verdict.n_border,
+            "euler_ok": verdict.euler_ok,
+            "ground": g.to_report(),
+        }
+    if report["valid"]:
         want = mesh.z(hf.values)
         off = np.abs(z - want) > 1e-9 * np.maximum(1.0, np.abs(want))
         if np.any(off):

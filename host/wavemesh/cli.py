@@ -62,6 +62,11 @@ def _input_options(p: argparse.ArgumentParser) -> None:
         metavar="nearest|VALUE",
         help="replace non-finite samples (no-data) by the nearest finite sample or by VALUE",
     )
+    p.add_argument("--nodata", choices=("error", "hole"), default=None,
+                   help="hole: invalid samples (NaN, the file's no-data value, --invalid) become holes in the "
+                        "mesh instead of filled surface; error (default without --fill): refuse them")
+    p.add_argument("--invalid", type=float, default=None, metavar="VALUE",
+                   help="samples equal to VALUE are invalid too (a scanner's 0 or sentinel)")
     p.add_argument("--spacing", metavar="DX[,DY]",
                    help="ground distance between neighbouring samples along a row (and a column), in height "
                         "units (default: from the georeference, degrees in metres; else 1 grid step)")
@@ -119,6 +124,9 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--simplify", choices=("on", "off"), default="on" if d.decimate else "off",
                    help=f"after the error bound, remove every vertex whose neighbourhood re-triangulates "
                         f"within zeta (the final decimation; default {'on' if d.decimate else 'off'})")
+    p.add_argument("--min-area", type=float, default=0.0, metavar="A",
+                   help="with --nodata hole: drop the pieces of the mesh smaller than A square grid steps "
+                        "(islands and slivers between dropouts; default 0: keep all)")
     p.add_argument("--max-triangles", type=int, default=None,
                    help="triangle budget: stop refining there (exit status 3 when E_max is still above zeta)")
     p.add_argument("--capacity", type=int, default=None,
@@ -237,12 +245,12 @@ def _mesh_params(args) -> api.MeshParams:
     return api.MeshParams(levels=args.levels, tau=args.tau, wavelet=args.wavelet,
                           initial_only=args.stage == "initial",
                           refine=refine, check_levels=bool(args.check_levels or args.report or args.lod),
-                          rms=bool(args.report))
+                          rms=bool(args.report), min_area=args.min_area)
 
 
 def _load(args, path: str):
     return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
-                          spacing=args.spacing, origin=args.origin)
+                          spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid)
 
 
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:
@@ -318,8 +326,16 @@ def check_command(args) -> int:
         api.write_json(args.report, report)
     if not args.quiet:
         state = "a proper triangulation" if report["valid"] else "NOT a proper triangulation"
+        if "holes" in report:  # --nodata hole
+            state += " of the valid samples"
         print(f"{args.mesh}: {report['vertices']} vertices, {report['triangles']} triangles, "
               f"{hf.width} x {hf.height} grid: {state}")
+        if "holes" in report:
+            h = report["holes"]
+            print(f"  holes: {h['invalid_samples']} invalid samples, none under a triangle: "
+                  f"{'yes' if not h['triangles_over_invalid'] else 'NO'}; valid samples covered "
+                  f"{h['covered_valid']} of {h['valid_samples']} (the rest next to invalid ones); "
+                  f"{h['hole_edges']} edges around holes")
         for problem in report["problems"][:20]:
             print(f"  {problem}")
         if "errors" in report:
@@ -327,7 +343,8 @@ def check_command(args) -> int:
             print(f"  E_max normal {e['e_max_normal']:.6g}, vertical {e['e_max_vertical']:.6g}; "
                   f"RMS normal {e['rms_normal']:.6g}, vertical {e['rms_vertical']:.6g}")
     if not report["valid"]:
-        raise MeshInvalid(f"{args.mesh} is not a proper triangulation of the {hf.width} x {hf.height} grid"
+        what = "the valid samples of the" if "holes" in report else "the"
+        raise MeshInvalid(f"{args.mesh} is not a proper triangulation of {what} {hf.width} x {hf.height} grid"
                           + (f": {report['problems'][0]}" if report["problems"] else ""))
     return 0
 

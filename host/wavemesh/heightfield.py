@@ -147,6 +147,9 @@ class HeightField:
     # The cell size (dx, dy) in ground units when --spacing gave it (None: from the transform, or 1 without
     # one); wavemesh.georef.ground tells the cell size and the coordinates of every height field.
     spacing: tuple[float, float] | None = None
+    # --nodata hole: (H, W) bool, True where the sample is invalid (NaN, no-data, --invalid VALUE); values
+    # and samples hold a nearest valid height there, for the filter bank only (wavemesh.holes).  None: none.
+    mask: np.ndarray | None = None
 
     @property
     def width(self) -> int:
@@ -176,6 +179,7 @@ class HeightField:
             "quantisation_step": float(self.scale),
             "max_quantisation_error": self.max_quantisation_error,
             "filled": int(self.filled),
+            "invalid": int(np.count_nonzero(self.mask)) if self.mask is not None else 0,
             "min": float(np.min(self.values)),
             "max": float(np.max(self.values)),
         }
@@ -241,8 +245,10 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool]:
     return samples, float(scale), float(offset), lossless
 
 
-def from_array(array, source: str = "<array>", fill: str | float | None = None) -> HeightField:
-    """Check an array of heights, fill non-finite samples if asked, quantise it."""
+def from_array(array, source: str = "<array>", fill: str | float | None = None, *,
+               invalid: float | None = None, holes: bool = False) -> HeightField:
+    """Check an array of heights, fill non-finite samples if asked, quantise it.  ``invalid``: samples
+    equal to it are no-data too; ``holes`` (--nodata hole): no-data samples become the mask."""
     fill_mode = parse_fill(fill)
     ma = sys.modules.get("numpy.ma")  # a masked array means numpy.ma is loaded; np.ma would load it (~15 ms)
     if ma is not None and isinstance(array, ma.MaskedArray):
@@ -272,8 +278,17 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None) 
     if kind in "iu" and arr.dtype.itemsize == 8:
         _check_exact_integers(arr, values, source)
     bad = ~np.isfinite(values)
+    if invalid is not None:
+        bad |= values == invalid
     n_bad = int(np.count_nonzero(bad))
     filled = 0
+    if n_bad and holes:
+        if n_bad == values.size:
+            raise InputError(f"{source}: all {n_bad} samples are invalid; there is nothing to mesh")
+        hidden = fill_nearest(values, bad)  # heights under the holes, for the filter bank alone
+        samples, scale, offset, lossless = quantise(hidden)
+        return HeightField(values=hidden, samples=samples, scale=scale, offset=offset, lossless=lossless,
+                           source=source, mask=bad)
     if n_bad:
         if n_bad == values.size:
             raise InputError(
@@ -321,10 +336,13 @@ def _check_exact_integers(arr: np.ndarray, values: np.ndarray, source: str) -> N
         )
 
 
-def load_heightfield(path: str, key: str | None = None, fill: str | float | None = None) -> HeightField:
-    """Read a height field file (a thin reader by extension or first bytes, else GDAL) and quantise it."""
+def load_heightfield(path: str, key: str | None = None, fill: str | float | None = None, *,
+                     invalid: float | None = None, holes: bool = False) -> HeightField:
+    """Read a height field file (a thin reader by extension or first bytes, else GDAL) and quantise it;
+    ``invalid`` and ``holes`` as from_array's."""
     path = os.fspath(path)
     fill_mode = parse_fill(fill)  # a bad --fill is reported before the file is read
+    marks = {"invalid": invalid, "holes": holes}
     try:
         with open(path, "rb") as f:
             head = f.read(64)
@@ -337,12 +355,12 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
         raise InputError(f"{path}: --key applies only to .npz files, this is a {what} file")
     if fmt == "raster":
         array, transform, crs = _read_raster(path, ext)
-        hf = from_array(array, source=path, fill=fill_mode)
+        hf = from_array(array, source=path, fill=fill_mode, **marks)
         return replace(hf, transform=transform, crs=crs)
     if fmt == "npz":
         with _library_warnings_quiet():
             array, transform = _read_npz(path, key)
-        return replace(from_array(array, source=path, fill=fill_mode), transform=transform)
+        return replace(from_array(array, source=path, fill=fill_mode, **marks), transform=transform)
     reader = {
         "npy": _read_npy,
         "pgm": _read_pgm,
@@ -350,7 +368,7 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
     }[fmt]
     with _library_warnings_quiet():
         array = reader(path)
-    return from_array(array, source=path, fill=fill_mode)
+    return from_array(array, source=path, fill=fill_mode, **marks)
 
 
 # ---------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wavemesh import holes
 from wavemesh import protocol as P
 from wavemesh.errors import WavemeshError
 from wavemesh.haar import HaarLevel
@@ -79,6 +80,7 @@ class Field(ctypes.Structure):
         ("levels", ctypes.c_int32),
         ("samples", ctypes.POINTER(ctypes.c_uint16)),
         ("details", ctypes.POINTER(ctypes.c_int32)),
+        ("mask", ctypes.POINTER(ctypes.c_uint8)),  # a bit per sample, set: invalid (wavemesh.holes)
     ]
 
 
@@ -366,7 +368,7 @@ def _export(lib, handle, width: int, height: int) -> Mesh:
 
 def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,
            scale: float = 1.0, zeta: float | None = None,
-           spacing: tuple[float, float] = (1.0, 1.0)) -> RefineOutput:
+           spacing: tuple[float, float] = (1.0, 1.0), mask: np.ndarray | None = None) -> RefineOutput:
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
     ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation); ``spacing`` is the
@@ -384,6 +386,9 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
                             hint="crop or subsample the height field, or use --stage initial")
     det = details_array(levels)
     fld = Field(width, height, len(levels), _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
+    if mask is not None:  # ``mask``: (H, W) bool, True where invalid (wavemesh.holes; wm_field.mask)
+        bits = np.frombuffer(holes.pack(mask), dtype=np.uint8)
+        fld.mask = _ptr(bits, ctypes.c_uint8)
     fp = fixed_params(params, scale, zeta, spacing)
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
     tris = np.ascontiguousarray(initial.tris, dtype=np.int32)

@@ -1,0 +1,109 @@
+/* Holes: what a triangle covers of a field with a validity mask (wavemesh.h, wm_tri_cover).
+ *
+ * Range scans, disparity maps and depth images have invalid samples (shadows, dropouts).  The host
+ * hands the refiner a bit per sample (wm_field.mask) and heights filled in under the holes (so the
+ * filter bank and the templates see a smooth surface); E(T) (tri_error.c) asks wm_tri_cover first:
+ *
+ *     only valid samples      ->  E(T) as without a mask
+ *     only invalid samples    ->  0            (a hole: dropped by the host at the end)
+ *     both, thin (D = 1)      ->  0            (no sample to split at: dropped too)
+ *     both, a non-corner one  ->  0xFFFFFFFF   (every stage refines it; split at the sample chosen here)
+ *
+ *       o---o---x---x          o valid, x invalid: the triangle covering both is split at a valid
+ *       | \ |   .   |          sample next to an invalid one (the rim), nearest its barycentre, until
+ *       o---o---x---x          each triangle covers one kind, or only its three corners
+ *
+ * The refiner's operators are unchanged: the mesh stays a proper triangulation of the rectangle, and
+ * the error bound, the reduction and the decimation never accept a triangle that covers both kinds
+ * and can still be split.  The scan reads one bit per covered sample (the rim test four more). */
+#include "wm_holes.h"
+#include "wm_internal.h"
+
+static int invalid_at(const wm_field *f, int32_t px, int32_t py)
+{
+    int64_t i = (int64_t)py * f->width + px;
+    return (f->mask[i >> 3] >> (i & 7)) & 1;
+}
+
+int wm_hole_at(const wm_field *f, int32_t px, int32_t py) { return invalid_at(f, px, py); }
+
+/* A valid sample with an invalid 4-neighbour. */
+static int on_rim(const wm_field *f, int32_t px, int32_t py)
+{
+    return (px > 0 && invalid_at(f, px - 1, py)) || (px + 1 < f->width && invalid_at(f, px + 1, py)) ||
+           (py > 0 && invalid_at(f, px, py - 1)) || (py + 1 < f->height && invalid_at(f, px, py + 1));
+}
+
+int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t *sx, int32_t *sy)
+{
+    int64_t A[3], B[3], C[3], D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    int32_t ymin = y[0], ymax = y[0], xmin = x[0], xmax = x[0];
+    int32_t bx = x[0] + x[1] + x[2], by = y[0] + y[1] + y[2]; /* 3 x the barycentre */
+    int n_valid = 0, n_invalid = 0, best_rim = -1;
+    uint64_t best_d = 0;
+    int32_t cx = -1, cy = -1;
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        A[k] = (int64_t)y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C >= 0 inside (tri_error.c) */
+        B[k] = (int64_t)x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        if (y[k] < ymin) ymin = y[k];
+        if (y[k] > ymax) ymax = y[k];
+        if (x[k] < xmin) xmin = x[k];
+        if (x[k] > xmax) xmax = x[k];
+    }
+    for (int32_t py = ymin; py <= ymax; py++) {
+        int64_t lo = xmin, hi = xmax;
+        int empty = 0;
+        for (int k = 0; k < 3; k++) {
+            int64_t num = B[k] * py + C[k];
+            if (A[k] > 0) {
+                int64_t l = wm_ceil_div(-num, A[k]);
+                if (l > lo) lo = l;
+            } else if (A[k] < 0) {
+                int64_t r = wm_floor_div(num, -A[k]);
+                if (r < hi) hi = r;
+            } else if (num < 0) {
+                empty = 1;
+            }
+        }
+        if (empty) continue;
+        for (int32_t px = (int32_t)lo; px <= (int32_t)hi; px++) {
+            int bad = invalid_at(f, px, py), corner = 0, rim;
+            uint64_t d;
+            if (bad)
+                n_invalid++;
+            else
+                n_valid++;
+            if (D == 1) continue; /* thin: no candidate to split at */
+            for (int k = 0; k < 3; k++) corner |= px == x[k] && py == y[k];
+            if (corner) continue;
+            rim = !bad && on_rim(f, px, py);
+            d = (uint64_t)((int64_t)(3 * px - bx) * (3 * px - bx)) + (uint64_t)((int64_t)(3 * py - by) * (3 * py - by));
+            if (rim > best_rim || (rim == best_rim && d < best_d)) {
+                best_rim = rim;
+                best_d = d;
+                cx = px;
+                cy = py;
+            }
+        }
+    }
+    if (n_invalid == 0) return WM_COVER_VALID;
+    if (n_valid == 0) return WM_COVER_HOLE;
+    if (best_rim < 0) return WM_COVER_THIN;
+    if (sx) *sx = cx;
+    if (sy) *sy = cy;
+    return WM_COVER_MIXED;
+}
+
+int wm_hole_error(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t *e, int32_t *wx,
+                  int32_t *wy)
+{
+    int32_t sx = x[0], sy = y[0];
+    int c = wm_tri_cover(f, x, y, &sx, &sy);
+    if (c == WM_COVER_VALID) return 0;
+    *e = c == WM_COVER_MIXED ? 0xFFFFFFFFu : 0u;
+    if (wx) *wx = sx;
+    if (wy) *wy = sy;
+    return 1;
+}

@@ -1,0 +1,310 @@
+"""Holes: meshes of height fields with invalid samples (range scans, disparity and depth images).
+
+``--nodata hole`` (docs/model.md, "Holes") keeps a validity mask beside the heights
+(:attr:`HeightField.mask <wavemesh.heightfield.HeightField.mask>`, True where a sample is invalid: NaN,
+the reader's no-data value, ``--invalid VALUE``).  The heights under the mask are a nearest valid
+sample's, for the filter bank and the templates alone.  The refiner measures E(T) against the mask
+(firmware/src/holes.c): a triangle that covers both valid and invalid samples is refined until each
+triangle covers one kind, or only its three corners; the mesh stays a proper triangulation of the
+rectangle.  :func:`drop` then keeps the triangles that cover valid samples only: holes bounded by mesh
+edges, every kept triangle within zeta over its samples, and nothing over an invalid one.  The same
+function filters the native run's meshes and the ones a device streams (the device runs the same C).
+
+:func:`pack` is the mask's one wire and memory format: a bit per sample, row-major, least significant
+bit first, set where the sample is invalid (wm_field.mask, the MASK frames of docs/protocol.md).
+:func:`check` is what ``wavemesh check`` adds for a mesh with holes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wavemesh.mesh import Mesh
+
+
+def pack(mask: np.ndarray) -> bytes:
+    """The mask as wm_field.mask: bit i % 8 of byte i // 8 for sample i = y W + x, set when invalid."""
+    return np.packbits(np.asarray(mask, dtype=bool).ravel(), bitorder="little").tobytes()
+
+
+def unpack(data: bytes, width: int, height: int) -> np.ndarray:
+    """pack's inverse: the (H, W) bool mask."""
+    bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8), bitorder="little", count=width * height)
+    return bits.reshape(height, width).astype(bool)
+
+
+def _spans(mesh: Mesh):
+    """Each triangle's closed region row by row: (triangle, row, first, last, count), from the exact
+    edge functions (counter-clockwise: E_k >= 0 inside) by integer floor division."""
+    xy, t = mesh.xy, mesh.tris
+    x, y = xy[t, 0], xy[t, 1]  # (T, 3)
+    ymin, ymax = y.min(1), y.max(1)
+    rows = ymax - ymin + 1
+    tri = np.repeat(np.arange(len(t)), rows)
+    py = ymin[tri] + np.arange(int(rows.sum())) - np.repeat(np.cumsum(rows) - rows, rows)
+    lo, hi = x.min(1)[tri], x.max(1)[tri]
+    empty = np.zeros(len(tri), dtype=bool)
+    for k in range(3):
+        k1, k2 = (k + 1) % 3, (k + 2) % 3
+        a = (y[:, k1] - y[:, k2])[tri]  # E_k = a px + num
+        b = (x[:, k2] - x[:, k1])[tri]
+        c = (-(x[:, k2] - x[:, k1]) * y[:, k1] - (y[:, k1] - y[:, k2]) * x[:, k1])[tri]
+        num = b * py + c
+        d = np.where(a == 0, 1, np.abs(a))
+        lo = np.where(a > 0, np.maximum(lo, -(num // d)), lo)  # ceil(-num / a)
+        hi = np.where(a < 0, np.minimum(hi, num // d), hi)  # floor(num / -a)
+        empty |= (a == 0) & (num < 0)
+    cnt = np.where(empty, 0, np.maximum(hi - lo + 1, 0))
+    return tri, py, lo, hi, cnt
+
+
+def cover_counts(mesh: Mesh, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each triangle: (samples it covers, invalid samples among them), counted with per-row prefix
+    sums of the mask."""
+    n = mesh.n_triangles
+    tri, py, lo, hi, cnt = _spans(mesh)
+    bad = np.asarray(mask, dtype=bool)
+    w = bad.shape[1]
+    prefix = np.zeros((bad.shape[0], w + 1), dtype=np.int64)
+    np.cumsum(bad, axis=1, out=prefix[:, 1:])
+    inv = np.where(cnt > 0, prefix[py, np.clip(hi + 1, 0, w)] - prefix[py, np.clip(lo, 0, w)], 0)
+    return np.bincount(tri, cnt, n).astype(np.int64), np.bincount(tri, inv, n).astype(np.int64)
+
+
+def coverage(mesh: Mesh) -> np.ndarray:
+    """(H, W) int: how many triangles of ``mesh`` cover each sample (closed triangles)."""
+    tri, py, lo, hi, cnt = _spans(mesh)
+    keep = cnt > 0
+    py, lo, hi = py[keep], lo[keep], hi[keep]
+    diff = np.zeros((mesh.height, mesh.width + 1), dtype=np.int64)
+    np.add.at(diff, (py, lo), 1)
+    np.add.at(diff, (py, hi + 1), -1)
+    return np.cumsum(diff, axis=1)[:, :mesh.width]
+
+
+def compact(width: int, height: int, xy: np.ndarray, tris: np.ndarray) -> Mesh:
+    """A mesh of the given triangles and only the vertices they use (in their order)."""
+    used = np.zeros(len(xy), dtype=bool)
+    used[tris.ravel()] = True
+    remap = np.cumsum(used) - 1
+    return Mesh(width, height, xy[used], remap[tris] if len(tris) else tris)
+
+
+def drop(mesh: Mesh, mask: np.ndarray | None) -> Mesh:
+    """The triangles of ``mesh`` that cover no invalid sample (all of them when ``mask`` is None)."""
+    if mask is None:
+        return mesh
+    _, inv = cover_counts(mesh, mask)
+    return compact(mesh.width, mesh.height, mesh.xy, mesh.tris[inv == 0])
+
+
+def drop_islands(mesh: Mesh, min_area: float) -> Mesh:
+    """--min-area A: without the pieces (triangles joined through shared edges) smaller than A square
+    grid steps: the islands and slivers a few samples big that dropouts leave."""
+    if min_area <= 0 or mesh.n_triangles == 0:
+        return mesh
+    t = mesh.tris
+    n = len(t)
+    parent = np.arange(n)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    owner = np.tile(np.arange(n), 3)
+    key = np.minimum(e[:, 0], e[:, 1]) * (len(mesh.xy) + 1) + np.maximum(e[:, 0], e[:, 1])
+    order = np.argsort(key, kind="stable")
+    ks, os_ = key[order], owner[order]
+    for i in np.flatnonzero(ks[1:] == ks[:-1]):
+        a, b = find(os_[i]), find(os_[i + 1])
+        if a != b:
+            parent[a] = b
+    roots = np.array([find(i) for i in range(n)])
+    xy = mesh.xy
+    p0, p1, p2 = xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]
+    area = ((p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p2[:, 0] - p0[:, 0]) * (p1[:, 1] - p0[:, 1])) / 2
+    total = np.bincount(roots, area, n)
+    keep = total[roots] >= min_area
+    return compact(mesh.width, mesh.height, xy, t[keep])
+
+
+# ---------------------------------------------------------------------------------------------------
+# The check of a mesh with holes
+
+
+@dataclass
+class HoleCheck:
+    """What check() found: the problems (empty: the mesh passes) and the coverage counts."""
+
+    problems: list[str] = field(default_factory=list)
+    invalid: int = 0  # invalid samples in the grid
+    valid: int = 0  # valid samples
+    covered_valid: int = 0  # valid samples in some triangle
+    over_invalid: int = 0  # triangles covering an invalid sample (0 when the mesh passes)
+    uncovered_inland: int = 0  # valid samples in no triangle with no invalid sample among their 8 neighbours
+    boundary_edges: int = 0  # edges of one triangle, off the rectangle's border
+
+    def to_report(self) -> dict:
+        return {"invalid_samples": self.invalid, "valid_samples": self.valid, "covered_valid": self.covered_valid,
+                "uncovered_valid": self.valid - self.covered_valid, "uncovered_inland": self.uncovered_inland,
+                "triangles_over_invalid": self.over_invalid, "hole_edges": self.boundary_edges}
+
+
+# ---------------------------------------------------------------------------------------------------
+# The check of a mesh with holes
+
+
+@dataclass
+class HoleCheck:
+    """What check() found: the problems (empty: the mesh passes) and the counts behind them."""
+
+    problems: list[str] = field(default_factory=list)
+    invalid: int = 0  # invalid samples in the grid
+    valid: int = 0  # valid samples
+    covered_valid: int = 0  # valid samples in some triangle
+    over_invalid: int = 0  # triangles covering an invalid sample
+    uncovered_inland: int = 0  # valid samples in no triangle and with no invalid sample among their 8 neighbours
+    hole_edges: int = 0  # edges of one triangle, off the rectangle's border
+    stray_edges: int = 0  # of those, the ones with no invalid sample within their length + 2 of their middle
+
+    @property
+    def valid_mesh(self) -> bool:
+        return not self.problems
+
+    def to_report(self) -> dict:
+        return {"invalid_samples": self.invalid, "valid_samples": self.valid, "covered_valid": self.covered_valid,
+                "uncovered_valid": self.valid - self.covered_valid, "uncovered_inland": self.uncovered_inland,
+                "triangles_over_invalid": self.over_invalid, "hole_edges": self.hole_edges,
+                "stray_hole_edges": self.stray_edges}
+
+
+def check(mesh: Mesh, mask: np.ndarray) -> HoleCheck:
+    """Whether ``mesh`` is a proper triangulation of the valid region of a grid whose invalid samples are
+    ``mask``: the triangles (counter-clockwise, positive areas, vertices at distinct grid samples, every
+    directed edge once, every edge in at most two triangles) do not overlap (no vertex in another
+    triangle, and no triangle with an edge of one triangle overlaps a triangle near it, by separating
+    axes, exact in integers: an overlap has such an edge on its border); no triangle covers an invalid
+    sample; every valid sample is covered except next to an invalid one; every edge of one triangle
+    lies on the rectangle's border or next to invalid samples."""
+    out = HoleCheck()
+    p = out.problems
+    bad = np.asarray(mask, dtype=bool)
+    H, W = bad.shape
+    out.invalid = int(bad.sum())
+    out.valid = bad.size - out.invalid
+    if (mesh.width, mesh.height) != (W, H):
+        p.append(f"the mesh is for a {mesh.width} x {mesh.height} grid, the mask {W} x {H}")
+        return out
+    xy, t = mesh.xy, mesh.tris
+    if len(t) == 0:
+        p.append("the mesh has no triangles")
+        return out
+    if ((t < 0) | (t >= len(xy))).any():
+        p.append("triangle vertex indices out of range")
+        return out
+    x, y = xy[:, 0], xy[:, 1]
+    if ((x < 0) | (y < 0) | (x >= W) | (y >= H)).any():
+        p.append("vertices outside the grid")
+        return out
+    if len(np.unique(y * W + x)) != len(xy):
+        p.append("two vertices at one sample")
+    used = np.zeros(len(xy), dtype=bool)
+    used[t.ravel()] = True
+    if not used.all():
+        p.append(f"{int((~used).sum())} vertices in no triangle")
+    tx, ty = x[t], y[t]
+    area2 = (tx[:, 1] - tx[:, 0]) * (ty[:, 2] - ty[:, 0]) - (tx[:, 2] - tx[:, 0]) * (ty[:, 1] - ty[:, 0])
+    if (area2 <= 0).any():
+        p.append(f"{int((area2 <= 0).sum())} triangles are not counter-clockwise (or have no area)")
+        return out
+    src = t.ravel()
+    dst = t[:, [1, 2, 0]].ravel()
+    n = len(xy)
+    directed = src * n + dst
+    if len(np.unique(directed)) != len(directed):
+        p.append("a directed edge is in two triangles (overlapping or flipped triangles)")
+    und = np.minimum(src, dst) * n + np.maximum(src, dst)
+    key, uses = np.unique(und, return_counts=True)
+    if (uses > 2).any():
+        p.append(f"{int((uses > 2).sum())} edges are in more than two triangles")
+    # a vertex in a triangle it is not a corner of: a T-junction or an overlap
+    cov = coverage(mesh)
+    incident = np.bincount(src, minlength=n)
+    extra = cov[y, x] - incident
+    if (extra != 0).any():
+        i = int(np.flatnonzero(extra)[0])
+        p.append(f"{int((extra != 0).sum())} vertices lie in triangles they are not a corner of, first "
+                 f"({x[i]}, {y[i]})")
+    # one-triangle edges: on the border, or around a hole
+    single = np.isin(und, key[uses == 1])
+    on_border = ((x[src] == x[dst]) & ((x[src] == 0) | (x[src] == W - 1))) | (
+        (y[src] == y[dst]) & ((y[src] == 0) | (y[src] == H - 1)))
+    hole = single & ~on_border
+    out.hole_edges = int(hole.sum())
+    if out.invalid and out.hole_edges:
+        from scipy import ndimage
+
+        dist = ndimage.distance_transform_edt(~bad)  # to the nearest invalid sample
+        mx, my = (x[src] + x[dst]) / 2, (y[src] + y[dst]) / 2
+        length = np.hypot(x[src] - x[dst], y[src] - y[dst])
+        near = dist[np.rint(my).astype(int), np.rint(mx).astype(int)] <= length + 2
+        out.stray_edges = int((hole & ~near).sum())
+    else:
+        out.stray_edges = out.hole_edges
+    if out.stray_edges:
+        p.append(f"{out.stray_edges} edges of one triangle are neither on the rectangle's border nor next to "
+                 f"an invalid sample (a hole in the mesh where the input has none)")
+    _overlaps(mesh, np.unique(np.flatnonzero(single) // 3), p)
+    # no triangle over an invalid sample; every valid sample covered but next to invalid ones
+    _, inv = cover_counts(mesh, bad)
+    out.over_invalid = int((inv > 0).sum())
+    if out.over_invalid:
+        i = int(np.flatnonzero(inv)[0])
+        p.append(f"{out.over_invalid} triangles cover invalid samples, first "
+                 f"{[tuple(map(int, xy[v])) for v in t[i]]}")
+    covered = cov > 0
+    out.covered_valid = int((covered & ~bad).sum())
+    from scipy import ndimage
+
+    rim = ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
+    inland = ~covered & ~rim
+    out.uncovered_inland = int(inland.sum())
+    if out.uncovered_inland:
+        yy, xx = np.argwhere(inland)[0]
+        p.append(f"{out.uncovered_inland} valid samples away from any invalid one are in no triangle, first "
+                 f"({xx}, {yy})")
+    return out
+
+
+def _overlaps(mesh: Mesh, cand: np.ndarray, p: list[str]) -> None:
+    """Separating axes between each triangle of ``cand`` (those with an edge of one triangle) and every
+    triangle whose bounding box meets its own; exact in integers.  Two triangles' interiors are
+    disjoint when an edge line of one has the other's three corners on its outer closed side."""
+    xy, t = mesh.xy, mesh.tris
+    X, Y = xy[t, 0], xy[t, 1]  # (T, 3)
+    x0, x1, y0, y1 = X.min(1), X.max(1), Y.min(1), Y.max(1)
+    order = np.argsort(x0, kind="stable")
+    xs = x0[order]
+    for a in cand:
+        near = order[: np.searchsorted(xs, x1[a], side="right")]
+        near = near[(x1[near] >= x0[a]) & (y0[near] <= y1[a]) & (y1[near] >= y0[a]) & (near != a)]
+        if len(near) == 0:
+            continue
+        sep = np.zeros(len(near), dtype=bool)
+        for P, Q, who in ((X[a][None, :], Y[a][None, :], "a"), (X[near], Y[near], "b")):
+            for k in range(3):
+                k1 = (k + 1) % 3
+                ex, ey = P[:, k1] - P[:, k], Q[:, k1] - Q[:, k]
+                other_x, other_y = (X[near], Y[near]) if who == "a" else (X[a][None, :], Y[a][None, :])
+                side = ex[:, None] * (other_y - Q[:, k][:, None]) - ey[:, None] * (other_x - P[:, k][:, None])
+                sep |= (side <= 0).all(axis=1)
+        if not sep.all():
+            b = int(near[~sep][0])
+            p.append(f"triangles {[tuple(map(int, xy[v])) for v in t[a]]} and "
+                     f"{[tuple(map(int, xy[v])) for v in t[b]]} overlap")
+            return
