@@ -245,7 +245,6 @@ typedef struct wm_field {
 #define WM_COVER_MIXED 3
 int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t *sx, int32_t *sy);
 
-
 #define WM_METRIC_NORMAL 0   /* distance along the triangle's normal (the dissertation's) */
 #define WM_METRIC_VERTICAL 1 /* vertical distance */
 #define WM_NEIGHBOURHOOD_FACE 0   /* face-based neighbourhood (4.10), coefficient at the barycentre */
@@ -363,6 +362,17 @@ int32_t wm_tri_cap_max(int32_t width, int32_t height);
  * parameters), WM_ERR_MEMORY, WM_ERR_CAPACITY (nt > tri_cap), WM_ERR_MESH. */
 int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f, const wm_params *p,
                    const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, int32_t tri_cap);
+
+/* Selective triangulation (dissertation 5.6): restricts E(T), everywhere the refiner uses it, to the
+ * samples in a region of interest (firmware/src/roi.c), so that only triangles holding ROI samples are
+ * refined and the error bound ends with every ROI sample within zeta.  rows[(W + 1) y + x] is the
+ * number of ROI samples in row y left of column x ((W + 1) H int32s, each row starting at 0 and rising
+ * by 0 or 1 per column); it must stay alive and unchanged while the refiner is used.  The details the
+ * refiner was given should be zero outside the ROI (the dissertation's mask; the host does that).
+ * Call it after wm_refine_init and before the first wm_refine_step: WM_ERR_STATE otherwise;
+ * WM_ERR_ARG when rows is NULL or not such a table.  The statistics' e_max and over then count ROI
+ * samples only. */
+int wm_refine_set_roi(wm_refiner *r, const int32_t *rows);
 
 /* Runs the next resolution level: level m = current - 1 with k iterations of region selection,
  * pairing, shape-preserving split and regularisation on the details of decomposition level m + 1;

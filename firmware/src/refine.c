@@ -75,7 +75,7 @@ void wm_touch(wm_refiner *r, int32_t t)
 {
     int32_t x[3], y[3], wx, wy;
     wm_tri_xy(&r->mesh, t, x, y);
-    r->err[t] = wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+    r->err[t] = r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
     r->worst[t] = wy * r->field.width + wx;
     r->mesh.tflag[t] |= WM_F_NEW;
     wm_forget_class(r, t);
@@ -132,6 +132,7 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
     r->failed = 0;
     r->budget_hit = 0;
     r->flips = r->removals = 0;
+    r->roi = NULL; /* wm_refine_set_roi (roi.c) */
     r->limit = tri_cap;
     r->limit_is_budget = 0;
     if (p->max_triangles > 0 && p->max_triangles < tri_cap) {
@@ -222,8 +223,10 @@ static int try_swap(wm_refiner *r, int32_t e)
                                               wm_scale_mul(&r->params, lb2, 1, 0, cap) + one);
             if ((((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) <= 65536u) return 0;
         }
-        e1 = wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
-        e2 = wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
+        e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
+                    : wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
+        e2 =
+            r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y) : wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
         re = ratio_q16(o1 + o2 + one,
                        wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
     }

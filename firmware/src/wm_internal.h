@@ -143,7 +143,11 @@ struct wm_refiner {
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
                             changed); decimation: the triangulation that cost belongs to */
+    const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
 };
+
+/* E(T) over the samples of the triangle in the region of interest, 0 when it has none (roi.c). */
+uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3], int32_t *wx, int32_t *wy);
 
 /* Triangle t's corner coordinates. */
 static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t y[3])

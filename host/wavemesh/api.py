@@ -36,6 +36,7 @@ from wavemesh.mesh import Mesh
 from wavemesh.meshio import read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
 from wavemesh.outputs import Outputs, check_path
+from wavemesh.roi import mask_details, parse_roi, roi_errors, roi_report
 from wavemesh.stream import (
     DEFAULT_TIMEOUTS,
     Device,
@@ -183,6 +184,8 @@ class RefineJob:
     output: RefineOutput
     seconds: float  # time spent in the refiner
     errors: ErrorReport | None = None  # the final mesh's errors against the input (check.mesh_errors)
+    roi: np.ndarray | None = None  # the region of interest (wavemesh.roi), or None: the whole grid
+    roi_errors: ErrorReport | None = None  # the final mesh's errors over the ROI samples (roi.roi_errors)
     holes: holes.HoleCheck | None = None  # with holes (--nodata hole): the final mesh's check (drop_holes)
 
     @property
@@ -212,7 +215,8 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
     The bound applies when the refiner reports every triangle within zeta (not when the triangle budget
     stopped it).  Lossless input: E_max by the chosen metric <= zeta on the input.  Lossy quantisation
     (docs/refiner.md): vertically on the input when zeta >= 2q, else E_max <= the zeta the refiner was
-    given on the 16-bit samples it saw.  The float metric's own rounding is allowed (1e-9 relative)."""
+    given on the 16-bit samples it saw.  The float metric's own rounding is allowed (1e-9 relative).
+    With an ROI the bound and ``errors`` are over the ROI samples (wavemesh.roi)."""
     if not rjob.bound_met:
         return None
     p = rjob.params
@@ -222,7 +226,9 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
         e, zeta, on = getattr(errors, metric), p.zeta, "the input"
     else:
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
-        e = getattr(mesh_errors(rjob.mesh, quantised, spacing=ground(hf).spacing), metric)
+        sp = ground(hf).spacing
+        e = getattr(mesh_errors(rjob.mesh, quantised, spacing=sp) if rjob.roi is None
+                    else roi_errors(rjob.mesh, quantised, rjob.roi, spacing=sp), metric)
         zeta, on = rjob.zeta_used, "the 16-bit samples"
     if e <= zeta + eps:
         return None
@@ -232,12 +238,13 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
            params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False,
-           wavelet: str = "haar", min_area: float = 0.0) -> RefineJob:
+           wavelet: str = "haar", roi: np.ndarray | None = None, min_area: float = 0.0) -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
     the bound met, within zeta (mesh_errors, kept in ``errors``: its maxima, and its RMS when ``rms``);
-    otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh."""
+    otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh.  ``roi``: an (H, W)
+    bool region of interest, the only place refined and bounded (selective triangulation, wavemesh.roi)."""
     from wavemesh import native  # loads (and if needed builds) the C library
 
     params = params or RefineParams()
@@ -251,16 +258,20 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     start = time.perf_counter()
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
     details = decompose(hf.samples, job.levels, job.wavelet)
+    if roi is not None:
+        details = mask_details(details, roi)  # 5.6: no detail energy outside the ROI
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
-                        mask=hf.mask)
+                        roi=roi, mask=hf.mask)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
         require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
     hole_check = drop_holes(out.levels, hf, min_area)
-    rjob = RefineJob(job, params, zeta, out, seconds, holes=hole_check)
+    rjob = RefineJob(job, params, zeta, out, seconds, roi=roi, holes=hole_check)
     rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms, spacing=spacing)
-    excess = bound_excess(hf, rjob, rjob.errors)
+    if roi is not None:
+        rjob.roi_errors = roi_errors(rjob.mesh, hf.values, roi, rms=rms, spacing=spacing)
+    excess = bound_excess(hf, rjob, rjob.errors if roi is None else rjob.roi_errors)
     if excess:
         raise MeshInvalid(excess, hint=BUG_HINT)
     return rjob
@@ -336,6 +347,7 @@ class MeshParams:
     refine: RefineParams = field(default_factory=RefineParams)  # the refiner's (ignored when initial_only)
     check_levels: bool = False  # also check and measure every coarser level (stream always does)
     rms: bool = False  # RMS errors too (the report's), not only the maxima
+    roi: tuple | np.ndarray | None = None  # --roi: rectangles "X,Y,W,H" / mask files, or a bool array
     min_area: float = 0.0  # --min-area: with holes, drop pieces of the mesh smaller (square grid steps)
 
 
@@ -359,9 +371,10 @@ class MeshResult:
 
     @property
     def e_max(self) -> float:
-        """The final mesh's E_max by the run's metric."""
+        """The final mesh's E_max by the run's metric, where the bound applies (with an ROI: inside it)."""
         metric = self.refine_params.metric if self.refine_params else "normal"
-        return self.errors.e_max_normal if metric == "normal" else self.errors.e_max_vertical
+        e = self.refined.roi_errors if self.refined is not None and self.refined.roi_errors else self.errors
+        return e.e_max_normal if metric == "normal" else e.e_max_vertical
 
     @property
     def exit_status(self) -> int:
@@ -403,6 +416,13 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
     checked and measured only with ``check_levels``."""
     params = params or MeshParams()
     m, t = _levels_and_tau(hf, params.levels, params.tau)
+    roi = None if params.roi is None else parse_roi(params.roi, hf.width, hf.height)
+    if roi is not None and (params.initial_only or not params.refine.bound):
+        raise InputError("--roi selects where the refiner works and bounds the error",
+                         hint="use it with --stage full and --bound on")
+    if roi is not None and hf.mask is not None:
+        raise InputError("--roi and --nodata hole do not go together yet (the ROI's error measure does not "
+                         "know holes)", hint="fill the invalid samples (--fill nearest), or drop --roi")
     if params.initial_only:
         job = triangulate(hf, m, t, params.wavelet)  # checks the mesh
         errors = mesh_errors(job.mesh, hf.values, rms=params.rms, spacing=ground(hf).spacing)
@@ -414,7 +434,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
                           comment=_comment(m, t, None), report=report)
     p = params.refine
     rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms, wavelet=params.wavelet,
-                  min_area=params.min_area)
+                  roi=roi, min_area=params.min_area)
     final = rjob.output.final
     if params.check_levels:
         rows = [level_report(lv, hf, p.metric, rjob.errors if lv is final else None)
@@ -442,6 +462,9 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
     if rjob.holes is not None:
         parameters["min_area"] = params.min_area
         report["holes"] = rjob.holes.to_report()
+    if roi is not None:
+        parameters["roi"] = [str(s) for s in params.roi] if isinstance(params.roi, (tuple, list)) else "array"
+        report["roi"] = roi_report(rjob.mesh, roi, rjob.roi_errors, rjob.errors, p.metric)
     return MeshResult(heightfield=hf, params=params, refine_params=p, levels=m, tau=t, mesh=rjob.mesh,
                       errors=rjob.errors, level_meshes=[(lv.level, lv.mesh) for lv in rjob.output.levels],
                       rows=rows, bound_met=rjob.bound_met, comment=_comment(m, t, p), report=report,
@@ -523,6 +546,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     params = params or MeshParams()
     p = params.refine
     p.check()
+    if params.roi is not None:  # no device takes an ROI (wavemesh.roi): refused before the port is opened
+        raise InputError("--roi: selective triangulation runs on the host only; no device takes a region of "
+                         "interest", hint="use `wavemesh mesh --roi ...`, or stream without --roi")
     m, tau = _levels_and_tau(hf, params.levels, params.tau)
     full = not params.initial_only
     tau_q = tau_counts(tau, hf.scale)

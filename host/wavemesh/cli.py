@@ -124,6 +124,10 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--simplify", choices=("on", "off"), default="on" if d.decimate else "off",
                    help=f"after the error bound, remove every vertex whose neighbourhood re-triangulates "
                         f"within zeta (the final decimation; default {'on' if d.decimate else 'off'})")
+    p.add_argument("--roi", action="append", metavar="X,Y,W,H|MASK",
+                   help="selective triangulation (5.6): refine and bound the error only in this region of "
+                        "interest, a rectangle of samples or a mask image of the grid's size (non-zero: "
+                        "inside); repeatable; outside stays at the initial triangulation (`mesh` only)")
     p.add_argument("--min-area", type=float, default=0.0, metavar="A",
                    help="with --nodata hole: drop the pieces of the mesh smaller than A square grid steps "
                         "(islands and slivers between dropouts; default 0: keep all)")
@@ -245,7 +249,8 @@ def _mesh_params(args) -> api.MeshParams:
     return api.MeshParams(levels=args.levels, tau=args.tau, wavelet=args.wavelet,
                           initial_only=args.stage == "initial",
                           refine=refine, check_levels=bool(args.check_levels or args.report or args.lod),
-                          rms=bool(args.report), min_area=args.min_area)
+                          rms=bool(args.report), roi=tuple(args.roi) if args.roi else None,
+                          min_area=args.min_area)
 
 
 def _load(args, path: str):
@@ -289,6 +294,11 @@ def mesh_command(args) -> int:
         table.append(f"  level  vertices  triangles  {head:>10}  splits  swaps")
         table += [f"  {r['level']:>5}  {r['vertices']:>8}  {r['triangles']:>9}  {r[e_max]:>10.4g}  "
                   f"{r['splits']:>6}  {r['swaps']:>5}" for r in result.rows]
+    roi = result.report.get("roi")
+    if roi:
+        table.append(f"  ROI: {roi['samples']} samples ({100 * roi['fraction']:.1f} %), E_max inside "
+                     f"{roi['e_max_inside']:.6g} (the bound), {roi['triangles_inside']} triangles inside, "
+                     f"{roi['triangles_outside']} outside")
     return _finish(args, result, table)
 
 

@@ -182,6 +182,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_refine_init": (ctypes.c_int, [ctypes.POINTER(vp), vp, sz, ctypes.POINTER(Field),
                                           ctypes.POINTER(Params),
                                           pi32, i32, pi32, i32, i32]),
+        "wm_refine_set_roi": (ctypes.c_int, [vp, pi32]),
         "wm_refine_step": (ctypes.c_int, [vp, ctypes.POINTER(LevelStats)]),
         "wm_refine_stats": (None, [vp, ctypes.POINTER(LevelStats)]),
         "wm_refine_done": (ctypes.c_int, [vp]),
@@ -368,7 +369,8 @@ def _export(lib, handle, width: int, height: int) -> Mesh:
 
 def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,
            scale: float = 1.0, zeta: float | None = None,
-           spacing: tuple[float, float] = (1.0, 1.0), mask: np.ndarray | None = None) -> RefineOutput:
+           spacing: tuple[float, float] = (1.0, 1.0), roi: np.ndarray | None = None,
+           mask: np.ndarray | None = None) -> RefineOutput:
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
     ``zeta`` overrides params.zeta (the host tightens it for lossy quantisation); ``spacing`` is the
@@ -376,6 +378,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     explicit capacity the storage is sized once for the most triangles any triangulation of the grid
     can have, 2 (W-1) (H-1): the refiner never runs out and runs once.  The library touches only the
     slots it uses, so the operating system commits only those pages of the (lazily mapped) buffer.
+    ``roi``: an (H, W) bool region of interest E(T) keeps to (wm_refine_set_roi; wavemesh.roi).
     """
     params.check()
     lib = load()
@@ -393,7 +396,8 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
     tris = np.ascontiguousarray(initial.tris, dtype=np.int32)
     cap = params.capacity if params.capacity is not None else lib.wm_tri_cap_max(width, height)
-    out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height)
+    rows = None if roi is None else roi_rows(roi)
+    out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height, rows)
     if code != WM_OK:
         what = error_text(code)
         if code == WM_ERR_CAPACITY:
@@ -403,7 +407,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     return RefineOutput(out, cap, fp)
 
 
-def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], int]:
+def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[list[Level], int]:
     nbytes = lib.wm_refine_bound(width, height, cap)
     if nbytes == 0:
         return [], -1
@@ -413,6 +417,8 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], 
     code = lib.wm_refine_init(ctypes.byref(handle), ctypes.c_void_p(base), nbytes, ctypes.byref(fld),
                               ctypes.byref(fp),
                               _ptr(xy, ctypes.c_int32), len(xy), _ptr(tris, ctypes.c_int32), len(tris), cap)
+    if code == WM_OK and rows is not None:
+        code = lib.wm_refine_set_roi(handle, _ptr(rows, ctypes.c_int32))
     if code != WM_OK:
         return [], code
     st = LevelStats()
@@ -425,6 +431,15 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height) -> tuple[list[Level], 
         levels.append(Level(st.level, _export(lib, handle, width, height), st.to_dict()))
     del mem
     return levels, WM_OK
+
+
+def roi_rows(roi: np.ndarray) -> np.ndarray:
+    """wm_refine_set_roi's table for an (H, W) bool ROI: (H, W + 1) int32, each row's count of ROI
+    samples left of every column."""
+    h, w = roi.shape
+    out = np.zeros((h, w + 1), dtype=np.int32)
+    np.cumsum(roi, axis=1, out=out[:, 1:])
+    return out
 
 
 def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 1.0,

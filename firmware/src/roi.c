@@ -1,0 +1,117 @@
+/* Selective triangulation (dissertation 5.6): a region of interest (ROI) the error measure keeps to.
+ *
+ * The dissertation masks the wavelet details outside the region so that "no refinement takes place in
+ * that region"; the host does that to the details it hands in (wavemesh/roi.py).  This file does the
+ * rest for the refiner, which also refines wherever E(T) > zeta (the candidates of 4.3, the error
+ * bound, the reduction's and the regularisation's tests): with an ROI, E(T) is the largest distance
+ * over the triangle's samples that lie in the ROI, and 0 for a triangle with none.
+ *
+ *     +-----------+            a triangle wholly outside:  E(T) = 0, never refined
+ *     |  . . .    |            wholly inside:              E(T) as without an ROI (tri_error.c)
+ *     |  . ###### |            across the ROI's edge:      the ROI samples alone, and the worst of
+ *     |  . ###### |                                        them is where the error bound splits
+ *     +-----------+
+ *
+ * So the error bound puts its vertices at ROI samples and ends with every ROI sample within zeta of
+ * the mesh (each lies in a triangle that holds it); outside, the mesh keeps what the templates and the
+ * refinement next to the ROI made.  The ROI is a table of row prefix counts, so that a triangle's
+ * share of it costs one subtraction per row. */
+#include "wm_internal.h"
+
+/* The span [*lo, *hi] of the closed triangle on row py (0 when it has none), from the edge functions
+ * E_k(px, py) = A_k px + B_k py + C_k >= 0 (as tri_error.c). */
+static int span(const int64_t A[3], const int64_t B[3], const int64_t C[3], int32_t py, int64_t *lo, int64_t *hi)
+{
+    for (int k = 0; k < 3; k++) {
+        int64_t num = B[k] * py + C[k];
+        if (A[k] > 0) {
+            int64_t l = wm_ceil_div(-num, A[k]);
+            if (l > *lo) *lo = l;
+        } else if (A[k] < 0) {
+            int64_t r = wm_floor_div(num, -A[k]);
+            if (r < *hi) *hi = r;
+        } else if (num < 0) {
+            return 0;
+        }
+    }
+    return *lo <= *hi;
+}
+
+uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3], int32_t *wx, int32_t *wy)
+{
+    const wm_field *f = &r->field;
+    const int32_t *rows = r->roi;
+    int64_t A[3], B[3], C[3], z[3], dS = 0, n_in = 0, n_all = 0;
+    uint64_t vmax = 0;
+    int32_t ymin = y[0], ymax = y[0], xmin = x[0], xmax = x[0], bx = x[0], by = y[0];
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    if (D <= 0) return 0xFFFFFFFFu;
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        A[k] = (int64_t)y[k1] - y[k2];
+        B[k] = (int64_t)x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        z[k] = f->samples[(int64_t)y[k] * f->width + x[k]];
+        dS += A[k] * z[k];
+        if (y[k] < ymin) ymin = y[k];
+        if (y[k] > ymax) ymax = y[k];
+        if (x[k] < xmin) xmin = x[k];
+        if (x[k] > xmax) xmax = x[k];
+    }
+    /* First the share of the ROI: none and all need no scan here. */
+    for (int32_t py = ymin; py <= ymax; py++) {
+        int64_t lo = xmin, hi = xmax;
+        const int32_t *row = rows + (int64_t)py * (f->width + 1);
+        if (!span(A, B, C, py, &lo, &hi)) continue;
+        n_in += row[hi + 1] - row[lo];
+        n_all += hi - lo + 1;
+    }
+    if (n_in == n_all) return wm_tri_error(f, &r->params, x, y, wx, wy);
+    if (n_in > 0) {
+        for (int32_t py = ymin; py <= ymax; py++) {
+            int64_t lo = xmin, hi = xmax, S = 0;
+            const int32_t *row = rows + (int64_t)py * (f->width + 1);
+            const uint16_t *h = f->samples + (int64_t)py * f->width;
+            if (!span(A, B, C, py, &lo, &hi) || row[hi + 1] == row[lo]) continue;
+            for (int k = 0; k < 3; k++) S += (A[k] * lo + B[k] * py + C[k]) * z[k];
+            for (int64_t px = lo; px <= hi; px++, S += dS) {
+                int64_t v = S - D * (int64_t)h[px];
+                uint64_t av = (uint64_t)(v < 0 ? -v : v);
+                if (row[px + 1] != row[px] && av > vmax) {
+                    vmax = av;
+                    bx = (int32_t)px;
+                    by = py;
+                }
+            }
+        }
+    }
+    if (wx) *wx = bx;
+    if (wy) *wy = by;
+    /* E(T)'s rounding of the largest distance, which the worst sample has (0 at a corner). */
+    return vmax ? wm_point_error(f, &r->params, x, y, bx, by) : 0;
+}
+
+int wm_refine_set_roi(wm_refiner *r, const int32_t *rows)
+{
+    wm_mesh *me;
+    int32_t w;
+    if (r == NULL || rows == NULL) return WM_ERR_ARG;
+    if (r->done || r->level != r->field.levels - 1) return WM_ERR_STATE;
+    me = &r->mesh;
+    w = r->field.width;
+    for (int32_t py = 0; py < r->field.height; py++) {
+        const int32_t *row = rows + (int64_t)py * (w + 1);
+        if (row[0] != 0) return WM_ERR_ARG;
+        for (int32_t px = 0; px < w; px++)
+            if (row[px + 1] - row[px] != 0 && row[px + 1] - row[px] != 1) return WM_ERR_ARG;
+    }
+    r->roi = rows;
+    for (int32_t t = 0; t < me->tri_end; t++) {
+        int32_t x[3], y[3], wx, wy;
+        if (me->hv[3 * t] < 0) continue;
+        wm_tri_xy(me, t, x, y);
+        r->err[t] = wm_roi_error(r, x, y, &wx, &wy);
+        r->worst[t] = wy * w + wx;
+    }
+    return WM_OK;
+}
