@@ -24,6 +24,7 @@ import numpy as np
 from wavemesh import __version__, holes
 from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
+from wavemesh.denoise import denoise_heightfield
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
 from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, sidecar_path, to_grid
@@ -167,11 +168,14 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
-               origin: str | None = None, nodata: str | None = None, invalid: float | None = None) -> HeightField:
+               origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
+               denoise: str | None = None) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
-    and --origin (of the file's grid), then --crop and --decimate."""
-    return shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
-                             decimate)
+    and --origin (of the file's grid), then --crop and --decimate, then --denoise (wavemesh.denoise: what
+    every command meshes and measures)."""
+    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
+                           decimate)
+    return hf if denoise is None else denoise_heightfield(hf, denoise)[0]
 
 
 @dataclass

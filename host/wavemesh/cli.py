@@ -14,6 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from wavemesh import __version__, api
+from wavemesh.denoise import METHODS
 from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.haar import WAVELETS
 from wavemesh.native import RefineParams
@@ -72,6 +73,10 @@ def _input_options(p: argparse.ArgumentParser) -> None:
                         "units (default: from the georeference, degrees in metres; else 1 grid step)")
     p.add_argument("--origin", metavar="X,Y",
                    help="map position of sample (0, 0) (default: the georeference's)")
+    p.add_argument("--denoise", choices=METHODS, default=None,
+                   help="de-noise the heights first (5.5): sure (SURE soft thresholding of the wavelet details "
+                        "and the inverse transform), median (a 5 x 5 median filter) or sure+median; the mesh "
+                        "and its errors are then of the de-noised heights (give `check` the same option)")
 
 
 def _mesh_options(p: argparse.ArgumentParser) -> None:
@@ -255,7 +260,8 @@ def _mesh_params(args) -> api.MeshParams:
 
 def _load(args, path: str):
     return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
-                          spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid)
+                          spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid,
+                          denoise=args.denoise)
 
 
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:

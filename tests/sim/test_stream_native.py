@@ -72,6 +72,7 @@ CASES = {
     "ball-levels-lod": ("ball64.npy", ["--levels", "3"], ".obj"),
     "ball-no-simplify": ("ball64.npy", ["--simplify", "off", "--reduce", "off"], ".obj"),
     "box-initial": ("box64.npy", ["--stage", "initial"], ".obj"),
+    "ball-denoise": ("ball64.npy", ["--denoise", "sure+median", "--zeta", "2"], ".obj"),  # the host de-noises
     "lossy-odd-ply": ("lossy.npy", ["--zeta", "0.5", "--levels", "2"], ".ply"),
     "vertical-vertex-k3": ("ball64.npy", ["--metric", "vertical", "--neighbourhood", "vertex", "-k", "3",
                                           "--alpha", "0.8", "--zeta", "2"], ".obj"),
