@@ -71,15 +71,14 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
         for (int32_t px = (int32_t)lo; px <= (int32_t)hi; px++) {
             int bad = invalid_at(f, px, py), corner = 0, rim;
             uint64_t d;
-            if (bad)
-                n_invalid++;
-            else
-                n_valid++;
+            if (bad) n_invalid++;
+            else n_valid++;
             if (D == 1) continue; /* thin: no candidate to split at */
             for (int k = 0; k < 3; k++) corner |= px == x[k] && py == y[k];
             if (corner) continue;
             rim = !bad && on_rim(f, px, py);
-            d = (uint64_t)((int64_t)(3 * px - bx) * (3 * px - bx)) + (uint64_t)((int64_t)(3 * py - by) * (3 * py - by));
+            d = (uint64_t)((int64_t)(3 * px - bx) * (3 * px - bx)) +
+                (uint64_t)((int64_t)(3 * py - by) * (3 * py - by));
             if (rim > best_rim || (rim == best_rim && d < best_d)) {
                 best_rim = rim;
                 best_d = d;
@@ -96,8 +95,7 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
     return WM_COVER_MIXED;
 }
 
-int wm_hole_error(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t *e, int32_t *wx,
-                  int32_t *wy)
+int wm_hole_error(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t *e, int32_t *wx, int32_t *wy)
 {
     int32_t sx = x[0], sy = y[0];
     int c = wm_tri_cover(f, x, y, &sx, &sy);

@@ -194,7 +194,7 @@ static void test_error(void)
     /* 5 x 5 field, zero but for one sample; triangle (0,0) (4,0) (0,4) */
     uint16_t h[25];
     int32_t x[3] = {0, 4, 0}, y[3] = {0, 0, 4}, wx, wy;
-    wm_field f = {5, 5, 1, h, NULL};
+    wm_field f = {5, 5, 1, h, NULL, NULL};
     wm_params p;
     memset(h, 0, sizeof h);
     memset(&p, 0, sizeof p);
@@ -262,7 +262,7 @@ static void test_refine(void)
     static uint16_t h[W * H], sc[W * H];
     static int32_t d[4096];
     int32_t xy[8] = {0, 0, W - 1, 0, 0, H - 1, W - 1, H - 1}, tris[6] = {0, 1, 3, 0, 3, 2};
-    wm_field f = {W, H, M, h, d};
+    wm_field f = {W, H, M, h, d, NULL};
     wm_params p;
     wm_refiner *r = NULL;
     wm_level_stats st;

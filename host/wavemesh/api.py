@@ -744,8 +744,8 @@ def check_file(path: str, hf: HeightField) -> dict:
     if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.holes)
         hc = holes.check(mesh, hf.mask)
         report = {"mesh": path, "valid": hc.valid_mesh, "problems": hc.problems, "vertices": mesh.n_vertices,
-                  "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(), "holes": hc.to_report(),
-                  "ground": g.to_report()}
+                  "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(),
+                  "holes": hc.to_report(), "ground": g.to_report()}
     else:
         verdict = check_mesh(mesh)
         report = {

@@ -64,8 +64,8 @@ def _input_options(p: argparse.ArgumentParser) -> None:
         help="replace non-finite samples (no-data) by the nearest finite sample or by VALUE",
     )
     p.add_argument("--nodata", choices=("error", "hole"), default=None,
-                   help="hole: invalid samples (NaN, the file's no-data value, --invalid) become holes in the "
-                        "mesh instead of filled surface; error (default without --fill): refuse them")
+                   help="hole: invalid samples (NaN, the file's no-data value, --invalid) become holes in "
+                        "the mesh instead of filled surface; error (default without --fill): refuse them")
     p.add_argument("--invalid", type=float, default=None, metavar="VALUE",
                    help="samples equal to VALUE are invalid too (a scanner's 0 or sentinel)")
     p.add_argument("--spacing", metavar="DX[,DY]",

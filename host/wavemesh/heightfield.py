@@ -179,10 +179,9 @@ class HeightField:
             "quantisation_step": float(self.scale),
             "max_quantisation_error": self.max_quantisation_error,
             "filled": int(self.filled),
-            "invalid": int(np.count_nonzero(self.mask)) if self.mask is not None else 0,
             "min": float(np.min(self.values)),
             "max": float(np.max(self.values)),
-        }
+        } | ({"invalid": int(np.count_nonzero(self.mask))} if self.mask is not None else {})
 
 
 # ---------------------------------------------------------------------------
@@ -297,7 +296,7 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
         if fill_mode is None:
             raise InputError(
                 f"{source}: {n_bad} of {values.size} samples are NaN, infinite or no-data; "
-                f"use --fill nearest or --fill VALUE to replace them"
+                f"use --fill nearest or --fill VALUE to replace them, or --nodata hole to leave holes"
             )
         if fill_mode == "nearest":
             values = fill_nearest(values, bad)

@@ -139,28 +139,6 @@ def drop_islands(mesh: Mesh, min_area: float) -> Mesh:
 
 @dataclass
 class HoleCheck:
-    """What check() found: the problems (empty: the mesh passes) and the coverage counts."""
-
-    problems: list[str] = field(default_factory=list)
-    invalid: int = 0  # invalid samples in the grid
-    valid: int = 0  # valid samples
-    covered_valid: int = 0  # valid samples in some triangle
-    over_invalid: int = 0  # triangles covering an invalid sample (0 when the mesh passes)
-    uncovered_inland: int = 0  # valid samples in no triangle with no invalid sample among their 8 neighbours
-    boundary_edges: int = 0  # edges of one triangle, off the rectangle's border
-
-    def to_report(self) -> dict:
-        return {"invalid_samples": self.invalid, "valid_samples": self.valid, "covered_valid": self.covered_valid,
-                "uncovered_valid": self.valid - self.covered_valid, "uncovered_inland": self.uncovered_inland,
-                "triangles_over_invalid": self.over_invalid, "hole_edges": self.boundary_edges}
-
-
-# ---------------------------------------------------------------------------------------------------
-# The check of a mesh with holes
-
-
-@dataclass
-class HoleCheck:
     """What check() found: the problems (empty: the mesh passes) and the counts behind them."""
 
     problems: list[str] = field(default_factory=list)
@@ -168,17 +146,18 @@ class HoleCheck:
     valid: int = 0  # valid samples
     covered_valid: int = 0  # valid samples in some triangle
     over_invalid: int = 0  # triangles covering an invalid sample
-    uncovered_inland: int = 0  # valid samples in no triangle and with no invalid sample among their 8 neighbours
+    uncovered_inland: int = 0  # valid samples in no triangle, no invalid sample among their 8 neighbours
     hole_edges: int = 0  # edges of one triangle, off the rectangle's border
-    stray_edges: int = 0  # of those, the ones with no invalid sample within their length + 2 of their middle
+    stray_edges: int = 0  # of those, the ones with no invalid sample within their length + 2 of the middle
 
     @property
     def valid_mesh(self) -> bool:
         return not self.problems
 
     def to_report(self) -> dict:
-        return {"invalid_samples": self.invalid, "valid_samples": self.valid, "covered_valid": self.covered_valid,
-                "uncovered_valid": self.valid - self.covered_valid, "uncovered_inland": self.uncovered_inland,
+        return {"invalid_samples": self.invalid, "valid_samples": self.valid,
+                "covered_valid": self.covered_valid, "uncovered_valid": self.valid - self.covered_valid,
+                "uncovered_inland": self.uncovered_inland,
                 "triangles_over_invalid": self.over_invalid, "hole_edges": self.hole_edges,
                 "stray_hole_edges": self.stray_edges}
 

@@ -15,7 +15,8 @@ from wavemesh import protocol as P
 HEADER = (Path(__file__).resolve().parents[2] / "firmware" / "include" / "wavemesh.h").read_text()
 C_TYPES = {"int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint64_t": ctypes.c_uint64,
            "const uint16_t *": ctypes.POINTER(ctypes.c_uint16),  # POINTER caches: one class per target
-           "const int32_t *": ctypes.POINTER(ctypes.c_int32)}
+           "const int32_t *": ctypes.POINTER(ctypes.c_int32),
+           "const uint8_t *": ctypes.POINTER(ctypes.c_uint8)}
 
 
 def c_struct(name: str) -> list[tuple[str, object]]:
@@ -27,7 +28,7 @@ def c_struct(name: str) -> list[tuple[str, object]]:
         decl = " ".join(decl.split())
         if not decl:
             continue
-        m = re.match(r"((?:const )?u?int(?:16|32|64)_t)\s*(\*?)\s*(.*)", decl)
+        m = re.match(r"((?:const )?u?int(?:8|16|32|64)_t)\s*(\*?)\s*(.*)", decl)
         ctype = C_TYPES[m.group(1) + (" *" if m.group(2) else "")]
         out += [(n.strip(), ctype) for n in m.group(3).split(",")]
     return out

@@ -98,7 +98,8 @@ int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
     }
     if (initial_only) return wm_job_emit_initial(p, j, &init, heap, (size_t)(init.low - heap), detail);
     {
-        wm_field f = {j->width, j->height, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE};
+        wm_field f = {j->width, j->height, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE,
+                      NULL};
         return wm_job_refine(p, j, &f, &init, heap, main_bytes, detail);
     }
 }

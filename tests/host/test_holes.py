@@ -1,0 +1,222 @@
+"""--nodata hole (issue 20): meshes of range data with invalid samples.
+
+Every mesh is checked twice: by wavemesh's own check (wavemesh.holes.check, also `wavemesh check
+--nodata hole`) and by the independent brute-force check below (lattice points per triangle by their
+bounding boxes, overlaps by separating axes over every pair, distances in floats), written apart from
+holes.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from wavemesh import api, holes
+from wavemesh.cli import main
+from wavemesh.errors import InputError
+from wavemesh.heightfield import from_array
+from wavemesh.mesh import Mesh
+from wavemesh.native import RefineParams
+
+ZETA = 1.0
+
+
+def motorcycle_crop() -> np.ndarray:
+    """A 96 x 72 piece of Middlebury's Motorcycle disparity (scikit-image's copy) with its real dropouts
+    (inf: occluded or unmatched pixels)."""
+    import importlib.metadata
+
+    try:
+        f = next(f for f in importlib.metadata.files("scikit-image") or () if f.name == "motorcycle_disp.npz")
+    except (importlib.metadata.PackageNotFoundError, StopIteration):
+        pytest.skip("scikit-image's motorcycle_disp.npz is not installed")
+    d = np.load(f.locate())["arr_0"].astype(np.float64)
+    return d[180:252, 300:396].copy()
+
+
+def shadowed_ball(n: int = 48) -> np.ndarray:
+    """The ball of the synthetic sets with a scanner's shadow: the samples a ray from the left at a low
+    angle does not reach behind the ball are NaN."""
+    from wavemesh.synth import make
+
+    z = make("ball", n).astype(np.float64)
+    seen = np.maximum.accumulate(z + 0.6 * np.arange(n)[None, :], axis=1)  # the ray, falling 0.6 a step
+    shadow = z + 0.6 * np.arange(n)[None, :] < seen - 1e-9
+    z[shadow] = np.nan
+    return z
+
+
+# ---------------------------------------------------------------------------------------------------
+# The independent check
+
+
+def lattice_points(p) -> np.ndarray:
+    """The grid points of the closed counter-clockwise triangle p (3 x 2), from its bounding box."""
+    (x0, y0), (x1, y1), (x2, y2) = p
+    X, Y = np.meshgrid(np.arange(min(x0, x1, x2), max(x0, x1, x2) + 1),
+                       np.arange(min(y0, y1, y2), max(y0, y1, y2) + 1))
+    ins = np.ones(X.shape, dtype=bool)
+    for (ax, ay), (bx, by) in (((x0, y0), (x1, y1)), ((x1, y1), (x2, y2)), ((x2, y2), (x0, y0))):
+        ins &= (bx - ax) * (Y - ay) - (by - ay) * (X - ax) >= 0
+    return np.column_stack([X[ins], Y[ins]])
+
+
+def overlapping_pairs(mesh: Mesh) -> int:
+    """Pairs of triangles whose interiors meet: no edge of either has the other on its outer side."""
+    P = mesh.xy[mesh.tris]  # (T, 3, 2)
+    T = len(P)
+    a, b = np.triu_indices(T, 1)
+    sep = np.zeros(len(a), dtype=bool)
+    for one, two in ((a, b), (b, a)):
+        for k in range(3):
+            s, e = P[one, k], P[one, (k + 1) % 3]
+            side = ((e[:, 0] - s[:, 0])[:, None] * (P[two, :, 1] - s[:, 1][:, None])
+                    - (e[:, 1] - s[:, 1])[:, None] * (P[two, :, 0] - s[:, 0][:, None]))
+            sep |= (side <= 0).all(axis=1)
+    return int((~sep).sum())
+
+
+def independent_check(mesh: Mesh, invalid: np.ndarray, heights: np.ndarray, zeta: float) -> dict:
+    H, W = invalid.shape
+    covered = np.zeros((H, W), dtype=int)
+    worst = 0.0
+    for tri in mesh.tris:
+        p = mesh.xy[tri]
+        d = (p[1, 0] - p[0, 0]) * (p[2, 1] - p[0, 1]) - (p[2, 0] - p[0, 0]) * (p[1, 1] - p[0, 1])
+        assert d > 0, "a triangle is not counter-clockwise"
+        pts = lattice_points(p)
+        assert not invalid[pts[:, 1], pts[:, 0]].any(), f"triangle {p.tolist()} covers an invalid sample"
+        covered[pts[:, 1], pts[:, 0]] += 1
+        z = heights[p[:, 1], p[:, 0]]
+        # the plane z = a x + b y + c through the corners; the normal distance of every covered sample
+        A = np.column_stack([p, np.ones(3)])
+        a, b, c = np.linalg.solve(A, z)
+        plane = a * pts[:, 0] + b * pts[:, 1] + c
+        dist = np.abs(heights[pts[:, 1], pts[:, 0]] - plane) / np.sqrt(1 + a * a + b * b)
+        worst = max(worst, float(dist.max()))
+    assert worst <= zeta * (1 + 1e-9), f"E_max {worst} over the valid samples > zeta {zeta}"
+    assert overlapping_pairs(mesh) == 0, "triangles overlap"
+    valid = ~invalid
+    uncovered = valid & (covered == 0)
+    near = np.zeros_like(invalid)  # 8-neighbours of invalid samples
+    pad = np.pad(invalid, 1)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            near |= pad[dy:dy + H, dx:dx + W]
+    assert not (uncovered & ~near).any(), "a valid sample away from the holes is not covered"
+    return {"uncovered_valid": int(uncovered.sum()), "valid": int(valid.sum()), "e_max": worst}
+
+
+def run(z: np.ndarray, **kw) -> api.MeshResult:
+    hf = from_array(z, holes=True, **kw)
+    return api.mesh(hf, api.MeshParams(refine=RefineParams(zeta=ZETA)))
+
+
+# ---------------------------------------------------------------------------------------------------
+
+
+def test_pack_is_the_refiners_bit_order():
+    rng = np.random.default_rng(1)
+    m = rng.random((7, 13)) < 0.3
+    data = holes.pack(m)
+    assert len(data) == (7 * 13 + 7) // 8
+    i = 7 * 13 - 1  # sample (12, 6): bit i % 8 of byte i // 8
+    assert bool(data[i // 8] >> (i % 8) & 1) == m[6, 12]
+    assert np.array_equal(holes.unpack(data, 13, 7), m)
+
+
+def test_real_dropouts_are_holes():
+    z = motorcycle_crop()
+    invalid = ~np.isfinite(z)
+    assert 50 < invalid.sum() < z.size // 2  # the crop has real dropouts
+    r = run(z)
+    assert r.bound_met
+    assert r.report["holes"]["triangles_over_invalid"] == 0
+    got = independent_check(r.mesh, invalid, r.heightfield.values, ZETA)
+    assert got["uncovered_valid"] == r.report["holes"]["uncovered_valid"]
+    assert got["uncovered_valid"] < 0.02 * got["valid"]
+    assert got["e_max"] <= ZETA
+
+
+def test_scanner_shadow_is_a_hole():
+    # (how many triangles holes save against --fill nearest is measured in make bench-holes)
+    z = shadowed_ball()
+    hole = run(z)
+    independent_check(hole.mesh, ~np.isfinite(z), hole.heightfield.values, ZETA)
+
+
+def test_invalid_value_marks_a_sentinel():
+    z = shadowed_ball()
+    z[~np.isfinite(z)] = 0.0  # a scanner's "no return"
+    z[0, 0] = 0.0
+    r = run(z, invalid=0.0)
+    independent_check(r.mesh, z == 0.0, r.heightfield.values, ZETA)
+
+
+def test_check_finds_what_is_wrong():
+    z = shadowed_ball()
+    invalid = ~np.isfinite(z)
+    good = run(z).mesh
+    assert holes.check(good, invalid).valid_mesh
+    # the filled mesh covers invalid samples
+    filled = api.mesh(from_array(z, fill="nearest"), api.MeshParams(refine=RefineParams(zeta=ZETA))).mesh
+    c = holes.check(filled, invalid)
+    assert c.over_invalid > 0 and not c.valid_mesh
+    # a hole where the input has none: drop the triangle farthest from every invalid sample
+    from scipy import ndimage
+
+    dist = ndimage.distance_transform_edt(~invalid)
+    centre = good.xy[good.tris].mean(axis=1)
+    far = int(np.argmax(dist[centre[:, 1].astype(int), centre[:, 0].astype(int)]))
+    gap = Mesh(good.width, good.height, good.xy, np.delete(good.tris, far, axis=0))
+    assert any("invalid sample" in p or "no triangle" in p for p in holes.check(gap, invalid).problems)
+    # an overlap: a triangle twice, shifted by one column
+    t = good.tris[far]
+    xy = np.vstack([good.xy, good.xy[t] + [1, 0]])
+    n = len(good.xy)
+    over = Mesh(good.width, good.height, xy, np.vstack([good.tris, [[n, n + 1, n + 2]]]))
+    if (xy[n:, 0] < good.width).all():
+        assert not holes.check(over, invalid).valid_mesh
+
+
+def test_cli_mesh_check_min_area(tmp_path, capsys):
+    z = motorcycle_crop()
+    src = tmp_path / "disp.npy"
+    np.save(src, z)
+    out = tmp_path / "m.obj"
+    assert main(["mesh", str(src), "-o", str(out), "--nodata", "hole", "-q"]) == 0
+    assert main(["check", str(out), "--against", str(src), "--nodata", "hole"]) == 0
+    assert "of the valid samples" in capsys.readouterr().out
+    # the same file against the filled input is no triangulation of the rectangle
+    assert main(["check", str(out), "--against", str(src), "--fill", "nearest", "-q"]) == 1
+    small = tmp_path / "s.obj"
+    assert main(["mesh", str(src), "-o", str(small), "--nodata", "hole", "--min-area", "40", "-q"]) == 0
+    from wavemesh.meshio import read_mesh
+
+    big, _ = read_mesh(str(out), 96, 72)
+    kept, _ = read_mesh(str(small), 96, 72)
+    assert kept.n_triangles < big.n_triangles
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["--fill", "nearest", "--nodata", "hole"], "both say"),
+    (["--min-area", "5", "--fill", "nearest"], "--min-area"),
+    (["--nodata", "hole", "--invalid", "nan"], "--invalid"),
+])
+def test_bad_options(tmp_path, capsys, argv, what):
+    z = shadowed_ball(16)
+    src = tmp_path / "z.npy"
+    np.save(src, z)
+    assert main(["mesh", str(src), "-o", str(tmp_path / "x.obj"), *argv]) != 0
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and what in err
+    assert not (tmp_path / "x.obj").exists()
+
+
+def test_all_invalid_and_crop():
+    with pytest.raises(InputError, match="invalid"):
+        from_array(np.full((4, 4), np.nan), holes=True)
+    z = shadowed_ball()
+    hf = api.load_input  # crop keeps the mask of the samples it takes
+    full = from_array(z, holes=True)
+    part = api.shape_heightfield(full, crop="10,5,30,30")
+    assert np.array_equal(part.mask, full.mask[5:35, 10:40])
+    assert hf is not None
