@@ -164,6 +164,20 @@ def _shape_options(p: argparse.ArgumentParser) -> None:
                    help="use every N-th sample of every N-th row (after --crop)")
 
 
+def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
+    """Seamless tiles (wavemesh.tiles, docs/tiles.md): `mesh` and `stream` of an input of any size."""
+    p.add_argument("--tile", type=int, metavar="N",
+                   help="mesh in tiles of at most N x N samples with shared, decided borders, stitched into "
+                        "one mesh (`stream` with several --port: default the devices' capacity)")
+    p.add_argument("--tiles-dir", metavar="DIR",
+                   help="with tiles: also each tile's mesh and index.json into DIR")
+    if local:
+        p.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="with --tile: tiles in N local processes at once (default: one per CPU)")
+        p.add_argument("--scheduler", metavar="ADDRESS",
+                       help="with --tile: run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="wavemesh",
@@ -181,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
         "checked (a proper triangulation, within zeta when the bound is met; exit status 1 if not); "
         "the coarser levels only with --check-levels, --report or --lod."))
     _mesh_options(p)
+    _tile_options(p, local=True)
 
     p = sub.add_parser("stream", help="triangulate a height field on a device (board or simulated board)",
                        description=(
@@ -191,8 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-triangles the budget is the device's triangle capacity less one. Exit status 3 when the "
         "budget stopped the run above zeta."))
     _mesh_options(p)
-    p.add_argument("--port", "-p", required=True, metavar="URL",
-                   help="the device: /dev/ttyUSB1, socket://127.0.0.1:7720 (make sim), rfc2217://..., loop://")
+    _tile_options(p, local=False)
+    p.add_argument("--port", "-p", required=True, action="append", metavar="URL",
+                   help="the device: /dev/ttyUSB1, socket://127.0.0.1:7720 (make sim), rfc2217://..., "
+                        "loop://; repeated: tiles on every device at once")
     p.add_argument("--baud", "-b", type=int, default=115200,
                    help="baud rate of a serial port (default 115200, the board's; a socket ignores it)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
@@ -287,6 +304,10 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 
 
 def mesh_command(args) -> int:
+    if args.tile is not None or args.scheduler or args.tiles_dir:
+        from wavemesh import tiles
+
+        return tiles.command(args, _mesh_params(args))
     api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
     params = _mesh_params(args)
     result = api.mesh(_load(args, args.input), params)
@@ -311,6 +332,11 @@ def mesh_command(args) -> int:
 def stream_command(args) -> int:
     from wavemesh.stream import DEFAULT_TIMEOUTS
 
+    if args.tile is not None or args.tiles_dir or len(args.port) > 1:
+        from wavemesh import tiles
+
+        return tiles.command(args, _mesh_params(args), ports=args.port)
+    args.port = args.port[0]
     api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
     api.check_port(args.port)
     params = _mesh_params(args)

@@ -1,0 +1,206 @@
+"""Seamless tiles (wavemesh.tiles): the stitched mesh of a multi-tile input is proper and within zeta in
+both metrics, `wavemesh check` says so; the decided borders hold every side's samples within zeta; the
+conforming of a tile's border keeps a proper mesh; a single tile is `wavemesh mesh`'s mesh; the Dask path
+(a LocalCluster of 2 worker processes) writes the same bytes as the local paths; inputs are read window
+by window; bad options end in one error line."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from wavemesh import api, tiles
+from wavemesh.check import check_mesh, mesh_errors
+from wavemesh.harness import jacksboro, run_cli
+from wavemesh.native import RefineParams, fixed_params
+from wavemesh.synth import make
+
+
+def terrain(w: int, h: int, seed: int = 7) -> np.ndarray:
+    """A rough seeded surface (integer heights 0..~2000): sums of random waves and a little noise."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    z = np.zeros((h, w))
+    for _ in range(24):
+        f = rng.uniform(0.005, 0.12)
+        th = rng.uniform(0, 2 * np.pi)
+        phase = f * (x * np.cos(th) + y * np.sin(th)) + rng.uniform(0, 6)
+        z += rng.uniform(20, 200) / (1 + 20 * f) * np.sin(phase)
+    return np.rint(z - z.min() + rng.normal(0, 1.5, z.shape).clip(-4, 4) + 10)
+
+
+@pytest.fixture(scope="module")
+def dem(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tiles")
+    path = d / "t.npy"
+    np.save(path, terrain(203, 170))
+    return path
+
+
+@pytest.mark.parametrize("metric,extra", [("vertical", ()), ("normal", ("--spacing", "4"))])
+def test_stitched_mesh_is_proper_and_within_zeta(dem, tmp_path, metric, extra):
+    out = tmp_path / "m.obj"
+    rc, stdout, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64", "--zeta", "3", "--metric",
+                              metric, "--workers", "1", "--tiles-dir", str(tmp_path / "td"), *extra)
+    assert rc == 0, err
+    assert "4 x 3 tiles" in stdout
+    rc, stdout, err = run_cli("check", str(out), "--against", str(dem), *extra)
+    assert rc == 0 and "a proper triangulation" in stdout, stdout + err
+    hf = api.load_input(str(dem), spacing=extra[1] if extra else None)
+    report = api.check_file(str(out), hf)
+    assert report["valid"] and report["errors"][f"e_max_{metric}"] <= 3 * (1 + 1e-9)
+    # each tile's file fits the whole grid as it is; the index names them
+    import json
+
+    index = json.loads((tmp_path / "td" / "index.json").read_text())
+    assert len(index["tiles"]) == 12 and sum(t["triangles"] for t in index["tiles"]) == report["triangles"]
+
+
+@pytest.mark.parametrize("metric", ["vertical", "normal"])
+def test_jacksboro_tiles(tmp_path, metric):
+    """A real DEM in ground units (about 10 m cells), 4 x 3 tiles: proper, within zeta, tiles' shared
+    border vertices merged (fewer vertices than the tiles' sum)."""
+    src = tiles.open_source(jacksboro(), key="elevation")
+    params = api.MeshParams(refine=RefineParams(zeta=2.0, metric=metric))
+    plan = tiles.plan_tiles(src, params, 128)
+    results = tiles.run_tiles(plan, workers=1)
+    tiled = tiles.stitch(plan, results)
+    hf = api.load_input(jacksboro(), key="elevation")
+    assert check_mesh(tiled.mesh).valid
+    e = mesh_errors(tiled.mesh, hf.values, rms=False, spacing=api.ground(hf).spacing)
+    assert getattr(e, f"e_max_{metric}") <= 2.0 * (1 + 1e-9)
+    assert np.array_equal(tiled.z, tiled.mesh.z(hf.values))
+    assert tiled.mesh.n_vertices < sum(len(r.xy) for r in results)
+
+
+@pytest.mark.parametrize("metric", ["vertical", "normal"])
+def test_decided_border_within_zeta(metric):
+    """Every sample of a side lies within zeta of the segment between its kept neighbours, measured
+    independently in floats (the vertical distance; the distance to the 3-D segment)."""
+    rng = np.random.default_rng(3)
+    z = np.cumsum(rng.integers(-6, 7, 700)) + 30000
+    scale, spacing, zeta = 0.25, (3.0, 3.0), 2.0
+    fp = fixed_params(RefineParams(zeta=zeta, metric=metric), scale, None, spacing)
+    kept = tiles.simplify_profile(z, fp, 0, metric)
+    assert kept[0] == 0 and kept[-1] == len(z) - 1 and list(kept) == sorted(set(kept))
+    worst = 0.0
+    for a, b in zip(kept, kept[1:], strict=False):
+        for i in range(a + 1, b):
+            dz = scale * (z[i] - (z[a] * (b - i) + z[b] * (i - a)) / (b - a))
+            if metric == "normal":
+                slope = scale * (z[b] - z[a]) / ((b - a) * spacing[0])
+                dz /= math.sqrt(1 + slope * slope)
+            worst = max(worst, abs(dz))
+    assert worst <= zeta
+    assert len(kept) < len(z) / 3  # and it simplifies
+    # one sample off by more than zeta is kept
+    flat = np.zeros(50, dtype=np.int64)
+    flat[20] = 100
+    assert 20 in tiles.simplify_profile(flat, fp, 0, metric)
+
+
+def test_conform_keeps_a_proper_mesh():
+    """Random decided borders forced on a real tile's mesh: always proper, with exactly those on the sides."""
+    hf = api.load_input(jacksboro(), key="elevation", crop="0,0,97,81")
+    mesh = api.refine(hf, params=RefineParams(zeta=1.0)).mesh
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        sides = {}
+        for side, n in (("top", 97), ("bottom", 97), ("left", 81), ("right", 81)):
+            if rng.random() < 0.7:
+                inner = rng.choice(np.arange(1, n - 1), size=int(rng.integers(0, 12)), replace=False)
+                sides[side] = tuple(sorted({0, n - 1, *inner.tolist()}))
+        out = tiles.conform(mesh, sides)
+        assert check_mesh(out).valid
+        got = tiles.border_of(out)
+        for side, want in sides.items():
+            assert got[side] == want
+        for side in set(tiles.SIDES) - set(sides):  # an undecided side keeps its vertices
+            assert set(got[side]) >= set(tiles.border_of(mesh)[side]) - {0}
+
+
+def test_one_tile_is_the_untiled_mesh(tmp_path):
+    hf = api.load_input(jacksboro(), key="elevation", crop="100,80,200,150")
+    untiled = api.mesh(hf, api.MeshParams(refine=RefineParams(zeta=2.0)))
+    src = tiles.open_source(jacksboro(), key="elevation", crop="100,80,200,150")
+    tiled = tiles.mesh_tiled(src, api.MeshParams(refine=RefineParams(zeta=2.0)), 1024, workers=1)
+    assert tiled.mesh.same_as(untiled.mesh)
+
+
+def test_dask_equals_local(dem, tmp_path):
+    """The same tiles on a Dask LocalCluster of 2 worker processes, on the local pool of 2 processes and in
+    this process: the same files, byte for byte."""
+    distributed = pytest.importorskip("distributed")
+    src = tiles.open_source(str(dem))
+    params = api.MeshParams(refine=RefineParams(zeta=3.0, metric="vertical"))
+    plan = tiles.plan_tiles(src, params, 64)
+
+    def files(results, name):
+        out = tmp_path / name
+        out.mkdir()
+        tiled = tiles.stitch(plan, results)
+        tiles.write_tiled(tiled, plan, str(out / "m.obj"), tiles_dir=str(out / "t"))
+        return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*.obj"))}
+
+    here = files(tiles.run_tiles(plan, workers=1), "here")
+    pool = files(tiles.run_tiles(plan, workers=2), "pool")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, distributed.Client(c) as client:
+        dask = files(tiles.run_tiles(plan, scheduler=client), "dask")
+        assert len(client.scheduler_info()["workers"]) == 2
+    assert len(here) == 13
+    assert here == pool == dask
+
+
+def test_lazy_sources_read_the_same(dem, tmp_path):
+    """.npy through a memmap, a GeoTIFF through rasterio windows, --crop and --decimate: the windows are the
+    whole-file reader's samples; a float input is quantised as the whole grid is."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    a = np.load(dem)
+    tif = tmp_path / "t.tif"
+    with rasterio.open(tif, "w", driver="GTiff", width=a.shape[1], height=a.shape[0], count=1,
+                       dtype="float64", crs="EPSG:32614", transform=from_origin(500000, 4000000, 5, 5),
+                       tiled=True, blockxsize=64, blockysize=64) as ds:
+        ds.write(a + 0.25, 1)
+    for path, kw in ((str(dem), {}), (str(tif), {}), (str(dem), {"crop": "5,7,150,120", "decimate": 2})):
+        src = tiles.open_source(path, **kw)
+        assert src.kind in ("npy", "raster")
+        hf = api.load_input(path, **kw)
+        assert (src.width, src.height) == (hf.width, hf.height)
+        assert np.array_equal(src.read(3, 4, 40, 30), hf.values[4:34, 3:43])
+        quant = tiles.scan(src)
+        assert (quant.scale, quant.offset) == (hf.scale, hf.offset)
+        assert np.array_equal(quant.samples(hf.values), hf.samples)
+    src = tiles.open_source(str(tif))
+    assert api.ground(src.grid()).spacing == (5.0, 5.0)
+
+
+def test_float_input_within_zeta_on_the_input(tmp_path):
+    """Lossy quantisation (float heights over a range wider than 16 bits): one zeta on the samples for every
+    tile, the vertical bound on the input heights."""
+    v = make("f3", 150) * 1000.0 + 0.123
+    path = tmp_path / "f.npy"
+    np.save(path, v)
+    src = tiles.open_source(str(path))
+    tiled = tiles.mesh_tiled(src, api.MeshParams(refine=RefineParams(zeta=0.5, metric="vertical")), 64,
+                             workers=1)
+    assert check_mesh(tiled.mesh).valid
+    assert mesh_errors(tiled.mesh, v, rms=False).e_max_vertical <= 0.5 * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("args,expect", [
+    (("--tile", "4"), "--tile 4 is too small"),
+    (("--tile", "64", "--max-triangles", "100"), "not with --tile"),
+    (("--tile", "64", "--bound", "off"), "--tile needs the error bound"),
+    (("--tile", "64", "--scheduler", "tcp://127.0.0.1:9"), "no Dask scheduler answers"),
+    (("--tile", "64", "--workers", "0"), "--workers 0 is out of range"),
+])
+def test_bad_options(dem, tmp_path, monkeypatch, args, expect):
+    monkeypatch.setattr(tiles, "DASK_CONNECT_S", 1)
+    out = tmp_path / "m.obj"
+    rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
+    assert rc != 0 and expect in err and err.startswith("error:"), err
+    assert not out.exists()
