@@ -157,6 +157,7 @@ demo: $(SETUP_STAMP) gen
 
 docs: $(SETUP_STAMP)
 	$(VPY) tools/make_docs.py
+	$(VPY) tools/make_selective_doc.py
 
 bench: $(SETUP_STAMP) gen
 	$(VPY) bench/run.py

@@ -178,3 +178,17 @@ def test_cli(tmp_path):
     rc, out, err = run_cli("stream", str(tmp_path / "t.npy"), "-o", str(tmp_path / "u.obj"), "--roi",
                            "0,0,5,5", "--port", "socket://127.0.0.1:9")  # refused before any port is opened
     assert rc == 2 and "--roi" in err and "host only" in err
+
+
+def test_doc_is_current():
+    """docs/selective.md (ROI and de-noising) is what tools/make_selective_doc.py writes (`make docs`)."""
+    import importlib.util
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    spec = importlib.util.spec_from_file_location("doc", root / "tools" / "make_selective_doc.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert (root / "docs" / "selective.md").read_text() == mod.markdown(), "stale: run `make docs`"
+    for picture in ("selective-left.png", "selective-right.png", "denoise-noisy.png", "denoise-sure.png"):
+        assert (root / "docs" / picture).exists(), "run `make docs`"
