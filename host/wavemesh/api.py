@@ -550,6 +550,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     params = params or MeshParams()
     p = params.refine
     p.check()
+    if hf.mask is not None:  # the protocol carries no validity mask yet (wavemesh.holes)
+        raise InputError("--nodata hole: no device takes a validity mask yet",
+                         hint="use `wavemesh mesh --nodata hole`, or stream with --fill nearest")
     if params.roi is not None:  # no device takes an ROI (wavemesh.roi): refused before the port is opened
         raise InputError("--roi: selective triangulation runs on the host only; no device takes a region of "
                          "interest", hint="use `wavemesh mesh --roi ...`, or stream without --roi")
