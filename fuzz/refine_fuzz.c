@@ -270,6 +270,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     f.levels = levels;
     f.samples = hs;
     f.details = details;
+    f.mask = NULL; /* no holes */
     {
         size_t bytes = wm_refine_bound(w, h, cap);
         if (bytes == 0) FAIL("wm_refine_bound(%d, %d, %d) overflows", w, h, cap);

@@ -56,6 +56,7 @@ int main(int argc, char **argv)
     fclose(in);
     fld.samples = samples;
     fld.details = details;
+    fld.mask = NULL; /* no holes */
     bytes = wm_refine_bound(fld.width, fld.height, cap);
     mem = malloc(bytes ? bytes : 1);
     rc = wm_refine_init(&r, mem, bytes, &fld, &p, xy, nv, tris, nt, cap);

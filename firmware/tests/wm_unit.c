@@ -500,7 +500,7 @@ static void test_reduce_plane(void)
             tris[k++] = a, tris[k++] = d, tris[k++] = c;
         }
     CHECK(wm_haar(z, 17, 17, 2, det, (uint16_t *)scratch) == WM_OK);
-    f.width = f.height = 17, f.levels = 2, f.samples = z, f.details = det;
+    f.width = f.height = 17, f.levels = 2, f.samples = z, f.details = det, f.mask = NULL;
     memset(&p, 0, sizeof p);
     p.metric = WM_METRIC_NORMAL, p.iterations = 1, p.scale_m = 32768, p.scale_e = 15;
     p.delta_p = 58982, p.alpha = 39322, p.delta_v = 2u << 16, p.delta_lambda = 655, p.delta_c = 64225;
