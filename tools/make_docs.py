@@ -198,8 +198,11 @@ def table_3_3() -> list[str]:
         "## Table 3.3: a wider wavelet",
         "",
         "f4 and f5 decomposed with the spline wavelet (`--wavelet spline`, docs/model.md) beside Haar",
-        "(above) and the paper's Table 3.3, which used the linear B-spline wavelet (not built here: the text",
-        "does not give its filters).  Initial triangulation, M = 4, the default tau:",
+        "(above) and the paper's Table 3.3, which used the linear B-spline wavelet: by 3.3.4 (\"a linear",
+        "spline wavelet with 4 vanishing moment, whose scaling function is the 1st B-spline\", Fig. 3.5(a))",
+        "the biorthogonal spline wavelet (2, 4), MATLAB's bior2.4, whose analysis wavelet is a second",
+        "difference (high-pass [1, -2, 1] / 4), not the slope the labeller reads in d1 and d2 (eq. 3.24):",
+        "not built here.  Initial triangulation, M = 4, the default tau:",
         "",
         "| image | wavelet | V | T | E_max | E_total | E_mean | paper (B-spline) V | T | E_max | E_total "
         "| E_mean |",
