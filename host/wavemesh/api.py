@@ -270,7 +270,8 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
         require_proper(lv.mesh, f"the refiner's mesh at level {lv.level}")
-    hole_check = drop_holes(out.levels, hf, min_area)
+    hole_check = drop_holes(out.levels, hf, min_area,
+                            native.error_within(hf.samples, out.params) if hf.mask is not None else None)
     rjob = RefineJob(job, params, zeta, out, seconds, roi=roi, holes=hole_check)
     rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms, spacing=spacing)
     if roi is not None:
@@ -281,10 +282,12 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     return rjob
 
 
-def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0) -> holes.HoleCheck | None:
+def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None) -> holes.HoleCheck | None:
     """With holes (hf.mask): every level's mesh less the triangles over invalid samples, the final one
-    also less the pieces under ``min_area`` and checked (wavemesh.holes: the refiner's full meshes were
-    proper triangulations of the rectangle); MeshInvalid when it is not a mesh of the valid samples."""
+    also less the vertices on straight rims that ``within`` (native.error_within) lets go
+    (holes.simplify_rims) and the pieces under ``min_area``, and checked (wavemesh.holes: the refiner's
+    full meshes were proper triangulations of the rectangle); MeshInvalid when it is not a mesh of the
+    valid samples."""
     if hf.mask is None:
         if min_area > 0:
             raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
@@ -292,6 +295,8 @@ def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0) -> holes.Ho
     for lv in levels:
         lv.mesh = holes.drop(lv.mesh, hf.mask)
     final = levels[-1]
+    if within is not None:
+        final.mesh = holes.simplify_rims(final.mesh, within)
     final.mesh = holes.drop_islands(final.mesh, min_area)
     verdict = holes.check(final.mesh, hf.mask)
     if final.stats["over"] == 0 and min_area <= 0 and not verdict.valid_mesh:

@@ -133,6 +133,90 @@ def drop_islands(mesh: Mesh, min_area: float) -> Mesh:
     return compact(mesh.width, mesh.height, xy, t[keep])
 
 
+def _orient(a, b, c) -> int:
+    return (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
+
+
+def _ear_clip(pts: list) -> list | None:
+    """Triangles (index triples into ``pts``) of the simple counter-clockwise polygon ``pts``: the first
+    strictly convex corner whose closed triangle holds no other corner is cut, again and again; None when
+    no such corner is left."""
+    idx = list(range(len(pts)))
+    out = []
+    while len(idx) > 3:
+        n = len(idx)
+        for k in range(n):
+            i, j, m = idx[k - 1], idx[k], idx[(k + 1) % n]
+            if _orient(pts[i], pts[j], pts[m]) <= 0:
+                continue
+            if any(_orient(pts[i], pts[j], pts[o]) >= 0 and _orient(pts[j], pts[m], pts[o]) >= 0
+                   and _orient(pts[m], pts[i], pts[o]) >= 0 for o in idx if o not in (i, j, m)):
+                continue
+            out.append((i, j, m))
+            del idx[k]
+            break
+        else:
+            return None
+    if _orient(pts[idx[0]], pts[idx[1]], pts[idx[2]]) <= 0:
+        return None
+    return out + [tuple(idx)]
+
+
+def simplify_rims(mesh: Mesh, within) -> Mesh:
+    """The mesh less every vertex that lies on the straight border between its two border neighbours
+    (a hole's rim, or the rectangle's side) and whose triangles re-triangulate (ear clipping) into
+    triangles ``within(x, y)`` accepts: the covered region stays the same, so every new triangle covers
+    only valid samples.  The refiner cannot remove these vertices itself: on its full triangulation the
+    triangle across the rim would cover valid and invalid samples.  Vertices in slot order, passes until
+    nothing changes (deterministic: the native and the device path give the same mesh)."""
+    xy = [tuple(map(int, p)) for p in mesh.xy]
+    tris = {k: tuple(map(int, t)) for k, t in enumerate(mesh.tris)}
+    around: dict[int, set] = {}
+    for k, t in tris.items():
+        for v in t:
+            around.setdefault(v, set()).add(k)
+    nxt = len(tris)
+    changed = True
+    while changed:
+        changed = False
+        for v in sorted(around):
+            fan = around.get(v)
+            if not fan:
+                continue
+            step = {}  # p -> q for each triangle (v, p, q), counter-clockwise around v
+            for k in fan:
+                t = tris[k]
+                r = t.index(v)
+                step[t[(r + 1) % 3]] = t[(r + 2) % 3]
+            starts = set(step) - set(step.values())
+            if len(starts) != 1:
+                continue  # v is inside the mesh, or where two pieces touch
+            ring = [starts.pop()]
+            while ring[-1] in step and len(ring) <= len(fan):
+                ring.append(step[ring[-1]])
+            a, b = xy[ring[0]], xy[ring[-1]]
+            if len(ring) != len(fan) + 1 or _orient(a, xy[v], b) != 0:
+                continue
+            pts = [xy[u] for u in ring]
+            cut = _ear_clip(pts)
+            if cut is None or not all(within([pts[i][0] for i in c], [pts[i][1] for i in c]) for c in cut):
+                continue
+            for k in fan:
+                for u in tris.pop(k):
+                    if u != v:
+                        around[u].discard(k)
+            del around[v]
+            for c in cut:
+                t = tuple(ring[i] for i in c)
+                tris[nxt] = t
+                for u in t:
+                    around[u].add(nxt)
+                nxt += 1
+            changed = True
+    kept = np.array([tris[k] for k in sorted(tris)], dtype=np.int64)
+    return compact(mesh.width, mesh.height, mesh.xy, kept)
+
+
 # ---------------------------------------------------------------------------------------------------
 # The check of a mesh with holes
 

@@ -456,6 +456,23 @@ def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 
     return q / 65536 * scale
 
 
+def error_within(samples: np.ndarray, fp: Params):
+    """A test ``within(x, y)``: the library's E(T) of the triangle (counter-clockwise corner columns x and
+    rows y) with the run's fixed-point parameters ``fp`` is at most its zeta (holes.simplify_rims)."""
+    lib = load()
+    samples = np.ascontiguousarray(samples, dtype=np.uint16)
+    height, width = samples.shape
+    fld = Field(width, height, 1, _ptr(samples, ctypes.c_uint16), None)
+
+    def within(x, y) -> bool:
+        xs = (ctypes.c_int32 * 3)(*x)
+        ys = (ctypes.c_int32 * 3)(*y)
+        return lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, None, None) <= fp.zeta
+
+    within.samples = samples  # kept alive with the test
+    return within
+
+
 def haar_details(samples: np.ndarray, levels: int, wavelet: str = "haar") -> np.ndarray:
     """The C filter bank's details (the layout of details_array): wm_haar, or wm_spline for the spline
     wavelet (the native device's filter banks), for tests."""
