@@ -74,9 +74,10 @@ def _input_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--origin", metavar="X,Y",
                    help="map position of sample (0, 0) (default: the georeference's)")
     p.add_argument("--denoise", choices=METHODS, default=None,
-                   help="de-noise the heights first (5.5): sure (SURE soft thresholding of the wavelet details "
-                        "and the inverse transform), median (a 5 x 5 median filter) or sure+median; the mesh "
-                        "and its errors are then of the de-noised heights (give `check` the same option)")
+                   help="de-noise the heights first (5.5): sure (SURE soft thresholding of the wavelet "
+                        "details and the inverse transform), median (a 5 x 5 median filter) or sure+median; "
+                        "the mesh and its errors are then of the de-noised heights (give `check` the same "
+                        "option)")
 
 
 def _mesh_options(p: argparse.ArgumentParser) -> None:
