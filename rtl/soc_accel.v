@@ -1,15 +1,19 @@
 /*
  * wavemesh: the SoC's FPGA stage, the filter bank and the template stage between the memories
  *
- *   HEIGHT --reader--> haar_bank --records--> fork --writer--> COEF  (d1 d2 d3 of every level)
+ *   HEIGHT --stream--> haar_bank --records--> fork --writer--> COEF  (d1 d2 d3 of every level)
  *                                                \--> tlut_stage --block_end beats--> TOUT
  *
- * START (ACCEL.CTRL) runs one frame: the reader streams the W H samples of the height memory (two
- * per 32-bit word, one per clock) into haar_bank; every record {d3, d2, d1, a} of levels 1..M is
- * held in a one-entry fork register until the coefficient writer has stored its three details
- * (three clocks) and tlut_stage has taken it.  tlut_stage keeps the records of level M and emits
- * one beat per triangle; the beat that ends a block (tuser bit 44) is stored as the block's entry
- * in TOUT, every other beat is dropped (the firmware expands the block's template itself, with the
+ * The memories are areas of the SDRAM (soc_top): the stage asks for one stream of the W H samples
+ * (height_start, height_count) and hands out coefficient and template entries with their indices
+ * on two valid/ready streams, which soc_top turns into SDRAM writes; every port may stall.
+ *
+ * START (ACCEL.CTRL) runs one frame: the W H samples stream into haar_bank; every record {d3, d2,
+ * d1, a} of levels 1..M is held in a one-entry fork register until the coefficient writer has
+ * handed out its three details (three beats) and tlut_stage has taken it.  tlut_stage keeps the
+ * records of level M and emits one beat per triangle; the beat that ends a block (tuser bit 44) is
+ * handed out as the block's entry for TOUT, every other beat is dropped (the firmware expands the
+ * block's template itself, with the
  * generated wm_templates.h).
  *
  * Memory layouts (docs/soc.md, "The FPGA stage"):
@@ -32,8 +36,8 @@
  *   0x24 COEFS         r   coefficient entries stored     0x28 BLOCKS  r  template entries stored
  *   0x30 MAX_WIDTH, 0x34 MAX_HEIGHT, 0x38 MAX_LEVELS  r   what the stage is built for
  *
- * Configuration writes are ignored while busy.  While BUSY the stage owns the ports of HEIGHT, COEF
- * and TOUT (soc_top multiplexes them): the CPU polls STATUS and leaves the memories alone.
+ * Configuration writes are ignored while busy.  DONE waits for mem_idle too (soc_top: every entry
+ * handed out is in the SDRAM), so the CPU reads the results once it sees DONE.
  *
  * START first spends MAX_LEVELS + 2 set-up clocks: the base of each level in COEF (3 cw ch per
  * level, the cell counts halving with rounding up), the block counts, the checks (W, H, M in range,
@@ -75,21 +79,25 @@ module soc_accel #
     output wire [31:0]                        bus_rdata,
 
     /*
-     * Memory ports (valid while busy)
+     * Memory streams
      */
     output wire                               busy,
-    output wire                               height_en,     // read a word of HEIGHT
-    output wire [$clog2(HEIGHT_SAMPLES/2)-1:0] height_addr,
-    input  wire [31:0]                        height_rdata,  // the word read in the previous en cycle
-    output wire                               coef_en,       // write an entry of COEF
-    output wire [$clog2(COEF_ENTRIES)-1:0]    coef_addr,
-    output wire [17:0]                        coef_wdata,
-    output wire                               tout_en,       // write an entry of TOUT
-    output wire [$clog2(TOUT_ENTRIES)-1:0]    tout_addr,
-    output wire [15:0]                        tout_wdata
+    output wire                               height_start,  // one cycle: stream height_count samples
+    output wire [31:0]                        height_count,
+    input  wire [15:0]                        s_axis_height_tdata,
+    input  wire                               s_axis_height_tvalid,
+    output wire                               s_axis_height_tready,
+    output wire [17:0]                        m_axis_coef_tdata,   // a detail ...
+    output wire [$clog2(COEF_ENTRIES)-1:0]    m_axis_coef_tuser,   // ... and its entry in COEF
+    output wire                               m_axis_coef_tvalid,
+    input  wire                               m_axis_coef_tready,
+    output wire [15:0]                        m_axis_tout_tdata,   // a template entry ...
+    output wire [$clog2(TOUT_ENTRIES)-1:0]    m_axis_tout_tuser,   // ... and its entry in TOUT
+    output wire                               m_axis_tout_tvalid,
+    input  wire                               m_axis_tout_tready,
+    input  wire                               mem_idle      // every entry handed out is stored
 );
 
-localparam HAW = $clog2(HEIGHT_SAMPLES / 2);
 localparam CAW = $clog2(COEF_ENTRIES);
 localparam TAW = $clog2(TOUT_ENTRIES);
 localparam [31:0] MAX_WIDTH_W = MAX_WIDTH;
@@ -215,18 +223,14 @@ always @(posedge clk) begin
 end
 
 /*
- * Height reader: word k holds samples 2k (bits 15..0) and 2k+1 (bits 31..16)
+ * Height stream: the W H samples in raster order, asked for in the last set-up cycle
  */
-reg [31:0] rd_left_reg = 32'd0;  // samples still to hand out
-reg rd_half_reg = 1'b0;          // the next sample is the word's high half
-reg [HAW-1:0] rd_word_reg = {HAW{1'b0}};
+reg [31:0] rd_left_reg = 32'd0;  // samples still to take
 
-wire [15:0] smp_tdata = rd_half_reg ? height_rdata[31:16] : height_rdata[15:0];
-wire smp_tvalid = state_reg == STATE_RUN && rd_left_reg != 32'd0;
+wire smp_tvalid = state_reg == STATE_RUN && rd_left_reg != 32'd0 && s_axis_height_tvalid;
 wire smp_tready;
 wire smp_fire = smp_tvalid && smp_tready;
-// the word is used up: fetch the next one (its data arrives with the next clock)
-wire rd_next_word = smp_fire && (rd_half_reg || rd_left_reg == 32'd1);
+assign s_axis_height_tready = state_reg == STATE_RUN && rd_left_reg != 32'd0 && smp_tready;
 
 wire setup_last = state_reg == STATE_SETUP && setup_level_reg == SETUP_END;
 
@@ -249,7 +253,8 @@ wire tl_tready;
 wire tl_tvalid = buf_valid_reg && !tl_sent_reg;
 wire tl_fire = tl_tvalid && tl_tready;
 wire wr_active = buf_valid_reg && wr_cnt_reg != 2'd3;
-wire wr_last = wr_cnt_reg == 2'd2 || wr_cnt_reg == 2'd3;
+wire wr_fire = wr_active && m_axis_coef_tready;
+wire wr_last = (wr_cnt_reg == 2'd2 && wr_fire) || wr_cnt_reg == 2'd3;
 wire buf_finish = buf_valid_reg && wr_last && (tl_sent_reg || tl_fire);
 assign rec_tready = !buf_valid_reg || buf_finish;
 
@@ -265,9 +270,9 @@ end
 wire [CAW:0] wr_base = ptr_reg[buf_level];
 wire [CAW:0] wr_addr = wr_base + {{(CAW-1){1'b0}}, wr_cnt_reg};
 
-assign coef_en = wr_active;
-assign coef_addr = wr_addr[CAW-1:0];
-assign coef_wdata = wr_detail;
+assign m_axis_coef_tvalid = wr_active;
+assign m_axis_coef_tuser = wr_addr[CAW-1:0];
+assign m_axis_coef_tdata = wr_detail;
 
 /*
  * Template entries
@@ -278,13 +283,13 @@ wire tri_tvalid, tri_tlast;
 wire tl_cfg_error;
 
 wire block_end = tri_tvalid && tri_tuser[44];
+// a block's last beat waits for TOUT's stream; the other beats are dropped at once
+wire tri_tready = !block_end || (state_reg == STATE_RUN && m_axis_tout_tready);
+wire tri_fire = tri_tvalid && tri_tready;
 
-assign tout_en = state_reg == STATE_RUN && block_end;
-assign tout_addr = blocks_reg[TAW-1:0];
-assign tout_wdata = {7'd0, tri_tuser[11:9], tri_tuser[8:3]};
-
-assign height_en = setup_last || (state_reg == STATE_RUN && rd_next_word);
-assign height_addr = setup_last ? {HAW{1'b0}} : rd_word_reg + {{(HAW-1){1'b0}}, 1'b1};
+assign m_axis_tout_tvalid = state_reg == STATE_RUN && block_end;
+assign m_axis_tout_tuser = blocks_reg[TAW-1:0];
+assign m_axis_tout_tdata = {7'd0, tri_tuser[11:9], tri_tuser[8:3]};
 
 /*
  * Set-up checks (valid in the last set-up cycle)
@@ -297,6 +302,9 @@ wire cfg_bad = width_reg < 16'd2 || height_reg < 16'd2 || {16'd0, width_reg} > M
     || {16'd0, cols_reg} > MAX_COLS_W || tl_cfg_error;
 
 wire [31:0] cells = cw_reg * ch_reg;
+
+assign height_start = setup_last && !cfg_bad;
+assign height_count = samples;
 
 always @(posedge clk) begin
     if (busy) begin
@@ -337,8 +345,6 @@ always @(posedge clk) begin
                 end else begin
                     state_reg <= STATE_RUN;
                     rd_left_reg <= samples;
-                    rd_half_reg <= 1'b0;
-                    rd_word_reg <= {HAW{1'b0}};
                     filter_done_reg <= 1'b0;
                     template_done_reg <= 1'b0;
                 end
@@ -361,7 +367,8 @@ always @(posedge clk) begin
         end
         default: begin
             // STATE_RUN: the reader, the writer and the template entries (below) until both ends
-            if (filter_done_reg && template_done_reg) begin
+            // and the SDRAM has every entry
+            if (filter_done_reg && template_done_reg && mem_idle) begin
                 state_reg <= STATE_IDLE;
                 done_reg <= 1'b1;
                 cyc_total_reg <= cyc_reg;
@@ -370,13 +377,9 @@ always @(posedge clk) begin
     endcase
 
     if (state_reg == STATE_RUN) begin
-        // height reader
+        // height stream
         if (smp_fire) begin
             rd_left_reg <= rd_left_reg - 32'd1;
-            rd_half_reg <= !rd_half_reg && rd_left_reg != 32'd1;
-            if (rd_next_word) begin
-                rd_word_reg <= rd_word_reg + {{(HAW-1){1'b0}}, 1'b1};
-            end
         end
 
         // fork register: load, write three details, hand to tlut_stage, free
@@ -390,14 +393,14 @@ always @(posedge clk) begin
         end else if (buf_finish) begin
             buf_valid_reg <= 1'b0;
         end else begin
-            if (wr_active) begin
+            if (wr_fire) begin
                 wr_cnt_reg <= wr_cnt_reg + 2'd1;
             end
             if (tl_fire) begin
                 tl_sent_reg <= 1'b1;
             end
         end
-        if (wr_active) begin
+        if (wr_fire) begin
             coefs_reg <= coefs_reg + 32'd1;
         end
         if (buf_finish) begin
@@ -409,12 +412,12 @@ always @(posedge clk) begin
         end
 
         // template entries: one per block, at its block_end beat
-        if (block_end) begin
+        if (block_end && tri_fire) begin
             blocks_reg <= blocks_reg + 32'd1;
-            if (tri_tlast) begin
-                template_done_reg <= 1'b1;
-                cyc_template_reg <= cyc_reg;
-            end
+        end
+        if (tri_fire && tri_tlast) begin
+            template_done_reg <= 1'b1;
+            cyc_template_reg <= cyc_reg;
         end
     end
 
@@ -444,7 +447,7 @@ haar_bank #(
     .cfg_width(width_reg),
     .cfg_height(height_reg),
     .cfg_levels(levels_reg),
-    .s_axis_tdata(smp_tdata),
+    .s_axis_tdata(s_axis_height_tdata),
     .s_axis_tvalid(smp_tvalid),
     .s_axis_tready(smp_tready),
     .m_axis_tdata(rec_tdata),
@@ -476,7 +479,7 @@ tlut_stage #(
     .m_axis_tdata(tri_tdata),
     .m_axis_tuser(tri_tuser),
     .m_axis_tvalid(tri_tvalid),
-    .m_axis_tready(1'b1),
+    .m_axis_tready(tri_tready),
     .m_axis_tlast(tri_tlast),
     .cfg_width(width_reg),
     .cfg_height(height_reg),

@@ -4,20 +4,22 @@
  * The CPU comes from the pythondata-cpu-picorv32 package (picorv32.v, never copied here).  Memory
  * map (docs/soc.md; generated from host/wavemesh/memmap.py into wm_memmap.vh):
  *
- *   0x0000_0000  FW_RAM  firmware RAM, FW_RAM_BYTES, loaded from FW_HEX; reset vector 0
- *   0x1000_0000  HEIGHT  height memory, HEIGHT_SAMPLES x 16 bit (two samples per 32-bit word)
- *   0x2000_0000  COEF    coefficient memory, COEF_ENTRIES x 18 bit signed, one per word
- *   0x3000_0000  TOUT    template-stage output, TOUT_ENTRIES x 16 bit, one per word
+ *   0x0000_0000  FW_RAM  firmware RAM (block RAM), FW_RAM_BYTES, loaded from FW_HEX; reset vector 0
  *   0x4000_0000  UART    soc_uart registers
  *   0x4000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
  *   0x4000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
+ *   0x5000_0000  SDRAM   the 32 MB SDRAM through sdram_ctrl's CPU port (sdram_cache); its areas
+ *                        HEIGHT, COEF, TOUT (the stage's) and HEAP start at the *_OFFSET bytes
  *
- * The FPGA stage (soc_accel) reads HEIGHT and writes COEF and TOUT while it is busy: it then owns
- * those three memories' ports, and CPU accesses to them are dropped (reads return stale data).
+ * The FPGA stage (soc_accel) streams HEIGHT from the SDRAM (the controller's stream reader) and
+ * hands its coefficient and template entries to sdram_words, which writes each as a sign- or
+ * zero-extended 32-bit word through the addressed writer; every halfword the stage writes clears
+ * its line in the CPU's cache, so the CPU reads the results after DONE without a flush.
  *
  * Address bits 31..28 select the region; an offset beyond a region's size, or any other address,
- * reads 0 and ignores writes.  Every access completes in two cycles (request, then mem_ready with
- * the registered read data), so a bad address never stalls the CPU.
+ * reads 0 and ignores writes.  Every access but the SDRAM's completes in two cycles (request, then
+ * mem_ready with the registered read data), so a bad address never stalls the CPU; an SDRAM access
+ * takes 2 cycles on a cache hit and 9-17 on a miss (rtl/README.md, "SDRAM controller").
  *
  * The simulation ports (uart_bypass and the two byte streams, the stage/halt strobes, uart_div,
  * trap) serve the Verilator board model in sim/; a board ties uart_bypass low and leaves the
@@ -38,12 +40,21 @@ module soc_top #
     parameter FW_RAM_BYTES = `WM_FW_RAM_ENTRIES * 4,
     // $readmemh image of the firmware RAM (one 32-bit word per line), "" for none
     parameter FW_HEX = "",
-    // height memory in 16-bit samples; even, >= 2
+    // the stage's SDRAM areas: byte offsets (multiples of 4) and sizes in entries (HEIGHT: 16-bit
+    // samples, even; COEF and TOUT: 32-bit words)
+    parameter HEIGHT_OFFSET = `WM_HEIGHT_OFFSET,
     parameter HEIGHT_SAMPLES = `WM_HEIGHT_ENTRIES,
-    // coefficient memory in 18-bit entries; >= 2
+    parameter COEF_OFFSET = `WM_COEF_OFFSET,
     parameter COEF_ENTRIES = `WM_COEF_ENTRIES,
-    // template-stage output memory in 16-bit entries; >= 2
+    parameter TOUT_OFFSET = `WM_TOUT_OFFSET,
     parameter TOUT_ENTRIES = `WM_TOUT_ENTRIES,
+    // SDRAM: CAS latency, and the reset's power-up wait in ns (the datasheet's; a simulation that
+    // starts with a powered chip model may shorten it)
+    parameter SDRAM_CAS_LATENCY = `WM_SDRAM_CAS_LATENCY,
+    parameter SDRAM_T_INIT_NS = `WM_SDRAM_T_INIT_NS,
+    // the CPU port's cache: lines (power of two >= 2) of LINE_WORDS words
+    parameter SDRAM_CACHE_LINES = `WM_SDRAM_CACHE_LINES,
+    parameter SDRAM_LINE_WORDS = `WM_SDRAM_LINE_WORDS,
     // UART FIFO depths in bytes; powers of two >= 2
     parameter UART_RX_DEPTH = `WM_UART_RX_DEPTH,
     parameter UART_TX_DEPTH = `WM_UART_TX_DEPTH,
@@ -68,6 +79,21 @@ module soc_top #
     output wire [LED_COUNT-1:0]  led,
 
     /*
+     * SDRAM pins (clocked by the inverted clk; the DQ tristate buffer is at the board's top)
+     */
+    output wire                  sdram_cke,
+    output wire                  sdram_cs_n,
+    output wire                  sdram_ras_n,
+    output wire                  sdram_cas_n,
+    output wire                  sdram_we_n,
+    output wire [1:0]            sdram_ba,
+    output wire [`WM_SDRAM_ROW_BITS-1:0] sdram_a,
+    output wire [1:0]            sdram_dqm,
+    output wire [15:0]           sdram_dq_o,
+    output wire                  sdram_dq_oe,
+    input  wire [15:0]           sdram_dq_i,
+
+    /*
      * Simulation: UART FIFO bypass (fast mode) and observation
      */
     input  wire                  uart_bypass,
@@ -87,17 +113,16 @@ module soc_top #
 
 
 localparam FW_WORDS = FW_RAM_BYTES / 4;
-localparam HEIGHT_WORDS = HEIGHT_SAMPLES / 2;
 localparam FW_AW = $clog2(FW_WORDS);
-localparam HEIGHT_AW = $clog2(HEIGHT_WORDS);
 localparam COEF_AW = $clog2(COEF_ENTRIES);
 localparam TOUT_AW = $clog2(TOUT_ENTRIES);
+localparam ROW_BITS = `WM_SDRAM_ROW_BITS;
+localparam COL_BITS = `WM_SDRAM_COL_BITS;
+localparam HW_BITS = ROW_BITS + 2 + COL_BITS;   // SDRAM halfword address bits
 
 // region limits as byte offsets
 localparam [31:0] FW_LIMIT = FW_RAM_BYTES;
-localparam [31:0] HEIGHT_LIMIT = HEIGHT_SAMPLES * 2;
-localparam [31:0] COEF_LIMIT = COEF_ENTRIES * 4;
-localparam [31:0] TOUT_LIMIT = TOUT_ENTRIES * 4;
+localparam [31:0] SDRAM_LIMIT = 32'd2 << HW_BITS;
 
 // check configuration
 initial begin
@@ -105,12 +130,11 @@ initial begin
         $error("Error: FW_RAM_BYTES must be a multiple of 4, 8 .. 256 MiB (instance %m)");
         $finish;
     end
-    if (HEIGHT_SAMPLES < 4 || HEIGHT_SAMPLES % 2 != 0 || HEIGHT_SAMPLES > (1 << 27)) begin
-        $error("Error: HEIGHT_SAMPLES must be even, 4 .. 2^27 (instance %m)");
-        $finish;
-    end
-    if (COEF_ENTRIES < 2 || COEF_ENTRIES > (1 << 26) || TOUT_ENTRIES < 2 || TOUT_ENTRIES > (1 << 26)) begin
-        $error("Error: COEF_ENTRIES and TOUT_ENTRIES must be 2 .. 2^26 (instance %m)");
+    if (HEIGHT_SAMPLES < 4 || HEIGHT_SAMPLES % 2 != 0 || COEF_ENTRIES < 2 || TOUT_ENTRIES < 2
+            || HEIGHT_OFFSET % 4 != 0 || COEF_OFFSET % 4 != 0 || TOUT_OFFSET % 4 != 0
+            || HEIGHT_OFFSET + 2 * HEIGHT_SAMPLES > SDRAM_LIMIT || COEF_OFFSET + 4 * COEF_ENTRIES > SDRAM_LIMIT
+            || TOUT_OFFSET + 4 * TOUT_ENTRIES > SDRAM_LIMIT) begin
+        $error("Error: the SDRAM areas must be word aligned, inside the SDRAM, HEIGHT_SAMPLES even (instance %m)");
         $finish;
     end
 end
@@ -123,7 +147,10 @@ wire        mem_instr_unused;
 wire [31:0] mem_addr;
 wire [31:0] mem_wdata;
 wire [3:0]  mem_wstrb;
-reg         mem_ready_reg = 1'b0;
+reg         mem_ready_reg = 1'b0;   // the two-cycle answer of every region but the SDRAM
+wire        sdram_cpu_ready;
+wire [31:0] sdram_cpu_rdata;
+wire        mem_ready = mem_ready_reg || sdram_cpu_ready;
 reg  [31:0] mem_rdata;
 
 wire        mem_la_read_unused;
@@ -162,7 +189,7 @@ picorv32 #(
     .trap(trap),
     .mem_valid(mem_valid),
     .mem_instr(mem_instr_unused),
-    .mem_ready(mem_ready_reg),
+    .mem_ready(mem_ready),
     .mem_addr(mem_addr),
     .mem_wdata(mem_wdata),
     .mem_wstrb(mem_wstrb),
@@ -192,35 +219,29 @@ picorv32 #(
 localparam [2:0]
     SEL_NONE   = 3'd0,
     SEL_FW     = 3'd1,
-    SEL_HEIGHT = 3'd2,
-    SEL_COEF   = 3'd3,
-    SEL_TOUT   = 3'd4,
     SEL_UART   = 3'd5,
     SEL_SYS    = 3'd6,
     SEL_ACCEL  = 3'd7;
 
 reg [2:0] sel_reg = SEL_NONE;
 
-// a request is the first cycle of mem_valid; mem_ready answers it in the next cycle
-wire req = mem_valid && !mem_ready_reg;
 wire [3:0] region = mem_addr[31:28];
 wire [31:0] offset = {4'd0, mem_addr[27:0]};
 wire io_page = region == `WM_REGION_IO && mem_addr[27:12] == 16'd0;
 
 wire fw_hit = region == `WM_REGION_FW_RAM && offset < FW_LIMIT;
-wire height_hit = region == `WM_REGION_HEIGHT && offset < HEIGHT_LIMIT;
-wire coef_hit = region == `WM_REGION_COEF && offset < COEF_LIMIT;
-wire tout_hit = region == `WM_REGION_TOUT && offset < TOUT_LIMIT;
+wire sdram_hit = region == `WM_REGION_SDRAM && offset < SDRAM_LIMIT;
 wire uart_hit = io_page && mem_addr[11:8] == `WM_IO_UART;
 wire sys_hit = io_page && mem_addr[11:8] == `WM_IO_SYS;
 wire accel_hit = io_page && mem_addr[11:8] == `WM_IO_ACCEL;
 
+// a request is the first cycle of mem_valid; mem_ready answers it in the next cycle, except in the
+// SDRAM, whose port holds the request until it answers
+wire req = mem_valid && !mem_ready_reg && !sdram_hit;
+
 reg [2:0] sel;
 always @* begin
     if (fw_hit) sel = SEL_FW;
-    else if (height_hit) sel = SEL_HEIGHT;
-    else if (coef_hit) sel = SEL_COEF;
-    else if (tout_hit) sel = SEL_TOUT;
     else if (uart_hit) sel = SEL_UART;
     else if (sys_hit) sel = SEL_SYS;
     else if (accel_hit) sel = SEL_ACCEL;
@@ -228,7 +249,7 @@ always @* begin
 end
 
 always @(posedge clk) begin
-    // every request is answered in the next cycle, mapped or not
+    // every other request is answered in the next cycle, mapped or not
     mem_ready_reg <= req;
     if (req) begin
         sel_reg <= sel;
@@ -241,38 +262,41 @@ always @(posedge clk) begin
 end
 
 wire [31:0] fw_rdata;
-wire [31:0] height_rdata;
-wire [31:0] coef_rdata;
-wire [31:0] tout_rdata;
 wire [31:0] uart_rdata;
 wire [31:0] sys_rdata;
 wire [31:0] accel_rdata;
 
 always @* begin
-    case (sel_reg)
-        SEL_FW: mem_rdata = fw_rdata;
-        SEL_HEIGHT: mem_rdata = height_rdata;
-        SEL_COEF: mem_rdata = coef_rdata;
-        SEL_TOUT: mem_rdata = tout_rdata;
-        SEL_UART: mem_rdata = uart_rdata;
-        SEL_SYS: mem_rdata = sys_rdata;
-        SEL_ACCEL: mem_rdata = accel_rdata;
-        default: mem_rdata = 32'd0;
-    endcase
+    if (sdram_cpu_ready) begin
+        mem_rdata = sdram_cpu_rdata;
+    end else begin
+        case (sel_reg)
+            SEL_FW: mem_rdata = fw_rdata;
+            SEL_UART: mem_rdata = uart_rdata;
+            SEL_SYS: mem_rdata = sys_rdata;
+            SEL_ACCEL: mem_rdata = accel_rdata;
+            default: mem_rdata = 32'd0;
+        endcase
+    end
 end
 
 /*
- * The FPGA stage and its ports into HEIGHT, COEF and TOUT (it owns them while busy)
+ * The FPGA stage and its streams into the SDRAM
  */
-wire                accel_busy;
-wire                accel_height_en;
-wire [HEIGHT_AW-1:0] accel_height_addr;
-wire                accel_coef_en;
-wire [COEF_AW-1:0]  accel_coef_addr;
-wire [17:0]         accel_coef_wdata;
-wire                accel_tout_en;
-wire [TOUT_AW-1:0]  accel_tout_addr;
-wire [15:0]         accel_tout_wdata;
+wire                accel_busy_unused;
+wire                height_start;
+wire [31:0]         height_count;
+wire [15:0]         height_tdata;
+wire                height_tvalid, height_tready, height_tlast_unused;
+wire [17:0]         coef_tdata;
+wire [COEF_AW-1:0]  coef_tuser;
+wire                coef_tvalid, coef_tready;
+wire [15:0]         tout_tdata;
+wire [TOUT_AW-1:0]  tout_tuser;
+wire                tout_tvalid, tout_tready;
+wire                words_busy, wa_busy;
+// soc_accel refuses W H above HEIGHT_SAMPLES, so the count fits the stream reader's length
+wire height_count_unused = ^height_count[31:HW_BITS+1];
 
 soc_accel #(
     .HEIGHT_SAMPLES(HEIGHT_SAMPLES),
@@ -286,33 +310,142 @@ soc_accel #(
     .bus_wdata(mem_wdata),
     .bus_wstrb(mem_wstrb),
     .bus_rdata(accel_rdata),
-    .busy(accel_busy),
-    .height_en(accel_height_en),
-    .height_addr(accel_height_addr),
-    .height_rdata(height_rdata),
-    .coef_en(accel_coef_en),
-    .coef_addr(accel_coef_addr),
-    .coef_wdata(accel_coef_wdata),
-    .tout_en(accel_tout_en),
-    .tout_addr(accel_tout_addr),
-    .tout_wdata(accel_tout_wdata)
+    .busy(accel_busy_unused),
+    .height_start(height_start),
+    .height_count(height_count),
+    .s_axis_height_tdata(height_tdata),
+    .s_axis_height_tvalid(height_tvalid),
+    .s_axis_height_tready(height_tready),
+    .m_axis_coef_tdata(coef_tdata),
+    .m_axis_coef_tuser(coef_tuser),
+    .m_axis_coef_tvalid(coef_tvalid),
+    .m_axis_coef_tready(coef_tready),
+    .m_axis_tout_tdata(tout_tdata),
+    .m_axis_tout_tuser(tout_tuser),
+    .m_axis_tout_tvalid(tout_tvalid),
+    .m_axis_tout_tready(tout_tready),
+    .mem_idle(!words_busy && !wa_busy && !coef_tvalid && !tout_tvalid)
 );
 
-// port multiplexers: the stage while busy, else the CPU
-wire                 height_en = accel_busy ? accel_height_en : req && height_hit;
-wire [3:0]           height_wstrb = accel_busy ? 4'b0000 : mem_wstrb;
-wire [HEIGHT_AW-1:0] height_addr = accel_busy ? accel_height_addr : mem_addr[HEIGHT_AW+1:2];
-wire                 coef_en = accel_busy ? accel_coef_en : req && coef_hit;
-wire [3:0]           coef_wstrb = accel_busy ? 4'b1111 : mem_wstrb;
-wire [COEF_AW-1:0]   coef_addr = accel_busy ? accel_coef_addr : mem_addr[COEF_AW+1:2];
-wire [31:0]          coef_wdata = accel_busy ? {{14{accel_coef_wdata[17]}}, accel_coef_wdata} : mem_wdata;
-wire                 tout_en = accel_busy ? accel_tout_en : req && tout_hit;
-wire [3:0]           tout_wstrb = accel_busy ? 4'b1111 : mem_wstrb;
-wire [TOUT_AW-1:0]   tout_addr = accel_busy ? accel_tout_addr : mem_addr[TOUT_AW+1:2];
-wire [31:0]          tout_wdata = accel_busy ? {16'd0, accel_tout_wdata} : mem_wdata;
+// the height stream's command: held from height_start until the reader takes it (it is idle then:
+// the last run's stream ended before its DONE)
+reg rd_cmd_valid_reg = 1'b0;
+reg [HW_BITS:0] rd_cmd_len_reg = {(HW_BITS+1){1'b0}};
+wire rd_cmd_ready;
+
+always @(posedge clk) begin
+    if (height_start) begin
+        rd_cmd_valid_reg <= 1'b1;
+        rd_cmd_len_reg <= height_count[HW_BITS:0];
+    end else if (rd_cmd_ready) begin
+        rd_cmd_valid_reg <= 1'b0;
+    end
+    if (rst) begin
+        rd_cmd_valid_reg <= 1'b0;
+    end
+end
+
+// entries as words: details sign-extended into COEF, template entries zero-extended into TOUT
+localparam [HW_BITS-2:0] COEF_WORD = COEF_OFFSET / 4;
+localparam [HW_BITS-2:0] TOUT_WORD = TOUT_OFFSET / 4;
+localparam [HW_BITS-1:0] HEIGHT_HW = HEIGHT_OFFSET / 2;
+wire [15:0]        wa_tdata;
+wire [HW_BITS-1:0] wa_tuser;
+wire               wa_tvalid, wa_tready;
+
+sdram_words #(
+    .HW_ADDR_BITS(HW_BITS)
+) words_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_axis_a_tdata({{14{coef_tdata[17]}}, coef_tdata}),
+    .s_axis_a_tuser(COEF_WORD + {{(HW_BITS-1-COEF_AW){1'b0}}, coef_tuser}),
+    .s_axis_a_tvalid(coef_tvalid),
+    .s_axis_a_tready(coef_tready),
+    .s_axis_b_tdata({16'd0, tout_tdata}),
+    .s_axis_b_tuser(TOUT_WORD + {{(HW_BITS-1-TOUT_AW){1'b0}}, tout_tuser}),
+    .s_axis_b_tvalid(tout_tvalid),
+    .s_axis_b_tready(tout_tready),
+    .m_axis_tdata(wa_tdata),
+    .m_axis_tuser(wa_tuser),
+    .m_axis_tvalid(wa_tvalid),
+    .m_axis_tready(wa_tready),
+    .busy(words_busy)
+);
 
 /*
- * Memories
+ * SDRAM controller: the CPU port (cache), the stage's height stream and its entries; the stream
+ * writer is not used
+ */
+wire init_done_unused, rd_busy_unused, wr_busy_unused;
+wire wr_cmd_ready_unused, wr_tready_unused;
+
+sdram_ctrl #(
+    .CLK_HZ(CLK_HZ),
+    .CAS_LATENCY(SDRAM_CAS_LATENCY),
+    .ROW_BITS(ROW_BITS),
+    .COL_BITS(COL_BITS),
+    .T_INIT_NS(SDRAM_T_INIT_NS),
+    .T_RCD_NS(`WM_SDRAM_T_RCD_NS),
+    .T_RP_NS(`WM_SDRAM_T_RP_NS),
+    .T_RAS_NS(`WM_SDRAM_T_RAS_NS),
+    .T_RC_NS(`WM_SDRAM_T_RC_NS),
+    .T_RFC_NS(`WM_SDRAM_T_RFC_NS),
+    .T_RRD_NS(`WM_SDRAM_T_RRD_NS),
+    .T_WR_NS(`WM_SDRAM_T_WR_NS),
+    .T_WR_MIN_CK(`WM_SDRAM_T_WR_MIN_CK),
+    .T_MRD_CK(`WM_SDRAM_T_MRD_CK),
+    .T_HZ_NS(`WM_SDRAM_T_HZ_NS),
+    .T_REFI_NS(`WM_SDRAM_T_REFI_NS),
+    .CACHE_LINES(SDRAM_CACHE_LINES),
+    .LINE_WORDS(SDRAM_LINE_WORDS)
+) sdram_inst (
+    .clk(clk),
+    .rst(rst),
+    .cpu_valid(mem_valid && sdram_hit),
+    .cpu_addr(mem_addr[HW_BITS:0]),
+    .cpu_wdata(mem_wdata),
+    .cpu_wstrb(mem_wstrb),
+    .cpu_ready(sdram_cpu_ready),
+    .cpu_rdata(sdram_cpu_rdata),
+    .s_rd_cmd_addr(HEIGHT_HW),
+    .s_rd_cmd_len(rd_cmd_len_reg),
+    .s_rd_cmd_valid(rd_cmd_valid_reg),
+    .s_rd_cmd_ready(rd_cmd_ready),
+    .m_axis_rd_tdata(height_tdata),
+    .m_axis_rd_tvalid(height_tvalid),
+    .m_axis_rd_tready(height_tready),
+    .m_axis_rd_tlast(height_tlast_unused),
+    .s_wr_cmd_addr({HW_BITS{1'b0}}),
+    .s_wr_cmd_len({(HW_BITS+1){1'b0}}),
+    .s_wr_cmd_valid(1'b0),
+    .s_wr_cmd_ready(wr_cmd_ready_unused),
+    .s_axis_wr_tdata(16'd0),
+    .s_axis_wr_tvalid(1'b0),
+    .s_axis_wr_tready(wr_tready_unused),
+    .s_axis_wa_tdata(wa_tdata),
+    .s_axis_wa_tuser(wa_tuser),
+    .s_axis_wa_tvalid(wa_tvalid),
+    .s_axis_wa_tready(wa_tready),
+    .init_done(init_done_unused),
+    .rd_busy(rd_busy_unused),
+    .wr_busy(wr_busy_unused),
+    .wa_busy(wa_busy),
+    .sdram_cke(sdram_cke),
+    .sdram_cs_n(sdram_cs_n),
+    .sdram_ras_n(sdram_ras_n),
+    .sdram_cas_n(sdram_cas_n),
+    .sdram_we_n(sdram_we_n),
+    .sdram_ba(sdram_ba),
+    .sdram_a(sdram_a),
+    .sdram_dqm(sdram_dqm),
+    .sdram_dq_o(sdram_dq_o),
+    .sdram_dq_oe(sdram_dq_oe),
+    .sdram_dq_i(sdram_dq_i)
+);
+
+/*
+ * Firmware RAM
  */
 soc_ram #(
     .WIDTH(32),
@@ -325,43 +458,6 @@ soc_ram #(
     .addr(mem_addr[FW_AW+1:2]),
     .wdata(mem_wdata),
     .rdata(fw_rdata)
-);
-
-soc_ram #(
-    .WIDTH(32),
-    .DEPTH(HEIGHT_WORDS)
-) height_ram_inst (
-    .clk(clk),
-    .en(height_en),
-    .wstrb(height_wstrb),
-    .addr(height_addr),
-    .wdata(mem_wdata),
-    .rdata(height_rdata)
-);
-
-soc_ram #(
-    .WIDTH(18),
-    .DEPTH(COEF_ENTRIES),
-    .SIGNED(1)
-) coef_ram_inst (
-    .clk(clk),
-    .en(coef_en),
-    .wstrb(coef_wstrb),
-    .addr(coef_addr),
-    .wdata(coef_wdata),
-    .rdata(coef_rdata)
-);
-
-soc_ram #(
-    .WIDTH(16),
-    .DEPTH(TOUT_ENTRIES)
-) tout_ram_inst (
-    .clk(clk),
-    .en(tout_en),
-    .wstrb(tout_wstrb),
-    .addr(tout_addr),
-    .wdata(tout_wdata),
-    .rdata(tout_rdata)
 );
 
 /*

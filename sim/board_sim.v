@@ -3,7 +3,10 @@
  *
  * soc_top with every port brought out, built without a firmware image: the model loads one at
  * start-up with the same $readmemh the FPGA build uses, from the +firmware=FILE plusarg
- * (board_main.cpp's --firmware option), so one simulator build runs any firmware.
+ * (board_main.cpp's --firmware option), so one simulator build runs any firmware.  The SDRAM pins
+ * go to sdram_chip, the chip's cycle model with the datasheet's timing checks, so the board model
+ * is the bitstream's design (rtl/boards/ulx3s_top.v adds only the pads, the chip's inverted clock
+ * and the reset).
  */
 
 `resetall
@@ -40,7 +43,13 @@ module board_sim
     output wire [31:0]  prof_pc
 );
 
-assign prof_fetch = soc_inst.mem_valid && soc_inst.mem_instr_unused && soc_inst.mem_ready_reg;
+assign prof_fetch = soc_inst.mem_valid && soc_inst.mem_instr_unused && soc_inst.mem_ready;
+
+wire        sdram_cke, sdram_cs_n, sdram_ras_n, sdram_cas_n, sdram_we_n;
+wire [1:0]  sdram_ba, sdram_dqm;
+wire [`WM_SDRAM_ROW_BITS-1:0] sdram_a;
+wire [15:0] sdram_dq_o, sdram_dq_i;
+wire        sdram_dq_oe;
 assign prof_pc = soc_inst.mem_addr;
 
 soc_top #(
@@ -52,6 +61,17 @@ soc_top #(
     .uart_rxd(uart_rxd),
     .uart_txd(uart_txd),
     .led(led),
+    .sdram_cke(sdram_cke),
+    .sdram_cs_n(sdram_cs_n),
+    .sdram_ras_n(sdram_ras_n),
+    .sdram_cas_n(sdram_cas_n),
+    .sdram_we_n(sdram_we_n),
+    .sdram_ba(sdram_ba),
+    .sdram_a(sdram_a),
+    .sdram_dqm(sdram_dqm),
+    .sdram_dq_o(sdram_dq_o),
+    .sdram_dq_oe(sdram_dq_oe),
+    .sdram_dq_i(sdram_dq_i),
     .uart_bypass(uart_bypass),
     .s_axis_uart_rx_tdata(s_axis_uart_rx_tdata),
     .s_axis_uart_rx_tvalid(s_axis_uart_rx_tvalid),
@@ -65,6 +85,21 @@ soc_top #(
     .halt_valid(halt_valid),
     .halt_code(halt_code),
     .trap(trap)
+);
+
+sdram_chip sdram_inst (
+    .clk(clk),
+    .cke(sdram_cke),
+    .cs_n(sdram_cs_n),
+    .ras_n(sdram_ras_n),
+    .cas_n(sdram_cas_n),
+    .we_n(sdram_we_n),
+    .ba(sdram_ba),
+    .a(sdram_a),
+    .dqm(sdram_dqm),
+    .dq_o(sdram_dq_o),
+    .dq_oe(sdram_dq_oe),
+    .dq_i(sdram_dq_i)
 );
 
 // the firmware image, loaded before the first clock edge

@@ -71,7 +71,7 @@ def locked(folder: Path):
 
 def sources() -> list[Path]:
     rtl = sorted(RTL.glob("*.v"))
-    return [SIM / "board_sim.v", *rtl, picorv32(), RTL / "lint.vlt",
+    return [SIM / "board_sim.v", SIM / "sdram_chip.v", *rtl, picorv32(), RTL / "lint.vlt",
             *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h", GEN / "wm_memmap.vh",
             PROTO_C, PROTO_INCLUDES[0] / "proto.h", PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
 
@@ -105,7 +105,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
         "-LDFLAGS", f"{outdir / 'proto.o'} -Wl,--gc-sections",
         *(["--trace-fst"] if trace else []),
-        str(RTL / "lint.vlt"), str(SIM / "board_sim.v"), *(str(SIM / c) for c in CPP),
+        str(RTL / "lint.vlt"), str(SIM / "board_sim.v"), str(SIM / "sdram_chip.v"), *(str(SIM / c) for c in CPP),
     ]
     h = hashlib.sha256(" ".join(args).encode())
     for p in sources():

@@ -36,26 +36,52 @@ UART_TX_DEPTH = 64  # TX FIFO depth in bytes (power of two)
 LED_COUNT = 8  # LED outputs
 
 # --- what the default configuration supports ---------------------------------------------------
-GRID_MAX_W = 256  # largest height field, columns
-GRID_MAX_H = 256  # largest height field, rows
-# Firmware RAM kept for code, data and stack; the rest is the job's heap.  The image is about 56 KB
-# (text 45.5 KB with the reduction and the decimation, bss, an 8 KB stack; `make firmware-board`
-# prints it); tests/sim/test_board.py checks the heap the linker leaves against the capacity below.
-FW_RESERVED_BYTES = 60 * 1024
-# The refiner's storage (firmware/src, wm_refine_bound) with the board's 16-bit indices
-# (WM_INDEX_BITS=16): per triangle half-edges, error, worst sample, heap entries, flags and its share
-# of the vertex arrays (30 B more per triangle at this capacity); per grid the vertex arrays' fixed
-# part and the refiner's state (about 6.3 KB).  tests/sim/test_memmap.py checks the capacity below
-# against a 16-bit build of wm_refine_bound: it fits, within 10 triangles of the most that would.
-REFINER_TRI_BYTES = 30
-REFINER_GRID_BYTES = 6656  # for the largest grid
+GRID_MAX_W = 1024  # largest height field, columns
+GRID_MAX_H = 1024  # largest height field, rows
 STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmware RAM
+# The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
+# (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
+# triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
+# (47.5 B); per grid the vertex arrays' fixed part and the refiner's state (about 28 KB at 1024^2).
+# tests/sim/test_memmap.py checks the capacity below against a native build of wm_refine_bound.
+REFINER_TRI_BYTES = 48
+REFINER_GRID_BYTES = 32 * 1024  # for the largest grid
 # The board job stages the initial triangulation in the heap beside the refiner's storage
 # (firmware/board/app/job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
 # coordinates (Euler: about one vertex per two triangles) and the lattice bitmap; per grid the
 # vertices of the border and the lattice rows.
 STAGING_TRI_BYTES = 17
-STAGING_GRID_BYTES = 8 * 1024
+STAGING_GRID_BYTES = 20 * 1024
+
+# --- SDRAM: the ULX3S's 16-bit SDR chip behind rtl/sdram_ctrl.v ---------------------------------
+# Geometry of the MT48LC16M16A2 / IS42S16160G (32 MB; the AS4C32M16SB's other 32 MB need COL_BITS 10).
+SDRAM_ROW_BITS = 13
+SDRAM_COL_BITS = 9
+SDRAM_BANKS = 4
+SDRAM_BYTES = 2 * SDRAM_BANKS << (SDRAM_ROW_BITS + SDRAM_COL_BITS)  # 32 MiB
+SDRAM_CAS_LATENCY = 2  # legal up to 100 MHz on all three parts
+# The datasheet timings, the worst of MT48LC16M16A2-75, IS42S16160G-7 and AS4C32M16SB-7, in ns (or
+# clocks, _CK).  The one table: the controller's parameters (soc_top), the simulated board's chip
+# model (sim/sdram_chip.v) and the cocotb chip model (tests/rtl/sdram_tb.py) all read it.
+SDRAM_TIMING = {
+    "T_INIT_NS": 200_000,  # power-up: NOP for at least this long
+    "T_RCD_NS": 21,  # ACTIVATE -> READ/WRITE
+    "T_RP_NS": 21,  # PRECHARGE -> ACTIVATE/REFRESH
+    "T_RAS_NS": 44,  # ACTIVATE -> PRECHARGE (min)
+    "T_RC_NS": 66,  # ACTIVATE -> ACTIVATE, one bank
+    "T_RFC_NS": 70,  # REFRESH -> anything
+    "T_RRD_NS": 15,  # ACTIVATE -> ACTIVATE, two banks
+    "T_WR_NS": 15,  # last WRITE datum -> PRECHARGE
+    "T_WR_MIN_CK": 2,
+    "T_MRD_CK": 2,  # LOAD MODE -> anything
+    "T_HZ_NS": 6,  # data-out high impedance after the last read datum
+    "T_AC_NS": 6,  # clock edge -> read datum valid (CL 2 and 3)
+    "T_OH_NS": 3,  # read datum held after the next clock edge
+    "T_REFI_NS": 7812,  # 8192 refreshes per 64 ms
+}
+# The CPU port's cache (rtl/sdram_cache.v): lines of words; 256 x 4 words (4 KB) uses 4 DP16KD.
+SDRAM_CACHE_LINES = 256
+SDRAM_LINE_WORDS = 4
 
 # --- regions ------------------------------------------------------------------------------------
 REGION_SHIFT = 28  # address bits 31..28 select the region
@@ -73,10 +99,11 @@ class Region:
     stride: int  # bytes of address space per entry
     access: str  # how the CPU may access it
     doc: str
+    offset: int = 0  # an SDRAM area's byte offset in the SDRAM region
 
     @property
     def base(self) -> int:
-        return self.code << REGION_SHIFT
+        return self.code << REGION_SHIFT | self.offset
 
     @property
     def bytes(self) -> int:
@@ -96,35 +123,47 @@ def _coef_entries(w: int, h: int, levels: int) -> int:
     return total
 
 
-MAX_LEVELS = (max(GRID_MAX_W, GRID_MAX_H) - 1).bit_length()  # 8: level 8 of 256 is one coefficient
-COEF_ENTRIES = 1 << (_coef_entries(GRID_MAX_W, GRID_MAX_H, MAX_LEVELS) - 1).bit_length()  # 65536
+MAX_LEVELS = (max(GRID_MAX_W, GRID_MAX_H) - 1).bit_length()  # 10: level 10 of 1024 is one coefficient
+COEF_ENTRIES = 1 << (_coef_entries(GRID_MAX_W, GRID_MAX_H, MAX_LEVELS) - 1).bit_length()  # 2^20
 MIN_BLOCK_LEVEL = 2  # the template output holds every block of the largest grid for M >= 2
 TOUT_ENTRIES = -(-(GRID_MAX_W - 1) // (1 << MIN_BLOCK_LEVEL)) * -(-(GRID_MAX_H - 1) // (1 << MIN_BLOCK_LEVEL))
 
 FW_RAM = Region(
     "FW_RAM", 0x0, 32 * 1024, 32, 4, "rwx, byte/half/word",
-    "firmware RAM: code, data, stack; reset vector at 0; loaded from a hex file ($readmemh)")
+    "firmware RAM (block RAM): code, data, stack; reset vector at 0; loaded from a hex file ($readmemh)")
+SDRAM = Region(
+    "SDRAM", 0x5, SDRAM_BYTES // 4, 32, 4, "rw, byte/half/word, cached",
+    "SDRAM through the CPU port's cache (rtl/sdram_cache.v, write-through): the areas below; a miss "
+    "takes 9-17 cycles")
+# Areas of the SDRAM (offsets in bytes from its base), laid out in this order from offset 0.
 HEIGHT = Region(
-    "HEIGHT", 0x1, GRID_MAX_W * GRID_MAX_H, 16, 2, "rw, byte/half/word",
-    "height memory: unsigned 16-bit samples, sample i at base + 2 i (row-major, W per row)")
+    "HEIGHT", 0x5, GRID_MAX_W * GRID_MAX_H, 16, 2, "rw, byte/half/word",
+    "height area: unsigned 16-bit samples, sample i at base + 2 i (row-major, W per row)", 0)
 COEF = Region(
-    "COEF", 0x2, COEF_ENTRIES, 18, 4, "rw, word stores only",
-    "coefficient memory: signed 18-bit details, one per 32-bit word, read sign-extended")
+    "COEF", 0x5, COEF_ENTRIES, 32, 4, "rw, byte/half/word",
+    "coefficient area: the stage's 18-bit details, one per 32-bit word, stored sign-extended",
+    HEIGHT.offset + HEIGHT.bytes)
 TOUT = Region(
-    "TOUT", 0x3, TOUT_ENTRIES, 16, 4, "rw, word stores only",
-    "template-stage output: one 16-bit entry per block (raster order), one per 32-bit word, read "
-    "zero-extended: bits 5..0 template id, 8..6 label (F f V v H h D = 0..6)")
+    "TOUT", 0x5, TOUT_ENTRIES, 32, 4, "rw, byte/half/word",
+    "template-stage output: one 16-bit entry per block (raster order), one per 32-bit word, stored "
+    "zero-extended: bits 5..0 template id, 8..6 label (F f V v H h D = 0..6)",
+    COEF.offset + COEF.bytes)
+HEAP = Region(
+    "HEAP", 0x5, (SDRAM_BYTES - TOUT.offset - TOUT.bytes) // 4, 32, 4, "rw, byte/half/word",
+    "the job's heap (the linker's __heap_start .. __heap_end): the refiner's storage and the staging "
+    "of the initial triangulation", TOUT.offset + TOUT.bytes)
 TOUT_TEMPLATE_SHIFT = 0  # TOUT entry: template id (wm_templates.h) in bits 5..0
 TOUT_TEMPLATE_MASK = 0x3F
 TOUT_LABEL_SHIFT = 6  # TOUT entry: label in bits 8..6
 TOUT_LABEL_MASK = 0x7
 IO_CODE = 0x4
-REGIONS = (FW_RAM, HEIGHT, COEF, TOUT)
+REGIONS = (FW_RAM, SDRAM)  # what the address decoder selects
+AREAS = (HEIGHT, COEF, TOUT, HEAP)  # the SDRAM's layout
 
 FW_RAM_BYTES = FW_RAM.bytes
 HEIGHT_SAMPLES = HEIGHT.entries
-TRI_CAPACITY = ((FW_RAM_BYTES - FW_RESERVED_BYTES - REFINER_GRID_BYTES - STAGING_GRID_BYTES)
-                // (REFINER_TRI_BYTES + STAGING_TRI_BYTES))  # 1165
+TRI_CAPACITY = ((HEAP.bytes - REFINER_GRID_BYTES - STAGING_GRID_BYTES)
+                // (REFINER_TRI_BYTES + STAGING_TRI_BYTES))
 
 # The FPGA stage (rtl/soc_accel.v): what its filter bank and template stage are built for.
 ACCEL_MAX_LEVELS = MAX_LEVELS  # haar_bank MAX_LEVELS
@@ -214,8 +253,8 @@ ACCEL = Block("ACCEL", 0x2, "the FPGA stage: height memory -> filter bank -> COE
         Field("START", 0, 0, "w", "start: heights -> coefficients and template entries"),
     )),
     Register("STATUS", 0x04, "r", "state of the stage", (
-        Field("BUSY", 0, 0, "r", "running: HEIGHT, COEF and TOUT belong to the stage (CPU accesses to them "
-              "are dropped, reads return stale data)"),
+        Field("BUSY", 0, 0, "r", "running: the stage streams HEIGHT and writes COEF and TOUT in the SDRAM "
+              "(every halfword it writes clears its line in the CPU's cache)"),
         Field("DONE", 1, 1, "r", "the last run finished (cleared by START)"),
         Field("ERROR", 2, 2, "r", "the last START was refused: W, H or M out of range, W H above the "
               "height memory, the details above COEF, the blocks above TOUT or above the template "
@@ -256,15 +295,18 @@ def ebr_blocks(region: Region) -> int:
     return -(-region.entries // per_block)
 
 
-# The FPGA stage's own block RAM (rtl/soc_accel.v at the defaults): haar_bank's level-1 line buffer
-# (128 x 34 bit: one DP16KD; the deeper levels' buffers are small enough for LUT RAM) and
-# tlut_stage's triangle ROM (512 x 12 bit: one), doubled for the tools' choices (Yosys maps the
-# level-2 buffer and the row buffer to DP16KD too when they are not forced into LUTs).
-ACCEL_EBR = 4
+# The FPGA stage's own block RAM (rtl/soc_accel.v at the defaults): haar_bank's level-1 and level-2
+# line buffers (512 and 256 x 34 bit: one DP16KD each; the deeper levels' are small enough for LUT
+# RAM), tlut_stage's triangle ROM (512 x 12 bit: one) and its row buffer, doubled for the tools'
+# choices.
+ACCEL_EBR = 8
+# The CPU port's cache: SDRAM_CACHE_LINES x SDRAM_LINE_WORDS words of data (512 x 36 per DP16KD),
+# the tags beside them in LUT RAM; one more pair for the tools' choices.
+SDRAM_CACHE_EBR = 2 * -(-SDRAM_CACHE_LINES * SDRAM_LINE_WORDS // 512)
 
 
 def ebr_estimate() -> dict[str, int]:
-    return {**{r.name: ebr_blocks(r) for r in REGIONS}, "ACCEL": ACCEL_EBR}
+    return {"FW_RAM": ebr_blocks(FW_RAM), "SDRAM cache": SDRAM_CACHE_EBR, "ACCEL": ACCEL_EBR}
 
 
 # --- generators ---------------------------------------------------------------------------------
@@ -321,7 +363,7 @@ def c_header() -> str:
         "",
         "/* Memory regions: base address, default size in bytes and in entries. */",
     ]
-    for r in REGIONS:
+    for r in (*REGIONS, *AREAS):
         lines += [
             num(f"WM_{r.name}_BASE", f"0x{r.base:08X}"),
             num(f"WM_{r.name}_BYTES", r.bytes),
@@ -364,6 +406,15 @@ def verilog_include() -> str:
     for r in (*REGIONS,):
         lines.append(d(f"WM_REGION_{r.name}", f"4'h{r.code:X}"))
         lines.append(d(f"WM_{r.name}_ENTRIES", r.entries))
+    lines.append("// SDRAM areas: byte offsets in the SDRAM, default sizes in entries")
+    for r in AREAS:
+        lines.append(d(f"WM_{r.name}_OFFSET", r.offset))
+        lines.append(d(f"WM_{r.name}_ENTRIES", r.entries))
+    lines.append("// SDRAM chip: geometry, CAS latency, datasheet timings (ns or clocks), the CPU port's cache")
+    lines += [d("WM_SDRAM_ROW_BITS", SDRAM_ROW_BITS), d("WM_SDRAM_COL_BITS", SDRAM_COL_BITS),
+              d("WM_SDRAM_CAS_LATENCY", SDRAM_CAS_LATENCY)]
+    lines += [d(f"WM_SDRAM_{k}", v) for k, v in SDRAM_TIMING.items()]
+    lines += [d("WM_SDRAM_CACHE_LINES", SDRAM_CACHE_LINES), d("WM_SDRAM_LINE_WORDS", SDRAM_LINE_WORDS)]
     lines.append(d("WM_REGION_IO", f"4'h{IO_CODE:X}"))
     lines.append("// I/O blocks: address bits 11..8; register offsets: bits 7..0; field bit positions")
     for b in BLOCKS:
@@ -386,6 +437,8 @@ def linker_script() -> str:
         "}",
         f"__wm_fw_ram_bytes = {FW_RAM.bytes};",
         f"__wm_stack_bytes = {STACK_BYTES};",
+        f"__wm_heap_base = 0x{HEAP.base:08X};",
+        f"__wm_heap_bytes = {HEAP.bytes};",
         "",
     ])
 
@@ -412,15 +465,25 @@ def markdown() -> str:
         "Sizes are parameters of `soc_top`; the SYS block reports the built sizes.  Any address outside "
         "these reads 0 and ignores writes.",
         "",
+        "The SDRAM's areas (the firmware's layout; the FPGA stage is given HEIGHT, COEF and TOUT):",
+        "",
+        "| address | size | area | contents |",
+        "|---|---|---|---|",
+    ]
+    for r in AREAS:
+        lines.append(f"| `0x{r.base:08X}` | {_size(r.bytes)} ({r.entries} x {r.entry_bits} bit) | "
+                     f"{r.name} | {r.doc} |")
+    lines += [
+        "",
         "Block RAM of the default configuration on an LFE5U-85F "
         f"({ECP5_85F_EBR} DP16KD blocks of 18 Kbit):",
         "",
-        "| region | storage | DP16KD blocks |",
+        "| memory | storage | DP16KD blocks |",
         "|---|---|---|",
+        f"| FW_RAM | {FW_RAM.storage_bits // 1024} Kbit | {ebr['FW_RAM']} |",
+        f"| SDRAM cache | {SDRAM_CACHE_LINES * SDRAM_LINE_WORDS * 32 // 1024} Kbit | {ebr['SDRAM cache']} |",
+        f"| ACCEL | line buffers, template ROM | {ebr['ACCEL']} |",
     ]
-    for r in REGIONS:
-        lines.append(f"| {r.name} | {r.storage_bits // 1024} Kbit | {ebr[r.name]} |")
-    lines.append(f"| ACCEL | line buffers, template ROM | {ebr['ACCEL']} |")
     total = sum(ebr.values())
     lines += [
         f"| total | | {total} of {ECP5_85F_EBR} ({100 * total // ECP5_85F_EBR} %) |",

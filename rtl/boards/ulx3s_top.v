@@ -5,6 +5,10 @@
  * 25 MHz clock without a PLL; its UART on the FT231X's serial port (ftdi_txd in, ftdi_rxd out: the
  * names are the FTDI chip's), the eight LEDs, FIRE1 (btn[1]) as the reset button.  wifi_gpio0 is
  * driven high: the ESP32 holds the board in reset or reconfigures it when this pin floats low.
+ * The SDRAM: the chip's clock is the inverted system clock, so it samples every command and datum
+ * in the middle of its cycle (20 ns from either edge at 25 MHz: the inverter's and the pads' few ns
+ * of skew leave far more than the chip's 1.5 ns setup and 0.8 ns hold); DQ through the pads'
+ * tristate buffers; every other pin straight from the controller's registers.
  * Pins: ulx3s.lpf.  `make bitstream BOARD=ulx3s` builds it with the firmware image as FW_HEX.
  */
 
@@ -25,7 +29,19 @@ module ulx3s_top #
     output wire        ftdi_rxd,    // FPGA transmits, FTDI receives
     input  wire [1:1]  btn,         // FIRE1, high when pressed
     output wire [`WM_LED_COUNT-1:0] led,  // D0..D7
-    output wire        wifi_gpio0
+    output wire        wifi_gpio0,
+
+    // SDRAM
+    output wire        sdram_clk,
+    output wire        sdram_cke,
+    output wire        sdram_csn,
+    output wire        sdram_rasn,
+    output wire        sdram_casn,
+    output wire        sdram_wen,
+    output wire [1:0]  sdram_ba,
+    output wire [`WM_SDRAM_ROW_BITS-1:0] sdram_a,
+    output wire [1:0]  sdram_dqm,
+    inout  wire [15:0] sdram_d
 );
 
 wire rst;
@@ -39,6 +55,12 @@ wm_por #(
 );
 
 assign wifi_gpio0 = 1'b1;
+
+assign sdram_clk = !clk_25mhz;
+
+wire [15:0] sdram_dq_o;
+wire        sdram_dq_oe;
+assign sdram_d = sdram_dq_oe ? sdram_dq_o : 16'bz;
 
 wire [7:0]  tx_tdata_unused;
 wire        tx_tvalid_unused;
@@ -63,6 +85,17 @@ soc_top #(
     .uart_rxd(ftdi_txd),
     .uart_txd(ftdi_rxd),
     .led(led),
+    .sdram_cke(sdram_cke),
+    .sdram_cs_n(sdram_csn),
+    .sdram_ras_n(sdram_rasn),
+    .sdram_cas_n(sdram_casn),
+    .sdram_we_n(sdram_wen),
+    .sdram_ba(sdram_ba),
+    .sdram_a(sdram_a),
+    .sdram_dqm(sdram_dqm),
+    .sdram_dq_o(sdram_dq_o),
+    .sdram_dq_oe(sdram_dq_oe),
+    .sdram_dq_i(sdram_d),
     .uart_bypass(1'b0),
     .s_axis_uart_rx_tdata(8'd0),
     .s_axis_uart_rx_tvalid(1'b0),

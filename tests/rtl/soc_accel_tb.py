@@ -1,6 +1,9 @@
 """cocotb bench of the SoC's FPGA stage (rtl/soc_accel.v) with Python models of its three memories.
 
-The height memory is loaded with the samples; after START and DONE, the coefficient memory must hold
+The memories sit behind streams as in the SoC (the SDRAM's stream reader and writers): the height
+stream starts on height_start with the count asked for, and every stream stalls at random (the
+height data gaps, the coefficient and template entries' back-pressure), and mem_idle stays low for a
+while after the last entry, so DONE must wait for it.  After START and DONE, the coefficient memory must hold
 every level's details in the layout of wm_details_offset (level by level from m = 1, row-major,
 d1 d2 d3 per cell) as wavemesh.haar.decompose makes them, the template memory one entry per block
 {label, template id} as wavemesh.label.label_blocks makes them, the registers the counts, and a
@@ -10,6 +13,7 @@ refused configuration must set ERROR and touch nothing.
 from __future__ import annotations
 
 import logging
+import random
 
 import cocotb
 import numpy as np
@@ -27,15 +31,20 @@ REG = {r.name: r.offset for r in ACCEL.registers}
 class TB:
     """Clock, reset, register bus and the three memories (synchronous, one access per cycle)."""
 
-    def __init__(self, dut):
+    def __init__(self, dut, seed: int = 1):
         self.dut = dut
         self.log = logging.getLogger("cocotb.tb")
-        self.height = {}
+        self.rng = random.Random(seed)
+        self.height = []
         self.coef = {}
         self.tout = {}
         self.coef_writes = 0
         self.tout_writes = 0
-        self.height_reads_idle = 0
+        self.height_starts_idle = 0
+        self.stream = []      # samples still to hand out
+        self.pending = 0      # cycles mem_idle stays low after an entry
+        self.early_done = 0   # DONE rose while mem_idle was low
+        self.done = 0
         cocotb.start_soon(Clock(dut.clk, 10, unit="ns").start())
         cocotb.start_soon(self._memories())
 
@@ -43,21 +52,35 @@ class TB:
         dut = self.dut
         while True:
             await FallingEdge(dut.clk)
-            rdata = None
-            if int(dut.height_en.value):
-                if not int(dut.busy.value):
-                    self.height_reads_idle += 1
-                rdata = self.height.get(int(dut.height_addr.value), 0)
-            if int(dut.coef_en.value):
-                v = int(dut.coef_wdata.value)
-                self.coef[int(dut.coef_addr.value)] = v - (1 << 18) if v >> 17 else v
+            done = int(dut.done_reg.value)
+            if done and not self.done and self.pending:
+                self.early_done += 1
+            self.done = done
+            # what the DUT does at the coming rising edge, with this cycle's valid/ready
+            if int(dut.s_axis_height_tvalid.value) and int(dut.s_axis_height_tready.value):
+                self.stream.pop(0)
+            if int(dut.m_axis_coef_tvalid.value) and int(dut.m_axis_coef_tready.value):
+                v = int(dut.m_axis_coef_tdata.value)
+                self.coef[int(dut.m_axis_coef_tuser.value)] = v - (1 << 18) if v >> 17 else v
                 self.coef_writes += 1
-            if int(dut.tout_en.value):
-                self.tout[int(dut.tout_addr.value)] = int(dut.tout_wdata.value)
+                self.pending = self.rng.randrange(12)
+            if int(dut.m_axis_tout_tvalid.value) and int(dut.m_axis_tout_tready.value):
+                self.tout[int(dut.m_axis_tout_tuser.value)] = int(dut.m_axis_tout_tdata.value)
                 self.tout_writes += 1
+                self.pending = self.rng.randrange(12)
+            if int(dut.height_start.value):
+                if self.stream:
+                    self.height_starts_idle += 1  # a new stream while the last one runs
+                self.stream = list(self.height[:int(dut.height_count.value)])
             await RisingEdge(dut.clk)
-            if rdata is not None:
-                dut.height_rdata.value = rdata
+            # the next cycle's stream state: random gaps and back-pressure
+            self.pending = max(0, self.pending - 1)
+            dut.mem_idle.value = int(self.pending == 0)
+            ok = bool(self.stream) and self.rng.random() < 0.7
+            dut.s_axis_height_tvalid.value = int(ok)
+            dut.s_axis_height_tdata.value = self.stream[0] if ok else 0xDEAD
+            dut.m_axis_coef_tready.value = int(self.rng.random() < 0.6)
+            dut.m_axis_tout_tready.value = int(self.rng.random() < 0.5)
 
     async def reset(self):
         dut = self.dut
@@ -66,7 +89,11 @@ class TB:
         dut.bus_addr.value = 0
         dut.bus_wdata.value = 0
         dut.bus_wstrb.value = 0
-        dut.height_rdata.value = 0
+        dut.s_axis_height_tvalid.value = 0
+        dut.s_axis_height_tdata.value = 0
+        dut.m_axis_coef_tready.value = 0
+        dut.m_axis_tout_tready.value = 0
+        dut.mem_idle.value = 1
         await ClockCycles(dut.clk, 3)
         dut.rst.value = 0
         await ClockCycles(dut.clk, 2)
@@ -94,10 +121,8 @@ class TB:
         return int(dut.bus_rdata.value)
 
     def load(self, samples: np.ndarray):
-        flat = samples.astype(np.int64).ravel().tolist()
-        if len(flat) % 2:
-            flat.append(0xBEEF)  # the word's unused high half must not matter
-        self.height = {k: flat[2 * k] | flat[2 * k + 1] << 16 for k in range(len(flat) // 2)}
+        # the height memory's samples, and more behind them that the stream must not reach
+        self.height = samples.astype(np.int64).ravel().tolist() + [0xBEEF] * 7
 
     async def run(self, w: int, h: int, m: int, tau: int, timeout: int = 200000) -> int:
         for name, v in (("WIDTH", w), ("HEIGHT", h), ("LEVELS", m), ("TAU", tau)):
@@ -160,10 +185,11 @@ async def test_coefficients_and_templates(dut):
         cf, ct, total = (await tb.read("CYC_FILTER"), await tb.read("CYC_TEMPLATE"),
                          await tb.read("CYC_TOTAL"))
         assert 0 < cf <= total and 0 < ct <= total
-        assert total < 2 * w * h + 100, f"{name}: {total} cycles for {w * h} samples"
+        assert total < 8 * w * h + 200, f"{name}: {total} cycles for {w * h} samples"
+        assert not tb.stream, f"{name}: {len(tb.stream)} samples not taken"
         tb.log.info("%s: %d coefficients, %d blocks; cycles filter %d template %d total %d",
                     name, len(coef), len(tout), cf, ct, total)
-    assert tb.height_reads_idle == 0
+    assert tb.height_starts_idle == 0 and tb.early_done == 0
 
 
 @cocotb.test()
@@ -182,7 +208,7 @@ async def test_refused_configurations(dut):
         tb.coef, tb.tout = {}, {}
         status = await tb.run(w, h, m, 0)
         assert status == 6, f"{w}x{h} M={m}: STATUS {status:#x}"
-        assert not tb.coef and not tb.tout
+        assert not tb.coef and not tb.tout and not tb.stream
     # and a good run afterwards
     samples = from_array(synth.ball(16)).samples
     tb.load(samples)

@@ -1,8 +1,9 @@
 """The memory map (host/wavemesh/memmap.py) is consistent, fits the ECP5, and every consumer agrees.
 
 - regions and registers do not overlap and fit their address windows;
-- the default sizes hold what docs/soc.md says they support (256 x 256 samples, levels 1..8 of
-  details, the blocks of M >= 2) and fit an LFE5U-85F's block RAM with room for the filter bank;
+- the default sizes hold what docs/soc.md says they support (1024 x 1024 samples, levels 1..10 of
+  details, the blocks of M >= 2), the SDRAM's areas are disjoint and inside it, and the block RAM
+  (firmware RAM, the cache, the filter bank) stays well below an LFE5U-85F's;
 - the generated C header, compiled with the host's gcc, and the Verilog include, elaborated by
   Verilator, give the same numbers as the Python module;
 - docs/soc.md embeds the current generated tables.
@@ -16,7 +17,7 @@ from pathlib import Path
 
 import pytest
 from wavemesh import gen, memmap
-from wavemesh.memmap import BLOCKS, COEF, HEIGHT, REGIONS, TOUT
+from wavemesh.memmap import AREAS, BLOCKS, COEF, HEAP, HEIGHT, REGIONS, SDRAM, TOUT
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,6 +29,12 @@ def test_regions_and_registers_are_disjoint():
         assert 0 < r.bytes <= 1 << memmap.REGION_SHIFT
         assert r.base % 4 == 0
     assert len({b.index for b in BLOCKS}) == len(BLOCKS)
+    # the SDRAM's areas: word aligned, in order, disjoint, inside the SDRAM
+    end = 0
+    for r in AREAS:
+        assert r.code == SDRAM.code and r.offset % 4 == 0 and r.offset >= end
+        end = r.offset + r.bytes
+    assert end <= SDRAM.bytes == memmap.SDRAM_BYTES
     for b in BLOCKS:
         offsets = [r.offset for r in b.registers]
         assert len(set(offsets)) == len(offsets), b.name
@@ -43,52 +50,52 @@ def test_regions_and_registers_are_disjoint():
 def test_default_sizes_hold_what_they_promise():
     w, h = memmap.GRID_MAX_W, memmap.GRID_MAX_H
     assert HEIGHT.entries >= w * h
-    # details of every level 1..8 of any grid up to 256 x 256 (ceil sizes per level)
-    for gw, gh in ((w, h), (w - 1, h), (w, 2), (129, 255)):
+    # details of every level 1..10 of any grid up to 1024 x 1024 (ceil sizes per level)
+    for gw, gh in ((w, h), (w - 1, h), (w, 2), (513, 1023)):
         assert memmap._coef_entries(gw, gh, memmap.MAX_LEVELS) <= COEF.entries
     # one template-stage entry per block for M >= MIN_BLOCK_LEVEL
     s = 1 << memmap.MIN_BLOCK_LEVEL
     assert -(-(w - 1) // s) * -(-(h - 1) // s) <= TOUT.entries
     assert (memmap.TRI_CAPACITY * (memmap.REFINER_TRI_BYTES + memmap.STAGING_TRI_BYTES)
-            + memmap.REFINER_GRID_BYTES + memmap.STAGING_GRID_BYTES
-            + memmap.FW_RESERVED_BYTES <= memmap.FW_RAM_BYTES)
+            + memmap.REFINER_GRID_BYTES + memmap.STAGING_GRID_BYTES <= HEAP.bytes)
+    assert memmap.TRI_CAPACITY >= 100_000
     assert memmap.UART_DIV_RESET >= memmap.UART_DIV_MIN
     assert abs(memmap.CLK_HZ / memmap.UART_DIV_RESET / memmap.UART_BAUD - 1) < 0.02
 
 
 def test_triangle_capacity_fits_the_refiner():
-    """The refiner (a native build of firmware/src with the board's 16-bit indices; 64-bit pointers,
-    so its state is if anything larger than on the rv32) needs no more than the firmware RAM left
-    after code, data and stack for TRI_CAPACITY triangles of the largest grid, and not much less (the
-    capacity is not understated)."""
+    """The refiner (a native build of firmware/src with the board's 32-bit indices; 64-bit pointers,
+    so its state is if anything larger than on the rv32) needs no more than the SDRAM's heap for
+    TRI_CAPACITY triangles of the largest grid, and not much less (the capacity is not understated:
+    the firmware's own search, board_job_capacity, finds the exact figure HELLO states)."""
     import ctypes
 
     from wavemesh import native
 
-    build = native.build(native.ROOT / "build" / "firmware-native16", "Release", ("-DWM_INDEX_BITS=16",))
+    build = native.build()
     lib = ctypes.CDLL(str(build / native.LIB_NAME))
     lib.wm_refine_bound.restype = ctypes.c_size_t
     lib.wm_refine_bound.argtypes = [ctypes.c_int32] * 3
     def staging(cap):  # the board job's staging of the initial triangulation beside the refiner
         return memmap.STAGING_TRI_BYTES * cap + memmap.STAGING_GRID_BYTES
 
-    room = memmap.FW_RAM_BYTES - memmap.FW_RESERVED_BYTES
+    room = HEAP.bytes
     need = lib.wm_refine_bound(memmap.GRID_MAX_W, memmap.GRID_MAX_H, memmap.TRI_CAPACITY)
     assert 0 < need + staging(memmap.TRI_CAPACITY) <= room
-    cap = memmap.TRI_CAPACITY + 10
+    cap = memmap.TRI_CAPACITY * 101 // 100
     assert lib.wm_refine_bound(memmap.GRID_MAX_W, memmap.GRID_MAX_H, cap) + staging(cap) > room
 
 
 def test_fits_the_ecp5_with_room_to_spare():
-    total = sum(memmap.ebr_estimate().values())  # the memories and the FPGA stage (rtl/soc_accel.v)
-    assert total <= memmap.ECP5_85F_EBR - 4  # a few blocks left for the tools' choices
+    total = sum(memmap.ebr_estimate().values())  # firmware RAM, cache, the FPGA stage (rtl/soc_accel.v)
+    assert total <= memmap.ECP5_85F_EBR // 2  # the heights, details and mesh live in the SDRAM
 
 
 def test_c_header_agrees(tmp_path):
     gen.write_all(tmp_path)
     names = ["WM_CLK_HZ", "WM_UART_DIV_RESET", "WM_GRID_MAX_W", "WM_TRI_CAPACITY"]
     values = [memmap.CLK_HZ, memmap.UART_DIV_RESET, memmap.GRID_MAX_W, memmap.TRI_CAPACITY]
-    for r in REGIONS:
+    for r in (*REGIONS, *AREAS):
         names += [f"WM_{r.name}_BASE", f"WM_{r.name}_BYTES", f"WM_{r.name}_ENTRIES"]
         values += [r.base, r.bytes, r.entries]
     for b in BLOCKS:
@@ -115,6 +122,9 @@ def verilog_checks() -> list[tuple[str, int]]:
               ("WM_LED_COUNT", memmap.LED_COUNT), ("WM_REGION_IO", memmap.IO_CODE)]
     for r in REGIONS:
         checks += [(f"WM_REGION_{r.name}", r.code), (f"WM_{r.name}_ENTRIES", r.entries)]
+    for r in AREAS:
+        checks += [(f"WM_{r.name}_OFFSET", r.offset), (f"WM_{r.name}_ENTRIES", r.entries)]
+    checks += [(f"WM_SDRAM_{k}", v) for k, v in memmap.SDRAM_TIMING.items()]
     for b in BLOCKS:
         checks.append((f"WM_IO_{b.name}", b.index))
         checks += [(f"WM_{b.name}_{reg.name}", reg.offset) for reg in b.registers]
@@ -146,6 +156,7 @@ def test_linker_script_fragment_agrees():
     m = re.search(r"ORIGIN = 0x([0-9A-F]+), LENGTH = (\d+)", text)
     assert (int(m.group(1), 16), int(m.group(2))) == (memmap.FW_RAM.base, memmap.FW_RAM.bytes)
     assert f"__wm_stack_bytes = {memmap.STACK_BYTES};" in text
+    assert f"__wm_heap_base = 0x{HEAP.base:08X};" in text and f"__wm_heap_bytes = {HEAP.bytes};" in text
 
 
 def test_docs_embed_the_current_tables():
