@@ -222,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
         "measure its errors. Exit status 1 when it is not a proper triangulation."))
     p.add_argument("mesh", help="mesh file (.obj or .ply)")
     p.add_argument("--against", required=True, metavar="INPUT", help="the height field")
+    p.add_argument("--roi", action="append", metavar="X,Y,W,H|MASK",
+                   help="also measure the errors inside this region of interest alone (as `mesh --roi`)")
     _input_options(p)
     _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write the results as JSON")
@@ -364,7 +366,8 @@ def check_command(args) -> int:
     if args.report:
         api.check_report(args.report)
     hf = _load(args, args.against)
-    report = api.check_file(args.mesh, hf) | {"against": args.against}
+    roi = tuple(args.roi) if args.roi else None
+    report = api.check_file(args.mesh, hf, roi=roi) | {"against": args.against}
     if args.report:
         api.write_json(args.report, report)
     if not args.quiet:
@@ -385,6 +388,10 @@ def check_command(args) -> int:
             e = report["errors"]
             print(f"  E_max normal {e['e_max_normal']:.6g}, vertical {e['e_max_vertical']:.6g}; "
                   f"RMS normal {e['rms_normal']:.6g}, vertical {e['rms_vertical']:.6g}")
+        if "roi_errors" in report:
+            e = report["roi_errors"]
+            print(f"  inside the ROI: E_max normal {e['e_max_normal']:.6g}, "
+                  f"vertical {e['e_max_vertical']:.6g}")
     if not report["valid"]:
         what = "the valid samples of the" if "holes" in report else "the"
         raise MeshInvalid(f"{args.mesh} is not a proper triangulation of {what} {hf.width} x {hf.height} grid"

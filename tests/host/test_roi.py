@@ -163,8 +163,12 @@ def test_cli(tmp_path):
                            "--report", str(tmp_path / "t.json"))
     assert rc == 0, err
     assert "ROI: 800 samples" in out
-    rc, out, err = run_cli("check", str(tmp_path / "t.obj"), "--against", str(tmp_path / "t.npy"))
+    rc, out, err = run_cli("check", str(tmp_path / "t.obj"), "--against", str(tmp_path / "t.npy"), "--roi",
+                           "0,0,20,20", "--roi", str(tmp_path / "mask.npy"))
     assert rc == 0 and "a proper triangulation" in out
+    inside = float(out.split("inside the ROI: E_max normal ")[1].split(",")[0])
+    whole = float(out.split("  E_max normal ")[1].split(",")[0])
+    assert inside <= 2 * (1 + 1e-9) < whole  # within zeta inside the ROI only
     for bad, says in ((["--roi", "0,0,99,10"], "does not fit"), (["--roi", "nothing.png"], "no such file"),
                       (["--roi", "1,2,x,4"], "not four integers"),
                       (["--roi", "0,0,5,5", "--stage", "initial"], "--stage full")):
