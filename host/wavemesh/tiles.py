@@ -50,7 +50,9 @@ import numpy as np
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.mesh import Mesh
 
-DEFAULT_TILE = 1024  # samples per tile side without --tile N (docs/tiles.md: its memory and overhead)
+# samples per tile side without --tile N: 2^10 + 1, so that a grid of 2^k or 2^k + 1 samples a side splits
+# into halves (tiles share a border row); its memory and its overhead: docs/tiles.md
+DEFAULT_TILE = 1025
 MIN_TILE = 16  # smaller tiles are all border
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 STRIP_BYTES = 64 << 20  # the first pass reads the input in row strips of about this many float64 bytes
@@ -784,8 +786,9 @@ def _run_pool(plan: TilePlan, workers: int, finished) -> None:
     from wavemesh import native
 
     native.load()  # built once here, not by every worker at once
-    # forkserver: a clean worker (no threads or locks of this process), the plan sent once per task
-    ctx = multiprocessing.get_context("forkserver")
+    # fork: the workers start from this process as it is (the library loaded; a script that calls this
+    # needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
+    ctx = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         # at most 2 tiles per worker in flight: memory is bounded by the tiles in flight
         todo = iter(_tasks(plan))

@@ -1,0 +1,311 @@
+"""Tiles (issue 15): `wavemesh mesh --tile` of inputs up to 8192 x 8192 in bounded memory.
+
+The height field is the seeded synthetic terrain of bench/datasets.py (terrain(): a fractal-like sum of
+plane waves, 0..1000 "m" on the unit square), sampled n x n over the same unit square (the "resolution"
+series of bench_cost: the same surface ever finer), written strip by strip into a float32 .npy that the
+run reads through a memmap, never whole.  Every run is `wavemesh.tiles` (plan_tiles, run_tiles on the
+local process pool, stitch: the stitched mesh checked proper) with --metric vertical --zeta 10 (1 % of the
+height range), in a process of its own; its peak RSS is that process tree's resident memory (itself and
+its pool workers, summed) sampled every 50 ms by psutil, the most it reached.
+
+- *growth*: 1024^2 .. 8192^2 at the default tile size (tiles.DEFAULT_TILE), 2 workers;
+- *tile size*: 4096^2 at tiles of 512, 1024 and 2048, 2 workers;
+- *workers*: 4096^2 at the default tile, 1 and 2 workers: parallel efficiency t1 / (2 t2);
+- *overhead*: the tiled mesh's triangles against one untiled run (wavemesh.api.mesh) at the default tile
+  size and at smaller ones, on this terrain (2048^2) and on the benchmark DEMs of bench_quality (the
+  real ones; each smaller than the default tile, where tiling is one tile, the untiled mesh itself).
+
+Wall times on a shared 2-core machine are noisy; CPU seconds are given beside them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+TITLE = "Tiles: any size in bounded memory (issue 15)"
+ZETA = 10.0
+SIZES = (1024, 2048, 4096, 8192)
+TILE_SIZES = (513, 1025, 2049)
+TILE_N = 4096
+STRIP = 256
+DEMS = ("jacksboro", "topobathy", "lidar_dem", "motorcycle")
+DEM_TILES = (257, 129)
+RSS_BAR = 2 << 30
+WORK = Path(os.environ.get("WAVEMESH_BENCH_TMP", "/tmp")) / "wavemesh-bench-tiles"
+
+
+def terrain_file(n: int) -> Path:
+    """The n x n terrain as a float32 .npy, written strip by strip (once)."""
+    import datasets as D
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    path = WORK / f"terrain-{n}.npy"
+    if not path.exists():
+        tmp = path.with_suffix(".part.npy")
+        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(n, n))
+        for r in range(0, n, STRIP):
+            out[r : r + STRIP] = D.terrain(n, rows=slice(r, min(n, r + STRIP)))
+        out.flush()
+        del out
+        tmp.rename(path)
+    return path
+
+
+def one(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
+    """One run in this process (the child): the tiled mesh, or the untiled one."""
+    import resource
+
+    from wavemesh import api, tiles
+    from wavemesh.native import RefineParams
+
+    path = str(terrain_file(n))
+    params = api.MeshParams(refine=RefineParams(zeta=ZETA, metric="vertical"))
+    t0, c0 = time.perf_counter(), time.process_time()
+    if untiled:
+        r = api.mesh(api.load_input(path), params)
+        out = {"triangles": r.mesh.n_triangles, "e_max": r.errors.e_max_vertical}
+    else:
+        plan = tiles.plan_tiles(tiles.open_source(path), params, tile)
+        tiled = tiles.stitch(plan, tiles.run_tiles(plan, workers=workers))
+        out = {
+            "triangles": tiled.mesh.n_triangles,
+            "e_max": tiled.report["e_max_vertical"],
+            "tiles": len(plan.tiles),
+            "border_seconds": plan.border_seconds,
+        }
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return out | {
+        "seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - c0 + kids.ru_utime + kids.ru_stime,
+    }
+
+
+def run_child(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
+    """one() in a process of its own, its tree's peak RSS sampled meanwhile."""
+    import psutil
+
+    cmd = [
+        sys.executable,
+        str(Path(__file__)),
+        "one",
+        str(n),
+        str(tile),
+        str(workers),
+        "1" if untiled else "0",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=BENCH)
+    peak = 0
+    stop = threading.Event()
+
+    def sample() -> None:
+        nonlocal peak
+        p = psutil.Process(proc.pid)
+        while not stop.is_set():
+            try:
+                total = p.memory_info().rss + sum(c.memory_info().rss for c in p.children(recursive=True))
+            except psutil.Error:
+                total = 0
+            peak = max(peak, total)
+            stop.wait(0.05)
+
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    out, _ = proc.communicate()
+    stop.set()
+    th.join()
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode})")
+    r = json.loads(out.strip().splitlines()[-1])
+    r |= {"n": n, "tile": tile, "workers": workers, "untiled": untiled, "peak_rss": peak}
+    print(
+        f"  {n}^2 {'untiled' if untiled else f'tile {tile} x{workers}'}: {r['triangles']} triangles, "
+        f"{r['seconds']:.1f} s ({r['cpu_seconds']:.1f} CPU s), peak RSS {peak / 2**20:.0f} MiB",
+        flush=True,
+    )
+    return r
+
+
+def dem_overhead() -> list[dict]:
+    """The benchmark DEMs: triangles tiled (default tile and smaller ones) against untiled, in process."""
+    import datasets as D
+    from wavemesh import api, tiles
+    from wavemesh.heightfield import from_array
+    from wavemesh.native import RefineParams
+
+    rows = []
+    for name in DEMS:
+        g = D.load(name)
+        hf = from_array(g.values, source=name)
+        zeta = 0.005 * g.height_range
+        params = api.MeshParams(refine=RefineParams(zeta=zeta, metric="vertical"))
+        base = api.mesh(hf, params).mesh.n_triangles
+        src = tiles.Source("array", hf.width, hf.height, array=hf.values, name=name)
+        row = {"name": name, "size": [hf.width, hf.height], "zeta": zeta, "untiled": base, "tiled": {}}
+        for tile in (tiles.DEFAULT_TILE, *DEM_TILES):
+            t = tiles.mesh_tiled(src, params, tile, workers=1)
+            row["tiled"][str(tile)] = {"tiles": len(t.tiles), "triangles": t.mesh.n_triangles}
+        rows.append(row)
+        print(
+            f"  {name} {hf.width} x {hf.height}: untiled {base}, "
+            + ", ".join(f"tile {k}: {v['triangles']} ({v['tiles']} tiles)" for k, v in row["tiled"].items()),
+            flush=True,
+        )
+    return rows
+
+
+def run() -> dict:
+    from wavemesh import tiles
+
+    d = tiles.DEFAULT_TILE
+    sizes = [int(s) for s in os.environ.get("TILES_SIZES", " ".join(map(str, SIZES))).split()]
+    out: dict = {"zeta": ZETA, "default_tile": d, "growth": [], "tile_size": [], "workers": [], "untiled": []}
+    for n in sizes:
+        terrain_file(n)
+    for n in sizes:
+        out["growth"].append(run_child(n, d, 2))
+    if TILE_N in sizes:
+        for tile in TILE_SIZES:
+            if tile != d:
+                out["tile_size"].append(run_child(TILE_N, tile, 2))
+        out["workers"].append(run_child(TILE_N, d, 1))
+    for n in (1024, 2048):
+        if n in sizes:
+            out["untiled"].append(run_child(n, d, 1, untiled=True))
+            for tile in (513, 257):
+                out["tile_size"].append(run_child(n, tile, 2))
+    out["dems"] = dem_overhead()
+    return out
+
+
+def _mib(b: float) -> str:
+    return f"{b / 2**20:,.0f}"
+
+
+def _row(*cells) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def markdown(r: dict) -> str:
+    import math
+
+    d = r["default_tile"]
+    by = {(x["n"], x["tile"], x["workers"]): x for x in r["growth"] + r["tile_size"] + r["workers"]}
+    lines = [
+        f"`make bench-tiles` (bench/bench_tiles.py): `wavemesh mesh --tile` on the seeded synthetic "
+        f"terrain (bench/datasets.py `terrain`, the unit square sampled n x n, a float32 .npy read through "
+        f"a memmap), --metric vertical --zeta {r['zeta']:g}; every run a process of its own, the peak RSS "
+        f"of its process tree (pool workers included) sampled every 50 ms.  Default tile: {d}.",
+        "",
+        "**Growth** (default tile, 2 workers):",
+        "",
+        "| n^2 | tiles | triangles | E_max | wall s | CPU s | peak RSS MiB | <= 2 GiB |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for x in r["growth"]:
+        lines.append(
+            _row(
+                f"{x['n']}^2",
+                x["tiles"],
+                f"{x['triangles']:,}",
+                f"{x['e_max']:.3f}",
+                f"{x['seconds']:.1f}",
+                f"{x['cpu_seconds']:.1f}",
+                _mib(x["peak_rss"]),
+                "yes" if x["peak_rss"] <= RSS_BAR else "NO",
+            )
+        )
+    g = r["growth"]
+    if len(g) >= 2:
+        ratio, samples = g[-1]["seconds"] / g[0]["seconds"], (g[-1]["n"] / g[0]["n"]) ** 2
+        lines += [
+            "",
+            f"Cost growth {g[0]['n']}^2 -> {g[-1]['n']}^2: wall time ~ samples^"
+            f"{math.log(ratio) / math.log(samples):.2f} ({ratio:.1f}x the time for {samples:.0f}x the "
+            f"samples); CPU {g[-1]['cpu_seconds'] / g[0]['cpu_seconds']:.1f}x.",
+        ]
+    rows = sorted(
+        (x for x in r["tile_size"] + [by.get((TILE_N, d, 2))] if x), key=lambda x: (x["n"], x["tile"])
+    )
+    if rows:
+        lines += [
+            "",
+            "**Tile size** (2 workers):",
+            "",
+            "| n^2 | tile | tiles | triangles | wall s | CPU s | peak RSS MiB |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for x in rows:
+            lines.append(
+                _row(
+                    f"{x['n']}^2",
+                    x["tile"],
+                    x["tiles"],
+                    f"{x['triangles']:,}",
+                    f"{x['seconds']:.1f}",
+                    f"{x['cpu_seconds']:.1f}",
+                    _mib(x["peak_rss"]),
+                )
+            )
+    w1, w2 = by.get((TILE_N, d, 1)), by.get((TILE_N, d, 2))
+    if w1 and w2:
+        lines += [
+            "",
+            f"**Workers** ({TILE_N}^2, tile {d}): 1 worker {w1['seconds']:.1f} s (peak "
+            f"{_mib(w1['peak_rss'])} MiB), 2 workers {w2['seconds']:.1f} s (peak "
+            f"{_mib(w2['peak_rss'])} MiB): parallel efficiency t1 / (2 t2) = "
+            f"{w1['seconds'] / (2 * w2['seconds']):.2f}, on a 2-core machine shared with other jobs "
+            f"during the run.",
+        ]
+    if r["untiled"]:
+        lines += [
+            "",
+            "**Overhead against one untiled run** (triangles), terrain:",
+            "",
+            "| n^2 | untiled | tile | tiles | tiled | overhead |",
+            "|---|---|---|---|---|---|",
+        ]
+        for u in r["untiled"]:
+            for x in sorted(
+                (x for x in r["growth"] + r["tile_size"] if x["n"] == u["n"]), key=lambda x: -x["tile"]
+            ):
+                lines.append(
+                    _row(
+                        f"{u['n']}^2",
+                        f"{u['triangles']:,}",
+                        x["tile"],
+                        x["tiles"],
+                        f"{x['triangles']:,}",
+                        f"{100 * (x['triangles'] / u['triangles'] - 1):+.1f} %",
+                    )
+                )
+    if r.get("dems"):
+        tiles_ = list(r["dems"][0]["tiled"])
+        lines += [
+            "",
+            "Benchmark DEMs (bench_quality's real ones; --metric vertical, zeta 0.5 % of the height range):",
+            "",
+            _row("DEM", "size", "untiled", *(f"tile {t}" for t in tiles_)),
+            "|---|---|---|" + "---|" * len(tiles_),
+        ]
+        for x in r["dems"]:
+            cells = [
+                f"{v['triangles']:,} ({100 * (v['triangles'] / x['untiled'] - 1):+.1f} %, {v['tiles']} tiles)"
+                for v in x["tiled"].values()
+            ]
+            lines.append(_row(x["name"], f"{x['size'][0]} x {x['size'][1]}", f"{x['untiled']:,}", *cells))
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    if sys.argv[1:2] == ["one"]:
+        n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
+        print(json.dumps(one(n, tile, workers, bool(untiled))))
