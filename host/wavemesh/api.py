@@ -282,6 +282,13 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     return rjob
 
 
+def native_within(samples, fp):
+    """native.error_within, imported when holes need it (the library loads, and builds if needed)."""
+    from wavemesh import native
+
+    return native.error_within(samples, fp)
+
+
 def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None) -> holes.HoleCheck | None:
     """With holes (hf.mask): every level's mesh less the triangles over invalid samples, the final one
     also less the vertices on straight rims that ``within`` (native.error_within) lets go
@@ -555,9 +562,6 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     params = params or MeshParams()
     p = params.refine
     p.check()
-    if hf.mask is not None:  # the protocol carries no validity mask yet (wavemesh.holes)
-        raise InputError("--nodata hole: no device takes a validity mask yet",
-                         hint="use `wavemesh mesh --nodata hole`, or stream with --fill nearest")
     if params.roi is not None:  # no device takes an ROI (wavemesh.roi): refused before the port is opened
         raise InputError("--roi: selective triangulation runs on the host only; no device takes a region of "
                          "interest", hint="use `wavemesh mesh --roi ...`, or stream without --roi")
@@ -580,6 +584,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                               hint=f"use --levels {info.max_levels} or fewer")
         if not full and not info.features & P.FEATURE_INITIAL_ONLY:
             raise DeviceError("the device cannot stop after the template stage", hint="use --stage full")
+        if hf.mask is not None and not info.features & P.FEATURE_HOLES:
+            raise DeviceError("--nodata hole: the device takes no validity mask (no FEATURE_HOLES)",
+                              hint="use `wavemesh mesh --nodata hole`, or stream with --fill nearest")
         if params.wavelet != "haar" and not info.features & P.FEATURE_SPLINE:
             raise DeviceError(f"--wavelet {params.wavelet}: the device's filter bank makes Haar's only",
                               hint="use --wavelet haar, or `wavemesh mesh` on the host")
@@ -598,14 +605,16 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                               hint=f"use --max-triangles {storage - 1} or less")
         fp = fixed_params(p, hf.scale, zeta, ground(hf).spacing)
         dev.configure(config_payload(hf.width, hf.height, m, tau_q, fp, capacity=p.capacity or 0,
-                                     initial_only=not full, spline=params.wavelet == "spline"))
+                                     initial_only=not full, spline=params.wavelet == "spline",
+                                     mask=hf.mask is not None))
         if full:
             say(f"job: {hf.width} x {hf.height}, M={m}, tau={tau:g}, zeta {p.zeta:g} ({p.metric}), "
                 f"budget {p.max_triangles} triangles{budget_note}")
-        kib = 2 * hf.width * hf.height / 1024
-        with _Progress("heights", hf.width * hf.height, progress) as bar:
+        words = P.job_words(hf.samples, hf.mask)  # the samples, then a mask's bits (CONFIG_MASK)
+        kib = 2 * len(words) / 1024
+        with _Progress("heights", len(words), progress) as bar:
             t0 = time.monotonic()
-            sent = dev.upload(hf.samples, bar)
+            sent = dev.upload(hf.samples if hf.mask is None else words.reshape(1, -1), bar)
             upload_s = time.monotonic() - t0
             bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
         got: list = []
@@ -621,7 +630,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                 work.update(len(got), f"level {lv.level}: {lv.mesh.n_triangles} triangles")
 
             t1 = time.monotonic()
-            levels, done = dev.run(samples_crc(hf.samples), hf.width, hf.height, on_level, on_progress)
+            levels, done = dev.run(samples_crc(words), hf.width, hf.height, on_level, on_progress)
             job_s = time.monotonic() - t1
             work.finish(f"{len(levels)} level{'s' if len(levels) != 1 else ''} in {job_s:.2f} s")
         link = dev.link.stats
@@ -631,6 +640,8 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         if not verdict.valid:
             raise ProtocolError(f"the device's level {lv.level} is not a proper triangulation: "
                                 + "; ".join(verdict.problems[:3]))
+    hole_check = drop_holes(levels, hf, params.min_area,  # as mesh() does: the same meshes
+                            native_within(hf.samples, fp) if hf.mask is not None and full else None)
     final = levels[-1]
     rows = [level_report(lv, hf, p.metric) | {"device_cycles": lv.cycles, "stream_bytes": lv.nbytes,
                                               "arrived_s": lv.seconds} for lv in levels] if full else []
@@ -655,6 +666,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                      "bytes_in": link.bytes_in, "damaged_frames": link.damaged},
     }
     bound_met = final.stats["over"] == 0
+    if hole_check is not None:
+        parameters["min_area"] = params.min_area
+        report["holes"] = hole_check.to_report()
     if full:
         parameters.update(p.to_report())
         parameters["zeta_refiner"] = zeta

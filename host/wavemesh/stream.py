@@ -175,16 +175,18 @@ def q16(x: float) -> int:
 
 def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, capacity: int = 0,
                    initial_only: bool = False, delta_lambda: float = 0.0, delta_c: float = 0.0,
-                   spline: bool = False) -> bytes:
+                   spline: bool = False, mask: bool = False) -> bytes:
     """CONFIG from the refiner's fixed-point parameters (wavemesh.native.fixed_params: the same
     conversion `wavemesh mesh` uses, so both paths give the library the same numbers, delta_lambda,
     delta_c and the WM_FLAG_* bits included; the delta_lambda and delta_c arguments are ignored);
-    ``spline``: the spline wavelet's filter bank (CONFIG_SPLINE, for a device with FEATURE_SPLINE).
+    ``spline``: the spline wavelet's filter bank (CONFIG_SPLINE, for a device with FEATURE_SPLINE);
+    ``mask``: a validity mask follows the samples (CONFIG_MASK, protocol.job_words; FEATURE_HOLES).
     Every field is checked against the range the device checks (protocol.CONFIG) before it is sent."""
     values = dict(
         width=width, height=height, levels=levels, metric=fixed.metric, neighbourhood=fixed.neighbourhood,
         iterations=fixed.iterations, tau=tau_q,
         flags=((P.CONFIG_INITIAL_ONLY if initial_only else 0) | (P.CONFIG_SPLINE if spline else 0)
+               | (P.CONFIG_MASK if mask else 0)
                | fixed.flags << P.CONFIG_REFINER_SHIFT),
         max_triangles=fixed.max_triangles, capacity=capacity, zeta=fixed.zeta, scale_m=fixed.scale_m,
         scale_e=fixed.scale_e, delta_p=fixed.delta_p, alpha=fixed.alpha, delta_v=fixed.delta_v,

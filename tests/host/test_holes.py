@@ -221,11 +221,3 @@ def test_all_invalid_and_crop():
     assert np.array_equal(part.mask, full.mask[5:35, 10:40])
     assert hf is not None
 
-
-def test_stream_refuses_holes_before_the_port(tmp_path, capsys):
-    src = tmp_path / "z.npy"
-    np.save(src, shadowed_ball(16))
-    assert main(["stream", str(src), "-o", str(tmp_path / "x.obj"), "--nodata", "hole",
-                 "--port", "socket://127.0.0.1:9"]) != 0
-    err = capsys.readouterr().err
-    assert err.startswith("error: --nodata hole") and not (tmp_path / "x.obj").exists()

@@ -104,6 +104,7 @@ typedef struct wm_proto_job {
     uint32_t delta_lambda;   /* Q16.16, for the reduction operators */
     uint32_t delta_c;        /* Q16.16, 0..65536 */
     const uint16_t *heights;
+    const uint8_t *mask;     /* CONFIG_MASK: the validity mask (wm_field.mask's format), else NULL */
 } wm_proto_job;
 
 struct wm_proto;
@@ -119,6 +120,8 @@ typedef struct wm_proto {
     wm_proto_io io;
     wm_proto_caps caps;
     uint16_t *heights;
+    uint8_t *mask;           /* wm_proto_set_mask's storage, or NULL */
+    uint32_t mask_bytes;
     wm_proto_job_fn job_fn;
     void *job_ctx;
     uint32_t ms_cycles;      /* cycles per millisecond */
@@ -150,7 +153,7 @@ typedef struct wm_proto {
     uint32_t last_detail;
     uint64_t last_valid;     /* cycles of the last valid frame of the session */
     wm_proto_job job;
-    uint32_t total, next;    /* samples expected, samples stored in order */
+    uint32_t total, next;    /* words expected (samples, then the mask's), words stored in order */
 
     /* job accounting: one clock runs at a time, the current stage's or, inside link I/O, the link's */
     int32_t stage;           /* current stage, -1 none */
@@ -177,6 +180,11 @@ typedef struct wm_proto {
 /* Sets up the engine.  heights must hold caps->max_samples samples.  Nothing is sent. */
 void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps, uint16_t *heights,
                    wm_proto_job_fn job, void *job_ctx);
+
+/* Storage for a validity mask (CONFIG_MASK, --nodata hole): bytes >= 2 ceil(max_samples / 16), static on
+ * the device.  Call it after wm_proto_init; caps.features should then state WM_PROTO_FEATURE_HOLES.  A
+ * CONFIG with CONFIG_MASK is refused (BAD_VALUE, FLAGS) without it or when W H needs more. */
+void wm_proto_set_mask(wm_proto *p, uint8_t *mask, uint32_t bytes);
 
 /* Serves requests until io->getc returns WM_PROTO_RX_CLOSED (WM_PROTO_SERVE_CLOSED) or, with
  * caps.idle_timeout_ms, until the connection was idle that long (WM_PROTO_SERVE_IDLE).  On a UART

@@ -289,6 +289,8 @@ int main(int argc, char **argv)
     pthread_t door;
     int exit_on_close = 0, quiet = 0;
     uint16_t *heights;
+    uint8_t *mask;
+    uint32_t mask_bytes;
     struct sockaddr_in addr;
     socklen_t len = sizeof addr;
     int one = 1;
@@ -319,6 +321,7 @@ int main(int argc, char **argv)
         if (i + 1 >= argc || !number(argv[++i], lo, hi, dst)) return usage("bad or missing number");
     }
     if (max_samples < 0) max_samples = max_w * max_h;
+    mask_bytes = 2 * (uint32_t)((max_samples + 15) / 16);
 
     memset(&caps, 0, sizeof caps);
     memcpy(caps.name, "wm-nativ", 8);
@@ -333,11 +336,13 @@ int main(int argc, char **argv)
     caps.max_payload = (uint16_t)payload;
     caps.clk_hz = 1000000000u; /* cycle counters count nanoseconds */
     caps.baud = (uint32_t)baud;
-    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_SPLINE; /* wm_spline, as the host's model */
+    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_SPLINE | /* wm_spline, as the host's model */
+                    WM_PROTO_FEATURE_HOLES;
     caps.idle_timeout_ms = (uint32_t)idle_ms;
     caps.write_timeout_ms = (uint32_t)write_ms;
     heights = calloc((size_t)max_samples, sizeof *heights);
-    if (!heights) return usage("cannot allocate the height memory");
+    mask = calloc((size_t)mask_bytes, 1); /* --nodata hole: a bit per sample */
+    if (!heights || !mask) return usage("cannot allocate the height memory");
 
     signal(SIGPIPE, SIG_IGN);
     memset(&c, 0, sizeof c);
@@ -378,6 +383,7 @@ int main(int argc, char **argv)
         c.rx_clock = c.tx_clock = 0;
         if (!quiet) printf("wmdev: client connected\n"), fflush(stdout);
         wm_proto_init(&eng, &io, &caps, heights, wm_native_job, NULL);
+        wm_proto_set_mask(&eng, mask, mask_bytes);
         how = wm_proto_serve(&eng);
         close(c.cfd);
         door_done(); /* before the lines below: whoever reads them may connect at once */

@@ -107,7 +107,7 @@ int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detai
     if (j->flags & WM_PROTO_CONFIG_INITIAL_ONLY) {
         rc = wm_job_emit_initial(p, j, &init, mem, bytes, detail);
     } else {
-        wm_field f = {w, h, m, j->heights, details, NULL};
+        wm_field f = {w, h, m, j->heights, details, j->mask};
         rc = wm_job_refine(p, j, &f, &init, mem, bytes, detail);
     }
 out:

@@ -484,6 +484,9 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
     if (levels > cap->max_levels) BAD(LEVELS);
     if ((flags & WM_PROTO_CONFIG_INITIAL_ONLY) && !(cap->features & WM_PROTO_FEATURE_INITIAL_ONLY)) BAD(FLAGS);
     if ((flags & WM_PROTO_CONFIG_SPLINE) && !(cap->features & WM_PROTO_FEATURE_SPLINE)) BAD(FLAGS);
+    if ((flags & WM_PROTO_CONFIG_MASK) &&
+        (!(cap->features & WM_PROTO_FEATURE_HOLES) || p->mask == NULL || 2 * ((w * h + 15) / 16) > p->mask_bytes))
+        BAD(FLAGS);
     if (cap_tri == 0) cap_tri = cap->tri_capacity;
     if (cap_tri < 2 || cap_tri > cap->tri_capacity) BAD(CAPACITY);
     if (budget != 0 && (budget < 2 || budget >= cap_tri)) BAD(MAX_TRIANGLES);
@@ -515,6 +518,7 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
     j->params.slope_y_m = slope_y_m;
     j->params.slope_y_e = (int32_t)slope_y_e;
     j->heights = p->heights;
+    j->mask = (flags & WM_PROTO_CONFIG_MASK) ? p->mask : NULL;
     if (wm_params_check(&j->params) != WM_OK) { /* cannot happen after the checks above */
         *detail = WM_PROTO_CONFIG_ZETA;
         return WM_PROTO_E_BAD_VALUE;
@@ -538,6 +542,7 @@ static void do_config(wm_proto *p)
         return;
     }
     p->total = (uint32_t)p->job.width * (uint32_t)p->job.height;
+    if (p->job.mask) p->total += (p->total + 15) / 16; /* the mask's words follow the samples */
     p->next = 0;
     p->nak_sent = 0;
     p->state = WM_PROTO_STATE_RECEIVING;
@@ -547,6 +552,25 @@ static void do_config(wm_proto *p)
     p->stage = -1;
     stage_enter(p, WM_PROTO_STAGE_RECEIVE);
     reply_ok(p);
+}
+
+/* Word k of what DATA carries: sample k, or beyond the W H samples the mask's bytes in pairs. */
+static void put_word(wm_proto *p, uint32_t k, uint16_t v)
+{
+    uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height;
+    if (k < wh) {
+        p->heights[k] = v;
+    } else {
+        p->mask[2 * (k - wh)] = (uint8_t)v;
+        p->mask[2 * (k - wh) + 1] = (uint8_t)(v >> 8);
+    }
+}
+
+static uint16_t word_at(const wm_proto *p, uint32_t k)
+{
+    uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height;
+    if (k < wh) return p->heights[k];
+    return (uint16_t)(p->mask[2 * (k - wh)] | p->mask[2 * (k - wh) + 1] << 8);
 }
 
 static void do_data(wm_proto *p)
@@ -572,7 +596,7 @@ static void do_data(wm_proto *p)
     if (off <= p->next) {
         /* in order, or a repeat that may reach beyond what is stored */
         s = p->f_pay + WM_PROTO_DATA_BYTES;
-        for (i = 0; i < n; i++) p->heights[off + i] = get16(s + 2 * i);
+        for (i = 0; i < n; i++) put_word(p, off + i, get16(s + 2 * i));
         if (off + n > p->next) {
             p->next = off + n;
             p->nak_sent = 0;
@@ -603,7 +627,7 @@ static void do_run(wm_proto *p)
     }
     for (uint32_t i = 0; i < p->total; i++) {
         uint8_t le[2];
-        put16(le, p->heights[i]);
+        put16(le, word_at(p, i));
         crc = wm_proto_crc32(crc, le, 2);
     }
     if (crc != get32(p->f_pay + WM_PROTO_RUN_CRC)) {
@@ -951,6 +975,12 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->state = WM_PROTO_STATE_IDLE;
     p->last_valid = now(p); /* the idle clock starts when the connection does */
     rx_reset(p);
+}
+
+void wm_proto_set_mask(wm_proto *p, uint8_t *mask, uint32_t bytes)
+{
+    p->mask = mask;
+    p->mask_bytes = mask ? bytes : 0;
 }
 
 int wm_proto_serve(wm_proto *p)
