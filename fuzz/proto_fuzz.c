@@ -28,6 +28,7 @@
 
 #include "job.h"
 #include "proto.h"
+#include "testhost.h"
 
 #define MAX_SIDE 24
 #define CLK_HZ 1000000u
@@ -49,10 +50,7 @@ typedef struct host {
     size_t q_len, q_pos;
     uint8_t seq;
     wm_proto_caps caps;
-    /* the device's frames, decoded as they are written */
-    uint8_t f[WM_PROTO_MAX_FRAME + 64];
-    size_t f_len;
-    int f_esc, f_bad;
+    th_rx rx; /* the device's frames, decoded as they are written */
     /* what the host learnt from them */
     uint32_t data_next;                  /* DATA_ACK's next */
     uint8_t le_index;                    /* the last LEVEL_END's index and total */
@@ -85,57 +83,17 @@ static uint32_t scaled(host *h)
     return v >> pick(h, 0, 31);
 }
 
-static void put16(uint8_t *b, uint32_t v)
-{
-    b[0] = (uint8_t)v;
-    b[1] = (uint8_t)(v >> 8);
-}
-
-static void put32(uint8_t *b, uint32_t v)
-{
-    put16(b, v);
-    put16(b + 2, v >> 16);
-}
-
-static uint32_t get32(const uint8_t *b)
-{
-    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
-}
-
 static void q_raw(host *h, uint8_t b)
 {
     if (h->q_len < sizeof h->q) h->q[h->q_len++] = b;
 }
 
-static void q_byte(host *h, uint8_t b)
-{
-    if (b == WM_PROTO_SLIP_END || b == WM_PROTO_SLIP_ESC) {
-        q_raw(h, WM_PROTO_SLIP_ESC);
-        q_raw(h, b == WM_PROTO_SLIP_END ? WM_PROTO_SLIP_ESC_END : WM_PROTO_SLIP_ESC_ESC);
-    } else {
-        q_raw(h, b);
-    }
-}
-
 /* A frame with a valid CRC, SLIP-encoded onto the queue; damage: one byte of it changed on the line. */
 static void q_frame(host *h, uint8_t type, const uint8_t *pay, uint32_t n, int damage)
 {
-    uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
-    size_t start = h->q_len;
-    uint32_t crc;
-    head[0] = type;
-    head[1] = h->seq++;
-    put16(head + 2, n);
-    crc = wm_proto_crc32(0, head, sizeof head);
-    crc = wm_proto_crc32(crc, pay, n);
-    put32(tail, crc);
-    q_raw(h, WM_PROTO_SLIP_END);
-    for (int i = 0; i < WM_PROTO_HEADER_BYTES; i++) q_byte(h, head[i]);
-    for (uint32_t i = 0; i < n; i++) q_byte(h, pay[i]);
-    for (int i = 0; i < WM_PROTO_CRC_BYTES; i++) q_byte(h, tail[i]);
-    q_raw(h, WM_PROTO_SLIP_END);
-    if (damage && h->q_len > start)
-        h->q[start + pick(h, 0, (uint32_t)(h->q_len - start - 1))] ^= (uint8_t)pick(h, 1, 255);
+    size_t start = h->q_len, k = th_frame(h->q + start, sizeof h->q - start, type, h->seq++, pay, n);
+    h->q_len += k;
+    if (damage && k) h->q[start + pick(h, 0, (uint32_t)(k - 1))] ^= (uint8_t)pick(h, 1, 255);
 }
 
 /* One operation of the script onto the queue (module comment). */
@@ -154,31 +112,33 @@ static void next_op(host *h)
     case 1:
         type = WM_PROTO_T_HELLO;
         n = WM_PROTO_HELLO_BYTES;
-        put16(pay + WM_PROTO_HELLO_VERSION, pick(h, 0, 7) ? WM_PROTO_VERSION : take(h, 2));
+        th_put16(pay + WM_PROTO_HELLO_VERSION, pick(h, 0, 7) ? WM_PROTO_VERSION : take(h, 2));
         break;
     case 2: { /* CONFIG of a small job, a field now and then out of range */
         uint32_t w = pick(h, 2, MAX_SIDE), ht = pick(h, 2, MAX_SIDE), wild = pick(h, 0, 15);
         type = WM_PROTO_T_CONFIG;
         n = WM_PROTO_CONFIG_BYTES;
-        put16(pay + WM_PROTO_CONFIG_WIDTH, wild == 1 ? take(h, 2) : w);
-        put16(pay + WM_PROTO_CONFIG_HEIGHT, wild == 2 ? take(h, 2) : ht);
+        th_put16(pay + WM_PROTO_CONFIG_WIDTH, wild == 1 ? take(h, 2) : w);
+        th_put16(pay + WM_PROTO_CONFIG_HEIGHT, wild == 2 ? take(h, 2) : ht);
         pay[WM_PROTO_CONFIG_LEVELS] = (uint8_t)(wild == 3 ? take(h, 1) : pick(h, 1, 5));
         pay[WM_PROTO_CONFIG_METRIC] = (uint8_t)(wild == 4 ? take(h, 1) : pick(h, 0, 1));
         pay[WM_PROTO_CONFIG_NEIGHBOURHOOD] = (uint8_t)(wild == 5 ? take(h, 1) : pick(h, 0, 1));
         pay[WM_PROTO_CONFIG_ITERATIONS] = (uint8_t)(wild == 6 ? take(h, 1) : pick(h, 0, 3));
-        put32(pay + WM_PROTO_CONFIG_FLAGS, wild == 7 ? take(h, 4) : pick(h, 0, WM_PROTO_CONFIG_KNOWN_FLAGS));
-        put32(pay + WM_PROTO_CONFIG_TAU, wild == 8 ? take(h, 4) : pick(h, 0, 3000));
-        put32(pay + WM_PROTO_CONFIG_MAX_TRIANGLES, wild == 9 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 600));
-        put32(pay + WM_PROTO_CONFIG_CAPACITY, wild == 10 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 1200));
-        put32(pay + WM_PROTO_CONFIG_ZETA, scaled(h));
-        put32(pay + WM_PROTO_CONFIG_SCALE_M, wild == 11 ? take(h, 4) : pick(h, 0, 65535));
-        put32(pay + WM_PROTO_CONFIG_SCALE_E, wild == 12 ? take(h, 4) : pick(h, 0, 40));
-        put32(pay + WM_PROTO_CONFIG_DELTA_P, wild == 13 ? take(h, 4) : pick(h, 0, 65535));
-        put32(pay + WM_PROTO_CONFIG_ALPHA, wild == 14 ? take(h, 4) : pick(h, 0, 65536));
-        put32(pay + WM_PROTO_CONFIG_DELTA_V, scaled(h));
-        put32(pay + WM_PROTO_CONFIG_DELTA_LAMBDA, scaled(h));
-        put32(pay + WM_PROTO_CONFIG_DELTA_C, wild == 15 ? take(h, 4) : pick(h, 0, 65536));
-        put32(pay + WM_PROTO_CONFIG_DELTA_D, scaled(h));
+        th_put32(pay + WM_PROTO_CONFIG_FLAGS, wild == 7 ? take(h, 4) : pick(h, 0, WM_PROTO_CONFIG_KNOWN_FLAGS));
+        th_put32(pay + WM_PROTO_CONFIG_TAU, wild == 8 ? take(h, 4) : pick(h, 0, 3000));
+        th_put32(pay + WM_PROTO_CONFIG_MAX_TRIANGLES, wild == 9       ? take(h, 4)
+                                                      : pick(h, 0, 3) ? 0
+                                                                      : pick(h, 2, 600));
+        th_put32(pay + WM_PROTO_CONFIG_CAPACITY, wild == 10 ? take(h, 4) : pick(h, 0, 3) ? 0 : pick(h, 2, 1200));
+        th_put32(pay + WM_PROTO_CONFIG_ZETA, scaled(h));
+        th_put32(pay + WM_PROTO_CONFIG_SCALE_M, wild == 11 ? take(h, 4) : pick(h, 0, 65535));
+        th_put32(pay + WM_PROTO_CONFIG_SCALE_E, wild == 12 ? take(h, 4) : pick(h, 0, 40));
+        th_put32(pay + WM_PROTO_CONFIG_DELTA_P, wild == 13 ? take(h, 4) : pick(h, 0, 65535));
+        th_put32(pay + WM_PROTO_CONFIG_ALPHA, wild == 14 ? take(h, 4) : pick(h, 0, 65536));
+        th_put32(pay + WM_PROTO_CONFIG_DELTA_V, scaled(h));
+        th_put32(pay + WM_PROTO_CONFIG_DELTA_LAMBDA, scaled(h));
+        th_put32(pay + WM_PROTO_CONFIG_DELTA_C, wild == 15 ? take(h, 4) : pick(h, 0, 65536));
+        th_put32(pay + WM_PROTO_CONFIG_DELTA_D, scaled(h));
         /* fields after DELTA_D (the generated header may add some) stay 0: their defaults */
         h->total = w * ht;
         h->data_next = 0;
@@ -190,10 +150,10 @@ static void next_op(host *h)
         type = WM_PROTO_T_DATA;
         off = pick(h, 0, 7) ? h->data_next : pick(h, 0, h->total + 4);
         n = pick(h, 1, pick(h, 0, 15) ? limit : (WM_PROTO_MAX_PAYLOAD - WM_PROTO_DATA_BYTES) / 2 + 2);
-        put32(pay + WM_PROTO_DATA_OFFSET, off);
+        th_put32(pay + WM_PROTO_DATA_OFFSET, off);
         for (i = 0; i < n; i++) {
             uint16_t v = (uint16_t)(shape == 0 ? base : shape == 1 ? base + step * (off + i) : take(h, 2));
-            put16(pay + WM_PROTO_DATA_BYTES + 2 * i, v);
+            th_put16(pay + WM_PROTO_DATA_BYTES + 2 * i, v);
             if (off + i < sizeof h->mirror / sizeof h->mirror[0]) h->mirror[off + i] = v;
         }
         n = WM_PROTO_DATA_BYTES + 2 * n;
@@ -205,10 +165,10 @@ static void next_op(host *h)
         n = WM_PROTO_RUN_BYTES;
         for (i = 0; i < h->total && i < sizeof h->mirror / sizeof h->mirror[0]; i++) {
             uint8_t le[2];
-            put16(le, h->mirror[i]);
+            th_put16(le, h->mirror[i]);
             crc = wm_proto_crc32(crc, le, 2);
         }
-        put32(pay + WM_PROTO_RUN_CRC, pick(h, 0, 7) ? crc : take(h, 4));
+        th_put32(pay + WM_PROTO_RUN_CRC, pick(h, 0, 7) ? crc : take(h, 4));
         break;
     }
     case 5:
@@ -220,7 +180,7 @@ static void next_op(host *h)
                                  : which < 7 ? WM_PROTO_T_DONE
                                              : (uint8_t)take(h, 1);
         pay[WM_PROTO_ACK_INDEX] = which < 5 ? h->le_index : which < 7 ? 0 : (uint8_t)take(h, 1);
-        put32(pay + WM_PROTO_ACK_HAVE, which < 3 || which > 4 ? h->le_total : pick(h, 0, h->le_total + 8));
+        th_put32(pay + WM_PROTO_ACK_HAVE, which < 3 || which > 4 ? h->le_total : pick(h, 0, h->le_total + 8));
         break;
     }
     case 8: type = WM_PROTO_T_ABORT; break;
@@ -263,21 +223,18 @@ static int is_device_type(uint8_t t)
 /* A whole frame from the device: well formed, or a finding. */
 static void device_frame(host *h)
 {
+    const uint8_t *f = h->rx.f;
+    const char *problem = th_frame_problem(&h->rx);
     uint32_t n;
-    if (h->f_bad) FAIL("the device sent a bad SLIP escape");
-    if (h->f_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) FAIL("the device sent a %zu-byte frame", h->f_len);
-    n = (uint32_t)h->f[2] | (uint32_t)h->f[3] << 8;
-    if (h->f_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES)
-        FAIL("the device's frame says %u payload bytes and has %zu", n, h->f_len - 8);
-    if (wm_proto_crc32(0, h->f, h->f_len - WM_PROTO_CRC_BYTES) != get32(h->f + h->f_len - WM_PROTO_CRC_BYTES))
-        FAIL("the device sent a frame with a wrong CRC");
-    if (!is_device_type(h->f[0])) FAIL("the device sent frame type 0x%02x", h->f[0]);
+    if (problem) FAIL("the device sent %s (%zu bytes)", problem, h->rx.len);
+    n = th_get16(f + 2);
+    if (!is_device_type(f[0])) FAIL("the device sent frame type 0x%02x", f[0]);
     if (n > h->caps.max_payload)
         FAIL("the device sent %u payload bytes, above its max_payload %u", n, h->caps.max_payload);
-    if (h->f[0] == WM_PROTO_T_DATA_ACK && n >= WM_PROTO_DATA_ACK_BYTES) h->data_next = get32(h->f + 4);
-    if (h->f[0] == WM_PROTO_T_LEVEL_END && n >= WM_PROTO_LEVEL_END_BYTES) {
-        h->le_index = h->f[4 + WM_PROTO_LEVEL_END_INDEX];
-        h->le_total = get32(h->f + 4 + WM_PROTO_LEVEL_END_TOTAL);
+    if (f[0] == WM_PROTO_T_DATA_ACK && n >= WM_PROTO_DATA_ACK_BYTES) h->data_next = th_get32(f + 4);
+    if (f[0] == WM_PROTO_T_LEVEL_END && n >= WM_PROTO_LEVEL_END_BYTES) {
+        h->le_index = f[4 + WM_PROTO_LEVEL_END_INDEX];
+        h->le_total = th_get32(f + 4 + WM_PROTO_LEVEL_END_TOTAL);
     }
 }
 
@@ -285,25 +242,8 @@ static void h_write(void *ctx, const uint8_t *data, size_t n)
 {
     host *h = ctx;
     for (size_t i = 0; i < n; i++) {
-        uint8_t c = data[i];
         h->t += BYTE_CYCLES;
-        if (c == WM_PROTO_SLIP_END) {
-            if (h->f_len || h->f_esc || h->f_bad) device_frame(h);
-            h->f_len = 0;
-            h->f_esc = h->f_bad = 0;
-            continue;
-        }
-        if (h->f_esc) {
-            h->f_esc = 0;
-            if (c == WM_PROTO_SLIP_ESC_END) c = WM_PROTO_SLIP_END;
-            else if (c == WM_PROTO_SLIP_ESC_ESC) c = WM_PROTO_SLIP_ESC;
-            else h->f_bad = 1;
-        } else if (c == WM_PROTO_SLIP_ESC) {
-            h->f_esc = 1;
-            continue;
-        }
-        if (h->f_len >= sizeof h->f) FAIL("the device sent a frame longer than %zu bytes", sizeof h->f);
-        h->f[h->f_len++] = c;
+        if (th_rx_byte(&h->rx, data[i])) device_frame(h);
     }
 }
 
@@ -342,6 +282,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     io.mark = NULL;
     wm_proto_init(&eng, &io, &h.caps, heights, wm_native_job, NULL);
     if (wm_proto_serve(&eng) != 0) FAIL("wm_proto_serve returned non-zero");
-    if (h.f_len) FAIL("the device left a frame unfinished");
+    if (th_rx_pending(&h.rx)) FAIL("the device left a frame unfinished");
     return 0;
 }

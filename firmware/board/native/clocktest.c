@@ -31,6 +31,7 @@
 #include <string.h>
 
 #include "proto.h"
+#include "testhost.h"
 
 enum { WORK_FILTER = 1000, WORK_TEMPLATE = 20000, WORK_REFINE1 = 300000, WORK_REFINE0 = 4000000 };
 enum { SIDE = 4, MAX_JOBS = 16, MAX_DELAYS = 16, CLK_HZ = 1000000 };
@@ -46,71 +47,23 @@ typedef struct host {
     size_t q_len, q_pos;
     uint64_t ready_at;
     int last_ack_queued;           /* the queue ends with the ACK of the job's last level */
-    /* the device's frame being decoded */
-    uint8_t f[WM_PROTO_MAX_FRAME + 8];
-    size_t f_len;
-    int f_esc;
+    th_rx rx;                      /* the device's frames */
     /* per job */
     uint64_t t_ok, t_last_ack, level_cycles[2], resent;
     int level_end_seen[2];
 } host;
 
-static void put16(uint8_t *b, uint32_t v)
-{
-    b[0] = (uint8_t)v;
-    b[1] = (uint8_t)(v >> 8);
-}
-
-static void put32(uint8_t *b, uint32_t v)
-{
-    put16(b, v);
-    put16(b + 2, v >> 16);
-}
-
-static uint32_t get32(const uint8_t *b)
-{
-    return (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
-}
-
-static uint64_t get64(const uint8_t *b) { return (uint64_t)get32(b) | (uint64_t)get32(b + 4) << 32; }
-
-static void q_byte(host *h, uint8_t b)
-{
-    if (h->q_len >= sizeof h->q) {
-        fprintf(stderr, "wm_clocktest: host queue full\n");
-        exit(1);
-    }
-    h->q[h->q_len++] = b;
-}
-
 /* A host frame onto the queue (SLIP, CRC-32). */
 static void q_frame(host *h, uint8_t type, const uint8_t *payload, uint32_t n)
 {
-    uint8_t raw[WM_PROTO_MAX_FRAME];
-    uint32_t len = 0, crc;
-    raw[len++] = type;
-    raw[len++] = h->seq++;
-    put16(raw + len, n);
-    len += 2;
-    memcpy(raw + len, payload, n);
-    len += n;
-    crc = wm_proto_crc32(0, raw, len);
-    put32(raw + len, crc);
-    len += 4;
+    size_t k;
     if (h->q_pos == h->q_len) h->q_len = h->q_pos = 0;
-    q_byte(h, WM_PROTO_SLIP_END);
-    for (uint32_t i = 0; i < len; i++) {
-        if (raw[i] == WM_PROTO_SLIP_END) {
-            q_byte(h, WM_PROTO_SLIP_ESC);
-            q_byte(h, WM_PROTO_SLIP_ESC_END);
-        } else if (raw[i] == WM_PROTO_SLIP_ESC) {
-            q_byte(h, WM_PROTO_SLIP_ESC);
-            q_byte(h, WM_PROTO_SLIP_ESC_ESC);
-        } else {
-            q_byte(h, raw[i]);
-        }
+    k = th_frame(h->q + h->q_len, sizeof h->q - h->q_len, type, h->seq++, payload, n);
+    if (k == 0) {
+        fprintf(stderr, "wm_clocktest: host queue full\n");
+        exit(1);
     }
-    q_byte(h, WM_PROTO_SLIP_END);
+    h->q_len += k;
 }
 
 /* CONFIG (a SIDE x SIDE grid, M = 2, zeros elsewhere), the samples, RUN. */
@@ -119,16 +72,16 @@ static void q_job(host *h)
     uint8_t cfg[WM_PROTO_CONFIG_BYTES], data[WM_PROTO_DATA_BYTES + 2 * SIDE * SIDE], run[WM_PROTO_RUN_BYTES];
     uint8_t le[2 * SIDE * SIDE];
     memset(cfg, 0, sizeof cfg);
-    put16(cfg + WM_PROTO_CONFIG_WIDTH, SIDE);
-    put16(cfg + WM_PROTO_CONFIG_HEIGHT, SIDE);
+    th_put16(cfg + WM_PROTO_CONFIG_WIDTH, SIDE);
+    th_put16(cfg + WM_PROTO_CONFIG_HEIGHT, SIDE);
     cfg[WM_PROTO_CONFIG_LEVELS] = 2;
-    put32(cfg + WM_PROTO_CONFIG_ZETA, 1u << 16);
+    th_put32(cfg + WM_PROTO_CONFIG_ZETA, 1u << 16);
     q_frame(h, WM_PROTO_T_CONFIG, cfg, sizeof cfg);
     memset(data, 0, sizeof data);
-    for (int i = 0; i < SIDE * SIDE; i++) put16(le + 2 * i, (uint32_t)(100 * i));
+    for (int i = 0; i < SIDE * SIDE; i++) th_put16(le + 2 * i, (uint32_t)(100 * i));
     memcpy(data + WM_PROTO_DATA_BYTES, le, sizeof le);
     q_frame(h, WM_PROTO_T_DATA, data, sizeof data);
-    put32(run + WM_PROTO_RUN_CRC, wm_proto_crc32(0, le, sizeof le));
+    th_put32(run + WM_PROTO_RUN_CRC, wm_proto_crc32(0, le, sizeof le));
     q_frame(h, WM_PROTO_T_RUN, run, sizeof run);
     h->ready_at = h->t;
     h->last_ack_queued = 0;
@@ -143,39 +96,40 @@ static void q_ack(host *h, uint8_t kind, uint8_t index, uint32_t have)
     memset(b, 0, sizeof b);
     b[WM_PROTO_ACK_KIND] = kind;
     b[WM_PROTO_ACK_INDEX] = index;
-    put32(b + WM_PROTO_ACK_HAVE, have);
+    th_put32(b + WM_PROTO_ACK_HAVE, have);
     q_frame(h, WM_PROTO_T_ACK, b, sizeof b);
 }
 
 /* A complete frame from the device. */
 static void device_frame(host *h)
 {
-    const uint8_t *pay = h->f + WM_PROTO_HEADER_BYTES;
-    uint32_t n = (uint32_t)h->f[2] | (uint32_t)h->f[3] << 8;
-    if (h->f_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES ||
-        wm_proto_crc32(0, h->f, h->f_len - WM_PROTO_CRC_BYTES) != get32(h->f + h->f_len - WM_PROTO_CRC_BYTES)) {
-        fprintf(stderr, "wm_clocktest: a damaged frame from the device\n");
+    const uint8_t *pay = h->rx.f + WM_PROTO_HEADER_BYTES;
+    const char *problem = th_frame_problem(&h->rx);
+    uint32_t n;
+    if (problem) {
+        fprintf(stderr, "wm_clocktest: the device sent %s\n", problem);
         h->failed = 1;
         return;
     }
-    switch (h->f[0]) {
+    n = th_get16(h->rx.f + 2);
+    switch (h->rx.f[0]) {
     case WM_PROTO_T_OK:
         if (pay[WM_PROTO_OK_REQUEST] == WM_PROTO_T_RUN) h->t_ok = h->t; /* the job starts now */
         break;
     case WM_PROTO_T_ERROR:
         fprintf(stderr, "wm_clocktest: ERROR code %u detail %u\n", pay[WM_PROTO_ERROR_CODE],
-                (unsigned)get32(pay + WM_PROTO_ERROR_DETAIL));
+                (unsigned)th_get32(pay + WM_PROTO_ERROR_DETAIL));
         h->failed = 1;
         break;
     case WM_PROTO_T_MESH: {
-        uint32_t off = get32(pay + WM_PROTO_MESH_OFFSET), index = pay[WM_PROTO_MESH_INDEX];
+        uint32_t off = th_get32(pay + WM_PROTO_MESH_OFFSET), index = pay[WM_PROTO_MESH_INDEX];
         if (index < 2 && off == 0)
-            h->level_cycles[index] = get64(pay + WM_PROTO_MESH_BYTES + WM_PROTO_LEVEL_HEADER_CYCLES);
+            h->level_cycles[index] = th_get64(pay + WM_PROTO_MESH_BYTES + WM_PROTO_LEVEL_HEADER_CYCLES);
         if (index < 2 && h->level_end_seen[index]) h->resent += n - WM_PROTO_MESH_BYTES;
         break;
     }
     case WM_PROTO_T_LEVEL_END: {
-        uint32_t index = pay[WM_PROTO_LEVEL_END_INDEX], total = get32(pay + WM_PROTO_LEVEL_END_TOTAL);
+        uint32_t index = pay[WM_PROTO_LEVEL_END_INDEX], total = th_get32(pay + WM_PROTO_LEVEL_END_TOTAL);
         int full = !h->short_ack || h->level_end_seen[index & 1];
         h->level_end_seen[index & 1] = 1;
         q_ack(h, WM_PROTO_T_LEVEL_END, (uint8_t)index, full ? total : total / 2);
@@ -187,11 +141,11 @@ static void device_frame(host *h)
         const uint8_t *d = pay;
         printf("job %d filter %llu template %llu refine %llu emit %llu link %llu span %llu levels %llu,%llu "
                "resent %llu status %u\n",
-               h->job, (unsigned long long)get64(d + WM_PROTO_DONE_CYCLES_FILTER),
-               (unsigned long long)get64(d + WM_PROTO_DONE_CYCLES_TEMPLATE),
-               (unsigned long long)get64(d + WM_PROTO_DONE_CYCLES_REFINE),
-               (unsigned long long)get64(d + WM_PROTO_DONE_CYCLES_EMIT),
-               (unsigned long long)get64(d + WM_PROTO_DONE_CYCLES_LINK),
+               h->job, (unsigned long long)th_get64(d + WM_PROTO_DONE_CYCLES_FILTER),
+               (unsigned long long)th_get64(d + WM_PROTO_DONE_CYCLES_TEMPLATE),
+               (unsigned long long)th_get64(d + WM_PROTO_DONE_CYCLES_REFINE),
+               (unsigned long long)th_get64(d + WM_PROTO_DONE_CYCLES_EMIT),
+               (unsigned long long)th_get64(d + WM_PROTO_DONE_CYCLES_LINK),
                (unsigned long long)(h->t_last_ack - h->t_ok), (unsigned long long)h->level_cycles[0],
                (unsigned long long)h->level_cycles[1], (unsigned long long)h->resent, d[WM_PROTO_DONE_STATUS]);
         if (d[WM_PROTO_DONE_STATUS] != 0) h->failed = 1;
@@ -210,20 +164,8 @@ static void io_write(void *ctx, const uint8_t *data, size_t n)
 {
     host *h = ctx;
     h->t += h->tx_cost * n;
-    for (size_t i = 0; i < n; i++) {
-        uint8_t c = data[i];
-        if (c == WM_PROTO_SLIP_END) {
-            if (h->f_len) device_frame(h);
-            h->f_len = 0;
-            h->f_esc = 0;
-        } else if (c == WM_PROTO_SLIP_ESC) {
-            h->f_esc = 1;
-        } else {
-            if (h->f_esc) c = c == WM_PROTO_SLIP_ESC_END ? WM_PROTO_SLIP_END : WM_PROTO_SLIP_ESC;
-            h->f_esc = 0;
-            if (h->f_len < sizeof h->f) h->f[h->f_len++] = c;
-        }
-    }
+    for (size_t i = 0; i < n; i++)
+        if (th_rx_byte(&h->rx, data[i])) device_frame(h);
 }
 
 static int io_getc(void *ctx, uint32_t timeout_ms)
