@@ -92,6 +92,25 @@ def compact(width: int, height: int, xy: np.ndarray, tris: np.ndarray) -> Mesh:
     return Mesh(width, height, xy[used], remap[tris] if len(tris) else tris)
 
 
+def block_flags(mask: np.ndarray, levels: int) -> np.ndarray:
+    """The per-block validity flag of the template stage's blocks (wavemesh.label: block (j, i) spans
+    samples [iS, min((i+1)S, W-1)] x [jS, min((j+1)S, H-1)], S = 2^M, closed): True where the block holds
+    an invalid sample.  The reference for an RTL flag beside each template; not used by the mesh (the
+    templates see the filled heights; only the refiner and the host read the mask)."""
+    from wavemesh.label import block_edges
+
+    bad = np.asarray(mask, dtype=bool)
+    h, w = bad.shape
+    size = 1 << levels
+    xs, ys = block_edges(w, size), block_edges(h, size)
+    # any invalid sample in a closed box: a 2-D prefix sum
+    pre = np.zeros((h + 1, w + 1), dtype=np.int64)
+    pre[1:, 1:] = np.cumsum(np.cumsum(bad, axis=0), axis=1)
+    x0, x1 = xs[:-1], xs[1:] + 1
+    y0, y1 = ys[:-1, None], ys[1:, None] + 1
+    return (pre[y1, x1] - pre[y0, x1] - pre[y1, x0] + pre[y0, x0]) > 0
+
+
 def drop(mesh: Mesh, mask: np.ndarray | None) -> Mesh:
     """The triangles of ``mesh`` that cover no invalid sample (all of them when ``mask`` is None)."""
     if mask is None:

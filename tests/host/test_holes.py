@@ -221,3 +221,16 @@ def test_all_invalid_and_crop():
     assert np.array_equal(part.mask, full.mask[5:35, 10:40])
     assert hf is not None
 
+
+
+def test_block_flags_against_a_loop():
+    from wavemesh.label import block_edges
+
+    rng = np.random.default_rng(3)
+    m = rng.random((37, 29)) < 0.01
+    for levels in (1, 2, 3):
+        got = holes.block_flags(m, levels)
+        xs, ys = block_edges(29, 1 << levels), block_edges(37, 1 << levels)
+        want = [[m[ys[j]:ys[j + 1] + 1, xs[i]:xs[i + 1] + 1].any() for i in range(len(xs) - 1)]
+                for j in range(len(ys) - 1)]
+        assert np.array_equal(got, np.array(want))

@@ -30,6 +30,12 @@ extern uint8_t __heap_start[], __heap_end[];
 
 #define ALIGN8(n) (((n) + 7u) & ~(size_t)7u)
 
+#define MASK_BYTES (2u * ((WM_GRID_MAX_W * WM_GRID_MAX_H + 15u) / 16u))
+
+size_t board_heap_bytes(void) { return (size_t)(__heap_end - __heap_start) - MASK_BYTES; }
+uint8_t *board_mask(void) { return __heap_start + board_heap_bytes(); }
+uint32_t board_mask_bytes(void) { return MASK_BYTES; }
+
 uint32_t board_job_capacity(size_t heap_bytes, int32_t width, int32_t height)
 {
     /* the worst staging of a job of cap triangles: lattice of at most cap / 2 blocks on the grid */
@@ -70,7 +76,7 @@ int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
     int32_t m = j->levels, nt;
     int initial_only = (j->flags & WM_PROTO_CONFIG_INITIAL_ONLY) != 0;
     uint8_t *heap = __heap_start;
-    size_t heap_bytes = (size_t)(__heap_end - __heap_start);
+    size_t heap_bytes = board_heap_bytes(); /* the mask's storage above it */
     size_t main_bytes = initial_only ? 0 : wm_refine_bound(j->width, j->height, j->capacity);
     wm_job_blocks b;
     wm_job_initial_mesh init;
@@ -99,7 +105,7 @@ int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
     if (initial_only) return wm_job_emit_initial(p, j, &init, heap, (size_t)(init.low - heap), detail);
     {
         wm_field f = {j->width, j->height, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE,
-                      NULL};
+                      j->mask};
         return wm_job_refine(p, j, &f, &init, heap, main_bytes, detail);
     }
 }

@@ -89,14 +89,14 @@ int main(void)
     caps.max_width = (uint16_t)max_w;
     caps.max_height = (uint16_t)max_h;
     caps.max_samples = config.height_samples;
-    caps.tri_capacity = board_job_capacity((size_t)(__heap_end - __heap_start), (int32_t)max_w, (int32_t)max_h);
+    caps.tri_capacity = board_job_capacity(board_heap_bytes(), (int32_t)max_w, (int32_t)max_h);
     caps.max_levels =
         (uint8_t)(WM_ACCEL_MAX_LEVELS < WM_PROTO_MAX_LEVELS ? WM_ACCEL_MAX_LEVELS : WM_PROTO_MAX_LEVELS);
     caps.window = WINDOW;
     caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     caps.clk_hz = config.clk_hz;
     caps.baud = config.clk_hz / board_uart_div();
-    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY;
+    caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_HOLES;
 
     io.ctx = NULL;
     io.getc = io_getc;
@@ -107,6 +107,7 @@ int main(void)
     board_stage(STAGE_SERVE);
     for (;;) {
         wm_proto_init(&eng, &io, &caps, (uint16_t *)WM_HEIGHT_BASE, board_job, NULL);
+        wm_proto_set_mask(&eng, board_mask(), board_mask_bytes());
         wm_proto_serve(&eng);
     }
 }
