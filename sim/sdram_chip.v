@@ -13,7 +13,9 @@
  * REFRESH, LOAD MODE with CL and burst length 1), tRCD, tRP, tRAS, tRC, tRRD, tRFC, tWR, tMRD,
  * every gap between two REFRESH commands <= tREFI, each command legal in its bank's state, no
  * auto precharge, no read or write outside a row, and the data bus driven by one side at a time.
- * A violation prints "wmsim: sdram: ..." with the cycle and stops the simulation ($fatal).
+ * A violation prints "wmsim: sdram: ..." with the cycle and stops the simulation ($fatal); with
+ * FATAL = 0 (the model's own test, tests/rtl/test_sdram_chip.py) it counts instead (violations_reg,
+ * last_what_reg) and the simulation goes on.
  */
 
 `resetall
@@ -28,7 +30,9 @@ module sdram_chip #
     parameter CLK_HZ = `WM_CLK_HZ,
     parameter ROW_BITS = `WM_SDRAM_ROW_BITS,
     parameter COL_BITS = `WM_SDRAM_COL_BITS,
-    parameter CAS_LATENCY = `WM_SDRAM_CAS_LATENCY
+    parameter CAS_LATENCY = `WM_SDRAM_CAS_LATENCY,
+    // 1: stop the simulation at the first violation; 0: count them
+    parameter FATAL = 1
 )
 (
     input  wire                 clk,          // the system clock; the chip runs on its falling edge
@@ -45,7 +49,8 @@ module sdram_chip #
     output wire [15:0]          dq_i          // what the controller sees on DQ
 );
 
-localparam [63:0] T_PS = 64'd1000000000000 / CLK_HZ;
+localparam [63:0] HZ = CLK_HZ;
+localparam [63:0] T_PS = 64'd1000000000000 / HZ;
 localparam ADDR_BITS = ROW_BITS + 2 + COL_BITS;
 
 // datasheet timings in ps
@@ -68,6 +73,9 @@ reg [15:0] mem [0:(1 << ADDR_BITS) - 1];
 
 // falling edges since time 0
 reg [63:0] n_reg = 64'd0;
+// violations so far and the name of the last (FATAL = 0)
+reg [31:0] violations_reg = 32'd0;
+reg [8*80-1:0] last_what_reg = {80{8'h20}};
 
 // per bank: open row, last ACTIVATE, PRECHARGE and WRITE
 reg        open_reg [0:3];
@@ -83,6 +91,7 @@ reg        pre_all_done_reg = 1'b0;  // the initialisation's PRECHARGE ALL
 reg [3:0]  init_refs_reg = 4'd0;     // its REFRESH commands
 reg        mode_done_reg = 1'b0;     // LOAD MODE: the chip is ready
 reg        first_cmd_reg = 1'b1;
+reg        refi_late_reg = 1'b0;     // this refresh gap has been reported
 
 // read pipeline: the datum of a READ seen at edge n is driven from edge n + CL - 1
 reg [CAS_LATENCY-1:0] rd_pipe_reg = {CAS_LATENCY{1'b0}};
@@ -138,7 +147,11 @@ task fail;
     input [8*80-1:0] what;
     begin
         $display("wmsim: sdram: %0s violated at cycle %0d (%0t)", what, now, $time);
-        $fatal(1, "sdram_chip: timing or protocol violation");
+        if (FATAL != 0) begin
+            $fatal(1, "sdram_chip: timing or protocol violation");
+        end
+        violations_reg = violations_reg + 32'd1;
+        last_what_reg = what;
     end
 endtask
 
@@ -171,8 +184,9 @@ always @(negedge clk) begin
     end
 
     // refresh interval, once the chip is running
-    if (mode_done_reg && since(ref_reg) > P_REFI) begin
+    if (mode_done_reg && since(ref_reg) > P_REFI && !refi_late_reg) begin
         fail("tREFI");
+        refi_late_reg <= 1'b1;
     end
 
     if (active) begin
@@ -234,6 +248,7 @@ always @(negedge clk) begin
                     if (since(pre_reg[i]) < P_RP) fail("tRP before REFRESH");
                 end
                 ref_reg <= now;
+                refi_late_reg <= 1'b0;
                 if (init_refs_reg != 4'd15) init_refs_reg <= init_refs_reg + 4'd1;
             end
             CMD_LOAD_MODE: begin

@@ -180,21 +180,26 @@ def table_3_1_pi() -> list[str]:
         "- Elliptic f1: the same counts (159 / 276) but 7-9% more error: the same vertices joined",
         "  differently in some blocks (a diagonal direction of a dual or a variant the lost figures would",
         "  show), since f2, whose blocks are all basic V, agrees.",
-        "- Hyperbolic f3: 276 triangles against 272, so a different mesh, and 14-24% more error.  Our f3",
-        "  label table is f1's mirrored left to right, letter for letter (|d1|, |d2|, |d3| are equal block",
-        "  by block; only the sign of d1 differs).  Which sides get midpoints depends only on the kinds",
-        "  (V/v split top and bottom, H/h left and right) and the kinds are mirrored, and a label and its",
-        "  dual have the same vertex and triangle counts for every split mask: so f1 and f3 must get",
-        "  equal counts here.  By Euler",
-        "  (T = 2V - B - 2) the paper's f3 mesh has 4 more border vertices than its f1 mesh (44 against 40)",
-        "  with the same 159 vertices: 4 side midpoints sit on the border instead of inside.  The paper's",
-        "  rule that does it is not mirror-symmetric; it must treat a dual differently from its basic",
-        "  template in where a variant puts its midpoint, and only the lost figures 3.13-3.17 can say how.",
-        "  Not a tie rule (|d| ties are the same in f1 and f3) and not the domain (checked: [-1, 1] and",
-        "  [-pi, pi] give the same tables).",
+        "- Hyperbolic f3: 276 triangles against the table's 272, but the paper's own numbers say 276:",
+        "  E_mean = E_total / |Gamma| (eq. 3.34), and " + implied("f3") + " (272 would give",
+        f"  E_mean {PAPER['f3'][3] / PAPER['f3'][1]:.3f}); " + implied("f1") + " and " + implied("f2"),
+        "  agree with their counts in the same way.  So 272 is a misprint: the paper's f3 mesh has 276",
+        "  triangles, as ours, and by Euler (T = 2V - B - 2) the same 40 border vertices as its f1 mesh.",
+        "  That is what our labels give: our f3 label table is f1's mirrored left to right, letter for",
+        "  letter (|d1|, |d2|, |d3| are equal block by block; only the sign of d1 differs), which sides get",
+        "  midpoints depends only on the kinds (V/v split top and bottom, H/h left and right), and a label",
+        "  and its dual have the same vertex and triangle counts for every split mask, so f1 and f3 must",
+        "  get equal counts.  The 14-24% more error is then, as f1's 7-9%, the same vertices joined",
+        "  differently in some blocks.",
         "",
     ]
     return lines
+
+
+def implied(name: str) -> str:
+    """The triangle count the paper's E_total / E_mean of a surface implies (eq. 3.34), as text."""
+    p = PAPER[name]
+    return f"{name}'s {p[3]} / {p[4]} = {p[3] / p[4]:.1f}"
 
 
 def table_3_3() -> list[str]:
@@ -317,7 +322,7 @@ def results_md() -> str:
         "  midpoints = 153 vertices, 64 x 4 = 256 triangles, exactly as Table 3.1.  This fixes the shape of",
         "  pi_v (one edge between the top and bottom midpoints, 4 triangles).",
         "- Elliptic f1: 159 vertices and 276 triangles, exactly Table 3.1.",
-        "- Hyperbolic f3: 159 vertices as the paper, 276 triangles against 272 (below: why).",
+        "- Hyperbolic f3: 159 vertices as the paper, 276 triangles; the table's 272 is a misprint.",
         "- f4, f5: the images are rebuilt from one-line descriptions, so only the size of the result can",
         "  agree: 123/206 and 109/184 against 119/200 and 106/178.",
         "- Errors: ours are normal distances with x and y in grid steps; on [-1, 1] they are about a tenth",

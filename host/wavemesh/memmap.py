@@ -410,7 +410,7 @@ def verilog_include() -> str:
     for r in AREAS:
         lines.append(d(f"WM_{r.name}_OFFSET", r.offset))
         lines.append(d(f"WM_{r.name}_ENTRIES", r.entries))
-    lines.append("// SDRAM chip: geometry, CAS latency, datasheet timings (ns or clocks), the CPU port's cache")
+    lines.append("// SDRAM chip: geometry, CAS latency, datasheet timings (ns or clocks), the CPU cache")
     lines += [d("WM_SDRAM_ROW_BITS", SDRAM_ROW_BITS), d("WM_SDRAM_COL_BITS", SDRAM_COL_BITS),
               d("WM_SDRAM_CAS_LATENCY", SDRAM_CAS_LATENCY)]
     lines += [d(f"WM_SDRAM_{k}", v) for k, v in SDRAM_TIMING.items()]
