@@ -13,9 +13,11 @@
  *                    RUN with the CRC of the heights sent, ACK of the level the device last ended);
  *                    sometimes with a wrong length, sometimes with one byte damaged on the line
  *
- * The device's capabilities (sizes, window, max_payload, features) come from the first bytes.  When
- * the script ends the link closes, and wm_proto_serve must return.  Every frame the device sends is
- * checked: SLIP well formed, length field and CRC right, a device type, payload at most its stated
+ * The device's capabilities (sizes, window, max_payload, features: the reduction, initial-only, the
+ * spline filter bank, holes with mask storage, so CONFIG_SPLINE and CONFIG_MASK jobs run the native
+ * job's spline bank and the refiner's hole handling) come from the first bytes.  When the script
+ * ends the link closes, and wm_proto_serve must return.  Every frame the device sends is checked:
+ * SLIP well formed, length field and CRC right, a device type, payload at most its stated
  * max_payload (an abort is a finding).  Each getc without a byte in hand consumes input, so every
  * input ends.
  *
@@ -34,6 +36,7 @@
 #define CLK_HZ 1000000u
 #define MIN_PAYLOAD (WM_PROTO_CONFIG_BYTES > 64 ? WM_PROTO_CONFIG_BYTES : 64)
 #define BYTE_CYCLES 10u /* 10 us per byte on the line (about 1 Mbaud) */
+#define MASK_WORDS(n) (((n) + 15u) / 16u) /* CONFIG_MASK: the mask's DATA words after n samples */
 
 #define FAIL(...)                                    \
     do {                                             \
@@ -57,7 +60,7 @@ typedef struct host {
     uint32_t le_total;
     /* the job the host last configured, and the heights it sent */
     uint32_t total;
-    uint16_t mirror[MAX_SIDE * MAX_SIDE];
+    uint16_t mirror[MAX_SIDE * MAX_SIDE + MASK_WORDS(MAX_SIDE * MAX_SIDE)];
 } host;
 
 static int more(const host *h) { return h->pos < h->n; }
@@ -115,7 +118,7 @@ static void next_op(host *h)
         th_put16(pay + WM_PROTO_HELLO_VERSION, pick(h, 0, 7) ? WM_PROTO_VERSION : take(h, 2));
         break;
     case 2: { /* CONFIG of a small job, a field now and then out of range */
-        uint32_t w = pick(h, 2, MAX_SIDE), ht = pick(h, 2, MAX_SIDE), wild = pick(h, 0, 15);
+        uint32_t w = pick(h, 2, MAX_SIDE), ht = pick(h, 2, MAX_SIDE), wild = pick(h, 0, 15), flags;
         type = WM_PROTO_T_CONFIG;
         n = WM_PROTO_CONFIG_BYTES;
         th_put16(pay + WM_PROTO_CONFIG_WIDTH, wild == 1 ? take(h, 2) : w);
@@ -124,7 +127,8 @@ static void next_op(host *h)
         pay[WM_PROTO_CONFIG_METRIC] = (uint8_t)(wild == 4 ? take(h, 1) : pick(h, 0, 1));
         pay[WM_PROTO_CONFIG_NEIGHBOURHOOD] = (uint8_t)(wild == 5 ? take(h, 1) : pick(h, 0, 1));
         pay[WM_PROTO_CONFIG_ITERATIONS] = (uint8_t)(wild == 6 ? take(h, 1) : pick(h, 0, 3));
-        th_put32(pay + WM_PROTO_CONFIG_FLAGS, wild == 7 ? take(h, 4) : pick(h, 0, WM_PROTO_CONFIG_KNOWN_FLAGS));
+        flags = wild == 7 ? take(h, 4) : pick(h, 0, WM_PROTO_CONFIG_KNOWN_FLAGS);
+        th_put32(pay + WM_PROTO_CONFIG_FLAGS, flags);
         th_put32(pay + WM_PROTO_CONFIG_TAU, wild == 8 ? take(h, 4) : pick(h, 0, 3000));
         th_put32(pay + WM_PROTO_CONFIG_MAX_TRIANGLES, wild == 9       ? take(h, 4)
                                                       : pick(h, 0, 3) ? 0
@@ -140,7 +144,7 @@ static void next_op(host *h)
         th_put32(pay + WM_PROTO_CONFIG_DELTA_C, wild == 15 ? take(h, 4) : pick(h, 0, 65536));
         th_put32(pay + WM_PROTO_CONFIG_DELTA_D, scaled(h));
         /* fields after DELTA_D (the generated header may add some) stay 0: their defaults */
-        h->total = w * ht;
+        h->total = w * ht + (flags & WM_PROTO_CONFIG_MASK ? MASK_WORDS(w * ht) : 0); /* samples, mask */
         h->data_next = 0;
         break;
     }
@@ -256,6 +260,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static host h;
     static wm_proto eng;
     static uint16_t heights[MAX_SIDE * MAX_SIDE];
+    static uint8_t mask[2 * MASK_WORDS(MAX_SIDE * MAX_SIDE)];
     wm_proto_io io;
     uint32_t w, ht;
     memset(&h, 0, sizeof h);
@@ -274,13 +279,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     /* at least CONFIG's length: a device that states less could never be configured */
     h.caps.max_payload = (uint16_t)pick(&h, MIN_PAYLOAD, WM_PROTO_MAX_PAYLOAD);
     h.caps.clk_hz = CLK_HZ;
-    h.caps.features = pick(&h, 0, 3);
+    h.caps.features = pick(&h, 0, 15); /* reduction, initial-only, the spline bank, holes (a mask) */
     io.ctx = &h;
     io.getc = h_getc;
     io.write = h_write;
     io.cycles = h_cycles;
     io.mark = NULL;
     wm_proto_init(&eng, &io, &h.caps, heights, wm_native_job, NULL);
+    if (h.caps.features & WM_PROTO_FEATURE_HOLES) wm_proto_set_mask(&eng, mask, sizeof mask);
     if (wm_proto_serve(&eng) != 0) FAIL("wm_proto_serve returned non-zero");
     if (th_rx_pending(&h.rx)) FAIL("the device left a frame unfinished");
     return 0;

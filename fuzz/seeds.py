@@ -16,6 +16,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from wavemesh import protocol as P
+
 CORPUS = Path(__file__).resolve().parent / "corpus"
 MAX_SIDE = 24
 MIN_PAYLOAD = 80  # proto_fuzz.c's: WM_PROTO_CONFIG_BYTES (protocol 4)
@@ -34,7 +36,8 @@ class Script:
         self.take(v - lo, n)
 
 
-def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int = 0, acks: int = 12) -> bytes:
+def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int = 0, acks: int = 12,
+            features: int = 3) -> bytes:
     s = Script()
     # capabilities: max W, H, samples, triangles, levels, window, max_payload, features
     s.pick(MAX_SIDE, 2, MAX_SIDE)
@@ -44,7 +47,7 @@ def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int =
     s.pick(8, 1, 12)
     s.pick(4, 1, 16)
     s.pick(payload, MIN_PAYLOAD, 1024)
-    s.pick(3, 0, 3)
+    s.pick(features, 0, 15)
     # HELLO (op 1), the right version
     s.take(1, 1)
     s.pick(1, 0, 7)
@@ -57,7 +60,7 @@ def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int =
     s.pick(0, 0, 1)          # metric normal
     s.pick(0, 0, 1)          # face neighbourhood
     s.pick(2, 0, 3)          # k
-    s.pick(flags, 0, 31)
+    s.pick(flags, 0, P.CONFIG_KNOWN_FLAGS)
     s.pick(100, 0, 3000)     # tau
     s.pick(1, 0, 3)          # no budget
     s.pick(1, 0, 3)          # capacity: the device's
@@ -74,12 +77,17 @@ def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int =
     s.take(58982, 4)         # delta_c
     s.take(1000, 4)          # delta_d
     s.pick(0, 0, 31)
-    # DATA (op 3): raw heights, at the device's next offset, as many frames as it takes
+    # DATA (op 3): raw heights, then with CONFIG_MASK the mask's words (every fifth sample a hole), at
+    # the device's next offset, as many frames as it takes
+    mask = bytearray(2 * ((w * h + 15) // 16) if flags & P.CONFIG_MASK else 0)
+    for i in range(0, w * h if mask else 0, 5):
+        mask[i // 8] |= 1 << (i % 8)
+    total = w * h + len(mask) // 2
     per = (payload - 4) // 2
     sent = 0
     k = 0
-    while sent < w * h:
-        n = min(per, w * h - sent)
+    while sent < total:
+        n = min(per, total - sent)
         s.take(3, 1)
         s.pick(2, 0, 2)      # shape: raw
         s.take(0, 2)         # base
@@ -87,9 +95,10 @@ def session(w: int, h: int, levels: int, payload: int, zeta_q: int, flags: int =
         s.pick(1, 0, 7)      # at data_next
         s.pick(1, 0, 15)     # n within the device's max_payload
         s.pick(n, 1, (payload - 4) // 2)
-        for i in range(n):
-            x, y = (sent + i) % w, (sent + i) // w
-            s.take((x * 977 + y * 1543 + (x * y * 31) ** 2 + k) % 60000, 2)
+        for j in range(sent, sent + n):
+            x, y, m = j % w, j // w, 2 * (j - w * h)
+            height = (x * 977 + y * 1543 + (x * y * 31) ** 2 + k) % 60000
+            s.take(height if j < w * h else mask[m] | mask[m + 1] << 8, 2)
         sent += n
         k += 1
     # RUN (op 4) with the right CRC
@@ -113,6 +122,8 @@ SEEDS = {
     "seed-big-payload": session(24, 24, 4, 1024, 3 << 16),
     "seed-initial-only": session(13, 11, 2, 128, 1 << 16, flags=1),
     "seed-no-bound": session(17, 9, 3, 96, 0, flags=2 | 8),
+    "seed-spline": session(15, 13, 3, 200, 1 << 16, flags=P.CONFIG_SPLINE, features=3 | P.FEATURE_SPLINE),
+    "seed-holes": session(14, 12, 2, 160, 1 << 16, flags=P.CONFIG_MASK, features=3 | P.FEATURE_HOLES),
 }
 
 
