@@ -550,6 +550,11 @@ def _pgm_header(data: bytes, path: str) -> tuple[bytes, int, int, int, int]:
     width, height, maxval = fields
     if not 1 <= maxval <= 65535:
         raise InputError(f"cannot read {path}: PGM maxval {maxval} is outside 1..65535")
+    if max(width, height) > MAX_SIDE:  # the fuzzer's 0 x 10^123 header: numpy's ValueError on reshape
+        raise InputError(
+            f"cannot read {path}: the PGM header says {width} x {height} samples; wavemesh meshes at most "
+            f"{MAX_SIDE} per side"
+        )
     if pos < n and data[pos : pos + 1] in b" \t\r\n\v\f":
         pos += 1  # the single whitespace character ending the header
     elif magic == b"P5":

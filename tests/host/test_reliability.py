@@ -181,6 +181,15 @@ def test_a_raster_claiming_billions_of_samples_is_refused_before_reading(tmp_pat
     assert r.returncode == 2 and f"6 x {rows} samples; wavemesh meshes at most 32767" in one_error(r.stderr)
 
 
+def test_a_pgm_header_beyond_any_grid_is_refused(tmp_path):
+    """The readers fuzzer's P2 header "0 2222...225 8" (a height of 126 digits, no samples) ended in
+    numpy's ValueError, not an error line."""
+    (tmp_path / "h.pgm").write_bytes(b"P2\n0 " + b"2" * 125 + b"5 8\n")
+    r = wavemesh("mesh", tmp_path / "h.pgm", "-o", tmp_path / "h.obj")
+    assert r.returncode == 2 and "says 0 x 2222" in one_error(r.stderr)
+    assert "wavemesh meshes at most 32767 per side" in r.stderr
+
+
 def test_library_warnings_stay_off_stderr(tmp_path):
     header = "{'descr': '<i2', 'fortran_order': False, 'shape': (3L, 4L), }"  # as Python 2 wrote it
     header = header.ljust(117) + "\n"
