@@ -8,12 +8,14 @@ local process pool, stitch: the stitched mesh checked proper) with --metric vert
 height range), in a process of its own; its peak RSS is that process tree's resident memory (itself and
 its pool workers, summed) sampled every 50 ms by psutil, the most it reached.
 
-- *growth*: 1024^2 .. 8192^2 at the default tile size (tiles.DEFAULT_TILE), 2 workers;
-- *tile size*: 4096^2 at tiles of 512, 1024 and 2048, 2 workers;
-- *workers*: 4096^2 at the default tile, 1 and 2 workers: parallel efficiency t1 / (2 t2);
-- *overhead*: the tiled mesh's triangles against one untiled run (wavemesh.api.mesh) at the default tile
-  size and at smaller ones, on this terrain (2048^2) and on the benchmark DEMs of bench_quality (the
-  real ones; each smaller than the default tile, where tiling is one tile, the untiled mesh itself).
+- *growth*: 1024^2 .. 8192^2 at the default tile size for 2 workers (tiles.default_tile: from the memory
+  available; 4097 on a machine with 2 x 4097^2 x 48 bytes to spare), 2 workers;
+- *tile size*: 8192^2 at tiles of 1025, 2049 and 4097, 2 workers;
+- *workers*: 8192^2 at tiles of 1025 (64 of them), 1 and 2 workers: parallel efficiency t1 / (2 t2);
+- *overhead*: the tiled mesh's triangles against one untiled run (wavemesh.api.mesh, in a process of
+  its own: its peak RSS is the whole grid's) at every size, at the default tile size and at smaller ones,
+  and on the benchmark DEMs of bench_quality (the real ones; each smaller than the default tile, where
+  tiling is one tile, the untiled mesh itself, so smaller tiles are shown too).
 
 Wall times on a shared 2-core machine are noisy; CPU seconds are given beside them.
 """
@@ -34,8 +36,9 @@ BENCH = Path(__file__).resolve().parent
 TITLE = "Tiles: any size in bounded memory (issue 15)"
 ZETA = 10.0
 SIZES = (1024, 2048, 4096, 8192)
-TILE_SIZES = (513, 1025, 2049)
-TILE_N = 4096
+TILE_SIZES = (1025, 2049, 4097)
+TILE_N = 8192
+WORKERS_TILE = 1025
 STRIP = 256
 DEMS = ("jacksboro", "topobathy", "lidar_dem", "motorcycle")
 DEM_TILES = (257, 129)
@@ -150,7 +153,7 @@ def dem_overhead() -> list[dict]:
         base = api.mesh(hf, params).mesh.n_triangles
         src = tiles.Source("array", hf.width, hf.height, array=hf.values, name=name)
         row = {"name": name, "size": [hf.width, hf.height], "zeta": zeta, "untiled": base, "tiled": {}}
-        for tile in (tiles.DEFAULT_TILE, *DEM_TILES):
+        for tile in (tiles.default_tile(2), *DEM_TILES):
             t = tiles.mesh_tiled(src, params, tile, workers=1)
             row["tiled"][str(tile)] = {"tiles": len(t.tiles), "triangles": t.mesh.n_triangles}
         rows.append(row)
@@ -165,9 +168,17 @@ def dem_overhead() -> list[dict]:
 def run() -> dict:
     from wavemesh import tiles
 
-    d = tiles.DEFAULT_TILE
+    d = tiles.default_tile(2)
     sizes = [int(s) for s in os.environ.get("TILES_SIZES", " ".join(map(str, SIZES))).split()]
-    out: dict = {"zeta": ZETA, "default_tile": d, "growth": [], "tile_size": [], "workers": [], "untiled": []}
+    out: dict = {
+        "zeta": ZETA,
+        "default_tile": d,
+        "available_gib": tiles.available_memory() / 2**30,
+        "growth": [],
+        "tile_size": [],
+        "workers": [],
+        "untiled": [],
+    }
     for n in sizes:
         terrain_file(n)
     for n in sizes:
@@ -176,10 +187,10 @@ def run() -> dict:
         for tile in TILE_SIZES:
             if tile != d:
                 out["tile_size"].append(run_child(TILE_N, tile, 2))
-        out["workers"].append(run_child(TILE_N, d, 1))
-    for n in (1024, 2048):
-        if n in sizes:
-            out["untiled"].append(run_child(n, d, 1, untiled=True))
+        out["workers"].append(run_child(TILE_N, WORKERS_TILE, 1))
+    for n in sizes:  # one untiled run beside each (its memory too: the whole grid at once)
+        out["untiled"].append(run_child(n, d, 1, untiled=True))
+        if n in (1024, 2048):
             for tile in (513, 257):
                 out["tile_size"].append(run_child(n, tile, 2))
     out["dems"] = dem_overhead()
@@ -203,7 +214,9 @@ def markdown(r: dict) -> str:
         f"`make bench-tiles` (bench/bench_tiles.py): `wavemesh mesh --tile` on the seeded synthetic "
         f"terrain (bench/datasets.py `terrain`, the unit square sampled n x n, a float32 .npy read through "
         f"a memmap), --metric vertical --zeta {r['zeta']:g}; every run a process of its own, the peak RSS "
-        f"of its process tree (pool workers included) sampled every 50 ms.  Default tile: {d}.",
+        f"of its process tree (pool workers included) sampled every 50 ms.  Default tile: {d} "
+        f"(tiles.default_tile for 2 workers, "
+        f"{r.get('available_gib', 0):.0f} GiB available at the run).",
         "",
         "**Growth** (default tile, 2 workers):",
         "",
@@ -255,11 +268,11 @@ def markdown(r: dict) -> str:
                     _mib(x["peak_rss"]),
                 )
             )
-    w1, w2 = by.get((TILE_N, d, 1)), by.get((TILE_N, d, 2))
+    w1, w2 = by.get((TILE_N, WORKERS_TILE, 1)), by.get((TILE_N, WORKERS_TILE, 2))
     if w1 and w2:
         lines += [
             "",
-            f"**Workers** ({TILE_N}^2, tile {d}): 1 worker {w1['seconds']:.1f} s (peak "
+            f"**Workers** ({TILE_N}^2, tile {WORKERS_TILE}): 1 worker {w1['seconds']:.1f} s (peak "
             f"{_mib(w1['peak_rss'])} MiB), 2 workers {w2['seconds']:.1f} s (peak "
             f"{_mib(w2['peak_rss'])} MiB): parallel efficiency t1 / (2 t2) = "
             f"{w1['seconds'] / (2 * w2['seconds']):.2f}, on a 2-core machine shared with other jobs "
@@ -268,10 +281,11 @@ def markdown(r: dict) -> str:
     if r["untiled"]:
         lines += [
             "",
-            "**Overhead against one untiled run** (triangles), terrain:",
+            "**Overhead against one untiled run** (triangles), terrain; the untiled run's wall time and "
+            "peak RSS (the whole grid at once) beside it:",
             "",
-            "| n^2 | untiled | tile | tiles | tiled | overhead |",
-            "|---|---|---|---|---|---|",
+            "| n^2 | untiled | untiled wall s | untiled peak RSS MiB | tile | tiles | tiled | overhead |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for u in r["untiled"]:
             for x in sorted(
@@ -281,6 +295,8 @@ def markdown(r: dict) -> str:
                     _row(
                         f"{u['n']}^2",
                         f"{u['triangles']:,}",
+                        f"{u['seconds']:.1f}",
+                        _mib(u["peak_rss"]),
                         x["tile"],
                         x["tiles"],
                         f"{x['triangles']:,}",

@@ -541,8 +541,9 @@ def device_fit_hint(hf: HeightField, info: DeviceInfo) -> str | None:
         dw, dh = -(-w // n), -(-h // n)
         if dw <= info.max_width and dh <= info.max_height and dw * dh <= info.max_samples:
             return (f"--decimate {n} makes it {dw} x {dh}; or --crop X,Y,W,H with W <= {info.max_width}, "
-                    f"H <= {info.max_height}")
-    return "crop it with --crop X,Y,W,H"
+                    f"H <= {info.max_height}; or --tile {min(info.max_width, info.max_height)}: the whole "
+                    f"input in tiles (docs/tiles.md)")
+    return "crop it with --crop X,Y,W,H, or mesh it in tiles with --tile N (docs/tiles.md)"
 
 
 STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 4: "sending", 5: "done"}

@@ -169,7 +169,8 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
     """Seamless tiles (wavemesh.tiles, docs/tiles.md): `mesh` and `stream` of an input of any size."""
     p.add_argument("--tile", type=int, metavar="N",
                    help="mesh in tiles of at most N x N samples with shared, decided borders, stitched into "
-                        "one mesh (`stream` with several --port: default the devices' capacity)")
+                        "one mesh (also without N with --scheduler, --tiles-dir or several --port: N from "
+                        "the memory available, or the devices' capacity)")
     p.add_argument("--tiles-dir", metavar="DIR",
                    help="with tiles: also each tile's mesh and index.json into DIR")
     if local:

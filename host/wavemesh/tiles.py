@@ -50,9 +50,12 @@ import numpy as np
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.mesh import Mesh
 
-# samples per tile side without --tile N: 2^10 + 1, so that a grid of 2^k or 2^k + 1 samples a side splits
-# into halves (tiles share a border row); its memory and its overhead: docs/tiles.md
-DEFAULT_TILE = 1025
+# The tile side without --tile N, from memory (default_tile): the largest of these (2^k + 1, so that a grid
+# of 2^j or 2^j + 1 samples a side splits evenly; tiles share a border row) whose tiles in flight, at
+# TILE_BYTES_PER_SAMPLE each, fit in half the memory available.  Larger tiles cost fewer triangles at the
+# seams, smaller ones less memory and more parallel work (make bench-tiles, docs/tiles.md).
+TILE_CHOICES = (4097, 2049, 1025, 513)
+TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
 MIN_TILE = 16  # smaller tiles are all border
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 STRIP_BYTES = 64 << 20  # the first pass reads the input in row strips of about this many float64 bytes
@@ -352,7 +355,7 @@ def plan_tiles(src: Source, params, tile: int | None = None, *,
 
     check_tiling(params)
     params.refine.check()
-    tile = DEFAULT_TILE if tile is None else tile
+    tile = default_tile(default_workers()) if tile is None else tile
     if tile < MIN_TILE:
         raise InputError(f"--tile {tile} is too small", hint=f"use at least {MIN_TILE} samples a side")
     if params.levels is not None and not 1 <= params.levels <= api.MAX_LEVELS:
@@ -736,6 +739,36 @@ def _mesh_tile_task(plan: TilePlan, index: int, window: np.ndarray | None) -> Ti
 # Running the tiles: in this process, on a local process pool, or on a Dask cluster
 
 
+def available_memory() -> int:
+    """Bytes of memory available now (/proc/meminfo's MemAvailable; else the physical memory)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def default_tile(workers: int, budget: int | None = None) -> int:
+    """The tile side from memory: the largest of TILE_CHOICES whose ``workers`` tiles in flight fit in
+    ``budget`` bytes (default: half the memory available now)."""
+    budget = available_memory() // 2 if budget is None else budget
+    for t in TILE_CHOICES:
+        if workers * TILE_BYTES_PER_SAMPLE * t * t <= budget:
+            return t
+    return TILE_CHOICES[-1]
+
+
+def dask_tile(client) -> int:
+    """The tile side from the Dask workers' memory limits: one tile in flight per worker thread."""
+    workers = client.scheduler_info().get("workers", {}).values()
+    per = [w.get("memory_limit") or 0 for w in workers]
+    threads = max([w.get("nthreads") or 1 for w in workers] or [1])
+    return default_tile(threads, min(per) // 2) if per and min(per) > 0 else default_tile(threads)
+
+
 def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
@@ -805,19 +838,26 @@ def _run_pool(plan: TilePlan, workers: int, finished) -> None:
                 finished(f.result())
 
 
-def _run_dask(plan: TilePlan, scheduler, finished) -> None:
+def connect(address: str):
+    """A distributed.Client of the Dask scheduler at ``address``, or WavemeshError."""
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise WavemeshError("--scheduler needs Dask's distributed package",
                             hint="pip install 'wavemesh[dask]' (or: pip install dask distributed)") from None
-    own = not hasattr(scheduler, "submit")
     try:
-        client = Client(scheduler, timeout=f"{DASK_CONNECT_S}s") if own else scheduler
-    except (OSError, TimeoutError) as e:
-        raise WavemeshError(f"--scheduler {scheduler}: no Dask scheduler answers ({e})",
+        return Client(address, timeout=f"{DASK_CONNECT_S}s")
+    except (OSError, TimeoutError, ValueError) as e:
+        raise WavemeshError(f"--scheduler {address}: no Dask scheduler answers ({e})",
                             hint="start one (dask scheduler; dask worker ADDRESS), or check the address") \
             from None
+
+
+def _run_dask(plan: TilePlan, scheduler, finished) -> None:
+    from distributed import as_completed
+
+    own = not hasattr(scheduler, "submit")
+    client = connect(scheduler) if own else scheduler
     try:
         run = f"{time.time_ns()}-{os.getpid()}"  # task keys of this run alone
         futures = [client.submit(_mesh_tile_task, *task, pure=False, key=f"wavemesh-{run}-{task[1]}")
@@ -1072,9 +1112,17 @@ def command(args, params, ports: list[str] | None = None) -> int:
                       spacing=args.spacing, origin=args.origin)
     params = _replace(params, check_levels=False, rms=False)
     if ports is None:
-        plan = plan_tiles(src, params, args.tile, log=say)
-        results = run_tiles(plan, workers=args.workers, scheduler=args.scheduler, progress=progress,
-                            log=say if not progress or not sys.stderr.isatty() else None)
+        client = connect(args.scheduler) if args.scheduler else None
+        try:
+            tile = args.tile
+            if tile is None:  # from memory: the Dask workers' limits, or this machine's
+                tile = dask_tile(client) if client else default_tile(args.workers or default_workers())
+            plan = plan_tiles(src, params, tile, log=say)
+            results = run_tiles(plan, workers=args.workers, scheduler=client, progress=progress,
+                                log=say if not progress or not sys.stderr.isatty() else None)
+        finally:
+            if client is not None:
+                client.close()
     else:
         from wavemesh.stream import DEFAULT_TIMEOUTS
 

@@ -204,3 +204,12 @@ def test_bad_options(dem, tmp_path, monkeypatch, args, expect):
     rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
     assert rc != 0 and expect in err and err.startswith("error:"), err
     assert not out.exists()
+
+
+def test_default_tile_from_memory():
+    per = tiles.TILE_BYTES_PER_SAMPLE
+    assert tiles.default_tile(2, 2 * per * 4097**2) == 4097
+    assert tiles.default_tile(2, 2 * per * 4097**2 - 1) == 2049
+    assert tiles.default_tile(4, 4 * per * 1025**2) == 1025
+    assert tiles.default_tile(64, 1) == 513
+    assert tiles.cuts(8192, 4097) == [0, 4096, 8191] and tiles.cuts(4097, 4097) == [0, 4096]
