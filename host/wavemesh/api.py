@@ -299,9 +299,9 @@ def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None
         if min_area > 0:
             raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
         return None
-    for lv in levels:
-        lv.mesh = holes.drop(lv.mesh, hf.mask)
     final = levels[-1]
+    for lv in levels:  # the final mesh's thin rim triangles flipped where a valid one comes of it
+        lv.mesh = holes.drop(holes.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
     if within is not None:
         final.mesh = holes.simplify_rims(final.mesh, within)
     final.mesh = holes.drop_islands(final.mesh, min_area)

@@ -111,6 +111,71 @@ def block_flags(mask: np.ndarray, levels: int) -> np.ndarray:
     return (pre[y1, x1] - pre[y0, x1] - pre[y1, x0] + pre[y0, x0]) > 0
 
 
+def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
+    """The refiner's full triangulation with its thin triangles over both kinds of samples (doubled area
+    1: no sample but their corners, E(T) 0; wm_tri_cover's THIN) flipped in pairs where that makes a
+    triangle of three valid corners with a corner in no such triangle yet: two such triangles sharing an
+    edge form a strictly convex quadrilateral of four samples whose other diagonal may give one, which
+    the mesh then keeps (a valid sample at a hole's rim covered that the first diagonal left out).  Each
+    flip keeps the triangulation proper and makes one more triangle kept, so the work ends; triangles
+    from the lowest slot, a stack of the ones a flip changed (deterministic)."""
+    X = mesh.xy[:, 0].tolist()
+    Y = mesh.xy[:, 1].tolist()
+    bad = np.asarray(mask, dtype=bool)[mesh.xy[:, 1], mesh.xy[:, 0]].tolist()  # per vertex
+    t = mesh.tris.tolist()
+
+    def orient(a, b, c) -> int:
+        return (X[b] - X[a]) * (Y[c] - Y[a]) - (X[c] - X[a]) * (Y[b] - Y[a])
+
+    def thin_mixed(tri) -> bool:
+        k = bad[tri[0]] + bad[tri[1]] + bad[tri[2]]
+        return 0 < k < 3 and orient(*tri) == 1
+
+    kept = [0] * len(X)  # triangles of three valid corners at each vertex (the refiner done: kept ones)
+    for a, b, c in t:
+        if not (bad[a] or bad[b] or bad[c]):
+            kept[a] += 1
+            kept[b] += 1
+            kept[c] += 1
+    edge = {}  # directed edge -> its thin mixed triangle
+    for i in range(len(t)):
+        if thin_mixed(t[i]):
+            for k in range(3):
+                edge[t[i][k], t[i][(k + 1) % 3]] = i
+    todo = sorted(set(edge.values()), reverse=True)  # a stack: the lowest slot first
+    while todo:
+        i = todo.pop()
+        if not thin_mixed(t[i]):
+            continue
+        for k in range(3):
+            u, v, w = t[i][k], t[i][(k + 1) % 3], t[i][(k + 2) % 3]
+            j = edge.get((v, u))
+            if j is None or j == i or not thin_mixed(t[j]):
+                continue
+            z = next(c for c in t[j] if c != u and c != v)
+            if orient(w, u, z) <= 0 or orient(w, z, v) <= 0:
+                continue  # not strictly convex
+            keep = [w, u, z] if not (bad[w] or bad[u] or bad[z]) else [w, z, v]
+            if bad[keep[0]] or bad[keep[1]] or bad[keep[2]] or all(kept[c] for c in keep):
+                continue  # the other diagonal keeps nothing, or nothing not kept already
+            for c in keep:
+                kept[c] += 1
+            for tri in (t[i], t[j]):
+                for m in range(3):
+                    edge.pop((tri[m], tri[(m + 1) % 3]), None)
+            t[i], t[j] = [w, u, z], [w, z, v]
+            for n in (i, j):
+                if thin_mixed(t[n]):
+                    for m in range(3):
+                        edge[t[n][m], t[n][(m + 1) % 3]] = n
+                    todo.append(n)
+                    # its thin neighbours may flip now too
+                    todo.extend(edge[b, a] for m in range(3)
+                                for a, b in [(t[n][m], t[n][(m + 1) % 3])] if (b, a) in edge)
+            break
+    return Mesh(mesh.width, mesh.height, mesh.xy, np.array(t, dtype=np.int64).reshape(-1, 3))
+
+
 def drop(mesh: Mesh, mask: np.ndarray | None) -> Mesh:
     """The triangles of ``mesh`` that cover no invalid sample (all of them when ``mask`` is None)."""
     if mask is None:
@@ -250,6 +315,8 @@ class HoleCheck:
     covered_valid: int = 0  # valid samples in some triangle
     over_invalid: int = 0  # triangles covering an invalid sample
     uncovered_inland: int = 0  # valid samples in no triangle, no invalid sample among their 8 neighbours
+    coverable: int = 0  # valid samples a unit right triangle of valid samples has as a corner (coverable())
+    uncovered_coverable: int = 0  # of those, the ones in no triangle
     hole_edges: int = 0  # edges of one triangle, off the rectangle's border
     stray_edges: int = 0  # of those, the ones with no invalid sample within their length + 2 of the middle
 
@@ -260,9 +327,25 @@ class HoleCheck:
     def to_report(self) -> dict:
         return {"invalid_samples": self.invalid, "valid_samples": self.valid,
                 "covered_valid": self.covered_valid, "uncovered_valid": self.valid - self.covered_valid,
-                "uncovered_inland": self.uncovered_inland,
+                "uncovered_inland": self.uncovered_inland, "coverable": self.coverable,
+                "uncovered_coverable": self.uncovered_coverable,
                 "triangles_over_invalid": self.over_invalid, "hole_edges": self.hole_edges,
                 "stray_hole_edges": self.stray_edges}
+
+
+def coverable(mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the valid samples that are a corner of a unit right triangle of three valid samples
+    (three of the four corners of a grid cell).  No mesh with grid-sample vertices covers the others
+    (isolated samples, one-sample-wide lines) without a triangle over an invalid sample, save long thin
+    triangles this leaves out."""
+    v = ~np.asarray(mask, dtype=bool)
+    h, w = v.shape
+    cell = v[:-1, :-1].astype(np.int8) + v[1:, :-1] + v[:-1, 1:] + v[1:, 1:] >= 3  # (H-1, W-1)
+    out = np.zeros((h, w), dtype=bool)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            out[dy:dy + h - 1, dx:dx + w - 1] |= cell
+    return out & v
 
 
 def check(mesh: Mesh, mask: np.ndarray) -> HoleCheck:
@@ -356,6 +439,9 @@ def check(mesh: Mesh, mask: np.ndarray) -> HoleCheck:
     rim = ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
     inland = ~covered & ~rim
     out.uncovered_inland = int(inland.sum())
+    can = coverable(bad)
+    out.coverable = int(can.sum())
+    out.uncovered_coverable = int((can & ~covered).sum())
     if out.uncovered_inland:
         yy, xx = np.argwhere(inland)[0]
         p.append(f"{out.uncovered_inland} valid samples away from any invalid one are in no triangle, first "
