@@ -29,6 +29,7 @@ from collections import Counter, deque
 import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, ReadOnly
+from wavemesh import memmap
 
 CLK_HZ = int(os.environ.get("SDRAM_CLK_HZ", "25000000"))
 CL = int(os.environ.get("SDRAM_CL", "2"))
@@ -38,11 +39,18 @@ ROW_BITS, COL_BITS = 13, 9
 ADDR_BITS = ROW_BITS + 2 + COL_BITS      # halfword address {row, bank, column}
 LINE_HW = 2 * int(os.environ.get("SDRAM_LINE_WORDS", "4"))   # the cache's line in halfwords
 
-# the ULX3S's parts, worst case (datasheets: MT48LC16M16A2-75, IS42S16160G-7, AS4C32M16SB-7), in ps
+# the ULX3S's parts, worst case (datasheets: MT48LC16M16A2-75, IS42S16160G-7, AS4C32M16SB-7), in ps:
+# the table of host/wavemesh/memmap.py (the controller's parameters in the SoC, and the simulated
+# board's chip model) and what only this chip checks (tRAS max, the clock each CL allows)
+_T = memmap.SDRAM_TIMING
 DATASHEET = {
-    "tINIT": 200_000_000, "init_refreshes": 8, "tRCD": 21_000, "tRP": 21_000, "tRAS": 44_000,
-    "tRAS_max": 100_000_000, "tRC": 66_000, "tRFC": 70_000, "tRRD": 15_000, "tWR": 15_000,
-    "tWR_ck": 2, "tMRD_ck": 2, "tHZ": 6_000, "tREFI": 7_812_500, "tCK_CL2": 10_000, "tCK_CL3": 7_000,
+    "tINIT": 1000 * _T["T_INIT_NS"], "init_refreshes": 8, "tRCD": 1000 * _T["T_RCD_NS"],
+    "tRP": 1000 * _T["T_RP_NS"], "tRAS": 1000 * _T["T_RAS_NS"], "tRAS_max": 100_000_000,
+    "tRC": 1000 * _T["T_RC_NS"], "tRFC": 1000 * _T["T_RFC_NS"], "tRRD": 1000 * _T["T_RRD_NS"],
+    "tWR": 1000 * _T["T_WR_NS"], "tWR_ck": _T["T_WR_MIN_CK"], "tMRD_ck": _T["T_MRD_CK"],
+    "tHZ": 1000 * _T["T_HZ_NS"],
+    "tREFI": 1000 * _T["T_REFI_NS"] + 500,  # 64 ms / 8192 = 7812.5 ns (the table rounds it down)
+    "tCK_CL2": 10_000, "tCK_CL3": 7_000,
 }
 
 NOP, ACT, READ, WRITE, PRE, REF, MRS, BST = "NOP", "ACT", "READ", "WRITE", "PRE", "REF", "MRS", "BST"

@@ -9,6 +9,7 @@ controller that is too fast for it.
 """
 
 import pytest
+from wavemesh import memmap
 from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / "sdram_ctrl.v", RTL / "sdram_cache.v", RTL / "wm_fifo.v"]
@@ -22,4 +23,6 @@ def test_sdram(clk_hz, cl, lines, words):
     env = {"SDRAM_CLK_HZ": str(clk_hz), "SDRAM_CL": str(cl), "SDRAM_SEED": str(clk_hz // 1_000_000 + cl),
            "SDRAM_LINE_WORDS": str(words)}
     params = {"CLK_HZ": clk_hz, "CAS_LATENCY": cl, "CACHE_LINES": lines, "LINE_WORDS": words}
+    # the timings the SoC builds it with (memmap.SDRAM_TIMING, the table the chip model checks too)
+    params |= {k: v for k, v in memmap.SDRAM_TIMING.items() if k not in ("T_AC_NS", "T_OH_NS")}
     run("sdram_ctrl", SOURCES, "sdram_tb", parameters=params, extra_env=env)
