@@ -71,13 +71,22 @@ static int run_stage(const wm_proto_job *j)
 
 #define TOUT ((volatile const uint32_t *)WM_TOUT_BASE)
 
-int board_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detail)
+int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
 {
+    /* The refiner's storage holds no more triangles than a triangulation of all the grid's samples
+     * (wm_tri_cap_max): with the SDRAM's heap the device's capacity is some 400k triangles, and the
+     * storage of that many, cleared before every job (wm_job_refine), would cost a small job 20 MB
+     * of stores.  The refiner cannot reach either limit, so the mesh is the same. */
+    wm_proto_job jc = *job;
+    const wm_proto_job *j = &jc;
     int32_t m = j->levels, nt;
     int initial_only = (j->flags & WM_PROTO_CONFIG_INITIAL_ONLY) != 0;
     uint8_t *heap = __heap_start;
     size_t heap_bytes = board_heap_bytes(); /* the mask's storage above it */
-    size_t main_bytes = initial_only ? 0 : wm_refine_bound(j->width, j->height, j->capacity);
+    size_t main_bytes;
+    int32_t grid_cap = wm_tri_cap_max(j->width, j->height);
+    if (grid_cap >= 2 && grid_cap < jc.capacity) jc.capacity = grid_cap;
+    main_bytes = initial_only ? 0 : wm_refine_bound(j->width, j->height, j->capacity);
     wm_job_blocks b;
     wm_job_initial_mesh init;
     (void)ctx;
