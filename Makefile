@@ -33,11 +33,13 @@ help:
 	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
 	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
 	@echo "make sim            build firmware and simulator, run the simulated board on 127.0.0.1:$(PORT)"
+	@echo "                    (the ULX3S's top; BOARD=icebreaker: the iCEBreaker's, the FPGA stage alone)"
 	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
 	@echo "make native-device  build and run the native stand-in device on 127.0.0.1:$(DEV_PORT) (DEV_FLAGS=...)"
 	@echo "make demo-native    stream the DEM through the native stand-in device into $(OUT)/"
 	@echo "make fuzz           libFuzzer/atheris harnesses (fuzz/README.md), FUZZ_SECONDS=$(FUZZ_SECONDS) each"
 	@echo "make bitstream BOARD=ulx3s|icebreaker  a board's bitstream (docs/boards.md); make flash BOARD=... loads it"
+	@echo "make postsynth      the iCEBreaker's synthesised netlist through its cocotb bench (Icarus; minutes)"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
@@ -90,9 +92,15 @@ firmware-board: $(SETUP_STAMP)
 	    -DWM_GEN_DIR=$(CURDIR)/$(GEN) >/dev/null
 	cmake --build $(FW_BUILD)
 
-sim: firmware-board
+# BOARD=icebreaker: the iCEBreaker's top instead (the FPGA stage alone, no firmware; docs/boards.md)
+sim: $(if $(filter icebreaker,$(BOARD)),$(SETUP_STAMP) gen,firmware-board)
+ifeq ($(BOARD),icebreaker)
+	$(VPY) sim/build.py --board icebreaker
+	build/sim/icebreaker/wmsim-icebreaker --port $(PORT) $(SIM_FLAGS)
+else
 	$(VPY) sim/build.py $(if $(TRACE),--trace)
 	$(SIM_EXE) --firmware $(FW_BUILD)/wavemesh_board.hex --port $(PORT) $(SIM_FLAGS)
+endif
 
 # The native stand-in device (firmware/board/native): the board's protocol engine and the refiner on the
 # host CPU, serving the wire protocol (docs/protocol.md) on 127.0.0.1:$(DEV_PORT), e.g.

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Build the simulated board (Verilator model of soc_top + sim/*.cpp) into build/sim/.
+"""Build the simulated boards (Verilator models of the board tops + sim/*.cpp) into build/sim/.
 
-    python sim/build.py [--trace] [--jobs N]     prints the simulator's path
+    python sim/build.py [--trace] [--jobs N]     the ULX3S (wmsim); prints the simulator's path
+    python sim/build.py --board icebreaker       the iCEBreaker (wmsim-icebreaker)
     python sim/build.py --firmware               builds firmware/board, prints the image's path
 
 Used by `make sim` and the tests (``build_sim``, ``build_firmware``).  Uses the Verilator of the
@@ -70,7 +71,7 @@ def locked(folder: Path):
 
 
 def sources() -> list[Path]:
-    rtl = sorted(RTL.glob("*.v"))
+    rtl = sorted(RTL.glob("*.v")) + sorted((RTL / "boards").glob("*.v"))
     return [SIM / "board_sim.v", SIM / "sdram_chip.v", *rtl, picorv32(), RTL / "lint.vlt",
             *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h", GEN / "wm_memmap.vh",
             PROTO_C, PROTO_INCLUDES[0] / "proto.h", PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
@@ -99,7 +100,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
     args = [
         verilator, "--cc", "--exe", "--build", "-j", str(jobs),
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
-        f"-I{GEN}", "-y", str(RTL), "-y", str(picorv32().parent),
+        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"), "-y", str(picorv32().parent),
         "--Mdir", str(outdir / "obj"), "-o", str(exe),
         "-MAKEFLAGS", " ".join(MAKEFLAGS),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
@@ -121,6 +122,49 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
             if quiet:
                 sys.stderr.write(r.stdout[-4000:] + r.stderr[-8000:])
             raise RuntimeError(f"the simulator build failed (verilator exit {r.returncode})")
+        stamp.write_text(h.hexdigest())
+    return exe
+
+
+ICEBREAKER_CPP = ["icebreaker_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
+
+
+def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
+    """Build (if needed) and return the simulated iCEBreaker: rtl/boards/icebreaker_top.v as the bitstream
+    has it (sim/icebreaker_sim.v brings out its UART divisor) driven by sim/icebreaker_main.cpp."""
+    from wavemesh.gen import write_all
+
+    write_all(GEN)
+    outdir = OUT / "icebreaker"
+    exe = outdir / "wmsim-icebreaker"
+    verilator, env = verilator_env()
+    args = [
+        verilator, "--cc", "--exe", "--build", "-j", str(jobs),
+        "--top-module", "icebreaker_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
+        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
+        "--Mdir", str(outdir / "obj"), "-o", str(exe),
+        "-MAKEFLAGS", " ".join(MAKEFLAGS),
+        "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
+        "-LDFLAGS", f"{outdir / 'proto.o'} -Wl,--gc-sections",
+        str(RTL / "lint.vlt"), str(SIM / "icebreaker_sim.v"), *(str(SIM / c) for c in ICEBREAKER_CPP),
+    ]
+    inputs = [SIM / "icebreaker_sim.v", *sorted(RTL.glob("*.v")), *sorted((RTL / "boards").glob("*.v")),
+              RTL / "lint.vlt", *(SIM / c for c in ICEBREAKER_CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
+              *sorted(GEN.glob("*.vh")), PROTO_C, PROTO_INCLUDES[0] / "proto.h", GEN / "wm_protocol.h"]
+    h = hashlib.sha256(" ".join(args).encode())
+    for p in inputs:
+        h.update(p.read_bytes())
+    stamp = outdir / "stamp"
+    with locked(outdir):
+        if exe.exists() and stamp.exists() and stamp.read_text() == h.hexdigest():
+            return exe
+        _proto_object(outdir)  # the bridge's ERROR BUSY frame
+        exe.unlink(missing_ok=True)
+        r = subprocess.run(args, env=env, capture_output=quiet, text=True)
+        if r.returncode != 0:
+            if quiet:
+                sys.stderr.write(r.stdout[-4000:] + r.stderr[-8000:])
+            raise RuntimeError(f"the iCEBreaker simulator build failed (verilator exit {r.returncode})")
         stamp.write_text(h.hexdigest())
     return exe
 
@@ -168,10 +212,14 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
     ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
+    ap.add_argument("--board", choices=("ulx3s", "icebreaker"), default="ulx3s",
+                    help="the simulated board to build (default ulx3s)")
     args = ap.parse_args(argv)
     try:
         if args.firmware:
             print(build_firmware(quiet=False))
+        elif args.board == "icebreaker":
+            print(build_icebreaker_sim(jobs=args.jobs, quiet=False))
         else:
             print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False))
     except RuntimeError as e:

@@ -5,12 +5,14 @@
 #                                           board's utilisation and fmax go to docs/boards.md
 #   make bitstreams                         both
 #   make flash BOARD=...                    openFPGALoader: the FPGA's SRAM (FLASH=1: the SPI flash)
+#   make postsynth                          the iCEBreaker's synthesised netlist through its cocotb bench
+#                                           (Icarus Verilog; minutes, not part of make test)
 BOARD ?=
 BOARDS := ulx3s icebreaker
 SEED ?= 1
 FLASH ?=
 
-.PHONY: bitstream bitstreams flash
+.PHONY: bitstream bitstreams flash postsynth
 
 bitstream: $(SETUP_STAMP) gen
 	@case " $(BOARDS) " in *" $(BOARD) "*) ;; \
@@ -24,3 +26,6 @@ flash: $(SETUP_STAMP)
 	@case " $(BOARDS) " in *" $(BOARD) "*) ;; \
 	 *) echo "error: BOARD=$(BOARD) is not a board: make flash BOARD=<one of: $(BOARDS)>" >&2; exit 2;; esac
 	@$(VPY) tools/boards.py flash $(BOARD) $(if $(FLASH),--flash)
+
+postsynth: $(SETUP_STAMP) gen
+	$(VPY) tools/postsynth.py

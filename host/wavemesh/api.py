@@ -10,6 +10,7 @@ parsing and printing over them.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -30,8 +31,8 @@ from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
 from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, sidecar_path, to_grid
 from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
-from wavemesh.initial import InitialResult, initial_triangulation
-from wavemesh.label import tau_counts
+from wavemesh.initial import InitialResult, assemble, initial_triangulation
+from wavemesh.label import Labelling, tau_counts
 from wavemesh.link import DEFAULT_BAUD, LinkStats
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import read_mesh, write_mesh
@@ -78,12 +79,18 @@ class MeshJob:
 
 
 def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = None,
-                wavelet: str = "haar") -> MeshJob:
-    """The initial triangulation of a height field (filter bank, labeller, templates)."""
+                wavelet: str = "haar", labelling: Labelling | None = None) -> MeshJob:
+    """The initial triangulation of a height field (filter bank, labeller, templates); with ``labelling``
+    (the blocks' labels and templates as a device's template stage made them, wavemesh.stage) the
+    templates of that labelling instead of the host's."""
     m, t = _levels_and_tau(hf, levels, tau)
     if wavelet not in WAVELETS:
         raise WavemeshError(f"--wavelet {wavelet} is not a wavelet here", hint=f"use {' or '.join(WAVELETS)}")
-    result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet)
+    if labelling is not None:
+        mesh = assemble(labelling, hf.width, hf.height)
+        result = InitialResult(mesh, labelling, tau_counts(t, hf.scale), m)
+    else:
+        result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet)
     require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
     return MeshJob(hf, m, t, result, wavelet)
 
@@ -242,7 +249,8 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
 
 def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
            params: RefineParams | None = None, *, check_levels: bool = False, rms: bool = False,
-           wavelet: str = "haar", roi: np.ndarray | None = None, min_area: float = 0.0) -> RefineJob:
+           wavelet: str = "haar", roi: np.ndarray | None = None, min_area: float = 0.0,
+           labelling: Labelling | None = None) -> RefineJob:
     """Filter bank, templates, then the native refiner down to level 0 with E(T) <= zeta.
 
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
@@ -253,7 +261,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 
     params = params or RefineParams()
     params.check()
-    job = triangulate(hf, levels, tau, wavelet)
+    job = triangulate(hf, levels, tau, wavelet, labelling)
     # The refiner sees the 16-bit samples.  For lossy quantisation a sample is off the input by at
     # most q, a plane through three samples by at most q too: zeta - 2q on the samples keeps the
     # vertical bound on the input values (docs/refiner.md, "Quantised input").
@@ -425,11 +433,11 @@ def _comment(m: int, tau: float, p: RefineParams | None) -> str:
     return f"wavemesh {__version__} refined mesh, M={m} tau={tau:g} zeta={p.zeta:g} metric={p.metric}"
 
 
-def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
+def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling | None = None) -> MeshResult:
     """`wavemesh mesh` without the files: the filter bank and the templates, then (unless
     ``initial_only``) the native refiner.  The final mesh is always checked (a proper triangulation,
     within zeta when the refiner reports the bound met; else MeshInvalid); the coarser levels are
-    checked and measured only with ``check_levels``."""
+    checked and measured only with ``check_levels``.  ``labelling``: see :func:`triangulate`."""
     params = params or MeshParams()
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     roi = None if params.roi is None else parse_roi(params.roi, hf.width, hf.height)
@@ -440,7 +448,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
         raise InputError("--roi and --nodata hole do not go together yet (the ROI's error measure does not "
                          "know holes)", hint="fill the invalid samples (--fill nearest), or drop --roi")
     if params.initial_only:
-        job = triangulate(hf, m, t, params.wavelet)  # checks the mesh
+        job = triangulate(hf, m, t, params.wavelet, labelling)  # checks the mesh
         errors = mesh_errors(job.mesh, hf.values, rms=params.rms, spacing=ground(hf).spacing)
         report = {"wavemesh": __version__, "input": hf.to_report(), "ground": ground(hf).to_report(),
                   "parameters": {"levels": m, "tau": t, "wavelet": params.wavelet, "stage": "initial"},
@@ -450,7 +458,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None) -> MeshResult:
                           comment=_comment(m, t, None), report=report)
     p = params.refine
     rjob = refine(hf, m, t, p, check_levels=params.check_levels, rms=params.rms, wavelet=params.wavelet,
-                  roi=roi, min_area=params.min_area)
+                  roi=roi, min_area=params.min_area, labelling=labelling)
     final = rjob.output.final
     if params.check_levels:
         rows = [level_report(lv, hf, p.metric, rjob.errors if lv is final else None)
@@ -583,7 +591,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         if m > info.max_levels:
             raise DeviceError(f"--levels {m}: the device makes at most {info.max_levels}",
                               hint=f"use --levels {info.max_levels} or fewer")
-        if not full and not info.features & P.FEATURE_INITIAL_ONLY:
+        if not full and not info.features & (P.FEATURE_INITIAL_ONLY | P.FEATURE_STAGE):
             raise DeviceError("the device cannot stop after the template stage", hint="use --stage full")
         if hf.mask is not None and not info.features & P.FEATURE_HOLES:
             raise DeviceError("--nodata hole: the device takes no validity mask (no FEATURE_HOLES)",
@@ -591,6 +599,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         if params.wavelet != "haar" and not info.features & P.FEATURE_SPLINE:
             raise DeviceError(f"--wavelet {params.wavelet}: the device's filter bank makes Haar's only",
                               hint="use --wavelet haar, or `wavemesh mesh` on the host")
+        if info.features & P.FEATURE_STAGE:
+            return _stream_on_stage(hf, dev, info, replace(params, levels=m, tau=tau), port, baud, timeouts,
+                                    progress)
         storage = p.capacity or info.tri_capacity
         if storage > info.tri_capacity:
             raise DeviceError(f"--capacity {storage}: the device has storage for {info.tri_capacity} "
@@ -686,6 +697,34 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                         rows=rows, bound_met=bound_met or not full, comment=_comment(m, tau, run),
                         report=report, device=info, cycles=cycles, link=link, upload_seconds=upload_s,
                         job_seconds=job_s)
+
+
+def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: MeshParams, port, baud: int,
+                     timeouts: Timeouts, progress: bool) -> StreamResult:
+    """stream() on a device that states FEATURE_STAGE (the iCEBreaker's FPGA stage alone): its filter bank
+    and template stage label the blocks (wavemesh.stage), and the host does the rest as mesh() does, from
+    that labelling: the same mesh as `wavemesh mesh` when the device's labels are the model's."""
+    from wavemesh import stage
+
+    silence = timeouts.reply * timeouts.attempts
+    with _Progress("heights", hf.width * hf.height, progress) as bar:
+        t0 = time.monotonic()
+        tau_q = tau_counts(params.tau, hf.scale)
+        lab = stage.labelling(dev.link, hf.samples, params.levels, tau_q, silence, bar)
+        upload_s = time.monotonic() - t0
+        bar.finish(f"{2 * hf.width * hf.height / 1024:.1f} KiB in {upload_s:.2f} s, the blocks' templates "
+                   "back")
+    t1 = time.monotonic()
+    result = mesh(hf, params, labelling=lab)
+    link = dev.link.stats
+    report = result.report | {
+        "device": info.to_report(),
+        "transfer": {"port": port if isinstance(port, str) else repr(port), "baud": baud,
+                     "height_bytes": 2 * hf.width * hf.height, "entry_bytes": 2 * lab.label.size,
+                     "upload_seconds": upload_s, "bytes_out": link.bytes_out, "bytes_in": link.bytes_in}}
+    base = {f.name: getattr(result, f.name) for f in dataclasses.fields(MeshResult)}
+    return StreamResult(**(base | {"report": report}), device=info, cycles={}, link=link,
+                        upload_seconds=upload_s, job_seconds=time.monotonic() - t1)
 
 
 # ---------------------------------------------------------------------------------------------------

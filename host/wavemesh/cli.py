@@ -315,6 +315,17 @@ def mesh_command(args) -> int:
     api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
     params = _mesh_params(args)
     result = api.mesh(_load(args, args.input), params)
+    table = _refiner_table(result, params)
+    roi = result.report.get("roi")
+    if roi:
+        table.append(f"  ROI: {roi['samples']} samples ({100 * roi['fraction']:.1f} %), E_max inside "
+                     f"{roi['e_max_inside']:.6g} (the bound), {roi['triangles_inside']} triangles inside, "
+                     f"{roi['triangles_outside']} outside")
+    return _finish(args, result, table)
+
+
+def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
+    """The host refiner's lines: its parameters and the level table (none for the initial stage alone)."""
     table = []
     if result.refined is not None:
         p = result.refine_params
@@ -325,12 +336,7 @@ def mesh_command(args) -> int:
         table.append(f"  level  vertices  triangles  {head:>10}  splits  swaps")
         table += [f"  {r['level']:>5}  {r['vertices']:>8}  {r['triangles']:>9}  {r[e_max]:>10.4g}  "
                   f"{r['splits']:>6}  {r['swaps']:>5}" for r in result.rows]
-    roi = result.report.get("roi")
-    if roi:
-        table.append(f"  ROI: {roi['samples']} samples ({100 * roi['fraction']:.1f} %), E_max inside "
-                     f"{roi['e_max_inside']:.6g} (the bound), {roi['triangles_inside']} triangles inside, "
-                     f"{roi['triangles_outside']} outside")
-    return _finish(args, result, table)
+    return table
 
 
 def stream_command(args) -> int:
@@ -350,6 +356,9 @@ def stream_command(args) -> int:
     result = api.stream(_load(args, args.input), args.port, params, baud=args.baud, timeouts=timeouts,
                         trace=sys.stderr if args.trace else None, progress=not args.quiet,
                         log=None if args.quiet else lambda text: print(text, flush=True))
+    if not result.cycles:  # the FPGA stage alone (FEATURE_STAGE): it labelled the blocks, the host refined
+        return _finish(args, result, [f"  device: {result.device.name} labelled the blocks; the host refined"]
+                       + _refiner_table(result, params))
     clk = result.device.clk_hz
     table = []
     if result.rows:

@@ -3,12 +3,10 @@
 Every port pyserial's ``list_ports`` finds (plus any URL given with ``--port``, e.g. the simulated
 board's ``socket://127.0.0.1:7720``) is opened and sent HELLO, as ``wavemesh stream`` does before a job
 (:meth:`wavemesh.stream.Device.sync`), with a short timeout; a port that answers is listed with the
-capabilities its HELLO_REPLY states.  A port that cannot be opened (busy, no permission) is listed with
-the reason.  A port that does not answer HELLO is asked once more in the byte stream of the
-iCEBreaker's FPGA stage (docs/boards.md, "The iCEBreaker's stream": a header with W = 0, which the
-stage refuses with "EW" and forgets).  HELLO ends whatever session the device had, so nothing is lost on
-a wavemesh device; on another kind of device the probe writes two short messages, as esptool's sync
-does (``--no-probe`` only lists).
+capabilities its HELLO_REPLY states (the iCEBreaker's FPGA stage answers HELLO too: FEATURE_STAGE).  A
+port that cannot be opened (busy, no permission) is listed with the reason.  HELLO ends whatever session
+the device had, so nothing is lost on a wavemesh device; on another kind of device the probe writes two
+short messages, as esptool's sync does (``--no-probe`` only lists).
 """
 
 from __future__ import annotations
@@ -20,10 +18,6 @@ from wavemesh.errors import WavemeshError
 # one HELLO, answered within half a second, twice: a board answers in a few milliseconds
 PROBE_SYNC_S = 0.5
 PROBE_ATTEMPTS = 2
-# the FPGA stage's refusal of a header with W = H = M = 0 (rtl/boards/stage_uart.v)
-STAGE_PROBE = b"WM" + bytes(8)
-STAGE_REFUSAL = b"EW"
-STAGE_SILENCE_S = 0.8  # past the stage's silence timeout (0.7 s): a header it was in the middle of is gone
 
 
 @dataclass
@@ -35,7 +29,6 @@ class PortReport:
     hwid: str = ""
     answer: str = ""  # the device's summary (DeviceInfo.summary) when it answered
     info: dict | None = None  # its HELLO_REPLY (DeviceInfo.to_report)
-    stage: bool = False  # the iCEBreaker's FPGA stage answered its byte stream (no HELLO)
     problem: str = ""  # why it could not be asked, or that nothing answered
 
     @property
@@ -47,8 +40,6 @@ class PortReport:
         head = self.url + (f"  ({self.description})" if shown else "")
         if self.answered:
             return f"{head}: wavemesh device: {self.answer}"
-        if self.stage:
-            return f"{head}: wavemesh FPGA stage (no HELLO: the iCEBreaker's byte stream, docs/boards.md)"
         return f"{head}: {self.problem or 'not probed'}"
 
 
@@ -69,11 +60,7 @@ def probe(report: PortReport, baud: int = 115200) -> PortReport:
             info = dev.sync()
     except WavemeshError as e:
         msg = e.message
-        if not msg.startswith("no device answers"):
-            report.problem = msg
-            return report
-        report.problem = "no HELLO answer"
-        report.stage = probe_stage(report.url, baud)
+        report.problem = "no HELLO answer" if msg.startswith("no device answers") else msg
         return report
     report.info = info.to_report()
     report.answer = info.summary()
@@ -89,31 +76,3 @@ def scan(extra: list[str] = (), baud: int = 115200, do_probe: bool = True) -> li
         reports = [probe(r, baud) for r in reports]
     return reports
 
-
-def probe_stage(url: str, baud: int = 115200, attempts: int = 2) -> bool:
-    """True when the iCEBreaker's FPGA stage answers on `url`: it refuses a header of zeros with "EW"."""
-    import time
-
-    from wavemesh.link import open_port
-
-    try:
-        port = open_port(url, baud)
-    except WavemeshError:
-        return False
-    try:
-        for k in range(attempts):
-            if k:
-                time.sleep(STAGE_SILENCE_S)
-            port.reset_input_buffer()
-            port.write(STAGE_PROBE)
-            got, deadline = b"", time.monotonic() + PROBE_SYNC_S
-            while time.monotonic() < deadline and STAGE_REFUSAL not in got:
-                got += port.read(64)
-                time.sleep(0.01)
-            if STAGE_REFUSAL in got:
-                return True
-        return False
-    except OSError:
-        return False
-    finally:
-        port.close()

@@ -275,28 +275,47 @@ class Link:
         self.stats.bytes_out += len(wire)
 
     def write_raw(self, data: bytes) -> None:
-        """Bytes as they are (tests: garbage on the line)."""
+        """Bytes as they are (wavemesh.stage's byte stream; tests: garbage on the line)."""
         if self.trace:
             self._dump("TX", "raw", data)
-        self.port.write(data)
+        try:
+            self.port.write(data)
+        except Exception as e:  # serial.SerialException, OSError: the peer went away
+            raise LinkError(f"cannot write to {self.url}: {e}",
+                            "the device closed the connection (or was unplugged)") from None
+        self.stats.bytes_out += len(data)
 
     # --- reading ---------------------------------------------------------------------------------------
     def _read_some(self, deadline: float) -> bool:
         """Wait until some bytes came (True) or the deadline passed (False)."""
+        data = self._wait_bytes(deadline, READ_CHUNK)
+        if data:
+            self.pending.extend(self.decoder.feed(data))
+        return bool(data)
+
+    def read_raw(self, timeout: float, limit: int = READ_CHUNK) -> bytes:
+        """Unframed bytes, at most ``limit``: what came within ``timeout`` s (b"" if nothing), for a device
+        that speaks a plain byte stream (wavemesh.stage: the FPGA stage's job)."""
+        data = self._wait_bytes(time.monotonic() + timeout, limit)
+        if data and self.trace:
+            self._dump("RX", "raw", data)
+        return data
+
+    def _wait_bytes(self, deadline: float, limit: int) -> bytes:
+        """The bytes that came first (b"" when none did by the deadline), counted."""
         pause = POLL_INTERVAL
         while True:
             try:
-                data = self.port.read(READ_CHUNK)
+                data = self.port.read(limit)
             except Exception as e:  # serial.SerialException: socket disconnected, device unplugged
                 hint = "the device went away (a simulated board serves one client at a time)"
                 raise LinkError(f"the connection to {self.url} broke: {e}", hint) from None
             if data:
                 self.stats.bytes_in += len(data)
-                self.pending.extend(self.decoder.feed(data))
-                return True
+                return data
             now = time.monotonic()
             if now >= deadline:
-                return False
+                return b""
             if self._fd is not None:  # a socket or a tty: sleep until something arrives
                 try:
                     select.select([self._fd], [], [], min(deadline - now, 0.5))

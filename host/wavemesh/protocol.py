@@ -88,6 +88,9 @@ def host_resend_s(session_timeout_ms: int, baud: int, max_payload: int = MAX_PAY
 FREE_VERTEX = 0xFFFF  # x and y of a free vertex slot in a level stream
 
 
+HOST_TYPE_MAX = 0x3F  # frame types 0x01..HOST_TYPE_MAX go host to device, 0x80..0xFF device to host
+
+
 class FrameType(IntEnum):
     """Frame types: 0x01..0x3F host to device, 0x80..0xFF device to host."""
 
@@ -175,6 +178,7 @@ FEATURE_REDUCTION = 1 << 0  # uses delta_lambda and delta_c (the reduction opera
 FEATURE_INITIAL_ONLY = 1 << 1  # honours CONFIG_INITIAL_ONLY
 FEATURE_SPLINE = 1 << 2  # its filter bank also makes the spline wavelet (CONFIG_SPLINE)
 FEATURE_HOLES = 1 << 3  # takes a validity mask (CONFIG_MASK; --nodata hole)
+FEATURE_STAGE = 1 << 4  # the FPGA stage alone (the iCEBreaker): a job over its byte stream, the host refines
 
 # Bits of CONFIG.flags
 CONFIG_INITIAL_ONLY = 1 << 0  # stop after the template stage: one level, the initial triangulation
@@ -556,6 +560,7 @@ def c_header() -> str:
         f"#define WM_PROTO_CONFIG_SPLINE 0x{CONFIG_SPLINE:X}u",
         f"#define WM_PROTO_FEATURE_HOLES 0x{FEATURE_HOLES:X}u",
         f"#define WM_PROTO_CONFIG_MASK 0x{CONFIG_MASK:X}u",
+        f"#define WM_PROTO_FEATURE_STAGE 0x{FEATURE_STAGE:X}u",
         f"#define WM_PROTO_CONFIG_KNOWN_FLAGS 0x{CONFIG_KNOWN_FLAGS:X}u",
         f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
         f"#define WM_PROTO_ACK_NAK 0x{ACK_NAK:X}u",
@@ -583,6 +588,34 @@ def c_header() -> str:
               "", "#endif /* WM_PROTOCOL_H */", ""]
     names = [ln.split()[1] for ln in lines if ln.startswith("#define ")]
     assert len(names) == len(set(names)), "a macro name is defined twice"
+    return "\n".join(lines)
+
+
+def verilog_header() -> str:
+    """wm_protocol.vh: what a device without a CPU needs to answer HELLO (rtl/boards/stage_uart.v, the
+    iCEBreaker's FPGA stage): the framing bytes, the frame types, the version, the feature bits and
+    HELLO_REPLY's layout (included inside a module: localparams)."""
+    host = [t for t in FrameType if t.value <= HOST_TYPE_MAX]
+    assert all(1 <= t.value for t in host) and all(t.value >= 0x80 for t in FrameType if t not in host)
+    lines = [
+        f"// {BANNER}",
+        f"localparam [7:0] WM_PROTO_SLIP_END = 8'h{SLIP_END:02X};",
+        f"localparam [7:0] WM_PROTO_SLIP_ESC = 8'h{SLIP_ESC:02X};",
+        f"localparam [7:0] WM_PROTO_SLIP_ESC_END = 8'h{SLIP_ESC_END:02X};",
+        f"localparam [7:0] WM_PROTO_SLIP_ESC_ESC = 8'h{SLIP_ESC_ESC:02X};",
+        f"localparam [15:0] WM_PROTO_VERSION = 16'h{VERSION:04X};",
+        f"localparam [7:0] WM_PROTO_T_HELLO = 8'h{FrameType.HELLO:02X};",
+        f"localparam [7:0] WM_PROTO_T_HELLO_REPLY = 8'h{FrameType.HELLO_REPLY:02X};",
+        f"localparam [7:0] WM_PROTO_HOST_TYPE_MAX = 8'h{HOST_TYPE_MAX:02X};  // host frame types: 1 .. this",
+        f"localparam [15:0] WM_PROTO_MIN_PAYLOAD = 16'd{MIN_PAYLOAD};",
+        f"localparam [31:0] WM_PROTO_FEATURE_STAGE = 32'h{FEATURE_STAGE:X};",
+        f"// HELLO_REPLY: byte offsets of its fields ({HELLO_REPLY.doc}; reserved fields are 0)",
+    ]
+    for name, off in HELLO_REPLY.offsets().items():
+        if "reserved" not in name:
+            f = next(f for f in HELLO_REPLY.fields if f.name == name)
+            lines.append(f"localparam integer WM_PROTO_HELLO_REPLY_{_cname(name)} = {off};  // {f.ctype}")
+    lines += [f"localparam [15:0] WM_PROTO_HELLO_REPLY_BYTES = 16'd{HELLO_REPLY.size};", ""]
     return "\n".join(lines)
 
 
@@ -709,7 +742,7 @@ def doc_is_current(path: str | Path) -> bool:
 
 
 def files() -> dict[str, str]:
-    return {"wm_protocol.h": c_header()}
+    return {"wm_protocol.h": c_header(), "wm_protocol.vh": verilog_header()}
 
 
 def main(argv=None) -> int:

@@ -127,10 +127,11 @@ class DeviceInfo:
 
     def summary(self) -> str:
         clock = f"{self.clk_hz / 1e6:g} MHz" if self.clk_hz != 10**9 else "ns clock"
+        what = ("the FPGA stage alone (the host refines)" if self.features & P.FEATURE_STAGE
+                else f"{self.tri_capacity} triangles")
         return (f"{self.name} firmware {self.fw_version[0]}.{self.fw_version[1]}, protocol "
                 f"{self.version >> 8}.{self.version & 0xFF}: up to {self.max_width} x {self.max_height} "
-                f"({self.max_samples} samples), {self.tri_capacity} triangles, M <= {self.max_levels}, "
-                f"{clock}")
+                f"({self.max_samples} samples), {what}, M <= {self.max_levels}, {clock}")
 
     def to_report(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}

@@ -3,7 +3,8 @@
  *
  * The whole SoC does not fit the UP5K (docs/boards.md has the measurements), so the iCEBreaker
  * carries the FPGA stage alone behind its UART (stage_uart.v: filter bank and template stage, the
- * samples streamed in and every block's TOUT entry streamed back; the host refines).  UART on the
+ * samples streamed in and every block's TOUT entry streamed back, HELLO answered; the host
+ * refines).  UART on the
  * FT2232H's second channel at 115200 baud; the user button (BTN_N) resets; the red LED is on while
  * a job runs, the green LED after an RX overrun (a job was lost).  Pins: icebreaker.pcf.
  */
@@ -14,8 +15,10 @@
 
 module icebreaker_top #
 (
-    // clock cycles per UART bit: 104 is 115200 baud at 12 MHz (0.16 % off); the test bench's is smaller
-    parameter DIV = 104,
+    // the oscillator's frequency in Hz, and the UART's baud rate: 104 clocks per bit (0.16 % off
+    // 115200); the test bench's rate is higher
+    parameter CLK_HZ = 12_000_000,
+    parameter BAUD = 115_200,
     // reset lasts 2^POR_BITS clocks (5.5 ms at 12 MHz)
     parameter POR_BITS = 16,
     // a header or job is dropped after 2^TIMEOUT_BITS clocks without a byte (0.7 s at 12 MHz)
@@ -45,7 +48,8 @@ wire busy;
 wire overrun;
 
 stage_uart #(
-    .DIV(DIV),
+    .CLK_HZ(CLK_HZ),
+    .BAUD(BAUD),
     .TIMEOUT_BITS(TIMEOUT_BITS)
 ) stage_inst (
     .clk(CLK),

@@ -18,11 +18,21 @@
  * The device is then ready for the next header.  Reasons: "W" W or H out of 2..MAX_WIDTH /
  * 2..MAX_HEIGHT, "M" M out of 1..MAX_LEVELS, "C" too many block columns for the template stage.
  *
- * Nothing a host sends can hang it: before a header the device skips every byte until "WM" (so a
- * wire-protocol HELLO, or any garbage, is passed over; a header with a bad field is answered and
- * dropped), and a header or a job whose next byte does not come within 2^TIMEOUT_BITS clocks (0.7 s
- * at 12 MHz) is dropped: the filter bank and the template stage are reset and the device waits for
- * the next "WM".
+ * HELLO (docs/protocol.md): between jobs the device also reads the wire protocol's SLIP frames.  A
+ * HELLO frame (0xC0, type HELLO, seq, ...) is answered with a HELLO_REPLY frame of the same seq
+ * stating what the stage is (name "wm-stage", FEATURE_STAGE, its largest grid and M, its clock,
+ * baud rate and silence timeout; the layout from the generated wm_protocol.vh, the CRC-32 computed
+ * bit by bit as the reply goes out); any other host frame (types 1..0x3F) is skipped to its closing
+ * 0xC0.  So `wavemesh stream` and `wavemesh devices` find the stage as they find a board, and the
+ * host then sends the job in the stream above.  The HELLO's length and CRC are not checked (a
+ * damaged HELLO is answered; the host checks the reply); a HELLO that ends while a reply is still
+ * going out is not answered (the host repeats it).
+ *
+ * Nothing a host sends can hang it: between jobs the device skips every byte until "WM" outside a
+ * frame (so any garbage is passed over; a header with a bad field is answered and dropped), and a
+ * header, a frame or a job whose next byte does not come within 2^TIMEOUT_BITS clocks (0.7 s at
+ * 12 MHz) is dropped: the filter bank and the template stage are reset and the device waits for the
+ * next "WM" or frame.
  *
  * Flow: the receiver has no back-pressure, so the stage must keep up with the line.  It does: the
  * filter bank takes a sample per clock, and the only stall, the template stage waiting for the
@@ -36,8 +46,9 @@
 
 module stage_uart #
 (
-    // baud divisor: clock cycles per bit
-    parameter DIV = 104,
+    // the clock in Hz, and the UART's baud rate (8N1; CLK_HZ / BAUD clocks per bit, rounded, >= 2)
+    parameter CLK_HZ = 12_000_000,
+    parameter BAUD = 115_200,
     // the filter bank's maxima
     parameter MAX_WIDTH = 256,
     parameter MAX_HEIGHT = 4096,
@@ -59,7 +70,57 @@ module stage_uart #
     output wire        rx_overrun  // sticky: a received byte found the RX FIFO full (the job is lost)
 );
 
-localparam [15:0] DIV16 = DIV;
+`include "wm_protocol.vh"
+
+localparam integer DIV = (CLK_HZ + BAUD / 2) / BAUD;
+localparam [15:0] DIV16 = DIV[15:0];
+
+// the stage's version (HELLO_REPLY's fw_major, fw_minor): the byte stream's
+localparam [7:0] VERSION_MAJOR = 8'd1;
+localparam [7:0] VERSION_MINOR = 8'd0;
+// the silence timeout in ms (HELLO_REPLY's byte and session timeouts)
+localparam [63:0] SILENCE_MS = ((64'd1 << TIMEOUT_BITS) * 64'd1000) / CLK_HZ;
+
+// HELLO_REPLY's payload: every field the stage states, at the generated offsets (little-endian)
+function [8*WM_PROTO_HELLO_REPLY_BYTES-1:0] hello_payload;
+    input integer unused;
+    integer k;
+    reg [63:0] name;
+    begin
+        hello_payload = {(8*WM_PROTO_HELLO_REPLY_BYTES){1'b0}};
+        name = "wm-stage";
+        hello_payload[8*WM_PROTO_HELLO_REPLY_VERSION +: 16] = WM_PROTO_VERSION;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_FW_MAJOR +: 8] = VERSION_MAJOR;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_FW_MINOR +: 8] = VERSION_MINOR;
+        for (k = 0; k < 8; k = k + 1) begin
+            hello_payload[8*(WM_PROTO_HELLO_REPLY_NAME + k) +: 8] = name[8*(7-k) +: 8];
+        end
+        hello_payload[8*WM_PROTO_HELLO_REPLY_MAX_WIDTH +: 16] = MAX_WIDTH;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_MAX_HEIGHT +: 16] = MAX_HEIGHT;
+        // no frame buffer: the samples stream through, so any W x H within the sides
+        hello_payload[8*WM_PROTO_HELLO_REPLY_MAX_SAMPLES +: 32] = MAX_WIDTH * MAX_HEIGHT;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_TRI_CAPACITY +: 32] = 32'd0;  // no refiner
+        hello_payload[8*WM_PROTO_HELLO_REPLY_MAX_LEVELS +: 8] = MAX_LEVELS;
+        // no DATA frames: the smallest window and payload a device may state
+        hello_payload[8*WM_PROTO_HELLO_REPLY_WINDOW +: 8] = 8'd1;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_MAX_PAYLOAD +: 16] = WM_PROTO_MIN_PAYLOAD;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_CLK_HZ +: 32] = CLK_HZ;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_BAUD +: 32] = BAUD;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_FEATURES +: 32] = WM_PROTO_FEATURE_STAGE;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS +: 16] = SILENCE_MS[15:0];
+        hello_payload[8*WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS +: 16] = 16'd0;  // nothing is acknowledged
+        hello_payload[8*WM_PROTO_HELLO_REPLY_SESSION_TIMEOUT_MS +: 32] = SILENCE_MS[31:0];
+        hello_payload[8*WM_PROTO_HELLO_REPLY_ACK_RETRIES +: 16] = 16'd0;
+        hello_payload[8*WM_PROTO_HELLO_REPLY_IDLE_TIMEOUT_MS +: 32] = 32'd0;  // a UART: never closed
+        hello_payload[8*WM_PROTO_HELLO_REPLY_WRITE_TIMEOUT_MS +: 32] = 32'd0;
+    end
+endfunction
+
+localparam [8*WM_PROTO_HELLO_REPLY_BYTES-1:0] HELLO_PAYLOAD = hello_payload(0);
+localparam [15:0] HELLO_LEN = WM_PROTO_HELLO_REPLY_BYTES;
+localparam [6:0] HELLO_CRC_AT = 7'd4 + HELLO_LEN[6:0];  // raw frame bytes: type, seq, len, payload, CRC
+localparam [6:0] HELLO_LAST = HELLO_CRC_AT + 7'd3;
+localparam [31:0] CRC32_POLY = 32'hEDB88320;  // zlib's CRC-32, reflected
 
 /*
  * Receiver and its FIFO
@@ -126,6 +187,58 @@ reg [31:0] samples_left_reg = 32'd0;
 reg [31:0] blocks_left_reg = 32'd0;
 reg        low_valid_reg = 1'b0;   // the sample's low byte is in
 reg [7:0]  low_reg = 8'd0;
+
+/*
+ * Wire-protocol frames between jobs (HELLO), and the HELLO_REPLY sender
+ */
+localparam [2:0]
+    FRAME_NONE = 3'd0,     // outside a frame: bytes go to the "WM" matcher
+    FRAME_START = 3'd1,    // after a 0xC0: the next byte is a frame type (or raw, or another 0xC0)
+    FRAME_SEQ = 3'd2,      // a HELLO's seq is next
+    FRAME_SEQ_ESC = 3'd3,  // ... escaped
+    FRAME_HELLO = 3'd4,    // the rest of a HELLO, to its closing 0xC0
+    FRAME_SKIP = 3'd5;     // another host frame, to its closing 0xC0
+
+reg [2:0]  frame_reg = FRAME_NONE;
+reg [7:0]  seq_reg = 8'd0;            // the seq of the HELLO being read
+
+localparam [2:0]
+    SEND_IDLE = 3'd0,
+    SEND_START = 3'd1,     // the opening 0xC0
+    SEND_CRC = 3'd2,       // the raw byte through the CRC, a bit per clock
+    SEND_BYTE = 3'd3,      // the raw byte, or the escape
+    SEND_ESC = 3'd4,       // the escaped byte's second half
+    SEND_END = 3'd5;       // the closing 0xC0
+
+reg [2:0]  send_reg = SEND_IDLE;
+reg        hello_pending_reg = 1'b0;  // a HELLO is to be answered
+reg [7:0]  hello_seq_reg = 8'd0;      // ... with this seq
+reg [7:0]  send_seq_reg = 8'd0;       // the seq of the reply going out
+reg [6:0]  send_idx_reg = 7'd0;       // its raw byte: 0 type, 1 seq, 2..3 length, payload, CRC
+reg [2:0]  crc_bit_reg = 3'd0;
+reg [31:0] crc_reg = 32'hFFFFFFFF;
+
+wire hello_busy = send_reg != SEND_IDLE;
+wire [31:0] crc_final = ~crc_reg;
+
+reg [7:0] send_raw;
+always @* begin
+    if (send_idx_reg == 7'd0) begin
+        send_raw = WM_PROTO_T_HELLO_REPLY;
+    end else if (send_idx_reg == 7'd1) begin
+        send_raw = send_seq_reg;
+    end else if (send_idx_reg == 7'd2) begin
+        send_raw = HELLO_LEN[7:0];
+    end else if (send_idx_reg == 7'd3) begin
+        send_raw = HELLO_LEN[15:8];
+    end else if (send_idx_reg < HELLO_CRC_AT) begin
+        send_raw = HELLO_PAYLOAD[8*(send_idx_reg - 7'd4) +: 8];
+    end else begin
+        send_raw = crc_final[8*(send_idx_reg - HELLO_CRC_AT) +: 8];
+    end
+end
+
+wire send_escaped = send_raw == WM_PROTO_SLIP_END || send_raw == WM_PROTO_SLIP_ESC;
 
 wire [15:0] hdr_w = hdr_reg[15:0];
 wire [15:0] hdr_h = hdr_reg[31:16];
@@ -228,11 +341,23 @@ reg [7:0]  tx_tdata;
 reg        tx_tvalid;
 wire       tx_tready;
 
+// the header's reply waits for a HELLO_REPLY in progress (and the job's entries for the header's reply)
+wire reply_go = checked_reg && !hello_busy && !hello_pending_reg;
+
 always @* begin
     tx_tdata = 8'd0;
     tx_tvalid = 1'b0;
-    if (state_reg == STATE_REPLY) begin
-        tx_tvalid = checked_reg;
+    if (hello_busy) begin
+        // a HELLO_REPLY frame: only between jobs (a HELLO is read only then, and a header's reply
+        // waits for it), so it never splits the job's bytes
+        tx_tvalid = send_reg != SEND_CRC;
+        case (send_reg)
+            SEND_BYTE: tx_tdata = send_escaped ? WM_PROTO_SLIP_ESC : send_raw;
+            SEND_ESC: tx_tdata = send_raw == WM_PROTO_SLIP_END ? WM_PROTO_SLIP_ESC_END : WM_PROTO_SLIP_ESC_ESC;
+            default: tx_tdata = WM_PROTO_SLIP_END;
+        endcase
+    end else if (state_reg == STATE_REPLY) begin
+        tx_tvalid = reply_go;
         if (reason_reg == 8'd0) begin
             tx_tdata = reply_count_reg == 2'd0 ? "O" : "K";
         end else begin
@@ -300,7 +425,44 @@ always @(posedge clk) begin
     case (state_reg)
         STATE_HEADER: begin
             if (rx_tvalid) begin
-                if (hdr_count_reg == 4'd0) begin
+                if (hdr_count_reg < 4'd2 && (frame_reg != FRAME_NONE || rx_tdata == WM_PROTO_SLIP_END)) begin
+                    // a wire-protocol frame (not inside a header: its fields may hold any byte)
+                    hdr_count_reg <= 4'd0;
+                    case (frame_reg)
+                        FRAME_START: begin
+                            if (rx_tdata == WM_PROTO_T_HELLO) begin
+                                frame_reg <= FRAME_SEQ;
+                            end else if (rx_tdata != WM_PROTO_SLIP_END && rx_tdata != 8'd0
+                                         && rx_tdata <= WM_PROTO_HOST_TYPE_MAX) begin
+                                frame_reg <= FRAME_SKIP;
+                            end else if (rx_tdata != WM_PROTO_SLIP_END) begin
+                                // not a frame after all: the byte goes to the "WM" matcher
+                                frame_reg <= FRAME_NONE;
+                                hdr_count_reg <= rx_tdata == "W" ? 4'd1 : 4'd0;
+                            end
+                        end
+                        FRAME_SEQ: begin
+                            seq_reg <= rx_tdata;
+                            frame_reg <= rx_tdata == WM_PROTO_SLIP_END ? FRAME_START
+                                       : (rx_tdata == WM_PROTO_SLIP_ESC ? FRAME_SEQ_ESC : FRAME_HELLO);
+                        end
+                        FRAME_SEQ_ESC: begin
+                            seq_reg <= rx_tdata == WM_PROTO_SLIP_ESC_END ? WM_PROTO_SLIP_END : WM_PROTO_SLIP_ESC;
+                            frame_reg <= FRAME_HELLO;
+                        end
+                        FRAME_HELLO, FRAME_SKIP: begin
+                            if (rx_tdata == WM_PROTO_SLIP_END) begin
+                                // the frame's end (and maybe the next one's start)
+                                frame_reg <= FRAME_START;
+                                if (frame_reg == FRAME_HELLO && !hello_busy) begin
+                                    hello_pending_reg <= 1'b1;
+                                    hello_seq_reg <= seq_reg;
+                                end
+                            end
+                        end
+                        default: frame_reg <= FRAME_START;  // FRAME_NONE: its 0xC0
+                    endcase
+                end else if (hdr_count_reg == 4'd0) begin
                     // skip to the "W" of "WM"
                     hdr_count_reg <= rx_tdata == "W" ? 4'd1 : 4'd0;
                 end else if (hdr_count_reg == 4'd1) begin
@@ -334,7 +496,7 @@ always @(posedge clk) begin
                 samples_left_reg <= hdr_w * hdr_h;
                 blocks_left_reg <= blocks(hdr_w, hdr_m[3:0]) * blocks(hdr_h, hdr_m[3:0]);
                 checked_reg <= 1'b1;
-            end else if (tx_tready) begin
+            end else if (reply_go && tx_tready) begin
                 reply_count_reg <= reply_count_reg + 2'd1;
                 if (reply_count_reg == 2'd1) begin
                     checked_reg <= 1'b0;
@@ -377,7 +539,8 @@ always @(posedge clk) begin
     // silence: counted while a header is partly in or samples are due; any received byte restarts it
     stage_rst_reg <= 1'b0;
     if (rx_pin_tvalid || !(state_reg == STATE_SAMPLES
-                           || (state_reg == STATE_HEADER && hdr_count_reg != 4'd0))) begin
+                           || (state_reg == STATE_HEADER && (hdr_count_reg != 4'd0
+                                                             || frame_reg > FRAME_START)))) begin
         silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
     end else if (!timed_out) begin
         silence_reg <= silence_reg + 1'b1;
@@ -387,14 +550,66 @@ always @(posedge clk) begin
         silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
         state_reg <= STATE_HEADER;
         hdr_count_reg <= 4'd0;
+        frame_reg <= FRAME_NONE;
         low_valid_reg <= 1'b0;
         tx_hi_reg <= 1'b0;
         stage_rst_reg <= 1'b1;
     end
 
+    // the HELLO_REPLY sender: C0, then each raw byte through the CRC and out (escaped), then C0
+    case (send_reg)
+        SEND_IDLE: begin
+            if (hello_pending_reg) begin
+                hello_pending_reg <= 1'b0;
+                send_seq_reg <= hello_seq_reg;
+                send_idx_reg <= 7'd0;
+                crc_reg <= 32'hFFFFFFFF;
+                send_reg <= SEND_START;
+            end
+        end
+        SEND_START: begin
+            if (tx_tready) begin
+                crc_bit_reg <= 3'd0;
+                send_reg <= SEND_CRC;
+            end
+        end
+        SEND_CRC: begin
+            // the CRC covers type .. payload; its own bytes are sent as they are
+            if (send_idx_reg < HELLO_CRC_AT) begin
+                crc_reg <= (crc_reg >> 1) ^ ((crc_reg[0] ^ send_raw[crc_bit_reg]) ? CRC32_POLY : 32'd0);
+            end
+            crc_bit_reg <= crc_bit_reg + 3'd1;
+            if (crc_bit_reg == 3'd7 || send_idx_reg >= HELLO_CRC_AT) begin
+                send_reg <= SEND_BYTE;
+            end
+        end
+        SEND_BYTE, SEND_ESC: begin
+            if (tx_tready) begin
+                if (send_reg == SEND_BYTE && send_escaped) begin
+                    send_reg <= SEND_ESC;
+                end else if (send_idx_reg == HELLO_LAST) begin
+                    send_reg <= SEND_END;
+                end else begin
+                    send_idx_reg <= send_idx_reg + 7'd1;
+                    crc_bit_reg <= 3'd0;
+                    send_reg <= SEND_CRC;
+                end
+            end
+        end
+        SEND_END: begin
+            if (tx_tready) begin
+                send_reg <= SEND_IDLE;
+            end
+        end
+        default: send_reg <= SEND_IDLE;
+    endcase
+
     if (rst) begin
         state_reg <= STATE_HEADER;
         hdr_count_reg <= 4'd0;
+        frame_reg <= FRAME_NONE;
+        send_reg <= SEND_IDLE;
+        hello_pending_reg <= 1'b0;
         reply_count_reg <= 2'd0;
         silence_reg <= {(TIMEOUT_BITS + 1){1'b0}};
         stage_rst_reg <= 1'b0;

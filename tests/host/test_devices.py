@@ -24,17 +24,15 @@ CAPS = dict(version=P.VERSION, fw_major=1, fw_minor=7, name=b"wm-test", max_widt
 
 
 class Listener:
-    """A TCP listener on 127.0.0.1 that answers every HELLO (or, silent, reads and says nothing; or, as
-    the iCEBreaker's FPGA stage, answers no HELLO but refuses a header of zeros with "EW")."""
+    """A TCP listener on 127.0.0.1 that answers every HELLO (or, silent, reads and says nothing)."""
 
-    def __init__(self, answer: bool, stage: bool = False):
+    def __init__(self, answer: bool):
         self.sock = socket.socket()
         self.sock.bind(("127.0.0.1", 0))
         self.sock.listen(4)
         self.sock.settimeout(0.1)
         self.url = f"socket://127.0.0.1:{self.sock.getsockname()[1]}"
         self.answer = answer
-        self.stage = stage
         self.hellos = 0
         self.closed = False
         self.thread = threading.Thread(target=self._serve, daemon=True)
@@ -53,7 +51,6 @@ class Listener:
     def _connection(self, conn) -> None:
         conn.settimeout(0.1)
         dec = SlipDecoder()
-        seen = b""
         with conn:
             while not self.closed:
                 try:
@@ -64,10 +61,6 @@ class Listener:
                     return
                 if not data:
                     return
-                seen += data
-                if self.stage and b"WM" + bytes(8) in seen:
-                    conn.sendall(b"EW")
-                    seen = b""
                 for raw in dec.feed(data):
                     if isinstance(raw, Exception):
                         continue
@@ -116,18 +109,8 @@ def test_silent_and_closed_ports_are_named_not_fatal(no_ports):
         a, b = scan([silent.url, url_closed])
     finally:
         silent.close()
-    assert not a.answered and a.problem == "no HELLO answer" and silent.hellos >= 1 and not a.stage
+    assert not a.answered and a.problem == "no HELLO answer" and silent.hellos >= 1
     assert not b.answered and "no device is listening" in b.problem
-
-
-def test_fpga_stage_is_recognised_without_hello(no_ports):
-    stage = Listener(answer=False, stage=True)
-    try:
-        [r] = scan([stage.url])
-    finally:
-        stage.close()
-    assert not r.answered and r.stage and stage.hellos >= 1
-    assert r.line().endswith("wavemesh FPGA stage (no HELLO: the iCEBreaker's byte stream, docs/boards.md)")
 
 
 def test_pyserial_ports_listed_and_no_probe_sends_nothing(monkeypatch, capsys):

@@ -1,15 +1,19 @@
 """cocotb bench: the iCEBreaker board top (rtl/boards/icebreaker_top.v: stage_uart behind the UART pins).
 
-The bench is the host's end of the serial line, bit by bit on the RX and TX pins at the top's DIV: it
+The bench is the host's end of the serial line, bit by bit on the RX and TX pins at the top's rate: it
 sends a job's header and samples as UART frames and reads the bytes the board sends back, and every
 block's entry must be the reference model's TOUT entry (wavemesh.label, as tests/rtl/soc_accel_tb.py
 computes them).  Jobs run back to back on one reset, with a refused header between them; garbage
-(a wire-protocol HELLO frame, stray bytes) before a header is skipped, and a header or job the host
-abandons is dropped after the silence timeout, the next job unharmed.
+(stray bytes, a wire-protocol frame other than HELLO) before a header is skipped, and a header or job
+the host abandons is dropped after the silence timeout, the next job unharmed.  HELLO is answered with
+a HELLO_REPLY frame (the host's own parser checks its CRC, and its fields must be the stage's
+parameters), also when its seq and CRC need SLIP escapes.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import struct
 
 import cocotb
@@ -20,11 +24,19 @@ from soc_accel_tb import expected
 from wavemesh import protocol as P
 from wavemesh import synth
 from wavemesh.heightfield import from_array
-from wavemesh.link import encode_frame
+from wavemesh.link import SlipDecoder, encode_frame, parse_frame
+from wavemesh.stream import DeviceInfo
+
+# the top's parameters for the bench (tests/rtl/test_icebreaker.py, tools/postsynth.py): a UART of 8
+# clocks per bit at the 12 MHz clock, a short power-on reset and silence timeout
+BENCH_PARAMETERS = {"BAUD": 1_500_000, "POR_BITS": 4, "TIMEOUT_BITS": 12}
 
 
 def param(dut, path: str) -> int:
-    """A parameter of the design, e.g. "stage_inst.MAX_WIDTH"."""
+    """A parameter of the design, e.g. "stage_inst.MAX_WIDTH"; from WM_TB_PARAMS (JSON) when it is set
+    (the synthesised netlist has no parameters: tools/postsynth.py)."""
+    if "WM_TB_PARAMS" in os.environ:
+        return int(json.loads(os.environ["WM_TB_PARAMS"])[path])
     obj = dut
     for part in path.split("."):
         obj = getattr(obj, part)
@@ -32,11 +44,12 @@ def param(dut, path: str) -> int:
 
 
 class Line:
-    """The host's end of the UART: frames onto RX, frames from TX (8N1, DIV clocks per bit)."""
+    """The host's end of the UART: frames onto RX, frames from TX (8N1, CLK_HZ / BAUD clocks per bit)."""
 
     def __init__(self, dut):
         self.dut = dut
-        self.div = param(dut, "DIV")
+        clk_hz, baud = param(dut, "CLK_HZ"), param(dut, "BAUD")
+        self.div = (clk_hz + baud // 2) // baud
         self.received: list[int] = []
         dut.RX.value = 1
         cocotb.start_soon(self._receive())
@@ -73,6 +86,17 @@ class Line:
         return out
 
 
+    async def read_frame(self, limit: int = 160):
+        """The next SLIP frame from the board, checked and split by the host's link code."""
+        decoder = SlipDecoder()
+        for _ in range(limit):
+            got = decoder.feed(await self.read(1))
+            if got:
+                assert isinstance(got[0], bytes), got[0]
+                return parse_frame(got[0])
+        raise AssertionError(f"no frame within {limit} bytes")
+
+
 def header(w: int, h: int, m: int, tau: int) -> bytes:
     return b"WM" + struct.pack("<HHB", w, h, m) + tau.to_bytes(3, "little")
 
@@ -95,8 +119,9 @@ async def test_jobs_over_the_uart(dut):
     await ClockCycles(dut.CLK, 40)  # the power-on reset
     assert int(dut.LEDR_N.value) == 1, "busy right after reset"
 
-    hello = encode_frame(P.FrameType.HELLO, 7, P.HELLO.pack(version=P.VERSION))
-    garbage = [hello, b"W", b"WW\x00M", b"", b"\xc0WX"]  # (none holds "WM": that starts a header)
+    # (none holds "WM" outside a frame: that starts a header; a DATA frame with a header inside is skipped)
+    data = encode_frame(P.FrameType.DATA, 0x57, bytes(4) + header(8, 8, 1, 0))
+    garbage = [b"\x00\xc0\xc0A", b"W", b"WW\x00M", data, b"\xc0WX"]
     for k, (name, make, m, tau) in enumerate(CASES):
         samples = from_array(np.asarray(make())).samples
         h, w = samples.shape
@@ -146,3 +171,42 @@ async def test_abandoned_header_and_job_are_dropped(dut):
     await line.send(samples.astype("<u2").tobytes())
     got = await line.read(2 * len(tout))
     assert list(struct.unpack(f"<{len(tout)}H", got)) == tout
+
+
+@cocotb.test()
+async def test_hello(dut):
+    """HELLO (seq 7, and seq 0xC0 that goes escaped) is answered with a HELLO_REPLY of the same seq that
+    states the stage's parameters; a job after it is exact."""
+    cocotb.start_soon(Clock(dut.CLK, 10, unit="ns").start())
+    dut.BTN_N.value = 1
+    line = Line(dut)
+    await ClockCycles(dut.CLK, 40)
+    for seq in (7, 0xC0, 0xDB):
+        await line.send(encode_frame(P.FrameType.HELLO, seq, P.HELLO.pack(version=P.VERSION)))
+        f = await line.read_frame()
+        assert (f.type, f.seq) == (P.FrameType.HELLO_REPLY, seq)
+        info = DeviceInfo.from_fields(f.fields())
+        assert f.payload[P.HELLO_REPLY.size - 10:P.HELLO_REPLY.size - 8] == bytes(2), "reserved"
+    clk_hz = param(dut, "CLK_HZ")
+    silence_ms = (1 << param(dut, "stage_inst.TIMEOUT_BITS")) * 1000 // clk_hz
+    assert info == DeviceInfo(
+        version=P.VERSION, fw_version=(1, 0), name="wm-stage", max_width=param(dut, "stage_inst.MAX_WIDTH"),
+        max_height=param(dut, "stage_inst.MAX_HEIGHT"),
+        max_samples=param(dut, "stage_inst.MAX_WIDTH") * param(dut, "stage_inst.MAX_HEIGHT"), tri_capacity=0,
+        max_levels=param(dut, "stage_inst.MAX_LEVELS"), window=1, max_payload=P.MIN_PAYLOAD, clk_hz=clk_hz,
+        baud=param(dut, "BAUD"), features=P.FEATURE_STAGE, byte_timeout_ms=silence_ms, ack_timeout_ms=0,
+        session_timeout_ms=silence_ms, ack_retries=0, idle_timeout_ms=0, write_timeout_ms=0)
+
+    # a HELLO, at once a header: the header's "OK" follows the whole reply
+    samples = from_array(synth.ball(12)).samples
+    _, tout = expected(samples, 2, 30)
+    hello = encode_frame(P.FrameType.HELLO, 1, P.HELLO.pack(version=P.VERSION))
+    await line.send(hello + header(12, 12, 2, 30))
+    f = await line.read_frame()
+    assert (f.type, f.seq) == (P.FrameType.HELLO_REPLY, 1)
+    assert await line.read(2) == b"OK"
+    await line.send(samples.astype("<u2").tobytes())
+    got = await line.read(2 * len(tout))
+    assert list(struct.unpack(f"<{len(tout)}H", got)) == tout
+    await ClockCycles(dut.CLK, 20 * line.div)
+    assert not line.received, "bytes nobody asked for"
