@@ -3,8 +3,9 @@
 
     .venv/bin/python tools/board_profile.py INPUT [wavemesh stream options ...] [--top N] [--raw FILE]
 
-Builds the board firmware and the simulator (sim/build.py), starts `wmsim --fast --profile`, streams
-INPUT with the options given (e.g. `--decimate 8`), and prints the cycles of the whole run (the wait for
+Builds the board firmware and the simulator and starts `wmsim --fast --profile` (both through
+wavemesh.harness.simboard, as the tests and benchmarks do), streams INPUT with the options given (e.g.
+`--decimate 8`), and prints the cycles of the whole run (the wait for
 the host included: it shows up in the UART receive loop) by function, from the firmware's ELF symbols
 (riscv64-unknown-elf-nm).  Every cycle counts against the last instruction fetched (sim/board_main.cpp,
 --profile): a function's *self* cycles, not its callees'.
@@ -14,23 +15,14 @@ from __future__ import annotations
 
 import argparse
 import bisect
-import os
-import re
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from wavemesh.harness import simboard
+
 VENV_BIN = Path(sys.executable).parent
-
-
-def _build() -> tuple[Path, Path]:
-    sim = subprocess.run([sys.executable, str(ROOT / "sim" / "build.py")], check=True, capture_output=True,
-                         text=True).stdout.strip().splitlines()[-1]
-    hexfile = subprocess.run([sys.executable, str(ROOT / "sim" / "build.py"), "--firmware"], check=True,
-                             capture_output=True, text=True).stdout.strip().splitlines()[-1]
-    return Path(sim), Path(hexfile)
 
 
 def _symbols(elf: Path) -> list[tuple[int, str]]:
@@ -50,28 +42,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--top", type=int, default=30, help="functions to list (default 30)")
     ap.add_argument("--raw", help="also keep the raw PC histogram here")
     args, stream_opts = ap.parse_known_args(argv)
-    sim, hexfile = _build()
+    sim, hexfile = simboard.build.build_sim(), simboard.build.build_firmware()
     elf = hexfile.with_suffix(".elf")
     with tempfile.TemporaryDirectory() as tmp:
         prof = Path(args.raw) if args.raw else Path(tmp) / "profile.txt"
-        proc = subprocess.Popen([str(sim), "--firmware", str(hexfile), "--port", "0", "--fast",
-                                 "--exit-on-close", "--quiet", "--profile", str(prof)],
-                                stdout=subprocess.PIPE, text=True)
-        line = proc.stdout.readline()
-        m = re.search(r"listening on 127\.0\.0\.1:(\d+)", line)
-        if not m:
-            proc.kill()
-            print(f"error: the simulator did not start: {line.strip()}", file=sys.stderr)
-            return 2
-        cmd = [str(VENV_BIN / "wavemesh"), "stream", args.input, *stream_opts, "--port",
-               f"socket://127.0.0.1:{m.group(1)}", "-o", str(Path(tmp) / "out.obj"), "--quiet",
+        board = simboard.SimBoard(sim, hexfile, "--port", "0", "--fast", "--exit-on-close", "--quiet",
+                                  "--profile", str(prof))
+        cmd = [str(VENV_BIN / "wavemesh"), "stream", args.input, *stream_opts, "--port", board.url, "-o",
+               str(Path(tmp) / "out.obj"), "--quiet",
                *([] if "--timeout" in stream_opts else ["--timeout", "3600"])]
         try:
-            rc = subprocess.run(cmd, env=dict(os.environ)).returncode
-            proc.wait(timeout=60)
+            rc = subprocess.run(cmd).returncode
+            board.wait(timeout=60)
         finally:
-            if proc.poll() is None:
-                proc.kill()
+            board.stop()
         if rc != 0:
             print(f"error: wavemesh stream exited {rc}", file=sys.stderr)
             return 2
