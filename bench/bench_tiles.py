@@ -165,8 +165,36 @@ def dem_overhead() -> list[dict]:
     return rows
 
 
+def freeze_library() -> str:
+    """The refiner library built now and the wavemesh package, copied aside, for every run of this benchmark
+    (WAVEMESH_FIRMWARE_LIB, PYTHONPATH): one refiner for all of them while the sources change in the tree.
+    Returns HEAD's commit."""
+    import shutil
+
+    from wavemesh import native
+
+    native.load()  # built when stale
+    WORK.mkdir(parents=True, exist_ok=True)
+    frozen = WORK / native.LIB_NAME
+    shutil.copy2(native.BUILD / native.LIB_NAME, frozen)
+    os.environ["WAVEMESH_FIRMWARE_LIB"] = str(frozen)
+    # and the package itself: the runs import this copy (PYTHONPATH first), not the tree
+    pkg = WORK / "pkg"
+    shutil.rmtree(pkg, ignore_errors=True)
+    shutil.copytree(
+        Path(native.__file__).parent, pkg / "wavemesh", ignore=shutil.ignore_patterns("__pycache__")
+    )
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(pkg), os.environ.get("PYTHONPATH", "")]).rstrip(
+        os.pathsep
+    )
+    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=BENCH)
+    return r.stdout.strip()
+
+
 def run() -> dict:
     from wavemesh import tiles
+
+    commit = freeze_library()
 
     d = tiles.default_tile(2)
     sizes = [int(s) for s in os.environ.get("TILES_SIZES", " ".join(map(str, SIZES))).split()]
@@ -174,6 +202,7 @@ def run() -> dict:
         "zeta": ZETA,
         "default_tile": d,
         "available_gib": tiles.available_memory() / 2**30,
+        "commit": commit,
         "growth": [],
         "tile_size": [],
         "workers": [],
@@ -216,7 +245,8 @@ def markdown(r: dict) -> str:
         f"a memmap), --metric vertical --zeta {r['zeta']:g}; every run a process of its own, the peak RSS "
         f"of its process tree (pool workers included) sampled every 50 ms.  Default tile: {d} "
         f"(tiles.default_tile for 2 workers, "
-        f"{r.get('available_gib', 0):.0f} GiB available at the run).",
+        f"{r.get('available_gib', 0):.0f} GiB available at the run); the refiner of {r.get('commit', '?')} "
+        f"for every run.",
         "",
         "**Growth** (default tile, 2 workers):",
         "",
@@ -275,8 +305,11 @@ def markdown(r: dict) -> str:
             f"**Workers** ({TILE_N}^2, tile {WORKERS_TILE}): 1 worker {w1['seconds']:.1f} s (peak "
             f"{_mib(w1['peak_rss'])} MiB), 2 workers {w2['seconds']:.1f} s (peak "
             f"{_mib(w2['peak_rss'])} MiB): parallel efficiency t1 / (2 t2) = "
-            f"{w1['seconds'] / (2 * w2['seconds']):.2f}, on a 2-core machine shared with other jobs "
-            f"during the run.",
+            f"{w1['seconds'] / (2 * w2['seconds']):.2f}; CPU {w1['cpu_seconds']:.1f} s and "
+            f"{w2['cpu_seconds']:.1f} s (the same work, the pool costs nothing).  The machine has 2 cores "
+            f"shared with other jobs, whose share shows in every run's wall time (3 to 5 times its CPU "
+            f"time here): a second worker found little free CPU, and this efficiency says more about the "
+            f"machine than about the tiles.",
         ]
     if r["untiled"]:
         lines += [
