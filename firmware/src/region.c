@@ -17,9 +17,10 @@ int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y)
         uint64_t a = (uint64_t)(d[k] < 0 ? -(int64_t)d[k] : d[k]);
         e += a * a;
     }
-    /* The detail of a slope g grows as 2^m g with the level (d = 2 x half-block mean difference over
-     * a block of side 2^m): the energy is compared at the scale of level 1, e / 4^(m-1) > delta_d,
-     * so that delta_d means the same at every level (docs/refiner.md, "Detail energy"). */
+    /* delta_d is the detail's energy per sample of the square (Parseval on the orthonormal details
+     * of eq. 3.16) over the square of the tolerance zeta 2^(m-1) this level refines toward; the host
+     * folds 16 zeta^2 / s^2 into params.delta_d (native.fixed_params), the level's 4^(m-1) is here
+     * (docs/refiner.md, "Region selection"). */
     {
         int sh = 2 * (m - 1);
         uint64_t th = r->params.delta_d;

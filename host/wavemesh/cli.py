@@ -108,8 +108,8 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--neighbourhood", choices=("face", "vertex"), default=d.neighbourhood,
                    help="region selection by face- (default) or vertex-based neighbourhoods (4.3.1)")
     p.add_argument("--delta-d", type=float, default=d.delta_d,
-                   help=f"detail energy threshold delta_d, height units squared "
-                        f"(4.12; default {d.delta_d:g})")
+                   help=f"detail energy threshold delta_d: energy per sample over the level's "
+                        f"tolerance squared (4.12; default {d.delta_d:g})")
     p.add_argument("--delta-p", type=float, default=d.delta_p,
                    help=f"pairing criterion delta_p, 0.5..1 (4.16; default {d.delta_p:g})")
     p.add_argument("--delta-v", type=float, default=d.delta_v,

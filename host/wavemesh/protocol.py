@@ -324,7 +324,7 @@ CONFIG = _m("CONFIG", "host to device: the job (docs/refiner.md has the fixed-po
             ("delta_lambda", "I", "delta_lambda, Q16.16 (vertex removal 4.32, edge collapse 4.33; from 1 on: "
                                   "every vertex qualifies)", None, (0, U32)),
             ("delta_c", "I", "delta_c, Q16.16 (edge collapse 4.34, at most 1)", None, (0, 65536)),
-            ("delta_d", "Q", "delta_d, coefficient units: floor(4 delta_d / s^2) (every value)", None,
+            ("delta_d", "Q", "delta_d, coefficient units: floor(16 delta_d zeta^2 / s^2) (every value)", None,
              (0, U64)),
             ("slope_x_m", "I", "the normal metric's s / dx (dx: the cell's width in height units) as "
                                "scale_m; 0: dx = 1", 0, (0, 65535)),
