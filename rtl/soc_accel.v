@@ -11,9 +11,9 @@
  * START (ACCEL.CTRL) runs one frame: the W H samples stream into haar_bank; every record {d3, d2,
  * d1, a} of levels 1..M is held in a one-entry fork register until the coefficient writer has
  * handed out its three details (three beats) and tlut_stage has taken it.  tlut_stage keeps the
- * records of level M and emits one beat per triangle; the beat that ends a block (tuser bit 44) is
- * handed out as the block's entry for TOUT, every other beat is dropped (the firmware expands the
- * block's template itself, with the
+ * records of level M and, built without its expander (EXPAND = 0: no triangle ROM, no site
+ * arithmetic), emits one beat per block, handed out as the block's entry for TOUT (the firmware
+ * expands the block's template itself, with the
  * generated wm_templates.h).
  *
  * Memory layouts (docs/soc.md, "The FPGA stage"):
@@ -467,7 +467,8 @@ wire wdata_bits_unused = ^bus_wdata[31:18];
 wire wr_addr_bit_unused = wr_addr[CAW];
 
 tlut_stage #(
-    .MAX_COLS(MAX_COLS)
+    .MAX_COLS(MAX_COLS),
+    .EXPAND(0)
 ) stage_inst (
     .clk(clk),
     .rst(rst),

@@ -1,12 +1,24 @@
 /*
  * wavemesh: Verilator top of the simulated board (sim/board_main.cpp drives it)
  *
- * soc_top with every port brought out, built without a firmware image: the model loads one at
- * start-up with the same $readmemh the FPGA build uses, from the +firmware=FILE plusarg
- * (board_main.cpp's --firmware option), so one simulator build runs any firmware.  The SDRAM pins
- * go to sdram_chip, the chip's cycle model with the datasheet's timing checks, so the board model
- * is the bitstream's design (rtl/boards/ulx3s_top.v adds only the pads, the chip's inverted clock
- * and the reset).
+ * The ULX3S bitstream's top itself, rtl/boards/ulx3s_top.v, with its default parameters: its
+ * power-on reset (rtl/boards/wm_por.v, 2^16 clocks), FIRE1 (btn[1]) as the reset button (the
+ * program's `rst` presses it), the UART on the FTDI pins, the LEDs, wifi_gpio0, and the SDRAM pins,
+ * which go to sdram_chip, the chip's cycle model with the datasheet's timing checks (it runs on the
+ * falling edge of the system clock, as the chip on the board's inverted sdram_clk; DQ is the top's
+ * tristate bus, driven by the chip while the controller's enable is low).  What a bitstream does not
+ * have is added from outside, without changing the top:
+ *
+ * - the firmware image: the bitstream has it built in (FW_HEX); here the top is built without one
+ *   (FW_HEX "", its default) and the same $readmemh loads it into the same memory at start-up from
+ *   the +firmware=FILE plusarg (board_main.cpp's --firmware option), so one simulator runs any
+ *   firmware;
+ * - the fast mode (wmsim --fast): soc_top's UART bypass ports, which ulx3s_top ties off (bypass
+ *   low, no bytes), are forced to this module's ports; in pin mode the forced values are the
+ *   tie-offs' (uart_bypass low, no valid byte, tready low), so the top runs as on the board;
+ * - the observation ports: soc_top's stage, halt, trap and uart_div outputs, which ulx3s_top leaves
+ *   unconnected, the profile's fetch address, and the controller's DQ enable for the chip model,
+ *   read through hierarchical references.
  */
 
 `resetall
@@ -18,7 +30,7 @@
 module board_sim
 (
     input  wire         clk,
-    input  wire         rst,
+    input  wire         rst,        // FIRE1 held down
 
     input  wire         uart_rxd,
     output wire         uart_txd,
@@ -43,71 +55,88 @@ module board_sim
     output wire [31:0]  prof_pc
 );
 
-assign prof_fetch = soc_inst.mem_valid && soc_inst.mem_instr_unused && soc_inst.mem_ready;
-
-wire        sdram_cke, sdram_cs_n, sdram_ras_n, sdram_cas_n, sdram_we_n;
+wire        wifi_gpio0;
+wire        sdram_clk_unused;
+wire        sdram_cke, sdram_csn, sdram_rasn, sdram_casn, sdram_wen;
 wire [1:0]  sdram_ba, sdram_dqm;
 wire [`WM_SDRAM_ROW_BITS-1:0] sdram_a;
-wire [15:0] sdram_dq_o, sdram_dq_i;
-wire        sdram_dq_oe;
-assign prof_pc = soc_inst.mem_addr;
+wire [15:0] sdram_d;
 
-soc_top #(
-    .FW_HEX(""),
-    .LED_COUNT(`WM_LED_COUNT)
-) soc_inst (
-    .clk(clk),
-    .rst(rst),
-    .uart_rxd(uart_rxd),
-    .uart_txd(uart_txd),
+ulx3s_top top_inst (
+    .clk_25mhz(clk),
+    .ftdi_txd(uart_rxd),
+    .ftdi_rxd(uart_txd),
+    .btn(rst),
     .led(led),
+    .wifi_gpio0(wifi_gpio0),
+    .sdram_clk(sdram_clk_unused),
     .sdram_cke(sdram_cke),
-    .sdram_cs_n(sdram_cs_n),
-    .sdram_ras_n(sdram_ras_n),
-    .sdram_cas_n(sdram_cas_n),
-    .sdram_we_n(sdram_we_n),
+    .sdram_csn(sdram_csn),
+    .sdram_rasn(sdram_rasn),
+    .sdram_casn(sdram_casn),
+    .sdram_wen(sdram_wen),
     .sdram_ba(sdram_ba),
     .sdram_a(sdram_a),
     .sdram_dqm(sdram_dqm),
-    .sdram_dq_o(sdram_dq_o),
-    .sdram_dq_oe(sdram_dq_oe),
-    .sdram_dq_i(sdram_dq_i),
-    .uart_bypass(uart_bypass),
-    .s_axis_uart_rx_tdata(s_axis_uart_rx_tdata),
-    .s_axis_uart_rx_tvalid(s_axis_uart_rx_tvalid),
-    .s_axis_uart_rx_tready(s_axis_uart_rx_tready),
-    .m_axis_uart_tx_tdata(m_axis_uart_tx_tdata),
-    .m_axis_uart_tx_tvalid(m_axis_uart_tx_tvalid),
-    .m_axis_uart_tx_tready(m_axis_uart_tx_tready),
-    .uart_div(uart_div),
-    .stage_valid(stage_valid),
-    .stage(stage),
-    .halt_valid(halt_valid),
-    .halt_code(halt_code),
-    .trap(trap)
+    .sdram_d(sdram_d)
 );
+
+// the chip on the pins; it drives DQ whenever the controller does not
+wire        sdram_dq_oe = top_inst.sdram_dq_oe;
+wire [15:0] chip_dq;
 
 sdram_chip sdram_inst (
     .clk(clk),
     .cke(sdram_cke),
-    .cs_n(sdram_cs_n),
-    .ras_n(sdram_ras_n),
-    .cas_n(sdram_cas_n),
-    .we_n(sdram_we_n),
+    .cs_n(sdram_csn),
+    .ras_n(sdram_rasn),
+    .cas_n(sdram_casn),
+    .we_n(sdram_wen),
     .ba(sdram_ba),
     .a(sdram_a),
     .dqm(sdram_dqm),
-    .dq_o(sdram_dq_o),
+    .dq_o(sdram_d),
     .dq_oe(sdram_dq_oe),
-    .dq_i(sdram_dq_i)
+    .dq_i(chip_dq)
 );
+
+assign sdram_d = sdram_dq_oe ? 16'bz : chip_dq;
+
+// the fast mode's ports, forced over ulx3s_top's tie-offs
+initial begin
+    force top_inst.soc_inst.uart_bypass = uart_bypass;
+    force top_inst.soc_inst.s_axis_uart_rx_tdata = s_axis_uart_rx_tdata;
+    force top_inst.soc_inst.s_axis_uart_rx_tvalid = s_axis_uart_rx_tvalid;
+    force top_inst.soc_inst.m_axis_uart_tx_tready = m_axis_uart_tx_tready;
+end
+
+assign s_axis_uart_rx_tready = top_inst.rx_tready_unused;
+assign m_axis_uart_tx_tdata = top_inst.tx_tdata_unused;
+assign m_axis_uart_tx_tvalid = top_inst.tx_tvalid_unused;
+assign uart_div = top_inst.uart_div_unused;
+assign stage_valid = top_inst.stage_valid_unused;
+assign stage = top_inst.stage_unused;
+assign halt_valid = top_inst.halt_valid_unused;
+assign halt_code = top_inst.halt_code_unused;
+assign trap = top_inst.trap_unused;
+
+assign prof_fetch = top_inst.soc_inst.mem_valid && top_inst.soc_inst.mem_instr_unused
+                    && top_inst.soc_inst.mem_ready;
+assign prof_pc = top_inst.soc_inst.mem_addr;
+
+// the ESP32 must see wifi_gpio0 high (docs/boards.md): a top that let it go low would fail here
+always @(posedge clk) begin
+    if (!wifi_gpio0) begin
+        $error("ulx3s_top drives wifi_gpio0 low");
+    end
+end
 
 // the firmware image, loaded before the first clock edge
 reg [8*1024-1:0] firmware;
 
 initial begin
     if ($value$plusargs("firmware=%s", firmware)) begin
-        $readmemh(firmware, soc_inst.fw_ram_inst.mem);
+        $readmemh(firmware, top_inst.soc_inst.fw_ram_inst.mem);
     end
 end
 
