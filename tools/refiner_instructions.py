@@ -23,8 +23,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "host"), str(ROOT / "bench"), str(ROOT / "tests" / "firmware")]
 
-PAIRS = (("jacksboro", "5 m"), ("jacksboro", "10 m"), ("mri", "1%"), ("mri", "5%"), ("f1", "1%"), ("f3", "2%"),
-         ("f4", "0.5%"), ("f5", "0.5%"), ("ball", "1%"), ("box", "1%"))
+PAIRS = (("jacksboro", "5 m"), ("jacksboro", "10 m"), ("mri", "1%"), ("mri", "5%"), ("f1", "1%"),
+         ("f3", "2%"), ("f4", "0.5%"), ("f5", "0.5%"), ("ball", "1%"), ("box", "1%"))
 
 
 def write_inputs(folder: Path) -> list[tuple[str, Path]]:
@@ -53,8 +53,8 @@ def write_inputs(folder: Path) -> list[tuple[str, Path]]:
 
 def measure(runner: Path, inp: Path, out: Path) -> tuple[int, int]:
     """(instructions, output triangles) of one run."""
-    res = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(runner), str(inp),
-                          str(out)], capture_output=True, text=True, check=True)
+    cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(runner), str(inp), str(out)]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=True)
     refs = int(re.search(r"refs:\s+([\d,]+)", res.stderr).group(1).replace(",", ""))
     last = [ln for ln in res.stdout.splitlines() if ln.startswith("level")][-1].split()
     return refs, int(last[3])
