@@ -166,29 +166,35 @@ def dem_overhead() -> list[dict]:
 
 
 def freeze_library() -> str:
-    """The refiner library built now and the wavemesh package, copied aside, for every run of this benchmark
-    (WAVEMESH_FIRMWARE_LIB, PYTHONPATH): one refiner for all of them while the sources change in the tree.
-    Returns HEAD's commit."""
+    """HEAD's package and refiner, exported (git archive) and built aside for every run of this benchmark
+    (PYTHONPATH, WAVEMESH_FIRMWARE_LIB): one commit for all of them, whatever the tree holds or does
+    meanwhile.  Returns the commit."""
     import shutil
 
-    from wavemesh import native
-
-    native.load()  # built when stale
-    WORK.mkdir(parents=True, exist_ok=True)
-    frozen = WORK / native.LIB_NAME
-    shutil.copy2(native.BUILD / native.LIB_NAME, frozen)
-    os.environ["WAVEMESH_FIRMWARE_LIB"] = str(frozen)
-    # and the package itself: the runs import this copy (PYTHONPATH first), not the tree
-    pkg = WORK / "pkg"
-    shutil.rmtree(pkg, ignore_errors=True)
-    shutil.copytree(
-        Path(native.__file__).parent, pkg / "wavemesh", ignore=shutil.ignore_patterns("__pycache__")
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=BENCH, check=True
+    ).stdout.strip()
+    src = WORK / "src"
+    shutil.rmtree(src, ignore_errors=True)
+    src.mkdir(parents=True)
+    archive = subprocess.run(
+        ["git", "archive", commit, "host", "firmware"], capture_output=True, cwd=BENCH.parent, check=True
+    ).stdout
+    subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    build = src / "build" / "firmware-native"
+    subprocess.run(
+        ["cmake", "-S", str(src / "firmware"), "-B", str(build), "-DCMAKE_BUILD_TYPE=Release"],
+        check=True,
+        capture_output=True,
     )
-    os.environ["PYTHONPATH"] = os.pathsep.join([str(pkg), os.environ.get("PYTHONPATH", "")]).rstrip(
-        os.pathsep
+    subprocess.run(
+        ["cmake", "--build", str(build), "-j2", "--target", "wavemesh_shared"],
+        check=True,
+        capture_output=True,
     )
-    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=BENCH)
-    return r.stdout.strip()
+    os.environ["WAVEMESH_FIRMWARE_LIB"] = str(build / "libwavemesh.so")
+    os.environ["PYTHONPATH"] = str(src / "host")
+    return commit
 
 
 def run() -> dict:
@@ -222,7 +228,7 @@ def run() -> dict:
         if n in (1024, 2048):
             for tile in (513, 257):
                 out["tile_size"].append(run_child(n, tile, 2))
-    out["dems"] = dem_overhead()
+    out["dems"] = json.loads(_child(["dems"]).strip().splitlines()[-1])  # with the frozen package too
     return out
 
 
@@ -245,8 +251,8 @@ def markdown(r: dict) -> str:
         f"a memmap), --metric vertical --zeta {r['zeta']:g}; every run a process of its own, the peak RSS "
         f"of its process tree (pool workers included) sampled every 50 ms.  Default tile: {d} "
         f"(tiles.default_tile for 2 workers, "
-        f"{r.get('available_gib', 0):.0f} GiB available at the run); the refiner of {r.get('commit', '?')} "
-        f"for every run.",
+        f"{r.get('available_gib', 0):.0f} GiB available at the run); every run with the package and "
+        f"refiner of {r.get('commit', '?')} (exported and built aside).",
         "",
         "**Growth** (default tile, 2 workers):",
         "",
@@ -306,9 +312,9 @@ def markdown(r: dict) -> str:
             f"{_mib(w1['peak_rss'])} MiB), 2 workers {w2['seconds']:.1f} s (peak "
             f"{_mib(w2['peak_rss'])} MiB): parallel efficiency t1 / (2 t2) = "
             f"{w1['seconds'] / (2 * w2['seconds']):.2f}; CPU {w1['cpu_seconds']:.1f} s and "
-            f"{w2['cpu_seconds']:.1f} s (the same work, the pool costs nothing).  The machine has 2 cores "
-            f"shared with other jobs, whose share shows in every run's wall time (3 to 5 times its CPU "
-            f"time here): a second worker found little free CPU, and this efficiency says more about the "
+            f"{w2['cpu_seconds']:.1f} s (about the same work: the pool adds little).  The machine has "
+            f"2 cores shared with other jobs, whose share shows in every run's wall time (3 to 5 times its "
+            f"CPU time here): a second worker found little free CPU, and this efficiency says more about the "
             f"machine than about the tiles.",
         ]
     if r["untiled"]:
@@ -354,7 +360,15 @@ def markdown(r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _child(args: list[str]) -> str:
+    return subprocess.run(
+        [sys.executable, str(Path(__file__)), *args], capture_output=True, text=True, cwd=BENCH, check=True
+    ).stdout
+
+
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["dems"]:
+        print(json.dumps(dem_overhead()))
     if sys.argv[1:2] == ["one"]:
         n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
         print(json.dumps(one(n, tile, workers, bool(untiled))))
