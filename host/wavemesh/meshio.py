@@ -594,9 +594,8 @@ def _read_binary_element(buf: bytes, pos: int, el: _Element, e: str):
                 p += np.dtype(prop.type).itemsize
         dt = np.dtype(fields)
         rec = dt.itemsize
-        if rec == 0:  # an element with no data at all (no properties, or only empty lists)
-            r += 1
-            continue
+        if rec == 0:  # an element without properties: its records take no bytes, however many it states
+            break
         n_fit = min(el.count - r, (n_buf - pos) // rec)
         if n_fit <= 0:
             raise _Bad(f"truncated PLY file (in {el.name} {r} of {el.count})")
@@ -638,9 +637,8 @@ def _read_ascii_element(vals: np.ndarray, pos: int, el: _Element):
                 cols.append((j, p - pos, None))
                 p += 1
         w = p - pos
-        if w == 0:
-            r += 1
-            continue
+        if w == 0:  # an element without properties: its records take no numbers, however many it states
+            break
         n_fit = min(el.count - r, (n_vals - pos) // w)
         if n_fit <= 0:
             raise _Bad(f"truncated PLY file (in {el.name} {r} of {el.count})")

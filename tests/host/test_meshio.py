@@ -274,6 +274,27 @@ def test_ply_little_endian_other_types(tmp_path):
     assert mesh.same_as(SQUARE) and z.tolist() == [0.0, 0.5, 0.5, 0.0]
 
 
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_an_element_without_properties_reads_at_once(tmp_path, fmt):
+    """Its records take no bytes however many the header states: 10^20 of them once kept the reader
+    counting them one by one (the readers fuzzer's hang)."""
+    header = (
+        f"ply\nformat {fmt} 1.0\nelement x 99999999999999999999\n"
+        "element vertex 4\nproperty int32 x\nproperty int32 y\nproperty int32 z\n"
+        "element face 2\nproperty list uchar int32 vertex_indices\nend_header\n"
+    ).encode()
+    tris = [[0, 1, 2], [0, 2, 3]]
+    if fmt == "ascii":
+        rows = [f"{x} {y} 0" for x, y in SQUARE_XY.tolist()] + [f"3 {a} {b} {c}" for a, b, c in tris]
+        body = "".join(r + "\n" for r in rows).encode()
+    else:
+        body = b"".join(struct.pack("<3i", x, y, 0) for x, y in SQUARE_XY.tolist())
+        body += b"".join(struct.pack("<B3i", 3, *t) for t in tris)
+    (tmp_path / "m.ply").write_bytes(header + body)
+    mesh, _ = read_mesh(tmp_path / "m.ply")
+    assert mesh.same_as(SQUARE)
+
+
 # ---------------------------------------------------------------------------------------------
 # Bad files
 
