@@ -46,7 +46,8 @@ async def run_frame(dut, rng: random.Random, m: np.ndarray, levels: int) -> list
     while len(got) < n_flags:
         cycles += 1
         assert cycles < 10 * (len(bits) + n_flags) + 100, (
-            f"{w} x {h}, levels {levels}: stuck after {i} of {len(bits)} mask bits, {len(got)} of {n_flags} flags")
+            f"{w} x {h}, levels {levels}: stuck after {i} of {len(bits)} mask bits, "
+            f"{len(got)} of {n_flags} flags")
         await FallingEdge(dut.clk)
         offer = i < len(bits) and rng.random() < 0.8
         dut.s_valid.value = int(offer)
