@@ -83,7 +83,7 @@ async def random_frames(dut):
     await FallingEdge(dut.clk)
     dut.rst.value = 0
     seen = set()
-    for k in range(40):
+    for k in range(20):
         if k:
             m, levels = frame(rng)
             await FallingEdge(dut.clk)
