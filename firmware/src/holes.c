@@ -16,7 +16,6 @@
  * The refiner's operators are unchanged: the mesh stays a proper triangulation of the rectangle, and
  * the error bound, the reduction and the decimation never accept a triangle that covers both kinds
  * and can still be split.  The scan reads one bit per covered sample (the rim test four more). */
-#include "wm_holes.h"
 #include "wm_internal.h"
 
 static int invalid_at(const wm_field *f, int32_t px, int32_t py)

@@ -19,7 +19,6 @@
  *
  * Every rounding makes the result larger, never smaller: the firmware never calls a triangle
  * within zeta when the exact distance is above it.  The slack is below 2^-15 relative + 2^-16. */
-#include "wm_holes.h"
 #include "wm_internal.h"
 
 #define GCAP ((uint64_t)1 << 62)
