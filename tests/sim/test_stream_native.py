@@ -345,7 +345,7 @@ def test_every_config_field_is_checked(asan_device):
     assert {n for n, _ in cases} == {f.name for f in P.CONFIG.fields} - set(every_value)
     raw = Raw(asan_device.url)
     try:
-        raw.hello()
+        caps = raw.hello()
         off = P.CONFIG.offsets()
         for name, value in cases + BAD_FOR_THE_DEVICE:
             raw.send(P.FrameType.CONFIG, raw.config(**{name: value}))
@@ -359,9 +359,11 @@ def test_every_config_field_is_checked(asan_device):
             top = (1 << (8 * P.CONFIG.fields[list(off).index(name)].size)) - 1
             raw.send(P.FrameType.CONFIG, raw.config(**{name: top}))
             assert raw.expect(P.FrameType.OK).fields()["request"] == P.FrameType.CONFIG, name
-        raw.send(P.FrameType.CONFIG, raw.config(width=300, height=300))
+        # one column more than the device states it holds (its HELLO), within the protocol's range
+        w, h = caps["max_width"] + 1, 12
+        raw.send(P.FrameType.CONFIG, raw.config(width=w, height=h))
         e = raw.error()
-        assert e["code"] == P.ErrorCode.TOO_LARGE and e["detail"] == 300 << 16 | 300
+        assert e["code"] == P.ErrorCode.TOO_LARGE and e["detail"] == w << 16 | h
         raw.send(P.FrameType.CONFIG, raw.config()[:-1])
         assert raw.error()["code"] == P.ErrorCode.BAD_LENGTH
     finally:
