@@ -275,7 +275,9 @@ def test_garbage_then_a_valid_request(fast_board, inputs, tmp_path, sim_timeouts
     stream_and_mesh(src, ["--levels", "2"], fast_board.url, tmp_path)
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+# One seed on the board (58 s; a second cost 42 s more of make test's 20 minutes): the fault campaigns
+# with many seeds run against the native device (tests/sim/test_stream_faults.py, make bench-faults).
+@pytest.mark.parametrize("seed", [1])
 def test_fault_proxy_between_host_and_board(seed, fast_board, inputs, tmp_path, sim_timeouts):
     """Seeded corruption, loss and duplication both ways: the reference mesh, or one clear error
     line; the board then serves a clean request."""
