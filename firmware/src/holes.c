@@ -53,20 +53,7 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
     }
     for (int32_t py = ymin; py <= ymax; py++) {
         int64_t lo = xmin, hi = xmax;
-        int empty = 0;
-        for (int k = 0; k < 3; k++) {
-            int64_t num = B[k] * py + C[k];
-            if (A[k] > 0) {
-                int64_t l = wm_ceil_div(-num, A[k]);
-                if (l > lo) lo = l;
-            } else if (A[k] < 0) {
-                int64_t r = wm_floor_div(num, -A[k]);
-                if (r < hi) hi = r;
-            } else if (num < 0) {
-                empty = 1;
-            }
-        }
-        if (empty) continue;
+        if (!wm_row_span(A, B, C, py, &lo, &hi)) continue;
         for (int32_t px = (int32_t)lo; px <= (int32_t)hi; px++) {
             int bad = invalid_at(f, px, py), corner = 0, rim;
             uint64_t d;

@@ -18,25 +18,6 @@
  * share of it costs one subtraction per row. */
 #include "wm_internal.h"
 
-/* The span [*lo, *hi] of the closed triangle on row py (0 when it has none), from the edge functions
- * E_k(px, py) = A_k px + B_k py + C_k >= 0 (as tri_error.c). */
-static int span(const int64_t A[3], const int64_t B[3], const int64_t C[3], int32_t py, int64_t *lo, int64_t *hi)
-{
-    for (int k = 0; k < 3; k++) {
-        int64_t num = B[k] * py + C[k];
-        if (A[k] > 0) {
-            int64_t l = wm_ceil_div(-num, A[k]);
-            if (l > *lo) *lo = l;
-        } else if (A[k] < 0) {
-            int64_t r = wm_floor_div(num, -A[k]);
-            if (r < *hi) *hi = r;
-        } else if (num < 0) {
-            return 0;
-        }
-    }
-    return *lo <= *hi;
-}
-
 uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3], int32_t *wx, int32_t *wy)
 {
     const wm_field *f = &r->field;
@@ -62,7 +43,7 @@ uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3
     for (int32_t py = ymin; py <= ymax; py++) {
         int64_t lo = xmin, hi = xmax;
         const int32_t *row = rows + (int64_t)py * (f->width + 1);
-        if (!span(A, B, C, py, &lo, &hi)) continue;
+        if (!wm_row_span(A, B, C, py, &lo, &hi)) continue;
         n_in += row[hi + 1] - row[lo];
         n_all += hi - lo + 1;
     }
@@ -72,7 +53,7 @@ uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3
             int64_t lo = xmin, hi = xmax, S = 0;
             const int32_t *row = rows + (int64_t)py * (f->width + 1);
             const uint16_t *h = f->samples + (int64_t)py * f->width;
-            if (!span(A, B, C, py, &lo, &hi) || row[hi + 1] == row[lo]) continue;
+            if (!wm_row_span(A, B, C, py, &lo, &hi) || row[hi + 1] == row[lo]) continue;
             for (int k = 0; k < 3; k++) S += (A[k] * lo + B[k] * py + C[k]) * z[k];
             for (int64_t px = lo; px <= hi; px++, S += dS) {
                 int64_t v = S - D * (int64_t)h[px];

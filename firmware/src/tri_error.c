@@ -30,6 +30,23 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y)
     return f->details + off + 3 * ((int64_t)(y >> m) * cw + (x >> m));
 }
 
+int wm_row_span(const int64_t A[3], const int64_t B[3], const int64_t C[3], int32_t py, int64_t *lo, int64_t *hi)
+{
+    for (int k = 0; k < 3; k++) {
+        int64_t num = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
+        if (A[k] > 0) {
+            int64_t l = wm_ceil_div(-num, A[k]);
+            if (l > *lo) *lo = l;
+        } else if (A[k] < 0) {
+            int64_t r = wm_floor_div(num, -A[k]);
+            if (r < *hi) *hi = r;
+        } else if (num < 0) {
+            return 0;
+        }
+    }
+    return *lo <= *hi;
+}
+
 /* The edge functions and heights of a triangle, for the scans. */
 struct tri_setup {
     int64_t z[3], A[3], B[3], C[3], dS;

@@ -146,6 +146,11 @@ struct wm_refiner {
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
 };
 
+/* The span [*lo, *hi] of the closed triangle on row py, narrowed from the caller's bounding box; 0 when
+ * the row has none.  E_k(px, py) = A_k px + B_k py + C_k >= 0 inside (tri_error.c): the generic 64-bit
+ * form for roi.c and holes.c; the scans keep their own, with 32-bit divisions for the soft CPU. */
+int wm_row_span(const int64_t A[3], const int64_t B[3], const int64_t C[3], int32_t py, int64_t *lo, int64_t *hi);
+
 /* E(T) over the samples of the triangle in the region of interest, 0 when it has none (roi.c). */
 uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3], int32_t *wx, int32_t *wy);
 
