@@ -41,16 +41,9 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
     int n_valid = 0, n_invalid = 0, best_rim = -1;
     uint64_t best_d = 0;
     int32_t cx = -1, cy = -1;
-    for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-        A[k] = (int64_t)y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C >= 0 inside (tri_error.c) */
-        B[k] = (int64_t)x[k2] - x[k1];
-        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
-        if (y[k] < ymin) ymin = y[k];
-        if (y[k] > ymax) ymax = y[k];
-        if (x[k] < xmin) xmin = x[k];
-        if (x[k] > xmax) xmax = x[k];
-    }
+    int32_t box[4];
+    wm_tri_edges(x, y, A, B, C, box);
+    xmin = box[0], xmax = box[1], ymin = box[2], ymax = box[3];
     for (int32_t py = ymin; py <= ymax; py++) {
         int64_t lo = xmin, hi = xmax;
         if (!wm_row_span(A, B, C, py, &lo, &hi)) continue;

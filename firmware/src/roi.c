@@ -27,17 +27,12 @@ uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3
     int32_t ymin = y[0], ymax = y[0], xmin = x[0], xmax = x[0], bx = x[0], by = y[0];
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     if (D <= 0) return 0xFFFFFFFFu;
+    int32_t box[4];
+    wm_tri_edges(x, y, A, B, C, box);
+    xmin = box[0], xmax = box[1], ymin = box[2], ymax = box[3];
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-        A[k] = (int64_t)y[k1] - y[k2];
-        B[k] = (int64_t)x[k2] - x[k1];
-        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
         z[k] = f->samples[(int64_t)y[k] * f->width + x[k]];
         dS += A[k] * z[k];
-        if (y[k] < ymin) ymin = y[k];
-        if (y[k] > ymax) ymax = y[k];
-        if (x[k] < xmin) xmin = x[k];
-        if (x[k] > xmax) xmax = x[k];
     }
     /* First the share of the ROI: none and all need no scan here. */
     for (int32_t py = ymin; py <= ymax; py++) {

@@ -30,6 +30,21 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y)
     return f->details + off + 3 * ((int64_t)(y >> m) * cw + (x >> m));
 }
 
+void wm_tri_edges(const int32_t x[3], const int32_t y[3], int64_t A[3], int64_t B[3], int64_t C[3], int32_t box[4])
+{
+    box[0] = box[1] = x[0], box[2] = box[3] = y[0];
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        A[k] = (int64_t)y[k1] - y[k2];
+        B[k] = (int64_t)x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        if (x[k] < box[0]) box[0] = x[k];
+        if (x[k] > box[1]) box[1] = x[k];
+        if (y[k] < box[2]) box[2] = y[k];
+        if (y[k] > box[3]) box[3] = y[k];
+    }
+}
+
 int wm_row_span(const int64_t A[3], const int64_t B[3], const int64_t C[3], int32_t py, int64_t *lo, int64_t *hi)
 {
     for (int k = 0; k < 3; k++) {

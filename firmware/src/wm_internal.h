@@ -146,6 +146,11 @@ struct wm_refiner {
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
 };
 
+/* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
+ * {xmin, xmax, ymin, ymax}, in 64 bits (tri_error.c), for roi.c and holes.c. */
+void wm_tri_edges(const int32_t x[3], const int32_t y[3], int64_t A[3], int64_t B[3], int64_t C[3],
+                  int32_t box[4]);
+
 /* The span [*lo, *hi] of the closed triangle on row py, narrowed from the caller's bounding box; 0 when
  * the row has none.  E_k(px, py) = A_k px + B_k py + C_k >= 0 inside (tri_error.c): the generic 64-bit
  * form for roi.c and holes.c; the scans keep their own, with 32-bit divisions for the soft CPU. */
