@@ -7,6 +7,7 @@ import ctypes
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,8 @@ from wavemesh import protocol as P
 from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.heightfield import from_array
 from wavemesh.stream import config_payload
+
+ROOT = Path(__file__).resolve().parents[2]
 
 Q30 = 1 << 30
 EIG_TOL = 2.0**-22  # Jacobi in Q30: a few dozen roundings of 2^-31 each
@@ -150,30 +153,26 @@ def test_bound_off_on_the_command_line(tmp_path):
     assert r.returncode != 0 and "error:" in r.stderr
 
 
-DELTA_D = [0.1, 0.5, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10]  # Table 5.7
-JACKSBORO_OPEN = ("Jacksboro's details are large against zeta = 2 m (3 arc-second cells, a median 11 m "
-                  "between neighbours): at delta_d = 10, a detail RMS of 3.2 level tolerances, most cells "
-                  "of levels 1, 2 are still energetic: the counts fall 1.8x (Haar), 2x (spline) over "
-                  "0.1 .. 10, 3x first at delta_d = 25 (Haar), 20 (spline) (docs/refiner.md, Table 5.7)")
-
-
 def _table_5_7_counts(name: str, wavelet: str) -> list[int]:
-    if name == "Ball":
-        hf, kw = from_array(synth.ball()), dict(iterations=2, alpha=0.8, zeta=1.0, delta_lambda=0.001)
-    else:
-        cbook = pytest.importorskip("matplotlib.cbook")
-        with np.load(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False)) as z:
-            hf, kw = from_array(z["elevation"]), dict(iterations=3, zeta=2.0)
+    """Table 5.7's runs as docs/refiner.md makes them (firmware/tools/make_refiner_doc.py: the data, its
+    parameters, Jacksboro's tolerance at the paper's operating point and why)."""
+    if name == "Jacksboro":
+        pytest.importorskip("matplotlib.cbook")
+    sys.path.insert(0, str(ROOT / "firmware" / "tools"))
+    try:
+        import make_refiner_doc as doc
+    finally:
+        sys.path.remove(str(ROOT / "firmware" / "tools"))
+    make, kw = doc.TABLE_5_7_RUNS[name]
+    hf = from_array(make())
     return [api.refine(hf, 5, None, native.RefineParams(delta_d=d, bound=False, **kw),
-                       wavelet=wavelet).mesh.n_triangles for d in DELTA_D]
+                       wavelet=wavelet).mesh.n_triangles for d, *_ in doc.PAPER_5_7]
 
 
 # Issue 10's bar: with --bound off, counts fall monotonically over Table 5.7's range, at least 3x.  delta_d is
 # the detail's energy per sample over the level's tolerance squared (region.c, native.fixed_params).
-@pytest.mark.parametrize("name,wavelet", [
-    ("Ball", "haar"), ("Ball", "spline"),
-    pytest.param("Jacksboro", "haar", marks=pytest.mark.xfail(reason=JACKSBORO_OPEN, strict=False)),
-    pytest.param("Jacksboro", "spline", marks=pytest.mark.xfail(reason=JACKSBORO_OPEN, strict=False))])
+@pytest.mark.parametrize("name,wavelet", [("Ball", "haar"), ("Ball", "spline"),
+                                          ("Jacksboro", "haar"), ("Jacksboro", "spline")])
 def test_table_5_7_counts_fall_with_delta_d(name, wavelet):
     counts = _table_5_7_counts(name, wavelet)
     assert np.all(np.diff(counts) <= 0), counts
