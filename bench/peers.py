@@ -169,6 +169,20 @@ with open(sys.argv[3], "w") as f:
 """
 
 
+def compile_wavemesh() -> None:
+    """Byte-compile the wavemesh package in place (its __pycache__, ignored by git) before `wavemesh mesh`
+    processes are timed.  pip byte-compiles an installed package, pydelatin's and numpy's too; an
+    editable install is compiled by its first run, unless PYTHONDONTWRITEBYTECODE is set (as on this
+    project's agent machines): then every timed process would first compile the ~10k lines of the
+    package (measured: process / process median 1.73 without, 1.35 with, CPU time, 10 small pairs)."""
+    import compileall
+    from pathlib import Path
+
+    import wavemesh
+
+    compileall.compile_dir(Path(wavemesh.__file__).parent, quiet=1)
+
+
 def wavemesh_argv(npy: str, zeta: float, out: str) -> list[str]:
     from pathlib import Path
 
