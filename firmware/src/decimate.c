@@ -61,6 +61,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
             if (worst > r->params.zeta) break;
         }
         if (j < nt) continue;
+        if (r->field.mask && !wm_hole_keeps_cover(r, v, ring, n, tris, nt)) continue; /* holes.c */
         best = worst;
         *apex = a;
         break;

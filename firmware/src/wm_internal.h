@@ -166,6 +166,10 @@ uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3
 int wm_hole_error(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t *e, int32_t *wx,
                   int32_t *wy);
 
+/* 1 when removing vertex v (its ring of n vertices) with the n - 2 or so triangles tris leaves every
+ * valid ring vertex that had a triangle of three valid corners with one (f->mask != NULL; holes.c). */
+int wm_hole_keeps_cover(const wm_refiner *r, int32_t v, const int32_t *ring, int32_t n, const int32_t *tris,
+                        int32_t nt);
 /* 1 when sample (px, py) is invalid (f->mask != NULL). */
 int wm_hole_at(const wm_field *f, int32_t px, int32_t py);
 
