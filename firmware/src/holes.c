@@ -18,11 +18,16 @@
  * and can still be split.  The scan reads one bit per covered sample (the rim test four more).
  *
  * A thin triangle over both kinds covers no valid sample but its corners, so E(T) = 0 lets the final
- * decimation make them freely; the host drops them, and a valid corner with no other triangle of three
- * valid corners would be left in no triangle.  wm_hole_keeps_cover is the decimation's one extra
- * rule: a removal may not take the last such triangle from a valid vertex (Motorcycle at zeta 1:
- * valid samples a grid cell's triangle could cover but no kept triangle does, 533 -> 113, for 5 % more
- * triangles; bench/bench_holes.py). */
+ * decimation and the splits make them freely; the host drops them, and a valid corner with no other
+ * triangle of three valid corners would be left in no triangle.  Two steps keep every valid sample that
+ * a grid cell's triangle of three valid samples has as a corner covered (the host meshes the others as
+ * invalid: wavemesh.holes.stranded):
+ *   wm_hole_cover, after the error bound: a valid vertex in no such triangle gets a vertex at another
+ *       valid corner of such a cell, or the cell's diagonal swapped; the bound runs again;
+ *   wm_hole_keeps_cover, in the final decimation: a removal may not take the last such triangle from a
+ *       valid vertex.
+ * Motorcycle at zeta 1 (bench/bench_holes.py): such samples in no kept triangle 533 -> 113 (the
+ * decimation's rule) -> 20 (the cover step), triangles 13,634 -> 14,247. */
 #include "wm_internal.h"
 
 static int invalid_at(const wm_field *f, int32_t px, int32_t py)
@@ -126,4 +131,124 @@ int wm_hole_keeps_cover(const wm_refiner *r, int32_t v, const int32_t *ring, int
         if (j == nt) return 0;
     }
     return 1;
+}
+
+/* The triangle that holds sample (ax, ay), a grid neighbour of vertex s (no sample strictly between
+ * them), found by walking along the segment from s; *on: the half-edge that holds it, or -1 inside.
+ * -1 when the walk does not end (it cannot in a proper mesh: a safeguard). */
+static int32_t locate(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay, int32_t *on)
+{
+    int32_t sx = me->vx[s], sy = me->vy[s], first = wm_fan_first(me, s), e = first, t = -1, in = -1;
+    do { /* the triangle of s's fan whose corner at s holds the direction to a */
+        int32_t p = me->hv[WM_NEXT(e)], q = me->hv[WM_PREV(e)];
+        if (wm_orient(sx, sy, me->vx[p], me->vy[p], ax, ay) >= 0 &&
+            wm_orient(me->vx[q], me->vy[q], sx, sy, ax, ay) >= 0) {
+            t = WM_TRI(e);
+            break;
+        }
+        e = wm_rot_ccw(me, e);
+    } while (e >= 0 && e != first);
+    for (int32_t step = 0; t >= 0 && step < 4096; step++) {
+        int32_t out = -1, k;
+        *on = -1;
+        for (k = 0; k < 3; k++) {
+            int32_t h = 3 * t + k, u = me->hv[h], v = me->hv[WM_NEXT(h)];
+            int64_t o = wm_orient(me->vx[u], me->vy[u], me->vx[v], me->vy[v], ax, ay);
+            if (o == 0) *on = h;
+            if (o < 0 && h != in) {
+                /* leave through the edge the segment s-a crosses: its ends on both sides of the line */
+                int64_t ou = wm_orient(sx, sy, ax, ay, me->vx[u], me->vy[u]);
+                int64_t ov = wm_orient(sx, sy, ax, ay, me->vx[v], me->vy[v]);
+                if ((ou <= 0 && ov >= 0) || (ou >= 0 && ov <= 0)) out = h;
+            }
+        }
+        if (out < 0) return t; /* a is in t (on the edge *on, or a corner when two edges hold it) */
+        in = me->ho[out];
+        if (in < 0) return -1;
+        t = WM_TRI(in);
+    }
+    return -1;
+}
+
+/* The vertex at grid sample (ax, ay), a grid neighbour of vertex s, or -1 when no vertex is there. */
+static int32_t vertex_at(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay)
+{
+    int32_t on, t = locate(me, s, ax, ay, &on);
+    for (int32_t j = 0; t >= 0 && j < 3; j++)
+        if (me->vx[me->hv[3 * t + j]] == ax && me->vy[me->hv[3 * t + j]] == ay) return me->hv[3 * t + j];
+    return -1;
+}
+
+/* Grid cell (cx, cy) with one invalid corner c, all four corners vertices and split by the diagonal
+ * from c: swapped, so that the cell's triangle of three valid corners is in the mesh (both triangles
+ * cover their corners alone: E(T) = 0).  1 when swapped. */
+static int swap_cell(wm_refiner *r, int32_t s, int32_t cx, int32_t cy)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t bad = -1, c, first, e, touched[2], n;
+    for (int32_t k = 0; k < 4; k++)
+        if (invalid_at(&r->field, cx + (k & 1), cy + (k >> 1))) bad = k;
+    c = vertex_at(me, s, cx + (bad & 1), cy + (bad >> 1));
+    if (c < 0) return 0;
+    first = wm_fan_first(me, c);
+    e = first;
+    do { /* the half-edge from c to the opposite corner, with the cell's two other corners beside it */
+        int32_t o = me->hv[WM_NEXT(e)], f = me->ho[e];
+        if (me->vx[o] == cx + 1 - (bad & 1) && me->vy[o] == cy + 1 - (bad >> 1) && f >= 0) {
+            int32_t p = me->hv[WM_PREV(e)], q = me->hv[WM_PREV(f)];
+            if (me->vx[p] < cx || me->vx[p] > cx + 1 || me->vy[p] < cy || me->vy[p] > cy + 1 || me->vx[q] < cx ||
+                me->vx[q] > cx + 1 || me->vy[q] < cy || me->vy[q] > cy + 1 || wm_edge_swap(me, e, touched, &n) != WM_OK)
+                return 0;
+            for (int32_t i = 0; i < n; i++) wm_touch(r, touched[i]);
+            return 1;
+        }
+        e = wm_rot_ccw(me, e);
+    } while (e >= 0 && e != first);
+    return 0;
+}
+
+int wm_hole_cover(wm_refiner *r)
+{
+    wm_mesh *me = &r->mesh;
+    const wm_field *f = &r->field;
+    int32_t added = 0, end = me->vert_end;
+    for (int32_t s = 0; s < end; s++) {
+        int32_t x = me->vx[s], y = me->vy[s], done = 0;
+        if (x == WM_FREE || invalid_at(f, x, y) || kept_at(me, f, s, -1)) continue;
+        /* the grid cells with corner s and three valid corners (s among them): their valid corners */
+        for (int32_t c = 0; c < 4 && !done; c++) {
+            int32_t cx = x - 1 + (c & 1), cy = y - 1 + (c >> 1), n = 0;
+            if (cx < 0 || cy < 0 || cx + 1 >= f->width || cy + 1 >= f->height) continue;
+            for (int32_t k = 0; k < 4; k++) n += !invalid_at(f, cx + (k & 1), cy + (k >> 1));
+            if (n < 3) continue;
+            for (int32_t k = 0; k < 4 && !done; k++) {
+                int32_t ax = cx + (k & 1), ay = cy + (k >> 1), on, t, touched[4], nt = 0, p = -1, rc;
+                if ((ax == x && ay == y) || invalid_at(f, ax, ay)) continue;
+                t = locate(me, s, ax, ay, &on);
+                if (t < 0) continue;
+                for (int32_t j = 0; j < 3; j++)
+                    if (me->vx[me->hv[3 * t + j]] == ax && me->vy[me->hv[3 * t + j]] == ay) p = j;
+                if (p >= 0) continue; /* a vertex already */
+                rc = wm_room(r, 2);
+                if (rc != 0) return rc < 0 ? rc : added; /* the budget: as the bound stops */
+                rc = on < 0 ? wm_tri_split(me, t, ax, ay, touched, &nt) : wm_edge_split(me, on, ax, ay, touched, &nt);
+                if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH;
+                for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
+                for (int32_t j = 0; j < 3; j++)
+                    if (me->vx[me->hv[3 * touched[0] + j]] == ax && me->vy[me->hv[3 * touched[0] + j]] == ay)
+                        p = me->hv[3 * touched[0] + j];
+                if (!(r->params.flags & WM_FLAG_NO_LEGALISE)) wm_legalise(r, p, touched, nt, NULL);
+                added++;
+                done = 1;
+            }
+        }
+        /* every such corner a vertex already: a cell with the wrong diagonal */
+        for (int32_t c = 0; c < 4 && !done; c++) {
+            int32_t cx = x - 1 + (c & 1), cy = y - 1 + (c >> 1), n = 0;
+            if (cx < 0 || cy < 0 || cx + 1 >= f->width || cy + 1 >= f->height) continue;
+            for (int32_t k = 0; k < 4; k++) n += !invalid_at(f, cx + (k & 1), cy + (k >> 1));
+            if (n == 3 && swap_cell(r, s, cx, cy)) added++, done = 1;
+        }
+    }
+    return added;
 }

@@ -516,6 +516,8 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
     if (rc == WM_OK && r->level == 0) {
         if (!(r->params.flags & WM_FLAG_NO_BOUND)) {
             rc = error_bound(r, st);
+            while (rc == WM_OK && r->field.mask && !r->budget_hit && (rc = wm_hole_cover(r)) > 0)
+                rc = error_bound(r, st); /* holes.c: a grid neighbour for valid vertices in no kept triangle */
             /* A budget that stopped the bound keeps its triangles: removing vertices would leave
              * fewer than asked for, at the same E_max. */
             if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE)) rc = wm_decimate(r, st);

@@ -170,6 +170,11 @@ int wm_hole_error(const wm_field *f, const int32_t x[3], const int32_t y[3], uin
  * valid ring vertex that had a triangle of three valid corners with one (f->mask != NULL; holes.c). */
 int wm_hole_keeps_cover(const wm_refiner *r, int32_t v, const int32_t *ring, int32_t n, const int32_t *tris,
                         int32_t nt);
+/* After the error bound: each valid vertex in no triangle of three valid corners gets a vertex at one
+ * more valid corner of a grid cell with three valid corners it is one of (split where that sample
+ * lies, legalised).  Returns the vertices added (the caller runs the bound again while > 0), or an
+ * error; stops adding at the budget (holes.c). */
+int wm_hole_cover(wm_refiner *r);
 /* 1 when sample (px, py) is invalid (f->mask != NULL). */
 int wm_hole_at(const wm_field *f, int32_t px, int32_t py);
 

@@ -285,6 +285,15 @@ def _load(args, path: str):
                           denoise=args.denoise)
 
 
+def _holes_line(h: dict, stranded: int) -> str:
+    """What a mesh with holes covers (wavemesh.holes.HoleCheck's report), for `mesh`, `stream`, `check`."""
+    return (f"holes: {h['invalid_samples'] - stranded} invalid samples"
+            + (f", and {stranded} valid ones meshed as invalid (no grid cell has three valid corners with "
+               "them: isolated samples, one-sample-wide lines)" if stranded else "")
+            + f"; none under a triangle: {'yes' if not h['triangles_over_invalid'] else 'NO'}; valid samples "
+            f"covered {h['covered_valid']} of {h['valid_samples']}; {h['hole_edges']} edges around holes")
+
+
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:
     """Write the files of `mesh` and `stream`, print the summary and the level table, return the status."""
     written = api.write_result(result, args.output, lod=args.lod, report=args.report, render=args.render,
@@ -294,6 +303,8 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
         print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
               f"{m.n_vertices} vertices, {m.n_triangles} triangles, "
               f"E_max normal {e.e_max_normal:.6g}, vertical {e.e_max_vertical:.6g}")
+        if "holes" in result.report:  # --nodata hole
+            print("  " + _holes_line(result.report["holes"], hf.stranded))
         g = api.ground(hf)
         if g.georeferenced:
             print(f"  {g.summary()}; x, y in {g.map_unit}s{' (CRS ' + g.crs[:40] + ')' if g.crs else ''}")
@@ -378,6 +389,8 @@ def check_command(args) -> int:
     hf = _load(args, args.against)
     roi = tuple(args.roi) if args.roi else None
     report = api.check_file(args.mesh, hf, roi=roi) | {"against": args.against}
+    if "holes" in report:
+        report["holes"]["stranded"] = hf.stranded
     if args.report:
         api.write_json(args.report, report)
     if not args.quiet:
@@ -387,11 +400,7 @@ def check_command(args) -> int:
         print(f"{args.mesh}: {report['vertices']} vertices, {report['triangles']} triangles, "
               f"{hf.width} x {hf.height} grid: {state}")
         if "holes" in report:
-            h = report["holes"]
-            print(f"  holes: {h['invalid_samples']} invalid samples, none under a triangle: "
-                  f"{'yes' if not h['triangles_over_invalid'] else 'NO'}; valid samples covered "
-                  f"{h['covered_valid']} of {h['valid_samples']} (the rest next to invalid ones); "
-                  f"{h['hole_edges']} edges around holes")
+            print("  " + _holes_line(report["holes"], hf.stranded))
         for problem in report["problems"][:20]:
             print(f"  {problem}")
         if "errors" in report:

@@ -150,6 +150,9 @@ class HeightField:
     # --nodata hole: (H, W) bool, True where the sample is invalid (NaN, no-data, --invalid VALUE); values
     # and samples hold a nearest valid height there, for the filter bank only (wavemesh.holes).  None: none.
     mask: np.ndarray | None = None
+    # --nodata hole: valid samples the mask takes in because no grid cell's triangle of three valid samples
+    # has them as a corner (isolated samples, one-sample-wide lines: wavemesh.holes.stranded).
+    stranded: int = 0
 
     @property
     def width(self) -> int:
@@ -181,7 +184,8 @@ class HeightField:
             "filled": int(self.filled),
             "min": float(np.min(self.values)),
             "max": float(np.max(self.values)),
-        } | ({"invalid": int(np.count_nonzero(self.mask))} if self.mask is not None else {})
+        } | ({"invalid": int(np.count_nonzero(self.mask)) - self.stranded, "stranded": self.stranded}
+             if self.mask is not None else {})
 
 
 # ---------------------------------------------------------------------------
@@ -284,10 +288,16 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
     if n_bad and holes:
         if n_bad == values.size:
             raise InputError(f"{source}: all {n_bad} samples are invalid; there is nothing to mesh")
+        from wavemesh.holes import stranded
+
+        lone = stranded(bad)  # meshed as invalid, as range-image meshers do: no triangle could cover them
+        if n_bad + int(lone.sum()) == values.size:
+            raise InputError(f"{source}: no three valid samples form a triangle of a grid cell; there is "
+                             "nothing to mesh")
         hidden = fill_nearest(values, bad)  # heights under the holes, for the filter bank alone
         samples, scale, offset, lossless = quantise(hidden)
         return HeightField(values=hidden, samples=samples, scale=scale, offset=offset, lossless=lossless,
-                           source=source, mask=bad)
+                           source=source, mask=bad | lone, stranded=int(lone.sum()))
     if n_bad:
         if n_bad == values.size:
             raise InputError(

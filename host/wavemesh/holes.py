@@ -348,14 +348,27 @@ def coverable(mask: np.ndarray) -> np.ndarray:
     return out & v
 
 
-def check(mesh: Mesh, mask: np.ndarray) -> HoleCheck:
+def stranded(mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the valid samples no grid cell's triangle of three valid samples has as a corner
+    (``~coverable`` among the valid ones).  ``--nodata hole`` meshes them as invalid (the height field's
+    mask takes them in, heightfield.from_array), as range-image meshers do, which triangulate grid cells of
+    valid samples: no triangle of cell corners covers them without an invalid sample.  Idempotent: every
+    valid sample of a cell with three valid corners stays valid."""
+    v = ~np.asarray(mask, dtype=bool)
+    return v & ~coverable(mask)
+
+
+def check(mesh: Mesh, mask: np.ndarray, min_area: float = 0.0) -> HoleCheck:
     """Whether ``mesh`` is a proper triangulation of the valid region of a grid whose invalid samples are
     ``mask``: the triangles (counter-clockwise, positive areas, vertices at distinct grid samples, every
     directed edge once, every edge in at most two triangles) do not overlap (no vertex in another
     triangle, and no triangle with an edge of one triangle overlaps a triangle near it, by separating
     axes, exact in integers: an overlap has such an edge on its border); no triangle covers an invalid
     sample; every valid sample is covered except next to an invalid one; every edge of one triangle
-    lies on the rectangle's border or next to invalid samples."""
+    lies on the rectangle's border or next to invalid samples.  ``min_area`` (--min-area A): valid samples
+    away from the holes may also be uncovered in 8-connected groups of at most 2A + 2 samples, the most a
+    piece of area under A holds (Pick: I + B/2 - 1 = A with I >= 0 gives I + B <= 2A + 2).  ``mask`` is the
+    height field's (stranded samples included: heightfield.from_array)."""
     out = HoleCheck()
     p = out.problems
     bad = np.asarray(mask, dtype=bool)
@@ -438,6 +451,10 @@ def check(mesh: Mesh, mask: np.ndarray) -> HoleCheck:
 
     rim = ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
     inland = ~covered & ~rim
+    if min_area > 0 and inland.any():  # the pieces --min-area dropped
+        groups, n = ndimage.label(~covered & ~bad, structure=np.ones((3, 3), dtype=bool))
+        size = np.bincount(groups.ravel(), minlength=n + 1)
+        inland &= size[groups] > 2 * min_area + 2
     out.uncovered_inland = int(inland.sum())
     can = coverable(bad)
     out.coverable = int(can.sum())
