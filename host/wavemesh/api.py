@@ -11,7 +11,6 @@ parsing and printing over them.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import re
 import sys
@@ -19,13 +18,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wavemesh import __version__, holes
+from wavemesh import __version__
 from wavemesh import protocol as P
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
-from wavemesh.denoise import denoise_heightfield
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
 from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, sidecar_path, to_grid
@@ -33,22 +32,18 @@ from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.label import Labelling, tau_counts
-from wavemesh.link import DEFAULT_BAUD, LinkStats
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
 from wavemesh.outputs import Outputs, check_path
-from wavemesh.roi import mask_details, parse_roi, roi_errors, roi_report
-from wavemesh.stream import (
-    DEFAULT_TIMEOUTS,
-    Device,
-    DeviceError,
-    DeviceInfo,
-    ProtocolError,
-    Timeouts,
-    config_payload,
-    samples_crc,
-)
+
+# What `wavemesh mesh` does not use is imported where it is used, so that the command pays only for what
+# it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.stream, .link), holes
+# (wavemesh.holes), the region of interest (wavemesh.roi), de-noising (wavemesh.denoise), pictures, JSON.
+if TYPE_CHECKING:
+    from wavemesh import holes
+    from wavemesh.link import LinkStats
+    from wavemesh.stream import Device, DeviceInfo, Timeouts
 
 MAX_LEVELS = P.MAX_LEVELS  # the model's limit (protocol.py, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
@@ -111,6 +106,8 @@ def _check_output(path: str, suffixes: tuple[str, ...], what: str) -> Path:
 
 
 def _write_json(path: str, data: dict) -> None:
+    import json
+
     p = _check_output(path, (".json",), "report")
     with Outputs() as staged:  # whole or not at all
         staged.path(p).write_text(json.dumps(data, indent=2) + "\n")
@@ -182,7 +179,11 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
     every command meshes and measures)."""
     hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
                            decimate)
-    return hf if denoise is None else denoise_heightfield(hf, denoise)[0]
+    if denoise is None:
+        return hf
+    from wavemesh.denoise import denoise_heightfield
+
+    return denoise_heightfield(hf, denoise)[0]
 
 
 @dataclass
@@ -236,6 +237,8 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
     if hf.lossless or (p.metric == "vertical" and p.zeta >= 2 * hf.max_quantisation_error):
         e, zeta, on = getattr(errors, metric), p.zeta, "the input"
     else:
+        from wavemesh.roi import roi_errors
+
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
         sp = ground(hf).spacing
         e = getattr(mesh_errors(rjob.mesh, quantised, spacing=sp) if rjob.roi is None
@@ -271,6 +274,8 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
     details = decompose(hf.samples, job.levels, job.wavelet)
     if roi is not None:
+        from wavemesh.roi import mask_details, roi_errors
+
         details = mask_details(details, roi)  # 5.6: no detail energy outside the ROI
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
                         roi=roi, mask=hf.mask)
@@ -307,6 +312,8 @@ def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None
         if min_area > 0:
             raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
         return None
+    from wavemesh import holes
+
     final = levels[-1]
     for lv in levels:  # the final mesh's thin rim triangles flipped where a valid one comes of it
         lv.mesh = holes.drop(holes.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
@@ -440,7 +447,11 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
     checked and measured only with ``check_levels``.  ``labelling``: see :func:`triangulate`."""
     params = params or MeshParams()
     m, t = _levels_and_tau(hf, params.levels, params.tau)
-    roi = None if params.roi is None else parse_roi(params.roi, hf.width, hf.height)
+    roi = None
+    if params.roi is not None:
+        from wavemesh.roi import parse_roi, roi_report
+
+        roi = parse_roi(params.roi, hf.width, hf.height)
     if roi is not None and (params.initial_only or not params.refine.bound):
         raise InputError("--roi selects where the refiner works and bounds the error",
                          hint="use it with --stage full and --bound on")
@@ -557,8 +568,8 @@ def device_fit_hint(hf: HeightField, info: DeviceInfo) -> str | None:
 STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 4: "sending", 5: "done"}
 
 
-def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int = DEFAULT_BAUD,
-           timeouts: Timeouts = DEFAULT_TIMEOUTS, trace=None, progress: bool = False,
+def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int | None = None,
+           timeouts: Timeouts | None = None, trace=None, progress: bool = False,
            log: Callable[[str], None] | None = None) -> StreamResult:
     """`wavemesh stream` without the files: the job of :func:`mesh` on a device behind ``port`` (a
     pyserial URL or an open port object) over the wire protocol (wavemesh.stream.Device).
@@ -567,7 +578,20 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     --capacity or --max-triangles beyond its storage are DeviceErrors with a hint; without
     ``max_triangles`` the budget is its storage less one.  Every level is checked (a proper
     triangulation, else ProtocolError) and measured.  ``trace``: a text stream for the frames' hex
-    dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user."""
+    dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user; ``baud`` and
+    ``timeouts``: by default wavemesh.link.DEFAULT_BAUD and wavemesh.stream.DEFAULT_TIMEOUTS."""
+    from wavemesh.link import DEFAULT_BAUD
+    from wavemesh.stream import (
+        DEFAULT_TIMEOUTS,
+        Device,
+        DeviceError,
+        ProtocolError,
+        config_payload,
+        samples_crc,
+    )
+
+    baud = DEFAULT_BAUD if baud is None else baud
+    timeouts = DEFAULT_TIMEOUTS if timeouts is None else timeouts
     params = params or MeshParams()
     p = params.refine
     p.check()
@@ -767,6 +791,8 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                            comment=f"{result.comment} level={level}", ground=g, local=local)
                 written.append(str(path))
         if report:
+            import json
+
             data = result.report | {"output": str(out)}
             if written:
                 data["lod"] = written
@@ -800,7 +826,10 @@ def check_file(path: str, hf: HeightField, roi=None) -> dict:
     array): also the errors over the region of interest alone (``roi_errors``; wavemesh.roi)."""
     if roi is not None and hf.mask is not None:
         raise InputError("--roi and --nodata hole do not go together yet", hint="drop one of them")
-    roi = None if roi is None else parse_roi(roi, hf.width, hf.height)
+    if roi is not None:
+        from wavemesh.roi import parse_roi, roi_errors
+
+        roi = parse_roi(roi, hf.width, hf.height)
     placed = read_sidecar(path)
     g = placed[0] if placed else ground(hf)
     mesh, z = read_mesh(path, hf.width, hf.height, to_grid=to_grid(*placed) if placed else None)
@@ -808,6 +837,8 @@ def check_file(path: str, hf: HeightField, roi=None) -> dict:
         raise InputError(f"{path} is for a {mesh.width} x {mesh.height} grid but the height field "
                          f"is {hf.width} x {hf.height}")
     if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.holes)
+        from wavemesh import holes
+
         hc = holes.check(mesh, hf.mask)
         report = {"mesh": path, "valid": hc.valid_mesh, "problems": hc.problems, "vertices": mesh.n_vertices,
                   "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(),

@@ -29,7 +29,6 @@ geographic one are refused: reproject them first (gdalwarp).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -291,6 +290,8 @@ def sidecar(g: Ground, mesh_path, local: bool) -> dict:
 def write_sidecar(g: Ground, mesh_path, local: bool) -> Path:
     p = sidecar_path(mesh_path)
     try:
+        import json  # only a run that writes or reads a sidecar needs it
+
         p.write_text(json.dumps(sidecar(g, mesh_path, local), indent=2) + "\n")
     except OSError as e:
         raise InputError(f"cannot write {p}: {e.strerror or e}") from None
@@ -304,6 +305,8 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float]] | None:
     if not p.exists():
         return None
     try:
+        import json
+
         s = json.loads(p.read_text())
         t = tuple(float(v) for v in s["transform"])
         g = Ground(int(s["grid"]["width"]), int(s["grid"]["height"]), t, s.get("crs"), str(s["map_unit"]),

@@ -15,10 +15,7 @@ with the rounding docs/refiner.md states (exactly, through :class:`fractions.Fra
 from __future__ import annotations
 
 import ctypes
-import fcntl
 import os
-import shutil
-import subprocess
 from dataclasses import dataclass, field
 from fractions import Fraction
 from math import floor
@@ -26,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wavemesh import holes
 from wavemesh import protocol as P
 from wavemesh.errors import WavemeshError
 from wavemesh.haar import HaarLevel
@@ -118,6 +114,9 @@ def _stale(lib: Path) -> bool:
 def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str, ...] = (),
           targets: tuple[str, ...] = ("wavemesh_shared",)) -> Path:
     """Configure (once) and build the firmware with CMake into build_dir; returns build_dir."""
+    import fcntl  # building is rare: a run that only loads the library does not import these
+    import shutil
+
     cmake = shutil.which("cmake")
     if cmake is None:
         raise NativeError("cannot build the firmware library: cmake is not installed",
@@ -137,6 +136,8 @@ def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str
 
 
 def _run(cmd: list[str]) -> None:
+    import subprocess
+
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
         tail = (r.stdout + r.stderr).strip().splitlines()[-15:]
@@ -393,7 +394,9 @@ def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: 
     det = details_array(levels)
     fld = Field(width, height, len(levels), _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
     if mask is not None:  # ``mask``: (H, W) bool, True where invalid (wavemesh.holes; wm_field.mask)
-        bits = np.frombuffer(holes.pack(mask), dtype=np.uint8)
+        from wavemesh.holes import pack  # holes are asked for: imported only then
+
+        bits = np.frombuffer(pack(mask), dtype=np.uint8)
         fld.mask = _ptr(bits, ctypes.c_uint8)
     fp = fixed_params(params, scale, zeta, spacing)
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)

@@ -19,7 +19,6 @@ permission bits say nothing, a read-only file system or /proc do), not an existi
 from __future__ import annotations
 
 import os
-import secrets
 import shutil
 from pathlib import Path
 
@@ -28,9 +27,14 @@ from wavemesh.errors import InputError, WavemeshError
 _PREFIX = ".wavemesh-partial-"
 
 
+def _token_hex() -> str:
+    """Six random hex digits (os.urandom: the `secrets` module's imports cost a short run 6 ms)."""
+    return os.urandom(3).hex()
+
+
 def _probe(directory: Path, what: str) -> None:
     """InputError unless a file can be created in ``directory`` (tried, then removed)."""
-    probe = directory / f"{_PREFIX}{os.getpid()}-probe-{secrets.token_hex(3)}"
+    probe = directory / f"{_PREFIX}{os.getpid()}-probe-{_token_hex()}"
     try:
         probe.mkdir()
         probe.rmdir()
@@ -74,7 +78,7 @@ class Outputs:
     """
 
     def __init__(self) -> None:
-        self._token = f"{os.getpid()}-{secrets.token_hex(3)}"
+        self._token = f"{os.getpid()}-{_token_hex()}"
         self._stages: dict[Path, Path] = {}  # existing directory -> its staging folder
         self._files: list[tuple[Path, Path, tuple[str, ...]]] = []  # (staged, final, companions)
         self._given: dict[Path, str] = {}  # staged -> the final path as the caller gave it (for messages)

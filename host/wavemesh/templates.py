@@ -159,19 +159,27 @@ def _closure() -> tuple[tuple[str, str, tuple], ...]:
     return tuple(seen.values())
 
 
+def _facts(tris) -> tuple[bool, int, str | None, str]:
+    """What the look-up table's predicates (_wanted) ask of a triangulation, worked out once per closure
+    member rather than once per label and mask (a short run paid ~15 ms for that): a vertex on the
+    centre, the split sides, the axis edge, the diagonals' direction."""
+    sites = {s for t in tris for s in t}
+    return CENTRE_SITE in sites, _sides(sites), _axis(tris), _diag_type(tris)
+
+
 def _wanted(label: int, mask: int):
-    """The predicate a template must satisfy for a block with this label and split mask, or None."""
+    """The predicate on a triangulation's _facts for a block with this label and split mask, or None."""
     kind, dual = label >> 1, bool(label & 1)
     if kind == KIND_DIAGONAL:
         if dual:
             return None
-        return lambda tris, sites: CENTRE_SITE in sites and _sides(sites) == mask
+        return lambda centre, sides, _axis, _diag: centre and sides == mask
     need = own_sides(label)
     if mask & need != need:
         return None
     tb = mask & (SIDE_TOP | SIDE_BOTTOM) == SIDE_TOP | SIDE_BOTTOM
     lr = mask & (SIDE_LEFT | SIDE_RIGHT) == SIDE_LEFT | SIDE_RIGHT
-    plain = lambda tris, sites: CENTRE_SITE not in sites and _sides(sites) == mask  # noqa: E731
+    plain = lambda centre, sides, _axis, _diag: not centre and sides == mask  # noqa: E731
     if kind == KIND_FLAT and bin(mask).count("1") == 2 and not tb and not lr:
         return plain  # pi4: two adjacent sides, whatever the diagonal
     if kind == KIND_VERTICAL or (kind == KIND_FLAT and tb):
@@ -181,7 +189,7 @@ def _wanted(label: int, mask: int):
     else:
         axis = None
     diag = "dual" if dual else "basic"
-    return lambda tris, sites: plain(tris, sites) and _axis(tris) == axis and _diag_type(tris) == diag
+    return lambda centre, sides, ax, dg: plain(centre, sides, ax, dg) and ax == axis and dg == diag
 
 
 def _sides(sites) -> int:
@@ -204,14 +212,14 @@ class TemplateSet:
 def template_set() -> TemplateSet:
     """Build the complete set: the templates the look-up table uses, in generator order."""
     closure = _closure()
+    facts = [_facts(tris) for _, _, tris in closure]
     choice: dict[int, int] = {}  # lut index -> closure index
     for label in range(len(LABELS)):
         for mask in range(16):
             pred = _wanted(label, mask)
             if pred is None:
                 continue
-            hits = [n for n, (_, _, tris) in enumerate(closure)
-                    if pred(tris, {s for t in tris for s in t})]
+            hits = [n for n, f in enumerate(facts) if pred(*f)]
             if len(hits) != 1:
                 raise AssertionError(f"label {LABELS[label]} mask {mask:04b}: {len(hits)} templates match")
             choice[label << 4 | mask] = hits[0]

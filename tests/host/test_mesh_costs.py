@@ -5,6 +5,8 @@ faster OBJ writer writes the very bytes of the line-by-line one it replaced."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -177,6 +179,22 @@ def test_help_documents_check_levels():
     text = commands["mesh"].format_help()
     assert "--check-levels" in text and "every level" in text
     assert "--check-levels" in commands["stream"].format_help()  # stream takes mesh's options
+
+
+def test_mesh_imports_only_what_it_runs(tmp_path, ball):
+    """A plain `wavemesh mesh` imports neither the device session, pictures, tiles, holes, the ROI nor the
+    report's JSON (issue 11: start-up is most of a short run's time; api.py imports them where used)."""
+    code = ("import sys; from wavemesh.cli import main; "
+            f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q']); "
+            "print(status, *sorted(sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    status, *modules = r.stdout.split()
+    assert status == "0" and "wavemesh.native" in modules  # it did run the refiner
+    unused = ("wavemesh.stream", "wavemesh.link", "wavemesh.devices", "wavemesh.render", "wavemesh.tiles",
+              "wavemesh.holes", "wavemesh.roi", "serial", "matplotlib", "tqdm", "PIL", "rasterio", "scipy",
+              "trimesh", "json", "secrets")
+    assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
 
 
 # ---------------------------------------------------------------------------------------------
