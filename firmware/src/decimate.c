@@ -177,9 +177,13 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
         }
         take_out(r, v, &n);
         nr = wm_vertex_ring(me, v, ring);
-        if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK ||
-            wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK)
+        if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK)
             continue; /* cannot happen: the plan was made on this star */
+        if (r->field.mask && !wm_hole_keeps_cover(r, v, ring, nr, tris, nt)) {
+            refile(r, v, &n); /* holes.c: a removal beyond v's ring took a ring vertex's other cover since */
+            continue;
+        }
+        if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) continue; /* cannot happen, as above */
         for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);
         r->removals++;
         for (int32_t i = 0; i < nr; i++) mark_stale(r, ring[i], &n);

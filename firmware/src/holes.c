@@ -25,9 +25,10 @@
  *   wm_hole_cover, after the error bound: a valid vertex in no such triangle gets a vertex at another
  *       valid corner of such a cell, or the cell's diagonal swapped; the bound runs again;
  *   wm_hole_keeps_cover, in the final decimation: a removal may not take the last such triangle from a
- *       valid vertex.
+ *       valid vertex (asked when a vertex's cost is found and again when it goes: another removal
+ *       beyond its ring may have taken a ring vertex's other such triangle since).
  * Motorcycle at zeta 1 (bench/bench_holes.py): such samples in no kept triangle 533 -> 113 (the
- * decimation's rule) -> 20 (the cover step), triangles 13,634 -> 14,247. */
+ * decimation's rule) -> 20 (the cover step) -> 0 (the rule asked again), triangles 13,634 -> 14,280. */
 #include "wm_internal.h"
 
 static int invalid_at(const wm_field *f, int32_t px, int32_t py)
@@ -197,7 +198,8 @@ static int swap_cell(wm_refiner *r, int32_t s, int32_t cx, int32_t cy)
         if (me->vx[o] == cx + 1 - (bad & 1) && me->vy[o] == cy + 1 - (bad >> 1) && f >= 0) {
             int32_t p = me->hv[WM_PREV(e)], q = me->hv[WM_PREV(f)];
             if (me->vx[p] < cx || me->vx[p] > cx + 1 || me->vy[p] < cy || me->vy[p] > cy + 1 || me->vx[q] < cx ||
-                me->vx[q] > cx + 1 || me->vy[q] < cy || me->vy[q] > cy + 1 || wm_edge_swap(me, e, touched, &n) != WM_OK)
+                me->vx[q] > cx + 1 || me->vy[q] < cy || me->vy[q] > cy + 1 ||
+                wm_edge_swap(me, e, touched, &n) != WM_OK)
                 return 0;
             for (int32_t i = 0; i < n; i++) wm_touch(r, touched[i]);
             return 1;
@@ -231,7 +233,8 @@ int wm_hole_cover(wm_refiner *r)
                 if (p >= 0) continue; /* a vertex already */
                 rc = wm_room(r, 2);
                 if (rc != 0) return rc < 0 ? rc : added; /* the budget: as the bound stops */
-                rc = on < 0 ? wm_tri_split(me, t, ax, ay, touched, &nt) : wm_edge_split(me, on, ax, ay, touched, &nt);
+                rc = on < 0 ? wm_tri_split(me, t, ax, ay, touched, &nt)
+                            : wm_edge_split(me, on, ax, ay, touched, &nt);
                 if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH;
                 for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
                 for (int32_t j = 0; j < 3; j++)

@@ -358,6 +358,19 @@ def stranded(mask: np.ndarray) -> np.ndarray:
     return v & ~coverable(mask)
 
 
+def enclosed_holes(mask: np.ndarray) -> int:
+    """The 8-connected groups of invalid samples that do not touch the rectangle's border: each is a hole
+    of any mesh that covers every valid sample around it and no invalid one.  A piece of mesh with h holes,
+    V_i inner and V_b rim vertices has 2 V_i + V_b + 2h - 2 triangles (Euler), and a rim has 3 vertices at
+    least, so such a mesh has at least 5h + 1 triangles (2h - 2 where rims pinch at shared vertices)."""
+    from scipy import ndimage
+
+    bad = np.asarray(mask, dtype=bool)
+    lab, n = ndimage.label(bad, structure=np.ones((3, 3), dtype=bool))
+    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    return n - int((border > 0).sum())
+
+
 def check(mesh: Mesh, mask: np.ndarray, min_area: float = 0.0) -> HoleCheck:
     """Whether ``mesh`` is a proper triangulation of the valid region of a grid whose invalid samples are
     ``mask``: the triangles (counter-clockwise, positive areas, vertices at distinct grid samples, every
