@@ -62,11 +62,18 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
     int32_t poly[WM_MAX_RING], nt = 0;
     if (n < 3 || n > WM_MAX_RING || apex >= n) return WM_ERR_ARG;
     if (apex >= 0) {
+        /* the fan (a, p_i, p_i+1) for i = apex + 1 .. apex + n - 2 (mod n), positions wrapped by a
+         * compare: the decimation tries every fan of every vertex it looks at */
+        int32_t a = ring[apex], ax = m->vx[a], ay = m->vy[a], i = apex + 1 == n ? 0 : apex + 1;
+        int32_t b = ring[i], bx = m->vx[b], by = m->vy[b];
         for (int32_t j = 1; j + 1 < n; j++) {
-            int32_t a = ring[apex], b = ring[(apex + j) % n], c = ring[(apex + j + 1) % n];
-            if (orient3(m, a, b, c) <= 0) return WM_ERR_REFUSED;
+            int32_t c, cx, cy;
+            i = i + 1 == n ? 0 : i + 1;
+            c = ring[i], cx = m->vx[c], cy = m->vy[c];
+            if (wm_orient(ax, ay, bx, by, cx, cy) <= 0) return WM_ERR_REFUSED;
             tris[3 * nt] = a, tris[3 * nt + 1] = b, tris[3 * nt + 2] = c;
             nt++;
+            b = c, bx = cx, by = cy;
         }
         *n_tris = nt;
         return WM_OK;
@@ -89,7 +96,7 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
         while (n > 3) {
             int32_t best = -1, valid = -1;
             for (int32_t i = 0; i < n; i++) {
-                int32_t ia = (i + n - 1) % n, ic = (i + 1) % n, j;
+                int32_t ia = i == 0 ? n - 1 : i - 1, ic = i + 1 == n ? 0 : i + 1, j;
                 int32_t ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 int32_t x0, x1, y0, y1;
                 if (ok[i] == 0) {
@@ -102,23 +109,23 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                     if (cy < y0) y0 = cy;
                     y1 = ay > by ? ay : by;
                     if (cy > y1) y1 = cy;
-                    for (j = 0; j < n; j++) {
-                        if (j == ia || j == i || j == ic) continue;
+                    /* the other ring vertices, ic + 1 .. ia - 1 (either test's answer does not depend
+                     * on the order) */
+                    for (j = ic + 1 == n ? 0 : ic + 1; j != ia; j = j + 1 == n ? 0 : j + 1) {
                         if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
                         if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 &&
                             wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
                             wm_orient(cx, cy, ax, ay, px[j], py[j]) >= 0)
                             break;
                     }
-                    if (j < n) continue;
+                    if (j != ia) continue;
                     ok[i] = 1;
                 }
                 if (valid < 0) valid = i; /* the first valid ear, unless a Delaunay one follows */
                 if (ok[i] == 1) {
-                    for (j = 0; j < n; j++)
-                        if (j != ia && j != i && j != ic && wm_incircle(ax, ay, bx, by, cx, cy, px[j], py[j]) > 0)
-                            break;
-                    if (j == n) ok[i] = 2;
+                    for (j = ic + 1 == n ? 0 : ic + 1; j != ia; j = j + 1 == n ? 0 : j + 1)
+                        if (wm_incircle(ax, ay, bx, by, cx, cy, px[j], py[j]) > 0) break;
+                    if (j == ia) ok[i] = 2;
                 }
                 if (ok[i] == 2) {
                     best = i;
