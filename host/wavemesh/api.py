@@ -304,7 +304,7 @@ def native_within(samples, fp):
 
 def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None) -> holes.HoleCheck | None:
     """With holes (hf.mask): every level's mesh less the triangles over invalid samples, the final one
-    also less the vertices on straight rims that ``within`` (native.error_within) lets go
+    also less the rim vertices that ``within`` (native.error_within) lets go
     (holes.simplify_rims) and the pieces under ``min_area``, and checked (wavemesh.holes: the refiner's
     full meshes were proper triangulations of the rectangle); MeshInvalid when it is not a mesh of the
     valid samples."""
@@ -318,10 +318,10 @@ def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None
     for lv in levels:  # the final mesh's thin rim triangles flipped where a valid one comes of it
         lv.mesh = holes.drop(holes.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
     if within is not None:
-        final.mesh = holes.simplify_rims(final.mesh, within)
+        final.mesh = holes.simplify_rims(final.mesh, within, hf.mask)
     final.mesh = holes.drop_islands(final.mesh, min_area)
-    verdict = holes.check(final.mesh, hf.mask)
-    if final.stats["over"] == 0 and min_area <= 0 and not verdict.valid_mesh:
+    verdict = holes.check(final.mesh, hf.mask, min_area)
+    if final.stats["over"] == 0 and not verdict.valid_mesh:
         raise MeshInvalid("the mesh with holes is not a proper mesh of the valid samples: "
                           + "; ".join(verdict.problems[:3]), hint=BUG_HINT)
     return verdict
@@ -818,14 +818,18 @@ def _render(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> 
     render_mesh(mesh, z, output, zscale=exaggeration, en=np.column_stack([east, north]), label=True, **kw)
 
 
-def check_file(path: str, hf: HeightField, roi=None) -> dict:
+def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> dict:
     """`wavemesh check`: whether the mesh file ``path`` is a proper triangulation of ``hf``'s grid whose
     vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...).
     A mesh in map units is placed on the grid by its sidecar (PATH.georef.json), whose cell size the
     normal metric then uses; else by the height field's georeference.  ``roi`` (--roi's specs, or a bool
-    array): also the errors over the region of interest alone (``roi_errors``; wavemesh.roi)."""
+    array): also the errors over the region of interest alone (``roi_errors``; wavemesh.roi).
+    ``min_area`` (with holes): the mesh was made with --min-area, whose dropped pieces may leave valid
+    samples uncovered."""
     if roi is not None and hf.mask is not None:
         raise InputError("--roi and --nodata hole do not go together yet", hint="drop one of them")
+    if min_area > 0 and hf.mask is None:
+        raise InputError("--min-area checks a mesh with holes", hint="use it with --nodata hole")
     if roi is not None:
         from wavemesh.roi import parse_roi, roi_errors
 
@@ -839,7 +843,7 @@ def check_file(path: str, hf: HeightField, roi=None) -> dict:
     if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.holes)
         from wavemesh import holes
 
-        hc = holes.check(mesh, hf.mask)
+        hc = holes.check(mesh, hf.mask, min_area)
         report = {"mesh": path, "valid": hc.valid_mesh, "problems": hc.problems, "vertices": mesh.n_vertices,
                   "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(),
                   "holes": hc.to_report(), "ground": g.to_report()}

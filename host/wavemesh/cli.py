@@ -225,6 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--against", required=True, metavar="INPUT", help="the height field")
     p.add_argument("--roi", action="append", metavar="X,Y,W,H|MASK",
                    help="also measure the errors inside this region of interest alone (as `mesh --roi`)")
+    p.add_argument("--min-area", type=float, default=0.0, metavar="A",
+                   help="with --nodata hole: the mesh was made with --min-area A (its dropped pieces may "
+                        "leave valid samples uncovered)")
     _input_options(p)
     _shape_options(p)
     p.add_argument("--report", metavar="R.json", help="write the results as JSON")
@@ -388,7 +391,7 @@ def check_command(args) -> int:
         api.check_report(args.report)
     hf = _load(args, args.against)
     roi = tuple(args.roi) if args.roi else None
-    report = api.check_file(args.mesh, hf, roi=roi) | {"against": args.against}
+    report = api.check_file(args.mesh, hf, roi=roi, min_area=args.min_area) | {"against": args.against}
     if "holes" in report:
         report["holes"]["stranded"] = hf.stranded
     if args.report:

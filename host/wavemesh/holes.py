@@ -246,7 +246,45 @@ def _ear_clip(pts: list) -> list | None:
     return out + [tuple(idx)]
 
 
-def simplify_rims(mesh: Mesh, within) -> Mesh:
+def _rows(p, q, r):
+    """The closed counter-clockwise triangle (p, q, r) row by row: (row, first, last) of its samples, from
+    the exact edge functions (as _spans, for one triangle)."""
+    x, y = (p[0], q[0], r[0]), (p[1], q[1], r[1])
+    for py in range(min(y), max(y) + 1):
+        lo, hi = min(x), max(x)
+        for k in range(3):
+            k1, k2 = (k + 1) % 3, (k + 2) % 3
+            a, b = y[k1] - y[k2], x[k2] - x[k1]
+            num = b * py - b * y[k1] - a * x[k1]
+            if a > 0:
+                lo = max(lo, -(num // a))
+            elif a < 0:
+                hi = min(hi, num // -a)
+            elif num < 0:
+                hi = lo - 1
+        if lo <= hi:
+            yield py, lo, hi
+
+
+def _free(p, q, r, prefix, rows_x) -> bool:
+    """The closed triangle (p, q, r) holds no invalid sample (``prefix``: the mask's per-row prefix sums)
+    and no vertex but its corners (``rows_x``: the vertices' columns by row, sorted)."""
+    import bisect
+
+    corners = {p, q, r}
+    for py, lo, hi in _rows(p, q, r):
+        if prefix[py][hi + 1] - prefix[py][lo]:
+            return False
+        xs = rows_x.get(py, ())
+        i = bisect.bisect_left(xs, lo)
+        while i < len(xs) and xs[i] <= hi:
+            if (xs[i], py) not in corners:
+                return False
+            i += 1
+    return True
+
+
+def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
     """The mesh less every vertex that lies on the straight border between its two border neighbours
     (a hole's rim, or the rectangle's side) and whose triangles re-triangulate (ear clipping) into
     triangles ``within(x, y)`` accepts: the covered region stays the same, so every new triangle covers
@@ -255,6 +293,17 @@ def simplify_rims(mesh: Mesh, within) -> Mesh:
     nothing changes (deterministic: the native and the device path give the same mesh)."""
     xy = [tuple(map(int, p)) for p in mesh.xy]
     tris = {k: tuple(map(int, t)) for k, t in enumerate(mesh.tris)}
+    prefix = rows_x = None
+    if mask is not None:  # a reflex rim vertex may go too when the triangle it leaves is free
+        bad = np.asarray(mask, dtype=bool)
+        prefix = np.zeros((bad.shape[0], bad.shape[1] + 1), dtype=np.int64)
+        np.cumsum(bad, axis=1, out=prefix[:, 1:])
+        prefix = prefix.tolist()
+        rows_x = {}
+        for px, py in xy:
+            rows_x.setdefault(py, []).append(px)
+        for r in rows_x.values():
+            r.sort()
     around: dict[int, set] = {}
     for k, t in tris.items():
         for v in t:
@@ -279,7 +328,10 @@ def simplify_rims(mesh: Mesh, within) -> Mesh:
             while ring[-1] in step and len(ring) <= len(fan):
                 ring.append(step[ring[-1]])
             a, b = xy[ring[0]], xy[ring[-1]]
-            if len(ring) != len(fan) + 1 or _orient(a, xy[v], b) != 0:
+            if len(ring) != len(fan) + 1:
+                continue
+            grow = _orient(xy[v], b, a)  # > 0: the ring's polygon is the star and the triangle (v, b, a)
+            if grow < 0 or (grow > 0 and (mask is None or not _free(xy[v], b, a, prefix, rows_x))):
                 continue
             pts = [xy[u] for u in ring]
             cut = _ear_clip(pts)
@@ -290,6 +342,8 @@ def simplify_rims(mesh: Mesh, within) -> Mesh:
                     if u != v:
                         around[u].discard(k)
             del around[v]
+            if rows_x is not None:
+                rows_x[xy[v][1]].remove(xy[v][0])
             for c in cut:
                 t = tuple(ring[i] for i in c)
                 tris[nxt] = t

@@ -215,6 +215,7 @@ def test_cli_mesh_check_min_area(tmp_path, capsys):
     # the check knows what --min-area drops: uncovered groups of at most 2A + 2 valid samples
     mask = from_array(z, holes=True).mask
     assert holes.check(kept, mask, min_area=40).valid_mesh
+    assert main(["check", str(small), "--against", str(src), "--nodata", "hole", "--min-area", "40"]) == 0
 
 
 @pytest.mark.parametrize("argv, what", [
