@@ -34,7 +34,7 @@ def motorcycle_raw() -> np.ndarray:
 
 
 def one(name: str, z: np.ndarray, zeta: float) -> dict:
-    from wavemesh import api
+    from wavemesh import api, holes
     from wavemesh.heightfield import from_array
     from wavemesh.native import RefineParams
 
@@ -48,6 +48,8 @@ def one(name: str, z: np.ndarray, zeta: float) -> dict:
                      "cpu_s": round(time.process_time() - t0, 3)}
         if mode == "hole":
             row[mode]["check"] = r.report.get("holes")  # None: the shadow left every sample valid
+            row["stranded"] = hf.stranded
+            row["enclosed_holes"] = holes.enclosed_holes(hf.mask) if hf.mask is not None else 0
     row["ratio"] = row["hole"]["triangles"] / row["fill"]["triangles"]
     return row
 
@@ -72,28 +74,40 @@ def markdown(results: dict) -> str:
         "scikit-image (741 x 500, px), its unknown pixels as they come.  Synthetic sets (wavemesh synth, "
         f"zeta {results['zeta_fraction']:g} of the height range) with a scanner's shadow: NaN where a ray "
         f"from the left, falling {results['shadow_drop']:g} height ranges across the grid, does not reach.  "
-        "`hole / fill`: the triangle ratio; `covered`: valid samples in a triangle (the rest lie next to "
-        "invalid ones); `coverable, not covered`: of the rest, those a unit right triangle of three valid "
-        "samples has as a corner (holes.coverable: the others, isolated samples and one-sample-wide "
-        "lines, no triangle of valid samples covers); no triangle of any hole mesh covers an invalid "
-        "sample (`over`).",
+        "`stranded`: valid samples no grid cell with three valid corners has as a corner (isolated samples, "
+        "one-sample-wide lines: no triangle of grid samples covers them without an invalid one), meshed as "
+        "invalid (holes.stranded); `covered`: the other valid samples in a triangle, of all of them; "
+        "`over`: triangles over an invalid sample.  `bound`: 5h + 1, "
+        "h the groups of invalid samples the valid ones enclose (holes.enclosed_holes): fewer triangles "
+        "than this no mesh has that leaves every such group a hole with a rim of its own (Euler, 3 "
+        "vertices a rim); `hole / fill`: the triangle ratio.",
         "",
-        "| grid | size | invalid | zeta | fill: triangles | hole: triangles | hole / fill | hole E_max | "
-        "covered | coverable, not covered | over |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| grid | size | invalid | stranded | zeta | fill: triangles | hole: triangles | hole / fill | "
+        "bound | hole E_max | covered | over |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in results["rows"]:
         n = r["width"] * r["height"]
         c = r["hole"]["check"] or {"covered_valid": n, "valid_samples": n, "triangles_over_invalid": 0,
                                    "uncovered_coverable": 0}
-        lines.append(f"| {r['name']} | {r['width']} x {r['height']} | {r['invalid']} | {r['zeta']:.4g} | "
-                     f"{r['fill']['triangles']} | {r['hole']['triangles']} | {r['ratio']:.2f} | "
+        bound = 5 * r["enclosed_holes"] + 1 if r["invalid"] else "-"
+        lines.append(f"| {r['name']} | {r['width']} x {r['height']} | {r['invalid']} | {r['stranded']} | "
+                     f"{r['zeta']:.4g} | {r['fill']['triangles']} | {r['hole']['triangles']} | "
+                     f"{r['ratio']:.2f} | {bound} | "
                      f"{r['hole']['e_max']:.4g} | {c['covered_valid']} / {c['valid_samples']} | "
-                     f"{c.get('uncovered_coverable', '-')} | {c['triangles_over_invalid']} |")
+                     f"{c['triangles_over_invalid']} |")
     ratios = [r["ratio"] for r in results["rows"] if r["invalid"]]
     real = [r["ratio"] for r in results["rows"] if "real" in r["name"]]
+    moto = [r for r in results["rows"] if "real" in r["name"]]
+    need = 5 * moto[0]["enclosed_holes"] + 1
+    under = [r for r in moto if r["fill"]["triangles"] < need]
     lines += ["", f"Median hole / fill over the rows with invalid samples {float(np.median(ratios)):.2f} "
               "(the shadow leaves f1, f3 and f4 whole); on the real dropouts "
               f"{min(real):.2f} .. {max(real):.2f}: outlining every speckle of a real scan costs triangles "
-              "that bridging it with invented surface does not; a shadow behind a depth jump saves them."]
+              "that bridging it with invented surface does not; a shadow behind a depth jump saves them.  "
+              f"Motorcycle's {moto[0]['enclosed_holes']} enclosed groups of dropouts need {need} triangles "
+              "at least" + (", more than `--fill nearest` uses at "
+                            + ", ".join(f"zeta {r['zeta']:g} ({r['fill']['triangles']})" for r in under)
+                            + ": there no mesh that keeps every dropout a hole (rims sharing no vertex) has "
+                            "fewer triangles than the filled one." if under else ".")]
     return "\n".join(lines) + "\n"

@@ -414,9 +414,10 @@ def stranded(mask: np.ndarray) -> np.ndarray:
 
 def enclosed_holes(mask: np.ndarray) -> int:
     """The 8-connected groups of invalid samples that do not touch the rectangle's border: each is a hole
-    of any mesh that covers every valid sample around it and no invalid one.  A piece of mesh with h holes,
-    V_i inner and V_b rim vertices has 2 V_i + V_b + 2h - 2 triangles (Euler), and a rim has 3 vertices at
-    least, so such a mesh has at least 5h + 1 triangles (2h - 2 where rims pinch at shared vertices)."""
+    of any mesh that covers every valid sample around it and no invalid one.  A piece of mesh with h holes
+    whose rims share no vertex, V_i inner and V_b rim vertices has 2 V_i + V_b + 2h - 2 triangles (Euler),
+    and a rim has 3 vertices at least, so such a mesh has at least 5h + 1 triangles (rims that pinch at a
+    shared vertex can do with fewer)."""
     from scipy import ndimage
 
     bad = np.asarray(mask, dtype=bool)
