@@ -150,12 +150,13 @@ static int32_t locate(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay, int3
         e = wm_rot_ccw(me, e);
     } while (e >= 0 && e != first);
     for (int32_t step = 0; t >= 0 && step < 4096; step++) {
-        int32_t out = -1, k;
+        int32_t out = -1, outside = 0, k;
         *on = -1;
         for (k = 0; k < 3; k++) {
             int32_t h = 3 * t + k, u = me->hv[h], v = me->hv[WM_NEXT(h)];
             int64_t o = wm_orient(me->vx[u], me->vy[u], me->vx[v], me->vy[v], ax, ay);
             if (o == 0) *on = h;
+            outside |= o < 0;
             if (o < 0 && h != in) {
                 /* leave through the edge the segment s-a crosses: its ends on both sides of the line */
                 int64_t ou = wm_orient(sx, sy, ax, ay, me->vx[u], me->vy[u]);
@@ -163,7 +164,7 @@ static int32_t locate(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay, int3
                 if ((ou <= 0 && ov >= 0) || (ou >= 0 && ov <= 0)) out = h;
             }
         }
-        if (out < 0) return t; /* a is in t (on the edge *on, or a corner when two edges hold it) */
+        if (out < 0) return outside ? -1 : t; /* a in t (on edge *on, or a corner: two edges hold it) */
         in = me->ho[out];
         if (in < 0) return -1;
         t = WM_TRI(in);
