@@ -180,7 +180,10 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
                        help="with --tile: run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or with ``command`` of that command alone (main() builds only the one
+    it runs, _parser_for: all six cost a short `wavemesh mesh` ~5 ms, the gettext look-ups of argparse
+    and a help formatter per option)."""
     parser = _Parser(
         prog="wavemesh",
         description="Wavelet-based multiresolution triangle meshes from height fields.",
@@ -189,6 +192,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
 
+    for name, add in _COMMANDS_PARSERS.items():
+        if command is None or command == name:
+            add(sub)
+    return parser
+
+
+def _mesh_parser(sub) -> None:
     p = sub.add_parser("mesh", help="triangulate a height field", description=(
         "Triangulate a height field (.npy .npz .pgm .png .tif .asc): the filter bank and templates give "
         "the initial triangulation, the firmware refiner (built natively) refines it level by level and "
@@ -199,6 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
     _mesh_options(p)
     _tile_options(p, local=True)
 
+
+def _stream_parser(sub) -> None:
     p = sub.add_parser("stream", help="triangulate a height field on a device (board or simulated board)",
                        description=(
         "Send a height field to a wavemesh device over a serial port (a board on /dev/ttyUSB1, the "
@@ -218,6 +230,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the device may compute without sending anything (default 120)")
     p.add_argument("--trace", action="store_true", help="hex dump of every frame on stderr")
 
+
+def _check_parser(sub) -> None:
     p = sub.add_parser("check", help="check a mesh against its height field", description=(
         "Check that MESH is a proper triangulation of the height field's grid rectangle and "
         "measure its errors. Exit status 1 when it is not a proper triangulation."))
@@ -233,6 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", metavar="R.json", help="write the results as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
+
+def _render_parser(sub) -> None:
     p = sub.add_parser("render", help="draw a mesh", description="Draw a mesh as a flat-shaded picture.")
     p.add_argument("mesh", help="mesh file (.obj or .ply)")
     p.add_argument("-o", "--output", required=True, help="picture to write (.png, .svg, .pdf)")
@@ -243,6 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "else automatic)")
     p.add_argument("--title", help="caption")
 
+
+def _devices_parser(sub) -> None:
     p = sub.add_parser("devices", help="list serial ports and the wavemesh devices on them", description=(
         "List the serial ports (pyserial's list_ports) and send HELLO on each: the ones a wavemesh device "
         "answers on are shown with its capabilities."))
@@ -252,13 +270,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-probe", action="store_true", help="only list the ports, send nothing")
     p.add_argument("--json", action="store_true", help="print the list as JSON")
 
+
+def _synth_parser(sub) -> None:
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
         "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))
     p.add_argument("name", choices=names, metavar="NAME", help=", ".join(names))
     p.add_argument("-o", "--output", required=True, help="file to write (.npy)")
     p.add_argument("--size", type=int, default=None, help="samples per side (default: the paper's)")
-    return parser
+
+
+_COMMANDS_PARSERS = {"mesh": _mesh_parser, "stream": _stream_parser, "check": _check_parser,
+                     "render": _render_parser, "devices": _devices_parser, "synth": _synth_parser}
+
+
+def _parser_for(argv: list[str]) -> argparse.ArgumentParser:
+    """The parser of the command argv names alone when it parses argv exactly as the whole one does: argv
+    names a command (its first word that is not an option) and no long option is followed by a word
+    starting with '-' (there every command's option strings decide, _glue_dash_values); else the whole
+    parser (its messages name every command)."""
+    words = [a for a in argv if not a.startswith("-")]
+    if words and words[0] in _COMMANDS_PARSERS and not any(
+            a.startswith("--") and b.startswith("-") for a, b in zip(argv, argv[1:], strict=False)):
+        return build_parser(words[0])
+    return build_parser()
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -455,9 +490,10 @@ COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_comma
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = _parser_for(argv)
     try:
-        args = parser.parse_args(_glue_dash_values(parser, sys.argv[1:] if argv is None else list(argv)))
+        args = parser.parse_args(_glue_dash_values(parser, argv))
         return COMMANDS[args.command](args)
     except WavemeshError as e:
         print(f"error: {e.message}", file=sys.stderr)
