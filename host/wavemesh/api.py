@@ -160,14 +160,24 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
         step = decimate
     out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
     spacing = hf.spacing and (hf.spacing[0] * step, hf.spacing[1] * step)
-    mask = None
+    mask = lone = None
     if hf.mask is not None:  # the part of the mask the samples came from
-        mask = hf.mask[y0:y0 + v.shape[0] * step:step, x0:x0 + v.shape[1] * step:step]
+        part = (slice(y0, y0 + v.shape[0] * step, step), slice(x0, x0 + v.shape[1] * step, step))
+        mask = hf.mask[part]
+        if hf.lone is not None:
+            lone = hf.lone[part]
+        if mask.any():  # samples whose cells of valid samples lay outside the part are stranded now
+            from wavemesh.holes import stranded
+
+            new = stranded(mask)
+            lone = new if lone is None else lone | new
+            mask = mask | new
         if mask.all():
             raise InputError(f"{out.source}: every sample is invalid; there is nothing to mesh")
         mask = np.ascontiguousarray(mask) if mask.any() else None
+        lone = lone if mask is not None and lone is not None and lone.any() else None
     return replace(out, filled=hf.filled, transform=cropped(hf.transform, x0, y0, step), crs=hf.crs,
-                   spacing=spacing, mask=mask)
+                   spacing=spacing, mask=mask, lone=lone)
 
 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,

@@ -68,9 +68,7 @@ import os
 import re
 import struct
 import sys
-import tokenize
 import warnings
-import zipfile
 import zlib
 from dataclasses import dataclass, replace
 
@@ -108,24 +106,30 @@ _RASTER_KINDS = {
     ".vrt": "GDAL VRT",
 }
 
-# Exceptions the thin readers (numpy, zipfile, zlib, Pillow) and rasterio raise for
-# unreadable, truncated or corrupt files.  Only caught around library calls.
-_READ_ERRORS: tuple[type[BaseException], ...] = (
-    OSError,  # includes rasterio's RasterioIOError
-    ValueError,
-    TypeError,
-    EOFError,
-    KeyError,
-    IndexError,
-    SyntaxError,
-    ArithmeticError,
-    RuntimeError,  # includes NotImplementedError (unsupported zip features)
-    MemoryError,  # a corrupt header claiming an enormous array
-    struct.error,
-    zlib.error,
-    zipfile.BadZipFile,
-    tokenize.TokenError,  # a corrupt .npy header
-)
+
+def _read_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions the thin readers (numpy, zipfile, zlib, Pillow) and rasterio raise for unreadable,
+    truncated or corrupt files.  Only caught around library calls; a function, so that reading an .npy
+    does not import zipfile (an except clause evaluates it only when an exception comes)."""
+    import tokenize
+    import zipfile
+
+    return (
+        OSError,  # includes rasterio's RasterioIOError
+        ValueError,
+        TypeError,
+        EOFError,
+        KeyError,
+        IndexError,
+        SyntaxError,
+        ArithmeticError,
+        RuntimeError,  # includes NotImplementedError (unsupported zip features)
+        MemoryError,  # a corrupt header claiming an enormous array
+        struct.error,
+        zlib.error,
+        zipfile.BadZipFile,
+        tokenize.TokenError,  # a corrupt .npy header
+    )
 
 
 @dataclass(frozen=True)
@@ -150,9 +154,15 @@ class HeightField:
     # --nodata hole: (H, W) bool, True where the sample is invalid (NaN, no-data, --invalid VALUE); values
     # and samples hold a nearest valid height there, for the filter bank only (wavemesh.holes).  None: none.
     mask: np.ndarray | None = None
-    # --nodata hole: valid samples the mask takes in because no grid cell's triangle of three valid samples
-    # has them as a corner (isolated samples, one-sample-wide lines: wavemesh.holes.stranded).
-    stranded: int = 0
+    # --nodata hole: (H, W) bool, True at the valid samples the mask takes in because no grid cell's
+    # triangle of three valid samples has them as a corner (isolated samples, one-sample-wide lines:
+    # wavemesh.holes.stranded).  None: none.
+    lone: np.ndarray | None = None
+
+    @property
+    def stranded(self) -> int:
+        """How many valid samples --nodata hole meshes as invalid (``lone``)."""
+        return 0 if self.lone is None else int(np.count_nonzero(self.lone))
 
     @property
     def width(self) -> int:
@@ -297,7 +307,7 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
         hidden = fill_nearest(values, bad)  # heights under the holes, for the filter bank alone
         samples, scale, offset, lossless = quantise(hidden)
         return HeightField(values=hidden, samples=samples, scale=scale, offset=offset, lossless=lossless,
-                           source=source, mask=bad | lone, stranded=int(lone.sum()))
+                           source=source, mask=bad | lone, lone=lone if lone.any() else None)
     if n_bad:
         if n_bad == values.size:
             raise InputError(
@@ -443,7 +453,7 @@ def _read_bytes(path: str) -> bytes:
 def _read_npy(path: str) -> np.ndarray:
     try:
         arr = np.load(path, allow_pickle=False)
-    except _READ_ERRORS as e:
+    except _read_errors() as e:
         raise InputError(f"cannot read {path}: not a valid .npy file ({_one_line(e)})") from None
     if not isinstance(arr, np.ndarray):
         if hasattr(arr, "close"):
@@ -455,7 +465,7 @@ def _read_npy(path: str) -> np.ndarray:
 def _read_npz(path: str, key: str | None) -> tuple[np.ndarray, tuple[float, ...] | None]:
     try:
         npz = np.load(path, allow_pickle=False)
-    except _READ_ERRORS as e:
+    except _read_errors() as e:
         raise InputError(f"cannot read {path}: not a valid .npz file ({_one_line(e)})") from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise InputError(f"cannot read {path}: not a .npz archive (it is a .npy file); rename it to .npy")
@@ -478,7 +488,7 @@ def _read_npz(path: str, key: str | None) -> tuple[np.ndarray, tuple[float, ...]
         try:
             array = np.asarray(npz[key])
             return array, _npz_transform(path, npz, array.shape)
-        except _READ_ERRORS as e:
+        except _read_errors() as e:
             raise InputError(f"cannot read {path}: array {key!r} is corrupt ({_one_line(e)})") from None
 
 
@@ -623,7 +633,7 @@ def _read_png(path: str) -> np.ndarray:
                     f"convert it to 16-bit grayscale"
                 )
             arr = np.asarray(img)
-    except (*_READ_ERRORS, Image.DecompressionBombError) as e:
+    except (*_read_errors(), Image.DecompressionBombError) as e:
         raise InputError(f"cannot read {path}: not a valid PNG file ({_one_line(e)})") from None
     if arr.dtype.byteorder == ">":
         arr = arr.astype(arr.dtype.newbyteorder("="))
@@ -650,7 +660,7 @@ def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, .
 
     _quiet_rasterio_logs()
     kind = _RASTER_KINDS.get(ext)
-    errors = (RasterioError, CPLE_BaseError, *_READ_ERRORS)
+    errors = (RasterioError, CPLE_BaseError, *_read_errors())
     try:
         # AAIGRID_DATATYPE: ESRI ASCII grids as float64, not float32 (their text holds any precision)
         env = rasterio.Env(AAIGRID_DATATYPE="Float64")

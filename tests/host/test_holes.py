@@ -241,6 +241,12 @@ def test_all_invalid_and_crop():
     full = from_array(z, holes=True)
     part = api.shape_heightfield(full, crop="10,5,30,30")
     assert np.array_equal(part.mask, full.mask[5:35, 10:40])
+    # and takes in the samples stranded at its edges (real dropouts)
+    full = from_array(motorcycle_crop(), holes=True)
+    part = api.shape_heightfield(full, crop="10,5,40,30")
+    cut = full.mask[5:35, 10:50]
+    lone = full.lone[5:35, 10:50] | lone_samples(cut)
+    assert np.array_equal(part.mask, cut | lone) and part.stranded == np.count_nonzero(lone) > 0
     assert hf is not None
 
 
