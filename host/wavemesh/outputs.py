@@ -19,7 +19,6 @@ permission bits say nothing, a read-only file system or /proc do), not an existi
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 from wavemesh.errors import InputError, WavemeshError
@@ -32,8 +31,15 @@ def _token_hex() -> str:
     return os.urandom(3).hex()
 
 
+_PROBED: set[Path] = set()  # directories this process found writable (the CLI checks its outputs before
+# the work and write_result again: the second probe would cost two more metadata writes on a busy disk)
+
+
 def _probe(directory: Path, what: str) -> None:
-    """InputError unless a file can be created in ``directory`` (tried, then removed)."""
+    """InputError unless a file can be created in ``directory`` (tried, then removed; once a process)."""
+    key = directory.absolute()
+    if key in _PROBED:
+        return
     probe = directory / f"{_PREFIX}{os.getpid()}-probe-{_token_hex()}"
     try:
         probe.mkdir()
@@ -41,6 +47,7 @@ def _probe(directory: Path, what: str) -> None:
     except OSError as e:
         raise InputError(f"cannot write {what}: directory {directory} is not writable ({e.strerror or e})",
                          hint="choose another output folder") from None
+    _PROBED.add(key)
 
 
 def check_path(path: str | os.PathLike, suffixes: tuple[str, ...] | None, what: str) -> Path:
@@ -126,7 +133,12 @@ class Outputs:
     def discard(self) -> None:
         """Remove the staging folders and whatever is in them."""
         for stage in self._stages.values():
-            shutil.rmtree(stage, ignore_errors=True)
+            try:
+                stage.rmdir()  # committed: empty
+            except OSError:
+                import shutil
+
+                shutil.rmtree(stage, ignore_errors=True)
         self._stages.clear()
         self._files.clear()
         self._given.clear()

@@ -150,9 +150,9 @@ def _closure() -> tuple[tuple[str, str, tuple], ...]:
              **{k: v[1] for k, v in template_forms.FUNDAMENTAL.items()}}
     seen: dict[frozenset, tuple] = {}
     for gi, gname in enumerate(GEN_NAMES):
+        g = [_g((gi >> 2) & 1, (gi >> 1) & 1, gi & 1, s) for s in range(9)]  # g_ijk as a site table
         for form, tris in forms.items():
-            i, j, k = (gi >> 2) & 1, (gi >> 1) & 1, gi & 1
-            out = tuple(sorted(ccw(tuple(_g(i, j, k, s) for s in t)) for t in tris))
+            out = tuple(sorted(ccw(tuple(g[s] for s in t)) for t in tris))
             key = _key(out)
             if key not in seen:
                 seen[key] = (form, gname, out)
