@@ -197,8 +197,8 @@ static inline void wm_forget_class(wm_refiner *r, int32_t t)
     for (int c = 0; c < 3; c++) r->vapex[r->mesh.hv[3 * t + c]] = WM_CLASS_UNKNOWN;
 }
 /* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles
- * touched[0..n) until every such edge is locally Delaunay (hmm's design), recomputing E(T) of the
- * flipped triangles.  heap_n: the error bound's heap (updated), or NULL. */
+ * touched[0..n) until every such edge is locally Delaunay (hmm's design), then E(T) of touched[] and
+ * of every flipped triangle, once each, as wm_touch.  heap_n: the error bound's heap (updated), or NULL. */
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n);
 /* The error bound's heap (refine.c): re-files t after its E(T) changed. */
 void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n);
