@@ -22,8 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from wavemesh import __version__
-from wavemesh import protocol as P
+from wavemesh import __version__, limits
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
@@ -45,7 +44,7 @@ if TYPE_CHECKING:
     from wavemesh.link import LinkStats
     from wavemesh.stream import Device, DeviceInfo, Timeouts
 
-MAX_LEVELS = P.MAX_LEVELS  # the model's limit (protocol.py, the one source)
+MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
 MESH_SUFFIXES = (".obj", ".ply", ".glb")
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
@@ -592,6 +591,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     triangulation, else ProtocolError) and measured.  ``trace``: a text stream for the frames' hex
     dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user; ``baud`` and
     ``timeouts``: by default wavemesh.link.DEFAULT_BAUD and wavemesh.stream.DEFAULT_TIMEOUTS."""
+    from wavemesh import protocol as P
     from wavemesh.link import DEFAULT_BAUD
     from wavemesh.stream import (
         DEFAULT_TIMEOUTS,

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wavemesh.protocol import MAX_LEVELS  # one source: the protocol's limits, wm_protocol.h
+from wavemesh.limits import MAX_LEVELS  # one source: the model's and the protocol's limits, wm_protocol.h
 from wavemesh.spline import spline_step
 
 DETAIL_BITS = 18  # signed width of d1, d2, d3 (|d| <= 2 * 65535)

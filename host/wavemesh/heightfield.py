@@ -75,7 +75,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from wavemesh.errors import InputError
-from wavemesh.protocol import MAX_SIDE
+from wavemesh.limits import MAX_SIDE
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
 # A raster's header can claim any size (300 bytes of TIFF saying 6 x 16777221 samples took GDAL and the

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wavemesh.haar import HaarLevel
-from wavemesh.protocol import TAU_MAX  # one source: the wire protocol's CONFIG range, wm_protocol.h
+from wavemesh.limits import TAU_MAX  # one source: the wire protocol's CONFIG range too, wm_protocol.h
 from wavemesh.templates import (
     KIND_DIAGONAL,
     KIND_FLAT,
