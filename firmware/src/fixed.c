@@ -123,18 +123,26 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
         x *= (int64_t)1 << s;
         y *= (int64_t)1 << s;
     }
-    for (int i = 0; i < 17; i++) {
-        int64_t xs = shr0(x, i), ys = shr0(y, i);
-        if (y > 0) {
-            x += ys;
-            y -= xs;
-            z += atan_q16[i];
-        } else if (y < 0) {
-            x -= ys;
-            y += xs;
-            z -= atan_q16[i];
-        } else {
-            break;
+    /* The rotations in 32 bits (the soft CPU's word): x and y start in [0, 2^28], the length grows by
+     * at most 1.65 and is at most 2^28.5 to begin with, so |x|, |y| < 2^30 throughout; x never falls
+     * (each step adds |y| 2^-i), so it stays >= 0 and shifts as unsigned. */
+    {
+        uint32_t ux = (uint32_t)x;
+        int32_t iy = (int32_t)y;
+        for (int i = 0; i < 17; i++) {
+            uint32_t xs = ux >> i;
+            int32_t ys = iy >= 0 ? (int32_t)((uint32_t)iy >> i) : -(int32_t)((uint32_t)-iy >> i);
+            if (iy > 0) {
+                ux += (uint32_t)ys;
+                iy -= (int32_t)xs;
+                z += atan_q16[i];
+            } else if (iy < 0) {
+                ux -= (uint32_t)ys; /* ys < 0: x grows */
+                iy += (int32_t)xs;
+                z -= atan_q16[i];
+            } else {
+                break;
+            }
         }
     }
     return z < 0 ? 0 : z;
