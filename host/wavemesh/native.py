@@ -23,11 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from wavemesh import protocol as P
 from wavemesh.errors import WavemeshError
 from wavemesh.haar import HaarLevel
+from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (src/job.c checks it); wm_level_stats' fields
 from wavemesh.mesh import Mesh
-from wavemesh.protocol import STAT_FIELDS  # wm_level_stats' int32 fields, one list for both sides
 
 ROOT = Path(__file__).resolve().parents[2]
 FIRMWARE = ROOT / "firmware"
@@ -37,7 +36,6 @@ LIB_NAME = "libwavemesh.so"
 WM_OK, WM_ERR_CAPACITY = 0, -3  # wavemesh.h's (tests/host/test_native_abi.py); the texts: wm_strerror
 METRICS = {"normal": 0, "vertical": 1}
 NEIGHBOURHOODS = {"face": 0, "vertex": 1}
-MAX_SIDE = P.MAX_SIDE  # WM_MAX_SIDE (protocol.py is the one source; src/job.c checks the header)
 U32 = (1 << 32) - 1
 U64 = (1 << 64) - 1
 

@@ -182,8 +182,9 @@ def test_help_documents_check_levels():
 
 
 def test_mesh_imports_only_what_it_runs(tmp_path, ball):
-    """A plain `wavemesh mesh` imports neither the device session, pictures, tiles, holes, the ROI nor the
-    report's JSON (issue 11: start-up is most of a short run's time; api.py imports them where used)."""
+    """A plain `wavemesh mesh` imports neither the wire protocol, the device session, pictures, tiles, holes,
+    the ROI nor the report's JSON (issue 11: start-up is most of a short run's time; api.py imports them
+    where used, the model's limits come from wavemesh.limits)."""
     code = ("import sys; from wavemesh.cli import main; "
             f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q']); "
             "print(status, *sorted(sys.modules))")
@@ -191,7 +192,8 @@ def test_mesh_imports_only_what_it_runs(tmp_path, ball):
     assert r.returncode == 0, r.stderr
     status, *modules = r.stdout.split()
     assert status == "0" and "wavemesh.native" in modules  # it did run the refiner
-    unused = ("wavemesh.stream", "wavemesh.link", "wavemesh.devices", "wavemesh.render", "wavemesh.tiles",
+    unused = ("wavemesh.protocol", "wavemesh.stream", "wavemesh.link", "wavemesh.devices", "wavemesh.render",
+              "wavemesh.tiles",
               "wavemesh.holes", "wavemesh.roi", "serial", "matplotlib", "tqdm", "PIL", "rasterio", "scipy",
               "trimesh", "json", "secrets", "zipfile")
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
