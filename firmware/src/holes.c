@@ -23,7 +23,8 @@
  * a grid cell's triangle of three valid samples has as a corner covered (the host meshes the others as
  * invalid: wavemesh.holes.stranded):
  *   wm_hole_cover, after the error bound: a valid vertex in no such triangle gets a vertex at another
- *       valid corner of such a cell, or the cell's diagonal swapped; the bound runs again;
+ *       valid corner of such a cell, or the cell's diagonal swapped, or the thin triangles across the
+ *       cell swapped away; the bound runs again;
  *   wm_hole_keeps_cover, in the final decimation: a removal may not take the last such triangle from a
  *       valid vertex (asked when a vertex's cost is found and again when it goes: another removal
  *       beyond its ring may have taken a ring vertex's other such triangle since).
@@ -210,6 +211,42 @@ static int swap_cell(wm_refiner *r, int32_t s, int32_t cx, int32_t cy)
     return 0;
 }
 
+static int mixed_thin(const wm_mesh *me, const wm_field *f, int32_t t)
+{
+    const wm_index *c = me->hv + 3 * t;
+    int32_t x[3], y[3];
+    wm_tri_xy(me, t, x, y);
+    return wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) == 1 &&
+           (invalid_at(f, me->vx[c[0]], me->vy[c[0]]) || invalid_at(f, me->vx[c[1]], me->vy[c[1]]) ||
+            invalid_at(f, me->vx[c[2]], me->vy[c[2]]));
+}
+
+/* The edge from vertex u to vertex w (a grid neighbour) made by swapping the edges that cross it, while
+ * each swap is of two thin triangles over both kinds (doubled area 1 each: the two new ones cover their
+ * corners alone, E(T) = 0, and no triangle of three valid corners goes).  The swaps made. */
+static int recover_edge(wm_refiner *r, int32_t u, int32_t w)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t ux = me->vx[u], uy = me->vy[u], wx = me->vx[w], wy = me->vy[w], swaps = 0;
+    for (int32_t step = 0; step < 8; step++) {
+        int32_t first = wm_fan_first(me, u), e = first, h = -1, touched[2], n;
+        do {
+            int32_t p = me->hv[WM_NEXT(e)], q = me->hv[WM_PREV(e)];
+            if (p == w || q == w) return swaps;
+            if (wm_orient(ux, uy, me->vx[p], me->vy[p], wx, wy) > 0 &&
+                wm_orient(me->vx[q], me->vy[q], ux, uy, wx, wy) > 0)
+                h = WM_NEXT(e); /* the edge p-q opposite u crosses u-w */
+            e = wm_rot_ccw(me, e);
+        } while (e >= 0 && e != first);
+        if (h < 0 || me->ho[h] < 0 || !mixed_thin(me, &r->field, WM_TRI(h)) ||
+            !mixed_thin(me, &r->field, WM_TRI(me->ho[h])) || wm_edge_swap(me, h, touched, &n) != WM_OK)
+            return swaps;
+        for (int32_t i = 0; i < n; i++) wm_touch(r, touched[i]);
+        swaps++;
+    }
+    return swaps;
+}
+
 int wm_hole_cover(wm_refiner *r)
 {
     wm_mesh *me = &r->mesh;
@@ -252,6 +289,18 @@ int wm_hole_cover(wm_refiner *r)
             if (cx < 0 || cy < 0 || cx + 1 >= f->width || cy + 1 >= f->height) continue;
             for (int32_t k = 0; k < 4; k++) n += !invalid_at(f, cx + (k & 1), cy + (k >> 1));
             if (n == 3 && swap_cell(r, s, cx, cy)) added++, done = 1;
+        }
+        /* or thin triangles across the cell: the edges from s to its valid cell corners swapped in */
+        for (int32_t c = 0; c < 4 && !done; c++) {
+            int32_t cx = x - 1 + (c & 1), cy = y - 1 + (c >> 1), n = 0;
+            if (cx < 0 || cy < 0 || cx + 1 >= f->width || cy + 1 >= f->height) continue;
+            for (int32_t k = 0; k < 4; k++) n += !invalid_at(f, cx + (k & 1), cy + (k >> 1));
+            for (int32_t k = 0; k < 4 && n >= 3; k++) {
+                int32_t ax = cx + (k & 1), ay = cy + (k >> 1), a;
+                if ((ax == x && ay == y) || invalid_at(f, ax, ay) || (a = vertex_at(me, s, ax, ay)) < 0) continue;
+                /* counted only when s is covered then: no kept triangle goes, so passes end */
+                if (recover_edge(r, s, a) && kept_at(me, f, s, -1)) added++, done = 1;
+            }
         }
     }
     return added;
