@@ -296,7 +296,10 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
     out.neighbourhood = NEIGHBOURHOODS[p.neighbourhood]
     out.iterations = p.iterations
     out.max_triangles = p.max_triangles or 0
-    out.zeta = max(0, min(U32, floor(z / s * 2**16)))  # rounded down: conservative
+    # rounded down: conservative; below 0xFFFFFFFF, the E(T) of a triangle over valid and invalid samples
+    # (firmware/src/holes.c), which must stay above zeta; no measured E(T) comes near (16-bit samples:
+    # E(T) <= 0xFFFF0000), so only a mask sees the difference
+    out.zeta = max(0, min(U32 - 1, floor(z / s * 2**16)))
     out.scale_m, out.scale_e = m, e
     out.delta_p = min(65535, round(Fraction(p.delta_p) * 2**16))
     out.alpha = min(65536, round(Fraction(p.alpha) * 2**16))

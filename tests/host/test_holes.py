@@ -161,6 +161,31 @@ def test_scanner_shadow_is_a_hole():
     assert independent_check(r.mesh, ~np.isfinite(z), r.heightfield.values, ZETA)["uncovered_valid"] == 0
 
 
+def test_a_zeta_above_every_error_still_splits_mixed_triangles():
+    # zeta saturates the refiner's Q16.16 (0xFFFFFFFF); the E(T) of a triangle over both kinds must stay
+    # above it (native.fixed_params), or such triangles stay and the host drops valid samples with them
+    z = shadowed_ball()
+    hf = from_array(z, holes=True)
+    r = api.mesh(hf, api.MeshParams(refine=RefineParams(zeta=1e9)))
+    assert independent_check(r.mesh, ~np.isfinite(z), r.heightfield.values, 1e9)["uncovered_valid"] == 0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_dropouts_cover_every_coverable_sample(seed):
+    # speckle and blobs of dropouts on a rough surface: the refiner's cover steps (holes.c) against the
+    # independent check, at a tight and a loose zeta
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(12, 40, 2)
+    z = np.cumsum(np.cumsum(rng.normal(size=(h, w)), 0), 1)
+    bad = rng.random((h, w)) < 0.3 if seed % 2 else ndimage.binary_dilation(rng.random((h, w)) < 0.04)
+    z[bad] = np.nan
+    zeta = (0.2 if seed < 3 else 3.0) * float(np.nanstd(z))
+    r = api.mesh(from_array(z, holes=True), api.MeshParams(refine=RefineParams(zeta=zeta)))
+    assert independent_check(r.mesh, bad, r.heightfield.values, zeta)["uncovered_valid"] == 0
+
+
 def test_invalid_value_marks_a_sentinel():
     z = shadowed_ball()
     z[~np.isfinite(z)] = 0.0  # a scanner's "no return"
