@@ -51,6 +51,37 @@ int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING])
     return (int)fan(m, v, e, &k, ring);
 }
 
+/* wm_incircle(a, b, c, d) > 0 for one triangle and many d (an ear against the polygon's other
+ * vertices): relative to a, with b' = b - a, c' = c - a, d' = d - a, the in-circle determinant is
+ *
+ *     -(k0 |d'|^2 + k1 d'x + k2 d'y),   k0 = b' x c',  k1 = b'y |c'|^2 - |b'|^2 c'y,  k2 = |b'|^2 c'x - b'x |c'|^2
+ *
+ * exactly (the same integer with the sign turned), so the three products per point replace the
+ * predicate's eleven.  Differences are below 2^15 (WM_MAX_SIDE): |d'|^2 and |k0| < 2^31, |k1|, |k2| <
+ * 2^47, each term below 2^62 and the sum of two below 2^63; the third is compared, as wm_incircle does. */
+struct circle {
+    int64_t k0, k1, k2;
+    int32_t ax, ay;
+};
+
+static void circle_of(struct circle *q, int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy)
+{
+    int64_t ux = (int64_t)bx - ax, uy = (int64_t)by - ay, vx = (int64_t)cx - ax, vy = (int64_t)cy - ay;
+    int64_t u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
+    q->k0 = ux * vy - uy * vx;
+    q->k1 = uy * v2 - u2 * vy;
+    q->k2 = u2 * vx - ux * v2;
+    q->ax = ax;
+    q->ay = ay;
+}
+
+static int in_circle(const struct circle *q, int32_t dx, int32_t dy)
+{
+    int64_t ex = (int64_t)dx - q->ax, ey = (int64_t)dy - q->ay;
+    int64_t s = q->k0 * (ex * ex + ey * ey) + q->k1 * ex;
+    return s < -(q->k2 * ey);
+}
+
 static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
 {
     return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
@@ -78,28 +109,36 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
         *n_tris = nt;
         return WM_OK;
     }
-    /* The polygon's coordinates in local arrays, removed from as ears are cut.  An ear's status only
-     * improves as other vertices go (fewer points to contain or to lie in its circle), so an ear once
-     * found valid stays valid and a Delaunay ear stays Delaunay until a neighbour of it is cut: ok[]
-     * keeps that (0 unknown, 1 valid, 2 valid and Delaunay) and only unknown ears are tested again.  The
-     * choice is the same as testing every ear each round: the first Delaunay ear in polygon order, else
-     * the first valid one. */
+    /* The polygon as a list over the ring positions (nx, pv; cut ones not alive), walked in position
+     * order, which is polygon order from the lowest position left.  An ear's status only improves as
+     * other vertices go (fewer points to contain or to lie in its circle), so an ear once found valid
+     * stays valid and a Delaunay ear stays Delaunay until a neighbour of it is cut: ok[] keeps that (0
+     * unknown, 1 valid, 2 valid and Delaunay) and only unknown ears are tested again; a valid ear that
+     * is not Delaunay keeps the vertex in its circle (blk) and is tested again only when that vertex
+     * has been cut (the decimation plans a hole for every vertex it looks at: this was half the cost).
+     * The choice is the same as testing every ear each round: the first Delaunay ear in polygon order,
+     * else the first valid one. */
     {
-        int32_t px[WM_MAX_RING], py[WM_MAX_RING];
-        int8_t ok[WM_MAX_RING];
+        int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
+        int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
+        int32_t left = n, i0 = 0;
         for (int32_t i = 0; i < n; i++) {
-            poly[i] = ring[i];
             px[i] = m->vx[ring[i]];
             py[i] = m->vy[ring[i]];
+            nx[i] = i + 1 == n ? 0 : i + 1;
+            pv[i] = i == 0 ? n - 1 : i - 1;
             ok[i] = 0;
+            alive[i] = 1;
         }
-        while (n > 3) {
+        while (left > 3) {
             int32_t best = -1, valid = -1;
             for (int32_t i = 0; i < n; i++) {
-                int32_t ia = i == 0 ? n - 1 : i - 1, ic = i + 1 == n ? 0 : i + 1, j;
-                int32_t ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
-                int32_t x0, x1, y0, y1;
+                int32_t ia = pv[i], ic = nx[i], j;
+                int32_t ax, ay, bx, by, cx, cy;
+                if (!alive[i]) continue;
+                ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
+                    int32_t x0, x1, y0, y1;
                     if (wm_orient(ax, ay, bx, by, cx, cy) <= 0) continue;
                     x0 = ax < bx ? ax : bx;
                     if (cx < x0) x0 = cx;
@@ -109,9 +148,9 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                     if (cy < y0) y0 = cy;
                     y1 = ay > by ? ay : by;
                     if (cy > y1) y1 = cy;
-                    /* the other ring vertices, ic + 1 .. ia - 1 (either test's answer does not depend
-                     * on the order) */
-                    for (j = ic + 1 == n ? 0 : ic + 1; j != ia; j = j + 1 == n ? 0 : j + 1) {
+                    /* the other polygon vertices, after ic up to ia (either test's answer does not
+                     * depend on the order) */
+                    for (j = nx[ic]; j != ia; j = nx[j]) {
                         if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
                         if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 &&
                             wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
@@ -120,12 +159,16 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                     }
                     if (j != ia) continue;
                     ok[i] = 1;
+                    blk[i] = -1;
                 }
                 if (valid < 0) valid = i; /* the first valid ear, unless a Delaunay one follows */
-                if (ok[i] == 1) {
-                    for (j = ic + 1 == n ? 0 : ic + 1; j != ia; j = j + 1 == n ? 0 : j + 1)
-                        if (wm_incircle(ax, ay, bx, by, cx, cy, px[j], py[j]) > 0) break;
+                if (ok[i] == 1 && (blk[i] < 0 || !alive[blk[i]])) {
+                    struct circle q;
+                    circle_of(&q, ax, ay, bx, by, cx, cy);
+                    for (j = nx[ic]; j != ia; j = nx[j])
+                        if (in_circle(&q, px[j], py[j])) break;
                     if (j == ia) ok[i] = 2;
+                    else blk[i] = j;
                 }
                 if (ok[i] == 2) {
                     best = i;
@@ -136,18 +179,16 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
             /* A simple polygon always has an ear (two, in fact). */
             WM_ASSERT(best >= 0);
             if (best < 0) return WM_ERR_REFUSED;
-            tris[3 * nt] = poly[(best + n - 1) % n], tris[3 * nt + 1] = poly[best],
-                     tris[3 * nt + 2] = poly[(best + 1) % n];
+            tris[3 * nt] = ring[pv[best]], tris[3 * nt + 1] = ring[best], tris[3 * nt + 2] = ring[nx[best]];
             nt++;
-            ok[(best + n - 1) % n] = ok[(best + 1) % n] = 0; /* its neighbours' ears changed shape */
-            for (int32_t i = best; i + 1 < n; i++) {
-                poly[i] = poly[i + 1];
-                px[i] = px[i + 1];
-                py[i] = py[i + 1];
-                ok[i] = ok[i + 1];
-            }
-            n--;
+            ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
+            nx[pv[best]] = nx[best];
+            pv[nx[best]] = pv[best];
+            alive[best] = 0;
+            left--;
         }
+        while (!alive[i0]) i0++;
+        poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
     }
     if (orient3(m, poly[0], poly[1], poly[2]) <= 0) return WM_ERR_REFUSED;
     tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
