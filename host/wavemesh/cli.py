@@ -18,7 +18,6 @@ from wavemesh.denoise import METHODS
 from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.haar import WAVELETS
 from wavemesh.native import RefineParams
-from wavemesh.synth import ALIASES, DATASETS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -272,6 +271,8 @@ def _devices_parser(sub) -> None:
 
 
 def _synth_parser(sub) -> None:
+    from wavemesh.synth import ALIASES, DATASETS  # only `synth` (and help) builds this parser
+
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
         "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))

@@ -193,9 +193,8 @@ def test_mesh_imports_only_what_it_runs(tmp_path, ball):
     status, *modules = r.stdout.split()
     assert status == "0" and "wavemesh.native" in modules  # it did run the refiner
     unused = ("wavemesh.protocol", "wavemesh.stream", "wavemesh.link", "wavemesh.devices", "wavemesh.render",
-              "wavemesh.tiles",
-              "wavemesh.holes", "wavemesh.roi", "serial", "matplotlib", "tqdm", "PIL", "rasterio", "scipy",
-              "trimesh", "json", "secrets", "zipfile")
+              "wavemesh.tiles", "wavemesh.synth", "wavemesh.holes", "wavemesh.roi", "serial", "matplotlib",
+              "tqdm", "PIL", "rasterio", "scipy", "trimesh", "json", "secrets", "zipfile")
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
 
 
