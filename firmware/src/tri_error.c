@@ -168,7 +168,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
 {
     const uint16_t *h = f->samples;
     int32_t A[3], B[3], C[3], xmin = x[0], xmax = x[0], ymin = y[0], ymax = y[0], bx = x[0], by = y[0];
-    uint32_t z[3], dS = 0, vm = 0;
+    uint32_t z[3], dS = 0, dSy = 0, Sr = 0, vm = 0;
     for (int k = 0; k < 3; k++) {
         int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
         z[k] = h[y[k] * f->width + x[k]];
@@ -180,11 +180,15 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         if (x[k] < xmin) xmin = x[k];
         if (x[k] > xmax) xmax = x[k];
     }
-    for (int k = 0; k < 3; k++) dS += (uint32_t)A[k] * z[k];
-    for (int32_t py = ymin; py <= ymax; py++) {
+    /* S = dS px + dSy py + S0 modulo 2^32 (V is taken modulo 2^32 anyway): one product a row */
+    for (int k = 0; k < 3; k++) {
+        dS += (uint32_t)A[k] * z[k];
+        dSy += (uint32_t)B[k] * z[k];
+        Sr += (uint32_t)(B[k] * ymin + C[k]) * z[k];
+    }
+    for (int32_t py = ymin; py <= ymax; py++, Sr += dSy) {
         int32_t lo = xmin, hi = xmax, num[3];
         const uint16_t *row = h + py * f->width, *at = NULL;
-        uint32_t S = 0;
         int empty = 0;
         for (int k = 0; k < 3; k++) {
             num[k] = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
@@ -199,8 +203,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
             }
         }
         if (empty || lo > hi) continue;
-        for (int k = 0; k < 3; k++) S += (uint32_t)(A[k] * lo + num[k]) * z[k];
-        vm = row_max32(row + lo, row + hi + 1, S, dS, d, vm, limit, &at);
+        vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, limit, &at);
         if (at) {
             bx = (int32_t)(at - row);
             by = py;
