@@ -342,8 +342,13 @@ static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
 
 void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
 {
-    heap_remove(r, t, n);
-    if (r->err[t] > r->params.zeta) {
+    int32_t i = r->pos[t];
+    if (r->err[t] <= r->params.zeta) {
+        heap_remove(r, t, n);
+    } else if (i >= 0 && i < *n && r->list[i] == t) { /* in place: (E(T), slot) orders totally */
+        heap_up(r, i);
+        heap_down(r, r->pos[t], *n);
+    } else {
         r->pos[t] = *n;
         r->list[(*n)++] = t;
         heap_up(r, *n - 1);
