@@ -14,6 +14,7 @@ timeouts for the simulated board and its in-process CLI runner).  Each mesh is a
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -91,7 +92,9 @@ def run() -> dict:
     code = code_state()  # the work tree is shared: what the firmware was built from
     exe, fw = build.build_sim(), build.build_firmware()
     saved = S.DEFAULT_TIMEOUTS
-    S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS  # read when the CLI opens the device
+    # read when the CLI opens the device; longer waits than the tests' (a benchmark runs at nice 19
+    # beside other work, where the simulator may get a tenth of a core): no device cycle depends on them
+    S.DEFAULT_TIMEOUTS = dataclasses.replace(SIM_TIMEOUTS, sync=20.0, reply=60.0, ack=30.0, job=3600.0)
     board = SimBoard(exe, fw, "--port", "0", "--fast", "--quiet")
     try:
         with tempfile.TemporaryDirectory() as tmp:

@@ -24,6 +24,10 @@
 // --profile FILE writes, at exit, "PC CYCLES" lines (hex, decimal): every cycle is counted against the
 // address of the last instruction fetched (the CPU is not pipelined: the cycles an instruction takes,
 // its memory accesses included, follow its fetch).  tools/board_profile.py maps them to functions.
+// With it, FILE.data gets the data accesses by 64-byte block: "BLOCK WAIT READS WRITES" (the block's
+// byte address in hex; the cycles data accesses to it waited beyond the 2 of a block RAM's answer,
+// and the reads and writes it took): where the SDRAM's misses and write-through cost go
+// (tools/board_profile.py --data maps them to the memory map's areas and the refiner's arrays).
 //
 // Exit status: 0 halt with code 0 (or the client left with --exit-on-close); 1 halt with another
 // code; 2 CPU trap; 3 --max-cycles reached; 4 socket error; 64 bad command line; 130 interrupted.
@@ -43,6 +47,7 @@
 #include "Vboard_sim.h"
 #include "tcp_bridge.h"
 #include "uart_line.h"
+#include "wm_memmap.h"
 #include "verilated.h"
 #if VM_TRACE
 #include "verilated_fst_c.h"
@@ -226,7 +231,18 @@ public:
         }
         if (profiling_) {
             if (top_->prof_fetch) pc_ = top_->prof_pc;
-            ++profile_[pc_];
+            if (pc_ / 2 < profile_fw_.size())
+                ++profile_fw_[pc_ / 2];  // the firmware RAM: an array (a map lookup a cycle halved the rate)
+            else
+                ++profile_[pc_];
+            if (top_->prof_data_wait) {
+                ++data_wait_;
+            } else if (top_->prof_data_done) {
+                DataBlock &b = data_[top_->prof_pc >> 6];
+                b.wait += data_wait_ > 1 ? data_wait_ - 1 : 0;  // a block RAM waits 1 cycle
+                ++(top_->prof_data_write ? b.writes : b.reads);
+                data_wait_ = 0;
+            }
         }
         top_->clk = 1;
         top_->eval();
@@ -236,10 +252,19 @@ public:
     }
 
     // The --profile histogram, "PC CYCLES" per line in address order; false when it cannot be written.
-    bool write_profile(const std::string &path) const {
+    bool write_profile(const std::string &path) {
         FILE *f = fopen(path.c_str(), "w");
         if (!f) return false;
+        for (size_t i = 0; i < profile_fw_.size(); ++i)
+            if (profile_fw_[i]) profile_[static_cast<uint32_t>(2 * i)] += profile_fw_[i];
+        profile_fw_.clear();
         for (const auto &kv : profile_) fprintf(f, "%08x %" PRIu64 "\n", kv.first, kv.second);
+        if (fclose(f) != 0) return false;
+        f = fopen((path + ".data").c_str(), "w");
+        if (!f) return false;
+        for (const auto &kv : data_)
+            fprintf(f, "%08x %" PRIu64 " %" PRIu64 " %" PRIu64 "\n", kv.first << 6, kv.second.wait, kv.second.reads,
+                    kv.second.writes);
         return fclose(f) == 0;
     }
 
@@ -284,6 +309,12 @@ private:
     bool profiling_ = !opt_.profile.empty();
     uint32_t pc_ = 0;
     std::map<uint32_t, uint64_t> profile_;
+    std::vector<uint64_t> profile_fw_ = std::vector<uint64_t>(profiling_ ? WM_FW_RAM_ENTRIES * 2 : 0);
+    struct DataBlock {
+        uint64_t wait = 0, reads = 0, writes = 0;
+    };
+    uint64_t data_wait_ = 0;  // cycles the current data access has waited
+    std::map<uint32_t, DataBlock> data_;
 };
 
 }  // namespace

@@ -52,7 +52,12 @@ module board_sim
 
     // for wmsim --profile: an instruction fetch completes this cycle, and its address (the PC)
     output wire         prof_fetch,
-    output wire [31:0]  prof_pc
+    output wire [31:0]  prof_pc,
+    // for wmsim --data-profile: a data access waits (request made, not answered) this cycle, or
+    // completes; its address (prof_pc) and whether it writes
+    output wire         prof_data_wait,
+    output wire         prof_data_done,
+    output wire         prof_data_write
 );
 
 wire        wifi_gpio0;
@@ -123,6 +128,11 @@ assign trap = top_inst.trap_unused;
 assign prof_fetch = top_inst.soc_inst.mem_valid && top_inst.soc_inst.mem_instr_unused
                     && top_inst.soc_inst.mem_ready;
 assign prof_pc = top_inst.soc_inst.mem_addr;
+assign prof_data_wait = top_inst.soc_inst.mem_valid && !top_inst.soc_inst.mem_instr_unused
+                        && !top_inst.soc_inst.mem_ready;
+assign prof_data_done = top_inst.soc_inst.mem_valid && !top_inst.soc_inst.mem_instr_unused
+                        && top_inst.soc_inst.mem_ready;
+assign prof_data_write = |top_inst.soc_inst.mem_wstrb;
 
 // the ESP32 must see wifi_gpio0 high (docs/boards.md): a top that let it go low would fail here
 always @(posedge clk) begin

@@ -9,12 +9,19 @@ wavemesh.harness.simboard, as the tests and benchmarks do), streams INPUT with t
 the host included: it shows up in the UART receive loop) by function, from the firmware's ELF symbols
 (riscv64-unknown-elf-nm).  Every cycle counts against the last instruction fetched (sim/board_main.cpp,
 --profile): a function's *self* cycles, not its callees'.
+
+--data also prints where the data accesses wait (wmsim's FILE.data: the cycles each access waited beyond
+a block RAM's answer): by memory-map area (the stack and the rest of the firmware RAM, the SDRAM's
+HEIGHT, COEF, TOUT) and, in the heap, by the refiner's arrays (firmware/src refine.c and mesh.c's
+layout for the job's grid and the board's storage clamp, app/job.c), with the reads and writes of each.
 """
 
 from __future__ import annotations
 
 import argparse
 import bisect
+import json
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -41,15 +48,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("input")
     ap.add_argument("--top", type=int, default=30, help="functions to list (default 30)")
     ap.add_argument("--raw", help="also keep the raw PC histogram here")
+    ap.add_argument("--data", action="store_true", help="also the data accesses' waits by area and array")
+    ap.add_argument("--firmware", help="profile this image (FILE.hex, FILE.elf beside it), not a new build")
     args, stream_opts = ap.parse_known_args(argv)
-    sim, hexfile = simboard.build.build_sim(), simboard.build.build_firmware()
-    elf = hexfile.with_suffix(".elf")
+    sim = simboard.build.build_sim()
+    hexfile = Path(args.firmware) if args.firmware else simboard.build.build_firmware()
     with tempfile.TemporaryDirectory() as tmp:
+        # a copy of the image: the work tree is shared, and a build during the run would move the symbols
+        elf = Path(tmp) / "fw.elf"
+        shutil.copyfile(hexfile.with_suffix(".elf"), elf)
+        shutil.copyfile(hexfile, elf.with_suffix(".hex"))
+        hexfile = elf.with_suffix(".hex")
         prof = Path(args.raw) if args.raw else Path(tmp) / "profile.txt"
         board = simboard.SimBoard(sim, hexfile, "--port", "0", "--fast", "--exit-on-close", "--quiet",
                                   "--profile", str(prof))
+        report = Path(tmp) / "report.json"
         cmd = [str(VENV_BIN / "wavemesh"), "stream", args.input, *stream_opts, "--port", board.url, "-o",
-               str(Path(tmp) / "out.obj"), "--quiet",
+               str(Path(tmp) / "out.obj"), "--quiet", "--report", str(report),
                *([] if "--timeout" in stream_opts else ["--timeout", "3600"])]
         try:
             rc = subprocess.run(cmd).returncode
@@ -60,7 +75,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: wavemesh stream exited {rc}", file=sys.stderr)
             return 2
         hist = [(int(a, 16), int(c)) for a, c in (ln.split() for ln in prof.read_text().splitlines())]
-    syms = _symbols(elf)
+        if args.data:
+            rep = json.loads(report.read_text())
+            data = [[int(f, 16) if i == 0 else int(f) for i, f in enumerate(ln.split())]
+                    for ln in Path(str(prof) + ".data").read_text().splitlines()]
+            areas = _areas(rep, elf)
+        syms = _symbols(elf)
     addrs = [a for a, _ in syms]
     per: dict[str, int] = {}
     for pc, cyc in hist:
@@ -71,7 +91,72 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{total:,} cycles")
     for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: args.top]:
         print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
+    if args.data:
+        _data_report(data, areas, total)
     return 0
+
+
+def _refiner_struct_bytes() -> int:
+    """sizeof(struct wm_refiner) on the board (rv32, 32-bit indices), from the cross compiler."""
+    root = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        src, obj = Path(tmp) / "probe.c", Path(tmp) / "probe.o"
+        src.write_text('#include "wm_internal.h"\nchar probe[sizeof(struct wm_refiner)];\n')
+        subprocess.run(["riscv64-unknown-elf-gcc", "-ffreestanding", "-march=rv32im", "-mabi=ilp32",
+                        "-DWM_INDEX_BITS=32", f"-I{root / 'firmware/src'}", f"-I{root / 'firmware/include'}",
+                        f"-I{root / 'build/gen'}", "-c", str(src), "-o", str(obj)], check=True)
+        out = subprocess.run(["riscv64-unknown-elf-nm", "-S", str(obj)], check=True, capture_output=True,
+                             text=True).stdout
+    return int(out.split()[1], 16)
+
+
+def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
+    """(start address, name), ascending: the firmware RAM's parts, the SDRAM's areas, the refiner's arrays."""
+    from wavemesh import memmap as mm
+
+    def a8(n: int) -> int:
+        return (n + 7) & ~7
+
+    syms = {}
+    for line in subprocess.run(["riscv64-unknown-elf-nm", str(elf)], check=True, capture_output=True,
+                               text=True).stdout.splitlines():
+        parts = line.split()
+        if len(parts) == 3:
+            syms[parts[2]] = int(parts[0], 16)
+    w, h = rep["input"]["width"], rep["input"]["height"]
+    cap = min(rep["device"]["tri_capacity"], 2 * (w - 1) * (h - 1))  # app/job.c's clamp (wm_tri_cap_max)
+    vc = cap // 2 + w + h + 2  # wm_vert_cap_for
+    items = max(cap, vc)
+    out = [(mm.FW_RAM.base, "firmware RAM: code, rodata"), (syms["__data_start"], "firmware RAM: data, bss"),
+           (syms["__bss_end"], "firmware RAM: free"), (syms["__stack_bottom"], "firmware RAM: stack"),
+           (mm.HEIGHT.base, "SDRAM HEIGHT (samples)"), (mm.COEF.base, "SDRAM COEF (details)"),
+           (mm.TOUT.base, "SDRAM TOUT"), (mm.HEAP.base, "heap: struct wm_refiner")]
+    q = mm.HEAP.base + a8(_refiner_struct_bytes())
+    for name, size in (("hv", 12 * cap), ("ho", 12 * cap), ("vh", 4 * vc), ("vx", 2 * vc), ("vy", 2 * vc),
+                       ("tflag", cap), ("err", 4 * cap), ("worst", 4 * cap), ("list", 4 * items),
+                       ("pos", 4 * items), ("vkey", 4 * vc), ("vapex", vc)):
+        out.append((q, f"heap: {name}"))
+        q += a8(size) if name not in ("err", "list") else size
+    out.append((q, "heap: above the refiner (staging, hole mask)"))
+    return out
+
+
+def _data_report(data: list[list[int]], areas: list[tuple[int, str]], total: int) -> None:
+    starts = [a for a, _ in areas]
+    per: dict[str, list[int]] = {}
+    for block, wait, reads, writes in data:
+        i = bisect.bisect_right(starts, block) - 1
+        name = areas[i][1] if i >= 0 else "?"
+        acc = per.setdefault(name, [0, 0, 0])
+        acc[0] += wait
+        acc[1] += reads
+        acc[2] += writes
+    waited = sum(v[0] for v in per.values())
+    share = 100 * waited / total
+    print(f"\ndata accesses: {waited:,} cycles waited beyond a block RAM's ({share:.2f} % of all)")
+    print(f"{'waited':>14} {'share':>8} {'reads':>14} {'writes':>14}  area")
+    for name, (wait, reads, writes) in sorted(per.items(), key=lambda kv: -kv[1][0]):
+        print(f"{wait:>14,} {100 * wait / max(waited, 1):6.2f} % {reads:>14,} {writes:>14,}  {name}")
 
 
 if __name__ == "__main__":

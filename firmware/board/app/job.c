@@ -45,9 +45,9 @@ uint32_t board_job_capacity(size_t heap_bytes, int32_t width, int32_t height)
         int32_t nv = wm_vert_cap_for(width, height, (int32_t)c);
         size_t need = wm_refine_bound(width, height, (int32_t)c);
         int32_t side = width > height ? width : height;
-        /* lattice: at most 2 (cap/2) + 2 (cols + rows) + 1 points, rows of at most 2 side + 1 */
-        size_t lat = ALIGN8(((size_t)c + 4u * (size_t)side + 1u) / 8u + 4u * (2u * (size_t)side + 1u)) +
-                     ALIGN8(4u * (2u * (size_t)side + 1u));
+        /* lattice: at most 2 (cap/2) + 2 (cols + rows) + 1 points, rows of at most 2 side + 1; the
+         * bitmap and its word bases (as many words) */
+        size_t lat = 2 * ALIGN8(((size_t)c + 4u * (size_t)side + 1u) / 8u + 4u * (2u * (size_t)side + 1u));
         need = need ? ALIGN8(need) + ALIGN8(12u * (size_t)c + 4u) + ALIGN8(8u * (size_t)nv) + lat : 0;
         if (need && need <= heap_bytes) lo = c;
         else hi = c - 1;

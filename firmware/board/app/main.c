@@ -41,6 +41,10 @@ static uint32_t ms_cycles;
 static int io_getc(void *ctx, uint32_t timeout_ms)
 {
     (void)ctx;
+    if (timeout_ms == 0) { /* a byte already waiting (the engine's bursts): no cycle counter reads */
+        int c = board_uart_getc();
+        return c >= 0 ? c : WM_PROTO_RX_TIMEOUT;
+    }
     for (;;) {
         uint32_t ms = timeout_ms > GETC_CHUNK_MS ? GETC_CHUNK_MS : timeout_ms;
         int c = board_uart_getc_timeout(ms * ms_cycles);

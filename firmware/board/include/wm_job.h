@@ -62,7 +62,7 @@ typedef struct wm_job_initial_mesh {
 /*
  * The initial triangulation of nt triangles (wm_job_triangles) from the blocks' template entries, in
  * canonical form, staged from the END of mem[0..bytes) downwards (the caller keeps the start for the
- * refiner's storage): triangles, the lattice bitmap and its row bases, then the vertices.  Nothing is
+ * refiner's storage): triangles, the lattice bitmap and its word bases, then the vertices.  Nothing is
  * read before it is written there.  WM_ERR_MEMORY when the staging would reach below mem + keep
  * (wm_job_initial_bound bytes above keep always suffice); WM_ERR_ARG on a template id out of range.
  */

@@ -7,14 +7,16 @@
  * 2 wide; a 1-wide last block has no middle of its own), rows likewise.  Positions grow with the
  * lattice index, so numbering the occupied lattice points row by row (a bitmap, its popcounts per
  * row) gives the canonical vertex order.  The triangles are then sorted in place (a heap sort of
- * their index triples: no scratch, n log n on every input).
+ * their index triples: no scratch, n log n on every input), a block row at a time: a triangle's
+ * smallest vertex number lies on its block row's top lattice row or the one below (it spans two
+ * lattice rows at least), so the block rows are already in order.
  *
  * Staging, from the end of the caller's storage downwards:
  *
  *   mem + keep   (the caller's: the refiner's storage)
  *                (free)
  *   low          xy[2 nv]
- *                row bases of the bitmap [ncy]
+ *                word bases of the bitmap [ncy rows of wpr words]: the points before each word
  *                the lattice bitmap [ncy rows of wpr words]
  *   mem + bytes  tris[3 nt]
  */
@@ -187,7 +189,7 @@ size_t wm_job_initial_bound(const wm_job_blocks *b, int32_t nt)
 {
     size_t ncx = 2 * (size_t)b->cols + 1, ncy = 2 * (size_t)b->rows + 1, wpr = (ncx + 31) / 32;
     size_t nv = ncx * ncy < 3 * (size_t)nt ? ncx * ncy : 3 * (size_t)nt;
-    return ALIGN8(12u * (size_t)nt) + ALIGN8(4u * wpr * ncy) + ALIGN8(4u * ncy) + ALIGN8(8u * nv);
+    return ALIGN8(12u * (size_t)nt) + 2 * ALIGN8(4u * wpr * ncy) + ALIGN8(8u * nv);
 }
 
 int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int32_t nt, void *mem, size_t bytes,
@@ -198,12 +200,12 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     uint8_t *base = mem, *floor = base + keep, *top = base + bytes;
     size_t tri_bytes = ALIGN8(12u * (size_t)nt), bit_bytes = ALIGN8(4u * (size_t)wpr * (size_t)ncy);
     int32_t *tris, *xy, nv = 0, n = 0;
-    uint32_t *bits, *rowbase;
+    uint32_t *bits, *wbase;
 
-    if (keep > bytes || bytes - keep < tri_bytes + bit_bytes + ALIGN8(4u * (size_t)ncy)) return WM_ERR_MEMORY;
+    if (keep > bytes || bytes - keep < tri_bytes + 2 * bit_bytes) return WM_ERR_MEMORY;
     tris = (int32_t *)(void *)(top - tri_bytes);
     bits = (uint32_t *)(void *)((uint8_t *)tris - bit_bytes);
-    rowbase = (uint32_t *)(void *)((uint8_t *)bits - ALIGN8(4u * (size_t)ncy));
+    wbase = (uint32_t *)(void *)((uint8_t *)bits - bit_bytes);
     memset(bits, 0, 4u * (size_t)wpr * (size_t)ncy);
 
     /* the occupied lattice points, then their numbers (row by row: the canonical order) */
@@ -220,13 +222,13 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
             }
         }
     }
-    for (int32_t v = 0; v < ncy; v++) {
-        rowbase[v] = (uint32_t)nv;
-        for (int32_t q = 0; q < wpr; q++) nv += popcount(bits[v * wpr + q]);
+    for (int32_t w = 0; w < ncy * wpr; w++) {
+        wbase[w] = (uint32_t)nv;
+        nv += popcount(bits[w]);
     }
-    if ((size_t)((uint8_t *)rowbase - floor) < ALIGN8(8u * (size_t)nv) || (uint8_t *)rowbase < floor)
+    if ((size_t)((uint8_t *)wbase - floor) < ALIGN8(8u * (size_t)nv) || (uint8_t *)wbase < floor)
         return WM_ERR_MEMORY;
-    xy = (int32_t *)(void *)((uint8_t *)rowbase - ALIGN8(8u * (size_t)nv));
+    xy = (int32_t *)(void *)((uint8_t *)wbase - ALIGN8(8u * (size_t)nv));
     for (int32_t v = 0; v < ncy; v++) {
         int32_t y = position(&ay, v);
         for (int32_t u = 0; u < ncx; u++) {
@@ -241,6 +243,7 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     /* the triangles: vertex numbers, from the smallest (orientation kept), sorted */
     n = 0;
     for (int32_t jb = 0; jb < rows; jb++) {
+        int32_t n0 = n;
         for (int32_t ib = 0; ib < cols; ib++) {
             unsigned tid = template_of(entries, jb * cols + ib);
             for (int t = 0; t < wm_template_ntri[tid] && n < nt; t++, n++) {
@@ -248,19 +251,17 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
                 for (int k = 0; k < 3; k++) {
                     int s = wm_template_tri[tid][t][k];
                     int32_t u = lattice(&ax, ib, s % 3), v = lattice(&ay, jb, s / 3);
-                    const uint32_t *row = bits + v * wpr;
-                    int32_t below = (int32_t)rowbase[v];
-                    for (int32_t q = 0; q < (u >> 5); q++) below += popcount(row[q]);
-                    id[k] = below + popcount(row[u >> 5] & ((1u << (u & 31)) - 1u));
+                    int32_t w = v * wpr + (u >> 5);
+                    id[k] = (int32_t)wbase[w] + popcount(bits[w] & ((1u << (u & 31)) - 1u));
                 }
                 if (id[1] < id[0] && id[1] < id[2]) tri[0] = id[1], tri[1] = id[2], tri[2] = id[0];
                 else if (id[2] < id[0] && id[2] < id[1]) tri[0] = id[2], tri[1] = id[0], tri[2] = id[1];
                 else tri[0] = id[0], tri[1] = id[1], tri[2] = id[2];
             }
         }
+        sort_tris(tris + 3 * n0, n - n0);
     }
     if (n != nt) return WM_ERR_ARG; /* nt is not these entries' count */
-    sort_tris(tris, nt);
 
     out->xy = xy, out->tris = tris, out->nv = nv, out->nt = nt, out->low = (uint8_t *)xy;
     return WM_OK;
