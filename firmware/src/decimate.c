@@ -34,7 +34,7 @@ static int fan_may_fit(const wm_refiner *r, const int32_t *rx, const int32_t *ry
         int64_t fk = wm_orient(rx[a], ry[a], rx[k], ry[k], vx, vy);
         if (fj >= 0 && fk <= 0) {
             int32_t x[3] = {rx[a], rx[j], rx[k]}, y[3] = {ry[a], ry[j], ry[k]};
-            return wm_point_error(&r->field, &r->params, x, y, vx, vy) <= r->params.zeta;
+            return !wm_point_above(&r->field, &r->params, x, y, vx, vy, r->params.zeta);
         }
         j = k;
         fj = fk;
@@ -66,7 +66,6 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
          * above for a fan.) */
         for (j = a >= 0 ? nt : 0; j < nt; j++) {
             int32_t x[3], y[3];
-            uint32_t e;
             for (int c = 0; c < 3; c++) {
                 x[c] = me->vx[tris[3 * j + c]];
                 y[c] = me->vy[tris[3 * j + c]];
@@ -74,8 +73,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
             if (wm_orient(x[0], y[0], x[1], y[1], vx, vy) < 0 || wm_orient(x[1], y[1], x[2], y[2], vx, vy) < 0 ||
                 wm_orient(x[2], y[2], x[0], y[0], vx, vy) < 0)
                 continue;
-            e = wm_point_error(&r->field, &r->params, x, y, vx, vy);
-            if (e > r->params.zeta) j = -1;
+            if (wm_point_above(&r->field, &r->params, x, y, vx, vy, r->params.zeta)) j = -1;
             break;
         }
         if (j < 0) continue;

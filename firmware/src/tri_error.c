@@ -318,3 +318,19 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
     v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
     return finish(f, p, x, y, D, (uint64_t)(v < 0 ? -v : v), 0);
 }
+
+int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                   int32_t py, uint32_t bound)
+{
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
+    /* the vertical metric without a mask: E = min(ceil(2^16 |V| / D), 2^32 - 1) > bound iff
+     * 2^16 |V| > bound D (|V| < 2^47, bound D < 2^63), so no division; otherwise as measured */
+    if (D <= 0 || p->metric != WM_METRIC_VERTICAL || f->mask || bound == 0xFFFFFFFFu)
+        return wm_point_error(f, p, x, y, px, py) > bound;
+    for (int k = 0; k < 3; k++) {
+        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
+    }
+    v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
+    return (uint64_t)(v < 0 ? -v : v) * 65536u > (uint64_t)bound * (uint64_t)D;
+}

@@ -104,6 +104,9 @@ int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int3
  * than wm_tri_error of the same triangle, so a value above zeta rules the triangle out cheaply. */
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                         int32_t py);
+/* wm_point_error(...) > bound, without a division in the vertical metric (the decimation's cheap test). */
+int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                   int32_t py, uint32_t bound);
 /* E(T) when it is at most bound; otherwise some value above bound, found with the scan stopped at the
  * first sample that puts E(T) over it (the tests of the reduction and the decimation need no more). */
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
