@@ -7,7 +7,8 @@
  * [iS, min((i+1)S, W-1)] x [jS, min((j+1)S, H-1)], closed, so a sample on a block boundary counts for
  * every block it bounds.  The reference model is wavemesh.holes.block_flags; tests/rtl/test_tlut_holes.py
  * checks every flag against it.  The mesh does not need the flags (the templates see filled heights and
- * the refiner reads the mask itself, docs/model.md "Holes"): this is the flag a template could carry.
+ * the refiner reads the mask itself, docs/model.md "Holes"); tlut_stage with HOLES = 1 puts it beside
+ * each block's template (tuser[45]).
  *
  *   s_data, s_valid, s_ready   the mask, one bit a sample, row by row (W per row, H rows)
  *   m_data, m_valid, m_ready   the flags, block row by block row (cols = ceil((W-1)/S) per row)

@@ -48,6 +48,21 @@
  *   |               | 43:28 | by, block row                                |
  *   |               | 44    | block_end: last triangle of this block       |
  *   | m_axis_tlast  | 1     | last triangle of the frame's last block      |
+ *   | m_axis_tuser  | 45    | hole: the block holds an invalid sample      |
+ *   |               |       | (only with HOLES = 1; tuser is 45 bits else) |
+ *
+ * Validity mask in (HOLES = 1 only, --nodata hole, issue 20): s_mask_tdata, one bit per sample in
+ * raster order (1: invalid), W * H per frame, on its own valid/ready stream.  tlut_holes turns it
+ * into one flag per block (wavemesh.holes.block_flags, closed blocks), block row by block row; a
+ * FIFO of HOLES_FIFO_DEPTH flags pairs them with the blocks, which leave in the same order: a beat
+ * goes out only with its block's flag at the FIFO's head (tvalid = the triangle's valid AND the
+ * flag's), and the flag is taken with the block's block_end beat.  The mask stream waits when that
+ * FIFO is full, the triangles when the flag is not in yet; nothing else depends on the mask.  A block
+ * row's flags are complete with its last sample row, its templates only with the next block row's
+ * records: when the mask and the heights come from one source in lockstep, the FIFO must hold two
+ * block rows of flags (HOLES_FIFO_DEPTH >= 2 x block columns, the default) or the two wait for
+ * each other.  With
+ * HOLES = 0 the mask ports are unused (s_mask_tready low) and the stage is exactly as without them.
  *
  * Throughput: one triangle per cycle; a block takes as many cycles as its template has triangles
  * (2..8), back to back (FIFO_DEPTH = 4 keeps even all-flat frames, 2 cycles per block, gap-free).
@@ -77,7 +92,12 @@ module tlut_stage #(
     //    alone, with tuser's template id and label, tri_index 0, bx = by = 0 (not counted) and
     //    tdata 0; tlast on the frame's last block.  For a consumer that wants only the templates
     //    (the SoC's TOUT writer, rtl/boards/stage_uart.v).
-    parameter EXPAND = 1
+    parameter EXPAND = 1,
+    // 1: take a validity mask and put each block's hole flag on tuser[45] (above); 0: no mask
+    parameter HOLES = 0,
+    // block flags buffered ahead of their blocks (HOLES = 1), >= 2; a source that sends the mask
+    // and the records' samples in lockstep needs two block rows' worth (the default)
+    parameter HOLES_FIFO_DEPTH = 2 * MAX_COLS
 ) (
     input  wire         clk,
     input  wire         rst,
@@ -95,10 +115,17 @@ module tlut_stage #(
      * Triangles out
      */
     output wire [95:0]  m_axis_tdata,
-    output wire [44:0]  m_axis_tuser,
+    output wire [44+(HOLES ? 1 : 0):0] m_axis_tuser,
     output wire         m_axis_tvalid,
     input  wire         m_axis_tready,
     output wire         m_axis_tlast,
+
+    /*
+     * Validity mask in (HOLES = 1): a bit per sample, raster order, 1 = invalid
+     */
+    input  wire         s_mask_tdata,
+    input  wire         s_mask_tvalid,
+    output wire         s_mask_tready,
 
     /*
      * Configuration
@@ -382,6 +409,13 @@ wire [FIFO_WIDTH-1:0] fifo_data;
 wire [$clog2(FIFO_DEPTH+1)-1:0] fifo_count_unused;
 wire                  exp_ready;
 
+// the triangle stream before the hole flags join it (HOLES = 0: the output itself)
+wire [95:0] st_tdata;
+wire [44:0] st_tuser;
+wire        st_tvalid;
+wire        st_tready;
+wire        st_tlast;
+
 assign fifo_pop = fifo_valid && exp_ready;
 
 // The resolver cannot wait: the credits guarantee the FIFO room for every block it writes
@@ -428,11 +462,11 @@ expand_inst (
     .s_label(fifo_data[12:10]),
     .s_tid(fifo_data[9:4]),
     .s_ntri(fifo_data[3:0]),
-    .m_axis_tdata(m_axis_tdata),
-    .m_axis_tuser(m_axis_tuser),
-    .m_axis_tvalid(m_axis_tvalid),
-    .m_axis_tready(m_axis_tready),
-    .m_axis_tlast(m_axis_tlast),
+    .m_axis_tdata(st_tdata),
+    .m_axis_tuser(st_tuser),
+    .m_axis_tvalid(st_tvalid),
+    .m_axis_tready(st_tready),
+    .m_axis_tlast(st_tlast),
     .cfg_levels(cfg_levels),
     .cfg_xmax(xmax_reg),
     .cfg_ymax(ymax_reg),
@@ -444,14 +478,82 @@ end else begin : g_blocks
 
 // one beat per block, straight from the block FIFO (its flags are registers, its data the FIFO's
 // read port)
-assign exp_ready = m_axis_tready;
-assign m_axis_tvalid = fifo_valid;
-assign m_axis_tdata = 96'd0;
-assign m_axis_tuser = {1'b1, 32'd0, fifo_data[12:10], fifo_data[9:4], 3'd0};
-assign m_axis_tlast = fifo_data[14] && fifo_data[13];
+assign exp_ready = st_tready;
+assign st_tvalid = fifo_valid;
+assign st_tdata = 96'd0;
+assign st_tuser = {1'b1, 32'd0, fifo_data[12:10], fifo_data[9:4], 3'd0};
+assign st_tlast = fifo_data[14] && fifo_data[13];
 
 // the expander's inputs that are not needed: the other flags, the triangle count, the geometry
 wire unused_blocks = &{1'b0, fifo_data[16:15], fifo_data[3:0], last_xm_reg, last_ym_reg};
+
+end
+endgenerate
+
+/*
+ * Hole flags (HOLES = 1): the mask's block flags, in block order, joined to the triangles
+ */
+generate
+if (HOLES) begin : g_holes
+
+wire hole_flag;
+wire hole_valid;
+wire hole_ready;
+wire flag_valid;
+wire flag_data;
+wire [$clog2(HOLES_FIFO_DEPTH+1)-1:0] flag_count_unused;
+
+tlut_holes #(
+    .MAX_COLS(MAX_COLS < 2 ? 2 : MAX_COLS)
+)
+holes_inst (
+    .clk(clk),
+    .rst(rst),
+    .cfg_width(cfg_width),
+    .cfg_height(cfg_height),
+    .cfg_levels(cfg_levels),
+    .s_data(s_mask_tdata),
+    .s_valid(s_mask_tvalid),
+    .s_ready(s_mask_tready),
+    .m_data(hole_flag),
+    .m_valid(hole_valid),
+    .m_ready(hole_ready)
+);
+
+wm_fifo #(
+    .DATA_WIDTH(1),
+    .DEPTH(HOLES_FIFO_DEPTH)
+)
+flag_fifo_inst (
+    .clk(clk),
+    .rst(rst),
+    .s_data(hole_flag),
+    .s_valid(hole_valid),
+    .s_ready(hole_ready),
+    .m_data(flag_data),
+    .m_valid(flag_valid),
+    .m_ready(m_axis_tvalid && m_axis_tready && st_tuser[44]),  // the block's last beat moves
+    .count(flag_count_unused)
+);
+
+// a beat leaves only beside its block's flag; both valids hold until taken, so their AND does too
+assign m_axis_tvalid = st_tvalid && flag_valid;
+assign st_tready = m_axis_tready && flag_valid;
+assign m_axis_tdata = st_tdata;
+assign m_axis_tuser = {flag_data, st_tuser};
+assign m_axis_tlast = st_tlast;
+
+end else begin : g_no_holes
+
+assign m_axis_tvalid = st_tvalid;
+assign st_tready = m_axis_tready;
+assign m_axis_tdata = st_tdata;
+assign m_axis_tuser = st_tuser;
+assign m_axis_tlast = st_tlast;
+assign s_mask_tready = 1'b0;
+
+// no mask without HOLES
+wire unused_mask = &{1'b0, s_mask_tdata, s_mask_tvalid};
 
 end
 endgenerate
