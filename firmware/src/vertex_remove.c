@@ -231,28 +231,41 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
     m->vert_free = v;
     m->n_vert--;
     for (int32_t j = 0; j < n_tris; j++) wm_tri_set(m, slot[j], tris[3 * j], tris[3 * j + 1], tris[3 * j + 2]);
-    /* Link every new half-edge a -> b: to the outside across a ring edge, to -1 on the new border
-     * edge p(n-1) -> p0 (a side of the rectangle), else to its twin b -> a inside the hole. */
-    for (int32_t j = 0; j < n_tris; j++) {
-        for (int32_t c = 0; c < 3; c++) {
-            int32_t h = 3 * slot[j] + c, a = m->hv[h], b = m->hv[WM_NEXT(h)], i, f = -2;
-            for (i = 0; i < k && f == -2; i++)
-                if (a == ring[i] && b == ring[(i + 1) % n]) f = out[i];
-            if (f == -2 && k < n && a == ring[n - 1] && b == ring[0]) f = -1;
-            if (f == -2) {
-                for (int32_t jj = 0; jj < n_tris && f == -2; jj++)
-                    for (int32_t cc = 0; cc < 3; cc++) {
-                        int32_t g = 3 * slot[jj] + cc;
-                        if (m->hv[g] == b && m->hv[WM_NEXT(g)] == a) {
-                            f = g;
-                            break;
-                        }
-                    }
+    /* Link every new half-edge a -> b by the ring positions of its ends: across ring edge p_i -> p_i+1
+     * to the outside, on the new border edge p(n-1) -> p0 (a side of the rectangle) to -1, else to
+     * its twin b -> a inside the hole, met before (pending) or later: each diagonal is cut once, so
+     * both its directions are among the new triangles. */
+    {
+        int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0;
+        for (int32_t j = 0; j < n_tris; j++) {
+            for (int32_t c = 0; c < 3; c++) {
+                int32_t h = 3 * slot[j] + c, a = m->hv[h], b = m->hv[WM_NEXT(h)], pa = -1, pb = -1, f = -1, q;
+                for (int32_t i = 0; i < n; i++) {
+                    if (ring[i] == a) pa = i;
+                    if (ring[i] == b) pb = i;
+                }
+                WM_ASSERT(pa >= 0 && pb >= 0);
+                if (pa < 0 || pb < 0) { /* cannot happen for a plan of this mesh */
+                    wm_link(m, h, -1);
+                    continue;
+                }
+                if (pb == (pa + 1 == n ? 0 : pa + 1)) {
+                    if (pa < k) f = out[pa]; /* else the new border edge */
+                    wm_link(m, h, f);
+                    continue;
+                }
+                for (q = 0; q < np; q++)
+                    if (pend_a[q] == pb && pend_b[q] == pa) break;
+                if (q < np) { /* its twin came first */
+                    wm_link(m, h, pend_h[q]);
+                    np--;
+                    pend_a[q] = pend_a[np], pend_b[q] = pend_b[np], pend_h[q] = pend_h[np];
+                } else if (np < WM_MAX_RING) {
+                    pend_a[np] = pa, pend_b[np] = pb, pend_h[np++] = h;
+                }
             }
-            WM_ASSERT(f != -2);
-            if (f == -2) f = -1; /* cannot happen for a plan of this mesh */
-            wm_link(m, h, f);
         }
+        WM_ASSERT(np == 0);
     }
     for (int32_t j = 0; j < n_tris; j++) {
         wm_tri_claim(m, slot[j]);
