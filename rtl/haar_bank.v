@@ -42,6 +42,8 @@
  *   m_axis_tuser   [15:0]   bx: block column at level m, 0 .. ceil(W / 2^m) - 1
  *                  [31:16]  by: block row at level m, 0 .. ceil(H / 2^m) - 1
  *                  [35:32]  level m, 1 .. cfg_levels
+ *                  [36]     HOLES = 1 only: an invalid sample (s_axis_tuser = 1) among the 2^m x 2^m
+ *                           samples of the block (clipped at the frame's edge)
  *   m_axis_tlast            the frame's last record (level cfg_levels, bottom-right block)
  *
  * Records of one level come out in raster order (by, then bx); levels interleave.
@@ -64,7 +66,11 @@ module haar_bank #
     // Approximations buffered in front of each level from the second on; >= 2 (any number)
     parameter APPROX_FIFO_DEPTH = 2,
     // The filters: 0 Haar (haar_level), 1 the spline wavelet (spline_level, host/wavemesh/spline.py)
-    parameter WAVELET = 0
+    parameter WAVELET = 0,
+    // 1: a validity mask beside the samples (s_axis_tuser, 1 = invalid; --nodata hole, issue 20) and
+    // every record's flag on m_axis_tuser[36]: 1 when its block's samples hold an invalid one (the OR
+    // over the coefficient's 2^m x 2^m samples, padding included); Haar only.  0: no flags
+    parameter HOLES = 0
 )
 (
     input  wire         clk,
@@ -81,6 +87,7 @@ module haar_bank #
      * Height samples in, raster order
      */
     input  wire [15:0]  s_axis_tdata,
+    input  wire         s_axis_tuser,   // HOLES = 1: the sample is invalid; else unused
     input  wire         s_axis_tvalid,
     output wire         s_axis_tready,
 
@@ -88,7 +95,7 @@ module haar_bank #
      * Coefficient records out
      */
     output wire [69:0]  m_axis_tdata,
-    output wire [35:0]  m_axis_tuser,
+    output wire [35+HOLES:0] m_axis_tuser,
     output wire         m_axis_tvalid,
     input  wire         m_axis_tready,
     output wire         m_axis_tlast,
@@ -108,12 +115,19 @@ localparam [3:0] MAX_LEVELS_4 = MAX_LEVELS[3:0];
 localparam [X_WIDTH-1:0] WM1_MAX = MAX_WIDTH[X_WIDTH-1:0] - 1'b1;
 localparam [Y_WIDTH-1:0] HM1_MAX = MAX_HEIGHT[Y_WIDTH-1:0] - 1'b1;
 // record in the output merge: {last, by[15:0], bx[15:0], d3, d2, d1, a}
-localparam REC_WIDTH = 1 + 16 + 16 + 70;
+// (HOLES = 1: the record's flag above d3, {last, by, bx, flag, d3, d2, d1, a})
+localparam REC_WIDTH = 1 + 16 + 16 + 70 + HOLES;
+localparam AW = 16 + HOLES;  // approximation FIFO entry: {flag, a}
+localparam RW = 70 + HOLES;  // record FIFO entry
 
 // check configuration
 initial begin
     if (MAX_WIDTH < 2 || MAX_WIDTH > 65535 || MAX_HEIGHT < 2 || MAX_HEIGHT > 65535) begin
         $error("Error: MAX_WIDTH and MAX_HEIGHT must be 2 .. 65535 (instance %m)");
+        $finish;
+    end
+    if (HOLES != 0 && (HOLES != 1 || WAVELET != 0)) begin
+        $error("Error: HOLES must be 0, or 1 with the Haar filters (instance %m)");
         $finish;
     end
     if (WAVELET != 0 && WAVELET != 1) begin
@@ -143,7 +157,7 @@ reg [MAX_LEVELS-1:0] lvl_top_reg = {MAX_LEVELS{1'b0}}, lvl_top_next;  // level i
 
 // output register
 reg [69:0] m_axis_tdata_reg = 70'd0, m_axis_tdata_next;
-reg [35:0] m_axis_tuser_reg = 36'd0, m_axis_tuser_next;
+reg [35+HOLES:0] m_axis_tuser_reg = {(36+HOLES){1'b0}}, m_axis_tuser_next;
 reg m_axis_tvalid_reg = 1'b0, m_axis_tvalid_next;
 reg m_axis_tlast_reg = 1'b0, m_axis_tlast_next;
 
@@ -212,37 +226,61 @@ generate
         // the level advances when both FIFOs it writes have room
         wire en = fifo_s_ready[i] && afifo_s_ready[i+1];
 
+        wire in_last;
+        wire rec_valid;
+        wire [15:0] rec_a;
+        wire [17:0] rec_d1, rec_d2, rec_d3;
+        wire rec_flag;
+
         wire in_valid;
         wire [15:0] in_data;
+        wire in_flag;
+        wire [AW-1:0] in_word;  // {flag, value} (HOLES = 1) or the value
+        wire [AW-1:0] a_word;   // this level's approximation as the next level takes it
+        wire [RW-1:0] r_word;   // this level's record as its FIFO takes it
+        assign in_data = in_word[15:0];
+        if (HOLES) begin : gen_words_flag
+            assign in_flag = in_word[AW-1];
+            assign a_word = {rec_flag, rec_a};
+            assign r_word = {rec_flag, rec_d3, rec_d2, rec_d1, rec_a};
+        end else begin : gen_words
+            assign in_flag = 1'b0;
+            assign a_word = rec_a;
+            assign r_word = {rec_d3, rec_d2, rec_d1, rec_a};
+            wire unused_rec_flag = rec_flag;
+        end
+        if (i == MAX_LEVELS - 1) begin : gen_a_last
+            wire unused_a_word = ^a_word;  // no level after the last
+        end
         if (i == 0) begin : gen_in_samples
             assign in_valid = s_axis_tvalid && state_reg == STATE_RUN;
-            assign in_data = s_axis_tdata;
+            if (HOLES) begin : gen_in_flag
+                assign in_word = {s_axis_tuser, s_axis_tdata};
+            end else begin : gen_in_plain
+                assign in_word = s_axis_tdata;
+                wire unused_tuser = s_axis_tuser;
+            end
         end else begin : gen_in_cascade
             // the previous level's approximations, when this level is on (the previous level
             // writes only when en, which includes s_ready; this level reads only when en)
             wire [$clog2(APPROX_FIFO_DEPTH+1)-1:0] afifo_count_unused;
 
             wm_fifo #(
-                .DATA_WIDTH(16),
+                .DATA_WIDTH(AW),
                 .DEPTH(APPROX_FIFO_DEPTH)
             )
             afifo_inst (
                 .clk(clk),
                 .rst(rst),
-                .s_data(lvl[i-1].rec_a),
+                .s_data(lvl[i-1].a_word),
                 .s_valid(lvl[i-1].en && lvl[i-1].rec_valid && lvl_on_reg[i]),
                 .s_ready(afifo_s_ready[i]),
-                .m_data(in_data),
+                .m_data(in_word),
                 .m_valid(in_valid),
                 .m_ready(en),
                 .count(afifo_count_unused)
             );
         end
-
-        wire in_last;
-        wire rec_valid;
-        wire [15:0] rec_a;
-        wire [17:0] rec_d1, rec_d2, rec_d3;
 
         if (WAVELET == 1) begin : gen_spline
             spline_level #(
@@ -267,12 +305,15 @@ generate
                 .rec_d2(rec_d2),
                 .rec_d3(rec_d3)
             );
+            assign rec_flag = 1'b0;  // HOLES is Haar's only
+            wire unused_in_flag = in_flag;
         end else begin : gen_haar
             haar_level #(
                 .MAX_WIDTH(LMAX_W),
                 .MAX_HEIGHT(LMAX_H),
                 .X_WIDTH(LX_WIDTH),
-                .Y_WIDTH(LY_WIDTH)
+                .Y_WIDTH(LY_WIDTH),
+                .FLAG(HOLES)
             )
             level_inst (
                 .clk(clk),
@@ -283,12 +324,14 @@ generate
                 .cfg_hm1(cfg_hm1),
                 .in_valid(in_valid),
                 .in_data(in_data),
+                .in_flag(in_flag),
                 .in_last(in_last),
                 .rec_valid(rec_valid),
                 .rec_a(rec_a),
                 .rec_d1(rec_d1),
                 .rec_d2(rec_d2),
-                .rec_d3(rec_d3)
+                .rec_d3(rec_d3),
+                .rec_flag(rec_flag)
             );
         end
 
@@ -299,18 +342,18 @@ generate
             wire unused_in_last = in_last;
         end
 
-        wire [69:0] entry;
+        wire [RW-1:0] entry;
         wire [$clog2(FIFO_DEPTH+1)-1:0] fifo_count_unused;
 
         // written only when en (which includes s_ready); read only when granted (m_valid)
         wm_fifo #(
-            .DATA_WIDTH(70),
+            .DATA_WIDTH(RW),
             .DEPTH(FIFO_DEPTH)
         )
         fifo_inst (
             .clk(clk),
             .rst(rst),
-            .s_data({rec_d3, rec_d2, rec_d1, rec_a}),
+            .s_data(r_word),
             .s_valid(en && rec_valid),
             .s_ready(fifo_s_ready[i]),
             .m_data(entry),
@@ -400,6 +443,16 @@ always @* begin
 end
 
 wire pop = (|fifo_m_valid) && out_ready;
+
+// the handed-out record's tuser: {level, by, bx}, and with HOLES its flag above them
+wire [35+HOLES:0] sel_user;
+generate
+    if (HOLES) begin : gen_user_flag
+        assign sel_user = {sel_rec[70], sel_level, sel_rec[102:71]};
+    end else begin : gen_user
+        assign sel_user = {sel_level, sel_rec[101:70]};
+    end
+endgenerate
 assign fifo_rd_en = grant & {MAX_LEVELS{out_ready}};
 
 always @* begin
@@ -463,9 +516,9 @@ always @* begin
     if (pop) begin
         // hand out the head of the granted FIFO
         m_axis_tdata_next = sel_rec[69:0];
-        m_axis_tuser_next = {sel_level, sel_rec[101:70]};
+        m_axis_tuser_next = sel_user;
         m_axis_tvalid_next = 1'b1;
-        m_axis_tlast_next = sel_rec[102] && sel_top;
+        m_axis_tlast_next = sel_rec[REC_WIDTH-1] && sel_top;
     end
 end
 

@@ -36,6 +36,11 @@
  *       -> record:  a, d1, d2, d3 from stage 2, one 18-bit add each, combinational: the bank
  *                   writes them into its FIFOs (valid for one cycle with en high)
  *
+ * With FLAG = 1 (the filter bank's HOLES, issue 20) a flag travels beside every value: in_flag with
+ * in_data, rec_flag with the record, the OR of the four values' flags (padding included: a value
+ * paired with itself brings its own flag), kept in a one-bit line buffer of its own.  With FLAG = 0
+ * rec_flag is 0 and in_flag unused; nothing else changes.
+ *
  * The record arithmetic is 18-bit modulo 2^18: every true value fits 18 bits signed
  * (|d| <= 2 * 65535), so the wrapped result is the exact two's complement value.
  */
@@ -53,7 +58,9 @@ module haar_level #
     // Width of the input column counter in bits: $clog2(MAX_WIDTH), at least 1
     parameter X_WIDTH = 9,
     // Width of the input row counter in bits: $clog2(MAX_HEIGHT), at least 1
-    parameter Y_WIDTH = 9
+    parameter Y_WIDTH = 9,
+    // 1: carry a flag beside the values (in_flag, rec_flag: the OR over the block)
+    parameter FLAG = 0
 )
 (
     input  wire                 clk,
@@ -72,6 +79,7 @@ module haar_level #
      */
     input  wire                 in_valid,
     input  wire [15:0]          in_data,
+    input  wire                 in_flag,    // FLAG = 1: the value's flag (with in_data)
     output wire                 in_last,    // the next input is the last one of the frame
 
     /*
@@ -81,7 +89,8 @@ module haar_level #
     output wire [15:0]          rec_a,
     output wire [17:0]          rec_d1,
     output wire [17:0]          rec_d2,
-    output wire [17:0]          rec_d3
+    output wire [17:0]          rec_d3,
+    output wire                 rec_flag    // FLAG = 1: OR of the block's flags; else 0
 );
 
 // line buffer: one word {s0, t0} per block column, addressed by the block column x / 2
@@ -223,6 +232,49 @@ always @(posedge clk) begin
         st2_valid_reg <= 1'b0;
     end
 end
+
+// the flags (FLAG = 1): the same pipeline as the values, one bit wide
+generate
+    if (FLAG) begin : gen_flag
+        reg left_f_reg = 1'b0;   // flag of the even-column value waiting for its neighbour
+        reg st1_f1_reg = 1'b0;   // the bottom pair's flag
+        reg st2_f1_reg = 1'b0;
+        reg st2_f0_reg = 1'b0;   // the top pair's (line buffer)
+        wire pair_f = in_flag || (x[0] && left_f_reg);
+        wire buf_rd_f;
+
+        haar_linebuf #(
+            .DEPTH(PAIRS),
+            .ADDR_WIDTH(BX_WIDTH),
+            .DATA_WIDTH(1)
+        )
+        flagbuf_inst (
+            .clk(clk),
+            .addr(pair_bx),
+            .wr_en(pair_done && !rec_row),
+            .wr_data(pair_f),
+            .rd_en(pair_done && y[0]),
+            .rd_data(buf_rd_f)
+        );
+
+        always @(posedge clk) begin
+            if (in_fire && !x[0]) begin
+                left_f_reg <= in_flag;
+            end
+            if (en) begin
+                st1_f1_reg <= pair_f;
+                st2_f1_reg <= st1_f1_reg;
+                st2_f0_reg <= buf_rd_f;
+            end
+        end
+
+        // a self-paired last row: the top pair is the bottom pair
+        assign rec_flag = st2_f1_reg || (!st2_self_reg && st2_f0_reg);
+    end else begin : gen_no_flag
+        assign rec_flag = 1'b0;
+        wire unused_flag = in_flag;
+    end
+endgenerate
 
 endmodule
 
