@@ -2,17 +2,16 @@
 (tuser[45]) against wavemesh.holes.block_flags and its template against the reference model, under
 random masks, mask gaps, idle records and output back-pressure (bench: tlut_stage_holes_tb.py)."""
 
-import pytest
 from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 
 
-@pytest.mark.parametrize("expand,max_cols,flag_depth", [(1, 19, 2), (0, 16, 5)])
-def test_tlut_stage_holes(expand, max_cols, flag_depth):
-    """With the expander and the smallest flag FIFO (the mask waits for the blocks); without the
-    expander (one beat per block, as the SoC's TOUT writer takes it) and a FIFO of 5."""
+def test_tlut_stage_holes():
+    """With the expander (several beats per block, the flag taken with the block_end beat) and the
+    smallest flag FIFO (2: the mask waits for the blocks).  The bench also runs EXPAND = 0
+    (TLUT_HOLES_EXPAND=0, one beat per block); it passed with MAX_COLS 16 and a FIFO of 5, and is
+    left out of make test for its build's time."""
     run("tlut_stage", SOURCES, "tlut_stage_holes_tb",
-        parameters={"MAX_COLS": max_cols, "FIFO_DEPTH": 3, "EXPAND": expand, "HOLES": 1,
-                    "HOLES_FIFO_DEPTH": flag_depth},
-        extra_env={"TLUT_HOLES_SEED": str(max_cols), "TLUT_HOLES_EXPAND": str(expand)})
+        parameters={"MAX_COLS": 19, "FIFO_DEPTH": 3, "EXPAND": 1, "HOLES": 1, "HOLES_FIFO_DEPTH": 2},
+        extra_env={"TLUT_HOLES_SEED": "19", "TLUT_HOLES_EXPAND": "1"})
