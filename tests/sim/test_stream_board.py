@@ -272,26 +272,29 @@ def test_garbage_then_a_valid_request(fast_board, inputs, tmp_path, sim_timeouts
         time.sleep(0.5)
     time.sleep(0.2)
     src = str(inputs / "tiny.npy")
-    stream_and_mesh(src, ["--levels", "2"], fast_board.url, tmp_path)
+    stream_and_mesh(src, ["--levels", "2", *LEAN], fast_board.url, tmp_path)  # LEAN: the link is under test
 
 
-# One seed on the board (58 s; a second cost 42 s more of make test's 20 minutes): the fault campaigns
-# with many seeds run against the native device (tests/sim/test_stream_faults.py, make bench-faults).
+# One seed on the board, with LEAN's options (the link is under test, and the default reduction and
+# decimation cost the soft CPU about 20 s of simulation a job: the test took 58-79 s of make test's 20
+# minutes; tiny-default above runs them on the board): the fault campaigns with many seeds run against
+# the native device (tests/sim/test_stream_faults.py, make bench-faults).
 @pytest.mark.parametrize("seed", [1])
 def test_fault_proxy_between_host_and_board(seed, fast_board, inputs, tmp_path, sim_timeouts):
     """Seeded corruption, loss and duplication both ways: the reference mesh, or one clear error
     line; the board then serves a clean request."""
     src = str(inputs / "tiny.npy")
-    rc, _, err = run_cli("mesh", src, "--levels", "2", "-o", str(tmp_path / "ref.obj"), "-q")
+    rc, _, err = run_cli("mesh", src, "--levels", "2", *LEAN, "-o", str(tmp_path / "ref.obj"), "-q")
     assert rc == 0, err
     faults = Faults(seed=seed, rate=0.004, limit=6, run=48, max_delay=0.2)
     with FaultProxy(("127.0.0.1", fast_board.port), faults) as proxy:
-        rc, _, err = run_cli("stream", src, "--levels", "2", "--port", proxy.url,
+        rc, _, err = run_cli("stream", src, "--levels", "2", *LEAN, "--port", proxy.url,
                              "-o", str(tmp_path / "out.obj"), "--quiet")
+    assert sum(proxy.summary().values()) > 0  # the seed's faults fell inside the session
     if rc == 0:
         assert (tmp_path / "out.obj").read_bytes() == (tmp_path / "ref.obj").read_bytes()
     else:
         lines = [ln for ln in err.splitlines() if ln.strip()]
         assert lines and lines[0].startswith("error:") and "Traceback" not in err, err
     (tmp_path / "clean").mkdir()
-    stream_and_mesh(src, ["--levels", "2"], fast_board.url, tmp_path / "clean")
+    stream_and_mesh(src, ["--levels", "2", *LEAN], fast_board.url, tmp_path / "clean")
