@@ -111,20 +111,6 @@ def block_flags(mask: np.ndarray, levels: int) -> np.ndarray:
     return (pre[y1, x1] - pre[y0, x1] - pre[y1, x0] + pre[y0, x0]) > 0
 
 
-def coefficient_flags(mask: np.ndarray, level: int) -> np.ndarray:
-    """The filter bank's per-coefficient validity flag at level m (rtl/haar_bank.v, HOLES = 1): True where
-    any of the samples level m's coefficient is computed from is invalid, the half-open 2^m x 2^m box
-    [iS, (i+1)S) x [jS, (j+1)S) clipped at the frame's edge (what the bank's padding repeats), S = 2^m.
-    block_flags is the template stage's flag: its blocks are closed boxes and share their edge samples."""
-    bad = np.asarray(mask, dtype=bool)
-    s = 1 << level
-    h, w = bad.shape
-    rows, cols = -(-h // s), -(-w // s)
-    padded = np.zeros((rows * s, cols * s), dtype=bool)
-    padded[:h, :w] = bad
-    return padded.reshape(rows, s, cols, s).any(axis=(1, 3))
-
-
 def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
     """The refiner's full triangulation with its thin triangles over both kinds of samples (doubled area
     1: no sample but their corners, E(T) 0; wm_tri_cover's THIN) flipped in pairs where that makes a

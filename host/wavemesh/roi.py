@@ -82,7 +82,9 @@ def _one(spec: str, width: int, height: int) -> np.ndarray:
 
 
 def cell_mask(roi: np.ndarray, m: int) -> np.ndarray:
-    """The cells of decomposition level m (ceil(H / 2^m) x ceil(W / 2^m)) that hold an ROI sample."""
+    """The cells of decomposition level m (ceil(H / 2^m) x ceil(W / 2^m)) that hold an ROI sample: the
+    half-open 2^m x 2^m boxes a coefficient is computed from, clipped at the edge.  Given the invalid
+    samples, the filter bank's per-coefficient hole flag (rtl/haar_bank.v, HOLES = 1)."""
     s = 1 << m
     h, w = roi.shape
     ch, cw = -(-h // s), -(-w // s)

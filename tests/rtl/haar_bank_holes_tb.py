@@ -2,7 +2,7 @@
 1 = invalid) and every record's flag on m_axis_tuser[36].
 
 Every record (value, level, position, per-level raster order, nothing missing or extra) is compared
-with wavemesh.haar.decompose as in haar_bank_tb, and its flag with wavemesh.holes.coefficient_flags:
+with wavemesh.haar.decompose as in haar_bank_tb, and its flag with wavemesh.roi.cell_mask:
 1 when any of the 2^m x 2^m samples its coefficient is computed from (the slice clipped at the frame's edge,
 which is what the padding repeats) is invalid.  Random sizes, levels and masks (densities 0..1,
 blobs), random input idle and output back-pressure, frames back to back.
@@ -19,7 +19,7 @@ import cocotb
 import numpy as np
 from cocotbext.axi import AxiStreamFrame
 from haar_bank_tb import TB, expected_records, frame_samples, signed18
-from wavemesh.holes import coefficient_flags
+from wavemesh.roi import cell_mask
 
 SEED = int(os.environ.get("HAAR_HOLES_SEED", "1"))
 FRAMES = int(os.environ.get("HAAR_HOLES_FRAMES", "8"))
@@ -66,7 +66,7 @@ async def random_holes(dut):
         assert sorted(got) == sorted(want), f"{what}: levels {sorted(got)}"
         for m in want:
             assert got[m] == want[m], f"{what}: level {m}: records differ from the reference"
-            ref = [int(f) for f in coefficient_flags(mask, m).ravel()]
+            ref = [int(f) for f in cell_mask(mask, m).ravel()]
             bad = [k for k, (a, b) in enumerate(zip(flags[m], ref, strict=True)) if a != b]
             assert not bad, f"{what}: level {m}: flag of record {bad[0]} differs ({len(bad)} flags)"
             flagged += sum(ref)
