@@ -274,11 +274,13 @@ int wm_hole_cover(wm_refiner *r)
                 rc = on < 0 ? wm_tri_split(me, t, ax, ay, touched, &nt)
                             : wm_edge_split(me, on, ax, ay, touched, &nt);
                 if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH;
-                for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
+                int legal = !(r->params.flags & WM_FLAG_NO_LEGALISE);
+                if (!legal) /* wm_legalise measures touched[] itself, after its flips */
+                    for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
                 for (int32_t j = 0; j < 3; j++)
                     if (me->vx[me->hv[3 * touched[0] + j]] == ax && me->vy[me->hv[3 * touched[0] + j]] == ay)
                         p = me->hv[3 * touched[0] + j];
-                if (!(r->params.flags & WM_FLAG_NO_LEGALISE)) wm_legalise(r, p, touched, nt, NULL);
+                if (legal) wm_legalise(r, p, touched, nt, NULL);
                 added++;
                 done = 1;
             }
