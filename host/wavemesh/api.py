@@ -182,12 +182,19 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
                origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
-               denoise: str | None = None) -> HeightField:
+               denoise: str | None = None, max_hole: int = 0) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
-    and --origin (of the file's grid), then --crop and --decimate, then --denoise (wavemesh.denoise: what
-    every command meshes and measures)."""
+    and --origin (of the file's grid), then --crop and --decimate, then --max-hole (holes.bridge), then
+    --denoise (wavemesh.denoise: what every command meshes and measures)."""
+    if max_hole and (nodata != "hole" or max_hole < 0):
+        raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
+                         "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
     hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
                            decimate)
+    if max_hole:
+        from wavemesh.holes import bridge
+
+        hf = bridge(hf, max_hole)
     if denoise is None:
         return hf
     from wavemesh.denoise import denoise_heightfield

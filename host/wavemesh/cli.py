@@ -67,6 +67,10 @@ def _input_options(p: argparse.ArgumentParser) -> None:
                         "the mesh instead of filled surface; error (default without --fill): refuse them")
     p.add_argument("--invalid", type=float, default=None, metavar="VALUE",
                    help="samples equal to VALUE are invalid too (a scanner's 0 or sentinel)")
+    p.add_argument("--max-hole", type=int, default=0, metavar="N",
+                   help="with --nodata hole: fill the enclosed dropouts of at most N samples (8-connected "
+                        "groups of invalid samples off the border) from their valid neighbours, as --fill "
+                        "nearest does, and keep the larger ones holes (default 0: every dropout a hole)")
     p.add_argument("--spacing", metavar="DX[,DY]",
                    help="ground distance between neighbouring samples along a row (and a column), in height "
                         "units (default: from the georeference, degrees in metres; else 1 grid step)")
@@ -321,7 +325,13 @@ def _mesh_params(args) -> api.MeshParams:
 def _load(args, path: str):
     return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
                           spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid,
-                          denoise=args.denoise)
+                          denoise=args.denoise, max_hole=args.max_hole)
+
+
+def _bridged_line(hf, max_hole: int) -> str:
+    """What --max-hole filled, for `mesh`, `stream`, `check` (wavemesh.holes.bridge)."""
+    return (f"filled: {hf.filled} invalid samples, the enclosed dropouts of at most {max_hole} samples "
+            "(--max-hole), from their valid neighbours as --fill nearest fills them")
 
 
 def _holes_line(h: dict, stranded: int) -> str:
@@ -342,6 +352,8 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
         print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
               f"{m.n_vertices} vertices, {m.n_triangles} triangles, "
               f"E_max normal {e.e_max_normal:.6g}, vertical {e.e_max_vertical:.6g}")
+        if args.max_hole:
+            print("  " + _bridged_line(hf, args.max_hole))
         if "holes" in result.report:  # --nodata hole
             print("  " + _holes_line(result.report["holes"], hf.stranded))
         g = api.ground(hf)
@@ -430,6 +442,7 @@ def check_command(args) -> int:
     report = api.check_file(args.mesh, hf, roi=roi, min_area=args.min_area) | {"against": args.against}
     if "holes" in report:
         report["holes"]["stranded"] = hf.stranded
+        report["holes"]["filled"] = hf.filled  # --max-hole
     if args.report:
         api.write_json(args.report, report)
     if not args.quiet:
@@ -438,6 +451,8 @@ def check_command(args) -> int:
             state += " of the valid samples"
         print(f"{args.mesh}: {report['vertices']} vertices, {report['triangles']} triangles, "
               f"{hf.width} x {hf.height} grid: {state}")
+        if args.max_hole:
+            print("  " + _bridged_line(hf, args.max_hole))
         if "holes" in report:
             print("  " + _holes_line(report["holes"], hf.stranded))
         for problem in report["problems"][:20]:

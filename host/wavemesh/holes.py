@@ -426,6 +426,40 @@ def enclosed_holes(mask: np.ndarray) -> int:
     return n - int((border > 0).sum())
 
 
+def small_holes(mask: np.ndarray, max_hole: int) -> np.ndarray:
+    """(H, W) bool: the samples of the 8-connected groups of ``mask`` that hold at most ``max_hole``
+    samples and do not touch the rectangle's border (the enclosed dropouts --max-hole bridges)."""
+    from scipy import ndimage
+
+    bad = np.asarray(mask, dtype=bool)
+    lab, n = ndimage.label(bad, structure=np.ones((3, 3), dtype=bool))
+    size = np.bincount(lab.ravel(), minlength=n + 1)
+    keep = size <= max_hole
+    keep[0] = False
+    keep[np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]])] = False
+    return keep[lab]
+
+
+def bridge(hf, max_hole: int):
+    """--max-hole N: the height field with its enclosed groups of at most N invalid samples (small_holes)
+    made valid, at the heights --fill nearest gives them (the mask's heights are a nearest valid sample's
+    already: heightfield.from_array), the others left holes; the stranded samples found afresh (a bridged
+    dropout may give them a cell of valid samples).  ``filled`` counts the bridged samples."""
+    from dataclasses import replace
+
+    if max_hole <= 0 or hf.mask is None:
+        return hf
+    raw = hf.mask if hf.lone is None else hf.mask & ~hf.lone
+    small = small_holes(raw, max_hole)
+    if not small.any():
+        return hf
+    bad = raw & ~small
+    lone = stranded(bad)
+    mask = bad | lone
+    return replace(hf, mask=np.ascontiguousarray(mask) if mask.any() else None,
+                   lone=lone if lone.any() else None, filled=hf.filled + int(np.count_nonzero(small)))
+
+
 def check(mesh: Mesh, mask: np.ndarray, min_area: float = 0.0) -> HoleCheck:
     """Whether ``mesh`` is a proper triangulation of the valid region of a grid whose invalid samples are
     ``mask``: the triangles (counter-clockwise, positive areas, vertices at distinct grid samples, every
@@ -534,30 +568,37 @@ def check(mesh: Mesh, mask: np.ndarray, min_area: float = 0.0) -> HoleCheck:
     return out
 
 
-def _overlaps(mesh: Mesh, cand: np.ndarray, p: list[str]) -> None:
+def _overlaps(mesh: Mesh, cand: np.ndarray, p: list[str], chunk: int = 1 << 20) -> None:
     """Separating axes between each triangle of ``cand`` (those with an edge of one triangle) and every
     triangle whose bounding box meets its own; exact in integers.  Two triangles' interiors are
-    disjoint when an edge line of one has the other's three corners on its outer closed side."""
+    disjoint when an edge line of one has the other's three corners on its outer closed side.  The pairs
+    come from a sweep over the boxes' left ends (each pair once: the later left end within the earlier
+    box), ``chunk`` pairs a numpy pass."""
     xy, t = mesh.xy, mesh.tris
     X, Y = xy[t, 0], xy[t, 1]  # (T, 3)
     x0, x1, y0, y1 = X.min(1), X.max(1), Y.min(1), Y.max(1)
+    want = np.zeros(len(t), dtype=bool)
+    want[cand] = True
     order = np.argsort(x0, kind="stable")
-    xs = x0[order]
-    for a in cand:
-        near = order[: np.searchsorted(xs, x1[a], side="right")]
-        near = near[(x1[near] >= x0[a]) & (y0[near] <= y1[a]) & (y1[near] >= y0[a]) & (near != a)]
-        if len(near) == 0:
-            continue
-        sep = np.zeros(len(near), dtype=bool)
-        for P, Q, who in ((X[a][None, :], Y[a][None, :], "a"), (X[near], Y[near], "b")):
-            for k in range(3):
-                k1 = (k + 1) % 3
-                ex, ey = P[:, k1] - P[:, k], Q[:, k1] - Q[:, k]
-                other_x, other_y = (X[near], Y[near]) if who == "a" else (X[a][None, :], Y[a][None, :])
-                side = ex[:, None] * (other_y - Q[:, k][:, None]) - ey[:, None] * (other_x - P[:, k][:, None])
+    n = np.searchsorted(x0[order], x1[order], side="right") - np.arange(len(t)) - 1  # pairs per position
+    ends = np.cumsum(n)
+    total = int(ends[-1]) if len(ends) else 0
+    for start in range(0, total, chunk):
+        k = np.arange(start, min(start + chunk, total))
+        i = np.searchsorted(ends, k, side="right")  # the earlier box's position in the order
+        a, b = order[i], order[i + 1 + k - (ends[i] - n[i])]
+        keep = (want[a] | want[b]) & (y0[b] <= y1[a]) & (y1[b] >= y0[a])
+        a, b = a[keep], b[keep]
+        sep = np.zeros(len(a), dtype=bool)
+        for one, two in ((a, b), (b, a)):
+            for e in range(3):
+                e1 = (e + 1) % 3
+                ex, ey = X[one, e1] - X[one, e], Y[one, e1] - Y[one, e]
+                side = (ex[:, None] * (Y[two] - Y[one, e][:, None])
+                        - ey[:, None] * (X[two] - X[one, e][:, None]))
                 sep |= (side <= 0).all(axis=1)
         if not sep.all():
-            b = int(near[~sep][0])
-            p.append(f"triangles {[tuple(map(int, xy[v])) for v in t[a]]} and "
-                     f"{[tuple(map(int, xy[v])) for v in t[b]]} overlap")
+            q = int(np.flatnonzero(~sep)[0])
+            p.append(f"triangles {[tuple(map(int, xy[v])) for v in t[a[q]]]} and "
+                     f"{[tuple(map(int, xy[v])) for v in t[b[q]]]} overlap")
             return

@@ -220,6 +220,27 @@ def test_check_finds_what_is_wrong():
         assert not holes.check(over, invalid).valid_mesh
 
 
+def test_overlap_sweep_agrees_with_every_pair():
+    # holes.check's overlap test (a sweep of bounding boxes, chunked) against the brute force over every
+    # pair, on a hole mesh with vertices moved at random (some moves make overlaps, some do not)
+    good = run(shadowed_ball()).mesh
+    rng = np.random.default_rng(7)
+    found = 0
+    for _ in range(24):
+        xy = good.xy.copy()
+        for v in rng.integers(len(xy), size=2):
+            xy[v] = np.clip(xy[v] + rng.integers(-3, 4, 2), 0, [good.width - 1, good.height - 1])
+        P = xy[good.tris] - xy[good.tris][:, :1]
+        d = P[:, 1, 0] * P[:, 2, 1] - P[:, 2, 0] * P[:, 1, 1]
+        m = Mesh(good.width, good.height, xy, good.tris[d > 0])
+        for chunk in (7, 1 << 20):
+            p = []
+            holes._overlaps(m, np.arange(m.n_triangles), p, chunk=chunk)
+            assert bool(p) == (overlapping_pairs(m) > 0)
+        found += bool(p)
+    assert 0 < found < 24
+
+
 def test_cli_mesh_check_min_area(tmp_path, capsys):
     z = motorcycle_crop()
     src = tmp_path / "disp.npy"
@@ -243,10 +264,65 @@ def test_cli_mesh_check_min_area(tmp_path, capsys):
     assert main(["check", str(small), "--against", str(src), "--nodata", "hole", "--min-area", "40"]) == 0
 
 
+def enclosed_groups(invalid: np.ndarray) -> list[list[tuple[int, int]]]:
+    """The 8-connected groups of invalid samples that touch no side of the grid, by a breadth-first walk."""
+    H, W = invalid.shape
+    seen = np.zeros_like(invalid)
+    out = []
+    for y0, x0 in np.argwhere(invalid):
+        if seen[y0, x0]:
+            continue
+        group, todo, seen[y0, x0] = [], [(y0, x0)], True
+        while todo:
+            y, x = todo.pop()
+            group.append((y, x))
+            for dy in (-1, 0, 1):
+                for dx in (-1, 0, 1):
+                    b, a = y + dy, x + dx
+                    if 0 <= b < H and 0 <= a < W and invalid[b, a] and not seen[b, a]:
+                        seen[b, a] = True
+                        todo.append((b, a))
+        if all(0 < y < H - 1 and 0 < x < W - 1 for y, x in group):
+            out.append(group)
+    return out
+
+
+def test_max_hole_bridges_small_dropouts(tmp_path, capsys):
+    # --max-hole N: the enclosed dropouts of at most N samples are filled as --fill nearest fills them, the
+    # others stay holes; the mesh covers the bridged samples and no other invalid one
+    z = motorcycle_crop()
+    src = tmp_path / "disp.npy"
+    np.save(src, z)
+    invalid = ~np.isfinite(z)
+    small = [g for g in enclosed_groups(invalid) if len(g) <= 4]
+    bridged = invalid.copy()
+    for g in small:
+        for y, x in g:
+            bridged[y, x] = False
+    n = sum(map(len, small))
+    assert 0 < n < invalid.sum()
+    hf = api.load_input(str(src), nodata="hole", max_hole=4)
+    assert hf.filled == n
+    filled = from_array(z, fill="nearest").values
+    assert np.array_equal(hf.values[~bridged], filled[~bridged])  # the bridged heights as --fill nearest's
+    r = api.mesh(hf, api.MeshParams(refine=RefineParams(zeta=ZETA)))
+    got = independent_check(r.mesh, bridged, r.heightfield.values, ZETA)
+    assert got["uncovered_valid"] == 0
+    assert r.mesh.n_triangles < run(z).mesh.n_triangles
+    out = tmp_path / "m.obj"
+    assert main(["mesh", str(src), "-o", str(out), "--nodata", "hole", "--max-hole", "4"]) == 0
+    assert f"filled: {n} invalid samples" in capsys.readouterr().out
+    assert main(["check", str(out), "--against", str(src), "--nodata", "hole", "--max-hole", "4"]) == 0
+    assert f"filled: {n} invalid samples" in capsys.readouterr().out
+    assert main(["check", str(out), "--against", str(src), "--nodata", "hole", "-q"]) == 1  # over dropouts
+
+
 @pytest.mark.parametrize("argv, what", [
     (["--fill", "nearest", "--nodata", "hole"], "both say"),
     (["--min-area", "5", "--fill", "nearest"], "--min-area"),
     (["--nodata", "hole", "--invalid", "nan"], "--invalid"),
+    (["--fill", "nearest", "--max-hole", "4"], "--max-hole"),
+    (["--nodata", "hole", "--max-hole", "-1"], "--max-hole"),
 ])
 def test_bad_options(tmp_path, capsys, argv, what):
     z = shadowed_ball(16)
