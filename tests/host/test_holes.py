@@ -241,6 +241,19 @@ def test_overlap_sweep_agrees_with_every_pair():
     assert 0 < found < 24
 
 
+def test_rim_triangulation_search():
+    # simplify_rims' fallback: every triangulation of the ring searched when ear clipping's one is refused
+    square = [(0, 0), (2, 0), (2, 2), (0, 2)]
+    cut = holes._dp_triangulate(square, lambda c: not {0, 2} <= set(c))  # the diagonal 0-2 refused
+    assert sorted(map(sorted, cut)) == [[0, 1, 3], [1, 2, 3]]
+    assert holes._dp_triangulate(square, lambda c: False) is None
+    # a C-shaped ring: the triangles lie inside it and fill it (doubled areas add up)
+    c = [(0, 0), (4, 0), (4, 1), (1, 1), (1, 3), (4, 3), (4, 4), (0, 4)]
+    cut = holes._dp_triangulate(c, lambda t: True)
+    area2 = sum(holes._orient(c[i], c[j], c[k]) for i, j, k in cut)
+    assert len(cut) == len(c) - 2 and area2 == 2 * (16 - 6)
+
+
 def test_cli_mesh_check_min_area(tmp_path, capsys):
     z = motorcycle_crop()
     src = tmp_path / "disp.npy"
