@@ -221,34 +221,95 @@ static uint32_t star_bound(const wm_refiner *r, int32_t v, uint32_t b)
     return b;
 }
 
-/* 1 when every triangle of tris (WM_COLLAPSE_POINT standing for (px, py)) has E(T) <= bound. */
-static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t px, int32_t py, uint32_t bound)
+/* 1 when every triangle of tris (WM_COLLAPSE_POINT standing for (px, py)) has E(T) <= bound; then, without
+ * an ROI (whose E(T) is over its samples only), each one's E(T) and worst sample in e[] and w[] (a scan
+ * that never passes its bound is the whole scan, so these are wm_tri_error's values: known[] below). */
+static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t px, int32_t py, uint32_t bound,
+                  uint32_t *e, int32_t *w, const int32_t *gone, int ngone)
 {
     const wm_mesh *me = &r->mesh;
-    for (int32_t j = 0; j < nt; j++) {
-        int32_t x[3], y[3];
-        for (int c = 0; c < 3; c++) {
-            int32_t w = tris[3 * j + c];
-            x[c] = w < 0 ? px : me->vx[w];
-            y[c] = w < 0 ? py : me->vy[w];
+    /* First the cheap test: the samples of the vertices the operation takes away, against the new
+     * triangle holding each (a lower bound of its E(T), rounded as E(T) is): a failed operation
+     * mostly stops here, without a scan. */
+    for (int g = 0; g < ngone; g++) {
+        int32_t gx = me->vx[gone[g]], gy = me->vy[gone[g]];
+        for (int32_t j = 0; j < nt; j++) {
+            int32_t x[3], y[3];
+            for (int c = 0; c < 3; c++) {
+                int32_t v = tris[3 * j + c];
+                x[c] = v < 0 ? px : me->vx[v];
+                y[c] = v < 0 ? py : me->vy[v];
+            }
+            if (wm_orient(x[0], y[0], x[1], y[1], gx, gy) < 0 || wm_orient(x[1], y[1], x[2], y[2], gx, gy) < 0 ||
+                wm_orient(x[2], y[2], x[0], y[0], gx, gy) < 0)
+                continue;
+            if (wm_point_above(&r->field, &r->params, x, y, gx, gy, bound)) return 0;
+            break;
         }
-        if (wm_tri_error_upto(&r->field, &r->params, x, y, bound) > bound) return 0;
+    }
+    for (int32_t j = 0; j < nt; j++) {
+        int32_t x[3], y[3], wx = 0, wy = 0;
+        for (int c = 0; c < 3; c++) {
+            int32_t v = tris[3 * j + c];
+            x[c] = v < 0 ? px : me->vx[v];
+            y[c] = v < 0 ? py : me->vy[v];
+        }
+        e[j] = wm_tri_error_within(&r->field, &r->params, x, y, bound, &wx, &wy);
+        if (e[j] > bound) return 0;
+        w[j] = wy * r->field.width + wx;
     }
     return 1;
+}
+
+/* As wm_touch for each of the nt triangles an operation made (touched[]), with the E(T) and worst
+ * sample within() measured for the planned triangle of the same corners (a corner order of the plan's
+ * is a rotation of the mesh's: both counter-clockwise, and the scan's result does not depend on it). */
+static void known(wm_refiner *r, const int32_t *touched, int32_t k, const int32_t *tris, int32_t nt, int32_t px,
+                  int32_t py, const uint32_t *e, const int32_t *w)
+{
+    wm_mesh *me = &r->mesh;
+    for (int32_t i = 0; i < k; i++) {
+        int32_t t = touched[i], j = nt, x[3], y[3];
+        if (r->roi == NULL) {
+            wm_tri_xy(me, t, x, y);
+            for (j = 0; j < nt; j++) {
+                int c = 0, hit = 0;
+                for (c = 0; c < 3; c++) {
+                    int32_t v = tris[3 * j + c];
+                    if ((v < 0 ? px : me->vx[v]) == x[0] && (v < 0 ? py : me->vy[v]) == y[0]) break;
+                }
+                if (c < 3) {
+                    int32_t v1 = tris[3 * j + (c + 1) % 3], v2 = tris[3 * j + (c + 2) % 3];
+                    hit = (v1 < 0 ? px : me->vx[v1]) == x[1] && (v1 < 0 ? py : me->vy[v1]) == y[1] &&
+                          (v2 < 0 ? px : me->vx[v2]) == x[2] && (v2 < 0 ? py : me->vy[v2]) == y[2];
+                }
+                if (hit) break;
+            }
+        }
+        if (j == nt) {
+            wm_touch(r, t);
+            continue;
+        }
+        r->err[t] = e[j];
+        r->worst[t] = w[j];
+        me->tflag[t] |= WM_F_NEW;
+        wm_forget_class(r, t);
+    }
 }
 
 static int try_remove(wm_refiner *r, int32_t v)
 {
     wm_mesh *me = &r->mesh;
-    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], n, nt, k;
+    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], w[WM_MAX_RING], n, nt, k;
+    uint32_t e[WM_MAX_RING];
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return 0; /* a corner, or too many neighbours */
     if (wm_star_plan(me, ring, n, me->vx[v], me->vy[v], tris, &nt) != WM_OK &&
         wm_vertex_remove_plan(me, v, -1, tris, &nt) != WM_OK)
         return 0;
-    if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0))) return 0;
+    if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0), e, w, &v, 1)) return 0;
     if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) return 0;
-    for (int32_t i = 0; i < k; i++) wm_touch(r, touched[i]);
+    known(r, touched, k, tris, nt, 0, 0, e, w);
     return 1;
 }
 
@@ -257,6 +318,8 @@ static int try_collapse(wm_refiner *r, int32_t e)
 {
     wm_mesh *me = &r->mesh;
     int32_t v = me->hv[e], w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
+    int32_t ws[6 * WM_MAX_RING];
+    uint32_t es[6 * WM_MAX_RING];
     int32_t ax = me->vx[v], ay = me->vy[v], bx = me->vx[w], by = me->vy[w];
     int32_t dx = bx - ax, dy = by - ay, g = wm_gcd(dx, dy), cx[4], cy[4], nc = 0;
     uint32_t bound = star_bound(r, w, star_bound(r, v, 0));
@@ -269,9 +332,9 @@ static int try_collapse(wm_refiner *r, int32_t e)
     cx[nc] = bx, cy[nc++] = by;
     for (int32_t i = 0; i < nc; i++) {
         if (wm_edge_collapse_plan(me, e, cx[i], cy[i], tris, &nt) != WM_OK) continue;
-        if (!within(r, tris, nt, cx[i], cy[i], bound)) continue;
+        if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0)) continue;
         if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return 0; /* capacity */
-        for (int32_t j = 0; j < k; j++) wm_touch(r, touched[j]);
+        known(r, touched, k, tris, nt, cx[i], cy[i], es, ws);
         return 1;
     }
     return 0;

@@ -286,15 +286,15 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
     return finish(f, p, x, y, D, scan_any(f, x, y, D, UINT64_MAX, wx, wy), 0);
 }
 
-uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound)
+uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                             uint32_t bound, int32_t *wx, int32_t *wy)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     uint64_t r = 0, evm = bound, limit = UINT64_MAX;
     uint32_t e;
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
-    if (f->mask && wm_hole_error(f, x, y, &e, NULL, NULL)) return e; /* holes.c */
+    if (f->mask && wm_hole_error(f, x, y, &e, wx, wy)) return e; /* holes.c */
     /* the largest Vmax whose E(T) is <= bound: E = ceil(2^16 ev / r) <= bound iff
      * ev <= floor(bound r / 2^16), and ev = ceil(2^16 V / D) <= evm iff V <= floor(evm D / 2^16) */
     if (p->metric != WM_METRIC_VERTICAL) {
@@ -302,7 +302,13 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
         evm = r < ((uint64_t)1 << 31) ? ((uint64_t)bound * r) >> 16 : 0xFFFFFFFFu;
     }
     if (evm < 0xFFFFFFFFu && D < ((int64_t)1 << 31)) limit = (evm * (uint64_t)D) >> 16;
-    return finish(f, p, x, y, D, scan_any(f, x, y, D, limit, NULL, NULL), r);
+    return finish(f, p, x, y, D, scan_any(f, x, y, D, limit, wx, wy), r);
+}
+
+uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           uint32_t bound)
+{
+    return wm_tri_error_within(f, p, x, y, bound, NULL, NULL);
 }
 
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,

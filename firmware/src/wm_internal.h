@@ -107,6 +107,9 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
 /* wm_point_error(...) > bound, without a division in the vertical metric (the decimation's cheap test). */
 int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                    int32_t py, uint32_t bound);
+/* wm_tri_error_upto, and while E(T) <= bound also the worst sample as wm_tri_error finds it. */
+uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                             uint32_t bound, int32_t *wx, int32_t *wy);
 /* E(T) when it is at most bound; otherwise some value above bound, found with the scan stopped at the
  * first sample that puts E(T) over it (the tests of the reduction and the decimation need no more). */
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],

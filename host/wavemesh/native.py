@@ -272,15 +272,22 @@ class RefineParams:
 
 def scale_fixed(scale: float | Fraction) -> tuple[int, int]:
     """s = m / 2^e, rounded down, m < 2^16 (in 2^15..2^16-1 unless s is out of range), e in 0..126."""
-    s = Fraction(scale)
-    if s <= 0:
+    exact = scale if hasattr(scale, "as_integer_ratio") else Fraction(scale)
+    n, d = map(int, exact.as_integer_ratio())  # numpy's are numpy integers
+    if n <= 0:
         raise ValueError("the height scale must be positive")
-    if s >= 65535:
+    if n >= 65535 * d:
         return 65535, 0  # smaller than s: conservative (the normal factor is estimated too large)
-    e = 0
-    while s * 2**e < 2**15 and e < 126:
+    # e: the least e >= 0 with s 2^e >= 2^15, at most 126, from the bit lengths (in integers: the refine
+    # call runs this three times, and a Fraction loop cost 0.1 ms each)
+    t = d << 15
+    e = max(0, t.bit_length() - n.bit_length())
+    while e > 0 and n << (e - 1) >= t:
+        e -= 1
+    while n << e < t:
         e += 1
-    return floor(s * 2**e), e
+    e = min(e, 126)
+    return (n << e) // d, e
 
 
 def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
