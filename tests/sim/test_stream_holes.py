@@ -30,6 +30,10 @@ def inputs(tmp_path_factory):
     d = tmp_path_factory.mktemp("holes_inputs")
     np.save(d / "ball.npy", shadowed("ball", 64, np.s_[8:48, 10:60]))  # 50 x 40
     np.save(d / "tiny.npy", shadowed("box", 32, np.s_[4:20, 8:30]))  # 22 x 16
+    speckled = shadowed("ball", 64, np.s_[8:48, 10:60])
+    rng = np.random.default_rng(5)
+    speckled[rng.integers(2, 38, 40), rng.integers(2, 48, 40)] = np.nan  # dropouts of a sample or a few
+    np.save(d / "speckled.npy", speckled)
     return d
 
 
@@ -72,6 +76,14 @@ def test_native_device_invalid_sentinel_and_min_area(device, inputs, tmp_path):
     z[~np.isfinite(z)] = 0.0
     np.save(tmp_path / "zero.npy", z)
     same_files(tmp_path, tmp_path / "zero.npy", device.url, ["--min-area", "20"], ("--invalid", "0"))
+
+
+def test_native_device_max_hole(device, inputs, tmp_path):
+    # --max-hole bridges the small dropouts before the job: the device gets the bridged mask
+    same_files(tmp_path, inputs / "speckled.npy", device.url, [], ("--max-hole", "2"))
+    rc, out, _ = run_cli("check", str(tmp_path / "stream.obj"), "--against", str(inputs / "speckled.npy"),
+                         "--nodata", "hole", "--max-hole", "2")
+    assert rc == 0 and "filled: " in out and "filled: 0 " not in out
 
 
 def test_a_device_without_holes_refuses(inputs, tmp_path, monkeypatch):
