@@ -85,8 +85,14 @@ typedef struct wm_mesh {
     wm_index *vh;   /* [vert_cap] one half-edge leaving the vertex */
 } wm_mesh;
 
-#define WM_NEXT(e) ((e) - (e) % 3 + ((e) + 1) % 3)
-#define WM_PREV(e) ((e) - (e) % 3 + ((e) + 2) % 3)
+/* Half-edge e's successor and predecessor in its triangle (e >= 0), without a division: e / 3 is a
+ * multiply-high by ceil(2^33 / 3) (exact for every 0 <= e < 2^32).  -Os compiles `% 3` to the division
+ * instruction, some 40 cycles on the soft CPU, and every mesh walk takes these. */
+static inline int32_t wm_div3(int32_t e) { return (int32_t)(((uint64_t)(uint32_t)e * 0xAAAAAAABu) >> 33); }
+static inline int32_t wm_next_he(int32_t e) { return e - 3 * wm_div3(e) == 2 ? e - 2 : e + 1; }
+static inline int32_t wm_prev_he(int32_t e) { return e - 3 * wm_div3(e) == 0 ? e + 2 : e - 1; }
+#define WM_NEXT(e) wm_next_he(e)
+#define WM_PREV(e) wm_prev_he(e)
 
 /* Bytes of storage wm_mesh_init needs for tri_cap triangles and vert_cap vertices (0 if too big). */
 size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap);

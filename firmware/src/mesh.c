@@ -156,21 +156,34 @@ int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris
     for (int32_t t = 0; t < nt; t++) m->tflag[t] = 0;
     m->vert_end = m->n_vert = nv;
     m->tri_end = m->n_tri = nt;
-    /* Buckets of half-edges by origin vertex: heads in vh, links in scratch. */
-    for (int32_t e = 0; e < 3 * nt; e++) {
-        int32_t a = m->hv[e];
-        scratch[e] = m->vh[a] < 0 ? nil : (uint32_t)m->vh[a];
-        m->vh[a] = e;
-    }
-    for (int32_t e = 0; e < 3 * nt; e++) {
-        int32_t a = m->hv[e], b = wm_dest(m, e), found = -1;
-        if (m->vh[b] < 0) continue;
-        for (uint32_t f = (uint32_t)m->vh[b]; f != nil; f = scratch[f]) {
-            if (wm_dest(m, (int32_t)f) != a) continue;
-            if (found >= 0) return WM_ERR_MESH; /* edge used by more than two triangles */
-            found = (int32_t)f;
+    /* Buckets of half-edges by origin vertex: heads in vh, links in scratch.  A link holds the next
+     * half-edge f as f << 2 | f % 3 (3 nt < 2^30), so the walk below finds f's destination without a
+     * division; a head is f itself (vh may be 16-bit). */
+    for (int32_t t = 0, e = 0; t < nt; t++) {
+        for (int32_t k = 0; k < 3; k++, e++) {
+            int32_t a = m->hv[e], h = m->vh[a];
+            scratch[e] = h < 0 ? nil : (uint32_t)h << 2 | (uint32_t)(h - 3 * wm_div3(h));
+            m->vh[a] = e;
         }
-        m->ho[e] = found;
+    }
+    /* Each edge once, from the half-edge a -> b with a < b: its opposite is the one half-edge b -> a in
+     * b's bucket, and both are linked.  A repeated half-edge a -> b then breaks the symmetry checked
+     * below, a repeated b -> a is found here: the same verdicts as a search from every half-edge. */
+    for (int32_t e = 0; e < 3 * nt; e += 3) {
+        for (int32_t k = 0; k < 3; k++) {
+            int32_t a = m->hv[e + k], b = m->hv[k == 2 ? e : e + k + 1], found = -1, h = m->vh[b];
+            uint32_t f;
+            if (a > b || h < 0) continue;
+            f = (uint32_t)h << 2 | (uint32_t)(h - 3 * wm_div3(h));
+            for (; f != nil; f = scratch[f >> 2]) {
+                uint32_t g = f >> 2;
+                if (m->hv[(f & 3u) == 2 ? g - 2 : g + 1] != a) continue;
+                if (found >= 0) return WM_ERR_MESH; /* edge used by more than two triangles */
+                found = (int32_t)g;
+            }
+            m->ho[e + k] = found;
+            if (found >= 0) m->ho[found] = e + k;
+        }
     }
     for (int32_t v = 0; v < nv; v++) m->vh[v] = -1;
     for (int32_t e = 3 * nt - 1; e >= 0; e--) m->vh[m->hv[e]] = e; /* the lowest half-edge */
@@ -217,7 +230,7 @@ int wm_mesh_check_line(const wm_mesh *m)
         if (m->vx[v] == WM_FREE) continue;
         live_v++;
         if (m->vx[v] >= m->width || m->vy[v] >= m->height) return __LINE__;
-        if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0 || m->hv[e] != v) return __LINE__;
+        if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * wm_div3(e)] < 0 || m->hv[e] != v) return __LINE__;
         if (wm_on_border(m, m->vx[v], m->vy[v])) border_v++;
     }
     for (int32_t t = 0; t < m->tri_end; t++) {
@@ -227,11 +240,12 @@ int wm_mesh_check_line(const wm_mesh *m)
         for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
             int32_t a = m->hv[e], b, o = m->ho[e];
             if (a < 0 || a >= m->vert_end || m->vx[a] == WM_FREE) return __LINE__;
-            b = wm_dest(m, e);
+            b = m->hv[e == 3 * t + 2 ? 3 * t : e + 1];
             if (b < 0 || b >= m->vert_end || m->vx[b] == WM_FREE) return __LINE__;
             if (o >= 0) {
-                if (o >= 3 * m->tri_end || m->hv[3 * WM_TRI(o)] < 0 || WM_TRI(o) == t) return __LINE__;
-                if (m->ho[o] != e || m->hv[o] != b || wm_dest(m, o) != a) return __LINE__;
+                int32_t to = wm_div3(o); /* o's triangle, and o's destination from it: one multiply */
+                if (o >= 3 * m->tri_end || m->hv[3 * to] < 0 || to == t) return __LINE__;
+                if (m->ho[o] != e || m->hv[o] != b || m->hv[o == 3 * to + 2 ? 3 * to : o + 1] != a) return __LINE__;
             } else {
                 int32_t ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
                 int on = (ax == bx && (ax == 0 || ax == m->width - 1)) ||
