@@ -42,12 +42,21 @@ static int fan_may_fit(const wm_refiner *r, const int32_t *rx, const int32_t *ry
     return 1;
 }
 
+/* The probe of the ear clipping's plan (wm_ring_plan_probe): v's sample above zeta. */
+static int v_above(const void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
+{
+    const wm_refiner *r = (const wm_refiner *)ctx;
+    return wm_point_above(&r->field, &r->params, x, y, px, py, r->params.zeta);
+}
+
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
 {
     const wm_mesh *me = &r->mesh;
     int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt;
     uint32_t best = NONE;
     int32_t vx = me->vx[v], vy = me->vy[v];
+    struct wm_plan_probe probe;
+    probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = r;
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
     for (int32_t i = 0; i < n; i++) {
@@ -58,25 +67,12 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
      * and those from 1 and 3): the duplicates are not tried again. */
     for (int32_t a = -1; a < (n == 3 ? 0 : n == 4 ? 2 : n); a++) {
         uint32_t worst = 0;
-        int32_t j = 0;
+        int32_t j;
+        /* First the cheap test: v's own sample against the new triangle that holds it (a lower bound
+         * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
+         * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
         if (a >= 0 && !fan_may_fit(r, rx, ry, n, a, vx, vy)) continue;
-        if (wm_ring_plan(me, ring, n, a, tris, &nt) != WM_OK) continue;
-        /* First the cheap test: v's own sample against the new triangle that holds it (a lower
-         * bound of that triangle's E(T), rounded the same way); most candidates stop here.  (Done
-         * above for a fan.) */
-        for (j = a >= 0 ? nt : 0; j < nt; j++) {
-            int32_t x[3], y[3];
-            for (int c = 0; c < 3; c++) {
-                x[c] = me->vx[tris[3 * j + c]];
-                y[c] = me->vy[tris[3 * j + c]];
-            }
-            if (wm_orient(x[0], y[0], x[1], y[1], vx, vy) < 0 || wm_orient(x[1], y[1], x[2], y[2], vx, vy) < 0 ||
-                wm_orient(x[2], y[2], x[0], y[0], vx, vy) < 0)
-                continue;
-            if (wm_point_above(&r->field, &r->params, x, y, vx, vy, r->params.zeta)) j = -1;
-            break;
-        }
-        if (j < 0) continue;
+        if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe) != WM_OK) continue;
         for (j = 0; j < nt; j++) {
             int32_t x[3], y[3];
             uint32_t e;

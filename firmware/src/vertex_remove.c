@@ -87,10 +87,36 @@ static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
     return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
 }
 
+/* 1 when (px, py) lies in the closed counter-clockwise triangle. */
+static int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t px, int32_t py)
+{
+    return wm_orient(ax, ay, bx, by, px, py) >= 0 && wm_orient(bx, by, cx, cy, px, py) >= 0 &&
+           wm_orient(cx, cy, ax, ay, px, py) >= 0;
+}
+
+/* The first of the ear clipping's triangles (in the order they are cut) that holds the probe's point
+ * is handed to the probe; an answer of 1 refuses the plan at once (the rest is not worked out). */
+static int probed(const struct wm_plan_probe *pr, int *done, int32_t ax, int32_t ay, int32_t bx, int32_t by,
+                  int32_t cx, int32_t cy)
+{
+    int32_t x[3], y[3];
+    if (pr == NULL || *done || !holds(ax, ay, bx, by, cx, cy, pr->px, pr->py)) return 0;
+    *done = 1;
+    x[0] = ax, x[1] = bx, x[2] = cx, y[0] = ay, y[1] = by, y[2] = cy;
+    return pr->above(pr->ctx, x, y, pr->px, pr->py);
+}
+
 int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
                  int32_t *n_tris)
 {
+    return wm_ring_plan_probe(m, ring, n, apex, tris, n_tris, NULL);
+}
+
+int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
+                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr)
+{
     int32_t poly[WM_MAX_RING], nt = 0;
+    int done = 0;
     if (n < 3 || n > WM_MAX_RING || apex >= n) return WM_ERR_ARG;
     if (apex >= 0) {
         /* the fan (a, p_i, p_i+1) for i = apex + 1 .. apex + n - 2 (mod n), positions wrapped by a
@@ -181,6 +207,8 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
             if (best < 0) return WM_ERR_REFUSED;
             tris[3 * nt] = ring[pv[best]], tris[3 * nt + 1] = ring[best], tris[3 * nt + 2] = ring[nx[best]];
             nt++;
+            if (probed(pr, &done, px[pv[best]], py[pv[best]], px[best], py[best], px[nx[best]], py[nx[best]]))
+                return WM_ERR_REFUSED;
             ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
             nx[pv[best]] = nx[best];
             pv[nx[best]] = pv[best];
@@ -191,6 +219,9 @@ int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
         poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
     }
     if (orient3(m, poly[0], poly[1], poly[2]) <= 0) return WM_ERR_REFUSED;
+    if (probed(pr, &done, m->vx[poly[0]], m->vy[poly[0]], m->vx[poly[1]], m->vy[poly[1]], m->vx[poly[2]],
+               m->vy[poly[2]]))
+        return WM_ERR_REFUSED;
     tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
     *n_tris = nt + 1;
     return WM_OK;

@@ -220,6 +220,16 @@ int32_t wm_reduce(wm_refiner *r);
 /* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition, and the sum of the Q28 unit
  * normals around v (below 2^33); the triangle count or an error. */
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3]);
+/* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
+ * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
+ * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL. */
+struct wm_plan_probe {
+    int32_t px, py;
+    int (*above)(const void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py);
+    const void *ctx;
+};
+int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
+                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr);
 /* The hole of a removed vertex triangulated by ear clipping with a heap of ears (O(h log h)): the
  * ring (n vertices, counter-clockwise, as wm_vertex_ring gives it) is star-shaped from (kx, ky),
  * the removed vertex, and an ear (a, b, c) is cut only when it is strictly convex and (kx, ky) is

@@ -347,13 +347,23 @@ def _ptr(a: np.ndarray, ctype):
     return a.ctypes.data_as(ctypes.POINTER(ctype))
 
 
-@dataclass
 class Level:
-    """One resolution level's mesh and the library's statistics for it."""
+    """One resolution level's mesh and the library's statistics for it.  The Mesh is made from the
+    exported slot arrays when first read: a refine call exports every level (the library's mesh moves
+    on), and most callers read only the final one (0.1 ms a call on a 128 x 128 grid)."""
 
-    level: int
-    mesh: Mesh
-    stats: dict
+    def __init__(self, level: int, mesh: Mesh | tuple, stats: dict):
+        self.level, self.stats, self._mesh = level, stats, mesh
+
+    @property
+    def mesh(self) -> Mesh:
+        if isinstance(self._mesh, tuple):  # (width, height, xy, tris) as _export copied them
+            self._mesh = Mesh.from_slots(*self._mesh)
+        return self._mesh
+
+    @mesh.setter
+    def mesh(self, mesh: Mesh) -> None:
+        self._mesh = mesh
 
 
 @dataclass
@@ -367,7 +377,7 @@ class RefineOutput:
         return self.levels[-1]
 
 
-def _export(lib, handle, width: int, height: int) -> Mesh:
+def _export(lib, handle, width: int, height: int) -> tuple:
     mesh_ptr = lib.wm_refine_mesh(handle)
     # wm_mesh's first eight int32 fields: width, height, tri_cap, vert_cap, tri_end, vert_end, n_tri, n_vert
     hdr = (ctypes.c_int32 * 8).from_address(mesh_ptr)
@@ -376,7 +386,7 @@ def _export(lib, handle, width: int, height: int) -> Mesh:
     tris = np.empty((n_tri, 3), dtype=np.int32)
     n = lib.wm_mesh_export(mesh_ptr, _ptr(xy, ctypes.c_int32), _ptr(tris, ctypes.c_int32))
     assert n == n_tri
-    return Mesh.from_slots(width, height, xy, tris)
+    return width, height, xy, tris
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel], initial: Mesh, params: RefineParams,
