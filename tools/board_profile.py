@@ -50,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--raw", help="also keep the raw PC histogram here")
     ap.add_argument("--data", action="store_true", help="also the data accesses' waits by area and array")
     ap.add_argument("--firmware", help="profile this image (FILE.hex, FILE.elf beside it), not a new build")
+    ap.add_argument("--check", action="store_true",
+                    help="also run `wavemesh mesh` with the same options: are the meshes equal?")
     args, stream_opts = ap.parse_known_args(argv)
     sim = simboard.build.build_sim()
     hexfile = Path(args.firmware) if args.firmware else simboard.build.build_firmware()
@@ -74,9 +76,16 @@ def main(argv: list[str] | None = None) -> int:
         if rc != 0:
             print(f"error: wavemesh stream exited {rc}", file=sys.stderr)
             return 2
+        same = None
+        if args.check:
+            soft = Path(tmp) / "soft.obj"
+            subprocess.run([str(VENV_BIN / "wavemesh"), "mesh", args.input, *stream_opts, "-o", str(soft),
+                            "-q"], check=True)
+            same = soft.read_bytes() == (Path(tmp) / "out.obj").read_bytes()
         hist = [(int(a, 16), int(c)) for a, c in (ln.split() for ln in prof.read_text().splitlines())]
+        rep = json.loads(report.read_text())
+        stages = rep["device_cycles"]
         if args.data:
-            rep = json.loads(report.read_text())
             data = [[int(f, 16) if i == 0 else int(f) for i, f in enumerate(ln.split())]
                     for ln in Path(str(prof) + ".data").read_text().splitlines()]
             areas = _areas(rep, elf)
@@ -89,11 +98,29 @@ def main(argv: list[str] | None = None) -> int:
         per[name] = per.get(name, 0) + cyc
     total = sum(per.values())
     print(f"{total:,} cycles")
+    print("stages (DONE's counters): "
+          + ", ".join(f"{k} {v:,}" for k, v in stages.items() if isinstance(v, int)))
+    print("per unit: " + ", ".join(f"{k} {v:,.1f} per {u}" for k, v, u in _per_unit(rep)))
+    if same is not None:
+        print("the mesh equals wavemesh mesh's" if same else "THE MESH DIFFERS from wavemesh mesh's")
     for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: args.top]:
         print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
     if args.data:
         _data_report(data, areas, total)
     return 0
+
+
+def _per_unit(rep: dict) -> list[tuple[str, float, str]]:
+    """Each stage's cycles over what it scales with (docs/soc.md's 1024 x 1024 extrapolation): samples,
+    initial triangles, output triangles, level-stream bytes."""
+    c = rep["device_cycles"]
+    samples = rep["input"]["width"] * rep["input"]["height"]
+    stream = rep["transfer"]["mesh_bytes"]
+    out = rep["refiner"]["levels"][-1]["triangles"] if "refiner" in rep else rep["initial"]["triangles"]
+    return [("receive", c["receive"] / samples, "sample"), ("filter", c["filter"] / samples, "sample"),
+            ("template", c["template"] / rep["initial"]["triangles"], "initial triangle"),
+            ("refine", c["refine"] / out, "output triangle"), ("emit", c["emit"] / stream, "stream byte"),
+            ("link", c["link"] / stream, "stream byte")]
 
 
 def _refiner_struct_bytes() -> int:

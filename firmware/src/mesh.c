@@ -245,7 +245,8 @@ int wm_mesh_check_line(const wm_mesh *m)
             if (o >= 0) {
                 int32_t to = wm_div3(o); /* o's triangle, and o's destination from it: one multiply */
                 if (o >= 3 * m->tri_end || m->hv[3 * to] < 0 || to == t) return __LINE__;
-                if (m->ho[o] != e || m->hv[o] != b || m->hv[o == 3 * to + 2 ? 3 * to : o + 1] != a) return __LINE__;
+                if (m->ho[o] != e || m->hv[o] != b || m->hv[o == 3 * to + 2 ? 3 * to : o + 1] != a)
+                    return __LINE__;
             } else {
                 int32_t ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
                 int on = (ax == bx && (ax == 0 || ax == m->width - 1)) ||

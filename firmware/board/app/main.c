@@ -54,6 +54,12 @@ static int io_getc(void *ctx, uint32_t timeout_ms)
     }
 }
 
+static int io_read(void *ctx, uint8_t *dst, uint32_t max)
+{
+    (void)ctx;
+    return (int)board_uart_read(dst, max, WM_PROTO_SLIP_END, WM_PROTO_SLIP_ESC);
+}
+
 static void io_write(void *ctx, const uint8_t *data, size_t n)
 {
     (void)ctx;
@@ -104,6 +110,7 @@ int main(void)
 
     io.ctx = NULL;
     io.getc = io_getc;
+    io.read = io_read;
     io.write = io_write;
     io.cycles = io_cycles;
     io.mark = io_mark;

@@ -28,7 +28,7 @@ uint32_t board_uart_div(void);
 /* Queue one byte; waits while the TX FIFO is full (it always drains: no timeout needed). */
 void board_uart_putc(uint8_t byte);
 
-/* Queue n bytes (board_uart_putc for each). */
+/* Queue n bytes: waits until the TX FIFO is empty, then fills it (no status read per byte). */
 void board_uart_write(const void *data, size_t n);
 
 /* Wait until the TX FIFO is empty and the last stop bit has been sent. */
@@ -36,6 +36,12 @@ void board_uart_flush(void);
 
 /* The oldest received byte, or -1 when none is waiting.  Never waits. */
 int board_uart_getc(void);
+
+/*
+ * The received bytes already waiting, at most max, into dst, up to and including the first that is
+ * stop_a or stop_b (a delimiter the caller handles itself); their number.  Never waits.
+ */
+size_t board_uart_read(uint8_t *dst, size_t max, uint8_t stop_a, uint8_t stop_b);
 
 /*
  * The oldest received byte, waiting up to `cycles` clock cycles (< 2^31) for one; -1 on timeout.

@@ -7,7 +7,7 @@
  * (firmware/board/native/) gives it a TCP socket.  Both hand in a job function that turns the
  * received heights and parameters into meshes, level by level:
  *
- *     static wm_proto eng;                                  (about 2.5 KiB: buffers inside)
+ *     static wm_proto eng;                                  (about 3 KiB: buffers inside)
  *     wm_proto_init(&eng, &io, &caps, heights, job, job_ctx);
  *     wm_proto_serve(&eng);                                 (returns only when the link closes)
  *
@@ -58,12 +58,16 @@ extern "C" {
 #define WM_PROTO_CLOCK_NONE 0xFFu
 #define WM_PROTO_CLOCK_LINK 0x100u
 
-/* The transport.  getc, write and cycles are required; mark may be NULL. */
+/* The transport.  getc, write and cycles are required; read and mark may be NULL. */
 typedef struct wm_proto_io {
     void *ctx;
     /* The next received byte, waiting up to timeout_ms milliseconds (0: do not wait);
      * WM_PROTO_RX_TIMEOUT or WM_PROTO_RX_CLOSED otherwise. */
     int (*getc)(void *ctx, uint32_t timeout_ms);
+    /* Optional, for speed (NULL: getc with timeout 0, a byte at a time): the bytes already received,
+     * at most max, into dst without waiting, up to and including the first WM_PROTO_SLIP_END or
+     * WM_PROTO_SLIP_ESC; their number (0: none waiting) or WM_PROTO_RX_CLOSED. */
+    int (*read)(void *ctx, uint8_t *dst, uint32_t max);
     /* Send n bytes (may block while a FIFO drains; must not block forever). */
     void (*write)(void *ctx, const uint8_t *data, size_t n);
     /* A free-running counter at caps.clk_hz (wraps after 2^64). */
@@ -115,7 +119,7 @@ struct wm_proto;
  * (stop at once), or an error code of its own (WM_PROTO_E_CAPACITY, WM_PROTO_E_JOB) with *detail. */
 typedef int (*wm_proto_job_fn)(void *ctx, const wm_proto_job *job, struct wm_proto *p, uint32_t *detail);
 
-/* The engine's state.  Opaque: use the functions below. */
+/* The engine's state.  Opaque: use the functions below.  (About 3 KiB: buffers inside.) */
 typedef struct wm_proto {
     wm_proto_io io;
     wm_proto_caps caps;
@@ -126,21 +130,27 @@ typedef struct wm_proto {
     void *job_ctx;
     uint32_t ms_cycles;      /* cycles per millisecond */
 
-    /* reception */
-    uint8_t rx[WM_PROTO_MAX_FRAME];
+    /* reception (h: DATA's samples read as halfwords) */
+    union {
+        uint8_t b[WM_PROTO_MAX_FRAME];
+        uint16_t h[WM_PROTO_MAX_FRAME / 2];
+    } rx;
     uint32_t rx_len;
     uint8_t rx_esc, rx_bad;
-    uint32_t rx_crc;         /* running CRC-32 (inverted) of the frame's bytes but its last four */
     uint64_t rx_last;        /* cycles of the last byte of the frame being received */
     uint8_t f_type, f_seq;   /* the frame just received */
     uint16_t f_len;
     const uint8_t *f_pay;
     uint32_t bad_frames;     /* damaged frames dropped (counter, for tests) */
 
-    /* transmission */
-    uint8_t tx[WM_PROTO_MAX_PAYLOAD];
-    uint8_t out[64];
+    /* transmission (h: the level stream written as halfwords) */
+    union {
+        uint8_t b[WM_PROTO_MAX_PAYLOAD];
+        uint16_t h[WM_PROTO_MAX_PAYLOAD / 2];
+    } tx;
+    uint8_t out[256];
     uint32_t out_len;
+    uint32_t x8n_n, x8n;     /* CRC combination: x^(8 n) modulo the CRC's polynomial for n = x8n_n */
     uint8_t seq;             /* the device's own frames */
 
     /* reply cache: the answer to the last CONFIG, RUN or ABORT, sent again for a duplicate */

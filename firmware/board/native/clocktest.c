@@ -270,6 +270,7 @@ int main(int argc, char **argv)
     caps.clk_hz = CLK_HZ;
     io.ctx = &h;
     io.getc = io_getc;
+    io.read = NULL;
     io.write = io_write;
     io.cycles = io_cycles;
     io.mark = NULL;

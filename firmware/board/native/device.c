@@ -366,6 +366,7 @@ int main(int argc, char **argv)
 
     io.ctx = &c;
     io.getc = io_getc;
+    io.read = NULL; /* getc(0) a byte at a time: a socket's reads are cheap */
     io.write = io_write;
     io.cycles = io_cycles;
     io.mark = NULL;

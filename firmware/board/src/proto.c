@@ -27,6 +27,22 @@
  */
 #include "proto.h"
 
+/* Both devices (rv32, x86-64) are little-endian, the wire's order: words and halfwords go straight
+ * between it and memory.  Elsewhere byte by byte. */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#define WM_LITTLE_ENDIAN 1
+#else
+#define WM_LITTLE_ENDIAN 0
+#endif
+
+/* DATA's samples and MESH's stream bytes start at even offsets (read and written as halfwords) */
+typedef char proto_halfword_payloads[(WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTES) % 2 == 0 &&
+                                             WM_PROTO_MESH_BYTES % 2 == 0 &&
+                                             WM_PROTO_LEVEL_HEADER_BYTES % 2 == 0 &&
+                                             WM_PROTO_FREE_VERTEX == WM_FREE
+                                         ? 1
+                                         : -1];
+
 #define CACHED_MAX 16u /* largest reply kept for duplicate requests (OK: 4, ERROR: 8) */
 #define SERVE_POLL_MS 100u /* how often the idle loop looks at the session clock */
 
@@ -122,6 +138,66 @@ uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n)
     return ~c;
 }
 
+/* The engine's bulk CRC (every received frame, every level stream, RUN's check of the stored samples):
+ * four bytes a step from an aligned word, "slicing by four" (3 KB more of tables, made by
+ * wm_proto_init: crc_slice[k][i] is crc_table[i] followed by k + 1 zero bytes), some 27 cycles a byte
+ * on the soft CPU against 48.  c is the register (inverted CRC). */
+static uint32_t crc_slice[3][256];
+
+static void crc_slice_init(void)
+{
+    for (int i = 0; i < 256; i++) {
+        uint32_t c = crc_table[i];
+        for (int k = 0; k < 3; k++) {
+            c = crc_table[c & 0xFFu] ^ (c >> 8);
+            crc_slice[k][i] = c;
+        }
+    }
+}
+
+static uint32_t crc_run(uint32_t c, const uint8_t *s, size_t n)
+{
+#if WM_LITTLE_ENDIAN
+    for (; n && ((uintptr_t)s & 3u); n--) c = crc_update(c, *s++);
+    for (; n >= 4; n -= 4, s += 4) {
+        uint32_t w;
+        __builtin_memcpy(&w, __builtin_assume_aligned(s, 4), 4); /* one load: the wire's order is the CPU's */
+        c ^= w;
+        c = crc_slice[2][c & 0xFFu] ^ crc_slice[1][c >> 8 & 0xFFu] ^ crc_slice[0][c >> 16 & 0xFFu] ^
+            crc_table[c >> 24];
+    }
+#endif
+    for (; n; n--) c = crc_update(c, *s++);
+    return c;
+}
+
+/* CRC combination (as zlib's crc32_combine): the CRC-32 of A B is crc_mul(x^(8 |B|), crc(A)) ^ crc(B),
+ * products of polynomials modulo the CRC's, bit 31 the constant term.  A frame's CRC then follows from
+ * its payload's (computed once, for the level stream's CRC) at some 3 k cycles a frame. */
+static uint32_t crc_mul(uint32_t a, uint32_t b)
+{
+    uint32_t r = 0;
+    for (; a; a <<= 1) {
+        if (a & 0x80000000u) r ^= b;
+        b = b & 1u ? b >> 1 ^ 0xEDB88320u : b >> 1;
+    }
+    return r;
+}
+
+static uint32_t crc_combine(wm_proto *p, uint32_t crc_a, uint32_t crc_b, uint32_t nb)
+{
+    if (p->x8n_n != nb) { /* x^(8 nb): one chunk size a level, mostly */
+        uint32_t r = 0x80000000u, sq = 0x00800000u; /* x^0, x^8 */
+        for (uint32_t k = nb; k; k >>= 1) {
+            if (k & 1u) r = crc_mul(sq, r);
+            sq = crc_mul(sq, sq);
+        }
+        p->x8n_n = nb;
+        p->x8n = r;
+    }
+    return crc_mul(p->x8n, crc_a) ^ crc_b;
+}
+
 /* ---------------------------------------------------------------------------------------------- */
 /* Time */
 
@@ -130,7 +206,8 @@ static uint64_t now(const wm_proto *p) { return p->io.cycles(p->io.ctx); }
 static uint64_t ms_to_cycles(const wm_proto *p, uint32_t ms) { return (uint64_t)ms * p->ms_cycles; }
 
 /* ---------------------------------------------------------------------------------------------- */
-/* Sending: SLIP-encode into a small buffer, written out when full and before every read */
+/* Sending: SLIP-encode into a buffer, written out when it may not hold the next piece and before every
+ * read */
 
 static void out_flush(wm_proto *p)
 {
@@ -146,38 +223,61 @@ static void out_raw(wm_proto *p, uint8_t b)
     p->out[p->out_len++] = b;
 }
 
-static void out_byte(wm_proto *p, uint8_t b)
+/* n bytes SLIP-escaped (each takes at most two) */
+static void out_slip(wm_proto *p, const uint8_t *s, uint32_t n)
 {
-    if (b == WM_PROTO_SLIP_END) {
-        out_raw(p, WM_PROTO_SLIP_ESC);
-        out_raw(p, WM_PROTO_SLIP_ESC_END);
-    } else if (b == WM_PROTO_SLIP_ESC) {
-        out_raw(p, WM_PROTO_SLIP_ESC);
-        out_raw(p, WM_PROTO_SLIP_ESC_ESC);
-    } else {
-        out_raw(p, b);
+    while (n) {
+        uint32_t k;
+        uint8_t *d;
+        const uint8_t *e;
+        if (sizeof p->out - p->out_len < 64) out_flush(p);
+        k = (uint32_t)(sizeof p->out - p->out_len) / 2;
+        if (k > n) k = n;
+        n -= k;
+        d = p->out + p->out_len;
+        for (e = s + k; s < e; s++) {
+            uint8_t b = *s;
+            if (b == WM_PROTO_SLIP_END) {
+                *d++ = WM_PROTO_SLIP_ESC;
+                *d++ = WM_PROTO_SLIP_ESC_END;
+            } else if (b == WM_PROTO_SLIP_ESC) {
+                *d++ = WM_PROTO_SLIP_ESC;
+                *d++ = WM_PROTO_SLIP_ESC_ESC;
+            } else {
+                *d++ = b;
+            }
+        }
+        p->out_len = (uint32_t)(d - p->out);
     }
 }
 
-/* One frame: header, payload (two pieces, either may be empty), CRC. */
+/* One frame: header, payload (two pieces, either may be empty), CRC (of the header and payload). */
+static void send_encoded(wm_proto *p, const uint8_t head[WM_PROTO_HEADER_BYTES], const uint8_t *a, uint32_t na,
+                         const uint8_t *b, uint32_t nb, uint32_t crc)
+{
+    uint8_t tail[WM_PROTO_CRC_BYTES];
+    put32(tail, crc);
+    out_raw(p, WM_PROTO_SLIP_END);
+    out_slip(p, head, WM_PROTO_HEADER_BYTES);
+    out_slip(p, a, na);
+    out_slip(p, b, nb);
+    out_slip(p, tail, sizeof tail);
+    out_raw(p, WM_PROTO_SLIP_END);
+}
+
+static void frame_head(uint8_t head[WM_PROTO_HEADER_BYTES], uint8_t type, uint8_t seq, uint32_t n)
+{
+    head[0] = type;
+    head[1] = seq;
+    put16(head + 2, n);
+}
+
 static void send_frame2(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *a, uint32_t na, const uint8_t *b,
                         uint32_t nb)
 {
-    uint8_t head[WM_PROTO_HEADER_BYTES], tail[WM_PROTO_CRC_BYTES];
-    uint32_t crc, i;
-    head[0] = type;
-    head[1] = seq;
-    put16(head + 2, na + nb);
-    crc = wm_proto_crc32(0, head, sizeof head);
-    crc = wm_proto_crc32(crc, a, na);
-    crc = wm_proto_crc32(crc, b, nb);
-    put32(tail, crc);
-    out_raw(p, WM_PROTO_SLIP_END);
-    for (i = 0; i < sizeof head; i++) out_byte(p, head[i]);
-    for (i = 0; i < na; i++) out_byte(p, a[i]);
-    for (i = 0; i < nb; i++) out_byte(p, b[i]);
-    for (i = 0; i < sizeof tail; i++) out_byte(p, tail[i]);
-    out_raw(p, WM_PROTO_SLIP_END);
+    uint8_t head[WM_PROTO_HEADER_BYTES];
+    frame_head(head, type, seq, na + nb);
+    send_encoded(p, head, a, na, b, nb, ~crc_run(crc_run(crc_run(~0u, head, sizeof head), a, na), b, nb));
 }
 
 static void send_frame(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *payload, uint32_t n)
@@ -257,21 +357,22 @@ static void rx_reset(wm_proto *p)
     p->rx_len = 0;
     p->rx_esc = 0;
     p->rx_bad = 0;
-    p->rx_crc = 0xFFFFFFFFu;
 }
 
-/* The bytes between two delimiters: a frame with the right length field and CRC? */
+/* The bytes between two delimiters: a frame with the right length field and CRC?  (The CRC in one
+ * go at the end: on a UART, the RX FIFO's 64 bytes are some 140 k cycles at 115200 baud, a 1 KB frame's
+ * CRC some 30 k.) */
 static int rx_check(wm_proto *p)
 {
-    uint32_t n;
+    uint32_t n, body = p->rx_len - WM_PROTO_CRC_BYTES;
     if (p->rx_len < WM_PROTO_HEADER_BYTES + WM_PROTO_CRC_BYTES) return 0;
-    n = get16(p->rx + 2);
+    n = get16(p->rx.b + 2);
     if (p->rx_len != WM_PROTO_HEADER_BYTES + n + WM_PROTO_CRC_BYTES) return 0;
-    if (~p->rx_crc != get32(p->rx + p->rx_len - WM_PROTO_CRC_BYTES)) return 0;
-    p->f_type = p->rx[0];
-    p->f_seq = p->rx[1];
+    if (~crc_run(~0u, p->rx.b, body) != get32(p->rx.b + body)) return 0;
+    p->f_type = p->rx.b[0];
+    p->f_seq = p->rx.b[1];
     p->f_len = (uint16_t)n;
-    p->f_pay = p->rx + WM_PROTO_HEADER_BYTES;
+    p->f_pay = p->rx.b + WM_PROTO_HEADER_BYTES;
     return 1;
 }
 
@@ -307,14 +408,54 @@ static int rx_byte(wm_proto *p, int c)
         p->rx_esc = 1;
         return 0;
     }
-    if (p->rx_len >= sizeof p->rx) {
+    if (p->rx_len >= sizeof p->rx.b) {
         p->rx_bad = 1; /* longer than any frame */
         return 0;
     }
-    /* the CRC runs four bytes behind: at the delimiter it covers all but the frame's own CRC
-     * (byte by byte, so no frame end costs more than a byte time of a UART) */
-    if (p->rx_len >= WM_PROTO_CRC_BYTES) p->rx_crc = crc_update(p->rx_crc, p->rx[p->rx_len - WM_PROTO_CRC_BYTES]);
-    p->rx[p->rx_len++] = (uint8_t)c;
+    p->rx.b[p->rx_len++] = (uint8_t)c;
+    return 0;
+}
+
+/* Bytes already received, at most max, into dst, up to and including the first delimiter or escape
+ * (wm_proto_io.read's contract): their number, or WM_PROTO_RX_CLOSED. */
+static int rx_take(wm_proto *p, uint8_t *dst, uint32_t max)
+{
+    uint32_t n = 0;
+    if (p->io.read) return p->io.read(p->io.ctx, dst, max);
+    while (n < max) {
+        int c = p->io.getc(p->io.ctx, 0);
+        if (c < 0) return c == WM_PROTO_RX_CLOSED && n == 0 ? WM_PROTO_RX_CLOSED : (int)n;
+        dst[n++] = (uint8_t)c;
+        if (c == WM_PROTO_SLIP_END || c == WM_PROTO_SLIP_ESC) break;
+    }
+    return (int)n;
+}
+
+/* After the byte c: the bytes already waiting, at most RX_BURST, each in its place in the frame buffer
+ * (all but the last of a read are plain bytes: they stay where they landed; the last goes through
+ * rx_byte).  1 when a frame is complete, -1 when the link closed, 0 when no byte waits (or the burst's
+ * bound is reached: it keeps a flood without delimiters from holding off the caller's timeouts). */
+static int rx_burst(wm_proto *p, int c)
+{
+    uint32_t k = 1;
+    if (rx_byte(p, c)) return 1;
+    while (k < RX_BURST) {
+        uint32_t room = (uint32_t)sizeof p->rx.b - p->rx_len;
+        int n;
+        if (p->rx_esc || p->rx_bad || room == 0) { /* a byte to translate, or to drop */
+            c = p->io.getc(p->io.ctx, 0);
+            if (c < 0) return c == WM_PROTO_RX_CLOSED ? -1 : 0;
+            k++;
+            if (rx_byte(p, c)) return 1;
+            continue;
+        }
+        if (room > RX_BURST - k) room = RX_BURST - k;
+        n = rx_take(p, p->rx.b + p->rx_len, room);
+        if (n <= 0) return n == WM_PROTO_RX_CLOSED ? -1 : 0;
+        k += (uint32_t)n;
+        p->rx_len += (uint32_t)n - 1u;
+        if (rx_byte(p, p->rx.b[p->rx_len])) return 1;
+    }
     return 0;
 }
 
@@ -341,20 +482,11 @@ static int rx_frame(wm_proto *p, uint32_t wait_ms)
         c = p->io.getc(p->io.ctx, to);
         if (c == WM_PROTO_RX_CLOSED) return -1;
         if (c < 0) continue;
-        /* a burst: up to RX_BURST bytes already waiting are taken without the timeouts' bookkeeping
-         * (the clock reads and the division above cost some 400 cycles a byte on the soft CPU); the
-         * bound keeps a flood without delimiters from holding off wait_ms */
-        for (uint32_t k = 0;; k++) {
-            if (rx_byte(p, c)) {
-                p->rx_last = now(p);
-                return 1;
-            }
-            if (k == RX_BURST) break;
-            c = p->io.getc(p->io.ctx, 0);
-            if (c < 0) break;
-        }
+        /* a burst of what is already waiting, without the timeouts' bookkeeping (the clock reads and
+         * the division above cost some 400 cycles a byte on the soft CPU) */
+        c = rx_burst(p, c);
         p->rx_last = now(p);
-        if (c == WM_PROTO_RX_CLOSED) return -1;
+        if (c != 0) return c;
     }
 }
 
@@ -650,7 +782,17 @@ static void do_data(wm_proto *p)
     if (off <= p->next) {
         /* in order, or a repeat that may reach beyond what is stored */
         s = p->f_pay + WM_PROTO_DATA_BYTES;
-        for (i = 0; i < n; i++) put_word(p, off + i, get16(s + 2 * i));
+#if WM_LITTLE_ENDIAN
+        if (off + n <= (uint32_t)p->job.width * (uint32_t)p->job.height) {
+            /* samples only: halfword copies (the wire's byte order is the CPU's) */
+            const uint16_t *h = p->rx.h + (WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTES) / 2;
+            uint16_t *d = p->heights + off;
+            for (i = 0; i < n; i++) d[i] = h[i];
+        } else
+#endif
+        {
+            for (i = 0; i < n; i++) put_word(p, off + i, get16(s + 2 * i));
+        }
         if (off + n > p->next) {
             p->next = off + n;
             p->nak_sent = 0;
@@ -682,8 +824,11 @@ static void do_run(wm_proto *p)
     {
         /* the samples, then the mask's words, each as its two little-endian bytes */
         uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height, c = ~crc;
-        const uint16_t *h = p->heights;
-        for (uint32_t i = 0; i < wh && i < p->total; i++) c = crc_update16(c, h[i]);
+#if WM_LITTLE_ENDIAN
+        c = crc_run(c, (const uint8_t *)p->heights, 2u * (wh < p->total ? wh : p->total));
+#else
+        for (uint32_t i = 0; i < wh && i < p->total; i++) c = crc_update16(c, p->heights[i]);
+#endif
         for (uint32_t i = wh; i < p->total; i++) c = crc_update16(c, word_at(p, i));
         crc = ~c;
     }
@@ -856,24 +1001,94 @@ static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
     }
 }
 
+/* Halfwords [pos, end) of the level stream into d: its bytes 2 pos .. 2 end - 1 in little-endian pairs
+ * (a vertex slot is two, an index one or two), for even offsets and lengths (the common case): whole
+ * vertex slots and triangles at a time, the triangle cursor (tri_slot) kept in registers. */
+static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES / 2, ve = hb + 2u * (uint32_t)m->vert_end;
+    for (; pos < end && pos < hb; pos++) *d++ = (uint16_t)get16(p->lhdr + 2 * pos);
+    if (pos < end && pos < ve) { /* vertex slots: x, y (a free one: WM_PROTO_FREE_VERTEX == WM_FREE twice) */
+        const uint16_t *vx = m->vx, *vy = m->vy;
+        uint32_t v = (pos - hb) >> 1;
+        if ((pos - hb) & 1u) { /* the first slot's y */
+            *d++ = vx[v] == WM_FREE ? WM_FREE : vy[v];
+            pos++;
+            v++;
+        }
+        for (; pos + 2u <= end && pos < ve; pos += 2u, v++, d += 2) {
+            uint16_t x = vx[v];
+            d[0] = x;
+            d[1] = x == WM_FREE ? x : vy[v];
+        }
+        if (pos < end && pos < ve) { /* the last slot's x */
+            *d++ = vx[v];
+            pos++;
+        }
+    }
+    if (pos < end) { /* the triangles, from the k-th live one's q-th halfword */
+        uint32_t per = p->lib == 4 ? 6u : 3u, r = pos - ve, k = r / per, q = r - k * per;
+        int32_t t = tri_slot(p, (int32_t)k), te = m->tri_end;
+        const wm_index *hv = m->hv;
+        for (;;) {
+            const wm_index *h = hv + 3 * t;
+            if (q == 0 && end - pos >= per) {
+                if (per == 3u) {
+                    d[0] = (uint16_t)h[0];
+                    d[1] = (uint16_t)h[1];
+                    d[2] = (uint16_t)h[2];
+                } else {
+                    uint32_t a = (uint32_t)h[0], b = (uint32_t)h[1], c = (uint32_t)h[2];
+                    d[0] = (uint16_t)a;
+                    d[1] = (uint16_t)(a >> 16);
+                    d[2] = (uint16_t)b;
+                    d[3] = (uint16_t)(b >> 16);
+                    d[4] = (uint16_t)c;
+                    d[5] = (uint16_t)(c >> 16);
+                }
+                d += per;
+                pos += per;
+            } else { /* part of one: the frame's first or last */
+                for (; q < per && pos < end; q++, pos++)
+                    *d++ = (uint16_t)(per == 6u ? (uint32_t)h[q >> 1] >> (16u * (q & 1u)) : (uint32_t)h[q]);
+                if (q < per) break;
+                q = 0;
+            }
+            if (pos == end) break;
+            do t++;
+            while (t < te && hv[3 * t] < 0);
+            k++;
+        }
+        p->cur_k = (int32_t)k; /* the cursor where this frame ended */
+        p->cur_slot = t;
+    }
+}
+
 /* MESH frames of p->chunk bytes for bytes [from, end) (end <= ltotal).  The first sending (first: from
- * is 0) takes the stream's CRC on the way, and only its frames are link I/O: building the stream is
- * the EMIT stage's work.  A resend happens inside link I/O (the host asked for it). */
+ * is 0) takes the stream's CRC on the way, and only its frames are link I/O: building the stream and
+ * its CRC is the EMIT stage's work; the frame's CRC follows from the payload's (crc_combine).  A resend
+ * happens inside link I/O (the host asked for it). */
 static void send_level_from(wm_proto *p, uint32_t from, uint32_t end, int first)
 {
     uint32_t chunk = p->chunk;
     if (first) p->lcrc = 0;
     while (from < end) {
-        uint32_t n = end - from < chunk ? end - from : chunk;
-        uint8_t *b = p->tx;
+        uint32_t n = end - from < chunk ? end - from : chunk, pc;
+        uint8_t *b = p->tx.b, head[WM_PROTO_HEADER_BYTES];
         zero(b, WM_PROTO_MESH_BYTES);
         b[WM_PROTO_MESH_LEVEL] = p->level;
         b[WM_PROTO_MESH_INDEX] = p->levels_sent;
         put32(b + WM_PROTO_MESH_OFFSET, from);
-        level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
-        if (first) p->lcrc = wm_proto_crc32(p->lcrc, b + WM_PROTO_MESH_BYTES, n);
+        if (WM_LITTLE_ENDIAN && !((from | n) & 1u))
+            level_halves(p, from / 2, (from + n) / 2, p->tx.h + WM_PROTO_MESH_BYTES / 2);
+        else level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        pc = ~crc_run(~0u, b + WM_PROTO_MESH_BYTES, n);
+        if (first) p->lcrc = crc_combine(p, p->lcrc, pc, n);
         link_begin(p);
-        send_own(p, WM_PROTO_T_MESH, b, WM_PROTO_MESH_BYTES + n);
+        frame_head(head, WM_PROTO_T_MESH, p->seq++, WM_PROTO_MESH_BYTES + n);
+        send_encoded(p, head, b, WM_PROTO_MESH_BYTES, b + WM_PROTO_MESH_BYTES, n,
+                     crc_combine(p, ~crc_run(crc_run(~0u, head, sizeof head), b, WM_PROTO_MESH_BYTES), pc, n));
         link_end(p);
         from += n;
     }
@@ -1039,6 +1254,8 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->stage = -1;
     p->state = WM_PROTO_STATE_IDLE;
     p->last_valid = now(p); /* the idle clock starts when the connection does */
+    p->x8n = 0x80000000u;   /* x^0, for x8n_n = 0 */
+    crc_slice_init();
     rx_reset(p);
 }
 
