@@ -18,8 +18,12 @@
  *
  * Coherence with the streaming port: every beat the engine writes for the stream clears the valid
  * bit of the line at that address's index (without comparing tags); a line being filled when that
- * happens answers its one pending read and stays invalid.  The CPU's own accesses are answered in order; a posted write reaches the SDRAM before
- * any later read of this port is issued.
+ * happens answers its one pending read and stays invalid.  The CPU's own accesses are answered in
+ * order; a posted write reaches the SDRAM before any later read of this port is issued.
+ *
+ * Flush: `flush` (while `idle`: no fill, no posted write) invalidates every line in one cycle; the
+ * controller's stage sync uses it, so that the CPU's accesses after a sync hit and miss alike
+ * whatever ran before (write through: no data are lost).
  *
  * CPU interface (PicoRV32 native): the CPU holds cpu_valid, cpu_addr, cpu_wdata, cpu_wstrb until
  * cpu_ready, a one-cycle pulse (with cpu_rdata for a read); a request is a cycle with cpu_valid
@@ -63,6 +67,12 @@ module sdram_cache #
      */
     input  wire                       snoop_valid,
     input  wire [HW_ADDR_BITS-1:0]    snoop_addr,
+
+    /*
+     * Flush: invalidate every line (only while idle)
+     */
+    input  wire                       flush,
+    output wire                       idle,
 
     /*
      * Engine client
@@ -175,6 +185,7 @@ endgenerate
 assign m_wdata = wb_lo ? wb_data_reg[15:0] : wb_data_reg[31:16];
 assign m_wmask = wb_lo ? ~wb_strb_reg[1:0] : ~wb_strb_reg[3:2];
 
+assign idle = state_reg == S_IDLE && wb_pend_reg == 2'b00;
 assign cpu_ready = ready_reg;
 assign cpu_rdata = line_word_reg;   // read at the edge that raised cpu_ready
 
@@ -248,6 +259,10 @@ always @* begin
         if (state_reg == S_FILL && snoop_index == fill_index) begin
             fill_stale_next = 1'b1;
         end
+    end
+
+    if (flush) begin
+        valid_next = {LINES{1'b0}};
     end
 end
 

@@ -35,6 +35,16 @@
  * for writers with several interleaved sequences (the filter bank's levels); the beats wait in a
  * FIFO and are written in order, each clearing its cache line too; wa_busy while any waits.
  *
+ * Stage sync: a `sync` pulse (the SoC's SYS.STAGE write, with the CPU held) brings the controller to
+ * one fixed state in a fixed time, so that what the CPU and the streams do next takes the same
+ * cycles whatever ran before.  The engine lets the CPU port finish its fill or posted write, grants
+ * no stream, precharges all banks and refreshes; `sync_busy` stays high for exactly C_SYNC + 1
+ * cycles (the longest that can take), and at its end every timing counter is zero, every bank
+ * idle, the arbitration as after reset, the CPU port's cache empty, and the refresh counter set as
+ * if that REFRESH had been at the pulse (it came later, so every gap stays within tREFI and the
+ * next refresh comes a fixed number of cycles after the sync).  A sync before the initialisation
+ * is done lasts until the chip is ready (in the same state).
+ *
  * Reset (synchronous, active high) restarts the chip's initialisation without the power-up wait
  * once it has been done (powered_reg is never reset) and drops every stream command and read in
  * flight; the timing counters keep counting through it, so a reset never shortens a timing.
@@ -131,6 +141,12 @@ module sdram_ctrl #
     output wire                            wa_busy,
 
     /*
+     * Stage sync: a pulse starts it; the CPU port must stay idle until sync_busy falls
+     */
+    input  wire                            sync,
+    output wire                            sync_busy,
+
+    /*
      * SDRAM pins (the tristate DQ buffer is at the board's top)
      */
     output wire                            sdram_cke,
@@ -180,10 +196,18 @@ localparam C_REF_SLACK = (C_RAS > C_WR ? C_RAS : C_WR) + C_RP + C_RC + 2;
 localparam [63:0] REFI = T_REFI_NS * HZ / 64'd1000000000;     // whole cycles within tREFI
 localparam C_REFI = REFI[31:0];
 localparam C_REF_DUE = C_REFI - 1 - C_REF_SLACK;
+// the stage sync's window: the longest time from `sync` to the quiet state: a refresh already due
+// (C_REF_SLACK to its REFRESH, then tRFC), the CPU port's last work (its row closed and opened
+// again, a line's beats, the last datum back), the sync's own PRECHARGE ALL and REFRESH, the READ ->
+// WRITE turnaround, and a cycle of arbitration or state change between each (checked in simulation
+// and by tests/rtl/sdram_tb.py, test_stage_sync)
+localparam C_ROW = (C_RAS > C_WR ? C_RAS : C_WR) + C_RP + C_RC + C_RCD;
+localparam C_SYNC = 2 * (C_REF_SLACK + C_RFC) + C_ROW + 2 * LINE_WORDS + CAS_LATENCY + C_RD_TO_WR + 8;
 
 localparam CNT_BITS = 6;                                      // per-bank and tRRD/turnaround counters
 localparam WAIT_BITS = $clog2(C_INIT + C_RFC + C_MRD + 1);
 localparam REF_BITS = $clog2(C_REFI + 1);
+localparam SYNC_BITS = $clog2(C_SYNC + 1);
 localparam INIT_REF_BITS = $clog2(INIT_REFRESHES + 1);
 localparam RL = CAS_LATENCY;                                  // READ to the datum in dq_in_reg
 
@@ -197,8 +221,8 @@ initial begin
         $finish;
     end
     if (C_RCD > 63 || C_RP > 63 || C_RAS > 63 || C_RC > 63 || C_RRD > 63 || C_WR > 63
-            || C_RD_TO_WR > 63 || C_REF_DUE < 16) begin
-        $error("Error: CLK_HZ too high for these timings (instance %m)");
+            || C_RD_TO_WR > 63 || C_REF_DUE < 16 || C_REF_DUE < 2 * C_SYNC) begin
+        $error("Error: CLK_HZ out of range for these timings (instance %m)");
         $finish;
     end
 end
@@ -221,6 +245,10 @@ localparam [CNT_BITS-1:0] N_RCD = C_RCD[CNT_BITS-1:0] - 1'b1, N_RP = C_RP[CNT_BI
 localparam [WAIT_BITS-1:0] N_INIT = C_INIT[WAIT_BITS-1:0] - 1'b1, N_RFC = C_RFC[WAIT_BITS-1:0] - 1'b1,
                            N_MRD = C_MRD[WAIT_BITS-1:0] - 1'b1;
 localparam [REF_BITS-1:0] N_REF_DUE = C_REF_DUE[REF_BITS-1:0];
+// after a sync: the cycles since the pulse (sync_busy's C_SYNC + 1, then this cycle)
+localparam C_SYNC_SINCE = C_SYNC + 2;
+localparam [REF_BITS-1:0] N_SYNC_SINCE = C_SYNC_SINCE[REF_BITS-1:0];
+localparam [SYNC_BITS-1:0] N_SYNC = C_SYNC[SYNC_BITS-1:0];
 localparam [INIT_REF_BITS-1:0] N_INIT_REFS = INIT_REFRESHES;
 localparam [7:0] N_RUN = MAX_RUN[7:0] - 1'b1;                 // 256 -> 255
 
@@ -233,6 +261,10 @@ reg [WAIT_BITS-1:0] wait_reg = N_INIT, wait_next;             // no command whil
 reg [INIT_REF_BITS-1:0] init_refs_reg = N_INIT_REFS, init_refs_next;
 reg [REF_BITS-1:0] since_ref_reg = {REF_BITS{1'b0}}, since_ref_next;   // cycles since REFRESH
 reg done_reg = 1'b0, done_next;
+// stage sync: under way, cycles left of its window, its REFRESH issued
+reg sync_reg = 1'b0, sync_next;
+reg [SYNC_BITS-1:0] sync_left_reg = {SYNC_BITS{1'b0}}, sync_left_next;
+reg sync_refd_reg = 1'b0, sync_refd_next;
 
 // banks: open flag, open row, timing counters (4 banks, flattened)
 reg [3:0] open_reg = 4'b0000, open_next;
@@ -274,6 +306,8 @@ wire [63:0] wdata;
 wire [7:0] wmask;
 reg [3:0] ack;
 reg do_act, do_pre, do_write;   // the engine's command for the granted bank this cycle
+reg flush;                      // the stage sync ends: empty the CPU port's cache
+wire cache_idle;                // the CPU port has no fill and no posted write under way
 wire rvalid = rd_pipe_reg[RL];
 reg [ADDR_BITS-1:0] wr_addr_reg = {ADDR_BITS{1'b0}};           // the stream writer's next halfword
 wire [ADDR_BITS-1:0] wa_fifo_addr;                              // the addressed writer's next one
@@ -295,6 +329,8 @@ sdram_cache #(
     .cpu_rdata(cpu_rdata),
     .snoop_valid(ack[2] || ack[3]),
     .snoop_addr(ack[3] ? wa_fifo_addr : wr_addr_reg),
+    .flush(flush),
+    .idle(cache_idle),
     .m_req(req[0]),
     .m_we(we[0]),
     .m_addr(addr[0 +: ADDR_BITS]),
@@ -479,6 +515,11 @@ always @* begin
 end
 wire all_pre_ok = &(ras_ok & wr_ok);
 wire all_ref_ok = &(rp_ok & rc_ok);
+// the state a stage sync ends in: no command may wait for anything
+wire quiet = state_reg == S_RUN && wait_reg == {WAIT_BITS{1'b0}} && open_reg == 4'b0000
+             && &(rcd_ok & ras_ok & rc_ok & rp_ok & wr_ok) && rrd_reg == {CNT_BITS{1'b0}}
+             && turn_reg == {CNT_BITS{1'b0}} && rd_pipe_reg == {(RL+1){1'b0}} && cache_idle;
+wire sync_end = sync_reg && sync_left_reg == {SYNC_BITS{1'b0}} && sync_refd_reg && quiet;
 wire wait_ok = wait_reg == {WAIT_BITS{1'b0}};
 wire ref_due = since_ref_reg >= N_REF_DUE;
 wire g_open = open_reg[g_bank];
@@ -511,6 +552,10 @@ always @* begin
     init_refs_next = init_refs_reg;
     since_ref_next = since_ref_reg == {REF_BITS{1'b1}} ? since_ref_reg : since_ref_reg + 1'b1;
     done_next = done_reg;
+    sync_next = sync_reg;
+    sync_left_next = sync_left_reg == {SYNC_BITS{1'b0}} ? sync_left_reg : sync_left_reg - 1'b1;
+    sync_refd_next = sync_refd_reg;
+    flush = 1'b0;
     open_next = open_reg;
     row_next = row_reg;
     for (k = 0; k < 4; k = k + 1) begin
@@ -590,17 +635,18 @@ always @* begin
             end
         end
         S_RUN: begin
-            if (ref_due) begin
-                // refresh first: the grant is given again afterwards
+            if (ref_due || (sync_reg && !sync_refd_reg && cache_idle)) begin
+                // refresh first (a sync's once the CPU port is done): the grant is given again afterwards
                 granted_next = 1'b0;
                 state_next = S_REF;
-            end else if (!g_req || (run_reg == 8'd0 && others)) begin
-                // arbitrate (no command this cycle): the CPU port first, the streams in turn
-                granted_next = req != 4'b0000;
+            end else if (!g_req || (run_reg == 8'd0 && others) || (sync_reg && grant_reg != 2'd0)) begin
+                // arbitrate (no command this cycle): the CPU port first, the streams in turn, and
+                // during a sync the CPU port alone
+                granted_next = sync_reg ? req[0] : req != 4'b0000;
                 run_next = N_RUN;
                 if (req[0]) begin
                     grant_next = 2'd0;
-                end else if (req != 4'b0000) begin
+                end else if (req != 4'b0000 && !sync_reg) begin
                     grant_next = next_stream;
                     last_next = next_stream;
                 end
@@ -662,11 +708,29 @@ always @* begin
                     cmd_next = CMD_REF;
                     wait_next = N_RFC;
                     since_ref_next = {REF_BITS{1'b0}};
+                    // the sync's refresh once the CPU port is done (it stays so: the CPU waits)
+                    sync_refd_next = sync_refd_reg || (sync_reg && cache_idle);
                     state_next = S_RUN;
                 end
             end
         end
     endcase
+
+    // the stage sync: ends in the quiet state once its window is over; a new pulse starts it again
+    if (sync_end) begin
+        sync_next = 1'b0;
+        since_ref_next = N_SYNC_SINCE;
+        granted_next = 1'b0;
+        grant_next = 2'd0;
+        last_next = 2'd3;
+        run_next = 8'd0;
+        flush = 1'b1;
+    end
+    if (sync) begin
+        sync_next = 1'b1;
+        sync_left_next = N_SYNC;
+        sync_refd_next = 1'b0;
+    end
 
     // the granted bank's counters and row (a loop over constant indices: no multipliers)
     for (k = 0; k < 4; k = k + 1) begin
@@ -694,6 +758,9 @@ always @(posedge clk) begin
     init_refs_reg <= init_refs_next;
     since_ref_reg <= since_ref_next;
     done_reg <= done_next;
+    sync_reg <= sync_next;
+    sync_left_reg <= sync_left_next;
+    sync_refd_reg <= sync_refd_next;
     open_reg <= open_next;
     row_reg <= row_next;
     rcd_reg <= rcd_next;
@@ -724,6 +791,9 @@ always @(posedge clk) begin
         wait_reg <= powered_reg ? wait_next : N_INIT;
         done_reg <= 1'b0;
         granted_reg <= 1'b0;
+        sync_reg <= 1'b0;
+        sync_left_reg <= {SYNC_BITS{1'b0}};
+        sync_refd_reg <= 1'b0;
         rd_pipe_reg <= {(RL+1){1'b0}};
         cmd_reg <= powered_reg ? CMD_NOP : CMD_INHIBIT;
         dq_oe_reg <= 1'b0;
@@ -731,6 +801,21 @@ always @(posedge clk) begin
 end
 
 assign init_done = done_reg;
+assign sync_busy = sync_reg;
+
+// synthesis translate_off
+// a sync that started on an initialised chip must end with its window (C_SYNC too short otherwise)
+reg sync_timed_reg = 1'b0;
+always @(posedge clk) begin
+    if (sync) begin
+        sync_timed_reg <= done_reg;
+    end
+    if (!rst && sync_reg && sync_timed_reg && sync_left_reg == {SYNC_BITS{1'b0}} && !sync_end) begin
+        $display("Error: sdram_ctrl: stage sync not quiet at the end of its window (%m)");
+        sync_timed_reg <= 1'b0;
+    end
+end
+// synthesis translate_on
 assign sdram_cke = 1'b1;
 assign {sdram_cs_n, sdram_ras_n, sdram_cas_n, sdram_we_n} = cmd_reg;
 assign sdram_ba = ba_reg;

@@ -17,9 +17,16 @@
  * its line in the CPU's cache, so the CPU reads the results after DONE without a flush.
  *
  * Address bits 31..28 select the region; an offset beyond a region's size, or any other address,
- * reads 0 and ignores writes.  Every access but the SDRAM's completes in two cycles (request, then
- * mem_ready with the registered read data), so a bad address never stalls the CPU; an SDRAM access
- * takes 2 cycles on a cache hit and 9-17 on a miss (rtl/README.md, "SDRAM controller").
+ * reads 0 and ignores writes.  Every access but the SDRAM's and a SYS.STAGE write completes in two
+ * cycles (request, then mem_ready with the registered read data), so a bad address never stalls the
+ * CPU; an SDRAM access takes 2 cycles on a cache hit and 9-17 on a miss (rtl/README.md, "SDRAM
+ * controller").
+ *
+ * Stage sync: a SYS.STAGE write (the firmware's marker at every switch of its cycle clocks) also
+ * starts sdram_ctrl's stage sync and is answered when that ends, a fixed number of cycles later
+ * (C_SYNC + 4 in all), with the SDRAM, its controller and the CPU's cache in one fixed state: the
+ * cycles of the work after a marker depend on that work alone, not on where the refresh clock
+ * stood or what the cache held (docs/soc.md, "Cycle accounting").
  *
  * The simulation ports (uart_bypass and the two byte streams, the stage/halt strobes, uart_div,
  * trap) serve the Verilator board model in sim/; a board ties uart_bypass low and leaves the
@@ -236,8 +243,12 @@ wire sys_hit = io_page && mem_addr[11:8] == `WM_IO_SYS;
 wire accel_hit = io_page && mem_addr[11:8] == `WM_IO_ACCEL;
 
 // a request is the first cycle of mem_valid; mem_ready answers it in the next cycle, except in the
-// SDRAM, whose port holds the request until it answers
-wire req = mem_valid && !mem_ready_reg && !sdram_hit;
+// SDRAM, whose port holds the request until it answers, and for a SYS.STAGE write, answered when
+// the stage sync it starts has ended
+reg sync_wait_reg = 1'b0;
+wire sdram_sync_busy;
+wire req = mem_valid && !mem_ready_reg && !sdram_hit && !sync_wait_reg;
+wire stage_write = req && sys_hit && mem_wstrb != 4'd0 && mem_addr[7:0] == `WM_SYS_STAGE;
 
 reg [2:0] sel;
 always @* begin
@@ -250,13 +261,15 @@ end
 
 always @(posedge clk) begin
     // every other request is answered in the next cycle, mapped or not
-    mem_ready_reg <= req;
+    mem_ready_reg <= (req && !stage_write) || (sync_wait_reg && !sdram_sync_busy);
+    sync_wait_reg <= sync_wait_reg ? sdram_sync_busy : stage_write;
     if (req) begin
         sel_reg <= sel;
     end
 
     if (rst) begin
         mem_ready_reg <= 1'b0;
+        sync_wait_reg <= 1'b0;
         sel_reg <= SEL_NONE;
     end
 end
@@ -431,6 +444,8 @@ sdram_ctrl #(
     .rd_busy(rd_busy_unused),
     .wr_busy(wr_busy_unused),
     .wa_busy(wa_busy),
+    .sync(stage_write),
+    .sync_busy(sdram_sync_busy),
     .sdram_cke(sdram_cke),
     .sdram_cs_n(sdram_cs_n),
     .sdram_ras_n(sdram_ras_n),

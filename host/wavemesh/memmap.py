@@ -237,8 +237,10 @@ SYS = Block("SYS", 0x1, "cycle counter, timer, LEDs, stage markers, halt, config
     Register("LEDS", 0x0C, "rw", "LED outputs", (
         Field("LEDS", LED_COUNT - 1, 0, "rw", "1 = LED on"),
     )),
-    Register("STAGE", 0x10, "rw", "stage marker: the simulator logs every write with its cycle count; "
-             "read: the last value written"),
+    Register("STAGE", 0x10, "rw", "stage marker and stage sync: a write is answered once the SDRAM, its "
+             "refresh clock and the CPU's cache are in one fixed state (a fixed number of cycles: "
+             "rtl/README.md, \"Stage sync\"), so the cycles after it depend only on what follows; the "
+             "simulator logs every write with its cycle count; read: the last value written"),
     Register("HALT", 0x14, "rw", "write: halt request with an exit code (the simulator exits: status 0 for "
              "code 0, else 1); read: the last code written"),
     Register("CLK_HZ", 0x20, "r", "system clock frequency in Hz", reset=str(CLK_HZ)),

@@ -29,6 +29,7 @@ from collections import Counter, deque
 import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, ReadOnly
+from cocotb.utils import get_sim_time
 from wavemesh import memmap
 
 CLK_HZ = int(os.environ.get("SDRAM_CLK_HZ", "25000000"))
@@ -58,6 +59,11 @@ COMMANDS = {0b111: NOP, 0b011: ACT, 0b101: READ, 0b100: WRITE, 0b010: PRE, 0b001
             0b110: BST}
 
 
+def now_cycle() -> int:
+    """The clock cycle of the simulation time (cycle k runs from rising edge k to rising edge k + 1)."""
+    return int(get_sim_time("ps")) // T_PS
+
+
 def initial_value(hw: int) -> int:
     """The chip's contents at power-up (any fixed pattern: the scoreboard uses the same one)."""
     return (hw * 40503 + 0x1D3A) & 0xFFFF
@@ -83,6 +89,7 @@ class Chip:
         self.ref_edges: list[int] = []     # edges of the REFRESH commands after the initialisation
         self.ref_busy = 0                  # ... of them while a stream was busy
         self.max_ref_gap = 0
+        self.trace: list[tuple] | None = None   # (clock cycle, command, bank, address) while a list
         self.rng = random.Random(SEED + 99)
         self.force_cl = force_cl           # a chip that answers at another latency (negative test)
         self.running = True
@@ -134,6 +141,8 @@ class Chip:
                 self.check_contention(now)
             if cmd != NOP:
                 self.counts[cmd] += 1
+                if self.trace is not None:
+                    self.trace.append((now_cycle(), cmd, int(dut.sdram_ba.value), int(dut.sdram_a.value)))
                 self.command(cmd, now, oe)
             for b in range(4):
                 if self.open[b] is not None and now - self.t_act[b] > self.t["tRAS_max"]:
@@ -264,6 +273,7 @@ class TB:
         self.ref: dict[int, int] = {}     # halfword -> value, as the ports wrote them
         self.chip: Chip | None = None
         self.clock = False
+        self.sync_quiet = 0               # the most cycles a sync took to reach its end state
 
     def value(self, hw: int) -> int:
         return self.ref.get(hw, initial_value(hw))
@@ -273,7 +283,7 @@ class TB:
         for name in ("cpu_valid", "cpu_addr", "cpu_wdata", "cpu_wstrb", "s_rd_cmd_valid", "s_rd_cmd_addr",
                      "s_rd_cmd_len", "m_axis_rd_tready", "s_wr_cmd_valid", "s_wr_cmd_addr", "s_wr_cmd_len",
                      "s_axis_wr_tvalid", "s_axis_wr_tdata", "s_axis_wa_tvalid", "s_axis_wa_tdata",
-                     "s_axis_wa_tuser"):
+                     "s_axis_wa_tuser", "sync"):
             getattr(d, name).value = 0
 
     async def start(self, chip_timing: dict | None = None, force_cl: int | None = None):
@@ -347,6 +357,31 @@ class TB:
                 await self.cpu(hw << 1, strb, self.rng.getrandbits(32))
             else:
                 await self.cpu(hw << 1)
+
+    async def sync(self) -> tuple[int, int]:
+        """A stage sync: `sync` for one cycle, then wait while `sync_busy` is high (the CPU port
+        idle meanwhile, as the SoC's CPU waits on its SYS.STAGE write); returns (cycles busy, the
+        cycle this returns in).  Notes in sync_quiet when the controller's end state was reached
+        (its REFRESH issued and `quiet`, internal signals), the margin of the fixed window."""
+        d = self.dut
+        ready = int(d.init_done.value)
+        d.sync.value = 1
+        await FallingEdge(d.clk)
+        d.sync.value = 0
+        n, quiet = 0, None
+        while True:
+            await ReadOnly()
+            if quiet is None and int(d.sync_refd_reg.value) and int(d.quiet.value):
+                quiet = n
+            if not int(d.sync_busy.value):
+                break
+            n += 1
+            assert n < 100_000, "the stage sync never ended"
+            await FallingEdge(d.clk)
+        await FallingEdge(d.clk)
+        if ready and quiet is not None:
+            self.sync_quiet = max(self.sync_quiet, quiet)
+        return n, now_cycle()
 
     # -- streams --------------------------------------------------------------------------------
 
@@ -615,6 +650,106 @@ async def test_reset_mid_traffic(dut):
         await tb.start()                     # reset now, mid-stream
         await tb.stream_read(keep, 64, 0.5)
     await tb.cpu_traffic(40, [keep + 2 * w for w in range(32)])
+    await tb.finish()
+
+
+@cocotb.test()
+async def test_stage_sync(dut):
+    """The stage sync (the SoC's SYS.STAGE write): sync_busy lasts the same number of cycles whatever
+    the controller was doing (idle at every phase of the refresh clock, a refresh due or under way,
+    a CPU line fill under way, a posted write to another row of an open bank, a stream write just
+    done, streams busy, another sync), and each sync issues a REFRESH; after it, a fixed CPU access
+    sequence takes the same cycles per access and puts the same commands on the pins at the same
+    cycles, the refreshes included, also after a reset where the sync waits for the initialisation.
+    The chip checks every refresh gap (<= tREFI) and every timing around the syncs; the data stay."""
+    tb = TB(dut, SEED + 7)
+    await tb.start()
+    rng, d = tb.rng, dut
+    refi = DATASHEET["tREFI"] // T_PS
+    # the CPU program after each sync, long enough for two refreshes: (idle cycles, byte address,
+    # strobes, data); rows open, closed and switched in three banks, reads and partial writes
+    prng = random.Random(77)
+    region = [join(r, b, c) + 2 * w for r, b, c in ((12, 0, 0), (13, 0, 64), (12, 1, 32), (400, 3, 0))
+              for w in range(16)]
+    strobes = (0, 0, 0, 0b1111, 0b0011, 0b1000)
+    probe = [(prng.choice((0, 0, 1, 3)), prng.choice(region) << 1, prng.choice(strobes), prng.getrandbits(32))
+             for _ in range(max(80, 3 * refi // 5))]
+    windows: list[int] = []
+    runs: dict[str, tuple] = {}
+
+    async def sync_and_probe(name: str, probe_after: bool = True):
+        refs = len(tb.chip.ref_edges)
+        n, t0 = await tb.sync()
+        assert len(tb.chip.ref_edges) > refs, f"{name}: no REFRESH in the sync"
+        windows.append(n)
+        if not probe_after:
+            return
+        tb.chip.trace = []
+        cycles = []
+        for gap, addr, strb, data in probe:
+            await tb.cycles(gap)
+            cycles.append((await tb.cpu(addr, strb, data))[1])
+        trace, tb.chip.trace = tb.chip.trace, None
+        assert sum(c == REF for _, c, _, _ in trace) >= 2, f"{name}: the probe saw fewer than two refreshes"
+        runs[name] = (cycles, [(t - t0, c, ba, a) for t, c, ba, a in trace])
+
+    async def after_refresh(k: int):
+        refs = len(tb.chip.ref_edges)
+        while len(tb.chip.ref_edges) == refs:
+            await FallingEdge(d.clk)
+        await tb.cycles(k)
+
+    # idle, at every phase of the refresh clock (a refresh due and under way among them)
+    for k in sorted({0, 1, 2, 3, refi // 3, refi // 2} | {refi - j for j in range(2, 40, 3)}):
+        await after_refresh(k)
+        await sync_and_probe(f"idle {k} after a refresh")
+    # a line fill under way (the CPU has its word early), in a closed row, also as a refresh falls due
+    for k in (0, refi - 16, refi - 12, refi - 8):
+        await after_refresh(k)
+        await tb.cpu(join(700 + k % 5, 2, 8 * LINE_HW) << 1)
+        await sync_and_probe(f"fill {k}")
+    # a posted write to another row of an open bank (PRECHARGE, ACTIVATE, then the write)
+    for k in (5, refi - 10):
+        await tb.cpu(join(801, 1, 0) << 1)
+        await after_refresh(k)
+        await tb.cpu(join(802, 1, 40) << 1, 0b0110, rng.getrandbits(32))
+        await sync_and_probe(f"posted write {k}")
+    # a stream write just done (its rows open, tWR running), and a sync right after another
+    await tb.stream_write(join(900, 3, 500), [rng.getrandbits(16) for _ in range(40)])
+    await sync_and_probe("stream write done")
+    await sync_and_probe("sync again", probe_after=False)
+    await sync_and_probe("after a sync")
+    # streams busy across syncs (they wait, then go on): the window holds, nothing is lost
+    src = join(950, 0, 100)
+    await tb.stream_write(src, [rng.getrandbits(16) for _ in range(300)])
+    r = cocotb.start_soon(tb.stream_read(src, 300, 0.5))
+    w = cocotb.start_soon(tb.stream_write(join(960, 2, 0), [rng.getrandbits(16) for _ in range(300)], 0.6))
+    a = cocotb.start_soon(tb.scatter_write(interleaved(rng, [join(970, 1, 0), join(971, 3, 0)], 200), 0.5))
+    for _ in range(6):
+        await tb.cycles(rng.randrange(5, 60))
+        await sync_and_probe("streams busy", probe_after=False)
+    await r
+    await w
+    await a
+    await tb.stream_read(join(960, 2, 0), 300, 0.8)
+    await sync_and_probe("streams done")
+    assert len(set(windows)) == 1, f"sync_busy lasted {sorted(set(windows))} cycles"
+    # after a reset: the sync lasts until the chip is initialised, then leaves the same state (the
+    # reset drops a posted write: the last one is let through first)
+    await tb.cycles(20)
+    d.rst.value = 1
+    await FallingEdge(d.clk)
+    tb.chip = _SIM["chip"] = Chip(dut, None, None, _SIM["chip"])
+    d.rst.value = 0
+    await sync_and_probe("after a reset")
+    assert int(d.init_done.value) and windows[-1] >= windows[0], windows[-1]
+    ref_name, (ref_cycles, ref_trace) = next(iter(runs.items()))
+    for name, (cycles, trace) in runs.items():
+        assert cycles == ref_cycles, f"{name}: other cycles per access after the sync than after {ref_name}"
+        assert trace == ref_trace, f"{name}: other commands or cycles after the sync than after {ref_name}"
+    dut._log.info("stage sync: sync_busy %d cycles (the end state reached after at most %d); %d starting "
+                  "states, the same %d accesses (%d cycles) after each", windows[0], tb.sync_quiet, len(runs),
+                  len(probe), sum(ref_cycles))
     await tb.finish()
 
 

@@ -29,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import memmap
 from wavemesh import protocol as P
 from wavemesh import stream as S
 from wavemesh.harness import jacksboro, run_cli
@@ -105,44 +104,17 @@ def job_cycles(report: dict) -> dict:
         "levels": [(lv["level"], lv["device_cycles"]) for lv in report["refiner"]["levels"]]}
 
 
-def _ck(ns: int, least: int = 1) -> int:
-    """rtl/sdram_ctrl.v's cycles(): a datasheet time in whole board clocks, at least `least`."""
-    return max(-(-ns * memmap.CLK_HZ // 1_000_000_000), least)
-
-
-def refresh_slack(cycles: int) -> int:
-    """How far the SDRAM's refresh can move a stretch of `cycles` CPU cycles between two runs of the
-    same work.  The refresh runs on its own clock (every tREFI, whatever the CPU does), so where it
-    falls in a stage depends on the cycle the stage began, which the host's timing sets.  Per refresh
-    the controller keeps the CPU waiting at most from "due" to its REFRESH done (C_REF_SLACK + tRFC:
-    the open banks' tRAS or tWR, tRP, tRC, two cycles) and then one ACTIVATE (tRCD) per bank the
-    refresh closed; refreshes come at most every C_REF_DUE + 1 cycles (rtl/sdram_ctrl.v)."""
-    t = memmap.SDRAM_TIMING
-    c_wr = _ck(t["T_WR_NS"], t["T_WR_MIN_CK"])
-    slack = max(_ck(t["T_RAS_NS"]), c_wr) + _ck(t["T_RP_NS"]) + _ck(t["T_RC_NS"]) + 2
-    period = t["T_REFI_NS"] * memmap.CLK_HZ // 1_000_000_000 - 1 - slack + 1
-    per_refresh = slack + _ck(t["T_RFC_NS"]) + memmap.SDRAM_BANKS * _ck(t["T_RCD_NS"])
-    return (cycles // period + 1) * per_refresh
-
-
 def assert_same_work(a: dict, b: dict) -> None:
-    """job_cycles of two runs: the same stages and levels, each within refresh_slack of the other
-    (exactly equal before the SDRAM: docs/soc.md, "Cycle accounting")."""
-    assert a.keys() == b.keys() and [lv for lv, _ in a["levels"]] == [lv for lv, _ in b["levels"]], (a, b)
-    levels = zip(a["levels"], b["levels"], strict=True)
-    pairs = [(a[k], b[k]) for k in STAGES] + [(x, y) for (_, x), (_, y) in levels]
-    for x, y in pairs:
-        assert abs(x - y) <= refresh_slack(max(x, y)), (a, b)
+    """job_cycles of two runs: the same stages and levels, each with exactly the same cycles (every
+    SYS.STAGE marker is a stage sync: the SDRAM, its refresh clock and the CPU's cache start each
+    stretch in one state, docs/soc.md, "Cycle accounting")."""
+    assert a == b, (a, b)
 
 
 def assert_same_trace(a: list, b: list) -> None:
-    """clock_trace of two runs: the same switches of the engine's clocks, each stage's stretch within
-    refresh_slack."""
-    assert [k for k, _ in a] == [k for k, _ in b] and len(a) > 10, (a, b)
-    for (_, x), (_, y) in zip(a, b, strict=True):
-        assert (x is None) == (y is None), (a, b)
-        if x is not None:
-            assert abs(x - y) <= refresh_slack(max(x, y)), (a, b)
+    """clock_trace of two runs: the same switches of the engine's clocks, each stage's stretch of
+    exactly the same cycles."""
+    assert len(a) > 10 and a == b, (a, b)
 
 
 CYCLES: dict[str, dict] = {}
