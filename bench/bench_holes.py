@@ -40,7 +40,9 @@ def structure(mesh) -> dict:
     """Where a hole mesh's triangles go: T = 2 V_i + B + 2 H - 2 P (Euler on each edge-connected piece,
     its pinch vertices split), V_i inner vertices, B edges of one triangle (rims and the rectangle's
     sides), H hole rims (boundary cycles that wind clockwise), P pieces; ``pinch``: vertices where rims
-    meet (two or more boundary passages)."""
+    meet (two or more boundary passages); ``pinholes``: rims whose hole holds one sample alone (an
+    invalid one: the mesh covers every valid sample), by their number of edges (3 is the least: a
+    lattice triangle with one inner sample)."""
     from collections import Counter
 
     from scipy.sparse import coo_matrix
@@ -48,6 +50,7 @@ def structure(mesh) -> dict:
 
     t = mesh.tris.tolist()
     third = {(a[k], a[(k + 1) % 3]): a[(k + 2) % 3] for a in t for k in range(3)}
+    owner_of = {(a[k], a[(k + 1) % 3]): i for i, a in enumerate(t) for k in range(3)}
     bnd = [e for e in third if e[::-1] not in third]
     bset = set(bnd)
     passes = Counter(a for a, _ in bnd)
@@ -60,23 +63,38 @@ def structure(mesh) -> dict:
                 cols.append(owner[key])
             owner[key] = i
     n = len(t)
-    pieces = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
-                                  directed=False)[0]
-    seen, rims = set(), 0
+    pieces, label = connected_components(coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
+                                         directed=False)
+    main = int(np.argmax(np.bincount(label)))
+    seen, rims, on_rims, on_main, pinholes = set(), 0, 0, 0, Counter()
     x, y = mesh.xy[:, 0].astype(np.int64), mesh.xy[:, 1].astype(np.int64)
     for e in bnd:  # boundary cycles, each followed through its own piece's fan
-        area = 0
+        if e in seen:
+            continue
+        area, corners, piece = 0, [], label[owner_of[e]]
         while e not in seen:
             seen.add(e)
             a, b = e
             area += int(x[a] * y[b] - x[b] * y[a])
+            corners.append(a)
             c = third[e]
             while (b, c) not in bset:
                 c = third[(c, b)]
             e = (b, c)
+        length = len(corners)
         rims += area < 0
+        on_rims += length if area < 0 else 0
+        on_main += length if area > 0 and piece == main else 0
+        if area < 0:  # Pick: 2 I = 2 A - (lattice points on the rim) + 2; every inner sample is invalid
+            ring = mesh.xy[corners].astype(np.int64)
+            d = np.abs(np.roll(ring, -1, axis=0) - ring)
+            if -area - int(np.gcd(d[:, 0], d[:, 1]).sum()) + 2 == 2:
+                pinholes[length] += 1
     return {"inner": len(mesh.xy) - len(passes), "boundary_edges": len(bnd), "rims": rims,
-            "pieces": int(pieces), "pinch": sum(m > 1 for m in passes.values())}
+            "pieces": int(pieces), "pinch": sum(m > 1 for m in passes.values()),
+            "edges_on_rims": on_rims, "edges_around_main": on_main,
+            "edges_around_others": len(bnd) - on_rims - on_main,
+            "pinholes": {str(k): v for k, v in sorted(pinholes.items())}}
 
 
 def motorcycle_matched(max_d: int = 64, win: int = 9) -> np.ndarray:
@@ -236,12 +254,21 @@ def markdown(results: dict) -> str:
                   "+ 2 H - 2 P (Euler on each edge-connected piece, its pinch vertices split): V_i inner "
                   "vertices, B edges of one triangle (hole rims and the rectangle's sides), H hole rims, "
                   "P pieces; `pinch`: vertices where rims meet.  B is most of T: the meshes are nearly all "
-                  "rim, and a rim edge has a triangle of its own.", "",
-                  "| grid | zeta | hole: triangles | V_i | B | H | P | pinch vertices | 5h + 1 |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "rim, and a rim edge has a triangle of its own.  B's edges lie on hole rims (clockwise "
+                  "cycles), around the largest piece (its outer border: the rectangle and the dropouts "
+                  "that reach it) or around the other pieces (islands of valid samples among dropouts).", "",
+                  "| grid | zeta | hole: triangles | V_i | B | B: on hole rims / around the largest piece / "
+                  "around the other pieces | H | P | pinch vertices | one-sample holes: rim 3 / 4 / more | "
+                  "5h + 1 |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             st = r["structure"]
+            split = (f"{st['edges_on_rims']} / {st['edges_around_main']} / {st['edges_around_others']}"
+                     if "edges_on_rims" in st else "-")
+            ph = st.get("pinholes")
+            pin = "-" if ph is None else (f"{ph.get('3', 0)} / {ph.get('4', 0)} / "
+                                          f"{sum(v for k, v in ph.items() if int(k) > 4)}")
             lines.append(f"| {r['name']} | {r['zeta']:.4g} | {r['hole']['triangles']} | {st['inner']} | "
-                         f"{st['boundary_edges']} | {st['rims']} | {st['pieces']} | {st['pinch']} | "
-                         f"{5 * r['enclosed_holes'] + 1} |")
+                         f"{st['boundary_edges']} | {split} | {st['rims']} | {st['pieces']} | "
+                         f"{st['pinch']} | {pin} | {5 * r['enclosed_holes'] + 1} |")
     return "\n".join(lines) + "\n"
