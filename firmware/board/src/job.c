@@ -6,10 +6,10 @@
  * lattice column 2i is block column i's left edge and 2i + 1 its middle (when the block is at least
  * 2 wide; a 1-wide last block has no middle of its own), rows likewise.  Positions grow with the
  * lattice index, so numbering the occupied lattice points row by row (a bitmap, its popcounts per
- * row) gives the canonical vertex order.  The triangles are then sorted in place (a heap sort of
- * their index triples: no scratch, n log n on every input), a block row at a time: a triangle's
- * smallest vertex number lies on its block row's top lattice row or the one below (it spans two
- * lattice rows at least), so the block rows are already in order.
+ * row) gives the canonical vertex order.  The triangles are then sorted in place a block row at a
+ * time: a triangle's smallest vertex number lies on its block row's top lattice row or the one below
+ * (it spans two lattice rows at least), so the block rows are already in order, and within a row the
+ * triangles of each of those two lattice rows are nearly in order already (wm_job_initial).
  *
  * Staging, from the end of the caller's storage downwards:
  *
@@ -156,34 +156,24 @@ static int tri_less(const int32_t *s, const int32_t *t)
     return s[2] < t[2];
 }
 
-static void tri_swap(int32_t *s, int32_t *t)
-{
-    for (int k = 0; k < 3; k++) {
-        int32_t x = s[k];
-        s[k] = t[k], t[k] = x;
-    }
-}
-
-static void sift(int32_t *tris, int32_t root, int32_t n)
-{
-    for (;;) {
-        int32_t c = 2 * root + 1;
-        if (c >= n) return;
-        if (c + 1 < n && tri_less(tris + 3 * c, tris + 3 * (c + 1))) c++;
-        if (!tri_less(tris + 3 * root, tris + 3 * c)) return;
-        tri_swap(tris + 3 * root, tris + 3 * c);
-        root = c;
-    }
-}
-
+/* Insertion sort of n triangles: a run in which each triangle lies at most a few blocks' triangles
+ * from its place costs that many moves per triangle (no scratch, any input still sorted). */
 static void sort_tris(int32_t *tris, int32_t n)
 {
-    for (int32_t i = n / 2 - 1; i >= 0; i--) sift(tris, i, n);
-    for (int32_t end = n - 1; end > 0; end--) {
-        tri_swap(tris, tris + 3 * end);
-        sift(tris, 0, end);
+    for (int32_t i = 1; i < n; i++) {
+        int32_t t[3] = {tris[3 * i], tris[3 * i + 1], tris[3 * i + 2]}, j = i;
+        for (; j > 0 && tri_less(t, tris + 3 * (j - 1)); j--) {
+            tris[3 * j] = tris[3 * j - 3];
+            tris[3 * j + 1] = tris[3 * j - 2];
+            tris[3 * j + 2] = tris[3 * j - 1];
+        }
+        tris[3 * j] = t[0], tris[3 * j + 1] = t[1], tris[3 * j + 2] = t[2];
     }
 }
+
+/* Template site s (0..8) is lattice column s % 3 and row s / 3 of its block (tables: the soft CPU's
+ * division takes some 40 cycles, and GCC keeps it for constant divisors on rv32) */
+static const uint8_t site_col[9] = {0, 1, 2, 0, 1, 2, 0, 1, 2}, site_row[9] = {0, 0, 0, 1, 1, 1, 2, 2, 2};
 
 size_t wm_job_initial_bound(const wm_job_blocks *b, int32_t nt)
 {
@@ -201,6 +191,7 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     size_t tri_bytes = ALIGN8(12u * (size_t)nt), bit_bytes = ALIGN8(4u * (size_t)wpr * (size_t)ncy);
     int32_t *tris, *xy, nv = 0, n = 0;
     uint32_t *bits, *wbase;
+    uint16_t used[WM_TEMPLATE_COUNT];
 
     if (keep > bytes || bytes - keep < tri_bytes + 2 * bit_bytes) return WM_ERR_MEMORY;
     tris = (int32_t *)(void *)(top - tri_bytes);
@@ -208,16 +199,24 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     wbase = (uint32_t *)(void *)((uint8_t *)bits - bit_bytes);
     memset(bits, 0, 4u * (size_t)wpr * (size_t)ncy);
 
+    /* the sites each template uses (a bit per site) */
+    for (int t = 0; t < WM_TEMPLATE_COUNT; t++) {
+        used[t] = 0;
+        for (int i = 0; i < wm_template_ntri[t]; i++)
+            for (int k = 0; k < 3; k++) used[t] |= (uint16_t)(1u << wm_template_tri[t][i][k]);
+    }
+
     /* the occupied lattice points, then their numbers (row by row: the canonical order) */
     for (int32_t jb = 0; jb < rows; jb++) {
+        int32_t v[3] = {2 * jb, lattice(&ay, jb, 1), 2 * jb + 2};
         for (int32_t ib = 0; ib < cols; ib++) {
             unsigned tid = template_of(entries, jb * cols + ib);
+            int32_t u[3] = {2 * ib, lattice(&ax, ib, 1), 2 * ib + 2};
             if (tid >= WM_TEMPLATE_COUNT) return WM_ERR_ARG;
-            for (int t = 0; t < wm_template_ntri[tid]; t++) {
-                for (int k = 0; k < 3; k++) {
-                    int s = wm_template_tri[tid][t][k];
-                    int32_t u = lattice(&ax, ib, s % 3), v = lattice(&ay, jb, s / 3);
-                    bits[v * wpr + (u >> 5)] |= 1u << (u & 31);
+            for (uint32_t m = used[tid], st = 0; m; m >>= 1, st++) {
+                if (m & 1u) {
+                    int32_t uu = u[site_col[st]];
+                    bits[v[site_row[st]] * wpr + (uu >> 5)] |= 1u << (uu & 31);
                 }
             }
         }
@@ -240,26 +239,52 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
         }
     }
 
-    /* the triangles: vertex numbers, from the smallest (orientation kept), sorted */
+    /* the triangles: vertex numbers, from the smallest (orientation kept), sorted a block row at a
+     * time.  A triangle's smallest vertex lies on the row's top lattice row or the one below; those of
+     * the top row fill the block row's part of tris from its front, the others from its back (then
+     * turned round), each block left to right.  Within each half a triangle is at most a block's
+     * triangles from its place (a block's sites span lattice columns 2 ib .. 2 ib + 2), so an insertion
+     * sort finishes each in a few moves per triangle. */
     n = 0;
     for (int32_t jb = 0; jb < rows; jb++) {
-        int32_t n0 = n;
+        int32_t v[3] = {2 * jb, lattice(&ay, jb, 1), 2 * jb + 2}, row_nt = 0, lo, hi, mid_first;
+        for (int32_t ib = 0; ib < cols; ib++) row_nt += wm_template_ntri[template_of(entries, jb * cols + ib)];
+        if (row_nt > nt - n) return WM_ERR_ARG; /* nt is not these entries' count */
+        lo = n, hi = n + row_nt;
+        mid_first = (int32_t)wbase[(2 * jb + 1) * wpr]; /* the first number below the top lattice row */
         for (int32_t ib = 0; ib < cols; ib++) {
             unsigned tid = template_of(entries, jb * cols + ib);
-            for (int t = 0; t < wm_template_ntri[tid] && n < nt; t++, n++) {
-                int32_t id[3], *tri = tris + 3 * n;
-                for (int k = 0; k < 3; k++) {
-                    int s = wm_template_tri[tid][t][k];
-                    int32_t u = lattice(&ax, ib, s % 3), v = lattice(&ay, jb, s / 3);
-                    int32_t w = v * wpr + (u >> 5);
-                    id[k] = (int32_t)wbase[w] + popcount(bits[w] & ((1u << (u & 31)) - 1u));
+            int32_t u[3] = {2 * ib, lattice(&ax, ib, 1), 2 * ib + 2}, site[9];
+            for (uint32_t m = used[tid], st = 0; m; m >>= 1, st++) {
+                if (m & 1u) {
+                    int32_t uu = u[site_col[st]], w = v[site_row[st]] * wpr + (uu >> 5);
+                    site[st] = (int32_t)wbase[w] + popcount(bits[w] & ((1u << (uu & 31)) - 1u));
                 }
-                if (id[1] < id[0] && id[1] < id[2]) tri[0] = id[1], tri[1] = id[2], tri[2] = id[0];
-                else if (id[2] < id[0] && id[2] < id[1]) tri[0] = id[2], tri[1] = id[0], tri[2] = id[1];
-                else tri[0] = id[0], tri[1] = id[1], tri[2] = id[2];
+            }
+            for (int t = 0; t < wm_template_ntri[tid]; t++) {
+                const uint8_t *ts = wm_template_tri[tid][t];
+                int32_t i0 = site[ts[0]], i1 = site[ts[1]], i2 = site[ts[2]], *tri;
+                if (i1 < i0 && i1 < i2) {
+                    int32_t x = i0;
+                    i0 = i1, i1 = i2, i2 = x;
+                } else if (i2 < i0 && i2 < i1) {
+                    int32_t x = i2;
+                    i2 = i1, i1 = i0, i0 = x;
+                }
+                tri = i0 < mid_first ? tris + 3 * lo++ : tris + 3 * --hi;
+                tri[0] = i0, tri[1] = i1, tri[2] = i2;
             }
         }
-        sort_tris(tris + 3 * n0, n - n0);
+        for (int32_t i = hi, j = n + row_nt - 1; i < j; i++, j--) { /* the back half, turned round */
+            int32_t *s = tris + 3 * i, *t = tris + 3 * j;
+            for (int k = 0; k < 3; k++) {
+                int32_t x = s[k];
+                s[k] = t[k], t[k] = x;
+            }
+        }
+        sort_tris(tris + 3 * n, lo - n);
+        sort_tris(tris + 3 * hi, n + row_nt - hi);
+        n += row_nt;
     }
     if (n != nt) return WM_ERR_ARG; /* nt is not these entries' count */
 
