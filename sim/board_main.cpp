@@ -45,6 +45,7 @@
 #include <vector>
 
 #include "Vboard_sim.h"
+#include "Vboard_sim___024root.h"
 #include "tcp_bridge.h"
 #include "uart_line.h"
 #include "wm_memmap.h"
@@ -52,6 +53,9 @@
 #if VM_TRACE
 #include "verilated_fst_c.h"
 #endif
+
+// the generated model's evaluation (Vboard_sim___024root__*.cpp; no header of Verilator's declares it)
+void Vboard_sim___024root___eval(Vboard_sim___024root *vlSelf);
 
 namespace {
 
@@ -171,10 +175,17 @@ public:
         top_->clk = 0;
         top_->rst = 1;
         top_->uart_rxd = 1;
-        top_->uart_bypass = o.fast ? 1 : 0;
-        top_->s_axis_uart_rx_tvalid = 0;
-        top_->s_axis_uart_rx_tdata = 0;
-        top_->m_axis_uart_tx_tready = o.fast ? 1 : 0;
+        top_->eval();  // the model's initialisation, no clock edge (it clears the force controls below)
+        // soc_top's fast-mode ports, forced over ulx3s_top's tie-offs (board_sim.vlt); in pin mode
+        // forced to the tie-offs' values
+        Vboard_sim___024root &r = *top_->rootp;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__uart_bypass__VforceEn = 1;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__uart_bypass__VforceVal = o.fast ? 1 : 0;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__m_axis_uart_tx_tready__VforceEn = 1;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__m_axis_uart_tx_tready__VforceVal = o.fast ? 1 : 0;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__s_axis_uart_rx_tvalid__VforceEn = 1;
+        r.board_sim__DOT__top_inst__DOT__soc_inst__DOT__s_axis_uart_rx_tdata__VforceEn = 0xff;
+        offer_rx(false, 0);
         for (int i = 0; i < RESET_CYCLES; ++i) tick_raw();
         top_->rst = 0;
         leds_ = top_->led;
@@ -193,8 +204,7 @@ public:
         std::deque<uint8_t> *rx = bridge ? &bridge->rx : nullptr;
         // inputs for this cycle
         if (opt_.fast) {
-            top_->s_axis_uart_rx_tvalid = rx && !rx->empty();
-            top_->s_axis_uart_rx_tdata = rx && !rx->empty() ? rx->front() : 0;
+            offer_rx(rx && !rx->empty(), rx && !rx->empty() ? rx->front() : 0);
         } else {
             if (!line_out_.busy() && rx && !rx->empty()) {
                 line_out_.start(rx->front(), top_->uart_div);
@@ -203,11 +213,11 @@ public:
             top_->uart_rxd = line_out_.step();
         }
         top_->clk = 0;
-        top_->eval();
+        eval();
         dump();
         // what happens at this rising edge
         if (opt_.fast) {
-            if (top_->s_axis_uart_rx_tvalid && top_->s_axis_uart_rx_tready) rx->pop_front();
+            if (rx_valid_ && top_->s_axis_uart_rx_tready) rx->pop_front();
             if (top_->m_axis_uart_tx_tvalid && bridge) bridge->tx.push_back(static_cast<char>(top_->m_axis_uart_tx_tdata));
         } else {
             uint8_t byte;
@@ -245,7 +255,7 @@ public:
             }
         }
         top_->clk = 1;
-        top_->eval();
+        eval();
         dump();
         ++cycles_;
         return status;
@@ -282,6 +292,19 @@ public:
     }
 
 private:
+    // One evaluation of the model: Vboard_sim::eval() without the housekeeping it does for Verilator's
+    // multi-threaded runtime (a deleter and a message queue, each behind a mutex: 3 % of a run), which
+    // this single-threaded model without dynamic objects never needs ($display and $fatal print at
+    // once).  The first evaluation, which initialises the model, is top_->eval() in the constructor.
+    void eval() { Vboard_sim___024root___eval(top_->rootp); }
+
+    // fast mode: the byte offered to the UART's RX FIFO this cycle (soc_top's s_axis_uart_rx_*)
+    void offer_rx(bool valid, uint8_t byte) {
+        rx_valid_ = valid;
+        top_->rootp->board_sim__DOT__top_inst__DOT__soc_inst__DOT__s_axis_uart_rx_tvalid__VforceVal = valid;
+        top_->rootp->board_sim__DOT__top_inst__DOT__soc_inst__DOT__s_axis_uart_rx_tdata__VforceVal = byte;
+    }
+
     void tick_raw() {
         top_->clk = 0;
         top_->eval();
@@ -306,6 +329,7 @@ private:
     UartLineSampler line_in_;
     uint64_t cycles_ = 0;
     uint32_t leds_ = 0;
+    bool rx_valid_ = false;
     bool profiling_ = !opt_.profile.empty();
     uint32_t pc_ = 0;
     std::map<uint32_t, uint64_t> profile_;

@@ -14,8 +14,10 @@
  *   the +firmware=FILE plusarg (board_main.cpp's --firmware option), so one simulator runs any
  *   firmware;
  * - the fast mode (wmsim --fast): soc_top's UART bypass ports, which ulx3s_top ties off (bypass
- *   low, no bytes), are forced to this module's ports; in pin mode the forced values are the
- *   tie-offs' (uart_bypass low, no valid byte, tready low), so the top runs as on the board;
+ *   low, no bytes), are forced by board_main.cpp (board_sim.vlt makes them forceable: a force
+ *   statement here would cost every read of them a lookup in Verilator's force table); in pin mode
+ *   the forced values are the tie-offs' (uart_bypass low, no valid byte, tready low), so the top
+ *   runs as on the board;
  * - the observation ports: soc_top's stage, halt, trap and uart_div outputs, which ulx3s_top leaves
  *   unconnected, the profile's fetch address, and the controller's DQ enable for the chip model,
  *   read through hierarchical references.
@@ -36,13 +38,9 @@ module board_sim
     output wire         uart_txd,
     output wire [`WM_LED_COUNT-1:0] led,
 
-    input  wire         uart_bypass,
-    input  wire [7:0]   s_axis_uart_rx_tdata,
-    input  wire         s_axis_uart_rx_tvalid,
     output wire         s_axis_uart_rx_tready,
     output wire [7:0]   m_axis_uart_tx_tdata,
     output wire         m_axis_uart_tx_tvalid,
-    input  wire         m_axis_uart_tx_tready,
     output wire [15:0]  uart_div,
     output wire         stage_valid,
     output wire [31:0]  stage,
@@ -106,14 +104,6 @@ sdram_chip sdram_inst (
 );
 
 assign sdram_d = sdram_dq_oe ? 16'bz : chip_dq;
-
-// the fast mode's ports, forced over ulx3s_top's tie-offs
-initial begin
-    force top_inst.soc_inst.uart_bypass = uart_bypass;
-    force top_inst.soc_inst.s_axis_uart_rx_tdata = s_axis_uart_rx_tdata;
-    force top_inst.soc_inst.s_axis_uart_rx_tvalid = s_axis_uart_rx_tvalid;
-    force top_inst.soc_inst.m_axis_uart_tx_tready = m_axis_uart_tx_tready;
-end
 
 assign s_axis_uart_rx_tready = top_inst.rx_tready_unused;
 assign m_axis_uart_tx_tdata = top_inst.tx_tdata_unused;
