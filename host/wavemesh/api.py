@@ -288,13 +288,14 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
     start = time.perf_counter()
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
-    details = decompose(hf.samples, job.levels, job.wavelet)
+    details = job.levels  # the library's filter bank makes them (native.refine)
     if roi is not None:
         from wavemesh.roi import mask_details, roi_errors
 
-        details = mask_details(details, roi)  # 5.6: no detail energy outside the ROI
+        # 5.6: no detail energy outside the ROI
+        details = mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
-                        roi=roi, mask=hf.mask)
+                        roi=roi, mask=hf.mask, wavelet=job.wavelet)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:
