@@ -12,7 +12,8 @@ function filters the native run's meshes and the ones a device streams (the devi
 
 :func:`pack` is the mask's one wire and memory format: a bit per sample, row-major, least significant
 bit first, set where the sample is invalid (wm_field.mask, the MASK frames of docs/protocol.md).
-:func:`check` is what ``wavemesh check`` adds for a mesh with holes.
+:func:`check` is what ``wavemesh check`` adds for a mesh with holes.  :func:`bridge` is ``--max-hole N``:
+the enclosed dropouts of at most N samples filled as ``--fill nearest`` fills them before the run.
 """
 
 from __future__ import annotations
