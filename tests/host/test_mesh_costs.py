@@ -77,7 +77,7 @@ def break_level(monkeypatch, which: int) -> None:
     def refine(*a, **kw):
         out = real(*a, **kw)
         lv = out.levels[which]
-        out.levels[which] = replace(lv, mesh=broken(lv.mesh))
+        lv.mesh = broken(lv.mesh)
         return out
 
     monkeypatch.setattr(native, "refine", refine)
@@ -119,7 +119,7 @@ def test_a_final_mesh_above_zeta_is_always_found(tmp_path, ball, monkeypatch, ca
     def refine(samples, *a, **kw):
         out = real(samples, *a, **kw)
         coarse = out.levels[0]  # the initial triangulation, far above zeta, claimed within it
-        out.levels[-1] = replace(out.levels[-1], mesh=coarse.mesh)
+        out.levels[-1].mesh = coarse.mesh
         return out
 
     monkeypatch.setattr(native, "refine", refine)
@@ -138,8 +138,9 @@ def test_bound_check_on_lossy_input():
     rjob = api.refine(hf, 3, None, native.RefineParams(zeta=0.05))
     assert rjob.bound_met and api.bound_excess(hf, rjob, rjob.errors) is None
     fake = api.RefineJob(rjob.initial, rjob.params, rjob.zeta_used,
-                         replace(rjob.output, levels=rjob.output.levels[:1] + [replace(
-                             rjob.output.final, mesh=rjob.output.levels[0].mesh)]), 0.0)
+                         replace(rjob.output, levels=rjob.output.levels[:1] + [native.Level(
+                             rjob.output.final.level, rjob.output.levels[0].mesh, rjob.output.final.stats)]),
+                         0.0)
     fake.errors = check.mesh_errors(fake.mesh, hf.values)
     assert "on the 16-bit samples" in api.bound_excess(hf, fake, fake.errors)
 
