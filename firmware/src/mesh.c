@@ -148,49 +148,53 @@ int wm_mesh_build(wm_mesh *m, const int32_t *xy, int32_t nv, const int32_t *tris
         m->vy[v] = (uint16_t)y;
         m->vh[v] = -1;
     }
-    for (int32_t e = 0; e < 3 * nt; e++) {
-        if (tris[e] < 0 || tris[e] >= nv) return WM_ERR_ARG;
-        m->hv[e] = tris[e];
-        m->ho[e] = -1;
+    /* The half-edges, and buckets of them by origin vertex: heads in vh, links in scratch.  Filled from
+     * the last half-edge down, so a head ends as its vertex's lowest half-edge (vh's meaning).  A link
+     * names half-edge f by its successor's number, next(f) << 2 | f % 3 (3 nt < 2^30), and is stored
+     * at scratch[next(f')] for the f' it follows: the walk below reads f's destination hv[next(f)] and
+     * the link after it at one index, without a division.  A head is f itself (vh may be 16-bit). */
+    for (int32_t t = nt - 1; t >= 0; t--) {
+        for (int32_t k = 2; k >= 0; k--) {
+            int32_t e = 3 * t + k, a = tris[e], h;
+            if (a < 0 || a >= nv) return WM_ERR_ARG;
+            m->hv[e] = a;
+            m->ho[e] = -1;
+            h = m->vh[a];
+            if (h < 0) {
+                scratch[k == 2 ? e - 2 : e + 1] = nil;
+            } else {
+                int32_t r = h - 3 * wm_div3(h);
+                scratch[k == 2 ? e - 2 : e + 1] = (uint32_t)(r == 2 ? h - 2 : h + 1) << 2 | (uint32_t)r;
+            }
+            m->vh[a] = e;
+        }
     }
     for (int32_t t = 0; t < nt; t++) m->tflag[t] = 0;
     m->vert_end = m->n_vert = nv;
     m->tri_end = m->n_tri = nt;
-    /* Buckets of half-edges by origin vertex: heads in vh, links in scratch.  A link holds the next
-     * half-edge f as f << 2 | f % 3 (3 nt < 2^30), so the walk below finds f's destination without a
-     * division; a head is f itself (vh may be 16-bit). */
-    for (int32_t t = 0, e = 0; t < nt; t++) {
-        for (int32_t k = 0; k < 3; k++, e++) {
-            int32_t a = m->hv[e], h = m->vh[a];
-            scratch[e] = h < 0 ? nil : (uint32_t)h << 2 | (uint32_t)(h - 3 * wm_div3(h));
-            m->vh[a] = e;
-        }
-    }
-    /* Each edge once, from the half-edge a -> b with a < b: its opposite is the one half-edge b -> a in
-     * b's bucket, and both are linked.  A repeated half-edge a -> b then breaks the symmetry checked
-     * below, a repeated b -> a is found here: the same verdicts as a search from every half-edge. */
-    for (int32_t e = 0; e < 3 * nt; e += 3) {
-        for (int32_t k = 0; k < 3; k++) {
-            int32_t a = m->hv[e + k], b = m->hv[k == 2 ? e : e + k + 1], found = -1, h = m->vh[b];
-            uint32_t f;
-            if (a > b || h < 0) continue;
-            f = (uint32_t)h << 2 | (uint32_t)(h - 3 * wm_div3(h));
-            for (; f != nil; f = scratch[f >> 2]) {
-                uint32_t g = f >> 2;
-                if (m->hv[(f & 3u) == 2 ? g - 2 : g + 1] != a) continue;
-                if (found >= 0) return WM_ERR_MESH; /* edge used by more than two triangles */
-                found = (int32_t)g;
-            }
-            m->ho[e + k] = found;
-            if (found >= 0) m->ho[found] = e + k;
-        }
-    }
-    for (int32_t v = 0; v < nv; v++) m->vh[v] = -1;
-    for (int32_t e = 3 * nt - 1; e >= 0; e--) m->vh[m->hv[e]] = e; /* the lowest half-edge */
     for (int32_t v = 0; v < nv; v++)
         if (m->vh[v] < 0) return WM_ERR_MESH; /* unused vertex */
-    for (int32_t e = 0; e < 3 * nt; e++) /* a repeated directed edge breaks the symmetry */
-        if (m->ho[e] >= 0 && m->ho[m->ho[e]] != e) return WM_ERR_MESH;
+    /* Each edge once, from the half-edge a -> b with a < b: its opposite is the one half-edge b -> a in
+     * b's bucket, and both are linked.  A repeated b -> a is found twice here, a repeated a -> b takes
+     * an opposite already taken: either is not a triangulation. */
+    for (int32_t e = 0; e < 3 * nt; e += 3) {
+        for (int32_t k = 0; k < 3; k++) {
+            int32_t a = m->hv[e + k], b = m->hv[k == 2 ? e : e + k + 1], found = -1, h = m->vh[b], r;
+            uint32_t f;
+            if (a > b) continue;
+            r = h - 3 * wm_div3(h);
+            for (f = (uint32_t)(r == 2 ? h - 2 : h + 1) << 2 | (uint32_t)r; f != nil; f = scratch[f >> 2]) {
+                if (m->hv[f >> 2] != a) continue;
+                if (found >= 0) return WM_ERR_MESH; /* edge used by more than two triangles */
+                found = (f & 3u) == 2 ? (int32_t)(f >> 2) + 2 : (int32_t)(f >> 2) - 1;
+            }
+            m->ho[e + k] = found;
+            if (found >= 0) {
+                if (m->ho[found] >= 0) return WM_ERR_MESH; /* a repeated half-edge a -> b */
+                m->ho[found] = e + k;
+            }
+        }
+    }
     return wm_mesh_check(m);
 }
 
