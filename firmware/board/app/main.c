@@ -66,6 +66,13 @@ static void io_write(void *ctx, const uint8_t *data, size_t n)
     board_uart_write(data, n);
 }
 
+static void io_write_escaped(void *ctx, const uint8_t *data, size_t n)
+{
+    (void)ctx;
+    board_uart_write_escaped(data, n, WM_PROTO_SLIP_ESC, WM_PROTO_SLIP_END, WM_PROTO_SLIP_ESC_END,
+                             WM_PROTO_SLIP_ESC_ESC);
+}
+
 static uint64_t io_cycles(void *ctx)
 {
     (void)ctx;
@@ -112,6 +119,7 @@ int main(void)
     io.getc = io_getc;
     io.read = io_read;
     io.write = io_write;
+    io.write_escaped = io_write_escaped;
     io.cycles = io_cycles;
     io.mark = io_mark;
 

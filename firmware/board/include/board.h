@@ -31,6 +31,12 @@ void board_uart_putc(uint8_t byte);
 /* Queue n bytes: waits until the TX FIFO is empty, then fills it (no status read per byte). */
 void board_uart_write(const void *data, size_t n);
 
+/*
+ * Queue n bytes escaped: a byte equal to a is sent as esc then a_sub, one equal to esc as
+ * esc then esc_sub (SLIP's escaping, RFC 1055); an empty TX FIFO takes half its depth of input at once.
+ */
+void board_uart_write_escaped(const void *data, size_t n, uint8_t esc, uint8_t a, uint8_t a_sub, uint8_t esc_sub);
+
 /* Wait until the TX FIFO is empty and the last stop bit has been sent. */
 void board_uart_flush(void);
 

@@ -70,6 +70,10 @@ typedef struct wm_proto_io {
     int (*read)(void *ctx, uint8_t *dst, uint32_t max);
     /* Send n bytes (may block while a FIFO drains; must not block forever). */
     void (*write)(void *ctx, const uint8_t *data, size_t n);
+    /* Optional, for speed (NULL: the engine escapes into its buffer and calls write): send n bytes
+     * SLIP-escaped, WM_PROTO_SLIP_END as WM_PROTO_SLIP_ESC WM_PROTO_SLIP_ESC_END and WM_PROTO_SLIP_ESC
+     * as WM_PROTO_SLIP_ESC WM_PROTO_SLIP_ESC_ESC (the engine uses it for long runs: payloads). */
+    void (*write_escaped)(void *ctx, const uint8_t *data, size_t n);
     /* A free-running counter at caps.clk_hz (wraps after 2^64). */
     uint64_t (*cycles)(void *ctx);
     /* Optional: called whenever another clock starts to run (WM_PROTO_CLOCK_*), right after the
@@ -130,10 +134,11 @@ typedef struct wm_proto {
     void *job_ctx;
     uint32_t ms_cycles;      /* cycles per millisecond */
 
-    /* reception (h: DATA's samples read as halfwords) */
+    /* reception (h, w: DATA's samples read as halfwords or pairs of them) */
     union {
         uint8_t b[WM_PROTO_MAX_FRAME];
         uint16_t h[WM_PROTO_MAX_FRAME / 2];
+        uint32_t w[WM_PROTO_MAX_FRAME / 4];
     } rx;
     uint32_t rx_len;
     uint8_t rx_esc, rx_bad;
@@ -147,6 +152,7 @@ typedef struct wm_proto {
     union {
         uint8_t b[WM_PROTO_MAX_PAYLOAD];
         uint16_t h[WM_PROTO_MAX_PAYLOAD / 2];
+        uint32_t w[WM_PROTO_MAX_PAYLOAD / 4];
     } tx;
     uint8_t out[256];
     uint32_t out_len;

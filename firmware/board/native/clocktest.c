@@ -272,6 +272,7 @@ int main(int argc, char **argv)
     io.getc = io_getc;
     io.read = NULL;
     io.write = io_write;
+    io.write_escaped = NULL;
     io.cycles = io_cycles;
     io.mark = NULL;
     printf("work filter %d template %d refine1 %d refine0 %d\n", WORK_FILTER, WORK_TEMPLATE, WORK_REFINE1,

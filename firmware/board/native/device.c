@@ -368,6 +368,7 @@ int main(int argc, char **argv)
     io.getc = io_getc;
     io.read = NULL; /* getc(0) a byte at a time: a socket's reads are cheap */
     io.write = io_write;
+    io.write_escaped = NULL;
     io.cycles = io_cycles;
     io.mark = NULL;
     if (pthread_create(&door, NULL, doorman, &c) != 0) {

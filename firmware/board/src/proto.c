@@ -35,8 +35,9 @@
 #define WM_LITTLE_ENDIAN 0
 #endif
 
-/* DATA's samples and MESH's stream bytes start at even offsets (read and written as halfwords) */
-typedef char proto_halfword_payloads[(WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTES) % 2 == 0 &&
+/* DATA's samples start at a word, MESH's stream bytes at an even offset (read and written as pairs of
+ * halfwords and as halfwords) */
+typedef char proto_halfword_payloads[(WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTES) % 4 == 0 &&
                                              WM_PROTO_MESH_BYTES % 2 == 0 &&
                                              WM_PROTO_LEVEL_HEADER_BYTES % 2 == 0 &&
                                              WM_PROTO_FREE_VERTEX == WM_FREE
@@ -223,9 +224,15 @@ static void out_raw(wm_proto *p, uint8_t b)
     p->out[p->out_len++] = b;
 }
 
-/* n bytes SLIP-escaped (each takes at most two) */
+/* n bytes SLIP-escaped (each takes at most two); a long run straight through the transport's
+ * write_escaped when it has one (no copy through the buffer) */
 static void out_slip(wm_proto *p, const uint8_t *s, uint32_t n)
 {
+    if (p->io.write_escaped && n >= 64) {
+        out_flush(p);
+        p->io.write_escaped(p->io.ctx, s, n);
+        return;
+    }
     while (n) {
         uint32_t k;
         uint8_t *d;
@@ -784,10 +791,15 @@ static void do_data(wm_proto *p)
         s = p->f_pay + WM_PROTO_DATA_BYTES;
 #if WM_LITTLE_ENDIAN
         if (off + n <= (uint32_t)p->job.width * (uint32_t)p->job.height) {
-            /* samples only: halfword copies (the wire's byte order is the CPU's) */
+            /* samples only, straight (the wire's byte order is the CPU's): two a step when the
+             * destination is word-aligned (the source is: an even offset in a word-aligned buffer) */
             const uint16_t *h = p->rx.h + (WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTES) / 2;
             uint16_t *d = p->heights + off;
-            for (i = 0; i < n; i++) d[i] = h[i];
+            i = 0;
+            if (!((uintptr_t)d & 3u))
+                for (; i + 2 <= n; i += 2)
+                    __builtin_memcpy(__builtin_assume_aligned(d + i, 4), __builtin_assume_aligned(h + i, 4), 4);
+            for (; i < n; i++) d[i] = h[i];
         } else
 #endif
         {

@@ -28,6 +28,29 @@ void board_uart_write(const void *data, size_t n)
     }
 }
 
+void board_uart_write_escaped(const void *data, size_t n, uint8_t esc, uint8_t a, uint8_t a_sub, uint8_t esc_sub)
+{
+    const uint8_t *p = data, *end = p + n;
+    while (p < end) {
+        /* half the FIFO's depth a fill: each byte takes at most two places */
+        const uint8_t *stop = (size_t)(end - p) > WM_UART_TX_DEPTH / 2 ? p + WM_UART_TX_DEPTH / 2 : end;
+        while (!(WM_UART_STATUS & WM_UART_STATUS_TX_EMPTY)) {
+            /* the transmitter empties the FIFO at the baud rate */
+        }
+        for (; p < stop; p++) {
+            uint32_t c = *p;
+            if (c == a) {
+                WM_UART_DATA = esc;
+                c = a_sub;
+            } else if (c == esc) {
+                WM_UART_DATA = esc;
+                c = esc_sub;
+            }
+            WM_UART_DATA = c;
+        }
+    }
+}
+
 void board_uart_flush(void)
 {
     while (!(WM_UART_STATUS & WM_UART_STATUS_TX_IDLE)) {
@@ -43,14 +66,25 @@ int board_uart_getc(void)
 
 size_t board_uart_read(uint8_t *dst, size_t max, uint8_t stop_a, uint8_t stop_b)
 {
-    size_t n = 0;
-    while (n < max) {
-        uint32_t data = WM_UART_DATA; /* the byte zero-extended, or EMPTY alone */
-        if (data & WM_UART_DATA_EMPTY) break;
-        dst[n++] = (uint8_t)data;
-        if (data == stop_a || data == stop_b) break;
+    /* as many as the FIFO holds now, four to a step: no EMPTY test per byte */
+    uint32_t have = (WM_UART_STATUS & WM_UART_STATUS_RX_COUNT_MASK) >> WM_UART_STATUS_RX_COUNT_SHIFT;
+    uint8_t *p = dst, *end = dst + (have < max ? have : max);
+    uint32_t c;
+#define TAKE(k)                                                              \
+    do {                                                                     \
+        c = WM_UART_DATA;                                                    \
+        p[k] = (uint8_t)c;                                                   \
+        if (c == stop_a || c == stop_b) return (size_t)(p - dst) + (k) + 1u; \
+    } while (0)
+    for (; end - p >= 4; p += 4) {
+        TAKE(0);
+        TAKE(1);
+        TAKE(2);
+        TAKE(3);
     }
-    return n;
+    for (; p < end; p++) TAKE(0);
+#undef TAKE
+    return (size_t)(p - dst);
 }
 
 int board_uart_getc_timeout(uint32_t cycles)
