@@ -44,6 +44,7 @@ help:
 	@echo "make postsynth      the iCEBreaker's synthesised netlist through its cocotb bench (Icarus; minutes)"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
+	@echo "make bench-board1024  issue 14's bar: 1024 x 1024 through the simulated board (hours; not in make bench)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
 setup: $(SETUP_STAMP)

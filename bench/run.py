@@ -7,8 +7,9 @@ Each benchmark is a module bench/bench_<name>.py with
     def run() -> dict               # measures; returns JSON-able results
     def markdown(results) -> str    # the section body for docs/benchmarks.md
 
-`python bench/run.py [NAME ...]` runs the named ones (default: all) and rebuilds docs/benchmarks.md from
-every results file present, so one benchmark can be re-run without the others.  Benchmarks report; they
+`python bench/run.py [NAME ...]` runs the named ones (default: all but those with ``DEFAULT = False``,
+runs of hours such as bench_board1024.py) and rebuilds docs/benchmarks.md from every results file
+present, so one benchmark can be re-run without the others.  Benchmarks report; they
 never fail on a number (speed targets are read from the document, not asserted).
 """
 
@@ -50,7 +51,7 @@ def write_doc() -> None:
 
 
 def main(argv: list[str]) -> int:
-    names = argv or available()
+    names = argv or [n for n in available() if getattr(load(n), "DEFAULT", True)]
     unknown = [n for n in names if n not in available()]
     if unknown:
         print(f"error: unknown benchmark {', '.join(unknown)}; have: {', '.join(available())}",

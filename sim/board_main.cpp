@@ -1,7 +1,7 @@
 // wavemesh simulated board: the Verilator model of soc_top with its UART bridged to TCP.
 //
 //   wmsim --firmware FILE.hex [--port N] [--fast] [--exit-on-close] [--no-socket]
-//         [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--quiet]
+//         [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--progress S] [--quiet]
 //
 // A host talks to it as to a board: pyserial's serial_for_url("socket://127.0.0.1:N").  Bytes
 // from the client are driven onto the UART RX pin bit by bit at the board's current baud divisor,
@@ -19,7 +19,9 @@
 //   wmsim: stage 0xVALUE cycle N              (every SYS.STAGE write)
 //   wmsim: leds 0xVALUE cycle N               (every change of the LED outputs)
 //   wmsim: halt 0xCODE cycle N                wmsim: trap cycle N
-//   wmsim: summary cycles N wall S.SSS s rate K kHz bytes-in N bytes-out N
+//   wmsim: progress cycle N cpu S.SSS s       (every S seconds of wall time with --progress S)
+//   wmsim: summary cycles N wall S.SSS s rate K kHz bytes-in N bytes-out N cpu S.SSS s
+// (wall: the seconds spent simulating, not waiting for a client; cpu: the process's CPU time)
 //
 // --profile FILE writes, at exit, "PC CYCLES" lines (hex, decimal): every cycle is counted against the
 // address of the last instruction fetched (the CPU is not pipelined: the cycles an instruction takes,
@@ -38,6 +40,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <deque>
 #include <memory>
 #include <map>
@@ -75,16 +78,20 @@ struct Options {
     bool no_socket = false;
     bool quiet = false;
     uint64_t max_cycles = 0;
+    double progress = 0;  // seconds between progress lines (0: none)
 };
 
 volatile std::sig_atomic_t g_stop = 0;
 
 void on_signal(int) { g_stop = 1; }
 
+double cpu_seconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }  // the process's CPU time
+
 void usage(const char *argv0) {
     fprintf(stderr,
             "usage: %s --firmware FILE.hex [--port N (default %d, 0 = any)] [--fast] [--exit-on-close]\n"
-            "          [--no-socket] [--max-cycles N] [--trace FILE.fst] [--quiet]\n",
+            "          [--no-socket] [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--progress S]\n"
+            "          [--quiet]\n",
             argv0, DEFAULT_PORT);
 }
 
@@ -124,6 +131,15 @@ bool parse(int argc, char **argv, Options *o) {
             const char *v = value("--profile");
             if (!v) return false;
             o->profile = v;
+        } else if (a == "--progress") {
+            const char *v = value("--progress");
+            if (!v) return false;
+            char *end = nullptr;
+            o->progress = strtod(v, &end);
+            if (*end || !(o->progress > 0)) {
+                fprintf(stderr, "wmsim: error: bad --progress '%s' (seconds > 0)\n", v);
+                return false;
+            }
         } else if (a == "--fast") {
             o->fast = true;
         } else if (a == "--exit-on-close") {
@@ -372,6 +388,7 @@ int main(int argc, char **argv) {
 
     Board board(opt, ctx.get());
     auto t0 = std::chrono::steady_clock::now();
+    auto next_progress = t0 + std::chrono::duration<double>(opt.progress);
     double waited = 0;  // seconds spent waiting for a client (not simulating)
     int status = -1;
     while (status < 0) {
@@ -379,6 +396,13 @@ int main(int argc, char **argv) {
             board.log("interrupted cycle %" PRIu64, board.cycles());
             status = 130;
             break;
+        }
+        if (opt.progress > 0 && (board.cycles() % SOCKET_EVERY) == 0 &&
+            std::chrono::steady_clock::now() >= next_progress) {
+            // (also with --quiet: asked for)
+            printf("wmsim: progress cycle %" PRIu64 " cpu %.3f s\n", board.cycles(), cpu_seconds());
+            fflush(stdout);
+            next_progress = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.progress);
         }
         if (!opt.no_socket && (board.cycles() % SOCKET_EVERY) == 0) {
             if (!bridge.service()) {
@@ -409,8 +433,10 @@ int main(int argc, char **argv) {
         fprintf(stderr, "wmsim: error: cannot write profile '%s'\n", opt.profile.c_str());
     double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - waited;
     double khz = wall > 0 ? board.cycles() / wall / 1000.0 : 0.0;
-    printf("wmsim: summary cycles %" PRIu64 " wall %.3f s rate %.0f kHz bytes-in %" PRIu64 " bytes-out %" PRIu64 "\n",
-           board.cycles(), wall, khz, bridge.bytes_in, bridge.bytes_out);
+    double cpu = cpu_seconds();
+    printf("wmsim: summary cycles %" PRIu64 " wall %.3f s rate %.0f kHz bytes-in %" PRIu64 " bytes-out %" PRIu64
+           " cpu %.3f s\n",
+           board.cycles(), wall, khz, bridge.bytes_in, bridge.bytes_out, cpu);
     fflush(stdout);
     return status;
 }

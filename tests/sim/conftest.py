@@ -1,12 +1,15 @@
 """Fixtures of the simulated-board tests: the simulator, the firmware, a running board.
 
 The simulator (sim/build.py, Verilator) and the firmware (firmware/board, riscv64-unknown-elf-gcc)
-are built once per session; a missing cross compiler fails the tests that need it with the hint to
-run `make setup` (which installs it), never skips them.
+are built once per session and copied for it: another session in the same tree may rebuild them
+while this one runs, and the boards of one session, whose cycle counts the tests compare, must run
+the same simulator and the same image.  A missing cross compiler fails the tests that need it with
+the hint to run `make setup` (which installs it), never skips them.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -18,19 +21,23 @@ def pytest_configure(config):
 
 
 @pytest.fixture(scope="session")
-def sim_exe(verilator) -> Path:
+def sim_exe(verilator, tmp_path_factory) -> Path:
     try:
-        return build.build_sim()
+        exe = build.build_sim()
     except RuntimeError as e:
         pytest.fail(str(e))
+    # (build.py renames a new simulator over the old one: a copy is one or the other, never half of one)
+    return Path(shutil.copy2(exe, tmp_path_factory.mktemp("sim") / exe.name))
 
 
 @pytest.fixture(scope="session")
-def firmware_hex() -> Path:
+def firmware_hex(tmp_path_factory) -> Path:
     try:
-        return build.build_firmware()
+        image = build.build_firmware()
     except RuntimeError as e:  # MissingToolchain too: its message says to run `make setup`
         pytest.fail(str(e))
+    with build.locked(image.parent):  # (the firmware build writes the image in place, under this lock)
+        return Path(shutil.copy2(image, tmp_path_factory.mktemp("firmware") / image.name))
 
 
 @pytest.fixture
