@@ -191,7 +191,7 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     size_t tri_bytes = ALIGN8(12u * (size_t)nt), bit_bytes = ALIGN8(4u * (size_t)wpr * (size_t)ncy);
     int32_t *tris, *xy, nv = 0, n = 0;
     uint32_t *bits, *wbase;
-    uint16_t used[WM_TEMPLATE_COUNT];
+    uint8_t used[WM_TEMPLATE_COUNT][10]; /* the sites a template uses: their count, then each */
 
     if (keep > bytes || bytes - keep < tri_bytes + 2 * bit_bytes) return WM_ERR_MEMORY;
     tris = (int32_t *)(void *)(top - tri_bytes);
@@ -199,11 +199,14 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
     wbase = (uint32_t *)(void *)((uint8_t *)bits - bit_bytes);
     memset(bits, 0, 4u * (size_t)wpr * (size_t)ncy);
 
-    /* the sites each template uses (a bit per site) */
+    /* the sites each template uses */
     for (int t = 0; t < WM_TEMPLATE_COUNT; t++) {
-        used[t] = 0;
+        uint32_t mask = 0;
         for (int i = 0; i < wm_template_ntri[t]; i++)
-            for (int k = 0; k < 3; k++) used[t] |= (uint16_t)(1u << wm_template_tri[t][i][k]);
+            for (int k = 0; k < 3; k++) mask |= 1u << wm_template_tri[t][i][k];
+        used[t][0] = 0;
+        for (uint8_t st = 0; st < 9; st++)
+            if (mask >> st & 1u) used[t][1 + used[t][0]++] = st;
     }
 
     /* the occupied lattice points, then their numbers (row by row: the canonical order) */
@@ -213,11 +216,10 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
             unsigned tid = template_of(entries, jb * cols + ib);
             int32_t u[3] = {2 * ib, lattice(&ax, ib, 1), 2 * ib + 2};
             if (tid >= WM_TEMPLATE_COUNT) return WM_ERR_ARG;
-            for (uint32_t m = used[tid], st = 0; m; m >>= 1, st++) {
-                if (m & 1u) {
-                    int32_t uu = u[site_col[st]];
-                    bits[v[site_row[st]] * wpr + (uu >> 5)] |= 1u << (uu & 31);
-                }
+            for (int i = 1; i <= used[tid][0]; i++) {
+                int st = used[tid][i];
+                int32_t uu = u[site_col[st]];
+                bits[v[site_row[st]] * wpr + (uu >> 5)] |= 1u << (uu & 31);
             }
         }
     }
@@ -255,11 +257,10 @@ int wm_job_initial(const wm_job_blocks *b, const volatile uint32_t *entries, int
         for (int32_t ib = 0; ib < cols; ib++) {
             unsigned tid = template_of(entries, jb * cols + ib);
             int32_t u[3] = {2 * ib, lattice(&ax, ib, 1), 2 * ib + 2}, site[9];
-            for (uint32_t m = used[tid], st = 0; m; m >>= 1, st++) {
-                if (m & 1u) {
-                    int32_t uu = u[site_col[st]], w = v[site_row[st]] * wpr + (uu >> 5);
-                    site[st] = (int32_t)wbase[w] + popcount(bits[w] & ((1u << (uu & 31)) - 1u));
-                }
+            for (int i = 1; i <= used[tid][0]; i++) {
+                int st = used[tid][i];
+                int32_t uu = u[site_col[st]], w = v[site_row[st]] * wpr + (uu >> 5);
+                site[st] = (int32_t)wbase[w] + popcount(bits[w] & ((1u << (uu & 31)) - 1u));
             }
             for (int t = 0; t < wm_template_ntri[tid]; t++) {
                 const uint8_t *ts = wm_template_tri[tid][t];
