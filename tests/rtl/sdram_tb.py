@@ -656,24 +656,24 @@ async def test_reset_mid_traffic(dut):
 @cocotb.test()
 async def test_stage_sync(dut):
     """The stage sync (the SoC's SYS.STAGE write): sync_busy lasts the same number of cycles whatever
-    the controller was doing (idle at every phase of the refresh clock, a refresh due or under way,
+    the controller was doing (idle at points all over the refresh interval, a refresh due or under way,
     a CPU line fill under way, a posted write to another row of an open bank, a stream write just
     done, streams busy, another sync), and each sync issues a REFRESH; after it, a fixed CPU access
     sequence takes the same cycles per access and puts the same commands on the pins at the same
-    cycles, the refreshes included, also after a reset where the sync waits for the initialisation.
+    cycles, the next refresh included, also after a reset where the sync waits for the initialisation.
     The chip checks every refresh gap (<= tREFI) and every timing around the syncs; the data stay."""
     tb = TB(dut, SEED + 7)
     await tb.start()
     rng, d = tb.rng, dut
     refi = DATASHEET["tREFI"] // T_PS
-    # the CPU program after each sync, long enough for two refreshes: (idle cycles, byte address,
+    # the CPU program after each sync, long enough for a refresh: (idle cycles, byte address,
     # strobes, data); rows open, closed and switched in three banks, reads and partial writes
     prng = random.Random(77)
     region = [join(r, b, c) + 2 * w for r, b, c in ((12, 0, 0), (13, 0, 64), (12, 1, 32), (400, 3, 0))
               for w in range(16)]
     strobes = (0, 0, 0, 0b1111, 0b0011, 0b1000)
     probe = [(prng.choice((0, 0, 1, 3)), prng.choice(region) << 1, prng.choice(strobes), prng.getrandbits(32))
-             for _ in range(max(80, 3 * refi // 5))]
+             for _ in range(max(60, refi // 2))]
     windows: list[int] = []
     runs: dict[str, tuple] = {}
 
@@ -690,7 +690,7 @@ async def test_stage_sync(dut):
             await tb.cycles(gap)
             cycles.append((await tb.cpu(addr, strb, data))[1])
         trace, tb.chip.trace = tb.chip.trace, None
-        assert sum(c == REF for _, c, _, _ in trace) >= 2, f"{name}: the probe saw fewer than two refreshes"
+        assert any(c == REF for _, c, _, _ in trace), f"{name}: no refresh during the probe"
         runs[name] = (cycles, [(t - t0, c, ba, a) for t, c, ba, a in trace])
 
     async def after_refresh(k: int):
@@ -699,8 +699,8 @@ async def test_stage_sync(dut):
             await FallingEdge(d.clk)
         await tb.cycles(k)
 
-    # idle, at every phase of the refresh clock (a refresh due and under way among them)
-    for k in sorted({0, 1, 2, 3, refi // 3, refi // 2} | {refi - j for j in range(2, 40, 3)}):
+    # idle, at points all over the refresh interval (a refresh due and under way among them)
+    for k in sorted({0, 1, refi // 2} | {refi - j for j in range(2, 40, 5)}):
         await after_refresh(k)
         await sync_and_probe(f"idle {k} after a refresh")
     # a line fill under way (the CPU has its word early), in a closed row, also as a refresh falls due
