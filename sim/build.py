@@ -43,9 +43,9 @@ PROTO_INCLUDES = [ROOT / "firmware" / "board" / "include", ROOT / "firmware" / "
 # FPGA stage is): the make variable puts the flag back (as tests/rtl/test_tlut_chain.py does).
 MAKEFLAGS = ["OPT_FAST=-O3", "OPT_SLOW=-O1", "OPT_GLOBAL=-O1", "CFG_CXXFLAGS_PCH_I=-include"]
 # The C++ compiler: clang++ when installed (tools/debian-packages.txt has it), g++ otherwise.  clang++ 14's
-# simulator runs 1.3 to 1.4 times as many cycles per CPU second as g++ 12's on the ULX3S model (docs/soc.md,
-# "Speed") and builds it in less time; both compile the same model, so the cycles do not change.  Its
-# Verilator runtime needs libatomic, which g++ links by itself.
+# ULX3S simulator runs about 1.3 times as many cycles per CPU second as g++ 12's (docs/soc.md, "A 1024 x 1024
+# job on the simulated board") and builds in less time; both compile the same model, so the cycles do not
+# change.  Its Verilator runtime needs libatomic, which g++ links by itself.
 CLANG = "clang++"
 
 
