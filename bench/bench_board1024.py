@@ -140,7 +140,9 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
         print(f"board{side}: wavemesh mesh: {head['mesh_triangles']:,} triangles in {mesh_s:.1f} s; "
               f"streaming through the simulated board (progress every {PROGRESS_S:.0f} s)", flush=True)
 
-        board = SimBoard(exe, fw, "--port", "0", "--fast", "--exit-on-close", "--progress", str(PROGRESS_S))
+        # (wmsim's progress lines twice as often as the monitor's: each of these has a recent one)
+        board = SimBoard(exe, fw, "--port", "0", "--fast", "--exit-on-close",
+                         "--progress", str(PROGRESS_S / 2))
         monitor = _Monitor(board, partial, head)
         monitor.write("running")
         monitor.start()
