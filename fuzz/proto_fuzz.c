@@ -19,7 +19,8 @@
  * ends the link closes, and wm_proto_serve must return.  Every frame the device sends is checked:
  * SLIP well formed, length field and CRC right, a device type, payload at most its stated
  * max_payload (an abort is a finding).  Each getc without a byte in hand consumes input, so every
- * input ends.
+ * input ends.  The transport's optional fast paths (read, write_escaped: the board's) are given or
+ * left NULL (the native device's) by the input's length, so both ways through the engine are fuzzed.
  *
  *   build/fuzz/fuzz_proto CORPUS...        (make fuzz; fuzz/README.md)
  */
@@ -251,6 +252,33 @@ static void h_write(void *ctx, const uint8_t *data, size_t n)
     }
 }
 
+/* The transport's optional fast paths, as the board's app/main.c has them: the bytes already in hand
+ * (none: 0, and the engine falls back to getc, which draws the next operation), up to and including
+ * the first delimiter or escape; and SLIP escaping done by the transport. */
+static int h_read(void *ctx, uint8_t *dst, uint32_t max)
+{
+    host *h = ctx;
+    uint32_t k = 0;
+    while (k < max && h->q_pos < h->q_len) {
+        uint8_t b = h->q[h->q_pos++];
+        h->t += BYTE_CYCLES;
+        dst[k++] = b;
+        if (b == WM_PROTO_SLIP_END || b == WM_PROTO_SLIP_ESC) break;
+    }
+    return (int)k;
+}
+
+static void h_write_escaped(void *ctx, const uint8_t *data, size_t n)
+{
+    static const uint8_t esc_end[2] = {WM_PROTO_SLIP_ESC, WM_PROTO_SLIP_ESC_END};
+    static const uint8_t esc_esc[2] = {WM_PROTO_SLIP_ESC, WM_PROTO_SLIP_ESC_ESC};
+    for (size_t i = 0; i < n; i++) {
+        if (data[i] == WM_PROTO_SLIP_END) h_write(ctx, esc_end, 2);
+        else if (data[i] == WM_PROTO_SLIP_ESC) h_write(ctx, esc_esc, 2);
+        else h_write(ctx, data + i, 1);
+    }
+}
+
 static uint64_t h_cycles(void *ctx) { return ((host *)ctx)->t; }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -261,7 +289,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static wm_proto eng;
     static uint16_t heights[MAX_SIDE * MAX_SIDE];
     static uint8_t mask[2 * MASK_WORDS(MAX_SIDE * MAX_SIDE)];
-    wm_proto_io io;
+    wm_proto_io io = {0};
     uint32_t w, ht;
     memset(&h, 0, sizeof h);
     h.d = data;
@@ -285,6 +313,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     io.write = h_write;
     io.cycles = h_cycles;
     io.mark = NULL;
+    /* The optional paths (the board's) or the fallbacks (the native device's), chosen by the input's
+     * length and not by its bytes, so that the corpus keeps its meaning. */
+    io.read = (size & 1u) ? h_read : NULL;
+    io.write_escaped = (size & 2u) ? h_write_escaped : NULL;
     wm_proto_init(&eng, &io, &h.caps, heights, wm_native_job, NULL);
     if (h.caps.features & WM_PROTO_FEATURE_HOLES) wm_proto_set_mask(&eng, mask, sizeof mask);
     if (wm_proto_serve(&eng) != 0) FAIL("wm_proto_serve returned non-zero");
