@@ -2,6 +2,7 @@
 """The native refiner's instruction counts on fixed inputs, for cost work on firmware/src.
 
     .venv/bin/python tools/refiner_instructions.py [--runner BUILD/wm_run] [--base OTHER/wm_run]
+    .venv/bin/python tools/refiner_instructions.py --phases [--peer]
 
 Writes the C runner's inputs (firmware/tests/wm_run.c) for ten pairs of the quality benchmark's tuning
 set (bench/bench_quality.py: its grids, its errors, --metric vertical, the defaults; never the held-out
@@ -9,6 +10,14 @@ grids), runs each under `valgrind --tool=callgrind` and prints the instructions 
 per pair and in all.  Instruction counts do not depend on the machine's load, unlike times, so a change
 to the refiner can be measured on a shared machine.  With --base, the same for a second runner (e.g. a
 build of the commit before) and the ratios.  Needs valgrind.
+
+--phases splits each pair's instructions by phase (callgrind_annotate, inclusive): the reduction (wm_reduce,
+steps 2(d) and 3(b)), the error bound (greedy insertion with Lawson flips), the final decimation, and the
+rest (set-up and the levels' select, pair, split, swap).  --peer also counts pydelatin's
+Triangulator::Run (the same greedy insertion, its whole algorithm; inclusive, in a Python process that
+calls Delatin as the quality benchmark does) on the same grid and error, and gives each phase over it:
+what issue 11's bar (native refine time at most pydelatin's) asks of each phase, in a unit the machine's
+load does not change.
 """
 
 from __future__ import annotations
@@ -51,20 +60,89 @@ def write_inputs(folder: Path) -> list[tuple[str, Path]]:
     return out
 
 
-def measure(runner: Path, inp: Path, out: Path) -> tuple[int, int]:
-    """(instructions, output triangles) of one run."""
-    cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(runner), str(inp), str(out)]
+def measure(runner: Path, inp: Path, out: Path, profile: Path | None = None) -> tuple[int, int]:
+    """(instructions, output triangles) of one run; the callgrind profile kept in ``profile`` if given."""
+    cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={profile or '/dev/null'}", str(runner),
+           str(inp), str(out)]
     res = subprocess.run(cmd, capture_output=True, text=True, check=True)
     refs = int(re.search(r"refs:\s+([\d,]+)", res.stderr).group(1).replace(",", ""))
     last = [ln for ln in res.stdout.splitlines() if ln.startswith("level")][-1].split()
     return refs, int(last[3])
 
 
+# The refiner's phases by their entry functions (firmware/src): each inclusive of what it calls.
+PHASES = (("reduction", "wm_reduce"), ("error bound", "error_bound"), ("decimation", "wm_decimate"))
+REFINER = ("wm_refine_init", "wm_refine_step")
+PEER = "Triangulator::Run("  # pydelatin's C++ core (its whole algorithm)
+
+
+def inclusive(profile: Path) -> dict[str, int]:
+    """Every function's inclusive instructions in a callgrind profile, by name (C++ names demangled)."""
+    out = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(profile)],
+                         capture_output=True, text=True, check=True).stdout
+    found = {}
+    for line in out.splitlines():
+        m = re.match(r"\s*([\d,]+) \([^)]*\)\s+\S*?:(.+?) \[", line)
+        if m:
+            found.setdefault(m.group(2), int(m.group(1).replace(",", "")))
+    return found
+
+
+def phases(profile: Path) -> dict[str, int]:
+    """The refiner's instructions by phase; "rest" is the set-up and the levels' iterations."""
+    inc = inclusive(profile)
+    total = sum(inc.get(f, 0) for f in REFINER)
+    out = {name: inc.get(f, 0) for name, f in PHASES}
+    out["rest"] = total - sum(out.values())
+    out["refiner"] = total
+    return out
+
+
+PEER_SCRIPT = """
+import sys
+sys.path[:0] = [sys.argv[1]]
+import bench_quality as Q, datasets as D, peers as P
+g = D.load(sys.argv[2])
+P.delatin_call(g.values, dict(Q.zetas(g))[sys.argv[3]])
+"""
+
+
+def peer_instructions(name: str, want: str, folder: Path) -> int:
+    """pydelatin's Triangulator::Run on the pair, inclusive, under callgrind."""
+    prof = folder / f"peer-{name}.cg"
+    subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={prof}", sys.executable, "-c",
+                    PEER_SCRIPT, str(ROOT / "bench"), name, want], capture_output=True, text=True, check=True)
+    return next(v for k, v in inclusive(prof).items() if k.startswith(PEER))
+
+
+def phase_table(inputs, runner: Path, folder: Path, peer: bool) -> None:
+    cols = [name for name, _ in PHASES] + ["rest", "refiner"]
+    head = "| pair | triangles | " + " | ".join(cols) + " |" + (" pydelatin Run | " + " | ".join(
+        f"{c} / pydelatin" for c in cols) + " |" if peer else "")
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    for (label, path), (name, want) in zip(inputs, PAIRS, strict=True):
+        prof = folder / "refiner.cg"
+        _, tris = measure(runner, path, folder / "out.bin", prof)
+        ph = phases(prof)
+        row = [label, str(tris)] + [f"{ph[c]:,}" for c in cols]
+        if peer:
+            pd = peer_instructions(name, want, folder)
+            row += [f"{pd:,}"] + [f"{ph[c] / pd:.2f}" for c in cols]
+        print("| " + " | ".join(row) + " |", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runner", type=Path, default=ROOT / "build" / "firmware-native" / "wm_run")
     ap.add_argument("--base", type=Path, help="a second wm_run to compare with")
+    ap.add_argument("--phases", action="store_true", help="instructions by phase (not with --base)")
+    ap.add_argument("--peer", action="store_true", help="with --phases: pydelatin's on the same pairs")
     args = ap.parse_args(argv)
+    if args.peer and not args.phases:
+        ap.error("--peer goes with --phases")
+    if args.phases and args.base:
+        ap.error("--phases measures one runner: leave out --base")
     if args.runner == ap.get_default("runner"):
         subprocess.run(["cmake", "-S", str(ROOT / "firmware"), "-B", str(args.runner.parent),
                         "-DCMAKE_BUILD_TYPE=Release"], check=True, capture_output=True)
@@ -73,6 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     runners = [args.runner] + ([args.base] if args.base else [])
     with tempfile.TemporaryDirectory() as tmp:
         inputs = write_inputs(Path(tmp))
+        if args.phases:
+            phase_table(inputs, args.runner, Path(tmp), args.peer)
+            return 0
         head = "| pair | instructions | triangles |" + (" base instructions | base triangles | ratio |"
                                                          if args.base else "")
         print(head)
