@@ -10,6 +10,12 @@ receive, filter bank, templates, refiner, emit, and the link I/O of the job apar
 with wavemesh.harness.simboard and driven as tests/sim/test_stream_board.py does (its host
 timeouts for the simulated board and its in-process CLI runner).  Each mesh is also compared with
 `wavemesh mesh` (reported, not asserted).
+
+Beside the board's cycles: the same refiner job (the same initial mesh, details and fixed-point
+parameters, built from the same options as `wavemesh mesh` builds them) run natively by the C runner
+firmware/tests/wm_run.c under callgrind, its x86-64 instructions per output triangle (when valgrind is
+there): how much of the cost is the algorithm's work rather than the soft CPU's.  And the upload's
+floor: the receive stage alone per output triangle, in fast mode and at the board's baud rate.
 """
 
 from __future__ import annotations
@@ -78,8 +84,45 @@ def _case(board, name: str, tmp: Path) -> dict:
         "refiner_levels": [{k: lv[k] for k in ("level", "triangles", "splits", "swaps", "device_cycles")}
                            for lv in levels],
         "link_bytes": rep["transfer"]["bytes_out"] + rep["transfer"]["bytes_in"],
+        "upload_bytes": rep["transfer"]["bytes_out"],
         "same_as_mesh": same, "wall_seconds": round(wall, 1),
     }
+
+
+def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
+    """(x86-64 instructions, output triangles) of the case's refiner job natively (wm_run under
+    callgrind), or None without valgrind.  The job is made as `wavemesh mesh` makes it: the CLI's own
+    option parsing, api's initial triangulation, native's fixed-point parameters (api.refine's zeta for
+    quantised input)."""
+    import re
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("valgrind") is None:
+        return None
+    sys.path.insert(0, str(ROOT / "tests" / "firmware"))
+    from fwio import write_input
+    from wavemesh import api, cli, native
+    from wavemesh.harness import jacksboro
+
+    file, opts = CASES[name]
+    src = jacksboro() if file == "JACKSBORO" else str(tmp / file)
+    args = cli.build_parser("mesh").parse_args(["mesh", src, "-o", str(tmp / "x.obj"), *opts])
+    mp, hf = cli._mesh_params(args), cli._load(args, src)
+    job = api.triangulate(hf, mp.levels, mp.tau, mp.wavelet)
+    q = hf.max_quantisation_error
+    zeta = max(0.0, mp.refine.zeta - 2 * q) if q > 0 else mp.refine.zeta
+    fp = native.fixed_params(mp.refine, hf.scale, zeta, api.ground(hf).spacing)
+    det = native.haar_details(hf.samples, job.levels, job.wavelet)
+    inp = tmp / "native.bin"
+    write_input(inp, hf.samples, det, job.levels, job.mesh, fp, 2 * (hf.width - 1) * (hf.height - 1))
+    runner = native.build(targets=("wm_run",)) / "wm_run"  # the release build the host's library is in
+    cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(runner), str(inp),
+           str(tmp / "native.out")]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    last = [ln for ln in res.stdout.splitlines() if ln.startswith("level")][-1].split()
+    return int(re.search(r"refs:\s+([\d,]+)", res.stderr).group(1).replace(",", "")), int(last[3])
 
 
 def run() -> dict:
@@ -100,6 +143,12 @@ def run() -> dict:
         with tempfile.TemporaryDirectory() as tmp:
             _inputs(Path(tmp))
             cases = [_case(board, name, Path(tmp)) for name in CASES]
+            for c in cases:
+                if "error" not in c:
+                    ins, tris = _native_instructions(c["name"], Path(tmp)) or (None, None)
+                    # the same job, natively: its mesh must have the board's triangle count
+                    c["native_instructions"] = ins if tris == c["output_triangles"] else None
+                    c["native_triangles"] = tris
     finally:
         S.DEFAULT_TIMEOUTS = saved
         board.stop()
@@ -162,6 +211,27 @@ def markdown(results: dict) -> str:
         "*total* = all six, *board s* = total / clock; the goal is for the total.  The counts are "
         "those of this firmware image: moving code (any change to the firmware) can shift them by about "
         "1 % (docs/soc.md, \"Cycle accounting\").",
+        "",
+        "**What the goal leaves, per output triangle** (the same cases): *receive* alone, in fast mode and "
+        f"on a board at {BAUD} baud (the upload's bytes x 10 bits at the board's clock), against the goal; "
+        "and the refiner's job natively (*native*: x86-64 instructions of the same job in firmware/tests/"
+        "wm_run.c under callgrind), which says how much of the cost is the algorithm's work whatever the "
+        "CPU, and the soft CPU's refine cycles per native instruction.",
+        "",
+        "| input | output triangles | receive per triangle (fast) | upload per triangle at "
+        f"{BAUD} baud | native instructions per triangle | refine cycles per native instruction |",
+        "|---|---|---|---|---|---|",
+    ]
+    for c in cases:
+        n = c["output_triangles"]
+        up = c.get("upload_bytes")
+        on_board = f"{up * 10 / BAUD * clk / n:,.0f}" if up else "-"
+        ins = c.get("native_instructions")
+        other = c.get("native_triangles")
+        native = (f"{ins / n:,.0f} | {c['cycles']['refine'] / ins:.1f}" if ins else
+                  f"not the same job ({other} triangles) | -" if other else "- | -")
+        lines.append(f"| {c['name']} | {n} | {c['cycles']['receive'] / n:,.0f} | {on_board} | {native} |")
+    lines += [
         "",
         "Refiner cycles per level (level: output triangles, splits, swaps, cycles):",
         "",
