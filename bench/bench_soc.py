@@ -4,10 +4,11 @@
 the PicoRV32 with the real firmware and the FPGA stage) in fast UART mode, on three inputs that fit
 the board's grid and triangle capacity: Ball and Box (wavemesh.synth, 256 x 256 decimated by 8) and a
 real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
-tests/sim/test_stream_board.py).  The device's cycles per stage come from `--report` (`device_cycles`:
-receive, filter bank, templates, refiner, emit, and the link I/O of the job apart; docs/protocol.md,
-"Cycle accounting").  The simulator and the firmware are built and started
-with wavemesh.harness.simboard and driven as tests/sim/test_stream_board.py does (its host
+tests/sim/test_stream_board.py), issue 11's three; and a held-out one never used while cutting cycles,
+reported apart (bench/datasets.py's lidar DEM decimated by 8).  The device's cycles per stage come
+from `--report` (`device_cycles`: receive, filter bank, templates, refiner, emit, and the link I/O of
+the job apart; docs/protocol.md, "Cycle accounting").  The simulator and the firmware are built and
+started with wavemesh.harness.simboard and driven as tests/sim/test_stream_board.py does (its host
 timeouts for the simulated board and its in-process CLI runner).  Each mesh is also compared with
 `wavemesh mesh` (reported, not asserted).
 
@@ -39,7 +40,11 @@ CASES = {
     "Ball 256 / 8": ("ball.npy", ["--decimate", "8"]),
     "Box 256 / 8": ("box.npy", ["--decimate", "8"]),
     "Jacksboro / 16": ("JACKSBORO", ["--key", "elevation", "--decimate", "16", "--zeta", "15"]),
+    # held out: never looked at while cutting cycles (bench/datasets.py's held-out lidar DEM, as .npy: grid
+    # steps, no georeference); reported apart, not one of issue 11's three inputs
+    "lidar_dem / 8 (held out)": ("lidar.npy", ["--decimate", "8"]),
 }
+HELD_OUT = ("lidar_dem / 8 (held out)",)
 
 
 def _inputs(folder: Path) -> None:
@@ -48,6 +53,9 @@ def _inputs(folder: Path) -> None:
 
     np.save(folder / "ball.npy", ball(256))
     np.save(folder / "box.npy", box(256))
+    import datasets
+
+    np.save(folder / "lidar.npy", datasets.load("lidar_dem").values)
 
 
 def _case(board, name: str, tmp: Path) -> dict:
@@ -169,7 +177,9 @@ def markdown(results: dict) -> str:
         "`wavemesh stream` through the simulated board (Verilator model of soc_top: PicoRV32 + firmware + "
         "FPGA stage, docs/soc.md) in fast UART mode; device cycles per stage from `--report` "
         "(`device_cycles`).  Inputs: wavemesh.synth's Ball and Box at 256 x 256 with `--decimate 8`, "
-        "matplotlib's Jacksboro DEM (`--key elevation --decimate 16 --zeta 15`, metres); other options "
+        "matplotlib's Jacksboro DEM (`--key elevation --decimate 16 --zeta 15`, metres), the goal's three; "
+        "below them, held out (never used while cutting cycles), the lidar DEM of bench/datasets.py "
+        "(400 x 400, as .npy: grid steps) with `--decimate 8`; other options "
         "`wavemesh stream`'s defaults.  " + code_line(results.get("code")),
         "",
         f"**Goal: at most {goal:,} cycles per output triangle for the whole job.**  The simulated clock is "
