@@ -3,20 +3,50 @@
  * numbers except through wm_floor_div / wm_ceil_div. */
 #include "wm_internal.h"
 
-/* floor(sqrt(x)) for x < 2^32 by Newton's iteration from above, r <- (r + x / r) / 2 while it falls,
- * in 32-bit arithmetic: from r = 2^ceil(bits / 2) >= sqrt(x) it ends on floor(sqrt(x)) after four or five
- * divisions (the bit-by-bit method took sixteen steps: 4.5 % of a Jacksboro run's instructions; checked
- * against it at every square and its neighbours below 2^32 and on 2e8 random numbers). */
+/* Square roots by Newton steps from below, each exact: with a = floor(sqrt(x >> 2s)) where x >> 2s lies
+ * in [4^(n-1), 4^n) (so a in [2^(n-1), 2^n)) and 1 <= s <= n <= 16, r0 = a 2^s <= sqrt(x) < r0 + 2^s, and
+ * c = r0 + floor(e / (2 r0)) with e = x - r0^2 >= 0 is >= floor(sqrt(x)) (a Newton step lands on or
+ * above the root) and overshoots sqrt(x) by (sqrt(x) - r0)^2 / (2 r0) < 2^2s / 2^(n + s) <= 1: c is the
+ * root or one above it, and one square decides.  floor(e / (2 a 2^s)) = floor(floor(e / 2^(s+1)) / a),
+ * and e < (2a + 1) 2^2s makes e >> (s + 1) < 2^(2n) <= 2^32: one 32-bit division a step.  From the
+ * table's 4-bit root of the top 8 bits, steps with s = 4, 8, 16 give the 8-, 16- and 32-bit roots of a
+ * number normalised to the top of 32 or 64 bits; floor(sqrt(4^k y)) >> k = floor(sqrt(y)) undoes the
+ * normalisation.  Three hardware divisions for a 64-bit root on the soft CPU, where Newton's iteration
+ * from a power of two took four or five 32-bit ones and two or three library calls for the 64-bit part;
+ * exact (wm_unit.c checks against the bit-by-bit root; checked at every x below 2^32 once). */
+
+/* floor(sqrt(i)), i < 256. */
+static const uint8_t sqrt8[256] = {
+    0,  1,  1,  1,  2,  2,  2,  2,  2,  3,  3,  3,  3,  3,  3,  3,  4,  4,  4,  4,  4,  4,  4,  4,  4,  5,
+    5,  5,  5,  5,  5,  5,  5,  5,  5,  5,  6,  6,  6,  6,  6,  6,  6,  6,  6,  6,  6,  6,  6,  7,  7,  7,
+    7,  7,  7,  7,  7,  7,  7,  7,  7,  7,  7,  7,  8,  8,  8,  8,  8,  8,  8,  8,  8,  8,  8,  8,  8,  8,
+    8,  8,  8,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  9,  10, 10, 10, 10,
+    10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 10, 11, 11, 11, 11, 11, 11, 11, 11, 11,
+    11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 11, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12,
+    12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 12, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13,
+    13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 13, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14,
+    14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 14, 15, 15, 15, 15, 15, 15, 15, 15, 15,
+    15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15, 15,
+};
+
+/* One step for x < 2^32 in 32-bit arithmetic: r0^2 <= x; the root is below 2^16, so c <= 2^16, and c
+ * clamped below 2^16 squares below 2^32. */
+static uint32_t root_step32(uint32_t x, int s, uint32_t a)
+{
+    uint32_t r0 = a << s, c = r0 + ((x - r0 * r0) >> (s + 1)) / a;
+    if (c > 0xFFFFu) c = 0xFFFFu;
+    return c * c > x ? c - 1 : c;
+}
+
+/* floor(sqrt(x)) for x in [2^30, 2^32): the 4-bit root of the top 8 bits, then steps to 8 and 16 bits. */
+static uint32_t root_top32(uint32_t x) { return root_step32(x, 8, root_step32(x >> 16, 4, sqrt8[x >> 24])); }
+
 static uint32_t isqrt32(uint32_t x)
 {
-    uint32_t r, y;
-    if (x == 0) return 0;
-    r = (uint32_t)1 << ((32 - __builtin_clz(x) + 1) >> 1); /* x < 2^bits: sqrt(x) < 2^(bits / 2) <= r */
-    for (;;) {
-        y = (r + x / r) >> 1;
-        if (y >= r) return r;
-        r = y;
-    }
+    int t;
+    if (x < 256) return sqrt8[x];
+    t = __builtin_clz(x) & ~1; /* an even shift that brings x to [2^30, 2^32) */
+    return root_top32(x << t) >> (t / 2);
 }
 
 int wm_bit_length64(uint64_t x)
@@ -24,23 +54,21 @@ int wm_bit_length64(uint64_t x)
     return x ? 64 - __builtin_clzll(x) : 0; /* GCC and Clang, on every target (a library call on rv32) */
 }
 
-/* floor(sqrt(x)).  Below 2^32 in 32-bit steps; above, from the 32-bit root of x's top bits plus one
- * (shifted back: above sqrt(x)) by Newton's iteration from above, r <- (r + x / r) / 2 while it falls,
- * which ends on floor(sqrt(x)) (two or three divisions: the start is within 2^-15 of the root).  Both
- * give the exact root, as the plain bit-by-bit 64-bit method did, at a fraction of its cost on a
- * 32-bit CPU. */
+/* floor(sqrt(x)): below 2^32 isqrt32; above, x normalised to [2^62, 2^64) and one step with s = 16 from
+ * the 16-bit root of the top 32 bits (the root is below 2^32, so c <= 2^32: clamped, the square fits). */
 uint64_t wm_isqrt64(uint64_t x)
 {
-    int s;
-    uint64_t r, y;
+    int t;
+    uint32_t a, r0, c;
+    uint64_t hi, c64;
     if (x < ((uint64_t)1 << 32)) return isqrt32((uint32_t)x);
-    s = (wm_bit_length64(x) - 31) / 2; /* x >> 2s < 2^32 */
-    r = ((uint64_t)isqrt32((uint32_t)(x >> (2 * s))) + 1) << s;
-    for (;;) {
-        y = (r + x / r) >> 1;
-        if (y >= r) return r;
-        r = y;
-    }
+    t = __builtin_clzll(x) & ~1;
+    hi = x << t;
+    a = root_top32((uint32_t)(hi >> 32));
+    r0 = a << 16; /* 32-bit operands, 64-bit products: a multiply and a multiply-high each on rv32 */
+    c64 = (uint64_t)r0 + (uint32_t)((hi - (uint64_t)r0 * r0) >> 17) / a;
+    c = c64 > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)c64;
+    return ((uint64_t)c * c > hi ? c - 1 : c) >> (t / 2);
 }
 
 int32_t wm_gcd(int32_t a, int32_t b)

@@ -171,10 +171,60 @@ static void test_vertex_move(void)
     CHECK(wm_mesh_check(&m) == WM_OK);
 }
 
+/* floor(sqrt(x)) bit by bit (the method fixed.c's fast roots replaced): the reference. */
+static uint64_t isqrt_ref(uint64_t x)
+{
+    uint64_t r = 0, bit = (uint64_t)1 << 62;
+    while (bit > x) bit >>= 2;
+    while (bit) {
+        if (x >= r + bit) {
+            x -= r + bit;
+            r = (r >> 1) + bit;
+        } else {
+            r >>= 1;
+        }
+        bit >>= 2;
+    }
+    return r;
+}
+
+static uint64_t rand64(uint64_t *s)
+{
+    *s ^= *s << 13;
+    *s ^= *s >> 7;
+    *s ^= *s << 17;
+    return *s;
+}
+
+/* The exact roots of wm_isqrt64 (one Newton step from a 32-bit root, then one square, above 2^32) at
+ * every bit length: squares, their neighbours (the step's worst cases sit just below a square), and
+ * random numbers of every length; a wrong root counts once. */
+static void test_isqrt(void)
+{
+    uint64_t seed = 0x9E3779B97F4A7C15u;
+    int bad = 0;
+    for (int b = 0; b < 64 && !bad; b++)
+        for (int i = 0; i < 4000; i++) {
+            uint64_t x = rand64(&seed) >> (63 - b), r = isqrt_ref(x);
+            uint64_t sq = r * r, next = r == 0xFFFFFFFFu ? UINT64_MAX : (r + 1) * (r + 1) - 1;
+            if (wm_isqrt64(x) != r || wm_isqrt64(sq) != r || wm_isqrt64(next) != r ||
+                (r > 0 && wm_isqrt64(sq - 1) != r - 1)) {
+                bad = 1;
+                printf("isqrt: wrong root near %llu\n", (unsigned long long)x);
+                break;
+            }
+        }
+    CHECK(!bad);
+    for (uint64_t r = 0xFFFFFFFFu; r > 0xFFFFFF00u; r--)
+        CHECK(wm_isqrt64(r * r) == r && wm_isqrt64(r * r - 1) == r - 1);
+    for (uint64_t r = 1u << 15; r < (1u << 15) + 64; r++) CHECK(wm_isqrt64(r * r << 32) == r << 16);
+}
+
 static void test_fixed(void)
 {
     CHECK(wm_isqrt64(0) == 0 && wm_isqrt64(15) == 3 && wm_isqrt64(16) == 4);
     CHECK(wm_isqrt64(UINT64_MAX) == 0xFFFFFFFFu);
+    test_isqrt();
     CHECK(wm_gcd(12, -18) == 6 && wm_gcd(0, 5) == 5 && wm_gcd(7, 0) == 7);
     CHECK(wm_floor_div(-7, 2) == -4 && wm_floor_div(7, 2) == 3 && wm_ceil_div(-7, 2) == -3);
     CHECK(wm_ceil_div(7, 2) == 4 && wm_floor_div(-8, 2) == -4);
