@@ -2,7 +2,7 @@
 """The native refiner's instruction counts on fixed inputs, for cost work on firmware/src.
 
     .venv/bin/python tools/refiner_instructions.py [--runner BUILD/wm_run] [--base OTHER/wm_run]
-    .venv/bin/python tools/refiner_instructions.py --phases [--peer]
+    .venv/bin/python tools/refiner_instructions.py --phases [--peer] [--set NAME=VALUE,...]
 
 Writes the C runner's inputs (firmware/tests/wm_run.c) for ten pairs of the quality benchmark's tuning
 set (bench/bench_quality.py: its grids, its errors, --metric vertical, the defaults; never the held-out
@@ -17,7 +17,9 @@ rest (set-up and the levels' select, pair, split, swap).  --peer also counts pyd
 Triangulator::Run (the same greedy insertion, its whole algorithm; inclusive, in a Python process that
 calls Delatin as the quality benchmark does) on the same grid and error, and gives each phase over it:
 what issue 11's bar (native refine time at most pydelatin's) asks of each phase, in a unit the machine's
-load does not change.
+load does not change.  --set changes the job from the defaults, e.g. `--set reduce=off,iterations=0` or
+`levels=1`: RefineParams' fields (on/off for the switches) and the job's levels M, to measure what a
+phase buys.
 """
 
 from __future__ import annotations
@@ -36,7 +38,29 @@ PAIRS = (("jacksboro", "5 m"), ("jacksboro", "10 m"), ("mri", "1%"), ("mri", "5%
          ("f3", "2%"), ("f4", "0.5%"), ("f5", "0.5%"), ("ball", "1%"), ("box", "1%"))
 
 
-def write_inputs(folder: Path) -> list[tuple[str, Path]]:
+def parse_set(text: str | None) -> dict:
+    """--set's NAME=VALUE,... as RefineParams keywords (and "levels"); SystemExit naming a bad one."""
+    import dataclasses
+
+    from wavemesh import native
+
+    kinds = {f.name: f.type for f in dataclasses.fields(native.RefineParams)}
+    out = {}
+    for item in filter(None, (text or "").split(",")):
+        name, _, value = item.partition("=")
+        kind = "int" if name == "levels" else kinds.get(name)
+        if kind is None or not value or (kind == "bool" and value not in ("on", "off")):
+            raise SystemExit(f"error: --set {item}: not NAME=VALUE of a RefineParams field (on/off for a "
+                             "switch) or levels")
+        try:
+            out[name] = (value == "on" if kind == "bool" else int(value) if kind in ("int", "int | None")
+                         else float(value) if kind == "float" else value)
+        except ValueError:
+            raise SystemExit(f"error: --set {item}: {value} is not a number") from None
+    return out
+
+
+def write_inputs(folder: Path, changes: dict | None = None) -> list[tuple[str, Path]]:
     import bench_quality as Q
     import datasets as D
     from fwio import write_input
@@ -50,8 +74,10 @@ def write_inputs(folder: Path) -> list[tuple[str, Path]]:
         grid = D.load(name)
         zeta = dict(Q.zetas(grid))[want]
         hf = from_array(grid.values)
-        params = native.RefineParams(zeta=float(zeta), metric="vertical")
-        job = api.triangulate(hf, None)
+        changes = dict(changes or {})
+        levels = changes.pop("levels", None)
+        params = native.RefineParams(**{"zeta": float(zeta), "metric": "vertical", **changes})
+        job = api.triangulate(hf, levels)
         fp = native.fixed_params(params, hf.scale)
         det = native.details_array(decompose(hf.samples, job.levels))
         path = folder / f"{name}-{len(out)}.bin"
@@ -103,33 +129,43 @@ import sys
 sys.path[:0] = [sys.argv[1]]
 import bench_quality as Q, datasets as D, peers as P
 g = D.load(sys.argv[2])
-P.delatin_call(g.values, dict(Q.zetas(g))[sys.argv[3]])
+print("triangles", len(P.delatin_call(g.values, dict(Q.zetas(g))[sys.argv[3]])[1]))
 """
 
 
-def peer_instructions(name: str, want: str, folder: Path) -> int:
-    """pydelatin's Triangulator::Run on the pair, inclusive, under callgrind."""
+def peer_instructions(name: str, want: str, folder: Path) -> tuple[int, int]:
+    """(instructions, triangles) of pydelatin's Triangulator::Run on the pair, inclusive, under callgrind."""
     prof = folder / f"peer-{name}.cg"
-    subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={prof}", sys.executable, "-c",
-                    PEER_SCRIPT, str(ROOT / "bench"), name, want], capture_output=True, text=True, check=True)
-    return next(v for k, v in inclusive(prof).items() if k.startswith(PEER))
+    cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={prof}", sys.executable, "-c", PEER_SCRIPT,
+           str(ROOT / "bench"), name, want]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    tris = int(re.search(r"triangles (\d+)", res.stdout).group(1))
+    return next(v for k, v in inclusive(prof).items() if k.startswith(PEER)), tris
 
 
 def phase_table(inputs, runner: Path, folder: Path, peer: bool) -> None:
     cols = [name for name, _ in PHASES] + ["rest", "refiner"]
     head = "| pair | triangles | " + " | ".join(cols) + " |" + (" pydelatin Run | " + " | ".join(
-        f"{c} / pydelatin" for c in cols) + " |" if peer else "")
+        f"{c} / pydelatin" for c in cols) + " | triangles / pydelatin's |" if peer else "")
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
+    ratios = []
     for (label, path), (name, want) in zip(inputs, PAIRS, strict=True):
         prof = folder / "refiner.cg"
         _, tris = measure(runner, path, folder / "out.bin", prof)
         ph = phases(prof)
         row = [label, str(tris)] + [f"{ph[c]:,}" for c in cols]
         if peer:
-            pd = peer_instructions(name, want, folder)
-            row += [f"{pd:,}"] + [f"{ph[c] / pd:.2f}" for c in cols]
+            pd, pd_tris = peer_instructions(name, want, folder)
+            row += [f"{pd:,}"] + [f"{ph[c] / pd:.2f}" for c in cols] + [f"{tris / pd_tris:.3f}"]
+            ratios.append((ph["refiner"] / pd, tris / pd_tris))
         print("| " + " | ".join(row) + " |", flush=True)
+    if ratios:
+        import statistics
+
+        tri = [t for _, t in ratios]
+        print(f"\nmedian refiner / pydelatin {statistics.median(r for r, _ in ratios):.2f}, triangles / "
+              f"pydelatin's median {statistics.median(tri):.3f}, max {max(tri):.3f}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -138,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--base", type=Path, help="a second wm_run to compare with")
     ap.add_argument("--phases", action="store_true", help="instructions by phase (not with --base)")
     ap.add_argument("--peer", action="store_true", help="with --phases: pydelatin's on the same pairs")
+    ap.add_argument("--set", help="NAME=VALUE,...: RefineParams fields (on/off) and levels, not the defaults")
     args = ap.parse_args(argv)
     if args.peer and not args.phases:
         ap.error("--peer goes with --phases")
@@ -150,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                        capture_output=True)
     runners = [args.runner] + ([args.base] if args.base else [])
     with tempfile.TemporaryDirectory() as tmp:
-        inputs = write_inputs(Path(tmp))
+        inputs = write_inputs(Path(tmp), parse_set(args.set))
         if args.phases:
             phase_table(inputs, args.runner, Path(tmp), args.peer)
             return 0
