@@ -216,13 +216,22 @@ uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint
     int k = sh - e;
     WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && m < 65536u && sh <= 16);
     prod = n * m; /* < 2^63 */
-    q = prod / d;
-    r = prod % d;
+    if (WM_NARROW_DIV &&
+        d < 65536u) { /* the board's triangles (twice the area below 2^16): 32-bit divisions only */
+        uint32_t r32;
+        q = wm_udiv_small(prod, (uint32_t)d, &r32);
+        r = r32;
+    } else {
+        q = prod / d;
+        r = prod % d;
+    }
     if (k <= 0) {
         res = (-k >= 64) ? 0 : q >> (-k);
     } else {
         if (q > (cap >> k)) return cap;
-        res = (q << k) + ((r << k) / d); /* r < d <= 2^47 / ... and k <= 16: no overflow */
+        /* r < d and k <= 16 (e >= 0): no overflow, and r 2^k < 2^32 when d < 2^16 */
+        res =
+            (q << k) + (WM_NARROW_DIV && d < 65536u && k <= 16 ? (uint32_t)(r << k) / (uint32_t)d : (r << k) / d);
     }
     return res > cap ? cap : res;
 }

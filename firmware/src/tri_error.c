@@ -224,17 +224,6 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
     return scan(f, x, y, D, limit, wx, wy);
 }
 
-/* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
- * n < 2^32 and d < 2^16, as on the board's grids (n = q d + rem, rem < d, so 2^16 rem < 2^32). */
-static uint64_t ceil_q16_div(uint64_t n, uint64_t d)
-{
-    if (n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 16)) {
-        uint32_t q = (uint32_t)n / (uint32_t)d, rem = (uint32_t)n - q * (uint32_t)d;
-        return ((uint64_t)q << 16) + ((rem << 16) + (uint32_t)d - 1u) / (uint32_t)d;
-    }
-    return (n * 65536u + d - 1) / d;
-}
-
 /* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric. */
 static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                              int64_t D)
@@ -268,11 +257,12 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
 static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
                        uint64_t vmax, uint64_t r)
 {
-    uint64_t ev = ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
+    uint64_t ev = wm_ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
     if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
     if (r == 0) r = slope_factor(f, p, x, y, D);
-    return (uint32_t)((ev * 65536u + r - 1) / r);
+    /* ceil(2^16 ev / r) <= ev (r >= 2^16); in 32-bit divisions on the soft CPU */
+    return (uint32_t)(WM_NARROW_DIV ? wm_ceil_q16_div(ev, r) : (ev * 65536u + r - 1) / r);
 }
 
 uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,

@@ -23,6 +23,14 @@
 #define WM_CHECK_MESH(m) ((void)0)
 #endif
 
+/* 1: take the exact 32-bit-division paths (wm_udiv_small, wm_ceil_q16_div's digits) where a 64-bit
+ * division is a library call of some 300 cycles (32-bit CPUs: the soft CPU); on x86-64 one instruction
+ * does, and the paths would add instructions.  The checked (debug) builds take them too, so the tests
+ * run them natively against the release build's plain divisions. */
+#ifndef WM_NARROW_DIV
+#define WM_NARROW_DIV (UINTPTR_MAX <= 0xFFFFFFFFu || WM_CHECK)
+#endif
+
 #define WM_TRI(e) ((e) / 3)
 
 /* wm_mesh_check, returning 0 or the source line of the first failed invariant (for debugging). */
@@ -81,6 +89,48 @@ int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 #endif
 #define WM_CLASS_UNKNOWN (-1) /* r->vapex: no class known for the vertex's current star (reduce.c) */
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
+/* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
+ * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
+ * the next 16 bits of the quotient in one digit (2^16 rem < 2^32), rounded up when a remainder is left.
+ * With WM_NARROW_DIV also for d < 2^24 (the slope factors of all but the steepest planes) in two 8-bit
+ * digits (2^8 rem < 2^32). */
+static inline uint64_t wm_ceil_q16_div(uint64_t n, uint64_t d)
+{
+    if (n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 16)) {
+        uint32_t q = (uint32_t)n / (uint32_t)d, rem = (uint32_t)n - q * (uint32_t)d;
+        return ((uint64_t)q << 16) + ((rem << 16) + (uint32_t)d - 1u) / (uint32_t)d;
+    }
+    if (WM_NARROW_DIV && n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 24)) {
+        uint32_t d32 = (uint32_t)d, q = (uint32_t)n / d32, rem = (uint32_t)n - q * d32, q1, q0;
+        q1 = (rem << 8) / d32;
+        rem = (rem << 8) - q1 * d32;
+        q0 = (rem << 8) / d32;
+        rem = (rem << 8) - q0 * d32;
+        return ((uint64_t)q << 16) + (q1 << 8) + q0 + (rem != 0);
+    }
+    return (n * 65536u + d - 1) / d;
+}
+/* n / d and its remainder (*rem) for 0 < d < 2^16, by long division in 16-bit digits: each partial
+ * dividend, remainder (< d) times 2^16 plus the next digit, is below 2^32, so every step is one 32-bit
+ * division (one for n < 2^32, three above) where a 64-bit division is a library call on the soft CPU
+ * (some 300 cycles).  The same quotient and remainder as n / d, n % d. */
+static inline uint64_t wm_udiv_small(uint64_t n, uint32_t d, uint32_t *rem)
+{
+    uint32_t hi, mid, lo, q2, q1, q0;
+    if (n >> 32 == 0) {
+        q0 = (uint32_t)n / d;
+        *rem = (uint32_t)n - q0 * d;
+        return q0;
+    }
+    hi = (uint32_t)(n >> 32);
+    q2 = hi / d;
+    mid = (hi - q2 * d) << 16 | (uint32_t)(n >> 16 & 0xFFFFu);
+    q1 = mid / d;
+    lo = (mid - q1 * d) << 16 | (uint32_t)(n & 0xFFFFu);
+    q0 = lo / d;
+    *rem = lo - q0 * d;
+    return ((uint64_t)q2 << 32) + ((uint64_t)q1 << 16) + q0;
+}
 int wm_bit_length64(uint64_t x);                        /* bits of x: 0 for 0, 64 for 2^63 and above */
 int32_t wm_gcd(int32_t a, int32_t b);                   /* gcd(|a|, |b|), gcd(0, 0) = 0 */
 int64_t wm_floor_div(int64_t a, int64_t b);             /* floor(a / b), b > 0 */

@@ -6,6 +6,9 @@
 #include <string.h>
 
 #include "wavemesh.h"
+/* wm_internal.h's inline 32-bit-division paths as the soft CPU takes them, tested against plain
+ * division (the library's own use of them runs natively in the checked build) */
+#define WM_NARROW_DIV 1
 #include "wm_internal.h"
 
 static int passed, failed;
@@ -220,11 +223,48 @@ static void test_isqrt(void)
     for (uint64_t r = 1u << 15; r < (1u << 15) + 64; r++) CHECK(wm_isqrt64(r * r << 32) == r << 16);
 }
 
+/* The 32-bit-division fast paths (wm_udiv_small, wm_ceil_q16_div, wm_frac_mul's) against plain 64-bit
+ * division, at every bit length of the dividend and divisors around the paths' limits. */
+static void test_narrow_div(void)
+{
+    uint64_t seed = 0x2545F4914F6CDD1Du;
+    int bad = 0;
+    for (int b = 0; b < 64; b++)
+        for (int i = 0; i < 400; i++) {
+            uint64_t n = rand64(&seed) >> (63 - b), v = rand64(&seed);
+            uint32_t d = (uint32_t)(v % 65535u) + 1u, rem = 0;
+            uint64_t dd = (uint64_t)1 + (v >> (40 - b % 26)) % (((uint64_t)1 << (8 + b % 26)) - 1);
+            uint64_t q = wm_udiv_small(n, i < 8 ? 65535u - (uint32_t)i : d, &rem);
+            uint64_t dn = i < 8 ? 65535u - (uint32_t)i : d, nq = n >> 16;
+            uint32_t m = (uint32_t)(v >> 48), sh = (uint32_t)(v >> 20) % 17u, e = (uint32_t)(v >> 8) % 40u;
+            uint64_t fd = i & 1 ? dd : d, ref, prod = (n >> 17) * m;
+            int k = (int)sh - (int)e;
+            bad |= q != n / dn || rem != n % dn;
+            bad |= wm_ceil_q16_div(nq, dd) != (nq * 65536u + dd - 1) / dd;
+            bad |= wm_ceil_q16_div(nq >> 16, dd) != ((nq >> 16) * 65536u + dd - 1) / dd;
+            /* wm_frac_mul as it read before its fast path */
+            if (k <= 0) ref = -k >= 64 ? 0 : (prod / fd) >> -k;
+            else
+                ref = (prod / fd) > (UINT64_MAX >> 1 >> k) ? UINT64_MAX >> 1
+                                                           : ((prod / fd) << k) + (((prod % fd) << k) / fd);
+            if (ref > UINT64_MAX >> 1) ref = UINT64_MAX >> 1;
+            bad |= wm_frac_mul(n >> 17, fd, m, (int32_t)e, (int)sh, UINT64_MAX >> 1) != ref;
+        }
+    CHECK(!bad);
+    for (uint32_t d = 1; d < 70000u; d += 997u) {
+        uint32_t rem;
+        CHECK(wm_udiv_small(UINT64_MAX, d < 65536u ? d : 65535u, &rem) == UINT64_MAX / (d < 65536u ? d : 65535u));
+        CHECK(wm_ceil_q16_div(0xFFFFFFFFu, (uint64_t)d << 8) ==
+              ((uint64_t)0xFFFFFFFFu * 65536u + ((uint64_t)d << 8) - 1) / ((uint64_t)d << 8));
+    }
+}
+
 static void test_fixed(void)
 {
     CHECK(wm_isqrt64(0) == 0 && wm_isqrt64(15) == 3 && wm_isqrt64(16) == 4);
     CHECK(wm_isqrt64(UINT64_MAX) == 0xFFFFFFFFu);
     test_isqrt();
+    test_narrow_div();
     CHECK(wm_gcd(12, -18) == 6 && wm_gcd(0, 5) == 5 && wm_gcd(7, 0) == 7);
     CHECK(wm_floor_div(-7, 2) == -4 && wm_floor_div(7, 2) == 3 && wm_ceil_div(-7, 2) == -3);
     CHECK(wm_ceil_div(7, 2) == 4 && wm_floor_div(-8, 2) == -4);
