@@ -99,12 +99,10 @@ def _case(board, name: str, tmp: Path) -> dict:
 
 def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     """(x86-64 instructions, output triangles) of the case's refiner job natively (wm_run under
-    callgrind), or None without valgrind.  The job is made as `wavemesh mesh` makes it: the CLI's own
-    option parsing, api's initial triangulation, native's fixed-point parameters (api.refine's zeta for
-    quantised input)."""
-    import re
+    callgrind: wm_refine_init and wm_refine_step, inclusive), or None without valgrind.  The job is
+    made as `wavemesh mesh` makes it: the CLI's own option parsing, api's initial triangulation,
+    native's fixed-point parameters (api.refine's zeta for quantised input)."""
     import shutil
-    import subprocess
     import sys
 
     if shutil.which("valgrind") is None:
@@ -126,11 +124,12 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     inp = tmp / "native.bin"
     write_input(inp, hf.samples, det, job.levels, job.mesh, fp, 2 * (hf.width - 1) * (hf.height - 1))
     runner = native.build(targets=("wm_run",)) / "wm_run"  # the release build the host's library is in
-    cmd = ["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(runner), str(inp),
-           str(tmp / "native.out")]
-    res = subprocess.run(cmd, capture_output=True, text=True, check=True)
-    last = [ln for ln in res.stdout.splitlines() if ln.startswith("level")][-1].split()
-    return int(re.search(r"refs:\s+([\d,]+)", res.stderr).group(1).replace(",", "")), int(last[3])
+    sys.path.insert(0, str(ROOT / "tools"))
+    import refiner_instructions as RI  # the refiner's own instructions (not the runner's start and I/O)
+
+    profile = tmp / "native.cg"
+    _, tris = RI.measure(runner, inp, tmp / "native.out", profile)
+    return RI.phases(profile)["refiner"], tris
 
 
 def run() -> dict:
