@@ -184,15 +184,15 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
     int k = 0;
     int64_t len[3], ux, uy, vx, vy, cross, dot;
     for (int i = 0; i < 3; i++) {
-        int b = (i + 1) % 3, c = (i + 2) % 3; /* the side opposite corner i */
+        int b = wm_k1(i), c = wm_k2(i); /* the side opposite corner i */
         int64_t dx = (int64_t)x[c] - x[b], dy = (int64_t)y[c] - y[b];
         len[i] = dx * dx + dy * dy;
         if (len[i] < len[k]) k = i;
     }
-    ux = (int64_t)x[(k + 1) % 3] - x[k];
-    uy = (int64_t)y[(k + 1) % 3] - y[k];
-    vx = (int64_t)x[(k + 2) % 3] - x[k];
-    vy = (int64_t)y[(k + 2) % 3] - y[k];
+    ux = (int64_t)x[wm_k1(k)] - x[k];
+    uy = (int64_t)y[wm_k1(k)] - y[k];
+    vx = (int64_t)x[wm_k2(k)] - x[k];
+    vy = (int64_t)y[wm_k2(k)] - y[k];
     cross = ux * vy - uy * vx;
     dot = ux * vx + uy * vy;
     return wm_angle_q16(dot, cross < 0 ? -cross : cross);

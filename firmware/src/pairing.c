@@ -18,7 +18,7 @@ static void gradient(const wm_refiner *r, int32_t m, int32_t t, int64_t g[2])
     int32_t x[3], y[3];
     const int32_t *d;
     wm_tri_xy(&r->mesh, t, x, y);
-    d = wm_detail_at(&r->field, m, (x[0] + x[1] + x[2]) / 3, (y[0] + y[1] + y[2]) / 3);
+    d = wm_detail_at(&r->field, m, wm_div3(x[0] + x[1] + x[2]), wm_div3(y[0] + y[1] + y[2]));
     g[0] = d[0];
     g[1] = d[1];
     while (g[0] >= 4096 || g[0] <= -4096 || g[1] >= 4096 || g[1] <= -4096) {
@@ -185,7 +185,7 @@ int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
     sy = (int64_t)y[0] + y[1] + y[2];
     ymin = ymax = y[0];
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         A[k] = -((int64_t)y[k2] - y[k1]);
         B[k] = (int64_t)x[k2] - x[k1];
         C[k] = -(B[k] * y[k1]) - A[k] * x[k1];

@@ -279,7 +279,7 @@ static void known(wm_refiner *r, const int32_t *touched, int32_t k, const int32_
                     if ((v < 0 ? px : me->vx[v]) == x[0] && (v < 0 ? py : me->vy[v]) == y[0]) break;
                 }
                 if (c < 3) {
-                    int32_t v1 = tris[3 * j + (c + 1) % 3], v2 = tris[3 * j + (c + 2) % 3];
+                    int32_t v1 = tris[3 * j + wm_k1(c)], v2 = tris[3 * j + wm_k2(c)];
                     hit = (v1 < 0 ? px : me->vx[v1]) == x[1] && (v1 < 0 ? py : me->vy[v1]) == y[1] &&
                           (v2 < 0 ? px : me->vx[v2]) == x[2] && (v2 < 0 ? py : me->vy[v2]) == y[2];
                 }

@@ -443,7 +443,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         /* Which edge holds the worst sample (E_k = 0: the edge from corner k+1 to k+2)?  Never a
          * corner: the distance is 0 there and E(T) > zeta >= 0. */
         for (k = 0; k < 3; k++) {
-            int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+            int k1 = wm_k1(k), k2 = wm_k2(k);
             E[k] = wm_orient(x[k1], y[k1], x[k2], y[k2], wx, wy);
             if (E[k] == 0) on = 3 * t + k1;
         }

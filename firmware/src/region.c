@@ -50,7 +50,7 @@ static int candidate(const wm_refiner *r, int32_t m, int32_t t)
         return 0;
     }
     /* (i, j) = floor of the barycentre in cell units (4.13): floor((x0 + x1 + x2) / (3 * 2^m)). */
-    return wm_energetic(r, m, (x[0] + x[1] + x[2]) / 3, (y[0] + y[1] + y[2]) / 3);
+    return wm_energetic(r, m, wm_div3(x[0] + x[1] + x[2]), wm_div3(y[0] + y[1] + y[2]));
 }
 
 int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)

@@ -34,7 +34,7 @@ void wm_tri_edges(const int32_t x[3], const int32_t y[3], int64_t A[3], int64_t 
 {
     box[0] = box[1] = x[0], box[2] = box[3] = y[0];
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         A[k] = (int64_t)y[k1] - y[k2];
         B[k] = (int64_t)x[k2] - x[k1];
         C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
@@ -73,7 +73,7 @@ static void setup(const wm_field *f, const int32_t x[3], const int32_t y[3], str
     t->ymin = t->ymax = y[0];
     t->xmin = t->xmax = x[0];
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         t->z[k] = f->samples[(int64_t)y[k] * f->width + x[k]];
         /* E_k(px, py) = (x_k2 - x_k1)(py - y_k1) - (y_k2 - y_k1)(px - x_k1) = A px + B py + C */
         t->A[k] = -((int64_t)y[k2] - y[k1]);
@@ -170,7 +170,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
     int32_t A[3], B[3], C[3], xmin = x[0], xmax = x[0], ymin = y[0], ymax = y[0], bx = x[0], by = y[0];
     uint32_t z[3], dS = 0, dSy = 0, Sr = 0, vm = 0;
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
         A[k] = y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C, as setup's */
         B[k] = x[k2] - x[k1];
@@ -308,7 +308,7 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
     if (D <= 0) return 0xFFFFFFFFu;
     if (f->mask && wm_hole_at(f, px, py)) return 0; /* never above E(T) (holes.c) */
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
     }
     v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
@@ -324,7 +324,7 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
     if (D <= 0 || p->metric != WM_METRIC_VERTICAL || f->mask || bound == 0xFFFFFFFFu)
         return wm_point_error(f, p, x, y, px, py) > bound;
     for (int k = 0; k < 3; k++) {
-        int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        int k1 = wm_k1(k), k2 = wm_k2(k);
         S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
     }
     v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
