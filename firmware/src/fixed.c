@@ -216,8 +216,13 @@ uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint
     int k = sh - e;
     WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && m < 65536u && sh <= 16);
     prod = n * m; /* < 2^63 */
-    if (WM_NARROW_DIV &&
-        d < 65536u) { /* the board's triangles (twice the area below 2^16): 32-bit divisions only */
+    if (WM_NARROW_DIV && d < 65536u && n >> 32 == 0 && prod >> 32 != 0) {
+        /* n = q1 d + r1 (r1 < d < 2^16), so n m = (q1 m + q2) d + r with r1 m = q2 d + r, r1 m < 2^32:
+         * two 32-bit divisions where wm_udiv_small takes three (one when n m < 2^32) */
+        uint32_t d32 = (uint32_t)d, q1 = (uint32_t)n / d32, t = ((uint32_t)n - q1 * d32) * m, q2 = t / d32;
+        q = (uint64_t)q1 * m + q2;
+        r = t - q2 * d32;
+    } else if (WM_NARROW_DIV && d < 65536u) { /* 32-bit divisions only (wm_udiv_small) */
         uint32_t r32;
         q = wm_udiv_small(prod, (uint32_t)d, &r32);
         r = r32;

@@ -248,8 +248,8 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
     while ((ga >> k) >= ((uint64_t)1 << 31) || (gb >> k) >= ((uint64_t)1 << 31)) k++;
     one = 2 * k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * k);
     ga >>= k;
-    gb >>= k;
-    return wm_isqrt64(one + ga * ga + gb * gb) << k;
+    gb >>= k; /* both below 2^31 now: 32-bit squares (a multiply and a multiply-high each on rv32) */
+    return wm_isqrt64(one + (uint64_t)(uint32_t)ga * (uint32_t)ga + (uint64_t)(uint32_t)gb * (uint32_t)gb) << k;
 }
 
 /* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  r: the slope factor,
