@@ -218,6 +218,12 @@ static void test_isqrt(void)
             }
         }
     CHECK(!bad);
+    CHECK(wm_bit_length64(0) == 0);
+    for (int b = 0; b < 64; b++) {
+        uint64_t p = (uint64_t)1 << b;
+        CHECK(wm_bit_length64(p) == b + 1 && wm_bit_length64(p | (p - 1)) == b + 1 &&
+              wm_bit_length64(p | 1) == b + 1);
+    }
     for (uint64_t r = 0xFFFFFFFFu; r > 0xFFFFFF00u; r--)
         CHECK(wm_isqrt64(r * r) == r && wm_isqrt64(r * r - 1) == r - 1);
     for (uint64_t r = 1u << 15; r < (1u << 15) + 64; r++) CHECK(wm_isqrt64(r * r << 32) == r << 16);
