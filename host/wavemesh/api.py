@@ -276,10 +276,11 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     the bound met, within zeta (mesh_errors, kept in ``errors``: its maxima, and its RMS when ``rms``);
     otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh.  ``roi``: an (H, W)
     bool region of interest, the only place refined and bounded (selective triangulation, wavemesh.roi)."""
-    from wavemesh import native  # loads (and if needed builds) the C library
+    from wavemesh import native
 
     params = params or RefineParams()
     params.check()
+    native.load()  # builds the C library if it is missing or stale: not part of the refiner's time
     job = triangulate(hf, levels, tau, wavelet, labelling)
     # The refiner sees the 16-bit samples.  For lossy quantisation a sample is off the input by at
     # most q, a plane through three samples by at most q too: zeta - 2q on the samples keeps the
