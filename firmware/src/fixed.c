@@ -230,44 +230,6 @@ uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64
     return wm_frac_mul(n, d, p->scale_m, p->scale_e, sh, cap);
 }
 
-void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int32_t *e)
-{
-    uint32_t sm = axis ? p->slope_y_m : p->slope_x_m;
-    *m = sm ? sm : p->scale_m;
-    *e = sm ? (axis ? p->slope_y_e : p->slope_x_e) : p->scale_e;
-}
-
-uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint64_t cap)
-{
-    uint64_t prod, q, r, res;
-    int k = sh - e;
-    WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && m < 65536u && sh <= 16);
-    prod = n * m; /* < 2^63 */
-    if (WM_NARROW_DIV && d < 65536u && n >> 32 == 0 && prod >> 32 != 0) {
-        /* n = q1 d + r1 (r1 < d < 2^16), so n m = (q1 m + q2) d + r with r1 m = q2 d + r, r1 m < 2^32:
-         * two 32-bit divisions where wm_udiv_small takes three (one when n m < 2^32) */
-        uint32_t d32 = (uint32_t)d, q1 = (uint32_t)n / d32, t = ((uint32_t)n - q1 * d32) * m, q2 = t / d32;
-        q = (uint64_t)q1 * m + q2;
-        r = t - q2 * d32;
-    } else if (WM_NARROW_DIV && d < 65536u) { /* 32-bit divisions only (wm_udiv_small) */
-        uint32_t r32;
-        q = wm_udiv_small(prod, (uint32_t)d, &r32);
-        r = r32;
-    } else {
-        q = prod / d;
-        r = prod % d;
-    }
-    if (k <= 0) {
-        res = (-k >= 64) ? 0 : q >> (-k);
-    } else {
-        if (q > (cap >> k)) return cap;
-        /* r < d and k <= 16 (e >= 0): no overflow, and r 2^k < 2^32 when d < 2^16 */
-        res =
-            (q << k) + (WM_NARROW_DIV && d < 65536u && k <= 16 ? (uint32_t)(r << k) / (uint32_t)d : (r << k) / d);
-    }
-    return res > cap ? cap : res;
-}
-
 int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy)
 {
     /* Relative to d every difference is below 2^15 in magnitude, so each squared length is below

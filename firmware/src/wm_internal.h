@@ -144,11 +144,46 @@ int wm_cmp_mul(uint64_t a, uint64_t b, uint64_t c, uint64_t d); /* sign(a b - c 
 int32_t wm_angle_q16(int64_t x, int64_t y);             /* atan2(y, x) for y >= 0, Q16 radians */
 /* floor(n * s * 2^sh / d) with the height scale s = scale_m / 2^scale_e, saturated at cap. */
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap);
-/* The same with the scale m / 2^e (m < 2^16, e in 0..126). */
-uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint64_t cap);
+/* The same with the scale m / 2^e (m < 2^16, e in 0..126).  Inline, as wm_slope_scale: the normal
+ * metric's slope factor takes both twice for every E(T) and point error. */
+static inline uint64_t wm_frac_mul(uint64_t n, uint64_t d, uint32_t m, int32_t e, int sh, uint64_t cap)
+{
+    uint64_t prod, q, r, res;
+    int k = sh - e;
+    WM_ASSERT(d > 0 && n < ((uint64_t)1 << 47) && m < 65536u && sh <= 16);
+    prod = n * m; /* < 2^63 */
+    if (WM_NARROW_DIV && d < 65536u && n >> 32 == 0 && prod >> 32 != 0) {
+        /* n = q1 d + r1 (r1 < d < 2^16), so n m = (q1 m + q2) d + r with r1 m = q2 d + r, r1 m < 2^32:
+         * two 32-bit divisions where wm_udiv_small takes three (one when n m < 2^32) */
+        uint32_t d32 = (uint32_t)d, q1 = (uint32_t)n / d32, t = ((uint32_t)n - q1 * d32) * m, q2 = t / d32;
+        q = (uint64_t)q1 * m + q2;
+        r = t - q2 * d32;
+    } else if (WM_NARROW_DIV && d < 65536u) { /* 32-bit divisions only (wm_udiv_small) */
+        uint32_t r32;
+        q = wm_udiv_small(prod, (uint32_t)d, &r32);
+        r = r32;
+    } else {
+        q = prod / d;
+        r = prod % d;
+    }
+    if (k <= 0) {
+        res = (-k >= 64) ? 0 : q >> (-k);
+    } else {
+        if (q > (cap >> k)) return cap;
+        /* r < d and k <= 16 (e >= 0): no overflow, and r 2^k < 2^32 when d < 2^16 */
+        res =
+            (q << k) + (WM_NARROW_DIV && d < 65536u && k <= 16 ? (uint32_t)(r << k) / (uint32_t)d : (r << k) / d);
+    }
+    return res > cap ? cap : res;
+}
 /* The normal metric's slope scale s / dx (axis 0) or s / dy (axis 1) as (m, e): the slope_* fields,
  * or the height scale when their m is 0 (a cell of 1). */
-void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int32_t *e);
+static inline void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int32_t *e)
+{
+    uint32_t sm = axis ? p->slope_y_m : p->slope_x_m;
+    *m = sm ? sm : p->scale_m;
+    *e = sm ? (axis ? p->slope_y_e : p->slope_x_e) : p->scale_e;
+}
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
 /* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside
