@@ -261,8 +261,7 @@ static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3]
     if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
     if (r == 0) r = slope_factor(f, p, x, y, D);
-    /* ceil(2^16 ev / r) <= ev (r >= 2^16); in 32-bit divisions on the soft CPU */
-    return (uint32_t)(WM_NARROW_DIV ? wm_ceil_q16_div(ev, r) : (ev * 65536u + r - 1) / r);
+    return (uint32_t)wm_ceil_q16_div(ev, r); /* <= ev (r >= 2^16) */
 }
 
 uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,
