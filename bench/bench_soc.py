@@ -101,13 +101,15 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     """(x86-64 instructions, output triangles) of the case's refiner job natively (wm_run under
     callgrind: wm_refine_init and wm_refine_step, inclusive), or None without valgrind.  The job is
     made as `wavemesh mesh` makes it: the CLI's own option parsing, api's initial triangulation,
-    native's fixed-point parameters (api.refine's zeta for quantised input)."""
+    native's fixed-point parameters (HeightField.refiner_zeta for quantised input)."""
     import shutil
     import sys
 
     if shutil.which("valgrind") is None:
         return None
-    sys.path.insert(0, str(ROOT / "tests" / "firmware"))
+    if str(ROOT / "tools") not in sys.path:
+        sys.path.insert(0, str(ROOT / "tools"))
+    import refiner_instructions as RI  # its callgrind runs (and it puts tests/firmware's fwio on the path)
     from fwio import write_input
     from wavemesh import api, cli, native
     from wavemesh.harness import jacksboro
@@ -117,19 +119,14 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     args = cli.build_parser("mesh").parse_args(["mesh", src, "-o", str(tmp / "x.obj"), *opts])
     mp, hf = cli._mesh_params(args), cli._load(args, src)
     job = api.triangulate(hf, mp.levels, mp.tau, mp.wavelet)
-    q = hf.max_quantisation_error
-    zeta = max(0.0, mp.refine.zeta - 2 * q) if q > 0 else mp.refine.zeta
-    fp = native.fixed_params(mp.refine, hf.scale, zeta, api.ground(hf).spacing)
+    fp = native.fixed_params(mp.refine, hf.scale, hf.refiner_zeta(mp.refine.zeta), api.ground(hf).spacing)
     det = native.haar_details(hf.samples, job.levels, job.wavelet)
     inp = tmp / "native.bin"
     write_input(inp, hf.samples, det, job.levels, job.mesh, fp, 2 * (hf.width - 1) * (hf.height - 1))
     runner = native.build(targets=("wm_run",)) / "wm_run"  # the release build the host's library is in
-    sys.path.insert(0, str(ROOT / "tools"))
-    import refiner_instructions as RI  # the refiner's own instructions (not the runner's start and I/O)
-
     profile = tmp / "native.cg"
     _, tris = RI.measure(runner, inp, tmp / "native.out", profile)
-    return RI.phases(profile)["refiner"], tris
+    return RI.phases(profile)["refiner"], tris  # the refiner's own, not the runner's start and file I/O
 
 
 def run() -> dict:

@@ -282,11 +282,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     params.check()
     native.load()  # builds the C library if it is missing or stale: not part of the refiner's time
     job = triangulate(hf, levels, tau, wavelet, labelling)
-    # The refiner sees the 16-bit samples.  For lossy quantisation a sample is off the input by at
-    # most q, a plane through three samples by at most q too: zeta - 2q on the samples keeps the
-    # vertical bound on the input values (docs/refiner.md, "Quantised input").
-    q = hf.max_quantisation_error
-    zeta = max(0.0, params.zeta - 2 * q) if q > 0 else params.zeta
+    zeta = hf.refiner_zeta(params.zeta)  # the refiner sees the 16-bit samples
     start = time.perf_counter()
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
     details = job.levels  # the library's filter bank makes them (native.refine)
@@ -622,8 +618,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     m, tau = _levels_and_tau(hf, params.levels, params.tau)
     full = not params.initial_only
     tau_q = tau_counts(tau, hf.scale)
-    q = hf.max_quantisation_error  # as refine(): zeta - 2q on the samples for lossy quantisation
-    zeta = max(0.0, p.zeta - 2 * q) if q > 0 else p.zeta
+    zeta = hf.refiner_zeta(p.zeta)  # as refine()
     say = log or (lambda text: None)
 
     with Device(port, baud, trace=trace, timeouts=timeouts) as dev:

@@ -180,6 +180,14 @@ class HeightField:
         recon = self.offset + self.scale * self.samples.astype(np.float64)
         return float(np.max(np.abs(self.values - recon)))
 
+    def refiner_zeta(self, zeta: float) -> float:
+        """The zeta the refiner is given on the 16-bit samples (`mesh`, `stream`, every tile): for lossy
+        quantisation a sample is off its input value by at most q, and so is a plane through three samples,
+        so zeta - 2q on the samples keeps the vertical bound on the input values (docs/refiner.md,
+        "Quantised input"); never below 0."""
+        q = self.max_quantisation_error
+        return max(0.0, zeta - 2 * q) if q > 0 else zeta
+
     def to_report(self) -> dict:
         """A JSON-able summary for reports."""
         return {

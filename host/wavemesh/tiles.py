@@ -674,7 +674,7 @@ def _finish_tile(plan: TilePlan, t: Tile, index: int, hf, first_out, seconds: fl
     if diff:
         raise MeshInvalid(f"{t.name}: the error bound changed the decided border ({', '.join(diff)})",
                           hint=_BUG)
-    rjob = RefineJob(None, p, plan.zeta_used if t.sides else first_zeta(hf, p.zeta), out, 0.0)
+    rjob = RefineJob(None, p, plan.zeta_used if t.sides else hf.refiner_zeta(p.zeta), out, 0.0)
     errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
     if not rjob.bound_met:
         raise MeshInvalid(f"{t.name}: {out.final.stats['over']} triangles above zeta after the border's "
@@ -693,13 +693,6 @@ def _finish_tile(plan: TilePlan, t: Tile, index: int, hf, first_out, seconds: fl
     return TileResult(index, t.name, xy, final.tris, final.z(hf.values), report)
 
 
-def first_zeta(hf, zeta: float) -> float:
-    """The zeta `wavemesh mesh` and `wavemesh stream` give the refiner for the tile alone (zeta - 2q
-    with the tile's own quantisation error; api.refine's rule), which the device computes too."""
-    q = hf.max_quantisation_error
-    return max(0.0, zeta - 2 * q) if q > 0 else zeta
-
-
 def mesh_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> TileResult:
     """Step 4 for one tile in this process: the full pipeline of `wavemesh mesh` (with the whole grid's
     zeta on the samples), then the border.  ``window``: the tile's heights when the caller read them."""
@@ -712,7 +705,7 @@ def mesh_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> T
     params = plan.params
     job = api.triangulate(hf, plan.levels, plan.tau, params.wavelet)
     out = native.refine(hf.samples, decompose(hf.samples, job.levels, job.wavelet), job.mesh, params.refine,
-                        scale=hf.scale, zeta=first_zeta(hf, params.refine.zeta), spacing=plan.spacing)
+                        scale=hf.scale, zeta=hf.refiner_zeta(params.refine.zeta), spacing=plan.spacing)
     return _finish_tile(plan, t, index, hf, out, time.perf_counter() - t0, {"levels": job.levels})
 
 
