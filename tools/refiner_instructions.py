@@ -78,7 +78,7 @@ def write_inputs(folder: Path, changes: dict | None = None) -> list[tuple[str, P
         levels = changes.pop("levels", None)
         params = native.RefineParams(**{"zeta": float(zeta), "metric": "vertical", **changes})
         job = api.triangulate(hf, levels)
-        fp = native.fixed_params(params, hf.scale)
+        fp = native.fixed_params(params, hf.scale, hf.refiner_zeta(params.zeta))  # as api.refine
         det = native.details_array(decompose(hf.samples, job.levels))
         path = folder / f"{name}-{len(out)}.bin"
         write_input(path, hf.samples, det, job.levels, job.mesh, fp, 2 * (hf.width - 1) * (hf.height - 1))
