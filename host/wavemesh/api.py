@@ -32,7 +32,7 @@ from wavemesh.heightfield import HeightField, from_array, load_heightfield, pars
 from wavemesh.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.label import Labelling, tau_counts
 from wavemesh.mesh import Mesh
-from wavemesh.meshio import read_mesh, write_mesh
+from wavemesh.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
 from wavemesh.outputs import Outputs, check_path
 
@@ -46,7 +46,6 @@ if TYPE_CHECKING:
 
 MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
-MESH_SUFFIXES = (".obj", ".ply", ".glb")
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
 
 
@@ -771,10 +770,31 @@ def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: Mes
 # Files
 
 
+@dataclass(frozen=True)
+class MeshFiles:
+    """How the mesh files are written (wavemesh.meshio.write_mesh): ``units`` "metres" or "crs" for a
+    georeferenced grid, ``local`` (with "crs"), per-vertex ``normals``, a solid ``base`` (thickness below
+    the lowest height), and ``normal_map``, a PNG of the heights' normals to write beside them."""
+
+    units: str = "metres"
+    local: bool = False
+    normals: bool = False
+    base: float | None = None
+    normal_map: str | None = None
+
+    def to_report(self) -> dict:
+        return {"units": self.units, "local": self.local, "normals": self.normals, "base": self.base}
+
+
 def check_outputs(output: str, *, lod: str | None = None, report: str | None = None,
-                  render: str | None = None) -> tuple[Path, Path | None]:
-    """The output paths of `mesh` and `stream`, checked before any work: (mesh file, --lod folder)."""
+                  render: str | None = None, files: MeshFiles | None = None) -> tuple[Path, Path | None]:
+    """The output paths of `mesh` and `stream`, and the options of their mesh files, checked before any
+    work: (mesh file, --lod folder)."""
     out = _check_output(output, MESH_SUFFIXES, "mesh")
+    if files is not None:
+        check_options(out, units=files.units, local=files.local, normals=files.normals, base=files.base)
+        if files.normal_map:
+            _check_output(files.normal_map, (".png",), "normal map")
     if render:
         _check_output(render, (".png", ".svg", ".pdf"), "picture")
     if report:
@@ -787,29 +807,40 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
 
 def write_result(result: MeshResult, output: str, *, lod: str | None = None, report: str | None = None,
                  render: str | None = None, title: str | None = None, local: bool = False,
-                 exaggeration: float | None = None) -> list[str]:
-    """Write a result's files: the mesh (.obj, .ply in map units, less sample (0, 0)'s position when
-    ``local``, with its sidecar; or .glb), each level's into ``lod``, the JSON report and a picture
-    (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in grid steps).
-    Returns the level files written."""
-    out, folder = check_outputs(output, lod=lod, report=report, render=render)
+                 exaggeration: float | None = None, files: MeshFiles | None = None) -> list[str]:
+    """Write a result's files: the mesh (a format of wavemesh.meshio.FORMATS, in the frame ``files``
+    chooses, with its sidecar), each level's into ``lod``, the normal map, the JSON report and a
+    picture (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in
+    grid steps).  ``local``: MeshFiles(units="crs", local=True), as before ``files``.  Returns the level
+    files written."""
+    if files is None:
+        files = MeshFiles(units="crs", local=True) if local else MeshFiles()
+    out, folder = check_outputs(output, lod=lod, report=report, render=render, files=files)
     hf = result.heightfield
+    if files.base is not None and hf.mask is not None:
+        raise InputError("--base closes a mesh of the whole grid rectangle into a solid; this one has holes",
+                         hint="leave out --base, or fill the invalid samples (--fill nearest)")
     g = ground(hf)
+    opts = {"ground": g, "local": files.local, "units": files.units, "normals": files.normals,
+            "base": files.base}
     written = []
     with Outputs() as staged:  # every file whole, or none of them (wavemesh.outputs)
-        write_mesh(str(staged.path(out, (SIDECAR,))), result.mesh, hf.values, comment=result.comment,
-                   ground=g, local=local)
+        write_mesh(str(staged.path(out, (SIDECAR,))), result.mesh, hf.values, comment=result.comment, **opts)
         if folder is not None:
             # M = 1: the initial triangulation and the refined mesh are both level 0; the refined one is kept
             for level, m in dict(result.level_meshes).items():
                 path = folder / f"level-{level}{out.suffix.lower()}"
                 write_mesh(str(staged.path(path, (SIDECAR,))), m, hf.values,
-                           comment=f"{result.comment} level={level}", ground=g, local=local)
+                           comment=f"{result.comment} level={level}", **opts)
                 written.append(str(path))
+        if files.normal_map:
+            from wavemesh.meshio import write_normal_map
+
+            write_normal_map(staged.path(files.normal_map), hf.values, g.spacing)
         if report:
             import json
 
-            data = result.report | {"output": str(out)}
+            data = result.report | {"output": str(out), "mesh_files": files.to_report()}
             if written:
                 data["lod"] = written
             staged.path(report).write_text(json.dumps(data, indent=2) + "\n")

@@ -86,7 +86,9 @@ def _input_options(p: argparse.ArgumentParser) -> None:
 def _mesh_options(p: argparse.ArgumentParser) -> None:
     """The options `mesh` and `stream` share: the job, the input, the outputs."""
     p.add_argument("input", help="height field file")
-    p.add_argument("-o", "--output", required=True, help="mesh file to write (.obj or .ply)")
+    from wavemesh.meshio import formats_help
+
+    p.add_argument("-o", "--output", required=True, help=f"mesh file to write: {formats_help()}")
     p.add_argument("--levels", "-M", type=int, default=None,
                    help="wavelet levels M (blocks of 2^M grid steps); default: log2(max(W, H)) - 3, "
                         "within 1..8")
@@ -154,7 +156,20 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", metavar="R.json", help="write a JSON report")
     p.add_argument("--render", metavar="R.png", help="write a picture of the mesh")
     p.add_argument("--local", action="store_true",
-                   help="OBJ/PLY vertices less the map position of sample (0, 0) (named in the sidecar)")
+                   help="with --units crs (implied): the map coordinates less the map position of sample "
+                        "(0, 0) (named in the sidecar)")
+    p.add_argument("--units", choices=("metres", "crs"), default=None,
+                   help="x and y of a georeferenced mesh: metres (default), east and north in ground units "
+                        "from sample (0, 0), as the .glb; crs, the CRS's own map coordinates (the sidecar "
+                        "says which)")
+    p.add_argument("--normals", action="store_true",
+                   help="write per-vertex unit normals (area-weighted; .obj, .ply, .glb)")
+    p.add_argument("--base", type=float, default=None, metavar="H",
+                   help="close the surface into a watertight solid: walls down to a flat bottom H height "
+                        "units below the lowest height (for 3-D printing; any mesh format)")
+    p.add_argument("--normal-map", metavar="N.png",
+                   help="also write the heights' normals as an RGB PNG of the grid's size (one pixel a "
+                        "sample; x right, y up the picture, z out)")
     p.add_argument("--exaggeration", type=float, default=None, metavar="Z",
                    help="vertical exaggeration of --render (default: 1 in ground units, automatic in grid "
                         "steps)")
@@ -343,10 +358,24 @@ def _holes_line(h: dict, stranded: int) -> str:
             f"covered {h['covered_valid']} of {h['valid_samples']}; {h['hole_edges']} edges around holes")
 
 
+def _mesh_files(args) -> api.MeshFiles:
+    """How `mesh` and `stream` write their mesh files: --units (crs when --local alone), --normals, --base,
+    --normal-map."""
+    units = args.units or ("crs" if args.local else "metres")
+    return api.MeshFiles(units=units, local=args.local, normals=args.normals, base=args.base,
+                         normal_map=args.normal_map)
+
+
+def _check_outputs(args) -> None:
+    api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render,
+                      files=_mesh_files(args))
+
+
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:
     """Write the files of `mesh` and `stream`, print the summary and the level table, return the status."""
     written = api.write_result(result, args.output, lod=args.lod, report=args.report, render=args.render,
-                               title=Path(args.input).name, local=args.local, exaggeration=args.exaggeration)
+                               title=Path(args.input).name, exaggeration=args.exaggeration,
+                               files=_mesh_files(args))
     if not args.quiet:
         hf, m, e = result.heightfield, result.mesh, result.errors
         print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
@@ -358,7 +387,11 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
             print("  " + _holes_line(result.report["holes"], hf.stranded))
         g = api.ground(hf)
         if g.georeferenced:
-            print(f"  {g.summary()}; x, y in {g.map_unit}s{' (CRS ' + g.crs[:40] + ')' if g.crs else ''}")
+            files = _mesh_files(args)
+            frame = (f"x, y in {g.map_unit}s" + (" less sample (0, 0)'s" if files.local else "")
+                     if files.units == "crs" and not args.output.lower().endswith(".glb")
+                     else f"x east, y north, z up in {g.ground_unit}s from sample (0, 0)")
+            print(f"  {g.summary()}; {frame}{' (CRS ' + g.crs[:40] + ')' if g.crs else ''}")
         for line in table:
             print(line)
         print(f"wrote {args.output}" + "".join(f", {p}" for p in (args.report, args.render) if p)
@@ -374,7 +407,7 @@ def mesh_command(args) -> int:
         from wavemesh import tiles
 
         return tiles.command(args, _mesh_params(args))
-    api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
+    _check_outputs(args)
     params = _mesh_params(args)
     result = api.mesh(_load(args, args.input), params)
     table = _refiner_table(result, params)
@@ -409,7 +442,7 @@ def stream_command(args) -> int:
 
         return tiles.command(args, _mesh_params(args), ports=args.port)
     args.port = args.port[0]
-    api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render)
+    _check_outputs(args)
     api.check_port(args.port)
     params = _mesh_params(args)
     if args.timeout is not None and not args.timeout > 0:

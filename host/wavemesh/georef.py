@@ -43,6 +43,10 @@ WGS84_E2 = 0.00669437999014  # first eccentricity squared (1 / f = 298.257223563
 DEGREE_CELL_MAX = 0.1  # a grid without a CRS is taken as degrees only with cells at most this large
 DISTORTION_NOTE = 0.01  # a degree of longitude changing by more than this fraction over the grid is noted
 SIDECAR_SUFFIX = ".georef.json"  # mesh.obj -> mesh.obj.georef.json
+# The frames of a georeferenced mesh file's x and y (--units): "metres", east and north in ground units
+# from sample (0, 0) (metres for a geographic or metric CRS), as the .glb; "crs", the CRS's own map
+# coordinates (less sample (0, 0)'s with --local).  Heights are z in both.
+UNITS = ("metres", "crs")
 
 
 def metres_per_degree(lat: float) -> tuple[float, float]:
@@ -105,6 +109,23 @@ class Ground:
         if a * e - b * d > 0:
             ky = -ky
         return (x - x0) * kx, (y - y0) * ky
+
+    def from_ground(self, east, north) -> tuple[np.ndarray, np.ndarray]:
+        """Grid positions (col, row) of (east, north) from sample (0, 0): the inverse of ground_xy."""
+        a, b, _, d, e, _ = self.transform
+        x0, y0 = self.origin
+        kx, ky = self.metres_per_unit
+        if a * e - b * d > 0:
+            ky = -ky
+        return self.grid_xy(x0 + np.asarray(east, dtype=np.float64) / kx,
+                            y0 + np.asarray(north, dtype=np.float64) / ky)
+
+    def mirrors(self, units: str) -> bool:
+        """Whether (col, row) -> the output frame's (x, y) reverses orientation (``units`` "metres": east,
+        north; "crs": map x, y): a counter-clockwise grid triangle is then clockwise seen from above."""
+        f = self.ground_xy if units == UNITS[0] else self.map_xy
+        (x0, y0), (x1, y1), (x2, y2) = (f(c, r) for c, r in ((0, 0), (1, 0), (0, 1)))
+        return float((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)) < 0
 
     def to_report(self) -> dict:
         return {"crs": self.crs, "transform": list(self.transform), "map_unit": self.map_unit,
@@ -265,8 +286,11 @@ def sidecar_path(mesh_path) -> Path:
     return p.with_name(p.name + SIDECAR_SUFFIX)
 
 
-def sidecar(g: Ground, mesh_path, local: bool) -> dict:
-    x0, y0 = g.origin if local else (0.0, 0.0)
+def sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> dict:
+    """The sidecar's content: ``units`` (UNITS) and ``local`` name the frame of the mesh's x and y."""
+    metres = units == UNITS[0]
+    x0, y0 = g.origin if local or metres else (0.0, 0.0)
+    vertices = "ground" if metres else "local" if local else "map"
     return {
         "wavemesh_georef": 1,
         "mesh": Path(mesh_path).name,
@@ -276,9 +300,16 @@ def sidecar(g: Ground, mesh_path, local: bool) -> dict:
         "transform": list(g.transform),
         "transform_doc": "GDAL geotransform as (a, b, c, d, e, f): x = a col + b row + c, "
                          "y = d col + e row + f; sample (col, row) at (col + 0.5, row + 0.5)",
-        "vertices": "local" if local else "map",
+        "units": units,
+        "vertices": vertices,
+        "vertices_doc": {"ground": f"x east, y north, z up in {g.ground_unit}s from sample (0, 0) "
+                                   "(at the map position origin)",
+                         "map": "x, y the map coordinates of the CRS, z the height",
+                         "local": "x, y the map coordinates less origin, z the height"}[vertices],
+        "faces": "counter-clockwise seen from above (+z)",
         "origin": [x0, y0],
-        "origin_doc": "subtracted from every vertex's x and y (--local: the map position of sample (0, 0))",
+        "origin_doc": "the map position of sample (0, 0)" if metres else
+                      "subtracted from every vertex's x and y (--local: the map position of sample (0, 0))",
         "spacing": list(g.spacing),
         "ground_unit": g.ground_unit,
         "spacing_from": g.how,
@@ -287,20 +318,21 @@ def sidecar(g: Ground, mesh_path, local: bool) -> dict:
     }
 
 
-def write_sidecar(g: Ground, mesh_path, local: bool) -> Path:
+def write_sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> Path:
     p = sidecar_path(mesh_path)
     try:
         import json  # only a run that writes or reads a sidecar needs it
 
-        p.write_text(json.dumps(sidecar(g, mesh_path, local), indent=2) + "\n")
+        p.write_text(json.dumps(sidecar(g, mesh_path, local, units), indent=2) + "\n")
     except OSError as e:
         raise InputError(f"cannot write {p}: {e.strerror or e}") from None
     return p
 
 
-def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float]] | None:
-    """The Ground and the origin subtracted from the vertices, from the sidecar beside a mesh; None
-    when there is none."""
+def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float], str, bool] | None:
+    """(the Ground, the origin subtracted from the vertices, the units (UNITS), whether the faces were
+    written counter-clockwise seen from above) from the sidecar beside a mesh; None when there is none
+    (:func:`to_grid` takes the rest of the tuple)."""
     p = sidecar_path(mesh_path)
     if not p.exists():
         return None
@@ -314,25 +346,35 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float]] | None:
                    str(s.get("spacing_from", p.name)), bool(s.get("geographic", False)),
                    tuple(float(v) for v in s.get("metres_per_unit", (1.0, 1.0))))
         origin = (float(s["origin"][0]), float(s["origin"][1]))
+        units = str(s.get("units", "crs"))
+        up = "faces" in s  # files before --units kept the grid's winding
+        if units not in UNITS:
+            raise ValueError(f"unknown units {units!r}")
     except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
         raise InputError(f"cannot read the mesh's sidecar {p}: {e}",
                          hint=f"delete it if {Path(mesh_path).name} is in grid coordinates") from None
     if len(t) != 6 or len(g.transform) != 6 or t[0] * t[4] - t[1] * t[3] == 0:
         raise InputError(f"{p}: the transform is not an invertible affine")
-    return g, origin
+    return g, (0.0, 0.0) if units == UNITS[0] else origin, units, up
 
 
-def to_grid(g: Ground, origin: tuple[float, float]):
+def to_grid(g: Ground, origin: tuple[float, float], units: str = "crs", up: bool = False):
     """A function mapping vertex coordinates in a sidecar's frame to grid positions (col, row), the
-    near-integral ones snapped (map coordinates carry a rounding error of a few ulps)."""
+    near-integral ones snapped (map coordinates carry a rounding error of a few ulps).  Its attribute
+    ``mirror`` says whether the file's triangles must be reversed to be counter-clockwise on the grid
+    (``up``: they were written counter-clockwise seen from above, in a frame that mirrors the grid)."""
 
     def conv(x, y):
-        col, row = g.grid_xy(np.asarray(x, dtype=np.float64) + origin[0],
-                             np.asarray(y, dtype=np.float64) + origin[1])
+        if units == UNITS[0]:
+            col, row = g.from_ground(x, y)
+        else:
+            col, row = g.grid_xy(np.asarray(x, dtype=np.float64) + origin[0],
+                                 np.asarray(y, dtype=np.float64) + origin[1])
         for v in (col, row):
             r = np.round(v)
             near = np.abs(v - r) < 1e-6
             v[near] = r[near]
         return col, row
 
+    conv.mirror = up and g.mirrors(units)
     return conv

@@ -1,9 +1,15 @@
-"""Mesh files: Wavefront OBJ and PLY, written and read.
+"""Mesh files: Wavefront OBJ, PLY, binary STL and glTF binary written (:data:`FORMATS`, the one list of
+them), OBJ and PLY read.
 
 Writing
-    :func:`write_obj` writes ``v x y z`` lines (x, y as integers, z as
-    ``repr(float(z))``, the shortest text that reads back to the same double)
-    and ``f i j k`` lines (1-based).  :func:`write_ply` writes
+    :func:`write_mesh` writes the format its file name ends in, in the frame the options choose: grid
+    positions without a georeference; with one, east, north and up in ground units from sample (0, 0)
+    (``units="metres"``, as the .glb always is) or the CRS's own map coordinates (``units="crs"``),
+    beside a sidecar naming the frame (wavemesh.georef), the triangles then counter-clockwise seen from
+    above.  ``normals`` adds per-vertex unit normals (:func:`vertex_normals`), ``base`` closes the
+    surface into a watertight solid (:func:`solid`).  :func:`write_obj` writes ``v x y z`` lines (x, y as
+    integers, z as ``repr(float(z))``, the shortest text that reads back to the same double) and
+    ``f i j k`` lines (1-based; ``f i//i j//j k//k`` with ``vn`` normals).  :func:`write_ply` writes
     ``binary_little_endian 1.0`` with ``double`` x, y, z per vertex and a
     ``list uchar int vertex_indices`` per face.  Both files carry the grid size
     as a comment, ``# wavemesh W H`` (OBJ) or ``comment wavemesh W H`` (PLY),
@@ -27,10 +33,13 @@ Reading
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import struct
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +47,7 @@ import numpy as np
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["write_obj", "write_ply", "write_mesh", "read_mesh"]
+__all__ = ["FORMATS", "write_obj", "write_ply", "write_mesh", "read_mesh", "vertex_normals", "normal_map"]
 
 _TAG = "wavemesh"
 _TAG_RE = re.compile(r"^wavemesh\s+(-?\d+)\s+(-?\d+)\s*$")
@@ -109,22 +118,49 @@ def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
     return ("v %d %d %r\n" * n) % tuple(flat)
 
 
+@dataclass(frozen=True)
+class _Surface:
+    """What a writer writes: vertices (x, y as grid positions (ints) or in the output frame (floats); z),
+    triangles, per-vertex unit normals or None, the grid size and the comment."""
+
+    width: int
+    height: int
+    xy: np.ndarray  # (V, 2)
+    z: np.ndarray  # (V,)
+    tris: np.ndarray  # (T, 3)
+    normals: np.ndarray | None = None  # (V, 3)
+    comment: str | None = None
+    glb: tuple = ()  # write_glb's frame: (Ground, its east/north of the vertices (V, 2))
+
+
 def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
               xy: np.ndarray | None = None) -> None:
     """Write ``mesh`` as a Wavefront OBJ file with z from ``heights`` ((H, W), or (V,) per vertex); x and y
     are the grid positions, or ``xy`` ((V, 2) floats: map coordinates) when given."""
-    z = _vertex_z(mesh, heights)
-    head = [f"# {_TAG} {mesh.width} {mesh.height}"]
-    head += [f"# {c}" if c else "#" for c in _comment_lines(comment)]
-    xy, tris = (mesh.xy if xy is None else np.asarray(xy, dtype=np.float64)), mesh.tris
+    xy = mesh.xy if xy is None else np.asarray(xy, dtype=np.float64)
+    _write_obj(path, _Surface(mesh.width, mesh.height, xy, _vertex_z(mesh, heights), mesh.tris,
+                                    None, comment))
+
+
+def _write_obj(path, s: _Surface) -> None:
+    head = [f"# {_TAG} {s.width} {s.height}"]
+    head += [f"# {c}" if c else "#" for c in _comment_lines(s.comment)]
+    xy, z, tris = s.xy, s.z, s.tris
+    face = "f %d %d %d\n" if s.normals is None else "f %d//%d %d//%d %d//%d\n"
     with _open_for_writing(path, binary=False) as f:
         try:
             f.write("\n".join(head) + "\n")
-            for s in range(0, len(xy), _CHUNK):
-                f.write(_obj_vertex_lines(xy[s : s + _CHUNK], z[s : s + _CHUNK]))
-            for s in range(0, len(tris), _CHUNK):
-                t = tris[s : s + _CHUNK] + 1
-                f.write(("f %d %d %d\n" * len(t)) % tuple(t.ravel().tolist()))
+            for a in range(0, len(xy), _CHUNK):
+                f.write(_obj_vertex_lines(xy[a : a + _CHUNK], z[a : a + _CHUNK]))
+            if s.normals is not None:
+                for a in range(0, len(xy), _CHUNK):
+                    n = s.normals[a : a + _CHUNK]
+                    f.write(("vn %.7g %.7g %.7g\n" * len(n)) % tuple(n.ravel().tolist()))
+            for a in range(0, len(tris), _CHUNK):
+                t = tris[a : a + _CHUNK] + 1
+                if s.normals is not None:
+                    t = np.repeat(t, 2, axis=1)
+                f.write((face * len(t)) % tuple(t.ravel().tolist()))
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
@@ -132,28 +168,30 @@ def write_obj(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
 def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
               xy: np.ndarray | None = None) -> None:
     """Write ``mesh`` as a binary little-endian PLY file with z from ``heights`` (x, y as write_obj)."""
-    z = _vertex_z(mesh, heights)
-    V, T = mesh.n_vertices, mesh.n_triangles
+    xy = mesh.xy if xy is None else np.asarray(xy, dtype=np.float64)
+    _write_ply(path, _Surface(mesh.width, mesh.height, xy, _vertex_z(mesh, heights), mesh.tris,
+                                    None, comment))
+
+
+def _write_ply(path, s: _Surface) -> None:
+    V, T = len(s.xy), len(s.tris)
     if V >= 1 << 31:
         raise InputError(f"{V} vertices do not fit the PLY 'int' vertex index")
-    head = ["ply", "format binary_little_endian 1.0", f"comment {_TAG} {mesh.width} {mesh.height}"]
-    head += [f"comment {c}" if c else "comment" for c in _comment_lines(comment)]
-    head += [
-        f"element vertex {V}",
-        "property double x",
-        "property double y",
-        "property double z",
-        f"element face {T}",
-        "property list uchar int vertex_indices",
-        "end_header",
-    ]
-    verts = np.empty(V, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
-    verts["x"] = mesh.xy[:, 0] if xy is None else xy[:, 0]
-    verts["y"] = mesh.xy[:, 1] if xy is None else xy[:, 1]
-    verts["z"] = z
+    head = ["ply", "format binary_little_endian 1.0", f"comment {_TAG} {s.width} {s.height}"]
+    head += [f"comment {c}" if c else "comment" for c in _comment_lines(s.comment)]
+    head += [f"element vertex {V}", "property double x", "property double y", "property double z"]
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    if s.normals is not None:
+        head += ["property float nx", "property float ny", "property float nz"]
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    head += [f"element face {T}", "property list uchar int vertex_indices", "end_header"]
+    verts = np.empty(V, dtype=fields)
+    verts["x"], verts["y"], verts["z"] = s.xy[:, 0], s.xy[:, 1], s.z
+    if s.normals is not None:
+        verts["nx"], verts["ny"], verts["nz"] = s.normals.T
     faces = np.empty(T, dtype=[("n", "u1"), ("v", "<i4", (3,))])
     faces["n"] = 3
-    faces["v"] = mesh.tris
+    faces["v"] = s.tris
     with _open_for_writing(path, binary=True) as f:
         try:
             f.write(("\n".join(head) + "\n").encode("utf-8"))
@@ -163,65 +201,41 @@ def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
-def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None, *,
-               ground=None, local: bool = False) -> None:
-    """Write ``mesh`` as OBJ, PLY or glTF binary, chosen by the extension of ``path`` (``.obj`` / ``.ply`` /
-    ``.glb``).  ``ground`` (a wavemesh.georef.Ground) with a georeference puts an OBJ's or PLY's
-    vertices at their map coordinates (less the origin, sample (0, 0)'s, when ``local``) and writes the
-    sidecar ``PATH.georef.json`` naming the CRS and the origin; without one x and y are grid positions."""
-    ext = Path(os.fspath(path)).suffix.lower()
-    xy = None
-    if ground is not None and ground.georeferenced and ext in (".obj", ".ply"):
-        from .georef import write_sidecar
-
-        x, y = ground.map_xy(mesh.xy[:, 0], mesh.xy[:, 1])
-        if local:
-            x0, y0 = ground.origin
-            x, y = x - x0, y - y0
-        xy = np.column_stack([x, y])
-    if ext == ".obj":
-        write_obj(path, mesh, heights, comment, xy)
-    elif ext == ".ply":
-        write_ply(path, mesh, heights, comment, xy)
-    elif ext == ".glb":
-        write_glb(path, mesh, heights, ground, comment)
-        return
-    else:
-        raise InputError(
-            f"cannot tell the mesh format of {os.fspath(path)}: the name must end in .obj, .ply or .glb",
-        )
-    if xy is not None:
-        write_sidecar(ground, path, local)
-    else:  # grid coordinates: a sidecar left by an earlier run would misplace them
-        from .georef import sidecar_path
-
-        sidecar_path(path).unlink(missing_ok=True)
+def _write_stl(path, s: _Surface) -> None:
+    """Binary STL: an 80-byte header (not starting with "solid", which would read as ASCII STL), the
+    triangle count, and per triangle its unit normal and three corners as float32."""
+    pos = np.column_stack([s.xy, s.z]).astype(np.float64)
+    corners = pos[s.tris]
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1), np.finfo(np.float64).tiny)[:, None]
+    rec = np.zeros(len(s.tris), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["n"], rec["v"] = n, corners
+    head = f"{_TAG} {s.width} {s.height} binary STL; {' '.join(_comment_lines(s.comment))}".encode()
+    with _open_for_writing(path, binary=True) as f:
+        try:
+            f.write(head[:80].ljust(80, b" ") + struct.pack("<I", len(s.tris)) + rec.tobytes())
+        except OSError as e:
+            raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
 
-def write_glb(path, mesh: Mesh, heights: np.ndarray, ground=None, comment: str | None = None) -> None:
-    """Write ``mesh`` as a glTF 2.0 binary (.glb) through trimesh: glTF's frame (metres, +Y up, +Z toward
-    the viewer: east, up, south) relative to sample (0, 0), positions as float32.  ``ground`` (a
-    wavemesh.georef.Ground; None: the grid in grid steps) gives (east, north); the scene's ``extras``
-    (trimesh writes a scene's metadata there) name the CRS, the origin and the grid, as the sidecar does."""
+def _write_glb(path, s: _Surface) -> None:
+    """glTF binary through trimesh (module write_glb)."""
     import trimesh  # imported here: only .glb needs it
 
-    from .georef import grid_ground
-
-    z = _vertex_z(mesh, heights)
-    g = ground or grid_ground(mesh.width, mesh.height)
-    east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
-    # glTF triangles are counter-clockwise seen from their front (above, in (east, north)): the grid's are
-    # counter-clockwise in (col, row), whose row 0 (east, north) always puts north: a mirror, so reversed.
-    tris = mesh.tris[:, ::-1]
-    verts = np.column_stack([east, z, -north])
-    tm = trimesh.Trimesh(vertices=verts, faces=tris, process=False, validate=False)
+    g, en = s.glb
+    # glTF's frame: x east, y up, z toward the viewer (south); a rotation of (east, north, up)
+    verts = np.column_stack([en[:, 0], s.z, -en[:, 1]])
+    tm = trimesh.Trimesh(vertices=verts, faces=s.tris, process=False, validate=False)
+    if s.normals is not None:
+        tm.vertex_normals = np.column_stack([s.normals[:, 0], s.normals[:, 2], -s.normals[:, 1]])
     x0, y0 = g.origin
-    extras = {"wavemesh": {"grid": [mesh.width, mesh.height], "crs": g.crs, "map_unit": g.map_unit,
+    extras = {"wavemesh": {"grid": [s.width, s.height], "crs": g.crs, "map_unit": g.map_unit,
                            "origin_map": [x0, y0], "transform": list(g.transform),
                            "frame": "x east, y up, z south, in ground units from sample (0, 0)",
-                           "comment": comment or ""}}
+                           "comment": s.comment or ""}}
     try:
-        data = trimesh.exchange.gltf.export_glb(trimesh.Scene(tm, metadata=extras), include_normals=False)
+        data = trimesh.exchange.gltf.export_glb(trimesh.Scene(tm, metadata=extras),
+                                                include_normals=s.normals is not None)
     except (ValueError, TypeError) as e:
         raise InputError(f"cannot write {os.fspath(path)}: {e}") from None
     with _open_for_writing(path, binary=True) as f:
@@ -229,6 +243,199 @@ def write_glb(path, mesh: Mesh, heights: np.ndarray, ground=None, comment: str |
             f.write(data)
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
+
+
+# ---- The output formats: one registry (the CLI's help, the checks of -o, the docs table read it)
+
+
+@dataclass(frozen=True)
+class Format:
+    """An output mesh format: its writer and what it can hold."""
+
+    suffix: str
+    name: str
+    writer: Callable[..., None]
+    normals: bool  # holds per-vertex normals (--normals)
+    crs_units: bool  # can be written in the CRS's own units (--units crs)
+    about: str  # one sentence for the docs table
+
+
+FORMATS: dict[str, Format] = {f.suffix: f for f in (
+    Format(".obj", "Wavefront OBJ", _write_obj, True, True,
+           "text; `vn` normals; `wavemesh check` and `render` read it back"),
+    Format(".ply", "PLY", _write_ply, True, True,
+           "binary little-endian, double x y z, float nx ny nz; `check` and `render` read it back"),
+    Format(".stl", "binary STL", _write_stl, False, True,
+           "float32 triangles with their facet normals, for 3-D printing (`--base H`: a closed solid)"),
+    Format(".glb", "glTF binary", _write_glb, True, False,
+           "glTF 2.0 (metres, +Y up, from sample (0, 0); through trimesh) for three.js, Cesium, Blender"),
+)}
+MESH_SUFFIXES = tuple(FORMATS)
+
+
+def formats_help() -> str:
+    """The formats for `-o`'s help."""
+    return ", ".join(f"{f.suffix} ({f.name})" for f in FORMATS.values())
+
+
+def formats_table() -> str:
+    """The docs' table of output formats (README.md holds it; tests/host/test_outputs.py compares)."""
+    rows = ["| `-o` | format | `--normals` | `--base H` | `--units crs` | |",
+            "| --- | --- | --- | --- | --- | --- |"]
+    for f in FORMATS.values():
+        rows.append(f"| `{f.suffix}` | {f.name} | {'yes' if f.normals else 'facet normals'} | yes | "
+                    f"{'yes' if f.crs_units else 'no (metres)'} | {f.about} |")
+    return "\n".join(rows) + "\n"
+
+
+def _format_of(path) -> Format:
+    ext = Path(os.fspath(path)).suffix.lower()
+    fmt = FORMATS.get(ext)
+    if fmt is None:
+        *most, last = FORMATS
+        raise InputError(f"cannot tell the mesh format of {os.fspath(path)}: the name must end in "
+                         f"{', '.join(most)} or {last}")
+    return fmt
+
+
+def check_options(path, *, units: str = "metres", local: bool = False, normals: bool = False,
+                  base: float | None = None, georeferenced: bool = True) -> Format:
+    """The mesh options against the format of ``path``, before any work: InputError naming the problem."""
+    from .georef import UNITS
+
+    fmt = _format_of(path)
+    if units not in UNITS:
+        raise InputError(f"--units {units}: not a unit of the outputs", hint=f"use {' or '.join(UNITS)}")
+    if local and units != "crs":
+        raise InputError("--local subtracts sample (0, 0)'s map position from the CRS's coordinates",
+                         hint="use it with --units crs (--units metres is already from sample (0, 0))")
+    if units == "crs" and not fmt.crs_units and georeferenced:
+        raise InputError(f"--units crs: a {fmt.suffix} file ({fmt.name}) is always in metres",
+                         hint="leave out --units, or write .obj, .ply or .stl")
+    if normals and not fmt.normals:
+        raise InputError(f"--normals: a {fmt.suffix} file holds one normal per triangle (always written), "
+                         "not vertex normals", hint="leave out --normals, or write .obj, .ply or .glb")
+    if base is not None and not (math.isfinite(base) and base > 0):
+        raise InputError(f"--base {base}: the thickness below the lowest height must be a number > 0",
+                         hint="give the base's thickness in height units, e.g. --base 10")
+    return fmt
+
+
+def vertex_normals(pos: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Unit normals per vertex, each the area-weighted mean of its triangles' normals (the sum of their
+    cross products); triangles counter-clockwise seen from their front."""
+    c = pos[tris]
+    face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])  # length: twice the area
+    acc = np.zeros_like(pos, dtype=np.float64)
+    for k in range(3):
+        np.add.at(acc, tris[:, k], face)
+    length = np.linalg.norm(acc, axis=1)
+    out = np.zeros_like(acc)
+    out[:, 2] = 1.0  # a vertex of no triangle (none in a proper mesh): up
+    ok = length > 0
+    out[ok] = acc[ok] / length[ok, None]
+    return out
+
+
+def solid(xy: np.ndarray, z: np.ndarray, tris: np.ndarray, base: float):
+    """The surface closed into a solid: a wall down from every border edge to a flat bottom ``base``
+    below the lowest height, and the bottom, a fan from the border's centre.  ``tris`` counter-clockwise
+    seen from above; every edge of the result is in exactly two triangles, used once each way (watertight,
+    consistently oriented, outward).  Returns (xy, z, tris) with the new vertices after the old ones."""
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    n = max(int(tris.max()) + 1, len(xy))
+    key = e[:, 0].astype(np.int64) * n + e[:, 1]
+    rev = e[:, 1].astype(np.int64) * n + e[:, 0]
+    border = e[~np.isin(key, rev)]  # directed edges with no twin: the border, interior on their left
+    rim = np.unique(border)
+    low = {int(v): len(xy) + i for i, v in enumerate(rim)}  # each border vertex's copy on the bottom
+    centre = len(xy) + len(rim)
+    a, b = border[:, 0], border[:, 1]
+    la, lb = np.array([low[int(v)] for v in a]), np.array([low[int(v)] for v in b])
+    c = np.full(len(a), centre)
+    walls = np.concatenate([np.column_stack([b, a, la]), np.column_stack([b, la, lb])])
+    bottom = np.column_stack([c, lb, la])
+    bxy = xy[rim].astype(np.float64)
+    mid = (bxy.min(axis=0) + bxy.max(axis=0)) / 2
+    floor = float(np.min(z)) - base
+    xy2 = np.concatenate([xy.astype(np.float64), bxy, mid[None, :]])
+    z2 = np.concatenate([z, np.full(len(rim) + 1, floor)])
+    return xy2, z2, np.concatenate([tris, walls, bottom]).astype(np.int64)
+
+
+def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None, *,
+               ground=None, local: bool = False, units: str = "metres", normals: bool = False,
+               base: float | None = None) -> None:
+    """Write ``mesh`` in the format of the extension of ``path`` (FORMATS: ``.obj`` / ``.ply`` / ``.stl``
+    / ``.glb``).  ``ground`` (a wavemesh.georef.Ground) with a georeference places the vertices:
+    ``units`` "metres" (default) east, north and up in ground units from sample (0, 0), as the .glb;
+    "crs" the map coordinates (less sample (0, 0)'s when ``local``); either way with the sidecar
+    ``PATH.georef.json`` naming the frame, the CRS and the origin, and the triangles counter-clockwise
+    seen from above.  Without one x and y are grid positions.  ``normals``: per-vertex normals (area-
+    weighted, unit length); ``base``: a closed solid, the bottom ``base`` below the lowest height."""
+    from .georef import grid_ground, sidecar_path, write_sidecar
+
+    geo = ground is not None and ground.georeferenced
+    fmt = check_options(path, units=units, local=local, normals=normals, base=base, georeferenced=geo)
+    z = _vertex_z(mesh, heights)
+    g = ground if geo else grid_ground(mesh.width, mesh.height)
+    en = None
+    if fmt.suffix == ".glb" or geo:
+        east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
+        en = np.column_stack([east, north])
+    if fmt.suffix == ".glb":
+        xy, mirror = en, g.mirrors("metres")
+    elif not geo:
+        xy, mirror = mesh.xy, False  # (col, row, z): right-handed, the grid's triangles face up
+    elif units == "metres":
+        xy, mirror = en, g.mirrors("metres")
+    else:
+        x, y = g.map_xy(mesh.xy[:, 0], mesh.xy[:, 1])
+        if local:
+            x0, y0 = g.origin
+            x, y = x - x0, y - y0
+        xy, mirror = np.column_stack([x, y]), g.mirrors("crs")
+    tris = mesh.tris[:, ::-1] if mirror else mesh.tris
+    if base is not None:
+        xy, z, tris = solid(xy, z, tris, base)
+        if fmt.suffix == ".glb":
+            en = xy
+    pos = np.column_stack([xy, z]).astype(np.float64) if normals else None
+    surface = _Surface(mesh.width, mesh.height, xy, z, tris,
+                       vertex_normals(pos, tris) if normals else None, comment,
+                       (g, en) if fmt.suffix == ".glb" else ())
+    fmt.writer(path, surface)
+    if geo and fmt.suffix != ".glb":
+        write_sidecar(g, path, local, units)
+    else:  # grid coordinates, or a .glb (which says where it is): an older sidecar would misplace it
+        sidecar_path(path).unlink(missing_ok=True)
+
+
+def normal_map(values: np.ndarray, spacing: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """A tangent-space normal map of a height field, (H, W, 3) uint8: the surface normal at each sample
+    from the heights' central differences (one-sided at the edges) over the ground spacing (dx, dy), in
+    the picture's frame (x right along a row, y up the picture: row 0 at the top, z out of it), each
+    component c written as round((c + 1) / 2 * 255): flat ground is (128, 128, 255)."""
+    h = np.asarray(values, dtype=np.float64)
+    dx, dy = spacing
+    if h.shape[0] > 1:
+        dz_down = np.gradient(h, axis=0) / dy
+    else:
+        dz_down = np.zeros_like(h)
+    dz_right = np.gradient(h, axis=1) / dx if h.shape[1] > 1 else np.zeros_like(h)
+    n = np.stack([-dz_right, dz_down, np.ones_like(h)], axis=-1)  # up the picture is minus a row
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.rint((n + 1.0) / 2.0 * 255.0).astype(np.uint8)
+
+
+def write_normal_map(path, values: np.ndarray, spacing: tuple[float, float] = (1.0, 1.0)) -> None:
+    """:func:`normal_map` as an RGB PNG of the grid's size (one pixel a sample)."""
+    from PIL import Image  # only --normal-map needs it
+
+    try:
+        Image.fromarray(normal_map(values, spacing), "RGB").save(path, format="PNG")
+    except OSError as e:
+        raise InputError(f"cannot write normal map {os.fspath(path)}: {e.strerror or e}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,6 +472,8 @@ def read_mesh(path, width: int | None = None, height: int | None = None,
             x, y, z, tris, comments, base = _parse_obj(data)
         if to_grid is not None:
             x, y = to_grid(x, y)
+            if getattr(to_grid, "mirror", False):  # written facing up in a frame that mirrors the grid
+                tris = np.asarray(tris)[:, ::-1]
         return _finish(x, y, z, tris, comments, base, width, height)
     except _Bad as e:
         raise InputError(f"{name}: {e}") from None

@@ -1040,24 +1040,28 @@ def mesh_tiled(src: Source, params, tile: int | None = None, *, workers: int | N
 
 
 def write_tiled(tiled: TiledResult, plan: TilePlan, output: str, *, tiles_dir: str | None = None,
-                report: str | None = None, comment: str = "") -> list[str]:
-    """The stitched mesh (.obj, .ply, .glb), each tile's mesh into ``tiles_dir`` (tile-RRR-CCC.EXT in the
-    whole grid's coordinates, so that they fit together as they are) with ``index.json`` naming each
-    tile's file, place and numbers, and the JSON report; whole or not at all."""
+                report: str | None = None, comment: str = "", files=None) -> list[str]:
+    """The stitched mesh (a format of wavemesh.meshio.FORMATS, written as ``files``, an api.MeshFiles,
+    says), each tile's mesh into ``tiles_dir`` (tile-RRR-CCC.EXT in the whole grid's frame, so that they
+    fit together as they are; no --base) with ``index.json`` naming each tile's file, place and numbers,
+    and the JSON report; whole or not at all."""
     import json
 
-    from wavemesh.api import check_outputs
+    from wavemesh.api import MeshFiles, check_outputs
     from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
     from wavemesh.georef import ground
     from wavemesh.meshio import write_mesh
     from wavemesh.outputs import Outputs, check_path
 
-    out, _ = check_outputs(output, report=report)
+    files = files or MeshFiles()
+    out, _ = check_outputs(output, report=report, files=files)
     folder = check_path(tiles_dir, None, "--tiles-dir") if tiles_dir else None
     g = ground(plan.source.grid())
+    opts = {"ground": g, "units": files.units, "local": files.local, "normals": files.normals}
     written = []
     with Outputs() as staged:
-        write_mesh(str(staged.path(out, (SIDECAR,))), tiled.mesh, tiled.z, comment=comment, ground=g)
+        write_mesh(str(staged.path(out, (SIDECAR,))), tiled.mesh, tiled.z, comment=comment, base=files.base,
+                   **opts)
         if folder is not None:
             index = {"grid": [plan.width, plan.height], "tile": plan.tile,
                      "layout": [len(plan.xcuts) - 1, len(plan.ycuts) - 1], "mesh": str(out), "tiles": []}
@@ -1065,7 +1069,7 @@ def write_tiled(tiled: TiledResult, plan: TilePlan, output: str, *, tiles_dir: s
                 m = Mesh(plan.width, plan.height, r.xy, r.tris)
                 path = folder / f"{r.name}{out.suffix.lower()}"
                 write_mesh(str(staged.path(path, (SIDECAR,))), m, r.z, comment=f"{comment} {r.name}",
-                           ground=g)
+                           **opts)
                 index["tiles"].append({"file": path.name} | r.report)
                 written.append(str(path))
             staged.path(folder / "index.json").write_text(json.dumps(index, indent=1) + "\n")
@@ -1097,7 +1101,12 @@ def command(args, params, ports: list[str] | None = None) -> int:
             raise WavemeshError(f"--{name} is not tiled yet", hint="leave out --tile")
     if getattr(args, "tile", None) is not None and args.tile < MIN_TILE:
         raise InputError(f"--tile {args.tile} is too small", hint=f"use at least {MIN_TILE} samples a side")
-    out, _ = api.check_outputs(args.output, report=args.report, render=args.render)
+    files = api.MeshFiles(units=args.units or ("crs" if args.local else "metres"), local=args.local,
+                          normals=args.normals, base=args.base, normal_map=args.normal_map)
+    if files.normal_map:
+        raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
+                            hint="leave out --tile, or --normal-map")
+    out, _ = api.check_outputs(args.output, report=args.report, render=args.render, files=files)
     quiet = args.quiet
     say = None if quiet else (lambda text: print(text, flush=True))
     progress = not quiet
@@ -1133,7 +1142,7 @@ def command(args, params, ports: list[str] | None = None) -> int:
     p = params.refine
     comment = (f"wavemesh tiled mesh, tile={plan.tile} tau={plan.tau:g} zeta={p.zeta:g} metric={p.metric}")
     written = write_tiled(tiled, plan, args.output, tiles_dir=args.tiles_dir, report=args.report,
-                          comment=comment)
+                          comment=comment, files=files)
     if args.render:
         from wavemesh.outputs import Outputs
 

@@ -120,7 +120,7 @@ def bad_inputs(tmp_path):
         "bad levels": ["mesh", ok, "-o", o, "--levels", "0"],
         "levels not a number": ["mesh", ok, "-o", o, "--levels", "x"],
         "negative tau": ["mesh", ok, "-o", o, "--tau", "-1"],
-        "bad output extension": ["mesh", ok, "-o", tmp_path / "o.stl"],
+        "bad output extension": ["mesh", ok, "-o", tmp_path / "o.stp"],
         "output dir missing": ["mesh", ok, "-o", tmp_path / "no" / "o.obj"],
         "bad fill": ["mesh", ok, "-o", o, "--fill", "sideways"],
         "negative zeta": ["mesh", ok, "-o", o, "--zeta", "-1"],

@@ -45,7 +45,7 @@ def test_every_obj_vertex_sits_at_its_samples_geotransform(tmp_path):
     z = hills(45, 61)
     tif = geotiff(tmp_path / "dem.tif", z)
     out = tmp_path / "dem.obj"
-    assert run("mesh", tif, "-o", out, "--zeta", "2", "-q") == 0
+    assert run("mesh", tif, "-o", out, "--zeta", "2", "--units", "crs", "-q") == 0
     raw = obj_vertices(out)
     # Which sample each vertex is: the heights are those of the samples, so match them independently of
     # the sidecar: col, row from the known geotransform, then the height must be that sample's.
@@ -80,7 +80,7 @@ def test_crop_and_decimate_keep_the_georeference(tmp_path):
     z = hills(45, 61)
     tif = geotiff(tmp_path / "dem.tif", z)
     out = tmp_path / "part.obj"
-    assert run("mesh", tif, "-o", out, "--crop", "3,4,40,30", "--decimate", "2", "-q") == 0
+    assert run("mesh", tif, "-o", out, "--crop", "3,4,40,30", "--decimate", "2", "--units", "crs", "-q") == 0
     raw = obj_vertices(out)
     col = np.round((raw[:, 0] - 500000.0) / 20.0 - 0.5).astype(int)
     row = np.round((4100000.0 - raw[:, 1]) / 30.0 - 0.5).astype(int)

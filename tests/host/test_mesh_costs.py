@@ -157,7 +157,8 @@ def test_the_report_is_the_same_with_or_without_check_levels(tmp_path, ball):
         reports.append(r)
     assert reports[0] == reports[1] == reports[2]
     r = reports[0]
-    assert list(r) == ["wavemesh", "input", "ground", "parameters", "initial", "errors", "refiner", "output"]
+    assert list(r) == ["wavemesh", "input", "ground", "parameters", "initial", "errors", "refiner", "output",
+                       "mesh_files"]
     rows = r["refiner"]["levels"]
     assert [row["level"] for row in rows] == [3, 2, 1, 0]
     assert list(rows[0]) == ["level", "vertices", "triangles", "e_max", "e_max_normal", "e_max_vertical",

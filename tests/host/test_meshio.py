@@ -136,8 +136,8 @@ def test_write_per_vertex_z(tmp_path):
 
 def test_write_errors(tmp_path):
     mesh = Mesh(2, 2, [(0, 0), (1, 0), (1, 1), (0, 1)], [(0, 1, 2), (0, 2, 3)])
-    with pytest.raises(InputError, match=r"\.obj, \.ply or \.glb"):
-        write_mesh(tmp_path / "m.stl", mesh, np.zeros((2, 2)))
+    with pytest.raises(InputError, match=r"\.obj, \.ply, \.stl or \.glb"):
+        write_mesh(tmp_path / "m.stp", mesh, np.zeros((2, 2)))
     with pytest.raises(InputError):
         write_mesh(tmp_path / "m.obj", mesh, np.zeros((3, 2)))
     with pytest.raises(InputError, match="cannot write"):
