@@ -102,6 +102,7 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     callgrind: wm_refine_init and wm_refine_step, inclusive), or None without valgrind.  The job is
     made as `wavemesh mesh` makes it: the CLI's own option parsing, api's initial triangulation,
     native's fixed-point parameters (HeightField.refiner_zeta for quantised input)."""
+    import shlex
     import shutil
     import sys
 
@@ -109,20 +110,12 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
         return None
     if str(ROOT / "tools") not in sys.path:
         sys.path.insert(0, str(ROOT / "tools"))
-    import refiner_instructions as RI  # its callgrind runs (and it puts tests/firmware's fwio on the path)
-    from fwio import write_input
-    from wavemesh import api, cli, native
-    from wavemesh.harness import jacksboro
+    import refiner_instructions as RI  # its callgrind runs and the CLI's job (cli_input)
+    from wavemesh import native
 
     file, opts = CASES[name]
-    src = jacksboro() if file == "JACKSBORO" else str(tmp / file)
-    args = cli.build_parser("mesh").parse_args(["mesh", src, "-o", str(tmp / "x.obj"), *opts])
-    mp, hf = cli._mesh_params(args), cli._load(args, src)
-    job = api.triangulate(hf, mp.levels, mp.tau, mp.wavelet)
-    fp = native.fixed_params(mp.refine, hf.scale, hf.refiner_zeta(mp.refine.zeta), api.ground(hf).spacing)
-    det = native.haar_details(hf.samples, job.levels, job.wavelet)
     inp = tmp / "native.bin"
-    write_input(inp, hf.samples, det, job.levels, job.mesh, fp, 2 * (hf.width - 1) * (hf.height - 1))
+    RI.cli_input(shlex.join([file if file == "JACKSBORO" else str(tmp / file), *opts]), inp)
     runner = native.build(targets=("wm_run",)) / "wm_run"  # the release build the host's library is in
     profile = tmp / "native.cg"
     _, tris = RI.measure(runner, inp, tmp / "native.out", profile)

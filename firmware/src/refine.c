@@ -149,7 +149,11 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->mesh.tflag[t] = 0;
     }
     /* 4.6 step 2(d): the initial mesh enhanced by the reduction (its removals are level M-1's) */
-    if (!(p->flags & WM_FLAG_NO_REDUCE)) wm_reduce(r);
+    if (!(p->flags & WM_FLAG_NO_REDUCE)) {
+        WM_PROF_SET(WM_PH_REDUCE);
+        wm_reduce(r);
+        WM_PROF_SET(WM_PH_LEVELS);
+    }
     *out = r;
     return WM_OK;
 }
@@ -544,17 +548,23 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
          * the final decimation follow: the decimation removes within zeta what can go, so level 0's pass
          * only cost time (Jacksboro at 5 m: 13 % of the instructions; triangles over the quality
          * benchmark's 52 pairs +0.01 %, docs/refiner.md). */
-        if (rc == WM_OK && !(r->params.flags & WM_FLAG_NO_REDUCE) && !(r->level == 0 && decimates(r)))
+        if (rc == WM_OK && !(r->params.flags & WM_FLAG_NO_REDUCE) && !(r->level == 0 && decimates(r))) {
+            WM_PROF_SET(WM_PH_REDUCE);
             wm_reduce(r);
+            WM_PROF_SET(WM_PH_LEVELS);
+        }
     }
     if (rc == WM_OK && r->level == 0) {
         if (!(r->params.flags & WM_FLAG_NO_BOUND)) {
+            WM_PROF_SET(WM_PH_BOUND);
             rc = error_bound(r, st);
             while (rc == WM_OK && r->field.mask && !r->budget_hit && (rc = wm_hole_cover(r)) > 0)
                 rc = error_bound(r, st); /* holes.c: a grid neighbour for valid vertices in no kept triangle */
             /* A budget that stopped the bound keeps its triangles: removing vertices would leave
              * fewer than asked for, at the same E_max. */
+            WM_PROF_SET(WM_PH_DECIMATE);
             if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE)) rc = wm_decimate(r, st);
+            WM_PROF_SET(WM_PH_LEVELS);
         }
         r->done = 1;
     }

@@ -23,6 +23,11 @@
 
 #define GCAP ((uint64_t)1 << 62)
 
+#if WM_PROFILE
+int wm_prof_phase;
+uint64_t wm_prof_count[WM_PH_COUNT][WM_PC_COUNT];
+#endif
+
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y)
 {
     int32_t cw = (f->width + (1 << m) - 1) >> m;
@@ -151,6 +156,8 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
                 if (av > limit) break;
             }
         }
+        WM_PROF_ADD(WM_PC_ROWS, 1);
+        WM_PROF_ADD(WM_PC_SAMPLES, vmax > limit ? bx - lo + 1 : hi - lo + 1);
         if (vmax > limit) break;
     }
     if (wx) *wx = bx;
@@ -208,6 +215,8 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
             bx = (int32_t)(at - row);
             by = py;
         }
+        WM_PROF_ADD(WM_PC_ROWS, 1);
+        WM_PROF_ADD(WM_PC_SAMPLES, vm > limit ? bx - lo + 1 : hi - lo + 1);
         if (vm > limit) break;
     }
     if (wx) *wx = bx;
@@ -219,6 +228,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
 static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
                          int32_t *wx, int32_t *wy)
 {
+    WM_PROF_ADD(WM_PC_SCANS, 1);
     if (f->width <= (1 << 14) && f->height <= (1 << 14) && D < (1 << 15))
         return scan32(f, x, y, (uint32_t)D, limit, wx, wy);
     return scan(f, x, y, D, limit, wx, wy);
@@ -234,6 +244,7 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
     int32_t se;
     int k = 0;
     uint64_t one;
+    WM_PROF_ADD(WM_PC_SLOPES, 1);
     z0 = f->samples[(int64_t)y[0] * f->width + x[0]];
     dz1 = (int64_t)f->samples[(int64_t)y[1] * f->width + x[1]] - z0;
     dz2 = (int64_t)f->samples[(int64_t)y[2] * f->width + x[2]] - z0;
@@ -305,6 +316,7 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
     if (D <= 0) return 0xFFFFFFFFu;
+    WM_PROF_ADD(WM_PC_POINTS, 1);
     if (f->mask && wm_hole_at(f, px, py)) return 0; /* never above E(T) (holes.c) */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
@@ -322,6 +334,7 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
      * 2^16 |V| > bound D (|V| < 2^47, bound D < 2^63), so no division; otherwise as measured */
     if (D <= 0 || p->metric != WM_METRIC_VERTICAL || f->mask || bound == 0xFFFFFFFFu)
         return wm_point_error(f, p, x, y, px, py) > bound;
+    WM_PROF_ADD(WM_PC_POINTS, 1);
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];

@@ -33,6 +33,25 @@
 
 #define WM_TRI(e) ((e) / 3)
 
+/* Profiling counters (WM_PROFILE=1: the profile build, firmware/CMakeLists.txt's WM_PROFILE option, for
+ * tools/refiner_instructions.py --scans; never the library the host loads nor the board's image): what
+ * the refiner's E(T) work costs by phase, in units the FPGA's triangle engine would take over (samples
+ * visited by scans) and units left to the CPU (scans, slope factors, point errors). */
+#ifndef WM_PROFILE
+#define WM_PROFILE 0
+#endif
+enum { WM_PH_LEVELS, WM_PH_REDUCE, WM_PH_BOUND, WM_PH_DECIMATE, WM_PH_COUNT };
+enum { WM_PC_SCANS, WM_PC_SAMPLES, WM_PC_ROWS, WM_PC_SLOPES, WM_PC_POINTS, WM_PC_COUNT };
+#if WM_PROFILE
+extern int wm_prof_phase;                                /* the phase now running (WM_PH_*) */
+extern uint64_t wm_prof_count[WM_PH_COUNT][WM_PC_COUNT]; /* per phase: WM_PC_* */
+#define WM_PROF_ADD(what, n) (wm_prof_count[wm_prof_phase][what] += (uint64_t)(n))
+#define WM_PROF_SET(ph) (wm_prof_phase = (ph)) /* the phases follow each other, none nests */
+#else
+#define WM_PROF_ADD(what, n) ((void)0)
+#define WM_PROF_SET(ph) ((void)0)
+#endif
+
 /* (k + 1) % 3 and (k + 2) % 3 for a corner k in 0..2, without a division: GCC keeps % 3 as one on rv32
  * (some 40 cycles on the PicoRV32) even in a loop of three. */
 static inline int wm_k1(int k) { return k == 2 ? 0 : k + 1; }

@@ -5,12 +5,16 @@
  * IN (native byte order): "WMR1", int32 W, H, M, nv, nt, tri_cap, sizeof(wm_params); wm_params;
  * uint16 samples[W H]; int64 n; int32 details[n]; int32 xy[2 nv]; int32 tris[3 nt].
  * OUT: int32 vertex slots V, triangles T; int32 xy[2 V]; int32 tris[3 T].
- * Prints one line per level: level vertices triangles e_max over splits swaps. */
+ * Prints one line per level: level vertices triangles e_max over splits swaps; built with WM_PROFILE, then
+ * one line per phase: profile PHASE scans samples rows slopes points (wm_internal.h's counters). */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "wavemesh.h"
+#if WM_PROFILE
+#include "wm_internal.h"
+#endif
 
 static int rd(FILE *f, void *p, size_t n) { return fread(p, 1, n, f) == n; }
 
@@ -90,6 +94,14 @@ int main(int argc, char **argv)
         free(oxy);
         free(otris);
     }
+#if WM_PROFILE
+    for (int ph = 0; ph < WM_PH_COUNT; ph++) {
+        static const char *const names[WM_PH_COUNT] = {"levels", "reduction", "bound", "decimation"};
+        printf("profile %s", names[ph]);
+        for (int c = 0; c < WM_PC_COUNT; c++) printf(" %llu", (unsigned long long)wm_prof_count[ph][c]);
+        printf("\n");
+    }
+#endif
     free(mem);
     free(samples);
     free(details);
