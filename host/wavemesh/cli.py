@@ -300,8 +300,30 @@ def _synth_parser(sub) -> None:
     p.add_argument("--size", type=int, default=None, help="samples per side (default: the paper's)")
 
 
+def _tiles_parser(sub) -> None:
+    p = sub.add_parser("tiles", help="write web terrain tiles (quantized-mesh, for CesiumJS)", description=(
+        "Write a quantized-mesh-1.0 tile pyramid with layer.json (CesiumJS's geographic tiling scheme, "
+        "EPSG:4326, TMS y) from a georeferenced height field: each tile a mesh of `wavemesh mesh`'s "
+        "pipeline on the DEM resampled to the tile (65 x 65 samples), within its level's tolerance, with "
+        "edge lists for skirts and oct-encoded vertex normals (docs/tiles.md)."))
+    p.add_argument("input", help="georeferenced height field file")
+    p.add_argument("-o", "--output", required=True, metavar="DIR",
+                   help="folder for L/X/Y.terrain and layer.json")
+    p.add_argument("--max-zoom", type=int, default=None, metavar="L",
+                   help="the finest level (default: the first whose tile samples are as close as the DEM's)")
+    p.add_argument("--zeta", type=float, default=1.0,
+                   help="the finest level's vertical error bound, metres (default 1); each coarser level "
+                        "doubles it, up to Cesium's geometric error for the level")
+    p.add_argument("--key", help="array name inside an .npz file")
+    p.add_argument("--fill", metavar="nearest|VALUE",
+                   help="replace non-finite samples (no-data) by the nearest finite sample or by VALUE")
+    _shape_options(p)
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+
+
 _COMMANDS_PARSERS = {"mesh": _mesh_parser, "stream": _stream_parser, "check": _check_parser,
-                     "render": _render_parser, "devices": _devices_parser, "synth": _synth_parser}
+                     "render": _render_parser, "devices": _devices_parser, "synth": _synth_parser,
+                     "tiles": _tiles_parser}
 
 
 def _parser_for(argv: list[str]) -> argparse.ArgumentParser:
@@ -534,8 +556,24 @@ def synth_command(args) -> int:
     return 0
 
 
+def tiles_command(args) -> int:
+    from wavemesh import terrain
+    from wavemesh.outputs import check_path
+
+    check_path(args.output, None, "terrain tiles")
+    hf = api.load_input(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)
+    say = None if args.quiet else print
+    ts = terrain.make_tiles(hf, max_zoom=args.max_zoom, zeta=args.zeta, log=say)
+    terrain.write_tiles(ts, args.output)
+    if say:
+        worst = max(r["e_max_vertical"] / r["tolerance"] for r in ts.rows)
+        say(f"wrote {len(ts.files)} tiles of levels 0..{ts.layer['maxzoom']} and layer.json into "
+            f"{args.output}; every tile within its level's tolerance (worst E_max / tolerance {worst:.3f})")
+    return 0
+
+
 COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_command, "render": render_command,
-            "synth": synth_command, "devices": devices_command}
+            "synth": synth_command, "devices": devices_command, "tiles": tiles_command}
 
 
 def main(argv: list[str] | None = None) -> int:
