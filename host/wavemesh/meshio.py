@@ -326,9 +326,8 @@ def vertex_normals(pos: np.ndarray, tris: np.ndarray) -> np.ndarray:
     cross products); triangles counter-clockwise seen from their front."""
     c = pos[tris]
     face = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])  # length: twice the area
-    acc = np.zeros_like(pos, dtype=np.float64)
-    for k in range(3):
-        np.add.at(acc, tris[:, k], face)
+    idx = tris.ravel()
+    acc = np.column_stack([np.bincount(idx, np.repeat(face[:, k], 3), minlength=len(pos)) for k in range(3)])
     length = np.linalg.norm(acc, axis=1)
     out = np.zeros_like(acc)
     out[:, 2] = 1.0  # a vertex of no triangle (none in a proper mesh): up
