@@ -840,7 +840,11 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
         if report:
             import json
 
-            data = result.report | {"output": str(out), "mesh_files": files.to_report()}
+            frame = ("grid positions (no georeference)" if not g.georeferenced
+                     else "x, y the CRS's map coordinates" + (" less sample (0, 0)'s" if files.local else "")
+                     if files.units == "crs" and out.suffix.lower() != ".glb"
+                     else f"x east, y north, z up in {g.ground_unit}s from sample (0, 0)")
+            data = result.report | {"output": str(out), "mesh_files": files.to_report() | {"frame": frame}}
             if written:
                 data["lod"] = written
             staged.path(report).write_text(json.dumps(data, indent=2) + "\n")

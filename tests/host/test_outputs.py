@@ -62,6 +62,7 @@ def test_jacksboro_obj_in_metres(jacksboro):
     assert side["units"] == "metres" and side["vertices"] == "ground"
     report = json.loads((d / "j.json").read_text())
     assert report["mesh_files"]["units"] == "metres" and report["mesh_files"]["normals"] is True
+    assert report["mesh_files"]["frame"] == "x east, y north, z up in metres from sample (0, 0)"
     # the faces are counter-clockwise seen from above: every triangle's normal points up
     f = obj_faces(out)
     c = v[f]
