@@ -584,8 +584,9 @@ STAGE_NAMES = {0: "receiving", 1: "filter bank", 2: "templates", 3: "refining", 
 
 
 def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int | None = None,
-           timeouts: Timeouts | None = None, trace=None, progress: bool = False,
-           log: Callable[[str], None] | None = None) -> StreamResult:
+           link_baud: int | str | None = None, timeouts: Timeouts | None = None, trace=None,
+           progress: bool = False, log: Callable[[str], None] | None = None,
+           warn: Callable[[str], None] | None = None) -> StreamResult:
     """`wavemesh stream` without the files: the job of :func:`mesh` on a device behind ``port`` (a
     pyserial URL or an open port object) over the wire protocol (wavemesh.stream.Device).
 
@@ -594,7 +595,10 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     ``max_triangles`` the budget is its storage less one.  Every level is checked (a proper
     triangulation, else ProtocolError) and measured.  ``trace``: a text stream for the frames' hex
     dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user; ``baud`` and
-    ``timeouts``: by default wavemesh.link.DEFAULT_BAUD and wavemesh.stream.DEFAULT_TIMEOUTS."""
+    ``timeouts``: by default wavemesh.link.DEFAULT_BAUD and wavemesh.stream.DEFAULT_TIMEOUTS.
+    ``link_baud``: after HELLO move the line to this rate (``"auto"``: the fastest of
+    protocol.COMMON_BAUDS the device reaches; wavemesh.stream.Device.change_baud); a switch that does not
+    happen or fails is one line to ``warn`` and the job runs at ``baud``."""
     from wavemesh import protocol as P
     from wavemesh.link import DEFAULT_BAUD
     from wavemesh.stream import (
@@ -623,6 +627,8 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     with Device(port, baud, trace=trace, timeouts=timeouts) as dev:
         info = dev.sync()
         say(f"device: {info.summary()}")
+        if link_baud is not None:
+            info = _switch_baud(dev, info, link_baud, say, warn or say)
         hint = device_fit_hint(hf, info)
         if hint:
             raise DeviceError(f"{hf.source} is {hf.width} x {hf.height} samples; the device holds at most "
@@ -711,7 +717,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         "device": info.to_report(),
         "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},
         "transfer": {"port": port if isinstance(port, str) else repr(port), "baud": baud,
-                     "height_bytes": 2 * hf.width * hf.height, "bytes_sent": sent, "upload_seconds": upload_s,
+                     "line_baud": info.baud, "height_bytes": 2 * hf.width * hf.height, "bytes_sent": sent, "upload_seconds": upload_s,
                      "mesh_bytes": sum(lv.nbytes for lv in levels), "job_seconds": job_s,
                      "frames_out": link.frames_out, "frames_in": link.frames_in, "bytes_out": link.bytes_out,
                      "bytes_in": link.bytes_in, "damaged_frames": link.damaged},
@@ -736,6 +742,30 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                         rows=rows, bound_met=bound_met or not full, comment=_comment(m, tau, run),
                         report=report, device=info, cycles=cycles, link=link, upload_seconds=upload_s,
                         job_seconds=job_s)
+
+
+def _switch_baud(dev, info, link_baud, say, warn):
+    """--link-baud: the device's HELLO at the rate the line runs at from now on (the start rate after a
+    switch that did not happen or failed: one line to ``warn`` says so)."""
+    from wavemesh import protocol as P
+
+    if link_baud == "auto":
+        rate = next((b for b in P.COMMON_BAUDS if info.reachable(b)), None)
+        if rate is None:
+            if info.div_max:
+                warn(f"--link-baud auto: the device reaches none of the common rates; staying at "
+                     f"{dev.link.baud} baud")
+            return info
+    else:
+        rate = int(link_baud)
+    if rate == dev.link.baud:
+        return info
+    new, problem = dev.change_baud(rate)
+    if problem:
+        warn(problem)
+    else:
+        say(f"link: {rate} baud (the device at {new.baud})")
+    return new
 
 
 def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: MeshParams, port, baud: int,

@@ -243,10 +243,27 @@ def _stream_parser(sub) -> None:
                    help="the device: /dev/ttyUSB1, socket://127.0.0.1:7720 (make sim), rfc2217://..., "
                         "loop://; repeated: tiles on every device at once")
     p.add_argument("--baud", "-b", type=int, default=115200,
-                   help="baud rate of a serial port (default 115200, the board's; a socket ignores it)")
+                   help="baud rate of a serial port (default 115200, the board's; a socket ignores it): the "
+                        "rate the session starts at")
+    p.add_argument("--link-baud", metavar="RATE|auto", default=None, type=_link_baud,
+                   help="after HELLO switch the line to RATE baud (auto: the fastest of 3M, 2M, 1.5M, 1M, "
+                        "921600, ... that the device reaches within 2.5 %%); a switch that fails is one "
+                        "warning and the job runs at --baud (default: stay at --baud)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="seconds the device may compute without sending anything (default 120)")
     p.add_argument("--trace", action="store_true", help="hex dump of every frame on stderr")
+
+
+def _link_baud(text: str):
+    if text == "auto":
+        return text
+    try:
+        rate = int(text)
+    except ValueError:
+        rate = 0
+    if rate <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a rate in baud (e.g. 921600) or auto")
+    return rate
 
 
 def _check_parser(sub) -> None:
@@ -470,9 +487,10 @@ def stream_command(args) -> int:
     if args.timeout is not None and not args.timeout > 0:
         raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
     timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
-    result = api.stream(_load(args, args.input), args.port, params, baud=args.baud, timeouts=timeouts,
-                        trace=sys.stderr if args.trace else None, progress=not args.quiet,
-                        log=None if args.quiet else lambda text: print(text, flush=True))
+    result = api.stream(_load(args, args.input), args.port, params, baud=args.baud, link_baud=args.link_baud,
+                        timeouts=timeouts, trace=sys.stderr if args.trace else None, progress=not args.quiet,
+                        log=None if args.quiet else lambda text: print(text, flush=True),
+                        warn=lambda text: print(f"warning: {text}", file=sys.stderr, flush=True))
     if not result.cycles:  # the FPGA stage alone (FEATURE_STAGE): it labelled the blocks, the host refined
         return _finish(args, result, [f"  device: {result.device.name} labelled the blocks; the host refined"]
                        + _refiner_table(result, params))

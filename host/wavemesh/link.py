@@ -360,6 +360,20 @@ class Link:
         if self.trace:
             self._dump("RX", f"damaged frame skipped: {why}", raw)
 
+    @property
+    def baud(self) -> int:
+        return int(getattr(self.port, "baudrate", 0) or 0)
+
+    def set_baud(self, baud: int) -> None:
+        """Set the port's rate (a socket takes any and ignores it); LinkError when the port refuses it.
+        What was received before is dropped (it came at the old rate)."""
+        try:
+            self.port.baudrate = baud
+        except Exception as e:  # ValueError, serial.SerialException: the driver does not take the rate
+            raise LinkError(f"{self.url} does not take {baud} baud: {e}",
+                            "give a rate the USB-serial bridge supports, or leave --link-baud out") from None
+        self.discard_input()
+
     def discard_input(self) -> None:
         """Drop everything received so far (esptool's flush before a sync)."""
         try:

@@ -105,6 +105,8 @@ class DeviceInfo:
     ack_retries: int
     idle_timeout_ms: int  # 0: the device never closes an idle connection (a UART)
     write_timeout_ms: int  # 0: the device never gives up on a peer that does not read (a UART)
+    div_min: int = 0  # BAUD: the rates clk_hz / d for d in div_min..div_max
+    div_max: int = 0  # 0: the device cannot switch its rate
 
     @classmethod
     def from_fields(cls, f: dict) -> DeviceInfo:
@@ -113,7 +115,16 @@ class DeviceInfo:
                    f["max_width"], f["max_height"], f["max_samples"], f["tri_capacity"], f["max_levels"],
                    f["window"], f["max_payload"], f["clk_hz"], f["baud"], f["features"], f["byte_timeout_ms"],
                    f["ack_timeout_ms"], f["session_timeout_ms"], f["ack_retries"], f["idle_timeout_ms"],
-                   f["write_timeout_ms"])
+                   f["write_timeout_ms"], f["div_min"], f["div_max"])
+
+    def reachable(self, baud: int) -> tuple[int, int] | None:
+        """(divisor, the device's rate) nearest to baud, or None when the device cannot switch or lands
+        farther than protocol.BAUD_TOLERANCE from it."""
+        if not self.div_max or baud <= 0:
+            return None
+        div = min(max(P.baud_divisor(self.clk_hz, baud), self.div_min), self.div_max)
+        rate = P.divisor_baud(self.clk_hz, div)
+        return (div, rate) if abs(rate - baud) <= P.BAUD_TOLERANCE * baud else None
 
     @property
     def resend_s(self) -> float:
@@ -346,13 +357,15 @@ class Device:
                           f"attempts in {timeout * attempts:g} s",
                           "the device stopped answering: is it still running?")
 
-    def sync(self) -> DeviceInfo:
+    def sync(self, attempts: int | None = None, timeout: float | None = None) -> DeviceInfo:
         """HELLO until the device answers (esptool's sync): its capabilities."""
         self.link.discard_input()
         payload = P.HELLO.pack(version=P.VERSION)
-        for _ in range(self.t.sync_attempts):
+        attempts = self.t.sync_attempts if attempts is None else attempts
+        timeout = self.t.sync if timeout is None else timeout
+        for _ in range(attempts):
             try:
-                f = self.request(P.FrameType.HELLO, payload, P.FrameType.HELLO_REPLY, self.t.sync, 1)
+                f = self.request(P.FrameType.HELLO, payload, P.FrameType.HELLO_REPLY, timeout, 1)
             except LinkTimeout:
                 continue
             info = DeviceInfo.from_fields(f.fields())
@@ -364,15 +377,55 @@ class Device:
                     and 1 <= info.window <= P.MAX_WINDOW
                     and P.MIN_PAYLOAD <= info.max_payload <= P.MAX_PAYLOAD
                     and 1 <= info.max_levels <= P.MAX_LEVELS and info.clk_hz >= 1000
-                    and info.session_timeout_ms >= 100):
+                    and info.session_timeout_ms >= 100
+                    and (info.div_max == 0 or 1 <= info.div_min <= info.div_max)):
                 raise ProtocolError(f"the device states impossible capabilities: {info}")
             self.info = info
             return info
-        raise LinkTimeout(f"no device answers on {self.link.url} ({self.t.sync_attempts} HELLOs, "
-                          f"{self.t.sync:g} s each)",
+        raise LinkTimeout(f"no device answers on {self.link.url} ({attempts} HELLOs, "
+                          f"{timeout:g} s each)",
                           f"is the device running wavemesh firmware with protocol {P.VERSION_MAJOR} "
                           "(`make sim`, `make native-device`), at this --baud, and not serving another "
                           "client?")
+
+    def change_baud(self, baud: int) -> tuple[DeviceInfo, str | None]:
+        """Move the line from the start rate to ``baud`` after sync(), esptool's change_baud with a proof:
+        BAUD(divisor) at the start rate, OK, both switch, a HELLO at the new rate proves it.  Returns the
+        device's HELLO (at the rate the line has now) and None, or, when the switch did not happen or did
+        not work, the HELLO at the start rate and one line saying why: the device went back by itself
+        (BAUD_PROBE_MS without a valid frame) and the job runs at the start rate."""
+        info = self.info
+        start = self.link.baud
+        if not info.div_max:
+            return info, f"the device cannot change its rate: staying at {start} baud"
+        got = info.reachable(baud)
+        if got is None:
+            div = min(max(P.baud_divisor(info.clk_hz, baud), info.div_min), info.div_max)
+            near = P.divisor_baud(info.clk_hz, div)
+            return info, (f"the device cannot run at {baud} baud (its nearest rate {near} is "
+                          f"{100 * abs(near - baud) / baud:.1f} % off): staying at {start} baud")
+        div, rate = got
+        self.link.set_baud(baud)  # the port takes the rate? (LinkError if not, before the device switches)
+        self.link.set_baud(start)
+        try:
+            self.request(P.FrameType.BAUD, P.BAUD.pack(divisor=div, baud=baud), P.FrameType.OK)
+        except DeviceError as e:
+            return info, f"the device refused {baud} baud ({e}): staying at {start} baud"
+        switched = time.monotonic()
+        self.link.set_baud(baud)
+        probe = P.BAUD_PROBE_MS / 1000
+        try:  # HELLOs at the new rate, well inside the device's probe window
+            new = self.sync(attempts=3, timeout=min(self.t.sync, probe / 4))
+            if new.baud and abs(new.baud - rate) > 1:
+                raise ProtocolError(f"the device says {new.baud} baud after switching to {rate}")
+            return new, None
+        except LinkTimeout:
+            pass
+        # the device goes back to the start rate once its probe window has passed without a valid frame
+        self.link.set_baud(start)
+        time.sleep(max(0.0, switched + probe - time.monotonic()))
+        return self.sync(), (f"the switch to {baud} baud failed (no answer at the new rate): back at "
+                             f"{start} baud")
 
     def status(self) -> dict:
         return self.request(P.FrameType.STATUS, b"", P.FrameType.STATUS_REPLY).fields()

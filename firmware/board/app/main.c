@@ -8,7 +8,8 @@
  * Uploaded samples go straight into the height memory (WM_HEIGHT_BASE), where the FPGA stage and
  * the refiner read them.  HELLO states the built sizes (SYS and ACCEL registers), the triangle
  * capacity the heap holds (app/job.c, board_job_capacity: the refiner's storage and the staging of
- * the initial triangulation for the largest grid) and the name "wm-board".
+ * the initial triangulation for the largest grid), the name "wm-board" and the UART's divisor range
+ * (BAUD switches the line: io_set_divisor).
  *
  * Stage markers (SYS.STAGE, logged by the simulator): 0x00010000 the engine starts serving;
  * 0x00020000 | clock whenever another of the engine's cycle clocks starts to run (proto.h,
@@ -74,6 +75,14 @@ static void io_write_escaped(void *ctx, const uint8_t *data, size_t n)
                              WM_PROTO_SLIP_ESC_ESC);
 }
 
+/* BAUD: the OK has left the FIFO and the shift register, then the new divisor (from the next bit on) */
+static void io_set_divisor(void *ctx, uint32_t div)
+{
+    (void)ctx;
+    board_uart_flush();
+    board_uart_set_div(div);
+}
+
 static uint64_t io_cycles(void *ctx)
 {
     (void)ctx;
@@ -115,6 +124,9 @@ int main(void)
     caps.clk_hz = config.clk_hz;
     caps.baud = config.clk_hz / board_uart_div();
     caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_HOLES;
+    caps.div = board_uart_div(); /* BAUD: any divisor the UART takes (memmap.py, UART.DIV) */
+    caps.div_min = WM_UART_DIV_MIN;
+    caps.div_max = WM_UART_DIV_MASK;
 
     io.ctx = NULL;
     io.getc = io_getc;
@@ -123,6 +135,7 @@ int main(void)
     io.write_escaped = io_write_escaped;
     io.cycles = io_cycles;
     io.mark = io_mark;
+    io.set_divisor = io_set_divisor;
 
     board_stage(STAGE_SERVE);
     for (;;) {

@@ -79,6 +79,10 @@ typedef struct wm_proto_io {
     /* Optional: called whenever another clock starts to run (WM_PROTO_CLOCK_*), right after the
      * engine read the counter, so that a trace of the calls shows what each clock counted. */
     void (*mark)(void *ctx, uint32_t clock);
+    /* Optional (NULL: the device cannot switch its rate; caps.div_max must then be 0): switch the line
+     * to div clock cycles per bit (at caps.clk_hz) once every byte written so far has left the
+     * transmitter (BAUD: the OK goes out at the old rate); bytes half received are dropped. */
+    void (*set_divisor)(void *ctx, uint32_t div);
 } wm_proto_io;
 
 /* What the device states in HELLO_REPLY (docs/protocol.md, HELLO_REPLY). */
@@ -99,6 +103,9 @@ typedef struct wm_proto_caps {
      * write_timeout_ms is the transport's own (its write gives up on a peer that does not read).
      * Both are stated in HELLO_REPLY. */
     uint32_t idle_timeout_ms, write_timeout_ms;
+    /* BAUD (docs/protocol.md, "Changing the rate"): the line runs at clk_hz / div; the host may ask for
+     * any divisor div_min..div_max (div_max 0: none, the rate is fixed).  div is the start divisor. */
+    uint32_t div, div_min, div_max;
 } wm_proto_caps;
 
 /* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */
@@ -181,6 +188,11 @@ typedef struct wm_proto {
     uint8_t level, levels_sent;
     uint32_t e_max, triangles, vertices;
     uint8_t done[WM_PROTO_DONE_BYTES]; /* the DONE payload, kept for its repeats */
+
+    /* the line's rate: the divisor now; after a BAUD, until a valid frame proves it, the one to go back to */
+    uint32_t div, probe_div;
+    uint8_t probing;
+    uint64_t probe_t0;
 
     /* the level being sent */
     const wm_mesh *lm;

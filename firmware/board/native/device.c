@@ -6,11 +6,13 @@
  *
  *   wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] [--tri-capacity N]
  *         [--max-levels N] [--window N] [--max-payload N] [--baud N] [--idle-timeout-ms N]
- *         [--write-timeout-ms N] [--exit-on-close] [--quiet]
+ *         [--write-timeout-ms N] [--no-baud-switch] [--exit-on-close] [--quiet]
  *
  * Defaults are the board's sizes (wm_memmap.h: WM_GRID_MAX_W x WM_GRID_MAX_H, WM_TRI_CAPACITY
  * triangles) and 8 levels.  --port 0 picks a free port.  --baud N paces both directions at N baud
- * (8N1: ten bit times per byte), as a UART would; 0 (the default) runs at socket speed.
+ * (8N1: ten bit times per byte), as a UART would; 0 (the default) runs at socket speed.  A paced device
+ * takes BAUD (the host's --link-baud) for any rate from 1000 to 10 M baud (divisors in nanoseconds a
+ * bit); --no-baud-switch states none (div_max 0), as a board with a fixed rate.
  *
  * One client at a time, and no client can hold the device: a connection that sends no valid frame
  * for --idle-timeout-ms outside a session and a job (default WM_PROTO_IDLE_TIMEOUT_MS), or that
@@ -250,6 +252,16 @@ static int io_getc(void *ctx, uint32_t timeout_ms)
     return c->in[c->in_pos++];
 }
 
+/* BAUD (with --baud only: an unpaced socket has no rate to switch): the bytes written so far leave at
+ * the old rate, then both directions are paced at div nanoseconds a bit */
+static void io_set_divisor(void *ctx, uint32_t div)
+{
+    conn *c = ctx;
+    conn_flush(c);
+    sleep_until(c->tx_clock);
+    c->byte_ns = 10u * (uint64_t)div;
+}
+
 static uint64_t io_cycles(void *ctx)
 {
     (void)ctx;
@@ -261,7 +273,7 @@ static int usage(const char *why)
     fprintf(stderr,
             "wmdev: %s\nusage: wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] "
             "[--tri-capacity N] [--max-levels N] [--window N] [--max-payload N] [--baud N] "
-            "[--idle-timeout-ms N] [--write-timeout-ms N] [--exit-on-close] [--quiet]\n",
+            "[--idle-timeout-ms N] [--write-timeout-ms N] [--no-baud-switch] [--exit-on-close] [--quiet]\n",
             why);
     return 64;
 }
@@ -287,7 +299,7 @@ int main(int argc, char **argv)
     long levels = DEFAULT_LEVELS, window = DEFAULT_WINDOW, payload = WM_PROTO_MAX_PAYLOAD, baud = 0;
     long idle_ms = WM_PROTO_IDLE_TIMEOUT_MS, write_ms = WM_PROTO_WRITE_TIMEOUT_MS;
     pthread_t door;
-    int exit_on_close = 0, quiet = 0;
+    int exit_on_close = 0, quiet = 0, no_switch = 0;
     uint16_t *heights;
     uint8_t *mask;
     uint32_t mask_bytes;
@@ -304,6 +316,10 @@ int main(int argc, char **argv)
         }
         if (!strcmp(a, "--quiet")) {
             quiet = 1;
+            continue;
+        }
+        if (!strcmp(a, "--no-baud-switch")) {
+            no_switch = 1;
             continue;
         }
         if (!strcmp(a, "--port")) dst = &port, lo = 0, hi = 65535;
@@ -339,6 +355,11 @@ int main(int argc, char **argv)
     caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_SPLINE | /* wm_spline, as the host's model */
                     WM_PROTO_FEATURE_HOLES;
     caps.idle_timeout_ms = (uint32_t)idle_ms;
+    if (baud && !no_switch) { /* a divisor is nanoseconds a bit (clk_hz 1e9) */
+        caps.div = (uint32_t)((2000000000ull + (uint64_t)baud) / (2ull * (uint64_t)baud));
+        caps.div_min = 100u;     /* 10 Mbaud */
+        caps.div_max = 1000000u; /* 1000 baud */
+    }
     caps.write_timeout_ms = (uint32_t)write_ms;
     heights = calloc((size_t)max_samples, sizeof *heights);
     mask = calloc((size_t)mask_bytes, 1); /* --nodata hole: a bit per sample */
@@ -371,6 +392,7 @@ int main(int argc, char **argv)
     io.write_escaped = NULL;
     io.cycles = io_cycles;
     io.mark = NULL;
+    io.set_divisor = caps.div_max ? io_set_divisor : NULL;
     if (pthread_create(&door, NULL, doorman, &c) != 0) {
         fprintf(stderr, "wmdev: cannot start the accepting thread\n");
         return 4;
@@ -383,6 +405,7 @@ int main(int argc, char **argv)
         c.in_len = c.in_pos = c.out_len = 0;
         c.bytes_in = c.bytes_out = 0;
         c.rx_clock = c.tx_clock = 0;
+        c.byte_ns = baud ? 10000000000ull / (uint64_t)baud : 0; /* every client starts at --baud */
         if (!quiet) printf("wmdev: client connected\n"), fflush(stdout);
         wm_proto_init(&eng, &io, &caps, heights, wm_native_job, NULL);
         wm_proto_set_mask(&eng, mask, mask_bytes);

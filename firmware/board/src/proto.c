@@ -618,7 +618,9 @@ static void do_hello(wm_proto *p)
     b[WM_PROTO_HELLO_REPLY_WINDOW] = c->window;
     put16(b + WM_PROTO_HELLO_REPLY_MAX_PAYLOAD, c->max_payload);
     put32(b + WM_PROTO_HELLO_REPLY_CLK_HZ, c->clk_hz);
-    put32(b + WM_PROTO_HELLO_REPLY_BAUD, c->baud);
+    /* the start rate as the transport states it; after a BAUD clk_hz / div rounded (protocol.divisor_baud) */
+    put32(b + WM_PROTO_HELLO_REPLY_BAUD,
+          p->div && p->div != c->div ? (uint32_t)((2ull * c->clk_hz + p->div) / (2ull * p->div)) : c->baud);
     put32(b + WM_PROTO_HELLO_REPLY_FEATURES, c->features);
     put16(b + WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS, WM_PROTO_BYTE_TIMEOUT_MS);
     put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
@@ -626,7 +628,38 @@ static void do_hello(wm_proto *p)
     put16(b + WM_PROTO_HELLO_REPLY_ACK_RETRIES, WM_PROTO_ACK_RETRIES);
     put32(b + WM_PROTO_HELLO_REPLY_IDLE_TIMEOUT_MS, c->idle_timeout_ms);
     put32(b + WM_PROTO_HELLO_REPLY_WRITE_TIMEOUT_MS, c->write_timeout_ms);
+    put32(b + WM_PROTO_HELLO_REPLY_DIV_MIN, c->div_min);
+    put32(b + WM_PROTO_HELLO_REPLY_DIV_MAX, c->div_max);
     reply(p, WM_PROTO_T_HELLO_REPLY, b, sizeof b);
+}
+
+/* BAUD, outside a session: OK at the old rate, then the new divisor.  Until a valid frame comes at the
+ * new rate (the host's HELLO) the old divisor is kept in probe_div; wm_proto_serve goes back to it after
+ * WM_PROTO_BAUD_PROBE_MS without one, so a switch the host cannot follow never strands the device. */
+static void do_baud(wm_proto *p)
+{
+    uint32_t div;
+    if (p->f_len != WM_PROTO_BAUD_BYTES) {
+        reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return;
+    }
+    if (p->state != WM_PROTO_STATE_IDLE) {
+        reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return;
+    }
+    div = get32(p->f_pay + WM_PROTO_BAUD_DIVISOR);
+    if (!p->io.set_divisor || p->caps.div_max == 0 || div < p->caps.div_min || div > p->caps.div_max) {
+        reply_error(p, WM_PROTO_E_BAD_BAUD, div);
+        return;
+    }
+    reply_ok(p);
+    out_flush(p);
+    if (!p->probing) p->probe_div = p->div; /* a second BAUD before the first was proved: back to the first's old */
+    p->io.set_divisor(p->io.ctx, div);
+    p->div = div;
+    p->probing = 1;
+    p->probe_t0 = now(p);
+    rx_reset(p);
 }
 
 /* CONFIG's field ranges (host/wavemesh/protocol.py, CONFIG: the ones the host checks before sending) */
@@ -875,6 +908,7 @@ static void handle(wm_proto *p)
     case WM_PROTO_T_CONFIG: do_config(p); break;
     case WM_PROTO_T_DATA: do_data(p); break;
     case WM_PROTO_T_RUN: do_run(p); break;
+    case WM_PROTO_T_BAUD: do_baud(p); break;
     case WM_PROTO_T_ACK: break; /* a late answer to a job that is over */
     default:
         /* the device's own types (an echo on the line) are ignored; anything else is unknown */
@@ -933,7 +967,8 @@ static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
         if (duplicate(p)) return 0;
         reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
         return 0;
-    case WM_PROTO_T_DATA: reply_error(p, WM_PROTO_E_BAD_STATE, p->state); return 0;
+    case WM_PROTO_T_DATA:
+    case WM_PROTO_T_BAUD: reply_error(p, WM_PROTO_E_BAD_STATE, p->state); return 0;
     default:
         if (p->f_type < 0x80u) reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
         return 0;
@@ -1263,6 +1298,9 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->job_fn = job;
     p->job_ctx = job_ctx;
     p->ms_cycles = caps->clk_hz / 1000u ? caps->clk_hz / 1000u : 1u;
+    if (!p->io.set_divisor) p->caps.div_max = 0;
+    if (p->caps.div_max == 0) p->caps.div_min = 0;
+    p->div = p->caps.div_max ? p->caps.div : 0; /* 0: HELLO states caps.baud */
     p->stage = -1;
     p->state = WM_PROTO_STATE_IDLE;
     p->last_valid = now(p); /* the idle clock starts when the connection does */
@@ -1287,10 +1325,18 @@ int wm_proto_serve(wm_proto *p)
             return WM_PROTO_SERVE_CLOSED;
         }
         if (r > 0) {
+            p->probing = 0; /* a valid frame: the line's rate is proved */
             handle(p);
             p->last_valid = now(p); /* the session clock restarts with every valid frame */
             out_flush(p);
             continue;
+        }
+        if (p->probing && now(p) - p->probe_t0 >= ms_to_cycles(p, WM_PROTO_BAUD_PROBE_MS)) {
+            /* nothing valid at the new rate: back to the old one, where the host will look for us */
+            p->probing = 0;
+            p->div = p->probe_div;
+            p->io.set_divisor(p->io.ctx, p->div);
+            rx_reset(p);
         }
         if ((p->state == WM_PROTO_STATE_RECEIVING || p->state == WM_PROTO_STATE_READY) &&
             now(p) - p->last_valid >= ms_to_cycles(p, WM_PROTO_SESSION_TIMEOUT_MS)) {
