@@ -219,6 +219,13 @@ CONFIG_KNOWN_FLAGS = (CONFIG_INITIAL_ONLY | CONFIG_NO_BOUND | CONFIG_NO_LEGALISE
                       | CONFIG_MASK)  # every defined bit; a device refuses any other
 assert CONFIG_KNOWN_FLAGS & (CONFIG_KNOWN_FLAGS + 1) == 0  # the low bits: 0..KNOWN is exactly "no other bit"
 
+# DATA.coding (docs/protocol.md, "Sample coding"): how a frame's samples are written
+CODING_RAW = 0  # 16-bit words as they are
+CODING_RICE = 1  # MED-predicted residuals, zig-zag, Rice-coded per block of RICE_BLOCK samples
+RICE_BLOCK = 16  # samples per block; each block starts with its Rice parameter k
+RICE_K_BITS = 4  # bits of k (0..15)
+RICE_ESCAPE = 16  # a quotient of this many ones is followed by the value in 16 bits instead
+
 # Bits of DATA_ACK.flags and LEVEL_END.flags
 ACK_NAK = 1 << 0  # DATA_ACK: a DATA frame came after a gap: send again from `next`
 LEVEL_LAST = 1 << 0  # LEVEL_END: no level follows (level 0, or the initial-only job)
@@ -363,8 +370,13 @@ CONFIG = _m("CONFIG", "host to device: the job (docs/refiner.md has the fixed-po
 
 DATA = _m("DATA", "host to device: samples",
           ("offset", "I", "index of the first sample (row-major, W per row)"),
-          tail="n 16-bit samples, 1 <= n <= (max_payload - 4) / 2, offset + n <= W H; with CONFIG_MASK "
-               "the W H samples go on with mask_words(W, H) more words: the mask, a bit per sample")
+          ("count", "H", "n: samples (words) in this frame, 1 <= n, offset + n <= W H (+ the mask's words)"),
+          ("coding", "B", "CODING_RAW: n 16-bit words; CODING_RICE: n samples MED-predicted and Rice-coded "
+                          "(offset + n <= W H)"),
+          ("reserved", "B", "0"),
+          tail="CODING_RAW: n little-endian 16-bit words (with CONFIG_MASK the W H samples go on with "
+               "mask_words(W, H) more words: the mask, a bit per sample); CODING_RICE: the bit stream of "
+               "\"Sample coding\" (whole bytes, at most 7 bits of padding)")
 
 DATA_ACK = _m("DATA_ACK", "device to host: after every DATA frame",
               ("next", "I", "samples 0 .. next-1 are stored"),
@@ -592,6 +604,11 @@ def c_header() -> str:
         f"#define WM_PROTO_CONFIG_KNOWN_FLAGS 0x{CONFIG_KNOWN_FLAGS:X}u",
         f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
         f"#define WM_PROTO_ACK_NAK 0x{ACK_NAK:X}u",
+        f"#define WM_PROTO_CODING_RAW {CODING_RAW}",
+        f"#define WM_PROTO_CODING_RICE {CODING_RICE}",
+        f"#define WM_PROTO_RICE_BLOCK {RICE_BLOCK}u",
+        f"#define WM_PROTO_RICE_K_BITS {RICE_K_BITS}",
+        f"#define WM_PROTO_RICE_ESCAPE {RICE_ESCAPE}u",
         f"#define WM_PROTO_LEVEL_LAST 0x{LEVEL_LAST:X}u",
         "",
         "/* Payload layouts: byte offsets of the fields, size of the fixed part */",

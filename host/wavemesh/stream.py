@@ -437,9 +437,10 @@ class Device:
         self.request(P.FrameType.CONFIG, payload, P.FrameType.OK)
 
     # --- samples ------------------------------------------------------------------------------------------
-    def upload(self, samples: np.ndarray, bar=None) -> int:
-        """Send the (H, W) samples in DATA frames, a window at a time; returns the bytes sent (frames
-        repeated after a loss included).
+    def upload(self, samples: np.ndarray, bar=None, extra: np.ndarray | None = None, coded: bool = True) -> int:
+        """Send the (H, W) samples (then ``extra`` words raw: a validity mask) in DATA frames, a window at
+        a time, compactly coded (wavemesh.coding; ``coded`` False: raw words); returns the bytes sent
+        (frames repeated after a loss included).
 
         The device answers every DATA frame with DATA_ACK(next) and flags a gap (NAK): the host goes
         back to `next` (go-back-N).  A loss that leaves no later frame to show it (the window's last
@@ -448,17 +449,16 @@ class Device:
         so the answer comes after every frame sent before the probe was taken in: fewer samples than
         were sent before it means a loss, and the host goes back to them.  A slow device (a simulated
         board) only answers later; nothing is sent twice because of it."""
+        from wavemesh.coding import SampleEncoder
+
         info = self.info
-        a = np.ascontiguousarray(samples, dtype="<u2")
-        height, width = a.shape
-        data = a.tobytes()
-        total = a.size
-        largest = (min(info.max_payload, P.MAX_PAYLOAD) - P.DATA.size) // 2
-        if width <= largest:
-            largest = (largest // width) * width  # whole rows per frame
-        smallest = min(largest, SMALLEST_TAIL // 2)
-        per_frame = largest  # samples a frame: halved after a go-back, doubled after clean windows
-        clean = 0  # samples stored since the last go-back (or the last growth)
+        enc = SampleEncoder(samples, extra, coded)
+        total = enc.total
+        largest = min(info.max_payload, P.MAX_PAYLOAD) - P.DATA.size  # tail bytes of a frame
+        smallest = min(largest, SMALLEST_TAIL)
+        budget = largest  # halved after a go-back, doubled after clean windows
+        in_flight: list[int] = []  # the end (sample) of every frame sent and not yet acknowledged
+        clean = 0  # frames acknowledged since the last go-back (or the last growth)
         every = self.resend_s
         acked = sent = 0
         rewinds = 0  # go-backs since the last progress
@@ -470,21 +470,23 @@ class Device:
         silence = self.t.reply * self.t.attempts
 
         def go_back(to: int) -> None:
-            nonlocal sent, epoch, rewinds, per_frame, clean
+            nonlocal sent, epoch, rewinds, budget, clean, in_flight
             sent, epoch = to, epoch + 1
+            in_flight = []
             rewinds += 1
-            per_frame, clean = max(smallest, per_frame // 2), 0
+            budget, clean = max(smallest, budget // 2), 0
             if rewinds > self.t.data_retries:
                 raise LinkTimeout(f"the samples do not get through: stored {acked} of {total} after "
                                   f"{rewinds - 1} resends",
                                   "the link loses too much; check the cable and --baud")
 
         while acked < total:
-            while sent < total and sent - acked < per_frame * info.window:
-                n = min(per_frame, total - sent)
+            while sent < total and len(in_flight) < info.window:
+                n, coding, tail = enc.frame(sent, budget)
                 self.link.write_frame(P.FrameType.DATA, self._next_seq(),
-                                      P.DATA.pack(offset=sent) + data[2 * sent:2 * (sent + n)])
+                                      P.DATA.pack(offset=sent, count=n, coding=coding) + tail)
                 sent += n
+                in_flight.append(sent)
                 write_by = time.monotonic() + every
             try:
                 f = self.link.read_frame(max(0.0, write_by - time.monotonic()))
@@ -521,11 +523,13 @@ class Device:
             if got > total:
                 raise ProtocolError(f"the device says it stored {got} of {total} samples")
             if got > acked:
-                clean += got - acked
                 acked = got
                 rewinds = 0
-                if clean >= GROW_AFTER * info.window * per_frame and per_frame < largest:
-                    per_frame, clean = min(largest, 2 * per_frame), 0
+                done = sum(1 for e in in_flight if e <= acked)
+                in_flight = [e for e in in_flight if e > acked]
+                clean += done
+                if clean >= GROW_AFTER * info.window and budget < largest:
+                    budget, clean = min(largest, 2 * budget), 0
                 if bar:
                     bar.update(acked, f"{2 * acked // 1024} of {2 * total // 1024} KiB")
             if taken == epoch and got < before and sent > got:

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wavemesh import memmap
 from wavemesh import protocol as P
 from wavemesh import stream as S
 from wavemesh.harness import jacksboro, run_cli
@@ -80,10 +81,10 @@ def sim_timeouts(monkeypatch):
     monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", SIM_TIMEOUTS)
 
 
-def stream_and_mesh(src: str, opts: list[str], url: str, tmp: Path) -> dict:
+def stream_and_mesh(src: str, opts: list[str], url: str, tmp: Path, link: tuple[str, ...] = ()) -> dict:
     """`wavemesh stream` on the board and `wavemesh mesh` with the same options: the same files, a
-    proper mesh; returns the stream's report."""
-    rc, _, err = run_cli("stream", src, *opts, "--port", url, "-o", str(tmp / "board.obj"),
+    proper mesh; returns the stream's report.  ``link``: options of the stream alone (--link-baud)."""
+    rc, _, err = run_cli("stream", src, *opts, *link, "--port", url, "-o", str(tmp / "board.obj"),
                          "--report", str(tmp / "board.json"), "--quiet")
     assert rc == 0, err
     rc, _, err = run_cli("mesh", src, *opts, "-o", str(tmp / "soft.obj"), "-q")
@@ -196,6 +197,26 @@ def test_pin_accurate_mode_gives_the_same_mesh_and_cycles(sim_exe, firmware_hex,
     assert fast["device_cycles"]["link"] < byte_cycles * mesh_bytes
     TINY_CYCLES.update(job_cycles(fast))
     TINY_TRACE[:] = fast_trace
+
+
+def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs, tmp_path, sim_timeouts):
+    """The tiny job bit by bit after `--link-baud` to the board's nearest rate to 3 Mbaud (divisor 8 at
+    25 MHz: 3.125 Mbaud; 3,000,000 itself is 4.2 % off, which the host refuses): the same mesh as
+    `wavemesh mesh`, the same stage cycles as the fast mode's, and the link's cycles hold the line time
+    of the mesh bytes at the new rate, less than a 115200-baud byte each."""
+    clk = memmap.CLK_HZ
+    rate = P.divisor_baud(clk, P.baud_divisor(clk, 3_000_000))
+    b = SimBoard(sim_exe, firmware_hex, "--port", "0", "--exit-on-close")
+    try:
+        rep = stream_and_mesh(str(inputs / "tiny.npy"), TINY, b.url, tmp_path, ("--link-baud", str(rate)))
+    finally:
+        b.stop()
+    assert rep["device"]["baud"] == rate and rep["transfer"]["line_baud"] == rate
+    if TINY_CYCLES:
+        assert_same_work(job_cycles(rep), TINY_CYCLES)
+    byte_cycles = 10 * P.baud_divisor(clk, rate)
+    mesh_bytes = rep["transfer"]["mesh_bytes"]
+    assert byte_cycles * mesh_bytes <= rep["device_cycles"]["link"]
 
 
 HOG = "import sys, time\nend = time.monotonic() + float(sys.argv[1])\nwhile time.monotonic() < end: pass"

@@ -310,6 +310,11 @@ class Raw:
         self.link.close()
 
 
+def data(offset: int, words: bytes) -> bytes:
+    """A DATA payload of raw words (an odd number of bytes: the count of the whole words)."""
+    return P.DATA.pack(offset=offset, count=len(words) // 2, coding=P.CODING_RAW) + words
+
+
 def full_job_works(url: str) -> None:
     """A complete small job: HELLO, CONFIG, DATA, RUN, every level, DONE."""
     rng = np.random.default_rng(3)
@@ -382,7 +387,7 @@ def test_frames_out_of_place_get_their_codes(asan_device):
         assert raw.error()["code"] == P.ErrorCode.BAD_TYPE
         raw.send(P.FrameType.STATUS, b"\x00")
         assert raw.error()["code"] == P.ErrorCode.BAD_LENGTH
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=0) + b"\x00\x00")
+        raw.send(P.FrameType.DATA, data(0, b"\x00\x00"))
         e = raw.error()
         assert e["code"] == P.ErrorCode.BAD_STATE and e["detail"] == P.State.IDLE
         raw.send(P.FrameType.RUN, P.RUN.pack(crc=0))
@@ -390,18 +395,18 @@ def test_frames_out_of_place_get_their_codes(asan_device):
         raw.send(P.FrameType.ACK, P.ACK.pack(kind=P.FrameType.LEVEL_END, index=0, have=0))  # stale: ignored
         raw.send(P.FrameType.CONFIG, raw.config())
         raw.expect(P.FrameType.OK)
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=190) + b"\x00\x00" * 3)  # beyond 16 x 12
+        raw.send(P.FrameType.DATA, data(190, b"\x00\x00" * 3))  # beyond 16 x 12
         assert raw.error()["code"] == P.ErrorCode.BAD_OFFSET
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=0) + b"\x00\x00\x00")  # odd sample bytes
+        raw.send(P.FrameType.DATA, data(0, b"\x00\x00\x00"))  # odd sample bytes
         assert raw.error()["code"] == P.ErrorCode.BAD_LENGTH
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=4) + b"\x01\x00")  # a gap: NAK, once
+        raw.send(P.FrameType.DATA, data(4, b"\x01\x00"))  # a gap: NAK, once
         ack = raw.expect(P.FrameType.DATA_ACK).fields()
         assert ack["next"] == 0 and ack["flags"] == P.ACK_NAK
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=8) + b"\x01\x00")
+        raw.send(P.FrameType.DATA, data(8, b"\x01\x00"))
         assert raw.expect(P.FrameType.DATA_ACK).fields()["flags"] == 0
         raw.send(P.FrameType.RUN, P.RUN.pack(crc=0))  # not every sample yet
         assert raw.error()["code"] == P.ErrorCode.BAD_STATE
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=0) + b"\x07\x00" * 192)
+        raw.send(P.FrameType.DATA, data(0, b"\x07\x00" * 192))
         assert raw.expect(P.FrameType.DATA_ACK).fields()["next"] == 192
         raw.send(P.FrameType.RUN, P.RUN.pack(crc=12345))  # not the samples' CRC
         e = raw.error()
@@ -420,7 +425,7 @@ def test_a_repeated_request_is_answered_not_redone(asan_device):
         raw.hello()
         seq = raw.send(P.FrameType.CONFIG, raw.config())
         assert raw.expect(P.FrameType.OK).seq == seq
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=0) + b"\x01\x00" * 10)
+        raw.send(P.FrameType.DATA, data(0, b"\x01\x00" * 10))
         raw.expect(P.FrameType.DATA_ACK)
         raw.send(P.FrameType.CONFIG, raw.config(), seq=seq)  # our OK was "lost": the same request again
         assert raw.expect(P.FrameType.OK).seq == seq
@@ -476,9 +481,9 @@ def start_job(raw: Raw, w: int = 64, h: int = 64) -> None:
     raw.send(P.FrameType.CONFIG, raw.config(width=w, height=h, levels=3))
     raw.expect(P.FrameType.OK)
     a = make("ball", 64)[:h, :w].astype("<u2")
-    data = a.tobytes()
+    words = a.tobytes()
     for off in range(0, w * h, 256):
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=off) + data[2 * off:2 * off + 512])
+        raw.send(P.FrameType.DATA, data(off, words[2 * off:2 * off + 512]))
         raw.expect(P.FrameType.DATA_ACK)
     raw.send(P.FrameType.RUN, P.RUN.pack(crc=S.samples_crc(a)))
 
@@ -534,7 +539,7 @@ def test_a_session_that_goes_silent_is_dropped(asan_device):
         raw.hello()
         raw.send(P.FrameType.CONFIG, raw.config())
         raw.expect(P.FrameType.OK)
-        raw.send(P.FrameType.DATA, P.DATA.pack(offset=0) + b"\x01\x00" * 5)
+        raw.send(P.FrameType.DATA, data(0, b"\x01\x00" * 5))
         raw.expect(P.FrameType.DATA_ACK)
         t0 = time.monotonic()
         e = raw.error(timeout=P.SESSION_TIMEOUT_MS / 1000 + 3)

@@ -620,7 +620,7 @@ static void do_hello(wm_proto *p)
     put32(b + WM_PROTO_HELLO_REPLY_CLK_HZ, c->clk_hz);
     /* the start rate as the transport states it; after a BAUD clk_hz / div rounded (protocol.divisor_baud) */
     put32(b + WM_PROTO_HELLO_REPLY_BAUD,
-          p->div && p->div != c->div ? (uint32_t)((2ull * c->clk_hz + p->div) / (2ull * p->div)) : c->baud);
+          p->div && p->div != c->div ? (c->clk_hz + p->div / 2u) / p->div : c->baud);
     put32(b + WM_PROTO_HELLO_REPLY_FEATURES, c->features);
     put16(b + WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS, WM_PROTO_BYTE_TIMEOUT_MS);
     put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
@@ -799,27 +799,105 @@ static uint16_t word_at(const wm_proto *p, uint32_t k)
     return (uint16_t)(p->mask[2 * (k - wh)] | p->mask[2 * (k - wh) + 1] << 8);
 }
 
+/* CODING_RICE (docs/protocol.md, "Sample coding"; host/wavemesh/coding.py encodes): n samples from off,
+ * each the MED prediction from the samples stored before it plus a zig-zag residual, Rice-coded in blocks
+ * of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
+ * not such a stream (too short, or a byte or more left over). */
+typedef struct bit_reader {
+    const uint8_t *s, *e;
+    uint32_t acc;
+    uint32_t n; /* bits in acc (at most 23) */
+} bit_reader;
+
+static int bits_get(bit_reader *r, uint32_t k, uint32_t *v)
+{
+    while (r->n < k) {
+        if (r->s == r->e) return -1;
+        r->acc = r->acc << 8 | *r->s++;
+        r->n += 8;
+    }
+    r->n -= k;
+    *v = (r->acc >> r->n) & ((1u << k) - 1u);
+    return 0;
+}
+
+static int rice_decode(wm_proto *p, uint32_t off, uint32_t n, const uint8_t *s, uint32_t len)
+{
+    uint16_t *h = p->heights;
+    uint32_t w = (uint32_t)p->job.width, x = off % w, i = off, end = off + n;
+    bit_reader r;
+    r.s = s;
+    r.e = s + len;
+    r.acc = 0;
+    r.n = 0;
+    while (i < end) {
+        uint32_t k, m = end - i < WM_PROTO_RICE_BLOCK ? end - i : WM_PROTO_RICE_BLOCK;
+        if (bits_get(&r, WM_PROTO_RICE_K_BITS, &k)) return -1;
+        for (; m; m--, i++) {
+            uint32_t q = 0, bit = 1, z, pred;
+            while (q < WM_PROTO_RICE_ESCAPE) {
+                if (bits_get(&r, 1, &bit)) return -1;
+                if (!bit) break;
+                q++;
+            }
+            if (q == WM_PROTO_RICE_ESCAPE) {
+                if (bits_get(&r, 16, &z)) return -1;
+            } else {
+                z = 0;
+                if (k && bits_get(&r, k, &z)) return -1;
+                z |= q << k;
+            }
+            if (i < w) {
+                pred = x ? h[i - 1] : 0u;
+            } else if (x == 0) {
+                pred = h[i - w];
+            } else {
+                uint32_t a = h[i - 1], b = h[i - w], c = h[i - w - 1];
+                uint32_t hi = a > b ? a : b, lo = a > b ? b : a;
+                pred = c >= hi ? lo : c <= lo ? hi : a + b - c;
+            }
+            h[i] = (uint16_t)(pred + ((z >> 1) ^ (0u - (z & 1u))));
+            if (++x == w) x = 0;
+        }
+    }
+    return (uint32_t)(r.e - r.s) == 0 && r.n < 8 ? 0 : -1;
+}
+
 static void do_data(wm_proto *p)
 {
     uint8_t b[WM_PROTO_DATA_ACK_BYTES];
-    uint32_t off, n, i;
+    uint32_t off, n, i, coding, tail;
     const uint8_t *s;
     if (p->state != WM_PROTO_STATE_RECEIVING && p->state != WM_PROTO_STATE_READY) {
         reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
         return;
     }
-    if (p->f_len < WM_PROTO_DATA_BYTES + 2 || (p->f_len - WM_PROTO_DATA_BYTES) % 2 != 0) {
+    off = get32(p->f_pay + WM_PROTO_DATA_OFFSET);
+    n = get16(p->f_pay + WM_PROTO_DATA_COUNT);
+    coding = p->f_pay[WM_PROTO_DATA_CODING];
+    tail = (uint32_t)p->f_len - WM_PROTO_DATA_BYTES;
+    if (p->f_len < WM_PROTO_DATA_BYTES + 1 || n == 0 || (coding == WM_PROTO_CODING_RAW && tail != 2 * n) ||
+        (coding != WM_PROTO_CODING_RAW && coding != WM_PROTO_CODING_RICE)) {
         reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
         return;
     }
-    off = get32(p->f_pay + WM_PROTO_DATA_OFFSET);
-    n = (uint32_t)(p->f_len - WM_PROTO_DATA_BYTES) / 2;
-    if (off > p->total || n > p->total - off) {
+    if (off > p->total || n > p->total - off ||
+        (coding == WM_PROTO_CODING_RICE && off + n > (uint32_t)p->job.width * (uint32_t)p->job.height)) {
         reply_error(p, WM_PROTO_E_BAD_OFFSET, off);
         return;
     }
     zero(b, sizeof b);
-    if (off <= p->next) {
+    if (off <= p->next && coding == WM_PROTO_CODING_RICE) {
+        /* every sample before off is stored: the predictions are the host's */
+        if (rice_decode(p, off, n, p->f_pay + WM_PROTO_DATA_BYTES, tail)) {
+            reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+            return;
+        }
+        if (off + n > p->next) {
+            p->next = off + n;
+            p->nak_sent = 0;
+        }
+    } else if (off <= p->next) {
         /* in order, or a repeat that may reach beyond what is stored */
         s = p->f_pay + WM_PROTO_DATA_BYTES;
 #if WM_LITTLE_ENDIAN

@@ -1,0 +1,141 @@
+"""The compact coding of DATA's samples (docs/protocol.md, "Sample coding"): the host's encoder and a
+reference decoder; the device's decoder is firmware/board/src/proto.c's (``rice_decode``).
+
+Each sample s at (x, y) is predicted from the samples before it in row-major order, as the device has
+them stored (the MED predictor of LOCO-I / JPEG-LS): a = left, b = above, c = above-left;
+pred = min(a, b) when c >= max(a, b), max(a, b) when c <= min(a, b), else a + b - c; row 0: the left
+sample (0 for the first), column 0: the one above.  The residual (s - pred) mod 2^16, read as a signed
+16-bit number r, becomes z = 2 r for r >= 0, -2 r - 1 else (zig-zag).  Blocks of RICE_BLOCK samples
+(from the frame's first sample) each start with k (RICE_K_BITS bits, the encoder's choice: the fewest
+bits), then every z as q = z >> k ones and a zero followed by the k low bits of z, or, when q >= RICE_ESCAPE,
+RICE_ESCAPE ones followed by z in 16 bits.  Bits go most significant first; a frame's stream is padded
+to a whole byte with zeros.  Every frame is decodable alone (the device has every sample before the
+frame's offset stored), and a frame whose code would not be shorter than its raw words goes raw.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wavemesh import protocol as P
+
+
+def residuals(samples: np.ndarray) -> np.ndarray:
+    """z of every sample of the (H, W) array, row-major (uint32)."""
+    a = np.asarray(samples, dtype=np.int64)
+    pred = np.zeros_like(a)
+    pred[0, 1:] = a[0, :-1]
+    pred[1:, 0] = a[:-1, 0]
+    left, up, ul = a[1:, :-1], a[:-1, 1:], a[:-1, :-1]
+    hi, lo = np.maximum(left, up), np.minimum(left, up)
+    pred[1:, 1:] = np.where(ul >= hi, lo, np.where(ul <= lo, hi, left + up - ul))
+    r = ((a - pred) & 0xFFFF).astype(np.int64)
+    r = np.where(r >= 0x8000, r - 0x10000, r)
+    return np.where(r >= 0, 2 * r, -2 * r - 1).astype(np.uint32).ravel()
+
+
+class SampleEncoder:
+    """The W H samples of a job (then ``extra`` words sent raw: a validity mask), cut into DATA tails on
+    demand: :meth:`frame` gives the most samples from an offset that fit a byte budget."""
+
+    def __init__(self, samples: np.ndarray, extra: np.ndarray | None = None, coded: bool = True):
+        a = np.ascontiguousarray(samples, dtype="<u2")
+        self.words = a.ravel() if extra is None else np.concatenate([a.ravel(), extra.astype("<u2")])
+        self.n = a.size  # samples that may be coded
+        self.total = self.words.size
+        self.coded = coded and self.n > 0
+        if not self.coded:
+            return
+        z = residuals(a).astype(np.int64)
+        nb = -(-self.n // P.RICE_BLOCK)
+        zb = np.zeros(nb * P.RICE_BLOCK, np.int64)
+        zb[:self.n] = z
+        zb = zb.reshape(nb, P.RICE_BLOCK)
+        valid = (np.arange(nb * P.RICE_BLOCK) < self.n).reshape(nb, P.RICE_BLOCK)
+        cost = np.stack([(np.where((zb >> k) < P.RICE_ESCAPE, (zb >> k) + 1 + k, P.RICE_ESCAPE + 16)
+                           * valid).sum(axis=1) for k in range(1 << P.RICE_K_BITS)], axis=1)
+        k = cost.argmin(axis=1)  # the fewest bits per block
+        kk = k[:, None]
+        qk = zb >> kk
+        esc = qk >= P.RICE_ESCAPE
+        slen = np.where(esc, P.RICE_ESCAPE + 16, qk + 1 + kk) * valid
+        ones = np.where(esc, P.RICE_ESCAPE, qk)
+        sval = np.where(esc, (((1 << P.RICE_ESCAPE) - 1) << 16) | zb,
+                        (((1 << np.minimum(ones, 62)) - 1) << (1 + kk)) | (zb & ((1 << kk) - 1)))
+        # items: a block's k, then its samples
+        lens_all = np.concatenate([np.full((nb, 1), P.RICE_K_BITS), slen], axis=1).ravel()
+        vals_all = np.concatenate([k[:, None], sval], axis=1).ravel()
+        keep = lens_all > 0
+        lens_all, vals_all = lens_all[keep], vals_all[keep].astype(np.uint64)
+        starts = np.concatenate([[0], np.cumsum(lens_all)])
+        nbits = int(starts[-1])
+        item = np.repeat(np.arange(lens_all.size), lens_all)
+        pos = np.arange(nbits) - starts[item]
+        shift = (lens_all[item] - 1 - pos).astype(np.uint64)
+        self.bits = ((vals_all[item] >> shift) & np.uint64(1)).astype(np.uint8)
+        # bit position where block b starts (b = 0 .. nb): the block header items
+        block_items = np.concatenate([[0], np.cumsum(1 + valid.sum(axis=1))])
+        self.block_bit = starts[block_items]
+
+    def coded_bytes(self, start_block: int, end_block: int) -> int:
+        return -(-int(self.block_bit[end_block] - self.block_bit[start_block]) // 8)
+
+    def frame(self, start: int, budget: int) -> tuple[int, int, bytes]:
+        """(count, coding, tail) of the DATA frame at sample ``start`` with at most ``budget`` tail bytes."""
+        if start >= self.n or not self.coded or start % P.RICE_BLOCK:
+            # the mask's words, or a start between blocks: raw, to the next block's start at most
+            stop = self.total if start >= self.n else min(self.n, start + P.RICE_BLOCK - start % P.RICE_BLOCK)
+            n = max(1, min(budget // 2, stop - start))
+            return n, P.CODING_RAW, self.words[start:start + n].tobytes()
+        b0 = start // P.RICE_BLOCK
+        nblocks = self.block_bit.size - 1
+        # as many raw samples as fit, in whole blocks: coded only when that is shorter
+        raw_n = min(self.n - start, max(P.RICE_BLOCK, (budget // 2) // P.RICE_BLOCK * P.RICE_BLOCK))
+        raw_end = min(nblocks, b0 + -(-raw_n // P.RICE_BLOCK))
+        if self.coded_bytes(b0, raw_end) >= 2 * raw_n:
+            return raw_n, P.CODING_RAW, self.words[start:start + raw_n].tobytes()
+        limit = self.block_bit[b0] + 8 * budget
+        b1 = int(np.searchsorted(self.block_bit, limit, side="right")) - 1
+        b1 = min(max(b1, b0 + 1), nblocks)
+        n = min(self.n, b1 * P.RICE_BLOCK) - start
+        tail = np.packbits(self.bits[self.block_bit[b0]:self.block_bit[b1]]).tobytes()
+        return n, P.CODING_RICE, tail
+
+
+def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) -> None:
+    """The reference decoder: writes samples start .. start + count - 1 of the row-major ``stored`` (uint16,
+    every sample before ``start`` in place) from a CODING_RICE tail; ValueError when the tail is not one."""
+    bits = np.unpackbits(np.frombuffer(tail, np.uint8))
+    pos = 0
+
+    def take(k: int) -> int:
+        nonlocal pos
+        if pos + k > bits.size:
+            raise ValueError("the bit stream ends inside a sample")
+        v = 0
+        for b in bits[pos:pos + k]:
+            v = v << 1 | int(b)
+        pos += k
+        return v
+
+    i, end = start, start + count
+    while i < end:
+        k = take(P.RICE_K_BITS)
+        for _ in range(min(P.RICE_BLOCK, end - i)):
+            q = 0
+            while q < P.RICE_ESCAPE and take(1):
+                q += 1
+            z = take(16) if q == P.RICE_ESCAPE else (q << k | take(k))
+            x, y = i % width, i // width
+            if y == 0:
+                pred = int(stored[i - 1]) if x else 0
+            elif x == 0:
+                pred = int(stored[i - width])
+            else:
+                a, b, c = int(stored[i - 1]), int(stored[i - width]), int(stored[i - width - 1])
+                pred = min(a, b) if c >= max(a, b) else max(a, b) if c <= min(a, b) else a + b - c
+            r = (z >> 1) ^ -(z & 1)
+            stored[i] = (pred + r) & 0xFFFF
+            i += 1
+    if bits.size - pos >= 8:
+        raise ValueError("bytes left after the last sample")
