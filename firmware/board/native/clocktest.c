@@ -79,6 +79,7 @@ static void q_job(host *h)
     q_frame(h, WM_PROTO_T_CONFIG, cfg, sizeof cfg);
     memset(data, 0, sizeof data);
     for (int i = 0; i < SIDE * SIDE; i++) th_put16(le + 2 * i, (uint32_t)(100 * i));
+    th_put16(data + WM_PROTO_DATA_COUNT, SIDE * SIDE); /* CODING_RAW (0): the words as they are */
     memcpy(data + WM_PROTO_DATA_BYTES, le, sizeof le);
     q_frame(h, WM_PROTO_T_DATA, data, sizeof data);
     th_put32(run + WM_PROTO_RUN_CRC, wm_proto_crc32(0, le, sizeof le));

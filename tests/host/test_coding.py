@@ -1,0 +1,70 @@
+"""The compact coding of DATA's samples (wavemesh.coding, docs/protocol.md "Sample coding"): every frame the
+encoder cuts decodes, by the reference decoder, to the samples (smooth, noisy, random, steps, wrap-around);
+incompressible samples cost no more than raw words; a real DEM costs under a byte a sample.  The device's
+decoder (proto.c) is checked end to end by every stream test (RUN's CRC and the meshes)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from wavemesh import coding as C
+from wavemesh import protocol as P
+from wavemesh.harness import jacksboro
+
+RNG = np.random.default_rng(20261127)
+CASES = {
+    "random": RNG.integers(0, 65536, (9, 37)),
+    "ramp": np.add.outer(np.arange(23) * 301, np.arange(41) * 7),
+    "walk": np.cumsum(RNG.integers(-40, 41, (31, 29)), axis=1) + 30000,
+    "steps": np.where(np.add.outer(np.arange(17), np.arange(19)) > 15, 65535, 0),
+    "one row": RNG.integers(0, 100, (1, 50)),
+    "one column": RNG.integers(0, 100, (50, 1)),
+}
+
+
+def roundtrip(a: np.ndarray, budget: int) -> tuple[np.ndarray, int, int]:
+    enc = C.SampleEncoder(a)
+    out = np.zeros(a.size, np.uint16)
+    start = tail_bytes = 0
+    frames = 0
+    while start < enc.n:
+        n, coding, tail = enc.frame(start, budget)
+        assert 1 <= n and len(tail) <= max(budget, 2 * P.RICE_BLOCK)
+        if coding == P.CODING_RAW:
+            assert len(tail) == 2 * n
+            out[start:start + n] = np.frombuffer(tail, "<u2")
+        else:
+            assert len(tail) < 2 * n
+            C.decode(tail, start, n, out, a.shape[1])
+        start += n
+        tail_bytes += len(tail)
+        frames += 1
+    return out, tail_bytes, frames
+
+
+@pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.parametrize("budget", [64, 1016])
+def test_every_frame_decodes_to_the_samples(name, budget):
+    a = (CASES[name] & 0xFFFF).astype(np.uint16)
+    out, tail, _ = roundtrip(a, budget)
+    assert np.array_equal(out, a.ravel())
+    assert tail <= 2 * a.size  # never more than raw words
+
+
+def test_a_damaged_stream_is_refused():
+    a = CASES["walk"].astype(np.uint16)
+    n, coding, tail = C.SampleEncoder(a).frame(0, 1016)
+    assert coding == P.CODING_RICE
+    with pytest.raises(ValueError):
+        C.decode(tail[:-3], 0, n, np.zeros(a.size, np.uint16), a.shape[1])
+    with pytest.raises(ValueError):
+        C.decode(tail + b"\0", 0, n, np.zeros(a.size, np.uint16), a.shape[1])
+
+
+def test_a_real_dem_costs_under_a_byte_a_sample():
+    from wavemesh.heightfield import load_heightfield as load
+
+    hf = load(jacksboro(), key="elevation")
+    out, tail, frames = roundtrip(hf.samples, P.MAX_PAYLOAD - P.DATA.size)
+    assert np.array_equal(out, hf.samples.ravel())
+    assert tail / hf.samples.size < 0.75  # 0.68 (bench/bench_link.py reports the wire bytes)
