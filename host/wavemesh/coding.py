@@ -84,7 +84,8 @@ class SampleEncoder:
         """(count, coding, tail) of the DATA frame at sample ``start`` with at most ``budget`` tail bytes."""
         if start >= self.n or not self.coded or start % P.RICE_BLOCK:
             # the mask's words, or a start between blocks: raw, to the next block's start at most
-            stop = self.total if start >= self.n else min(self.n, start + P.RICE_BLOCK - start % P.RICE_BLOCK)
+            stop = (self.total if start >= self.n or not self.coded
+                    else min(self.n, start + P.RICE_BLOCK - start % P.RICE_BLOCK))
             n = max(1, min(budget // 2, stop - start))
             return n, P.CODING_RAW, self.words[start:start + n].tobytes()
         b0 = start // P.RICE_BLOCK

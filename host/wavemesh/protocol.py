@@ -153,7 +153,7 @@ class ErrorCode(IntEnum):
     ABORTED = 12  # the host sent ABORT (or a new HELLO) during the job
     NO_ACK = 13  # the host stopped acknowledging LEVEL_END or DONE (detail: the level)
     BUSY = 14  # another client holds the device: sent unasked to a new connection, which is then closed
-    BAD_BAUD = 15  # BAUD's divisor is outside div_min..div_max, or the device cannot switch (detail: the divisor)
+    BAD_BAUD = 15  # BAUD's divisor is not in div_min..div_max, or the rate is fixed (detail: the divisor)
 
 
 ERROR_TEXT = {
@@ -329,7 +329,7 @@ HELLO_REPLY = _m("HELLO_REPLY", "device to host: what the device is and can do",
                                           "and a job is closed (0: never, a UART)", 0),
                  ("write_timeout_ms", "I", "a connection that takes none of the device's bytes for this long "
                                            "is closed (0: never, a UART)", 0),
-                 ("div_min", "I", "BAUD: the smallest divisor (clock cycles per bit at clk_hz: the fastest rate)",
+                 ("div_min", "I", "BAUD: the smallest divisor (clock cycles a bit: the fastest rate)",
                   0),
                  ("div_max", "I", "BAUD: the largest divisor; 0: the device cannot switch its rate", 0))
 
@@ -408,7 +408,7 @@ ACK = _m("ACK", "host to device: answer to every LEVEL_END and DONE",
                        "end)", 0))
 
 BAUD = _m("BAUD", "host to device: switch the line's rate (outside a session)",
-          ("divisor", "I", "clock cycles per bit at HELLO_REPLY.clk_hz, div_min..div_max (protocol.baud_divisor)"),
+          ("divisor", "I", "clock cycles a bit at HELLO_REPLY.clk_hz, div_min..div_max (baud_divisor)"),
           ("baud", "I", "the rate the host sets, for the record (the device uses the divisor)"))
 
 STATUS = _m("STATUS", "host to device: ask for the state")
@@ -478,7 +478,8 @@ LEVEL_HEADER = _m("LEVEL_HEADER", "the start of a level stream (the MESH frames'
                        "(three vertex slot numbers of index_bytes each, counter-clockwise), in slot order "
                        "as wm_mesh_export writes them")
 
-MESSAGES = (HELLO, HELLO_REPLY, CONFIG, DATA, DATA_ACK, RUN, OK, ERROR, ACK, STATUS, STATUS_REPLY, ABORT, BAUD,
+MESSAGES = (HELLO, HELLO_REPLY, CONFIG, DATA, DATA_ACK, RUN, OK, ERROR, ACK, STATUS, STATUS_REPLY, ABORT,
+            BAUD,
             PROGRESS, MESH, LEVEL_END, DONE, LEVEL_HEADER)
 PAYLOAD = {FrameType.HELLO: HELLO, FrameType.CONFIG: CONFIG, FrameType.DATA: DATA, FrameType.RUN: RUN,
            FrameType.ACK: ACK, FrameType.STATUS: STATUS, FrameType.ABORT: ABORT, FrameType.BAUD: BAUD,

@@ -437,7 +437,8 @@ class Device:
         self.request(P.FrameType.CONFIG, payload, P.FrameType.OK)
 
     # --- samples ------------------------------------------------------------------------------------------
-    def upload(self, samples: np.ndarray, bar=None, extra: np.ndarray | None = None, coded: bool = True) -> int:
+    def upload(self, samples: np.ndarray, bar=None, extra: np.ndarray | None = None,
+               coded: bool = True) -> int:
         """Send the (H, W) samples (then ``extra`` words raw: a validity mask) in DATA frames, a window at
         a time, compactly coded (wavemesh.coding; ``coded`` False: raw words); returns the bytes sent
         (frames repeated after a loss included).

@@ -106,7 +106,8 @@ def test_link_over_loop_port_reads_whole_frames_and_counts_damage():
     with Link(port, trace=trace) as link:
         link.write_raw(b"\xc0garbage\xc0")
         link.write_frame(P.FrameType.STATUS, 3)
-        link.write_frame(P.FrameType.DATA, 4, P.DATA.pack(offset=7, count=1, coding=P.CODING_RAW) + b"\x01\x00")
+        data = P.DATA.pack(offset=7, count=1, coding=P.CODING_RAW) + b"\x01\x00"
+        link.write_frame(P.FrameType.DATA, 4, data)
         f1 = link.read_frame(1.0)
         f2 = link.read_frame(1.0)
         assert (f1.name, f1.seq, f2.name) == ("STATUS", 3, "DATA")

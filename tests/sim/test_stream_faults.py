@@ -110,7 +110,7 @@ def test_a_lost_mesh_frame_is_asked_for_alone_in_smaller_frames(device, referenc
 def last_data(total: int):
     def pick(direction, f):
         if direction == "up" and f.type == P.FrameType.DATA:
-            return f.fields()["offset"] + len(f.tail()) // 2 == total
+            return f.fields()["offset"] + f.fields()["count"] == total
         return direction == "down" and f.type == P.FrameType.DATA_ACK and f.fields()["next"] == total
     return pick
 

@@ -357,7 +357,7 @@ int main(int argc, char **argv)
     caps.idle_timeout_ms = (uint32_t)idle_ms;
     if (baud && !no_switch) { /* a divisor is nanoseconds a bit (clk_hz 1e9) */
         caps.div = (uint32_t)((2000000000ull + (uint64_t)baud) / (2ull * (uint64_t)baud));
-        caps.div_min = 100u;     /* 10 Mbaud */
+        caps.div_min = 100u; /* 10 Mbaud */
         caps.div_max = 1000000u; /* 1000 baud */
     }
     caps.write_timeout_ms = (uint32_t)write_ms;

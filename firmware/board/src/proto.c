@@ -654,7 +654,8 @@ static void do_baud(wm_proto *p)
     }
     reply_ok(p);
     out_flush(p);
-    if (!p->probing) p->probe_div = p->div; /* a second BAUD before the first was proved: back to the first's old */
+    if (!p->probing)
+        p->probe_div = p->div; /* a second BAUD before the first was proved: back to the first's old */
     p->io.set_divisor(p->io.ctx, div);
     p->div = div;
     p->probing = 1;

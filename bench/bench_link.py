@@ -1,0 +1,131 @@
+"""The link at board speed: wire bytes per sample of the compact sample coding on the real height fields,
+and line seconds of whole jobs at 115200, 921600 and 3,000,000 baud (`python bench/run.py link`).
+
+Wire bytes are counted by the real encoder (wavemesh.coding) and framing (wavemesh.link: header, CRC,
+SLIP escapes, delimiters), DATA frames as `Device.upload` cuts them on a clean line (max_payload 1024);
+the level streams down as the device sends them (LEVEL_HEADER, vertex slots, triangles, in MESH frames of
+1016 bytes), from `wavemesh mesh`'s level meshes with the same options, plus the session's small frames
+(HELLO, CONFIG, RUN, ACKs, DONE).  Line seconds = wire bytes x 10 bits / baud.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import numpy as np
+
+TITLE = "The link: sample coding and line time"
+SETS = ("jacksboro", "topobathy", "lidar_dem", "motorcycle")  # the real DEMs and range images
+BAUDS = (115_200, 921_600, 3_000_000)
+SIZES = ((256, 256), (640, 480), (1024, 1024))
+
+
+def upload_bytes(samples: np.ndarray, coded: bool = True) -> int:
+    from wavemesh import protocol as P
+    from wavemesh.coding import SampleEncoder
+    from wavemesh.link import encode_frame
+
+    enc = SampleEncoder(samples, coded=coded)
+    start, total, seq = 0, 0, 0
+    budget = P.MAX_PAYLOAD - P.DATA.size
+    while start < enc.total:
+        n, coding, tail = enc.frame(start, budget)
+        total += len(encode_frame(P.FrameType.DATA, seq, P.DATA.pack(offset=start, count=n, coding=coding)
+                                  + tail))
+        start, seq = start + n, seq + 1
+    return total
+
+
+def mesh_bytes(levels) -> int:
+    """Wire bytes of the level streams of ``levels`` ((level, Mesh) pairs) in MESH frames."""
+    from wavemesh import protocol as P
+    from wavemesh.link import encode_frame
+
+    total = 0
+    for lv, m in levels:
+        ib = 2 if m.n_vertices <= 0xFFFF else 4
+        stream = (bytes(P.LEVEL_HEADER.size) + np.asarray(m.xy, "<u2").reshape(-1, 2).tobytes()
+                  + np.asarray(m.tris, "<u2" if ib == 2 else "<u4").tobytes())
+        chunk = P.MAX_PAYLOAD - P.MESH.size
+        for off in range(0, len(stream), chunk):
+            total += len(encode_frame(P.FrameType.MESH, 0, P.MESH.pack(level=lv, index=0, offset=off)
+                                      + stream[off:off + chunk]))
+    return total
+
+
+def session_bytes(nlevels: int) -> int:
+    from wavemesh import protocol as P
+
+    small = P.HELLO.size + P.HELLO_REPLY.size + P.CONFIG.size + P.RUN.size + P.DONE.size + 3 * P.OK.size
+    per_level = P.LEVEL_END.size + P.ACK.size + P.PROGRESS.size * 2
+    return small + 18 * 8 + nlevels * (per_level + 3 * 18)
+
+
+def run() -> dict:
+    import datasets
+    from wavemesh import api
+    from wavemesh.heightfield import from_array
+
+    coding = {}
+    for name in SETS:
+        try:
+            g = datasets.load(name)
+        except FileNotFoundError as e:
+            coding[name] = {"missing": str(e)}
+            continue
+        hf = from_array(g.values)
+        t0 = time.perf_counter()
+        coded = upload_bytes(hf.samples)
+        coding[name] = {"shape": list(hf.samples.shape), "kind": g.kind,
+                        "raw_wire": upload_bytes(hf.samples, False),
+                        "coded_wire": coded, "per_sample": coded / hf.samples.size,
+                        "encode_s": time.perf_counter() - t0}
+    jobs = {}
+    for w, h in SIZES:
+        n = max(w, h)
+        hf = from_array(datasets.terrain(n)[:h, :w])
+        res = api.mesh(hf, api.MeshParams())
+        up, up_raw = upload_bytes(hf.samples), upload_bytes(hf.samples, False)
+        down = mesh_bytes(res.level_meshes)
+        extra = session_bytes(len(res.level_meshes))
+        jobs[f"{w}x{h}"] = {"upload": up, "upload_raw": up_raw, "mesh": down, "session": extra,
+                            "triangles": int(res.mesh.n_triangles), "levels": len(res.level_meshes),
+                            "seconds": {str(b): 10 * (up + down + extra) / b for b in BAUDS},
+                            "seconds_raw": {str(b): 10 * (up_raw + down + extra) / b for b in BAUDS}}
+    real = [v["per_sample"] for v in coding.values() if "per_sample" in v]
+    return {"coding": coding, "median_per_sample": statistics.median(real) if real else None, "jobs": jobs}
+
+
+def markdown(r: dict) -> str:
+    out = [__doc__.split("\n\n", 1)[1].strip(), "",
+           "**Wire bytes per sample** (DATA frames, framing included; raw: 16-bit words as protocol 6 sent "
+           "them, with this framing):", "",
+           "| input | kind | W x H | raw wire bytes / sample | coded wire bytes / sample |",
+           "|---|---|---|---:|---:|"]
+    for name, c in r["coding"].items():
+        if "missing" in c:
+            out.append(f"| {name} | | (not installed: `make bench` installs it) | | |")
+            continue
+        h, w = c["shape"]
+        raw = c["raw_wire"] / (w * h)
+        out.append(f"| {name} | {c['kind']} | {w} x {h} | {raw:.3f} | {c['per_sample']:.3f} |")
+    med = r["median_per_sample"]
+    out += ["", f"**Bar: at most 1.0 wire bytes per sample, median over the real DEMs and range images: "
+            f"{'met' if med is not None and med <= 1.0 else 'not met'}** (median {med:.3f}).", "",
+            "**Line seconds of a whole job** (bench/datasets.py's seeded terrain, `wavemesh mesh`'s default "
+            "options, every level's mesh down): upload (coded) + level streams + the session's small frames, "
+            "x 10 bits / baud; in brackets with raw samples.  The job's cycles on the board are not in these "
+            "figures: the simulated board's are measured for small inputs only (\"The whole job on the "
+            "simulated board\" above, and the 1024 x 1024 Ball at 2 levels in its own section above), so the "
+            "board seconds of these jobs are these line seconds plus job cycles not yet measured at these "
+            "sizes.",
+            "",
+            "| input | triangles | upload bytes | mesh bytes | "
+            + " | ".join(f"{b} baud s" for b in BAUDS) + " |",
+            "|---|---:|---:|---:|" + "---:|" * len(BAUDS)]
+    for k, j in r["jobs"].items():
+        secs = " | ".join(f"{j['seconds'][str(b)]:.2f} ({j['seconds_raw'][str(b)]:.2f})" for b in BAUDS)
+        size = k.replace("x", " x ")
+        out.append(f"| {size} | {j['triangles']:,} | {j['upload']:,} | {j['mesh']:,} | {secs} |")
+    return "\n".join(out) + "\n"
