@@ -2,12 +2,13 @@
 reference decoder; the device's decoder is firmware/board/src/proto.c's (``rice_decode``).
 
 Each sample s at (x, y) is predicted from the samples before it in row-major order, as the device has
-them stored (the MED predictor of LOCO-I / JPEG-LS): a = left, b = above, c = above-left;
-pred = min(a, b) when c >= max(a, b), max(a, b) when c <= min(a, b), else a + b - c; row 0: the left
-sample (0 for the first), column 0: the one above.  The residual (s - pred) mod 2^16, read as a signed
-16-bit number r, becomes z = 2 r for r >= 0, -2 r - 1 else (zig-zag).  Blocks of RICE_BLOCK samples
-(from the frame's first sample) each start with k (RICE_K_BITS bits, the encoder's choice: the fewest
-bits), then every z as q = z >> k ones and a zero followed by the k low bits of z, or, when q >= RICE_ESCAPE,
+them stored: a = left, b = above, c = above-left; RICE_PRED_MED (LOCO-I's / JPEG-LS's median edge
+detector): pred = min(a, b) when c >= max(a, b), max(a, b) when c <= min(a, b), else a + b - c;
+RICE_PRED_PLANE: pred = a + b - c; with either, row 0: the left sample (0 for the first), column 0: the
+one above.  The residual (s - pred) mod 2^16, read as a signed 16-bit number r, becomes z = 2 r for
+r >= 0, -2 r - 1 else (zig-zag).  Blocks of RICE_BLOCK samples (from the frame's first sample) each start
+with the predictor (RICE_PRED_BITS) and k (RICE_K_BITS), the encoder's choice: the fewest bits; then
+every z as q = z >> k ones and a zero followed by the k low bits of z, or, when q >= RICE_ESCAPE,
 RICE_ESCAPE ones followed by z in 16 bits.  Bits go most significant first; a frame's stream is padded
 to a whole byte with zeros.  Every frame is decodable alone (the device has every sample before the
 frame's offset stored), and a frame whose code would not be shorter than its raw words goes raw.
@@ -20,15 +21,17 @@ import numpy as np
 from wavemesh import protocol as P
 
 
-def residuals(samples: np.ndarray) -> np.ndarray:
-    """z of every sample of the (H, W) array, row-major (uint32)."""
+def residuals(samples: np.ndarray, predictor: int = P.RICE_PRED_MED) -> np.ndarray:
+    """z of every sample of the (H, W) array, row-major (uint32), with RICE_PRED_MED or RICE_PRED_PLANE."""
     a = np.asarray(samples, dtype=np.int64)
     pred = np.zeros_like(a)
     pred[0, 1:] = a[0, :-1]
     pred[1:, 0] = a[:-1, 0]
     left, up, ul = a[1:, :-1], a[:-1, 1:], a[:-1, :-1]
     hi, lo = np.maximum(left, up), np.minimum(left, up)
-    pred[1:, 1:] = np.where(ul >= hi, lo, np.where(ul <= lo, hi, left + up - ul))
+    plane = left + up - ul
+    med = np.where(ul >= hi, lo, np.where(ul <= lo, hi, plane))
+    pred[1:, 1:] = plane if predictor == P.RICE_PRED_PLANE else med
     r = ((a - pred) & 0xFFFF).astype(np.int64)
     r = np.where(r >= 0x8000, r - 0x10000, r)
     return np.where(r >= 0, 2 * r, -2 * r - 1).astype(np.uint32).ravel()
@@ -46,15 +49,20 @@ class SampleEncoder:
         self.coded = coded and self.n > 0
         if not self.coded:
             return
-        z = residuals(a).astype(np.int64)
         nb = -(-self.n // P.RICE_BLOCK)
-        zb = np.zeros(nb * P.RICE_BLOCK, np.int64)
-        zb[:self.n] = z
-        zb = zb.reshape(nb, P.RICE_BLOCK)
         valid = (np.arange(nb * P.RICE_BLOCK) < self.n).reshape(nb, P.RICE_BLOCK)
-        cost = np.stack([(np.where((zb >> k) < P.RICE_ESCAPE, (zb >> k) + 1 + k, P.RICE_ESCAPE + 16)
-                           * valid).sum(axis=1) for k in range(1 << P.RICE_K_BITS)], axis=1)
-        k = cost.argmin(axis=1)  # the fewest bits per block
+        zs, costs = [], []
+        for pred in (P.RICE_PRED_MED, P.RICE_PRED_PLANE):
+            zb = np.zeros(nb * P.RICE_BLOCK, np.int64)
+            zb[:self.n] = residuals(a, pred)
+            zb = zb.reshape(nb, P.RICE_BLOCK)
+            zs.append(zb)
+            costs.append(np.stack([(np.where((zb >> k) < P.RICE_ESCAPE, (zb >> k) + 1 + k, P.RICE_ESCAPE + 16)
+                                    * valid).sum(axis=1) for k in range(1 << P.RICE_K_BITS)], axis=1))
+        cost = np.concatenate(costs, axis=1)  # (nb, predictor x k)
+        best = cost.argmin(axis=1)  # the fewest bits per block
+        pick, k = best // (1 << P.RICE_K_BITS), best % (1 << P.RICE_K_BITS)
+        zb = np.where(pick[:, None] == P.RICE_PRED_PLANE, zs[1], zs[0])
         kk = k[:, None]
         qk = zb >> kk
         esc = qk >= P.RICE_ESCAPE
@@ -63,8 +71,9 @@ class SampleEncoder:
         sval = np.where(esc, (((1 << P.RICE_ESCAPE) - 1) << 16) | zb,
                         (((1 << np.minimum(ones, 62)) - 1) << (1 + kk)) | (zb & ((1 << kk) - 1)))
         # items: a block's k, then its samples
-        lens_all = np.concatenate([np.full((nb, 1), P.RICE_K_BITS), slen], axis=1).ravel()
-        vals_all = np.concatenate([k[:, None], sval], axis=1).ravel()
+        head = pick << P.RICE_K_BITS | k
+        lens_all = np.concatenate([np.full((nb, 1), P.RICE_PRED_BITS + P.RICE_K_BITS), slen], axis=1).ravel()
+        vals_all = np.concatenate([head[:, None], sval], axis=1).ravel()
         keep = lens_all > 0
         lens_all, vals_all = lens_all[keep], vals_all[keep].astype(np.uint64)
         starts = np.concatenate([[0], np.cumsum(lens_all)])
@@ -121,6 +130,7 @@ def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) 
 
     i, end = start, start + count
     while i < end:
+        pick = take(P.RICE_PRED_BITS)
         k = take(P.RICE_K_BITS)
         for _ in range(min(P.RICE_BLOCK, end - i)):
             q = 0
@@ -134,7 +144,10 @@ def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) 
                 pred = int(stored[i - width])
             else:
                 a, b, c = int(stored[i - 1]), int(stored[i - width]), int(stored[i - width - 1])
-                pred = min(a, b) if c >= max(a, b) else max(a, b) if c <= min(a, b) else a + b - c
+                if pick == P.RICE_PRED_PLANE:
+                    pred = a + b - c
+                else:
+                    pred = min(a, b) if c >= max(a, b) else max(a, b) if c <= min(a, b) else a + b - c
             r = (z >> 1) ^ -(z & 1)
             stored[i] = (pred + r) & 0xFFFF
             i += 1

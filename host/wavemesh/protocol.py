@@ -221,8 +221,11 @@ assert CONFIG_KNOWN_FLAGS & (CONFIG_KNOWN_FLAGS + 1) == 0  # the low bits: 0..KN
 
 # DATA.coding (docs/protocol.md, "Sample coding"): how a frame's samples are written
 CODING_RAW = 0  # 16-bit words as they are
-CODING_RICE = 1  # MED-predicted residuals, zig-zag, Rice-coded per block of RICE_BLOCK samples
-RICE_BLOCK = 16  # samples per block; each block starts with its Rice parameter k
+CODING_RICE = 1  # predicted residuals, zig-zag, Rice-coded per block of RICE_BLOCK samples
+RICE_BLOCK = 16  # samples per block; each block starts with its predictor and its Rice parameter k
+RICE_PRED_BITS = 1  # the block's predictor: RICE_PRED_MED or RICE_PRED_PLANE
+RICE_PRED_MED = 0  # LOCO-I's median edge detector
+RICE_PRED_PLANE = 1  # the plane through the three neighbours: left + above - above-left
 RICE_K_BITS = 4  # bits of k (0..15)
 RICE_ESCAPE = 16  # a quotient of this many ones is followed by the value in 16 bits instead
 
@@ -371,7 +374,7 @@ CONFIG = _m("CONFIG", "host to device: the job (docs/refiner.md has the fixed-po
 DATA = _m("DATA", "host to device: samples",
           ("offset", "I", "index of the first sample (row-major, W per row)"),
           ("count", "H", "n: samples (words) in this frame, 1 <= n, offset + n <= W H (+ the mask's words)"),
-          ("coding", "B", "CODING_RAW: n 16-bit words; CODING_RICE: n samples MED-predicted and Rice-coded "
+          ("coding", "B", "CODING_RAW: n 16-bit words; CODING_RICE: n samples predicted and Rice-coded "
                           "(offset + n <= W H)"),
           ("reserved", "B", "0"),
           tail="CODING_RAW: n little-endian 16-bit words (with CONFIG_MASK the W H samples go on with "
@@ -608,6 +611,9 @@ def c_header() -> str:
         f"#define WM_PROTO_CODING_RAW {CODING_RAW}",
         f"#define WM_PROTO_CODING_RICE {CODING_RICE}",
         f"#define WM_PROTO_RICE_BLOCK {RICE_BLOCK}u",
+        f"#define WM_PROTO_RICE_PRED_BITS {RICE_PRED_BITS}",
+        f"#define WM_PROTO_RICE_PRED_MED {RICE_PRED_MED}u",
+        f"#define WM_PROTO_RICE_PRED_PLANE {RICE_PRED_PLANE}u",
         f"#define WM_PROTO_RICE_K_BITS {RICE_K_BITS}",
         f"#define WM_PROTO_RICE_ESCAPE {RICE_ESCAPE}u",
         f"#define WM_PROTO_LEVEL_LAST 0x{LEVEL_LAST:X}u",

@@ -801,8 +801,8 @@ static uint16_t word_at(const wm_proto *p, uint32_t k)
 }
 
 /* CODING_RICE (docs/protocol.md, "Sample coding"; host/wavemesh/coding.py encodes): n samples from off,
- * each the MED prediction from the samples stored before it plus a zig-zag residual, Rice-coded in blocks
- * of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
+ * each a prediction from the samples stored before it (the block's predictor: MED or the plane) plus a
+ * zig-zag residual, Rice-coded in blocks of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
  * not such a stream (too short, or a byte or more left over). */
 typedef struct bit_reader {
     const uint8_t *s, *e;
@@ -832,8 +832,8 @@ static int rice_decode(wm_proto *p, uint32_t off, uint32_t n, const uint8_t *s, 
     r.acc = 0;
     r.n = 0;
     while (i < end) {
-        uint32_t k, m = end - i < WM_PROTO_RICE_BLOCK ? end - i : WM_PROTO_RICE_BLOCK;
-        if (bits_get(&r, WM_PROTO_RICE_K_BITS, &k)) return -1;
+        uint32_t pick, k, m = end - i < WM_PROTO_RICE_BLOCK ? end - i : WM_PROTO_RICE_BLOCK;
+        if (bits_get(&r, WM_PROTO_RICE_PRED_BITS, &pick) || bits_get(&r, WM_PROTO_RICE_K_BITS, &k)) return -1;
         for (; m; m--, i++) {
             uint32_t q = 0, bit = 1, z, pred;
             while (q < WM_PROTO_RICE_ESCAPE) {
@@ -855,7 +855,7 @@ static int rice_decode(wm_proto *p, uint32_t off, uint32_t n, const uint8_t *s, 
             } else {
                 uint32_t a = h[i - 1], b = h[i - w], c = h[i - w - 1];
                 uint32_t hi = a > b ? a : b, lo = a > b ? b : a;
-                pred = c >= hi ? lo : c <= lo ? hi : a + b - c;
+                pred = pick == WM_PROTO_RICE_PRED_PLANE || (c < hi && c > lo) ? a + b - c : c >= hi ? lo : hi;
             }
             h[i] = (uint16_t)(pred + ((z >> 1) ^ (0u - (z & 1u))));
             if (++x == w) x = 0;
