@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
 import sys
 import time
@@ -34,7 +35,7 @@ from wavemesh.label import Labelling, tau_counts
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
-from wavemesh.outputs import Outputs, check_path
+from wavemesh.outputs import Inputs, Outputs, as_inputs, check_path
 
 # What `wavemesh mesh` does not use is imported where it is used, so that the command pays only for what
 # it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.stream, .link), holes
@@ -99,20 +100,20 @@ def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> t
     return m, t
 
 
-def _check_output(path: str, suffixes: tuple[str, ...], what: str) -> Path:
-    return check_path(path, suffixes, what)  # extension, directory, writable (wavemesh.outputs)
+def _check_output(path: str, suffixes: tuple[str, ...], what: str, inputs=None) -> Path:
+    return check_path(path, suffixes, what, inputs)  # extension, directory, writable, not an input (outputs)
 
 
-def _write_json(path: str, data: dict) -> None:
+def _write_json(path: str, data: dict, inputs=None) -> None:
     import json
 
-    p = _check_output(path, (".json",), "report")
-    with Outputs() as staged:  # whole or not at all
-        staged.path(p).write_text(json.dumps(data, indent=2) + "\n")
+    p = _check_output(path, (".json",), "report", inputs)
+    with Outputs(inputs) as staged:  # whole or not at all
+        staged.path(p, what="report").write_text(json.dumps(data, indent=2) + "\n")
 
 
 def _load(path: str, key: str | None, fill: str | None, nodata: str | None = None,
-          invalid: float | None = None) -> HeightField:
+          invalid: float | None = None, size_check=None) -> HeightField:
     if nodata not in (None, "error", "hole"):
         raise InputError(f"--nodata {nodata}: not a way to treat invalid samples", hint="use hole or error")
     if nodata == "hole" and fill is not None:
@@ -121,7 +122,7 @@ def _load(path: str, key: str | None, fill: str | None, nodata: str | None = Non
     if invalid is not None and not math.isfinite(invalid):
         raise InputError(f"--invalid {invalid}: NaN and infinities are invalid anyway", hint="give a number")
     return load_heightfield(path, key=key, fill=parse_fill(fill) if fill is not None else None,
-                            invalid=invalid, holes=nodata == "hole")
+                            invalid=invalid, holes=nodata == "hole", size_check=size_check)
 
 
 def parse_crop(text: str) -> tuple[int, int, int, int]:
@@ -181,15 +182,29 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
                origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
-               denoise: str | None = None, max_hole: int = 0) -> HeightField:
+               denoise: str | None = None, max_hole: int = 0, check_memory: bool = False) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
     and --origin (of the file's grid), then --crop and --decimate, then --max-hole (holes.bridge), then
-    --denoise (wavemesh.denoise: what every command meshes and measures)."""
+    --denoise (wavemesh.denoise: what every command meshes and measures).  ``check_memory``: before the
+    samples are read, the memory an untiled run of the grid takes is estimated (memory_check)."""
     if max_hole and (nodata != "hole" or max_hole < 0):
         raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
                          "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
-    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid), spacing, origin), crop,
-                           decimate)
+    if crop is not None:
+        parse_crop(crop)  # a bad --crop before the file is read
+
+    def size_check(width: int, height: int, itemsize: int) -> None:
+        w, h = width, height
+        if crop is not None:
+            x, y, w, h = parse_crop(crop)
+            w, h = max(0, min(w, width - x)), max(0, min(h, height - y))
+        if decimate is not None and decimate >= 1:
+            w, h = -(-w // decimate), -(-h // decimate)
+        memory_check(path, width, height, itemsize, w, h)
+
+    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid,
+                                                 size_check if check_memory else None), spacing, origin),
+                           crop, decimate)
     if max_hole:
         from wavemesh.holes import bridge
 
@@ -199,6 +214,86 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
     from wavemesh.denoise import denoise_heightfield
 
     return denoise_heightfield(hf, denoise)[0]
+
+
+# Memory of an untiled run (`wavemesh mesh`, `stream`): the least address space it takes,
+# READ_BYTES_PER_SAMPLE plus the file's own sample size a sample of the file (float64 heights and the
+# no-data mask beside the samples as read), then MESH_BYTES_PER_SAMPLE a sample of the grid it meshes (the
+# 16-bit samples, the filter bank, the refiner's grids, the error check): what the grid costs whatever the
+# mesh.  Measured as VmPeak of `wavemesh mesh X.npy -o o.obj` (float32 input) at 1025^2, 2049^2 and 4097^2
+# samples (docs/tiles.md, "Memory"): 107-124 bytes a sample more for a flat field and for the two-ball
+# terrain (109 with glibc's mmap threshold fixed, MALLOC_TRIM_THRESHOLD_ set as dask does), about 240 for
+# noise at the default zeta, 830 when the mesh keeps nearly every sample (noise, --zeta 0.001).  The
+# estimate stays below that floor (4 + 9 + 88 = 101 bytes for float32): a run it refuses would not have
+# fitted.
+MESH_BYTES_PER_SAMPLE = 88
+READ_BYTES_PER_SAMPLE = 9
+
+
+def available_memory() -> int:
+    """Bytes of memory available now (/proc/meminfo's MemAvailable; else the physical memory)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def memory_available() -> tuple[int, str]:
+    """Bytes this process may still take, and what says so: the least of /proc/meminfo's MemAvailable,
+    the address space limit (RLIMIT_AS, ulimit -v) less what the process maps now, and the cgroup's
+    memory.max less its memory.current."""
+    import resource
+
+    found = [(available_memory(), "memory available")]
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        used = 0
+        try:
+            with open("/proc/self/status") as f:
+                for line in f:
+                    if line.startswith("VmSize:"):
+                        used = int(line.split()[1]) * 1024
+        except OSError:
+            pass
+        found.append((max(0, soft - used), f"the address space limit (ulimit -v {soft // 1024})"))
+    try:
+        with open("/sys/fs/cgroup/memory.max") as f:
+            top = f.read().strip()
+        if top.isdigit():
+            with open("/sys/fs/cgroup/memory.current") as f:
+                found.append((max(0, int(top) - int(f.read().strip())), "the cgroup's memory.max"))
+    except (OSError, ValueError):
+        pass
+    return min(found)
+
+
+def _size(n: float) -> str:
+    return f"{n / 2 ** 30:.1f} GiB" if n >= 2 ** 30 else f"{n / 2 ** 20:.0f} MiB"
+
+
+def memory_check(source: str, width: int, height: int, itemsize: int, w: int | None = None,
+                 h: int | None = None) -> None:
+    """InputError, with the --tile N to use, when an untiled run of the ``w`` x ``h`` grid (default the
+    file's ``width`` x ``height``, of ``itemsize``-byte samples) needs more memory than this process may
+    take (memory_available): the file's samples as read, and MESH_BYTES_PER_SAMPLE a sample of the grid."""
+    w, h = (width, height) if w is None else (w, h)
+    need = width * height * (itemsize + READ_BYTES_PER_SAMPLE) + w * h * MESH_BYTES_PER_SAMPLE
+    have, what = memory_available()
+    if need <= have:
+        return
+    from wavemesh.tiles import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
+
+    workers = default_workers()
+    fits = [t for t in TILE_CHOICES if workers * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
+    tile = fits[0] if fits else TILE_CHOICES[-1]
+    raise InputError(f"{source}: meshing the {w} x {h} grid untiled needs at least {_size(need)} of memory; "
+                     f"{_size(have)} is left ({what})",
+                     hint=f"mesh it in tiles: --tile {tile}" + ("" if fits else " --workers 1")
+                     + " (docs/tiles.md)")
 
 
 @dataclass
@@ -817,20 +912,29 @@ class MeshFiles:
         return {"units": self.units, "local": self.local, "normals": self.normals, "base": self.base}
 
 
+PICTURE_SUFFIXES = (".png", ".svg", ".pdf")
+
+
 def check_outputs(output: str, *, lod: str | None = None, report: str | None = None,
-                  render: str | None = None, files: MeshFiles | None = None) -> tuple[Path, Path | None]:
+                  render: str | None = None, files: MeshFiles | None = None,
+                  inputs: Inputs | list | None = None,
+                  exaggeration: float | None = None) -> tuple[Path, Path | None]:
     """The output paths of `mesh` and `stream`, and the options of their mesh files, checked before any
-    work: (mesh file, --lod folder)."""
-    out = _check_output(output, MESH_SUFFIXES, "mesh")
+    work: (mesh file, --lod folder).  None of them (nor the mesh's sidecar) may be one of ``inputs``
+    (wavemesh.outputs.Inputs)."""
+    inputs = as_inputs(inputs)
+    out = _check_output(output, MESH_SUFFIXES, "mesh", inputs)
+    inputs.refuse(sidecar_path(out), "the mesh's sidecar")
     if files is not None:
         check_options(out, units=files.units, local=files.local, normals=files.normals, base=files.base)
         if files.normal_map:
-            _check_output(files.normal_map, (".png",), "normal map")
+            _check_output(files.normal_map, (".png",), "normal map", inputs)
     if render:
-        _check_output(render, (".png", ".svg", ".pdf"), "picture")
+        _check_output(render, PICTURE_SUFFIXES, "picture", inputs)
+        check_exaggeration(exaggeration)
     if report:
-        _check_output(report, (".json",), "report")
-    folder = check_path(lod, None, "--lod") if lod else None
+        _check_output(report, (".json",), "report", inputs)
+    folder = check_path(lod, None, "--lod", inputs) if lod else None
     if folder is not None and folder.resolve() in {Path(p).resolve() for p in (output, report, render) if p}:
         raise InputError(f"--lod {lod} names a file the run also writes", hint="give --lod its own folder")
     return out, folder
@@ -838,15 +942,18 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
 
 def write_result(result: MeshResult, output: str, *, lod: str | None = None, report: str | None = None,
                  render: str | None = None, title: str | None = None, local: bool = False,
-                 exaggeration: float | None = None, files: MeshFiles | None = None) -> list[str]:
+                 exaggeration: float | None = None, files: MeshFiles | None = None,
+                 inputs: Inputs | list | None = None) -> list[str]:
     """Write a result's files: the mesh (a format of wavemesh.meshio.FORMATS, in the frame ``files``
     chooses, with its sidecar), each level's into ``lod``, the normal map, the JSON report and a
     picture (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in
-    grid steps).  ``local``: MeshFiles(units="crs", local=True), as before ``files``.  Returns the level
-    files written."""
+    grid steps).  ``local``: MeshFiles(units="crs", local=True), as before ``files``.  None of them may
+    be one of ``inputs`` (the input file: wavemesh.outputs).  Returns the level files written."""
     if files is None:
         files = MeshFiles(units="crs", local=True) if local else MeshFiles()
-    out, folder = check_outputs(output, lod=lod, report=report, render=render, files=files)
+    inputs = as_inputs(inputs)
+    out, folder = check_outputs(output, lod=lod, report=report, render=render, files=files, inputs=inputs,
+                                exaggeration=exaggeration)
     hf = result.heightfield
     if files.base is not None and hf.mask is not None:
         raise InputError("--base closes a mesh of the whole grid rectangle into a solid; this one has holes",
@@ -855,19 +962,20 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
     opts = {"ground": g, "local": files.local, "units": files.units, "normals": files.normals,
             "base": files.base}
     written = []
-    with Outputs() as staged:  # every file whole, or none of them (wavemesh.outputs)
-        write_mesh(str(staged.path(out, (SIDECAR,))), result.mesh, hf.values, comment=result.comment, **opts)
+    with Outputs(inputs) as staged:  # every file whole, or none of them (wavemesh.outputs)
+        write_mesh(str(staged.path(out, (SIDECAR,), "mesh")), result.mesh, hf.values, comment=result.comment,
+                   **opts)
         if folder is not None:
             # M = 1: the initial triangulation and the refined mesh are both level 0; the refined one is kept
             for level, m in dict(result.level_meshes).items():
                 path = folder / f"level-{level}{out.suffix.lower()}"
-                write_mesh(str(staged.path(path, (SIDECAR,))), m, hf.values,
+                write_mesh(str(staged.path(path, (SIDECAR,), "--lod")), m, hf.values,
                            comment=f"{result.comment} level={level}", **opts)
                 written.append(str(path))
         if files.normal_map:
             from wavemesh.meshio import write_normal_map
 
-            write_normal_map(staged.path(files.normal_map), hf.values, g.spacing)
+            write_normal_map(staged.path(files.normal_map, what="normal map"), hf.values, g.spacing)
         if report:
             import json
 
@@ -878,10 +986,10 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
             data = result.report | {"output": str(out), "mesh_files": files.to_report() | {"frame": frame}}
             if written:
                 data["lod"] = written
-            staged.path(report).write_text(json.dumps(data, indent=2) + "\n")
+            staged.path(report, what="report").write_text(json.dumps(data, indent=2) + "\n")
         if render:
-            _render(result.mesh, result.mesh.z(hf.values), str(staged.path(render)), g, exaggeration,
-                    title=title)
+            _render(result.mesh, result.mesh.z(hf.values), str(staged.path(render, what="picture")), g,
+                    exaggeration, title=title)
     if not g.georeferenced:  # grid coordinates: a sidecar an earlier run left would misplace them
         for path in (out, *written):
             sidecar_path(path).unlink(missing_ok=True)
@@ -892,12 +1000,18 @@ def _render(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> 
     """A picture in true aspect: (east, north) in ground units; the exaggeration stated in it."""
     from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
 
-    if exaggeration is not None and not (math.isfinite(exaggeration) and exaggeration > 0):
-        raise InputError(f"--exaggeration {exaggeration} is out of range", hint="give a number > 0")
+    check_exaggeration(exaggeration)
     if exaggeration is None and g.georeferenced:
         exaggeration = 1.0  # ground units: true aspect
     east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
     render_mesh(mesh, z, output, zscale=exaggeration, en=np.column_stack([east, north]), label=True, **kw)
+
+
+def check_exaggeration(exaggeration: float | None, name: str = "--exaggeration") -> None:
+    """A picture's vertical exaggeration: None (automatic) or a finite number > 0; checked before any
+    work."""
+    if exaggeration is not None and not (math.isfinite(exaggeration) and exaggeration > 0):
+        raise InputError(f"{name} {exaggeration} is out of range", hint="give a number > 0")
 
 
 def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> dict:
@@ -969,14 +1083,14 @@ def check_port(url: str) -> None:
                          hint=f"use {m.group(1)}://HOST:PORT, PORT in 1..65535 (e.g. {m.group(1)}://127.0.0.1:7721)")
 
 
-def check_report(path: str) -> Path:
-    """A JSON report's path, checked before any work."""
-    return _check_output(path, (".json",), "report")
+def check_report(path: str, inputs: Inputs | list | None = None) -> Path:
+    """A JSON report's path, checked before any work (not one of ``inputs``)."""
+    return _check_output(path, (".json",), "report", inputs)
 
 
-def write_json(path: str, data: dict) -> None:
-    """A JSON file (.json), or InputError."""
-    _write_json(path, data)
+def write_json(path: str, data: dict, inputs: Inputs | list | None = None) -> None:
+    """A JSON file (.json), not one of ``inputs``, or InputError."""
+    _write_json(path, data, inputs)
 
 
 def write_synth(name: str, output: str, size: int | None = None) -> Path:
@@ -995,11 +1109,12 @@ def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: boo
                 zscale: float | None = None, title: str | None = None) -> None:
     """`wavemesh render`: a picture of a mesh file, in true aspect when its sidecar places it
     (``zscale``: the vertical exaggeration, stated in the picture)."""
-    _check_output(output, (".png", ".svg", ".pdf"), "picture")
-    if zscale is not None and not (math.isfinite(zscale) and zscale > 0):
-        raise InputError(f"vertical exaggeration {zscale} is out of range", hint="give a number > 0")
+    inputs = Inputs([mesh_path, sidecar_path(mesh_path)])
+    _check_output(output, PICTURE_SUFFIXES, "picture", inputs)
+    check_exaggeration(zscale, "vertical exaggeration")
     placed = read_sidecar(mesh_path)
     m, z = read_mesh(mesh_path, to_grid=to_grid(*placed) if placed else None)
     g = placed[0] if placed else grid_ground(m.width, m.height)
-    with Outputs() as staged:
-        _render(m, z, str(staged.path(output)), g, zscale, view=view, wireframe=wireframe, title=title)
+    with Outputs(inputs) as staged:
+        _render(m, z, str(staged.path(output, what="picture")), g, zscale, view=view, wireframe=wireframe,
+                title=title)

@@ -9,6 +9,7 @@ a bug in wavemesh.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -25,6 +26,18 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise WavemeshError(message, hint=f"see '{self.prog} --help'")
+
+
+def _number(text: str) -> float:
+    """A number option's value: finite (NaN and infinities are no option's value; argparse names the
+    option in its message)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+    return value
 
 
 def _glue_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
@@ -65,7 +78,7 @@ def _input_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nodata", choices=("error", "hole"), default=None,
                    help="hole: invalid samples (NaN, the file's no-data value, --invalid) become holes in "
                         "the mesh instead of filled surface; error (default without --fill): refuse them")
-    p.add_argument("--invalid", type=float, default=None, metavar="VALUE",
+    p.add_argument("--invalid", type=_number, default=None, metavar="VALUE",
                    help="samples equal to VALUE are invalid too (a scanner's 0 or sentinel)")
     p.add_argument("--max-hole", type=int, default=0, metavar="N",
                    help="with --nodata hole: fill the enclosed dropouts of at most N samples (8-connected "
@@ -92,7 +105,7 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--levels", "-M", type=int, default=None,
                    help="wavelet levels M (blocks of 2^M grid steps); default: log2(max(W, H)) - 3, "
                         "within 1..8")
-    p.add_argument("--tau", type=float, default=None,
+    p.add_argument("--tau", type=_number, default=None,
                    help="threshold tau_M for a dominant coefficient, in height units "
                         "(difference of half-block means); default: 1%% of the height range")
     p.add_argument("--wavelet", choices=tuple(WAVELETS), default="haar",
@@ -101,7 +114,7 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
     d = RefineParams()
     p.add_argument("--stage", choices=("initial", "full"), default="full",
                    help="initial: the template stage only; full (default): also the refiner")
-    p.add_argument("--zeta", type=float, default=d.zeta,
+    p.add_argument("--zeta", type=_number, default=d.zeta,
                    help=f"error bound: E(T) <= zeta for every triangle at level 0, height units "
                         f"(default {d.zeta:g})")
     p.add_argument("--metric", choices=("normal", "vertical"), default=d.metric,
@@ -112,19 +125,19 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                         f"default {d.iterations})")
     p.add_argument("--neighbourhood", choices=("face", "vertex"), default=d.neighbourhood,
                    help="region selection by face- (default) or vertex-based neighbourhoods (4.3.1)")
-    p.add_argument("--delta-d", type=float, default=d.delta_d,
+    p.add_argument("--delta-d", type=_number, default=d.delta_d,
                    help=f"detail energy threshold delta_d: energy per sample over the level's "
                         f"tolerance squared (4.12; default {d.delta_d:g})")
-    p.add_argument("--delta-p", type=float, default=d.delta_p,
+    p.add_argument("--delta-p", type=_number, default=d.delta_p,
                    help=f"pairing criterion delta_p, 0.5..1 (4.16; default {d.delta_p:g})")
-    p.add_argument("--delta-v", type=float, default=d.delta_v,
+    p.add_argument("--delta-v", type=_number, default=d.delta_v,
                    help=f"vertex movement threshold delta_v, 3-D distance (4.21; default {d.delta_v:g})")
-    p.add_argument("--alpha", type=float, default=d.alpha,
+    p.add_argument("--alpha", type=_number, default=d.alpha,
                    help=f"mesh regularity factor alpha, 0..1 (4.22; default {d.alpha:g})")
-    p.add_argument("--delta-lambda", type=float, default=d.delta_lambda,
+    p.add_argument("--delta-lambda", type=_number, default=d.delta_lambda,
                    help=f"vertex removal criterion delta_lambda: the eigenvalues of R(v) (4.32, 4.33; "
                         f"default {d.delta_lambda:g})")
-    p.add_argument("--delta-c", type=float, default=d.delta_c,
+    p.add_argument("--delta-c", type=_number, default=d.delta_c,
                    help=f"edge collapsing criterion delta_c, 0..1 (4.34; default {d.delta_c:g})")
     p.add_argument("--bound", choices=("on", "off"), default="on" if d.bound else "off",
                    help="on (default): refine until every E(T) <= zeta at level 0; off: the dissertation's "
@@ -139,7 +152,7 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                    help="selective triangulation (5.6): refine and bound the error only in this region of "
                         "interest, a rectangle of samples or a mask image of the grid's size (non-zero: "
                         "inside); repeatable; outside stays at the initial triangulation (`mesh` only)")
-    p.add_argument("--min-area", type=float, default=0.0, metavar="A",
+    p.add_argument("--min-area", type=_number, default=0.0, metavar="A",
                    help="with --nodata hole: drop the pieces of the mesh smaller than A square grid steps "
                         "(islands and slivers between dropouts; default 0: keep all)")
     p.add_argument("--max-triangles", type=int, default=None,
@@ -164,13 +177,13 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                         "says which)")
     p.add_argument("--normals", action="store_true",
                    help="write per-vertex unit normals (area-weighted; .obj, .ply, .glb)")
-    p.add_argument("--base", type=float, default=None, metavar="H",
+    p.add_argument("--base", type=_number, default=None, metavar="H",
                    help="close the surface into a watertight solid: walls down to a flat bottom H height "
                         "units below the lowest height (for 3-D printing; any mesh format)")
     p.add_argument("--normal-map", metavar="N.png",
                    help="also write the heights' normals as an RGB PNG of the grid's size (one pixel a "
                         "sample; x right, y up the picture, z out)")
-    p.add_argument("--exaggeration", type=float, default=None, metavar="Z",
+    p.add_argument("--exaggeration", type=_number, default=None, metavar="Z",
                    help="vertical exaggeration of --render (default: 1 in ground units, automatic in grid "
                         "steps)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
@@ -249,7 +262,7 @@ def _stream_parser(sub) -> None:
                    help="after HELLO switch the line to RATE baud (auto: the fastest of 3M, 2M, 1.5M, 1M, "
                         "921600, ... that the device reaches within 2.5 %%); a switch that fails is one "
                         "warning and the job runs at --baud (default: stay at --baud)")
-    p.add_argument("--timeout", type=float, default=None, metavar="S",
+    p.add_argument("--timeout", type=_number, default=None, metavar="S",
                    help="seconds the device may compute without sending anything (default 120)")
     p.add_argument("--trace", action="store_true", help="hex dump of every frame on stderr")
 
@@ -274,7 +287,7 @@ def _check_parser(sub) -> None:
     p.add_argument("--against", required=True, metavar="INPUT", help="the height field")
     p.add_argument("--roi", action="append", metavar="X,Y,W,H|MASK",
                    help="also measure the errors inside this region of interest alone (as `mesh --roi`)")
-    p.add_argument("--min-area", type=float, default=0.0, metavar="A",
+    p.add_argument("--min-area", type=_number, default=0.0, metavar="A",
                    help="with --nodata hole: the mesh was made with --min-area A (its dropped pieces may "
                         "leave valid samples uncovered)")
     _input_options(p)
@@ -289,7 +302,7 @@ def _render_parser(sub) -> None:
     p.add_argument("-o", "--output", required=True, help="picture to write (.png, .svg, .pdf)")
     p.add_argument("--view", choices=("3d", "top"), default="3d", help="oblique 3-D view or map view")
     p.add_argument("--no-wireframe", action="store_true", help="do not draw triangle edges")
-    p.add_argument("--exaggeration", "--zscale", dest="zscale", type=float, default=None, metavar="Z",
+    p.add_argument("--exaggeration", "--zscale", dest="zscale", type=_number, default=None, metavar="Z",
                    help="vertical exaggeration (default: 1 when the mesh's sidecar places it on the ground, "
                         "else automatic)")
     p.add_argument("--title", help="caption")
@@ -328,7 +341,7 @@ def _tiles_parser(sub) -> None:
                    help="folder for L/X/Y.terrain and layer.json")
     p.add_argument("--max-zoom", type=int, default=None, metavar="L",
                    help="the finest level (default: the first whose tile samples are as close as the DEM's)")
-    p.add_argument("--zeta", type=float, default=1.0,
+    p.add_argument("--zeta", type=_number, default=1.0,
                    help="the finest level's vertical error bound, metres (default 1); each coarser level "
                         "doubles it, up to Cesium's geometric error for the level")
     p.add_argument("--key", help="array name inside an .npz file")
@@ -376,10 +389,37 @@ def _mesh_params(args) -> api.MeshParams:
                           min_area=args.min_area)
 
 
-def _load(args, path: str):
+def _check_options(args) -> None:
+    """The options of `mesh` and `stream` that only a late step would read, checked before any work (a
+    bad --exaggeration found by the picture, after the mesh was made, would cost the run)."""
+    api.check_exaggeration(args.exaggeration)
+    if args.min_area < 0:
+        raise WavemeshError(f"--min-area {args.min_area:g} is out of range",
+                            hint="give square grid steps >= 0")
+    if args.tau is not None and args.tau < 0:
+        raise WavemeshError(f"--tau {args.tau:g} is out of range", hint="give tau in height units, >= 0")
+    if args.levels is not None and not 1 <= args.levels <= api.MAX_LEVELS:
+        raise WavemeshError(f"--levels {args.levels} is out of range", hint=f"use 1..{api.MAX_LEVELS}")
+    if getattr(args, "timeout", None) is not None and not args.timeout > 0:
+        raise WavemeshError(f"--timeout {args.timeout:g} is out of range", hint="give seconds > 0")
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
+
+
+def _inputs(args, *paths):
+    """The files a command reads (wavemesh.outputs.Inputs: no output may be one of them): ``paths`` and
+    every --roi mask."""
+    from wavemesh.outputs import Inputs
+
+    return Inputs([*paths, *(getattr(args, "roi", None) or ())])
+
+
+def _load(args, path: str, memory: bool = False):
+    """The input as `mesh`, `stream` and `check` read it; ``memory``: an untiled run's memory is estimated
+    first (wavemesh.api.check_memory: refused, with the --tile to use, when it will not fit)."""
     return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
                           spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid,
-                          denoise=args.denoise, max_hole=args.max_hole)
+                          denoise=args.denoise, max_hole=args.max_hole, check_memory=memory)
 
 
 def _bridged_line(hf, max_hole: int) -> str:
@@ -407,14 +447,15 @@ def _mesh_files(args) -> api.MeshFiles:
 
 def _check_outputs(args) -> None:
     api.check_outputs(args.output, lod=args.lod, report=args.report, render=args.render,
-                      files=_mesh_files(args))
+                      files=_mesh_files(args), inputs=_inputs(args, args.input),
+                      exaggeration=args.exaggeration)
 
 
 def _finish(args, result: api.MeshResult, table: list[str]) -> int:
     """Write the files of `mesh` and `stream`, print the summary and the level table, return the status."""
     written = api.write_result(result, args.output, lod=args.lod, report=args.report, render=args.render,
                                title=Path(args.input).name, exaggeration=args.exaggeration,
-                               files=_mesh_files(args))
+                               files=_mesh_files(args), inputs=_inputs(args, args.input))
     if not args.quiet:
         hf, m, e = result.heightfield, result.mesh, result.errors
         print(f"{args.input}: {hf.width} x {hf.height}, M={result.levels}, tau={result.tau:g}: "
@@ -442,13 +483,14 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 
 
 def mesh_command(args) -> int:
+    _check_options(args)
     if args.tile is not None or args.scheduler or args.tiles_dir:
         from wavemesh import tiles
 
-        return tiles.command(args, _mesh_params(args))
+        return tiles.command(args, _mesh_params(args), inputs=_inputs(args, args.input))
     _check_outputs(args)
     params = _mesh_params(args)
-    result = api.mesh(_load(args, args.input), params)
+    result = api.mesh(_load(args, args.input, memory=True), params)
     table = _refiner_table(result, params)
     roi = result.report.get("roi")
     if roi:
@@ -476,19 +518,19 @@ def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
 def stream_command(args) -> int:
     from wavemesh.stream import DEFAULT_TIMEOUTS
 
+    _check_options(args)
     if args.tile is not None or args.tiles_dir or len(args.port) > 1:
         from wavemesh import tiles
 
-        return tiles.command(args, _mesh_params(args), ports=args.port)
+        return tiles.command(args, _mesh_params(args), ports=args.port, inputs=_inputs(args, args.input))
     args.port = args.port[0]
     _check_outputs(args)
     api.check_port(args.port)
     params = _mesh_params(args)
-    if args.timeout is not None and not args.timeout > 0:
-        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
     timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
-    result = api.stream(_load(args, args.input), args.port, params, baud=args.baud, link_baud=args.link_baud,
-                        timeouts=timeouts, trace=sys.stderr if args.trace else None, progress=not args.quiet,
+    result = api.stream(_load(args, args.input, memory=True), args.port, params, baud=args.baud,
+                        link_baud=args.link_baud, timeouts=timeouts,
+                        trace=sys.stderr if args.trace else None, progress=not args.quiet,
                         log=None if args.quiet else lambda text: print(text, flush=True),
                         warn=lambda text: print(f"warning: {text}", file=sys.stderr, flush=True))
     if not result.cycles:  # the FPGA stage alone (FEATURE_STAGE): it labelled the blocks, the host refined
@@ -508,8 +550,14 @@ def stream_command(args) -> int:
 
 
 def check_command(args) -> int:
+    from wavemesh.georef import sidecar_path
+
+    if args.min_area < 0:
+        raise WavemeshError(f"--min-area {args.min_area:g} is out of range",
+                            hint="give square grid steps >= 0")
+    inputs = _inputs(args, args.mesh, sidecar_path(args.mesh), args.against)
     if args.report:
-        api.check_report(args.report)
+        api.check_report(args.report, inputs)
     hf = _load(args, args.against)
     roi = tuple(args.roi) if args.roi else None
     report = api.check_file(args.mesh, hf, roi=roi, min_area=args.min_area) | {"against": args.against}
@@ -517,7 +565,7 @@ def check_command(args) -> int:
         report["holes"]["stranded"] = hf.stranded
         report["holes"]["filled"] = hf.filled  # --max-hole
     if args.report:
-        api.write_json(args.report, report)
+        api.write_json(args.report, report, inputs)
     if not args.quiet:
         state = "a proper triangulation" if report["valid"] else "NOT a proper triangulation"
         if "holes" in report:  # --nodata hole
@@ -578,11 +626,12 @@ def tiles_command(args) -> int:
     from wavemesh import terrain
     from wavemesh.outputs import check_path
 
-    check_path(args.output, None, "terrain tiles")
+    inputs = _inputs(args, args.input)
+    check_path(args.output, None, "terrain tiles", inputs)
     hf = api.load_input(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)
     say = None if args.quiet else print
     ts = terrain.make_tiles(hf, max_zoom=args.max_zoom, zeta=args.zeta, log=say)
-    terrain.write_tiles(ts, args.output)
+    terrain.write_tiles(ts, args.output, inputs)
     if say:
         worst = max(r["e_max_vertical"] / r["tolerance"] for r in ts.rows)
         say(f"wrote {len(ts.files)} tiles of levels 0..{ts.layer['maxzoom']} and layer.json into "
@@ -595,19 +644,29 @@ COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_comma
 
 
 def main(argv: list[str] | None = None) -> int:
+    from wavemesh.outputs import Terminated, handle_termination
+
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser_for(argv)
     try:
-        args = parser.parse_args(_glue_dash_values(parser, argv))
-        return COMMANDS[args.command](args)
+        with handle_termination():  # SIGTERM and SIGHUP unwind as Ctrl-C: no staging folder, no worker left
+            args = parser.parse_args(_glue_dash_values(parser, argv))
+            return COMMANDS[args.command](args)
     except WavemeshError as e:
         print(f"error: {e.message}", file=sys.stderr)
         if e.hint:
             print(f"hint: {e.hint}", file=sys.stderr)
         return e.exit_code
+    except Terminated as e:
+        print(f"error: terminated ({e})", file=sys.stderr)
+        return 128 + e.signum
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("error: out of memory", file=sys.stderr)
+        print("hint: mesh a large grid in tiles (--tile N), or free memory", file=sys.stderr)
+        return 2
     except BrokenPipeError:
         return 141
 

@@ -336,6 +336,9 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float], str, bool] | N
     p = sidecar_path(mesh_path)
     if not p.exists():
         return None
+    from wavemesh.heightfield import regular_file
+
+    regular_file(str(p), "sidecar")
     try:
         import json
 

@@ -33,8 +33,17 @@ GDAL.
   NaN; a band scale and offset are applied.  The georeference is kept in
   ``HeightField.transform`` and ``HeightField.crs`` (an .npz's ``dx``, ``dy``, ``xmin``, ``ymin``
   too, :func:`_npz_transform`); :mod:`wavemesh.georef` derives the cell size and the coordinates.
-  An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers (GDAL itself
-  would read missing samples or text as 0 without a word).
+  An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers, and its header's
+  values numbers (GDAL itself would read missing samples or text as 0 without a word:
+  ``NODATA_value abc`` would mask every 0).  A no-data value must be a number the band's
+  samples can hold (:func:`check_nodata`: a GeoTIFF's GDAL_NODATA tag ``xyzzy``, NaN on
+  int16 or -9999 on uint16 are refused; GDAL would read 0, or drop the value).
+
+Every reader reads a regular file only (:func:`regular_file`: a FIFO would block, a
+device such as /dev/zero never ends) and no more than its header says: a P5 PGM's
+W x H samples, an .npy's shape (checked against the file's size before numpy sets the
+array aside).  ``load_heightfield(..., size_check=f)`` calls ``f(W, H, itemsize)`` once the
+header has told the size, before the samples are read (the untiled run's memory estimate).
 
 Accepted data: a 2-D array of bool, integer or float samples, at least 2 x 2; a
 constant field too (two triangles).  Heights become float64: 64-bit integers
@@ -66,6 +75,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import stat
 import struct
 import sys
 import warnings
@@ -364,29 +374,28 @@ def _check_exact_integers(arr: np.ndarray, values: np.ndarray, source: str) -> N
 
 
 def load_heightfield(path: str, key: str | None = None, fill: str | float | None = None, *,
-                     invalid: float | None = None, holes: bool = False) -> HeightField:
+                     invalid: float | None = None, holes: bool = False, size_check=None) -> HeightField:
     """Read a height field file (a thin reader by extension or first bytes, else GDAL) and quantise it;
-    ``invalid`` and ``holes`` as from_array's."""
+    ``invalid`` and ``holes`` as from_array's.  ``size_check(width, height, itemsize)``, when given, is
+    called once the file's header has told its size, before its samples are read (wavemesh.api's memory
+    estimate)."""
     path = os.fspath(path)
     fill_mode = parse_fill(fill)  # a bad --fill is reported before the file is read
     marks = {"invalid": invalid, "holes": holes}
-    try:
-        with open(path, "rb") as f:
-            head = f.read(64)
-    except OSError as e:
-        raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
+    size_check = size_check or (lambda w, h, itemsize: None)
+    head = _read_head(path, 64)
     ext = os.path.splitext(path)[1].lower()
     fmt = _EXTENSIONS.get(ext) or _sniff(head) or "raster"
     if key is not None and fmt != "npz":
         what = "GDAL raster" if fmt == "raster" else fmt
         raise InputError(f"{path}: --key applies only to .npz files, this is a {what} file")
     if fmt == "raster":
-        array, transform, crs = _read_raster(path, ext)
+        array, transform, crs = _read_raster(path, ext, size_check)
         hf = from_array(array, source=path, fill=fill_mode, **marks)
         return replace(hf, transform=transform, crs=crs)
     if fmt == "npz":
         with _library_warnings_quiet():
-            array, transform = _read_npz(path, key)
+            array, transform = _read_npz(path, key, size_check)
         return replace(from_array(array, source=path, fill=fill_mode, **marks), transform=transform)
     reader = {
         "npy": _read_npy,
@@ -394,7 +403,7 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
         "png": _read_png,
     }[fmt]
     with _library_warnings_quiet():
-        array = reader(path)
+        array = reader(path, size_check)
     return from_array(array, source=path, fill=fill_mode, **marks)
 
 
@@ -450,15 +459,90 @@ def _sniff(head: bytes) -> str | None:
     return None
 
 
-def _read_bytes(path: str) -> bytes:
+_NOT_REGULAR = {stat.S_IFIFO: "a FIFO (named pipe)", stat.S_IFCHR: "a character device",
+                stat.S_IFBLK: "a block device", stat.S_IFSOCK: "a socket", stat.S_IFDIR: "a directory"}
+
+
+def regular_file(path: str, what: str = "") -> int:
+    """The size of the regular file ``path`` (after its symbolic links); InputError for anything else:
+    a FIFO would block the read until a writer came, a device (/dev/zero) never ends.  Opened without
+    blocking, then its kind is looked at."""
+    name = f"{what} {path}" if what else path
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as e:
+        raise InputError(f"cannot read {name}: {e.strerror or _one_line(e)}") from None
+    try:
+        st = os.fstat(fd)
+    finally:
+        os.close(fd)
+    if not stat.S_ISREG(st.st_mode):
+        kind = _NOT_REGULAR.get(stat.S_IFMT(st.st_mode), "not a regular file")
+        raise InputError(f"cannot read {name}: it is {kind}, not a regular file",
+                         hint="give a file (copy the data into one first)")
+    return st.st_size
+
+
+def _read_head(path: str, n: int) -> bytes:
+    """The first ``n`` bytes of a regular file (regular_file)."""
+    regular_file(path)
     try:
         with open(path, "rb") as f:
-            return f.read()
+            return f.read(n)
     except OSError as e:
         raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
 
 
-def _read_npy(path: str) -> np.ndarray:
+def _read_bytes(path: str, limit: int | None = None, offset: int = 0) -> bytes:
+    """A regular file's bytes (at most ``limit`` from ``offset``)."""
+    regular_file(path)
+    try:
+        with open(path, "rb") as f:
+            f.seek(offset)
+            return f.read() if limit is None else f.read(limit)
+    except OSError as e:
+        raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
+
+
+def npy_layout(path: str, f) -> tuple[tuple[int, ...], np.dtype, int] | None:
+    """An .npy stream's (shape, dtype, data offset) from its header (numpy.lib.format), None when it
+    is not one numpy reads that way (numpy's own reader then says what is wrong)."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(f)
+        if version == (1, 0):
+            shape, _, dtype = fmt.read_array_header_1_0(f)
+        elif version in ((2, 0), (3, 0)):
+            shape, _, dtype = fmt.read_array_header_2_0(f)
+        else:
+            return None
+        return tuple(int(n) for n in shape), np.dtype(dtype), f.tell()
+    except _read_errors():
+        return None
+
+
+def _check_npy_size(path: str, size_check) -> None:
+    """An .npy file's header against the file: the samples it claims must be in the file (numpy would
+    set aside the claimed size first) and, to the caller, fit in memory (``size_check``)."""
+    size = regular_file(path)
+    try:
+        with open(path, "rb") as f:
+            layout = npy_layout(path, f)
+    except OSError as e:
+        raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
+    if layout is None or layout[1].hasobject:
+        return
+    shape, dtype, offset = layout
+    need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if size - offset < need:
+        raise InputError(f"cannot read {path}: .npy data is truncated: the header says {dtype} samples of "
+                         f"shape {shape}, {need} bytes, the file holds {max(0, size - offset)}")
+    if len(shape) == 2:
+        size_check(shape[1], shape[0], dtype.itemsize)
+
+
+def _read_npy(path: str, size_check=lambda w, h, itemsize: None) -> np.ndarray:
+    _check_npy_size(path, size_check)
     try:
         arr = np.load(path, allow_pickle=False)
     except _read_errors() as e:
@@ -470,7 +554,9 @@ def _read_npy(path: str) -> np.ndarray:
     return arr
 
 
-def _read_npz(path: str, key: str | None) -> tuple[np.ndarray, tuple[float, ...] | None]:
+def _read_npz(path: str, key: str | None, size_check=lambda w, h, itemsize: None
+              ) -> tuple[np.ndarray, tuple[float, ...] | None]:
+    regular_file(path)
     try:
         npz = np.load(path, allow_pickle=False)
     except _read_errors() as e:
@@ -494,10 +580,31 @@ def _read_npz(path: str, key: str | None) -> tuple[np.ndarray, tuple[float, ...]
         elif key not in names:
             raise InputError(f"{path}: no array {key!r} in the .npz archive; its arrays are: {listed}")
         try:
+            _check_npz_member(path, npz, key, size_check)
             array = np.asarray(npz[key])
             return array, _npz_transform(path, npz, array.shape)
         except _read_errors() as e:
             raise InputError(f"cannot read {path}: array {key!r} is corrupt ({_one_line(e)})") from None
+
+
+def _check_npz_member(path: str, npz, key: str, size_check) -> None:
+    """An .npz member's header against the member's size in the archive (as _check_npy_size)."""
+    try:
+        info = npz.zip.getinfo(key if key in npz.zip.namelist() else key + ".npy")
+        with npz.zip.open(info) as f:
+            layout = npy_layout(path, f)
+    except _read_errors():
+        return
+    if layout is None or layout[1].hasobject:
+        return
+    shape, dtype, offset = layout
+    need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if info.file_size - offset < need:
+        raise InputError(f"cannot read {path}: array {key!r} is truncated: its header says {dtype} samples "
+                         f"of shape {shape}, {need} bytes, the archive holds "
+                         f"{max(0, info.file_size - offset)}")
+    if len(shape) == 2:
+        size_check(shape[1], shape[0], dtype.itemsize)
 
 
 def _npz_transform(path: str, npz, shape: tuple[int, ...]) -> tuple[float, ...] | None:
@@ -590,15 +697,25 @@ def _pgm_header(data: bytes, path: str) -> tuple[bytes, int, int, int, int]:
     return magic, width, height, maxval, pos
 
 
-def _read_pgm(path: str) -> np.ndarray:
-    data = _read_bytes(path)
-    magic, width, height, maxval, pos = _pgm_header(data, path)
+PGM_HEADER_MAX = 1 << 16  # bytes a PGM header (comments included) may take
+
+
+def _read_pgm(path: str, size_check=lambda w, h, itemsize: None) -> np.ndarray:
+    """A PGM's samples, reading no more of the file than its header's W x H samples take (P5; a longer
+    file's rest is not read), or the regular file as it is (P2)."""
+    size = regular_file(path)
+    head = _read_bytes(path, PGM_HEADER_MAX)
+    magic, width, height, maxval, pos = _pgm_header(head, path)
+    if pos >= len(head) and size > len(head):
+        raise InputError(f"cannot read {path}: PGM header is longer than {PGM_HEADER_MAX} bytes")
     count = width * height
     if magic == b"P5":
         dtype = np.dtype(np.uint8) if maxval <= 255 else np.dtype(">u2")
         need = count * dtype.itemsize
-        raster = data[pos : pos + need]
-        found = len(raster) // dtype.itemsize
+        found = max(0, min(size - pos, need)) // dtype.itemsize
+        if found >= count:
+            size_check(width, height, dtype.itemsize)
+        raster = _read_bytes(path, need, pos) if found >= count else b""
         if found < count:
             raise InputError(
                 f"cannot read {path}: PGM data is truncated: expected {width} x {height} = {count} samples, "
@@ -606,7 +723,9 @@ def _read_pgm(path: str) -> np.ndarray:
             )
         arr = np.frombuffer(raster, dtype=dtype).astype(np.int64)
     else:
-        body = re.sub(rb"#[^\r\n]*", b" ", data[pos:])
+        if size - pos >= 2 * count - 1:  # else too short for the samples: said below
+            size_check(width, height, 8)
+        body = re.sub(rb"#[^\r\n]*", b" ", _read_bytes(path, None, pos))
         tokens = body.split()
         if len(tokens) != count:
             what = "truncated" if len(tokens) < count else "too long"
@@ -626,11 +745,13 @@ def _read_pgm(path: str) -> np.ndarray:
     return arr.reshape(height, width)
 
 
-def _read_png(path: str) -> np.ndarray:
+def _read_png(path: str, size_check=lambda w, h, itemsize: None) -> np.ndarray:
     from PIL import Image  # imported here: only PNG needs Pillow
 
+    regular_file(path)
     try:
         with Image.open(path, formats=["PNG"]) as img:
+            size_check(*img.size, 4)
             img.load()
             mode = img.mode
             bands = len(img.getbands())
@@ -652,7 +773,8 @@ def _read_png(path: str) -> np.ndarray:
 # GDAL rasters, through rasterio
 
 
-def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, ...] | None, str | None]:
+def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
+                 ) -> tuple[np.ma.MaskedArray, tuple[float, ...] | None, str | None]:
     """Read band 1 of a raster GDAL can open: ``(masked heights, transform, crs)``.
 
     The mask is GDAL's (no-data value, mask band); the band's scale and offset
@@ -667,6 +789,7 @@ def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, .
     from rasterio.errors import NotGeoreferencedWarning, RasterioError
 
     _quiet_rasterio_logs()
+    regular_file(path)
     kind = _RASTER_KINDS.get(ext)
     errors = (RasterioError, CPLE_BaseError, *_read_errors())
     try:
@@ -708,6 +831,8 @@ def _read_raster(path: str, ext: str) -> tuple[np.ma.MaskedArray, tuple[float, .
                     _check_ascii_grid(path, ds.height, ds.width)
                 if ds.driver in _RAW_DRIVERS:
                     _check_raw_size(path, ds)
+                check_nodata(path, ds)
+                size_check(ds.width, ds.height, np.dtype(ds.dtypes[0]).itemsize)
                 array = ds.read(1, masked=True)
                 scale, offset = ds.scales[0], ds.offsets[0]
                 georeferenced = ds.crs is not None or not ds.transform.is_identity
@@ -732,6 +857,20 @@ def _check_ascii_grid(path: str, nrows: int, ncols: int) -> None:
     header = _ASC_HEADER.match(text)
     data = text[header.end() if header else 0 :].split()
     where = f"cannot read {path}: ESRI ASCII grid"
+    for line in text[: header.end() if header else 0].splitlines():
+        words = line.split()
+        if len(words) != 2:
+            continue
+        key, value = words[0].decode("latin-1"), words[1].decode("latin-1")
+        kind = _ASC_KEYS.get(key.lower())
+        try:
+            number = int(value) if kind is int else float(value) if kind is float else None
+        except ValueError:
+            number = None
+        if kind is not None and number is None:  # GDAL would read it as 0 (a no-data 0, a cell of 0)
+            want = "an integer" if kind is int else "a number"
+            raise InputError(f"{where}: header {key} {_short(value)} is not {want}",
+                             hint=f"fix the header line '{key} ...'")
     count = nrows * ncols
     if len(data) != count:
         what = "truncated" if len(data) < count else "too long"
@@ -742,6 +881,67 @@ def _check_ascii_grid(path: str, nrows: int, ncols: int) -> None:
         np.array(data, dtype=np.float64)
     except ValueError:
         raise InputError(f"{where}: data holds a value that is not a number") from None
+
+
+def check_nodata(path: str, ds) -> None:
+    """A raster's no-data value, strictly: a GeoTIFF's GDAL_NODATA tag must be a number (GDAL reads
+    "xyzzy" as 0, and would mask every 0), and the value must be one the band's samples can hold (NaN on
+    int16, -9999 on uint16 or 1.5 on int16 mask nothing: the file means something it does not say)."""
+    value = ds.nodata
+    text = _tiff_nodata_text(path) if ds.driver == "GTiff" else None  # GDAL drops what it cannot use
+    if text is not None:
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError(f"cannot read {path}: its no-data value {_short(text)} (the GDAL_NODATA tag) is "
+                             "not a number",
+                             hint="set it right (gdal_edit.py -a_nodata VALUE, or -unsetnodata)") from None
+    if value is None:
+        return
+    dtype = np.dtype(ds.dtypes[0])
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        if not (np.isfinite(value) and value == np.floor(value) and info.min <= value <= info.max):
+            raise InputError(f"cannot read {path}: its no-data value {value:g} cannot occur in {dtype} "
+                             f"samples ({info.min}..{info.max}), so it would mark none",
+                             hint="set the value the file uses for missing samples "
+                                  "(gdal_edit.py -a_nodata VALUE, or -unsetnodata)")
+
+
+def _tiff_nodata_text(path: str) -> str | None:
+    """The GDAL_NODATA tag (42113, ASCII) of a TIFF's first image as written, or None (no tag, not a
+    TIFF that can be read here: GDAL's value then stands)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+            order = {b"II": "<", b"MM": ">"}.get(head[:2])
+            if order is None:
+                return None
+            magic = struct.unpack(order + "H", head[2:4])[0]
+            if magic == 42:
+                ifd, count_f, entry_f, small = struct.unpack(order + "I", head[4:8])[0], "H", "HHII", 4
+            elif magic == 43:
+                ifd, count_f, entry_f, small = struct.unpack(order + "Q", head[8:16])[0], "Q", "HHQQ", 8
+            else:
+                return None
+            f.seek(ifd)
+            raw = f.read(struct.calcsize(order + count_f))
+            (n,) = struct.unpack(order + count_f, raw)
+            size = struct.calcsize(order + entry_f)
+            entries = f.read(min(n, 4096) * size)
+            for i in range(len(entries) // size):
+                tag, typ, count, value = struct.unpack(order + entry_f, entries[i * size:(i + 1) * size])
+                if tag != 42113 or typ != 2:
+                    continue
+                if count <= small:
+                    data = entries[i * size + size - small:i * size + size][:count]
+                else:
+                    f.seek(value)
+                    data = f.read(min(count, 1024))
+                return data.split(b"\0")[0].decode("latin-1").strip()
+    except (OSError, struct.error, OverflowError, ValueError):
+        return None
+    return None
 
 
 # GDAL's drivers of raw sample files, which read the missing end of a short file as 0 without a word.
@@ -762,6 +962,10 @@ def _check_raw_size(path: str, ds) -> None:
             f"samples need at least {need} bytes, the file has {size}"
         )
 
+
+# The header keys of an ESRI ASCII grid whose values must be numbers (GDAL reads any text there as 0).
+_ASC_KEYS = {"ncols": int, "nrows": int, "xllcorner": float, "yllcorner": float, "xllcenter": float,
+             "yllcenter": float, "cellsize": float, "dx": float, "dy": float, "nodata_value": float}
 
 # The header of an ESRI ASCII grid: lines ``key value`` whose key starts with a letter.
 _ASC_HEADER = re.compile(rb"(?:\s*[A-Za-z_]\w*[ \t]+\S+)*")

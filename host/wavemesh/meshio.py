@@ -458,6 +458,9 @@ def read_mesh(path, width: int | None = None, height: int | None = None,
         placed = read_sidecar(path)
         to_grid = placing(*placed) if placed else None
     name = os.fspath(path)
+    from .heightfield import regular_file
+
+    regular_file(name, "mesh file")  # not a FIFO (the read would wait for a writer), not a device
     try:
         data = Path(name).read_bytes()
     except OSError as e:

@@ -284,15 +284,17 @@ def make_tiles(hf, *, max_zoom: int | None = None, zeta: float = 1.0, log=None) 
     return TileSet(files, rows, layer_json(getattr(hf, "source", "wavemesh"), max_zoom, available, s.bounds))
 
 
-def write_tiles(ts: TileSet, folder: str) -> Path:
-    """The pyramid into ``folder`` (created; its existing files kept unless replaced), whole or not at all."""
+def write_tiles(ts: TileSet, folder: str, inputs=None) -> Path:
+    """The pyramid into ``folder`` (created; its existing files kept unless replaced), whole or not at all,
+    none of its files one of ``inputs`` (wavemesh.outputs)."""
     import json
 
     from wavemesh.outputs import Outputs, check_path
 
-    out = check_path(folder, None, "terrain tiles")
-    with Outputs() as staged:
+    out = check_path(folder, None, "terrain tiles", inputs)
+    with Outputs(inputs) as staged:
         for (level, x, y), data in ts.files.items():
-            staged.path(out / str(level) / str(x) / f"{y}.terrain").write_bytes(data)
-        staged.path(out / "layer.json").write_text(json.dumps(ts.layer, indent=1) + "\n")
+            staged.path(out / str(level) / str(x) / f"{y}.terrain", what="terrain tile").write_bytes(data)
+        staged.path(out / "layer.json", what="terrain tiles").write_text(
+            json.dumps(ts.layer, indent=1) + "\n")
     return out

@@ -152,7 +152,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
     needs the whole grid), is read whole by wavemesh.api.load_input."""
     from wavemesh import api
     from wavemesh.georef import apply_overrides, cropped
-    from wavemesh.heightfield import parse_fill
+    from wavemesh.heightfield import check_nodata, parse_fill, regular_file
 
     fill_mode = parse_fill(fill)
     ext = Path(path).suffix.lower()
@@ -163,6 +163,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
         return Source("array", hf.width, hf.height, array=hf.values, name=hf.source, transform=hf.transform,
                       crs=hf.crs, spacing=hf.spacing)
     transform = crs = None
+    regular_file(path)  # not a FIFO, not a device
     if ext == ".npy":
         try:
             mm = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -182,6 +183,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
                 if ds.count != 1:
                     raise InputError(f"{path} has {ds.count} bands; a height field needs one",
                                      hint="extract one (e.g. gdal_translate -b 1)")
+                check_nodata(path, ds)
                 fh, fw = ds.height, ds.width
                 if ds.crs is not None or not ds.transform.is_identity:
                     transform = tuple(float(t) for t in ds.transform[:6])
@@ -733,15 +735,11 @@ def _mesh_tile_task(plan: TilePlan, index: int, window: np.ndarray | None) -> Ti
 
 
 def available_memory() -> int:
-    """Bytes of memory available now (/proc/meminfo's MemAvailable; else the physical memory)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    """Bytes this process may still take now (wavemesh.api.memory_available: MemAvailable, ulimit -v,
+    the cgroup's limit)."""
+    from wavemesh.api import memory_available
+
+    return memory_available()[0]
 
 
 def default_tile(workers: int, budget: int | None = None) -> int:
@@ -806,8 +804,12 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, pro
 
 
 def _run_pool(plan: TilePlan, workers: int, finished) -> None:
+    """The tiles on ``workers`` forked processes, one tile each at a time, each result through the
+    worker's own pipe.  The parent has no threads of its own for them: a run that ends early (a failed
+    tile, Ctrl-C, SIGTERM) kills its workers and returns at once (concurrent.futures' pool could wait
+    forever at exit for a result a killed worker had half sent)."""
     import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from multiprocessing.connection import wait
 
     from wavemesh import native
 
@@ -815,20 +817,112 @@ def _run_pool(plan: TilePlan, workers: int, finished) -> None:
     # fork: the workers start from this process as it is (the library loaded; a script that calls this
     # needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
     ctx = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        # at most 2 tiles per worker in flight: memory is bounded by the tiles in flight
+    pool: list[tuple] = []  # (process, pipe)
+    ok = False
+    try:
+        for _ in range(workers):
+            here, there = ctx.Pipe()
+            proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
+            proc.start()
+            there.close()
+            pool.append((proc, here))
         todo = iter(_tasks(plan))
-        running, more = set(), True
-        while more or running:
-            while more and len(running) < 2 * workers:
+        busy: dict = {}  # pipe -> process, of the workers at a tile
+        for proc, pipe in pool:
+            task = next(todo, None)
+            if task is None:
+                break
+            pipe.send(task)
+            busy[pipe] = proc
+        while busy:
+            ready = wait([*busy, *(p.sentinel for p in busy.values())])
+            for pipe in [c for c in busy if c in ready]:
+                try:
+                    kind, value, hint = pipe.recv()
+                except (EOFError, OSError):
+                    proc = busy[pipe]
+                    proc.join(1.0)
+                    raise WavemeshError(f"a tile worker ended without its tile (exit status {proc.exitcode})",
+                                        hint="out of memory? try a smaller --tile or fewer --workers") \
+                        from None
+                if kind == "error":
+                    if isinstance(value, WavemeshError) and hint is not None:
+                        value.hint = hint
+                    raise value
+                finished(value)
                 task = next(todo, None)
                 if task is None:
-                    more = False
+                    del busy[pipe]
                 else:
-                    running.add(pool.submit(_mesh_tile_task, *task))
-            done, running = wait(running, return_when=FIRST_COMPLETED)
-            for f in done:
-                finished(f.result())
+                    pipe.send(task)
+            for pipe, proc in list(busy.items()):
+                if proc.sentinel in ready and pipe not in ready and not pipe.poll():
+                    proc.join(1.0)
+                    raise WavemeshError(f"a tile worker ended without its tile (exit status {proc.exitcode})",
+                                        hint="out of memory? try a smaller --tile or fewer --workers")
+        ok = True
+    finally:
+        _end_workers(pool, gently=ok)
+
+
+def _worker_loop(pipe, parent: int) -> None:
+    """A pool worker: tiles from its pipe until it closes; each result, or the error, back through it."""
+    _worker_start(parent)
+    while True:
+        try:
+            task = pipe.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        try:
+            reply = ("ok", _mesh_tile_task(*task), None)
+        except Exception as e:  # the parent raises it (WavemeshError with its hint)
+            reply = ("error", e, getattr(e, "hint", None))
+        try:
+            pipe.send(reply)
+        except Exception as e:  # an error that does not pickle: its text
+            pipe.send(("error", RuntimeError(f"{type(e).__name__}: {e}"), None))
+
+
+def _worker_start(parent: int) -> None:
+    """A pool worker's start: Ctrl-C is the parent's to handle (it ends the workers, _end_workers), SIGTERM
+    ends the worker at once, and the worker ends when its parent does, even one killed outright (Linux's
+    PR_SET_PDEATHSIG)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent ended before the line above
+        os._exit(1)
+
+
+def _end_workers(pool: list, gently: bool) -> None:
+    """End the workers: ``gently`` (the run is done) by closing their pipes; else at once (SIGTERM, then
+    SIGKILL after a second).  Reaped either way."""
+    for proc, pipe in pool:
+        if gently:
+            try:
+                pipe.send(None)
+            except OSError:
+                pass
+        elif proc.is_alive():
+            proc.terminate()
+    deadline = time.monotonic() + (10.0 if gently else 1.0)
+    for proc, pipe in pool:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
+        pipe.close()
 
 
 def connect(address: str):
@@ -1039,42 +1133,68 @@ def mesh_tiled(src: Source, params, tile: int | None = None, *, workers: int | N
 # Files: the stitched mesh, and each tile's with an index
 
 
+def check_tiled_outputs(output: str, *, tiles_dir: str | None = None, report: str | None = None,
+                        render: str | None = None, exaggeration: float | None = None, inputs=None,
+                        files=None):
+    """A tiled run's output paths, checked before any work (wavemesh.api.check_outputs, and --tiles-dir):
+    (mesh file, --tiles-dir folder)."""
+    from wavemesh.api import check_outputs
+    from wavemesh.outputs import as_inputs, check_path
+
+    inputs = as_inputs(inputs)
+    out, _ = check_outputs(output, report=report, render=render, inputs=inputs, exaggeration=exaggeration,
+                           files=files)
+    folder = check_path(tiles_dir, None, "--tiles-dir", inputs) if tiles_dir else None
+    if folder is not None and folder.resolve() in {Path(p).resolve() for p in (output, report, render) if p}:
+        raise InputError(f"--tiles-dir {tiles_dir} names a file the run also writes",
+                         hint="give --tiles-dir its own folder")
+    return out, folder
+
+
 def write_tiled(tiled: TiledResult, plan: TilePlan, output: str, *, tiles_dir: str | None = None,
-                report: str | None = None, comment: str = "", files=None) -> list[str]:
+                report: str | None = None, comment: str = "", files=None, render: str | None = None,
+                exaggeration: float | None = None, title: str | None = None, inputs=None) -> list[str]:
     """The stitched mesh (a format of wavemesh.meshio.FORMATS, written as ``files``, an api.MeshFiles,
     says), each tile's mesh into ``tiles_dir`` (tile-RRR-CCC.EXT in the whole grid's frame, so that they
     fit together as they are; no --base) with ``index.json`` naming each tile's file, place and numbers,
-    and the JSON report; whole or not at all."""
+    the JSON report and the picture (``render``); whole or not at all, as one set, none of them one of
+    ``inputs`` (wavemesh.outputs)."""
     import json
 
-    from wavemesh.api import MeshFiles, check_outputs
+    from wavemesh.api import MeshFiles, _render
     from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
     from wavemesh.georef import ground
     from wavemesh.meshio import write_mesh
-    from wavemesh.outputs import Outputs, check_path
+    from wavemesh.outputs import Outputs, as_inputs
 
     files = files or MeshFiles()
-    out, _ = check_outputs(output, report=report, files=files)
-    folder = check_path(tiles_dir, None, "--tiles-dir") if tiles_dir else None
+    inputs = as_inputs(inputs)
+    out, folder = check_tiled_outputs(output, tiles_dir=tiles_dir, report=report, render=render,
+                                      exaggeration=exaggeration, inputs=inputs, files=files)
     g = ground(plan.source.grid())
     opts = {"ground": g, "units": files.units, "local": files.local, "normals": files.normals}
     written = []
-    with Outputs() as staged:
-        write_mesh(str(staged.path(out, (SIDECAR,))), tiled.mesh, tiled.z, comment=comment, base=files.base,
-                   **opts)
+    with Outputs(inputs) as staged:
+        write_mesh(str(staged.path(out, (SIDECAR,), "mesh")), tiled.mesh, tiled.z, comment=comment,
+                   base=files.base, **opts)
         if folder is not None:
             index = {"grid": [plan.width, plan.height], "tile": plan.tile,
                      "layout": [len(plan.xcuts) - 1, len(plan.ycuts) - 1], "mesh": str(out), "tiles": []}
             for r in tiled.tiles:
                 m = Mesh(plan.width, plan.height, r.xy, r.tris)
                 path = folder / f"{r.name}{out.suffix.lower()}"
-                write_mesh(str(staged.path(path, (SIDECAR,))), m, r.z, comment=f"{comment} {r.name}",
-                           **opts)
+                write_mesh(str(staged.path(path, (SIDECAR,), "--tiles-dir")), m, r.z,
+                           comment=f"{comment} {r.name}", **opts)
                 index["tiles"].append({"file": path.name} | r.report)
                 written.append(str(path))
-            staged.path(folder / "index.json").write_text(json.dumps(index, indent=1) + "\n")
+            staged.path(folder / "index.json", what="--tiles-dir").write_text(
+                json.dumps(index, indent=1) + "\n")
         if report:
-            staged.path(report).write_text(json.dumps(tiled.report | {"output": str(out)}, indent=2) + "\n")
+            staged.path(report, what="report").write_text(
+                json.dumps(tiled.report | {"output": str(out)}, indent=2) + "\n")
+        if render:
+            _render(tiled.mesh, tiled.z, str(staged.path(render, what="picture")), g, exaggeration,
+                    title=title)
     return written
 
 
@@ -1086,13 +1206,12 @@ def progress_enabled() -> bool:
 # The commands' tiled path (wavemesh.cli hands `mesh --tile` and `stream --tile` or several --port here)
 
 
-def command(args, params, ports: list[str] | None = None) -> int:
+def command(args, params, ports: list[str] | None = None, inputs=None) -> int:
     """`wavemesh mesh --tile N` (``ports`` None) or `wavemesh stream` of tiles on ``ports``: read the input
     lazily, plan, run the tiles, stitch, write; print a summary unless --quiet."""
     from dataclasses import replace as _replace
 
     from wavemesh import api
-    from wavemesh.georef import ground
 
     if getattr(args, "lod", None):
         raise WavemeshError("--lod is not written for a tiled run", hint="leave out --lod, or --tile")
@@ -1106,7 +1225,12 @@ def command(args, params, ports: list[str] | None = None) -> int:
     if files.normal_map:
         raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
                             hint="leave out --tile, or --normal-map")
-    out, _ = api.check_outputs(args.output, report=args.report, render=args.render, files=files)
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
+    if getattr(args, "timeout", None) is not None and not args.timeout > 0:
+        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
+    check_tiled_outputs(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
+                        exaggeration=args.exaggeration, inputs=inputs, files=files)
     quiet = args.quiet
     say = None if quiet else (lambda text: print(text, flush=True))
     progress = not quiet
@@ -1142,13 +1266,8 @@ def command(args, params, ports: list[str] | None = None) -> int:
     p = params.refine
     comment = (f"wavemesh tiled mesh, tile={plan.tile} tau={plan.tau:g} zeta={p.zeta:g} metric={p.metric}")
     written = write_tiled(tiled, plan, args.output, tiles_dir=args.tiles_dir, report=args.report,
-                          comment=comment, files=files)
-    if args.render:
-        from wavemesh.outputs import Outputs
-
-        with Outputs() as staged:
-            api._render(tiled.mesh, tiled.z, str(staged.path(args.render)), ground(src.grid()),
-                        args.exaggeration, title=Path(args.input).name)
+                          comment=comment, files=files, render=args.render, exaggeration=args.exaggeration,
+                          title=Path(args.input).name, inputs=inputs)
     if not quiet:
         r = tiled.report
         print(f"{args.input}: {plan.width} x {plan.height} in {r['layout'][0]} x {r['layout'][1]} tiles of "
