@@ -192,7 +192,7 @@ def test_normal_map(tmp_path):
 
 @pytest.mark.parametrize("opts, says", [
     (("--base", "-1"), "--base -1.0"),
-    (("--base", "nan"), "--base nan"),
+    (("--base", "nan"), "--base: nan is not a finite number"),
     (("--base", "0"), "--base 0.0"),
     (("--units", "feet"), "--units: invalid choice"),
     (("--normals", "-o", "x.stl"), "--normals: a .stl file"),
