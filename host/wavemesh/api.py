@@ -66,6 +66,7 @@ class MeshJob:
     tau: float
     result: InitialResult
     wavelet: str = "haar"  # the filter bank's (wavemesh.haar.WAVELETS)
+    details: np.ndarray | None = None  # the C filter bank's details (native.haar_details), None: not made
 
     @property
     def mesh(self) -> Mesh:
@@ -84,9 +85,12 @@ def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = 
         mesh = assemble(labelling, hf.width, hf.height)
         result = InitialResult(mesh, labelling, tau_counts(t, hf.scale), m)
     else:
-        result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet)
+        from wavemesh import native  # the C filter bank once, for the labeller and the refiner (tested equal)
+
+        details = native.haar_details(hf.samples, m, wavelet) if native.host_lib() is not None else None
+        result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet, details)
     require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
-    return MeshJob(hf, m, t, result, wavelet)
+    return MeshJob(hf, m, t, result, wavelet, details)
 
 
 def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> tuple[int, float]:
@@ -386,7 +390,8 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
         # 5.6: no detail energy outside the ROI
         details = mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
-                        roi=roi, mask=hf.mask, wavelet=job.wavelet)
+                        roi=roi, mask=hf.mask, wavelet=job.wavelet,
+                        details=job.details if roi is None else None)
     seconds = time.perf_counter() - start
     # The operators keep the mesh proper and within zeta: a failure here is a bug.
     for lv in out.levels if check_levels else out.levels[-1:]:

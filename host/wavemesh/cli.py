@@ -238,6 +238,9 @@ def _mesh_parser(sub) -> None:
         "checked (a proper triangulation, within zeta when the bound is met; exit status 1 if not); "
         "the coarser levels only with --check-levels, --report or --lod."))
     _mesh_options(p)
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="threads for the host's stages (quantisation, the filter bank's check, the error "
+                        "measure; default: every core); the same mesh whatever N, 1 for one core")
     _tile_options(p, local=True)
 
 
@@ -484,6 +487,10 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 
 def mesh_command(args) -> int:
     _check_options(args)
+    if args.threads is not None:
+        from wavemesh import native
+
+        native.set_threads(args.threads)  # InputError-like: one error line when out of range
     if args.tile is not None or args.scheduler or args.tiles_dir:
         from wavemesh import tiles
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wavemesh.haar import decompose
+from wavemesh.haar import HaarLevel, decompose
 from wavemesh.label import Labelling, label_blocks, tau_counts
 from wavemesh.mesh import Mesh
 from wavemesh.templates import LABELS, template_set
@@ -61,11 +61,23 @@ def assemble(lab: Labelling, width: int, height: int) -> Mesh:
     return Mesh(width, height, xy, inverse.reshape(-1, 3)).canonical()
 
 
+def last_level(details: np.ndarray, width: int, height: int, levels: int) -> HaarLevel:
+    """Level M's details from the C filter bank's layout (native.haar_details: per level, cells row by
+    row, (d1, d2, d3)); its approximation is not kept there (``a`` is None: the labeller reads none)."""
+    off = sum(3 * (-(-width >> m)) * (-(-height >> m)) for m in range(1, levels))
+    cw, ch = -(-width >> levels), -(-height >> levels)
+    d = details[off:off + 3 * cw * ch].reshape(ch, cw, 3).astype(np.int64)
+    return HaarLevel(levels, None, d[..., 0], d[..., 1], d[..., 2])
+
+
 def initial_triangulation(samples: np.ndarray, levels: int, tau_q: int,
-                          wavelet: str = "haar") -> InitialResult:
-    """Filter bank (``wavelet``: wavemesh.haar.WAVELETS), labeller and templates on (H, W) 16-bit samples."""
+                          wavelet: str = "haar", details: np.ndarray | None = None) -> InitialResult:
+    """Filter bank (``wavelet``: wavemesh.haar.WAVELETS), labeller and templates on (H, W) 16-bit samples.
+    ``details``: the filter bank's details as the C library made them (native.haar_details, equal to
+    decompose's: tests/host/test_host_stages.py), else wavemesh.haar's model makes them."""
     height, width = samples.shape
-    level = decompose(samples, levels, wavelet)[-1]
+    level = (decompose(samples, levels, wavelet)[-1] if details is None
+             else last_level(details, width, height, levels))
     lab = label_blocks(level, tau_q, width, height)
     return InitialResult(assemble(lab, width, height), lab, tau_q, levels)
 

@@ -98,7 +98,7 @@ class LevelStats(ctypes.Structure):
 
 
 def _sources() -> list[Path]:
-    return sorted(p for d in ("src", "include") for p in (FIRMWARE / d).glob("*.[ch]")) + [
+    return sorted(p for d in ("src", "include", "host") for p in (FIRMWARE / d).glob("*.[ch]")) + [
         FIRMWARE / "CMakeLists.txt", FIRMWARE / "sources.cmake"]
 
 
@@ -172,7 +172,8 @@ def load() -> ctypes.CDLL:
 
 def _declare(lib: ctypes.CDLL) -> None:
     i32, u32, sz, vp = ctypes.c_int32, ctypes.c_uint32, ctypes.c_size_t, ctypes.c_void_p
-    pi32 = ctypes.POINTER(ctypes.c_int32)
+    pi32, pi64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_int64)
+    i64, pf64, pu16 = ctypes.c_int64, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_uint16)
     sig = {
         "wm_abi_size": (sz, [ctypes.c_int]),
         "wm_strerror": (ctypes.c_char_p, [ctypes.c_int]),
@@ -195,6 +196,9 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_spline": (ctypes.c_int, [ctypes.POINTER(ctypes.c_uint16), i32, i32, i32, pi32,
                                      ctypes.POINTER(ctypes.c_uint16)]),
         "wm_spline_scratch": (ctypes.c_int64, [i32, i32]),
+        "wm_host_quantise": (ctypes.c_int, [pf64, i64, i32, pu16, pf64, pi32]),
+        "wm_host_quant_error": (ctypes.c_double, [pf64, pu16, i64, ctypes.c_double, ctypes.c_double, i32]),
+        "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, i32]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -392,7 +396,8 @@ def _export(lib, handle, width: int, height: int) -> tuple:
 def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, params: RefineParams,
            scale: float = 1.0, zeta: float | None = None,
            spacing: tuple[float, float] = (1.0, 1.0), roi: np.ndarray | None = None,
-           mask: np.ndarray | None = None, wavelet: str = "haar") -> RefineOutput:
+           mask: np.ndarray | None = None, wavelet: str = "haar", details: np.ndarray | None = None
+           ) -> RefineOutput:
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
     ``levels``: the details (wavemesh.haar.decompose's), or their number M, and then the library's own
@@ -414,7 +419,10 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
         raise WavemeshError(f"the grid is {width} x {height}; the refiner takes at most {MAX_SIDE} per side",
                             hint="crop or subsample the height field, or use --stage initial")
     count = isinstance(levels, (int, np.integer))
-    det = haar_details(samples, int(levels), wavelet) if count else details_array(levels)
+    if count:  # ``details``: haar_details' already made (the initial triangulation's)
+        det = details if details is not None else haar_details(samples, int(levels), wavelet)
+    else:
+        det = details_array(levels)
     m = int(levels) if count else len(levels)
     fld = Field(width, height, m, _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
     if mask is not None:  # ``mask``: (H, W) bool, True where invalid (wavemesh.holes; wm_field.mask)
@@ -517,4 +525,99 @@ def haar_details(samples: np.ndarray, levels: int, wavelet: str = "haar") -> np.
                 _ptr(scratch, ctypes.c_uint16))
     if code != WM_OK:
         raise WavemeshError(f"{'wm_spline' if spline else 'wm_haar'}: {error_text(code)}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The host stages in C (firmware/host, wm_host.h): quantisation, the final check's error measure.
+# Each equals its Python model (heightfield.quantise, check.mesh_errors) bit for bit whatever the thread
+# count (tests/host/test_host_stages.py); the callers use them when the library loads, else the model.
+
+_THREADS: int | None = None  # set_threads(); None: every core this process may use
+_HOST: ctypes.CDLL | None | bool = None  # host_lib()'s answer, once: the library, or False
+
+
+def cores() -> int:
+    """The processors this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def set_threads(n: int | None) -> None:
+    """How many threads the host stages use (``wavemesh mesh --threads N``); None: cores()."""
+    global _THREADS
+    if n is not None and n < 1:
+        raise WavemeshError(f"--threads {n} is out of range", hint="use 1 or more (1: one core)")
+    _THREADS = n
+
+
+def threads() -> int:
+    return _THREADS if _THREADS is not None else cores()
+
+
+def host_lib() -> ctypes.CDLL | None:
+    """The library for the host stages, or None when it cannot be built or loaded (then the callers run
+    the Python model; `wavemesh mesh` needs the library anyway and says so)."""
+    global _HOST
+    if _HOST is None:
+        try:
+            _HOST = load()
+        except WavemeshError:
+            _HOST = False
+    return _HOST or None
+
+
+QUANTISE_ERRORS = {1: "non-finite", 2: "span"}
+
+
+def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float] | str | None:
+    """wm_host_quantise on float64 heights: (samples, scale, offset, lossless, max error), or the kind of
+    problem ("non-finite", "span") for the caller's message, or None without the library."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    samples = np.empty(v.shape, dtype=np.uint16)
+    out = np.zeros(3, dtype=np.float64)
+    lossless = ctypes.c_int32(0)
+    for n in (threads(), 1):  # a thread that cannot start: once more on this one
+        code = lib.wm_host_quantise(_ptr(v, ctypes.c_double), v.size, n, _ptr(samples, ctypes.c_uint16),
+                                    _ptr(out, ctypes.c_double), ctypes.byref(lossless))
+        if code != 3:
+            break
+    if code in QUANTISE_ERRORS:
+        return QUANTISE_ERRORS[code]
+    if code != 0:
+        return None
+    return samples, float(out[0]), float(out[1]), bool(lossless.value), float(out[2])
+
+
+def quant_error(values: np.ndarray, samples: np.ndarray, offset: float, scale: float) -> float | None:
+    """max |values - (offset + scale * samples)| (wm_host_quant_error), or None without the library."""
+    lib = host_lib()
+    if lib is None or values.shape != samples.shape:
+        return None
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    s = np.ascontiguousarray(samples, dtype=np.uint16)
+    return float(lib.wm_host_quant_error(_ptr(v, ctypes.c_double), _ptr(s, ctypes.c_uint16), v.size,
+                                         float(offset), float(scale), threads()))
+
+
+def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray,
+            tris: np.ndarray) -> np.ndarray | None:
+    """Per triangle, the largest |height - plane| over the samples in the closed triangle (-inf: none),
+    as check.mesh_errors measures it (wm_host_tri_max); None without the library."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    h = np.ascontiguousarray(heights, dtype=np.float64)
+    x, y = np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(y, dtype=np.int64)
+    zv = np.ascontiguousarray(zv, dtype=np.float64)
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    out = np.empty(len(tris), dtype=np.float64)
+    lib.wm_host_tri_max(_ptr(h, ctypes.c_double), h.shape[1], h.shape[0], _ptr(x, ctypes.c_int64),
+                        _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64),
+                        len(tris), _ptr(out, ctypes.c_double), threads())
     return out

@@ -1,0 +1,47 @@
+/* wavemesh host stages: the parts of `wavemesh mesh` around the refiner that run on the host only
+ * (quantisation of float heights, the final check's error measure), in hosted C with doubles and
+ * threads.  Not part of the refiner's freestanding core (src/) and never built for the board.
+ *
+ * Each function equals its Python reference model bit for bit (host/wavemesh/heightfield.py's
+ * quantise, check.py's mesh_errors), whatever the thread count: the threads split the work into
+ * independent parts (samples, triangles) and combine them by min / max, which do not depend on the
+ * order (tests/host/test_host_stages.py).  threads <= 1 runs on the calling thread. */
+#ifndef WM_HOST_H
+#define WM_HOST_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define WM_HOST_OK 0
+#define WM_HOST_NONFINITE 1 /* a height is NaN or infinite */
+#define WM_HOST_SPAN 2      /* max - min overflows a double */
+#define WM_HOST_NOMEM 3     /* a thread could not be started: the caller may retry with 1 */
+
+/* quantise(): n finite heights v to 16-bit samples.  out[0] = scale, out[1] = offset, out[2] = the
+ * largest |v - (offset + scale * sample)|; *lossless = 1 when that is 0 (every height reconstructed).
+ * The rules are heightfield.py's: integers within 65535 of each other are kept exactly (offset 0
+ * when they lie in 0..65535, else their minimum); otherwise offset = min, scale = (max - min) / 65535,
+ * sample = rint((v - offset) / scale) clipped to 0..65535 (scale 1, samples 0 for a constant). */
+int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samples, double *out,
+                     int32_t *lossless);
+
+/* The largest |v - (offset + scale * s)| over n heights and their samples (0 for none). */
+double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double offset, double scale,
+                           int32_t threads);
+
+/* mesh_errors()'s per-triangle vertical maxima: for each of the t triangles (vertex indices tris[3 i..],
+ * vertex columns x, rows y, heights zv) the largest |h - plane| over the samples of the W x H height
+ * field h in the closed triangle, the plane z0 + (E1 dz1 + E2 dz2) / |D| evaluated with the exact
+ * integer edge functions; -inf for a degenerate triangle or one with no sample in the grid.
+ * Coordinates must be below 2^30 in size (the caller checks). */
+int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
+                    const double *zv, const int64_t *tris, int64_t t, double *per_v, int32_t threads);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

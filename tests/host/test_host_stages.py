@@ -1,0 +1,152 @@
+"""The host stages in C (firmware/host, native.quantise / quant_error / tri_max, the C filter bank for the
+labeller) against their Python models (heightfield.quantise, check.mesh_errors, haar.decompose), bit for
+bit, on random and real grids, at several thread counts; and `wavemesh mesh` writes the same mesh
+whatever --threads says."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from wavemesh import api, native
+from wavemesh.check import mesh_errors
+from wavemesh.cli import main
+from wavemesh.errors import InputError
+from wavemesh.heightfield import from_array, quantise
+from wavemesh.initial import initial_triangulation
+from wavemesh.mesh import Mesh
+
+THREADS = (1, 2, 3, 7)
+
+
+@pytest.fixture(autouse=True)
+def _threads():
+    assert native.host_lib() is not None  # the library builds here: the fast paths are what is tested
+    yield
+    native.set_threads(None)
+
+
+def real_grids() -> dict[str, np.ndarray]:
+    import datasets  # bench/ (pytest.ini's pythonpath)
+
+    return {name: datasets.load(name).values for name in ("jacksboro", "topobathy", "mri")}
+
+
+def random_grids() -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(31)
+    return {
+        "floats": rng.normal(100.0, 30.0, (37, 53)),
+        "integers": rng.integers(0, 65536, (41, 29)).astype(np.float64),  # lossless, offset 0
+        "negative integers": rng.integers(-70000, -10000, (23, 31)).astype(np.float64) // 2,  # lossless
+        "wide integers": rng.integers(-10**9, 10**9, (19, 17)).astype(np.float64),  # lossy
+        "constant": np.full((5, 7), 2.5),
+        "tiny span": np.array([[0.0, 5e-324], [5e-324, 0.0]]),  # the step underflows
+        "halves": np.round(rng.uniform(0, 10, (33, 33)) * 2) / 2,
+        "float32": rng.uniform(-1, 1, (16, 64)).astype(np.float32).astype(np.float64),
+        "big": rng.normal(0.0, 1e6, (300, 301)),
+    }
+
+
+ALL = {**random_grids(), **real_grids()}
+
+
+@pytest.mark.parametrize("name", list(ALL))
+def test_quantise_equals_the_model(name):
+    v = ALL[name]
+    ref = quantise(v, native=False)
+    want_err = float(np.max(np.abs(v - (ref[2] + ref[1] * ref[0].astype(np.float64)))))
+    for n in THREADS:
+        native.set_threads(n)
+        fast = native.quantise(v)
+        assert np.array_equal(fast[0], ref[0]) and fast[0].dtype == np.uint16
+        assert fast[1:4] == ref[1:4]
+        assert fast[4] == (0.0 if ref[3] else want_err)
+        assert native.quant_error(v, ref[0], ref[2], ref[1]) == want_err
+        hf = from_array(v)  # the fast path, and the property's cached value
+        assert np.array_equal(hf.samples, ref[0])
+        assert hf.max_quantisation_error == (0.0 if ref[3] else want_err)
+
+
+def test_quantise_refuses_what_the_model_refuses():
+    for bad in (np.array([[1.0, np.nan], [0.0, 2.0]]), np.array([[1.0, np.inf], [0.0, 2.0]])):
+        assert native.quantise(bad) == "non-finite"
+        with pytest.raises(InputError, match="non-finite"):
+            quantise(bad)
+    huge = np.array([[-1.7e308, 1.7e308], [0.0, 0.0]])
+    assert native.quantise(huge) == "span"
+    with pytest.raises(InputError, match="too large"):
+        quantise(huge)
+
+
+def meshes(name: str, v: np.ndarray) -> list[Mesh]:
+    hf = from_array(v)
+    job = api.triangulate(hf)
+    out = [job.mesh]
+    if min(v.shape) >= 8:
+        out.append(api.mesh(hf, api.MeshParams(refine=native.RefineParams(zeta=hf.scale * 500))).mesh)
+    return out
+
+
+@pytest.mark.parametrize("name", ["floats", "halves", "big", "jacksboro", "topobathy", "mri"])
+def test_error_measure_equals_the_model(name):
+    v = ALL[name]
+    for mesh in meshes(name, v):
+        for spacing in ((1.0, 1.0), (30.0, 20.0)):
+            ref = mesh_errors(mesh, v, rms=False, spacing=spacing, native=False)
+            for n in THREADS:
+                native.set_threads(n)
+                fast = mesh_errors(mesh, v, rms=False, spacing=spacing)
+                assert np.array_equal(fast.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
+                assert np.array_equal(fast.per_triangle_normal, ref.per_triangle_normal, equal_nan=True)
+                assert (fast.e_max_vertical, fast.e_max_normal) == (ref.e_max_vertical, ref.e_max_normal)
+
+
+def test_error_measure_of_odd_meshes():
+    """Degenerate and thin triangles, vertices off the grid (given heights), a NaN height: as the model."""
+    rng = np.random.default_rng(5)
+    h = rng.normal(0, 10, (12, 15))
+    xy = np.array([[0, 0], [14, 0], [14, 11], [0, 11], [7, 0], [7, 11], [3, 5], [20, 5]])
+    tris = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 1], [4, 5, 0], [6, 6, 1], [1, 7, 2], [0, 1, 7]])
+    mesh = Mesh(15, 12, xy, tris)
+    z = rng.normal(0, 10, len(xy))
+    for heights in (h, np.where(np.arange(h.size).reshape(h.shape) == 40, np.nan, h)):
+        ref = mesh_errors(mesh, heights, z, rms=False, native=False)
+        for n in THREADS:
+            native.set_threads(n)
+            fast = mesh_errors(mesh, heights, z, rms=False)
+            assert np.array_equal(fast.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
+            assert np.isnan(fast.e_max_vertical) == np.isnan(ref.e_max_vertical)
+
+
+@pytest.mark.parametrize("wavelet", ["haar", "spline"])
+@pytest.mark.parametrize("shape", [(17, 33), (64, 64), (65, 40), (3, 130)])
+def test_initial_triangulation_from_the_c_filter_bank(wavelet, shape):
+    rng = np.random.default_rng(shape[0] * shape[1])
+    samples = rng.integers(0, 65536, shape).astype(np.uint16)
+    samples = np.cumsum(np.cumsum(samples % 64, axis=0), axis=1).astype(np.uint16)  # smooth-ish
+    for m in range(1, api.default_levels(shape[1], shape[0]) + 2):
+        for tau_q in (0, 40, 4000):
+            ref = initial_triangulation(samples, m, tau_q, wavelet)
+            det = native.haar_details(samples, m, wavelet)
+            fast = initial_triangulation(samples, m, tau_q, wavelet, det)
+            for k in ("label", "mask", "template"):
+                assert np.array_equal(getattr(fast.labelling, k), getattr(ref.labelling, k))
+            assert fast.mesh.same_as(ref.mesh)
+
+
+def test_mesh_is_the_same_whatever_the_thread_count(tmp_path):
+    v = ALL["big"]
+    np.save(tmp_path / "in.npy", v)
+    outs = []
+    for n in ("1", "2", "5", None):
+        out = tmp_path / f"m{n}.obj"
+        assert main(["mesh", str(tmp_path / "in.npy"), "-o", str(out), "--zeta", "20000", "-q",
+                     *(["--threads", n] if n else [])]) == 0
+        outs.append(out.read_bytes())
+    assert all(o == outs[0] for o in outs[1:])
+
+
+def test_threads_out_of_range(tmp_path, capsys):
+    np.save(tmp_path / "in.npy", ALL["floats"])
+    assert main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.obj"), "--threads", "0"]) != 0
+    assert "--threads 0" in capsys.readouterr().err
+    assert not (tmp_path / "m.obj").exists()
