@@ -133,10 +133,16 @@ class _Grid:
 def _read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
     """A window of band 1 of a GDAL raster as float64: masked samples NaN, the band's scale and offset
     applied (as wavemesh.heightfield reads the whole raster)."""
+    import warnings
+
     import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
     from rasterio.windows import Window
 
-    with rasterio.open(path) as ds:
+    with warnings.catch_warnings():  # a plain TIFF: no stray warning line
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        ds = rasterio.open(path)
+    with ds:
         a = ds.read(1, window=Window(x, y, w, h), masked=True)
         scale, offset = ds.scales[0], ds.offsets[0]
     v = np.ma.filled(a.astype(np.float64), np.nan)
@@ -176,10 +182,16 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
         fh, fw = mm.shape
         kind = "npy"
     else:
+        import warnings
+
         import rasterio
+        from rasterio.errors import NotGeoreferencedWarning
 
         try:
-            with rasterio.open(path) as ds:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", NotGeoreferencedWarning)
+                ds = rasterio.open(path)
+            with ds:
                 if ds.count != 1:
                     raise InputError(f"{path} has {ds.count} bands; a height field needs one",
                                      hint="extract one (e.g. gdal_translate -b 1)")

@@ -271,7 +271,10 @@ def test_sigterm_while_writing_leaves_no_staging(tmp_path, terrain):
 # --- 4. SIGTERM to a tiled run: its workers end with it --------------------------------------------
 
 
-def test_sigterm_ends_a_tiled_runs_workers(tmp_path):
+@pytest.mark.parametrize("how", ["SIGTERM", "Ctrl-C"])
+def test_sigterm_ends_a_tiled_runs_workers(tmp_path, how):
+    """SIGTERM to the command (kill PID) or SIGINT to its process group (Ctrl-C on a terminal: the
+    workers get it too): exit 143 or 130, and no worker left."""
     path = tmp_path / "big.npy"
     np.save(path, synth.make("ball", 513) + synth.make("f2", 513))
     p = start("mesh", path, "-o", tmp_path / "t.obj", "--tile", "65", "--workers", "2", "--zeta", "0.02",
@@ -282,10 +285,13 @@ def test_sigterm_ends_a_tiled_runs_workers(tmp_path):
         workers = children(p.pid)
         assert p.poll() is None and len(workers) >= 2
         time.sleep(0.3)  # the workers at their tiles
-        p.send_signal(signal.SIGTERM)
+        if how == "SIGTERM":
+            p.send_signal(signal.SIGTERM)
+        else:
+            os.killpg(p.pid, signal.SIGINT)
         _, err = p.communicate(timeout=30)
-        assert p.returncode == 128 + signal.SIGTERM, err
-        assert one_error(err).startswith("error: terminated")
+        assert p.returncode == (128 + signal.SIGTERM if how == "SIGTERM" else 130), err
+        assert one_error(err).startswith("error: terminated" if how == "SIGTERM" else "error: interrupted")
         wait_for(lambda: not any(alive(w) for w in workers), 10, "the workers ending")
     finally:
         if p.poll() is None:
