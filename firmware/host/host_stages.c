@@ -10,7 +10,9 @@
 
 #define SAMPLE_MAX 65535.0
 #define MAX_THREADS 64
-#define TRI_CHUNK 512 /* triangles a thread takes at a time (their sizes vary a lot) */
+#define TRI_CHUNK 512
+#define EXACT ((int64_t)1 << 52) /* E_k below this: E_k(xl) + a_k k exact in doubles (each term < 2^53) */
+#define ABS(v) ((v) < 0 ? -(v) : (v)) /* triangles a thread takes at a time (their sizes vary a lot) */
 
 typedef void (*part_fn)(void *ctx, int32_t part, int32_t parts);
 
@@ -285,14 +287,32 @@ static double tri_max(const struct trimax *m, int64_t t)
             if (a[k] < 0 && q < xr) xr = q;
             if (a[k] == 0 && num[k] < 0) empty = 1;
         }
-        if (empty) continue;
-        const double *row = m->h + yy * m->width;
+        if (empty || xr < xl) continue;
+        const double *row = m->h + yy * m->width + xl;
+        int64_t e1l = a[1] * xl + num[1], e2l = a[2] * xl + num[2];
+        int64_t e1r = a[1] * xr + num[1], e2r = a[2] * xr + num[2];
+        if (ABS(e1l) < EXACT && ABS(e2l) < EXACT && ABS(e1r) < EXACT && ABS(e2r) < EXACT) {
+            /* every E_k on the row is an integer below 2^52: e_k(xl) + a_k k in doubles is exact, as
+             * numpy's conversion of the int64 E_k is; a loop the compiler vectorises */
+            double e1 = (double)e1l, e2 = (double)e2l, da1 = (double)a[1], da2 = (double)a[2], rb = best;
+            int32_t n = (int32_t)(xr - xl + 1), nan = 0;
+            for (int32_t k = 0; k < n; k++) {
+                double kd = (double)k;
+                double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;
+                double v = fabs(row[k] - plane);
+                rb = v > rb ? v : rb;
+                nan |= v != v;
+            }
+            if (nan) return NAN; /* numpy's maximum keeps a NaN */
+            best = rb;
+            continue;
+        }
         for (int64_t xx = xl; xx <= xr; xx++) {
             int64_t e1 = a[1] * xx + num[1], e2 = a[2] * xx + num[2];
             double plane = z0 + ((double)e1 * dz1 + (double)e2 * dz2) / absd;
-            double v = fabs(row[xx] - plane);
+            double v = fabs(row[xx - xl] - plane);
             if (v > best || v != v) best = v;
-            if (best != best) return best; /* NaN: numpy's maximum keeps it */
+            if (best != best) return best;
         }
     }
     return best;

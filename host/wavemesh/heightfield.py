@@ -290,9 +290,11 @@ def quantise(values: np.ndarray, native: bool = True) -> tuple[np.ndarray, float
 
 
 def from_array(array, source: str = "<array>", fill: str | float | None = None, *,
-               invalid: float | None = None, holes: bool = False) -> HeightField:
+               invalid: float | None = None, holes: bool = False, owned: bool = False) -> HeightField:
     """Check an array of heights, fill non-finite samples if asked, quantise it.  ``invalid``: samples
-    equal to it are no-data too; ``holes`` (--nodata hole): no-data samples become the mask."""
+    equal to it are no-data too; ``holes`` (--nodata hole): no-data samples become the mask.  ``owned``:
+    the array is the caller's to give away (a reader's fresh one): a writeable C-ordered float64 array is
+    then kept as the values, not copied (a 4096^2 grid: 128 MiB and ~0.1 s less)."""
     fill_mode = parse_fill(fill)
     ma = sys.modules.get("numpy.ma")  # a masked array means numpy.ma is loaded; np.ma would load it (~15 ms)
     if ma is not None and isinstance(array, ma.MaskedArray):
@@ -318,9 +320,19 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
             f"({h} rows x {w} columns)"
         )
     with np.errstate(invalid="ignore"):  # a signalling NaN (float32 input) raises no warning: reported below
-        values = np.array(arr, dtype=np.float64)  # a fresh copy, never a view of the caller's array
+        keep = (owned and type(arr) is np.ndarray and arr.dtype == np.float64 and arr.flags.c_contiguous
+                and arr.flags.writeable and not isinstance(arr.base, np.memmap))
+        values = arr if keep else np.array(arr, dtype=np.float64)  # a fresh copy, never a caller's view
     if kind in "iu" and arr.dtype.itemsize == 8:
         _check_exact_integers(arr, values, source)
+    if invalid is None and not holes:
+        from wavemesh import native  # every height finite: quantised in one pass, no mask made (tested equal)
+
+        fast = native.quantise(values)
+        if isinstance(fast, tuple):
+            samples, scale, offset, lossless = fast[:4]
+            return HeightField(values=values, samples=samples, scale=scale, offset=offset, lossless=lossless,
+                               source=source)
     bad = ~np.isfinite(values)
     if invalid is not None:
         bad |= values == invalid
@@ -404,12 +416,13 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
         raise InputError(f"{path}: --key applies only to .npz files, this is a {what} file")
     if fmt == "raster":
         array, transform, crs = _read_raster(path, ext, size_check)
-        hf = from_array(array, source=path, fill=fill_mode, **marks)
+        hf = from_array(array, source=path, fill=fill_mode, owned=True, **marks)
         return replace(hf, transform=transform, crs=crs)
     if fmt == "npz":
         with _library_warnings_quiet():
             array, transform = _read_npz(path, key, size_check)
-        return replace(from_array(array, source=path, fill=fill_mode, **marks), transform=transform)
+        hf = from_array(array, source=path, fill=fill_mode, owned=True, **marks)
+        return replace(hf, transform=transform)
     reader = {
         "npy": _read_npy,
         "pgm": _read_pgm,
@@ -417,7 +430,7 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
     }[fmt]
     with _library_warnings_quiet():
         array = reader(path, size_check)
-    return from_array(array, source=path, fill=fill_mode, **marks)
+    return from_array(array, source=path, fill=fill_mode, owned=True, **marks)
 
 
 # ---------------------------------------------------------------------------
