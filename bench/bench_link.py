@@ -37,16 +37,22 @@ def upload_bytes(samples: np.ndarray, coded: bool = True) -> int:
     return total
 
 
-def mesh_bytes(levels) -> int:
-    """Wire bytes of the level streams of ``levels`` ((level, Mesh) pairs) in MESH frames."""
+def mesh_bytes(levels, coded: bool = True) -> int:
+    """Wire bytes of the level streams of ``levels`` ((level, Mesh) pairs) in MESH frames (LEVEL_DELTA
+    where shorter, as the device chooses; ``coded`` False: LEVEL_RAW)."""
     from wavemesh import protocol as P
+    from wavemesh.coding import encode_level_body
     from wavemesh.link import encode_frame
 
     total = 0
     for lv, m in levels:
         ib = 2 if m.n_vertices <= 0xFFFF else 4
-        stream = (bytes(P.LEVEL_HEADER.size) + np.asarray(m.xy, "<u2").reshape(-1, 2).tobytes()
-                  + np.asarray(m.tris, "<u2" if ib == 2 else "<u4").tobytes())
+        body = (np.asarray(m.xy, "<u2").reshape(-1, 2).tobytes()
+                + np.asarray(m.tris, "<u2" if ib == 2 else "<u4").tobytes())
+        if coded:
+            delta = encode_level_body(m.xy, m.tris)
+            body = delta if len(delta) < len(body) else body
+        stream = bytes(P.LEVEL_HEADER.size) + body
         chunk = P.MAX_PAYLOAD - P.MESH.size
         for off in range(0, len(stream), chunk):
             total += len(encode_frame(P.FrameType.MESH, 0, P.MESH.pack(level=lv, index=0, offset=off)
@@ -87,12 +93,13 @@ def run() -> dict:
         hf = from_array(datasets.terrain(n)[:h, :w])
         res = api.mesh(hf, api.MeshParams())
         up, up_raw = upload_bytes(hf.samples), upload_bytes(hf.samples, False)
-        down = mesh_bytes(res.level_meshes)
+        down, down_raw = mesh_bytes(res.level_meshes), mesh_bytes(res.level_meshes, False)
         extra = session_bytes(len(res.level_meshes))
-        jobs[f"{w}x{h}"] = {"upload": up, "upload_raw": up_raw, "mesh": down, "session": extra,
-                            "triangles": int(res.mesh.n_triangles), "levels": len(res.level_meshes),
+        jobs[f"{w}x{h}"] = {"upload": up, "upload_raw": up_raw, "mesh": down, "mesh_raw": down_raw,
+                            "session": extra, "triangles": int(res.mesh.n_triangles),
+                            "levels": len(res.level_meshes),
                             "seconds": {str(b): 10 * (up + down + extra) / b for b in BAUDS},
-                            "seconds_raw": {str(b): 10 * (up_raw + down + extra) / b for b in BAUDS}}
+                            "seconds_raw": {str(b): 10 * (up_raw + down_raw + extra) / b for b in BAUDS}}
     real = [v["per_sample"] for v in coding.values() if "per_sample" in v]
     return {"coding": coding, "median_per_sample": statistics.median(real) if real else None, "jobs": jobs}
 
@@ -114,18 +121,20 @@ def markdown(r: dict) -> str:
     out += ["", f"**Bar: at most 1.0 wire bytes per sample, median over the real DEMs and range images: "
             f"{'met' if med is not None and med <= 1.0 else 'not met'}** (median {med:.3f}).", "",
             "**Line seconds of a whole job** (bench/datasets.py's seeded terrain, `wavemesh mesh`'s default "
-            "options, every level's mesh down): upload (coded) + level streams + the session's small frames, "
-            "x 10 bits / baud; in brackets with raw samples.  The job's cycles on the board are not in these "
-            "figures: the simulated board's are measured for small inputs only (\"The whole job on the "
+            "options, every level's mesh down): upload + level streams + the session's small frames, "
+            "x 10 bits / baud, coded (in brackets: raw samples and LEVEL_RAW levels, protocol 6's sizes).  "
+            "The job's cycles on the board are not in these figures: the simulated board's are measured "
+            "for small inputs only (\"The whole job on the "
             "simulated board\" above, and the 1024 x 1024 Ball at 2 levels in its own section above), so the "
             "board seconds of these jobs are these line seconds plus job cycles not yet measured at these "
             "sizes.",
             "",
-            "| input | triangles | upload bytes | mesh bytes | "
+            "| input | triangles | upload bytes (raw) | mesh bytes (raw) | "
             + " | ".join(f"{b} baud s" for b in BAUDS) + " |",
             "|---|---:|---:|---:|" + "---:|" * len(BAUDS)]
     for k, j in r["jobs"].items():
         secs = " | ".join(f"{j['seconds'][str(b)]:.2f} ({j['seconds_raw'][str(b)]:.2f})" for b in BAUDS)
         size = k.replace("x", " x ")
-        out.append(f"| {size} | {j['triangles']:,} | {j['upload']:,} | {j['mesh']:,} | {secs} |")
+        out.append(f"| {size} | {j['triangles']:,} | {j['upload']:,} ({j['upload_raw']:,}) | {j['mesh']:,} "
+                   f"({j['mesh_raw']:,}) | {secs} |")
     return "\n".join(out) + "\n"

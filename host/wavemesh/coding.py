@@ -153,3 +153,89 @@ def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) 
             i += 1
     if bits.size - pos >= 8:
         raise ValueError("bytes left after the last sample")
+
+
+# ---------------------------------------------------------------------------------------------------
+# Level streams (docs/protocol.md, "Level coding"): the device's coder is proto.c's coded_item
+
+
+def varints(buf: bytes) -> np.ndarray:
+    """Every LEB128 number of buf (7 bits a byte, low first, the top bit set on all but a number's last
+    byte), as int64; ValueError when buf ends inside one or one is longer than 5 bytes."""
+    b = np.frombuffer(buf, np.uint8).astype(np.int64)
+    if b.size == 0:
+        return b
+    last = b < 0x80
+    if not last[-1]:
+        raise ValueError("the level stream ends inside a number")
+    ends = np.flatnonzero(last)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    if np.any(ends - starts >= 5):
+        raise ValueError("a number of more than 5 bytes")
+    group = np.repeat(np.arange(ends.size), ends - starts + 1)
+    shift = 7 * (np.arange(b.size) - starts[group])
+    return np.bincount(group, weights=(b & 0x7F) << shift, minlength=ends.size).astype(np.int64)
+
+
+def unzigzag(z: np.ndarray) -> np.ndarray:
+    return (z >> 1) ^ -(z & 1)
+
+
+def decode_level_body(body: bytes, vertex_slots: int, triangles: int) -> tuple[np.ndarray, np.ndarray]:
+    """A LEVEL_DELTA body -> (xy (V, 2) with FREE_VERTEX twice for a free slot, tris (T, 3)), as the raw
+    body's numbers; ValueError when it is not one."""
+    vals = varints(body)
+    xy = np.empty((vertex_slots, 2), np.int64)
+    i, px, py = 0, 0, 0
+    for v in range(vertex_slots):
+        if i >= vals.size:
+            raise ValueError("the vertex slots end early")
+        first = int(vals[i])
+        if first == 0:
+            xy[v] = (P.FREE_VERTEX, P.FREE_VERTEX)
+            i += 1
+            continue
+        if i + 1 >= vals.size:
+            raise ValueError("the vertex slots end early")
+        px += int(unzigzag(np.int64(first - 1)))
+        py += int(unzigzag(vals[i + 1]))
+        xy[v] = (px, py)
+        i += 2
+    rest = vals[i:]
+    if rest.size != 3 * triangles:
+        raise ValueError(f"{rest.size} numbers for {triangles} triangles")
+    t = unzigzag(rest.reshape(triangles, 3))
+    a = np.cumsum(t[:, 0])
+    tris = np.stack([a, a + t[:, 1], a + t[:, 2]], axis=1) if triangles else np.zeros((0, 3), np.int64)
+    return xy, tris
+
+
+def encode_level_body(xy: np.ndarray, tris: np.ndarray) -> bytes:
+    """The LEVEL_DELTA body of vertex slots xy (FREE_VERTEX x for a free one) and triangles tris: what the
+    device's coder writes (for tests and bench_link)."""
+    out = bytearray()
+
+    def put(v: int) -> None:
+        while v >= 0x80:
+            out.append((v & 0x7F) | 0x80)
+            v >>= 7
+        out.append(v)
+
+    def zz(v: int) -> int:
+        return 2 * v if v >= 0 else -2 * v - 1
+
+    px = py = 0
+    for x, y in np.asarray(xy, np.int64).tolist():
+        if x == P.FREE_VERTEX:
+            out.append(0)
+            continue
+        put(zz(x - px) + 1)
+        put(zz(y - py))
+        px, py = x, y
+    pa = 0
+    for a, b, c in np.asarray(tris, np.int64).tolist():
+        put(zz(a - pa))
+        put(zz(b - a))
+        put(zz(c - a))
+        pa = a
+    return bytes(out)

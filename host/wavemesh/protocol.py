@@ -229,6 +229,10 @@ RICE_PRED_PLANE = 1  # the plane through the three neighbours: left + above - ab
 RICE_K_BITS = 4  # bits of k (0..15)
 RICE_ESCAPE = 16  # a quotient of this many ones is followed by the value in 16 bits instead
 
+# LEVEL_HEADER.coding (docs/protocol.md, "Level coding")
+LEVEL_RAW = 0  # vertex slots and triangles as fixed-size numbers
+LEVEL_DELTA = 1  # the same, delta-coded in variable-length numbers (whenever that is shorter)
+
 # Bits of DATA_ACK.flags and LEVEL_END.flags
 ACK_NAK = 1 << 0  # DATA_ACK: a DATA frame came after a gap: send again from `next`
 LEVEL_LAST = 1 << 0  # LEVEL_END: no level follows (level 0, or the initial-only job)
@@ -468,8 +472,10 @@ DONE = _m("DONE", "device to host: the job ended (repeated until acknowledged)",
 # STAT_FIELDS (wavemesh.limits): the refiner's per-level statistics, the level header's st_ fields.
 LEVEL_HEADER = _m("LEVEL_HEADER", "the start of a level stream (the MESH frames' bytes joined)",
                   ("level", "B", "resolution level m (M-1: the initial triangulation .. 0)"),
-                  ("index_bytes", "B", "bytes per vertex index in the triangles: 2 or 4"),
-                  ("reserved", "H", "0"),
+                  ("index_bytes", "B", "bytes per vertex index in the triangles (LEVEL_RAW): 2 or 4"),
+                  ("coding", "B", "LEVEL_RAW or LEVEL_DELTA: how the vertex slots and triangles are written",
+                   LEVEL_RAW),
+                  ("reserved", "B", "0"),
                   ("vertex_slots", "I", "V: vertex slots that follow (free slots included)"),
                   ("triangles", "I", "T: triangles that follow"),
                   ("cycles", "Q", "cycles the device's stages spent making this level, link I/O excluded "
@@ -477,9 +483,10 @@ LEVEL_HEADER = _m("LEVEL_HEADER", "the start of a level stream (the MESH frames'
                   *((f"st_{n}", "i", f"wm_level_stats.{n}") for n in STAT_FIELDS),
                   ("st_e_max", "I", "wm_level_stats.e_max: E_max, Q16.16 sample counts (upper bound)"),
                   ("st_removals", "i", "wm_level_stats.removals: vertices removed (reduction, decimation)"),
-                  tail="V vertex slots (x u16, y u16; 0xFFFF 0xFFFF a free slot), then T triangles "
-                       "(three vertex slot numbers of index_bytes each, counter-clockwise), in slot order "
-                       "as wm_mesh_export writes them")
+                  tail="LEVEL_RAW: V vertex slots (x u16, y u16; 0xFFFF 0xFFFF a free slot), then T "
+                       "triangles (three vertex slot numbers of index_bytes each, counter-clockwise), in "
+                       "slot order as wm_mesh_export writes them; LEVEL_DELTA: the same, delta-coded "
+                       "(\"Level coding\")")
 
 MESSAGES = (HELLO, HELLO_REPLY, CONFIG, DATA, DATA_ACK, RUN, OK, ERROR, ACK, STATUS, STATUS_REPLY, ABORT,
             BAUD,
@@ -608,6 +615,8 @@ def c_header() -> str:
         f"#define WM_PROTO_CONFIG_KNOWN_FLAGS 0x{CONFIG_KNOWN_FLAGS:X}u",
         f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
         f"#define WM_PROTO_ACK_NAK 0x{ACK_NAK:X}u",
+        f"#define WM_PROTO_LEVEL_RAW {LEVEL_RAW}",
+        f"#define WM_PROTO_LEVEL_DELTA {LEVEL_DELTA}",
         f"#define WM_PROTO_CODING_RAW {CODING_RAW}",
         f"#define WM_PROTO_CODING_RICE {CODING_RICE}",
         f"#define WM_PROTO_RICE_BLOCK {RICE_BLOCK}u",

@@ -219,18 +219,28 @@ def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, 
         raise ProtocolError(f"level stream of {len(buf)} bytes")
     h = P.LEVEL_HEADER.unpack(buf)
     nv, nt, ib = h["vertex_slots"], h["triangles"], h["index_bytes"]
-    if ib not in (2, 4) or len(buf) != P.level_stream_size(nv, nt, ib):
+    off = P.LEVEL_HEADER.size
+    if h["coding"] == P.LEVEL_DELTA:
+        from wavemesh.coding import decode_level_body
+
+        try:
+            xy, tris = decode_level_body(buf[off:], nv, nt)
+        except ValueError as e:
+            raise ProtocolError(f"level {h['level']}: {e}") from None
+    elif h["coding"] != P.LEVEL_RAW:
+        raise ProtocolError(f"level {h['level']}: unknown coding {h['coding']}")
+    elif ib not in (2, 4) or len(buf) != P.level_stream_size(nv, nt, ib):
         raise ProtocolError(f"level {h['level']}: {nv} vertex slots, {nt} triangles, {ib}-byte indices "
                             f"do not make {len(buf)} bytes")
-    off = P.LEVEL_HEADER.size
-    xy = np.frombuffer(buf, "<u2", count=2 * nv, offset=off).reshape(nv, 2).astype(np.int64)
-    tris = np.frombuffer(buf, "<u2" if ib == 2 else "<u4", count=3 * nt,
-                         offset=off + 4 * nv).reshape(nt, 3).astype(np.int64)
+    else:
+        xy = np.frombuffer(buf, "<u2", count=2 * nv, offset=off).reshape(nv, 2).astype(np.int64)
+        tris = np.frombuffer(buf, "<u2" if ib == 2 else "<u4", count=3 * nt,
+                             offset=off + 4 * nv).reshape(nt, 3).astype(np.int64)
     free = xy[:, 0] == P.FREE_VERTEX
     live = ~free
-    if np.any(xy[live, 0] >= width) or np.any(xy[live, 1] >= height):
+    if np.any(xy[live] < 0) or np.any(xy[live, 0] >= width) or np.any(xy[live, 1] >= height):
         raise ProtocolError(f"level {h['level']}: a vertex outside the {width} x {height} grid")
-    if nt and (tris.max() >= nv or np.any(free[tris])):
+    if nt and (tris.min() < 0 or tris.max() >= nv or np.any(free[tris])):
         raise ProtocolError(f"level {h['level']}: a triangle refers to a missing vertex")
     if not live.all():  # free vertex slots: dropped, as wavemesh.native does
         remap = np.cumsum(live) - 1

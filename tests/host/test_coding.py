@@ -68,3 +68,20 @@ def test_a_real_dem_costs_under_a_byte_a_sample():
     out, tail, frames = roundtrip(hf.samples, P.MAX_PAYLOAD - P.DATA.size)
     assert np.array_equal(out, hf.samples.ravel())
     assert tail / hf.samples.size < 0.75  # 0.68 (bench/bench_link.py reports the wire bytes)
+
+
+def test_level_bodies_decode_to_their_numbers():
+    """LEVEL_DELTA: the vertex slots (free ones too) and triangles come back as they went, and a damaged
+    body is refused (the device's coder, proto.c's coded_item, is checked end to end by the stream tests)."""
+    rng = np.random.default_rng(5)
+    xy = rng.integers(0, 1024, (300, 2))
+    xy[rng.random(300) < 0.1] = P.FREE_VERTEX
+    tris = rng.integers(0, 300, (500, 3))
+    body = C.encode_level_body(xy, tris)
+    got_xy, got_tris = C.decode_level_body(body, 300, 500)
+    assert np.array_equal(got_xy, xy) and np.array_equal(got_tris, tris)
+    assert len(body) < 4 * 300 + 3 * 2 * 500  # shorter than raw even for random numbers of this range
+    for bad in (body[:-1], body + b"\x00", body[:-2] + b"\xff\xff"):
+        with pytest.raises(ValueError):
+            C.decode_level_body(bad, 300, 500)
+    assert C.decode_level_body(b"", 0, 0)[0].shape == (0, 2)

@@ -141,6 +141,19 @@ def test_level_stream_parsing_rejects_inconsistent_streams():
     body4 = struct.pack("<8H", 0, 0, 0xFFFF, 0xFFFF, 1, 0, 0, 1) + struct.pack("<3H", 0, 2, 3)
     _, mesh, _, _ = parse_level(P.LEVEL_HEADER.pack(**hdr4) + body4, 2, 2)
     assert mesh.xy.tolist() == [[0, 0], [1, 0], [0, 1]] and mesh.tris.tolist() == [[0, 1, 2]]
+    # LEVEL_DELTA: the same level delta-coded gives the same mesh; damaged, a ProtocolError
+    from wavemesh.coding import encode_level_body
+
+    delta = encode_level_body([(0, 0), (0xFFFF, 0xFFFF), (1, 0), (0, 1)], [(0, 2, 3)])
+    hdr_d = dict(hdr4, coding=P.LEVEL_DELTA)
+    _, mesh_d, _, _ = parse_level(P.LEVEL_HEADER.pack(**hdr_d) + delta, 2, 2)
+    assert mesh_d.xy.tolist() == mesh.xy.tolist() and mesh_d.tris.tolist() == mesh.tris.tolist()
+    for bad in (delta[:-1], delta + b"\x00", encode_level_body([(0, 0), (0xFFFF, 0xFFFF), (1, 0), (0, 2)],
+                                                                 [(0, 2, 3)])):
+        with pytest.raises(ProtocolError):  # short, a number over, a vertex outside the grid
+            parse_level(P.LEVEL_HEADER.pack(**hdr_d) + bad, 2, 2)
+    with pytest.raises(ProtocolError):  # an unknown coding
+        parse_level(P.LEVEL_HEADER.pack(**dict(hdr4, coding=7)) + body4, 2, 2)
 
 
 def test_hello_reply_parses_into_device_info():

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 from wavemesh import protocol as P
+from wavemesh.coding import encode_level_body
 from wavemesh.harness.nativedev import build_wmdev
 
 JOB = re.compile(r"job (\d+) filter (\d+) template (\d+) refine (\d+) emit (\d+) link (\d+) span (\d+) "
@@ -75,5 +76,8 @@ def test_stage_counts_are_the_jobs_work_and_link_is_the_rest(name, clocktest):
         waits = (4 if short else 2) * delay[j["job"] % len(delay)]  # one (two) ACK waits per level
         assert j["link"] >= waits
         assert (j["link"] > 0) == (tx != "0" or waits > 0)
-        half = P.level_stream_size(4, 2, 2) // 2  # (4 vertices, 2 triangles, 2-byte indices)
-        assert j["resent"] == (2 * half if short else 0)  # the second half of both levels again
+        # the fake job's level (clocktest.c: 4 vertices, 2 triangles), delta-coded: shorter than raw
+        total = P.LEVEL_HEADER.size + len(encode_level_body([(0, 0), (3, 0), (0, 3), (3, 3)],
+                                                            [(0, 1, 3), (0, 3, 2)]))
+        assert total < P.level_stream_size(4, 2, 2)
+        assert j["resent"] == (2 * (total - total // 2) if short else 0)  # the second half of both levels

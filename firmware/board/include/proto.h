@@ -203,6 +203,13 @@ typedef struct wm_proto {
     uint32_t lwant;          /* the last ACK's want: bytes from have to send again (0: all) */
     uint16_t chunk;          /* MESH tail bytes (the host's ACK.chunk; max_payload - 8 at RUN) */
     int32_t cur_k, cur_slot; /* triangle cursor: k-th live triangle is in slot cur_slot */
+    /* LEVEL_DELTA: the coder of the stream's body, which gives its bytes in order from cpos on (a resend
+     * from before cpos starts it again) */
+    uint8_t lcoded;
+    uint8_t cb[16], cbn, cbi; /* the current item's bytes, cbi of them given */
+    uint32_t cpos;            /* stream position of the next byte */
+    int32_t cv, ck, cslot;    /* next vertex slot; next live triangle, its slot */
+    int32_t cpx, cpy, cpi;    /* the previous vertex's x, y; the previous triangle's first index */
 } wm_proto;
 
 /* Sets up the engine.  heights must hold caps->max_samples samples.  Nothing is sent. */

@@ -1191,6 +1191,95 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
     }
 }
 
+/* --- LEVEL_DELTA (docs/protocol.md, "Level coding"): the body as variable-length numbers --- */
+
+static uint32_t put_varint(uint8_t *d, uint32_t v)
+{
+    uint32_t n = 0;
+    while (v >= 0x80u) {
+        d[n++] = (uint8_t)(v | 0x80u);
+        v >>= 7;
+    }
+    d[n++] = (uint8_t)v;
+    return n;
+}
+
+static uint32_t zigzag32(int32_t v) { return ((uint32_t)v << 1) ^ (uint32_t)(0 - (int32_t)((uint32_t)v >> 31)); }
+
+static void coded_reset(wm_proto *p)
+{
+    p->cpos = 0;
+    p->cv = p->ck = p->cslot = 0;
+    p->cpx = p->cpy = p->cpi = 0;
+    p->cbn = p->cbi = 0;
+}
+
+/* The next item of the body into cb (a vertex slot, then the live triangles); 0 when none is left. */
+static int coded_item(wm_proto *p)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t n = 0;
+    if (p->cv < m->vert_end) {
+        int32_t v = p->cv++;
+        if (m->vx[v] == WM_FREE) {
+            p->cb[n++] = 0; /* a free slot */
+        } else {
+            int32_t x = m->vx[v], y = m->vy[v];
+            n += put_varint(p->cb + n, zigzag32(x - p->cpx) + 1u);
+            n += put_varint(p->cb + n, zigzag32(y - p->cpy));
+            p->cpx = x;
+            p->cpy = y;
+        }
+    } else if (p->ck < m->n_tri) {
+        const wm_index *h;
+        int32_t a;
+        while (m->hv[3 * p->cslot] < 0) p->cslot++;
+        h = m->hv + 3 * p->cslot;
+        a = h[0];
+        n += put_varint(p->cb + n, zigzag32(a - p->cpi));
+        n += put_varint(p->cb + n, zigzag32(h[1] - a));
+        n += put_varint(p->cb + n, zigzag32(h[2] - a));
+        p->cpi = a;
+        p->cslot++;
+        p->ck++;
+    } else {
+        return 0;
+    }
+    p->cbn = (uint8_t)n;
+    p->cbi = 0;
+    return 1;
+}
+
+/* The coded stream's length: the header and every item (the coder starts again). */
+static uint32_t coded_total(wm_proto *p)
+{
+    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
+    coded_reset(p);
+    while (coded_item(p)) total += p->cbn;
+    coded_reset(p);
+    return total;
+}
+
+/* Bytes [off, off + n) of the coded stream into dst (in order from where the last call ended: no work
+ * but the new bytes; from before it: the coder runs again from the start). */
+static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
+{
+    if (off < p->cpos) coded_reset(p);
+    while (n) {
+        uint8_t c;
+        if (p->cpos < WM_PROTO_LEVEL_HEADER_BYTES) {
+            c = p->lhdr[p->cpos];
+        } else {
+            if (p->cbi == p->cbn && !coded_item(p)) return; /* past the end: cannot happen (end <= ltotal) */
+            c = p->cb[p->cbi++];
+        }
+        if (p->cpos++ >= off) {
+            *dst++ = c;
+            n--;
+        }
+    }
+}
+
 /* MESH frames of p->chunk bytes for bytes [from, end) (end <= ltotal).  The first sending (first: from
  * is 0) takes the stream's CRC on the way, and only its frames are link I/O: building the stream and
  * its CRC is the EMIT stage's work; the frame's CRC follows from the payload's (crc_combine).  A resend
@@ -1206,7 +1295,8 @@ static void send_level_from(wm_proto *p, uint32_t from, uint32_t end, int first)
         b[WM_PROTO_MESH_LEVEL] = p->level;
         b[WM_PROTO_MESH_INDEX] = p->levels_sent;
         put32(b + WM_PROTO_MESH_OFFSET, from);
-        if (WM_LITTLE_ENDIAN && !((from | n) & 1u))
+        if (p->lcoded) coded_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        else if (WM_LITTLE_ENDIAN && !((from | n) & 1u))
             level_halves(p, from / 2, (from + n) / 2, p->tx.h + WM_PROTO_MESH_BYTES / 2);
         else level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
         pc = ~crc_run(~0u, b + WM_PROTO_MESH_BYTES, n);
@@ -1269,6 +1359,12 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
     p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
     p->llast = (uint8_t)(last != 0);
+    { /* delta-coded when that is shorter (a pass of the coder that only counts) */
+        uint32_t coded = coded_total(p);
+        p->lcoded = coded < p->ltotal;
+        if (p->lcoded) p->ltotal = coded;
+        p->lhdr[WM_PROTO_LEVEL_HEADER_CODING] = p->lcoded ? WM_PROTO_LEVEL_DELTA : WM_PROTO_LEVEL_RAW;
+    }
 
     link_begin(p);
     send_progress(p, WM_PROTO_STAGE_EMIT, st->level);
