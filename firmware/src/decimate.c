@@ -13,6 +13,36 @@
 
 #define NONE 0xFFFFFFFFu
 
+/* The triangle a cheap test measured and its slope factor (kept as wm_internal.h says), for the scan
+ * of the same triangle that follows when the test passes. */
+struct tested {
+    const wm_refiner *r;
+    int32_t x[3], y[3];
+    uint64_t kept;
+};
+
+static int test_point(struct tested *t, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
+{
+    int above;
+    t->kept = 0;
+    above = wm_point_above(&t->r->field, &t->r->params, x, y, px, py, t->r->params.zeta, &t->kept);
+    if (t->kept) /* the normal metric, and the test passed */
+        for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
+    return above;
+}
+
+/* The kept word for the triangle (x, y) when it is the tested one (its corners in any rotation), else NULL. */
+static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[3])
+{
+    if (t->kept == 0) return NULL;
+    for (int c = 0; c < 3; c++)
+        if (x[c] == t->x[0] && y[c] == t->y[0]) {
+            int c1 = wm_k1(c), c2 = wm_k2(c);
+            return x[c1] == t->x[1] && y[c1] == t->y[1] && x[c2] == t->x[2] && y[c2] == t->y[2] ? &t->kept : NULL;
+        }
+    return NULL;
+}
+
 /* The first triangulation of v's hole that keeps every E(T) <= zeta, in the order the fans from ring
  * vertex 0, 1, ..., then ear clipping (Delaunay ears first): its largest E(T) (the vertex's
  * cost) and its kind (apex, as wm_vertex_remove_plan takes it).  NONE when there is none.  Taking the
@@ -24,7 +54,7 @@
  * one the test on the built fan takes, costs one orientation per step instead of three.  0 when v's own
  * error against it is above zeta: that fan cannot go, valid or not; else 1 (also when no triangle
  * holds v, which only an invalid fan allows: wm_ring_plan then refuses it). */
-static int fan_may_fit(const wm_refiner *r, const int32_t *rx, const int32_t *ry, int32_t n, int32_t a, int32_t vx,
+static int fan_may_fit(struct tested *t, const int32_t *rx, const int32_t *ry, int32_t n, int32_t a, int32_t vx,
                        int32_t vy)
 {
     int32_t j = a + 1 == n ? 0 : a + 1;
@@ -34,7 +64,7 @@ static int fan_may_fit(const wm_refiner *r, const int32_t *rx, const int32_t *ry
         int64_t fk = wm_orient(rx[a], ry[a], rx[k], ry[k], vx, vy);
         if (fj >= 0 && fk <= 0) {
             int32_t x[3] = {rx[a], rx[j], rx[k]}, y[3] = {ry[a], ry[j], ry[k]};
-            return !wm_point_above(&r->field, &r->params, x, y, vx, vy, r->params.zeta);
+            return !test_point(t, x, y, vx, vy);
         }
         j = k;
         fj = fk;
@@ -43,10 +73,9 @@ static int fan_may_fit(const wm_refiner *r, const int32_t *rx, const int32_t *ry
 }
 
 /* The probe of the ear clipping's plan (wm_ring_plan_probe): v's sample above zeta. */
-static int v_above(const void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
+static int v_above(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
-    const wm_refiner *r = (const wm_refiner *)ctx;
-    return wm_point_above(&r->field, &r->params, x, y, px, py, r->params.zeta);
+    return test_point((struct tested *)ctx, x, y, px, py);
 }
 
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
@@ -56,7 +85,9 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
     uint32_t best = NONE;
     int32_t vx = me->vx[v], vy = me->vy[v];
     struct wm_plan_probe probe;
-    probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = r;
+    struct tested tested;
+    tested.r = r;
+    probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested;
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
     for (int32_t i = 0; i < n; i++) {
@@ -71,10 +102,11 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
     for (int32_t i = 0, fans = n == 3 ? 0 : n == 4 ? 2 : n; i <= fans; i++) {
         int32_t a = i < fans ? i : -1, j;
         uint32_t worst = 0;
+        tested.kept = 0;
         /* First the cheap test: v's own sample against the new triangle that holds it (a lower bound
          * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
-        if (a >= 0 && !fan_may_fit(r, rx, ry, n, a, vx, vy)) continue;
+        if (a >= 0 && !fan_may_fit(&tested, rx, ry, n, a, vx, vy)) continue;
         if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe) != WM_OK) continue;
         for (j = 0; j < nt; j++) {
             int32_t x[3], y[3];
@@ -83,7 +115,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
                 x[c] = me->vx[tris[3 * j + c]];
                 y[c] = me->vy[tris[3 * j + c]];
             }
-            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta);
+            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, kept_for(&tested, x, y));
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }

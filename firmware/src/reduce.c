@@ -228,6 +228,8 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
                   uint32_t *e, int32_t *w, const int32_t *gone, int ngone)
 {
     const wm_mesh *me = &r->mesh;
+    uint64_t kept = 0; /* the slope factor of triangle jk, which the cheap test measured (wm_internal.h) */
+    int32_t jk = -1;
     /* First the cheap test: the samples of the vertices the operation takes away, against the new
      * triangle holding each (a lower bound of its E(T), rounded as E(T) is): a failed operation
      * mostly stops here, without a scan. */
@@ -243,7 +245,8 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
             if (wm_orient(x[0], y[0], x[1], y[1], gx, gy) < 0 || wm_orient(x[1], y[1], x[2], y[2], gx, gy) < 0 ||
                 wm_orient(x[2], y[2], x[0], y[0], gx, gy) < 0)
                 continue;
-            if (wm_point_above(&r->field, &r->params, x, y, gx, gy, bound)) return 0;
+            if (wm_point_above(&r->field, &r->params, x, y, gx, gy, bound, &kept)) return 0;
+            jk = j;
             break;
         }
     }
@@ -254,7 +257,7 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
             x[c] = v < 0 ? px : me->vx[v];
             y[c] = v < 0 ? py : me->vy[v];
         }
-        e[j] = wm_tri_error_within(&r->field, &r->params, x, y, bound, &wx, &wy);
+        e[j] = wm_tri_error_within(&r->field, &r->params, x, y, bound, &wx, &wy, j == jk ? &kept : NULL);
         if (e[j] > bound) return 0;
         w[j] = wy * r->field.width + wx;
     }

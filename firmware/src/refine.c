@@ -188,7 +188,7 @@ static int try_swap(wm_refiner *r, int32_t e)
     int32_t ang_old, ang_new, a1;
     uint32_t e1 = 0, e2 = 0, ra, re = 65536u, alpha = r->params.alpha;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
-    uint64_t xi;
+    uint64_t xi, r1 = 0, r2 = 0; /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
     wm_tri_xy(me, t1, ox, oy);
     wm_tri_xy(me, t2, px, py);
@@ -216,11 +216,11 @@ static int try_swap(wm_refiner *r, int32_t e)
             for (int k = 0; k < 2; k++) {
                 int32_t s = r->worst[k ? t2 : t1], sx = s % r->field.width, sy = s / r->field.width;
                 if (in_tri(n1x, n1y, sx, sy)) {
-                    uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy);
+                    uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
                     if (v > lb1) lb1 = v;
                 }
                 if (in_tri(qx, qy, sx, sy)) {
-                    uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy);
+                    uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
                     if (v > lb2) lb2 = v;
                 }
             }
@@ -229,9 +229,9 @@ static int try_swap(wm_refiner *r, int32_t e)
             if ((((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) <= 65536u) return 0;
         }
         e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
-                    : wm_tri_error(&r->field, &r->params, n1x, n1y, &w1x, &w1y);
-        e2 =
-            r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y) : wm_tri_error(&r->field, &r->params, qx, qy, &w2x, &w2y);
+                    : wm_tri_error_kept(&r->field, &r->params, n1x, n1y, &w1x, &w1y, &r1);
+        e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
+                    : wm_tri_error_kept(&r->field, &r->params, qx, qy, &w2x, &w2y, &r2);
         re = ratio_q16(o1 + o2 + one,
                        wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
     }

@@ -64,7 +64,7 @@ uint32_t wm_roi_error(const wm_refiner *r, const int32_t x[3], const int32_t y[3
     if (wx) *wx = bx;
     if (wy) *wy = by;
     /* E(T)'s rounding of the largest distance, which the worst sample has (0 at a corner). */
-    return vmax ? wm_point_error(f, &r->params, x, y, bx, by) : 0;
+    return vmax ? wm_point_error(f, &r->params, x, y, bx, by, NULL) : 0;
 }
 
 int wm_refine_set_roi(wm_refiner *r, const int32_t *rows)

@@ -23,6 +23,14 @@
 
 #define GCAP ((uint64_t)1 << 62)
 
+/* The small steps every measure takes (finish, point_v): inline in each, as one copy was before they
+ * were shared (a call and its spills cost the native build some 1 % of the refiner's instructions). */
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
 #if WM_PROFILE
 int wm_prof_phase;
 uint64_t wm_prof_count[WM_PH_COUNT][WM_PC_COUNT];
@@ -234,15 +242,15 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
     return scan(f, x, y, D, limit, wx, wy);
 }
 
-/* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric. */
-static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                             int64_t D)
+/* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric, before its
+ * root: r = floor(sqrt(X)) << *k for the X returned. */
+static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                             int64_t D, int *k)
 {
     uint64_t ga, gb;
     int64_t z0, dz1, dz2, Na, Nb;
     uint32_t sm;
     int32_t se;
-    int k = 0;
     uint64_t one;
     WM_PROF_ADD(WM_PC_SLOPES, 1);
     z0 = f->samples[(int64_t)y[0] * f->width + x[0]];
@@ -256,41 +264,66 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
     gb = wm_frac_mul((uint64_t)(Nb < 0 ? -Nb : Nb), (uint64_t)D, sm, se, 16, GCAP);
     /* steep slopes are shifted right by k first (ga, gb keep >= 30 significant bits), and the root
      * shifted back */
-    while ((ga >> k) >= ((uint64_t)1 << 31) || (gb >> k) >= ((uint64_t)1 << 31)) k++;
-    one = 2 * k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * k);
-    ga >>= k;
-    gb >>= k; /* both below 2^31 now: 32-bit squares (a multiply and a multiply-high each on rv32) */
-    return wm_isqrt64(one + (uint64_t)(uint32_t)ga * (uint32_t)ga + (uint64_t)(uint32_t)gb * (uint32_t)gb) << k;
+    *k = 0;
+    while ((ga >> *k) >= ((uint64_t)1 << 31) || (gb >> *k) >= ((uint64_t)1 << 31)) (*k)++;
+    one = 2 * *k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * *k);
+    ga >>= *k;
+    gb >>= *k; /* both below 2^31 now: 32-bit squares (a multiply and a multiply-high each on rv32) */
+    return one + (uint64_t)(uint32_t)ga * (uint32_t)ga + (uint64_t)(uint32_t)gb * (uint32_t)gb; /* < 2^64 */
 }
 
-/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  r: the slope factor,
- * 0 when not yet computed. */
-static uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
-                       uint64_t vmax, uint64_t r)
+/* The slope factor r of the triangle, from *kept when a measure of the same triangle left it there
+ * (non-zero: r >= 2^16), else computed and left there (kept may be NULL). */
+static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                             int64_t D, uint64_t *kept)
+{
+    int k;
+    uint64_t r;
+    if (kept && *kept) return *kept;
+    r = slope_square(f, p, x, y, D, &k);
+    r = wm_isqrt64(r) << k;
+    if (kept) *kept = r;
+    return r;
+}
+
+/* ev = ceil(2^16 vmax / D), saturated at 2^32 - 1: E(T) in the vertical metric. */
+static uint32_t vertical(uint64_t vmax, int64_t D)
 {
     uint64_t ev = wm_ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
-    if (ev > 0xFFFFFFFFu) ev = 0xFFFFFFFFu;
-    if (p->metric == WM_METRIC_VERTICAL || ev == 0) return (uint32_t)ev;
-    if (r == 0) r = slope_factor(f, p, x, y, D);
-    return (uint32_t)wm_ceil_q16_div(ev, r); /* <= ev (r >= 2^16) */
+    return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
 }
 
-uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,
-                      int32_t *wy)
+/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  kept: as slope_factor's. */
+static ALWAYS_INLINE uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                                     int64_t D, uint64_t vmax, uint64_t *kept)
+{
+    uint32_t ev = vertical(vmax, D);
+    if (p->metric == WM_METRIC_VERTICAL || ev == 0) return ev;
+    return (uint32_t)wm_ceil_q16_div(ev, slope_factor(f, p, x, y, D, kept)); /* <= ev (r >= 2^16) */
+}
+
+uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           int32_t *wx, int32_t *wy, uint64_t *kept)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     uint32_t e;
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
     if (f->mask && wm_hole_error(f, x, y, &e, wx, wy)) return e; /* holes.c */
-    return finish(f, p, x, y, D, scan_any(f, x, y, D, UINT64_MAX, wx, wy), 0);
+    return finish(f, p, x, y, D, scan_any(f, x, y, D, UINT64_MAX, wx, wy), kept);
+}
+
+uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t *wx,
+                      int32_t *wy)
+{
+    return wm_tri_error_kept(f, p, x, y, wx, wy, NULL);
 }
 
 uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                             uint32_t bound, int32_t *wx, int32_t *wy)
+                             uint32_t bound, int32_t *wx, int32_t *wy, uint64_t *kept)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
-    uint64_t r = 0, evm = bound, limit = UINT64_MAX;
+    uint64_t r, evm = bound, limit = UINT64_MAX;
     uint32_t e;
     WM_ASSERT(D > 0);
     if (D <= 0) return 0xFFFFFFFFu;
@@ -298,47 +331,69 @@ uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_
     /* the largest Vmax whose E(T) is <= bound: E = ceil(2^16 ev / r) <= bound iff
      * ev <= floor(bound r / 2^16), and ev = ceil(2^16 V / D) <= evm iff V <= floor(evm D / 2^16) */
     if (p->metric != WM_METRIC_VERTICAL) {
-        r = slope_factor(f, p, x, y, D);
+        r = slope_factor(f, p, x, y, D, kept);
         evm = r < ((uint64_t)1 << 31) ? ((uint64_t)bound * r) >> 16 : 0xFFFFFFFFu;
+        kept = &r;
     }
     if (evm < 0xFFFFFFFFu && D < ((int64_t)1 << 31)) limit = (evm * (uint64_t)D) >> 16;
-    return finish(f, p, x, y, D, scan_any(f, x, y, D, limit, wx, wy), r);
+    return finish(f, p, x, y, D, scan_any(f, x, y, D, limit, wx, wy), kept);
 }
 
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound)
+                           uint32_t bound, uint64_t *kept)
 {
-    return wm_tri_error_within(f, p, x, y, bound, NULL, NULL);
+    return wm_tri_error_within(f, p, x, y, bound, NULL, NULL, kept);
+}
+
+/* |V| at sample (px, py) (the file's head comment) for the triangle of D = twice its area. */
+static ALWAYS_INLINE uint64_t point_v(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
+                                      int32_t px, int32_t py)
+{
+    int64_t S = 0, v;
+    for (int k = 0; k < 3; k++) {
+        int k1 = wm_k1(k), k2 = wm_k2(k);
+        S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
+    }
+    v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
+    return (uint64_t)(v < 0 ? -v : v);
 }
 
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
-                        int32_t py)
+                        int32_t py, uint64_t *kept)
 {
-    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     if (D <= 0) return 0xFFFFFFFFu;
     WM_PROF_ADD(WM_PC_POINTS, 1);
     if (f->mask && wm_hole_at(f, px, py)) return 0; /* never above E(T) (holes.c) */
-    for (int k = 0; k < 3; k++) {
-        int k1 = wm_k1(k), k2 = wm_k2(k);
-        S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
-    }
-    v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
-    return finish(f, p, x, y, D, (uint64_t)(v < 0 ? -v : v), 0);
+    return finish(f, p, x, y, D, point_v(f, x, y, D, px, py), kept);
 }
 
 int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
-                   int32_t py, uint32_t bound)
+                   int32_t py, uint32_t bound, uint64_t *kept)
 {
-    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]), S = 0, v;
-    /* the vertical metric without a mask: E = min(ceil(2^16 |V| / D), 2^32 - 1) > bound iff
-     * 2^16 |V| > bound D (|V| < 2^47, bound D < 2^63), so no division; otherwise as measured */
-    if (D <= 0 || p->metric != WM_METRIC_VERTICAL || f->mask || bound == 0xFFFFFFFFu)
-        return wm_point_error(f, p, x, y, px, py) > bound;
+    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    uint64_t av, c, X;
+    uint32_t ev;
+    int k;
+    if (D <= 0 || f->mask || bound == 0xFFFFFFFFu) return wm_point_error(f, p, x, y, px, py, kept) > bound;
     WM_PROF_ADD(WM_PC_POINTS, 1);
-    for (int k = 0; k < 3; k++) {
-        int k1 = wm_k1(k), k2 = wm_k2(k);
-        S += wm_orient(x[k1], y[k1], x[k2], y[k2], px, py) * (int64_t)f->samples[(int64_t)y[k] * f->width + x[k]];
+    av = point_v(f, x, y, D, px, py);
+    /* the vertical metric: E = min(ceil(2^16 |V| / D), 2^32 - 1) > bound iff 2^16 |V| > bound D (|V| <
+     * 2^47, bound D < 2^63), so no division */
+    if (p->metric == WM_METRIC_VERTICAL) return av * 65536u > (uint64_t)bound * (uint64_t)D;
+    ev = vertical(av, D);
+    if (ev == 0) return 0; /* E = 0 */
+    if (kept && *kept) return wm_ceil_q16_div(ev, *kept) > bound;
+    if (bound == 0) return 1; /* E >= 1: r is finite */
+    /* The normal metric without the root: E = ceil(2^16 ev / r) > bound iff 2^16 ev > bound r iff
+     * r < c = ceil(2^16 ev / bound) (r an integer), and with r = floor(sqrt(X)) 2^k iff
+     * floor(sqrt(X)) < c' = ceil(c / 2^k) iff X < c'^2 (X < 2^64 <= c'^2 when c' >= 2^32). */
+    c = wm_ceil_q16_div(ev, bound); /* < 2^48 */
+    X = slope_square(f, p, x, y, D, &k);
+    c = (c + ((uint64_t)1 << k) - 1) >> k;
+    if (c >> 32 == 0 && X >= c * c) {
+        if (kept) *kept = wm_isqrt64(X) << k; /* within: the caller goes on to measure the triangle */
+        return 0;
     }
-    v = S - D * (int64_t)f->samples[(int64_t)py * f->width + px];
-    return (uint64_t)(v < 0 ? -v : v) * 65536u > (uint64_t)bound * (uint64_t)D;
+    return 1;
 }

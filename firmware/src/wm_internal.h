@@ -209,20 +209,29 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
  * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
 int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy);
 
+/* The normal metric's slope factor r of a triangle (sqrt(1 + g^2) in Q16.16: tri_error.c) is the same
+ * for every measure of the triangle.  A caller that measures one triangle more than once (a point test,
+ * then its scan) hands each the same kept word, 0 at first: the first measure that needs r leaves it
+ * there and the others take it (r >= 2^16, so 0 means unknown).  NULL: not kept. */
 /* E(T)'s measure at the one sample (px, py) of the closed triangle, rounded as E(T) is: never more
  * than wm_tri_error of the same triangle, so a value above zeta rules the triangle out cheaply. */
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
-                        int32_t py);
-/* wm_point_error(...) > bound, without a division in the vertical metric (the decimation's cheap test). */
+                        int32_t py, uint64_t *kept);
+/* wm_point_error(...) > bound, without a division in the vertical metric and without the slope factor's
+ * root in the normal one (the cheap tests of the decimation and the reduction; r is kept only when the
+ * answer is 0, as the caller then measures the triangle). */
 int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
-                   int32_t py, uint32_t bound);
+                   int32_t py, uint32_t bound, uint64_t *kept);
+/* wm_tri_error with a kept word. */
+uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           int32_t *wx, int32_t *wy, uint64_t *kept);
 /* wm_tri_error_upto, and while E(T) <= bound also the worst sample as wm_tri_error finds it. */
 uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                             uint32_t bound, int32_t *wx, int32_t *wy);
+                             uint32_t bound, int32_t *wx, int32_t *wy, uint64_t *kept);
 /* E(T) when it is at most bound; otherwise some value above bound, found with the scan stopped at the
  * first sample that puts E(T) over it (the tests of the reduction and the decimation need no more). */
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound);
+                           uint32_t bound, uint64_t *kept);
 
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
@@ -334,8 +343,8 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
  * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL. */
 struct wm_plan_probe {
     int32_t px, py;
-    int (*above)(const void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py);
-    const void *ctx;
+    int (*above)(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py);
+    void *ctx;
 };
 int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                        int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr);
