@@ -8,8 +8,12 @@
  *   0x4000_0000  UART    soc_uart registers
  *   0x4000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
  *   0x4000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
+ *   0x4000_0300  ENGINE  soc_engine registers: the triangle error engine (E(T)'s scan of HEIGHT)
  *   0x5000_0000  SDRAM   the 32 MB SDRAM through sdram_ctrl's CPU port (sdram_cache); its areas
  *                        HEIGHT, COEF, TOUT (the stage's) and HEAP start at the *_OFFSET bytes
+ *
+ * The triangle error engine (soc_engine, tri_engine) reads HEIGHT a row span at a time through the
+ * same stream reader (the stage runs before the refiner, never beside it).
  *
  * The FPGA stage (soc_accel) streams HEIGHT from the SDRAM (the controller's stream reader) and
  * hands its coefficient and template entries to sdram_words, which writes each as a sign- or
@@ -226,6 +230,7 @@ picorv32 #(
 localparam [2:0]
     SEL_NONE   = 3'd0,
     SEL_FW     = 3'd1,
+    SEL_ENGINE = 3'd2,
     SEL_UART   = 3'd5,
     SEL_SYS    = 3'd6,
     SEL_ACCEL  = 3'd7;
@@ -241,6 +246,7 @@ wire sdram_hit = region == `WM_REGION_SDRAM && offset < SDRAM_LIMIT;
 wire uart_hit = io_page && mem_addr[11:8] == `WM_IO_UART;
 wire sys_hit = io_page && mem_addr[11:8] == `WM_IO_SYS;
 wire accel_hit = io_page && mem_addr[11:8] == `WM_IO_ACCEL;
+wire engine_hit = io_page && mem_addr[11:8] == `WM_IO_ENGINE;
 
 // a request is the first cycle of mem_valid; mem_ready answers it in the next cycle, except in the
 // SDRAM, whose port holds the request until it answers, and for a SYS.STAGE write, answered when
@@ -256,6 +262,7 @@ always @* begin
     else if (uart_hit) sel = SEL_UART;
     else if (sys_hit) sel = SEL_SYS;
     else if (accel_hit) sel = SEL_ACCEL;
+    else if (engine_hit) sel = SEL_ENGINE;
     else sel = SEL_NONE;
 end
 
@@ -278,6 +285,7 @@ wire [31:0] fw_rdata;
 wire [31:0] uart_rdata;
 wire [31:0] sys_rdata;
 wire [31:0] accel_rdata;
+wire [31:0] engine_rdata;
 
 always @* begin
     if (sdram_cpu_ready) begin
@@ -288,6 +296,7 @@ always @* begin
             SEL_UART: mem_rdata = uart_rdata;
             SEL_SYS: mem_rdata = sys_rdata;
             SEL_ACCEL: mem_rdata = accel_rdata;
+            SEL_ENGINE: mem_rdata = engine_rdata;
             default: mem_rdata = 32'd0;
         endcase
     end
@@ -358,10 +367,65 @@ always @(posedge clk) begin
     end
 end
 
-// entries as words: details sign-extended into COEF, template entries zero-extended into TOUT
 localparam [HW_BITS-2:0] COEF_WORD = COEF_OFFSET / 4;
 localparam [HW_BITS-2:0] TOUT_WORD = TOUT_OFFSET / 4;
 localparam [HW_BITS-1:0] HEIGHT_HW = HEIGHT_OFFSET / 2;
+
+/*
+ * The triangle error engine: its row spans through the same stream reader.  The reader takes a command
+ * only when the last one's data are all out, so the data go to whoever's command was taken last; the
+ * stage's command wins (the two never run together: the stage runs before the refiner).
+ */
+localparam ENGINE_CB = `WM_ENGINE_COORD_BITS;
+wire [HW_BITS-1:0]  eng_rd_addr;
+wire [ENGINE_CB:0]  eng_rd_len;
+wire                eng_rd_valid, eng_rd_ready;
+wire                eng_data_valid, eng_data_ready;
+wire                engine_busy_unused;
+wire [15:0]         rd_tdata;
+wire                rd_tvalid, rd_tready;
+reg                 rd_owner_reg = 1'b0;     // 1: the engine's command was the last taken
+
+soc_engine #(
+    .ADDR_BITS(HW_BITS),
+    .HEIGHT_BASE(HEIGHT_HW)
+) engine_inst (
+    .clk(clk),
+    .rst(rst),
+    .bus_valid(req && engine_hit),
+    .bus_addr(mem_addr[7:0]),
+    .bus_wdata(mem_wdata),
+    .bus_wstrb(mem_wstrb),
+    .bus_rdata(engine_rdata),
+    .m_rd_addr(eng_rd_addr),
+    .m_rd_len(eng_rd_len),
+    .m_rd_valid(eng_rd_valid),
+    .m_rd_ready(eng_rd_ready),
+    .s_rd_data(rd_tdata),
+    .s_rd_valid(eng_data_valid),
+    .s_rd_ready(eng_data_ready),
+    .busy(engine_busy_unused)
+);
+
+wire [HW_BITS-1:0] rd_addr = rd_cmd_valid_reg ? HEIGHT_HW : eng_rd_addr;
+wire [HW_BITS:0] rd_len = rd_cmd_valid_reg ? rd_cmd_len_reg : {{(HW_BITS-ENGINE_CB){1'b0}}, eng_rd_len};
+wire rd_valid = rd_cmd_valid_reg || eng_rd_valid;
+assign eng_rd_ready = rd_cmd_ready && !rd_cmd_valid_reg;
+assign height_tdata = rd_tdata;
+assign height_tvalid = rd_tvalid && !rd_owner_reg;
+assign eng_data_valid = rd_tvalid && rd_owner_reg;
+assign rd_tready = rd_owner_reg ? eng_data_ready : height_tready;
+
+always @(posedge clk) begin
+    if (rd_valid && rd_cmd_ready) begin
+        rd_owner_reg <= !rd_cmd_valid_reg;
+    end
+    if (rst) begin
+        rd_owner_reg <= 1'b0;
+    end
+end
+
+// entries as words: details sign-extended into COEF, template entries zero-extended into TOUT
 wire [15:0]        wa_tdata;
 wire [HW_BITS-1:0] wa_tuser;
 wire               wa_tvalid, wa_tready;
@@ -421,13 +485,13 @@ sdram_ctrl #(
     .cpu_wstrb(mem_wstrb),
     .cpu_ready(sdram_cpu_ready),
     .cpu_rdata(sdram_cpu_rdata),
-    .s_rd_cmd_addr(HEIGHT_HW),
-    .s_rd_cmd_len(rd_cmd_len_reg),
-    .s_rd_cmd_valid(rd_cmd_valid_reg),
+    .s_rd_cmd_addr(rd_addr),
+    .s_rd_cmd_len(rd_len),
+    .s_rd_cmd_valid(rd_valid),
     .s_rd_cmd_ready(rd_cmd_ready),
-    .m_axis_rd_tdata(height_tdata),
-    .m_axis_rd_tvalid(height_tvalid),
-    .m_axis_rd_tready(height_tready),
+    .m_axis_rd_tdata(rd_tdata),
+    .m_axis_rd_tvalid(rd_tvalid),
+    .m_axis_rd_tready(rd_tready),
     .m_axis_rd_tlast(height_tlast_unused),
     .s_wr_cmd_addr({HW_BITS{1'b0}}),
     .s_wr_cmd_len({(HW_BITS+1){1'b0}}),

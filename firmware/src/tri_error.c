@@ -232,11 +232,17 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
     return vm;
 }
 
-/* The scan that fits the triangle (the same result either way). */
+/* The scan that fits the triangle (the same result either way).  The board's refiner (WM_TRI_ENGINE)
+ * hands it to the FPGA's triangle error engine, which returns the same Vmax and sample; the holes
+ * mask's cover test (holes.c) has run before, on the CPU. */
 static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
                          int32_t *wx, int32_t *wy)
 {
     WM_PROF_ADD(WM_PC_SCANS, 1);
+#ifdef WM_TRI_ENGINE
+    uint64_t v;
+    if (wm_tri_engine_scan(f, x, y, limit, &v, wx, wy)) return v;
+#endif
     if (f->width <= (1 << 14) && f->height <= (1 << 14) && D < (1 << 15))
         return scan32(f, x, y, (uint32_t)D, limit, wx, wy);
     return scan(f, x, y, D, limit, wx, wy);

@@ -233,6 +233,14 @@ uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                            uint32_t bound, uint64_t *kept);
 
+#ifdef WM_TRI_ENGINE
+/* The board's triangle error engine (firmware/board/src/tri_engine.c): E(T)'s scan of the counter-
+ * clockwise triangle (x, y) in the FPGA, the same Vmax and sample as the C scan (tri_error.c) into
+ * *vmax, *wx, *wy (each may be NULL but vmax); 0 when it cannot take the field (the C scan runs). */
+int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
+                       int32_t *wx, int32_t *wy);
+#endif
+
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */
 const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 

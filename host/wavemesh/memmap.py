@@ -277,7 +277,46 @@ ACCEL = Block("ACCEL", 0x2, "the FPGA stage: height memory -> filter bank -> COE
     Register("MAX_HEIGHT", 0x34, "r", "largest H", reset=str(GRID_MAX_H)),
     Register("MAX_LEVELS", 0x38, "r", "largest M", reset=str(ACCEL_MAX_LEVELS)),
 ))
-BLOCKS = (UART, SYS, ACCEL)
+# The triangle error engine (rtl/tri_engine.v behind rtl/soc_engine.v): E(T)'s scan in the fabric,
+# reading HEIGHT through the SDRAM controller's stream reader (the FPGA stage's, idle while the refiner
+# runs).  Grid coordinates of ENGINE_COORD_BITS bits: the largest grid, with room.
+ENGINE_COORD_BITS = max(GRID_MAX_W, GRID_MAX_H).bit_length()  # 11 for 1024: coordinates 0..2047
+ENGINE_VMAX_BITS = 2 * ENGINE_COORD_BITS + 18  # V modulo 2^VMAX_BITS (V < 2^16 D < 2^(VMAX_BITS-1))
+ENGINE_CMD_DEPTH = 4  # triangles the CPU may queue
+ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT", (
+    Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)", (
+        Field("X", 15, 0, "rw", "column"),
+        Field("Y", 31, 16, "rw", "row"),
+    )),
+    Register("V1", 0x04, "rw", "corner 1, as V0"),
+    Register("V2", 0x08, "rw", "corner 2, as V0"),
+    Register("Z01", 0x0C, "rw", "the corner heights: z0 in bits 15..0, z1 in 31..16 (the samples at the "
+             "corners)"),
+    Register("Z2", 0x10, "rw", "z2 in bits 15..0"),
+    Register("LIMIT_LO", 0x14, "rw", "the limit, bits 31..0: the scan stops at the first sample whose V "
+             "exceeds it (all ones: no limit)"),
+    Register("LIMIT_HI", 0x18, "rw", "the limit, bits 63..32"),
+    Register("PUSH", 0x1C, "w", "write: queue the triangle of V0..LIMIT_HI (they keep their values); "
+             "lost, and STATUS.OVERRUN set, while the queue is full"),
+    Register("STATUS", 0x20, "r/w1c", "queue and result state", (
+        Field("RES_VALID", 0, 0, "r", "a result is waiting (RES_VMAX_LO, RES_VMAX_HI, RES_AT)"),
+        Field("CMD_FULL", 1, 1, "r", f"the queue holds {ENGINE_CMD_DEPTH} triangles (a PUSH now is lost)"),
+        Field("BUSY", 2, 2, "r", "a triangle is queued or in work, or a result unread"),
+        Field("OVERRUN", 8, 8, "w1c", "sticky: a PUSH was lost"),
+    )),
+    Register("RES_VMAX_LO", 0x24, "r", "the oldest result's Vmax = max |E_0 z_0 + E_1 z_1 + E_2 z_2 - D h| "
+             "over the triangle's samples (or the first V above the limit), bits 31..0"),
+    Register("RES_VMAX_HI", 0x28, "r", f"its bits {ENGINE_VMAX_BITS - 1}..32"),
+    Register("RES_AT", 0x2C, "r", "read: the sample of the oldest result, and the result is taken", (
+        Field("X", 15, 0, "r", "its column: the first sample reaching Vmax in scan order (rows, then "
+              "columns, ascending), or corner 0 when every V is 0"),
+        Field("Y", 30, 16, "r", "its row"),
+        Field("EMPTY", 31, 31, "r", "there was no result (nothing taken)"),
+    )),
+    Register("WIDTH", 0x30, "rw", "W, samples per row of HEIGHT (hold while busy)"),
+    Register("MAX_SIDE", 0x34, "r", "largest W and H the engine takes", reset=str(1 << ENGINE_COORD_BITS)),
+))
+BLOCKS = (UART, SYS, ACCEL, ENGINE)
 
 
 def reg_addr(block: Block, name: str) -> int:
@@ -362,6 +401,7 @@ def c_header() -> str:
         num("WM_STAGING_TRI_BYTES", STAGING_TRI_BYTES),
         num("WM_STAGING_GRID_BYTES", STAGING_GRID_BYTES),
         num("WM_STACK_BYTES", STACK_BYTES),
+        num("WM_ENGINE_COORD_BITS", ENGINE_COORD_BITS),
         "",
         "/* Memory regions: base address, default size in bytes and in entries. */",
     ]
@@ -403,6 +443,8 @@ def verilog_include() -> str:
         d("WM_GRID_MAX_H", GRID_MAX_H),
         d("WM_STAGE_MAX_LEVELS", ACCEL_MAX_LEVELS),
         d("WM_STAGE_MAX_COLS", ACCEL_MAX_COLS),
+        d("WM_ENGINE_COORD_BITS", ENGINE_COORD_BITS),
+        d("WM_ENGINE_CMD_DEPTH", ENGINE_CMD_DEPTH),
         "// regions: address bits 31..28; default sizes in entries",
     ]
     for r in (*REGIONS,):

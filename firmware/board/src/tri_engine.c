@@ -1,0 +1,43 @@
+/* The triangle error engine on the board (rtl/soc_engine.v, the ENGINE registers): E(T)'s scan of a
+ * triangle's samples in the FPGA, for tri_error.c's scan_any (built into the board's refiner with
+ * WM_TRI_ENGINE: firmware/board/CMakeLists.txt; the native build keeps the C scan).
+ *
+ * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
+ * (the board job's: app/job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
+ * answers 0 and the C scans.  One triangle at a time: the grid's width, the corners, their heights (read
+ * here through the cache, as the C scan reads them) and the limit into the staging registers (all of
+ * them each time: no state carries from one job to the next, so a job's cycles depend on it alone),
+ * PUSH, then the result once STATUS says it is there.  The result is the C scan's,
+ * Vmax and the first sample reaching it (or the first V above limit): tests/rtl/test_tri_engine.py. */
+#include "wm_internal.h"
+#include "wm_memmap.h"
+
+int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
+                       int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    int32_t w = f->width;
+    uint32_t at, lo, hi;
+    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
+        f->height > (1 << WM_ENGINE_COORD_BITS))
+        return 0;
+    WM_ENGINE_WIDTH = (uint32_t)w;
+    WM_ENGINE_LIMIT_LO = (uint32_t)limit;
+    WM_ENGINE_LIMIT_HI = (uint32_t)(limit >> 32);
+    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
+    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
+    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
+    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
+    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+    WM_ENGINE_PUSH = 1;
+    while (!(WM_ENGINE_STATUS & WM_ENGINE_STATUS_RES_VALID)) {
+        /* the engine scans */
+    }
+    lo = WM_ENGINE_RES_VMAX_LO;
+    hi = WM_ENGINE_RES_VMAX_HI;
+    at = WM_ENGINE_RES_AT; /* takes the result */
+    *vmax = (uint64_t)hi << 32 | lo;
+    if (wx) *wx = (int32_t)(at & WM_ENGINE_RES_AT_X_MASK);
+    if (wy) *wy = (int32_t)((at & WM_ENGINE_RES_AT_Y_MASK) >> WM_ENGINE_RES_AT_Y_SHIFT);
+    return 1;
+}
