@@ -27,7 +27,16 @@ from wavemesh import __version__, limits
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
 from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
-from wavemesh.georef import apply_overrides, cropped, grid_ground, ground, read_sidecar, sidecar_path, to_grid
+from wavemesh.georef import (
+    apply_overrides,
+    cropped,
+    grid_ground,
+    ground,
+    parse_pair,
+    read_sidecar,
+    sidecar_path,
+    to_grid,
+)
 from wavemesh.haar import WAVELETS, decompose
 from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
 from wavemesh.initial import InitialResult, assemble, initial_triangulation
@@ -194,8 +203,15 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
     if max_hole and (nodata != "hole" or max_hole < 0):
         raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
                          "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
+    # the options that apply after the read, checked before it
     if crop is not None:
-        parse_crop(crop)  # a bad --crop before the file is read
+        parse_crop(crop)
+    if decimate is not None and decimate < 1:
+        raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
+    if spacing is not None:
+        parse_pair(spacing, "--spacing", positive=True, one_ok=True)
+    if origin is not None:
+        parse_pair(origin, "--origin", positive=False, one_ok=False)
 
     def size_check(width: int, height: int, itemsize: int) -> None:
         w, h = width, height
@@ -220,18 +236,19 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
     return denoise_heightfield(hf, denoise)[0]
 
 
-# Memory of an untiled run (`wavemesh mesh`, `stream`): the least address space it takes,
-# READ_BYTES_PER_SAMPLE plus the file's own sample size a sample of the file (float64 heights and the
-# no-data mask beside the samples as read), then MESH_BYTES_PER_SAMPLE a sample of the grid it meshes (the
-# 16-bit samples, the filter bank, the refiner's grids, the error check): what the grid costs whatever the
-# mesh.  Measured as VmPeak of `wavemesh mesh X.npy -o o.obj` (float32 input) at 1025^2, 2049^2 and 4097^2
-# samples (docs/tiles.md, "Memory"): 107-124 bytes a sample more for a flat field and for the two-ball
-# terrain (109 with glibc's mmap threshold fixed, MALLOC_TRIM_THRESHOLD_ set as dask does), about 240 for
-# noise at the default zeta, 830 when the mesh keeps nearly every sample (noise, --zeta 0.001).  The
-# estimate stays below that floor (4 + 9 + 88 = 101 bytes for float32): a run it refuses would not have
-# fitted.
+# Memory of an untiled run (`wavemesh mesh`, `stream`), the least it takes whatever the mesh: the file's
+# samples as read (their own size, plus READ_BYTES_PER_SAMPLE: float64 heights and the no-data mask) and
+# MESH_BYTES_PER_SAMPLE a sample of the grid it meshes (the 16-bit samples, the filter bank, the refiner's
+# grids, the error check), in address space (what ulimit -v bounds); RESIDENT_BYTES_PER_SAMPLE of resident
+# memory a sample besides the file's samples (what MemAvailable and a cgroup bound).  The source:
+# tools/mesh_memory.py (VmPeak and VmHWM of `wavemesh mesh` on float32 N x N, the slope between N = 1025,
+# 2049, 4097; docs/tiles.md "Memory"): address space 107-111 bytes a sample for a flat field and the
+# two-ball terrain, 231-246 for noise, 830 when the mesh keeps nearly every sample (noise, --zeta 0.001);
+# resident 15.6-15.8 (flat), 25-42 (terrain), 231-246 (noise).  The estimates stay below those floors
+# (4 + 9 + 88 = 101 and 4 + 11 = 15 bytes for float32): a run they refuse would not have fitted.
 MESH_BYTES_PER_SAMPLE = 88
 READ_BYTES_PER_SAMPLE = 9
+RESIDENT_BYTES_PER_SAMPLE = 11
 
 
 def available_memory() -> int:
@@ -246,13 +263,13 @@ def available_memory() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
-def memory_available() -> tuple[int, str]:
-    """Bytes this process may still take, and what says so: the least of /proc/meminfo's MemAvailable,
-    the address space limit (RLIMIT_AS, ulimit -v) less what the process maps now, and the cgroup's
-    memory.max less its memory.current."""
+def memory_available() -> list[tuple[int, str, str]]:
+    """What this process may still take: (bytes, what says so, "address" or "resident"): /proc/meminfo's
+    MemAvailable and the cgroup's memory.max less its memory.current (resident memory), the address space
+    limit (RLIMIT_AS, ulimit -v) less what the process maps now."""
     import resource
 
-    found = [(available_memory(), "memory available")]
+    found = [(available_memory(), "memory available", "resident")]
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     if soft != resource.RLIM_INFINITY:
         used = 0
@@ -263,16 +280,17 @@ def memory_available() -> tuple[int, str]:
                         used = int(line.split()[1]) * 1024
         except OSError:
             pass
-        found.append((max(0, soft - used), f"the address space limit (ulimit -v {soft // 1024})"))
+        found.append((max(0, soft - used), f"the address space limit, ulimit -v {soft // 1024}", "address"))
     try:
         with open("/sys/fs/cgroup/memory.max") as f:
             top = f.read().strip()
         if top.isdigit():
             with open("/sys/fs/cgroup/memory.current") as f:
-                found.append((max(0, int(top) - int(f.read().strip())), "the cgroup's memory.max"))
+                left = max(0, int(top) - int(f.read().strip()))
+            found.append((left, "the cgroup's memory.max", "resident"))
     except (OSError, ValueError):
         pass
-    return min(found)
+    return found
 
 
 def _size(n: float) -> str:
@@ -283,21 +301,22 @@ def memory_check(source: str, width: int, height: int, itemsize: int, w: int | N
                  h: int | None = None) -> None:
     """InputError, with the --tile N to use, when an untiled run of the ``w`` x ``h`` grid (default the
     file's ``width`` x ``height``, of ``itemsize``-byte samples) needs more memory than this process may
-    take (memory_available): the file's samples as read, and MESH_BYTES_PER_SAMPLE a sample of the grid."""
+    take (memory_available; the estimates above)."""
     w, h = (width, height) if w is None else (w, h)
-    need = width * height * (itemsize + READ_BYTES_PER_SAMPLE) + w * h * MESH_BYTES_PER_SAMPLE
-    have, what = memory_available()
-    if need <= have:
-        return
-    from wavemesh.tiles import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
+    need = {"address": width * height * (itemsize + READ_BYTES_PER_SAMPLE) + w * h * MESH_BYTES_PER_SAMPLE,
+            "resident": width * height * itemsize + w * h * RESIDENT_BYTES_PER_SAMPLE}
+    for have, what, kind in memory_available():
+        if need[kind] <= have:
+            continue
+        from wavemesh.tiles import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
 
-    workers = default_workers()
-    fits = [t for t in TILE_CHOICES if workers * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
-    tile = fits[0] if fits else TILE_CHOICES[-1]
-    raise InputError(f"{source}: meshing the {w} x {h} grid untiled needs at least {_size(need)} of memory; "
-                     f"{_size(have)} is left ({what})",
-                     hint=f"mesh it in tiles: --tile {tile}" + ("" if fits else " --workers 1")
-                     + " (docs/tiles.md)")
+        workers = default_workers()
+        fits = [t for t in TILE_CHOICES if workers * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
+        tile = fits[0] if fits else TILE_CHOICES[-1]
+        raise InputError(f"{source}: meshing the {w} x {h} grid untiled needs at least "
+                         f"{_size(need[kind])} of memory; {_size(have)} is left ({what})",
+                         hint=f"mesh it in tiles: --tile {tile}" + ("" if fits else " --workers 1")
+                         + " (docs/tiles.md)")
 
 
 @dataclass

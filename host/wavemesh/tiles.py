@@ -747,11 +747,11 @@ def _mesh_tile_task(plan: TilePlan, index: int, window: np.ndarray | None) -> Ti
 
 
 def available_memory() -> int:
-    """Bytes this process may still take now (wavemesh.api.memory_available: MemAvailable, ulimit -v,
-    the cgroup's limit)."""
+    """Bytes this process may still take now (the least of wavemesh.api.memory_available: MemAvailable,
+    ulimit -v, the cgroup's limit)."""
     from wavemesh.api import memory_available
 
-    return memory_available()[0]
+    return min(have for have, _, _ in memory_available())
 
 
 def default_tile(workers: int, budget: int | None = None) -> int:

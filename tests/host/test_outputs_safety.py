@@ -364,21 +364,25 @@ def test_an_untiled_run_too_large_for_memory_suggests_tiles(tmp_path):
 
 
 def test_the_memory_estimate_is_the_measured_floor(tmp_path):
-    """The estimate against a run's own peak: a flat 1025 x 1025 float32 field (the least a grid costs,
-    whatever the mesh) grows the address space by at least what memory_check counts for it."""
-    from wavemesh.api import MESH_BYTES_PER_SAMPLE, READ_BYTES_PER_SAMPLE
+    """The estimates against a run's own peaks: a flat 1025 x 1025 float32 field (the least a grid costs,
+    whatever the mesh) grows the address space (VmPeak) and the resident memory (VmHWM) by at least what
+    memory_check counts for it (tools/mesh_memory.py measures the slopes)."""
+    from wavemesh.api import MESH_BYTES_PER_SAMPLE, READ_BYTES_PER_SAMPLE, RESIDENT_BYTES_PER_SAMPLE
 
     prog = ("import sys, numpy as np; from wavemesh.cli import main\n"
-            "peak = lambda: int([x for x in open('/proc/self/status')\n"
-            "                    if x.startswith('VmPeak')][0].split()[1])\n"
+            "def peaks():\n"
+            "    s = dict(line.split(':', 1) for line in open('/proc/self/status'))\n"
+            "    return [int(s[k].split()[0]) * 1024 for k in ('VmPeak', 'VmHWM')]\n"
             "np.save(sys.argv[1], np.zeros((2, 2))); main(['mesh', sys.argv[1], '-o', sys.argv[2], '-q'])\n"
-            "a = peak(); np.save(sys.argv[1], np.zeros((1025, 1025), np.float32))\n"
-            "main(['mesh', sys.argv[1], '-o', sys.argv[2], '-q']); print((peak() - a) * 1024)")
+            "a = peaks(); np.save(sys.argv[1], np.zeros((1025, 1025), np.float32))\n"
+            "main(['mesh', sys.argv[1], '-o', sys.argv[2], '-q']); b = peaks()\n"
+            "print(b[0] - a[0], b[1] - a[1])")
     r = subprocess.run([sys.executable, "-c", prog, tmp_path / "a.npy", tmp_path / "a.obj"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
-    per_sample = int(r.stdout.split()[0]) / 1025 ** 2
-    assert per_sample >= MESH_BYTES_PER_SAMPLE + READ_BYTES_PER_SAMPLE + 4, per_sample
+    address, resident = (int(v) / 1025 ** 2 for v in r.stdout.split())
+    assert address >= MESH_BYTES_PER_SAMPLE + READ_BYTES_PER_SAMPLE + 4, address
+    assert resident >= RESIDENT_BYTES_PER_SAMPLE + 4, resident
 
 
 # --- 7. junk refused ----------------------------------------------------------------------------------
