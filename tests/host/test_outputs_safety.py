@@ -245,18 +245,23 @@ def test_a_failed_move_puts_back_the_files_already_replaced(tmp_path, monkeypatc
 
 
 def test_sigterm_while_writing_leaves_no_staging(tmp_path, terrain):
-    """SIGTERM once the outputs are being staged (the mesh and the levels written, the picture being
-    drawn): exit 143, the old mesh as it was, no .wavemesh-partial-* folder anywhere."""
+    """SIGTERM once the outputs are being staged (the mesh, the levels in an existing --lod folder and the
+    report written, the picture being drawn): exit 143, the old files as they were, no
+    .wavemesh-partial-* folder anywhere (beside the mesh, inside the --lod folder)."""
     (tmp_path / "m.obj").write_text("OLD")
-    p = start("mesh", terrain, "-o", tmp_path / "m.obj", "--lod", tmp_path / "lod", "--report",
-              tmp_path / "m.json", "--render", tmp_path / "m.png", "--zeta", "0.05", "-q")
+    lod = tmp_path / "lod"
+    lod.mkdir()
+    (lod / "level-0.obj").write_text("OLD")
+    p = start("mesh", terrain, "-o", tmp_path / "m.obj", "--lod", lod, "--report", tmp_path / "m.json",
+              "--render", tmp_path / "m.png", "--zeta", "0.05", "-q")
     try:
         def staged() -> bool:
             names = [n for n in os.listdir(tmp_path) if n.startswith(PARTIAL) and "probe" not in n]
-            return bool(names) and os.path.exists(tmp_path / names[0] / "m.obj")
+            return bool(names) and os.path.exists(tmp_path / names[0] / "m.json")
 
         wait_for(lambda: staged() or p.poll() is not None, 60, "the outputs being staged")
         assert p.poll() is None, "the run ended before its outputs were staged"
+        assert any(n.startswith(PARTIAL) for n in os.listdir(lod))  # the levels staged in the folder
         p.send_signal(signal.SIGTERM)
         _, err = p.communicate(timeout=30)
     finally:
@@ -265,7 +270,8 @@ def test_sigterm_while_writing_leaves_no_staging(tmp_path, terrain):
             p.communicate()
     assert p.returncode == 128 + signal.SIGTERM, err
     assert one_error(err).startswith("error: terminated")
-    assert entries(tmp_path) == ["m.obj"] and (tmp_path / "m.obj").read_text() == "OLD"
+    assert entries(tmp_path) == ["lod", "m.obj"] and (tmp_path / "m.obj").read_text() == "OLD"
+    assert entries(lod) == ["level-0.obj"] and (lod / "level-0.obj").read_text() == "OLD"
 
 
 # --- 4. SIGTERM to a tiled run: its workers end with it --------------------------------------------
