@@ -44,7 +44,7 @@ from wavemesh.label import Labelling, tau_counts
 from wavemesh.mesh import Mesh
 from wavemesh.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
 from wavemesh.native import RefineOutput, RefineParams, fixed_params
-from wavemesh.outputs import Inputs, Outputs, as_inputs, check_path
+from wavemesh.outputs import Inputs, Outputs, as_inputs, check_path, distinct
 
 # What `wavemesh mesh` does not use is imported where it is used, so that the command pays only for what
 # it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.stream, .link), holes
@@ -949,6 +949,8 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
     inputs = as_inputs(inputs)
     out = _check_output(output, MESH_SUFFIXES, "mesh", inputs)
     inputs.refuse(sidecar_path(out), "the mesh's sidecar")
+    distinct({"-o": output, "--report": report, "--render": render,
+              "--normal-map": files.normal_map if files is not None else None})
     if files is not None:
         check_options(out, units=files.units, local=files.local, normals=files.normals, base=files.base)
         if files.normal_map:

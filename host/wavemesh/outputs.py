@@ -142,6 +142,20 @@ def as_inputs(inputs: Inputs | Iterable[str | os.PathLike | None] | None) -> Inp
     return inputs if isinstance(inputs, Inputs) else Inputs(inputs)
 
 
+def distinct(named: dict[str, str | os.PathLike | None]) -> None:
+    """InputError when two of a run's outputs (option name -> path; None: not asked for) are one file:
+    the second would replace the first."""
+    seen: dict[Path, str] = {}
+    for name, path in named.items():
+        if path is None:
+            continue
+        key, _ = _identity(path)
+        if key in seen:
+            raise InputError(f"{seen[key]} and {name} both name {os.fspath(path)}",
+                             hint="give each output its own file")
+        seen[key] = name
+
+
 # ---------------------------------------------------------------------------------------------------
 # Paths checked before the work
 
@@ -220,6 +234,9 @@ class Outputs:
         existing directory (a --lod folder that does not exist yet is made inside the staging folder)."""
         given = os.fspath(final)
         self._inputs.refuse(final, what)
+        if any(f == Path(final).absolute() for _, f, _ in self._files):
+            raise InputError(f"cannot write {what} {given}: the run writes another file there",
+                             hint="give each output its own file")
         for suffix in companions:
             self._inputs.refuse(given + suffix, what)
         final = Path(final).absolute()

@@ -178,6 +178,19 @@ def test_outputs_refuse_an_input_when_staged():
         out.path(__file__)
 
 
+def test_two_outputs_in_one_place_are_refused(tmp_path, terrain):
+    """--render and --normal-map on one file: the second move took the first file away after the run said
+    it wrote it."""
+    rc, _, err = run_cli("mesh", str(terrain), "-o", str(tmp_path / "m.obj"), "--render",
+                         str(tmp_path / "x.png"), "--normal-map", str(tmp_path / "x.png"))
+    assert rc == 2 and "both name" in one_error(err), err
+    assert entries(tmp_path) == []
+    with pytest.raises(InputError, match="another file there"), Outputs() as out:
+        out.path(tmp_path / "a.json").write_text("1")
+        out.path(tmp_path / "a.json")
+    assert entries(tmp_path) == []
+
+
 # --- 2. one all-or-nothing set, tiled included ------------------------------------------------------
 
 
