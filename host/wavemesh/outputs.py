@@ -325,7 +325,12 @@ class Outputs:
 
     def __exit__(self, kind, exc, tb) -> bool:
         if exc is None:
-            self.commit()
+            try:
+                self.commit()
+            except OSError as e:  # the set put back as it was (commit): say which file would not move
+                where = e.filename2 or e.filename or "an output"  # os.replace: the final place second
+                raise InputError(f"cannot write {where}: {e.strerror or e}",
+                                 hint="nothing was replaced; check the output folder") from None
             return False
         try:
             if isinstance(exc, WavemeshError):

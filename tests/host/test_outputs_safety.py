@@ -242,11 +242,11 @@ def test_a_failed_move_puts_back_the_files_already_replaced(tmp_path, monkeypatc
     def failing(src, dst):
         calls.append(dst)
         if str(dst) == str(b) and len(calls) == 2:
-            raise OSError(28, "No space left on device")
+            raise OSError(28, "No space left on device", str(src), None, str(dst))
         return real(src, dst)
 
     monkeypatch.setattr(os, "replace", failing)
-    with pytest.raises(OSError), Outputs() as out:
+    with pytest.raises(InputError, match="cannot write .*b.json: No space left"), Outputs() as out:
         out.path(a).write_text("new a")
         out.path(b).write_text("new b")
     monkeypatch.setattr(os, "replace", real)
