@@ -310,8 +310,11 @@ def memory_check(source: str, width: int, height: int, itemsize: int, w: int | N
             continue
         from wavemesh.tiles import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
 
-        workers = default_workers()
-        fits = [t for t in TILE_CHOICES if workers * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
+        if kind == "address":  # per process: each worker has its own address space (the tile's float64 too)
+            fits = [t for t in TILE_CHOICES if (MESH_BYTES_PER_SAMPLE + READ_BYTES_PER_SAMPLE + 8) * t * t
+                    <= have // 2]
+        else:  # shared: every worker's tile in flight (tiles.default_tile's rule)
+            fits = [t for t in TILE_CHOICES if default_workers() * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
         tile = fits[0] if fits else TILE_CHOICES[-1]
         raise InputError(f"{source}: meshing the {w} x {h} grid untiled needs at least "
                          f"{_size(need[kind])} of memory; {_size(have)} is left ({what})",
