@@ -253,7 +253,7 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
 
 #define WM_METRIC_NORMAL 0   /* distance along the triangle's normal (the dissertation's) */
 #define WM_METRIC_VERTICAL 1 /* vertical distance */
-#define WM_NEIGHBOURHOOD_FACE 0   /* face-based neighbourhood (4.10), coefficient at the barycentre */
+#define WM_NEIGHBOURHOOD_FACE 0   /* face-based neighbourhood (4.10), the coefficients the triangle holds */
 #define WM_NEIGHBOURHOOD_VERTEX 1 /* vertex-based neighbourhood (4.9), coefficient at the vertex */
 
 /* Parameters (Table 4.3) as fixed-point numbers.  The host converts them (host/wavemesh/native.py)
@@ -270,9 +270,9 @@ typedef struct wm_params {
     uint32_t alpha;         /* mesh regularity factor alpha (4.22), Q0.16, 0..65536 */
     uint32_t delta_v;       /* vertex movement threshold delta_v (4.21), 3-D distance, Q16.16 */
     uint32_t flags;         /* WM_FLAG_*: 0 is the default pipeline */
-    uint64_t delta_d;       /* detail energy threshold: e = d1^2 + d2^2 + d3^2 > delta_d 4^(m-1) (4.12),
-                               in coefficient units: floor(16 delta_d zeta^2 / s^2) (delta_d: energy per
-                               sample over the level tolerance squared, docs/refiner.md) */
+    uint64_t delta_d;       /* detail energy threshold: e = d1^2 + d2^2 + d3^2 > delta_d at every level
+                               (4.12), in coefficient units: floor(16 delta_d zeta^2 / s^2) (delta_d: energy
+                               per sample over zeta squared, docs/refiner.md) */
     uint32_t delta_lambda;  /* vertex removal criterion delta_lambda (4.32, 4.33): eigenvalues of R(v)
                                (unit normals, so in 0..1), Q16.16, rounded */
     uint32_t delta_c;       /* edge collapse criterion delta_c (4.34), |e21 . e22| > delta_c, Q16.16,

@@ -110,7 +110,7 @@ int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
     }
     for (int32_t t = 0; t < me->tri_end; t++) {
         if ((me->tflag[t] & (WM_F_ACTIVE | WM_F_PLAN)) != WM_F_ACTIVE) continue;
-        me->tflag[t] |= WM_F_PLAN;
+        me->tflag[t] |= WM_F_PLAN | WM_F_UNPAIRED;
         r->list[n++] = -(t + 1);
         if (st) st->unpaired++;
     }
@@ -241,7 +241,7 @@ int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
         edge_vec(me, e, &cx, &cy);
         len = cx * cx + cy * cy;
         if (len <= best_len || wm_gcd((int32_t)cx, (int32_t)cy) < 2) continue;
-        if (o >= 0 && (me->tflag[WM_TRI(o)] & WM_F_PLAN)) continue;
+        if (o >= 0 && (me->tflag[WM_TRI(o)] & (WM_F_PLAN | WM_F_UNPAIRED)) == WM_F_PLAN) continue;
         best_e = e;
         best_len = len;
     }
@@ -263,7 +263,11 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
     int32_t e = op, f, a, b, G, k, px, py;
     int64_t cx, cy, tq;
     uint64_t lim, da, db;
-    if (op < 0) return wm_split_unpaired(r, -op - 1, st);
+    if (op < 0) { /* the slot of an unpaired triangle an earlier one's edge split halved holds a half */
+        int32_t t = -op - 1;
+        if ((me->tflag[t] & WM_F_NEW) && (r->err[t] <= r->params.zeta || wm_tri_area2(me, t) <= 1)) return WM_OK;
+        return wm_split_unpaired(r, t, st);
+    }
     f = me->ho[e];
     a = me->hv[e];
     b = wm_dest(me, e);
@@ -271,10 +275,9 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
     G = wm_gcd((int32_t)cx, (int32_t)cy);
     if (G < 2) {
         /* No grid sample inside the common edge: the pair cannot be split there; each triangle is
-         * subdivided as an unpaired one, the partner only when it is not yet within the level's
-         * tolerance (a dependent partner often is: splitting it adds a vertex the bound never needs). */
+         * subdivided as an unpaired one, the partner only when it is not yet within zeta (a dependent partner often is: splitting it adds a vertex the bound never needs). */
         int32_t t2 = f >= 0 ? WM_TRI(f) : -1, rc = wm_split_unpaired(r, WM_TRI(e), st);
-        if (rc == WM_OK && t2 >= 0 && r->err[t2] > wm_level_zeta(r, m)) rc = wm_split_unpaired(r, t2, st);
+        if (rc == WM_OK && t2 >= 0 && r->err[t2] > r->params.zeta) rc = wm_split_unpaired(r, t2, st);
         return rc;
     }
     /* Split point: the mean of the two crossings (one for a quasi-valid pair), snapped to the grid

@@ -92,6 +92,25 @@ int wm_room(wm_refiner *r, int32_t added)
     return WM_ERR_CAPACITY;
 }
 
+static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha);
+
+/* 4.6 step 2(d): the initial mesh enhanced with the local operators of 2.5.1 (Table 3.2: fewer triangles
+ * and lower errors): edge swaps that lower the error (eq. 4.22 with alpha = 0: R_E > 1) over the whole
+ * mesh, the reduction (its removals are level M-1's), then the same swaps over what the reduction made
+ * (2.5.1: the swap "minimize[s] the error produced by previously applied operators"). */
+static void enhance(wm_refiner *r)
+{
+    wm_mesh *me = &r->mesh;
+    for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = WM_F_NEW;
+    regularise(r, NULL, 0);
+    for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = 0;
+    WM_PROF_SET(WM_PH_REDUCE);
+    wm_reduce(r);
+    WM_PROF_SET(WM_PH_LEVELS);
+    regularise(r, NULL, 0);
+    for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = 0;
+}
+
 int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f, const wm_params *p,
                    const int32_t *xy, int32_t nv, const int32_t *tris, int32_t nt, int32_t tri_cap)
 {
@@ -148,12 +167,7 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         wm_touch(r, t);
         r->mesh.tflag[t] = 0;
     }
-    /* 4.6 step 2(d): the initial mesh enhanced by the reduction (its removals are level M-1's) */
-    if (!(p->flags & WM_FLAG_NO_REDUCE)) {
-        WM_PROF_SET(WM_PH_REDUCE);
-        wm_reduce(r);
-        WM_PROF_SET(WM_PH_LEVELS);
-    }
+    if (!(p->flags & WM_FLAG_NO_REDUCE)) enhance(r);
     *out = r;
     return WM_OK;
 }
@@ -179,14 +193,14 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
 
-static int try_swap(wm_refiner *r, int32_t e)
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old, ang_new, a1;
-    uint32_t e1 = 0, e2 = 0, ra, re = 65536u, alpha = r->params.alpha;
+    uint32_t e1 = 0, e2 = 0, ra, re = 65536u;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t xi, r1 = 0, r2 = 0; /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
@@ -237,6 +251,22 @@ static int try_swap(wm_refiner *r, int32_t e)
     }
     xi = ((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16;
     if (xi <= 65536u) return 0;
+    /* With the levels alone (no error bound after them), the bound of the reduction (reduce.c): no new
+     * triangle over max(zeta, the pair's E(T)), so a swap never makes E_max grow and never undoes the
+     * refinement where it met zeta; the error bound repairs what a swap spoils (docs/refiner.md). */
+    if (r->params.flags & WM_FLAG_NO_BOUND) {
+        uint32_t bnd = r->params.zeta;
+        if (r->err[t1] > bnd) bnd = r->err[t1];
+        if (r->err[t2] > bnd) bnd = r->err[t2];
+        if (alpha == 65536u) {
+            e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
+                        : wm_tri_error_within(&r->field, &r->params, n1x, n1y, bnd, &w1x, &w1y, NULL);
+            if (e1 > bnd) return 0;
+            e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
+                        : wm_tri_error_within(&r->field, &r->params, qx, qy, bnd, &w2x, &w2y, NULL);
+        }
+        if (e1 > bnd || e2 > bnd) return 0;
+    }
     if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
     if (alpha < 65536u) {
@@ -259,7 +289,7 @@ static int try_swap(wm_refiner *r, int32_t e)
  * did not change since it was last examined is skipped: it would give the same "no".  A triangle is
  * marked when it is swapped; the marks of this pass and the one before decide (an edge examined in
  * pass p is examined again in p + 1 only if a triangle of it changed after that, in p or p + 1). */
-static void regularise(wm_refiner *r, wm_level_stats *st)
+static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
 {
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
@@ -274,7 +304,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st)
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
                 u = WM_TRI(o);
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (try_swap(r, e)) {
+                if (try_swap(r, e, alpha)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
                     swaps++;
@@ -513,7 +543,8 @@ static int iterate(wm_refiner *r, int32_t m, wm_level_stats *st)
         int rc = wm_execute(r, m, r->list[i], st);
         if (rc != WM_OK) return rc;
     }
-    regularise(r, st);
+    for (int32_t t = 0; t < r->mesh.tri_end; t++) r->mesh.tflag[t] &= (uint8_t)~WM_F_UNPAIRED;
+    regularise(r, st, r->params.alpha);
     return 0;
 }
 

@@ -1,12 +1,17 @@
-/* Region selection for refinement (dissertation 4.3): detail energy (eq. 4.12) at the coefficient
- * of the triangle's barycentre (face-based, eq. 4.13) or of its vertices (vertex-based), the active
- * region (union of N0), the dependent region (union of N1) and the union of N2 (4.9, 4.10).
+/* Region selection for refinement (dissertation 4.3): detail energy (eq. 4.12) of the detail cells a
+ * triangle contains (face-based) or of the cells its vertices lie in (vertex-based), the active region
+ * (union of N0), the dependent region (union of N1) and the union of N2 (4.9, 4.10).
  *
- *        N2  N1  N2              A triangle is active when the detail energy of its coefficient
- *          \ | /                 exceeds delta_d, its own E(T) exceeds zeta (refining a triangle
- *        N1- T -N1               that already meets the bound adds nothing: 4.6 step 3 stops
- *          / | \                 "when the user specified error criterion is satisfied") and it
- *        N2  N1  N2              has a grid sample besides its corners (twice its area > 1). */
+ *        N2  N1  N2              A triangle is active when its own E(T) exceeds zeta (Table 4.3:
+ *          \ | /                 E(T) <= zeta; refining a triangle that already meets it adds
+ *        N1- T -N1               nothing), it has a grid sample besides its corners (twice its area
+ *          / | \                 > 1) and a detail cell it contains is energetic: 4.2.1, "triangles
+ *        N2  N1  N2              that contain wavelet detail coefficients with large magnitude".
+ *
+ * The cells of level m that T contains are those holding one of T's grid samples (the closed
+ * triangle, as E(T) measures it): the barycentre's cell (4.13) first, which decides most triangles,
+ * then T rasterised over the 2^m x 2^m cells row by row, each row's span from two divisions, each
+ * cell tested once per row of cells; the first energetic cell ends it. */
 #include "wm_internal.h"
 
 int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y)
@@ -17,31 +22,63 @@ int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y)
         uint64_t a = (uint64_t)(d[k] < 0 ? -(int64_t)d[k] : d[k]);
         e += a * a;
     }
-    /* delta_d is the detail's energy per sample of the square (Parseval on the orthonormal details
-     * of eq. 3.16) over the square of the tolerance zeta 2^(m-1) this level refines toward; the host
-     * folds 16 zeta^2 / s^2 into params.delta_d (native.fixed_params), the level's 4^(m-1) is here
-     * (docs/refiner.md, "Region selection"). */
-    {
-        int sh = 2 * (m - 1);
-        uint64_t th = r->params.delta_d;
-        if (sh > 0) th = th > (UINT64_MAX >> sh) ? UINT64_MAX : th << sh;
-        return e > th;
-    }
+    /* delta_d is the detail's energy per sample of its square (Parseval on the orthonormal details of
+     * eq. 3.16: sum D^2 / 4 at every level) over zeta^2; the host folds 16 zeta^2 / s^2 into
+     * params.delta_d (native.fixed_params; docs/refiner.md, "Region selection"). */
+    return e > r->params.delta_d;
 }
 
-/* The tolerance of the resolution level m - 1 the details of level m refine toward: zeta 2^(m-1),
- * so that each level of detail stops where its own, coarser, bound holds. */
-uint32_t wm_level_zeta(const wm_refiner *r, int32_t m)
+static int32_t fdiv(int64_t a, int64_t b) /* floor(a / b), b > 0: 32-bit when it fits (the soft CPU) */
 {
-    uint64_t z = (uint64_t)r->params.zeta << (m - 1);
-    return z > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)z;
+    if (a > -0x40000000 && a < 0x40000000 && b < 0x40000000) { /* no int32 overflow below */
+        int32_t a32 = (int32_t)a, b32 = (int32_t)b;
+        return a32 >= 0 ? a32 / b32 : -((-a32 + b32 - 1) / b32);
+    }
+    return (int32_t)wm_floor_div(a, b);
+}
+
+/* 1 when a detail cell of level m holding a grid sample of the closed triangle (x, y) is energetic. */
+static int any_cell(const wm_refiner *r, int32_t m, const int32_t x[3], const int32_t y[3])
+{
+    int64_t A[3], B[3], C[3];
+    int32_t box[4], clo = 1, chi = 0, crow = -1;
+    if (wm_energetic(r, m, wm_div3(x[0] + x[1] + x[2]), wm_div3(y[0] + y[1] + y[2]))) return 1;
+    wm_tri_edges(x, y, A, B, C, box);
+    for (int32_t py = box[2]; py <= box[3]; py++) {
+        int32_t lo = box[0], hi = box[1], a, b;
+        for (int k = 0; k < 3; k++) {
+            int64_t num = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
+            if (A[k] > 0) {
+                int32_t l = -fdiv(num, A[k]); /* ceil(-num / A) */
+                if (l > lo) lo = l;
+            } else if (A[k] < 0) {
+                int32_t h = fdiv(num, -A[k]);
+                if (h < hi) hi = h;
+            }
+        }
+        if (lo > hi) continue; /* (a row with A_k = 0 lies on or inside that edge: py in the box) */
+        a = lo >> m;
+        b = hi >> m;
+        if ((py >> m) != crow) { /* a new row of cells: nothing of it tested yet */
+            crow = py >> m;
+            clo = 1;
+            chi = 0;
+        }
+        for (int32_t c = a; c <= b; c++) {
+            if (c >= clo && c <= chi) continue; /* tested on the row above */
+            if (wm_energetic(r, m, c << m, py)) return 1;
+        }
+        clo = a;
+        chi = b;
+    }
+    return 0;
 }
 
 static int candidate(const wm_refiner *r, int32_t m, int32_t t)
 {
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3];
-    if (r->err[t] <= wm_level_zeta(r, m) || wm_tri_area2(me, t) <= 1) return 0;
+    if (r->err[t] <= r->params.zeta || wm_tri_area2(me, t) <= 1) return 0;
     wm_tri_xy(me, t, x, y);
     if (r->params.neighbourhood == WM_NEIGHBOURHOOD_VERTEX) {
         /* N0(v) of every vertex v whose nearest coefficient (the cell containing v) is energetic. */
@@ -49,8 +86,7 @@ static int candidate(const wm_refiner *r, int32_t m, int32_t t)
             if (wm_energetic(r, m, x[k], y[k])) return 1;
         return 0;
     }
-    /* (i, j) = floor of the barycentre in cell units (4.13): floor((x0 + x1 + x2) / (3 * 2^m)). */
-    return wm_energetic(r, m, wm_div3(x[0] + x[1] + x[2]), wm_div3(y[0] + y[1] + y[2]));
+    return any_cell(r, m, x, y);
 }
 
 int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)

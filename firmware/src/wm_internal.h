@@ -257,6 +257,7 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 #define WM_F_CHANGED 32u  /* regularisation: swapped in this pass */
 #define WM_F_CHANGED0 64u /* regularisation: swapped in the pass before (or the first pass) */
 #define WM_F_MEASURE 128u /* decimation: made by a removal, E(T) not measured yet */
+#define WM_F_UNPAIRED WM_F_MEASURE /* levels: planned as unpaired (cleared after the iteration's splits) */
 
 struct wm_refiner {
     wm_mesh mesh;
@@ -370,8 +371,6 @@ int wm_room(wm_refiner *r, int32_t added);
 
 /* The detail energy test (4.12) for the cell of level m at (x, y). */
 int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y);
-/* The tolerance the details of level m refine toward: zeta 2^(m-1) (region.c). */
-uint32_t wm_level_zeta(const wm_refiner *r, int32_t m);
 /* Region selection (4.3): sets the flags, returns the number of active triangles. */
 int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st);
 /* Gradient-consistent pairing (4.4.1): fills r->list, returns the number of operations. */

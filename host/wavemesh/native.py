@@ -225,7 +225,7 @@ class RefineParams:
 
     zeta: float = 1.0  # E(T) <= zeta at level 0, height units (5.3: 1 unit synthetic, 2 m terrain)
     metric: str = "normal"  # "normal" (the dissertation's) or "vertical"
-    delta_d: float = 0.1  # detail energy threshold: per sample, over the level tolerance squared
+    delta_d: float = 0.1  # detail energy threshold: per sample, over zeta squared (4.12)
     delta_p: float = 0.9  # pairing criterion, 0.5 < delta_p < 1
     delta_v: float = 2.0  # vertex movement threshold, 3-D distance (grid steps and height units)
     alpha: float = 0.6  # mesh regularity factor, 0..1 (5.2.3: "most of the later experiments")
@@ -317,11 +317,10 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
     out.delta_v = min(U32, round(Fraction(p.delta_v) * 2**16))
     out.flags = ((0 if p.bound else FLAG_NO_BOUND) | (0 if p.legalise else FLAG_NO_LEGALISE)
                  | (0 if p.decimate else FLAG_NO_DECIMATE) | (0 if p.reduce else FLAG_NO_REDUCE))
-    # delta_d is the detail's energy per sample over the level's tolerance squared (docs/refiner.md,
-    # "Region selection"): e = d1^2 + d2^2 + d3^2 in coefficient units, (d / 2) s is a half-block mean
-    # difference D, and the orthonormal details' energy per sample of the square is sum D^2 / 4, so
-    # e (s / 2)^2 / 4 > delta_d (zeta 2^(m-1))^2  <=>  e > 16 delta_d zeta^2 / s^2 4^(m-1); region.c
-    # does the 4^(m-1), this the rest, rounded down (e an integer).
+    # delta_d is the detail's energy per sample over zeta squared (docs/refiner.md, "Region selection"):
+    # e = d1^2 + d2^2 + d3^2 in coefficient units, (d / 2) s is a half-block mean difference D, and the
+    # orthonormal details' energy per sample of the square is sum D^2 / 4 at every level, so
+    # e (s / 2)^2 / 4 > delta_d zeta^2  <=>  e > 16 delta_d zeta^2 / s^2, rounded down (e an integer).
     out.delta_d = min(U64, floor(16 * Fraction(p.delta_d) * z * z / (s * s)))
     out.delta_lambda = min(U32, round(Fraction(p.delta_lambda) * 2**16))  # Q16.16, as CONFIG carries it
     out.delta_c = min(65536, round(Fraction(p.delta_c) * 2**16))

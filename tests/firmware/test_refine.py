@@ -117,8 +117,11 @@ def test_data_sets_meet_zeta_at_level_0(name, zeta, levels, k, metric):
     hf = from_array(values)
     rjob = api.refine(hf, levels, None, native.RefineParams(zeta=zeta, metric=metric, iterations=k))
     counts = [lv.mesh.n_triangles for lv in rjob.output.levels]
-    # The levels only add; level 0 ends with the decimation, which only removes.
-    assert counts[:-1] == sorted(counts[:-1]) and counts[0] < max(counts)
+    # The levels refine (a level's reduction, 3(b), can remove more than it adds once the levels above met
+    # zeta); level 0 ends with the decimation, which only removes.
+    levels_stats = [lv.stats for lv in rjob.output.levels[1:]]
+    assert all(st["edge_splits"] + st["ternary_splits"] + st["moves"] > 0 for st in levels_stats[:2])
+    assert counts[0] < max(counts)
     final = rjob.output.final.stats
     assert final["removals"] > 0 and final["triangles"] == counts[-1]
     assert_bound(hf, rjob)

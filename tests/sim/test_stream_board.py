@@ -62,6 +62,7 @@ CASES = {
     # a real DEM on the board at 13 x 11 (/16, 26 x 22, took ~55 s of make test; make bench-soc runs it)
     "jacksboro-13x11": ("JACKSBORO", ["--key", "elevation", "--decimate", "32", "--zeta", "15", *LEAN]),
     "tiny-default": ("tiny.npy", []),
+    "tiny-levels-alone": ("tiny.npy", ["--levels", "2", "--bound", "off", "-k", "3"]),  # the levels alone
 }
 
 

@@ -70,6 +70,7 @@ def inputs(tmp_path_factory):
 
 CASES = {
     "ball-levels-lod": ("ball64.npy", ["--levels", "3"], ".obj"),
+    "ball-levels-alone": ("ball64.npy", ["--levels", "4", "--bound", "off", "-k", "3"], ".obj"),
     "ball-no-simplify": ("ball64.npy", ["--simplify", "off", "--reduce", "off"], ".obj"),
     "box-initial": ("box64.npy", ["--stage", "initial"], ".obj"),
     "ball-denoise": ("ball64.npy", ["--denoise", "sure+median", "--zeta", "2"], ".obj"),  # the host de-noises
