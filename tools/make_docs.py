@@ -281,7 +281,8 @@ def table_3_2_enhanced() -> list[str]:
         f"89 / 158; f5 {counts[('haar', 'f5')]} against 106 / 178 to 43 / 80), further: the reduction",
         "accepts a change when no new triangle is further than max(zeta, the replaced triangles' E(T))",
         "from its samples, so a flat region coarsens up to the largest error around it.  E_max before and",
-        "after the enhancement: " + "; ".join(falls) + " (the paper: Haar f4 1.53 to 1.062, f5 4.984 to 3.53).",
+        "after the enhancement: " + "; ".join(falls)
+        + " (the paper: Haar f4 1.53 to 1.062, f5 4.984 to 3.53).",
         "",
     ]
     return lines
