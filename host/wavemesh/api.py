@@ -244,11 +244,11 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
 # tools/mesh_memory.py (VmPeak and VmHWM of `wavemesh mesh` on float32 N x N, the slope between N = 1025,
 # 2049, 4097; docs/tiles.md "Memory"): address space 107-111 bytes a sample for a flat field and the
 # two-ball terrain, 231-246 for noise, 830 when the mesh keeps nearly every sample (noise, --zeta 0.001);
-# resident 15.6-15.8 (flat), 25-42 (terrain), 231-246 (noise).  The estimates stay below those floors
-# (4 + 9 + 88 = 101 and 4 + 11 = 15 bytes for float32): a run they refuse would not have fitted.
+# resident 14.2-15.9 (flat), 25-42 (terrain), 231-246 (noise).  The estimates stay below those floors
+# (4 + 9 + 88 = 101 and 4 + 8 = 12 bytes for float32): a run they refuse would not have fitted.
 MESH_BYTES_PER_SAMPLE = 88
 READ_BYTES_PER_SAMPLE = 9
-RESIDENT_BYTES_PER_SAMPLE = 11
+RESIDENT_BYTES_PER_SAMPLE = 8
 
 
 def available_memory() -> int:
