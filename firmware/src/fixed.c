@@ -227,7 +227,18 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
 
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap)
 {
-    return wm_frac_mul(n, d, p->scale_m, p->scale_e, sh, cap);
+    uint64_t q;
+    int k = sh - p->scale_e;
+    if (d != 1) return wm_frac_mul(n, d, p->scale_m, p->scale_e, sh, cap);
+    /* wm_frac_mul's result for d = 1 (every caller: the regularisation's E in height units, the pairing's
+     * height steps), without its divisions by 1 (two or three 32-bit ones on the soft CPU): q = n m, no
+     * remainder */
+    WM_ASSERT(n < ((uint64_t)1 << 47) && p->scale_m < 65536u && sh <= 16);
+    q = n * p->scale_m;
+    if (k <= 0) q = -k >= 64 ? 0 : q >> -k;
+    else if (q > (cap >> k)) return cap;
+    else q <<= k;
+    return q > cap ? cap : q;
 }
 
 int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy)
