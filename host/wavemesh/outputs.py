@@ -122,7 +122,7 @@ class Inputs:
 
     def refuse(self, output: str | os.PathLike, what: str) -> None:
         """InputError when ``output`` is one of the inputs (module docstring)."""
-        if not self._known:
+        if not self._known or not os.path.exists(output):  # no file there: none of the inputs (they exist)
             return
         resolved, ino = _identity(output)
         for given, r, i in self._known:
@@ -228,18 +228,19 @@ class Outputs:
         self._given: dict[Path, str] = {}  # staged -> the final path as the caller gave it (for messages)
         self._current: str | None = None
         self._inputs = as_inputs(inputs)
+        self._finals: set[Path] = set()  # the final places asked for (none twice)
 
     def path(self, final: str | os.PathLike, companions: tuple[str, ...] = (), what: str = "output") -> Path:
         """Where to write the file ``final``: its name inside a staging folder beside its nearest
         existing directory (a --lod folder that does not exist yet is made inside the staging folder)."""
         given = os.fspath(final)
         self._inputs.refuse(final, what)
-        if any(f == Path(final).absolute() for _, f, _ in self._files):
-            raise InputError(f"cannot write {what} {given}: the run writes another file there",
-                             hint="give each output its own file")
         for suffix in companions:
             self._inputs.refuse(given + suffix, what)
         final = Path(final).absolute()
+        if final in self._finals:
+            raise InputError(f"cannot write {what} {given}: the run writes another file there",
+                             hint="give each output its own file")
         base = final.parent
         while not base.is_dir():
             base = base.parent
@@ -255,6 +256,7 @@ class Outputs:
         staged = stage / final.relative_to(base)
         staged.parent.mkdir(parents=True, exist_ok=True)
         self._files.append((staged, final, tuple(companions)))
+        self._finals.add(final)
         self._given[staged] = self._current = given
         return staged
 
@@ -312,6 +314,7 @@ class Outputs:
                     shutil.rmtree(stage, ignore_errors=True)
             self._stages.clear()
             self._files.clear()
+            self._finals.clear()
             self._given.clear()
 
     def _final_names(self, text: str) -> str:
