@@ -62,6 +62,9 @@ WRITE_TIMEOUT_MS = 2000  # a connection that takes none of the device's bytes fo
 # too and proves the new rate with a HELLO.  A device that sees no valid frame for BAUD_PROBE_MS after
 # the switch goes back to the divisor it had (the start rate), so a failed switch never strands it.
 BAUD_PROBE_MS = 1000  # device: back to the old divisor when no valid frame came this long after a switch
+BAUD_IDLE_MS = 3000  # device: back to the start rate after this long without a valid frame outside a session
+# (a host that left at a switched rate must not strand the board for the next, which starts at the start
+# rate: its first HELLOs go unanswered for at most this long, within a sync's attempts)
 BAUD_TOLERANCE = 0.025  # host: a rate the device can only reach farther off than this (relative) is refused
 # The rates a USB-serial bridge commonly takes (FT231X and FT2232H: 3 MHz / n; CP210x, CH340 to 2 Mbaud);
 # `--link-baud auto` tries the fastest one that the device reaches within BAUD_TOLERANCE.
@@ -589,6 +592,7 @@ def c_header() -> str:
         f"#define WM_PROTO_IDLE_TIMEOUT_MS {IDLE_TIMEOUT_MS}u",
         f"#define WM_PROTO_WRITE_TIMEOUT_MS {WRITE_TIMEOUT_MS}u",
         f"#define WM_PROTO_BAUD_PROBE_MS {BAUD_PROBE_MS}u",
+        f"#define WM_PROTO_BAUD_IDLE_MS {BAUD_IDLE_MS}u",
         "",
         "/* Frame types */",
         *[f"#define WM_PROTO_T_{t.name} 0x{t.value:02X}u" for t in FrameType],
@@ -764,6 +768,8 @@ def _constants():
                                              "(`host_resend_s`)"),
         ("BAUD_PROBE_MS", BAUD_PROBE_MS, "device: back to the old divisor when no valid frame came this long "
                                          "after a switch"),
+        ("BAUD_IDLE_MS", BAUD_IDLE_MS, "device: back to the start rate after this long without a valid frame "
+                                       "outside a session and a job"),
         ("BAUD_TOLERANCE", BAUD_TOLERANCE, "host: largest relative distance of the device's rate from the "
                                            "rate asked for"),
     ]

@@ -119,6 +119,18 @@ def test_a_failed_switch_falls_back_to_the_start_rate(paced, ref, tmp_path, monk
     assert report(out)["transfer"]["line_baud"] == 115200
 
 
+def test_the_device_goes_back_to_the_start_rate_when_the_host_leaves(paced):
+    """After a switch, BAUD_IDLE_MS without a valid frame outside a session: the start rate again (a
+    board keeps its divisor across hosts; the next host starts at the start rate)."""
+    with S.Device(paced.url, timeouts=FAST) as dev:
+        dev.sync()
+        new, problem = dev.change_baud(921600)
+        assert problem is None and abs(new.baud - 921600) < 0.01 * 921600
+        assert abs(dev.sync().baud - 921600) < 0.01 * 921600  # proved: it stays
+        time.sleep(P.BAUD_IDLE_MS / 1000 + 0.3)
+        assert dev.sync().baud == 115200
+
+
 def test_baud_gets_its_error_codes(paced):
     with S.Device(paced.url, timeouts=FAST) as dev:
         info = dev.sync()

@@ -1513,6 +1513,13 @@ int wm_proto_serve(wm_proto *p)
             p->io.set_divisor(p->io.ctx, p->div);
             rx_reset(p);
         }
+        if (p->state == WM_PROTO_STATE_IDLE && !p->probing && p->div != p->caps.div &&
+            now(p) - p->last_valid >= ms_to_cycles(p, WM_PROTO_BAUD_IDLE_MS)) {
+            /* the host left at a switched rate: the next one starts at the start rate */
+            p->div = p->caps.div;
+            p->io.set_divisor(p->io.ctx, p->div);
+            rx_reset(p);
+        }
         if ((p->state == WM_PROTO_STATE_RECEIVING || p->state == WM_PROTO_STATE_READY) &&
             now(p) - p->last_valid >= ms_to_cycles(p, WM_PROTO_SESSION_TIMEOUT_MS)) {
             uint32_t got = p->next;
