@@ -106,6 +106,9 @@ typedef struct wm_proto_caps {
     /* BAUD (docs/protocol.md, "Changing the rate"): the line runs at clk_hz / div; the host may ask for
      * any divisor div_min..div_max (div_max 0: none, the rate is fixed).  div is the start divisor. */
     uint32_t div, div_min, div_max;
+    /* The DATA window HELLO states at a switched rate (0: window): a transport that can take a frame in
+     * while it works on the one before at the start rate but not at a faster one states less. */
+    uint8_t switched_window;
 } wm_proto_caps;
 
 /* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */

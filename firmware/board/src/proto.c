@@ -615,7 +615,7 @@ static void do_hello(wm_proto *p)
     put32(b + WM_PROTO_HELLO_REPLY_MAX_SAMPLES, c->max_samples);
     put32(b + WM_PROTO_HELLO_REPLY_TRI_CAPACITY, c->tri_capacity);
     b[WM_PROTO_HELLO_REPLY_MAX_LEVELS] = c->max_levels;
-    b[WM_PROTO_HELLO_REPLY_WINDOW] = c->window;
+    b[WM_PROTO_HELLO_REPLY_WINDOW] = p->div != c->div && c->switched_window ? c->switched_window : c->window;
     put16(b + WM_PROTO_HELLO_REPLY_MAX_PAYLOAD, c->max_payload);
     put32(b + WM_PROTO_HELLO_REPLY_CLK_HZ, c->clk_hz);
     /* the start rate as the transport states it; after a BAUD clk_hz / div rounded (protocol.divisor_baud) */
@@ -804,64 +804,77 @@ static uint16_t word_at(const wm_proto *p, uint32_t k)
  * each a prediction from the samples stored before it (the block's predictor: MED or the plane) plus a
  * zig-zag residual, Rice-coded in blocks of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
  * not such a stream (too short, or a byte or more left over). */
-typedef struct bit_reader {
-    const uint8_t *s, *e;
-    uint32_t acc;
-    uint32_t n; /* bits in acc (at most 23) */
-} bit_reader;
-
-static int bits_get(bit_reader *r, uint32_t k, uint32_t *v)
-{
-    while (r->n < k) {
-        if (r->s == r->e) return -1;
-        r->acc = r->acc << 8 | *r->s++;
-        r->n += 8;
-    }
-    r->n -= k;
-    *v = (r->acc >> r->n) & ((1u << k) - 1u);
-    return 0;
-}
-
 static int rice_decode(wm_proto *p, uint32_t off, uint32_t n, const uint8_t *s, uint32_t len)
 {
+    /* The bits left-aligned in acc (the next one is bit 31), nb of them valid; refilled a byte at a time
+     * to at least 25 while bytes are left.  The left and above-left samples are carried in registers
+     * (the height memory is the SDRAM): one load a sample, the one above. */
+    const uint8_t *e = s + len;
     uint16_t *h = p->heights;
     uint32_t w = (uint32_t)p->job.width, x = off % w, i = off, end = off + n;
-    bit_reader r;
-    r.s = s;
-    r.e = s + len;
-    r.acc = 0;
-    r.n = 0;
+    uint32_t acc = 0, nb = 0, left = 0, ul = 0;
+#define REFILL()                             \
+    while (nb <= 24 && s < e) {              \
+        acc |= (uint32_t)*s++ << (24u - nb); \
+        nb += 8u;                            \
+    }
+    if (x) {
+        left = h[i - 1];
+        if (i > w) ul = h[i - w - 1];
+    }
     while (i < end) {
         uint32_t pick, k, m = end - i < WM_PROTO_RICE_BLOCK ? end - i : WM_PROTO_RICE_BLOCK;
-        if (bits_get(&r, WM_PROTO_RICE_PRED_BITS, &pick) || bits_get(&r, WM_PROTO_RICE_K_BITS, &k)) return -1;
+        REFILL();
+        if (nb < WM_PROTO_RICE_PRED_BITS + WM_PROTO_RICE_K_BITS) return -1;
+        pick = acc >> (32u - WM_PROTO_RICE_PRED_BITS);
+        k = (acc << WM_PROTO_RICE_PRED_BITS) >> (32u - WM_PROTO_RICE_K_BITS);
+        acc <<= WM_PROTO_RICE_PRED_BITS + WM_PROTO_RICE_K_BITS;
+        nb -= WM_PROTO_RICE_PRED_BITS + WM_PROTO_RICE_K_BITS;
         for (; m; m--, i++) {
-            uint32_t q = 0, bit = 1, z, pred;
-            while (q < WM_PROTO_RICE_ESCAPE) {
-                if (bits_get(&r, 1, &bit)) return -1;
-                if (!bit) break;
+            uint32_t q = 0, z, pred;
+            REFILL();
+            while (q < WM_PROTO_RICE_ESCAPE && nb && (acc & 0x80000000u)) { /* the quotient's ones */
+                acc <<= 1;
+                nb--;
                 q++;
             }
             if (q == WM_PROTO_RICE_ESCAPE) {
-                if (bits_get(&r, 16, &z)) return -1;
+                REFILL();
+                if (nb < 16u) return -1;
+                z = acc >> 16;
+                acc <<= 16;
+                nb -= 16u;
             } else {
-                z = 0;
-                if (k && bits_get(&r, k, &z)) return -1;
-                z |= q << k;
+                if (nb == 0) return -1; /* no room for the quotient's zero */
+                acc <<= 1;
+                nb--;
+                REFILL();
+                if (nb < k) return -1;
+                z = k ? (q << k) | (acc >> (32u - k)) : q;
+                acc = k ? acc << k : acc;
+                nb -= k;
             }
             if (i < w) {
-                pred = x ? h[i - 1] : 0u;
-            } else if (x == 0) {
-                pred = h[i - w];
+                pred = x ? left : 0u;
             } else {
-                uint32_t a = h[i - 1], b = h[i - w], c = h[i - w - 1];
-                uint32_t hi = a > b ? a : b, lo = a > b ? b : a;
-                pred = pick == WM_PROTO_RICE_PRED_PLANE || (c < hi && c > lo) ? a + b - c : c >= hi ? lo : hi;
+                uint32_t b = h[i - w];
+                if (x == 0) {
+                    pred = b;
+                } else {
+                    uint32_t hi = left > b ? left : b, lo = left > b ? b : left;
+                    pred = pick == WM_PROTO_RICE_PRED_PLANE || (ul < hi && ul > lo) ? left + b - ul
+                           : ul >= hi                                               ? lo
+                                                                                    : hi;
+                }
+                ul = b;
             }
-            h[i] = (uint16_t)(pred + ((z >> 1) ^ (0u - (z & 1u))));
+            left = (uint16_t)(pred + ((z >> 1) ^ (0u - (z & 1u))));
+            h[i] = (uint16_t)left;
             if (++x == w) x = 0;
         }
     }
-    return (uint32_t)(r.e - r.s) == 0 && r.n < 8 ? 0 : -1;
+#undef REFILL
+    return s == e && nb < 8u ? 0 : -1;
 }
 
 static void do_data(wm_proto *p)
@@ -1466,6 +1479,7 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     p->caps = *caps;
     if (p->caps.window < 1) p->caps.window = 1;
     if (p->caps.window > WM_PROTO_MAX_WINDOW) p->caps.window = WM_PROTO_MAX_WINDOW;
+    if (p->caps.switched_window > p->caps.window) p->caps.switched_window = p->caps.window;
     if (p->caps.max_payload < WM_PROTO_MIN_PAYLOAD || p->caps.max_payload > WM_PROTO_MAX_PAYLOAD)
         p->caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     if (p->caps.max_levels > WM_PROTO_MAX_LEVELS) p->caps.max_levels = WM_PROTO_MAX_LEVELS;
