@@ -793,7 +793,8 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         kib = 2 * len(words) / 1024
         with _Progress("heights", len(words), progress) as bar:
             t0 = time.monotonic()
-            sent = dev.upload(hf.samples, bar, None if hf.mask is None else words[hf.samples.size:])
+            sent = dev.upload(hf.samples, bar, None if hf.mask is None else words[hf.samples.size:],
+                              coded=bool(info.features & P.FEATURE_RICE))
             upload_s = time.monotonic() - t0
             bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
         got: list = []

@@ -207,6 +207,7 @@ FEATURE_INITIAL_ONLY = 1 << 1  # honours CONFIG_INITIAL_ONLY
 FEATURE_SPLINE = 1 << 2  # its filter bank also makes the spline wavelet (CONFIG_SPLINE)
 FEATURE_HOLES = 1 << 3  # takes a validity mask (CONFIG_MASK; --nodata hole)
 FEATURE_STAGE = 1 << 4  # the FPGA stage alone (the iCEBreaker): a job over its byte stream, the host refines
+FEATURE_RICE = 1 << 5  # at the rate it runs now, CODING_RICE samples arrive sooner than raw: the host codes
 
 # Bits of CONFIG.flags
 CONFIG_INITIAL_ONLY = 1 << 0  # stop after the template stage: one level, the initial triangulation
@@ -616,6 +617,7 @@ def c_header() -> str:
         f"#define WM_PROTO_FEATURE_HOLES 0x{FEATURE_HOLES:X}u",
         f"#define WM_PROTO_CONFIG_MASK 0x{CONFIG_MASK:X}u",
         f"#define WM_PROTO_FEATURE_STAGE 0x{FEATURE_STAGE:X}u",
+        f"#define WM_PROTO_FEATURE_RICE 0x{FEATURE_RICE:X}u",
         f"#define WM_PROTO_CONFIG_KNOWN_FLAGS 0x{CONFIG_KNOWN_FLAGS:X}u",
         f"#define WM_PROTO_CONFIG_REFINER_SHIFT {CONFIG_REFINER_SHIFT}",
         f"#define WM_PROTO_ACK_NAK 0x{ACK_NAK:X}u",

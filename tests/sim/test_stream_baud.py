@@ -68,6 +68,7 @@ def test_the_switch_happens_and_the_mesh_is_the_same(paced, ref, tmp_path):
     assert out.read_bytes() == (ref / "ref.obj").read_bytes()
     t = report(out)["transfer"]
     assert t["baud"] == 115200 and abs(t["line_baud"] - 921600) <= P.BAUD_TOLERANCE * 921600
+    assert t["bytes_sent"] < t["height_bytes"]  # the device states FEATURE_RICE: coded samples
     # auto: the fastest common rate the device reaches (wmdev: every one of them)
     r = stream(ref, paced.url, out, "--link-baud", "auto")
     assert r.code == 0, r.err

@@ -109,6 +109,10 @@ typedef struct wm_proto_caps {
     /* The DATA window HELLO states at a switched rate (0: window): a transport that can take a frame in
      * while it works on the one before at the start rate but not at a faster one states less. */
     uint8_t switched_window;
+    /* FEATURE_RICE (in features) is stated only at divisors >= rice_min_div (0: at every rate): a device
+     * whose decoding costs more cycles a sample than the line time it saves at fast rates asks for raw
+     * samples there (it decodes CODING_RICE frames at every rate). */
+    uint32_t rice_min_div;
 } wm_proto_caps;
 
 /* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */

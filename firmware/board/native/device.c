@@ -353,7 +353,7 @@ int main(int argc, char **argv)
     caps.clk_hz = 1000000000u; /* cycle counters count nanoseconds */
     caps.baud = (uint32_t)baud;
     caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_SPLINE | /* wm_spline, as the host's model */
-                    WM_PROTO_FEATURE_HOLES;
+                    WM_PROTO_FEATURE_HOLES | WM_PROTO_FEATURE_RICE; /* decoding costs it nothing that counts */
     caps.idle_timeout_ms = (uint32_t)idle_ms;
     if (baud && !no_switch) { /* a divisor is nanoseconds a bit (clk_hz 1e9) */
         caps.div = (uint32_t)((2000000000ull + (uint64_t)baud) / (2ull * (uint64_t)baud));

@@ -621,7 +621,8 @@ static void do_hello(wm_proto *p)
     /* the start rate as the transport states it; after a BAUD clk_hz / div rounded (protocol.divisor_baud) */
     put32(b + WM_PROTO_HELLO_REPLY_BAUD,
           p->div && p->div != c->div ? (c->clk_hz + p->div / 2u) / p->div : c->baud);
-    put32(b + WM_PROTO_HELLO_REPLY_FEATURES, c->features);
+    put32(b + WM_PROTO_HELLO_REPLY_FEATURES,
+          p->div && p->div < c->rice_min_div ? c->features & ~(uint32_t)WM_PROTO_FEATURE_RICE : c->features);
     put16(b + WM_PROTO_HELLO_REPLY_BYTE_TIMEOUT_MS, WM_PROTO_BYTE_TIMEOUT_MS);
     put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
     put32(b + WM_PROTO_HELLO_REPLY_SESSION_TIMEOUT_MS, WM_PROTO_SESSION_TIMEOUT_MS);
