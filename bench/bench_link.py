@@ -68,6 +68,43 @@ def session_bytes(nlevels: int) -> int:
     return small + 18 * 8 + nlevels * (per_level + 3 * 18)
 
 
+def board_receive() -> dict:
+    """The simulated board's receive cycles a sample (DONE's cycles_receive / samples, fast mode: the
+    bytes go straight into the UART's FIFO, so this is the CPU's work and the host's turnaround) for a
+    coded and a raw upload of a 64 x 64 terrain (`--stage initial`)."""
+    import functools
+    import json
+    import tempfile
+    from pathlib import Path
+
+    import datasets
+    from wavemesh import stream as S
+    from wavemesh.harness import run_cli
+    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(tmp) / "t64.npy"
+        np.save(src, datasets.terrain(64).astype(np.float32))
+        saved = S.DEFAULT_TIMEOUTS, S.Device.upload
+        S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS
+        board = SimBoard(build.build_sim(), build.build_firmware(), "--port", "0", "--fast", "--quiet")
+        try:
+            for coded in (True, False):
+                S.Device.upload = functools.partialmethod(saved[1], coded=coded)
+                rc, _, err = run_cli("stream", str(src), "--stage", "initial", "--port", board.url, "-o",
+                                     str(Path(tmp) / "t.obj"), "--report", str(Path(tmp) / "t.json"), "-q")
+                if rc != 0:
+                    raise RuntimeError(err)
+                r = json.loads((Path(tmp) / "t.json").read_text())
+                out["coded" if coded else "raw"] = r["device_cycles"]["receive"] / 4096
+                out["clk_hz"] = r["device"]["clk_hz"]
+        finally:
+            S.DEFAULT_TIMEOUTS, S.Device.upload = saved
+            board.stop()
+    return out
+
+
 def run() -> dict:
     import datasets
     from wavemesh import api
@@ -95,13 +132,32 @@ def run() -> dict:
         up, up_raw = upload_bytes(hf.samples), upload_bytes(hf.samples, False)
         down, down_raw = mesh_bytes(res.level_meshes), mesh_bytes(res.level_meshes, False)
         extra = session_bytes(len(res.level_meshes))
-        jobs[f"{w}x{h}"] = {"upload": up, "upload_raw": up_raw, "mesh": down, "mesh_raw": down_raw,
+        jobs[f"{w}x{h}"] = {"samples": w * h, "upload": up, "upload_raw": up_raw, "mesh": down,
+                            "mesh_raw": down_raw,
                             "session": extra, "triangles": int(res.mesh.n_triangles),
                             "levels": len(res.level_meshes),
                             "seconds": {str(b): 10 * (up + down + extra) / b for b in BAUDS},
                             "seconds_raw": {str(b): 10 * (up_raw + down_raw + extra) / b for b in BAUDS}}
     real = [v["per_sample"] for v in coding.values() if "per_sample" in v]
-    return {"coding": coding, "median_per_sample": statistics.median(real) if real else None, "jobs": jobs}
+    return {"coding": coding, "median_per_sample": statistics.median(real) if real else None, "jobs": jobs,
+            "board_receive": board_receive()}
+
+
+def board_link_seconds(j: dict, baud: int, rx: dict) -> tuple[float, bool]:
+    """The board's link seconds of a job at baud: the upload (line time and the CPU's receive cycles: at
+    the start rate frames come back to back, so the longer of the two; at a switched rate one frame at a
+    time, so both) with the coding the board asks for there (FEATURE_RICE at divisors of 32 and up), then
+    the level streams and the session's frames at line speed.  (seconds, coded)"""
+    from wavemesh import memmap
+    from wavemesh import protocol as P
+
+    div = P.baud_divisor(rx["clk_hz"], baud)
+    coded = div >= 32
+    up = j["upload"] if coded else j["upload_raw"]
+    line_up = 10 * up / baud
+    cpu = j["samples"] * rx["coded" if coded else "raw"] / rx["clk_hz"]
+    upload = max(line_up, cpu) if baud == memmap.UART_BAUD else line_up + cpu
+    return upload + 10 * (j["mesh"] + j["session"]) / baud, coded
 
 
 def markdown(r: dict) -> str:
@@ -137,4 +193,24 @@ def markdown(r: dict) -> str:
         size = k.replace("x", " x ")
         out.append(f"| {size} | {j['triangles']:,} | {j['upload']:,} ({j['upload_raw']:,}) | {j['mesh']:,} "
                    f"({j['mesh_raw']:,}) | {secs} |")
+    rx = r.get("board_receive")
+    if rx:
+        out += ["", f"**The board's link seconds** (the ULX3S at {rx['clk_hz'] / 1e6:g} MHz): the line time "
+                "above plus what the soft CPU spends receiving: "
+                f"{rx['coded']:.0f} cycles a sample coded, {rx['raw']:.0f} raw (measured here on the "
+                "simulated board in fast mode, a 64 x 64 terrain, `--stage initial`: DONE's cycles_receive, "
+                "the host's "
+                "turnaround included).  At 115200 baud frames come back to back (window 4) and the longer of "
+                "line and CPU counts; after a switch the board takes one frame at a time and both count; the "
+                "board asks for coded samples only at 781 kbaud and slower (FEATURE_RICE).  The job's own "
+                "cycles (filter bank, templates, refiner, level streams) are not in these figures.",
+                "",
+                "| input | " + " | ".join(f"{b} baud s" for b in BAUDS) + " |",
+                "|---|" + "---:|" * len(BAUDS)]
+        for k, j in r["jobs"].items():
+            cells = []
+            for b in BAUDS:
+                s, coded = board_link_seconds(j, b, rx)
+                cells.append(f"{s:.2f} ({'coded' if coded else 'raw'})")
+            out.append(f"| {k.replace('x', ' x ')} | " + " | ".join(cells) + " |")
     return "\n".join(out) + "\n"
