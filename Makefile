@@ -44,6 +44,7 @@ help:
 	@echo "make postsynth      the iCEBreaker's synthesised netlist through its cocotb bench (Icarus; minutes)"
 	@echo "make bench          benchmarks (results in docs/benchmarks.md and bench/results/)"
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
+	@echo "make bench-big      whole processes at 2048^2 and 4096^2 against pydelatin: time, memory (minutes; not in make bench)"
 	@echo "make bench-board1024  issue 14's bar: 1024 x 1024 through the simulated board (hours; not in make bench)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
@@ -185,7 +186,7 @@ $(BENCH_STAMP): $(SETUP_STAMP) bench/requirements-data.txt
 	$(VPY) -m pip install -q --disable-pip-version-check --no-deps -r bench/requirements-data.txt
 	touch $@
 
-bench bench-quality bench-cost bench-holes bench-tiles: $(BENCH_STAMP)
+bench bench-quality bench-cost bench-holes bench-tiles bench-big: $(BENCH_STAMP)
 
 include tools/boards.mk
 

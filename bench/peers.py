@@ -126,7 +126,8 @@ class Verdict:
 
 
 def verdict(mesh: Mesh, heights: np.ndarray, zeta: float, z: np.ndarray | None = None,
-            problems: list[str] | None = None) -> Verdict:
+            problems: list[str] | None = None, rms: bool = True) -> Verdict:
+    """Proper, heights, E_max; ``rms=False``: mesh_errors' maxima alone (the C measure, on every core)."""
     problems = list(problems or [])
     ck = check_mesh(mesh)
     problems += ck.problems[:5]
@@ -139,7 +140,7 @@ def verdict(mesh: Mesh, heights: np.ndarray, zeta: float, z: np.ndarray | None =
             problems.append(f"{int(bad.sum())} vertex heights differ from the grid's")
     ev = en = None
     if ck.valid:
-        err = mesh_errors(mesh, heights)
+        err = mesh_errors(mesh, heights, rms=rms)
         ev, en = float(err.e_max_vertical), float(err.e_max_normal)
     proper = ck.valid and not any("grid sample" in p for p in problems)
     within = proper and ev is not None and ev <= zeta * (1 + ZETA_SLACK) and en <= zeta * (1 + ZETA_SLACK)

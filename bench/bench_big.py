@@ -1,0 +1,227 @@
+"""Big grids: `wavemesh mesh` against pydelatin as whole processes at 2048^2 and 4096^2 samples, time
+(wall and CPU) and peak memory of each process beside the triangles (`make bench-big`; minutes, so not
+part of `make bench`).
+
+Grids, each made n x n (bench/datasets.py):
+
+- *terrain*: the seeded synthetic terrain sampled n x n over the unit square (datasets.terrain);
+- real height fields mirror-tiled to n x n (the grid, then its mirror image, and so on across and down:
+  every sample a real one, no seam steps): the Jacksboro DEM (terrain), and held out (never tuned on,
+  reported apart) the LiDAR DEM and the Motorcycle disparity map (a range image).
+
+At E = FRACTION of each grid's height range (vertical), for each grid: the grid saved as .npy, then run
+in turn (A B C A B C ...) RUNS times each:
+
+- A: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (its defaults: every core);
+- B: the peer process of bench/peers.py: load the same .npy, run pydelatin, write an OBJ;
+- C: A with `--threads 1` (one core for the host stages; the refiner runs on one anyway).
+
+Each process's CPU time (user + sys) and peak memory (ru_maxrss) come from the operating system
+(os.wait4, in a small launcher: see LAUNCH).  Both OBJ files are read back and checked by wavemesh.check
+(proper, grid-sample vertices carrying the grid's heights, E_max vertical within E); A's and C's files
+must be byte for byte equal.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import datasets as D  # bench/ is on the path: the folder of bench/run.py and of this script
+import numpy as np
+import peers as P
+
+TITLE = "Big grids: whole processes at 2048^2 and 4096^2 against pydelatin (time, memory, triangles)"
+DEFAULT = False  # minutes of runs: `make bench-big`
+SIZES = (2048, 4096)
+FRACTION = 0.01  # E: of each grid's height range
+RUNS = 3
+HELD_OUT = ("lidar_dem", "motorcycle")
+GRIDS = ("terrain", "jacksboro", "lidar_dem", "motorcycle")
+TARGET_TIME, TARGET_TRIANGLES = 1.0, 0.6  # process / process on every grid; triangles / pydelatin's
+
+
+def mirror_tile(z: np.ndarray, n: int) -> np.ndarray:
+    """z repeated as z, its mirror image, z, ... across and down, cut to n x n."""
+    h, w = z.shape
+    reps = (-(-n // h), -(-n // w))
+    rows = np.concatenate([z if i % 2 == 0 else z[::-1] for i in range(reps[0])], axis=0)
+    full = np.concatenate([rows if j % 2 == 0 else rows[:, ::-1] for j in range(reps[1])], axis=1)
+    return np.ascontiguousarray(full[:n, :n])
+
+
+def make_grid(name: str, n: int) -> tuple[np.ndarray, str]:
+    """(heights, how they were made)."""
+    if name == "terrain":
+        return D.terrain(n), "datasets.terrain(n): the seeded terrain over the unit square"
+    g = D.load(name)
+    return mirror_tile(g.values, n), f"{name} ({g.shape[1]} x {g.shape[0]}, {g.kind}) mirror-tiled"
+
+
+# A small launcher between this process and the measured one: a child's ru_maxrss starts from its
+# parent's resident size when it is forked (Linux keeps the high-water mark across exec), and this
+# process holds the grids; the launcher (a bare interpreter, ~10 MiB) forks, execs, reaps with os.wait4 and
+# prints the measured process's figures.
+LAUNCH = """\
+import json, os, sys, time
+t0 = time.perf_counter()
+pid = os.fork()
+if pid == 0:
+    fd = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(fd, 1)
+    os.execv(sys.argv[1], sys.argv[1:])
+_, status, ru = os.wait4(pid, 0)
+print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
+                  "peak_mib": ru.ru_maxrss / 1024, "rc": os.waitstatus_to_exitcode(status)}))
+"""
+
+
+def run_process(cmd: list[str]) -> dict:
+    """One whole process: wall seconds, CPU seconds (user + sys) and peak memory (MiB) by os.wait4."""
+    import json
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", LAUNCH, *cmd], capture_output=True, text=True)
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    out["error"] = r.stderr.strip()[-300:] if out["rc"] else None
+    return out
+
+
+def check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
+    from wavemesh.meshio import read_mesh
+
+    h, w = heights.shape
+    try:
+        mesh, z = read_mesh(str(path), w, h)
+    except Exception as e:  # noqa: BLE001 - a file written badly is a finding, not a crash
+        return {"triangles": None, "proper": False, "within": False, "problems": [str(e)[:200]]}
+    v = P.verdict(mesh, heights, zeta, z, rms=False)
+    return {"triangles": v.triangles, "proper": v.proper and v.heights_ok,
+            "within": v.within and v.heights_ok, "e_max_vertical": v.e_max_vertical, "problems": v.problems}
+
+
+def _summary(runs: list[dict]) -> dict:
+    return {"wall_s": P.median(r["wall_s"] for r in runs), "cpu_s": P.median(r["cpu_s"] for r in runs),
+            "peak_mib": max(r["peak_mib"] for r in runs), "runs": len(runs),
+            "error": next((r["error"] for r in runs if r["rc"]), None)}
+
+
+def run_grid(name: str, n: int, tmp: Path, runs: int = RUNS) -> dict:
+    z, made = make_grid(name, n)
+    zeta = FRACTION * float(z.max() - z.min())
+    npy = tmp / f"{name}-{n}.npy"
+    np.save(npy, z)
+    outs = {k: tmp / f"{k}.obj" for k in ("wavemesh", "pydelatin", "threads1")}
+    cmds = {"wavemesh": P.wavemesh_argv(str(npy), zeta, str(outs["wavemesh"])),
+            "pydelatin": P.peer_argv(str(npy), zeta, str(outs["pydelatin"])),
+            "threads1": P.wavemesh_argv(str(npy), zeta, str(outs["threads1"])) + ["--threads", "1"]}
+    got = {k: [] for k in cmds}
+    for _ in range(runs):
+        for k, cmd in cmds.items():
+            got[k].append(run_process(cmd))
+    res = {k: _summary(v) for k, v in got.items()}
+    res["wavemesh"]["file"] = check_obj(outs["wavemesh"], z, zeta)
+    res["pydelatin"]["file"] = check_obj(outs["pydelatin"], z, zeta)
+    same = outs["wavemesh"].exists() and outs["wavemesh"].read_bytes() == outs["threads1"].read_bytes()
+    wm, pd = res["wavemesh"], res["pydelatin"]
+
+    def ratio(a, b):
+        return None if a is None or not b else a / b
+
+    npy.unlink()
+    return {"grid": name, "n": n, "made": made, "held_out": name in HELD_OUT, "zeta": zeta,
+            "height_range": float(z.max() - z.min()), **res, "same_mesh_one_thread": same,
+            "ratios": {"wall": ratio(wm["wall_s"], pd["wall_s"]), "cpu": ratio(wm["cpu_s"], pd["cpu_s"]),
+                       "peak": ratio(wm["peak_mib"], pd["peak_mib"]),
+                       "triangles": ratio(wm["file"]["triangles"], pd["file"]["triangles"]),
+                       "one_thread_wall": ratio(res["threads1"]["wall_s"], pd["wall_s"])}}
+
+
+def run(sizes=SIZES, grids=GRIDS) -> dict:
+    P.compile_wavemesh()
+    rows = []
+    with tempfile.TemporaryDirectory() as t:
+        for n in sizes:
+            for name in grids:
+                t0 = time.perf_counter()
+                r = run_grid(name, n, Path(t))
+                rows.append(r)
+                q = r["ratios"]
+                print(f"  {name} {n}^2: wall x{_f(q['wall'])}, cpu x{_f(q['cpu'])}, peak x{_f(q['peak'])}, "
+                      f"triangles x{_f(q['triangles'], 3)} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    return {"code": P.code_state(), "fraction": FRACTION, "runs": RUNS, "cores": os.cpu_count(),
+            "load_before": os.getloadavg(), "rows": rows}
+
+
+def _f(v, nd=2) -> str:
+    return "-" if v is None or v != v else f"{v:.{nd}f}"
+
+
+def _ok(r: dict) -> str:
+    f = r["file"]
+    return "ok" if f["within"] else ("not proper" if not f["proper"] else "over E")
+
+
+def markdown(results: dict) -> str:
+    rows = results["rows"]
+    lines = [
+        f"`wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (every core; and `--threads 1`) against "
+        "a process that loads the same .npy, runs pydelatin and writes an OBJ (bench/peers.py), at E = "
+        f"{100 * results['fraction']:g}% of each grid's height range, run in turn {results['runs']} times "
+        "each; medians of wall and CPU (user + sys) seconds, the largest peak memory (ru_maxrss), from "
+        "os.wait4.  Grids n x n: the seeded terrain, and real height fields mirror-tiled to n x n "
+        "(bench/bench_big.py).  Both OBJ files checked by wavemesh.check (*checks*: wavemesh / pydelatin); "
+        "*same*: the `--threads 1` mesh is byte for byte the default's.  "
+        f"Machine: {results['cores']} cores, shared (load average {results['load_before'][0]:.1f} at the "
+        "start): the ratios (runs interleaved) are the figures to read.",
+        "",
+        P.code_line(results.get("code")),
+        "",
+        "| grid | n | E | triangles wm / pd | **wall wm / pd** | cpu wm / pd | peak MiB wm / pd | wall s wm, "
+        "`--threads 1`, pd | cpu s wm, pd | checks | same |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for held in (False, True):
+        part = [r for r in rows if r["held_out"] == held]
+        if held and part:
+            lines.append("| **held out** | | | | | | | | | | |")
+        for r in part:
+            wm, pd, t1, q = r["wavemesh"], r["pydelatin"], r["threads1"], r["ratios"]
+            lines.append(
+                f"| {r['grid']} | {r['n']} | {r['zeta']:.4g} | {wm['file']['triangles']} / "
+                f"{pd['file']['triangles']} = {_f(q['triangles'], 3)} | **{_f(q['wall'])}** | {_f(q['cpu'])} "
+                f"| {wm['peak_mib']:.0f} / {pd['peak_mib']:.0f} = {_f(q['peak'])} "
+                f"| {wm['wall_s']:.2f}, {t1['wall_s']:.2f}, {pd['wall_s']:.2f} | {wm['cpu_s']:.2f}, "
+                f"{pd['cpu_s']:.2f} | {_ok(wm)} / {_ok(pd)} "
+                f"| {'yes' if r['same_mesh_one_thread'] else '**no**'} |")
+    walls = [r["ratios"]["wall"] for r in rows]
+    tris = [r["ratios"]["triangles"] for r in rows]
+    big = [r["ratios"]["peak"] for r in rows if r["n"] == max(x["n"] for x in rows)]
+    lines += [
+        "",
+        f"Targets on this run: `wavemesh mesh` process at most {TARGET_TIME:g}x pydelatin's on every grid "
+        f"(wall): {'met' if walls and max(w or 9 for w in walls) <= TARGET_TIME else '**not met**'} "
+        f"(largest {_f(max((w for w in walls if w), default=None))}, median {_f(P.median(walls))}); "
+        f"triangles at most {TARGET_TRIANGLES:g}x (median): "
+        f"{'met' if P.median(tris) <= TARGET_TRIANGLES else '**not met**'} ({_f(P.median(tris), 3)}); peak "
+        f"memory at most pydelatin's on the largest grids: "
+        f"{'met' if big and max(big) <= 1.0 else '**not met**'} "
+        f"(largest ratio {_f(max(big, default=None))}).",
+        "",
+        "Grids: " + "; ".join(sorted({f"{r['grid']}: {r['made']}" for r in rows})) + ".",
+    ]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # python bench/bench_big.py [N] [GRID ...]: a quick look
+    import json
+    import sys
+
+    args = sys.argv[1:]
+    sizes = (int(args.pop(0)),) if args and args[0].isdigit() else SIZES
+    res = run(sizes, tuple(args) or GRIDS)
+    print(json.dumps([r["ratios"] for r in res["rows"]], indent=1))
+    print(markdown(res))
