@@ -94,3 +94,22 @@ def test_cost_slope():
     n = [256**2, 512**2, 1024**2, 2048**2]
     assert C.slope(n, [x**1.2 for x in n]) == pytest.approx(1.2)
     assert C.slope(n, [3 * x for x in n]) == pytest.approx(1.0)
+
+
+def test_bench_big_harness(tmp_path):
+    """bench_big on a small grid, one run of each process: the figures come back, both files checked, the
+    one-thread mesh the default's, the table written; mirror tiling keeps every sample a real one."""
+    import bench_big as B
+
+    z = np.arange(12.0).reshape(3, 4)
+    t = B.mirror_tile(z, 8)
+    assert t.shape == (8, 8) and np.array_equal(t[:3, :4], z) and np.array_equal(t[3:6, :4], z[::-1])
+    assert np.array_equal(t[:3, 4:8], z[:, ::-1])
+    r = B.run_grid("terrain", 48, tmp_path, runs=1)
+    for who in ("wavemesh", "pydelatin", "threads1"):
+        assert r[who]["error"] is None and r[who]["cpu_s"] > 0 and r[who]["peak_mib"] > 5
+    assert r["wavemesh"]["file"]["within"] and r["pydelatin"]["file"]["within"]
+    assert r["same_mesh_one_thread"] and 0 < r["ratios"]["triangles"] < 2
+    text = B.markdown({"code": None, "fraction": B.FRACTION, "runs": 1, "cores": 2, "load_before": (1.0,),
+                       "rows": [r]})
+    assert "| terrain | 48 |" in text
