@@ -14,7 +14,7 @@ in turn (A B C A B C ...) RUNS times each:
 
 - A: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (its defaults: every core);
 - B: the peer process of bench/peers.py: load the same .npy, run pydelatin, write an OBJ;
-- C: A with `--threads 1` (one core for the host stages; the refiner runs on one anyway).
+- C: A with `--threads 1` (one core for the host stages; the refiner runs on one anyway), once.
 
 Each process's CPU time (user + sys) and peak memory (ru_maxrss) come from the operating system
 (os.wait4, in a small launcher: see LAUNCH).  Both OBJ files are read back and checked by wavemesh.check
@@ -119,9 +119,10 @@ def run_grid(name: str, n: int, tmp: Path, runs: int = RUNS) -> dict:
             "pydelatin": P.peer_argv(str(npy), zeta, str(outs["pydelatin"])),
             "threads1": P.wavemesh_argv(str(npy), zeta, str(outs["threads1"])) + ["--threads", "1"]}
     got = {k: [] for k in cmds}
-    for _ in range(runs):
+    for i in range(runs):
         for k, cmd in cmds.items():
-            got[k].append(run_process(cmd))
+            if k != "threads1" or i == 0:  # one core: once, for its time and its mesh
+                got[k].append(run_process(cmd))
     res = {k: _summary(v) for k, v in got.items()}
     res["wavemesh"]["file"] = check_obj(outs["wavemesh"], z, zeta)
     res["pydelatin"]["file"] = check_obj(outs["pydelatin"], z, zeta)
@@ -140,20 +141,25 @@ def run_grid(name: str, n: int, tmp: Path, runs: int = RUNS) -> dict:
                        "one_thread_wall": ratio(res["threads1"]["wall_s"], pd["wall_s"])}}
 
 
-def run(sizes=SIZES, grids=GRIDS) -> dict:
+def run(sizes=SIZES, grids=GRIDS, runs: int = RUNS, partial: Path | None = None) -> dict:
+    """Every grid at every size; ``partial``: a JSON file of the rows so far, rewritten after each."""
+    import json
+
     P.compile_wavemesh()
-    rows = []
+    rows, load = [], os.getloadavg()
     with tempfile.TemporaryDirectory() as t:
         for n in sizes:
             for name in grids:
                 t0 = time.perf_counter()
-                r = run_grid(name, n, Path(t))
+                r = run_grid(name, n, Path(t), runs)
                 rows.append(r)
+                if partial is not None:
+                    partial.write_text(json.dumps(rows, indent=1) + "\n")
                 q = r["ratios"]
                 print(f"  {name} {n}^2: wall x{_f(q['wall'])}, cpu x{_f(q['cpu'])}, peak x{_f(q['peak'])}, "
                       f"triangles x{_f(q['triangles'], 3)} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    return {"code": P.code_state(), "fraction": FRACTION, "runs": RUNS, "cores": os.cpu_count(),
-            "load_before": os.getloadavg(), "rows": rows}
+    return {"code": P.code_state(), "fraction": FRACTION, "runs": runs, "cores": os.cpu_count(),
+            "load_before": load, "load_after": os.getloadavg(), "rows": rows}
 
 
 def _f(v, nd=2) -> str:
@@ -171,12 +177,14 @@ def markdown(results: dict) -> str:
         f"`wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (every core; and `--threads 1`) against "
         "a process that loads the same .npy, runs pydelatin and writes an OBJ (bench/peers.py), at E = "
         f"{100 * results['fraction']:g}% of each grid's height range, run in turn {results['runs']} times "
-        "each; medians of wall and CPU (user + sys) seconds, the largest peak memory (ru_maxrss), from "
+        "each (`--threads 1` once); medians of wall and CPU (user + sys) seconds, the largest peak memory "
+        "(ru_maxrss), from "
         "os.wait4.  Grids n x n: the seeded terrain, and real height fields mirror-tiled to n x n "
         "(bench/bench_big.py).  Both OBJ files checked by wavemesh.check (*checks*: wavemesh / pydelatin); "
         "*same*: the `--threads 1` mesh is byte for byte the default's.  "
         f"Machine: {results['cores']} cores, shared (load average {results['load_before'][0]:.1f} at the "
-        "start): the ratios (runs interleaved) are the figures to read.",
+        f"start, {results.get('load_after', results['load_before'])[0]:.1f} at the end): the ratios (runs "
+        "interleaved) are the figures to read.",
         "",
         P.code_line(results.get("code")),
         "",
