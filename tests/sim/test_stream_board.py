@@ -205,8 +205,9 @@ def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs,
     25 MHz: 3.125 Mbaud; 3,000,000 itself is 4.2 % off, which the host refuses): the same mesh as
     `wavemesh mesh`, the same stage cycles as the fast mode's, and the link's cycles hold the line time
     of the mesh bytes at the new rate, less than a 115200-baud byte each.  Then, at that rate (the board
-    keeps it for BAUD_IDLE_MS, tens of seconds of simulation): garbage on the line, a job through the
-    fault proxy (the reference mesh or one clear error line) and a clean job again."""
+    keeps it for BAUD_IDLE_MS, tens of seconds of simulation): garbage on the line and a clean job again.
+    (Faults at a switched rate: bench_faults' 3 Mbaud set against the native device; a fault-proxy job
+    here cost make test some 40 s more.)"""
     clk = memmap.CLK_HZ
     rate = P.divisor_baud(clk, P.baud_divisor(clk, 3_000_000))
     link = ("--link-baud", str(rate))
@@ -218,16 +219,6 @@ def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs,
             s.sendall(bytes(random.Random(3).randrange(256) for _ in range(300)) + b"\xc0\x01\x02")
             time.sleep(0.5)
         time.sleep(0.5)  # the bridge has seen the close (a second client would get BUSY)
-        faults = Faults(seed=1, rate=0.004, limit=3, run=48, max_delay=0.2)
-        with FaultProxy(("127.0.0.1", b.port), faults) as proxy:
-            rc, _, err = run_cli("stream", src, *TINY, *link, "--port", proxy.url,
-                                 "-o", str(tmp_path / "f.obj"), "--quiet")
-        assert sum(proxy.summary().values()) > 0, err  # the seed's faults fell inside the session
-        if rc == 0:
-            assert (tmp_path / "f.obj").read_bytes() == (tmp_path / "soft.obj").read_bytes()
-        else:
-            lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("warning:")]
-            assert lines and lines[0].startswith("error:") and "Traceback" not in err, err
         (tmp_path / "clean").mkdir()
         stream_and_mesh(src, TINY, b.url, tmp_path / "clean", link)
     finally:
