@@ -676,7 +676,8 @@ def verilog_header() -> str:
         f"localparam [7:0] WM_PROTO_HOST_TYPE_MAX = 8'h{HOST_TYPE_MAX:02X};  // host frame types: 1 .. this",
         f"localparam [15:0] WM_PROTO_MIN_PAYLOAD = 16'd{MIN_PAYLOAD};",
         f"localparam [31:0] WM_PROTO_FEATURE_STAGE = 32'h{FEATURE_STAGE:X};",
-        f"// HELLO_REPLY: byte offsets of its fields ({HELLO_REPLY.doc}; reserved fields and the divisor range are 0)",
+        f"// HELLO_REPLY: byte offsets of its fields ({HELLO_REPLY.doc}; reserved fields and the divisor "
+        "range are 0)",
     ]
     for name, off in HELLO_REPLY.offsets().items():
         if "reserved" not in name and not name.startswith("div_"):  # no CPU to switch the rate: 0 there
