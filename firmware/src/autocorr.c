@@ -151,7 +151,8 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     }
 }
 
-int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3])
+int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
+                struct wm_normal_slot *kept)
 {
     int64_t sum[6] = {0, 0, 0, 0, 0, 0};
     int32_t first, h, k = 0;
@@ -163,7 +164,18 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
         int32_t x[3], y[3], n[3];
         if (k >= WM_MAX_RING) return WM_ERR_REFUSED; /* keeps the sums below 2^61 */
         wm_tri_xy(m, WM_TRI(h), x, y);
-        wm_unit_normal(f, p, x, y, n);
+        if (kept) { /* the slot's normal when its corners are the ones it was computed for */
+            struct wm_normal_slot *s = &kept[WM_TRI(h) & (WM_NORMAL_SLOTS - 1)];
+            int32_t key[3];
+            for (int c = 0; c < 3; c++) key[c] = y[c] * m->width + x[c];
+            if (s->key[0] != key[0] || s->key[1] != key[1] || s->key[2] != key[2]) {
+                wm_unit_normal(f, p, x, y, s->n);
+                for (int c = 0; c < 3; c++) s->key[c] = key[c];
+            }
+            for (int c = 0; c < 3; c++) n[c] = s->n[c];
+        } else {
+            wm_unit_normal(f, p, x, y, n);
+        }
         sum[0] += (int64_t)n[0] * n[0];
         sum[1] += (int64_t)n[0] * n[1];
         sum[2] += (int64_t)n[0] * n[2];
@@ -183,7 +195,7 @@ int wm_vertex_autocorr(const wm_mesh *m, const wm_field *f, const wm_params *p, 
                        int64_t lambda[3], int64_t vec[9])
 {
     int64_t mean[3];
-    int k = wm_vertex_r(m, f, p, v, r, mean);
+    int k = wm_vertex_r(m, f, p, v, r, mean, NULL);
     if (k < 0) return k;
     wm_sym3_eigen(r, lambda, vec);
     return k;

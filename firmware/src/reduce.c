@@ -198,11 +198,11 @@ static int8_t class_of(const int64_t r[6], uint32_t delta_lambda)
 
 /* The class of v (4.32, 4.33); for a collapse also the eigen-decomposition (into g), whose middle
  * eigenvector the collapse test compares (4.34). */
-static int8_t classify(const wm_refiner *r, int32_t v, struct eig *g)
+static int8_t classify(wm_refiner *r, int32_t v, struct eig *g)
 {
     int64_t mean[3];
     int8_t cls;
-    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean) < 0) return CLS_NONE;
+    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean, r->normals) < 0) return CLS_NONE;
     cls = class_of(g->r, r->params.delta_lambda);
     if (cls == CLS_COLLAPSE) wm_sym3_eigen(g->r, g->lambda, g->vec);
     return cls;
@@ -354,7 +354,7 @@ struct ecache {
     int64_t e2[3];
 };
 
-static int8_t classify_cached(const wm_refiner *r, int32_t v, struct eig *g, struct ecache *cache)
+static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g, struct ecache *cache)
 {
     struct ecache *c = &cache[v & (ECACHE - 1)];
     int8_t cls;

@@ -153,6 +153,7 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
     r->budget_hit = 0;
     r->flips = r->removals = 0;
     r->roi = NULL; /* wm_refine_set_roi (roi.c) */
+    for (int i = 0; i < WM_NORMAL_SLOTS; i++) r->normals[i].key[0] = -1;
     r->limit = tri_cap;
     r->limit_is_budget = 0;
     if (p->max_triangles > 0 && p->max_triangles < tri_cap) {
