@@ -34,6 +34,7 @@ help:
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
 	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
 	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
+	@echo "                    (CPU=vexriscv: firmware, simulator and bitstream of the SoC with that CPU)"
 	@echo "make sim            build firmware and simulator, run the simulated board on 127.0.0.1:$(PORT)"
 	@echo "                    (the ULX3S's top; BOARD=icebreaker: the iCEBreaker's, the FPGA stage alone)"
 	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
@@ -89,14 +90,16 @@ test-sim: $(SETUP_STAMP) gen
 PORT      ?= 7720
 SIM_FLAGS ?=
 TRACE     ?=
-FW_BUILD  := build/firmware-board
-SIM_EXE   := build/sim/$(if $(TRACE),trace,default)/wmsim
+# CPU=vexriscv: the SoC with that CPU (host/wavemesh/soc_cpu.py; its own build folders) for the
+# firmware, the simulator and the bitstream; empty: the default
+CPU       ?= $(WM_CPU)
+export WM_CPU := $(CPU)
+CPU_SUFFIX = $(shell WM_CPU=$(CPU) $(VPY) -c 'from wavemesh import soc_cpu; print(soc_cpu.suffix(soc_cpu.selected()))')
+FW_BUILD   = build/firmware-board$(CPU_SUFFIX)
+SIM_EXE    = build/sim/$(if $(TRACE),trace,default)$(CPU_SUFFIX)/wmsim
 
 firmware-board: $(SETUP_STAMP)
-	$(VPY) -m wavemesh.gen $(GEN) >/dev/null
-	cmake -S firmware/board -B $(FW_BUILD) -DCMAKE_TOOLCHAIN_FILE=$(CURDIR)/firmware/board/riscv32-toolchain.cmake \
-	    -DWM_GEN_DIR=$(CURDIR)/$(GEN) >/dev/null
-	cmake --build $(FW_BUILD)
+	$(VPY) sim/build.py --firmware
 
 # BOARD=icebreaker: the iCEBreaker's top instead (the FPGA stage alone, no firmware; docs/boards.md)
 sim: $(if $(filter icebreaker,$(BOARD)),$(SETUP_STAMP) gen,firmware-board)
@@ -144,13 +147,13 @@ format: $(SETUP_STAMP)
 # ruff over the Python; clang-format over the C (`make format` fixes what it finds);
 # `verilator --lint-only -Wall` on every module of rtl/, one by one as
 # tests/rtl/test_lint.py does (waivers, each with its reason, only in rtl/lint.vlt); a few seconds.
-PICORV32_DIR = $(shell $(VPY) -c 'import pythondata_cpu_picorv32 as p; print(p.data_location)')
+CPU_DIRS = $(shell $(VPY) -c 'from wavemesh import soc_cpu; print(" ".join(f"-y {d}" for d in soc_cpu.lint_folders()))')
 
 lint: $(SETUP_STAMP) gen
 	$(VPY) -m ruff check host tests tools bench fuzz
 	$(CLANG_FORMAT) --dry-run -Werror $(C_SOURCES)
 	@for f in rtl/*.v rtl/boards/*.v; do \
-	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y rtl/boards -y $(PICORV32_DIR) rtl/lint.vlt \
+	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y rtl/boards $(CPU_DIRS) rtl/lint.vlt \
 	        $$f --top-module $$(basename $$f .v) || { echo "lint: $$f"; exit 1; }; \
 	done; echo "verilator --lint-only -Wall: rtl/*.v rtl/boards/*.v clean"
 

@@ -153,7 +153,10 @@ def run() -> dict:
     sim = {}
     if m:
         sim = {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3))}
-    return {"goal_cycles_per_triangle": GOAL, "cases": cases, "simulator": sim, "code": code}
+    from wavemesh import soc_cpu
+
+    return {"goal_cycles_per_triangle": GOAL, "cases": cases, "simulator": sim, "code": code,
+            "cpu": soc_cpu.selected().name}
 
 
 def markdown(results: dict) -> str:
@@ -197,7 +200,8 @@ def markdown(results: dict) -> str:
     lines += [
         "*filter* is the FPGA stage (about 1.4 cycles per sample, its registers and the wait for it); "
         "*template* counts the triangles from the stage's output and builds the initial triangulation on "
-        "the CPU; *refine* is the refiner on the PicoRV32 (its storage cleared, set up, level by level); "
+        f"the CPU; *refine* is the refiner on the {results.get('cpu', 'picorv32')} "
+        "(`make bench-soc CPU=...`, docs/soc.md, \"The CPU\"; its storage cleared, set up, level by level); "
         "*emit* builds each level stream once (header, vertices, triangles, CRC-32).  These four, *work*, "
         "count no link I/O and depend only on the job: a second run, the pin-accurate UART mode or a "
         "loaded host give the same numbers: exactly since the stage sync (a1f40e1), which leaves the "

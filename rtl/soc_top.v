@@ -1,14 +1,16 @@
 /*
  * wavemesh: the SoC, a PicoRV32 (RV32IMC) with its memories and peripherals
  *
- * The CPU comes from the pythondata-cpu-picorv32 package (picorv32.v, never copied here).  Memory
+ * The CPU comes from the pythondata-cpu-picorv32 package (picorv32.v, never copied here); with
+ * WM_CPU_VEXRISCV defined it is the VexRiscv of pythondata-cpu-vexriscv behind the same native bus
+ * (soc_cpu_vexriscv; host/wavemesh/soc_cpu.py chooses, docs/soc.md "The CPU").  Memory
  * map (docs/soc.md; generated from host/wavemesh/memmap.py into wm_memmap.vh):
  *
  *   0x0000_0000  FW_RAM  firmware RAM (block RAM), FW_RAM_BYTES, loaded from FW_HEX; reset vector 0
- *   0x4000_0000  UART    soc_uart registers
- *   0x4000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
- *   0x4000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
- *   0x4000_0300  ENGINE  soc_engine registers: the triangle error engine (E(T)'s scan of HEIGHT)
+ *   0x8000_0000  UART    soc_uart registers
+ *   0x8000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
+ *   0x8000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
+ *   0x8000_0300  ENGINE  soc_engine registers: the triangle error engine (E(T)'s scan of HEIGHT)
  *   0x5000_0000  SDRAM   the 32 MB SDRAM through sdram_ctrl's CPU port (sdram_cache); its areas
  *                        HEIGHT, COEF, TOUT (the stage's) and HEAP start at the *_OFFSET bytes
  *
@@ -164,6 +166,24 @@ wire [31:0] sdram_cpu_rdata;
 wire        mem_ready = mem_ready_reg || sdram_cpu_ready;
 reg  [31:0] mem_rdata;
 
+`ifdef WM_CPU_VEXRISCV
+// the VexRiscv with its caches, its Wishbone buses on the native bus (host/wavemesh/soc_cpu.py chooses)
+soc_cpu_vexriscv #(
+    .PROGADDR_RESET(32'h0000_0000),
+    .FETCH_LIMIT(FW_LIMIT)
+) cpu_inst (
+    .clk(clk),
+    .rst(rst),
+    .trap(trap),
+    .mem_valid(mem_valid),
+    .mem_instr(mem_instr_unused),
+    .mem_ready(mem_ready),
+    .mem_addr(mem_addr),
+    .mem_wdata(mem_wdata),
+    .mem_wstrb(mem_wstrb),
+    .mem_rdata(mem_rdata)
+);
+`else
 wire        mem_la_read_unused;
 wire        mem_la_write_unused;
 wire [31:0] mem_la_addr_unused;
@@ -223,6 +243,7 @@ picorv32 #(
     .trace_valid(trace_valid_unused),
     .trace_data(trace_data_unused)
 );
+`endif
 
 /*
  * Address decoding

@@ -256,7 +256,7 @@ public:
             status = 2;
         }
         if (profiling_) {
-            if (top_->prof_fetch) pc_ = top_->prof_pc;
+            if (top_->prof_fetch) pc_ = top_->prof_fetch_pc;
             if (pc_ / 2 < profile_fw_.size())
                 ++profile_fw_[pc_ / 2];  // the firmware RAM: an array (a map lookup a cycle halved the rate)
             else

@@ -48,11 +48,13 @@ module board_sim
     output wire [31:0]  halt_code,
     output wire         trap,
 
-    // for wmsim --profile: an instruction fetch completes this cycle, and its address (the PC)
+    // for wmsim --profile: an instruction fetch completes this cycle, and its address (the PC); the
+    // VexRiscv fetches through its cache, so there: the instruction in its last stage, and its PC
     output wire         prof_fetch,
+    output wire [31:0]  prof_fetch_pc,
     output wire [31:0]  prof_pc,
-    // for wmsim --data-profile: a data access waits (request made, not answered) this cycle, or
-    // completes; its address (prof_pc) and whether it writes
+    // for wmsim --data-profile: a bus access for data waits (request made, not answered) this cycle,
+    // or completes; its address (prof_pc) and whether it writes
     output wire         prof_data_wait,
     output wire         prof_data_done,
     output wire         prof_data_write
@@ -113,10 +115,22 @@ assign stage_valid = top_inst.stage_valid_unused;
 assign stage = top_inst.stage_unused;
 assign halt_valid = top_inst.halt_valid_unused;
 assign halt_code = top_inst.halt_code_unused;
+`ifdef WM_CPU_VEXRISCV
+// the VexRiscv's trap output is only a fetch outside the firmware RAM (soc_cpu_vexriscv): here also
+// every exception it takes (illegal instruction, misaligned access), which jumps to mtvec
+assign trap = top_inst.trap_unused || top_inst.soc_inst.cpu_inst.cpu_inst.CsrPlugin_hadException;
+`else
 assign trap = top_inst.trap_unused;
+`endif
 
+`ifdef WM_CPU_VEXRISCV
+assign prof_fetch = top_inst.soc_inst.cpu_inst.cpu_inst.lastStageIsValid;
+assign prof_fetch_pc = top_inst.soc_inst.cpu_inst.cpu_inst.lastStagePc;
+`else
 assign prof_fetch = top_inst.soc_inst.mem_valid && top_inst.soc_inst.mem_instr_unused
                     && top_inst.soc_inst.mem_ready;
+assign prof_fetch_pc = top_inst.soc_inst.mem_addr;
+`endif
 assign prof_pc = top_inst.soc_inst.mem_addr;
 assign prof_data_wait = top_inst.soc_inst.mem_valid && !top_inst.soc_inst.mem_instr_unused
                         && !top_inst.soc_inst.mem_ready;

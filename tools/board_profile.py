@@ -8,7 +8,8 @@ wavemesh.harness.simboard, as the tests and benchmarks do), streams INPUT with t
 `--decimate 8`), and prints the cycles of the whole run (the wait for
 the host included: it shows up in the UART receive loop) by function, from the firmware's ELF symbols
 (riscv64-unknown-elf-nm).  Every cycle counts against the last instruction fetched (sim/board_main.cpp,
---profile): a function's *self* cycles, not its callees'.
+--profile; with the VexRiscv, WM_CPU=vexriscv, the instruction in its last stage): a function's *self*
+cycles, not its callees'.
 
 --data also prints where the data accesses wait (wmsim's FILE.data: the cycles each access waited beyond
 a block RAM's answer): by memory-map area (the stack and the rest of the firmware RAM, the SDRAM's

@@ -84,17 +84,25 @@ class FlowError(RuntimeError):
     """A step of the flow failed; the message is the one line to print."""
 
 
-def picorv32() -> Path:
-    import pythondata_cpu_picorv32
+def cpu():
+    """The SoC's CPU: host/wavemesh/soc_cpu.py's choice ($WM_CPU, `make bitstream ... CPU=NAME`)."""
+    from wavemesh import soc_cpu
 
-    return Path(pythondata_cpu_picorv32.data_location) / "picorv32.v"
+    return soc_cpu.selected()
+
+
+def work_folder(board: Board) -> Path:
+    """build/boards/BOARD, or BOARD-NAME for a CPU other than the default (a board with the SoC)."""
+    from wavemesh import soc_cpu
+
+    return OUT / (board.name + (soc_cpu.suffix(cpu()) if board.firmware else ""))
 
 
 def sources(board: Board) -> list[Path]:
     """The Verilog files of the board's design: its top and the files of every module it instantiates,
-    transitively (one module per file, named after it, in rtl/boards/ or rtl/, and the PicoRV32), so a
-    module of rtl/ the board does not use is never read."""
-    files = {f.stem: f for f in [*RTL.glob("*.v"), *BOARDS_RTL.glob("*.v"), picorv32()]}
+    transitively (one module per file, named after it, in rtl/boards/ or rtl/, and the chosen CPU's), so
+    a module of rtl/ the board does not use is never read."""
+    files = {f.stem: f for f in [*RTL.glob("*.v"), *BOARDS_RTL.glob("*.v"), cpu().verilog_file()]}
     inst = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:#\s*\(|[A-Za-z_]\w*\s*\()", re.M)
     todo, found = [board.top], {}
     while todo:
@@ -117,7 +125,7 @@ def _stamp(board: Board, fw_hex: Path | None, seed: int) -> str:
     from wavemesh.gen import write_all
 
     write_all(GEN)
-    h = hashlib.sha256(f"{board}|seed={seed}|margin={MARGIN}".encode())
+    h = hashlib.sha256(f"{board}|seed={seed}|margin={MARGIN}|cpu={cpu().name}".encode())
     for p in [*sources(board), BOARDS_RTL / board.constraints[1], *([fw_hex] if fw_hex else []),
               *sorted(GEN.glob("*.vh"))]:
         h.update(p.name.encode())
@@ -147,7 +155,7 @@ def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool =
 
     `fw_hex`: the firmware image to build in (default: firmware/board, built first when needed)."""
     fw_hex = firmware_image(board, fw_hex)
-    work = OUT / board.name
+    work = work_folder(board)
     work.mkdir(parents=True, exist_ok=True)
     bitfile = work / f"{board.name}.{board.ext}"
     report_file = work / "report.json"
@@ -163,7 +171,8 @@ def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool =
             print(f"bitstream {board.name}: {msg}", flush=True)
 
     # Yosys: the board top with the firmware image as FW_HEX (a path Yosys opens, relative to work/)
-    script = [f"read_verilog -I{rel(GEN, work)} {rel(s, work)}" for s in sources(board)]
+    define = f" -D{cpu().define}" if cpu().define and board.firmware else ""
+    script = [f"read_verilog -I{rel(GEN, work)}{define} {rel(s, work)}" for s in sources(board)]
     if fw_hex is not None:
         script.append(f'chparam -set FW_HEX "{rel(fw_hex, work)}" {board.top}')
     script += [f"hierarchy -top {board.top}",
@@ -198,7 +207,8 @@ def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool =
     worst = min(fmax.values())
     report = {"board": board.name, "label": board.label, "top": board.top, "clock_mhz": board.clock_mhz,
               "fmax_mhz": worst, "fmax_by_clock": fmax, "margin": round(worst / board.clock_mhz - 1, 3),
-              "seed": seed, "utilization": util, "firmware": rel(fw_hex, ROOT) if fw_hex else None,
+              "seed": seed, "cpu": cpu().name if board.firmware else None, "utilization": util,
+              "firmware": rel(fw_hex, ROOT) if fw_hex else None,
               "firmware_words": len(fw_hex.read_text().split()) if fw_hex else 0,
               "tools": _versions(work), "commit": _commit()}
     if worst < MARGIN * board.clock_mhz:
@@ -279,7 +289,7 @@ LOADER = "openFPGALoader"
 def flash(board: Board, to_flash: bool = False) -> None:
     """Load the built bitstream with openFPGALoader (SRAM; to_flash: the SPI flash)."""
     to_flash = to_flash or not board.sram
-    bitfile = OUT / board.name / f"{board.name}.{board.ext}"
+    bitfile = work_folder(board) / f"{board.name}.{board.ext}"
     if not bitfile.exists():
         raise FlowError(f"no bitstream {rel(bitfile, ROOT)}: run `make bitstream BOARD={board.name}` first")
     exe = shutil.which(LOADER)

@@ -156,7 +156,7 @@ TOUT_TEMPLATE_SHIFT = 0  # TOUT entry: template id (wm_templates.h) in bits 5..0
 TOUT_TEMPLATE_MASK = 0x3F
 TOUT_LABEL_SHIFT = 6  # TOUT entry: label in bits 8..6
 TOUT_LABEL_MASK = 0x7
-IO_CODE = 0x4
+IO_CODE = 0x8  # bit 31 set: the VexRiscv's data cache passes such addresses through uncached (soc_cpu.py)
 REGIONS = (FW_RAM, SDRAM)  # what the address decoder selects
 AREAS = (HEIGHT, COEF, TOUT, HEAP)  # the SDRAM's layout
 

@@ -13,12 +13,12 @@ MODULES = sorted(BOARDS.glob("*.v"))
 
 @pytest.mark.parametrize("source", MODULES, ids=[p.stem for p in MODULES])
 def test_board_module_lint_clean(source: Path, verilator):
-    import pythondata_cpu_picorv32
+    from wavemesh import soc_cpu
     from wavemesh.gen import write_all
 
     write_all(GEN)
     exe, env = verilator
     r = subprocess.run([exe, "--lint-only", "-Wall", f"-I{GEN}", "-y", str(RTL), "-y", str(BOARDS),
-                        "-y", pythondata_cpu_picorv32.data_location, str(RTL / "lint.vlt"),
+                        *(a for d in soc_cpu.lint_folders() for a in ("-y", str(d))), str(RTL / "lint.vlt"),
                         str(source), "--top-module", source.stem], capture_output=True, text=True, env=env)
     assert r.returncode == 0, r.stderr

@@ -9,23 +9,37 @@ from wavemesh.harness.rtl_runner import GEN, RTL
 MODULES = sorted(RTL.glob("*.v"))
 
 
-def picorv32_dir() -> str:
-    """The PicoRV32 of the pythondata-cpu-picorv32 package (soc_top instantiates it; never copied here)."""
-    import pythondata_cpu_picorv32
+def cpu_dirs() -> list[str]:
+    """-y for the folders of every CPU's Verilog (their pythondata packages; never copied here)."""
+    from wavemesh import soc_cpu
 
-    return pythondata_cpu_picorv32.data_location
+    return [a for d in soc_cpu.lint_folders() for a in ("-y", str(d))]
 
 
-@pytest.mark.parametrize("source", MODULES, ids=[p.stem for p in MODULES])
-def test_lint_clean(source: Path, verilator):
+def lint(source: Path, verilator, *defines: str):
     from wavemesh.gen import write_all
 
     write_all(GEN)
     exe, env = verilator
-    r = subprocess.run([exe, "--lint-only", "-Wall", f"-I{GEN}", "-y", str(RTL), "-y", picorv32_dir(),
-                        str(RTL / "lint.vlt"),
-                        str(source), "--top-module", source.stem], capture_output=True, text=True, env=env)
+    return subprocess.run([exe, "--lint-only", "-Wall", f"-I{GEN}", "-y", str(RTL), *cpu_dirs(),
+                           *(f"+define+{d}" for d in defines), str(RTL / "lint.vlt"),
+                           str(source), "--top-module", source.stem], capture_output=True, text=True, env=env)
+
+
+@pytest.mark.parametrize("source", MODULES, ids=[p.stem for p in MODULES])
+def test_lint_clean(source: Path, verilator):
+    r = lint(source, verilator)
     assert r.returncode == 0, r.stderr
+
+
+def test_lint_clean_every_cpu(verilator):
+    """soc_top with each CPU host/wavemesh/soc_cpu.py offers (the default one is linted above)."""
+    from wavemesh import soc_cpu
+
+    for cpu in soc_cpu.CPUS.values():
+        if cpu.define:
+            r = lint(RTL / "soc_top.v", verilator, cpu.define)
+            assert r.returncode == 0, f"{cpu.name}: {r.stderr}"
 
 
 def test_waivers_have_reasons():

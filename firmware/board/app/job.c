@@ -66,6 +66,7 @@ static int run_stage(const wm_proto_job *j)
     while (!(WM_ACCEL_STATUS & WM_ACCEL_STATUS_DONE)) {
         /* the stage owns HEIGHT, COEF and TOUT until DONE */
     }
+    board_dcache_flush(); /* the CPU reads COEF and TOUT next: what the stage wrote, not old lines */
     return WM_ACCEL_STATUS & WM_ACCEL_STATUS_ERROR ? -1 : 0;
 }
 

@@ -57,6 +57,31 @@ int board_uart_getc_timeout(uint32_t cycles);
 /* Read and clear the sticky error bits (WM_UART_STATUS_RX_OVERRUN, _RX_FRAME_ERR, _TX_OVERRUN). */
 uint32_t board_uart_take_errors(void);
 
+/* ---- the CPU's caches ------------------------------------------------------------------------- */
+
+/*
+ * Make the CPU's next loads read the memory: the VexRiscv's data cache (write through) does not see
+ * what the FPGA stage writes into the SDRAM, so the job flushes it after the stage (its custom
+ * instruction 0x500F: every line invalid).  The PicoRV32 has no caches: nothing to do.
+ */
+static inline void board_dcache_flush(void)
+{
+#ifdef WM_CPU_VEXRISCV
+    __asm__ volatile(".word 0x500F" ::: "memory");
+#endif
+}
+
+/*
+ * Empty the CPU's instruction and data caches (the VexRiscv's: fence.i, as its configuration reports
+ * it, and 0x500F), so that the cycles of what follows do not depend on what ran before (board_stage).
+ */
+static inline void board_caches_flush(void)
+{
+#ifdef WM_CPU_VEXRISCV
+    __asm__ volatile(".word 0x500F\n\t.word 0x100F\n\tnop\n\tnop\n\tnop" ::: "memory");
+#endif
+}
+
 /* ---- cycles and timer ------------------------------------------------------------------------ */
 
 /* Clock cycles since reset (64-bit counter read consistently: CYCLE_LO latches CYCLE_HI). */
@@ -84,9 +109,14 @@ uint32_t board_leds(void);
 
 /*
  * Mark the start or end of a stage: the simulator logs `stage 0xMARKER cycle N`; on a board it
- * costs one store.
+ * costs one store (the stage sync: docs/soc.md, "Cycle accounting"), and with the VexRiscv the
+ * flush of its caches, so that the next stretch starts from the same state whatever ran before.
  */
-static inline void board_stage(uint32_t marker) { WM_SYS_STAGE = marker; }
+static inline void board_stage(uint32_t marker)
+{
+    WM_SYS_STAGE = marker;
+    board_caches_flush();
+}
 
 /* Halt with an exit code: the simulator exits (status 0 for code 0); on a board the CPU spins. */
 void board_halt(uint32_t code) __attribute__((noreturn));

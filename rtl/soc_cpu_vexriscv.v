@@ -1,0 +1,126 @@
+/*
+ * wavemesh: the VexRiscv as the SoC's CPU, behind the PicoRV32's native memory interface
+ *
+ * The CPU is the default VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv.v, never copied
+ * here): RV32IM, 5 stages, 4 KiB instruction cache, 4 KiB write-through data cache, one-cycle
+ * multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
+ * WM_CPU_VEXRISCV is defined (host/wavemesh/soc_cpu.py chooses; docs/soc.md, "The CPU").
+ *
+ * Its two Wishbone buses (classic cycles; the caches refill 32-byte lines as bursts of 8 words, one
+ * word per ACK) share the native bus: mem_valid, mem_addr, mem_wdata, mem_wstrb are the granted
+ * master's STB, ADR, DAT_MOSI, SEL (a read has wstrb 0), held until mem_ready, which is that master's
+ * ACK with mem_rdata its DAT_MISO.  A master keeps the bus while its CYC is high (a whole line
+ * refill); otherwise the data bus goes first.  Each word takes what the native bus takes (2 cycles in
+ * block RAM and on an SDRAM cache hit); no cycle is lost between words or masters.
+ *
+ * The data cache treats only addresses with bit 31 set as I/O (uncached): the memory map puts the
+ * I/O region there.  It does not see the FPGA stage's writes into the SDRAM: the firmware flushes it
+ * after the stage (wm_sys.h, wm_dcache_flush).  mem_instr is high while the instruction bus holds
+ * the bus (sim/board_sim.v's profile counts fetches by it; with the cache they are line refills).
+ * trap: an instruction fetch outside the firmware RAM (the VexRiscv has no trap output; an
+ * exception jumps to mtvec, which the firmware never sets; sim/board_sim.v adds the CPU's own
+ * exception flag to the simulator's trap).
+ */
+
+`resetall
+`timescale 1ns / 1ps
+`default_nettype none
+
+module soc_cpu_vexriscv #
+(
+    // reset vector
+    parameter [31:0] PROGADDR_RESET = 32'h0000_0000,
+    // instruction fetches at or above this address raise trap
+    parameter [31:0] FETCH_LIMIT = 32'h0002_0000
+)
+(
+    input  wire         clk,
+    input  wire         rst,
+    output wire         trap,
+
+    /*
+     * PicoRV32 native memory interface
+     */
+    output wire         mem_valid,
+    output wire         mem_instr,
+    input  wire         mem_ready,
+    output wire [31:0]  mem_addr,
+    output wire [31:0]  mem_wdata,
+    output wire [3:0]   mem_wstrb,
+    input  wire [31:0]  mem_rdata
+);
+
+wire        i_cyc, i_stb, i_we;
+wire [29:0] i_adr;
+wire [31:0] i_dat_mosi_unused;
+wire [3:0]  i_sel;
+wire [2:0]  i_cti_unused;
+wire [1:0]  i_bte_unused;
+wire        d_cyc, d_stb, d_we;
+wire [29:0] d_adr;
+wire [31:0] d_dat_mosi;
+wire [3:0]  d_sel;
+wire [2:0]  d_cti_unused;
+wire [1:0]  d_bte_unused;
+
+// the grant: the master that held the bus in the last cycle keeps it while its CYC stays high
+reg  hold_reg = 1'b0;
+reg  owner_d_reg = 1'b0;
+wire owner_cyc = owner_d_reg ? d_cyc : i_cyc;
+wire grant_d = (hold_reg && owner_cyc) ? owner_d_reg : d_cyc;
+
+always @(posedge clk) begin
+    hold_reg <= grant_d ? d_cyc : i_cyc;
+    owner_d_reg <= grant_d;
+    if (rst) begin
+        hold_reg <= 1'b0;
+        owner_d_reg <= 1'b0;
+    end
+end
+
+assign mem_valid = grant_d ? (d_cyc && d_stb) : (i_cyc && i_stb);
+assign mem_instr = !grant_d;
+assign mem_addr = {grant_d ? d_adr : i_adr, 2'b00};
+assign mem_wdata = d_dat_mosi;
+assign mem_wstrb = grant_d && d_we ? d_sel : 4'd0;
+wire i_ack = mem_ready && !grant_d;
+wire d_ack = mem_ready && grant_d;
+// the instruction bus only reads whole words
+wire i_unused = i_we | ^i_sel;
+
+assign trap = mem_valid && !grant_d && mem_addr >= FETCH_LIMIT;
+
+VexRiscv cpu_inst (
+    .externalResetVector(PROGADDR_RESET),
+    .timerInterrupt(1'b0),
+    .softwareInterrupt(1'b0),
+    .externalInterruptArray(32'd0),
+    .iBusWishbone_CYC(i_cyc),
+    .iBusWishbone_STB(i_stb),
+    .iBusWishbone_ACK(i_ack),
+    .iBusWishbone_WE(i_we),
+    .iBusWishbone_ADR(i_adr),
+    .iBusWishbone_DAT_MISO(mem_rdata),
+    .iBusWishbone_DAT_MOSI(i_dat_mosi_unused),
+    .iBusWishbone_SEL(i_sel),
+    .iBusWishbone_ERR(1'b0),
+    .iBusWishbone_CTI(i_cti_unused),
+    .iBusWishbone_BTE(i_bte_unused),
+    .dBusWishbone_CYC(d_cyc),
+    .dBusWishbone_STB(d_stb),
+    .dBusWishbone_ACK(d_ack),
+    .dBusWishbone_WE(d_we),
+    .dBusWishbone_ADR(d_adr),
+    .dBusWishbone_DAT_MISO(mem_rdata),
+    .dBusWishbone_DAT_MOSI(d_dat_mosi),
+    .dBusWishbone_SEL(d_sel),
+    .dBusWishbone_ERR(1'b0),
+    .dBusWishbone_CTI(d_cti_unused),
+    .dBusWishbone_BTE(d_bte_unused),
+    .clk(clk),
+    .reset(rst)
+);
+
+endmodule
+
+`resetall
