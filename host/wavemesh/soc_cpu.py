@@ -31,7 +31,13 @@ class Cpu:
     doc: str
 
     def folder(self) -> Path:
-        return Path(importlib.import_module(self.package).data_location)
+        try:
+            module = importlib.import_module(self.package)
+        except ImportError:
+            pkg = self.package.replace("_", "-")
+            raise MissingCpu(f"{pkg} is not installed (the {self.name}'s Verilog): run `make setup` "
+                             "(requirements.txt pins it)") from None
+        return Path(module.data_location)
 
     def verilog_file(self) -> Path:
         return self.folder() / self.verilog
@@ -56,6 +62,10 @@ CPU = "picorv32"
 
 class UnknownCpu(ValueError):
     pass
+
+
+class MissingCpu(RuntimeError):
+    """A CPU's pythondata package is not installed."""
 
 
 def selected(name: str | None = None) -> Cpu:
