@@ -389,8 +389,9 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
     if (p->metric == WM_METRIC_VERTICAL) return av * 65536u > (uint64_t)bound * (uint64_t)D;
     ev = vertical(av, D);
     if (ev == 0) return 0; /* E = 0 */
+    if (ev <= bound) return 0; /* E <= ev (r >= 2^16): no slope factor needed */
+    if (bound == 0) return 1;  /* E >= 1: r is finite */
     if (kept && *kept) return wm_ceil_q16_div(ev, *kept) > bound;
-    if (bound == 0) return 1; /* E >= 1: r is finite */
     /* The normal metric without the root: E = ceil(2^16 ev / r) > bound iff 2^16 ev > bound r iff
      * r < c = ceil(2^16 ev / bound) (r an integer), and with r = floor(sqrt(X)) 2^k iff
      * floor(sqrt(X)) < c' = ceil(c / 2^k) iff X < c'^2 (X < 2^64 <= c'^2 when c' >= 2^32). */
