@@ -205,7 +205,9 @@ def markdown(r: dict) -> str:
                 "the host's "
                 "turnaround included).  At 115200 baud frames come back to back (window 4) and the longer of "
                 "line and CPU counts; after a switch the board takes one frame at a time and both count; the "
-                "board asks for coded samples only at 781 kbaud and slower (FEATURE_RICE).  The job's own "
+                "board asks for coded samples only at 781 kbaud and slower (FEATURE_RICE); at 25 MHz its "
+                "nearest rate to 3 Mbaud is 3.125 Mbaud (divisor 8), the line time here is 3,000,000's.  "
+                "The job's own "
                 "cycles (filter bank, templates, refiner, level streams) are not in these figures.",
                 "",
                 "| input | " + " | ".join(f"{b} baud s" for b in BAUDS) + " |",
