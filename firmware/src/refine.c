@@ -194,7 +194,7 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
 
-static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha)
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
@@ -252,13 +252,17 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha)
     }
     xi = ((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16;
     if (xi <= 65536u) return 0;
-    /* With the levels alone (no error bound after them), the bound of the reduction (reduce.c): no new
-     * triangle over max(zeta, the pair's E(T)), so a swap never makes E_max grow and never undoes the
-     * refinement where it met zeta; the error bound repairs what a swap spoils (docs/refiner.md). */
-    if (r->params.flags & WM_FLAG_NO_BOUND) {
-        uint32_t bnd = r->params.zeta;
-        if (r->err[t1] > bnd) bnd = r->err[t1];
-        if (r->err[t2] > bnd) bnd = r->err[t2];
+    /* The swap's bound (regularise): no new triangle over the mesh's E_max when the sweep began, so a
+     * swap never makes E_max grow and each level's mesh stays a level of detail (unbounded, eq. 4.22
+     * trades error for angles: Box at k = 2 went from E_max 3.5 at level 2 to 200 at level 1); with the
+     * levels alone, max(zeta, the pair's E(T)), the reduction's bound (docs/refiner.md). */
+    {
+        uint32_t bnd = emax;
+        if (r->params.flags & WM_FLAG_NO_BOUND) {
+            bnd = r->params.zeta;
+            if (r->err[t1] > bnd) bnd = r->err[t1];
+            if (r->err[t2] > bnd) bnd = r->err[t2];
+        }
         if (alpha == 65536u) {
             e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
                         : wm_tri_error_within(&r->field, &r->params, n1x, n1y, bnd, &w1x, &w1y, NULL);
@@ -294,8 +298,11 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
 {
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
-    for (int32_t t = 0; t < me->tri_end; t++)
+    uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
+    for (int32_t t = 0; t < me->tri_end; t++) {
         me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
+        if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
+    }
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
@@ -305,7 +312,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
                 u = WM_TRI(o);
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (try_swap(r, e, alpha)) {
+                if (try_swap(r, e, alpha, emax)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
                     swaps++;
