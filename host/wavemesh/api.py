@@ -90,6 +90,7 @@ def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = 
     m, t = _levels_and_tau(hf, levels, tau)
     if wavelet not in WAVELETS:
         raise WavemeshError(f"--wavelet {wavelet} is not a wavelet here", hint=f"use {' or '.join(WAVELETS)}")
+    details = None  # with a device's labelling the refiner's details are made later (native.refine)
     if labelling is not None:
         mesh = assemble(labelling, hf.width, hf.height)
         result = InitialResult(mesh, labelling, tau_counts(t, hf.scale), m)
