@@ -26,6 +26,7 @@ they are reported in their own table and medians and are not for tuning.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import tempfile
@@ -68,12 +69,32 @@ def _ratio(a, b):
     return None if a is None or b is None or b == 0 else a / b
 
 
-def wavemesh_mesh(z: np.ndarray, zeta: float):
+def wavemesh_mesh(z: np.ndarray, zeta: float, **params):
+    """The benchmark's wavemesh job; ``params``: RefineParams fields other than the defaults (triangles())."""
     from wavemesh import api
     from wavemesh.heightfield import from_array
     from wavemesh.native import RefineParams
 
-    return api.refine(from_array(z), params=RefineParams(zeta=float(zeta), metric="vertical"))
+    return api.refine(from_array(z), params=RefineParams(zeta=float(zeta), metric="vertical", **params))
+
+
+def triangles(params: dict, results: Path = Path(__file__).parent / "results" / "quality.json") -> dict:
+    """Triangles over pydelatin's on every pair, the wavemesh job run with ``params`` (RefineParams fields)
+    and pydelatin's counts taken from the stored run: the cheap way to compare refiner settings (no
+    timings).  Medians of the tuning and the held-out pairs, and the pairs not proper or over zeta."""
+    stored = json.loads(results.read_text())
+    peer = {(p["grid"], p["label"]): p["pydelatin"]["triangles"] for p in stored["pairs"]}
+    ratios: dict[bool, list[float]] = {False: [], True: []}
+    bad = []
+    for name in GRIDS:
+        grid = D.load(name)
+        for label, zeta in zetas(grid):
+            v = P.verdict(wavemesh_mesh(grid.values, zeta, **params).mesh, grid.values, zeta)
+            ratios[name in HELD_OUT].append(v.triangles / peer[(name, label)])
+            if not (v.proper and v.within):
+                bad.append(f"{name} {label}")
+    return {"params": params, "tuning": float(np.median(ratios[False])),
+            "held_out": float(np.median(ratios[True])), "bad": bad}
 
 
 def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: float = 6.0) -> dict:
@@ -359,9 +380,13 @@ def markdown(results: dict) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":  # a quick look at some grids: python bench/bench_quality.py f1 ball
-    import json
-
+if __name__ == "__main__":
+    # a quick look at some grids: python bench/bench_quality.py f1 ball
+    # triangles over pydelatin's with other refiner settings: python bench/bench_quality.py --set iterations=0
+    if sys.argv[1:2] == ["--set"] and len(sys.argv) == 3:
+        params = {k: int(v) for k, v in (item.split("=") for item in sys.argv[2].split(","))}
+        print(json.dumps(triangles(params), indent=1))
+        sys.exit(0)
     res = run(tuple(sys.argv[1:]) or GRIDS)
     print(json.dumps(res["summary"], indent=1))
     print(markdown(res))
