@@ -1,4 +1,4 @@
-"""Issue 14's bar: a 1024 x 1024 input through the simulated ULX3S, bit for bit `wavemesh mesh`'s mesh.
+"""The board's target: a 1024 x 1024 input through the simulated ULX3S, bit for bit `wavemesh mesh`'s mesh.
 
     make bench-board1024                               the 1024 x 1024 run: hours; not part of `make bench`
     .venv/bin/python bench/bench_board1024.py --side 128   the same job at 128 x 128 (minutes), its results
@@ -40,11 +40,11 @@ BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 RESULTS = BENCH / "results"
 
-TITLE = "Issue 14's bar: 1024 x 1024 through the simulated board"
+TITLE = "1024 x 1024 through the simulated board"
 DEFAULT = False  # hours: bench/run.py runs it only when named (`make bench-board1024`)
 SIDE = 1024
 OPTIONS = ["--levels", "2", "--reduce", "off", "--simplify", "off", "-k", "0"]
-BAR_TRIANGLES = 100_000  # the issue's "at least 100k triangles"
+BAR_TRIANGLES = 100_000  # the target: at least 100k triangles
 PROGRESS_S = 60.0  # seconds between progress lines and partial results
 STAGES = ("receive", "filter", "template", "refine", "emit", "link")  # DONE's counters
 WORK = ("filter", "template", "refine", "emit")  # the device's work, apart from the host link

@@ -1,10 +1,10 @@
-"""Cost growth (issue 11): time and triangles at 256^2, 512^2, 1024^2 and 2048^2 samples, with the
+"""Cost growth: time and triangles at 256^2, 512^2, 1024^2 and 2048^2 samples, with the
 log-log slope of time against samples.
 
 The height field is a seeded synthetic terrain (bench/datasets.py terrain(): one continuous surface, a
 sum of random plane waves with a fractal-like spectrum, 0..1000 "m"), in two series:
 
-- *resolution*: the same unit square sampled finer (the issue's "resampled"): the surface is the same,
+- *resolution*: the same unit square sampled finer ("resampled"): the surface is the same,
   so the triangles needed for E level off and the cost is what more samples add;
 - *extent*: the same sample spacing over a larger area ((n - 1) / 255 units across): more of the same
   terrain, triangles growing with the samples, so the cost per triangle shows.
@@ -26,7 +26,7 @@ import peers as P
 
 BENCH = Path(__file__).resolve().parent
 
-TITLE = "Cost growth: 256^2 to 2048^2 (issue 11)"
+TITLE = "Cost growth: 256^2 to 2048^2"
 SIZES = (256, 512, 1024, 2048)
 ZETA = 10.0  # "m": 1% of the terrain's 0..1000 on the unit square
 SERIES = {"resolution": lambda n: 1.0, "extent": lambda n: (n - 1) / 255}

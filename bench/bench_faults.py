@@ -1,11 +1,11 @@
-"""Fault campaign (issue 13): `wavemesh stream` through a proxy that corrupts, drops, duplicates and
+"""Fault campaign: `wavemesh stream` through a proxy that corrupts, drops, duplicates and
 delays bytes, with the host's default timeouts, against the native stand-in device.
 
 Each run streams the Jacksboro DEM (decimated by 4: 101 x 86 samples, zeta 5 m) through
 wavemesh.harness.faultproxy in front of wmdev and is classified (faultproxy.campaign): identical
 (the very file `wavemesh mesh` writes), a clear error (exit 2, one `error:` line and a hint, no
 output), a silently different mesh, an unclear ending, or a hang (still running after RUN_LIMIT s).
-The sets: 0.2 % faults per byte without a bound, as on a real lossy line (issue 13's bar: at least
+The sets: 0.2 % faults per byte without a bound, as on a real lossy line (the target: at least
 95 % of these runs end with the identical mesh; the host shrinks its frames, see wavemesh.stream),
 RUNS_LOSSY runs; then with at most LIMIT faults per direction and connection at 0.2 % and at other
 rates.  `make bench-faults`; the short seeded version is tests/sim/test_stream_faults.py.
@@ -23,7 +23,7 @@ DECIMATE = 4
 # stops the job (the reference, `wavemesh mesh`, has no budget of its own)
 OPTS = ["--key", "elevation", "--decimate", str(DECIMATE), "--zeta", "5", "--max-triangles", "19999"]
 DEVICE = ["--tri-capacity", "20000", "--quiet"]
-FRAMES = 10_000  # issue 13: at least this many frames through the proxy in all
+FRAMES = 10_000  # the target: at least this many frames through the proxy in all
 LIMIT = 8  # faults per direction and connection in the bounded sets
 RUN_LIMIT = 150.0  # s: longer counts as a hang (the host's longest single wait is 120 s)
 RUNS_LOSSY = 20  # runs at 0.2 % without a bound (the bar)
@@ -83,7 +83,8 @@ def run() -> dict:
                                   for s in range(RUNS_BOUNDED)]))
             frames = sum(s["tally"]["frames"] for s in sets)
             if frames < FRAMES:
-                raise RuntimeError(f"only {frames} frames went through the proxy; issue 13 asks for {FRAMES}")
+                raise RuntimeError(f"only {frames} frames went through the proxy; the campaign needs "
+                                   f"{FRAMES}")
     finally:
         dev.stop()
     h, w = np.load(jacksboro())["elevation"][::DECIMATE, ::DECIMATE].shape
@@ -133,7 +134,7 @@ def markdown(results: dict) -> str:
                      f"| {o['identical']} | {o['error']} | {o['different']} | {o['unclear']} | {o['hang']} "
                      f"| {t['slowest']:.1f} s | {t['slowest_error']:.1f} s |")
     lines += ["", f"In all: {frames} frames, {bad} runs silently different, unclear or hung.  0.2 % without "
-              f"a bound: {100 * share:.1f} % of the runs ended with the identical mesh (issue 13 asks for at "
+              f"a bound: {100 * share:.1f} % of the runs ended with the identical mesh (the target: at "
               "least 95 %)."]
     if fast:
         lines += ["", "At 3 Mbaud (the native device paced like a UART at 115200 baud, "

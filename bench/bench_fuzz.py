@@ -1,4 +1,4 @@
-"""Fuzzing campaign (issue 13): the libFuzzer harnesses of fuzz/ (refine, proto; clang, ASan + UBSan) and
+"""Fuzzing campaign: the libFuzzer harnesses of fuzz/ (refine, proto; clang, ASan + UBSan) and
 the atheris harness of the readers, one after the other (one process at a time: at the priority the
 benchmark was started with, `nice -n 19 make bench-fuzz`, it takes only the idle CPU of a shared
 machine), each for FUZZ_CPU CPU seconds (default 1200: one CPU-hour in all).  Each starts from the

@@ -1,4 +1,4 @@
-"""Holes against filling (issue 20): `--nodata hole` and `--fill nearest` at the same zeta, on a disparity
+"""Holes against filling: `--nodata hole` and `--fill nearest` at the same zeta, on a disparity
 map with real dropouts (Middlebury's Motorcycle, scikit-image's copy: 27,226 unknown pixels) and on the
 synthetic sets with a synthesised scanner shadow.  Triangles, vertices, E_max, and the hole mesh's check
 (wavemesh.holes.check: nothing over an invalid sample, coverage of the valid ones)."""

@@ -1,9 +1,9 @@
-"""Quality and speed against pydelatin and pymartini at the same max vertical error (issues 10 and 11).
+"""Quality and speed against pydelatin and pymartini at the same max vertical error.
 
 Grids (bench/datasets.py, sources and licences in bench/README.md): real height fields that ship inside
 packages installed here (terrain DEMs, a stereo disparity map, intensity images) and the dissertation's
 synthetic sets, each whole.  Errors: fractions of each grid's height range, fine to coarse
-(FRACTIONS); on Jacksboro the issue's 5 m and 10 m take the place of the two finest.
+(FRACTIONS); on Jacksboro 5 m and 10 m take the place of the two finest.
 
 Per grid/error pair:
 
@@ -39,16 +39,16 @@ import peers as P
 
 BENCH = Path(__file__).resolve().parent
 
-TITLE = "Quality: triangles and time against pydelatin and pymartini (issues 10, 11)"
+TITLE = "Quality: triangles and time against pydelatin and pymartini"
 FRACTIONS = (0.005, 0.01, 0.02, 0.05)  # of each grid's height range, fine to coarse
-ABSOLUTE = {"jacksboro": {0.005: 5.0, 0.01: 10.0}}  # the issue's examples (metres) replace these fractions
+ABSOLUTE = {"jacksboro": {0.005: 5.0, 0.01: 10.0}}  # metres, in place of these fractions
 # A third of the grids, kept aside: not used for tuning, reported on their own.  Chosen among the grids
 # this benchmark brought in (the project's docs and tests had never used them; Jacksboro and the
 # synthetic sets had), one per kind and a second terrain, before any result was seen.
 HELD_OUT = ("topobathy", "lidar_dem", "motorcycle", "moon")
 GRIDS = tuple(D.SETS)
-TARGET_MEDIAN, TARGET_MAX = 1.0, 1.3  # issue 10: triangles vs pydelatin
-TARGET_NATIVE, TARGET_PROCESS = 1.0, 1.5  # issue 11: native refine vs pydelatin call, process vs process
+TARGET_MEDIAN, TARGET_MAX = 1.0, 1.3  # the targets: triangles vs pydelatin
+TARGET_NATIVE, TARGET_PROCESS = 1.0, 1.5  # the targets: native refine vs pydelatin call, process vs process
 WM_BUDGET = 3.0  # seconds of repeats for one wavemesh timing (a slower call runs once)
 PEER_BUDGET = 2.0
 
@@ -322,8 +322,8 @@ def markdown(results: dict) -> str:
         "once) on a 2-core machine shared with other work: read the ratios, not the seconds (in "
         "bench/results/quality.json).",
         "",
-        "**Summary** (issue 10: median triangle ratio at most 1.0, no pair above 1.3, the held-out set "
-        "included; issue 11: median native refine / pydelatin call at most 1.0, median process / process at "
+        "**Summary** (the targets: median triangle ratio at most 1.0, no pair above 1.3, the held-out set "
+        "included; median native refine / pydelatin call at most 1.0, median process / process at "
         "most 1.5):",
         "",
         "| set | grids | pairs | median triangle ratio | max | pairs > 1.3 | median native / call | "

@@ -45,7 +45,7 @@ CASES = {
     "Box 256 / 8": ("box.npy", ["--decimate", "8"]),
     "Jacksboro / 16": ("JACKSBORO", ["--key", "elevation", "--decimate", "16", "--zeta", "15"]),
     # held out: never looked at while cutting cycles (bench/datasets.py's held-out lidar DEM, as .npy: grid
-    # steps, no georeference); reported apart, not one of issue 11's three inputs
+    # steps, no georeference); reported apart, not one of the three timed inputs
     "lidar_dem / 8 (held out)": ("lidar.npy", ["--decimate", "8"]),
 }
 HELD_OUT = ("lidar_dem / 8 (held out)",)

@@ -1,4 +1,4 @@
-"""Tiles (issue 15): `wavemesh mesh --tile` of inputs up to 8192 x 8192 in bounded memory.
+"""Tiles: `wavemesh mesh --tile` of inputs up to 8192 x 8192 in bounded memory.
 
 The height field is the seeded synthetic terrain of bench/datasets.py (terrain(): a fractal-like sum of
 plane waves, 0..1000 "m" on the unit square), sampled n x n over the same unit square (the "resolution"
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 BENCH = Path(__file__).resolve().parent
-TITLE = "Tiles: any size in bounded memory (issue 15)"
+TITLE = "Tiles: any size in bounded memory"
 ZETA = 10.0
 SIZES = (1024, 2048, 4096, 8192)
 TILE_SIZES = (1025, 2049, 4097)

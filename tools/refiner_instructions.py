@@ -18,7 +18,7 @@ steps 2(d) and 3(b)), the error bound (greedy insertion with Lawson flips), the 
 rest (set-up and the levels' select, pair, split, swap).  --peer also counts pydelatin's
 Triangulator::Run (the same greedy insertion, its whole algorithm; inclusive, in a Python process that
 calls Delatin as the quality benchmark does) on the same grid and error, and gives each phase over it:
-what issue 11's bar (native refine time at most pydelatin's) asks of each phase, in a unit the machine's
+what the speed target (native refine time at most pydelatin's) asks of each phase, in a unit the machine's
 load does not change.  --set changes the job from the defaults, e.g. `--set reduce=off,iterations=0` or
 `levels=1`: RefineParams' fields (on/off for the switches) and the job's levels M, to measure what a
 phase buys.
