@@ -205,20 +205,23 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t xi, r1 = 0, r2 = 0; /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
-    wm_tri_xy(me, t1, ox, oy);
-    wm_tri_xy(me, t2, px, py);
-    ang_old = wm_min_angle(ox, oy);
-    a1 = wm_min_angle(px, py);
-    if (a1 < ang_old) ang_old = a1;
     /* new triangles (a, d, c) and (d, b, c) */
     n1x[0] = me->vx[a], n1y[0] = me->vy[a], n1x[1] = me->vx[d], n1y[1] = me->vy[d];
     n1x[2] = me->vx[c], n1y[2] = me->vy[c];
     qx[0] = me->vx[d], qy[0] = me->vy[d], qx[1] = me->vx[b], qy[1] = me->vy[b];
     qx[2] = me->vx[c], qy[2] = me->vy[c];
-    ang_new = wm_min_angle(n1x, n1y);
-    a1 = wm_min_angle(qx, qy);
-    if (a1 < ang_new) ang_new = a1;
-    ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
+    ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
+    if (alpha > 0) {
+        wm_tri_xy(me, t1, ox, oy);
+        wm_tri_xy(me, t2, px, py);
+        ang_old = wm_min_angle(ox, oy);
+        a1 = wm_min_angle(px, py);
+        if (a1 < ang_old) ang_old = a1;
+        ang_new = wm_min_angle(n1x, n1y);
+        a1 = wm_min_angle(qx, qy);
+        if (a1 < ang_new) ang_new = a1;
+        ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
+    }
     if (alpha < 65536u) {
         const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
         uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
