@@ -251,8 +251,8 @@ def _versions(work: Path) -> dict[str, str]:
 def section(report: dict) -> str:
     """The board's generated section of docs/boards.md (between its markers)."""
     board = BOARDS[report["board"]]
-    built = f" on {report['commit']}" if report.get("commit") else ""
-    lines = [f"From `make bitstream BOARD={board.name}`{built} (nextpnr seed {report['seed']}; "
+    # the commit stays in the report (build/boards/BOARD/report.json): the manual states what the build gives
+    lines = [f"From `make bitstream BOARD={board.name}` (nextpnr seed {report['seed']}; "
              + ", ".join(f"{k} {v}" for k, v in report["tools"].items()) + "):", "",
              "| resource | used | available | share |", "|---|---:|---:|---:|"]
     for cell, what in board.cells.items():
