@@ -57,7 +57,7 @@ $(SETUP_STAMP): requirements.txt host/pyproject.toml tools/debian-packages.txt t
 # Always run: the generator rewrites a file only when its content changes, so timestamps stay put, and it
 # reads several sources (template forms, memory map, protocol constants) that make would have to track.
 gen: $(SETUP_STAMP)
-	$(VPY) -m wavemesh.gen $(GEN) >/dev/null
+	$(VPY) -m wavemesh.device.gen $(GEN) >/dev/null
 
 # test and test-host also install the benchmark's data packages (BENCH_STAMP, below): the holes tests
 # read a real disparity map with real dropouts from scikit-image's wheel (tests/host/test_holes.py).
@@ -74,7 +74,7 @@ test-firmware: $(SETUP_STAMP) gen
 	@if ls tests/firmware/test_*.py >/dev/null 2>&1; then $(PYTEST) $(PYTEST_FLAGS) tests/firmware; \
 	 else echo "test-firmware: no firmware yet (the refiner issue adds it)"; fi
 
-# The native refiner (firmware/): the library the host loads (host/wavemesh/native.py also builds it on
+# The native refiner (firmware/): the library the host loads (host/wavemesh/refine/native.py also builds it on
 # first use when it is missing or stale), its C unit tests and runner.
 firmware:
 	cmake -S firmware -B build/firmware-native -DCMAKE_BUILD_TYPE=Release >/dev/null
@@ -90,7 +90,7 @@ test-sim: $(SETUP_STAMP) gen
 PORT      ?= 7720
 SIM_FLAGS ?=
 TRACE     ?=
-# CPU=vexriscv: the SoC with that CPU (host/wavemesh/soc_cpu.py; its own build folders) for the
+# CPU=vexriscv: the SoC with that CPU (host/wavemesh/device/soc_cpu.py; its own build folders) for the
 # firmware, the simulator and the bitstream; empty: the default
 CPU       ?= $(WM_CPU)
 export WM_CPU := $(CPU)

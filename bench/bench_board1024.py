@@ -4,7 +4,7 @@
     .venv/bin/python bench/bench_board1024.py --side 128   the same job at 128 x 128 (minutes), its results
                                                        to build/bench/ (bench/results/ keeps the 1024 run)
 
-The input is wavemesh.synth's Ball at SIDE x SIDE, meshed with `--levels 2 --reduce off --simplify off
+The input is wavemesh.io.synth's Ball at SIDE x SIDE, meshed with `--levels 2 --reduce off --simplify off
 -k 0`: the cheapest job with 100k triangles (docs/soc.md, "A 1024 x 1024 job on the simulated board"):
 at M = 2 every 4 x 4 block gives at least two triangles, so the template stage alone makes 139,216 of
 them at 1024 x 1024, and `-k 0` refines only until the error bound holds (139,950).  It is streamed by
@@ -53,7 +53,7 @@ JOB_TIMEOUT = 6 * 3600.0  # s the device may compute without a frame (the refine
 
 def _stage_name(value: int) -> str:
     """A firmware stage marker (docs/soc.md, "The job": 0x00020000 | the engine's clock) as text."""
-    from wavemesh.protocol import Stage
+    from wavemesh.device.protocol import Stage
 
     if value >> 16 != 2:
         return f"0x{value:08x}"
@@ -112,13 +112,14 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
     import numpy as np
     from peers import code_state
     from wavemesh import cli
-    from wavemesh import stream as S
+    from wavemesh.device import stream as S
     from wavemesh.harness import run_cli
     from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
-    from wavemesh.synth import ball
+    from wavemesh.io.synth import ball
 
     partial = partial or RESULTS / f"board{side}.partial.json"
-    head = {"side": side, "input": f"wavemesh.synth.ball({side})", "options": OPTIONS, "code": code_state()}
+    head = {"side": side, "input": f"wavemesh.io.synth.ball({side})", "options": OPTIONS,
+            "code": code_state()}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         exe = Path(shutil.copy2(build.build_sim(), tmp / "wmsim"))
@@ -211,7 +212,7 @@ def markdown(results: dict) -> str:
     r = results
     side = r["side"]
     lines = [
-        f"wavemesh.synth's Ball at {side} x {side}, `wavemesh stream {' '.join(r['options'])}` through "
+        f"wavemesh.io.synth's Ball at {side} x {side}, `wavemesh stream {' '.join(r['options'])}` through "
         "the simulated ULX3S (`wmsim --fast`: the Verilator model of the bitstream's design, PicoRV32, FPGA "
         "stage, SDRAM controller and the SDRAM chip's cycle model), compared byte for byte with "
         "`wavemesh mesh`'s OBJ file.  " + code_line(r.get("code")),

@@ -6,7 +6,7 @@ wavemesh.harness.faultproxy in front of wmdev and is classified (faultproxy.camp
 (the very file `wavemesh mesh` writes), a clear error (exit 2, one `error:` line and a hint, no
 output), a silently different mesh, an unclear ending, or a hang (still running after RUN_LIMIT s).
 The sets: 0.2 % faults per byte without a bound, as on a real lossy line (the target: at least
-95 % of these runs end with the identical mesh; the host shrinks its frames, see wavemesh.stream),
+95 % of these runs end with the identical mesh; the host shrinks its frames, see wavemesh.device.stream),
 RUNS_LOSSY runs; then with at most LIMIT faults per direction and connection at 0.2 % and at other
 rates.  `make bench-faults`; the short seeded version is tests/sim/test_stream_faults.py.
 """
@@ -52,7 +52,7 @@ def _set(name: str, upstream, src, ref, work: Path, faults, link: tuple[str, ...
 def run() -> dict:
     import numpy as np
     from wavemesh import cli
-    from wavemesh import protocol as P
+    from wavemesh.device import protocol as P
     from wavemesh.harness import jacksboro
     from wavemesh.harness.faultproxy import Faults
     from wavemesh.harness.nativedev import NativeDevice, build_wmdev

@@ -138,8 +138,8 @@ def motorcycle_matched(max_d: int = 64, win: int = 9) -> np.ndarray:
 
 def one(name: str, z: np.ndarray, zeta: float) -> dict:
     from wavemesh import api, holes
-    from wavemesh.heightfield import from_array
-    from wavemesh.native import RefineParams
+    from wavemesh.io.heightfield import from_array
+    from wavemesh.refine.native import RefineParams
 
     params = api.MeshParams(refine=RefineParams(zeta=zeta))
     row = {"name": name, "width": z.shape[1], "height": z.shape[0], "zeta": zeta,
@@ -163,7 +163,7 @@ def one(name: str, z: np.ndarray, zeta: float) -> dict:
 
 
 def run() -> dict:
-    from wavemesh.synth import make
+    from wavemesh.io.synth import make
 
     rows = []
     d = motorcycle_raw()

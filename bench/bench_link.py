@@ -1,7 +1,8 @@
 """The link at board speed: wire bytes per sample of the compact sample coding on the real height fields,
 and line seconds of whole jobs at 115200, 921600 and 3,000,000 baud (`python bench/run.py link`).
 
-Wire bytes are counted by the real encoder (wavemesh.coding) and framing (wavemesh.link: header, CRC,
+Wire bytes are counted by the real encoder (wavemesh.device.coding) and framing (wavemesh.device.link:
+header, CRC,
 SLIP escapes, delimiters), DATA frames as `Device.upload` cuts them on a clean line (max_payload 1024);
 the level streams down as the device sends them (LEVEL_HEADER, vertex slots, triangles, in MESH frames of
 1016 bytes), from `wavemesh mesh`'s level meshes with the same options, plus the session's small frames
@@ -22,9 +23,9 @@ SIZES = ((256, 256), (640, 480), (1024, 1024))
 
 
 def upload_bytes(samples: np.ndarray, coded: bool = True) -> int:
-    from wavemesh import protocol as P
-    from wavemesh.coding import SampleEncoder
-    from wavemesh.link import encode_frame
+    from wavemesh.device import protocol as P
+    from wavemesh.device.coding import SampleEncoder
+    from wavemesh.device.link import encode_frame
 
     enc = SampleEncoder(samples, coded=coded)
     start, total, seq = 0, 0, 0
@@ -40,9 +41,9 @@ def upload_bytes(samples: np.ndarray, coded: bool = True) -> int:
 def mesh_bytes(levels, coded: bool = True) -> int:
     """Wire bytes of the level streams of ``levels`` ((level, Mesh) pairs) in MESH frames (LEVEL_DELTA
     where shorter, as the device chooses; ``coded`` False: LEVEL_RAW)."""
-    from wavemesh import protocol as P
-    from wavemesh.coding import encode_level_body
-    from wavemesh.link import encode_frame
+    from wavemesh.device import protocol as P
+    from wavemesh.device.coding import encode_level_body
+    from wavemesh.device.link import encode_frame
 
     total = 0
     for lv, m in levels:
@@ -61,7 +62,7 @@ def mesh_bytes(levels, coded: bool = True) -> int:
 
 
 def session_bytes(nlevels: int) -> int:
-    from wavemesh import protocol as P
+    from wavemesh.device import protocol as P
 
     small = P.HELLO.size + P.HELLO_REPLY.size + P.CONFIG.size + P.RUN.size + P.DONE.size + 3 * P.OK.size
     per_level = P.LEVEL_END.size + P.ACK.size + P.PROGRESS.size * 2
@@ -77,7 +78,7 @@ def board_receive() -> dict:
     from pathlib import Path
 
     import datasets
-    from wavemesh import stream as S
+    from wavemesh.device import stream as S
     from wavemesh.harness import run_cli
     from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
 
@@ -111,7 +112,7 @@ def board_receive() -> dict:
 def run() -> dict:
     import datasets
     from wavemesh import api
-    from wavemesh.heightfield import from_array
+    from wavemesh.io.heightfield import from_array
 
     coding = {}
     for name in SETS:
@@ -151,8 +152,8 @@ def board_link_seconds(j: dict, baud: int, rx: dict) -> tuple[float, bool]:
     the start rate frames come back to back, so the longer of the two; at a switched rate one frame at a
     time, so both) with the coding the board asks for there (FEATURE_RICE at divisors of 32 and up), then
     the level streams and the session's frames at line speed.  (seconds, coded)"""
-    from wavemesh import memmap
-    from wavemesh import protocol as P
+    from wavemesh.device import memmap
+    from wavemesh.device import protocol as P
 
     div = P.baud_divisor(rx["clk_hz"], baud)
     coded = div >= 32

@@ -72,8 +72,8 @@ def _ratio(a, b):
 def wavemesh_mesh(z: np.ndarray, zeta: float, **params):
     """The benchmark's wavemesh job; ``params``: RefineParams fields other than the defaults (triangles())."""
     from wavemesh import api
-    from wavemesh.heightfield import from_array
-    from wavemesh.native import RefineParams
+    from wavemesh.io.heightfield import from_array
+    from wavemesh.refine.native import RefineParams
 
     return api.refine(from_array(z), params=RefineParams(zeta=float(zeta), metric="vertical", **params))
 
@@ -115,7 +115,7 @@ def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: flo
 
 
 def _check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
-    from wavemesh.meshio import read_mesh
+    from wavemesh.io.meshio import read_mesh
 
     h, w = heights.shape
     try:

@@ -2,7 +2,7 @@
 
 `wavemesh stream` through the simulated board (sim/, the cycle-accurate Verilator model of soc_top:
 the PicoRV32 with the real firmware and the FPGA stage) in fast UART mode, on three inputs that fit
-the board's grid and triangle capacity: Ball and Box (wavemesh.synth, 256 x 256 decimated by 8) and a
+the board's grid and triangle capacity: Ball and Box (wavemesh.io.synth, 256 x 256 decimated by 8) and a
 real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
 tests/sim/test_stream_board.py); and a held-out one never used while cutting cycles,
 reported apart (bench/datasets.py's lidar DEM decimated by 8).  The device's cycles per stage come
@@ -53,7 +53,7 @@ HELD_OUT = ("lidar_dem / 8 (held out)",)
 
 def _inputs(folder: Path) -> None:
     import numpy as np
-    from wavemesh.synth import ball, box
+    from wavemesh.io.synth import ball, box
 
     np.save(folder / "ball.npy", ball(256))
     np.save(folder / "box.npy", box(256))
@@ -119,7 +119,7 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     if str(ROOT / "tools") not in sys.path:
         sys.path.insert(0, str(ROOT / "tools"))
     import refiner_instructions as RI  # its callgrind runs and the CLI's job (cli_input)
-    from wavemesh import native
+    from wavemesh.refine import native
 
     file, opts = CASES[name]
     inp = tmp / "native.bin"
@@ -134,7 +134,7 @@ def run() -> dict:
     import re
 
     from peers import code_state
-    from wavemesh import stream as S
+    from wavemesh.device import stream as S
     from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
 
     code = code_state()  # the work tree is shared: what the firmware was built from
@@ -161,7 +161,7 @@ def run() -> dict:
     sim = {}
     if m:
         sim = {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3))}
-    from wavemesh import soc_cpu
+    from wavemesh.device import soc_cpu
 
     return {"budget": {"per_sample": PER_SAMPLE, "per_output_triangle": PER_TRIANGLE}, "cases": cases,
             "simulator": sim, "code": code, "cpu": soc_cpu.selected().name}
@@ -209,7 +209,8 @@ def markdown(results: dict) -> str:
         "`wavemesh stream` through the simulated board (Verilator model of soc_top: "
         f"{results.get('cpu', 'picorv32')} + firmware + FPGA stage with the triangle error engine, "
         "docs/soc.md) in fast UART mode; device cycles per stage from `--report` (`device_cycles`).  "
-        "Inputs: wavemesh.synth's Ball and Box at 256 x 256 with `--decimate 8`, matplotlib's Jacksboro DEM "
+        "Inputs: wavemesh.io.synth's Ball and Box at 256 x 256 with `--decimate 8`, matplotlib's Jacksboro "
+        "DEM "
         "(`--key elevation --decimate 16 --zeta 15`, metres); held out (never used while cutting cycles) "
         "and reported apart, the lidar DEM of bench/datasets.py (400 x 400, as .npy: grid steps) with "
         "`--decimate 8`; other options "

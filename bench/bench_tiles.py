@@ -68,7 +68,7 @@ def one(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
     import resource
 
     from wavemesh import api, tiles
-    from wavemesh.native import RefineParams
+    from wavemesh.refine.native import RefineParams
 
     path = str(terrain_file(n))
     params = api.MeshParams(refine=RefineParams(zeta=ZETA, metric="vertical"))
@@ -141,8 +141,8 @@ def dem_overhead() -> list[dict]:
     """The benchmark DEMs: triangles tiled (default tile and smaller ones) against untiled, in process."""
     import datasets as D
     from wavemesh import api, tiles
-    from wavemesh.heightfield import from_array
-    from wavemesh.native import RefineParams
+    from wavemesh.io.heightfield import from_array
+    from wavemesh.refine.native import RefineParams
 
     rows = []
     for name in DEMS:

@@ -35,7 +35,7 @@ def cycles() -> list[dict]:
 
 def fpga(target: str) -> dict:
     import fpga as fp
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     # synth_pnr reads the sources with no include path; Yosys also looks in its working directory,
     # so the generated wm_templates.vh is written there (generated, as `make gen` does, not copied)

@@ -1,4 +1,4 @@
-"""Mesh writers: wavemesh's own OBJ and PLY writers (wavemesh.meshio) against meshio's and
+"""Mesh writers: wavemesh's own OBJ and PLY writers (wavemesh.io.meshio) against meshio's and
 trimesh's on a mesh of 1M triangles.
 
 The target: OBJ/PLY through meshio or trimesh unless wavemesh's writer is at least 3x faster on
@@ -6,7 +6,7 @@ The target: OBJ/PLY through meshio or trimesh unless wavemesh's writer is at lea
 0..1000 with full double precision, the hard case for text), split into 1,002,528 triangles.  Each writer
 writes it to a temporary file, 3 times; the time is the least CPU time of the process (time.process_time:
 what the writer costs, not what the other jobs on the machine cost).  Every file is read back with
-wavemesh.meshio.read_mesh: *exact* means the same triangles and the same doubles as the heights
+wavemesh.io.meshio.read_mesh: *exact* means the same triangles and the same doubles as the heights
 (the OBJ text of a lossy writer reads back rounded); *same bytes* that the 3 writes gave the same file
 (`wavemesh stream` and `wavemesh mesh` must write the same file byte for byte); *grid* that the file
 names the grid size (`# wavemesh W H`, `comment wavemesh W H`: read_mesh needs it when a mesh does not
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-TITLE = "Mesh writers: wavemesh.meshio against meshio and trimesh (1M triangles)"
+TITLE = "Mesh writers: wavemesh.io.meshio against meshio and trimesh (1M triangles)"
 N = 709  # samples per side: 2 x 708^2 = 1,002,528 triangles
 REPEATS = 3
 TARGET = 3.0  # the target: wavemesh's writer at least this much faster, else a kept library writes
@@ -44,7 +44,7 @@ def writers() -> dict:
     """name -> (format, write(path, mesh, heights))."""
     import meshio as mio
     import trimesh
-    from wavemesh import meshio as wm
+    from wavemesh.io import meshio as wm
 
     def points(mesh, heights):
         return np.column_stack([mesh.xy.astype(np.float64), mesh.z(heights)])
@@ -70,7 +70,7 @@ def run() -> dict:
 
     from datasets import terrain
     from peers import code_state
-    from wavemesh.meshio import read_mesh
+    from wavemesh.io.meshio import read_mesh
 
     heights = terrain(N)
     mesh = grid_mesh(N)
@@ -109,7 +109,7 @@ def markdown(results: dict) -> str:
         f"Every sample of a {results['n']} x {results['n']} grid of bench/datasets.py's synthetic terrain "
         f"({results['vertices']:,} vertices, {results['triangles']:,} triangles), written by each writer: "
         "the least CPU time (time.process_time) of 3 writes of the whole file, its size, and whether "
-        "wavemesh.meshio.read_mesh reads back the same triangles and the same doubles (*exact*).  "
+        "wavemesh.io.meshio.read_mesh reads back the same triangles and the same doubles (*exact*).  "
         + ", ".join(f"{k} {v}" for k, v in results["versions"].items()) + ".  `make bench-writers`.",
         "",
         code_line(results.get("code")),

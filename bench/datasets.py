@@ -77,7 +77,7 @@ def lidar_dem() -> np.ndarray:
 def motorcycle() -> np.ndarray:
     """Middlebury 2014 Motorcycle ground-truth disparity (skimage's copy); unknown pixels (inf) filled
     with the nearest known disparity (wavemesh's --fill nearest)."""
-    from wavemesh.heightfield import fill_nearest
+    from wavemesh.io.heightfield import fill_nearest
 
     d = np.load(package_file("scikit-image", "skimage/data/motorcycle_disp.npz"))["arr_0"].astype(np.float64)
     bad = ~np.isfinite(d)
@@ -93,7 +93,7 @@ def moon() -> np.ndarray:
 
 def _synth(name: str):
     def make() -> np.ndarray:
-        from wavemesh.synth import make as synth
+        from wavemesh.io.synth import make as synth
 
         return synth(name).astype(np.float64)
 

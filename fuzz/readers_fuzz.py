@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""fuzz_readers: the height-field and mesh readers (host/wavemesh/heightfield.py, meshio.py) under
+"""fuzz_readers: the height-field and mesh readers (host/wavemesh/io/heightfield.py, meshio.py) under
 atheris, coverage-guided over wavemesh's own Python code (GDAL, numpy and Pillow are run, not traced).
 
 An input is ``kind, options, file bytes``: ``kind`` picks the file name the bytes are written under
@@ -32,8 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "host"))
 with atheris.instrument_imports(include=["wavemesh"]):
     from wavemesh.check import check_mesh
     from wavemesh.errors import InputError
-    from wavemesh.heightfield import HeightField, load_heightfield
-    from wavemesh.meshio import read_mesh
+    from wavemesh.io.heightfield import HeightField, load_heightfield
+    from wavemesh.io.meshio import read_mesh
 
 import numpy as np  # noqa: E402  (after the instrumented imports, not traced itself)
 

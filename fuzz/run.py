@@ -48,7 +48,7 @@ def build() -> None:
     if shutil.which(CLANG) is None:
         raise SystemExit(f"error: {CLANG} not found\nhint: `make setup` installs clang and libclang-rt-dev")
     py = ROOT / ".venv" / "bin" / "python"
-    subprocess.run([str(py if py.exists() else sys.executable), "-m", "wavemesh.gen", str(GEN)],
+    subprocess.run([str(py if py.exists() else sys.executable), "-m", "wavemesh.device.gen", str(GEN)],
                    check=True, stdout=subprocess.DEVNULL, cwd=ROOT)
     env = dict(os.environ, CC=CLANG)
     subprocess.run(["cmake", "-S", str(FUZZ), "-B", str(BUILD), f"-DWM_GEN_DIR={GEN}"], check=True, env=env,

@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from wavemesh import protocol as P
+from wavemesh.device import protocol as P
 
 CORPUS = Path(__file__).resolve().parent / "corpus"
 MAX_SIDE = 24
@@ -130,7 +130,7 @@ SEEDS = {
 def refine_job(w: int, h: int, levels: int, zeta_q: int, shape: int, amp: int, metric: int = 0,
                flags: int = 0,
                iterations: int = 1, budget: int = 0) -> bytes:
-    """A refine_fuzz.c input: a job with the host's default parameters (wavemesh.native.fixed_params of
+    """A refine_fuzz.c input: a job with the host's default parameters (wavemesh.refine.native.fixed_params of
     RefineParams() at a height scale of 1) but those given."""
     s = Script()
     s.pick(w, 2, 40)

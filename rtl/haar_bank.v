@@ -4,7 +4,7 @@
  * Height samples enter in raster order, one per clock at most; for every level m = 1..cfg_levels
  * the bank emits one record per 2 x 2 block of level m-1's approximation: the approximation a and
  * the details d1, d2, d3, with the level and the block position.  Bit for bit the integers of
- * host/wavemesh/haar.py, padding included (an odd last column or row pairs with itself).
+ * host/wavemesh/model/haar.py, padding included (an odd last column or row pairs with itself).
  *
  * Structure: a cascade of haar_level instances.  Level m's records go to a small record FIFO,
  * its approximations also to a 16-bit FIFO in front of level m+1; the output merge hands out one
@@ -65,7 +65,7 @@ module haar_bank #
     parameter FIFO_DEPTH = 2,
     // Approximations buffered in front of each level from the second on; >= 2 (any number)
     parameter APPROX_FIFO_DEPTH = 2,
-    // The filters: 0 Haar (haar_level), 1 the spline wavelet (spline_level, host/wavemesh/spline.py)
+    // The filters: 0 Haar (haar_level), 1 the spline wavelet (spline_level, host/wavemesh/model/spline.py)
     parameter WAVELET = 0,
     // 1: a validity mask beside the samples (s_axis_tuser, 1 = invalid; --nodata hole, issue 20) and
     // every record's flag on m_axis_tuser[36]: 1 when its block's samples hold an invalid one (the OR

@@ -18,7 +18,7 @@
  *
  * Memory layouts (docs/soc.md, "The FPGA stage"):
  *
- *   COEF  the layout of wm_details_offset (firmware/include/wavemesh.h) and wavemesh.haar: level by
+ *   COEF  the layout of wm_details_offset (firmware/include/wavemesh.h) and wavemesh.model.haar: level by
  *         level from m = 1, each level ceil(H / 2^m) rows of ceil(W / 2^m) cells, each cell three
  *         entries d1, d2, d3; so the firmware hands the memory to the refiner as its int32 array
  *   TOUT  one entry per block (by, bx) of level M at by * ceil((W-1) / 2^M) + bx:

@@ -4,7 +4,7 @@
  * The CPU is the default VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv.v, never copied
  * here): RV32IM, 5 stages, 4 KiB instruction cache, 4 KiB write-through data cache, one-cycle
  * multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
- * WM_CPU_VEXRISCV is defined (host/wavemesh/soc_cpu.py chooses; docs/soc.md, "The CPU").
+ * WM_CPU_VEXRISCV is defined (host/wavemesh/device/soc_cpu.py chooses; docs/soc.md, "The CPU").
  *
  * Its two Wishbone buses (classic cycles; the caches refill 32-byte lines as bursts of 8 words, one
  * word per ACK) share the native bus: mem_valid, mem_addr, mem_wdata, mem_wstrb are the granted

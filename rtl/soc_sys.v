@@ -2,7 +2,7 @@
  * wavemesh: the SoC's system register block
  *
  * Registers (offsets in the block; docs/soc.md has the tables, generated from
- * host/wavemesh/memmap.py):
+ * host/wavemesh/device/memmap.py):
  *
  *   0x00 CYCLE_LO        cycles since reset [31:0]; reading it latches [63:32] for CYCLE_HI
  *   0x04 CYCLE_HI        cycles since reset [63:32] as latched by the last CYCLE_LO read

@@ -3,8 +3,8 @@
  *
  * The CPU comes from the pythondata-cpu-picorv32 package (picorv32.v, never copied here); with
  * WM_CPU_VEXRISCV defined it is the VexRiscv of pythondata-cpu-vexriscv behind the same native bus
- * (soc_cpu_vexriscv; host/wavemesh/soc_cpu.py chooses, docs/soc.md "The CPU").  Memory
- * map (docs/soc.md; generated from host/wavemesh/memmap.py into wm_memmap.vh):
+ * (soc_cpu_vexriscv; host/wavemesh/device/soc_cpu.py chooses, docs/soc.md "The CPU").  Memory
+ * map (docs/soc.md; generated from host/wavemesh/device/memmap.py into wm_memmap.vh):
  *
  *   0x0000_0000  FW_RAM  firmware RAM (block RAM), FW_RAM_BYTES, loaded from FW_HEX; reset vector 0
  *   0x8000_0000  UART    soc_uart registers
@@ -167,7 +167,7 @@ wire        mem_ready = mem_ready_reg || sdram_cpu_ready;
 reg  [31:0] mem_rdata;
 
 `ifdef WM_CPU_VEXRISCV
-// the VexRiscv with its caches, its Wishbone buses on the native bus (host/wavemesh/soc_cpu.py chooses)
+// the VexRiscv with its caches, its Wishbone buses on the native bus (host/wavemesh/device/soc_cpu.py chooses)
 soc_cpu_vexriscv #(
     .PROGADDR_RESET(32'h0000_0000),
     .FETCH_LIMIT(FW_LIMIT)

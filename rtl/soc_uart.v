@@ -2,7 +2,7 @@
  * wavemesh: the SoC's UART register block (DATA, STATUS, DIV)
  *
  * uart_rx -> RX FIFO -> DATA reads; DATA writes -> TX FIFO -> uart_tx.  Registers (offsets in the
- * block, bits in docs/soc.md, generated from host/wavemesh/memmap.py):
+ * block, bits in docs/soc.md, generated from host/wavemesh/device/memmap.py):
  *
  *   0x00 DATA    read: pop the oldest byte [7:0], bit 31 EMPTY when there was none; write: queue [7:0]
  *   0x04 STATUS  RX_VALID, RX_FULL, TX_FULL, TX_EMPTY, TX_IDLE; sticky RX_OVERRUN, RX_FRAME_ERR,

@@ -1,6 +1,6 @@
 /*
  * wavemesh: one level of the integer 2D spline-wavelet filter bank (docs/model.md, "Filter bank";
- * host/wavemesh/spline.py is the specification, matched bit for bit)
+ * host/wavemesh/model/spline.py is the specification, matched bit for bit)
  *
  * The interface, the stall rule (every register advances only when en is high) and the record
  * order (raster order of the blocks) are haar_level's, so haar_bank builds either (WAVELET).  Per

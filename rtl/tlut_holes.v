@@ -3,7 +3,7 @@
  *
  * Takes a height field's validity mask, a bit per sample in raster order (1: the sample is invalid),
  * and gives, for every block of the template stage, whether it holds an invalid sample: the blocks of
- * wavemesh.label, S = 2^levels grid steps a side, block (j, i) spanning samples
+ * wavemesh.model.label, S = 2^levels grid steps a side, block (j, i) spanning samples
  * [iS, min((i+1)S, W-1)] x [jS, min((j+1)S, H-1)], closed, so a sample on a block boundary counts for
  * every block it bounds.  The reference model is wavemesh.holes.block_flags; tests/rtl/test_tlut_holes.py
  * checks every flag against it.  The mesh does not need the flags (the templates see filled heights and

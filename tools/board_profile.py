@@ -140,7 +140,7 @@ def _refiner_struct_bytes() -> int:
 
 def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
     """(start address, name), ascending: the firmware RAM's parts, the SDRAM's areas, the refiner's arrays."""
-    from wavemesh import memmap as mm
+    from wavemesh.device import memmap as mm
 
     def a8(n: int) -> int:
         return (n + 7) & ~7

@@ -85,15 +85,15 @@ class FlowError(RuntimeError):
 
 
 def cpu():
-    """The SoC's CPU: host/wavemesh/soc_cpu.py's choice ($WM_CPU, `make bitstream ... CPU=NAME`)."""
-    from wavemesh import soc_cpu
+    """The SoC's CPU: host/wavemesh/device/soc_cpu.py's choice ($WM_CPU, `make bitstream ... CPU=NAME`)."""
+    from wavemesh.device import soc_cpu
 
     return soc_cpu.selected()
 
 
 def work_folder(board: Board) -> Path:
     """build/boards/BOARD, or BOARD-NAME for a CPU other than the default (a board with the SoC)."""
-    from wavemesh import soc_cpu
+    from wavemesh.device import soc_cpu
 
     return OUT / (board.name + (soc_cpu.suffix(cpu()) if board.firmware else ""))
 
@@ -122,7 +122,7 @@ def _last_error(text: str) -> str:
 
 
 def _stamp(board: Board, fw_hex: Path | None, seed: int) -> str:
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     write_all(GEN)
     h = hashlib.sha256(f"{board}|seed={seed}|margin={MARGIN}|cpu={cpu().name}".encode())

@@ -15,12 +15,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
-from wavemesh import api, synth  # noqa: E402
+from wavemesh import api  # noqa: E402
 from wavemesh.check import check_mesh, mesh_errors  # noqa: E402
-from wavemesh.denoise import denoise_values  # noqa: E402
 from wavemesh.harness import jacksboro  # noqa: E402
-from wavemesh.heightfield import from_array  # noqa: E402
-from wavemesh.native import RefineParams  # noqa: E402
+from wavemesh.io import synth  # noqa: E402
+from wavemesh.io.heightfield import from_array  # noqa: E402
+from wavemesh.refine.denoise import denoise_values  # noqa: E402
+from wavemesh.refine.native import RefineParams  # noqa: E402
 
 SIGMA = 2.0  # the noise of the de-noising sets, height units
 NOISE_SEED = 11
@@ -96,7 +97,7 @@ def markdown() -> str:
          "refinement takes place in that region\" and it \"remains in its primitive stage\".  `--roi` names "
          "the region to keep: rectangles of samples `X,Y,W,H` or a mask image of the grid's size (non-zero "
          "inside), repeatable, in the coordinates of the grid meshed (after `--crop` and `--decimate`).  "
-         "The job then (host/wavemesh/roi.py, firmware/src/roi.c):",
+         "The job then (host/wavemesh/model/roi.py, firmware/src/roi.c):",
          "",
          "- sets the details of levels 1 .. M-1 to 0 in every cell without an ROI sample, so the energy "
          "test (4.12) selects nothing outside; level M's details are kept, so the initial triangulation "
@@ -156,7 +157,8 @@ def markdown() -> str:
           "reconstructed data is used for the height value\", the thresholds by \"Stein's unbiased risk "
           "estimate method\" with \"soft-thresholding for detail coefficients at each decomposition level\", "
           "and a 5 x 5 median filter for peak noise.  What the text leaves open and what we chose "
-          "(host/wavemesh/denoise.py): the orthonormal 2-D Haar transform in floating point over the mesh's "
+          "(host/wavemesh/refine/denoise.py): the orthonormal 2-D Haar transform in floating point over the "
+          "mesh's "
           "default M levels (orthonormal, so white noise stays white with the same sigma in every band, as "
           "SURE assumes); sigma = median(|d|) / 0.6745 of the finest diagonal band; per level and band the "
           "threshold sigma t* with t* the minimiser of SURE over [0, sqrt(2 ln n)]; soft thresholding, the "
@@ -197,7 +199,7 @@ def markdown() -> str:
 
 
 def pictures() -> None:
-    from wavemesh.render import render_mesh
+    from wavemesh.check.render import render_mesh
 
     hf, runs = roi_runs()
     for name, file in (("left half (the ball)", "selective-left.png"),

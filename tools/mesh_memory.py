@@ -24,7 +24,7 @@ RUN = ("import sys; from wavemesh.cli import main; main(sys.argv[1:]); "
 
 
 def heights(kind: str, n: int) -> np.ndarray:
-    from wavemesh import synth
+    from wavemesh.io import synth
 
     if kind == "flat":
         return np.zeros((n, n), np.float32)

@@ -69,7 +69,7 @@ def stage_params(top: dict) -> dict:
 
 def netlist(board: boards.Board, params: dict, quiet: bool) -> Path:
     """Synthesise the board top with `params` into a Verilog netlist (skipped when nothing changed)."""
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     write_all(boards.GEN)
     work = OUT / board.name

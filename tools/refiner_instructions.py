@@ -53,7 +53,7 @@ def parse_set(text: str | None) -> dict:
     """--set's NAME=VALUE,... as RefineParams keywords (and "levels"); SystemExit naming a bad one."""
     import dataclasses
 
-    from wavemesh import native
+    from wavemesh.refine import native
 
     kinds = {f.name: f.type for f in dataclasses.fields(native.RefineParams)}
     out = {}
@@ -75,9 +75,10 @@ def write_inputs(folder: Path, changes: dict | None = None) -> list[tuple[str, P
     import bench_quality as Q
     import datasets as D
     from fwio import write_input
-    from wavemesh import api, native
-    from wavemesh.haar import decompose
-    from wavemesh.heightfield import from_array
+    from wavemesh import api
+    from wavemesh.io.heightfield import from_array
+    from wavemesh.model.haar import decompose
+    from wavemesh.refine import native
 
     out = []
     for name, want in PAIRS:
@@ -103,8 +104,9 @@ def cli_input(spec: str, path: Path) -> str:
     import shlex
 
     from fwio import write_input
-    from wavemesh import api, cli, native
+    from wavemesh import api, cli
     from wavemesh.harness import jacksboro
+    from wavemesh.refine import native
 
     src, *opts = shlex.split(spec)
     if src == "JACKSBORO":

@@ -13,9 +13,10 @@ from quantized_mesh_encoder import encode
 from quantized_mesh_encoder.normals import oct_encode as encoder_oct
 from quantized_mesh_tile.terrain import TerrainTile
 from quantized_mesh_tile.utils import octDecode
-from wavemesh import api, terrain
-from wavemesh.heightfield import from_array
-from wavemesh.native import RefineParams
+from wavemesh import api
+from wavemesh.io import terrain
+from wavemesh.io.heightfield import from_array
+from wavemesh.refine.native import RefineParams
 
 
 def decode(data: bytes, bounds, lighting: bool) -> TerrainTile:
@@ -30,7 +31,8 @@ def pyramid() -> None:
                         key="elevation")
     s = terrain.sampler(hf)
     top = terrain.default_max_zoom(s)
-    worst = {"encode()": [0.0, 0.0, 0], "wavemesh.terrain": [0.0, 0.0, 0]}  # u units, h steps, edges missed
+    # u units, h steps, edges missed
+    worst = {"encode()": [0.0, 0.0, 0], "wavemesh.io.terrain": [0.0, 0.0, 0]}
     tiles = edges = 0
     for level in range(top + 1):
         x0, y0, x1, y1 = terrain.tiles_at(level, s.bounds)
@@ -52,7 +54,7 @@ def pyramid() -> None:
                 edges += int(on.sum())
                 ours = terrain.encode_tile(m, zv, level, x, y)
                 for name, data, lighting in (("encode()", f.getvalue(), False),
-                                             ("wavemesh.terrain", ours, True)):
+                                             ("wavemesh.io.terrain", ours, True)):
                     t = decode(data, b, lighting)
                     # decoded vertices come in another order: match them by their (u, v) to the nearest grid
                     u = np.array(t.u, float)

@@ -106,7 +106,7 @@ int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap);
 int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t height, int32_t tri_cap,
                  int32_t vert_cap);
 
-/* Fills an empty mesh from triangle arrays as wavemesh.initial makes them: xy[2 nv] (x, y pairs),
+/* Fills an empty mesh from triangle arrays as wavemesh.model.initial makes them: xy[2 nv] (x, y pairs),
  * tris[3 nt] counter-clockwise vertex indices.  scratch: 3 nt words, clobbered.
  * WM_ERR_CAPACITY: nt > tri_cap or nv > vert_cap; WM_ERR_ARG: an index or coordinate out of range;
  * WM_ERR_MESH: not a proper triangulation (orientation, edges, border, area, unused vertex). */
@@ -119,7 +119,7 @@ int32_t wm_mesh_export(const wm_mesh *m, int32_t *xy, int32_t *tris);
 /* The full invariant check, O(n): live indices, counter-clockwise triangles, opposite half-edges
  * that match (same edge, reversed), border half-edges on the rectangle's border, vh consistent,
  * free lists sound, doubled areas adding up to 2 (W-1)(H-1), Euler's T = 2V - B - 2.
- * WM_OK or WM_ERR_MESH.  Together these imply a proper triangulation (host/wavemesh/check.py gives
+ * WM_OK or WM_ERR_MESH.  Together these imply a proper triangulation (host/wavemesh/check/__init__.py gives
  * the proof), except for two vertices at one position, which no operator can create. */
 int wm_mesh_check(const wm_mesh *m);
 
@@ -205,7 +205,7 @@ int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touche
 /* ---------------------------------------------------------------------------------------------- */
 /* The height field, its wavelet details, the parameters */
 
-/* Detail coefficients as wavemesh.haar computes them (docs/model.md, "Filter bank"): for each level
+/* Detail coefficients as wavemesh.model.haar computes them (docs/model.md, "Filter bank"): for each level
  * m = 1..M, ceil(H / 2^m) rows of ceil(W / 2^m) cells, each cell three int32 (d1, d2, d3), levels
  * one after the other from m = 1.  d is twice the difference of half-block means in sample counts. */
 int64_t wm_details_offset(int32_t width, int32_t height, int32_t m); /* int32 index of level m */
@@ -216,7 +216,7 @@ int64_t wm_details_size(int32_t width, int32_t height, int32_t levels); /* int32
 int64_t wm_haar_scratch(int32_t width, int32_t height);
 int wm_haar(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
             uint16_t *scratch);
-/* The spline wavelet's filter bank (host/wavemesh/spline.py), the same detail layout as wm_haar;
+/* The spline wavelet's filter bank (host/wavemesh/model/spline.py), the same detail layout as wm_haar;
  * scratch holds wm_spline_scratch() uint16s and must be 4-byte aligned. */
 int64_t wm_spline_scratch(int32_t width, int32_t height);
 int wm_spline(const uint16_t *samples, int32_t width, int32_t height, int32_t levels, int32_t *details,
@@ -256,7 +256,7 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
 #define WM_NEIGHBOURHOOD_FACE 0   /* face-based neighbourhood (4.10), the coefficients the triangle holds */
 #define WM_NEIGHBOURHOOD_VERTEX 1 /* vertex-based neighbourhood (4.9), coefficient at the vertex */
 
-/* Parameters (Table 4.3) as fixed-point numbers.  The host converts them (host/wavemesh/native.py)
+/* Parameters (Table 4.3) as fixed-point numbers.  The host converts them (host/wavemesh/refine/native.py)
  * with the rounding stated for each, and wm_params_check rejects values out of range. */
 typedef struct wm_params {
     int32_t metric;         /* WM_METRIC_* */
@@ -294,7 +294,7 @@ typedef struct wm_params {
 /* WM_OK, or WM_ERR_ARG when a parameter is out of its range. */
 int wm_params_check(const wm_params *p);
 
-/* sizeof of the structures a foreign-function interface fills in (host/wavemesh/native.py checks
+/* sizeof of the structures a foreign-function interface fills in (host/wavemesh/refine/native.py checks
  * its own layout against these): WM_ABI_PARAMS, WM_ABI_FIELD, WM_ABI_STATS; 0 for anything else. */
 #define WM_ABI_PARAMS 0
 #define WM_ABI_FIELD 1

@@ -2,7 +2,7 @@
  * (quantisation of float heights, the final check's error measure), in hosted C with doubles and
  * threads.  Not part of the refiner's freestanding core (src/) and never built for the board.
  *
- * Each function equals its Python reference model bit for bit (host/wavemesh/heightfield.py's
+ * Each function equals its Python reference model bit for bit (host/wavemesh/io/heightfield.py's
  * quantise, check.py's mesh_errors), whatever the thread count: the threads split the work into
  * independent parts (samples, triangles) and combine them by min / max, which do not depend on the
  * order (tests/host/test_host_stages.py).  threads <= 1 runs on the calling thread. */

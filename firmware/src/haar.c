@@ -1,4 +1,4 @@
-/* The integer 2-D Haar filter bank of host/wavemesh/haar.py (docs/model.md, "Filter bank"), for
+/* The integer 2-D Haar filter bank of host/wavemesh/model/haar.py (docs/model.md, "Filter bank"), for
  * tests and for a device without the FPGA stage.  Per level, on 2 x 2 blocks of the previous
  * approximation (odd sizes repeat their last column / row):
  *

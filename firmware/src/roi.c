@@ -1,7 +1,7 @@
 /* Selective triangulation (dissertation 5.6): a region of interest (ROI) the error measure keeps to.
  *
  * The dissertation masks the wavelet details outside the region so that "no refinement takes place in
- * that region"; the host does that to the details it hands in (wavemesh/roi.py).  This file does the
+ * that region"; the host does that to the details it hands in (wavemesh/model/roi.py).  This file does the
  * rest for the refiner, which also refines wherever E(T) > zeta (the candidates of 4.3, the error
  * bound, the reduction's and the regularisation's tests): with an ROI, E(T) is the largest distance
  * over the triangle's samples that lie in the ROI, and 0 for a triangle with none.

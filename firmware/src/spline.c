@@ -1,4 +1,4 @@
-/* The integer 2-D spline-wavelet filter bank of host/wavemesh/spline.py (docs/model.md, "The spline
+/* The integer 2-D spline-wavelet filter bank of host/wavemesh/model/spline.py (docs/model.md, "The spline
  * wavelet"), for a device without the FPGA stage (the native stand-in device) and for tests: the
  * same detail layout as wm_haar (wm_details_offset), so the refiner takes either.  Per level, with
  * every index clamped into the previous approximation a (h x w):

@@ -20,10 +20,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "refiner.md"
 
-from wavemesh import api, native, synth  # noqa: E402
+from wavemesh import api  # noqa: E402
 from wavemesh.check import mesh_errors  # noqa: E402
-from wavemesh.haar import WAVELETS  # noqa: E402
-from wavemesh.heightfield import from_array  # noqa: E402
+from wavemesh.io import synth  # noqa: E402
+from wavemesh.io.heightfield import from_array  # noqa: E402
+from wavemesh.model.haar import WAVELETS  # noqa: E402
+from wavemesh.refine import native  # noqa: E402
 
 # Table 5.6 of the dissertation: |Gamma_m| and E_max (normal distance) per level m, M = 5.
 PAPER_5_6 = {
@@ -193,7 +195,7 @@ def refine_rows(hf, levels: int, kw: dict):
 def energetic_fraction(hf, delta_d: float, zeta: float, levels: int = 5, wavelet: str = "haar") -> list[float]:
     """The share of detail cells per level that region.c calls energetic (energy per sample over zeta^2
     above delta_d), levels 1 .. levels - 1."""
-    from wavemesh.haar import decompose
+    from wavemesh.model.haar import decompose
 
     th = native.fixed_params(native.RefineParams(delta_d=delta_d, zeta=zeta), hf.scale).delta_d
     out = []

@@ -1,17 +1,20 @@
 """wavemesh: wavelet-based multiresolution triangle meshes from height fields.
 
 The package is the executable specification of the whole system (the reference
-model the RTL and the firmware are tested against) and the host tool.  Modules:
+model the RTL and the firmware are tested against) and the host tool.  Its
+folders follow the data flow (read -> model stages -> refine -> write, and the
+device path beside it):
 
-- ``heightfield``: reading height fields and quantising them to 16-bit samples
-- ``haar``: the integer multi-level 2D Haar filter bank
-- ``templates``: the template set, generated from ``template_forms``
-- ``label``: the dominant-coefficient labeller and the variant resolver
-- ``initial``: assembly of the initial triangulation
-- ``native``: the firmware refiner, built natively and loaded through ctypes
-- ``mesh``, ``meshio``, ``check``, ``render``: the mesh type, its files, validity, errors, pictures
-- ``protocol``, ``link``, ``stream``: the wire protocol, its frames, a session with a device
-- ``memmap``, ``gen``: the SoC memory map and the files generated from the single sources
+- ``io``: reading height fields (``heightfield``), writing and reading meshes (``meshio``, ``terrain``),
+  where the samples lie (``georef``), outputs written whole or not at all (``outputs``), ``synth``
+- ``model``: the filter bank (``haar``, ``spline``), the templates (``template_forms``, ``templates``),
+  the labeller (``label``), the initial triangulation (``initial``), ``tri_scan``, ``roi``
+- ``refine``: the firmware refiner, built natively and loaded through ctypes (``native``), ``denoise``
+- ``device``: the wire protocol (``protocol``), its frames (``link``), a session (``stream``), the
+  SoC memory map (``memmap``), the files generated from the single sources (``gen``)
+- ``check``: a mesh's validity and errors; ``check.render``: its picture
+- ``tiles``: seamless tiles over the whole pipeline
+- ``mesh``, ``errors``, ``limits``: what every stage shares
 - ``api``: the typed functions: ``api.mesh(hf, params)`` and ``api.stream(hf, port, params)`` return a
   ``MeshResult``, ``api.write_result`` writes its files
 - ``cli``: the ``wavemesh`` command, argument parsing over ``api``

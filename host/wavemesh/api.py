@@ -26,8 +26,8 @@ import numpy as np
 from wavemesh import __version__, limits
 from wavemesh.check import ErrorReport, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
-from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
-from wavemesh.georef import (
+from wavemesh.io.georef import SIDECAR_SUFFIX as SIDECAR
+from wavemesh.io.georef import (
     apply_overrides,
     cropped,
     grid_ground,
@@ -37,22 +37,23 @@ from wavemesh.georef import (
     sidecar_path,
     to_grid,
 )
-from wavemesh.haar import WAVELETS, decompose
-from wavemesh.heightfield import HeightField, from_array, load_heightfield, parse_fill
-from wavemesh.initial import InitialResult, assemble, initial_triangulation
-from wavemesh.label import Labelling, tau_counts
+from wavemesh.io.heightfield import HeightField, from_array, load_heightfield, parse_fill
+from wavemesh.io.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
+from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
 from wavemesh.mesh import Mesh
-from wavemesh.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
-from wavemesh.native import RefineOutput, RefineParams, fixed_params
-from wavemesh.outputs import Inputs, Outputs, as_inputs, check_path, distinct
+from wavemesh.model.haar import WAVELETS, decompose
+from wavemesh.model.initial import InitialResult, assemble, initial_triangulation
+from wavemesh.model.label import Labelling, tau_counts
+from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
 # What `wavemesh mesh` does not use is imported where it is used, so that the command pays only for what
-# it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.stream, .link), holes
-# (wavemesh.holes), the region of interest (wavemesh.roi), de-noising (wavemesh.denoise), pictures, JSON.
+# it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.device.stream, .link), holes
+# (wavemesh.holes), the region of interest (wavemesh.model.roi), de-noising (wavemesh.refine.denoise),
+# pictures, JSON.
 if TYPE_CHECKING:
     from wavemesh import holes
-    from wavemesh.link import LinkStats
-    from wavemesh.stream import Device, DeviceInfo, Timeouts
+    from wavemesh.device.link import LinkStats
+    from wavemesh.device.stream import Device, DeviceInfo, Timeouts
 
 MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
@@ -74,7 +75,7 @@ class MeshJob:
     levels: int
     tau: float
     result: InitialResult
-    wavelet: str = "haar"  # the filter bank's (wavemesh.haar.WAVELETS)
+    wavelet: str = "haar"  # the filter bank's (wavemesh.model.haar.WAVELETS)
     details: np.ndarray | None = None  # the C filter bank's details (native.haar_details), None: not made
 
     @property
@@ -85,7 +86,7 @@ class MeshJob:
 def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = None,
                 wavelet: str = "haar", labelling: Labelling | None = None) -> MeshJob:
     """The initial triangulation of a height field (filter bank, labeller, templates); with ``labelling``
-    (the blocks' labels and templates as a device's template stage made them, wavemesh.stage) the
+    (the blocks' labels and templates as a device's template stage made them, wavemesh.device.stage) the
     templates of that labelling instead of the host's."""
     m, t = _levels_and_tau(hf, levels, tau)
     if wavelet not in WAVELETS:
@@ -95,7 +96,9 @@ def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = 
         mesh = assemble(labelling, hf.width, hf.height)
         result = InitialResult(mesh, labelling, tau_counts(t, hf.scale), m)
     else:
-        from wavemesh import native  # the C filter bank once, for the labeller and the refiner (tested equal)
+        from wavemesh.refine import (
+            native,  # the C filter bank once, for the labeller and the refiner (tested equal)
+        )
 
         details = native.haar_details(hf.samples, m, wavelet) if native.host_lib() is not None else None
         result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet, details)
@@ -199,7 +202,7 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
                denoise: str | None = None, max_hole: int = 0, check_memory: bool = False) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
     and --origin (of the file's grid), then --crop and --decimate, then --max-hole (holes.bridge), then
-    --denoise (wavemesh.denoise: what every command meshes and measures).  ``check_memory``: before the
+    --denoise (wavemesh.refine.denoise: what every command meshes and measures).  ``check_memory``: before the
     samples are read, the memory an untiled run of the grid takes is estimated (memory_check)."""
     if max_hole and (nodata != "hole" or max_hole < 0):
         raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
@@ -232,7 +235,7 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
         hf = bridge(hf, max_hole)
     if denoise is None:
         return hf
-    from wavemesh.denoise import denoise_heightfield
+    from wavemesh.refine.denoise import denoise_heightfield
 
     return denoise_heightfield(hf, denoise)[0]
 
@@ -333,7 +336,7 @@ class RefineJob:
     output: RefineOutput
     seconds: float  # time spent in the refiner
     errors: ErrorReport | None = None  # the final mesh's errors against the input (check.mesh_errors)
-    roi: np.ndarray | None = None  # the region of interest (wavemesh.roi), or None: the whole grid
+    roi: np.ndarray | None = None  # the region of interest (wavemesh.model.roi), or None: the whole grid
     roi_errors: ErrorReport | None = None  # the final mesh's errors over the ROI samples (roi.roi_errors)
     holes: holes.HoleCheck | None = None  # with holes (--nodata hole): the final mesh's check (drop_holes)
 
@@ -365,7 +368,7 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
     stopped it).  Lossless input: E_max by the chosen metric <= zeta on the input.  Lossy quantisation
     (docs/refiner.md): vertically on the input when zeta >= 2q, else E_max <= the zeta the refiner was
     given on the 16-bit samples it saw.  The float metric's own rounding is allowed (1e-9 relative).
-    With an ROI the bound and ``errors`` are over the ROI samples (wavemesh.roi)."""
+    With an ROI the bound and ``errors`` are over the ROI samples (wavemesh.model.roi)."""
     if not rjob.bound_met:
         return None
     p = rjob.params
@@ -374,7 +377,7 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
     if hf.lossless or (p.metric == "vertical" and p.zeta >= 2 * hf.max_quantisation_error):
         e, zeta, on = getattr(errors, metric), p.zeta, "the input"
     else:
-        from wavemesh.roi import roi_errors
+        from wavemesh.model.roi import roi_errors
 
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
         sp = ground(hf).spacing
@@ -396,8 +399,9 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     The final mesh is always checked: a proper triangulation (check_mesh) and, when the refiner reports
     the bound met, within zeta (mesh_errors, kept in ``errors``: its maxima, and its RMS when ``rms``);
     otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh.  ``roi``: an (H, W)
-    bool region of interest, the only place refined and bounded (selective triangulation, wavemesh.roi)."""
-    from wavemesh import native
+    bool region of interest, the only place refined and bounded (selective triangulation,
+    wavemesh.model.roi)."""
+    from wavemesh.refine import native
 
     params = params or RefineParams()
     params.check()
@@ -405,10 +409,10 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     job = triangulate(hf, levels, tau, wavelet, labelling)
     zeta = hf.refiner_zeta(params.zeta)  # the refiner sees the 16-bit samples
     start = time.perf_counter()
-    spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.georef)
+    spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.io.georef)
     details = job.levels  # the library's filter bank makes them (native.refine)
     if roi is not None:
-        from wavemesh.roi import mask_details, roi_errors
+        from wavemesh.model.roi import mask_details, roi_errors
 
         # 5.6: no detail energy outside the ROI
         details = mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
@@ -433,7 +437,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 
 def native_within(samples, fp):
     """native.error_within, imported when holes need it (the library loads, and builds if needed)."""
-    from wavemesh import native
+    from wavemesh.refine import native
 
     return native.error_within(samples, fp)
 
@@ -511,7 +515,7 @@ class MeshParams:
 
     levels: int | None = None  # M, 1..MAX_LEVELS; None: default_levels
     tau: float | None = None  # tau_M in height units; None: default_tau
-    wavelet: str = "haar"  # the filter bank (--wavelet): wavemesh.haar.WAVELETS
+    wavelet: str = "haar"  # the filter bank (--wavelet): wavemesh.model.haar.WAVELETS
     initial_only: bool = False  # stop after the template stage (--stage initial)
     refine: RefineParams = field(default_factory=RefineParams)  # the refiner's (ignored when initial_only)
     check_levels: bool = False  # also check and measure every coarser level (stream always does)
@@ -587,7 +591,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     roi = None
     if params.roi is not None:
-        from wavemesh.roi import parse_roi, roi_report
+        from wavemesh.model.roi import parse_roi, roi_report
 
         roi = parse_roi(params.roi, hf.width, hf.height)
     if roi is not None and (params.initial_only or not params.refine.bound):
@@ -711,20 +715,21 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
            progress: bool = False, log: Callable[[str], None] | None = None,
            warn: Callable[[str], None] | None = None) -> StreamResult:
     """`wavemesh stream` without the files: the job of :func:`mesh` on a device behind ``port`` (a
-    pyserial URL or an open port object) over the wire protocol (wavemesh.stream.Device).
+    pyserial URL or an open port object) over the wire protocol (wavemesh.device.stream.Device).
 
     The device's capacity bounds the job: an input larger than it holds, more levels than it makes, a
     --capacity or --max-triangles beyond its storage are DeviceErrors with a hint; without
     ``max_triangles`` the budget is its storage less one.  Every level is checked (a proper
     triangulation, else ProtocolError) and measured.  ``trace``: a text stream for the frames' hex
     dump; ``progress``: bars on stderr; ``log``: called with each line worth telling a user; ``baud`` and
-    ``timeouts``: by default wavemesh.link.DEFAULT_BAUD and wavemesh.stream.DEFAULT_TIMEOUTS.
+    ``timeouts``: by default wavemesh.device.link.DEFAULT_BAUD and wavemesh.device.stream.DEFAULT_TIMEOUTS.
     ``link_baud``: after HELLO move the line to this rate (``"auto"``: the fastest of
-    protocol.COMMON_BAUDS the device reaches; wavemesh.stream.Device.change_baud); a switch that does not
+    protocol.COMMON_BAUDS the device reaches; wavemesh.device.stream.Device.change_baud); a switch that does
+    not
     happen or fails is one line to ``warn`` and the job runs at ``baud``."""
-    from wavemesh import protocol as P
-    from wavemesh.link import DEFAULT_BAUD
-    from wavemesh.stream import (
+    from wavemesh.device import protocol as P
+    from wavemesh.device.link import DEFAULT_BAUD
+    from wavemesh.device.stream import (
         DEFAULT_TIMEOUTS,
         Device,
         DeviceError,
@@ -738,7 +743,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     params = params or MeshParams()
     p = params.refine
     p.check()
-    if params.roi is not None:  # no device takes an ROI (wavemesh.roi): refused before the port is opened
+    if params.roi is not None:  # no device takes an ROI (model.roi): refused before the port is opened
         raise InputError("--roi: selective triangulation runs on the host only; no device takes a region of "
                          "interest", hint="use `wavemesh mesh --roi ...`, or stream without --roi")
     m, tau = _levels_and_tau(hf, params.levels, params.tau)
@@ -872,7 +877,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
 def _switch_baud(dev, info, link_baud, say, warn):
     """--link-baud: the device's HELLO at the rate the line runs at from now on (the start rate after a
     switch that did not happen or failed: one line to ``warn`` says so)."""
-    from wavemesh import protocol as P
+    from wavemesh.device import protocol as P
 
     if link_baud == "auto":
         rate = next((b for b in P.COMMON_BAUDS if info.reachable(b)), None)
@@ -896,9 +901,10 @@ def _switch_baud(dev, info, link_baud, say, warn):
 def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: MeshParams, port, baud: int,
                      timeouts: Timeouts, progress: bool) -> StreamResult:
     """stream() on a device that states FEATURE_STAGE (the iCEBreaker's FPGA stage alone): its filter bank
-    and template stage label the blocks (wavemesh.stage), and the host does the rest as mesh() does, from
+    and template stage label the blocks (wavemesh.device.stage), and the host does the rest as mesh() does,
+    from
     that labelling: the same mesh as `wavemesh mesh` when the device's labels are the model's."""
-    from wavemesh import stage
+    from wavemesh.device import stage
 
     silence = timeouts.reply * timeouts.attempts
     with _Progress("heights", hf.width * hf.height, progress) as bar:
@@ -927,7 +933,7 @@ def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: Mes
 
 @dataclass(frozen=True)
 class MeshFiles:
-    """How the mesh files are written (wavemesh.meshio.write_mesh): ``units`` "metres" or "crs" for a
+    """How the mesh files are written (wavemesh.io.meshio.write_mesh): ``units`` "metres" or "crs" for a
     georeferenced grid, ``local`` (with "crs"), per-vertex ``normals``, a solid ``base`` (thickness below
     the lowest height), and ``normal_map``, a PNG of the heights' normals to write beside them."""
 
@@ -950,7 +956,7 @@ def check_outputs(output: str, *, lod: str | None = None, report: str | None = N
                   exaggeration: float | None = None) -> tuple[Path, Path | None]:
     """The output paths of `mesh` and `stream`, and the options of their mesh files, checked before any
     work: (mesh file, --lod folder).  None of them (nor the mesh's sidecar) may be one of ``inputs``
-    (wavemesh.outputs.Inputs)."""
+    (wavemesh.io.outputs.Inputs)."""
     inputs = as_inputs(inputs)
     out = _check_output(output, MESH_SUFFIXES, "mesh", inputs)
     inputs.refuse(sidecar_path(out), "the mesh's sidecar")
@@ -975,11 +981,11 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                  render: str | None = None, title: str | None = None, local: bool = False,
                  exaggeration: float | None = None, files: MeshFiles | None = None,
                  inputs: Inputs | list | None = None) -> list[str]:
-    """Write a result's files: the mesh (a format of wavemesh.meshio.FORMATS, in the frame ``files``
+    """Write a result's files: the mesh (a format of wavemesh.io.meshio.FORMATS, in the frame ``files``
     chooses, with its sidecar), each level's into ``lod``, the normal map, the JSON report and a
     picture (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in
     grid steps).  ``local``: MeshFiles(units="crs", local=True), as before ``files``.  None of them may
-    be one of ``inputs`` (the input file: wavemesh.outputs).  Returns the level files written."""
+    be one of ``inputs`` (the input file: wavemesh.io.outputs).  Returns the level files written."""
     if files is None:
         files = MeshFiles(units="crs", local=True) if local else MeshFiles()
     inputs = as_inputs(inputs)
@@ -993,7 +999,7 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
     opts = {"ground": g, "local": files.local, "units": files.units, "normals": files.normals,
             "base": files.base}
     written = []
-    with Outputs(inputs) as staged:  # every file whole, or none of them (wavemesh.outputs)
+    with Outputs(inputs) as staged:  # every file whole, or none of them (wavemesh.io.outputs)
         write_mesh(str(staged.path(out, (SIDECAR,), "mesh")), result.mesh, hf.values, comment=result.comment,
                    **opts)
         if folder is not None:
@@ -1004,7 +1010,7 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                            comment=f"{result.comment} level={level}", **opts)
                 written.append(str(path))
         if files.normal_map:
-            from wavemesh.meshio import write_normal_map
+            from wavemesh.io.meshio import write_normal_map
 
             write_normal_map(staged.path(files.normal_map, what="normal map"), hf.values, g.spacing)
         if report:
@@ -1029,7 +1035,7 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
 
 def _render(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> None:
     """A picture in true aspect: (east, north) in ground units; the exaggeration stated in it."""
-    from wavemesh.render import render_mesh  # matplotlib is slow to import; only when asked
+    from wavemesh.check.render import render_mesh  # matplotlib is slow to import; only when asked
 
     check_exaggeration(exaggeration)
     if exaggeration is None and g.georeferenced:
@@ -1050,7 +1056,7 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
     vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...).
     A mesh in map units is placed on the grid by its sidecar (PATH.georef.json), whose cell size the
     normal metric then uses; else by the height field's georeference.  ``roi`` (--roi's specs, or a bool
-    array): also the errors over the region of interest alone (``roi_errors``; wavemesh.roi).
+    array): also the errors over the region of interest alone (``roi_errors``; wavemesh.model.roi).
     ``min_area`` (with holes): the mesh was made with --min-area, whose dropped pieces may leave valid
     samples uncovered."""
     if roi is not None and hf.mask is not None:
@@ -1058,7 +1064,7 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
     if min_area > 0 and hf.mask is None:
         raise InputError("--min-area checks a mesh with holes", hint="use it with --nodata hole")
     if roi is not None:
-        from wavemesh.roi import parse_roi, roi_errors
+        from wavemesh.model.roi import parse_roi, roi_errors
 
         roi = parse_roi(roi, hf.width, hf.height)
     placed = read_sidecar(path)
@@ -1126,7 +1132,7 @@ def write_json(path: str, data: dict, inputs: Inputs | list | None = None) -> No
 
 def write_synth(name: str, output: str, size: int | None = None) -> Path:
     """`wavemesh synth`: one of the dissertation's synthetic sets into an .npy file."""
-    from wavemesh.synth import make
+    from wavemesh.io.synth import make
 
     out = _check_output(output, (".npy",), "height field")
     if size is not None and not 2 <= size <= 16384:

@@ -15,10 +15,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from wavemesh import __version__, api
-from wavemesh.denoise import METHODS
 from wavemesh.errors import MeshInvalid, WavemeshError
-from wavemesh.haar import WAVELETS
-from wavemesh.native import RefineParams
+from wavemesh.model.haar import WAVELETS
+from wavemesh.refine.denoise import METHODS
+from wavemesh.refine.native import RefineParams
 
 
 class _Parser(argparse.ArgumentParser):
@@ -99,7 +99,7 @@ def _input_options(p: argparse.ArgumentParser) -> None:
 def _mesh_options(p: argparse.ArgumentParser) -> None:
     """The options `mesh` and `stream` share: the job, the input, the outputs."""
     p.add_argument("input", help="height field file")
-    from wavemesh.meshio import formats_help
+    from wavemesh.io.meshio import formats_help
 
     p.add_argument("-o", "--output", required=True, help=f"mesh file to write: {formats_help()}")
     p.add_argument("--levels", "-M", type=int, default=None,
@@ -323,7 +323,7 @@ def _devices_parser(sub) -> None:
 
 
 def _synth_parser(sub) -> None:
-    from wavemesh.synth import ALIASES, DATASETS  # only `synth` (and help) builds this parser
+    from wavemesh.io.synth import ALIASES, DATASETS  # only `synth` (and help) builds this parser
 
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
@@ -410,9 +410,9 @@ def _check_options(args) -> None:
 
 
 def _inputs(args, *paths):
-    """The files a command reads (wavemesh.outputs.Inputs: no output may be one of them): ``paths`` and
+    """The files a command reads (wavemesh.io.outputs.Inputs: no output may be one of them): ``paths`` and
     every --roi mask."""
-    from wavemesh.outputs import Inputs
+    from wavemesh.io.outputs import Inputs
 
     return Inputs([*paths, *(getattr(args, "roi", None) or ())])
 
@@ -488,7 +488,7 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 def mesh_command(args) -> int:
     _check_options(args)
     if args.threads is not None:
-        from wavemesh import native
+        from wavemesh.refine import native
 
         native.set_threads(args.threads)  # InputError-like: one error line when out of range
     if args.tile is not None or args.scheduler or args.tiles_dir:
@@ -523,7 +523,7 @@ def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
 
 
 def stream_command(args) -> int:
-    from wavemesh.stream import DEFAULT_TIMEOUTS
+    from wavemesh.device.stream import DEFAULT_TIMEOUTS
 
     _check_options(args)
     if args.tile is not None or args.tiles_dir or len(args.port) > 1:
@@ -557,7 +557,7 @@ def stream_command(args) -> int:
 
 
 def check_command(args) -> int:
-    from wavemesh.georef import sidecar_path
+    from wavemesh.io.georef import sidecar_path
 
     if args.min_area < 0:
         raise WavemeshError(f"--min-area {args.min_area:g} is out of range",
@@ -608,7 +608,7 @@ def render_command(args) -> int:
 
 
 def devices_command(args) -> int:
-    from wavemesh.devices import scan
+    from wavemesh.device.devices import scan
 
     reports = scan(args.port, args.baud, do_probe=not args.no_probe)
     if args.json:
@@ -630,8 +630,8 @@ def synth_command(args) -> int:
 
 
 def tiles_command(args) -> int:
-    from wavemesh import terrain
-    from wavemesh.outputs import check_path
+    from wavemesh.io import terrain
+    from wavemesh.io.outputs import check_path
 
     inputs = _inputs(args, args.input)
     check_path(args.output, None, "terrain tiles", inputs)
@@ -651,7 +651,7 @@ COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_comma
 
 
 def main(argv: list[str] | None = None) -> int:
-    from wavemesh.outputs import Terminated, handle_termination
+    from wavemesh.io.outputs import Terminated, handle_termination
 
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser_for(argv)

@@ -1,7 +1,7 @@
 """Holes: meshes of height fields with invalid samples (range scans, disparity and depth images).
 
 ``--nodata hole`` (docs/model.md, "Holes") keeps a validity mask beside the heights
-(:attr:`HeightField.mask <wavemesh.heightfield.HeightField.mask>`, True where a sample is invalid: NaN,
+(:attr:`HeightField.mask <wavemesh.io.heightfield.HeightField.mask>`, True where a sample is invalid: NaN,
 the reader's no-data value, ``--invalid VALUE``).  The heights under the mask are a nearest valid
 sample's, for the filter bank and the templates alone.  The refiner measures E(T) against the mask
 (firmware/src/holes.c): a triangle that covers both valid and invalid samples is refined until each
@@ -94,11 +94,11 @@ def compact(width: int, height: int, xy: np.ndarray, tris: np.ndarray) -> Mesh:
 
 
 def block_flags(mask: np.ndarray, levels: int) -> np.ndarray:
-    """The per-block validity flag of the template stage's blocks (wavemesh.label: block (j, i) spans
+    """The per-block validity flag of the template stage's blocks (wavemesh.model.label: block (j, i) spans
     samples [iS, min((i+1)S, W-1)] x [jS, min((j+1)S, H-1)], S = 2^M, closed): True where the block holds
     an invalid sample.  The reference for an RTL flag beside each template; not used by the mesh (the
     templates see the filled heights; only the refiner and the host read the mask)."""
-    from wavemesh.label import block_edges
+    from wavemesh.model.label import block_edges
 
     bad = np.asarray(mask, dtype=bool)
     h, w = bad.shape

@@ -3,7 +3,7 @@
 from pathlib import Path
 
 import pytest
-from wavemesh import native
+from wavemesh.refine import native
 
 ROOT = Path(__file__).resolve().parents[2]
 # Debug (WM_CHECK: asserts and the invariant check after every operator) with AddressSanitizer and

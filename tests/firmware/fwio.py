@@ -7,8 +7,8 @@ import struct
 from pathlib import Path
 
 import numpy as np
-from wavemesh import native
 from wavemesh.mesh import Mesh
+from wavemesh.refine import native
 
 
 def write_input(path: Path, samples: np.ndarray, details: np.ndarray, levels: int, mesh: Mesh,

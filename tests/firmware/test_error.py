@@ -6,10 +6,11 @@ float metric by more than the float's own rounding, and above it by at most abou
 
 import numpy as np
 import pytest
-from wavemesh import api, native
+from wavemesh import api
 from wavemesh.check import mesh_errors
-from wavemesh.heightfield import from_array
+from wavemesh.io.heightfield import from_array
 from wavemesh.mesh import Mesh
+from wavemesh.refine import native
 
 
 def check_triangles(hf, mesh, metric):
@@ -63,7 +64,7 @@ def test_error_of_thin_and_steep_triangles(metric):
 
 @pytest.mark.parametrize("wavelet", ["haar", "spline"])
 def test_c_filter_bank_matches_the_model(wavelet):
-    from wavemesh.haar import decompose
+    from wavemesh.model.haar import decompose
 
     rng = np.random.default_rng(3)
     for w, h, m in ((1, 1, 1), (2, 3, 2), (17, 9, 4), (64, 33, 6), (5, 130, 3), (3, 2, 2)):

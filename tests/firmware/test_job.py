@@ -1,6 +1,6 @@
 """The job library both devices run (firmware/board/include/wm_job.h, src/job.c) against the reference
-model: its labels and template entries against wavemesh.label, its initial triangulation against
-wavemesh.initial, element for element, and its staging inside the caller's storage."""
+model: its labels and template entries against wavemesh.model.label, its initial triangulation against
+wavemesh.model.initial, element for element, and its staging inside the caller's storage."""
 
 from __future__ import annotations
 
@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wavemesh import memmap, synth
-from wavemesh.haar import HaarLevel, decompose
+from wavemesh.device import memmap
 from wavemesh.harness.nativedev import build_wmdev
-from wavemesh.initial import assemble, initial_triangulation
-from wavemesh.label import TAU_MAX, label_blocks
+from wavemesh.io import synth
+from wavemesh.model.haar import HaarLevel, decompose
+from wavemesh.model.initial import assemble, initial_triangulation
+from wavemesh.model.label import TAU_MAX, label_blocks
 
 WM_OK, WM_ERR_MEMORY = 0, -2
 

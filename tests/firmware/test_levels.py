@@ -13,10 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import api, native, synth
+from wavemesh import api
 from wavemesh.check import check_mesh, mesh_errors
-from wavemesh.haar import decompose
-from wavemesh.heightfield import from_array
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import decompose
+from wavemesh.refine import native
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -11,11 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import api, native, synth
-from wavemesh import protocol as P
+from wavemesh import api
 from wavemesh.check import check_mesh, mesh_errors
-from wavemesh.heightfield import from_array
-from wavemesh.stream import config_payload
+from wavemesh.device import protocol as P
+from wavemesh.device.stream import config_payload
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.refine import native
 
 ROOT = Path(__file__).resolve().parents[2]
 

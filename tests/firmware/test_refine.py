@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from wavemesh import api, native, synth
+from wavemesh import api
 from wavemesh.check import check_mesh, mesh_errors
-from wavemesh.heightfield import from_array
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.refine import native
 
 EPS = 1e-9  # the float metric's own rounding
 

@@ -8,10 +8,12 @@ import subprocess
 import numpy as np
 import pytest
 from fwio import read_output, write_input
-from wavemesh import api, native, synth
+from wavemesh import api
 from wavemesh.check import check_mesh
-from wavemesh.haar import decompose
-from wavemesh.heightfield import from_array
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import decompose
+from wavemesh.refine import native
 
 CASES = [
     ("ball", lambda rng: synth.ball(48), 3, native.RefineParams(zeta=0.5, iterations=3)),

@@ -6,12 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import api, synth
+from wavemesh import api
 from wavemesh.check import check_mesh
 from wavemesh.cli import main
 from wavemesh.errors import WavemeshError
-from wavemesh.heightfield import from_array
-from wavemesh.native import RefineParams
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.refine.native import RefineParams
 
 
 def test_mesh_equals_the_command_file_for_file(tmp_path):

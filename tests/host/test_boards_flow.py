@@ -87,7 +87,7 @@ def test_board_sources_are_the_tops_closure(boards):
 def test_ulx3s_clock_is_the_memory_maps(boards):
     """The SoC's clock (memmap.CLK_HZ: SYS.CLK_HZ, the UART divisor, HELLO) is the ULX3S oscillator's, and
     its 8 LEDs are the memory map's: ulx3s_top.v builds soc_top with the memory map's values."""
-    from wavemesh import memmap
+    from wavemesh.device import memmap
 
     assert memmap.CLK_HZ == boards.BOARDS["ulx3s"].clock_mhz * 1e6
     assert memmap.LED_COUNT == 8

@@ -12,8 +12,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_check import cut_mesh, fan_mesh, grid_mesh, random_cut_mesh
-from wavemesh import api, check, synth
-from wavemesh.heightfield import from_array
+from wavemesh import api, check
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
 from wavemesh.mesh import Mesh
 
 

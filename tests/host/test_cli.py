@@ -6,11 +6,12 @@ import sys
 
 import numpy as np
 import pytest
-from wavemesh import api, synth
+from wavemesh import api
 from wavemesh.check import check_mesh
 from wavemesh.cli import main
-from wavemesh.heightfield import from_array
-from wavemesh.meshio import read_mesh
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.io.meshio import read_mesh
 
 
 def wavemesh(*args, cwd=None):

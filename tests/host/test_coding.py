@@ -1,4 +1,5 @@
-"""The compact coding of DATA's samples (wavemesh.coding, docs/protocol.md "Sample coding"): every frame the
+"""The compact coding of DATA's samples (wavemesh.device.coding, docs/protocol.md "Sample coding"): every
+frame the
 encoder cuts decodes, by the reference decoder, to the samples (smooth, noisy, random, steps, wrap-around);
 incompressible samples cost no more than raw words; a real DEM costs under a byte a sample.  The device's
 decoder (proto.c) is checked end to end by every stream test (RUN's CRC and the meshes)."""
@@ -7,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from wavemesh import coding as C
-from wavemesh import protocol as P
+from wavemesh.device import coding as C
+from wavemesh.device import protocol as P
 from wavemesh.harness import jacksboro
 
 RNG = np.random.default_rng(20261127)
@@ -62,7 +63,7 @@ def test_a_damaged_stream_is_refused():
 
 
 def test_a_real_dem_costs_under_a_byte_a_sample():
-    from wavemesh.heightfield import load_heightfield as load
+    from wavemesh.io.heightfield import load_heightfield as load
 
     hf = load(jacksboro(), key="elevation")
     part = hf.samples[:24]  # the reference decoder (a loop over bits) on a strip

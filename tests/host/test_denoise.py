@@ -1,16 +1,17 @@
-"""De-noising (--denoise, dissertation 5.5; wavemesh.denoise): the SURE threshold is the minimiser of
+"""De-noising (--denoise, dissertation 5.5; wavemesh.refine.denoise): the SURE threshold is the minimiser of
 Stein's risk estimate (against a brute-force scan), the transform inverts exactly, and on noisy synthetic
 sets the heights and the mesh come closer to the clean surface with fewer triangles, the mesh proper and
 within zeta of the de-noised heights."""
 
 import numpy as np
 import pytest
-from wavemesh import api, synth
+from wavemesh import api
 from wavemesh.check import check_mesh, mesh_errors
-from wavemesh.denoise import denoise_values, haar_forward, haar_inverse, sure_threshold
 from wavemesh.harness import run_cli
-from wavemesh.heightfield import from_array
-from wavemesh.native import RefineParams
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.refine.denoise import denoise_values, haar_forward, haar_inverse, sure_threshold
+from wavemesh.refine.native import RefineParams
 
 SIGMA = 2.0
 

@@ -12,10 +12,10 @@ import socket
 import threading
 
 import pytest
-from wavemesh import protocol as P
 from wavemesh.cli import main
-from wavemesh.devices import PortReport, scan
-from wavemesh.link import SlipDecoder, encode_frame, parse_frame
+from wavemesh.device import protocol as P
+from wavemesh.device.devices import PortReport, scan
+from wavemesh.device.link import SlipDecoder, encode_frame, parse_frame
 
 CAPS = dict(version=P.VERSION, fw_major=1, fw_minor=7, name=b"wm-test", max_width=300, max_height=200,
             max_samples=40000, tri_capacity=1234, max_levels=6, window=4, max_payload=1024, clk_hz=25_000_000,

@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 import rasterio
 from rasterio.transform import Affine
-from wavemesh import api, cli, georef, native
+from wavemesh import api, cli
 from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.errors import InputError
-from wavemesh.heightfield import from_array, load_heightfield
-from wavemesh.meshio import read_mesh
+from wavemesh.io import georef
+from wavemesh.io.heightfield import from_array, load_heightfield
+from wavemesh.io.meshio import read_mesh
+from wavemesh.refine import native
 
 # Non-square UTM cells (20 m east, 30 m north), sample (0, 0)'s cell corner at (500000, 4100000)
 GEO = Affine(20.0, 0.0, 500000.0, 0.0, -30.0, 4100000.0)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wavemesh.haar import decompose, haar_step, level_shape
+from wavemesh.model.haar import decompose, haar_step, level_shape
 
 
 def slow_step(a):

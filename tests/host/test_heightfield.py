@@ -17,7 +17,7 @@ from hypothesis.extra.numpy import arrays
 from PIL import Image
 from rasterio.transform import Affine
 from wavemesh.errors import InputError
-from wavemesh.heightfield import (
+from wavemesh.io.heightfield import (
     HeightField,
     fill_nearest,
     from_array,

@@ -12,8 +12,8 @@ import rasterio.shutil
 from rasterio.transform import Affine
 from wavemesh.check import check_mesh
 from wavemesh.errors import InputError
-from wavemesh.heightfield import load_heightfield
-from wavemesh.meshio import read_mesh
+from wavemesh.io.heightfield import load_heightfield
+from wavemesh.io.meshio import read_mesh
 
 SRTM3 = 1201  # samples per side of a 3 arc-second SRTM tile (the smallest size GDAL's SRTMHGT takes)
 UTM = {"crs": "EPSG:32617", "transform": Affine(30.0, 0.0, 500000.0, 0.0, -30.0, 4100000.0)}
@@ -245,7 +245,7 @@ def test_cli_starts_without_rasterio_or_scipy(tmp_path):
     np.save(tmp_path / "a.npy", np.arange(12.0).reshape(3, 4))
     code = (
         "import sys, wavemesh.cli\n"
-        "from wavemesh.heightfield import load_heightfield\n"
+        "from wavemesh.io.heightfield import load_heightfield\n"
         f"load_heightfield({str(tmp_path / 'a.npy')!r})\n"
         "print(sorted({m.split('.')[0] for m in sys.modules} & {'rasterio', 'scipy', 'tifffile'}))\n"
     )

@@ -12,9 +12,9 @@ import pytest
 from wavemesh import api, holes
 from wavemesh.cli import main
 from wavemesh.errors import InputError
-from wavemesh.heightfield import from_array
+from wavemesh.io.heightfield import from_array
 from wavemesh.mesh import Mesh
-from wavemesh.native import RefineParams
+from wavemesh.refine.native import RefineParams
 
 ZETA = 1.0
 
@@ -35,7 +35,7 @@ def motorcycle_crop() -> np.ndarray:
 def shadowed_ball(n: int = 48) -> np.ndarray:
     """The ball of the synthetic sets with a scanner's shadow: the samples a ray from the left at a low
     angle does not reach behind the ball are NaN."""
-    from wavemesh.synth import make
+    from wavemesh.io.synth import make
 
     z = make("ball", n).astype(np.float64)
     seen = np.maximum.accumulate(z + 0.6 * np.arange(n)[None, :], axis=1)  # the ray, falling 0.6 a step
@@ -266,7 +266,7 @@ def test_cli_mesh_check_min_area(tmp_path, capsys):
     assert main(["check", str(out), "--against", str(src), "--fill", "nearest", "-q"]) == 1
     small = tmp_path / "s.obj"
     assert main(["mesh", str(src), "-o", str(small), "--nodata", "hole", "--min-area", "40", "-q"]) == 0
-    from wavemesh.meshio import read_mesh
+    from wavemesh.io.meshio import read_mesh
 
     big, _ = read_mesh(str(out), 96, 72)
     kept, _ = read_mesh(str(small), 96, 72)
@@ -365,7 +365,7 @@ def test_all_invalid_and_crop():
 
 
 def test_block_flags_against_a_loop():
-    from wavemesh.label import block_edges
+    from wavemesh.model.label import block_edges
 
     rng = np.random.default_rng(3)
     m = rng.random((37, 29)) < 0.01

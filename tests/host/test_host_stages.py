@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from wavemesh import api, native
+from wavemesh import api
 from wavemesh.check import mesh_errors
 from wavemesh.cli import main
 from wavemesh.errors import InputError
-from wavemesh.heightfield import from_array, quantise
-from wavemesh.initial import initial_triangulation
+from wavemesh.io.heightfield import from_array, quantise
 from wavemesh.mesh import Mesh
+from wavemesh.model.initial import initial_triangulation
+from wavemesh.refine import native
 
 THREADS = (1, 2, 3, 7)
 

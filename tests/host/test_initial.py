@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wavemesh import synth
 from wavemesh.check import check_mesh
-from wavemesh.haar import HaarLevel
-from wavemesh.heightfield import from_array
-from wavemesh.initial import initial_triangulation
-from wavemesh.label import block_edges, dominant_labels, tau_counts
-from wavemesh.templates import LABELS
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import HaarLevel
+from wavemesh.model.initial import initial_triangulation
+from wavemesh.model.label import block_edges, dominant_labels, tau_counts
+from wavemesh.model.templates import LABELS
 
 
 def run(values, levels, tau=None):

@@ -1,4 +1,5 @@
-"""The link layer (host/wavemesh/link.py): SLIP framing, CRC-32, the frame reader, port errors, --trace.
+"""The link layer (host/wavemesh/device/link.py): SLIP framing, CRC-32, the frame reader, port errors,
+--trace.
 
 No device needed: frames go through pyserial's loop:// port or straight through the decoder.
 """
@@ -16,8 +17,8 @@ import pytest
 import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wavemesh import protocol as P
-from wavemesh.link import (
+from wavemesh.device import protocol as P
+from wavemesh.device.link import (
     FrameError,
     Link,
     LinkError,

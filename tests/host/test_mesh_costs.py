@@ -11,10 +11,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from wavemesh import api, check, native, synth
+from wavemesh import api, check
 from wavemesh.cli import build_parser, main
+from wavemesh.io import synth
+from wavemesh.io.meshio import read_mesh, write_obj
 from wavemesh.mesh import Mesh
-from wavemesh.meshio import read_mesh, write_obj
+from wavemesh.refine import native
 
 
 @pytest.fixture
@@ -131,7 +133,7 @@ def test_a_final_mesh_above_zeta_is_always_found(tmp_path, ball, monkeypatch, ca
 
 def test_bound_check_on_lossy_input():
     """Lossy quantisation: the normal bound is checked on the 16-bit samples the refiner saw."""
-    from wavemesh.heightfield import from_array
+    from wavemesh.io.heightfield import from_array
 
     hf = from_array(synth.ball(64))
     assert not hf.lossless
@@ -193,9 +195,11 @@ def test_mesh_imports_only_what_it_runs(tmp_path, ball):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     status, *modules = r.stdout.split()
-    assert status == "0" and "wavemesh.native" in modules  # it did run the refiner
-    unused = ("wavemesh.protocol", "wavemesh.stream", "wavemesh.link", "wavemesh.devices", "wavemesh.render",
-              "wavemesh.tiles", "wavemesh.synth", "wavemesh.holes", "wavemesh.roi", "serial", "matplotlib",
+    assert status == "0" and "wavemesh.refine.native" in modules  # it did run the refiner
+    unused = ("wavemesh.device.protocol", "wavemesh.device.stream", "wavemesh.device.link",
+              "wavemesh.device.devices", "wavemesh.check.render",
+              "wavemesh.tiles", "wavemesh.io.synth", "wavemesh.holes", "wavemesh.model.roi", "serial",
+              "matplotlib",
               "tqdm", "PIL", "rasterio", "scipy", "trimesh", "json", "secrets", "zipfile")
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
 
@@ -225,7 +229,7 @@ def test_obj_writer_writes_the_same_bytes(tmp_path, kind, monkeypatch):
                                 5e-324, 1.5, -2.0], V),
         "mixed": np.where(rng.random(V) < 0.5, np.round(rng.normal(size=V) * 1e3), rng.normal(size=V)),
     }[kind]
-    from wavemesh import meshio
+    from wavemesh.io import meshio
 
     for chunk in (meshio._CHUNK, 7):
         monkeypatch.setattr(meshio, "_CHUNK", chunk)

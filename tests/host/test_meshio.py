@@ -1,4 +1,4 @@
-"""Tests for wavemesh.meshio: OBJ and PLY mesh files, written and read."""
+"""Tests for wavemesh.io.meshio: OBJ and PLY mesh files, written and read."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import struct
 import numpy as np
 import pytest
 from wavemesh.errors import InputError
+from wavemesh.io.meshio import read_mesh, write_mesh, write_obj, write_ply
 from wavemesh.mesh import Mesh
-from wavemesh.meshio import read_mesh, write_mesh, write_obj, write_ply
 
 
 def grid_mesh(w: int, h: int, rng: np.random.Generator) -> Mesh:

@@ -1,4 +1,4 @@
-"""The ctypes side of the native library (wavemesh.native) against the C header it mirrors, field by
+"""The ctypes side of the native library (wavemesh.refine.native) against the C header it mirrors, field by
 field: the structures' member names, types and order, and the codes and limits the host uses.  The
 header (firmware/include/wavemesh.h) is the truth for the library; protocol.py for the limits."""
 
@@ -9,8 +9,8 @@ import re
 from pathlib import Path
 
 import pytest
-from wavemesh import native
-from wavemesh import protocol as P
+from wavemesh.device import protocol as P
+from wavemesh.refine import native
 
 HEADER = (Path(__file__).resolve().parents[2] / "firmware" / "include" / "wavemesh.h").read_text()
 C_TYPES = {"int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint64_t": ctypes.c_uint64,

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import trimesh
 from PIL import Image
-from wavemesh import cli, meshio
+from wavemesh import cli
+from wavemesh.io import meshio
 
 ROOT = Path(__file__).resolve().parents[2]
 JACKSBORO = matplotlib.cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False)

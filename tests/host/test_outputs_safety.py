@@ -16,10 +16,10 @@ import time
 import numpy as np
 import pytest
 import tifffile
-from wavemesh import synth
 from wavemesh.errors import InputError
 from wavemesh.harness import run_cli
-from wavemesh.outputs import Outputs
+from wavemesh.io import synth
+from wavemesh.io.outputs import Outputs
 
 PARTIAL = ".wavemesh-partial-"
 
@@ -90,7 +90,7 @@ def wait_for(condition, timeout: float, what: str) -> None:
 
 @pytest.fixture(scope="module")
 def terrain(tmp_path_factory):
-    from wavemesh import native
+    from wavemesh.refine import native
 
     native.load()  # built here if it has to be, not inside a timed subprocess
     path = tmp_path_factory.mktemp("in") / "t.npy"
@@ -172,7 +172,7 @@ def test_every_output_path_is_checked_against_the_inputs(tmp_path, terrain):
 
 def test_outputs_refuse_an_input_when_staged():
     """The staging itself refuses an input (files whose names come late: --lod, --tiles-dir)."""
-    from wavemesh.outputs import Inputs
+    from wavemesh.io.outputs import Inputs
 
     with pytest.raises(InputError, match="is the input"), Outputs(Inputs([__file__])) as out:
         out.path(__file__)
@@ -209,7 +209,7 @@ def test_a_tiled_run_checks_its_options_first(tmp_path, terrain):
 def test_a_tiled_run_writes_its_files_as_one_set(tmp_path, terrain, monkeypatch):
     """The picture fails after the tiled mesh and the report: none of them replaces the old files; then
     all of them together."""
-    from wavemesh import render
+    from wavemesh.check import render
 
     def broken(*a, **k):
         raise InputError("cannot draw")

@@ -1,4 +1,4 @@
-"""The protocol's single source (host/wavemesh/protocol.py): formats, the generated C header, the docs.
+"""The protocol's single source (host/wavemesh/device/protocol.py): formats, the generated C header, the docs.
 
 The C header is compiled and its every constant and offset compared with the module; docs/protocol.md's
 byte tables must be the generated ones; the refiner's statistics and parameters keep the layout the
@@ -13,9 +13,10 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from wavemesh import gen, native
-from wavemesh import protocol as P
-from wavemesh.stream import DeviceInfo, config_payload, parse_level, samples_crc
+from wavemesh.device import gen
+from wavemesh.device import protocol as P
+from wavemesh.device.stream import DeviceInfo, config_payload, parse_level, samples_crc
+from wavemesh.refine import native
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -64,7 +65,7 @@ def test_gen_writes_the_protocol_header(tmp_path):
 
 def test_docs_tables_are_current():
     assert P.doc_is_current(ROOT / "docs" / "protocol.md"), \
-        "run `python -m wavemesh.protocol --update docs/protocol.md`"
+        "run `python -m wavemesh.device.protocol --update docs/protocol.md`"
 
 
 def test_every_frame_type_has_a_payload_and_fits():
@@ -128,7 +129,7 @@ def test_level_stream_parsing_rejects_inconsistent_streams():
     body = struct.pack("<6H", 0, 0, 1, 0, 0, 1) + struct.pack("<3H", 0, 1, 2)
     h, mesh, stats, cycles = parse_level(P.LEVEL_HEADER.pack(**hdr) + body, 2, 2)
     assert mesh.n_triangles == 1 and mesh.n_vertices == 3 and cycles == 5 and stats["e_max_q16"] == 0
-    from wavemesh.stream import ProtocolError
+    from wavemesh.device.stream import ProtocolError
 
     with pytest.raises(ProtocolError):  # one byte short
         parse_level(P.LEVEL_HEADER.pack(**hdr) + body[:-1], 2, 2)
@@ -136,13 +137,13 @@ def test_level_stream_parsing_rejects_inconsistent_streams():
         parse_level(P.LEVEL_HEADER.pack(**hdr) + struct.pack("<6H", 0, 0, 5, 0, 0, 1) + body[12:], 2, 2)
     with pytest.raises(ProtocolError):  # a triangle refers to vertex 3 of 3
         parse_level(P.LEVEL_HEADER.pack(**hdr) + body[:12] + struct.pack("<3H", 0, 1, 3), 2, 2)
-    # a free vertex slot is dropped and the indices renumbered, as wavemesh.native does
+    # a free vertex slot is dropped and the indices renumbered, as wavemesh.refine.native does
     hdr4 = dict(hdr, vertex_slots=4)
     body4 = struct.pack("<8H", 0, 0, 0xFFFF, 0xFFFF, 1, 0, 0, 1) + struct.pack("<3H", 0, 2, 3)
     _, mesh, _, _ = parse_level(P.LEVEL_HEADER.pack(**hdr4) + body4, 2, 2)
     assert mesh.xy.tolist() == [[0, 0], [1, 0], [0, 1]] and mesh.tris.tolist() == [[0, 1, 2]]
     # LEVEL_DELTA: the same level delta-coded gives the same mesh; damaged, a ProtocolError
-    from wavemesh.coding import encode_level_body
+    from wavemesh.device.coding import encode_level_body
 
     delta = encode_level_body([(0, 0), (0xFFFF, 0xFFFF), (1, 0), (0, 1)], [(0, 2, 3)])
     hdr_d = dict(hdr4, coding=P.LEVEL_DELTA)

@@ -11,13 +11,13 @@ import sys
 import numpy as np
 import pytest
 import tifffile
-from wavemesh import synth
 from wavemesh.check import check_mesh
 from wavemesh.errors import InputError
 from wavemesh.harness import run_cli
-from wavemesh.heightfield import from_array, load_heightfield
-from wavemesh.meshio import read_mesh
-from wavemesh.outputs import Outputs
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array, load_heightfield
+from wavemesh.io.meshio import read_mesh
+from wavemesh.io.outputs import Outputs
 
 
 def wavemesh(*args, fsize=None, memory=None, cwd=None):
@@ -48,7 +48,7 @@ def entries(folder) -> list[str]:
 def terrain(tmp_path_factory):
     """A 129 x 129 height field whose outputs run to some hundred KiB.  The native library is built
     here if it has to be (not inside a run under a file size limit)."""
-    from wavemesh import native
+    from wavemesh.refine import native
 
     native.load()
     path = tmp_path_factory.mktemp("in") / "t.npy"
@@ -106,7 +106,7 @@ def test_output_paths_checked_before_any_work(tmp_path, terrain):
 
 def test_a_failure_late_in_the_run_leaves_nothing(tmp_path, terrain, monkeypatch):
     """The picture fails after the mesh, the levels and the report were written: none of them stays."""
-    from wavemesh import render
+    from wavemesh.check import render
 
     def broken(*a, **k):
         raise InputError("cannot draw")

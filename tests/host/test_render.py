@@ -1,4 +1,4 @@
-"""Tests for wavemesh.render: pictures of meshes (checked through their pixels with Pillow)."""
+"""Tests for wavemesh.check.render: pictures of meshes (checked through their pixels with Pillow)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import time
 import numpy as np
 import pytest
 from PIL import Image
-from wavemesh import render
+from wavemesh.check import render
+from wavemesh.check.render import render_grid, render_heightfield, render_mesh
 from wavemesh.errors import InputError
 from wavemesh.mesh import Mesh
-from wavemesh.render import render_grid, render_heightfield, render_mesh
 
 
 def grid(w: int, h: int) -> Mesh:

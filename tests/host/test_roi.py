@@ -1,4 +1,5 @@
-"""Selective triangulation (--roi, dissertation 5.6; wavemesh.roi, firmware/src/roi.c): inside the region
+"""Selective triangulation (--roi, dissertation 5.6; wavemesh.model.roi, firmware/src/roi.c): inside the
+region
 of interest every sample is within zeta (checked here sample by sample, in exact integers, apart from
 the library and from check.py); outside the mesh stays at the initial triangulation's coarseness; the
 mesh is proper; an ROI of the whole grid changes nothing."""
@@ -9,13 +10,14 @@ from fractions import Fraction
 import numpy as np
 import pytest
 from scipy import ndimage
-from wavemesh import api, native
+from wavemesh import api
 from wavemesh.check import check_mesh
-from wavemesh.haar import decompose
 from wavemesh.harness import run_cli
-from wavemesh.heightfield import from_array
-from wavemesh.native import RefineParams
-from wavemesh.roi import cell_mask, mask_details, roi_report
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import decompose
+from wavemesh.model.roi import cell_mask, mask_details, roi_report
+from wavemesh.refine import native
+from wavemesh.refine.native import RefineParams
 
 M = 4
 

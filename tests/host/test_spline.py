@@ -5,17 +5,17 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from wavemesh import synth
-from wavemesh.haar import WAVELETS, decompose, haar_step, level_shape
-from wavemesh.heightfield import from_array
-from wavemesh.initial import initial_triangulation
-from wavemesh.spline import spline_step
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import WAVELETS, decompose, haar_step, level_shape
+from wavemesh.model.initial import initial_triangulation
+from wavemesh.model.spline import spline_step
 
 H = (1, 3, 3, 1)
 
 
 def slow_step(a):
-    """wavemesh.spline's formulas written out one coefficient at a time, 2-D weights h x h etc."""
+    """wavemesh.model.spline's formulas written out one coefficient at a time, 2-D weights h x h etc."""
     h, w = len(a), len(a[0])
 
     def at(r, c):  # every index clamped into the array
@@ -112,7 +112,7 @@ def test_mesh_with_the_spline_wavelet(tmp_path):
     import sys
 
     from wavemesh import api
-    from wavemesh.native import RefineParams
+    from wavemesh.refine.native import RefineParams
 
     hf = from_array(synth.ball(64))
     runs = {w: api.mesh(hf, api.MeshParams(levels=3, wavelet=w, refine=RefineParams(zeta=0.5)))
@@ -136,9 +136,9 @@ def test_mesh_with_the_spline_wavelet(tmp_path):
 
 def test_config_carries_the_wavelet():
     """CONFIG_SPLINE is a known flag, set only for the spline wavelet."""
-    from wavemesh import protocol as P
-    from wavemesh.native import RefineParams, fixed_params
-    from wavemesh.stream import config_payload
+    from wavemesh.device import protocol as P
+    from wavemesh.device.stream import config_payload
+    from wavemesh.refine.native import RefineParams, fixed_params
 
     fp = fixed_params(RefineParams(), 1.0)
     assert P.CONFIG_SPLINE & P.CONFIG_KNOWN_FLAGS

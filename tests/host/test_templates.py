@@ -4,10 +4,10 @@ import itertools
 
 import numpy as np
 import pytest
-from wavemesh import template_forms, templates
 from wavemesh.check import check_mesh
 from wavemesh.mesh import Mesh
-from wavemesh.templates import (
+from wavemesh.model import template_forms, templates
+from wavemesh.model.templates import (
     CENTRE_SITE,
     LABELS,
     LUT_INVALID,

@@ -13,8 +13,8 @@ import pytest
 from wavemesh import api, tiles
 from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.harness import jacksboro, run_cli
-from wavemesh.native import RefineParams, fixed_params
-from wavemesh.synth import make
+from wavemesh.io.synth import make
+from wavemesh.refine.native import RefineParams, fixed_params
 
 
 def terrain(w: int, h: int, seed: int = 7) -> np.ndarray:

@@ -2,7 +2,7 @@
 1 = invalid) and every record's flag on m_axis_tuser[36].
 
 Every record (value, level, position, per-level raster order, nothing missing or extra) is compared
-with wavemesh.haar.decompose as in haar_bank_tb, and its flag with wavemesh.roi.cell_mask:
+with wavemesh.model.haar.decompose as in haar_bank_tb, and its flag with wavemesh.model.roi.cell_mask:
 1 when any of the 2^m x 2^m samples its coefficient is computed from (the slice clipped at the frame's edge,
 which is what the padding repeats) is invalid.  Random sizes, levels and masks (densities 0..1,
 blobs), random input idle and output back-pressure, frames back to back.
@@ -19,7 +19,7 @@ import cocotb
 import numpy as np
 from cocotbext.axi import AxiStreamFrame
 from haar_bank_tb import TB, expected_records, frame_samples, signed18
-from wavemesh.roi import cell_mask
+from wavemesh.model.roi import cell_mask
 
 SEED = int(os.environ.get("HAAR_HOLES_SEED", "1"))
 FRAMES = int(os.environ.get("HAAR_HOLES_FRAMES", "8"))

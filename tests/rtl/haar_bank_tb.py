@@ -1,4 +1,4 @@
-"""cocotb bench of rtl/haar_bank.v: every record against the reference model wavemesh.haar.
+"""cocotb bench of rtl/haar_bank.v: every record against the reference model wavemesh.model.haar.
 
 Run by tests/rtl/test_haar_bank.py (and bench/bench_rtl.py) through rtl_runner.run; the environment
 says what to do:
@@ -10,7 +10,7 @@ says what to do:
     HAAR_NO_STALL "1": also require that the input never waits inside a frame and that a frame takes
                   W * H + 3 M + 3 clocks from its start to its last record (needs HAAR_BP=none)
     HAAR_RESULTS  file to write per-frame cycle counts to (JSON), for the benchmark
-    HAAR_WAVELET  the bank's filters, as wavemesh.haar.WAVELETS names them (default "haar"); the
+    HAAR_WAVELET  the bank's filters, as wavemesh.model.haar.WAVELETS names them (default "haar"); the
                   spline bank's frames take longer (its flush), so HAAR_NO_STALL checks only the input
 """
 
@@ -28,7 +28,7 @@ from cocotb.clock import Clock
 from cocotb.simtime import get_sim_time
 from cocotb.triggers import ClockCycles, RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
-from wavemesh.haar import decompose
+from wavemesh.model.haar import decompose
 
 CLOCK_NS = 10
 STATE_RUN = 2  # haar_bank's state_reg while it takes samples

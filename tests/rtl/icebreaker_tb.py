@@ -2,7 +2,7 @@
 
 The bench is the host's end of the serial line, bit by bit on the RX and TX pins at the top's rate: it
 sends a job's header and samples as UART frames and reads the bytes the board sends back, and every
-block's entry must be the reference model's TOUT entry (wavemesh.label, as tests/rtl/soc_accel_tb.py
+block's entry must be the reference model's TOUT entry (wavemesh.model.label, as tests/rtl/soc_accel_tb.py
 computes them).  Jobs run back to back on one reset, with a refused header between them; garbage
 (stray bytes, a wire-protocol frame other than HELLO) before a header is skipped, and a header or job
 the host abandons is dropped after the silence timeout, the next job unharmed.  HELLO is answered with
@@ -21,11 +21,11 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge
 from soc_accel_tb import expected
-from wavemesh import protocol as P
-from wavemesh import synth
-from wavemesh.heightfield import from_array
-from wavemesh.link import SlipDecoder, encode_frame, parse_frame
-from wavemesh.stream import DeviceInfo
+from wavemesh.device import protocol as P
+from wavemesh.device.link import SlipDecoder, encode_frame, parse_frame
+from wavemesh.device.stream import DeviceInfo
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
 
 # the top's parameters for the bench (tests/rtl/test_icebreaker.py, tools/postsynth.py): a UART of 8
 # clocks per bit at the 12 MHz clock, a short power-on reset and silence timeout

@@ -13,7 +13,7 @@ from __future__ import annotations
 import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
-from wavemesh import memmap
+from wavemesh.device import memmap
 
 T_NS = 8  # 125 MHz
 CL = memmap.SDRAM_CAS_LATENCY

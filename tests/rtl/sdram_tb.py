@@ -30,7 +30,7 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, ReadOnly
 from cocotb.utils import get_sim_time
-from wavemesh import memmap
+from wavemesh.device import memmap
 
 CLK_HZ = int(os.environ.get("SDRAM_CLK_HZ", "25000000"))
 CL = int(os.environ.get("SDRAM_CL", "2"))
@@ -41,7 +41,7 @@ ADDR_BITS = ROW_BITS + 2 + COL_BITS      # halfword address {row, bank, column}
 LINE_HW = 2 * int(os.environ.get("SDRAM_LINE_WORDS", "4"))   # the cache's line in halfwords
 
 # the ULX3S's parts, worst case (datasheets: MT48LC16M16A2-75, IS42S16160G-7, AS4C32M16SB-7), in ps:
-# the table of host/wavemesh/memmap.py (the controller's parameters in the SoC, and the simulated
+# the table of host/wavemesh/device/memmap.py (the controller's parameters in the SoC, and the simulated
 # board's chip model) and what only this chip checks (tRAS max, the clock each CL allows)
 _T = memmap.SDRAM_TIMING
 DATASHEET = {

@@ -5,8 +5,8 @@ stream starts on height_start with the count asked for, and every stream stalls 
 height data gaps, the coefficient and template entries' back-pressure), and mem_idle stays low for a
 while after the last entry, so DONE must wait for it.  After START and DONE, the coefficient memory must hold
 every level's details in the layout of wm_details_offset (level by level from m = 1, row-major,
-d1 d2 d3 per cell) as wavemesh.haar.decompose makes them, the template memory one entry per block
-{label, template id} as wavemesh.label.label_blocks makes them, the registers the counts, and a
+d1 d2 d3 per cell) as wavemesh.model.haar.decompose makes them, the template memory one entry per block
+{label, template id} as wavemesh.model.label.label_blocks makes them, the registers the counts, and a
 refused configuration must set ERROR and touch nothing.
 """
 
@@ -19,11 +19,11 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge
-from wavemesh import synth
-from wavemesh.haar import decompose
-from wavemesh.heightfield import from_array
-from wavemesh.label import label_blocks
-from wavemesh.memmap import ACCEL, TOUT_LABEL_SHIFT, TOUT_TEMPLATE_MASK
+from wavemesh.device.memmap import ACCEL, TOUT_LABEL_SHIFT, TOUT_TEMPLATE_MASK
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import decompose
+from wavemesh.model.label import label_blocks
 
 REG = {r.name: r.offset for r in ACCEL.registers}
 

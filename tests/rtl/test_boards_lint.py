@@ -13,8 +13,8 @@ MODULES = sorted(BOARDS.glob("*.v"))
 
 @pytest.mark.parametrize("source", MODULES, ids=[p.stem for p in MODULES])
 def test_board_module_lint_clean(source: Path, verilator):
-    from wavemesh import soc_cpu
-    from wavemesh.gen import write_all
+    from wavemesh.device import soc_cpu
+    from wavemesh.device.gen import write_all
 
     write_all(GEN)
     exe, env = verilator

@@ -1,7 +1,7 @@
-"""rtl/haar_bank.v against the reference model (wavemesh.haar), under Verilator through cocotb.
+"""rtl/haar_bank.v against the reference model (wavemesh.model.haar), under Verilator through cocotb.
 
 The cocotb side is haar_bank_tb.py: it sends frames of random samples (uniform, extremes 0/65535,
-noisy ramps), compares every record with wavemesh.haar.decompose (value, level, block position,
+noisy ramps), compares every record with wavemesh.model.haar.decompose (value, level, block position,
 per-level raster order, nothing missing or extra, tlast on the last one only) and scrambles the
 configuration inputs while a frame runs (they are sampled at its start).  Here each test builds one
 parameter set (once: rtl_runner keeps a build directory per set) and runs a list of frames under one

@@ -1,5 +1,5 @@
 """The filter bank with holes (rtl/haar_bank.v, HOLES = 1; issue 20): every record against
-wavemesh.haar.decompose and its flag (m_axis_tuser[36]) against the OR of the mask over the
+wavemesh.model.haar.decompose and its flag (m_axis_tuser[36]) against the OR of the mask over the
 coefficient's samples, under random masks, idle input and output back-pressure (bench:
 haar_bank_holes_tb.py)."""
 

@@ -11,13 +11,13 @@ MODULES = sorted(RTL.glob("*.v"))
 
 def cpu_dirs() -> list[str]:
     """-y for the folders of every CPU's Verilog (their pythondata packages; never copied here)."""
-    from wavemesh import soc_cpu
+    from wavemesh.device import soc_cpu
 
     return [a for d in soc_cpu.lint_folders() for a in ("-y", str(d))]
 
 
 def lint(source: Path, verilator, *defines: str):
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     write_all(GEN)
     exe, env = verilator
@@ -33,8 +33,8 @@ def test_lint_clean(source: Path, verilator):
 
 
 def test_lint_clean_every_cpu(verilator):
-    """soc_top with each CPU host/wavemesh/soc_cpu.py offers (the default one is linted above)."""
-    from wavemesh import soc_cpu
+    """soc_top with each CPU host/wavemesh/device/soc_cpu.py offers (the default one is linted above)."""
+    from wavemesh.device import soc_cpu
 
     for cpu in soc_cpu.CPUS.values():
         if cpu.define:

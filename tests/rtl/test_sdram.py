@@ -9,7 +9,7 @@ controller that is too fast for it.
 """
 
 import pytest
-from wavemesh import memmap
+from wavemesh.device import memmap
 from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / "sdram_ctrl.v", RTL / "sdram_cache.v", RTL / "wm_fifo.v"]

@@ -1,8 +1,8 @@
 """rtl/haar_bank.v built with WAVELET = 1 (rtl/spline_level.v) against the reference model
-(wavemesh.spline), under Verilator through cocotb.
+(wavemesh.model.spline), under Verilator through cocotb.
 
 The bench is haar_bank_tb.py with HAAR_WAVELET=spline: every record against
-wavemesh.haar.decompose(..., "spline") (value, level, block position, per-level raster order, nothing
+wavemesh.model.haar.decompose(..., "spline") (value, level, block position, per-level raster order, nothing
 missing or extra, tlast on the last one only), on edge sizes (one and two columns or rows at the deep
 levels, odd sizes, whose last record row and column the spline level completes after its input) and
 random ones, under input idles and output back-pressure; with neither, the input must never wait

@@ -1,15 +1,15 @@
 """The generated template ROM include and C header hold the reference model's template set.
 
 Both are compiled and executed (Verilator, gcc) and every word they produce is
-compared with wavemesh.templates; a failure here means a consumer would see
+compared with wavemesh.model.templates; a failure here means a consumer would see
 other data than the model.
 """
 
 import json
 import subprocess
 
-from wavemesh import gen
-from wavemesh.templates import LUT_INVALID, LUT_SIZE, MAX_TRIANGLES, template_set
+from wavemesh.device import gen
+from wavemesh.model.templates import LUT_INVALID, LUT_SIZE, MAX_TRIANGLES, template_set
 
 TS = template_set()
 

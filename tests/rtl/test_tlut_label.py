@@ -1,4 +1,5 @@
-"""rtl/tlut_label.v (the dominant-coefficient labeller) against wavemesh.label (bench: tlut_label_tb.py)."""
+"""rtl/tlut_label.v (the dominant-coefficient labeller) against wavemesh.model.label (bench:
+tlut_label_tb.py)."""
 
 import numpy as np
 from tlut_label_tb import expected_labels, random_details

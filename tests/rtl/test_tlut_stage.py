@@ -16,10 +16,10 @@ from tlut_stage_tb import (
     random_level,
     samples_frame,
 )
-from wavemesh import synth
 from wavemesh.check import check_mesh
-from wavemesh.haar import decompose
 from wavemesh.harness.rtl_runner import RTL, run
+from wavemesh.io import synth
+from wavemesh.model.haar import decompose
 
 SOURCES = [*sorted(RTL.glob("tlut_*.v")), RTL / "wm_fifo.v"]
 # cocotb test names; test_sizes is crossed with idle input cycles and output back-pressure

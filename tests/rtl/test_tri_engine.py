@@ -1,5 +1,5 @@
-"""rtl/tri_engine.v, the triangle error engine, against wavemesh.tri_scan (bench: tri_engine_tb.py), and
-wavemesh.tri_scan against the C (firmware/src/tri_error.c through the native library).
+"""rtl/tri_engine.v, the triangle error engine, against wavemesh.model.tri_scan (bench: tri_engine_tb.py), and
+wavemesh.model.tri_scan against the C (firmware/src/tri_error.c through the native library).
 
 The bench runs random triangles of every kind (thin, border, big, one sample wide, flat edges, every
 triangle of a 4 x 3 grid) with random heights and limits under random back-pressure on every port, and
@@ -12,9 +12,9 @@ import random
 import numpy as np
 import pytest
 from tri_engine_tb import heights, random_triangles
-from wavemesh import native
 from wavemesh.harness.rtl_runner import RTL, run
-from wavemesh.tri_scan import scan
+from wavemesh.model.tri_scan import scan
+from wavemesh.refine import native
 
 SETS = [
     {"COORD_BITS": 11, "ADDR_BITS": 24},

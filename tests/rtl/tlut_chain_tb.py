@@ -13,8 +13,8 @@ from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 from tlut_stage_tb import check_frame, samples_frame
-from wavemesh import synth
-from wavemesh.heightfield import from_array
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
 
 
 def pattern(seed: int, p: float):

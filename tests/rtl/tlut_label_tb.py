@@ -1,9 +1,9 @@
-"""cocotb bench of rtl/tlut_label.v: one record per cycle, labels against wavemesh.label.
+"""cocotb bench of rtl/tlut_label.v: one record per cycle, labels against wavemesh.model.label.
 
-Expected labels come from wavemesh.label.label_blocks on 2 x 2-block levels of a 4 x 4 grid at
+Expected labels come from wavemesh.model.label.label_blocks on 2 x 2-block levels of a 4 x 4 grid at
 M = 1, whose second block column is 1 grid step wide and second block row 1 step high: the four
 blocks cover no demotion, narrow, low and both (docs/model.md "Labeller", step 4).  Without
-demotion, label_blocks' label is wavemesh.label.dominant_labels'.
+demotion, label_blocks' label is wavemesh.model.label.dominant_labels'.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge
-from wavemesh.haar import HaarLevel
-from wavemesh.label import TAU_MAX, dominant_labels, label_blocks
+from wavemesh.model.haar import HaarLevel
+from wavemesh.model.label import TAU_MAX, dominant_labels, label_blocks
 
 M18 = (1 << 18) - 1
 D_MAX = (1 << 17) - 1

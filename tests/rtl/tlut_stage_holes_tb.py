@@ -1,8 +1,8 @@
 """cocotb bench of rtl/tlut_stage.v with HOLES = 1: the template stage with a validity mask beside its
 records, every output beat carrying its block's hole flag on tuser[45].
 
-The records and the expected beats are tlut_stage_tb's (the reference model: wavemesh.label,
-wavemesh.templates, wavemesh.initial), so the templates must be exactly those of the stage without
+The records and the expected beats are tlut_stage_tb's (the reference model: wavemesh.model.label,
+wavemesh.model.templates, wavemesh.model.initial), so the templates must be exactly those of the stage without
 holes; the flag of every beat must be wavemesh.holes.block_flags of the frame's mask at the beat's
 block.  The mask goes in on its own stream (s_mask_*) with random gaps, the records with random idle
 cycles, the output under random back-pressure; frames follow each other without a reset.

@@ -1,7 +1,7 @@
 """cocotb bench of rtl/tlut_stage.v: level M's coefficients in, the blocks' triangles out.
 
-The golden model is the reference (wavemesh.label.label_blocks, wavemesh.templates,
-wavemesh.initial): every output beat (triangle coordinates, block, label, template id, triangle
+The golden model is the reference (wavemesh.model.label.label_blocks, wavemesh.model.templates,
+wavemesh.model.initial): every output beat (triangle coordinates, block, label, template id, triangle
 index, block end, tlast) is compared with the one the model predicts, and the triangles of a frame
 are assembled into a mesh that must be the reference initial triangulation and pass check_mesh.
 
@@ -18,15 +18,15 @@ import os
 import random
 
 import numpy as np
-from wavemesh import synth
 from wavemesh.api import triangulate
 from wavemesh.check import check_mesh
-from wavemesh.haar import HaarLevel, decompose
-from wavemesh.heightfield import from_array
-from wavemesh.initial import assemble
-from wavemesh.label import Labelling, label_blocks
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
 from wavemesh.mesh import Mesh
-from wavemesh.templates import LUT_INVALID, template_set
+from wavemesh.model.haar import HaarLevel, decompose
+from wavemesh.model.initial import assemble
+from wavemesh.model.label import Labelling, label_blocks
+from wavemesh.model.templates import LUT_INVALID, template_set
 
 M18 = (1 << 18) - 1
 TS = template_set()
@@ -150,7 +150,7 @@ def samples_frame(name: str, values: np.ndarray, levels: int, tau: float | None 
 def coefficient_frame(name: str, lv: HaarLevel, width: int, height: int, tau_q: int,
                       junk: int = 0, rng: random.Random | None = None) -> Frame:
     """A frame from level M's coefficients given directly, with `junk` records of other levels
-    mixed in (the stage must drop them); the reference mesh is wavemesh.initial.assemble's."""
+    mixed in (the stage must drop them); the reference mesh is wavemesh.model.initial.assemble's."""
     recs = level_records(lv)
     rng = rng or random.Random(0)
     for _ in range(junk):

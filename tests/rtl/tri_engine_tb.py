@@ -1,4 +1,4 @@
-"""cocotb bench of rtl/tri_engine.v against wavemesh.tri_scan (the model of tri_error.c's scan).
+"""cocotb bench of rtl/tri_engine.v against wavemesh.model.tri_scan (the model of tri_error.c's scan).
 
 One loop drives the three interfaces each cycle (inputs after the falling edge, outputs read with the
 inputs settled): triangles into the command port (a writer that holds its beat), a memory that takes
@@ -22,7 +22,7 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, ReadOnly
-from wavemesh.tri_scan import scan, spans, twice_area
+from wavemesh.model.tri_scan import scan, spans, twice_area
 
 SEED = int(os.environ.get("TRI_ENGINE_SEED", "1"))
 CB = int(os.environ.get("TRI_ENGINE_COORD_BITS", "11"))

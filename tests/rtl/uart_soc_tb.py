@@ -16,7 +16,7 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, RisingEdge, Timer
 from cocotbext.uart import UartSink, UartSource
-from wavemesh import memmap
+from wavemesh.device import memmap
 
 CLOCK_NS = 10
 RX_DEPTH = int(os.environ.get("UART_RX_DEPTH", "8"))

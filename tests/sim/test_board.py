@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 import pytest
-from wavemesh import memmap
-from wavemesh import protocol as P
-from wavemesh import stream as S
-from wavemesh.link import SlipDecoder, encode_frame, parse_frame
+from wavemesh.device import memmap
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
+from wavemesh.device.link import SlipDecoder, encode_frame, parse_frame
 
 pytestmark = pytest.mark.sim
 

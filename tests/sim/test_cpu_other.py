@@ -1,4 +1,4 @@
-"""The SoC with its other CPUs (host/wavemesh/soc_cpu.py: the PicoRV32 and the VexRiscv behind
+"""The SoC with its other CPUs (host/wavemesh/device/soc_cpu.py: the PicoRV32 and the VexRiscv behind
 rtl/soc_cpu_vexriscv.v): the board jobs of each CPU other than the default, which the other board
 tests run.
 
@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_stream_board import LEAN, assert_same_work, job_cycles, stream_and_mesh
-from wavemesh import soc_cpu
-from wavemesh import stream as S
+from wavemesh.device import soc_cpu
+from wavemesh.device import stream as S
 from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 pytestmark = pytest.mark.sim
 

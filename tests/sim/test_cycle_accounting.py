@@ -18,8 +18,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from wavemesh import protocol as P
-from wavemesh.coding import encode_level_body
+from wavemesh.device import protocol as P
+from wavemesh.device.coding import encode_level_body
 from wavemesh.harness.nativedev import build_wmdev
 
 JOB = re.compile(r"job (\d+) filter (\d+) template (\d+) refine (\d+) emit (\d+) link (\d+) span (\d+) "

@@ -17,12 +17,12 @@ import time
 import numpy as np
 import pytest
 from wavemesh import cli
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
+from wavemesh.device.link import Link, LinkError
 from wavemesh.harness.faultproxy import FrameTap, stream_once
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.link import Link, LinkError
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, job=5.0)
 RUN_LIMIT = 150.0
@@ -109,7 +109,7 @@ def test_a_client_that_does_not_read_is_dropped(wmdev_exe):
 
 
 def _status(i: int) -> bytes:
-    from wavemesh.link import encode_frame
+    from wavemesh.device.link import encode_frame
 
     return encode_frame(P.FrameType.STATUS, i & 0xFF)
 
@@ -153,7 +153,7 @@ def test_lengths_are_checked_against_max_payload_and_during_a_job(wmdev_exe):
 
 
 def _fixed():
-    from wavemesh.native import RefineParams, fixed_params
+    from wavemesh.refine.native import RefineParams, fixed_params
 
     return fixed_params(RefineParams(), 1.0)
 
@@ -206,7 +206,7 @@ def test_native_device_killed_mid_job(tmp_path):
 
 def _board_budget() -> int:
     """The budget `wavemesh stream` uses on wmdev without --max-triangles: its storage less one."""
-    from wavemesh.memmap import TRI_CAPACITY
+    from wavemesh.device.memmap import TRI_CAPACITY
 
     return TRI_CAPACITY - 1
 

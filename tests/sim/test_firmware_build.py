@@ -11,7 +11,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from wavemesh import gen, memmap
+from wavemesh.device import gen, memmap
 
 ROOT = Path(__file__).resolve().parents[2]
 SRC = ROOT / "firmware" / "board"

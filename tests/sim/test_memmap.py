@@ -1,4 +1,4 @@
-"""The memory map (host/wavemesh/memmap.py) is consistent, fits the ECP5, and every consumer agrees.
+"""The memory map (host/wavemesh/device/memmap.py) is consistent, fits the ECP5, and every consumer agrees.
 
 - regions and registers do not overlap and fit their address windows;
 - the default sizes hold what docs/soc.md says they support (1024 x 1024 samples, levels 1..10 of
@@ -16,8 +16,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from wavemesh import gen, memmap
-from wavemesh.memmap import AREAS, BLOCKS, COEF, HEAP, HEIGHT, REGIONS, SDRAM, TOUT
+from wavemesh.device import gen, memmap
+from wavemesh.device.memmap import AREAS, BLOCKS, COEF, HEAP, HEIGHT, REGIONS, SDRAM, TOUT
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -70,7 +70,7 @@ def test_triangle_capacity_fits_the_refiner():
     the firmware's own search, board_job_capacity, finds the exact figure HELLO states)."""
     import ctypes
 
-    from wavemesh import native
+    from wavemesh.refine import native
 
     build = native.build()
     lib = ctypes.CDLL(str(build / native.LIB_NAME))
@@ -162,7 +162,7 @@ def test_linker_script_fragment_agrees():
 def test_docs_embed_the_current_tables():
     text = (ROOT / "docs" / "soc.md").read_text()
     assert memmap.doc_section(text) == memmap.markdown(), (
-        "docs/soc.md is stale: run `.venv/bin/python -m wavemesh.memmap --update docs/soc.md`")
+        "docs/soc.md is stale: run `.venv/bin/python -m wavemesh.device.memmap --update docs/soc.md`")
 
 
 @pytest.mark.parametrize("name", ["wm_memmap.h", "wm_memmap.vh", "wm_memmap.ld", "memmap.md"])

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import pytest
 from rv32 import Program, addi, beq, bne, hex_words, jal, lhu, li, lw, sh, sw
-from wavemesh import memmap
+from wavemesh.device import memmap
+from wavemesh.device.memmap import COEF, FW_RAM, HEIGHT, SDRAM, SYS, TOUT, UART, reg_addr
 from wavemesh.harness.simboard import SimBoard, build
-from wavemesh.memmap import COEF, FW_RAM, HEIGHT, SDRAM, SYS, TOUT, UART, reg_addr
 
 pytestmark = pytest.mark.sim
 

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
 from wavemesh.harness import run_cli
 from wavemesh.harness.faultproxy import FrameTap
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 pytestmark = pytest.mark.sim
 

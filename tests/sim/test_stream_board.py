@@ -29,13 +29,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import memmap
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import memmap
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.faultproxy import FaultProxy, Faults
 from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 pytestmark = pytest.mark.sim
 

@@ -18,11 +18,11 @@ import filecmp
 import numpy as np
 import pytest
 from wavemesh import cli
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
 from wavemesh.harness.faultproxy import Faults, FrameTap, Tally, campaign, stream_once
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 RUN_LIMIT = 150.0  # s: a run that takes longer counts as a hang (the host's longest wait is 120 s)
 OPTS = ["--levels", "3", "--max-triangles", "19999"]

@@ -9,11 +9,11 @@ import filecmp
 
 import numpy as np
 import pytest
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
 from wavemesh.harness import run_cli
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 
 def shadowed(name: str, n: int, crop) -> np.ndarray:

@@ -3,7 +3,7 @@ rtl/boards/icebreaker_top.v, with its own parameters (12 MHz, 115200 baud, the p
 bit by bit on its UART pins by wmsim-icebreaker (sim/icebreaker_main.cpp).
 
 HELLO finds the FPGA stage (FEATURE_STAGE), `wavemesh devices` lists it, the stage labels the blocks of
-the job it is sent (wavemesh.stage), and the host refines: the mesh file equals `wavemesh mesh`'s byte
+the job it is sent (wavemesh.device.stage), and the host refines: the mesh file equals `wavemesh mesh`'s byte
 for byte, and the stage's labelling is the model's block for block.  A job beyond the stage's HELLO
 (more levels than it makes) is refused on the host with one error line, and the next job is exact.
 """
@@ -14,15 +14,16 @@ import json
 
 import numpy as np
 import pytest
-from wavemesh import protocol as P
-from wavemesh import stage, synth
 from wavemesh.cli import main
-from wavemesh.haar import decompose
+from wavemesh.device import protocol as P
+from wavemesh.device import stage
+from wavemesh.device.stream import Device
 from wavemesh.harness.devproc import DeviceProcess
 from wavemesh.harness.simboard import SIM_TIMEOUTS, build
-from wavemesh.heightfield import from_array
-from wavemesh.label import label_blocks, tau_counts
-from wavemesh.stream import Device
+from wavemesh.io import synth
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import decompose
+from wavemesh.model.label import label_blocks, tau_counts
 
 pytestmark = pytest.mark.sim
 

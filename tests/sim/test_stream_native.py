@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from wavemesh import protocol as P
-from wavemesh import stream as S
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
+from wavemesh.device.link import Link, SlipDecoder, encode_frame, parse_frame
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.link import Link, SlipDecoder, encode_frame, parse_frame
-from wavemesh.synth import make
+from wavemesh.io.synth import make
 
 FAST = S.Timeouts(sync=0.5, sync_attempts=3, reply=0.5, attempts=3, ack=0.5, job=5.0)
 
@@ -591,7 +591,7 @@ def test_crop_and_decimate_select_the_samples(inputs, tmp_path):
     """--crop X,Y,W,H then --decimate N: the same as slicing the array (mesh, stream and check share them)."""
     from wavemesh.api import shape_heightfield
     from wavemesh.errors import InputError
-    from wavemesh.heightfield import from_array
+    from wavemesh.io.heightfield import from_array
 
     a = np.arange(20 * 30, dtype=np.float64).reshape(20, 30)
     hf = shape_heightfield(from_array(a), "3,2,20,15", 2)
@@ -613,7 +613,7 @@ def test_the_engine_builds_freestanding_for_the_board(tmp_path):
     import shutil
     import subprocess
 
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     gcc = shutil.which("riscv64-unknown-elf-gcc")
     if gcc is None:

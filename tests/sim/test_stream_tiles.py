@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from wavemesh import api, tiles
+from wavemesh.device.stream import DEFAULT_TIMEOUTS
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
-from wavemesh.native import RefineParams
-from wavemesh.stream import DEFAULT_TIMEOUTS
+from wavemesh.refine.native import RefineParams
 
 SMALL = ("--tri-capacity", "60000", "--max-width", "128", "--max-height", "128")
 

@@ -3,7 +3,7 @@
  * stage markers, halt) and a CRC-32.
  *
  * Every public symbol starts with board_.  Registers and sizes come from the generated
- * wm_memmap.h (host/wavemesh/memmap.py); docs/soc.md has the register tables.  Nothing here
+ * wm_memmap.h (host/wavemesh/device/memmap.py); docs/soc.md has the register tables.  Nothing here
  * allocates memory or uses interrupts; every wait that depends on the outside world has a timeout.
  */
 #ifndef BOARD_H

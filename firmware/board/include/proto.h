@@ -27,7 +27,7 @@
  * timestamps, SLIP escapes) can change.
  *
  * Every public symbol starts with wm_proto_.  Frame types, error codes, limits and field offsets
- * come from the generated wm_protocol.h (host/wavemesh/protocol.py is their one source).
+ * come from the generated wm_protocol.h (host/wavemesh/device/protocol.py is their one source).
  */
 #ifndef WM_PROTO_H
 #define WM_PROTO_H

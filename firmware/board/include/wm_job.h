@@ -7,7 +7,7 @@
  *   template entries --wm_job_initial--> initial triangulation (canonical form) in caller storage
  *   initial triangulation --wm_job_refine--> every level's mesh, each sent as it is made
  *
- * The initial triangulation is host/wavemesh/initial.py's (tests/firmware/test_job.py compares them):
+ * The initial triangulation is host/wavemesh/model/initial.py's (tests/firmware/test_job.py compares them):
  * each block's template (the generated wm_templates.h) on the block's grid positions (docs/model.md,
  * "Blocks"), then the canonical form of host/wavemesh/mesh.py (vertices by (y, x), each triangle
  * from its smallest vertex, triangles sorted), the order the refiner's result depends on.
@@ -37,7 +37,7 @@ void wm_job_blocks_init(wm_job_blocks *b, int32_t width, int32_t height, int32_t
 
 /*
  * The labeller (3.5.1-3.5.3: dominant detail above tau, dual sign, thin blocks demoted to flat) and the
- * variant resolver (3.5.4: the sides a neighbouring V or H block splits) of host/wavemesh/label.py:
+ * variant resolver (3.5.4: the sides a neighbouring V or H block splits) of host/wavemesh/model/label.py:
  * one template entry per block in raster order, as the FPGA stage writes TOUT ((label <<
  * WM_TOUT_LABEL_SHIFT) | template id).  details_m: level M's details, cells row by row (the
  * layout of wm_details_offset(W, H, M)), (d1, d2, d3) each.  entries: cols * rows words.

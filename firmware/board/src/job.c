@@ -29,7 +29,7 @@
 
 #define ALIGN8(n) (((size_t)(n) + 7u) & ~(size_t)7u)
 
-/* One source for the limits: host/wavemesh/protocol.py (wm_protocol.h) states the refiner's own
+/* One source for the limits: host/wavemesh/device/protocol.py (wm_protocol.h) states the refiner's own
  * (wavemesh.h), checked here at compile time on both devices (C99: an array of negative size). */
 typedef char
     wm_job_limits_agree[WM_PROTO_MAX_SIDE == WM_MAX_SIDE && WM_PROTO_MAX_LEVELS == WM_MAX_LEVELS ? 1 : -1];
@@ -49,7 +49,7 @@ void wm_job_blocks_init(wm_job_blocks *b, int32_t width, int32_t height, int32_t
     b->rows = (height - 1 + b->size - 1) >> levels;
 }
 
-/* ---- labels and templates (host/wavemesh/label.py) ------------------------------------------- */
+/* ---- labels and templates (host/wavemesh/model/label.py) ------------------------------------------- */
 
 int wm_job_label(const wm_job_blocks *b, uint32_t tau, const int32_t *details_m, uint32_t *entries)
 {
@@ -118,7 +118,7 @@ int32_t wm_job_triangles(const wm_job_blocks *b, const volatile uint32_t *entrie
     return nt;
 }
 
-/* ---- the initial triangulation (host/wavemesh/initial.py) -------------------------------------- */
+/* ---- the initial triangulation (host/wavemesh/model/initial.py) -------------------------------------- */
 
 /* The lattice of one axis: n samples in blocks of size. */
 typedef struct axis {

@@ -664,7 +664,7 @@ static void do_baud(wm_proto *p)
     rx_reset(p);
 }
 
-/* CONFIG's field ranges (host/wavemesh/protocol.py, CONFIG: the ones the host checks before sending) */
+/* CONFIG's field ranges (host/wavemesh/device/protocol.py, CONFIG: the ones the host checks before sending) */
 typedef struct config_range {
     uint8_t off, bytes;
     uint64_t lo, hi;
@@ -801,7 +801,7 @@ static uint16_t word_at(const wm_proto *p, uint32_t k)
     return (uint16_t)(p->mask[2 * (k - wh)] | p->mask[2 * (k - wh) + 1] << 8);
 }
 
-/* CODING_RICE (docs/protocol.md, "Sample coding"; host/wavemesh/coding.py encodes): n samples from off,
+/* CODING_RICE (docs/protocol.md, "Sample coding"; host/wavemesh/device/coding.py encodes): n samples from off,
  * each a prediction from the samples stored before it (the block's predictor: MED or the plane) plus a
  * zig-zag residual, Rice-coded in blocks of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
  * not such a stream (too short, or a byte or more left over). */

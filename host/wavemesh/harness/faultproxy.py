@@ -210,7 +210,7 @@ class FaultProxy:
 
 class FrameTap:
     """A proxy for one connection that forwards whole frames, each after ``on_frame(direction, frame)``
-    (direction "up": host to device, "down"; a wavemesh.link.Frame) said True: a scripted fault (drop
+    (direction "up": host to device, "down"; a wavemesh.device.link.Frame) said True: a scripted fault (drop
     one chosen frame) or a trigger (stop the device when the first MESH frame passes).  Bytes that are
     not a valid frame are dropped."""
 
@@ -237,7 +237,7 @@ class FrameTap:
             threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
 
     def _pump(self, src: socket.socket, dst: socket.socket, name: str) -> None:
-        from wavemesh.link import FrameError, SlipDecoder, parse_frame, slip_encode
+        from wavemesh.device.link import FrameError, SlipDecoder, parse_frame, slip_encode
 
         dec = SlipDecoder()
         try:

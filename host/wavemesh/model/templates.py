@@ -1,5 +1,5 @@
 """The complete template set and the template look-up table, generated from
-:mod:`wavemesh.template_forms` by the generating functions g_ijk (eq. 3.28-3.30).
+:mod:`wavemesh.model.template_forms` by the generating functions g_ijk (eq. 3.28-3.30).
 
 Generating functions act on the nine sites (row r, column c, both 0..2)::
 
@@ -36,7 +36,7 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-from wavemesh import template_forms
+from wavemesh.model import template_forms
 
 LABELS = "FfVvHhD"  # code -> letter
 KIND_FLAT, KIND_VERTICAL, KIND_HORIZONTAL, KIND_DIAGONAL = 0, 1, 2, 3

@@ -22,7 +22,7 @@ one record per (i, j):
     d2  = (D[2j-1] + 3 D[2j] + 3 D[2j+1] + D[2j+2] + 2) >> 2        bottom minus top     18 bits signed
     d3  = D[2j+1] - D[2j]                                           diagonal minus anti  18 bits signed
 
-Scaling: the same as the Haar bank's (``wavemesh.haar``), so every threshold (tau, delta_d) means the
+Scaling: the same as the Haar bank's (``wavemesh.model.haar``), so every threshold (tau, delta_d) means the
 same with either wavelet: the high-pass filter is applied to the smoothed (weights 8) neighbours and the
 result divided by 4, so a plane of slope g per sample gives d1 = 2g at level 1 exactly as Haar does,
 and d3 is Haar's d3 itself (p00 + p11 - p01 - p10).  d1 and d2 round half up (``+ 2 >> 2``, an

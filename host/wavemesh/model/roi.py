@@ -26,8 +26,8 @@ import numpy as np
 
 from wavemesh.check import ErrorReport, mesh_errors
 from wavemesh.errors import InputError
-from wavemesh.haar import HaarLevel
 from wavemesh.mesh import Mesh
+from wavemesh.model.haar import HaarLevel
 
 
 def parse_roi(specs, width: int, height: int) -> np.ndarray:
@@ -68,7 +68,7 @@ def _one(spec: str, width: int, height: int) -> np.ndarray:
         out = np.zeros((height, width), dtype=bool)
         out[y:y + h, x:x + w] = True
         return out
-    from wavemesh.heightfield import load_heightfield  # the height field readers read masks too
+    from wavemesh.io.heightfield import load_heightfield  # the height field readers read masks too
 
     if not os.path.exists(spec):
         raise InputError(f"--roi {spec}: no such file, and not a rectangle X,Y,W,H",

@@ -5,7 +5,7 @@ Writing
     :func:`write_mesh` writes the format its file name ends in, in the frame the options choose: grid
     positions without a georeference; with one, east, north and up in ground units from sample (0, 0)
     (``units="metres"``, as the .glb always is) or the CRS's own map coordinates (``units="crs"``),
-    beside a sidecar naming the frame (wavemesh.georef), the triangles then counter-clockwise seen from
+    beside a sidecar naming the frame (wavemesh.io.georef), the triangles then counter-clockwise seen from
     above.  ``normals`` adds per-vertex unit normals (:func:`vertex_normals`), ``base`` closes the
     surface into a watertight solid (:func:`solid`).  :func:`write_obj` writes ``v x y z`` lines (x, y as
     integers, z as ``repr(float(z))``, the shortest text that reads back to the same double) and
@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .mesh import Mesh
+from wavemesh.errors import InputError
+from wavemesh.mesh import Mesh
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "write_mesh", "read_mesh", "vertex_normals", "normal_map"]
 
@@ -301,7 +301,7 @@ def _format_of(path) -> Format:
 def check_options(path, *, units: str = "metres", local: bool = False, normals: bool = False,
                   base: float | None = None, georeferenced: bool = True) -> Format:
     """The mesh options against the format of ``path``, before any work: InputError naming the problem."""
-    from .georef import UNITS
+    from wavemesh.io.georef import UNITS
 
     fmt = _format_of(path)
     if units not in UNITS:
@@ -366,13 +366,13 @@ def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None
                ground=None, local: bool = False, units: str = "metres", normals: bool = False,
                base: float | None = None) -> None:
     """Write ``mesh`` in the format of the extension of ``path`` (FORMATS: ``.obj`` / ``.ply`` / ``.stl``
-    / ``.glb``).  ``ground`` (a wavemesh.georef.Ground) with a georeference places the vertices:
+    / ``.glb``).  ``ground`` (a wavemesh.io.georef.Ground) with a georeference places the vertices:
     ``units`` "metres" (default) east, north and up in ground units from sample (0, 0), as the .glb;
     "crs" the map coordinates (less sample (0, 0)'s when ``local``); either way with the sidecar
     ``PATH.georef.json`` naming the frame, the CRS and the origin, and the triangles counter-clockwise
     seen from above.  Without one x and y are grid positions.  ``normals``: per-vertex normals (area-
     weighted, unit length); ``base``: a closed solid, the bottom ``base`` below the lowest height."""
-    from .georef import grid_ground, sidecar_path, write_sidecar
+    from wavemesh.io.georef import grid_ground, sidecar_path, write_sidecar
 
     geo = ground is not None and ground.georeferenced
     fmt = check_options(path, units=units, local=local, normals=normals, base=base, georeferenced=geo)
@@ -449,16 +449,16 @@ def read_mesh(path, width: int | None = None, height: int | None = None,
     (``width``/``height``, when given, must then agree), else from ``width`` and
     ``height``, else from the largest vertex coordinates (max x + 1, max y + 1).
     ``to_grid(x, y) -> (col, row)`` maps vertex coordinates in map units to grid positions
-    (wavemesh.georef.to_grid); by default the sidecar ``PATH.georef.json``, when there is one, does.
+    (wavemesh.io.georef.to_grid); by default the sidecar ``PATH.georef.json``, when there is one, does.
     """
     if to_grid is None:
-        from .georef import read_sidecar
-        from .georef import to_grid as placing
+        from wavemesh.io.georef import read_sidecar
+        from wavemesh.io.georef import to_grid as placing
 
         placed = read_sidecar(path)
         to_grid = placing(*placed) if placed else None
     name = os.fspath(path)
-    from .heightfield import regular_file
+    from wavemesh.io.heightfield import regular_file
 
     regular_file(name, "mesh file")  # not a FIFO (the read would wait for a writer), not a device
     try:

@@ -1,6 +1,6 @@
 """The link layer of the wire protocol: SLIP framing, CRC-32, a reader that yields whole frames.
 
-docs/protocol.md has the byte tables; :mod:`wavemesh.protocol` the constants.  A frame on the wire::
+docs/protocol.md has the byte tables; :mod:`wavemesh.device.protocol` the constants.  A frame on the wire::
 
     0xC0 | type | seq | len u16 | payload[len] | crc u32 | 0xC0
 
@@ -10,7 +10,7 @@ docs/protocol.md has the byte tables; :mod:`wavemesh.protocol` the constants.  A
 board or the native stand-in device, ``rfc2217://``, ``loop://``) or takes an open port object,
 writes frames, and reads whole, checked frames: :meth:`Link.read_frame` returns the next frame whose
 CRC and length are right and counts (and with ``trace`` dumps) the damaged ones it skips; it raises
-:class:`LinkTimeout` when none came in time.  Retries live one level up (:mod:`wavemesh.stream`),
+:class:`LinkTimeout` when none came in time.  Retries live one level up (:mod:`wavemesh.device.stream`),
 where it is known what to send again.
 """
 
@@ -23,7 +23,7 @@ import time
 import zlib
 from dataclasses import dataclass, field
 
-from wavemesh import protocol as P
+from wavemesh.device import protocol as P
 from wavemesh.errors import WavemeshError
 
 # --- link constants -----------------------------------------------------------------------------------
@@ -275,7 +275,7 @@ class Link:
         self.stats.bytes_out += len(wire)
 
     def write_raw(self, data: bytes) -> None:
-        """Bytes as they are (wavemesh.stage's byte stream; tests: garbage on the line)."""
+        """Bytes as they are (wavemesh.device.stage's byte stream; tests: garbage on the line)."""
         if self.trace:
             self._dump("TX", "raw", data)
         try:
@@ -295,7 +295,7 @@ class Link:
 
     def read_raw(self, timeout: float, limit: int = READ_CHUNK) -> bytes:
         """Unframed bytes, at most ``limit``: what came within ``timeout`` s (b"" if nothing), for a device
-        that speaks a plain byte stream (wavemesh.stage: the FPGA stage's job)."""
+        that speaks a plain byte stream (wavemesh.device.stage: the FPGA stage's job)."""
         data = self._wait_bytes(time.monotonic() + timeout, limit)
         if data and self.trace:
             self._dump("RX", "raw", data)

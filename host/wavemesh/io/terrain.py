@@ -70,7 +70,7 @@ class Sampler:
     crs: str | None  # the DEM's CRS when it must be reprojected to, None when geographic
 
     def __call__(self, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
-        from wavemesh.georef import ground
+        from wavemesh.io.georef import ground
 
         lon, lat = np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)
         if self.crs is not None:
@@ -97,7 +97,7 @@ class Sampler:
 
 def sampler(hf) -> Sampler:
     """The DEM placed on the globe by its georeference; InputError without one."""
-    from wavemesh.georef import ground
+    from wavemesh.io.georef import ground
 
     g = ground(hf)
     if hf.transform is None or not g.georeferenced:
@@ -158,8 +158,8 @@ def normals_ecef(lon, lat, z, tris) -> np.ndarray:
     (east, north, up) frame in metres (degrees scaled at the tile's middle latitude), each turned to
     the Earth-centred frame at its vertex.  Flat ground is then exactly the ellipsoid's up, also on a
     level-0 tile, whose chord triangles would tilt it by tens of degrees."""
-    from wavemesh.georef import metres_per_degree
-    from wavemesh.meshio import vertex_normals
+    from wavemesh.io.georef import metres_per_degree
+    from wavemesh.io.meshio import vertex_normals
 
     kx, ky = metres_per_degree(float(np.clip((lat.min() + lat.max()) / 2, -89.9, 89.9)))
     n = vertex_normals(np.column_stack([(lon - lon.min()) * kx, (lat - lat.min()) * ky, z]), tris)
@@ -247,8 +247,8 @@ class TileSet:
 def make_tiles(hf, *, max_zoom: int | None = None, zeta: float = 1.0, log=None) -> TileSet:
     """Every tile of levels 0..max_zoom over the DEM (module docstring)."""
     from wavemesh import api
-    from wavemesh.heightfield import from_array
-    from wavemesh.native import RefineParams
+    from wavemesh.io.heightfield import from_array
+    from wavemesh.refine.native import RefineParams
 
     if not (math.isfinite(zeta) and zeta > 0):
         raise InputError(f"--zeta {zeta} is out of range",
@@ -286,10 +286,10 @@ def make_tiles(hf, *, max_zoom: int | None = None, zeta: float = 1.0, log=None) 
 
 def write_tiles(ts: TileSet, folder: str, inputs=None) -> Path:
     """The pyramid into ``folder`` (created; its existing files kept unless replaced), whole or not at all,
-    none of its files one of ``inputs`` (wavemesh.outputs)."""
+    none of its files one of ``inputs`` (wavemesh.io.outputs)."""
     import json
 
-    from wavemesh.outputs import Outputs, check_path
+    from wavemesh.io.outputs import Outputs, check_path
 
     out = check_path(folder, None, "terrain tiles", inputs)
     with Outputs(inputs) as staged:

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wavemesh.limits import MAX_LEVELS  # one source: the model's and the protocol's limits, wm_protocol.h
-from wavemesh.spline import spline_step
+from wavemesh.model.spline import spline_step
 
 DETAIL_BITS = 18  # signed width of d1, d2, d3 (|d| <= 2 * 65535)
 APPROX_BITS = 16  # unsigned width of a
@@ -78,7 +78,7 @@ def haar_step(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 def decompose(samples: np.ndarray, levels: int, wavelet: str = "haar") -> list[HaarLevel]:
     """Levels 1..M of the filter bank on (H, W) 16-bit samples; element m-1 is level m.
 
-    ``wavelet`` picks the filters (WAVELETS): "haar" (this module) or "spline" (wavemesh.spline, the
+    ``wavelet`` picks the filters (WAVELETS): "haar" (this module) or "spline" (wavemesh.model.spline, the
     dissertation's spline wavelet); both give records of the same shapes, widths and scale."""
     samples = np.asarray(samples)
     if samples.ndim != 2 or min(samples.shape) < 1:

@@ -26,9 +26,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from wavemesh import protocol as P
+from wavemesh.device import protocol as P
+from wavemesh.device.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
 from wavemesh.errors import WavemeshError
-from wavemesh.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
 from wavemesh.mesh import Mesh
 
 # --- timeouts and retries (host side; seconds of wall time) -------------------------------------------
@@ -155,7 +155,7 @@ class LevelResult:
     level: int
     index: int  # order of arrival, 0 first
     mesh: Mesh
-    stats: dict  # wm_level_stats (STAT_FIELDS) and e_max_q16, as wavemesh.native.Level.stats
+    stats: dict  # wm_level_stats (STAT_FIELDS) and e_max_q16, as wavemesh.refine.native.Level.stats
     cycles: int  # device cycles spent making it
     nbytes: int  # size of its level stream
     seconds: float  # host time when it arrived, from RUN
@@ -188,7 +188,7 @@ def q16(x: float) -> int:
 def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, capacity: int = 0,
                    initial_only: bool = False, delta_lambda: float = 0.0, delta_c: float = 0.0,
                    spline: bool = False, mask: bool = False) -> bytes:
-    """CONFIG from the refiner's fixed-point parameters (wavemesh.native.fixed_params: the same
+    """CONFIG from the refiner's fixed-point parameters (wavemesh.refine.native.fixed_params: the same
     conversion `wavemesh mesh` uses, so both paths give the library the same numbers, delta_lambda,
     delta_c and the WM_FLAG_* bits included; the delta_lambda and delta_c arguments are ignored);
     ``spline``: the spline wavelet's filter bank (CONFIG_SPLINE, for a device with FEATURE_SPLINE);
@@ -221,7 +221,7 @@ def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, 
     nv, nt, ib = h["vertex_slots"], h["triangles"], h["index_bytes"]
     off = P.LEVEL_HEADER.size
     if h["coding"] == P.LEVEL_DELTA:
-        from wavemesh.coding import decode_level_body
+        from wavemesh.device.coding import decode_level_body
 
         try:
             xy, tris = decode_level_body(buf[off:], nv, nt)
@@ -242,7 +242,7 @@ def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, 
         raise ProtocolError(f"level {h['level']}: a vertex outside the {width} x {height} grid")
     if nt and (tris.min() < 0 or tris.max() >= nv or np.any(free[tris])):
         raise ProtocolError(f"level {h['level']}: a triangle refers to a missing vertex")
-    if not live.all():  # free vertex slots: dropped, as wavemesh.native does
+    if not live.all():  # free vertex slots: dropped, as wavemesh.refine.native does
         remap = np.cumsum(live) - 1
         xy, tris = xy[live], remap[tris]
     stats = {name: h[f"st_{name}"] for name in P.STAT_FIELDS} | {"e_max_q16": h["st_e_max"],
@@ -450,7 +450,7 @@ class Device:
     def upload(self, samples: np.ndarray, bar=None, extra: np.ndarray | None = None,
                coded: bool = True) -> int:
         """Send the (H, W) samples (then ``extra`` words raw: a validity mask) in DATA frames, a window at
-        a time, compactly coded (wavemesh.coding; ``coded`` False: raw words); returns the bytes sent
+        a time, compactly coded (wavemesh.device.coding; ``coded`` False: raw words); returns the bytes sent
         (frames repeated after a loss included).
 
         The device answers every DATA frame with DATA_ACK(next) and flags a gap (NAK): the host goes
@@ -460,7 +460,7 @@ class Device:
         so the answer comes after every frame sent before the probe was taken in: fewer samples than
         were sent before it means a loss, and the host goes back to them.  A slow device (a simulated
         board) only answers later; nothing is sent twice because of it."""
-        from wavemesh.coding import SampleEncoder
+        from wavemesh.device.coding import SampleEncoder
 
         info = self.info
         enc = SampleEncoder(samples, extra, coded)

@@ -4,7 +4,7 @@ units, and the coordinates the outputs are written in.
 A height field's georeference is the affine ``transform`` (a, b, c, d, e, f) of GDAL: the map position
 of grid position (col, row) is ``x = a col + b row + c``, ``y = d col + e row + f``, (0, 0) the outer
 corner of sample (0, 0)'s cell, so sample (col, row) sits at (col + 0.5, row + 0.5); and the CRS
-(``HeightField.transform``, ``HeightField.crs``; :mod:`wavemesh.heightfield` reads them).  Without a
+(``HeightField.transform``, ``HeightField.crs``; :mod:`wavemesh.io.heightfield` reads them).  Without a
 georeference the map is the grid itself: sample (col, row) at x = col, y = row (:data:`GRID`).
 
 The cell size (:attr:`Ground.spacing`, dx along a row, dy along a column) is the ground distance
@@ -336,7 +336,7 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float], str, bool] | N
     p = sidecar_path(mesh_path)
     if not p.exists():
         return None
-    from wavemesh.heightfield import regular_file
+    from wavemesh.io.heightfield import regular_file
 
     regular_file(str(p), "sidecar")
     try:

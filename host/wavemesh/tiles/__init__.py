@@ -120,7 +120,7 @@ class Source:
 
 @dataclass(frozen=True)
 class _Grid:
-    """What wavemesh.georef.ground needs of a height field, without its samples."""
+    """What wavemesh.io.georef.ground needs of a height field, without its samples."""
 
     width: int
     height: int
@@ -132,7 +132,7 @@ class _Grid:
 
 def _read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
     """A window of band 1 of a GDAL raster as float64: masked samples NaN, the band's scale and offset
-    applied (as wavemesh.heightfield reads the whole raster)."""
+    applied (as wavemesh.io.heightfield reads the whole raster)."""
     import warnings
 
     import rasterio
@@ -157,8 +157,8 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
     through rasterio windows, without reading the samples; every other format, and --fill nearest (which
     needs the whole grid), is read whole by wavemesh.api.load_input."""
     from wavemesh import api
-    from wavemesh.georef import apply_overrides, cropped
-    from wavemesh.heightfield import check_nodata, parse_fill, regular_file
+    from wavemesh.io.georef import apply_overrides, cropped
+    from wavemesh.io.heightfield import check_nodata, parse_fill, regular_file
 
     fill_mode = parse_fill(fill)
     ext = Path(path).suffix.lower()
@@ -228,7 +228,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
 
 
 # ---------------------------------------------------------------------------------------------------
-# One quantisation for the whole grid (wavemesh.heightfield.quantise's rules, found window by window)
+# One quantisation for the whole grid (wavemesh.io.heightfield.quantise's rules, found window by window)
 
 
 @dataclass(frozen=True)
@@ -263,7 +263,7 @@ def _strips(src: Source) -> Iterable[tuple[int, np.ndarray]]:
 
 
 def scan(src: Source) -> Quant:
-    """The quantisation of the whole grid, in strips of rows: wavemesh.heightfield.quantise's scale and
+    """The quantisation of the whole grid, in strips of rows: wavemesh.io.heightfield.quantise's scale and
     offset; a second pass for the largest quantisation error when the heights are not integers."""
     vmin, vmax, integer, bad = math.inf, -math.inf, True, 0
     for _, v in _strips(src):
@@ -364,8 +364,8 @@ def plan_tiles(src: Source, params, tile: int | None = None, *,
                log: Callable[[str], None] | None = None) -> TilePlan:
     """The layout, the whole grid's quantisation and every border's vertices, decided once."""
     from wavemesh import api
-    from wavemesh.georef import ground
-    from wavemesh.native import fixed_params
+    from wavemesh.io.georef import ground
+    from wavemesh.refine.native import fixed_params
 
     check_tiling(params)
     params.refine.check()
@@ -427,7 +427,7 @@ def _segment_ok(z: np.ndarray, a: int, b: int, fp, axis: int, metric: str) -> bo
     num = np.abs(z[a + 1:b].astype(np.int64) * L - (za * (b - i) + zb * (i - a)))  # |dz| L, exact
     if metric == "vertical":  # the refiner's vertical E(T) is exact: |dz| <= zeta (Q16.16 counts)
         return bool(np.all(num * 65536 <= int(fp.zeta) * L))
-    from wavemesh.native import Params  # noqa: F401  (fp is one)
+    from wavemesh.refine.native import Params  # noqa: F401  (fp is one)
 
     m, e = (fp.slope_x_m, fp.slope_x_e) if axis == 0 else (fp.slope_y_m, fp.slope_y_e)
     slope = (m / 2.0 ** e) * (zb - za) / L  # the segment's slope with the refiner's rounded-down scale
@@ -649,8 +649,8 @@ class TileResult:
 def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None):
     """The tile as a HeightField: its window of the input with the whole grid's quantisation, its
     place on the ground, and the whole grid's cell size."""
-    from wavemesh.georef import cropped
-    from wavemesh.heightfield import HeightField
+    from wavemesh.io.georef import cropped
+    from wavemesh.io.heightfield import HeightField
 
     src, quant = plan.source, plan.quant
     v = src.read(t.x, t.y, t.width, t.height) if window is None else window
@@ -665,10 +665,10 @@ def _finish_tile(plan: TilePlan, t: Tile, index: int, hf, first_out, seconds: fl
                  extra: dict | None = None) -> TileResult:
     """Steps 4's second half: conform ``first_out``'s mesh (the refiner's output for the tile by the full
     pipeline) to the decided border, run the error bound on it, check it, and measure it."""
-    from wavemesh import native
     from wavemesh.api import BUG_HINT, RefineJob, bound_excess, require_proper
     from wavemesh.check import mesh_errors
-    from wavemesh.haar import decompose
+    from wavemesh.model.haar import decompose
+    from wavemesh.refine import native
 
     p = plan.params.refine
     t0 = time.perf_counter()
@@ -710,8 +710,9 @@ def _finish_tile(plan: TilePlan, t: Tile, index: int, hf, first_out, seconds: fl
 def mesh_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> TileResult:
     """Step 4 for one tile in this process: the full pipeline of `wavemesh mesh` (with the whole grid's
     zeta on the samples), then the border.  ``window``: the tile's heights when the caller read them."""
-    from wavemesh import api, native
-    from wavemesh.haar import decompose
+    from wavemesh import api
+    from wavemesh.model.haar import decompose
+    from wavemesh.refine import native
 
     t = plan.tiles[index]
     t0 = time.perf_counter()
@@ -823,7 +824,7 @@ def _run_pool(plan: TilePlan, workers: int, finished) -> None:
     import multiprocessing
     from multiprocessing.connection import wait
 
-    from wavemesh import native
+    from wavemesh.refine import native
 
     native.load()  # built once here, not by every worker at once
     # fork: the workers start from this process as it is (the library loaded; a script that calls this
@@ -986,7 +987,7 @@ def device_tile(infos: list) -> int:
 
 def hello(ports: list[str], baud: int, timeouts) -> list:
     """Each device's DeviceInfo (HELLO), in the order of ``ports``."""
-    from wavemesh.stream import Device
+    from wavemesh.device.stream import Device
 
     infos = []
     for port in ports:
@@ -1030,7 +1031,7 @@ def stream_tiles(plan: TilePlan, ports: list[str], *, baud: int, timeouts, progr
     from collections import deque
 
     from wavemesh.api import _Progress
-    from wavemesh.stream import DeviceError
+    from wavemesh.device.stream import DeviceError
 
     n = len(plan.tiles)
     results: list[TileResult | None] = [None] * n
@@ -1151,7 +1152,7 @@ def check_tiled_outputs(output: str, *, tiles_dir: str | None = None, report: st
     """A tiled run's output paths, checked before any work (wavemesh.api.check_outputs, and --tiles-dir):
     (mesh file, --tiles-dir folder)."""
     from wavemesh.api import check_outputs
-    from wavemesh.outputs import as_inputs, check_path
+    from wavemesh.io.outputs import as_inputs, check_path
 
     inputs = as_inputs(inputs)
     out, _ = check_outputs(output, report=report, render=render, inputs=inputs, exaggeration=exaggeration,
@@ -1166,18 +1167,18 @@ def check_tiled_outputs(output: str, *, tiles_dir: str | None = None, report: st
 def write_tiled(tiled: TiledResult, plan: TilePlan, output: str, *, tiles_dir: str | None = None,
                 report: str | None = None, comment: str = "", files=None, render: str | None = None,
                 exaggeration: float | None = None, title: str | None = None, inputs=None) -> list[str]:
-    """The stitched mesh (a format of wavemesh.meshio.FORMATS, written as ``files``, an api.MeshFiles,
+    """The stitched mesh (a format of wavemesh.io.meshio.FORMATS, written as ``files``, an api.MeshFiles,
     says), each tile's mesh into ``tiles_dir`` (tile-RRR-CCC.EXT in the whole grid's frame, so that they
     fit together as they are; no --base) with ``index.json`` naming each tile's file, place and numbers,
     the JSON report and the picture (``render``); whole or not at all, as one set, none of them one of
-    ``inputs`` (wavemesh.outputs)."""
+    ``inputs`` (wavemesh.io.outputs)."""
     import json
 
     from wavemesh.api import MeshFiles, _render
-    from wavemesh.georef import SIDECAR_SUFFIX as SIDECAR
-    from wavemesh.georef import ground
-    from wavemesh.meshio import write_mesh
-    from wavemesh.outputs import Outputs, as_inputs
+    from wavemesh.io.georef import SIDECAR_SUFFIX as SIDECAR
+    from wavemesh.io.georef import ground
+    from wavemesh.io.meshio import write_mesh
+    from wavemesh.io.outputs import Outputs, as_inputs
 
     files = files or MeshFiles()
     inputs = as_inputs(inputs)
@@ -1262,7 +1263,7 @@ def command(args, params, ports: list[str] | None = None, inputs=None) -> int:
             if client is not None:
                 client.close()
     else:
-        from wavemesh.stream import DEFAULT_TIMEOUTS
+        from wavemesh.device.stream import DEFAULT_TIMEOUTS
 
         for port in ports:
             api.check_port(port)

@@ -32,7 +32,7 @@ GDAL.
   (equal to the band's no-data value, or masked by the file's mask band) become
   NaN; a band scale and offset are applied.  The georeference is kept in
   ``HeightField.transform`` and ``HeightField.crs`` (an .npz's ``dx``, ``dy``, ``xmin``, ``ymin``
-  too, :func:`_npz_transform`); :mod:`wavemesh.georef` derives the cell size and the coordinates.
+  too, :func:`_npz_transform`); :mod:`wavemesh.io.georef` derives the cell size and the coordinates.
   An ESRI ASCII grid's data must be exactly ``nrows * ncols`` numbers, and its header's
   values numbers (GDAL itself would read missing samples or text as 0 without a word:
   ``NODATA_value abc`` would mask every 0).  A no-data value must be a number the band's
@@ -160,7 +160,7 @@ class HeightField:
     transform: tuple[float, ...] | None = None
     crs: str | None = None
     # The cell size (dx, dy) in ground units when --spacing gave it (None: from the transform, or 1 without
-    # one); wavemesh.georef.ground tells the cell size and the coordinates of every height field.
+    # one); wavemesh.io.georef.ground tells the cell size and the coordinates of every height field.
     spacing: tuple[float, float] | None = None
     # --nodata hole: (H, W) bool, True where the sample is invalid (NaN, no-data, --invalid VALUE); values
     # and samples hold a nearest valid height there, for the filter bank only (wavemesh.holes).  None: none.
@@ -188,7 +188,7 @@ class HeightField:
         """Largest ``|values - (offset + scale * samples)|``; 0.0 when lossless."""
         if self.lossless:
             return 0.0
-        from wavemesh import native  # the host stages in C (equal to the lines below, tested)
+        from wavemesh.refine import native  # the host stages in C (equal to the lines below, tested)
 
         fast = native.quant_error(self.values, self.samples, self.offset, self.scale)
         if fast is not None:
@@ -261,7 +261,9 @@ def quantise(values: np.ndarray, native: bool = True) -> tuple[np.ndarray, float
     if v.size == 0:
         raise InputError("cannot quantise an empty height field")
     if native:
-        from wavemesh import native as lib  # the same rules in C, one pass (tested equal to the lines below)
+        from wavemesh.refine import (
+            native as lib,  # the same rules in C, one pass (tested equal to the lines below)
+        )
 
         fast = lib.quantise(v)
         if isinstance(fast, tuple):
@@ -326,7 +328,9 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
     if kind in "iu" and arr.dtype.itemsize == 8:
         _check_exact_integers(arr, values, source)
     if invalid is None and not holes:
-        from wavemesh import native  # every height finite: quantised in one pass, no mask made (tested equal)
+        from wavemesh.refine import (
+            native,  # every height finite: quantised in one pass, no mask made (tested equal)
+        )
 
         fast = native.quantise(values)
         if isinstance(fast, tuple):

@@ -65,8 +65,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError, MeshInvalid
-from .mesh import Mesh
+from wavemesh.errors import InputError, MeshInvalid
+from wavemesh.mesh import Mesh
 
 __all__ = ["CheckResult", "check_mesh", "ErrorReport", "mesh_errors"]
 
@@ -557,7 +557,7 @@ def mesh_errors(
     per_v = np.full(T, -np.inf)
     t_s = 0  # the first triangle the loop below measures
     if not rms and native:
-        from wavemesh import native as lib  # the loop below in C, on every core (tested equal)
+        from wavemesh.refine import native as lib  # the loop below in C, on every core (tested equal)
 
         fast = lib.tri_max(h, X, Y, zv, tris)
         if fast is not None:

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wavemesh.haar import HaarLevel, decompose
-from wavemesh.label import Labelling, label_blocks, tau_counts
 from wavemesh.mesh import Mesh
-from wavemesh.templates import LABELS, template_set
+from wavemesh.model.haar import HaarLevel, decompose
+from wavemesh.model.label import Labelling, label_blocks, tau_counts
+from wavemesh.model.templates import LABELS, template_set
 
 
 @dataclass(frozen=True)
@@ -72,9 +72,10 @@ def last_level(details: np.ndarray, width: int, height: int, levels: int) -> Haa
 
 def initial_triangulation(samples: np.ndarray, levels: int, tau_q: int,
                           wavelet: str = "haar", details: np.ndarray | None = None) -> InitialResult:
-    """Filter bank (``wavelet``: wavemesh.haar.WAVELETS), labeller and templates on (H, W) 16-bit samples.
+    """Filter bank (``wavelet``: wavemesh.model.haar.WAVELETS), labeller and templates on (H, W) 16-bit
+    samples.
     ``details``: the filter bank's details as the C library made them (native.haar_details, equal to
-    decompose's: tests/host/test_host_stages.py), else wavemesh.haar's model makes them."""
+    decompose's: tests/host/test_host_stages.py), else wavemesh.model.haar's model makes them."""
     height, width = samples.shape
     level = (decompose(samples, levels, wavelet)[-1] if details is None
              else last_level(details, width, height, levels))

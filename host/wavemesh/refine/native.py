@@ -6,7 +6,7 @@ than the library (so a fresh clone needs nothing but cmake and a C compiler); ``
 names a prebuilt library instead.
 
 :func:`refine` takes a height field's 16-bit samples, the filter bank's details (as
-:mod:`wavemesh.haar` computes them: the hardware will hand over exactly these), the initial
+:mod:`wavemesh.model.haar` computes them: the hardware will hand over exactly these), the initial
 triangulation and the parameters, and returns the mesh of every resolution level with the
 library's statistics.  Parameters are converted to the library's fixed-point formats here, each
 with the rounding docs/refiner.md states (exactly, through :class:`fractions.Fraction`).
@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import WavemeshError
-from wavemesh.haar import HaarLevel
 from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (src/job.c checks it); wm_level_stats' fields
 from wavemesh.mesh import Mesh
+from wavemesh.model.haar import HaarLevel
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FIRMWARE = ROOT / "firmware"
 BUILD = ROOT / "build" / "firmware-native"
 LIB_NAME = "libwavemesh.so"
@@ -341,7 +341,8 @@ def _nonzero(me: tuple[int, int]) -> tuple[int, int]:
 
 
 def details_array(levels: list[HaarLevel]) -> np.ndarray:
-    """wavemesh.haar's levels 1..M as the library's layout: per level, cells row by row, (d1, d2, d3)."""
+    """wavemesh.model.haar's levels 1..M as the library's layout: per level, cells row by row, (d1, d2,
+    d3)."""
     parts = [np.stack([lv.d1, lv.d2, lv.d3], axis=-1).astype(np.int32).ravel() for lv in levels]
     return np.ascontiguousarray(np.concatenate(parts) if parts else np.zeros(0, np.int32), dtype=np.int32)
 
@@ -399,7 +400,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
            ) -> RefineOutput:
     """Run the firmware refiner; returns every level's mesh (initial first) and statistics.
 
-    ``levels``: the details (wavemesh.haar.decompose's), or their number M, and then the library's own
+    ``levels``: the details (wavemesh.model.haar.decompose's), or their number M, and then the library's own
     filter bank for ``wavelet`` makes them (haar_details: equal to decompose's, tests/firmware/test_error.py,
     in a tenth of the time).
 
@@ -408,7 +409,7 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
     explicit capacity the storage is sized once for the most triangles any triangulation of the grid
     can have, 2 (W-1) (H-1): the refiner never runs out and runs once.  The library touches only the
     slots it uses, so the operating system commits only those pages of the (lazily mapped) buffer.
-    ``roi``: an (H, W) bool region of interest E(T) keeps to (wm_refine_set_roi; wavemesh.roi).
+    ``roi``: an (H, W) bool region of interest E(T) keeps to (wm_refine_set_roi; wavemesh.model.roi).
     """
     params.check()
     lib = load()

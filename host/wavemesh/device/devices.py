@@ -2,7 +2,7 @@
 
 Every port pyserial's ``list_ports`` finds (plus any URL given with ``--port``, e.g. the simulated
 board's ``socket://127.0.0.1:7720``) is opened and sent HELLO, as ``wavemesh stream`` does before a job
-(:meth:`wavemesh.stream.Device.sync`), with a short timeout; a port that answers is listed with the
+(:meth:`wavemesh.device.stream.Device.sync`), with a short timeout; a port that answers is listed with the
 capabilities its HELLO_REPLY states (the iCEBreaker's FPGA stage answers HELLO too: FEATURE_STAGE).  A
 port that cannot be opened (busy, no permission) is listed with the reason.  HELLO ends whatever session
 the device had, so nothing is lost on a wavemesh device; on another kind of device the probe writes two
@@ -52,7 +52,7 @@ def list_ports() -> list[PortReport]:
 
 def probe(report: PortReport, baud: int = 115200) -> PortReport:
     """Send HELLO on `report.url`; fill in the answer or the problem."""
-    from wavemesh.stream import DEFAULT_TIMEOUTS, Device
+    from wavemesh.device.stream import DEFAULT_TIMEOUTS, Device
 
     timeouts = replace(DEFAULT_TIMEOUTS, sync=PROBE_SYNC_S, sync_attempts=PROBE_ATTEMPTS)
     try:

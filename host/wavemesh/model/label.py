@@ -21,7 +21,7 @@ Labels (per block):
 Variants (vertex compatibility): a side gets a midpoint when either block
 sharing it asks for one (V/v: top and bottom; H/h: left and right; blocks on
 the mesh border have no outside neighbour).  The block's split mask then picks
-its template from the look-up table (:mod:`wavemesh.templates`).  Variants
+its template from the look-up table (:mod:`wavemesh.model.templates`).  Variants
 never add midpoints of their own, so one pass settles every block.
 """
 
@@ -31,9 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wavemesh.haar import HaarLevel
 from wavemesh.limits import TAU_MAX  # one source: the wire protocol's CONFIG range too, wm_protocol.h
-from wavemesh.templates import (
+from wavemesh.model.haar import HaarLevel
+from wavemesh.model.templates import (
     KIND_DIAGONAL,
     KIND_FLAT,
     KIND_HORIZONTAL,

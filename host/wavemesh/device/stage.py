@@ -3,8 +3,8 @@
 A device whose HELLO_REPLY states ``FEATURE_STAGE`` (rtl/boards/stage_uart.v) has the filter bank and
 the template stage but no CPU, so no wire-protocol session: it takes a job as a plain byte stream and
 answers every block's template entry, in raster order.  :func:`labelling` sends one job over an open
-:class:`~wavemesh.link.Link` and returns the :class:`~wavemesh.label.Labelling` the entries make;
-:func:`wavemesh.api.stream` builds the initial triangulation from it (``wavemesh.initial.assemble``)
+:class:`~wavemesh.device.link.Link` and returns the :class:`~wavemesh.model.label.Labelling` the entries make;
+:func:`wavemesh.api.stream` builds the initial triangulation from it (``wavemesh.model.initial.assemble``)
 and refines that natively, as ``wavemesh mesh`` does with its own labelling.
 
 Wire format (little-endian; stage_uart.v's table)::
@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from wavemesh.errors import WavemeshError
-from wavemesh.label import Labelling, block_edges
-from wavemesh.templates import LABELS, LUT_INVALID, template_set
+from wavemesh.model.label import Labelling, block_edges
+from wavemesh.model.templates import LABELS, LUT_INVALID, template_set
 
 MAGIC = b"WM"
 HEADER = struct.Struct("<2sHHB3s")  # magic, W, H, M, tau (u24; the stage clamps it to 18 bits)
@@ -56,7 +56,7 @@ def block_counts(width: int, height: int, levels: int) -> tuple[int, int]:
 def parse_entries(data: bytes, width: int, height: int, levels: int) -> Labelling:
     """The stage's entries -> the Labelling they make (split masks from the templates' sides), checked:
     every template id must be the look-up table's for its label and mask, as the model's resolver makes
-    them (wavemesh.label.label_blocks); StageError otherwise."""
+    them (wavemesh.model.label.label_blocks); StageError otherwise."""
     rows, cols = block_counts(width, height, levels)
     if len(data) != 2 * rows * cols:
         raise StageError(f"the FPGA stage sent {len(data)} bytes of entries, not {2 * rows * cols}")
@@ -80,7 +80,7 @@ def parse_entries(data: bytes, width: int, height: int, levels: int) -> Labellin
 
 
 def labelling(link, samples: np.ndarray, levels: int, tau_q: int, silence: float, bar=None) -> Labelling:
-    """One job on the stage behind ``link`` (a wavemesh.link.Link after HELLO): the blocks' labelling.
+    """One job on the stage behind ``link`` (a wavemesh.device.link.Link after HELLO): the blocks' labelling.
 
     ``silence``: seconds the stage may stay silent while an answer is due (its "OK", its entries) before
     StageError; ``bar``: a progress bar fed the samples sent (api._Progress)."""

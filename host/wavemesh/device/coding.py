@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wavemesh import protocol as P
+from wavemesh.device import protocol as P
 
 
 def residuals(samples: np.ndarray, predictor: int = P.RICE_PRED_MED) -> np.ndarray:

@@ -3,7 +3,7 @@
 Everything else about templates (the complete set, the look-up table from a
 block's label and split sides to a template, the Verilog ROM include, the C
 header, docs/templates.md) is generated from the data in this file by
-:mod:`wavemesh.templates`.  Edit here, nowhere else.
+:mod:`wavemesh.model.templates`.  Edit here, nowhere else.
 
 A template triangulates one block of the coarsest level.  Its vertices are taken
 from nine sites, numbered row by row (row 0 at the top, y grows downwards as in

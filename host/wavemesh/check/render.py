@@ -35,8 +35,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-from .errors import InputError
-from .mesh import Mesh
+from wavemesh.errors import InputError
+from wavemesh.mesh import Mesh
 
 __all__ = ["render_mesh", "render_heightfield", "render_grid", "grid_mesh"]
 
@@ -238,7 +238,7 @@ def render_mesh(mesh: Mesh, z: np.ndarray, path, *, view: str = "3d", wireframe:
                 elev: float = 35.0, azim: float = -60.0, en=None, label: bool = False) -> None:
     """Render ``mesh`` with per-vertex heights ``z`` to a picture file (.png, .svg, .pdf, ...).
 
-    ``en`` is each vertex's (east, north) in the heights' unit (wavemesh.georef.Ground.ground_xy: true
+    ``en`` is each vertex's (east, north) in the heights' unit (wavemesh.io.georef.Ground.ground_xy: true
     aspect); by default (col, -row), one grid step a height unit.  ``zscale`` (the vertical
     exaggeration) multiplies heights for the 3d view and the shading; by default the z extent becomes
     a quarter of the larger horizontal extent (1 when all heights are equal).  ``label`` writes the

@@ -133,7 +133,7 @@ def denoise_heightfield(hf, method: str):
     """The height field with de-noised heights (re-quantised as a file would be), its georeference
     kept; the source names the method and the noise estimate."""
     from wavemesh.errors import InputError
-    from wavemesh.heightfield import from_array
+    from wavemesh.io.heightfield import from_array
 
     if method not in METHODS:
         raise InputError(f"--denoise {method}: not a de-noising method", hint=f"use {', '.join(METHODS)}")

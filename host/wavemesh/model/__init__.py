@@ -1,0 +1,1 @@
+"""The model's stages between reading and refining: filter bank, templates, labeller, initial mesh."""
