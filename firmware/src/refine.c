@@ -194,13 +194,15 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
 
-static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
+/* angle_t: the smallest angle of WM_TRI(e), -1 when not known yet; left there when computed, and set
+ * to the new one when the swap is done (the slot keeps its own corners' triangle: wm_edge_swap). */
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int32_t *angle_t)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
-    int32_t ang_old, ang_new, a1;
+    int32_t ang_old, ang_new, a1, an1 = -1;
     uint32_t e1 = 0, e2 = 0, ra, re = 65536u;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t xi, r1 = 0, r2 = 0; /* the new triangles' slope factors, kept (wm_internal.h) */
@@ -212,12 +214,15 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     qx[2] = me->vx[c], qy[2] = me->vy[c];
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
-        wm_tri_xy(me, t1, ox, oy);
+        if (*angle_t < 0) {
+            wm_tri_xy(me, t1, ox, oy);
+            *angle_t = wm_min_angle(ox, oy);
+        }
         wm_tri_xy(me, t2, px, py);
-        ang_old = wm_min_angle(ox, oy);
+        ang_old = *angle_t;
         a1 = wm_min_angle(px, py);
         if (a1 < ang_old) ang_old = a1;
-        ang_new = wm_min_angle(n1x, n1y);
+        ang_new = an1 = wm_min_angle(n1x, n1y);
         a1 = wm_min_angle(qx, qy);
         if (a1 < ang_new) ang_new = a1;
         ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
@@ -277,6 +282,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     }
     if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
+    *angle_t = an1;
     if (alpha < 65536u) {
         r->err[t1] = e1;
         r->err[t2] = e2;
@@ -309,13 +315,14 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
+            int32_t angle_t = -1; /* t's smallest angle, once for its three edges (try_swap) */
             if (me->hv[3 * t] < 0 || !(me->tflag[t] & WM_F_SWAP)) continue;
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
                 u = WM_TRI(o);
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (try_swap(r, e, alpha, emax)) {
+                if (try_swap(r, e, alpha, emax, &angle_t)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
                     swaps++;
