@@ -187,6 +187,17 @@ static uint32_t ratio_q16(uint64_t num, uint64_t den)
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
+/* xi = alpha R_A + (1 - alpha) R_E > 1 with R_A = ra and R_E = ratio_q16(num, den) (den > 0, both below
+ * 2^42), as try_swap rounds it; at alpha = 0 (step 2(d)) R_E > 1 without the division: floor(2^16 num /
+ * den) > 2^16 iff 2^16 num >= (2^16 + 1) den (both sides below 2^59), and at alpha = 1 R_A alone. */
+static int xi_above_one(uint32_t alpha, uint32_t ra, uint64_t num, uint64_t den)
+{
+    uint64_t re;
+    if (alpha == 0) return (num << 16) >= 65537u * den;
+    re = alpha == 65536u ? 0 : ratio_q16(num, den);
+    return (((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) > 65536u;
+}
+
 /* (px, py) in the closed counter-clockwise triangle. */
 static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
@@ -203,9 +214,10 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old, ang_new, a1, an1 = -1;
-    uint32_t e1 = 0, e2 = 0, ra, re = 65536u;
+    uint32_t e1 = 0, e2 = 0, ra;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
-    uint64_t xi, r1 = 0, r2 = 0; /* the new triangles' slope factors, kept (wm_internal.h) */
+    uint64_t num = 65536u, den = 65536u; /* R_E's, as xi_above_one takes them */
+    uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
     /* new triangles (a, d, c) and (d, b, c) */
     n1x[0] = me->vx[a], n1y[0] = me->vy[a], n1x[1] = me->vx[d], n1y[1] = me->vy[d];
@@ -247,19 +259,17 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int
                     if (v > lb2) lb2 = v;
                 }
             }
-            re = ratio_q16(o1 + o2 + one, wm_scale_mul(&r->params, lb1, 1, 0, cap) +
-                                              wm_scale_mul(&r->params, lb2, 1, 0, cap) + one);
-            if ((((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) <= 65536u) return 0;
+            num = o1 + o2 + one;
+            den = wm_scale_mul(&r->params, lb1, 1, 0, cap) + wm_scale_mul(&r->params, lb2, 1, 0, cap) + one;
+            if (!xi_above_one(alpha, ra, num, den)) return 0;
         }
         e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
                     : wm_tri_error_kept(&r->field, &r->params, n1x, n1y, &w1x, &w1y, &r1);
         e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
                     : wm_tri_error_kept(&r->field, &r->params, qx, qy, &w2x, &w2y, &r2);
-        re = ratio_q16(o1 + o2 + one,
-                       wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one);
+        den = wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one;
     }
-    xi = ((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16;
-    if (xi <= 65536u) return 0;
+    if (!xi_above_one(alpha, ra, num, den)) return 0;
     /* The swap's bound (regularise): no new triangle over the mesh's E_max when the sweep began, so a
      * swap never makes E_max grow and each level's mesh stays a level of detail (unbounded, eq. 4.22
      * trades error for angles: Box at k = 2 went from E_max 3.5 at level 2 to 200 at level 1); with the
