@@ -152,28 +152,36 @@ def parse_crop(text: str) -> tuple[int, int, int, int]:
     return x, y, w, h
 
 
+def crop_window(crop: str | None, decimate: int | None, width: int, height: int
+                ) -> tuple[int, int, int, int, int, list[str]]:
+    """--crop and --decimate on a ``width`` x ``height`` grid: (x0, y0, w, h, step, what), the samples
+    (x0 + step i, y0 + step j) of a w x h grid; InputError when they do not fit.  ``what`` names them for
+    the source's name.  The one place these rules live (shape_heightfield, wavemesh.tiles' windows)."""
+    x0, y0, w, h, step, what = 0, 0, width, height, 1, []
+    if crop is not None:
+        x0, y0, w, h = parse_crop(crop)
+        if x0 < 0 or y0 < 0 or w < 2 or h < 2 or x0 + w > width or y0 + h > height:
+            raise InputError(f"--crop {crop} does not fit the {width} x {height} input",
+                             hint="X + W <= width, Y + H <= height, W and H at least 2")
+        what.append(f"crop {x0},{y0},{w},{h}")
+    if decimate is not None:
+        if decimate < 1:
+            raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
+        step = decimate
+        w, h = -(-w // step), -(-h // step)
+        if min(w, h) < 2:
+            raise InputError(f"--decimate {decimate} leaves {w} x {h} samples",
+                             hint="a height field needs at least 2 x 2")
+        what.append(f"decimate {decimate}")
+    return x0, y0, w, h, step, what
+
+
 def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | None = None) -> HeightField:
     """The part of a height field --crop and --decimate select, quantised afresh (as if it were the file)."""
     if crop is None and decimate in (None, 1):
         return hf
-    v, what, x0, y0, step = hf.values, [], 0, 0, 1
-    if crop is not None:
-        x, y, w, h = parse_crop(crop)
-        if x < 0 or y < 0 or w < 2 or h < 2 or x + w > hf.width or y + h > hf.height:
-            raise InputError(f"--crop {crop} does not fit the {hf.width} x {hf.height} input",
-                             hint="X + W <= width, Y + H <= height, W and H at least 2")
-        v = v[y:y + h, x:x + w]
-        what.append(f"crop {x},{y},{w},{h}")
-        x0, y0 = x, y
-    if decimate is not None:
-        if decimate < 1:
-            raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
-        v = v[::decimate, ::decimate]
-        if min(v.shape) < 2:
-            raise InputError(f"--decimate {decimate} leaves {v.shape[1]} x {v.shape[0]} samples",
-                             hint="a height field needs at least 2 x 2")
-        what.append(f"decimate {decimate}")
-        step = decimate
+    x0, y0, w, h, step, what = crop_window(crop, decimate, hf.width, hf.height)
+    v = hf.values[y0:y0 + step * (h - 1) + 1:step, x0:x0 + step * (w - 1) + 1:step]
     out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
     spacing = hf.spacing and (hf.spacing[0] * step, hf.spacing[1] * step)
     mask = lone = None
@@ -648,7 +656,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
                       refined=rjob)
 
 
-class _Progress:
+class Progress:
     """A progress bar on stderr (tqdm) fed absolute counts with a note, as Device.upload feeds it: redrawn
     in place on a terminal; elsewhere (logs, tests) only its last line, when it finishes.  A context
     manager: leaving it early (an error) ends a terminal's bar with a newline, so the error line starts
@@ -666,7 +674,7 @@ class _Progress:
             self.bar = tqdm(total=total, desc=label, file=sys.stderr, ascii=".#", bar_format=self.FORMAT,
                             mininterval=0.1, dynamic_ncols=True)
 
-    def __enter__(self) -> _Progress:
+    def __enter__(self) -> Progress:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -797,14 +805,14 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
                 f"budget {p.max_triangles} triangles{budget_note}")
         words = P.job_words(hf.samples, hf.mask)  # the samples, then a mask's bits (CONFIG_MASK)
         kib = 2 * len(words) / 1024
-        with _Progress("heights", len(words), progress) as bar:
+        with Progress("heights", len(words), progress) as bar:
             t0 = time.monotonic()
             sent = dev.upload(hf.samples, bar, None if hf.mask is None else words[hf.samples.size:],
                               coded=bool(info.features & P.FEATURE_RICE))
             upload_s = time.monotonic() - t0
             bar.finish(f"{kib:.1f} KiB in {upload_s:.2f} s ({kib / max(upload_s, 1e-9):.1f} KiB/s)")
         got: list = []
-        with _Progress("device", m if full else 1, progress) as work:
+        with Progress("device", m if full else 1, progress) as work:
 
             def on_progress(x: dict) -> None:
                 name = STAGE_NAMES.get(x["stage"], "?")
@@ -907,7 +915,7 @@ def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: Mes
     from wavemesh.device import stage
 
     silence = timeouts.reply * timeouts.attempts
-    with _Progress("heights", hf.width * hf.height, progress) as bar:
+    with Progress("heights", hf.width * hf.height, progress) as bar:
         t0 = time.monotonic()
         tau_q = tau_counts(params.tau, hf.scale)
         lab = stage.labelling(dev.link, hf.samples, params.levels, tau_q, silence, bar)
@@ -1025,7 +1033,7 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                 data["lod"] = written
             staged.path(report, what="report").write_text(json.dumps(data, indent=2) + "\n")
         if render:
-            _render(result.mesh, result.mesh.z(hf.values), str(staged.path(render, what="picture")), g,
+            render_picture(result.mesh, result.mesh.z(hf.values), str(staged.path(render, what="picture")), g,
                     exaggeration, title=title)
     if not g.georeferenced:  # grid coordinates: a sidecar an earlier run left would misplace them
         for path in (out, *written):
@@ -1033,7 +1041,7 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
     return written
 
 
-def _render(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> None:
+def render_picture(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> None:
     """A picture in true aspect: (east, north) in ground units; the exaggeration stated in it."""
     from wavemesh.check.render import render_mesh  # matplotlib is slow to import; only when asked
 
@@ -1153,5 +1161,5 @@ def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: boo
     m, z = read_mesh(mesh_path, to_grid=to_grid(*placed) if placed else None)
     g = placed[0] if placed else grid_ground(m.width, m.height)
     with Outputs(inputs) as staged:
-        _render(m, z, str(staged.path(output, what="picture")), g, zscale, view=view, wireframe=wireframe,
-                title=title)
+        render_picture(m, z, str(staged.path(output, what="picture")), g, zscale, view=view,
+                       wireframe=wireframe, title=title)

@@ -14,7 +14,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from wavemesh import __version__, api
+from wavemesh import __version__, api, tiles
 from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.model.haar import WAVELETS
 from wavemesh.refine.denoise import METHODS
@@ -485,6 +485,72 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
     return result.exit_status
 
 
+def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None, inputs=None) -> int:
+    """`wavemesh mesh --tile N` (``ports`` None) or `wavemesh stream` of tiles on ``ports`` (wavemesh.tiles):
+    read the input lazily, plan, run the tiles, stitch, write; print a summary unless --quiet."""
+    if getattr(args, "lod", None):
+        raise WavemeshError("--lod is not written for a tiled run", hint="leave out --lod, or --tile")
+    for name in ("roi", "nodata", "invalid", "denoise"):  # they need the whole grid at once
+        if getattr(args, name, None) not in (None, "error"):
+            raise WavemeshError(f"--{name} is not tiled yet", hint="leave out --tile")
+    if getattr(args, "tile", None) is not None and args.tile < tiles.MIN_TILE:
+        raise WavemeshError(f"--tile {args.tile} is too small",
+                            hint=f"use at least {tiles.MIN_TILE} samples a side")
+    files = api.MeshFiles(units=args.units or ("crs" if args.local else "metres"), local=args.local,
+                          normals=args.normals, base=args.base, normal_map=args.normal_map)
+    if files.normal_map:
+        raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
+                            hint="leave out --tile, or --normal-map")
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
+    if getattr(args, "timeout", None) is not None and not args.timeout > 0:
+        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
+    tiles.check_tiled_outputs(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
+                              exaggeration=args.exaggeration, inputs=inputs, files=files)
+    say = None if args.quiet else (lambda text: print(text, flush=True))
+    src = tiles.open_source(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
+                            spacing=args.spacing, origin=args.origin)
+    params = replace(params, check_levels=False, rms=False)
+    if ports is None:
+        with tiles.Runner(args.workers, args.scheduler) as runner:
+            tile = args.tile
+            if tile is None:  # from memory: the Dask workers' limits, or this machine's
+                tile = (tiles.dask_tile(runner.client) if runner.client
+                        else tiles.default_tile(args.workers or tiles.default_workers()))
+            plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say)
+            results = tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
+                                      log=say if args.quiet or not sys.stderr.isatty() else None)
+    else:
+        from wavemesh.device.stream import DEFAULT_TIMEOUTS  # the device link: only for `stream`, as below
+
+        for port in ports:
+            api.check_port(port)
+        timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
+        infos = tiles.hello(ports, args.baud, timeouts)
+        if say:
+            for port, info in zip(ports, infos, strict=True):
+                say(f"device {port}: {info.summary()}")
+        tile = args.tile if args.tile is not None else tiles.device_tile(infos)
+        plan = tiles.plan_tiles(src, params, tile, log=say)
+        results = tiles.stream_tiles(plan, ports, baud=args.baud, timeouts=timeouts, progress=not args.quiet,
+                                     log=say)
+    tiled = tiles.stitch(plan, results)
+    p = params.refine
+    comment = f"wavemesh tiled mesh, tile={plan.tile} tau={plan.tau:g} zeta={p.zeta:g} metric={p.metric}"
+    written = tiles.write_tiled(tiled, plan, args.output, tiles_dir=args.tiles_dir, report=args.report,
+                                comment=comment, files=files, render=args.render,
+                                exaggeration=args.exaggeration, title=Path(args.input).name, inputs=inputs)
+    if say:
+        r = tiled.report
+        say(f"{args.input}: {plan.width} x {plan.height} in {r['layout'][0]} x {r['layout'][1]} tiles of "
+            f"at most {plan.tile}: {tiled.mesh.n_vertices} vertices, {tiled.mesh.n_triangles} triangles, "
+            f"E_max normal {r['e_max_normal']:.6g}, vertical {r['e_max_vertical']:.6g} (zeta {p.zeta:g}, "
+            f"{p.metric}); the stitched mesh is proper")
+        say(f"wrote {args.output}" + "".join(f", {q}" for q in (args.report, args.render) if q)
+            + (f", {len(written)} tiles and index.json in {args.tiles_dir}" if written else ""))
+    return 0
+
+
 def mesh_command(args) -> int:
     _check_options(args)
     if args.threads is not None:
@@ -492,9 +558,7 @@ def mesh_command(args) -> int:
 
         native.set_threads(args.threads)  # InputError-like: one error line when out of range
     if args.tile is not None or args.scheduler or args.tiles_dir:
-        from wavemesh import tiles
-
-        return tiles.command(args, _mesh_params(args), inputs=_inputs(args, args.input))
+        return _tiled_command(args, _mesh_params(args), inputs=_inputs(args, args.input))
     _check_outputs(args)
     params = _mesh_params(args)
     result = api.mesh(_load(args, args.input, memory=True), params)
@@ -527,9 +591,7 @@ def stream_command(args) -> int:
 
     _check_options(args)
     if args.tile is not None or args.tiles_dir or len(args.port) > 1:
-        from wavemesh import tiles
-
-        return tiles.command(args, _mesh_params(args), ports=args.port, inputs=_inputs(args, args.input))
+        return _tiled_command(args, _mesh_params(args), ports=args.port, inputs=_inputs(args, args.input))
     args.port = args.port[0]
     _check_outputs(args)
     api.check_port(args.port)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wavemesh.mesh import Mesh
+from wavemesh.mesh import Mesh, ear_clip, orient
 
 
 def pack(mask: np.ndarray) -> bytes:
@@ -218,39 +218,10 @@ def drop_islands(mesh: Mesh, min_area: float) -> Mesh:
     return compact(mesh.width, mesh.height, xy, t[keep])
 
 
-def _orient(a, b, c) -> int:
-    return (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
-
-
-def _ear_clip(pts: list) -> list | None:
-    """Triangles (index triples into ``pts``) of the simple counter-clockwise polygon ``pts``: the first
-    strictly convex corner whose closed triangle holds no other corner is cut, again and again; None when
-    no such corner is left."""
-    idx = list(range(len(pts)))
-    out = []
-    while len(idx) > 3:
-        n = len(idx)
-        for k in range(n):
-            i, j, m = idx[k - 1], idx[k], idx[(k + 1) % n]
-            if _orient(pts[i], pts[j], pts[m]) <= 0:
-                continue
-            if any(_orient(pts[i], pts[j], pts[o]) >= 0 and _orient(pts[j], pts[m], pts[o]) >= 0
-                   and _orient(pts[m], pts[i], pts[o]) >= 0 for o in idx if o not in (i, j, m)):
-                continue
-            out.append((i, j, m))
-            del idx[k]
-            break
-        else:
-            return None
-    if _orient(pts[idx[0]], pts[idx[1]], pts[idx[2]]) <= 0:
-        return None
-    return out + [tuple(idx)]
-
-
 def _crosses(p, q, r, s) -> bool:
     """Segments p-q and r-s cross at a point inside both (not at a shared end, not collinear)."""
-    d1, d2 = _orient(p, q, r), _orient(p, q, s)
-    d3, d4 = _orient(r, s, p), _orient(r, s, q)
+    d1, d2 = orient(p, q, r), orient(p, q, s)
+    d3, d4 = orient(r, s, p), orient(r, s, q)
     return d1 * d2 < 0 and d3 * d4 < 0
 
 
@@ -281,11 +252,11 @@ def _dp_triangulate(pts: list, ok, limit: int = 16) -> list | None:
 
     def fits(i, j, k) -> bool:
         p, q, r = pts[i], pts[j], pts[k]
-        if _orient(p, q, r) <= 0:
+        if orient(p, q, r) <= 0:
             return False
         for o in range(n):
-            if o not in (i, j, k) and _orient(p, q, pts[o]) >= 0 and _orient(q, r, pts[o]) >= 0 \
-                    and _orient(r, p, pts[o]) >= 0:
+            if o not in (i, j, k) and orient(p, q, pts[o]) >= 0 and orient(q, r, pts[o]) >= 0 \
+                    and orient(r, p, pts[o]) >= 0:
                 return False  # a corner in the closed triangle
         if any(_crosses(a, b, c, d) for a, b in ((p, q), (q, r), (r, p)) for c, d in edges):
             return False
@@ -400,7 +371,7 @@ def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
                 if len(ring) != len(fan) + 1:
                     continue
                 a, b = xy[ring[0]], xy[ring[-1]]
-                grow = _orient(xy[v], b, a)  # > 0: the ring's polygon is the star and the triangle (v, b, a)
+                grow = orient(xy[v], b, a)  # > 0: the ring's polygon is the star and the triangle (v, b, a)
                 if grow < 0 or (grow > 0 and (mask is None or not _free(xy[v], b, a, prefix, rows_x))):
                     continue
             pts = [xy[u] for u in ring]
@@ -408,7 +379,7 @@ def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
             def ok(c, pts=pts):
                 return within([pts[i][0] for i in c], [pts[i][1] for i in c])
 
-            cut = _ear_clip(pts)
+            cut = ear_clip(pts)
             if cut is None or not all(map(ok, cut)):
                 cut = _dp_triangulate(pts, ok)  # every triangulation, when ear clipping's one is not within
                 if cut is None:

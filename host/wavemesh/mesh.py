@@ -18,6 +18,7 @@ Conventions (docs/model.md, "Mesh conventions"):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,3 +88,44 @@ class Mesh:
         x, y = self.xy[:, 0], self.xy[:, 1]
         on = (x == 0) | (y == 0) | (x == self.width - 1) | (y == self.height - 1)
         return int(np.count_nonzero(on))
+
+
+def orient(a, b, c) -> int:
+    """Twice the signed area of the triangle a, b, c (integer points): > 0 counter-clockwise, 0 collinear."""
+    return (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
+
+
+def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | None:
+    """Triangles (index triples into ``pts``) of the simple counter-clockwise polygon ``pts`` by ear
+    clipping in exact integers: an ear is a strictly convex corner whose closed triangle holds no other
+    corner, not even on its sides (that would be a T-junction).  The first ear, or with ``fattest`` the
+    one with the largest smallest angle (its sine, in floats; ties: the first); None when none is left
+    (wavemesh.holes re-triangulates a rim, wavemesh.tiles a tile's border)."""
+    idx = list(range(len(pts)))
+    out = []
+    while len(idx) > 3:
+        n = len(idx)
+        best, best_q = None, -1.0
+        for k in range(n):
+            i, j, m = idx[k - 1], idx[k], idx[(k + 1) % n]
+            pi, pj, pm = pts[i], pts[j], pts[m]
+            if orient(pi, pj, pm) <= 0:
+                continue
+            if any(orient(pi, pj, pts[o]) >= 0 and orient(pj, pm, pts[o]) >= 0 and orient(pm, pi, pts[o]) >= 0
+                   for o in idx if o not in (i, j, m)):
+                continue
+            if not fattest:
+                best = k
+                break
+            d2 = orient(pi, pj, pm)
+            la, lb, lc = math.dist(pj, pm), math.dist(pi, pm), math.dist(pi, pj)
+            q = d2 / max(la * lb, lb * lc, lc * la)
+            if q > best_q:
+                best, best_q = k, q
+        if best is None:
+            return None
+        out.append((idx[best - 1], idx[best], idx[(best + 1) % n]))
+        del idx[best]
+    if orient(pts[idx[0]], pts[idx[1]], pts[idx[2]]) <= 0:
+        return None
+    return out + [tuple(idx)]

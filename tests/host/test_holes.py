@@ -13,7 +13,7 @@ from wavemesh import api, holes
 from wavemesh.cli import main
 from wavemesh.errors import InputError
 from wavemesh.io.heightfield import from_array
-from wavemesh.mesh import Mesh
+from wavemesh.mesh import Mesh, orient
 from wavemesh.refine.native import RefineParams
 
 ZETA = 1.0
@@ -250,7 +250,7 @@ def test_rim_triangulation_search():
     # a C-shaped ring: the triangles lie inside it and fill it (doubled areas add up)
     c = [(0, 0), (4, 0), (4, 1), (1, 1), (1, 3), (4, 3), (4, 4), (0, 4)]
     cut = holes._dp_triangulate(c, lambda t: True)
-    area2 = sum(holes._orient(c[i], c[j], c[k]) for i, j, k in cut)
+    area2 = sum(orient(c[i], c[j], c[k]) for i, j, k in cut)
     assert len(cut) == len(c) - 2 and area2 == 2 * (16 - 6)
 
 

@@ -199,7 +199,7 @@ def test_float_input_within_zeta_on_the_input(tmp_path):
     (("--tile", "64", "--workers", "0"), "--workers 0 is out of range"),
 ])
 def test_bad_options(dem, tmp_path, monkeypatch, args, expect):
-    monkeypatch.setattr(tiles, "DASK_CONNECT_S", 1)
+    monkeypatch.setattr(tiles.runner, "DASK_CONNECT_S", 1)
     out = tmp_path / "m.obj"
     rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
     assert rc != 0 and expect in err and err.startswith("error:"), err

@@ -83,7 +83,7 @@ def labelling(link, samples: np.ndarray, levels: int, tau_q: int, silence: float
     """One job on the stage behind ``link`` (a wavemesh.device.link.Link after HELLO): the blocks' labelling.
 
     ``silence``: seconds the stage may stay silent while an answer is due (its "OK", its entries) before
-    StageError; ``bar``: a progress bar fed the samples sent (api._Progress)."""
+    StageError; ``bar``: a progress bar fed the samples sent (api.Progress)."""
     height, width = samples.shape
     rows, cols = block_counts(width, height, levels)
     want = 2 * rows * cols

@@ -272,23 +272,32 @@ def quantise(values: np.ndarray, native: bool = True) -> tuple[np.ndarray, float
         raise InputError("cannot quantise non-finite heights; use --fill nearest or --fill VALUE")
     vmin = float(np.min(v))
     vmax = float(np.max(v))
+    scale, offset, exact = quant_rule(vmin, vmax, bool(np.all(v == np.floor(v))))
+    samples = to_samples(v, scale, offset, exact)
+    lossless = exact or bool(np.array_equal(offset + scale * samples.astype(np.float64), v))
+    return samples, scale, offset, lossless
+
+
+def quant_rule(vmin: float, vmax: float, integers: bool) -> tuple[float, float, bool]:
+    """quantise's scale and offset for finite heights in vmin..vmax (``integers``: all of them whole
+    numbers): ``(scale, offset, exact)``, exact for integers within SAMPLE_MAX of each other (scale 1).
+    wavemesh.tiles finds vmin, vmax and ``integers`` strip by strip and quantises every tile by them."""
     span = vmax - vmin
     if not np.isfinite(span):
         raise InputError(f"height range {vmin:g} .. {vmax:g} is too large to quantise; rescale the heights")
-    if span <= SAMPLE_MAX and bool(np.all(v == np.floor(v))):
-        offset = 0.0 if (vmin >= 0 and vmax <= SAMPLE_MAX) else vmin
-        samples = (v - offset).astype(np.uint16)
-        return samples, 1.0, float(offset), True
-    offset = vmin
+    if span <= SAMPLE_MAX and integers:
+        return 1.0, 0.0 if (vmin >= 0 and vmax <= SAMPLE_MAX) else float(vmin), True
     if span / SAMPLE_MAX == 0:  # constant (or a span so small the step underflows)
-        scale = 1.0
-        samples = np.zeros(v.shape, dtype=np.uint16)
-    else:
-        scale = span / SAMPLE_MAX
-        counts = np.rint((v - offset) / scale)  # rint: round half to even
-        samples = np.clip(counts, 0, SAMPLE_MAX).astype(np.uint16)
-    lossless = bool(np.array_equal(offset + scale * samples.astype(np.float64), v))
-    return samples, float(scale), float(offset), lossless
+        return 1.0, float(vmin), False
+    return float(span / SAMPLE_MAX), float(vmin), False
+
+
+def to_samples(v: np.ndarray, scale: float, offset: float, exact: bool) -> np.ndarray:
+    """Heights to 16-bit samples by quant_rule's scale and offset: rint (half to even), clipped (a constant
+    grid, scale 1: all 0)."""
+    if exact:
+        return (v - offset).astype(np.uint16)
+    return np.clip(np.rint((v - offset) / scale), 0, SAMPLE_MAX).astype(np.uint16)
 
 
 def from_array(array, source: str = "<array>", fill: str | float | None = None, *,

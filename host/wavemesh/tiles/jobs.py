@@ -1,0 +1,238 @@
+"""A tile's jobs (free, then conformed), a run of them, and the stitched mesh (docs/tiles.md, steps 3-6)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from wavemesh import api
+from wavemesh.check import mesh_errors
+from wavemesh.errors import InputError, MeshInvalid
+from wavemesh.io.georef import cropped
+from wavemesh.io.heightfield import (
+    HeightField,
+)
+from wavemesh.mesh import Mesh
+from wavemesh.model.haar import decompose
+from wavemesh.refine import native
+from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles
+from wavemesh.tiles.runner import Runner
+from wavemesh.tiles.sides import FACING, SIDES, border_of, conform, reconcile, side_profile
+from wavemesh.tiles.source import Source, _light_source
+
+# ---------------------------------------------------------------------------------------------------
+# One tile's jobs: free (step 3), then conformed to its reconciled sides (steps 4 and 5)
+
+
+@dataclass
+class FreeTile:
+    """A tile's mesh by the full pipeline (tile coordinates), the refiner's last statistics, its sides'
+    vertices, and its numbers."""
+
+    index: int
+    mesh: Mesh
+    over: int  # triangles above zeta (0: the bound met)
+    bound_splits: int
+    sides: dict  # side -> positions (border_of)
+    seconds: float
+    extra: dict
+
+
+@dataclass
+class TileResult:
+    """A tile's mesh in grid coordinates of the whole input, its vertices' heights, and its numbers."""
+
+    index: int
+    name: str
+    xy: np.ndarray  # (V, 2) int64, whole-grid positions
+    tris: np.ndarray  # (T, 3) int64 into xy
+    z: np.ndarray  # (V,) float64 heights
+    report: dict
+    device: str | None = None  # the port that made it (stream)
+
+
+def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None) -> HeightField:
+    """The tile as a HeightField: its window of the input with the whole grid's quantisation, its
+    place on the ground, and the whole grid's cell size."""
+    src, quant = plan.source, plan.quant
+    v = src.read(t.x, t.y, t.width, t.height) if window is None else window
+    if not np.all(np.isfinite(v)):
+        raise InputError(f"{src.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
+    return HeightField(values=v, samples=quant.samples(v), scale=quant.scale, offset=quant.offset,
+                       lossless=quant.lossless, source=f"{src.name} {t.name}",
+                       transform=cropped(src.transform, t.x, t.y, 1), crs=src.crs, spacing=plan.spacing)
+
+
+def free_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> FreeTile:
+    """Step 3 for one tile: the full pipeline of `wavemesh mesh` (with the whole grid's tau and M)."""
+    t0 = time.perf_counter()
+    hf = tile_heightfield(plan, plan.tiles[index], window)
+    p = plan.params.refine
+    job = api.triangulate(hf, plan.levels, plan.tau, plan.params.wavelet)
+    out = native.refine(hf.samples, decompose(hf.samples, job.levels, job.wavelet), job.mesh, p,
+                        scale=hf.scale, zeta=hf.refiner_zeta(p.zeta), spacing=plan.spacing)
+    final = out.final
+    return FreeTile(index, final.mesh, final.stats["over"], final.stats["bound_splits"],
+                    border_of(final.mesh), time.perf_counter() - t0, {"levels": job.levels})
+
+
+@dataclass
+class _Level:
+    """The shape of a refiner level (wavemesh.native's) that api.RefineJob reads."""
+
+    mesh: Mesh
+    stats: dict
+
+
+@dataclass
+class _Levels:
+    final: _Level
+
+
+def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray | None = None) -> TileResult:
+    """Steps 4 and 5 for one tile: each shared side reconciled with the neighbour's vertices on it
+    (``facing``: side -> the neighbour's positions), the free mesh conformed to them, the error bound run
+    on it, the result checked (proper, the reconciled sides, within zeta) and measured."""
+    t0 = time.perf_counter()
+    t = plan.tiles[free.index]
+    hf = tile_heightfield(plan, t, window)
+    p = plan.params.refine
+    fp = native.fixed_params(p, hf.scale, plan.zeta_used, plan.spacing)
+    sides = {s: reconcile(side_profile(hf.samples, s), free.sides[s], facing[s], fp,
+                          0 if s in ("top", "bottom") else 1, p.metric) for s in t.neighbours}
+    out = _Levels(_Level(free.mesh, {"over": free.over, "bound_splits": free.bound_splits}))
+    if any(sides[s] != free.sides[s] for s in sides):
+        bound = replace(p, reduce=False, decimate=False, max_triangles=None, capacity=None)
+        out = native.refine(hf.samples, decompose(hf.samples, 1), conform(free.mesh, sides), bound,
+                            scale=hf.scale, zeta=plan.zeta_used, spacing=plan.spacing)
+    final = out.final.mesh
+    api.require_proper(final, f"{t.name}'s mesh")
+    got = border_of(final)
+    diff = [s for s in SIDES if s in sides and got[s] != sides[s]]
+    if diff:
+        raise MeshInvalid(f"{t.name}: the error bound changed the decided border ({', '.join(diff)})",
+                          hint=api.BUG_HINT)
+    rjob = api.RefineJob(None, p, plan.zeta_used if sides else hf.refiner_zeta(p.zeta), out, 0.0)
+    errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
+    if not rjob.bound_met:
+        raise MeshInvalid(f"{t.name}: {out.final.stats['over']} triangles above zeta after the border's "
+                          "error bound", hint=api.BUG_HINT)
+    excess = api.bound_excess(hf, rjob, errors)
+    if excess:
+        raise MeshInvalid(f"{t.name}: {excess}", hint=api.BUG_HINT)
+    xy = final.xy + np.array([t.x, t.y], dtype=np.int64)
+    report = {"tile": t.name, "row": t.row, "col": t.col, "x": t.x, "y": t.y, "width": t.width,
+              "height": t.height, "triangles_before_border": free.mesh.n_triangles,
+              "vertices": final.n_vertices, "triangles": final.n_triangles,
+              "border_vertices": {s: len(v) for s, v in sides.items()},
+              "bound_splits": out.final.stats["bound_splits"],
+              "seconds": free.seconds + time.perf_counter() - t0,
+              "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical} | free.extra
+    return TileResult(free.index, t.name, xy, final.tris, final.z(hf.values), report,
+                      free.extra.get("device"))
+
+
+def mesh_tile(plan: TilePlan, index: int, facing: dict | None = None) -> TileResult:
+    """Steps 3 to 5 for one tile in this process; ``facing`` the neighbours' positions on the shared
+    sides (default: their free meshes', made here too)."""
+    free = free_tile(plan, index)
+    if facing is None:
+        facing = {s: free_tile(plan, k).sides[FACING[s]] for s, k in plan.tiles[index].neighbours.items()}
+    return finish_tile(plan, free, facing)
+
+
+def _window(plan: TilePlan, index: int) -> np.ndarray | None:
+    """A tile's heights when the input is in memory here (a worker cannot read it), else None."""
+    if plan.source.kind != "array":
+        return None
+    t = plan.tiles[index]
+    return plan.source.read(t.x, t.y, t.width, t.height)
+
+
+def _facing(plan: TilePlan, frees: list, index: int) -> dict:
+    return {s: frees[k].sides[FACING[s]] for s, k in plan.tiles[index].neighbours.items()}
+
+
+def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, runner: Runner | None = None,
+              progress: bool = False, log: Callable[[str], None] | None = None,
+              frees: list | None = None) -> list[TileResult]:
+    """Every tile's jobs on ``runner`` (or a Runner of ``workers`` / ``scheduler`` for this call): the free
+    meshes (unless ``frees`` has them, as stream_tiles makes them), then each tile conformed to its
+    reconciled sides; the results in tile order whatever order they finish in.  A failed tile ends the run
+    with its error."""
+    if runner is None:
+        with Runner(workers, scheduler) as own:
+            return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees)
+    n = len(plan.tiles)
+    light = replace(plan, source=_light_source(plan.source))
+    with api.Progress("tiles", 2 * n, progress) as bar:
+        count = [0 if frees is None else n, 0]
+
+        def freed(r: FreeTile) -> None:
+            count[0] += 1
+            bar.update(count[0] + count[1])
+
+        def finished(r: TileResult) -> None:
+            count[1] += 1
+            note = f"{r.name}: {len(r.tris)} triangles, {r.report['seconds']:.2f} s"
+            bar.update(count[0] + count[1], note)
+            if log:
+                log(f"  {count[1]}/{n} {note}")
+
+        if frees is None:
+            frees = runner.map(free_tile, [(light, i, _window(plan, i)) for i in range(n)], freed)
+        results = runner.map(finish_tile, [(light, frees[i], _facing(plan, frees, i), _window(plan, i))
+                                           for i in range(n)], finished)
+        bar.finish(f"{n} tiles")
+    return results
+
+
+# ---------------------------------------------------------------------------------------------------
+# Stitching
+
+
+@dataclass
+class TiledResult:
+    """The stitched mesh, the vertices' heights, and the run's report."""
+
+    mesh: Mesh
+    z: np.ndarray
+    tiles: list[TileResult]
+    report: dict
+
+
+def stitch(plan: TilePlan, results: list[TileResult]) -> TiledResult:
+    """One mesh of the whole grid from the tiles' (their shared border vertices merged by position),
+    checked: a proper triangulation (check_mesh: no T-junctions, no cracks)."""
+    W = plan.width
+    keys = np.concatenate([r.xy[:, 1] * W + r.xy[:, 0] for r in results])
+    z_all = np.concatenate([r.z for r in results])
+    uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    offsets = np.cumsum([0] + [len(r.xy) for r in results])
+    tris = np.concatenate([inverse[r.tris + offsets[k]] for k, r in enumerate(results)])
+    xy = np.column_stack([uniq % W, uniq // W]).astype(np.int64)
+    mesh = Mesh(W, plan.height, xy, tris).canonical()  # vertices already in (y, x) order: same z order
+    z = z_all[first]
+    api.require_proper(mesh, "the stitched mesh")
+    report = {
+        "tile": plan.tile, "layout": [len(plan.xcuts) - 1, len(plan.ycuts) - 1],
+        "xcuts": plan.xcuts, "ycuts": plan.ycuts, "tau": plan.tau, "zeta_refiner": plan.zeta_used,
+        "quantisation": {"scale": plan.quant.scale, "offset": plan.quant.offset,
+                         "max_quantisation_error": plan.quant.q},
+        "vertices": mesh.n_vertices, "triangles": mesh.n_triangles,
+        "e_max_normal": max(r.report["e_max_normal"] for r in results),
+        "e_max_vertical": max(r.report["e_max_vertical"] for r in results), "scan_seconds": plan.scan_seconds,
+        "tiles": [r.report for r in results],
+    }
+    return TiledResult(mesh, z, results, report)
+
+
+def mesh_tiled(src: Source, params, tile: int | None = None, *, workers: int | None = None, scheduler=None,
+               progress: bool = False, log: Callable[[str], None] | None = None) -> TiledResult:
+    """`wavemesh mesh --tile`: plan, run the tiles, stitch (one Runner for every phase)."""
+    with Runner(workers, scheduler) as runner:
+        plan = plan_tiles(src, params, tile, runner=runner, log=log)
+        return stitch(plan, run_tiles(plan, runner=runner, progress=progress, log=log))

@@ -1,0 +1,159 @@
+"""The layout of a tiled run and the tile side from memory (docs/tiles.md, step 1)."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from wavemesh import api
+from wavemesh.errors import InputError, WavemeshError
+from wavemesh.io.georef import ground
+
+if TYPE_CHECKING:
+    from wavemesh.tiles.runner import Runner
+from wavemesh.tiles.source import Quant, Source, scan
+
+# The tile side without --tile N, from memory (default_tile): the largest of these (2^k + 1, so that a grid
+# of 2^j or 2^j + 1 samples a side splits evenly; tiles share a border row) whose tiles in flight, at
+# TILE_BYTES_PER_SAMPLE each, fit in half the memory available.  Larger tiles cost fewer triangles at the
+# seams, smaller ones less memory and more parallel work (make bench-tiles, docs/tiles.md).
+TILE_CHOICES = (4097, 2049, 1025, 513)
+TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
+MIN_TILE = 16  # smaller tiles are all border
+
+# ---------------------------------------------------------------------------------------------------
+# The layout
+
+
+def cuts(n: int, tile: int) -> list[int]:
+    """Positions 0 = c0 < c1 < ... < ck = n - 1 with every c(i+1) - c(i) + 1 <= tile, evenly spread."""
+    k = max(1, -(-(n - 1) // (tile - 1)))
+    return [round(i * (n - 1) / k) for i in range(k + 1)]
+
+
+@dataclass(frozen=True)
+class Tile:
+    """One tile: its place in the layout and on the grid, and its neighbours across its shared sides
+    (side name -> the neighbour's index in the plan)."""
+
+    row: int
+    col: int
+    x: int
+    y: int
+    width: int
+    height: int
+    neighbours: dict  # side -> tile index, for the shared sides only
+
+    @property
+    def name(self) -> str:
+        return f"tile-{self.row:03d}-{self.col:03d}"
+
+
+@dataclass
+class TilePlan:
+    """A tiled job before any tile runs: the input, the parameters, the quantisation, the tiles."""
+
+    source: Source
+    params: object  # wavemesh.api.MeshParams
+    tile: int
+    quant: Quant
+    levels: int | None  # M per tile (None: each tile's default)
+    tau: float  # tau_M in height units, one for every tile (default: 1% of the whole grid's range)
+    zeta_used: float  # the refiner's zeta on the samples (zeta - 2q for lossy quantisation)
+    spacing: tuple[float, float]  # the whole grid's cell size (the normal metric's)
+    xcuts: list[int]
+    ycuts: list[int]
+    tiles: list[Tile] = field(default_factory=list)
+    scan_seconds: float = 0.0
+
+    @property
+    def width(self) -> int:
+        return self.source.width
+
+    @property
+    def height(self) -> int:
+        return self.source.height
+
+
+def check_tiling(params) -> None:
+    """WavemeshError unless the job can be tiled: the error bound on, no triangle budget or storage."""
+    p = params.refine
+    if params.initial_only:
+        raise WavemeshError("--tile needs the refiner: --stage initial is not tiled", hint="use --stage full")
+    if not p.bound:
+        raise WavemeshError("--tile needs the error bound: the tiles' borders are decided within zeta",
+                            hint="use --bound on")
+    if p.max_triangles is not None or p.capacity is not None:
+        raise WavemeshError("--max-triangles and --capacity are per job, not per tile: not with --tile",
+                            hint="leave them out (each tile's storage is sized for its grid)")
+
+
+def plan_tiles(src: Source, params, tile: int | None = None, *, runner: Runner | None = None,
+               log: Callable[[str], None] | None = None) -> TilePlan:
+    """The layout and the whole grid's quantisation (its strips scanned on ``runner``'s workers)."""
+    check_tiling(params)
+    params.refine.check()
+    tile = default_tile(default_workers()) if tile is None else tile
+    if tile < MIN_TILE:
+        raise InputError(f"--tile {tile} is too small", hint=f"use at least {MIN_TILE} samples a side")
+    if params.levels is not None and not 1 <= params.levels <= api.MAX_LEVELS:
+        raise WavemeshError(f"--levels {params.levels} is out of range", hint=f"use 1..{api.MAX_LEVELS}")
+    t0 = time.perf_counter()
+    quant = scan(src, runner)
+    tau = params.tau if params.tau is not None else api.DEFAULT_TAU_FRACTION * (quant.vmax - quant.vmin)
+    if not math.isfinite(tau) or tau < 0:
+        raise WavemeshError(f"--tau {tau} is not a finite number >= 0", hint="give tau in height units")
+    p = params.refine
+    zeta = max(0.0, p.zeta - 2 * quant.q) if quant.q > 0 else p.zeta
+    plan = TilePlan(src, params, tile, quant, params.levels, tau, zeta, ground(src.grid()).spacing,
+                    cuts(src.width, tile), cuts(src.height, tile))
+    nx, ny = len(plan.xcuts) - 1, len(plan.ycuts) - 1
+    for j in range(ny):
+        for i in range(nx):
+            x, y = plan.xcuts[i], plan.ycuts[j]
+            # only the shared sides are reconciled: the grid's own border stays the refiner's to choose
+            near = {"top": (j - 1, i), "bottom": (j + 1, i), "left": (j, i - 1), "right": (j, i + 1)}
+            neighbours = {s: r * nx + c for s, (r, c) in near.items() if 0 <= r < ny and 0 <= c < nx}
+            plan.tiles.append(Tile(j, i, x, y, plan.xcuts[i + 1] - x + 1, plan.ycuts[j + 1] - y + 1,
+                                   neighbours))
+    plan.scan_seconds = time.perf_counter() - t0
+    if log:
+        log(f"tiles: {nx} x {ny} of at most {tile} x {tile} samples; quantisation scanned in "
+            f"{plan.scan_seconds:.2f} s")
+    return plan
+
+
+# ---------------------------------------------------------------------------------------------------
+# Where the tasks run: in this process, on a local process pool, or on a Dask cluster
+
+
+def available_memory() -> int:
+    """Bytes this process may still take now (the least of wavemesh.api.memory_available: MemAvailable,
+    ulimit -v, the cgroup's limit)."""
+    return min(have for have, _, _ in api.memory_available())
+
+
+def default_tile(workers: int, budget: int | None = None) -> int:
+    """The tile side from memory: the largest of TILE_CHOICES whose ``workers`` tiles in flight fit in
+    ``budget`` bytes (default: half the memory available now)."""
+    budget = available_memory() // 2 if budget is None else budget
+    for t in TILE_CHOICES:
+        if workers * TILE_BYTES_PER_SAMPLE * t * t <= budget:
+            return t
+    return TILE_CHOICES[-1]
+
+
+def dask_tile(client) -> int:
+    """The tile side from the Dask workers' memory limits: one tile in flight per worker thread."""
+    workers = client.scheduler_info().get("workers", {}).values()
+    per = [w.get("memory_limit") or 0 for w in workers]
+    threads = max([w.get("nthreads") or 1 for w in workers] or [1])
+    return default_tile(threads, min(per) // 2) if per and min(per) > 0 else default_tile(threads)
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))

@@ -1,0 +1,195 @@
+"""A tiled run's shared sides: the 1-D test, the two neighbours' vertices reconciled, a tile's mesh conformed
+to them (docs/tiles.md, steps 4-5)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from wavemesh import api
+from wavemesh.errors import MeshInvalid
+from wavemesh.mesh import Mesh, ear_clip
+
+# The normal metric's 1-D border test keeps this margin below the refiner's zeta (relative, and in sample
+# counts), more than the refiner's E(T) rounding (at most about 2^-15 relative + 2^-16, docs/refiner.md).
+NORMAL_MARGIN_REL = 2.0 ** -12
+NORMAL_MARGIN_ABS = 2.0 ** -12
+
+SIDES = ("top", "right", "bottom", "left")
+FACING = {"top": "bottom", "bottom": "top", "left": "right", "right": "left"}
+
+
+# ---------------------------------------------------------------------------------------------------
+# A shared side: the 1-D test, and the two neighbours' vertices reconciled
+
+
+def _segment_ok(z: np.ndarray, a: int, b: int, fp, axis: int, metric: str) -> bool:
+    """Every sample strictly between a and b within the refiner's zeta of the segment (a, z[a])-(b, z[b])."""
+    if b - a < 2:
+        return True
+    i = np.arange(a + 1, b, dtype=np.int64)
+    za, zb, L = int(z[a]), int(z[b]), b - a
+    num = np.abs(z[a + 1:b].astype(np.int64) * L - (za * (b - i) + zb * (i - a)))  # |dz| L, exact
+    if metric == "vertical":  # the refiner's vertical E(T) is exact: |dz| <= zeta (Q16.16 counts)
+        return bool(np.all(num * 65536 <= int(fp.zeta) * L))
+    m, e = (fp.slope_x_m, fp.slope_x_e) if axis == 0 else (fp.slope_y_m, fp.slope_y_e)
+    slope = (m / 2.0 ** e) * (zb - za) / L  # the segment's slope with the refiner's rounded-down scale
+    limit = (fp.zeta / 65536) * (1 - NORMAL_MARGIN_REL) - NORMAL_MARGIN_ABS
+    return bool(np.all(num / L / math.sqrt(1 + slope * slope) <= limit))
+
+
+def simplify_profile(z: np.ndarray, fp, axis: int, metric: str) -> tuple[int, ...]:
+    """The kept positions of a side's profile z (16-bit samples, its two ends kept): from each kept
+    position the farthest next one a galloping search finds whose segment holds every sample between
+    within zeta (_segment_ok)."""
+    z = np.asarray(z, dtype=np.int64)
+    n = len(z)
+    kept, a = [0], 0
+    while a < n - 1:
+        good, step, bad = a + 1, 2, None
+        while True:
+            b = min(a + step, n - 1)
+            if not _segment_ok(z, a, b, fp, axis, metric):
+                bad = b
+                break
+            good = b
+            if b == n - 1:
+                break
+            step *= 2
+        while bad is not None and bad - good > 1:
+            mid = (good + bad) // 2
+            if _segment_ok(z, a, mid, fp, axis, metric):
+                good = mid
+            else:
+                bad = mid
+        kept.append(good)
+        a = good
+    return tuple(kept)
+
+
+def reconcile(z: np.ndarray, mine, theirs, fp, axis: int, metric: str) -> tuple[int, ...]:
+    """A shared side's vertices from both neighbours' free meshes (their positions along it): the union,
+    each segment of it that does not hold its samples within zeta (_segment_ok) simplified on its own
+    (simplify_profile).  Symmetric in ``mine`` and ``theirs``; every vertex either mesh has is kept, so
+    conforming a mesh to it only inserts."""
+    z = np.asarray(z, dtype=np.int64)
+    kept = [0]
+    for c in sorted(set(mine) | set(theirs) | {len(z) - 1})[1:]:
+        a = kept[-1]
+        if not _segment_ok(z, a, c, fp, axis, metric):
+            kept += [a + k for k in simplify_profile(z[a:c + 1], fp, axis, metric)[1:-1]]
+        kept.append(c)
+    return tuple(kept)
+
+
+def side_profile(samples: np.ndarray, side: str) -> np.ndarray:
+    """A tile's samples along one side (top and bottom left to right, left and right top to bottom)."""
+    return {"top": samples[0], "bottom": samples[-1], "left": samples[:, 0], "right": samples[:, -1]}[side]
+
+
+# ---------------------------------------------------------------------------------------------------
+# A tile's mesh conformed to its decided border
+
+
+def _side_of(x: int, y: int, w: int, h: int) -> list[tuple[str, int]]:
+    return [(s, p) for s, p, on in (("top", x, y == 0), ("bottom", x, y == h - 1), ("left", y, x == 0),
+                                    ("right", y, x == w - 1)) if on]
+
+
+def _side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
+    return {"top": (pos, 0), "bottom": (pos, h - 1), "left": (0, pos), "right": (w - 1, pos)}[side]
+
+
+def conform(mesh: Mesh, sides: dict) -> Mesh:
+    """``mesh`` (a proper triangulation of its grid rectangle) with exactly the decided border vertices:
+    each missing one inserted by splitting the triangle on its border edge, each other border vertex
+    (corners stay) removed and its hole, a simple polygon, re-triangulated by ear clipping (the fattest
+    ear first).  The result is proper (the refiner's wm_mesh_build checks it again); its error is the
+    next step's business."""
+    w, h = mesh.width, mesh.height
+    xy = [tuple(p) for p in mesh.xy.tolist()]
+    tris = [tuple(t) for t in mesh.tris.tolist()]
+    alive = [True] * len(tris)
+    border = [i for i, (x, y) in enumerate(xy) if x in (0, w - 1) or y in (0, h - 1)]
+    inc: dict[int, set[int]] = {v: set() for v in border}
+    bset = np.zeros(len(xy), dtype=bool)
+    bset[border] = True
+    for t in np.flatnonzero(bset[mesh.tris].any(axis=1)).tolist():
+        for v in tris[t]:
+            if v in inc:
+                inc[v].add(t)
+
+    def add(tri) -> None:
+        tris.append(tri)
+        alive.append(True)
+        for v in tri:
+            if v in inc:
+                inc[v].add(len(tris) - 1)
+
+    def kill(t) -> None:
+        alive[t] = False
+        for v in tris[t]:
+            if v in inc:
+                inc[v].discard(t)
+
+    want = {_side_point(s, pos, w, h) for s, ps in sides.items() for pos in ps}
+    # 1. insert the decided vertices the mesh lacks: split the triangle whose border edge holds each
+    for p in sorted(want - set(xy)):
+        side, pos = _side_of(p[0], p[1], w, h)[0]
+        line = [v for v in inc if any(s == side for s, _ in _side_of(*xy[v], w, h))]
+        coord = (lambda v: xy[v][0]) if side in ("top", "bottom") else (lambda v: xy[v][1])
+        a = max((v for v in line if coord(v) < pos), key=coord)
+        b = min((v for v in line if coord(v) > pos), key=coord)
+        t = next(t for t in inc[a] & inc[b])
+        ta = tris[t]
+        k = ta.index(a)
+        if ta[(k + 1) % 3] != b:  # the triangle holds the edge as b -> a
+            a, b = b, a
+            k = ta.index(a)
+        c = ta[(k + 2) % 3]
+        v = len(xy)
+        xy.append(p)
+        inc[v] = set()
+        kill(t)
+        add((a, v, c))
+        add((v, b, c))
+    # 2. remove the border vertices that were not decided (never a corner)
+    corners = {(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)}
+    for v in sorted(inc, key=lambda v: (xy[v][1], xy[v][0])):
+        if xy[v] in want or xy[v] in corners or not any(s in sides for s, _ in _side_of(*xy[v], w, h)):
+            continue
+        fan = list(inc[v])
+        # the star's link, walked from the side neighbour with v's fan counter-clockwise: edge (v -> n1)
+        # in a triangle (v, n1, n2) continues from n2; the start is the neighbour no triangle ends at
+        nxt = {}
+        for t in fan:
+            tv = tris[t]
+            k = tv.index(v)
+            nxt[tv[(k + 1) % 3]] = tv[(k + 2) % 3]
+        start = next(n for n in nxt if n not in nxt.values())
+        ring = [start]
+        while ring[-1] in nxt:
+            ring.append(nxt[ring[-1]])
+        cut = ear_clip([xy[r] for r in ring], fattest=True)
+        if cut is None:
+            raise MeshInvalid("a tile's border could not be re-triangulated (no ear)", hint=api.BUG_HINT)
+        for t in fan:
+            kill(t)
+        for tri in cut:
+            add(tuple(ring[k] for k in tri))
+        del inc[v]
+        xy[v] = None  # freed
+    live_v = [i for i, p in enumerate(xy) if p is not None]
+    remap = np.full(len(xy), -1, dtype=np.int64)
+    remap[live_v] = np.arange(len(live_v))
+    t_out = np.array([t for t, ok in zip(tris, alive, strict=True) if ok], dtype=np.int64).reshape(-1, 3)
+    return Mesh(w, h, np.array([xy[i] for i in live_v], dtype=np.int64).reshape(-1, 2), remap[t_out])
+
+
+def border_of(mesh: Mesh) -> dict:
+    """A mesh's vertices on each side of its rectangle, as positions along the side (sorted)."""
+    x, y = mesh.xy[:, 0], mesh.xy[:, 1]
+    w, h = mesh.width, mesh.height
+    return {"top": tuple(sorted(x[y == 0].tolist())), "bottom": tuple(sorted(x[y == h - 1].tolist())),
+            "left": tuple(sorted(y[x == 0].tolist())), "right": tuple(sorted(y[x == w - 1].tolist()))}

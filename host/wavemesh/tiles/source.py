@@ -1,0 +1,241 @@
+"""The input of a tiled run, read window by window, and its one quantisation (docs/tiles.md, steps 1-2)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from wavemesh import api
+from wavemesh.errors import InputError
+from wavemesh.io.georef import apply_overrides, cropped
+from wavemesh.io.heightfield import (
+    check_nodata,
+    parse_fill,
+    quant_rule,
+    regular_file,
+    to_samples,
+)
+
+if TYPE_CHECKING:
+    from wavemesh.tiles.runner import Runner
+
+
+STRIP_BYTES = 16 << 20  # the quantisation pass reads the input in row strips of about this many float64 bytes
+
+# ---------------------------------------------------------------------------------------------------
+# The input, read window by window
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a tiled job's heights come from, picklable: a worker opens it and reads its own window.
+
+    ``kind``: "npy" (a .npy file, read through a memmap), "raster" (a GDAL raster, read by rasterio
+    window by window) or "array" (heights in memory, for every other format and for --fill nearest).
+    (x0, y0, step): the grid is the file's samples (x0 + step i, y0 + step j) (--crop, --decimate)."""
+
+    kind: str
+    width: int
+    height: int
+    path: str | None = None
+    array: np.ndarray | None = None
+    x0: int = 0
+    y0: int = 0
+    step: int = 1
+    fill: float | None = None  # --fill VALUE for the lazy kinds
+    name: str = "<array>"
+    transform: tuple[float, ...] | None = None  # of the tiled grid (after crop and decimate)
+    crs: str | None = None
+    spacing: tuple[float, float] | None = None  # --spacing, when given
+
+    def read(self, x: int, y: int, w: int, h: int) -> np.ndarray:
+        """Heights (float64) of the w x h window whose top-left sample is (x, y), non-finite ones filled
+        by --fill VALUE (left as they are without it)."""
+        s = self.step
+        fx, fy = self.x0 + s * x, self.y0 + s * y
+        cols = slice(fx, fx + s * (w - 1) + 1, s)
+        rows = slice(fy, fy + s * (h - 1) + 1, s)
+        if self.kind == "array":
+            v = np.array(self.array[rows, cols], dtype=np.float64)
+        elif self.kind == "npy":
+            mm = np.load(self.path, mmap_mode="r", allow_pickle=False)
+            with np.errstate(invalid="ignore"):
+                v = np.array(mm[rows, cols], dtype=np.float64)
+            del mm
+        else:
+            v = _read_raster_window(self.path, fx, fy, s * (w - 1) + 1, s * (h - 1) + 1)[::s, ::s]
+        if self.fill is not None:
+            v[~np.isfinite(v)] = self.fill
+        return v
+
+    def grid(self) -> _Grid:
+        return _Grid(self.width, self.height, self.transform, self.crs, self.spacing, self.name)
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """What wavemesh.georef.ground needs of a height field, without its samples."""
+
+    width: int
+    height: int
+    transform: tuple[float, ...] | None
+    crs: str | None
+    spacing: tuple[float, float] | None
+    source: str
+
+
+def _open_raster(path: str):
+    """rasterio's dataset (imported here: rasterio costs a second of start-up that a .npy run never needs)."""
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    with warnings.catch_warnings():  # a plain TIFF: no stray warning line
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return rasterio.open(path)
+
+
+def _read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
+    """A window of band 1 of a GDAL raster as float64: masked samples NaN, the band's scale and offset
+    applied (as wavemesh.heightfield reads the whole raster)."""
+    from rasterio.windows import Window  # with rasterio (_open_raster)
+
+    with _open_raster(path) as ds:
+        a = ds.read(1, window=Window(x, y, w, h), masked=True)
+        scale, offset = ds.scales[0], ds.offsets[0]
+    v = np.ma.filled(a.astype(np.float64), np.nan)
+    if (scale, offset) != (1.0, 0.0):
+        v = v * scale + offset
+    return v
+
+
+def open_source(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
+                decimate: int | None = None, spacing: str | None = None, origin: str | None = None) -> Source:
+    """A height field file as a tiled job reads it: .npy through a memmap and GeoTIFF (any GDAL raster)
+    through rasterio windows, without reading the samples; every other format, and --fill nearest (which
+    needs the whole grid), is read whole by wavemesh.api.load_input."""
+    fill_mode = parse_fill(fill)
+    ext = Path(path).suffix.lower()
+
+    def whole() -> Source:
+        hf = api.load_input(path, key=key, fill=fill, crop=crop, decimate=decimate, spacing=spacing,
+                            origin=origin)
+        return Source("array", hf.width, hf.height, array=hf.values, name=hf.source, transform=hf.transform,
+                      crs=hf.crs, spacing=hf.spacing)
+
+    if fill_mode == "nearest" or ext not in (".npy", ".tif", ".tiff"):
+        return whole()
+    transform = crs = None
+    regular_file(path)  # not a FIFO, not a device
+    if ext == ".npy":
+        try:
+            mm = np.load(path, mmap_mode="r", allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise InputError(f"cannot read {path}: not a valid .npy file ({e})") from None
+        if mm.ndim != 2 or mm.dtype.kind not in "biuf" or min(mm.shape) < 2:
+            return whole()  # the whole-file reader says what is wrong, in its words
+        fh, fw = mm.shape
+        kind = "npy"
+    else:
+        from rasterio.errors import RasterioError  # with rasterio (_open_raster)
+
+        try:
+            with _open_raster(path) as ds:
+                if ds.count != 1:
+                    raise InputError(f"{path} has {ds.count} bands; a height field needs one",
+                                     hint="extract one (e.g. gdal_translate -b 1)")
+                check_nodata(path, ds)
+                fh, fw = ds.height, ds.width
+                if ds.crs is not None or not ds.transform.is_identity:
+                    transform = tuple(float(t) for t in ds.transform[:6])
+                    crs = ds.crs.to_string() if ds.crs is not None else None
+        except RasterioError as e:
+            raise InputError(f"cannot read {path}: {e}") from None
+        kind = "raster"
+    x0, y0, w, h, step, what = api.crop_window(crop, decimate, fw, fh)
+    name = path + (f" ({', '.join(what)})" if what else "")
+    grid = apply_overrides(_Grid(fw, fh, transform, crs, None, path), spacing, origin)
+    return Source(kind, w, h, path=path, x0=x0, y0=y0, step=step,
+                  fill=None if fill_mode is None else float(fill_mode), name=name,
+                  transform=cropped(grid.transform, x0, y0, step), crs=grid.crs, spacing=grid.spacing)
+
+
+# ---------------------------------------------------------------------------------------------------
+# One quantisation for the whole grid: wavemesh.heightfield's rules, its statistics found strip by strip
+
+
+@dataclass(frozen=True)
+class Quant:
+    """The whole grid's quantisation (heightfield.quant_rule of its range): samples = the heights less
+    offset, over scale (rounded and clipped unless ``exact``); ``q`` the largest quantisation error."""
+
+    scale: float
+    offset: float
+    exact: bool  # integers within SAMPLE_MAX of each other: the lossless case of heightfield.quantise
+    q: float
+    vmin: float
+    vmax: float
+
+    @property
+    def lossless(self) -> bool:
+        return self.q == 0
+
+    def samples(self, v: np.ndarray) -> np.ndarray:
+        return to_samples(v, self.scale, self.offset, self.exact)
+
+
+def _light_source(src: Source) -> Source:
+    """The source without an in-memory input (each task then carries its own window)."""
+    return src if src.kind != "array" else replace(src, array=None)
+
+
+def _strip_rows(src: Source) -> int:
+    return max(1, STRIP_BYTES // (8 * src.width))
+
+
+def _strip_stats(src: Source, y: int, rows: int) -> tuple[float, float, bool, int]:
+    """(least, largest, all integers, non-finite count) of the heights of rows y .. y + rows - 1."""
+    v = src.read(0, y, src.width, rows)
+    ok = np.isfinite(v)
+    bad = int(v.size - np.count_nonzero(ok))
+    if bad:
+        v = v[ok]
+    if not v.size:
+        return math.inf, -math.inf, True, bad
+    return float(v.min()), float(v.max()), bool(np.all(v == np.floor(v))), bad
+
+
+def _strip_error(src: Source, y: int, rows: int, quant: Quant) -> float:
+    """The largest quantisation error of rows y .. y + rows - 1."""
+    v = src.read(0, y, src.width, rows)
+    return float(np.max(np.abs(v - (quant.offset + quant.scale * quant.samples(v).astype(np.float64)))))
+
+
+def scan(src: Source, runner: Runner | None = None) -> Quant:
+    """The quantisation of the whole grid, from the strips' statistics (on ``runner``'s workers: an input
+    in memory is scanned here); a second pass for the largest quantisation error unless exact."""
+    rows = _strip_rows(src)
+    light = _light_source(src)
+    tasks = [(light, y, min(rows, src.height - y)) for y in range(0, src.height, rows)]
+    here = runner is None or src.kind == "array"
+
+    def each(fn, extra=()):
+        if here:
+            return [fn(src, y, r, *extra) for _, y, r in tasks]
+        return runner.map(fn, [t + extra for t in tasks])
+
+    stats = each(_strip_stats)
+    bad = sum(s[3] for s in stats)
+    if bad:
+        raise InputError(f"{src.name}: {bad} samples are NaN, infinite or no-data",
+                         hint="use --fill VALUE (or --fill nearest, which reads the whole grid)")
+    vmin, vmax = min(s[0] for s in stats), max(s[1] for s in stats)
+    scale, offset, exact = quant_rule(vmin, vmax, all(s[2] for s in stats))
+    quant = Quant(scale, offset, exact, 0.0, vmin, vmax)
+    if exact:
+        return quant
+    return replace(quant, q=max(each(_strip_error, (quant,))))
