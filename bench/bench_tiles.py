@@ -11,7 +11,12 @@ its pool workers, summed) sampled every 50 ms by psutil, the most it reached.
 - *growth*: 1024^2 .. 8192^2 at the default tile size for 2 workers (tiles.default_tile: from the memory
   available; 4097 on a machine with 2 x 4097^2 x 48 bytes to spare), 2 workers;
 - *tile size*: 8192^2 at tiles of 1025, 2049 and 4097, 2 workers;
-- *workers*: 8192^2 at tiles of 1025 (64 of them), 1 and 2 workers: parallel efficiency t1 / (2 t2);
+- *workers*: 8192^2 at tiles of 1025 (64 of them) with 1, 2, 4, ... workers up to the CPUs this process may
+  use (TILES_WORKERS_MAX, or `python bench/bench_tiles.py --workers-max N` on a bigger machine): the
+  speed-up t1 / tw, the parallel efficiency t1 / (w tw), and the parent's own CPU time (os.times of the
+  run's process, its workers apart) against t1: the serial part that bounds the speed-up; with
+  TILES_SCHEDULER (`--scheduler local` for a Dask LocalCluster of w single-threaded worker processes, or a
+  scheduler's address) the same series through Dask;
 - *overhead*: the tiled mesh's triangles against one untiled run (wavemesh.api.mesh, in a process of
   its own: its peak RSS is the whole grid's) at every size, at the default tile size and at smaller ones,
   and on the benchmark DEMs of bench_quality (the real ones; each smaller than the default tile, where
@@ -63,36 +68,50 @@ def terrain_file(n: int) -> Path:
     return path
 
 
-def one(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
-    """One run in this process (the child): the tiled mesh, or the untiled one."""
-    import resource
-
+def one(n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "") -> dict:
+    """One run in this process (the child): the tiled mesh (on a Runner of ``workers`` local processes,
+    or through Dask: ``scheduler`` "local" for a LocalCluster of ``workers`` processes, or an address),
+    or the untiled one.  The parent's own CPU time (os.times: this process, its workers apart)."""
     from wavemesh import api, tiles
     from wavemesh.refine.native import RefineParams
 
     path = str(terrain_file(n))
     params = api.MeshParams(refine=RefineParams(zeta=ZETA, metric="vertical"))
-    t0, c0 = time.perf_counter(), time.process_time()
+    cluster = None
+    if scheduler == "local":
+        from distributed import LocalCluster
+
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        scheduler = cluster.scheduler_address
+    t0, c0 = time.perf_counter(), os.times()
     if untiled:
         r = api.mesh(api.load_input(path), params)
         out = {"triangles": r.mesh.n_triangles, "e_max": r.errors.e_max_vertical}
     else:
-        plan = tiles.plan_tiles(tiles.open_source(path), params, tile)
-        tiled = tiles.stitch(plan, tiles.run_tiles(plan, workers=workers))
+        with tiles.Runner(workers, scheduler or None) as runner:
+            plan = tiles.plan_tiles(tiles.open_source(path), params, tile, runner=runner)
+            tiled = tiles.stitch(plan, tiles.run_tiles(plan, runner=runner))
         out = {
             "triangles": tiled.mesh.n_triangles,
             "e_max": tiled.report["e_max_vertical"],
             "tiles": len(plan.tiles),
-            "border_seconds": plan.border_seconds,
+            "scan_seconds": plan.scan_seconds,
         }
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    c1 = os.times()
+    if cluster is not None:
+        cluster.close()
+    parent = c1.user + c1.system - c0.user - c0.system
     return out | {
         "seconds": time.perf_counter() - t0,
-        "cpu_seconds": time.process_time() - c0 + kids.ru_utime + kids.ru_stime,
+        "parent_cpu_seconds": parent,
+        "cpu_seconds": parent + c1.children_user + c1.children_system - c0.children_user - c0.children_system,
+        "scheduler": scheduler and ("dask" if cluster is not None else "dask " + scheduler),
     }
 
 
-def run_child(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
+def run_child(n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "") -> dict:
     """one() in a process of its own, its tree's peak RSS sampled meanwhile."""
     import psutil
 
@@ -104,6 +123,7 @@ def run_child(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
         str(tile),
         str(workers),
         "1" if untiled else "0",
+        scheduler,
     ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=BENCH)
     peak = 0
@@ -128,7 +148,7 @@ def run_child(n: int, tile: int, workers: int, untiled: bool = False) -> dict:
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode})")
     r = json.loads(out.strip().splitlines()[-1])
-    r |= {"n": n, "tile": tile, "workers": workers, "untiled": untiled, "peak_rss": peak}
+    r |= {"n": n, "tile": tile, "workers": workers, "untiled": untiled, "peak_rss": peak, "via": scheduler}
     print(
         f"  {n}^2 {'untiled' if untiled else f'tile {tile} x{workers}'}: {r['triangles']} triangles, "
         f"{r['seconds']:.1f} s ({r['cpu_seconds']:.1f} CPU s), peak RSS {peak / 2**20:.0f} MiB",
@@ -197,8 +217,19 @@ def freeze_library() -> str:
     return commit
 
 
+def workers_series() -> list[int]:
+    """1, 2, 4, ... up to TILES_WORKERS_MAX (default: the CPUs this process may use), that one included."""
+    from wavemesh import tiles
+
+    top = int(os.environ.get("TILES_WORKERS_MAX") or tiles.default_workers())
+    series = [1 << k for k in range(top.bit_length()) if 1 << k <= top]
+    return series + ([top] if series[-1] != top else [])
+
+
 def run() -> dict:
     from wavemesh import tiles
+
+    schedulers = [os.environ["TILES_SCHEDULER"]] if os.environ.get("TILES_SCHEDULER") else []
 
     commit = freeze_library()
 
@@ -222,7 +253,11 @@ def run() -> dict:
         for tile in TILE_SIZES:
             if tile != d:
                 out["tile_size"].append(run_child(TILE_N, tile, 2))
-        out["workers"].append(run_child(TILE_N, WORKERS_TILE, 1))
+        out["workers"] = [
+            run_child(TILE_N, WORKERS_TILE, w, scheduler=via)
+            for via in ("", *schedulers)
+            for w in workers_series()
+        ]
     for n in sizes:  # one untiled run beside each (its memory too: the whole grid at once)
         out["untiled"].append(run_child(n, d, 1, untiled=True))
         if n in (1024, 2048):
@@ -244,7 +279,7 @@ def markdown(r: dict) -> str:
     import math
 
     d = r["default_tile"]
-    by = {(x["n"], x["tile"], x["workers"]): x for x in r["growth"] + r["tile_size"] + r["workers"]}
+    by = {(x["n"], x["tile"], x["workers"]): x for x in r["growth"] + r["tile_size"]}
     lines = [
         f"`make bench-tiles` (bench/bench_tiles.py): `wavemesh mesh --tile` on the seeded synthetic "
         f"terrain (bench/datasets.py `terrain`, the unit square sampled n x n, a float32 .npy read through "
@@ -304,19 +339,34 @@ def markdown(r: dict) -> str:
                     _mib(x["peak_rss"]),
                 )
             )
-    w1, w2 = by.get((TILE_N, WORKERS_TILE, 1)), by.get((TILE_N, WORKERS_TILE, 2))
-    if w1 and w2:
+    for via in dict.fromkeys(x.get("via", "") for x in r["workers"]):
+        series = [x for x in r["workers"] if x.get("via", "") == via]
+        t1 = next((x for x in series if x["workers"] == 1), None)
+        if not t1:
+            continue
         lines += [
             "",
-            f"**Workers** ({TILE_N}^2, tile {WORKERS_TILE}): 1 worker {w1['seconds']:.1f} s (peak "
-            f"{_mib(w1['peak_rss'])} MiB), 2 workers {w2['seconds']:.1f} s (peak "
-            f"{_mib(w2['peak_rss'])} MiB): parallel efficiency t1 / (2 t2) = "
-            f"{w1['seconds'] / (2 * w2['seconds']):.2f}; CPU {w1['cpu_seconds']:.1f} s and "
-            f"{w2['cpu_seconds']:.1f} s (about the same work: the pool adds little).  The machine has "
-            f"2 cores shared with other jobs, whose share shows in every run's wall time (3 to 5 times its "
-            f"CPU time here): a second worker found little free CPU, and this efficiency says more about the "
-            f"machine than about the tiles.",
+            f"**Workers** ({TILE_N}^2, tile {WORKERS_TILE}, {'Dask ' + via if via else 'the local pool'}): "
+            "the speed-up t1 / tw, the parallel efficiency t1 / (w tw), and the parent's own CPU time (its "
+            "workers apart) against t1, the serial part that bounds the speed-up (at most t1 / parent).  "
+            "Wall times on a machine shared with other jobs are noisy; CPU seconds beside them.",
+            "",
+            "| workers | wall s | speed-up | efficiency | CPU s | parent CPU s | parent / t1 | peak MiB |",
+            "|---|---|---|---|---|---|---|---|",
         ]
+        for x in series:
+            lines.append(
+                _row(
+                    x["workers"],
+                    f"{x['seconds']:.1f}",
+                    f"{t1['seconds'] / x['seconds']:.2f}x",
+                    f"{t1['seconds'] / (x['workers'] * x['seconds']):.2f}",
+                    f"{x['cpu_seconds']:.1f}",
+                    f"{x.get('parent_cpu_seconds', 0):.2f}",
+                    f"{100 * x.get('parent_cpu_seconds', 0) / t1['seconds']:.1f} %",
+                    _mib(x["peak_rss"]),
+                )
+            )
     if r["untiled"]:
         lines += [
             "",
@@ -371,4 +421,21 @@ if __name__ == "__main__":
         print(json.dumps(dem_overhead()))
     if sys.argv[1:2] == ["one"]:
         n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
-        print(json.dumps(one(n, tile, workers, bool(untiled))))
+        print(json.dumps(one(n, tile, workers, bool(untiled), sys.argv[6] if len(sys.argv) > 6 else "")))
+    elif sys.argv[1:2] != ["dems"]:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
+        import argparse
+
+        import run as bench_run
+
+        ap = argparse.ArgumentParser(description="make bench-tiles with other workers (bench/run.py tiles)")
+        ap.add_argument("--workers-max", type=int, help="the workers series' top (default: the CPUs)")
+        ap.add_argument("--scheduler", help="also through Dask: 'local' (a LocalCluster) or ADDRESS")
+        a = ap.parse_args()
+        os.environ.update(
+            {
+                k: str(v)
+                for k, v in (("TILES_WORKERS_MAX", a.workers_max), ("TILES_SCHEDULER", a.scheduler))
+                if v
+            }
+        )
+        sys.exit(bench_run.main(["tiles"]))
