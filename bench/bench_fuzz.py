@@ -128,6 +128,6 @@ def markdown(data: dict) -> str:
         *lines,
         "",
         "Coverage counts what each harness instruments: for refine and proto the edges of the C code linked "
-        "(the refiner, proto.c, the native job), for readers the branches of wavemesh's Python modules the "
-        "readers import (atheris); GDAL, numpy and Pillow run untraced.",
+        "(the refiner, the protocol engine, the native job), for readers the branches of wavemesh's Python "
+        "modules the readers import (atheris); GDAL, numpy and Pillow run untraced.",
     ])

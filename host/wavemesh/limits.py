@@ -13,7 +13,7 @@ TAU_MAX = (1 << 18) - 1  # largest tau in coefficient units (every 18-bit detail
 
 # The refiner's per-level statistics: the int32 fields of wm_level_stats (firmware/include/wavemesh.h)
 # before e_max, in order.  The one list: wavemesh.refine.native builds its ctypes structure from it, and the
-# generated header gives proto.c the level header's offsets and values in this order.
+# generated header gives the engine (proto_emit.c) the level header's offsets and values in this order.
 STAT_FIELDS = ("level", "vertices", "triangles", "iterations", "active", "dependent", "pairs", "quasi_pairs",
                "unpaired", "edge_splits", "ternary_splits", "moves", "swaps", "bound_splits", "flips",
                "budget_hit", "over")

@@ -2,7 +2,7 @@
 frame the
 encoder cuts decodes, by the reference decoder, to the samples (smooth, noisy, random, steps, wrap-around);
 incompressible samples cost no more than raw words; a real DEM costs under a byte a sample.  The device's
-decoder (proto.c) is checked end to end by every stream test (RUN's CRC and the meshes)."""
+decoder (proto_data.c) is checked end to end by every stream test (RUN's CRC and the meshes)."""
 
 from __future__ import annotations
 
@@ -78,7 +78,8 @@ def test_a_real_dem_costs_under_a_byte_a_sample():
 
 def test_level_bodies_decode_to_their_numbers():
     """LEVEL_DELTA: the vertex slots (free ones too) and triangles come back as they went, and a damaged
-    body is refused (the device's coder, proto.c's coded_item, is checked end to end by the stream tests)."""
+    body is refused (the device's coder, proto_emit.c's coded_item, is checked end to end by the stream
+    tests)."""
     rng = np.random.default_rng(5)
     xy = rng.integers(0, 1024, (300, 2))
     xy[rng.random(300) < 0.1] = P.FREE_VERTEX

@@ -114,7 +114,7 @@ def busy_answer(port: int, send: bytes) -> tuple[list, float]:
 
 def test_one_client_at_a_time(start_sim, firmware_hex):
     """A second client gets ERROR BUSY within a second and is closed, as from the native device (the
-    bridge sends proto.c's frame); the first is still served; later clients are served in turn."""
+    bridge sends proto_slip.c's frame); the first is still served; later clients are served in turn."""
     board = start_sim(firmware_hex, "--fast")
     with S.Device(board.url, timeouts=TIMEOUTS) as first:
         first.sync()

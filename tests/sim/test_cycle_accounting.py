@@ -1,6 +1,6 @@
 """The protocol engine's cycle accounting, exactly: wm_clocktest (firmware/board/native/clocktest.c).
 
-The engine (firmware/board/src/proto.c) runs a fake job against a scripted host on a virtual clock
+The engine (firmware/board/src/proto_*.c) runs a fake job against a scripted host on a virtual clock
 that nothing advances but the job's stages (by amounts the program prints first) and the transport
 (writing costs ticks per byte, the host waits before each ACK, may ask for half a level again).  So
 every count DONE reports has an exact expected value: each stage exactly its work, emit nothing (the

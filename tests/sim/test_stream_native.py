@@ -1,6 +1,6 @@
 """`wavemesh stream` and the wire protocol against the native stand-in device (firmware/board/native).
 
-The device is the board's protocol engine (firmware/board/src/proto.c) and the refiner library on the
+The device is the board's protocol engine (firmware/board/src/proto_*.c) and the refiner library on the
 host CPU, serving TCP on 127.0.0.1: fast, so these tests exercise the protocol itself.  `wavemesh
 stream` must write exactly what `wavemesh mesh` writes; every kind of bad frame gets its error code;
 garbage never crashes the device (the garbage tests run an AddressSanitizer/UBSan build) and never
@@ -609,7 +609,8 @@ def test_crop_and_decimate_select_the_samples(inputs, tmp_path):
 
 
 def test_the_engine_builds_freestanding_for_the_board(tmp_path):
-    """proto.c for rv32imc as the board builds it: -Werror, no libc beyond memcpy, no 64-bit division."""
+    """proto_*.c for rv32imc as the board builds it: -Werror, no libc beyond memcpy, no 64-bit division."""
+    import re
     import shutil
     import subprocess
 
@@ -620,12 +621,23 @@ def test_the_engine_builds_freestanding_for_the_board(tmp_path):
         pytest.fail("riscv64-unknown-elf-gcc not found: run `make setup`")
     root = Path(__file__).resolve().parents[2]
     write_all(tmp_path)
-    obj = tmp_path / "proto.o"
-    subprocess.run([gcc, "-march=rv32imc", "-mabi=ilp32", "-ffreestanding", "-Os", "-std=c99", "-Wall",
-                    "-Wextra", "-Werror", "-Wshadow", "-Wstrict-prototypes", "-Wmissing-prototypes",
-                    f"-I{root / 'firmware/board/include'}", f"-I{root / 'firmware/include'}", f"-I{tmp_path}",
-                    "-c", str(root / "firmware/board/src/proto.c"), "-o", str(obj)], check=True)
-    nm = subprocess.run([gcc.replace("gcc", "nm"), "-u", str(obj)], capture_output=True, text=True,
-                        check=True)
-    undefined = {ln.split()[-1] for ln in nm.stdout.splitlines() if ln.strip()}
-    assert undefined <= {"memcpy", "wm_params_check"}, undefined
+    names = re.search(r"set\(WM_PROTO_SOURCE_NAMES([^)]*)\)",
+                      (root / "firmware/board/proto_sources.cmake").read_text()).group(1).split()
+    assert len(names) >= 5, names
+    defined, undefined = set(), set()
+    for name in names:
+        obj = tmp_path / (name + ".o")
+        subprocess.run([gcc, "-march=rv32imc", "-mabi=ilp32", "-ffreestanding", "-Os", "-std=c99", "-Wall",
+                        "-Wextra", "-Werror", "-Wshadow", "-Wstrict-prototypes", "-Wmissing-prototypes",
+                        f"-I{root / 'firmware/board/include'}", f"-I{root / 'firmware/include'}",
+                        f"-I{tmp_path}", "-c", str(root / "firmware/board/src" / name), "-o", str(obj)],
+                       check=True)
+        nm = subprocess.run([gcc.replace("gcc", "nm"), str(obj)], capture_output=True, text=True, check=True)
+        for ln in nm.stdout.splitlines():
+            parts = ln.split()
+            if parts and parts[-2:-1] == ["U"]:
+                undefined.add(parts[-1])
+            elif len(parts) == 3 and parts[1] in "TDRB":
+                defined.add(parts[2])
+    assert all(s.startswith("wm_proto_") for s in defined), defined
+    assert undefined - defined <= {"memcpy", "wm_params_check"}, undefined - defined

@@ -1,5 +1,5 @@
 /*
- * wavemesh board firmware: the device program.  The protocol engine (src/proto.c, docs/protocol.md)
+ * wavemesh board firmware: the device program.  The protocol engine (src/proto_*.c, docs/protocol.md)
  * on the UART, with the board's job (app/job.c: the FPGA stage, then the refiner) behind it.
  *
  * The engine waits for bytes with board_uart_getc_timeout in chunks of at most a second (the cycle

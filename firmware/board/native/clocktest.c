@@ -1,5 +1,5 @@
 /*
- * wm_clocktest: the protocol engine's cycle accounting (../src/proto.c) against a scripted host on a
+ * wm_clocktest: the protocol engine's cycle accounting (../src/proto_session.c) against a scripted host on a
  * virtual clock, so that every count has an exact expected value.
  *
  * Nothing advances the clock but the fake job and the transport: the job's stages cost exactly

@@ -1,5 +1,5 @@
 /*
- * wmdev: the native stand-in device.  The board's protocol engine (firmware/board/src/proto.c) and
+ * wmdev: the native stand-in device.  The board's protocol engine (firmware/board/src/proto_*.c) and
  * the refiner library (firmware/src) on the host CPU, serving the wire protocol on a TCP socket of
  * 127.0.0.1, so `wavemesh stream INPUT --port socket://127.0.0.1:PORT` talks to it as to a board.
  * A fast device for protocol and fault-injection tests; the simulated board (sim/) is the exact one.

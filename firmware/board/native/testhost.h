@@ -1,8 +1,8 @@
 /*
- * The host's end of the line for programs that drive the protocol engine (../src/proto.c) directly on
+ * The host's end of the line for programs that drive the protocol engine (../src/proto_*.c) directly on
  * a virtual clock, with no transport around it: wm_clocktest (clocktest.c, the cycle accounting) and
  * fuzz_proto (fuzz/proto_fuzz.c).  It frames the host's requests and takes the device's bytes apart,
- * written apart from proto.c's own framing so that it checks the engine rather than mirror it (only
+ * written apart from the engine's own framing so that it checks the engine rather than mirror it (only
  * the CRC-32, wm_proto_crc32, is shared).
  */
 #ifndef WM_TESTHOST_H

@@ -1,5 +1,5 @@
 """The compact coding of DATA's samples (docs/protocol.md, "Sample coding"): the host's encoder and a
-reference decoder; the device's decoder is firmware/board/src/proto.c's (``rice_decode``).
+reference decoder; the device's decoder is firmware/board/src/proto_data.c's (``rice_decode``).
 
 Each sample s at (x, y) is predicted from the samples before it in row-major order, as the device has
 them stored: a = left, b = above, c = above-left; RICE_PRED_MED (LOCO-I's / JPEG-LS's median edge
@@ -156,7 +156,7 @@ def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) 
 
 
 # ---------------------------------------------------------------------------------------------------
-# Level streams (docs/protocol.md, "Level coding"): the device's coder is proto.c's coded_item
+# Level streams (docs/protocol.md, "Level coding"): the device's coder is proto_emit.c's coded_item
 
 
 def varints(buf: bytes) -> np.ndarray:

@@ -3,7 +3,7 @@
 docs/protocol.md explains the protocol; the byte tables in it are generated from this module
 (``python -m wavemesh.device.protocol --update docs/protocol.md``; tests/host/test_protocol.py fails when
 they are stale).  ``python -m wavemesh.device.gen OUTDIR`` writes the C header ``wm_protocol.h`` from it for
-the device side (firmware/board/src/proto.c); the host side (:mod:`wavemesh.device.link`,
+the device side (firmware/board/src/proto_*.c); the host side (:mod:`wavemesh.device.link`,
 :mod:`wavemesh.device.stream`) imports it directly.  Nothing else defines a frame type, an error code, a
 limit or a field offset.
 

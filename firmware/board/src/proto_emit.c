@@ -1,0 +1,326 @@
+/*
+ * The protocol engine's mesh emission (proto_int.h lists the engine's parts; docs/protocol.md, "Level
+ * stream"): each level's stream (LEVEL_HEADER, vertex slots, triangles; delta-coded when that is
+ * shorter) in MESH frames, then LEVEL_END, resent from where the host's ACK says until it has all of it.
+ * Building the stream once is the EMIT stage's work; framing, writing and waiting are link I/O.
+ */
+#include "proto_int.h"
+
+/* --- the level stream: LEVEL_HEADER, vertex slots, triangles --- */
+
+/* The k-th live triangle's slot (sequential calls are O(1) each). */
+static int32_t tri_slot(wm_proto *p, int32_t k)
+{
+    const wm_mesh *m = p->lm;
+    if (k < p->cur_k) {
+        p->cur_k = 0;
+        p->cur_slot = 0;
+        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+    }
+    while (p->cur_k < k) {
+        p->cur_slot++;
+        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+        p->cur_k++;
+    }
+    return p->cur_slot;
+}
+
+/* Bytes [off, off + n) of the level stream into dst.  Triangle bytes run from one position on (one
+ * division a call, not four a byte: each is a division instruction of some 40 cycles on the soft
+ * CPU, and the stream is most of the EMIT stage). */
+static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES, vb = 4u * (uint32_t)m->vert_end, tb = 3u * p->lib, i = 0;
+    uint32_t lsh = p->lib == 4 ? 2u : 1u; /* index bytes 2 or 4 */
+    for (; i < n && off < hb; i++, off++) dst[i] = p->lhdr[off];
+    for (; i < n && off < hb + vb; i++, off++) {
+        uint32_t v = (off - hb) / 4, part = (off - hb) % 4;
+        uint32_t c = part < 2 ? m->vx[v] : m->vy[v];
+        if (m->vx[v] == WM_FREE) c = WM_PROTO_FREE_VERTEX;
+        dst[i] = (uint8_t)(c >> (8 * (part & 1)));
+    }
+    if (i < n) {
+        uint32_t r = off - hb - vb, k = r / tb, q = r - k * tb;
+        int32_t t = tri_slot(p, (int32_t)k);
+        for (;;) {
+            uint32_t v = (uint32_t)m->hv[3 * t + (int32_t)(q >> lsh)];
+            dst[i++] = (uint8_t)(v >> (8 * (q & (p->lib - 1u))));
+            if (i == n) break;
+            if (++q == tb) {
+                q = 0;
+                t = tri_slot(p, (int32_t)++k);
+            }
+        }
+    }
+}
+
+/* Halfwords [pos, end) of the level stream into d: its bytes 2 pos .. 2 end - 1 in little-endian pairs
+ * (a vertex slot is two, an index one or two), for even offsets and lengths (the common case): whole
+ * vertex slots and triangles at a time, the triangle cursor (tri_slot) kept in registers. */
+static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES / 2, ve = hb + 2u * (uint32_t)m->vert_end;
+    for (; pos < end && pos < hb; pos++) *d++ = (uint16_t)get16(p->lhdr + 2 * pos);
+    if (pos < end && pos < ve) { /* vertex slots: x, y (a free one: WM_PROTO_FREE_VERTEX == WM_FREE twice) */
+        const uint16_t *vx = m->vx, *vy = m->vy;
+        uint32_t v = (pos - hb) >> 1;
+        if ((pos - hb) & 1u) { /* the first slot's y */
+            *d++ = vx[v] == WM_FREE ? WM_FREE : vy[v];
+            pos++;
+            v++;
+        }
+        for (; pos + 2u <= end && pos < ve; pos += 2u, v++, d += 2) {
+            uint16_t x = vx[v];
+            d[0] = x;
+            d[1] = x == WM_FREE ? x : vy[v];
+        }
+        if (pos < end && pos < ve) { /* the last slot's x */
+            *d++ = vx[v];
+            pos++;
+        }
+    }
+    if (pos < end) { /* the triangles, from the k-th live one's q-th halfword */
+        uint32_t per = p->lib == 4 ? 6u : 3u, r = pos - ve, k = r / per, q = r - k * per;
+        int32_t t = tri_slot(p, (int32_t)k), te = m->tri_end;
+        const wm_index *hv = m->hv;
+        for (;;) {
+            const wm_index *h = hv + 3 * t;
+            if (q == 0 && end - pos >= per) {
+                if (per == 3u) {
+                    d[0] = (uint16_t)h[0];
+                    d[1] = (uint16_t)h[1];
+                    d[2] = (uint16_t)h[2];
+                } else {
+                    uint32_t a = (uint32_t)h[0], b = (uint32_t)h[1], c = (uint32_t)h[2];
+                    d[0] = (uint16_t)a;
+                    d[1] = (uint16_t)(a >> 16);
+                    d[2] = (uint16_t)b;
+                    d[3] = (uint16_t)(b >> 16);
+                    d[4] = (uint16_t)c;
+                    d[5] = (uint16_t)(c >> 16);
+                }
+                d += per;
+                pos += per;
+            } else { /* part of one: the frame's first or last */
+                for (; q < per && pos < end; q++, pos++)
+                    *d++ = (uint16_t)(per == 6u ? (uint32_t)h[q >> 1] >> (16u * (q & 1u)) : (uint32_t)h[q]);
+                if (q < per) break;
+                q = 0;
+            }
+            if (pos == end) break;
+            do t++;
+            while (t < te && hv[3 * t] < 0);
+            k++;
+        }
+        p->cur_k = (int32_t)k; /* the cursor where this frame ended */
+        p->cur_slot = t;
+    }
+}
+
+/* --- LEVEL_DELTA (docs/protocol.md, "Level coding"): the body as variable-length numbers --- */
+
+static uint32_t put_varint(uint8_t *d, uint32_t v)
+{
+    uint32_t n = 0;
+    while (v >= 0x80u) {
+        d[n++] = (uint8_t)(v | 0x80u);
+        v >>= 7;
+    }
+    d[n++] = (uint8_t)v;
+    return n;
+}
+
+static uint32_t zigzag32(int32_t v) { return ((uint32_t)v << 1) ^ (uint32_t)(0 - (int32_t)((uint32_t)v >> 31)); }
+
+static void coded_reset(wm_proto *p)
+{
+    p->cpos = 0;
+    p->cv = p->ck = p->cslot = 0;
+    p->cpx = p->cpy = p->cpi = 0;
+    p->cbn = p->cbi = 0;
+}
+
+/* The next item of the body into cb (a vertex slot, then the live triangles); 0 when none is left. */
+static int coded_item(wm_proto *p)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t n = 0;
+    if (p->cv < m->vert_end) {
+        int32_t v = p->cv++;
+        if (m->vx[v] == WM_FREE) {
+            p->cb[n++] = 0; /* a free slot */
+        } else {
+            int32_t x = m->vx[v], y = m->vy[v];
+            n += put_varint(p->cb + n, zigzag32(x - p->cpx) + 1u);
+            n += put_varint(p->cb + n, zigzag32(y - p->cpy));
+            p->cpx = x;
+            p->cpy = y;
+        }
+    } else if (p->ck < m->n_tri) {
+        const wm_index *h;
+        int32_t a;
+        while (m->hv[3 * p->cslot] < 0) p->cslot++;
+        h = m->hv + 3 * p->cslot;
+        a = h[0];
+        n += put_varint(p->cb + n, zigzag32(a - p->cpi));
+        n += put_varint(p->cb + n, zigzag32(h[1] - a));
+        n += put_varint(p->cb + n, zigzag32(h[2] - a));
+        p->cpi = a;
+        p->cslot++;
+        p->ck++;
+    } else {
+        return 0;
+    }
+    p->cbn = (uint8_t)n;
+    p->cbi = 0;
+    return 1;
+}
+
+/* The coded stream's length: the header and every item (the coder starts again). */
+static uint32_t coded_total(wm_proto *p)
+{
+    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
+    coded_reset(p);
+    while (coded_item(p)) total += p->cbn;
+    coded_reset(p);
+    return total;
+}
+
+/* Bytes [off, off + n) of the coded stream into dst (in order from where the last call ended: no work
+ * but the new bytes; from before it: the coder runs again from the start). */
+static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
+{
+    if (off < p->cpos) coded_reset(p);
+    while (n) {
+        uint8_t c;
+        if (p->cpos < WM_PROTO_LEVEL_HEADER_BYTES) {
+            c = p->lhdr[p->cpos];
+        } else {
+            if (p->cbi == p->cbn && !coded_item(p)) return; /* past the end: cannot happen (end <= ltotal) */
+            c = p->cb[p->cbi++];
+        }
+        if (p->cpos++ >= off) {
+            *dst++ = c;
+            n--;
+        }
+    }
+}
+
+/* MESH frames of p->chunk bytes for bytes [from, end) (end <= ltotal).  The first sending (first: from
+ * is 0) takes the stream's CRC on the way, and only its frames are link I/O: building the stream and
+ * its CRC is the EMIT stage's work; the frame's CRC follows from the payload's (crc_combine).  A resend
+ * happens inside link I/O (the host asked for it). */
+static void send_level_from(wm_proto *p, uint32_t from, uint32_t end, int first)
+{
+    uint32_t chunk = p->chunk;
+    if (first) p->lcrc = 0;
+    while (from < end) {
+        uint32_t n = end - from < chunk ? end - from : chunk, pc;
+        uint8_t *b = p->tx.b, head[WM_PROTO_HEADER_BYTES];
+        zero(b, WM_PROTO_MESH_BYTES);
+        b[WM_PROTO_MESH_LEVEL] = p->level;
+        b[WM_PROTO_MESH_INDEX] = p->levels_sent;
+        put32(b + WM_PROTO_MESH_OFFSET, from);
+        if (p->lcoded) coded_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        else if (WM_LITTLE_ENDIAN && !((from | n) & 1u))
+            level_halves(p, from / 2, (from + n) / 2, p->tx.h + WM_PROTO_MESH_BYTES / 2);
+        else level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        pc = ~wm_proto_crc_run(~0u, b + WM_PROTO_MESH_BYTES, n);
+        if (first) p->lcrc = wm_proto_crc_combine(p, p->lcrc, pc, n);
+        link_begin(p);
+        frame_head(head, WM_PROTO_T_MESH, p->seq++, WM_PROTO_MESH_BYTES + n);
+        wm_proto_send_encoded(
+            p, head, b, WM_PROTO_MESH_BYTES, b + WM_PROTO_MESH_BYTES, n,
+            wm_proto_crc_combine(
+                p, ~wm_proto_crc_run(wm_proto_crc_run(~0u, head, sizeof head), b, WM_PROTO_MESH_BYTES), pc, n));
+        link_end(p);
+        from += n;
+    }
+}
+
+static void send_level_end(wm_proto *p)
+{
+    uint8_t b[WM_PROTO_LEVEL_END_BYTES];
+    zero(b, sizeof b);
+    b[WM_PROTO_LEVEL_END_LEVEL] = p->level;
+    b[WM_PROTO_LEVEL_END_INDEX] = p->levels_sent;
+    b[WM_PROTO_LEVEL_END_FLAGS] = p->llast ? WM_PROTO_LEVEL_LAST : 0;
+    put32(b + WM_PROTO_LEVEL_END_TOTAL, p->ltotal);
+    put32(b + WM_PROTO_LEVEL_END_CRC, p->lcrc);
+    wm_proto_send_own(p, WM_PROTO_T_LEVEL_END, b, sizeof b);
+    out_flush(p);
+}
+
+static int abort_code(const wm_proto *p)
+{
+    return p->abort == ABORT_NO_ACK ? WM_PROTO_E_NO_ACK : WM_PROTO_E_ABORTED;
+}
+
+int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st, int last)
+{
+    static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_OFFSETS;
+    const int32_t stat_val[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_VALUES(st);
+    int prev = p->stage, tries = 0;
+    uint32_t have = 0, best = 0;
+    uint64_t work;
+    if (p->abort) return abort_code(p);
+
+    /* the stage that made this level ends; its cycles (link I/O excluded) since the last level */
+    stage_enter(p, WM_PROTO_STAGE_EMIT);
+    work =
+        p->cycles[WM_PROTO_STAGE_FILTER] + p->cycles[WM_PROTO_STAGE_TEMPLATE] + p->cycles[WM_PROTO_STAGE_REFINE];
+
+    /* the header of the level stream */
+    p->lm = m;
+    p->level = (uint8_t)st->level;
+    p->lib = m->vert_end > 0xFFFF ? 4 : 2;
+    zero(p->lhdr, sizeof p->lhdr);
+    p->lhdr[WM_PROTO_LEVEL_HEADER_LEVEL] = (uint8_t)st->level;
+    p->lhdr[WM_PROTO_LEVEL_HEADER_INDEX_BYTES] = p->lib;
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_VERTEX_SLOTS, (uint32_t)m->vert_end);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_TRIANGLES, (uint32_t)m->n_tri);
+    put64(p->lhdr + WM_PROTO_LEVEL_HEADER_CYCLES, work - p->work_mark);
+    p->work_mark = work;
+    for (int i = 0; i < WM_PROTO_STAT_FIELDS; i++) put32(p->lhdr + stat_off[i], (uint32_t)stat_val[i]);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_E_MAX, st->e_max);
+    put32(p->lhdr + WM_PROTO_LEVEL_HEADER_ST_REMOVALS, (uint32_t)st->removals);
+    p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
+    p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
+    p->llast = (uint8_t)(last != 0);
+    { /* delta-coded when that is shorter (a pass of the coder that only counts) */
+        uint32_t coded = coded_total(p);
+        p->lcoded = coded < p->ltotal;
+        if (p->lcoded) p->ltotal = coded;
+        p->lhdr[WM_PROTO_LEVEL_HEADER_CODING] = p->lcoded ? WM_PROTO_LEVEL_DELTA : WM_PROTO_LEVEL_RAW;
+    }
+
+    link_begin(p);
+    wm_proto_send_progress(p, WM_PROTO_STAGE_EMIT, st->level);
+    link_end(p);
+    send_level_from(p, 0, p->ltotal, 1);
+    link_begin(p); /* from here on everything waits for, or answers, the host */
+    send_level_end(p);
+    for (;;) {
+        if (!wm_proto_wait_ack(p, WM_PROTO_T_LEVEL_END, p->levels_sent, &have, &tries, send_level_end)) break;
+        if (have >= p->ltotal) break;
+        if (have > best) {
+            best = have; /* progress: the retry budget starts again */
+            tries = 0;
+        } else if (++tries > WM_PROTO_ACK_RETRIES) {
+            p->abort = ABORT_NO_ACK;
+            break;
+        }
+        send_level_from(p, have, p->lwant && p->lwant < p->ltotal - have ? have + p->lwant : p->ltotal, 0);
+        send_level_end(p);
+    }
+    link_end(p);
+    if (p->abort) return abort_code(p);
+    p->levels_sent++;
+    p->e_max = st->e_max;
+    p->triangles = (uint32_t)m->n_tri;
+    p->vertices = (uint32_t)m->n_vert;
+    stage_enter(p, prev);
+    return WM_PROTO_E_NONE;
+}
