@@ -1,16 +1,29 @@
-/* The host stages of `wavemesh mesh` in C (include/wm_host.h): quantisation and the final check's
- * error measure, split over threads.  Compiled with -ffp-contract=off: every product and sum rounds
+/* The host stages of `wavemesh mesh` in C (include/wm_host.h): quantisation and the final check (the
+ * proper-mesh check, the error measure), split over threads.  Compiled with -ffp-contract=off: every product and sum rounds
  * on its own, as numpy's do, so the results equal the Python model's bit for bit. */
 #define _POSIX_C_SOURCE 200809L
 #include "wm_host.h"
 
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdlib.h>
 
 #define SAMPLE_MAX 65535.0
 #define MAX_THREADS 64
 #define TRI_CHUNK 512
+#define PART_MIN \
+    ((int64_t)1 << 18) /* samples a thread takes at least: starting one costs about what a
+                                    * pass over this many does, more on a busy machine */
+
+static int64_t part_min = PART_MIN;
+
+int64_t wm_host_part_min(int64_t n)
+{
+    int64_t old = part_min;
+    if (n > 0) part_min = n;
+    return old;
+}
 #define EXACT ((int64_t)1 << 52) /* E_k below this: E_k(xl) + a_k k exact in doubles (each term < 2^53) */
 #define ABS(v) ((v) < 0 ? -(v) : (v)) /* triangles a thread takes at a time (their sizes vary a lot) */
 
@@ -56,6 +69,14 @@ static int run_parts(part_fn fn, void *ctx, int32_t parts)
     if (ok) fn(ctx, 0, parts);
     for (int32_t p = 1; p <= started; p++) pthread_join(tid[p], NULL);
     return ok ? WM_HOST_OK : WM_HOST_NOMEM;
+}
+
+/* How many parts n samples are split into: at most `threads`, each of part_min samples or more. */
+static int32_t parts_for(int32_t threads, int64_t n)
+{
+    int32_t parts = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    if (n / part_min < parts) parts = n / part_min > 1 ? (int32_t)(n / part_min) : 1;
+    return parts;
 }
 
 static void part_range(int64_t n, int32_t part, int32_t parts, int64_t *lo, int64_t *hi)
@@ -136,14 +157,13 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
 {
     struct scan *s = malloc(sizeof *s);
     struct apply *a = malloc(sizeof *a);
-    int32_t parts = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    int32_t parts = parts_for(threads, n);
     double mn = INFINITY, mx = -INFINITY, err = 0.0;
     int32_t integer = 1, code = WM_HOST_OK;
     if (s == NULL || a == NULL) {
         code = WM_HOST_NOMEM;
         goto done;
     }
-    if ((int64_t)parts > n) parts = n > 0 ? (int32_t)n : 1;
     s->v = v;
     s->n = n;
     if ((code = run_parts(scan_part, s, parts)) != WM_HOST_OK) goto done;
@@ -216,9 +236,8 @@ double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double
                            int32_t threads)
 {
     struct qerr q;
-    int32_t parts = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    int32_t parts = parts_for(threads, n);
     double err = 0.0;
-    if ((int64_t)parts > n) parts = n > 0 ? (int32_t)n : 1;
     q.v = v;
     q.s = s;
     q.n = n;
@@ -338,7 +357,7 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
                     const double *zv, const int64_t *tris, int64_t t, double *per_v, int32_t threads)
 {
     struct trimax m;
-    int32_t parts = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    int32_t parts = parts_for(threads, (int64_t)width * height); /* the triangles cover the grid once */
     if ((int64_t)parts > (t + TRI_CHUNK - 1) / TRI_CHUNK) parts = (int32_t)((t + TRI_CHUNK - 1) / TRI_CHUNK);
     m.h = h;
     m.width = width;
@@ -354,4 +373,153 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
     if (run_parts(trimax_part, &m, parts) != WM_HOST_OK) trimax_part(&m, 0, 1); /* the chunks left */
     if (parts > 1) pthread_mutex_destroy(&m.lock);
     return WM_HOST_OK;
+}
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The proper-triangulation check (check.py's check_mesh) for a mesh that passes it */
+
+#define CHECK_CELLS ((int64_t)1 << 30)   /* the occupancy bitmap's largest grid (128 MiB) */
+#define LATTICE_PER_ELEMENT 64 /* inner lattice points visited: per vertex and triangle, */
+#define LINEAR_DEGREE 16 /* out-neighbours searched one by one up to this many, else sorted */
+#define LATTICE_FREE ((int64_t)1 << 24) /* and these (~20 ms) besides, at most */
+
+static int64_t gcd64(int64_t a, int64_t b) /* a, b >= 0; most edges are short: no division for them */
+{
+    if (a <= 1 || b <= 1) return a == 0 ? b : b == 0 ? a : 1;
+    while (b != 0) {
+        int64_t r = a % b;
+        a = b;
+        b = r;
+    }
+    return a;
+}
+
+static int bit_get(const uint8_t *bits, int64_t i) { return (bits[i >> 3] >> (i & 7)) & 1; }
+
+/* The sorted out-neighbours dst[lo..hi) hold want (binary search). */
+static int holds(const int32_t *dst, int64_t lo, int64_t end, int32_t want)
+{
+    int64_t hi = end;
+    while (lo < hi) {
+        int64_t mid = lo + (hi - lo) / 2;
+        if (dst[mid] < want) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo < end && dst[lo] == want;
+}
+
+/* dst[lo..hi) holds want (a vertex's few out-neighbours: a linear search). */
+static int in_list(const int32_t *dst, int64_t lo, int64_t hi, int32_t want)
+{
+    for (int64_t i = lo; i < hi; i++)
+        if (dst[i] == want) return 1;
+    return 0;
+}
+
+static int cmp_i32(const void *a, const void *b)
+{
+    int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
+    return (x > y) - (x < y);
+}
+
+static void sort_i32(int32_t *a, int64_t n) { qsort(a, (size_t)n, sizeof *a, cmp_i32); }
+
+int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
+                       int64_t *border)
+{
+    int64_t W = width, H = height, b = 0, total = 0, lattice = 0;
+    uint8_t *grid = NULL, *used = NULL;
+    int64_t *start = NULL;
+    int32_t *dst = NULL;
+    int code = 0;
+    *border = 0;
+    if (W < 2 || H < 2 || v <= 0 || t <= 0) return 0;
+    if (W > CHECK_CELLS || H > CHECK_CELLS || W * H > CHECK_CELLS || v > INT32_MAX || t > INT32_MAX / 3) return -1;
+    grid = calloc((size_t)((W * H + 7) / 8), 1);
+    used = calloc((size_t)v, 1);
+    start = calloc((size_t)v + 1, sizeof *start);
+    dst = malloc((size_t)(3 * t) * sizeof *dst);
+    if (grid == NULL || used == NULL || start == NULL || dst == NULL) {
+        code = -1;
+        goto done;
+    }
+    /* 1. vertices: in the rectangle, distinct (the bitmap), on the border counted */
+    for (int64_t i = 0; i < v; i++) {
+        int64_t x = xy[2 * i], y = xy[2 * i + 1];
+        if (x < 0 || x > W - 1 || y < 0 || y > H - 1) goto done;
+        int64_t cell = y * W + x;
+        if (bit_get(grid, cell)) goto done;
+        grid[cell >> 3] |= (uint8_t)(1u << (cell & 7));
+        b += x == 0 || y == 0 || x == W - 1 || y == H - 1;
+    }
+    *border = b;
+    /* indices in range, every vertex used; 2. counter-clockwise; 3. the areas' sum; out-degrees */
+    for (int64_t k = 0; k < t; k++) {
+        const int64_t *tri = tris + 3 * k;
+        for (int c = 0; c < 3; c++) {
+            if (tri[c] < 0 || tri[c] >= v) goto done;
+            used[tri[c]] = 1;
+            start[tri[c] + 1]++;
+        }
+        int64_t x0 = xy[2 * tri[0]], y0 = xy[2 * tri[0] + 1];
+        int64_t area2 =
+            (xy[2 * tri[1]] - x0) * (xy[2 * tri[2] + 1] - y0) - (xy[2 * tri[2]] - x0) * (xy[2 * tri[1] + 1] - y0);
+        if (area2 <= 0) goto done;
+        total += area2; /* each below 2 W H <= 2^31, t below 2^31: no overflow */
+    }
+    for (int64_t i = 0; i < v; i++)
+        if (!used[i]) goto done;
+    if (total != 2 * (W - 1) * (H - 1)) goto done;
+    if (t != 2 * v - b - 2) goto done; /* 6. Euler */
+    /* 4. edges, each vertex's out-neighbours listed: no directed edge twice; an edge whose reverse is
+     * missing lies on the border (no edge can then have more than two triangles) */
+    for (int64_t i = 0; i < v; i++) start[i + 1] += start[i];
+    {
+        int64_t *fill = malloc((size_t)v * sizeof *fill);
+        if (fill == NULL) {
+            code = -1;
+            goto done;
+        }
+        for (int64_t i = 0; i < v; i++) fill[i] = start[i];
+        for (int64_t k = 0; k < t; k++)
+            for (int c = 0; c < 3; c++) dst[fill[tris[3 * k + c]]++] = (int32_t)tris[3 * k + (c + 1) % 3];
+        free(fill);
+    }
+    for (int64_t i = 0; i < v; i++) /* a long list sorted: searched by halves below */
+        if (start[i + 1] - start[i] > LINEAR_DEGREE) sort_i32(dst + start[i], start[i + 1] - start[i]);
+    for (int64_t a = 0; a < v; a++) {
+        int64_t xa = xy[2 * a], ya = xy[2 * a + 1], lo = start[a], hi = start[a + 1];
+        for (int64_t j = lo; j < hi; j++) {
+            int32_t bb = dst[j];
+            if (hi - lo > LINEAR_DEGREE ? (j > lo && dst[j - 1] == bb) : in_list(dst, lo, j, bb))
+                goto done; /* a directed edge twice */
+            int64_t xb = xy[2 * (int64_t)bb], yb = xy[2 * (int64_t)bb + 1];
+            int back = start[bb + 1] - start[bb] > LINEAR_DEGREE
+                           ? holds(dst, start[bb], start[bb + 1], (int32_t)a)
+                           : in_list(dst, start[bb], start[bb + 1], (int32_t)a);
+            if (!back && !((xa == xb && (xa == 0 || xa == W - 1)) || (ya == yb && (ya == 0 || ya == H - 1))))
+                goto done; /* an edge of one triangle inside the rectangle */
+            if (back && a > bb) continue; /* an inner edge: its lattice points once */
+            /* 5. no vertex strictly inside an edge: every inner lattice point looked up, within a budget
+             * (a mesh of a few long edges over a huge grid is Python's, which tests vertex by vertex) */
+            int64_t dx = xb - xa, dy = yb - ya;
+            int64_t g = gcd64(dx < 0 ? -dx : dx, dy < 0 ? -dy : dy);
+            if (g < 2) continue;
+            lattice += g - 1;
+            if (lattice > LATTICE_PER_ELEMENT * (v + t) + LATTICE_FREE) {
+                code = -1;
+                goto done;
+            }
+            int64_t sx = dx / g, sy = dy / g;
+            for (int64_t k = 1; k < g; k++)
+                if (bit_get(grid, (ya + k * sy) * W + xa + k * sx)) goto done;
+        }
+    }
+    code = 1;
+done:
+    free(grid);
+    free(used);
+    free(start);
+    free(dst);
+    return code;
 }

@@ -1,11 +1,12 @@
 /* wavemesh host stages: the parts of `wavemesh mesh` around the refiner that run on the host only
- * (quantisation of float heights, the final check's error measure), in hosted C with doubles and
+ * (quantisation of float heights, the final check: proper mesh, error measure), in hosted C with doubles and
  * threads.  Not part of the refiner's freestanding core (src/) and never built for the board.
  *
  * Each function equals its Python reference model bit for bit (host/wavemesh/io/heightfield.py's
  * quantise, check.py's mesh_errors), whatever the thread count: the threads split the work into
  * independent parts (samples, triangles) and combine them by min / max, which do not depend on the
- * order (tests/host/test_host_stages.py).  threads <= 1 runs on the calling thread. */
+ * order (tests/host/test_host_stages.py).  threads <= 1 runs on the calling thread, as does a grid of fewer
+ * samples than wm_host_part_min's. */
 #ifndef WM_HOST_H
 #define WM_HOST_H
 
@@ -19,6 +20,10 @@ extern "C" {
 #define WM_HOST_NONFINITE 1 /* a height is NaN or infinite */
 #define WM_HOST_SPAN 2      /* max - min overflows a double */
 #define WM_HOST_NOMEM 3     /* a thread could not be started: the caller may retry with 1 */
+
+/* Each thread takes at least this many samples (default 2^18: a smaller grid runs on the calling
+ * thread alone); n > 0 sets it (the tests: 1, to split small grids too).  Returns the value before. */
+int64_t wm_host_part_min(int64_t n);
 
 /* quantise(): n finite heights v to 16-bit samples.  out[0] = scale, out[1] = offset, out[2] = the
  * largest |v - (offset + scale * sample)|; *lossless = 1 when that is 0 (every height reconstructed).
@@ -39,6 +44,15 @@ double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double
  * Coordinates must be below 2^30 in size (the caller checks). */
 int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
                     const double *zv, const int64_t *tris, int64_t t, double *per_v, int32_t threads);
+
+/* check.py's check_mesh when the mesh is proper: 1 when every one of its checks passes (vertices in the
+ * W x H rectangle, distinct and used; indices in range; every triangle counter-clockwise; the doubled
+ * areas add up to 2 (W-1) (H-1); no directed edge twice, an edge of one triangle only on the border;
+ * no vertex inside an edge; T = 2V - B - 2), *border = B; 0 when one fails (the caller's Python check
+ * then says which); -1 when it cannot decide cheaply (W x H over 2^30, a vertex index beyond int32,
+ * more lattice points inside edges than its budget, no memory): the caller checks in Python. */
+int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
+                       int64_t *border);
 
 #ifdef __cplusplus
 }

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from wavemesh import api
-from wavemesh.check import mesh_errors
+from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.cli import main
 from wavemesh.errors import InputError
 from wavemesh.io.heightfield import from_array, quantise
@@ -21,8 +21,11 @@ THREADS = (1, 2, 3, 7)
 
 @pytest.fixture(autouse=True)
 def _threads():
-    assert native.host_lib() is not None  # the library builds here: the fast paths are what is tested
+    lib = native.host_lib()
+    assert lib is not None  # the library builds here: the fast paths are what is tested
+    old = lib.wm_host_part_min(1)  # small grids split over the threads too (else they run on one)
     yield
+    lib.wm_host_part_min(old)
     native.set_threads(None)
 
 
@@ -151,3 +154,48 @@ def test_threads_out_of_range(tmp_path, capsys):
     assert main(["mesh", str(tmp_path / "in.npy"), "-o", str(tmp_path / "m.obj"), "--threads", "0"]) != 0
     assert "--threads 0" in capsys.readouterr().err
     assert not (tmp_path / "m.obj").exists()
+
+
+def _mutations(mesh: Mesh, rng: np.random.Generator) -> list[Mesh]:
+    """Broken variants of a proper mesh: each check of check_mesh has one that fails it."""
+    w, h, xy, tris = mesh.width, mesh.height, mesh.xy.copy(), mesh.tris.copy()
+    t = int(rng.integers(len(tris)))
+    out = [Mesh(w, h, xy, np.delete(tris, t, axis=0)),  # a hole (and an unused vertex, maybe)
+           Mesh(w, h, xy, np.vstack([tris, tris[t:t + 1]])),  # an overlap: a directed edge twice
+           Mesh(w, h, xy, np.vstack([tris[:t], tris[t, ::-1][None], tris[t + 1:]])),  # clockwise
+           Mesh(w + 1, h, xy, tris), Mesh(w, h + 1, xy, tris),  # not the rectangle's area
+           Mesh(w, h, np.vstack([xy, [[w - 1, h - 1]]]), tris),  # a coincident, unused vertex
+           Mesh(w, h, xy, np.where(tris == tris[t, 0], len(xy), tris))]  # an index out of range
+    moved = xy.copy()
+    moved[int(rng.integers(len(xy)))] += (int(rng.integers(-1, 2)), int(rng.integers(-1, 2)))
+    out.append(Mesh(w, h, moved, tris))  # a vertex moved: outside, coincident, folded or still proper
+    return out
+
+
+def test_proper_mesh_check_in_c_agrees_with_the_model():
+    """native.check_proper's verdict is check_mesh's (fast=False) on proper meshes (grids, fans, cut
+    meshes, the refiner's) and on broken variants of each; check_mesh's own answer is the same either way."""
+    import test_check as tc  # tests/host (pytest.ini's pythonpath): the checker's own mesh builders
+
+    rng = np.random.default_rng(31)
+    proper = [tc.SQUARE, tc.fan_mesh(9, 7, (4, 3)), tc.fan_mesh(40, 3, (17, 1)), tc.grid_mesh(6, 5, rng)]
+    proper += [tc.random_cut_mesh(rng) for _ in range(40)]
+    proper += [m for name in ("floats", "big", "mri") for m in meshes(name, ALL[name])]
+    # a T-junction: a square cut into a triangle and a quad split at its edge's midpoint
+    tj = Mesh(3, 3, [(0, 0), (2, 0), (2, 2), (0, 2), (1, 1), (2, 1)], [(0, 1, 4), (1, 5, 4), (5, 2, 4),
+                                                                      (0, 4, 3), (4, 2, 3)])
+    cases = [(m, True) for m in proper] + [(tj, None)]
+    cases += [(b, None) for m in proper for b in _mutations(m, rng)]
+    seen = set()
+    for mesh, want in cases:
+        ref = check_mesh(mesh, fast=False)
+        if want is not None:
+            assert ref.valid
+        c = native.check_proper(mesh)
+        assert c is not None, (mesh, ref.problems)
+        assert c[0] == ref.valid
+        if c[0]:
+            assert c[1] == ref.n_border
+        seen.add(ref.valid)
+        assert check_mesh(mesh) == ref
+    assert seen == {True, False}

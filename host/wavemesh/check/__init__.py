@@ -131,13 +131,22 @@ def _pt(xy: np.ndarray, i) -> str:
     return f"({int(xy[i, 0])}, {int(xy[i, 1])})"
 
 
-def check_mesh(mesh: Mesh) -> CheckResult:
+def check_mesh(mesh: Mesh, fast: bool = True) -> CheckResult:
     """Check that ``mesh`` is a proper triangulation of its W x H grid rectangle (see module doc).
 
     Each check first counts its failures with sorts of exact integer keys; only a check that fails
     goes on to find the examples for its problem lines (with stable sorts, so the examples are the
-    same ones whatever the sorting algorithm)."""
+    same ones whatever the sorting algorithm).  ``fast``: the C check (native.check_proper, one pass
+    over the vertices and triangles, ~20x quicker) first; a mesh it passes is proper, any other is
+    checked here as well, for the lines that say what is wrong (tests/host/test_host_stages.py: the
+    same verdict as this code's on proper and broken meshes)."""
     W, H = int(mesh.width), int(mesh.height)
+    if fast and mesh.n_vertices and mesh.n_triangles:
+        from wavemesh.refine import native  # the C library loads at the first check, not on import
+
+        verdict = native.check_proper(mesh)
+        if verdict is not None and verdict[0]:
+            return CheckResult(True, [], mesh.n_vertices, mesh.n_triangles, verdict[1], True)
     xy, tris = mesh.xy, mesh.tris
     V, T = mesh.n_vertices, mesh.n_triangles
     B = mesh.border_count()

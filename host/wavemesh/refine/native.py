@@ -199,6 +199,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_host_quantise": (ctypes.c_int, [pf64, i64, i32, pu16, pf64, pi32]),
         "wm_host_quant_error": (ctypes.c_double, [pf64, pu16, i64, ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, i32]),
+        "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, pi64]),
+        "wm_host_part_min": (i64, [i64]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -621,3 +623,18 @@ def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray,
                         _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64),
                         len(tris), _ptr(out, ctypes.c_double), threads())
     return out
+
+
+def check_proper(mesh: Mesh) -> tuple[bool, int] | None:
+    """wm_host_check_mesh: (True, B) when ``mesh`` passes every check of check.check_mesh (B: its vertices
+    on the border), (False, 0) when one fails; None when the C check cannot decide cheaply or the
+    library is missing (then check_mesh's Python decides, and says what is wrong)."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    xy = np.ascontiguousarray(mesh.xy, dtype=np.int64)
+    tris = np.ascontiguousarray(mesh.tris, dtype=np.int64)
+    border = ctypes.c_int64(0)
+    code = lib.wm_host_check_mesh(int(mesh.width), int(mesh.height), _ptr(xy, ctypes.c_int64), len(xy),
+                                  _ptr(tris, ctypes.c_int64), len(tris), ctypes.byref(border))
+    return None if code < 0 else (code == 1, int(border.value))
