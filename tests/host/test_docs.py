@@ -31,10 +31,10 @@ def test_generated_docs_are_current(name):
 # one letter a-f and at least one digit ("4f604f2", "00da38b-dirty"), standing alone: not after "0x" or "#"
 # (register values, CRC constants such as 0xedb88320, colours such as #1f77b4), not inside a longer word or
 # a path or file name (the neighbouring characters are not letters, digits, "_", ".", "/" or "-" before
-# it).  Numbers (all digits) and words of a-f alone ("deadbeef", "faded") are not hashes.  Upper-case hex
-# (addresses such as 80000100 are digits; 0xEDB88320 has its 0x) is never a git abbreviation.
-# docs/benchmarks.md may name the commit it measured; nothing else may.  "issue N" (issue 12, issues 10,
-# Issue #3) names a tracker the reader does not have: nowhere.
+# it).  Numbers (all digits), words of a-f alone ("deadbeef", "faded"), hex runs longer than 40 (a sha256
+# digest) and upper-case hex ("CAFE1234") are not hashes.  docs/benchmarks.md may name the commit it
+# measured; nothing else may.  "issue N" (issue 12, issues 10, Issue #3) names a tracker the reader does
+# not have: nowhere.
 COMMIT_HASH = re.compile(r"(?<![0-9A-Za-z_#./-])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}"
                          r"(?![0-9A-Za-z_])")
 ISSUE_NUMBER = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
@@ -50,7 +50,8 @@ def test_the_rules_catch_what_they_mean():
     assert COMMIT_HASH.findall(hashes) == ["57e3c63", "00da38b", "0b9bdb3",
                                            "a1f40e1d2c3b4a5f6e7d8c9b0a1f2e3d4c5b6a7f"]
     for fine in ("0xedb88320", "#1f77b4", "1048576", "deadbeef", "build/1a2b3c4d/x", "wm_3a4b5c6d",
-                 "abc1234x", "decade", "a1b2c3"):
+                 "abc1234x", "decade", "a1b2c3", "CAFE1234", "9f86d081884c7d659a2feaa0c55ad015"
+                 "a3bf4f1b2b0b822cd15d6c15b0f00a08"):  # the last: a sha256 digest, longer than 40
         assert not COMMIT_HASH.search(fine), fine
     found = ISSUE_NUMBER.findall("issue 14's bar; (issues 10, 11); Issue #3")
     assert found == ["issue 14", "issues 10", "Issue #3"]
