@@ -1,7 +1,7 @@
 """Holes against filling: `--nodata hole` and `--fill nearest` at the same zeta, on a disparity
 map with real dropouts (Middlebury's Motorcycle, scikit-image's copy: 27,226 unknown pixels) and on the
 synthetic sets with a synthesised scanner shadow.  Triangles, vertices, E_max, and the hole mesh's check
-(wavemesh.holes.check: nothing over an invalid sample, coverage of the valid ones)."""
+(wavemesh.check.check_holes: nothing over an invalid sample, coverage of the valid ones)."""
 
 from __future__ import annotations
 
@@ -137,8 +137,10 @@ def motorcycle_matched(max_d: int = 64, win: int = 9) -> np.ndarray:
 
 
 def one(name: str, z: np.ndarray, zeta: float) -> dict:
-    from wavemesh import api, holes
+    from wavemesh import api
+    from wavemesh.io import bridge
     from wavemesh.io.heightfield import from_array
+    from wavemesh.model import holemask
     from wavemesh.refine.native import RefineParams
 
     params = api.MeshParams(refine=RefineParams(zeta=zeta))
@@ -146,7 +148,7 @@ def one(name: str, z: np.ndarray, zeta: float) -> dict:
            "invalid": int((~np.isfinite(z)).sum())}
     hole = from_array(z, holes=True)
     modes = [("hole", hole), ("fill", from_array(z, fill="nearest"))]
-    modes += [(f"hole{n}", holes.bridge(hole, n)) for n in MAX_HOLES if hole.mask is not None]
+    modes += [(f"hole{n}", bridge.bridge(hole, n)) for n in MAX_HOLES if hole.mask is not None]
     for mode, hf in modes:
         t0 = time.process_time()
         r = api.mesh(hf, params)
@@ -155,7 +157,7 @@ def one(name: str, z: np.ndarray, zeta: float) -> dict:
                      "check": r.report.get("holes")}  # None: every sample valid
         if mode == "hole":
             row["stranded"] = hf.stranded
-            row["enclosed_holes"] = holes.enclosed_holes(hf.mask) if hf.mask is not None else 0
+            row["enclosed_holes"] = holemask.enclosed_holes(hf.mask) if hf.mask is not None else 0
             if hf.mask is not None:
                 row["structure"] = structure(r.mesh)
     row["ratio"] = row["hole"]["triangles"] / row["fill"]["triangles"]
@@ -191,14 +193,14 @@ def markdown(results: dict) -> str:
         "out (measured, never tuned on).  "
         "`stranded`: valid samples no grid cell with three valid corners has as a corner (isolated samples, "
         "one-sample-wide lines: no triangle of grid samples covers them without an invalid one), meshed as "
-        "invalid (holes.stranded); `covered`: the other valid samples in a triangle, of all of them; "
+        "invalid (holemask.stranded); `covered`: the other valid samples in a triangle, of all of them; "
         "`over`: triangles over an invalid sample.  "
         + ("`--max-hole N`: the hole mesh with the enclosed dropouts of at most N samples filled as "
-           "--fill nearest fills them (holes.bridge; triangles, and the samples filled), the others holes, "
+           "--fill nearest fills them (bridge.bridge; triangles, and the samples filled), the others holes, "
            "every other valid sample covered and nothing over an invalid one (else the cell says NOT "
            "exact).  " if caps else "")
         + "`hole / fill`: the triangle ratio.  `5h + 1`: h the groups of invalid samples the valid ones "
-        "enclose (holes.enclosed_holes); a mesh of one piece whose hole rims share no vertex has at least "
+        "enclose (holemask.enclosed_holes); a mesh of one piece whose hole rims share no vertex has at least "
         "this many triangles (Euler, 3 vertices a rim).  It is not a lower bound on every exact mesh: rims "
         "can share vertices (two holes pinched at a vertex need two triangles fewer than two apart) and the "
         "valid samples can fall into pieces, "

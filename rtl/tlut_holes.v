@@ -5,7 +5,7 @@
  * and gives, for every block of the template stage, whether it holds an invalid sample: the blocks of
  * wavemesh.model.label, S = 2^levels grid steps a side, block (j, i) spanning samples
  * [iS, min((i+1)S, W-1)] x [jS, min((j+1)S, H-1)], closed, so a sample on a block boundary counts for
- * every block it bounds.  The reference model is wavemesh.holes.block_flags; tests/rtl/test_tlut_holes.py
+ * every block it bounds.  The reference model is wavemesh.model.holemask.block_flags; tests/rtl/test_tlut_holes.py
  * checks every flag against it.  The mesh does not need the flags (the templates see filled heights and
  * the refiner reads the mask itself, docs/model.md "Holes"); tlut_stage with HOLES = 1 puts it beside
  * each block's template (tuser[45]).

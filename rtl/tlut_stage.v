@@ -53,7 +53,7 @@
  *
  * Validity mask in (HOLES = 1 only, --nodata hole, issue 20): s_mask_tdata, one bit per sample in
  * raster order (1: invalid), W * H per frame, on its own valid/ready stream.  tlut_holes turns it
- * into one flag per block (wavemesh.holes.block_flags, closed blocks), block row by block row; a
+ * into one flag per block (wavemesh.model.holemask.block_flags, closed blocks), block row by block row; a
  * FIFO of HOLES_FIFO_DEPTH flags pairs them with the blocks, which leave in the same order: a beat
  * goes out only with its block's flag at the FIFO's head (tvalid = the triangle's valid AND the
  * flag's), and the flag is taken with the block's block_end beat.  The mask stream waits when that

@@ -237,7 +237,7 @@ typedef struct wm_field {
 
 /* What the closed triangle covers of a field with a mask (holes.c):
  * WM_COVER_VALID   only valid samples: E(T) measures them as without a mask;
- * WM_COVER_HOLE    only invalid samples: E(T) = 0 (a hole: the host drops it, wavemesh/holes.py);
+ * WM_COVER_HOLE    only invalid samples: E(T) = 0 (a hole: the host drops it, wavemesh/refine/cover.py);
  * WM_COVER_THIN    both, but no sample besides its corners (twice its area is 1): it cannot be split,
  *                  E(T) = 0 and it is dropped with the holes;
  * WM_COVER_MIXED   both, and a sample besides its corners: E(T) = 0xFFFFFFFF, so every stage refines it,

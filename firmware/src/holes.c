@@ -21,7 +21,7 @@
  * decimation and the splits make them freely; the host drops them, and a valid corner with no other
  * triangle of three valid corners would be left in no triangle.  Two steps keep every valid sample that
  * a grid cell's triangle of three valid samples has as a corner covered (the host meshes the others as
- * invalid: wavemesh.holes.stranded):
+ * invalid: wavemesh.model.holemask.stranded):
  *   wm_hole_cover, after the error bound: a valid vertex in no such triangle gets a vertex at another
  *       valid corner of such a cell, or the cell's diagonal swapped, or the thin triangles across the
  *       cell swapped away; the bound runs again;

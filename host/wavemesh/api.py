@@ -11,9 +11,11 @@ parsing and printing over them.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import re
+import resource
 import sys
 import time
 from collections.abc import Callable
@@ -24,8 +26,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from wavemesh import __version__, limits
-from wavemesh.check import ErrorReport, check_mesh, mesh_errors
+from wavemesh.check import ErrorReport, HoleCheck, check_holes, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
+from wavemesh.io.bridge import bridge
 from wavemesh.io.georef import SIDECAR_SUFFIX as SIDECAR
 from wavemesh.io.georef import (
     apply_overrides,
@@ -38,31 +41,29 @@ from wavemesh.io.georef import (
     to_grid,
 )
 from wavemesh.io.heightfield import HeightField, from_array, load_heightfield, parse_fill
-from wavemesh.io.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh
+from wavemesh.io.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh, write_normal_map
 from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
+from wavemesh.io.synth import make
 from wavemesh.mesh import Mesh
-from wavemesh.model.haar import WAVELETS, decompose
+from wavemesh.model.haar import WAVELETS, decompose, default_levels
+from wavemesh.model.holemask import stranded
 from wavemesh.model.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.model.label import Labelling, tau_counts
+from wavemesh.model.roi import mask_details, parse_roi, roi_errors, roi_report
+from wavemesh.refine import cover, native
+from wavemesh.refine.denoise import denoise_heightfield
 from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
-# What `wavemesh mesh` does not use is imported where it is used, so that the command pays only for what
-# it runs (issue 11; tests/host/test_mesh_costs.py): the device session (wavemesh.device.stream, .link), holes
-# (wavemesh.holes), the region of interest (wavemesh.model.roi), de-noising (wavemesh.refine.denoise),
-# pictures, JSON.
+# Imported where used, for their start-up cost (tests/host/test_mesh_costs.py: `wavemesh mesh` does not
+# load them): the device path (wavemesh.device: protocol, link, stream, about 16 ms), pictures
+# (wavemesh.check.render: matplotlib, about 270 ms), tiles (about 16 ms), tqdm.
 if TYPE_CHECKING:
-    from wavemesh import holes
     from wavemesh.device.link import LinkStats
     from wavemesh.device.stream import Device, DeviceInfo, Timeouts
 
 MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits, the one source)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
-
-
-def default_levels(width: int, height: int) -> int:
-    """log2(max(W, H)) - 3 within 1..8: about 8 blocks across, as the paper's 128/M=4, 256/M=5, 512/M=6."""
-    return min(8, max(1, int(math.floor(math.log2(max(width, height)))) - 3))
 
 
 def default_tau(hf: HeightField) -> float:
@@ -96,10 +97,7 @@ def triangulate(hf: HeightField, levels: int | None = None, tau: float | None = 
         mesh = assemble(labelling, hf.width, hf.height)
         result = InitialResult(mesh, labelling, tau_counts(t, hf.scale), m)
     else:
-        from wavemesh.refine import (
-            native,  # the C filter bank once, for the labeller and the refiner (tested equal)
-        )
-
+        # the C filter bank once, for the labeller and the refiner (tested equal)
         details = native.haar_details(hf.samples, m, wavelet) if native.host_lib() is not None else None
         result = initial_triangulation(hf.samples, m, tau_counts(t, hf.scale), wavelet, details)
     require_proper(result.mesh, "the initial triangulation")  # the templates guarantee it: else a bug
@@ -122,8 +120,6 @@ def _check_output(path: str, suffixes: tuple[str, ...], what: str, inputs=None) 
 
 
 def _write_json(path: str, data: dict, inputs=None) -> None:
-    import json
-
     p = _check_output(path, (".json",), "report", inputs)
     with Outputs(inputs) as staged:  # whole or not at all
         staged.path(p, what="report").write_text(json.dumps(data, indent=2) + "\n")
@@ -191,8 +187,6 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
         if hf.lone is not None:
             lone = hf.lone[part]
         if mask.any():  # samples whose cells of valid samples lay outside the part are stranded now
-            from wavemesh.holes import stranded
-
             new = stranded(mask)
             lone = new if lone is None else lone | new
             mask = mask | new
@@ -209,7 +203,7 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
                origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
                denoise: str | None = None, max_hole: int = 0, check_memory: bool = False) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
-    and --origin (of the file's grid), then --crop and --decimate, then --max-hole (holes.bridge), then
+    and --origin (of the file's grid), then --crop and --decimate, then --max-hole (bridge.bridge), then
     --denoise (wavemesh.refine.denoise: what every command meshes and measures).  ``check_memory``: before the
     samples are read, the memory an untiled run of the grid takes is estimated (memory_check)."""
     if max_hole and (nodata != "hole" or max_hole < 0):
@@ -238,13 +232,9 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
                                                  size_check if check_memory else None), spacing, origin),
                            crop, decimate)
     if max_hole:
-        from wavemesh.holes import bridge
-
         hf = bridge(hf, max_hole)
     if denoise is None:
         return hf
-    from wavemesh.refine.denoise import denoise_heightfield
-
     return denoise_heightfield(hf, denoise)[0]
 
 
@@ -261,6 +251,19 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
 MESH_BYTES_PER_SAMPLE = 88
 READ_BYTES_PER_SAMPLE = 9
 RESIDENT_BYTES_PER_SAMPLE = 8
+
+# The tile side without --tile N, from memory (wavemesh.tiles.default_tile, and the hint of memory_check
+# below): the largest of these (2^k + 1, so that a grid of 2^j or 2^j + 1 samples a side splits evenly;
+# tiles share a border row) whose tiles in flight, at TILE_BYTES_PER_SAMPLE each, fit in half the memory
+# available.  Larger tiles cost fewer triangles at the seams, smaller ones less memory and more parallel
+# work (make bench-tiles, docs/tiles.md).
+TILE_CHOICES = (4097, 2049, 1025, 513)
+TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
+
+
+def default_workers() -> int:
+    """The tile workers without --workers N: the CPUs this process may use."""
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
 def available_memory() -> int:
@@ -279,8 +282,6 @@ def memory_available() -> list[tuple[int, str, str]]:
     """What this process may still take: (bytes, what says so, "address" or "resident"): /proc/meminfo's
     MemAvailable and the cgroup's memory.max less its memory.current (resident memory), the address space
     limit (RLIMIT_AS, ulimit -v) less what the process maps now."""
-    import resource
-
     found = [(available_memory(), "memory available", "resident")]
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     if soft != resource.RLIM_INFINITY:
@@ -320,8 +321,6 @@ def memory_check(source: str, width: int, height: int, itemsize: int, w: int | N
     for have, what, kind in memory_available():
         if need[kind] <= have:
             continue
-        from wavemesh.tiles import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
-
         if kind == "address":  # per process: each worker has its own address space (the tile's float64 too)
             fits = [t for t in TILE_CHOICES if (MESH_BYTES_PER_SAMPLE + READ_BYTES_PER_SAMPLE + 8) * t * t
                     <= have // 2]
@@ -346,7 +345,7 @@ class RefineJob:
     errors: ErrorReport | None = None  # the final mesh's errors against the input (check.mesh_errors)
     roi: np.ndarray | None = None  # the region of interest (wavemesh.model.roi), or None: the whole grid
     roi_errors: ErrorReport | None = None  # the final mesh's errors over the ROI samples (roi.roi_errors)
-    holes: holes.HoleCheck | None = None  # with holes (--nodata hole): the final mesh's check (drop_holes)
+    holes: HoleCheck | None = None  # with holes (--nodata hole): the final mesh's check (drop_holes)
 
     @property
     def mesh(self) -> Mesh:
@@ -385,8 +384,6 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
     if hf.lossless or (p.metric == "vertical" and p.zeta >= 2 * hf.max_quantisation_error):
         e, zeta, on = getattr(errors, metric), p.zeta, "the input"
     else:
-        from wavemesh.model.roi import roi_errors
-
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
         sp = ground(hf).spacing
         e = getattr(mesh_errors(rjob.mesh, quantised, spacing=sp) if rjob.roi is None
@@ -409,8 +406,6 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     otherwise MeshInvalid.  ``check_levels`` also checks every coarser level's mesh.  ``roi``: an (H, W)
     bool region of interest, the only place refined and bounded (selective triangulation,
     wavemesh.model.roi)."""
-    from wavemesh.refine import native
-
     params = params or RefineParams()
     params.check()
     native.load()  # builds the C library if it is missing or stale: not part of the refiner's time
@@ -420,8 +415,6 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     spacing = ground(hf).spacing  # the normal metric's cell size in height units (wavemesh.io.georef)
     details = job.levels  # the library's filter bank makes them (native.refine)
     if roi is not None:
-        from wavemesh.model.roi import mask_details, roi_errors
-
         # 5.6: no detail energy outside the ROI
         details = mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
@@ -444,33 +437,29 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
 
 
 def native_within(samples, fp):
-    """native.error_within, imported when holes need it (the library loads, and builds if needed)."""
-    from wavemesh.refine import native
-
+    """native.error_within (the library loads, and builds if needed, when holes need it)."""
     return native.error_within(samples, fp)
 
 
-def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None) -> holes.HoleCheck | None:
+def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None) -> HoleCheck | None:
     """With holes (hf.mask): every level's mesh less the triangles over invalid samples, the final one
     also less the rim vertices that ``within`` (native.error_within) lets go
-    (holes.simplify_rims) and the pieces under ``min_area``, and checked (wavemesh.holes: the refiner's
+    (cover.simplify_rims) and the pieces under ``min_area``, and checked (wavemesh.refine.cover: the refiner's
     full meshes were proper triangulations of the rectangle); MeshInvalid when it is not a mesh of the
     valid samples."""
     if hf.mask is None:
         if min_area > 0:
             raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
         return None
-    from wavemesh import holes
-
     final = levels[-1]
     for lv in levels:  # the final mesh's thin rim triangles flipped where a valid one comes of it
-        lv.mesh = holes.drop(holes.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
+        lv.mesh = cover.drop(cover.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
     if within is not None:
-        final.mesh = holes.simplify_rims(final.mesh, within, hf.mask)
-    final.mesh = holes.drop_islands(final.mesh, min_area)
-    verdict = holes.check(final.mesh, hf.mask, min_area)
+        final.mesh = cover.simplify_rims(final.mesh, within, hf.mask)
+    final.mesh = cover.drop_islands(final.mesh, min_area)
+    verdict = check_holes(final.mesh, hf.mask, min_area)
     # (with --min-area, pieces dropped next to each other can leave a larger uncovered group than
-    # holes.check's bound: the report says so, and the run goes on)
+    # check_holes's bound: the report says so, and the run goes on)
     if final.stats["over"] == 0 and min_area <= 0 and not verdict.valid_mesh:
         raise MeshInvalid("the mesh with holes is not a proper mesh of the valid samples: "
                           + "; ".join(verdict.problems[:3]), hint=BUG_HINT)
@@ -599,8 +588,6 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     roi = None
     if params.roi is not None:
-        from wavemesh.model.roi import parse_roi, roi_report
-
         roi = parse_roi(params.roi, hf.width, hf.height)
     if roi is not None and (params.initial_only or not params.refine.bound):
         raise InputError("--roi selects where the refiner works and bounds the error",
@@ -735,9 +722,9 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
     protocol.COMMON_BAUDS the device reaches; wavemesh.device.stream.Device.change_baud); a switch that does
     not
     happen or fails is one line to ``warn`` and the job runs at ``baud``."""
-    from wavemesh.device import protocol as P
-    from wavemesh.device.link import DEFAULT_BAUD
-    from wavemesh.device.stream import (
+    from wavemesh.device import protocol as P  # start-up: the device path only for `stream` (see the top)
+    from wavemesh.device.link import DEFAULT_BAUD  # the same
+    from wavemesh.device.stream import (  # the same
         DEFAULT_TIMEOUTS,
         Device,
         DeviceError,
@@ -885,7 +872,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
 def _switch_baud(dev, info, link_baud, say, warn):
     """--link-baud: the device's HELLO at the rate the line runs at from now on (the start rate after a
     switch that did not happen or failed: one line to ``warn`` says so)."""
-    from wavemesh.device import protocol as P
+    from wavemesh.device import protocol as P  # start-up: the device path only for `stream` (see the top)
 
     if link_baud == "auto":
         rate = next((b for b in P.COMMON_BAUDS if info.reachable(b)), None)
@@ -912,7 +899,7 @@ def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: Mes
     and template stage label the blocks (wavemesh.device.stage), and the host does the rest as mesh() does,
     from
     that labelling: the same mesh as `wavemesh mesh` when the device's labels are the model's."""
-    from wavemesh.device import stage
+    from wavemesh.device import stage  # start-up: the device path only for `stream` (see the top)
 
     silence = timeouts.reply * timeouts.attempts
     with Progress("heights", hf.width * hf.height, progress) as bar:
@@ -1018,12 +1005,8 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
                            comment=f"{result.comment} level={level}", **opts)
                 written.append(str(path))
         if files.normal_map:
-            from wavemesh.io.meshio import write_normal_map
-
             write_normal_map(staged.path(files.normal_map, what="normal map"), hf.values, g.spacing)
         if report:
-            import json
-
             frame = ("grid positions (no georeference)" if not g.georeferenced
                      else "x, y the CRS's map coordinates" + (" less sample (0, 0)'s" if files.local else "")
                      if files.units == "crs" and out.suffix.lower() != ".glb"
@@ -1072,8 +1055,6 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
     if min_area > 0 and hf.mask is None:
         raise InputError("--min-area checks a mesh with holes", hint="use it with --nodata hole")
     if roi is not None:
-        from wavemesh.model.roi import parse_roi, roi_errors
-
         roi = parse_roi(roi, hf.width, hf.height)
     placed = read_sidecar(path)
     g = placed[0] if placed else ground(hf)
@@ -1081,10 +1062,8 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
     if (mesh.width, mesh.height) != (hf.width, hf.height):
         raise InputError(f"{path} is for a {mesh.width} x {mesh.height} grid but the height field "
                          f"is {hf.width} x {hf.height}")
-    if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.holes)
-        from wavemesh import holes
-
-        hc = holes.check(mesh, hf.mask, min_area)
+    if hf.mask is not None:  # --nodata hole: a proper mesh of the valid samples (wavemesh.refine.cover)
+        hc = check_holes(mesh, hf.mask, min_area)
         report = {"mesh": path, "valid": hc.valid_mesh, "problems": hc.problems, "vertices": mesh.n_vertices,
                   "triangles": mesh.n_triangles, "border_vertices": mesh.border_count(),
                   "holes": hc.to_report(), "ground": g.to_report()}
@@ -1140,8 +1119,6 @@ def write_json(path: str, data: dict, inputs: Inputs | list | None = None) -> No
 
 def write_synth(name: str, output: str, size: int | None = None) -> Path:
     """`wavemesh synth`: one of the dissertation's synthetic sets into an .npy file."""
-    from wavemesh.io.synth import make
-
     out = _check_output(output, (".npy",), "height field")
     if size is not None and not 2 <= size <= 16384:
         raise WavemeshError(f"--size {size} is out of range", hint="use 2..16384")

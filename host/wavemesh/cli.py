@@ -9,14 +9,21 @@ a bug in wavemesh.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from dataclasses import replace
 from pathlib import Path
 
-from wavemesh import __version__, api, tiles
+from wavemesh import __version__, api
 from wavemesh.errors import MeshInvalid, WavemeshError
+from wavemesh.io import terrain
+from wavemesh.io.georef import sidecar_path
+from wavemesh.io.meshio import formats_help
+from wavemesh.io.outputs import Inputs, Terminated, check_path, handle_termination
+from wavemesh.io.synth import ALIASES, DATASETS
 from wavemesh.model.haar import WAVELETS
+from wavemesh.refine import native
 from wavemesh.refine.denoise import METHODS
 from wavemesh.refine.native import RefineParams
 
@@ -99,8 +106,6 @@ def _input_options(p: argparse.ArgumentParser) -> None:
 def _mesh_options(p: argparse.ArgumentParser) -> None:
     """The options `mesh` and `stream` share: the job, the input, the outputs."""
     p.add_argument("input", help="height field file")
-    from wavemesh.io.meshio import formats_help
-
     p.add_argument("-o", "--output", required=True, help=f"mesh file to write: {formats_help()}")
     p.add_argument("--levels", "-M", type=int, default=None,
                    help="wavelet levels M (blocks of 2^M grid steps); default: log2(max(W, H)) - 3, "
@@ -323,8 +328,6 @@ def _devices_parser(sub) -> None:
 
 
 def _synth_parser(sub) -> None:
-    from wavemesh.io.synth import ALIASES, DATASETS  # only `synth` (and help) builds this parser
-
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
         "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))
@@ -412,8 +415,6 @@ def _check_options(args) -> None:
 def _inputs(args, *paths):
     """The files a command reads (wavemesh.io.outputs.Inputs: no output may be one of them): ``paths`` and
     every --roi mask."""
-    from wavemesh.io.outputs import Inputs
-
     return Inputs([*paths, *(getattr(args, "roi", None) or ())])
 
 
@@ -426,13 +427,13 @@ def _load(args, path: str, memory: bool = False):
 
 
 def _bridged_line(hf, max_hole: int) -> str:
-    """What --max-hole filled, for `mesh`, `stream`, `check` (wavemesh.holes.bridge)."""
+    """What --max-hole filled, for `mesh`, `stream`, `check` (wavemesh.io.bridge.bridge)."""
     return (f"filled: {hf.filled} invalid samples, the enclosed dropouts of at most {max_hole} samples "
             "(--max-hole), from their valid neighbours as --fill nearest fills them")
 
 
 def _holes_line(h: dict, stranded: int) -> str:
-    """What a mesh with holes covers (wavemesh.holes.HoleCheck's report), for `mesh`, `stream`, `check`."""
+    """What a mesh with holes covers (wavemesh.check.HoleCheck's report), for `mesh`, `stream`, `check`."""
     return (f"holes: {h['invalid_samples'] - stranded} invalid samples"
             + (f", and {stranded} valid ones meshed as invalid (no grid cell has three valid corners with "
                "them: isolated samples, one-sample-wide lines)" if stranded else "")
@@ -488,6 +489,8 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None, inputs=None) -> int:
     """`wavemesh mesh --tile N` (``ports`` None) or `wavemesh stream` of tiles on ``ports`` (wavemesh.tiles):
     read the input lazily, plan, run the tiles, stitch, write; print a summary unless --quiet."""
+    from wavemesh import tiles  # start-up: tiles (20-50 ms over api, measured) only for a tiled run
+
     if getattr(args, "lod", None):
         raise WavemeshError("--lod is not written for a tiled run", hint="leave out --lod, or --tile")
     for name in ("roi", "nodata", "invalid", "denoise"):  # they need the whole grid at once
@@ -554,8 +557,6 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
 def mesh_command(args) -> int:
     _check_options(args)
     if args.threads is not None:
-        from wavemesh.refine import native
-
         native.set_threads(args.threads)  # InputError-like: one error line when out of range
     if args.tile is not None or args.scheduler or args.tiles_dir:
         return _tiled_command(args, _mesh_params(args), inputs=_inputs(args, args.input))
@@ -587,7 +588,7 @@ def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
 
 
 def stream_command(args) -> int:
-    from wavemesh.device.stream import DEFAULT_TIMEOUTS
+    from wavemesh.device.stream import DEFAULT_TIMEOUTS  # start-up: the device path (about 16 ms) only here
 
     _check_options(args)
     if args.tile is not None or args.tiles_dir or len(args.port) > 1:
@@ -619,8 +620,6 @@ def stream_command(args) -> int:
 
 
 def check_command(args) -> int:
-    from wavemesh.io.georef import sidecar_path
-
     if args.min_area < 0:
         raise WavemeshError(f"--min-area {args.min_area:g} is out of range",
                             hint="give square grid steps >= 0")
@@ -670,12 +669,10 @@ def render_command(args) -> int:
 
 
 def devices_command(args) -> int:
-    from wavemesh.device.devices import scan
+    from wavemesh.device.devices import scan  # start-up: the device path (about 16 ms) only here
 
     reports = scan(args.port, args.baud, do_probe=not args.no_probe)
     if args.json:
-        import json
-
         print(json.dumps([r.__dict__ for r in reports], indent=1))
     else:
         for r in reports:
@@ -692,9 +689,6 @@ def synth_command(args) -> int:
 
 
 def tiles_command(args) -> int:
-    from wavemesh.io import terrain
-    from wavemesh.io.outputs import check_path
-
     inputs = _inputs(args, args.input)
     check_path(args.output, None, "terrain tiles", inputs)
     hf = api.load_input(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)
@@ -713,8 +707,6 @@ COMMANDS = {"mesh": mesh_command, "stream": stream_command, "check": check_comma
 
 
 def main(argv: list[str] | None = None) -> int:
-    from wavemesh.io.outputs import Terminated, handle_termination
-
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = _parser_for(argv)
     try:

@@ -100,7 +100,7 @@ def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | N
     clipping in exact integers: an ear is a strictly convex corner whose closed triangle holds no other
     corner, not even on its sides (that would be a T-junction).  The first ear, or with ``fattest`` the
     one with the largest smallest angle (its sine, in floats; ties: the first); None when none is left
-    (wavemesh.holes re-triangulates a rim, wavemesh.tiles a tile's border)."""
+    (wavemesh.refine.cover re-triangulates a rim, wavemesh.tiles a tile's border)."""
     idx = list(range(len(pts)))
     out = []
     while len(idx) > 3:

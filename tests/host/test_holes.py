@@ -1,6 +1,6 @@
 """--nodata hole (issue 20): meshes of range data with invalid samples.
 
-Every mesh is checked twice: by wavemesh's own check (wavemesh.holes.check, also `wavemesh check
+Every mesh is checked twice: by wavemesh's own check (wavemesh.check.check_holes, also `wavemesh check
 --nodata hole`) and by the independent brute-force check below (lattice points per triangle by their
 bounding boxes, overlaps by separating axes over every pair, distances in floats), written apart from
 holes.py."""
@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from wavemesh import api, holes
+from wavemesh import api, check
 from wavemesh.cli import main
 from wavemesh.errors import InputError
 from wavemesh.io.heightfield import from_array
 from wavemesh.mesh import Mesh, orient
+from wavemesh.model import holemask
+from wavemesh.refine import cover
 from wavemesh.refine.native import RefineParams
 
 ZETA = 1.0
@@ -133,11 +135,11 @@ def run(z: np.ndarray, **kw) -> api.MeshResult:
 def test_pack_is_the_refiners_bit_order():
     rng = np.random.default_rng(1)
     m = rng.random((7, 13)) < 0.3
-    data = holes.pack(m)
+    data = holemask.pack(m)
     assert len(data) == (7 * 13 + 7) // 8
     i = 7 * 13 - 1  # sample (12, 6): bit i % 8 of byte i // 8
     assert bool(data[i // 8] >> (i % 8) & 1) == m[6, 12]
-    assert np.array_equal(holes.unpack(data, 13, 7), m)
+    assert np.array_equal(holemask.unpack(data, 13, 7), m)
 
 
 def test_real_dropouts_are_holes():
@@ -198,10 +200,10 @@ def test_check_finds_what_is_wrong():
     z = shadowed_ball()
     invalid = ~np.isfinite(z)
     good = run(z).mesh
-    assert holes.check(good, invalid).valid_mesh
+    assert check.check_holes(good, invalid).valid_mesh
     # the filled mesh covers invalid samples
     filled = api.mesh(from_array(z, fill="nearest"), api.MeshParams(refine=RefineParams(zeta=ZETA))).mesh
-    c = holes.check(filled, invalid)
+    c = check.check_holes(filled, invalid)
     assert c.over_invalid > 0 and not c.valid_mesh
     # a hole where the input has none: drop the triangle farthest from every invalid sample
     from scipy import ndimage
@@ -210,18 +212,18 @@ def test_check_finds_what_is_wrong():
     centre = good.xy[good.tris].mean(axis=1)
     far = int(np.argmax(dist[centre[:, 1].astype(int), centre[:, 0].astype(int)]))
     gap = Mesh(good.width, good.height, good.xy, np.delete(good.tris, far, axis=0))
-    assert any("invalid sample" in p or "no triangle" in p for p in holes.check(gap, invalid).problems)
+    assert any("invalid sample" in p or "no triangle" in p for p in check.check_holes(gap, invalid).problems)
     # an overlap: a triangle twice, shifted by one column
     t = good.tris[far]
     xy = np.vstack([good.xy, good.xy[t] + [1, 0]])
     n = len(good.xy)
     over = Mesh(good.width, good.height, xy, np.vstack([good.tris, [[n, n + 1, n + 2]]]))
     if (xy[n:, 0] < good.width).all():
-        assert not holes.check(over, invalid).valid_mesh
+        assert not check.check_holes(over, invalid).valid_mesh
 
 
 def test_overlap_sweep_agrees_with_every_pair():
-    # holes.check's overlap test (a sweep of bounding boxes, chunked) against the brute force over every
+    # check.check_holes's overlap test (a sweep of bounding boxes, chunked) against the brute force over every
     # pair, on a hole mesh with vertices moved at random (some moves make overlaps, some do not)
     good = run(shadowed_ball()).mesh
     rng = np.random.default_rng(7)
@@ -235,7 +237,7 @@ def test_overlap_sweep_agrees_with_every_pair():
         m = Mesh(good.width, good.height, xy, good.tris[d > 0])
         for chunk in (7, 1 << 20):
             p = []
-            holes._overlaps(m, np.arange(m.n_triangles), p, chunk=chunk)
+            check._overlaps(m, np.arange(m.n_triangles), p, chunk=chunk)
             assert bool(p) == (overlapping_pairs(m) > 0)
         found += bool(p)
     assert 0 < found < 24
@@ -244,12 +246,12 @@ def test_overlap_sweep_agrees_with_every_pair():
 def test_rim_triangulation_search():
     # simplify_rims' fallback: every triangulation of the ring searched when ear clipping's one is refused
     square = [(0, 0), (2, 0), (2, 2), (0, 2)]
-    cut = holes._dp_triangulate(square, lambda c: not {0, 2} <= set(c))  # the diagonal 0-2 refused
+    cut = cover._dp_triangulate(square, lambda c: not {0, 2} <= set(c))  # the diagonal 0-2 refused
     assert sorted(map(sorted, cut)) == [[0, 1, 3], [1, 2, 3]]
-    assert holes._dp_triangulate(square, lambda c: False) is None
+    assert cover._dp_triangulate(square, lambda c: False) is None
     # a C-shaped ring: the triangles lie inside it and fill it (doubled areas add up)
     c = [(0, 0), (4, 0), (4, 1), (1, 1), (1, 3), (4, 3), (4, 4), (0, 4)]
-    cut = holes._dp_triangulate(c, lambda t: True)
+    cut = cover._dp_triangulate(c, lambda t: True)
     area2 = sum(orient(c[i], c[j], c[k]) for i, j, k in cut)
     assert len(cut) == len(c) - 2 and area2 == 2 * (16 - 6)
 
@@ -273,7 +275,7 @@ def test_cli_mesh_check_min_area(tmp_path, capsys):
     assert kept.n_triangles < big.n_triangles
     # the check knows what --min-area drops: uncovered groups of at most 2A + 2 valid samples
     mask = from_array(z, holes=True).mask
-    assert holes.check(kept, mask, min_area=40).valid_mesh
+    assert check.check_holes(kept, mask, min_area=40).valid_mesh
     assert main(["check", str(small), "--against", str(src), "--nodata", "hole", "--min-area", "40"]) == 0
 
 
@@ -370,7 +372,7 @@ def test_block_flags_against_a_loop():
     rng = np.random.default_rng(3)
     m = rng.random((37, 29)) < 0.01
     for levels in (1, 2, 3):
-        got = holes.block_flags(m, levels)
+        got = holemask.block_flags(m, levels)
         xs, ys = block_edges(29, 1 << levels), block_edges(37, 1 << levels)
         want = [[m[ys[j]:ys[j + 1] + 1, xs[i]:xs[i + 1] + 1].any() for i in range(len(xs) - 1)]
                 for j in range(len(ys) - 1)]

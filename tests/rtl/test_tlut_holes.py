@@ -1,5 +1,6 @@
 """rtl/tlut_holes.v, the template stage's per-block validity flag (issue 20), against
-wavemesh.holes.block_flags (bench: tlut_holes_tb.py): random frames, sizes, levels and mask densities,
+wavemesh.model.holemask.block_flags (bench: tlut_holes_tb.py): random frames, sizes, levels and mask
+densities,
 random stalls on both streams, frames back to back."""
 
 import pytest

@@ -1,5 +1,5 @@
 """The template stage with holes (rtl/tlut_stage.v, HOLES = 1; issue 20): every output beat's hole flag
-(tuser[45]) against wavemesh.holes.block_flags and its template against the reference model, under
+(tuser[45]) against wavemesh.model.holemask.block_flags and its template against the reference model, under
 random masks, mask gaps, idle records and output back-pressure (bench: tlut_stage_holes_tb.py)."""
 
 from wavemesh.harness.rtl_runner import RTL, run

@@ -1,5 +1,5 @@
 """cocotb bench of rtl/tlut_holes.v, the template stage's per-block validity flag, against the reference
-model wavemesh.holes.block_flags.
+model wavemesh.model.holemask.block_flags.
 
 Each frame: a random W x H (2..37 a side, within MAX_COLS block columns), levels and mask density; the
 mask goes in raster order with random gaps in s_valid, the flags come out with random m_ready, and
@@ -18,7 +18,7 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge, ReadOnly, RisingEdge
-from wavemesh.holes import block_flags
+from wavemesh.model.holemask import block_flags
 
 SEED = int(os.environ.get("WM_HOLES_SEED", "1"))
 MAX_COLS = int(os.environ.get("WM_HOLES_MAX_COLS", "16"))

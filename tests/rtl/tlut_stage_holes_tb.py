@@ -3,7 +3,7 @@ records, every output beat carrying its block's hole flag on tuser[45].
 
 The records and the expected beats are tlut_stage_tb's (the reference model: wavemesh.model.label,
 wavemesh.model.templates, wavemesh.model.initial), so the templates must be exactly those of the stage without
-holes; the flag of every beat must be wavemesh.holes.block_flags of the frame's mask at the beat's
+holes; the flag of every beat must be wavemesh.model.holemask.block_flags of the frame's mask at the beat's
 block.  The mask goes in on its own stream (s_mask_*) with random gaps, the records with random idle
 cycles, the output under random back-pressure; frames follow each other without a reset.
 
@@ -28,7 +28,7 @@ from tlut_stage_tb import (
     random_pattern,
     samples_frame,
 )
-from wavemesh.holes import block_flags
+from wavemesh.model.holemask import block_flags
 
 SEED = int(os.environ.get("TLUT_HOLES_SEED", "1"))
 FRAMES = int(os.environ.get("TLUT_HOLES_FRAMES", "6"))

@@ -61,14 +61,15 @@ approximates the height field at every grid sample.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.mesh import Mesh
+from wavemesh.model.holemask import cover_counts, coverable, coverage
 
-__all__ = ["CheckResult", "check_mesh", "ErrorReport", "mesh_errors"]
+__all__ = ["CheckResult", "check_mesh", "ErrorReport", "mesh_errors", "HoleCheck", "check_holes"]
 
 _MAX_PROBLEMS = 20  # problem lines kept in a CheckResult
 _EXAMPLES = 3  # examples shown per kind of problem before a summary line
@@ -668,3 +669,179 @@ def mesh_errors(
         per_triangle_normal=per_n,
         n_uncovered=W * H - n_cov if rms else -1,
     )
+
+
+# ---------------------------------------------------------------------------------------------------
+# The check of a mesh with holes (--nodata hole)
+
+
+@dataclass
+class HoleCheck:
+    """What check() found: the problems (empty: the mesh passes) and the counts behind them."""
+
+    problems: list[str] = field(default_factory=list)
+    invalid: int = 0  # invalid samples in the grid
+    valid: int = 0  # valid samples
+    covered_valid: int = 0  # valid samples in some triangle
+    over_invalid: int = 0  # triangles covering an invalid sample
+    uncovered_inland: int = 0  # valid samples in no triangle, no invalid sample among their 8 neighbours
+    coverable: int = 0  # valid samples a unit right triangle of valid samples has as a corner (coverable())
+    uncovered_coverable: int = 0  # of those, the ones in no triangle
+    hole_edges: int = 0  # edges of one triangle, off the rectangle's border
+    stray_edges: int = 0  # of those, the ones with no invalid sample within their length + 2 of the middle
+
+    @property
+    def valid_mesh(self) -> bool:
+        return not self.problems
+
+    def to_report(self) -> dict:
+        return {"invalid_samples": self.invalid, "valid_samples": self.valid,
+                "covered_valid": self.covered_valid, "uncovered_valid": self.valid - self.covered_valid,
+                "uncovered_inland": self.uncovered_inland, "coverable": self.coverable,
+                "uncovered_coverable": self.uncovered_coverable,
+                "triangles_over_invalid": self.over_invalid, "hole_edges": self.hole_edges,
+                "stray_hole_edges": self.stray_edges}
+
+
+def check_holes(mesh: Mesh, mask: np.ndarray, min_area: float = 0.0) -> HoleCheck:
+    """Whether ``mesh`` is a proper triangulation of the valid region of a grid whose invalid samples are
+    ``mask``: the triangles (counter-clockwise, positive areas, vertices at distinct grid samples, every
+    directed edge once, every edge in at most two triangles) do not overlap (no vertex in another
+    triangle, and no triangle with an edge of one triangle overlaps a triangle near it, by separating
+    axes, exact in integers: an overlap has such an edge on its border); no triangle covers an invalid
+    sample; every valid sample is covered except next to an invalid one; every edge of one triangle
+    lies on the rectangle's border or next to invalid samples.  ``min_area`` (--min-area A): valid samples
+    away from the holes may also be uncovered in 8-connected groups of at most 2A + 2 samples, the most a
+    piece of area under A holds (Pick: I + B/2 - 1 = A with I >= 0 gives I + B <= 2A + 2).  ``mask`` is the
+    height field's (stranded samples included: heightfield.from_array)."""
+    out = HoleCheck()
+    p = out.problems
+    bad = np.asarray(mask, dtype=bool)
+    H, W = bad.shape
+    out.invalid = int(bad.sum())
+    out.valid = bad.size - out.invalid
+    if (mesh.width, mesh.height) != (W, H):
+        p.append(f"the mesh is for a {mesh.width} x {mesh.height} grid, the mask {W} x {H}")
+        return out
+    xy, t = mesh.xy, mesh.tris
+    if len(t) == 0:
+        p.append("the mesh has no triangles")
+        return out
+    if ((t < 0) | (t >= len(xy))).any():
+        p.append("triangle vertex indices out of range")
+        return out
+    x, y = xy[:, 0], xy[:, 1]
+    if ((x < 0) | (y < 0) | (x >= W) | (y >= H)).any():
+        p.append("vertices outside the grid")
+        return out
+    if len(np.unique(y * W + x)) != len(xy):
+        p.append("two vertices at one sample")
+    used = np.zeros(len(xy), dtype=bool)
+    used[t.ravel()] = True
+    if not used.all():
+        p.append(f"{int((~used).sum())} vertices in no triangle")
+    tx, ty = x[t], y[t]
+    area2 = (tx[:, 1] - tx[:, 0]) * (ty[:, 2] - ty[:, 0]) - (tx[:, 2] - tx[:, 0]) * (ty[:, 1] - ty[:, 0])
+    if (area2 <= 0).any():
+        p.append(f"{int((area2 <= 0).sum())} triangles are not counter-clockwise (or have no area)")
+        return out
+    src = t.ravel()
+    dst = t[:, [1, 2, 0]].ravel()
+    n = len(xy)
+    directed = src * n + dst
+    if len(np.unique(directed)) != len(directed):
+        p.append("a directed edge is in two triangles (overlapping or flipped triangles)")
+    und = np.minimum(src, dst) * n + np.maximum(src, dst)
+    key, uses = np.unique(und, return_counts=True)
+    if (uses > 2).any():
+        p.append(f"{int((uses > 2).sum())} edges are in more than two triangles")
+    # a vertex in a triangle it is not a corner of: a T-junction or an overlap
+    cov = coverage(mesh)
+    incident = np.bincount(src, minlength=n)
+    extra = cov[y, x] - incident
+    if (extra != 0).any():
+        i = int(np.flatnonzero(extra)[0])
+        p.append(f"{int((extra != 0).sum())} vertices lie in triangles they are not a corner of, first "
+                 f"({x[i]}, {y[i]})")
+    # one-triangle edges: on the border, or around a hole
+    single = np.isin(und, key[uses == 1])
+    on_border = ((x[src] == x[dst]) & ((x[src] == 0) | (x[src] == W - 1))) | (
+        (y[src] == y[dst]) & ((y[src] == 0) | (y[src] == H - 1)))
+    hole = single & ~on_border
+    out.hole_edges = int(hole.sum())
+    if out.invalid and out.hole_edges:
+        from scipy import ndimage  # start-up: scipy only for masks (tests/host/test_mesh_costs.py)
+
+        dist = ndimage.distance_transform_edt(~bad)  # to the nearest invalid sample
+        mx, my = (x[src] + x[dst]) / 2, (y[src] + y[dst]) / 2
+        length = np.hypot(x[src] - x[dst], y[src] - y[dst])
+        near = dist[np.rint(my).astype(int), np.rint(mx).astype(int)] <= length + 2
+        out.stray_edges = int((hole & ~near).sum())
+    else:
+        out.stray_edges = out.hole_edges
+    if out.stray_edges:
+        p.append(f"{out.stray_edges} edges of one triangle are neither on the rectangle's border nor next to "
+                 f"an invalid sample (a hole in the mesh where the input has none)")
+    _overlaps(mesh, np.unique(np.flatnonzero(single) // 3), p)
+    # no triangle over an invalid sample; every valid sample covered but next to invalid ones
+    _, inv = cover_counts(mesh, bad)
+    out.over_invalid = int((inv > 0).sum())
+    if out.over_invalid:
+        i = int(np.flatnonzero(inv)[0])
+        p.append(f"{out.over_invalid} triangles cover invalid samples, first "
+                 f"{[tuple(map(int, xy[v])) for v in t[i]]}")
+    covered = cov > 0
+    out.covered_valid = int((covered & ~bad).sum())
+    from scipy import ndimage  # start-up: scipy only for masks (tests/host/test_mesh_costs.py)
+
+    rim = ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
+    inland = ~covered & ~rim
+    if min_area > 0 and inland.any():  # the pieces --min-area dropped
+        groups, n = ndimage.label(~covered & ~bad, structure=np.ones((3, 3), dtype=bool))
+        size = np.bincount(groups.ravel(), minlength=n + 1)
+        inland &= size[groups] > 2 * min_area + 2
+    out.uncovered_inland = int(inland.sum())
+    can = coverable(bad)
+    out.coverable = int(can.sum())
+    out.uncovered_coverable = int((can & ~covered).sum())
+    if out.uncovered_inland:
+        yy, xx = np.argwhere(inland)[0]
+        p.append(f"{out.uncovered_inland} valid samples away from any invalid one are in no triangle, first "
+                 f"({xx}, {yy})")
+    return out
+
+
+def _overlaps(mesh: Mesh, cand: np.ndarray, p: list[str], chunk: int = 1 << 20) -> None:
+    """Separating axes between each triangle of ``cand`` (those with an edge of one triangle) and every
+    triangle whose bounding box meets its own; exact in integers.  Two triangles' interiors are
+    disjoint when an edge line of one has the other's three corners on its outer closed side.  The pairs
+    come from a sweep over the boxes' left ends (each pair once: the later left end within the earlier
+    box), ``chunk`` pairs a numpy pass."""
+    xy, t = mesh.xy, mesh.tris
+    X, Y = xy[t, 0], xy[t, 1]  # (T, 3)
+    x0, x1, y0, y1 = X.min(1), X.max(1), Y.min(1), Y.max(1)
+    want = np.zeros(len(t), dtype=bool)
+    want[cand] = True
+    order = np.argsort(x0, kind="stable")
+    n = np.searchsorted(x0[order], x1[order], side="right") - np.arange(len(t)) - 1  # pairs per position
+    ends = np.cumsum(n)
+    total = int(ends[-1]) if len(ends) else 0
+    for start in range(0, total, chunk):
+        k = np.arange(start, min(start + chunk, total))
+        i = np.searchsorted(ends, k, side="right")  # the earlier box's position in the order
+        a, b = order[i], order[i + 1 + k - (ends[i] - n[i])]
+        keep = (want[a] | want[b]) & (y0[b] <= y1[a]) & (y1[b] >= y0[a])
+        a, b = a[keep], b[keep]
+        sep = np.zeros(len(a), dtype=bool)
+        for one, two in ((a, b), (b, a)):
+            for e in range(3):
+                e1 = (e + 1) % 3
+                ex, ey = X[one, e1] - X[one, e], Y[one, e1] - Y[one, e]
+                side = (ex[:, None] * (Y[two] - Y[one, e][:, None])
+                        - ey[:, None] * (X[two] - X[one, e][:, None]))
+                sep |= (side <= 0).all(axis=1)
+        if not sep.all():
+            q = int(np.flatnonzero(~sep)[0])
+            p.append(f"triangles {[tuple(map(int, xy[v])) for v in t[a[q]]]} and "
+                     f"{[tuple(map(int, xy[v])) for v in t[b[q]]]} overlap")
+            return

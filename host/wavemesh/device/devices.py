@@ -13,6 +13,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from serial.tools import list_ports as lp
+
+from wavemesh.device.stream import DEFAULT_TIMEOUTS, Device
 from wavemesh.errors import WavemeshError
 
 # one HELLO, answered within half a second, twice: a board answers in a few milliseconds
@@ -45,15 +48,11 @@ class PortReport:
 
 def list_ports() -> list[PortReport]:
     """The serial ports pyserial finds, sorted by name (none on a machine without any)."""
-    from serial.tools import list_ports as lp
-
     return [PortReport(p.device, p.description or "", p.hwid or "") for p in sorted(lp.comports())]
 
 
 def probe(report: PortReport, baud: int = 115200) -> PortReport:
     """Send HELLO on `report.url`; fill in the answer or the problem."""
-    from wavemesh.device.stream import DEFAULT_TIMEOUTS, Device
-
     timeouts = replace(DEFAULT_TIMEOUTS, sync=PROBE_SYNC_S, sync_attempts=PROBE_ATTEMPTS)
     try:
         with Device(report.url, baud, timeouts=timeouts) as dev:

@@ -23,6 +23,8 @@ import time
 import zlib
 from dataclasses import dataclass, field
 
+import serial
+
 from wavemesh.device import protocol as P
 from wavemesh.errors import WavemeshError
 
@@ -171,8 +173,6 @@ class SlipDecoder:
 
 def open_port(port, baud: int = DEFAULT_BAUD):
     """A pyserial port from a URL (opened here) or an open port object (used as it is)."""
-    import serial
-
     if not isinstance(port, str):
         return port
     try:

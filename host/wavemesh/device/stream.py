@@ -27,6 +27,7 @@ from fractions import Fraction
 import numpy as np
 
 from wavemesh.device import protocol as P
+from wavemesh.device.coding import SampleEncoder, decode_level_body
 from wavemesh.device.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
 from wavemesh.errors import WavemeshError
 from wavemesh.mesh import Mesh
@@ -221,8 +222,6 @@ def parse_level(buf: bytes, width: int, height: int) -> tuple[dict, Mesh, dict, 
     nv, nt, ib = h["vertex_slots"], h["triangles"], h["index_bytes"]
     off = P.LEVEL_HEADER.size
     if h["coding"] == P.LEVEL_DELTA:
-        from wavemesh.device.coding import decode_level_body
-
         try:
             xy, tris = decode_level_body(buf[off:], nv, nt)
         except ValueError as e:
@@ -460,8 +459,6 @@ class Device:
         so the answer comes after every frame sent before the probe was taken in: fewer samples than
         were sent before it means a loss, and the host goes back to them.  A slow device (a simulated
         board) only answers later; nothing is sent twice because of it."""
-        from wavemesh.device.coding import SampleEncoder
-
         info = self.info
         enc = SampleEncoder(samples, extra, coded)
         total = enc.total

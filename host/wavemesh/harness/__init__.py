@@ -15,11 +15,11 @@ from __future__ import annotations
 import contextlib
 import io
 
+from wavemesh import cli
+
 
 def run_cli(*argv: str) -> tuple[int, str, str]:
     """``wavemesh ARGV...`` in this process: (exit status, stdout, stderr)."""
-    from wavemesh import cli
-
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = cli.main(list(argv))
@@ -29,6 +29,6 @@ def run_cli(*argv: str) -> tuple[int, str, str]:
 def jacksboro() -> str:
     """The path of the Jacksboro fault DEM that ships with matplotlib (403 x 344 samples at about 10 m,
     the array ``elevation`` of an .npz): the real height field of the tests, the demo and the benchmarks."""
-    import matplotlib.cbook as cbook
+    import matplotlib.cbook as cbook  # start-up: matplotlib (about 150 ms) only for the DEM's path
 
     return str(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))

@@ -34,6 +34,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wavemesh import cli
+from wavemesh.device.link import FrameError, SlipDecoder, parse_frame, slip_encode
+
 KINDS = ("corrupt", "drop", "duplicate", "delay")
 
 
@@ -237,8 +240,6 @@ class FrameTap:
             threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
 
     def _pump(self, src: socket.socket, dst: socket.socket, name: str) -> None:
-        from wavemesh.device.link import FrameError, SlipDecoder, parse_frame, slip_encode
-
         dec = SlipDecoder()
         try:
             while data := src.recv(65536):
@@ -287,8 +288,6 @@ class Run:
 
 def stream_once(argv: list[str], out: Path, ref: Path, run_limit: float) -> tuple[str, float, str]:
     """`wavemesh ARGV` (a stream command writing `out`) on a thread: (outcome, seconds, message)."""
-    from wavemesh import cli
-
     result: dict = {}
 
     def work():

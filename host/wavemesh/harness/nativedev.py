@@ -13,6 +13,7 @@ import fcntl
 import subprocess
 from pathlib import Path
 
+from wavemesh.device.gen import write_all
 from wavemesh.harness.devproc import DeviceProcess
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -22,8 +23,6 @@ SOURCE = ROOT / "firmware" / "board" / "native"
 def build_wmdev(sanitize: bool = False, target: str = "wmdev") -> Path:
     """Build wmdev, or another target of firmware/board/native (wm_clocktest), once per tree (cmake
     --build is a no-op when nothing changed); returns its path."""
-    from wavemesh.device.gen import write_all
-
     gen = ROOT / "build" / "gen"
     write_all(gen)
     out = ROOT / "build" / ("native-device-asan" if sanitize else "native-device")

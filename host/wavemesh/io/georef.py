@@ -29,6 +29,7 @@ geographic one are refused: reproject them first (gdalwarp).
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -36,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import InputError
+from wavemesh.io.heightfield import regular_file
 
 GRID = (1.0, 0.0, -0.5, 0.0, 1.0, -0.5)  # no georeference: sample (col, row) at (col, row)
 WGS84_A = 6378137.0  # semi-major axis, metres
@@ -321,8 +323,6 @@ def sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> dict:
 def write_sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> Path:
     p = sidecar_path(mesh_path)
     try:
-        import json  # only a run that writes or reads a sidecar needs it
-
         p.write_text(json.dumps(sidecar(g, mesh_path, local, units), indent=2) + "\n")
     except OSError as e:
         raise InputError(f"cannot write {p}: {e.strerror or e}") from None
@@ -336,12 +336,9 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float], str, bool] | N
     p = sidecar_path(mesh_path)
     if not p.exists():
         return None
-    from wavemesh.io.heightfield import regular_file
 
     regular_file(str(p), "sidecar")
     try:
-        import json
-
         s = json.loads(p.read_text())
         t = tuple(float(v) for v in s["transform"])
         g = Ground(int(s["grid"]["width"]), int(s["grid"]["height"]), t, s.get("crs"), str(s["map_unit"]),

@@ -87,6 +87,7 @@ import numpy as np
 
 from wavemesh.errors import InputError
 from wavemesh.limits import MAX_SIDE
+from wavemesh.model.holemask import stranded
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
 # A raster's header can claim any size (300 bytes of TIFF saying 6 x 16777221 samples took GDAL and the
@@ -122,8 +123,8 @@ def _read_errors() -> tuple[type[BaseException], ...]:
     """Exceptions the thin readers (numpy, zipfile, zlib, Pillow) and rasterio raise for unreadable,
     truncated or corrupt files.  Only caught around library calls; a function, so that reading an .npy
     does not import zipfile (an except clause evaluates it only when an exception comes)."""
-    import tokenize
-    import zipfile
+    import tokenize  # start-up: only when an error comes (see above)
+    import zipfile  # start-up: only when an error comes (zipfile: about 3 ms)
 
     return (
         OSError,  # includes rasterio's RasterioIOError
@@ -163,11 +164,12 @@ class HeightField:
     # one); wavemesh.io.georef.ground tells the cell size and the coordinates of every height field.
     spacing: tuple[float, float] | None = None
     # --nodata hole: (H, W) bool, True where the sample is invalid (NaN, no-data, --invalid VALUE); values
-    # and samples hold a nearest valid height there, for the filter bank only (wavemesh.holes).  None: none.
+    # and samples hold a nearest valid height there, for the filter bank only
+    # (wavemesh.model.holemask).  None: none.
     mask: np.ndarray | None = None
     # --nodata hole: (H, W) bool, True at the valid samples the mask takes in because no grid cell's
     # triangle of three valid samples has them as a corner (isolated samples, one-sample-wide lines:
-    # wavemesh.holes.stranded).  None: none.
+    # wavemesh.model.holemask.stranded).  None: none.
     lone: np.ndarray | None = None
 
     @property
@@ -354,7 +356,6 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
     if n_bad and holes:
         if n_bad == values.size:
             raise InputError(f"{source}: all {n_bad} samples are invalid; there is nothing to mesh")
-        from wavemesh.holes import stranded
 
         lone = stranded(bad)  # meshed as invalid, as range-image meshers do: no triangle could cover them
         if n_bad + int(lone.sum()) == values.size:
@@ -824,8 +825,8 @@ def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
     ``crs`` then also None.
     """
     import rasterio  # imported here: only GDAL rasters need rasterio (and its start-up cost)
-    from rasterio._err import CPLE_BaseError
-    from rasterio.errors import NotGeoreferencedWarning, RasterioError
+    from rasterio._err import CPLE_BaseError  # as rasterio's
+    from rasterio.errors import NotGeoreferencedWarning, RasterioError  # as rasterio's
 
     _quiet_rasterio_logs()
     regular_file(path)

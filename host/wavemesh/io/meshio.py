@@ -45,6 +45,9 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import InputError
+from wavemesh.io.georef import UNITS, grid_ground, read_sidecar, sidecar_path, write_sidecar
+from wavemesh.io.georef import to_grid as placing
+from wavemesh.io.heightfield import regular_file
 from wavemesh.mesh import Mesh
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "write_mesh", "read_mesh", "vertex_normals", "normal_map"]
@@ -301,8 +304,6 @@ def _format_of(path) -> Format:
 def check_options(path, *, units: str = "metres", local: bool = False, normals: bool = False,
                   base: float | None = None, georeferenced: bool = True) -> Format:
     """The mesh options against the format of ``path``, before any work: InputError naming the problem."""
-    from wavemesh.io.georef import UNITS
-
     fmt = _format_of(path)
     if units not in UNITS:
         raise InputError(f"--units {units}: not a unit of the outputs", hint=f"use {' or '.join(UNITS)}")
@@ -372,8 +373,6 @@ def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None
     ``PATH.georef.json`` naming the frame, the CRS and the origin, and the triangles counter-clockwise
     seen from above.  Without one x and y are grid positions.  ``normals``: per-vertex normals (area-
     weighted, unit length); ``base``: a closed solid, the bottom ``base`` below the lowest height."""
-    from wavemesh.io.georef import grid_ground, sidecar_path, write_sidecar
-
     geo = ground is not None and ground.georeferenced
     fmt = check_options(path, units=units, local=local, normals=normals, base=base, georeferenced=geo)
     z = _vertex_z(mesh, heights)
@@ -452,14 +451,9 @@ def read_mesh(path, width: int | None = None, height: int | None = None,
     (wavemesh.io.georef.to_grid); by default the sidecar ``PATH.georef.json``, when there is one, does.
     """
     if to_grid is None:
-        from wavemesh.io.georef import read_sidecar
-        from wavemesh.io.georef import to_grid as placing
-
         placed = read_sidecar(path)
         to_grid = placing(*placed) if placed else None
     name = os.fspath(path)
-    from wavemesh.io.heightfield import regular_file
-
     regular_file(name, "mesh file")  # not a FIFO (the read would wait for a writer), not a device
     try:
         data = Path(name).read_bytes()

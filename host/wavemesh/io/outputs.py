@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import threading
 from collections.abc import Iterable
@@ -309,8 +310,6 @@ class Outputs:
                 try:
                     stage.rmdir()  # committed and nothing replaced: empty
                 except OSError:
-                    import shutil
-
                     shutil.rmtree(stage, ignore_errors=True)
             self._stages.clear()
             self._files.clear()

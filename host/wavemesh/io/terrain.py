@@ -33,6 +33,7 @@ mesh (:func:`normals_ecef`).
 from __future__ import annotations
 
 import io
+import json
 import math
 import struct
 from dataclasses import dataclass
@@ -40,7 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
+from wavemesh import api
 from wavemesh.errors import InputError
+from wavemesh.io.georef import ground, metres_per_degree
+from wavemesh.io.heightfield import from_array
+from wavemesh.io.meshio import vertex_normals
+from wavemesh.io.outputs import Outputs, check_path
+from wavemesh.refine.native import RefineParams
 
 SAMPLES = 65  # a tile's grid: 65 x 65, as Cesium's height-map tiles
 QMAX = 32767  # quantized-mesh's u, v, h range
@@ -70,11 +77,9 @@ class Sampler:
     crs: str | None  # the DEM's CRS when it must be reprojected to, None when geographic
 
     def __call__(self, lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
-        from wavemesh.io.georef import ground
-
         lon, lat = np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)
         if self.crs is not None:
-            from rasterio.warp import transform
+            from rasterio.warp import transform  # start-up: rasterio only for georeferenced DEMs
 
             xs, ys = transform("EPSG:4326", self.crs, lon.ravel(), lat.ravel())
             x, y = np.reshape(xs, lon.shape), np.reshape(ys, lat.shape)
@@ -97,8 +102,6 @@ class Sampler:
 
 def sampler(hf) -> Sampler:
     """The DEM placed on the globe by its georeference; InputError without one."""
-    from wavemesh.io.georef import ground
-
     g = ground(hf)
     if hf.transform is None or not g.georeferenced:
         raise InputError(f"{hf.source}: terrain tiles need a georeference (where on the Earth the grid "
@@ -114,7 +117,7 @@ def sampler(hf) -> Sampler:
     if not g.crs:
         raise InputError(f"{hf.source}: the grid's map coordinates name no CRS, so its place on the Earth "
                          "is unknown", hint="use a raster whose georeference names its CRS (a GeoTIFF)")
-    from rasterio.warp import transform_bounds
+    from rasterio.warp import transform_bounds  # start-up: rasterio only for georeferenced DEMs
 
     west, south, east, north = transform_bounds(g.crs, "EPSG:4326", min(corners_x), min(corners_y),
                                                 max(corners_x), max(corners_y), densify_pts=21)
@@ -158,9 +161,6 @@ def normals_ecef(lon, lat, z, tris) -> np.ndarray:
     (east, north, up) frame in metres (degrees scaled at the tile's middle latitude), each turned to
     the Earth-centred frame at its vertex.  Flat ground is then exactly the ellipsoid's up, also on a
     level-0 tile, whose chord triangles would tilt it by tens of degrees."""
-    from wavemesh.io.georef import metres_per_degree
-    from wavemesh.io.meshio import vertex_normals
-
     kx, ky = metres_per_degree(float(np.clip((lat.min() + lat.max()) / 2, -89.9, 89.9)))
     n = vertex_normals(np.column_stack([(lon - lon.min()) * kx, (lat - lat.min()) * ky, z]), tris)
     lo, la = np.radians(lon), np.radians(lat)
@@ -187,8 +187,8 @@ def oct_encode(n: np.ndarray) -> np.ndarray:
 def encode_tile(mesh, z: np.ndarray, level: int, x: int, y: int) -> bytes:
     """A quantized-mesh-1.0 tile with the octvertexnormals extension from a mesh of the tile's 65 x 65 grid
     (``z`` per vertex), through quantized-mesh-encoder's writers (module docstring)."""
-    from quantized_mesh_encoder.constants import EXTENSION_HEADER
-    from quantized_mesh_encoder.encode import (
+    from quantized_mesh_encoder.constants import EXTENSION_HEADER  # start-up: only when a tile is written
+    from quantized_mesh_encoder.encode import (  # start-up: only when a tile is written
         compute_header,
         encode_header,
         write_edge_indices,
@@ -246,10 +246,6 @@ class TileSet:
 
 def make_tiles(hf, *, max_zoom: int | None = None, zeta: float = 1.0, log=None) -> TileSet:
     """Every tile of levels 0..max_zoom over the DEM (module docstring)."""
-    from wavemesh import api
-    from wavemesh.io.heightfield import from_array
-    from wavemesh.refine.native import RefineParams
-
     if not (math.isfinite(zeta) and zeta > 0):
         raise InputError(f"--zeta {zeta} is out of range",
                          hint="give the finest level's bound in metres, > 0")
@@ -287,10 +283,6 @@ def make_tiles(hf, *, max_zoom: int | None = None, zeta: float = 1.0, log=None) 
 def write_tiles(ts: TileSet, folder: str, inputs=None) -> Path:
     """The pyramid into ``folder`` (created; its existing files kept unless replaced), whole or not at all,
     none of its files one of ``inputs`` (wavemesh.io.outputs)."""
-    import json
-
-    from wavemesh.io.outputs import Outputs, check_path
-
     out = check_path(folder, None, "terrain tiles", inputs)
     with Outputs(inputs) as staged:
         for (level, x, y), data in ts.files.items():

@@ -35,6 +35,7 @@ has to pair the odd last sample of a row (or the last row) with itself.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,6 +100,12 @@ def decompose(samples: np.ndarray, levels: int, wavelet: str = "haar") -> list[H
 
 
 WAVELETS = {"haar": haar_step, "spline": spline_step}  # --wavelet: name -> one level's step
+
+
+def default_levels(width: int, height: int) -> int:
+    """The default M, log2(max(W, H)) - 3 within 1..8: about 8 blocks across, as the paper's 128/M=4,
+    256/M=5, 512/M=6."""
+    return min(8, max(1, int(math.floor(math.log2(max(width, height)))) - 3))
 
 
 def level_shape(height: int, width: int, m: int) -> tuple[int, int]:

@@ -31,15 +31,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from wavemesh.errors import InputError
+from wavemesh.io.heightfield import from_array
+from wavemesh.model.haar import default_levels
+
 METHODS = ("sure", "median", "sure+median")
 MEDIAN_SIZE = 5  # 5.5's 5 x 5 median filter
 MAD_TO_SIGMA = 0.6745  # the median of |N(0, 1)|
 
 
 def levels_for(width: int, height: int) -> int:
-    """The transform's depth: the mesh's default M (api.default_levels), within what the grid allows."""
-    from wavemesh.api import default_levels
-
+    """The transform's depth: the mesh's default M (haar.default_levels), within what the grid allows."""
     return max(1, min(default_levels(width, height), int(math.log2(max(2, min(width, height))))))
 
 
@@ -107,7 +109,7 @@ def sure_denoise(values: np.ndarray, levels: int) -> tuple[np.ndarray, dict]:
 
 
 def median5(values: np.ndarray) -> np.ndarray:
-    from scipy.ndimage import median_filter
+    from scipy.ndimage import median_filter  # start-up: scipy only for --denoise median (test_mesh_costs.py)
 
     return median_filter(np.asarray(values, dtype=np.float64), size=MEDIAN_SIZE, mode="nearest")
 
@@ -132,9 +134,6 @@ def denoise_values(values: np.ndarray, method: str) -> tuple[np.ndarray, dict]:
 def denoise_heightfield(hf, method: str):
     """The height field with de-noised heights (re-quantised as a file would be), its georeference
     kept; the source names the method and the noise estimate."""
-    from wavemesh.errors import InputError
-    from wavemesh.io.heightfield import from_array
-
     if method not in METHODS:
         raise InputError(f"--denoise {method}: not a de-noising method", hint=f"use {', '.join(METHODS)}")
     if getattr(hf, "mask", None) is not None:

@@ -74,7 +74,7 @@ class Field(ctypes.Structure):
         ("levels", ctypes.c_int32),
         ("samples", ctypes.POINTER(ctypes.c_uint16)),
         ("details", ctypes.POINTER(ctypes.c_int32)),
-        ("mask", ctypes.POINTER(ctypes.c_uint8)),  # a bit per sample, set: invalid (wavemesh.holes)
+        ("mask", ctypes.POINTER(ctypes.c_uint8)),  # a bit per sample, set: invalid (wavemesh.refine.cover)
     ]
 
 
@@ -113,7 +113,7 @@ def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str
           targets: tuple[str, ...] = ("wavemesh_shared",)) -> Path:
     """Configure (once) and build the firmware with CMake into build_dir; returns build_dir."""
     import fcntl  # building is rare: a run that only loads the library does not import these
-    import shutil
+    import shutil  # as fcntl
 
     cmake = shutil.which("cmake")
     if cmake is None:
@@ -134,7 +134,7 @@ def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str
 
 
 def _run(cmd: list[str]) -> None:
-    import subprocess
+    import subprocess  # start-up: a build only (subprocess: about 3 ms)
 
     r = subprocess.run(cmd, capture_output=True, text=True)
     if r.returncode != 0:
@@ -427,8 +427,8 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
         det = details_array(levels)
     m = int(levels) if count else len(levels)
     fld = Field(width, height, m, _ptr(samples, ctypes.c_uint16), _ptr(det, ctypes.c_int32))
-    if mask is not None:  # ``mask``: (H, W) bool, True where invalid (wavemesh.holes; wm_field.mask)
-        from wavemesh.holes import pack  # holes are asked for: imported only then
+    if mask is not None:  # ``mask``: (H, W) bool, True where invalid (wavemesh.refine.cover; wm_field.mask)
+        from wavemesh.model.holemask import pack  # holes are asked for: imported only then
 
         bits = np.frombuffer(pack(mask), dtype=np.uint8)
         fld.mask = _ptr(bits, ctypes.c_uint8)
@@ -498,7 +498,7 @@ def tri_error(samples: np.ndarray, x, y, metric: str = "normal", scale: float = 
 
 def error_within(samples: np.ndarray, fp: Params):
     """A test ``within(x, y)``: the library's E(T) of the triangle (counter-clockwise corner columns x and
-    rows y) with the run's fixed-point parameters ``fp`` is at most its zeta (holes.simplify_rims)."""
+    rows y) with the run's fixed-point parameters ``fp`` is at most its zeta (cover.simplify_rims)."""
     lib = load()
     samples = np.ascontiguousarray(samples, dtype=np.uint16)
     height, width = samples.shape

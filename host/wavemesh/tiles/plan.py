@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from wavemesh import api
+from wavemesh.api import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
 from wavemesh.errors import InputError, WavemeshError
 from wavemesh.io.georef import ground
 
@@ -17,12 +17,7 @@ if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
 from wavemesh.tiles.source import Quant, Source, scan
 
-# The tile side without --tile N, from memory (default_tile): the largest of these (2^k + 1, so that a grid
-# of 2^j or 2^j + 1 samples a side splits evenly; tiles share a border row) whose tiles in flight, at
-# TILE_BYTES_PER_SAMPLE each, fit in half the memory available.  Larger tiles cost fewer triangles at the
-# seams, smaller ones less memory and more parallel work (make bench-tiles, docs/tiles.md).
-TILE_CHOICES = (4097, 2049, 1025, 513)
-TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
+# TILE_CHOICES, TILE_BYTES_PER_SAMPLE, default_workers: api's (its memory check names a tile side too)
 MIN_TILE = 16  # smaller tiles are all border
 
 # ---------------------------------------------------------------------------------------------------
@@ -153,7 +148,3 @@ def dask_tile(client) -> int:
     per = [w.get("memory_limit") or 0 for w in workers]
     threads = max([w.get("nthreads") or 1 for w in workers] or [1])
     return default_tile(threads, min(per) // 2) if per and min(per) > 0 else default_tile(threads)
-
-
-def default_workers() -> int:
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))

@@ -91,8 +91,8 @@ class _Grid:
 
 def _open_raster(path: str):
     """rasterio's dataset (imported here: rasterio costs a second of start-up that a .npy run never needs)."""
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning
+    import rasterio  # start-up: see the docstring
+    from rasterio.errors import NotGeoreferencedWarning  # the same
 
     with warnings.catch_warnings():  # a plain TIFF: no stray warning line
         warnings.simplefilter("ignore", NotGeoreferencedWarning)

@@ -1,0 +1,136 @@
+"""The import graph of host/wavemesh stays readable: no import cycle, and no import inside a function
+without a reason beside it (a comment on its line: the measured start-up cost it saves, or the optional
+dependency it waits for).  Read from the source with ast, so a hidden import cannot slip past."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[2] / "host" / "wavemesh"
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PKG.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def sources() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+
+
+def type_checking_nodes(tree: ast.AST) -> set[int]:
+    """ids of the import nodes under ``if TYPE_CHECKING:`` (for the type checker only, never run)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            out |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    return out
+
+
+def imports(name: str, path: Path, known: set[str]) -> list[tuple[ast.stmt, set[str]]]:
+    """Each import statement of the module and the wavemesh modules it names."""
+    tree = ast.parse(path.read_text())
+    skip = type_checking_nodes(tree)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in known else mod for a in node.names]
+        else:
+            continue
+        # the module named (a package's own __init__ that a submodule's import runs first is not counted:
+        # a package that gathers its submodules' names is no cycle)
+        out.append((node, set(targets) & known))
+    return out
+
+
+def graph() -> dict[str, set[str]]:
+    src = sources()
+    known = set(src)
+    return {name: set().union(*(m for _, m in imports(name, path, known))) - {name}
+            for name, path in src.items()}
+
+
+def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(edges.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycle():
+    edges = graph()
+    assert "wavemesh.api" in edges and "wavemesh.refine.native" in edges["wavemesh.api"]  # the graph is read
+    assert cycles(edges) == []
+
+
+def test_the_cycle_finder_finds_one():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+def function_level(path: Path) -> list[tuple[int, str]]:
+    """(line, text) of each import inside a function with no reason beside it (a comment that is more
+    than a linter's noqa)."""
+    text = path.read_text()
+    lines = text.split("\n")
+    tree = ast.parse(text)
+    out = []
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                span = lines[node.lineno - 1:node.end_lineno]
+                comments = [s.split("#", 1)[1].strip() for s in span if "#" in s]
+                if not any(c and not c.startswith("noqa") for c in comments):
+                    out.append((node.lineno, " ".join(s.strip() for s in span)))
+    return out
+
+
+def test_function_level_imports_say_why():
+    bare = {str(p.relative_to(PKG)): found for p in sorted(PKG.rglob("*.py")) if (found := function_level(p))}
+    assert bare == {}
+
+
+def test_the_import_reader_sees_a_bare_function_import(tmp_path):
+    p = tmp_path / "m.py"
+    p.write_text("import os\n\ndef f():\n    import json\n    from x import y  # x is slow (12 ms)\n"
+                 "    import z  # noqa: F401\n")
+    assert [line for line, _ in function_level(p)] == [4, 6]
