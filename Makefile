@@ -94,7 +94,7 @@ TRACE     ?=
 # firmware, the simulator and the bitstream; empty: the default
 CPU       ?= $(WM_CPU)
 export WM_CPU := $(CPU)
-CPU_SUFFIX = $(shell WM_CPU=$(CPU) $(VPY) -c 'from wavemesh import soc_cpu; print(soc_cpu.suffix(soc_cpu.selected()))')
+CPU_SUFFIX = $(shell WM_CPU=$(CPU) $(VPY) -c 'from wavemesh.device import soc_cpu; print(soc_cpu.suffix(soc_cpu.selected()))')
 FW_BUILD   = build/firmware-board$(CPU_SUFFIX)
 SIM_EXE    = build/sim/$(if $(TRACE),trace,default)$(CPU_SUFFIX)/wmsim
 
@@ -147,7 +147,7 @@ format: $(SETUP_STAMP)
 # ruff over the Python; clang-format over the C (`make format` fixes what it finds);
 # `verilator --lint-only -Wall` on every module of rtl/, one by one as
 # tests/rtl/test_lint.py does (waivers, each with its reason, only in rtl/lint.vlt); a few seconds.
-CPU_DIRS = $(shell $(VPY) -c 'from wavemesh import soc_cpu; print(" ".join(f"-y {d}" for d in soc_cpu.lint_folders()))')
+CPU_DIRS = $(shell $(VPY) -c 'from wavemesh.device import soc_cpu; print(" ".join(f"-y {d}" for d in soc_cpu.lint_folders()))')
 
 lint: $(SETUP_STAMP) gen
 	$(VPY) -m ruff check host tests tools bench fuzz
