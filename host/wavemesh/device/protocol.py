@@ -684,7 +684,27 @@ def verilog_header() -> str:
         if "reserved" not in name and not name.startswith("div_"):  # no CPU to switch the rate: 0 there
             f = next(f for f in HELLO_REPLY.fields if f.name == name)
             lines.append(f"localparam integer WM_PROTO_HELLO_REPLY_{_cname(name)} = {off};  // {f.ctype}")
-    lines += [f"localparam [15:0] WM_PROTO_HELLO_REPLY_BYTES = 16'd{HELLO_REPLY.size};", ""]
+    lines += [f"localparam [15:0] WM_PROTO_HELLO_REPLY_BYTES = 16'd{HELLO_REPLY.size};"]
+    # what the SoC's upload block (rtl/upload_rx.v) needs to check frames and store DATA's samples
+    lines += [
+        "// frames and DATA's samples (rtl/upload_rx.v)",
+        f"localparam integer WM_PROTO_HEADER_BYTES = {HEADER_BYTES};",
+        f"localparam integer WM_PROTO_CRC_BYTES = {CRC_BYTES};",
+        f"localparam integer WM_PROTO_MAX_PAYLOAD = {MAX_PAYLOAD};",
+        "localparam [31:0] WM_PROTO_CRC_RESIDUE = 32'hDEBB20E3;  // the register after a frame and its CRC",
+        f"localparam [7:0] WM_PROTO_T_DATA = 8'h{FrameType.DATA:02X};",
+        f"localparam integer WM_PROTO_DATA_BYTES = {DATA.size};",
+        *[f"localparam integer WM_PROTO_DATA_{_cname(n)} = {o};" for n, o in DATA.offsets().items()
+          if "reserved" not in n],
+        f"localparam [7:0] WM_PROTO_CODING_RAW = 8'd{CODING_RAW};",
+        f"localparam [7:0] WM_PROTO_CODING_RICE = 8'd{CODING_RICE};",
+        f"localparam integer WM_PROTO_RICE_BLOCK = {RICE_BLOCK};",
+        f"localparam integer WM_PROTO_RICE_PRED_BITS = {RICE_PRED_BITS};",
+        f"localparam integer WM_PROTO_RICE_PRED_PLANE = {RICE_PRED_PLANE};",
+        f"localparam integer WM_PROTO_RICE_K_BITS = {RICE_K_BITS};",
+        f"localparam integer WM_PROTO_RICE_ESCAPE = {RICE_ESCAPE};",
+        "",
+    ]
     return "\n".join(lines)
 
 
