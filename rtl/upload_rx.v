@@ -12,7 +12,7 @@
  * While cfg_arm is high, a DATA frame's samples also go through the sample path on the fly: the DATA
  * header's checks (the firmware's, in the same order: code 1 BAD_LENGTH, 2 BAD_OFFSET, 3 GAP: a
  * start beyond `next`), then every sample i < cfg_samples (W H) of the frame, raw words or
- * CODING_RICE decoded (the prediction from the line buffer, exactly as wavemesh.coding.decode), into
+ * CODING_RICE decoded (the prediction from the line buffer, exactly as wavemesh.device.coding.decode), into
  * the line buffer and, for i >= next, into the SDRAM (HEIGHT_BASE + i, through the addressed writer)
  * and a tentative CRC of the samples.  When the frame turns out good and its code is 0, next moves to
  * the frame's end and the CRC is committed; a bad frame, or a Rice stream that is not one (code 4),

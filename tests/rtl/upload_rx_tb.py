@@ -1,7 +1,7 @@
 """cocotb bench of rtl/upload_rx.v (the upload block) against the Python model of the protocol.
 
-The byte source sends SLIP frames built by wavemesh.link (header, payload, CRC) with random gaps; the
-DATA frames carry the samples of a height field (and mask words past W H) as wavemesh.coding's
+The byte source sends SLIP frames built by wavemesh.device.link (header, payload, CRC) with random gaps; the
+DATA frames carry the samples of a height field (and mask words past W H) as wavemesh.device.coding's
 SampleEncoder cuts them (Rice-coded or raw, per frame).  Among them: corrupted frames (a byte
 changed, a bad escape, a frame cut short, bytes after the CRC, a length above MAX_PAYLOAD, junk
 between frames, a silence past the timeout, a flush), resends after them (go-back-N), repeats from
@@ -10,7 +10,7 @@ frames that fail the header checks, Rice streams one byte short or long (good CR
 types, DATA frames while disarmed.
 
 The model (`Model`) is the firmware's DATA logic: the header checks in its order, the Rice decoding
-of wavemesh.coding.decode on the samples stored so far, `next` and the CRC of samples 0 .. next-1.
+of wavemesh.device.coding.decode on the samples stored so far, `next` and the CRC of samples 0 .. next-1.
 The CPU side takes every held frame in order and compares its header, its payload (read from the
 payload buffer word by word), its code, next and the CRC with the model's, and the count of dropped
 frames before it.  The SDRAM is a memory behind the addressed writer, whose beats land a random time
@@ -33,9 +33,9 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, FallingEdge
-from wavemesh import coding
-from wavemesh import protocol as P
-from wavemesh.link import encode_frame, frame_bytes, slip_encode
+from wavemesh.device import coding
+from wavemesh.device import protocol as P
+from wavemesh.device.link import encode_frame, frame_bytes, slip_encode
 
 SEED = int(os.environ.get("WM_UPLOAD_SEED", "1"))
 W = int(os.environ.get("WM_UPLOAD_W", "37"))
