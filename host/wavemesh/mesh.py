@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -129,3 +130,61 @@ def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | N
     if orient(pts[idx[0]], pts[idx[1]], pts[idx[2]]) <= 0:
         return None
     return out + [tuple(idx)]
+
+
+def _crosses(p, q, r, s) -> bool:
+    """Segments p-q and r-s cross at a point inside both (not at a shared end, not collinear)."""
+    d1, d2 = orient(p, q, r), orient(p, q, s)
+    d3, d4 = orient(r, s, p), orient(r, s, q)
+    return d1 * d2 < 0 and d3 * d4 < 0
+
+
+def _inside(pts: list, x3: int, y3: int) -> bool:
+    """The point (x3 / 3, y3 / 3) strictly inside the simple polygon ``pts`` (even-odd rule, exact)."""
+    n, odd = len(pts), False
+    for i in range(n):
+        (ax, ay), (bx, by) = pts[i - 1], pts[i]
+        ax, ay, bx, by = 3 * ax, 3 * ay, 3 * bx, 3 * by
+        if (ay > y3) != (by > y3) and (x3 - ax) * (by - ay) * (1 if by > ay else -1) < (
+                (bx - ax) * (y3 - ay) * (1 if by > ay else -1)):
+            odd = not odd
+    return odd
+
+
+def triangulate_within(pts: list, ok, limit: int = 16) -> list | None:
+    """A triangulation (index triples into ``pts``) of the simple counter-clockwise polygon ``pts`` whose
+    every triangle ``ok`` accepts, if one exists: all triangulations searched by the polygon's intervals
+    (the first middle corner that works, in order: deterministic); None when none exists or the polygon
+    has more than ``limit`` corners.  The fallback when ear clipping's one triangulation is not within
+    zeta (wavemesh.holes' rims, wavemesh.tiles' seams)."""
+    n = len(pts)
+    if n < 3 or n > limit:
+        return None
+    edges = [(pts[i - 1], pts[i]) for i in range(n)]
+
+    def fits(i, j, k) -> bool:
+        p, q, r = pts[i], pts[j], pts[k]
+        if orient(p, q, r) <= 0:
+            return False
+        for o in range(n):
+            if o not in (i, j, k) and orient(p, q, pts[o]) >= 0 and orient(q, r, pts[o]) >= 0 \
+                    and orient(r, p, pts[o]) >= 0:
+                return False  # a corner in the closed triangle
+        if any(_crosses(a, b, c, d) for a, b in ((p, q), (q, r), (r, p)) for c, d in edges):
+            return False
+        return _inside(pts, p[0] + q[0] + r[0], p[1] + q[1] + r[1]) and ok((i, j, k))
+
+    @lru_cache(maxsize=None)
+    def solve(i, k):
+        if k - i < 2:
+            return ()
+        for j in range(i + 1, k):
+            if fits(i, j, k):
+                a = solve(i, j)
+                b = solve(j, k) if a is not None else None
+                if b is not None:
+                    return a + b + ((i, j, k),)
+        return None
+
+    out = solve(0, n - 1)
+    return None if out is None else list(out)

@@ -13,9 +13,8 @@ from wavemesh import api, check
 from wavemesh.cli import main
 from wavemesh.errors import InputError
 from wavemesh.io.heightfield import from_array
-from wavemesh.mesh import Mesh, orient
+from wavemesh.mesh import Mesh, orient, triangulate_within
 from wavemesh.model import holemask
-from wavemesh.refine import cover
 from wavemesh.refine.native import RefineParams
 
 ZETA = 1.0
@@ -246,12 +245,12 @@ def test_overlap_sweep_agrees_with_every_pair():
 def test_rim_triangulation_search():
     # simplify_rims' fallback: every triangulation of the ring searched when ear clipping's one is refused
     square = [(0, 0), (2, 0), (2, 2), (0, 2)]
-    cut = cover._dp_triangulate(square, lambda c: not {0, 2} <= set(c))  # the diagonal 0-2 refused
+    cut = triangulate_within(square, lambda c: not {0, 2} <= set(c))  # the diagonal 0-2 refused
     assert sorted(map(sorted, cut)) == [[0, 1, 3], [1, 2, 3]]
-    assert cover._dp_triangulate(square, lambda c: False) is None
+    assert triangulate_within(square, lambda c: False) is None
     # a C-shaped ring: the triangles lie inside it and fill it (doubled areas add up)
     c = [(0, 0), (4, 0), (4, 1), (1, 1), (1, 3), (4, 3), (4, 4), (0, 4)]
-    cut = cover._dp_triangulate(c, lambda t: True)
+    cut = triangulate_within(c, lambda t: True)
     area2 = sum(orient(c[i], c[j], c[k]) for i, j, k in cut)
     assert len(cut) == len(c) - 2 and area2 == 2 * (16 - 6)
 

@@ -72,6 +72,8 @@ def test_jacksboro_tiles(tmp_path, metric):
     assert getattr(e, f"e_max_{metric}") <= 2.0 * (1 + 1e-9)
     assert np.array_equal(tiled.z, tiled.mesh.z(hf.values))
     assert tiled.mesh.n_vertices < sum(len(r.xy) for r in results)
+    # the seams thinned: vertices both neighbours could do without left the shared sides
+    assert sum(r.report["seam_removed"] for r in results) > 0
 
 
 @pytest.mark.parametrize("metric", ["vertical", "normal"])
@@ -98,6 +100,24 @@ def test_decided_border_within_zeta(metric):
     flat = np.zeros(50, dtype=np.int64)
     flat[20] = 100
     assert 20 in tiles.simplify_profile(flat, fp, 0, metric)
+
+
+def test_reconcile_keeps_both_sides_vertices_within_zeta():
+    """A shared side from two neighbours' vertices: the same list whichever side asks, every vertex of both
+    kept (conforming then only inserts), every sample within zeta of its segment (the 1-D test, and an
+    independent float check of the vertical distance)."""
+    rng = np.random.default_rng(11)
+    z = np.cumsum(rng.integers(-9, 10, 400)) + 20000
+    fp = fixed_params(RefineParams(zeta=3.0, metric="vertical"), 1.0, None, (1.0, 1.0))
+    for _ in range(10):
+        mine, theirs = ({0, 399, *rng.choice(np.arange(1, 399), size=int(rng.integers(0, 30))).tolist()}
+                        for _ in range(2))
+        kept = tiles.reconcile(z, mine, theirs, fp, 0, "vertical")
+        assert kept == tiles.reconcile(z, theirs, mine, fp, 0, "vertical")
+        assert set(kept) >= mine | theirs and list(kept) == sorted(set(kept))
+        for a, b in zip(kept, kept[1:], strict=False):
+            i = np.arange(a, b + 1)
+            assert np.all(np.abs(z[a:b + 1] - (z[a] + (z[b] - z[a]) * (i - a) / (b - a))) <= 3.0 + 1e-9)
 
 
 def test_conform_keeps_a_proper_mesh():

@@ -12,11 +12,10 @@ streams (the device runs the same C): :func:`flip_thin` before, :func:`simplify_
 from __future__ import annotations
 
 import bisect
-from functools import lru_cache
 
 import numpy as np
 
-from wavemesh.mesh import Mesh, ear_clip, orient
+from wavemesh.mesh import Mesh, ear_clip, orient, triangulate_within
 from wavemesh.model.holemask import cover_counts
 
 
@@ -134,64 +133,6 @@ def drop_islands(mesh: Mesh, min_area: float) -> Mesh:
     return compact(mesh.width, mesh.height, xy, t[keep])
 
 
-def _crosses(p, q, r, s) -> bool:
-    """Segments p-q and r-s cross at a point inside both (not at a shared end, not collinear)."""
-    d1, d2 = orient(p, q, r), orient(p, q, s)
-    d3, d4 = orient(r, s, p), orient(r, s, q)
-    return d1 * d2 < 0 and d3 * d4 < 0
-
-
-def _inside(pts: list, x3: int, y3: int) -> bool:
-    """The point (x3 / 3, y3 / 3) strictly inside the simple polygon ``pts`` (even-odd rule, exact)."""
-    n, odd = len(pts), False
-    for i in range(n):
-        (ax, ay), (bx, by) = pts[i - 1], pts[i]
-        ax, ay, bx, by = 3 * ax, 3 * ay, 3 * bx, 3 * by
-        if (ay > y3) != (by > y3) and (x3 - ax) * (by - ay) * (1 if by > ay else -1) < (
-                (bx - ax) * (y3 - ay) * (1 if by > ay else -1)):
-            odd = not odd
-    return odd
-
-
-def _dp_triangulate(pts: list, ok, limit: int = 16) -> list | None:
-    """A triangulation (index triples into ``pts``) of the simple counter-clockwise polygon ``pts`` whose
-    every triangle ``ok`` accepts, if one exists: all triangulations searched by the polygon's intervals
-    (the first middle corner that works, in order: deterministic); None when none exists or the polygon
-    has more than ``limit`` corners.  The fallback when ear clipping's one triangulation is not within
-    zeta."""
-    n = len(pts)
-    if n < 3 or n > limit:
-        return None
-    edges = [(pts[i - 1], pts[i]) for i in range(n)]
-
-    def fits(i, j, k) -> bool:
-        p, q, r = pts[i], pts[j], pts[k]
-        if orient(p, q, r) <= 0:
-            return False
-        for o in range(n):
-            if o not in (i, j, k) and orient(p, q, pts[o]) >= 0 and orient(q, r, pts[o]) >= 0 \
-                    and orient(r, p, pts[o]) >= 0:
-                return False  # a corner in the closed triangle
-        if any(_crosses(a, b, c, d) for a, b in ((p, q), (q, r), (r, p)) for c, d in edges):
-            return False
-        return _inside(pts, p[0] + q[0] + r[0], p[1] + q[1] + r[1]) and ok((i, j, k))
-
-    @lru_cache(maxsize=None)
-    def solve(i, k):
-        if k - i < 2:
-            return ()
-        for j in range(i + 1, k):
-            if fits(i, j, k):
-                a = solve(i, j)
-                b = solve(j, k) if a is not None else None
-                if b is not None:
-                    return a + b + ((i, j, k),)
-        return None
-
-    out = solve(0, n - 1)
-    return None if out is None else list(out)
-
-
 def _rows(p, q, r):
     """The closed counter-clockwise triangle (p, q, r) row by row: (row, first, last) of its samples, from
     the exact edge functions (as _spans, for one triangle)."""
@@ -231,7 +172,7 @@ def _free(p, q, r, prefix, rows_x) -> bool:
 def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
     """The mesh less every vertex that lies on the straight border between its two border neighbours
     (a hole's rim, or the rectangle's side), or inside the mesh, and whose triangles re-triangulate (ear
-    clipping, else the first of all triangulations: _dp_triangulate) into triangles ``within(x, y)``
+    clipping, else the first of all triangulations: mesh.triangulate_within) into triangles ``within(x, y)``
     accepts: the covered region stays the same, so every new triangle covers only valid samples.  The
     refiner cannot remove these vertices itself: on its full triangulation the triangle across the rim
     would cover valid and invalid samples, and its decimation tries one triangulation of a ring.
@@ -293,7 +234,7 @@ def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
 
             cut = ear_clip(pts)
             if cut is None or not all(map(ok, cut)):
-                cut = _dp_triangulate(pts, ok)  # every triangulation, when ear clipping's one is not within
+                cut = triangulate_within(pts, ok)  # every triangulation, when ear clipping's one is not within
                 if cut is None:
                     continue
             for k in fan:

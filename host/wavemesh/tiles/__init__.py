@@ -27,7 +27,10 @@ The steps (docs/tiles.md says why each is so); every one but the last runs in th
    mesh (levels 1, no reduction, no decimation): it splits only the triangles now above zeta, and never a
    border edge, since no border sample can be the worst of a triangle above zeta (step 4).  The tile's
    border is then checked to be exactly the reconciled one, the tile proper and within zeta.
-6. **Stitch** (the parent): the tiles' vertices merged by grid position (the shared sides are identical),
+6. **Each shared side, thinned** (:func:`thin_seam`, then :func:`thin_tile`): every vertex on it both
+   neighbours can do without (its hole in each tile re-triangulated within zeta by the refiner's own E(T)
+   test, its ring off the tile's other sides) removed from both.
+7. **Stitch** (the parent): the tiles' vertices merged by grid position (the shared sides are identical),
    the triangles renumbered, and the whole mesh checked (check_mesh: proper, no T-junctions, no cracks).
 
 The same tile jobs run on devices (``wavemesh stream --tile``, :func:`stream_tiles`): the device does step
@@ -42,10 +45,11 @@ from wavemesh.tiles.jobs import (
     TileResult,
     finish_tile,
     free_tile,
-    mesh_tile,
     mesh_tiled,
     run_tiles,
     stitch,
+    thin_seam,
+    thin_tile,
     tile_heightfield,
 )
 from wavemesh.tiles.plan import (
@@ -63,14 +67,14 @@ from wavemesh.tiles.plan import (
     plan_tiles,
 )
 from wavemesh.tiles.runner import Runner, connect
-from wavemesh.tiles.sides import SIDES, border_of, conform, reconcile, simplify_profile
+from wavemesh.tiles.sides import SIDES, Editable, border_of, conform, reconcile, simplify_profile, thin_side
 from wavemesh.tiles.source import Quant, Source, open_source, scan
 
 __all__ = [
-    "MIN_TILE", "SIDES", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "FreeTile", "Quant", "Runner", "Source",
-    "Tile", "TilePlan", "TileResult", "TiledResult", "available_memory", "border_of", "check_tiled_outputs",
-    "check_tiling", "conform", "connect", "cuts", "dask_tile", "default_tile", "default_workers",
-    "device_tile", "finish_tile", "free_tile", "hello", "mesh_tile", "mesh_tiled", "open_source",
+    "Editable", "FreeTile", "MIN_TILE", "Quant", "Runner", "SIDES", "Source", "TILE_BYTES_PER_SAMPLE",
+    "TILE_CHOICES", "Tile", "TilePlan", "TileResult", "TiledResult", "available_memory", "border_of",
+    "check_tiled_outputs", "check_tiling", "conform", "connect", "cuts", "dask_tile", "default_tile",
+    "default_workers", "device_tile", "finish_tile", "free_tile", "hello", "mesh_tiled", "open_source",
     "plan_tiles", "reconcile", "run_tiles", "scan", "simplify_profile", "stitch", "stream_tile",
-    "stream_tiles", "tile_heightfield", "write_tiled",
+    "stream_tiles", "thin_seam", "thin_side", "thin_tile", "tile_heightfield", "write_tiled",
 ]

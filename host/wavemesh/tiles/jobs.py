@@ -20,7 +20,17 @@ from wavemesh.model.haar import decompose
 from wavemesh.refine import native
 from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles
 from wavemesh.tiles.runner import Runner
-from wavemesh.tiles.sides import FACING, SIDES, border_of, conform, reconcile, side_profile
+from wavemesh.tiles.sides import (
+    FACING,
+    SIDES,
+    Editable,
+    border_of,
+    conform,
+    reconcile,
+    side_point,
+    side_profile,
+    thin_side,
+)
 from wavemesh.tiles.source import Source, _light_source
 
 # ---------------------------------------------------------------------------------------------------
@@ -108,40 +118,71 @@ def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray
         bound = replace(p, reduce=False, decimate=False, max_triangles=None, capacity=None)
         out = native.refine(hf.samples, decompose(hf.samples, 1), conform(free.mesh, sides), bound,
                             scale=hf.scale, zeta=plan.zeta_used, spacing=plan.spacing)
-    final = out.final.mesh
-    api.require_proper(final, f"{t.name}'s mesh")
-    got = border_of(final)
-    diff = [s for s in SIDES if s in sides and got[s] != sides[s]]
-    if diff:
-        raise MeshInvalid(f"{t.name}: the error bound changed the decided border ({', '.join(diff)})",
-                          hint=api.BUG_HINT)
-    rjob = api.RefineJob(None, p, plan.zeta_used if sides else hf.refiner_zeta(p.zeta), out, 0.0)
-    errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
-    if not rjob.bound_met:
+    if out.final.stats["over"]:
         raise MeshInvalid(f"{t.name}: {out.final.stats['over']} triangles above zeta after the border's "
                           "error bound", hint=api.BUG_HINT)
+    report = {"tile": t.name, "row": t.row, "col": t.col, "x": t.x, "y": t.y, "width": t.width,
+              "height": t.height, "triangles_before_border": free.mesh.n_triangles,
+              "bound_splits": out.final.stats["bound_splits"]} | free.extra
+    zeta = plan.zeta_used if sides else hf.refiner_zeta(p.zeta)
+    seconds = free.seconds + time.perf_counter() - t0
+    return _checked(plan, free.index, hf, out.final.mesh, sides, report, seconds, zeta)
+
+
+def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: dict, report: dict,
+             seconds: float, zeta_used: float) -> TileResult:
+    """A tile's last mesh checked (proper, exactly the decided ``sides``, within zeta) and measured."""
+    p, t = plan.params.refine, plan.tiles[index]
+    api.require_proper(final, f"{t.name}'s mesh")
+    got = border_of(final)
+    diff = [s for s in SIDES if s in sides and got[s] != tuple(sides[s])]
+    if diff:
+        raise MeshInvalid(f"{t.name}: the mesh's border is not the decided one ({', '.join(diff)})",
+                          hint=api.BUG_HINT)
+    errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
+    rjob = api.RefineJob(None, p, zeta_used, _Levels(_Level(final, {"over": 0})), 0.0)
     excess = api.bound_excess(hf, rjob, errors)
     if excess:
         raise MeshInvalid(f"{t.name}: {excess}", hint=api.BUG_HINT)
-    xy = final.xy + np.array([t.x, t.y], dtype=np.int64)
-    report = {"tile": t.name, "row": t.row, "col": t.col, "x": t.x, "y": t.y, "width": t.width,
-              "height": t.height, "triangles_before_border": free.mesh.n_triangles,
-              "vertices": final.n_vertices, "triangles": final.n_triangles,
-              "border_vertices": {s: len(v) for s, v in sides.items()},
-              "bound_splits": out.final.stats["bound_splits"],
-              "seconds": free.seconds + time.perf_counter() - t0,
-              "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical} | free.extra
-    return TileResult(free.index, t.name, xy, final.tris, final.z(hf.values), report,
-                      free.extra.get("device"))
+    report = report | {"vertices": final.n_vertices, "triangles": final.n_triangles,
+                       "border_vertices": {s: len(v) for s, v in sides.items()}, "seconds": seconds,
+                       "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical}
+    return TileResult(index, t.name, final.xy + np.array([t.x, t.y], dtype=np.int64),
+                      final.tris, final.z(hf.values), report, report.get("device"))
 
 
-def mesh_tile(plan: TilePlan, index: int, facing: dict | None = None) -> TileResult:
-    """Steps 3 to 5 for one tile in this process; ``facing`` the neighbours' positions on the shared
-    sides (default: their free meshes', made here too)."""
-    free = free_tile(plan, index)
-    if facing is None:
-        facing = {s: free_tile(plan, k).sides[FACING[s]] for s, k in plan.tiles[index].neighbours.items()}
-    return finish_tile(plan, free, facing)
+def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None) -> tuple[Editable, HeightField]:
+    t = plan.tiles[r.index]
+    hf = tile_heightfield(plan, t, window)
+    fp = native.fixed_params(plan.params.refine, hf.scale, plan.zeta_used, plan.spacing)
+    mesh = Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris)
+    return Editable(mesh, native.error_within(hf.samples, fp)), hf
+
+
+def thin_seam(plan: TilePlan, a: TileResult, b: TileResult, side: str, win_a=None, win_b=None) -> tuple:
+    """Step 6 for one shared side (``a``'s ``side``, facing ``b``): the positions of the vertices on it
+    both tiles can do without (sides.thin_side), found on copies of both meshes."""
+    return thin_side(_editable(plan, a, win_a)[0], _editable(plan, b, win_b)[0], side)
+
+
+def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray | None = None) -> TileResult:
+    """Step 6 for one tile: the vertices ``removed`` (side -> positions, as thin_seam found them) taken
+    out, side by side (the sides' removals touch no common triangle), the result checked again."""
+    t0 = time.perf_counter()
+    t = plan.tiles[r.index]
+    ed, hf = _editable(plan, r, window)
+    for side in SIDES:
+        for pos in removed.get(side, ()):
+            step = ed.removal(side_point(side, pos, t.width, t.height), side)
+            if step is None:
+                raise MeshInvalid(f"{t.name}: a seam vertex both tiles could do without could not be removed "
+                                  f"({side} {pos})", hint=api.BUG_HINT)
+            ed.apply(step)
+    before = border_of(Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris))
+    sides = {s: tuple(q for q in before[s] if q not in set(removed.get(s, ()))) for s in t.neighbours}
+    report = r.report | {"seam_removed": r.report.get("seam_removed", 0) + sum(map(len, removed.values()))}
+    seconds = r.report["seconds"] + time.perf_counter() - t0
+    return _checked(plan, r.index, hf, ed.mesh(), sides, report, seconds, plan.zeta_used)
 
 
 def _window(plan: TilePlan, index: int) -> np.ndarray | None:
@@ -160,15 +201,15 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
               progress: bool = False, log: Callable[[str], None] | None = None,
               frees: list | None = None) -> list[TileResult]:
     """Every tile's jobs on ``runner`` (or a Runner of ``workers`` / ``scheduler`` for this call): the free
-    meshes (unless ``frees`` has them, as stream_tiles makes them), then each tile conformed to its
-    reconciled sides; the results in tile order whatever order they finish in.  A failed tile ends the run
-    with its error."""
+    meshes (unless ``frees`` has them, as stream_tiles makes them), each tile conformed to its reconciled
+    sides, each shared side thinned (thin_seam), each tile without its sides' thinned vertices (thin_tile);
+    the results in tile order whatever order they finish in.  A failed task ends the run with its error."""
     if runner is None:
         with Runner(workers, scheduler) as own:
             return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees)
     n = len(plan.tiles)
     light = replace(plan, source=_light_source(plan.source))
-    with api.Progress("tiles", 2 * n, progress) as bar:
+    with api.Progress("tiles", 3 * n, progress) as bar:
         count = [0 if frees is None else n, 0]
 
         def freed(r: FreeTile) -> None:
@@ -185,7 +226,22 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
         if frees is None:
             frees = runner.map(free_tile, [(light, i, _window(plan, i)) for i in range(n)], freed)
         results = runner.map(finish_tile, [(light, frees[i], _facing(plan, frees, i), _window(plan, i))
-                                           for i in range(n)], finished)
+                                           for i in range(n)], freed)
+        for side in ("right", "bottom"):  # the columns' sides, then the rows': two opposite sides at a time
+            pairs = [(i, k) for i, t in enumerate(plan.tiles) for s, k in t.neighbours.items() if s == side]
+            if not pairs:
+                continue
+            cuts = runner.map(thin_seam, [(light, results[i], results[k], side, _window(plan, i),
+                                           _window(plan, k)) for i, k in pairs])
+            removed: list[dict] = [{} for _ in range(n)]
+            for (i, k), cut in zip(pairs, cuts, strict=True):
+                removed[i][side] = removed[k][FACING[side]] = cut
+            last = side == "bottom" or not any("bottom" in t.neighbours for t in plan.tiles)
+            results = runner.map(thin_tile, [(light, results[i], removed[i], _window(plan, i))
+                                             for i in range(n)], finished if last else None)
+        if not any(plan.tiles[i].neighbours for i in range(n)):
+            for r in results:
+                finished(r)
         bar.finish(f"{n} tiles")
     return results
 

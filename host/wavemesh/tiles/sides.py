@@ -9,7 +9,7 @@ import numpy as np
 
 from wavemesh import api
 from wavemesh.errors import MeshInvalid
-from wavemesh.mesh import Mesh, ear_clip
+from wavemesh.mesh import Mesh, ear_clip, triangulate_within
 
 # The normal metric's 1-D border test keeps this margin below the refiner's zeta (relative, and in sample
 # counts), more than the refiner's E(T) rounding (at most about 2^-15 relative + 2^-16, docs/refiner.md).
@@ -97,7 +97,7 @@ def _side_of(x: int, y: int, w: int, h: int) -> list[tuple[str, int]]:
                                     ("right", y, x == w - 1)) if on]
 
 
-def _side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
+def side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
     return {"top": (pos, 0), "bottom": (pos, h - 1), "left": (0, pos), "right": (w - 1, pos)}[side]
 
 
@@ -133,7 +133,7 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
             if v in inc:
                 inc[v].discard(t)
 
-    want = {_side_point(s, pos, w, h) for s, ps in sides.items() for pos in ps}
+    want = {side_point(s, pos, w, h) for s, ps in sides.items() for pos in ps}
     # 1. insert the decided vertices the mesh lacks: split the triangle whose border edge holds each
     for p in sorted(want - set(xy)):
         side, pos = _side_of(p[0], p[1], w, h)[0]
@@ -193,3 +193,105 @@ def border_of(mesh: Mesh) -> dict:
     w, h = mesh.width, mesh.height
     return {"top": tuple(sorted(x[y == 0].tolist())), "bottom": tuple(sorted(x[y == h - 1].tolist())),
             "left": tuple(sorted(y[x == 0].tolist())), "right": tuple(sorted(y[x == w - 1].tolist()))}
+
+
+# ---------------------------------------------------------------------------------------------------
+# The seams thinned: shared side vertices both neighbours can do without
+
+
+class Editable:
+    """A tile's mesh (tile coordinates) that loses vertices one at a time: a side vertex's star replaced
+    by a triangulation of its ring (the first that ear clipping finds of the fattest ear first, then of
+    the first ear) whose every triangle ``within`` (the refiner's E(T) <= zeta) accepts."""
+
+    def __init__(self, mesh: Mesh, within):
+        self.w, self.h, self.within = mesh.width, mesh.height, within
+        self.xy = [tuple(p) for p in mesh.xy.tolist()]
+        self.at = {p: i for i, p in enumerate(self.xy)}
+        self.tris = [tuple(t) for t in mesh.tris.tolist()]
+        self.alive = [True] * len(self.tris)
+        self.inc: dict[int, set[int]] = {v: set() for v in range(len(self.xy))}
+        for k, t in enumerate(self.tris):
+            for v in t:
+                self.inc[v].add(k)
+
+    def removal(self, p: tuple[int, int], side: str):
+        """(vertex, new triangles) that remove the vertex at ``p`` on ``side``, or None: a corner, a vertex
+        whose ring reaches the opposite side of the tile (off its corners: the two sides' removals then
+        never touch the same triangles, whatever their order), or no triangulation of its hole within zeta
+        (ear clipping, the fattest ear first, then the first ear, then every triangulation of a small
+        ring: wavemesh.holes' search)."""
+        w, h = self.w, self.h
+        v = self.at.get(p)
+        if v is None or v not in self.inc or len(_side_of(*p, w, h)) > 1:
+            return None
+        nxt = {}
+        for k in self.inc[v]:
+            tv = self.tris[k]
+            j = tv.index(v)
+            nxt[tv[(j + 1) % 3]] = tv[(j + 2) % 3]
+        start = next(n for n in nxt if n not in nxt.values())
+        ring = [start]
+        while ring[-1] in nxt:
+            ring.append(nxt[ring[-1]])
+        pts = [self.xy[r] for r in ring]
+        if any(s == FACING[side] for q in pts if len(_side_of(*q, w, h)) == 1 for s, _ in _side_of(*q, w, h)):
+            return None
+        def ok(t) -> bool:
+            a, b, c = (pts[k] for k in t)
+            return self.within([a[0], b[0], c[0]], [a[1], b[1], c[1]])
+
+        for fattest in (True, False):
+            cut = ear_clip(pts, fattest=fattest)
+            if cut is not None and all(ok(t) for t in cut):
+                return v, [tuple(ring[k] for k in t) for t in cut]
+        cut = triangulate_within(pts, ok)
+        if cut is not None:
+            return v, [tuple(ring[k] for k in t) for t in cut]
+        return None
+
+    def apply(self, plan) -> None:
+        v, new = plan
+        for k in list(self.inc[v]):
+            self.alive[k] = False
+            for u in self.tris[k]:
+                self.inc[u].discard(k)
+        for t in new:
+            self.tris.append(t)
+            self.alive.append(True)
+            for u in t:
+                self.inc[u].add(len(self.tris) - 1)
+        del self.inc[v]
+
+    def mesh(self) -> Mesh:
+        live = sorted(self.inc)
+        remap = np.full(len(self.xy), -1, dtype=np.int64)
+        remap[live] = np.arange(len(live))
+        tris = np.array([t for t, ok in zip(self.tris, self.alive, strict=True) if ok], dtype=np.int64)
+        return Mesh(self.w, self.h, np.array([self.xy[i] for i in live], dtype=np.int64).reshape(-1, 2),
+                    remap[tris.reshape(-1, 3)])
+
+
+def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
+    """The vertices of ``a``'s shared ``side`` (facing ``b``'s FACING side) that both can do without,
+    removed from both in order along the side: their positions along it."""
+    other = FACING[side]
+    along = 1 if side in ("left", "right") else 0
+    line = sorted((p for p in a.at if a.at[p] in a.inc and any(s == side for s, _ in _side_of(*p, a.w, a.h))),
+                  key=lambda p: p[along])
+    removed = []
+    while True:
+        more = False
+        for p in line:
+            pos = p[along]
+            if pos in removed:
+                continue
+            ra = a.removal(p, side)
+            rb = ra and b.removal(side_point(other, pos, b.w, b.h), other)
+            if ra and rb:
+                a.apply(ra)
+                b.apply(rb)
+                removed.append(pos)
+                more = True
+        if not more:
+            return tuple(removed)
