@@ -234,7 +234,7 @@ def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
 
             cut = ear_clip(pts)
             if cut is None or not all(map(ok, cut)):
-                cut = triangulate_within(pts, ok)  # every triangulation, when ear clipping's one is not within
+                cut = triangulate_within(pts, ok)  # every triangulation: ear clipping's is not within
                 if cut is None:
                     continue
             for k in fan:
