@@ -887,6 +887,48 @@ def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
     return array, transform, crs
 
 
+def _open_raster(path: str):
+    """rasterio's dataset of a GDAL raster, quiet about a plain TIFF's missing georeference."""
+    import rasterio  # imported here: only GDAL rasters need rasterio (and its start-up cost)
+    from rasterio.errors import NotGeoreferencedWarning  # as rasterio's
+
+    _quiet_rasterio_logs()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return rasterio.open(path)
+
+
+def raster_header(path: str) -> tuple[int, int, tuple[float, ...] | None, str | None]:
+    """A GDAL raster's ``(width, height, transform, crs)`` without its samples, after _read_raster's
+    checks of one band and its no-data value (wavemesh.tiles reads it window by window:
+    read_raster_window)."""
+    from rasterio.errors import RasterioError  # as rasterio's (_open_raster)
+
+    try:
+        with _open_raster(path) as ds:
+            if ds.count != 1:
+                raise InputError(f"{path} has {ds.count} bands; a height field needs one",
+                                 hint="extract one (e.g. gdal_translate -b 1)")
+            check_nodata(path, ds)
+            georeferenced = ds.crs is not None or not ds.transform.is_identity
+            return (ds.width, ds.height, tuple(float(t) for t in ds.transform[:6]) if georeferenced else None,
+                    ds.crs.to_string() if ds.crs is not None else None)
+    except RasterioError as e:
+        raise InputError(f"cannot read {path}: {e}") from None
+
+
+def read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
+    """The w x h window at (x, y) of band 1 of a GDAL raster as float64: masked samples NaN, the band's
+    scale and offset applied (as _read_raster reads the whole raster)."""
+    from rasterio.windows import Window  # as rasterio's (_open_raster)
+
+    with _open_raster(path) as ds:
+        a = ds.read(1, window=Window(x, y, w, h), masked=True)
+        scale, offset = ds.scales[0], ds.offsets[0]
+    v = np.ma.filled(a.astype(np.float64), np.nan)
+    return v * scale + offset if (scale, offset) != (1.0, 0.0) else v
+
+
 def _check_ascii_grid(path: str, nrows: int, ncols: int) -> None:
     """An ESRI ASCII grid's data: exactly nrows * ncols numbers after the header.
 

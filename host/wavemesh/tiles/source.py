@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -14,9 +13,10 @@ from wavemesh import api
 from wavemesh.errors import InputError
 from wavemesh.io.georef import apply_overrides, cropped
 from wavemesh.io.heightfield import (
-    check_nodata,
     parse_fill,
     quant_rule,
+    raster_header,
+    read_raster_window,
     regular_file,
     to_samples,
 )
@@ -68,7 +68,7 @@ class Source:
                 v = np.array(mm[rows, cols], dtype=np.float64)
             del mm
         else:
-            v = _read_raster_window(self.path, fx, fy, s * (w - 1) + 1, s * (h - 1) + 1)[::s, ::s]
+            v = read_raster_window(self.path, fx, fy, s * (w - 1) + 1, s * (h - 1) + 1)[::s, ::s]
         if self.fill is not None:
             v[~np.isfinite(v)] = self.fill
         return v
@@ -87,30 +87,6 @@ class _Grid:
     crs: str | None
     spacing: tuple[float, float] | None
     source: str
-
-
-def _open_raster(path: str):
-    """rasterio's dataset (imported here: rasterio costs a second of start-up that a .npy run never needs)."""
-    import rasterio  # start-up: see the docstring
-    from rasterio.errors import NotGeoreferencedWarning  # the same
-
-    with warnings.catch_warnings():  # a plain TIFF: no stray warning line
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        return rasterio.open(path)
-
-
-def _read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
-    """A window of band 1 of a GDAL raster as float64: masked samples NaN, the band's scale and offset
-    applied (as wavemesh.heightfield reads the whole raster)."""
-    from rasterio.windows import Window  # with rasterio (_open_raster)
-
-    with _open_raster(path) as ds:
-        a = ds.read(1, window=Window(x, y, w, h), masked=True)
-        scale, offset = ds.scales[0], ds.offsets[0]
-    v = np.ma.filled(a.astype(np.float64), np.nan)
-    if (scale, offset) != (1.0, 0.0):
-        v = v * scale + offset
-    return v
 
 
 def open_source(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
@@ -141,20 +117,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
         fh, fw = mm.shape
         kind = "npy"
     else:
-        from rasterio.errors import RasterioError  # with rasterio (_open_raster)
-
-        try:
-            with _open_raster(path) as ds:
-                if ds.count != 1:
-                    raise InputError(f"{path} has {ds.count} bands; a height field needs one",
-                                     hint="extract one (e.g. gdal_translate -b 1)")
-                check_nodata(path, ds)
-                fh, fw = ds.height, ds.width
-                if ds.crs is not None or not ds.transform.is_identity:
-                    transform = tuple(float(t) for t in ds.transform[:6])
-                    crs = ds.crs.to_string() if ds.crs is not None else None
-        except RasterioError as e:
-            raise InputError(f"cannot read {path}: {e}") from None
+        fw, fh, transform, crs = raster_header(path)
         kind = "raster"
     x0, y0, w, h, step, what = api.crop_window(crop, decimate, fw, fh)
     name = path + (f" ({', '.join(what)})" if what else "")
