@@ -18,7 +18,7 @@ runner).  Each mesh is also compared with `wavemesh mesh` (reported, not asserte
 
 Beside the board's cycles: the same refiner job (the same initial mesh, details and fixed-point
 parameters, built from the same options as `wavemesh mesh` builds them) run natively by the C runner
-firmware/tests/wm_run.c under callgrind, its x86-64 instructions per output triangle (when valgrind is
+tests/firmware/wm_run.c under callgrind, its x86-64 instructions per output triangle (when valgrind is
 there): how much of the cost is the algorithm's work rather than the soft CPU's.  And the upload's
 floor: the receive stage alone per output triangle, in fast mode and at the board's baud rate.
 """
@@ -271,7 +271,7 @@ def markdown(results: dict) -> str:
     lines += [
         "**The upload and the algorithm's share, per output triangle** (the same cases): *receive* alone, "
         f"in fast mode and on a board at {BAUD} baud (the upload's bytes x 10 bits at the board's clock); "
-        "and the refiner's job natively (*native*: x86-64 instructions of the same job in firmware/tests/"
+        "and the refiner's job natively (*native*: x86-64 instructions of the same job in tests/firmware/"
         "wm_run.c under callgrind, the C scan there), which says how much of the cost is the algorithm's "
         "work whatever the CPU, and the soft CPU's refine cycles per native instruction.",
         "",

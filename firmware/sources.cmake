@@ -4,5 +4,5 @@
 set(WM_REFINER_SOURCE_NAMES
   mesh.c fixed.c tri_error.c haar.c spline.c
   edge_split.c tri_split.c edge_swap.c vertex_move.c vertex_remove.c
-  region.c pairing.c refine.c decimate.c roi.c
+  region.c pairing.c mesh_state.c refine.c decimate.c roi.c
   autocorr.c edge_collapse.c reduce.c holes.c)

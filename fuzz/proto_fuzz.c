@@ -1,6 +1,6 @@
 /*
  * fuzz_proto: the device's frame decoder and protocol engine (firmware/board/src/proto_*.c) with the
- * native device's job (firmware/board/native/job.c: filter bank, template stage, refiner), under ASan
+ * native device's job (firmware/board/native/native_job.c: filter bank, template stage, refiner), under ASan
  * and UBSan, on a virtual clock.
  *
  * The input is a script for a host: a run of operations, each a byte and its arguments.
@@ -29,7 +29,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "job.h"
+#include "native_job.h"
 #include "proto.h"
 #include "testhost.h"
 

@@ -6,7 +6,7 @@
  * wm_params_check accepts, a triangle storage (from just enough to never running out) and the
  * heights, drawn from the input's bytes in one of a few shapes (raw noise, ramps, cliffs, a
  * constant, a few spikes on a plane).  The pipeline is the native device's: wm_haar, the template
- * stage in C (firmware/board/native/job.c), wm_refine_init, wm_refine_step to the end.
+ * stage in C (firmware/board/native/native_job.c), wm_refine_init, wm_refine_step to the end.
  *
  * Checked independently of the library, after every level (an abort is a finding):
  *   - the mesh is a proper triangulation of the W x H rectangle: every triangle counter-clockwise,
@@ -24,7 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "job.h"
+#include "native_job.h"
 #include "wavemesh.h"
 
 #define MAX_SIDE 40

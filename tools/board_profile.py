@@ -14,7 +14,7 @@ cycles, not its callees'.
 --data also prints where the data accesses wait (wmsim's FILE.data: the cycles each access waited beyond
 a block RAM's answer): by memory-map area (the stack and the rest of the firmware RAM, the SDRAM's
 HEIGHT, COEF, TOUT) and, in the heap, by the refiner's arrays (firmware/src refine.c and mesh.c's
-layout for the job's grid and the board's storage clamp, app/job.c), with the reads and writes of each.
+layout for the job's grid and the board's storage clamp, app/board_job.c), with the reads and writes of each.
 """
 
 from __future__ import annotations
@@ -152,7 +152,7 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
         if len(parts) == 3:
             syms[parts[2]] = int(parts[0], 16)
     w, h = rep["input"]["width"], rep["input"]["height"]
-    cap = min(rep["device"]["tri_capacity"], 2 * (w - 1) * (h - 1))  # app/job.c's clamp (wm_tri_cap_max)
+    cap = min(rep["device"]["tri_capacity"], 2 * (w - 1) * (h - 1))  # board_job.c's clamp (wm_tri_cap_max)
     vc = cap // 2 + w + h + 2  # wm_vert_cap_for
     items = max(cap, vc)
     out = [(mm.FW_RAM.base, "firmware RAM: code, rodata"), (syms["__data_start"], "firmware RAM: data, bss"),

@@ -6,7 +6,7 @@
     .venv/bin/python tools/refiner_instructions.py --job 'INPUT [wavemesh mesh options]' ... [--phases]
                                                    [--routines N] [--scans]
 
-Writes the C runner's inputs (firmware/tests/wm_run.c) for ten pairs of the quality benchmark's tuning
+Writes the C runner's inputs (tests/firmware/wm_run.c) for ten pairs of the quality benchmark's tuning
 set (bench/bench_quality.py: its grids, its errors, --metric vertical, the defaults; never the held-out
 grids), runs each under `valgrind --tool=callgrind` and prints the instructions and the output triangles
 per pair and in all.  Instruction counts do not depend on the machine's load, unlike times, so a change

@@ -333,8 +333,13 @@ static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t 
     }
 }
 
+/* The refiner's mesh state under every phase (mesh_state.c): wm_touch, wm_room, wm_legalise and
+ * wm_heap_update; the phases call them, they call no phase. */
 /* Recomputes E(T) of t (and its worst sample) and marks it new; forgets its corners' classes. */
 void wm_touch(wm_refiner *r, int32_t t);
+/* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
+ * small; 1 when the budget forbids it (and records that). */
+int wm_room(wm_refiner *r, int32_t added);
 /* t was made or changed: the stars of its corners changed, and the reduction's class of each, kept in
  * vapex from pass to pass, is forgotten (reduce.c).  Every operator's new triangles come through here. */
 static inline void wm_forget_class(wm_refiner *r, int32_t t)
@@ -345,7 +350,7 @@ static inline void wm_forget_class(wm_refiner *r, int32_t t)
  * touched[0..n) until every such edge is locally Delaunay (hmm's design), then E(T) of touched[] and
  * of every flipped triangle, once each, as wm_touch.  heap_n: the error bound's heap (updated), or NULL. */
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n);
-/* The error bound's heap (refine.c): re-files t after its E(T) changed. */
+/* The error bound's heap (mesh_state.c): re-files t after its E(T) changed. */
 void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n);
 /* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
  * E(T) <= zeta; returns WM_OK. */
@@ -377,9 +382,6 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
  * WM_ERR_REFUSED when no such ear is left (the caller falls back to wm_vertex_remove_plan). */
 int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, int32_t ky,
                  int32_t tris[3 * WM_MAX_RING], int32_t *n_tris);
-/* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
- * small; 1 when the budget forbids it (and records that). */
-int wm_room(wm_refiner *r, int32_t added);
 
 /* The detail energy test (4.12) for the cell of level m at (x, y). */
 int wm_energetic(const wm_refiner *r, int32_t m, int32_t x, int32_t y);

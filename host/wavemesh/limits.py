@@ -2,7 +2,7 @@
 
 :mod:`wavemesh.device.protocol` states them to devices and re-exports these names (``wm_protocol.h`` and
 docs/protocol.md are generated from it; the device code checks at compile time that the refiner's
-WM_MAX_SIDE and WM_MAX_LEVELS equal them, firmware/src/job.c).  They live in a module of their own so
+WM_MAX_SIDE and WM_MAX_LEVELS equal them, firmware/board/src/wm_job.c).  They live in a module of their own so
 that ``wavemesh mesh``, which speaks no protocol, does not import the protocol's enums and message
 tables (issue 11: most of a short run is start-up).
 """

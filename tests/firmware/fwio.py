@@ -1,4 +1,4 @@
-"""Input files of the C runner firmware/tests/wm_run.c, and its output."""
+"""Input files of the C runner tests/firmware/wm_run.c, and its output."""
 
 from __future__ import annotations
 

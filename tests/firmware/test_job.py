@@ -1,4 +1,4 @@
-"""The job library both devices run (firmware/board/include/wm_job.h, src/job.c) against the reference
+"""The job library both devices run (firmware/board/include/wm_job.h, src/wm_job.c) against the reference
 model: its labels and template entries against wavemesh.model.label, its initial triangulation against
 wavemesh.model.initial, element for element, and its staging inside the caller's storage."""
 

@@ -1,5 +1,5 @@
 """Whole refinements in the checking build (asserts, the invariant check after every operator,
-AddressSanitizer, UndefinedBehaviorSanitizer) through the file-driven runner firmware/tests/wm_run.c;
+AddressSanitizer, UndefinedBehaviorSanitizer) through the file-driven runner tests/firmware/wm_run.c;
 the meshes are identical, slot for slot, to the release library's (-O0 and -O2 agree bit for bit, and
 so do 16-bit indices, the checking build's, and 32-bit ones)."""
 

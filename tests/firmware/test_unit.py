@@ -1,4 +1,4 @@
-"""The C unit tests (firmware/tests/wm_unit.c): tiny hand-built meshes for every operator, the exact
+"""The C unit tests (tests/firmware/wm_unit.c): tiny hand-built meshes for every operator, the exact
 helpers, E(T), the filter bank, small refinements; in the release build and in the checking build
 (asserts, the invariant check after every operator, AddressSanitizer, UndefinedBehaviorSanitizer)."""
 

@@ -54,7 +54,7 @@ def test_codes_flags_and_limits_are_the_headers():
     assert native.METRICS == {"normal": define("WM_METRIC_NORMAL"), "vertical": define("WM_METRIC_VERTICAL")}
     assert native.NEIGHBOURHOODS == {"face": define("WM_NEIGHBOURHOOD_FACE"),
                                      "vertex": define("WM_NEIGHBOURHOOD_VERTEX")}
-    # protocol.py is the one source of the limits; the header states them too (src/job.c checks that
+    # protocol.py is the one source of the limits; the header states them too (board/src/wm_job.c checks that
     # at compile time, and this for the host)
     assert (P.MAX_SIDE, P.MAX_LEVELS) == (define("WM_MAX_SIDE"), define("WM_MAX_LEVELS"))
     assert native.MAX_SIDE == P.MAX_SIDE

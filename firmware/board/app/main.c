@@ -1,13 +1,13 @@
 /*
  * wavemesh board firmware: the device program.  The protocol engine (src/proto_*.c, docs/protocol.md)
- * on the UART, with the board's job (app/job.c: the FPGA stage, then the refiner) behind it.
+ * on the UART, with the board's job (app/board_job.c: the FPGA stage, then the refiner) behind it.
  *
  * The engine waits for bytes with board_uart_getc_timeout in chunks of at most a second (the cycle
  * counter's 32-bit intervals), takes the runs already waiting with board_uart_read, writes with
  * board_uart_write (payloads with board_uart_write_escaped) and times itself with board_cycles.
  * Uploaded samples go straight into the height memory (WM_HEIGHT_BASE), where the FPGA stage and
  * the refiner read them.  HELLO states the built sizes (SYS and ACCEL registers), the triangle
- * capacity the heap holds (app/job.c, board_job_capacity: the refiner's storage and the staging of
+ * capacity the heap holds (app/board_job.c, board_job_capacity: the refiner's storage and the staging of
  * the initial triangulation for the largest grid), the name "wm-board" and the UART's divisor range
  * (BAUD switches the line: io_set_divisor).
  *
@@ -19,7 +19,7 @@
 #include <string.h>
 
 #include "board.h"
-#include "job.h"
+#include "board_job.h"
 #include "proto.h"
 #include "wm_memmap.h"
 

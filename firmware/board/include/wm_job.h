@@ -1,6 +1,6 @@
 /*
- * The job both devices run, as one library: the board (firmware/board/app/job.c: the FPGA stage
- * labels the blocks) and the native stand-in device (firmware/board/native/job.c: the labeller here)
+ * The job both devices run, as one library: the board (firmware/board/app/board_job.c: the FPGA stage
+ * labels the blocks) and the native stand-in device (firmware/board/native/native_job.c: the labeller here)
  * differ only in where the details and the template entries come from and where the storage is.
  *
  *   details of level M --wm_job_label--> template entries (TOUT's format)

@@ -41,7 +41,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "job.h"
+#include "native_job.h"
 #include "proto.h"
 #include "wm_memmap.h"
 

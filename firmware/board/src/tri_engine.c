@@ -3,7 +3,7 @@
  * WM_TRI_ENGINE: firmware/board/CMakeLists.txt; the native build keeps the C scan).
  *
  * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
- * (the board job's: app/job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
+ * (the board job's: app/board_job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
  * answers 0 and the C scans.  One triangle at a time: the grid's width, the corners, their heights (read
  * here through the cache, as the C scan reads them) and the limit into the staging registers (all of
  * them each time: no state carries from one job to the next, so a job's cycles depend on it alone),

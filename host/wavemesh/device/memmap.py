@@ -47,7 +47,7 @@ STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmwar
 REFINER_TRI_BYTES = 48
 REFINER_GRID_BYTES = 32 * 1024  # for the largest grid
 # The board job stages the initial triangulation in the heap beside the refiner's storage
-# (firmware/board/app/job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
+# (firmware/board/app/board_job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
 # coordinates (Euler: about one vertex per two triangles) and the lattice bitmap; per grid the
 # vertices of the border and the lattice rows.
 STAGING_TRI_BYTES = 17

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import WavemeshError
-from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (src/job.c checks it); wm_level_stats' fields
+from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (board/src/wm_job.c checks it); the stats
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import HaarLevel
 

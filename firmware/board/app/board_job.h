@@ -1,5 +1,5 @@
 /*
- * The board's job (firmware/board/app/job.c): the FPGA stage, the initial triangulation from its
+ * The board's job (firmware/board/app/board_job.c): the FPGA stage, the initial triangulation from its
  * template entries, and the refiner, behind the protocol engine's job interface (proto.h).
  */
 #ifndef WM_BOARD_JOB_H

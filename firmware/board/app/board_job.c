@@ -20,7 +20,7 @@
  * entries it has not written (a heap position it then checks), and what such a read finds must not be
  * the last job's data.
  */
-#include "job.h"
+#include "board_job.h"
 
 #include "board.h"
 #include "wm_job.h"

@@ -8,7 +8,7 @@
  * refine-and-emit loop the job library's (wm_job.h), the same code the board runs after its FPGA
  * stage.  This is a hosted program: the storage the library takes comes from malloc.
  */
-#include "job.h"
+#include "native_job.h"
 
 #include <stdlib.h>
 #include <string.h>

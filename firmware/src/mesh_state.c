@@ -1,0 +1,163 @@
+/* The refiner's mesh state under every phase: what an operator's caller does after changing the mesh.
+ * E(T) of a made or changed triangle again (wm_touch), the room an operation needs (wm_room), the
+ * error bound's heap (wm_heap_update) and the legalisation after a split (wm_legalise).  The phases
+ * (refine.c's level loop and error bound, pairing.c, holes.c, reduce.c, decimate.c) call down into
+ * here; nothing here calls a phase. */
+#include "wm_internal.h"
+
+void wm_touch(wm_refiner *r, int32_t t)
+{
+    int32_t x[3], y[3], wx, wy;
+    wm_tri_xy(&r->mesh, t, x, y);
+    r->err[t] = r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+    r->worst[t] = wy * r->field.width + wx;
+    r->mesh.tflag[t] |= WM_F_NEW;
+    wm_forget_class(r, t);
+}
+
+int wm_room(wm_refiner *r, int32_t added)
+{
+    if (r->mesh.n_tri + added <= r->limit) return 0;
+    if (r->limit_is_budget) {
+        r->budget_hit = 1;
+        return 1;
+    }
+    return WM_ERR_CAPACITY;
+}
+
+/* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot. */
+
+static int heap_before(const wm_refiner *r, int32_t a, int32_t b)
+{
+    return r->err[a] > r->err[b] || (r->err[a] == r->err[b] && a < b);
+}
+
+static void heap_put(wm_refiner *r, int32_t i, int32_t t)
+{
+    r->list[i] = t;
+    r->pos[t] = i;
+}
+
+static void heap_up(wm_refiner *r, int32_t i)
+{
+    int32_t t = r->list[i];
+    while (i > 0) {
+        int32_t p = (i - 1) / 2;
+        if (!heap_before(r, t, r->list[p])) break;
+        heap_put(r, i, r->list[p]);
+        i = p;
+    }
+    heap_put(r, i, t);
+}
+
+static void heap_down(wm_refiner *r, int32_t i, int32_t n)
+{
+    int32_t t = r->list[i];
+    for (;;) {
+        int32_t c = 2 * i + 1;
+        if (c >= n) break;
+        if (c + 1 < n && heap_before(r, r->list[c + 1], r->list[c])) c++;
+        if (!heap_before(r, r->list[c], t)) break;
+        heap_put(r, i, r->list[c]);
+        i = c;
+    }
+    heap_put(r, i, t);
+}
+
+static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
+{
+    int32_t i = r->pos[t];
+    if (i < 0 || i >= *n || r->list[i] != t) return; /* not in the heap (pos may be stale) */
+    r->pos[t] = -1;
+    (*n)--;
+    if (i == *n) return;
+    {
+        int32_t moved = r->list[*n];
+        heap_put(r, i, moved);
+        heap_up(r, i);
+        heap_down(r, r->pos[moved], *n);
+    }
+}
+
+void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
+{
+    int32_t i = r->pos[t];
+    if (r->err[t] <= r->params.zeta) {
+        heap_remove(r, t, n);
+    } else if (i >= 0 && i < *n && r->list[i] == t) { /* in place: (E(T), slot) orders totally */
+        heap_up(r, i);
+        heap_down(r, r->pos[t], *n);
+    } else {
+        r->pos[t] = *n;
+        r->list[(*n)++] = t;
+        heap_up(r, *n - 1);
+    }
+}
+
+/* Legalisation after inserting p (Lawson; hmm's design).  An edge a -> b opposite p, in triangle
+ * (a, b, p), is flipped when the far vertex d of the triangle across it lies strictly inside the
+ * circle through a, b, p; the two edges that then face p are examined in turn.
+ *
+ *          p                     p
+ *         / \                   /|\
+ *        a---b       ->        a | b
+ *         \ /                   \|/
+ *          d                     d
+ *
+ * Each flip makes p adjacent to one more vertex, so the loop ends; the stack is bounded and an edge
+ * that does not fit is simply left as it is (the mesh stays proper either way). */
+#define LEGAL_STACK 64
+
+/* A slot legalisation changed: E(T) is measured once, at the end, for the triangle the slot then
+ * holds (a split's triangle that a flip replaces at once was scanned for nothing: a third of the error
+ * bound's scans).  Past the list's room, at once. */
+static void changed(wm_refiner *r, int32_t *list, int32_t *n, int32_t t, int32_t *heap_n)
+{
+    for (int32_t i = 0; i < *n; i++)
+        if (list[i] == t) return;
+    if (*n < LEGAL_STACK) {
+        list[(*n)++] = t;
+        return;
+    }
+    wm_touch(r, t);
+    if (heap_n) wm_heap_update(r, t, heap_n);
+}
+
+void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
+    for (int32_t i = 0; i < n; i++) {
+        int32_t t = touched[i];
+        changed(r, slots, &ns, t, heap_n);
+        for (int32_t e = 3 * t; e < 3 * t + 3; e++)
+            if (me->hv[e] != p && wm_dest(me, e) != p && top < LEGAL_STACK) stack[top++] = e;
+    }
+    while (top > 0) {
+        int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
+        if (o < 0 || me->hv[WM_PREV(e)] != p) continue;
+        a = me->hv[e];
+        b = me->hv[o];
+        d = me->hv[WM_PREV(o)];
+        if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
+            0)
+            continue;
+        if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) continue; /* not strictly convex */
+        /* wm_edge_swap: T1 = (a, d, p), T2 = (d, b, p) in the same slots. */
+        t1 = WM_TRI(e);
+        t2 = WM_TRI(o);
+        changed(r, slots, &ns, t1, heap_n);
+        changed(r, slots, &ns, t2, heap_n);
+        r->flips++;
+        if (top + 2 <= LEGAL_STACK) {
+            stack[top++] = 3 * t1;
+            stack[top++] = 3 * t2;
+        }
+    }
+    /* The heap orders by (E(T), slot), a total order, so filing the slots now rather than flip by
+     * flip pops the same triangles in the same order. */
+    for (int32_t i = 0; i < ns; i++) {
+        wm_touch(r, slots[i]);
+        if (heap_n) wm_heap_update(r, slots[i], heap_n);
+    }
+}
