@@ -34,6 +34,27 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):
         raise WavemeshError(message, hint=f"see '{self.prog} --help'")
 
+    # argparse makes a help formatter to check each option's metavar and to name the subcommands' prog
+    # ("wavemesh mesh", shorter than any width); a formatter measures the terminal (shutil, which loads
+    # bz2 and lzma: ~3 ms of a short run), needed only when help or usage is drawn.
+    def add_argument(self, *args, **kwargs):
+        return self._building(super().add_argument, *args, **kwargs)
+
+    def add_subparsers(self, *args, **kwargs):
+        return self._building(super().add_subparsers, *args, **kwargs)
+
+    def _building(self, fn, *args, **kwargs):
+        self._checking = True
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            self._checking = False
+
+    def _get_formatter(self):
+        if getattr(self, "_checking", False):
+            return self.formatter_class(prog=self.prog, width=80)
+        return super()._get_formatter()
+
 
 def _number(text: str) -> float:
     """A number option's value: finite (NaN and infinities are no option's value; argparse names the

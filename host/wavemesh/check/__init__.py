@@ -539,13 +539,6 @@ def mesh_errors(
         a = (dz1 * (y2 - y0) - dz2 * (y1 - y0)) / Df / spacing[0]
         b = ((x1 - x0) * dz2 - (x2 - x0) * dz1) / Df / spacing[1]
         nfac = np.hypot(1.0, np.hypot(a, b))  # sqrt(1 + a^2 + b^2)
-    # Edge functions E_k(s) = A_k x + B_k y + C_k, E_k = D * (barycentric weight of vertex k),
-    # multiplied by sign(D) so that "inside the closed triangle" is "all three >= 0".
-    A0, A1, A2 = (y1 - y2) * sgn, (y2 - y0) * sgn, (y0 - y1) * sgn
-    B0, B1, B2 = (x2 - x1) * sgn, (x0 - x2) * sgn, (x1 - x0) * sgn
-    C0, C1, C2 = (x1 * y2 - x2 * y1) * sgn, (x2 * y0 - x0 * y2) * sgn, (x0 * y1 - x1 * y0) * sgn
-    absD = np.abs(D).astype(np.float64)
-
     # Scanlines: for each triangle and each row of its bounding box (clipped to the grid), the
     # exact run of samples in the closed triangle, from the edge functions by floor division.
     xmin = np.maximum(np.minimum(np.minimum(x0, x1), x2), 0)
@@ -553,17 +546,6 @@ def mesh_errors(
     ymin = np.maximum(np.minimum(np.minimum(y0, y1), y2), 0)
     ymax = np.minimum(np.maximum(np.maximum(y0, y1), y2), H - 1)
     live = (D != 0) & (xmax >= xmin) & (ymax >= ymin)
-    nrows = np.where(live, ymax - ymin + 1, 0)
-    rcum = np.cumsum(nrows)
-    edges = ((A0, B0, C0), (A1, B1, C1), (A2, B2, C2))
-    hflat = h.ravel()
-    row_budget = max(point_budget // 4, 1)
-    # A numerator B_k y + C_k is at most 4 c^2 in size (c: the largest coordinate or side); below 2^53
-    # the float quotient of two exact integers floors to the exact floor (its rounding error is below
-    # 1/|A_k|, the least distance from a non-integral quotient to an integer).
-    c_max = max(W, H, int(np.abs(xy).max()))
-    float_floor = 4 * c_max * c_max < _FLOAT_FLOOR_LIMIT
-
     per_v = np.full(T, -np.inf)
     t_s = 0  # the first triangle the loop below measures
     if not rms and native:
@@ -572,6 +554,24 @@ def mesh_errors(
         fast = lib.tri_max(h, X, Y, zv, tris)
         if fast is not None:
             per_v, t_s = fast, T
+    if t_s < T:  # the samples in Python: the scanlines' terms
+        # Edge functions E_k(s) = A_k x + B_k y + C_k, E_k = D * (barycentric weight of vertex k),
+        # multiplied by sign(D) so that "inside the closed triangle" is "all three >= 0".
+        A0, A1, A2 = (y1 - y2) * sgn, (y2 - y0) * sgn, (y0 - y1) * sgn
+        B0, B1, B2 = (x2 - x1) * sgn, (x0 - x2) * sgn, (x1 - x0) * sgn
+        C0, C1, C2 = (x1 * y2 - x2 * y1) * sgn, (x2 * y0 - x0 * y2) * sgn, (x0 * y1 - x1 * y0) * sgn
+        absD = np.abs(D).astype(np.float64)
+
+        nrows = np.where(live, ymax - ymin + 1, 0)
+        rcum = np.cumsum(nrows)
+        edges = ((A0, B0, C0), (A1, B1, C1), (A2, B2, C2))
+        hflat = h.ravel()
+        row_budget = max(point_budget // 4, 1)
+        # A numerator B_k y + C_k is at most 4 c^2 in size (c: the largest coordinate or side); below 2^53
+        # the float quotient of two exact integers floors to the exact floor (its rounding error is below
+        # 1/|A_k|, the least distance from a non-integral quotient to an integer).
+        c_max = max(W, H, int(np.abs(xy).max()))
+        float_floor = 4 * c_max * c_max < _FLOAT_FLOOR_LIMIT
     covered = np.zeros(W * H if rms else 0, dtype=bool)
     n_cov = 0
     sum_v2 = 0.0

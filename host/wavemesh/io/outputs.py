@@ -299,6 +299,11 @@ class Outputs:
                     with contextlib.suppress(OSError):
                         d.rmdir()
                 raise
+            else:  # in place: the links kept for the undo go, and the staging folders are empty
+                for _, backup, _ in undo:
+                    if backup is not None:
+                        with contextlib.suppress(OSError):
+                            backup.unlink()
             finally:
                 self._files.clear()
                 self.discard()

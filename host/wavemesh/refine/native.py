@@ -97,16 +97,17 @@ class LevelStats(ctypes.Structure):
 # Building and loading
 
 
-def _sources() -> list[Path]:
-    return sorted(p for d in ("src", "include", "host") for p in (FIRMWARE / d).glob("*.[ch]")) + [
-        FIRMWARE / "CMakeLists.txt", FIRMWARE / "sources.cmake"]
-
-
 def _stale(lib: Path) -> bool:
-    if not lib.exists():
+    """The library is missing or older than a source of it (every run asks: os.scandir, no sorting)."""
+    try:
+        built = os.stat(lib).st_mtime
+    except OSError:
         return True
-    built = lib.stat().st_mtime
-    return any(p.stat().st_mtime > built for p in _sources())
+    for d in ("src", "include", "host"):
+        with os.scandir(FIRMWARE / d) as entries:
+            if any(e.name.endswith((".c", ".h")) and e.stat().st_mtime > built for e in entries):
+                return True
+    return any(os.stat(FIRMWARE / name).st_mtime > built for name in ("CMakeLists.txt", "sources.cmake"))
 
 
 def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str, ...] = (),
