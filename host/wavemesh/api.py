@@ -18,7 +18,7 @@ import re
 import resource
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -521,6 +521,24 @@ class MeshParams:
     min_area: float = 0.0  # --min-area: with holes, drop pieces of the mesh smaller (square grid steps)
 
 
+class LevelMeshes(Sequence):
+    """(level, mesh) of each of the refiner's levels, the coarsest first, each Mesh made when first read
+    (native.Level): a run without --lod, --report or --check-levels reads the final one alone (at 4096^2
+    the finer levels' int64 copies are hundreds of MiB)."""
+
+    def __init__(self, levels: list) -> None:
+        self._levels = levels
+
+    def __len__(self) -> int:
+        return len(self._levels)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [(lv.level, lv.mesh) for lv in self._levels[i]]
+        lv = self._levels[i]
+        return lv.level, lv.mesh
+
+
 @dataclass(kw_only=True)
 class MeshResult:
     """What a job made: the final mesh, every level's, their errors, and the JSON report's content."""
@@ -532,7 +550,7 @@ class MeshResult:
     tau: float  # tau_M as used
     mesh: Mesh  # the final mesh
     errors: ErrorReport  # the final mesh's against the input
-    level_meshes: list[tuple[int, Mesh]]  # (level, mesh), the coarsest first; the last is ``mesh``
+    level_meshes: Sequence[tuple[int, Mesh]]  # (level, mesh), the coarsest first; the last is ``mesh``
     rows: list[dict]  # the level table (level_report or level_counts rows); empty for initial only
     bound_met: bool  # the refiner reports every triangle within zeta (True for initial only)
     comment: str  # the mesh files' comment line
@@ -638,7 +656,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
         parameters["roi"] = [str(s) for s in params.roi] if isinstance(params.roi, (tuple, list)) else "array"
         report["roi"] = roi_report(rjob.mesh, roi, rjob.roi_errors, rjob.errors, p.metric)
     return MeshResult(heightfield=hf, params=params, refine_params=p, levels=m, tau=t, mesh=rjob.mesh,
-                      errors=rjob.errors, level_meshes=[(lv.level, lv.mesh) for lv in rjob.output.levels],
+                      errors=rjob.errors, level_meshes=LevelMeshes(rjob.output.levels),
                       rows=rows, bound_met=rjob.bound_met, comment=_comment(m, t, p), report=report,
                       refined=rjob)
 
@@ -863,7 +881,7 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         }
     run = p if full else None
     return StreamResult(heightfield=hf, params=params, refine_params=run, levels=m, tau=tau,
-                        mesh=final.mesh, errors=errors, level_meshes=[(lv.level, lv.mesh) for lv in levels],
+                        mesh=final.mesh, errors=errors, level_meshes=LevelMeshes(levels),
                         rows=rows, bound_met=bound_met or not full, comment=_comment(m, tau, run),
                         report=report, device=info, cycles=cycles, link=link, upload_seconds=upload_s,
                         job_seconds=job_s)
