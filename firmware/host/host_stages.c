@@ -424,10 +424,58 @@ static int cmp_i32(const void *a, const void *b)
 
 static void sort_i32(int32_t *a, int64_t n) { qsort(a, (size_t)n, sizeof *a, cmp_i32); }
 
-int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
-                       int64_t *border)
+/* The edges of the vertices of one part (their out-neighbours listed): 4. and 5. of check_mesh. */
+struct edges {
+    const int64_t *xy, *start;
+    const int32_t *dst;
+    const uint8_t *grid;
+    int64_t W, H, v, budget;
+    int32_t code[MAX_THREADS]; /* per part: 1 passed, 0 failed, -1 over its lattice budget */
+};
+
+static void edges_part(void *ctx, int32_t part, int32_t parts)
 {
-    int64_t W = width, H = height, b = 0, total = 0, lattice = 0;
+    struct edges *e = ctx;
+    const int64_t *xy = e->xy, *start = e->start;
+    const int32_t *dst = e->dst;
+    int64_t W = e->W, H = e->H, lattice = 0, first, last;
+    e->code[part] = 0; /* until the part's edges all pass */
+    part_range(e->v, part, parts, &first, &last);
+    for (int64_t a = first; a < last; a++) {
+        int64_t xa = xy[2 * a], ya = xy[2 * a + 1], lo = start[a], hi = start[a + 1];
+        for (int64_t j = lo; j < hi; j++) {
+            int32_t bb = dst[j];
+            if (hi - lo > LINEAR_DEGREE ? (j > lo && dst[j - 1] == bb) : in_list(dst, lo, j, bb))
+                return; /* a directed edge twice */
+            int64_t xb = xy[2 * (int64_t)bb], yb = xy[2 * (int64_t)bb + 1];
+            int back = start[bb + 1] - start[bb] > LINEAR_DEGREE
+                           ? holds(dst, start[bb], start[bb + 1], (int32_t)a)
+                           : in_list(dst, start[bb], start[bb + 1], (int32_t)a);
+            if (!back && !((xa == xb && (xa == 0 || xa == W - 1)) || (ya == yb && (ya == 0 || ya == H - 1))))
+                return; /* an edge of one triangle inside the rectangle */
+            if (back && a > bb) continue; /* an inner edge: its lattice points once */
+            /* 5. no vertex strictly inside an edge: every inner lattice point looked up, within a budget
+             * (a mesh of a few long edges over a huge grid is Python's, which tests vertex by vertex) */
+            int64_t dx = xb - xa, dy = yb - ya;
+            int64_t g = gcd64(dx < 0 ? -dx : dx, dy < 0 ? -dy : dy);
+            if (g < 2) continue;
+            lattice += g - 1;
+            if (lattice > e->budget) {
+                e->code[part] = -1;
+                return;
+            }
+            int64_t sx = dx / g, sy = dy / g;
+            for (int64_t k = 1; k < g; k++)
+                if (bit_get(e->grid, (ya + k * sy) * W + xa + k * sx)) return;
+        }
+    }
+    e->code[part] = 1;
+}
+
+int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
+                       int32_t threads, int64_t *border)
+{
+    int64_t W = width, H = height, b = 0, total = 0;
     uint8_t *grid = NULL, *used = NULL;
     int64_t *start = NULL;
     int32_t *dst = NULL;
@@ -487,35 +535,21 @@ int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t
     }
     for (int64_t i = 0; i < v; i++) /* a long list sorted: searched by halves below */
         if (start[i + 1] - start[i] > LINEAR_DEGREE) sort_i32(dst + start[i], start[i + 1] - start[i]);
-    for (int64_t a = 0; a < v; a++) {
-        int64_t xa = xy[2 * a], ya = xy[2 * a + 1], lo = start[a], hi = start[a + 1];
-        for (int64_t j = lo; j < hi; j++) {
-            int32_t bb = dst[j];
-            if (hi - lo > LINEAR_DEGREE ? (j > lo && dst[j - 1] == bb) : in_list(dst, lo, j, bb))
-                goto done; /* a directed edge twice */
-            int64_t xb = xy[2 * (int64_t)bb], yb = xy[2 * (int64_t)bb + 1];
-            int back = start[bb + 1] - start[bb] > LINEAR_DEGREE
-                           ? holds(dst, start[bb], start[bb + 1], (int32_t)a)
-                           : in_list(dst, start[bb], start[bb + 1], (int32_t)a);
-            if (!back && !((xa == xb && (xa == 0 || xa == W - 1)) || (ya == yb && (ya == 0 || ya == H - 1))))
-                goto done; /* an edge of one triangle inside the rectangle */
-            if (back && a > bb) continue; /* an inner edge: its lattice points once */
-            /* 5. no vertex strictly inside an edge: every inner lattice point looked up, within a budget
-             * (a mesh of a few long edges over a huge grid is Python's, which tests vertex by vertex) */
-            int64_t dx = xb - xa, dy = yb - ya;
-            int64_t g = gcd64(dx < 0 ? -dx : dx, dy < 0 ? -dy : dy);
-            if (g < 2) continue;
-            lattice += g - 1;
-            if (lattice > LATTICE_PER_ELEMENT * (v + t) + LATTICE_FREE) {
-                code = -1;
-                goto done;
-            }
-            int64_t sx = dx / g, sy = dy / g;
-            for (int64_t k = 1; k < g; k++)
-                if (bit_get(grid, (ya + k * sy) * W + xa + k * sx)) goto done;
+    {
+        struct edges e = {xy, start, dst, grid, W, H, v, (LATTICE_PER_ELEMENT * (v + t) + LATTICE_FREE), {0}};
+        int32_t parts = parts_for(threads, 3 * t);
+        e.budget /= parts; /* each part's share: a part over it answers -1 (Python decides) */
+        if (run_parts(edges_part, &e, parts) != WM_HOST_OK) { /* a thread would not start: all on this one */
+            e.budget *= parts;
+            parts = 1;
+            edges_part(&e, 0, 1);
         }
+        code = 1; /* every part passed: proper; any failed: not; else one over its budget: undecided */
+        for (int32_t p = 0; p < parts; p++)
+            if (e.code[p] == -1) code = -1;
+        for (int32_t p = 0; p < parts; p++)
+            if (e.code[p] == 0) code = 0;
     }
-    code = 1;
 done:
     free(grid);
     free(used);

@@ -50,9 +50,10 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
  * areas add up to 2 (W-1) (H-1); no directed edge twice, an edge of one triangle only on the border;
  * no vertex inside an edge; T = 2V - B - 2), *border = B; 0 when one fails (the caller's Python check
  * then says which); -1 when it cannot decide cheaply (W x H over 2^30, a vertex index beyond int32,
- * more lattice points inside edges than its budget, no memory): the caller checks in Python. */
+ * more lattice points inside edges than its budget, no memory): the caller checks in Python.  The
+ * edges are split over `threads` (the verdict is the same whatever the count). */
 int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
-                       int64_t *border);
+                       int32_t threads, int64_t *border);
 
 #ifdef __cplusplus
 }

@@ -174,7 +174,8 @@ def _mutations(mesh: Mesh, rng: np.random.Generator) -> list[Mesh]:
 
 def test_proper_mesh_check_in_c_agrees_with_the_model():
     """native.check_proper's verdict is check_mesh's (fast=False) on proper meshes (grids, fans, cut
-    meshes, the refiner's) and on broken variants of each; check_mesh's own answer is the same either way."""
+    meshes, the refiner's) and on broken variants of each, at every thread count; check_mesh's own answer
+    is the same either way."""
     import test_check as tc  # tests/host (pytest.ini's pythonpath): the checker's own mesh builders
 
     rng = np.random.default_rng(31)
@@ -191,11 +192,13 @@ def test_proper_mesh_check_in_c_agrees_with_the_model():
         ref = check_mesh(mesh, fast=False)
         if want is not None:
             assert ref.valid
-        c = native.check_proper(mesh)
-        assert c is not None, (mesh, ref.problems)
-        assert c[0] == ref.valid
-        if c[0]:
-            assert c[1] == ref.n_border
+        for n in THREADS:
+            native.set_threads(n)
+            c = native.check_proper(mesh)
+            assert c is not None, (mesh, ref.problems)
+            assert c[0] == ref.valid
+            if c[0]:
+                assert c[1] == ref.n_border
+            assert check_mesh(mesh) == ref
         seen.add(ref.valid)
-        assert check_mesh(mesh) == ref
     assert seen == {True, False}

@@ -539,13 +539,6 @@ def mesh_errors(
         a = (dz1 * (y2 - y0) - dz2 * (y1 - y0)) / Df / spacing[0]
         b = ((x1 - x0) * dz2 - (x2 - x0) * dz1) / Df / spacing[1]
         nfac = np.hypot(1.0, np.hypot(a, b))  # sqrt(1 + a^2 + b^2)
-    # Scanlines: for each triangle and each row of its bounding box (clipped to the grid), the
-    # exact run of samples in the closed triangle, from the edge functions by floor division.
-    xmin = np.maximum(np.minimum(np.minimum(x0, x1), x2), 0)
-    xmax = np.minimum(np.maximum(np.maximum(x0, x1), x2), W - 1)
-    ymin = np.maximum(np.minimum(np.minimum(y0, y1), y2), 0)
-    ymax = np.minimum(np.maximum(np.maximum(y0, y1), y2), H - 1)
-    live = (D != 0) & (xmax >= xmin) & (ymax >= ymin)
     per_v = np.full(T, -np.inf)
     t_s = 0  # the first triangle the loop below measures
     if not rms and native:
@@ -554,7 +547,15 @@ def mesh_errors(
         fast = lib.tri_max(h, X, Y, zv, tris)
         if fast is not None:
             per_v, t_s = fast, T
+    live = None  # the C maxima: -inf where no sample (a degenerate triangle, none in the grid)
     if t_s < T:  # the samples in Python: the scanlines' terms
+        # Scanlines: for each triangle and each row of its bounding box (clipped to the grid), the
+        # exact run of samples in the closed triangle, from the edge functions by floor division.
+        xmin = np.maximum(np.minimum(np.minimum(x0, x1), x2), 0)
+        xmax = np.minimum(np.maximum(np.maximum(x0, x1), x2), W - 1)
+        ymin = np.maximum(np.minimum(np.minimum(y0, y1), y2), 0)
+        ymax = np.minimum(np.maximum(np.maximum(y0, y1), y2), H - 1)
+        live = (D != 0) & (xmax >= xmin) & (ymax >= ymin)
         # Edge functions E_k(s) = A_k x + B_k y + C_k, E_k = D * (barycentric weight of vertex k),
         # multiplied by sign(D) so that "inside the closed triangle" is "all three >= 0".
         A0, A1, A2 = (y1 - y2) * sgn, (y2 - y0) * sgn, (y0 - y1) * sgn
@@ -650,7 +651,9 @@ def mesh_errors(
             r_s = r_e
         t_s = t_e
 
-    measured = live & ~np.isneginf(per_v)  # every live triangle has its vertices as samples
+    measured = ~np.isneginf(per_v)  # every live triangle has its vertices as samples
+    if live is not None:
+        measured &= live
     per_v[~measured] = np.nan
     with np.errstate(invalid="ignore"):
         per_n = per_v / nfac

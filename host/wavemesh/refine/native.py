@@ -200,7 +200,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_host_quantise": (ctypes.c_int, [pf64, i64, i32, pu16, pf64, pi32]),
         "wm_host_quant_error": (ctypes.c_double, [pf64, pu16, i64, ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, i32]),
-        "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, pi64]),
+        "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
     }
     for name, (res, args) in sig.items():
@@ -637,5 +637,5 @@ def check_proper(mesh: Mesh) -> tuple[bool, int] | None:
     tris = np.ascontiguousarray(mesh.tris, dtype=np.int64)
     border = ctypes.c_int64(0)
     code = lib.wm_host_check_mesh(int(mesh.width), int(mesh.height), _ptr(xy, ctypes.c_int64), len(xy),
-                                  _ptr(tris, ctypes.c_int64), len(tris), ctypes.byref(border))
+                                  _ptr(tris, ctypes.c_int64), len(tris), threads(), ctypes.byref(border))
     return None if code < 0 else (code == 1, int(border.value))
