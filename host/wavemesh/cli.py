@@ -19,7 +19,7 @@ from wavemesh import __version__, api
 from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.io import terrain
 from wavemesh.io.georef import sidecar_path
-from wavemesh.io.meshio import formats_help
+from wavemesh.io.meshio import formats_help, suffixes
 from wavemesh.io.outputs import Inputs, Terminated, check_path, handle_termination
 from wavemesh.io.synth import ALIASES, DATASETS
 from wavemesh.model.haar import WAVELETS
@@ -202,7 +202,7 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                         "from sample (0, 0), as the .glb; crs, the CRS's own map coordinates (the sidecar "
                         "says which)")
     p.add_argument("--normals", action="store_true",
-                   help="write per-vertex unit normals (area-weighted; .obj, .ply, .glb)")
+                   help=f"write per-vertex unit normals (area-weighted; {suffixes('normals')})")
     p.add_argument("--base", type=_number, default=None, metavar="H",
                    help="close the surface into a watertight solid: walls down to a flat bottom H height "
                         "units below the lowest height (for 3-D printing; any mesh format)")

@@ -105,8 +105,7 @@ def test_config_carries_the_refiners_fixed_point_parameters():
     p = native.RefineParams(zeta=2.5, metric="vertical", delta_d=0.3, delta_p=0.75, delta_v=1.5, alpha=0.25,
                             iterations=3, neighbourhood="vertex", max_triangles=999)
     fp = native.fixed_params(p, 0.5)
-    c = P.CONFIG.unpack(config_payload(100, 50, 4, 77, fp, capacity=1000, initial_only=True,
-                                       delta_lambda=0.01, delta_c=0.98))
+    c = P.CONFIG.unpack(config_payload(100, 50, 4, 77, fp, capacity=1000, initial_only=True))
     assert (c["width"], c["height"], c["levels"], c["tau"], c["capacity"]) == (100, 50, 4, 77, 1000)
     assert c["flags"] == P.CONFIG_INITIAL_ONLY
     for name, _ in native.Params._fields_:

@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 import serial
 
 from wavemesh.device import protocol as P
+from wavemesh.device.memmap import UART_BAUD
 from wavemesh.errors import WavemeshError
 
 # --- link constants -----------------------------------------------------------------------------------
-DEFAULT_BAUD = 115_200  # the board's UART after reset (a socket ignores it)
+DEFAULT_BAUD = UART_BAUD  # the board's UART after reset (memmap's, the one source; a socket ignores it)
 POLL_INTERVAL = 0.001  # s between polls of a port that had nothing to read (first poll)
 POLL_MAX = 0.005  # s: the longest pause between polls (latency added to a frame at most)
 READ_CHUNK = 65536  # bytes asked of the port per read

@@ -187,25 +187,20 @@ def q16(x: float) -> int:
 
 
 def config_payload(width: int, height: int, levels: int, tau_q: int, fixed, *, capacity: int = 0,
-                   initial_only: bool = False, delta_lambda: float = 0.0, delta_c: float = 0.0,
-                   spline: bool = False, mask: bool = False) -> bytes:
+                   initial_only: bool = False, spline: bool = False, mask: bool = False) -> bytes:
     """CONFIG from the refiner's fixed-point parameters (wavemesh.refine.native.fixed_params: the same
-    conversion `wavemesh mesh` uses, so both paths give the library the same numbers, delta_lambda,
-    delta_c and the WM_FLAG_* bits included; the delta_lambda and delta_c arguments are ignored);
-    ``spline``: the spline wavelet's filter bank (CONFIG_SPLINE, for a device with FEATURE_SPLINE);
-    ``mask``: a validity mask follows the samples (CONFIG_MASK, protocol.job_words; FEATURE_HOLES).
-    Every field is checked against the range the device checks (protocol.CONFIG) before it is sent."""
-    values = dict(
-        width=width, height=height, levels=levels, metric=fixed.metric, neighbourhood=fixed.neighbourhood,
-        iterations=fixed.iterations, tau=tau_q,
+    conversion `wavemesh mesh` uses, so both paths give the library the same numbers): every member of
+    wm_params that CONFIG carries, by name, and the WM_FLAG_* bits; ``spline``: the spline wavelet's
+    filter bank (CONFIG_SPLINE, for a device with FEATURE_SPLINE); ``mask``: a validity mask follows the
+    samples (CONFIG_MASK, protocol.job_words; FEATURE_HOLES).  Every field is checked against the range
+    the device checks (protocol.CONFIG) before it is sent."""
+    carried = {f.name for f in P.CONFIG.fields} - {"flags"}
+    values = {name: getattr(fixed, name) for name, _ in fixed._fields_ if name in carried}
+    values.update(
+        width=width, height=height, levels=levels, tau=tau_q, capacity=capacity,
         flags=((P.CONFIG_INITIAL_ONLY if initial_only else 0) | (P.CONFIG_SPLINE if spline else 0)
                | (P.CONFIG_MASK if mask else 0)
-               | fixed.flags << P.CONFIG_REFINER_SHIFT),
-        max_triangles=fixed.max_triangles, capacity=capacity, zeta=fixed.zeta, scale_m=fixed.scale_m,
-        scale_e=fixed.scale_e, delta_p=fixed.delta_p, alpha=fixed.alpha, delta_v=fixed.delta_v,
-        delta_lambda=fixed.delta_lambda, delta_c=fixed.delta_c,
-        delta_d=fixed.delta_d, slope_x_m=fixed.slope_x_m, slope_x_e=fixed.slope_x_e,
-        slope_y_m=fixed.slope_y_m, slope_y_e=fixed.slope_y_e)
+               | fixed.flags << P.CONFIG_REFINER_SHIFT))
     values = {k: int(v) for k, v in values.items()}
     problem = P.config_problem(values)
     if problem:

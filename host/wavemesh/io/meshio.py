@@ -281,6 +281,13 @@ def formats_help() -> str:
     return ", ".join(f"{f.suffix} ({f.name})" for f in FORMATS.values())
 
 
+def suffixes(holds: str) -> str:
+    """The suffixes of the formats that hold ``holds`` (a Format flag: "normals", "crs_units"), as words:
+    ".obj, .ply or .glb"."""
+    *most, last = [f.suffix for f in FORMATS.values() if getattr(f, holds)]
+    return f"{', '.join(most)} or {last}" if most else last
+
+
 def formats_table() -> str:
     """The docs' table of output formats (README.md holds it; tests/host/test_outputs.py compares)."""
     rows = ["| `-o` | format | `--normals` | `--base H` | `--units crs` | |",
@@ -312,10 +319,10 @@ def check_options(path, *, units: str = "metres", local: bool = False, normals: 
                          hint="use it with --units crs (--units metres is already from sample (0, 0))")
     if units == "crs" and not fmt.crs_units and georeferenced:
         raise InputError(f"--units crs: a {fmt.suffix} file ({fmt.name}) is always in metres",
-                         hint="leave out --units, or write .obj, .ply or .stl")
+                         hint=f"leave out --units, or write {suffixes('crs_units')}")
     if normals and not fmt.normals:
         raise InputError(f"--normals: a {fmt.suffix} file holds one normal per triangle (always written), "
-                         "not vertex normals", hint="leave out --normals, or write .obj, .ply or .glb")
+                         "not vertex normals", hint=f"leave out --normals, or write {suffixes('normals')}")
     if base is not None and not (math.isfinite(base) and base > 0):
         raise InputError(f"--base {base}: the thickness below the lowest height must be a number > 0",
                          hint="give the base's thickness in height units, e.g. --base 10")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 from math import floor
@@ -44,38 +45,34 @@ class NativeError(WavemeshError):
     """The library could not be built or loaded, or it returned an error code."""
 
 
+HEADER = FIRMWARE / "include" / "wavemesh.h"  # the one statement of the structures the library takes
+_C_TYPES = {"int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint64_t": ctypes.c_uint64,
+            "const uint16_t *": ctypes.POINTER(ctypes.c_uint16),
+            "const int32_t *": ctypes.POINTER(ctypes.c_int32),
+            "const uint8_t *": ctypes.POINTER(ctypes.c_uint8)}
+
+
+def c_struct(name: str, header: str | None = None) -> list[tuple[str, object]]:
+    """The ctypes fields of ``typedef struct NAME { ... } NAME;`` in wavemesh.h: (member, type), in order.
+    The structures below are made from the header, so a member added there is one here too (their sizes
+    are checked against the library's wm_abi_size when it loads)."""
+    text = HEADER.read_text() if header is None else header
+    body = re.search(rf"typedef struct {name} \{{(.*?)\}} {name};", text, re.S).group(1)
+    body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
+    out = []
+    for decl in filter(None, (" ".join(d.split()) for d in body.split(";"))):
+        m = re.fullmatch(r"((?:const )?u?int(?:8|16|32|64)_t)\s*(\*?)\s*(.*)", decl)
+        ctype = _C_TYPES[m.group(1) + (" *" if m.group(2) else "")]
+        out += [(n.strip(), ctype) for n in m.group(3).split(",")]
+    return out
+
+
 class Params(ctypes.Structure):
-    _fields_ = [
-        ("metric", ctypes.c_int32),
-        ("neighbourhood", ctypes.c_int32),
-        ("iterations", ctypes.c_int32),
-        ("max_triangles", ctypes.c_int32),
-        ("zeta", ctypes.c_uint32),
-        ("scale_m", ctypes.c_uint32),
-        ("scale_e", ctypes.c_int32),
-        ("delta_p", ctypes.c_uint32),
-        ("alpha", ctypes.c_uint32),
-        ("delta_v", ctypes.c_uint32),
-        ("flags", ctypes.c_uint32),
-        ("delta_d", ctypes.c_uint64),
-        ("delta_lambda", ctypes.c_uint32),
-        ("delta_c", ctypes.c_uint32),
-        ("slope_x_m", ctypes.c_uint32),
-        ("slope_x_e", ctypes.c_int32),
-        ("slope_y_m", ctypes.c_uint32),
-        ("slope_y_e", ctypes.c_int32),
-    ]
+    _fields_ = c_struct("wm_params")  # the refiner's parameters (fixed_params fills them)
 
 
 class Field(ctypes.Structure):
-    _fields_ = [
-        ("width", ctypes.c_int32),
-        ("height", ctypes.c_int32),
-        ("levels", ctypes.c_int32),
-        ("samples", ctypes.POINTER(ctypes.c_uint16)),
-        ("details", ctypes.POINTER(ctypes.c_int32)),
-        ("mask", ctypes.POINTER(ctypes.c_uint8)),  # a bit per sample, set: invalid (wavemesh.refine.cover)
-    ]
+    _fields_ = c_struct("wm_field")  # samples, details, the validity mask (a bit per sample, set: invalid)
 
 
 # wm_params.flags (WM_FLAG_* in wavemesh.h); 0 is the default pipeline.

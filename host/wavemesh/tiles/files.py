@@ -36,7 +36,7 @@ def check_tiled_outputs(output: str, *, tiles_dir: str | None = None, report: st
 def write_tiled(tiled: TiledResult, plan: TilePlan, output: str, *, tiles_dir: str | None = None,
                 report: str | None = None, comment: str = "", files=None, render: str | None = None,
                 exaggeration: float | None = None, title: str | None = None, inputs=None) -> list[str]:
-    """The stitched mesh (a format of wavemesh.meshio.FORMATS, written as ``files``, an api.MeshFiles,
+    """The stitched mesh (a format of wavemesh.io.meshio.FORMATS, written as ``files``, an api.MeshFiles,
     says), each tile's mesh into ``tiles_dir`` (tile-RRR-CCC.EXT in the whole grid's frame, so that they
     fit together as they are; no --base) with ``index.json`` naming each tile's file, place and numbers,
     the JSON report and the picture (``render``); whole or not at all, as one set, none of them one of
