@@ -48,15 +48,23 @@ STRIP = 256
 DEMS = ("jacksboro", "topobathy", "lidar_dem", "motorcycle")
 DEM_TILES = (257, 129)
 RSS_BAR = 2 << 30
+REAL, REAL_N, REAL_TILES, REAL_ZETA = "jacksboro", 8192, (1025, 4097), 0.01  # zeta: of the height range
 WORK = Path(os.environ.get("WAVEMESH_BENCH_TMP", "/tmp")) / "wavemesh-bench-tiles"
 
 
-def terrain_file(n: int) -> Path:
-    """The n x n terrain as a float32 .npy, written strip by strip (once)."""
+def terrain_file(n: int, grid: str = "terrain") -> Path:
+    """The n x n terrain as a float32 .npy, written strip by strip (once); another ``grid``: that real DEM
+    of bench/datasets.py mirror-tiled to n x n (bench_big.mirror_tile: every sample a real one)."""
     import datasets as D
 
     WORK.mkdir(parents=True, exist_ok=True)
-    path = WORK / f"terrain-{n}.npy"
+    path = WORK / f"{grid}-{n}.npy"
+    if not path.exists() and grid != "terrain":
+        from bench_big import mirror_tile
+
+        tmp = path.with_suffix(".part.npy")
+        np.save(tmp, mirror_tile(D.load(grid).values, n).astype(np.float32))
+        tmp.rename(path)
     if not path.exists():
         tmp = path.with_suffix(".part.npy")
         out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float32, shape=(n, n))
@@ -68,15 +76,18 @@ def terrain_file(n: int) -> Path:
     return path
 
 
-def one(n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "") -> dict:
+def one(
+    n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "", grid: str = "terrain"
+) -> dict:
     """One run in this process (the child): the tiled mesh (on a Runner of ``workers`` local processes,
     or through Dask: ``scheduler`` "local" for a LocalCluster of ``workers`` processes, or an address),
     or the untiled one.  The parent's own CPU time (os.times: this process, its workers apart)."""
     from wavemesh import api, tiles
     from wavemesh.refine.native import RefineParams
 
-    path = str(terrain_file(n))
-    params = api.MeshParams(refine=RefineParams(zeta=ZETA, metric="vertical"))
+    path = str(terrain_file(n, grid))
+    zeta = ZETA if grid == "terrain" else REAL_ZETA * float(np.ptp(np.load(path, mmap_mode="r")))
+    params = api.MeshParams(refine=RefineParams(zeta=zeta, metric="vertical"))
     cluster = None
     if scheduler == "local":
         from distributed import LocalCluster
@@ -111,7 +122,9 @@ def one(n: int, tile: int, workers: int, untiled: bool = False, scheduler: str =
     }
 
 
-def run_child(n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "") -> dict:
+def run_child(
+    n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "", grid: str = "terrain"
+) -> dict:
     """one() in a process of its own, its tree's peak RSS sampled meanwhile."""
     import psutil
 
@@ -124,6 +137,7 @@ def run_child(n: int, tile: int, workers: int, untiled: bool = False, scheduler:
         str(workers),
         "1" if untiled else "0",
         scheduler,
+        grid,
     ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=BENCH)
     peak = 0
@@ -148,7 +162,15 @@ def run_child(n: int, tile: int, workers: int, untiled: bool = False, scheduler:
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode})")
     r = json.loads(out.strip().splitlines()[-1])
-    r |= {"n": n, "tile": tile, "workers": workers, "untiled": untiled, "peak_rss": peak, "via": scheduler}
+    r |= {
+        "n": n,
+        "tile": tile,
+        "workers": workers,
+        "untiled": untiled,
+        "peak_rss": peak,
+        "via": scheduler,
+        "grid": grid,
+    }
     print(
         f"  {n}^2 {'untiled' if untiled else f'tile {tile} x{workers}'}: {r['triangles']} triangles, "
         f"{r['seconds']:.1f} s ({r['cpu_seconds']:.1f} CPU s), peak RSS {peak / 2**20:.0f} MiB",
@@ -263,6 +285,7 @@ def run() -> dict:
         if n in (1024, 2048):
             for tile in (513, 257):
                 out["tile_size"].append(run_child(n, tile, 2))
+    out["real"] = [run_child(REAL_N, t, 2, untiled=t == 0, grid=REAL) for t in (0, *REAL_TILES)]
     out["dems"] = json.loads(_child(["dems"]).strip().splitlines()[-1])  # with the frozen package too
     return out
 
@@ -392,6 +415,30 @@ def markdown(r: dict) -> str:
                         f"{100 * (x['triangles'] / u['triangles'] - 1):+.1f} %",
                     )
                 )
+    real = r.get("real") or []
+    base = next((x for x in real if x["untiled"]), None)
+    if base:
+        lines += [
+            "",
+            f"**Seams on a real DEM**: {REAL} mirror-tiled to {REAL_N}^2 (bench_big.mirror_tile), --metric "
+            f"vertical, zeta {100 * REAL_ZETA:g} % of its height range; triangles against one untiled run "
+            f"({base['triangles']:,}, {base['seconds']:.1f} s):",
+            "",
+            "| tile | tiles | triangles | overhead | wall s (2 workers) | E_max |",
+            "|---|---|---|---|---|---|",
+        ]
+        for x in real:
+            if not x["untiled"]:
+                lines.append(
+                    _row(
+                        x["tile"],
+                        x["tiles"],
+                        f"{x['triangles']:,}",
+                        f"{100 * (x['triangles'] / base['triangles'] - 1):+.1f} %",
+                        f"{x['seconds']:.1f}",
+                        f"{x['e_max']:.3f}",
+                    )
+                )
     if r.get("dems"):
         tiles_ = list(r["dems"][0]["tiled"])
         lines += [
@@ -421,7 +468,7 @@ if __name__ == "__main__":
         print(json.dumps(dem_overhead()))
     if sys.argv[1:2] == ["one"]:
         n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
-        print(json.dumps(one(n, tile, workers, bool(untiled), sys.argv[6] if len(sys.argv) > 6 else "")))
+        print(json.dumps(one(n, tile, workers, bool(untiled), *sys.argv[6:8])))
     elif sys.argv[1:2] != ["dems"]:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
         import argparse
 

@@ -151,26 +151,29 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
                       final.tris, final.z(hf.values), report, report.get("device"))
 
 
-def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None) -> tuple[Editable, HeightField]:
+def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str]
+              ) -> tuple[Editable, HeightField]:
     t = plan.tiles[r.index]
     hf = tile_heightfield(plan, t, window)
     fp = native.fixed_params(plan.params.refine, hf.scale, plan.zeta_used, plan.spacing)
     mesh = Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris)
-    return Editable(mesh, native.error_within(hf.samples, fp)), hf
+    return Editable(mesh, native.error_within(hf.samples, fp), sides), hf
 
 
 def thin_seam(plan: TilePlan, a: TileResult, b: TileResult, side: str, win_a=None, win_b=None) -> tuple:
     """Step 6 for one shared side (``a``'s ``side``, facing ``b``): the positions of the vertices on it
     both tiles can do without (sides.thin_side), found on copies of both meshes."""
-    return thin_side(_editable(plan, a, win_a)[0], _editable(plan, b, win_b)[0], side)
+    return thin_side(_editable(plan, a, win_a, [side])[0], _editable(plan, b, win_b, [FACING[side]])[0], side)
 
 
 def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray | None = None) -> TileResult:
     """Step 6 for one tile: the vertices ``removed`` (side -> positions, as thin_seam found them) taken
     out, side by side (the sides' removals touch no common triangle), the result checked again."""
+    if not any(removed.values()):  # nothing to take out: the mesh as it was checked
+        return replace(r, report=r.report | {"seam_removed": r.report.get("seam_removed", 0)})
     t0 = time.perf_counter()
     t = plan.tiles[r.index]
-    ed, hf = _editable(plan, r, window)
+    ed, hf = _editable(plan, r, window, [s for s in SIDES if removed.get(s)])
     for side in SIDES:
         for pos in removed.get(side, ()):
             step = ed.removal(side_point(side, pos, t.width, t.height), side)

@@ -4,6 +4,7 @@ to them (docs/tiles.md, steps 4-5)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -200,20 +201,27 @@ def border_of(mesh: Mesh) -> dict:
 
 
 class Editable:
-    """A tile's mesh (tile coordinates) that loses vertices one at a time: a side vertex's star replaced
-    by a triangulation of its ring (the first that ear clipping finds of the fattest ear first, then of
-    the first ear) whose every triangle ``within`` (the refiner's E(T) <= zeta) accepts."""
+    """A tile's mesh (tile coordinates) whose vertices on ``sides`` go one at a time: a side vertex's star
+    replaced by a triangulation of its ring whose every triangle ``within`` (the refiner's E(T) <= zeta)
+    accepts.  Only the triangles at those sides are held as Python objects; the rest stay as they are."""
 
-    def __init__(self, mesh: Mesh, within):
-        self.w, self.h, self.within = mesh.width, mesh.height, within
-        self.xy = [tuple(p) for p in mesh.xy.tolist()]
-        self.at = {p: i for i, p in enumerate(self.xy)}
-        self.tris = [tuple(t) for t in mesh.tris.tolist()]
+    def __init__(self, mesh: Mesh, within, sides: Iterable[str]):
+        self.w, self.h, self.within, self.source = mesh.width, mesh.height, within, mesh
+        x, y = mesh.xy[:, 0], mesh.xy[:, 1]
+        on = np.zeros(len(mesh.xy), dtype=bool)
+        for side in sides:
+            on |= {"top": y == 0, "bottom": y == self.h - 1, "left": x == 0, "right": x == self.w - 1}[side]
+        near = on[mesh.tris].any(axis=1)
+        self.rest = mesh.tris[~near]
+        self.tris = [tuple(t) for t in mesh.tris[near].tolist()]
         self.alive = [True] * len(self.tris)
-        self.inc: dict[int, set[int]] = {v: set() for v in range(len(self.xy))}
+        self.inc: dict[int, set[int]] = {}
         for k, t in enumerate(self.tris):
             for v in t:
-                self.inc[v].add(k)
+                self.inc.setdefault(v, set()).add(k)
+        self.xy = {v: tuple(mesh.xy[v].tolist()) for v in self.inc}
+        self.at = {p: v for v, p in self.xy.items()}
+        self.gone: list[int] = []
 
     def removal(self, p: tuple[int, int], side: str):
         """(vertex, new triangles) that remove the vertex at ``p`` on ``side``, or None: a corner, a vertex
@@ -262,14 +270,15 @@ class Editable:
             for u in t:
                 self.inc[u].add(len(self.tris) - 1)
         del self.inc[v]
+        self.gone.append(v)
 
     def mesh(self) -> Mesh:
-        live = sorted(self.inc)
-        remap = np.full(len(self.xy), -1, dtype=np.int64)
-        remap[live] = np.arange(len(live))
-        tris = np.array([t for t, ok in zip(self.tris, self.alive, strict=True) if ok], dtype=np.int64)
-        return Mesh(self.w, self.h, np.array([self.xy[i] for i in live], dtype=np.int64).reshape(-1, 2),
-                    remap[tris.reshape(-1, 3)])
+        keep = np.ones(len(self.source.xy), dtype=bool)
+        keep[self.gone] = False
+        remap = np.cumsum(keep) - 1
+        near = np.array([t for t, ok in zip(self.tris, self.alive, strict=True) if ok], dtype=np.int64)
+        tris = np.concatenate([self.rest, near.reshape(-1, 3)])
+        return Mesh(self.w, self.h, self.source.xy[keep], remap[tris])
 
 
 def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
@@ -277,7 +286,7 @@ def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
     removed from both in order along the side: their positions along it."""
     other = FACING[side]
     along = 1 if side in ("left", "right") else 0
-    line = sorted((p for p in a.at if a.at[p] in a.inc and any(s == side for s, _ in _side_of(*p, a.w, a.h))),
+    line = sorted((p for p in a.at if any(s == side for s, _ in _side_of(*p, a.w, a.h))),
                   key=lambda p: p[along])
     removed = []
     while True:
