@@ -107,36 +107,44 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
     each missing one inserted by splitting the triangle on its border edge, each other border vertex
     (corners stay) removed and its hole, a simple polygon, re-triangulated by ear clipping (the fattest
     ear first).  The result is proper (the refiner's wm_mesh_build checks it again); its error is the
-    next step's business."""
+    next step's business.  Only the triangles at the border are held as Python objects."""
     w, h = mesh.width, mesh.height
-    xy = [tuple(p) for p in mesh.xy.tolist()]
-    tris = [tuple(t) for t in mesh.tris.tolist()]
-    alive = [True] * len(tris)
-    border = [i for i, (x, y) in enumerate(xy) if x in (0, w - 1) or y in (0, h - 1)]
-    inc: dict[int, set[int]] = {v: set() for v in border}
-    bset = np.zeros(len(xy), dtype=bool)
-    bset[border] = True
-    for t in np.flatnonzero(bset[mesh.tris].any(axis=1)).tolist():
-        for v in tris[t]:
+    n_v, n_t = len(mesh.xy), len(mesh.tris)
+    bset = (mesh.xy[:, 0] == 0) | (mesh.xy[:, 0] == w - 1) | (mesh.xy[:, 1] == 0) | (mesh.xy[:, 1] == h - 1)
+    near = np.flatnonzero(bset[mesh.tris].any(axis=1))
+    tris = {k: tuple(t) for k, t in zip(near.tolist(), mesh.tris[near].tolist(), strict=True)}
+    used = np.unique(mesh.tris[near])
+    xy = {v: tuple(q) for v, q in zip(used.tolist(), mesh.xy[used].tolist(), strict=True)}
+    alive = np.ones(n_t, dtype=bool)
+    added: list[int] = []
+    dead: set[int] = set()
+    freed: list[int] = []
+    inc: dict[int, set[int]] = {v: set() for v in np.flatnonzero(bset).tolist()}
+    for k, t in tris.items():
+        for v in t:
             if v in inc:
-                inc[v].add(t)
+                inc[v].add(k)
 
     def add(tri) -> None:
-        tris.append(tri)
-        alive.append(True)
+        k = n_t + len(added)
+        tris[k] = tri
+        added.append(k)
         for v in tri:
             if v in inc:
-                inc[v].add(len(tris) - 1)
+                inc[v].add(k)
 
     def kill(t) -> None:
-        alive[t] = False
+        if t < n_t:
+            alive[t] = False
+        else:
+            dead.add(t)
         for v in tris[t]:
             if v in inc:
                 inc[v].discard(t)
 
     want = {side_point(s, pos, w, h) for s, ps in sides.items() for pos in ps}
     # 1. insert the decided vertices the mesh lacks: split the triangle whose border edge holds each
-    for p in sorted(want - set(xy)):
+    for p in sorted(want - set(xy.values())):
         side, pos = _side_of(p[0], p[1], w, h)[0]
         line = [v for v in inc if any(s == side for s, _ in _side_of(*xy[v], w, h))]
         coord = (lambda v: xy[v][0]) if side in ("top", "bottom") else (lambda v: xy[v][1])
@@ -149,8 +157,8 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
             a, b = b, a
             k = ta.index(a)
         c = ta[(k + 2) % 3]
-        v = len(xy)
-        xy.append(p)
+        v = n_v + len(xy) - len(used)  # the next new vertex
+        xy[v] = p
         inc[v] = set()
         kill(t)
         add((a, v, c))
@@ -180,12 +188,15 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
         for tri in cut:
             add(tuple(ring[k] for k in tri))
         del inc[v]
-        xy[v] = None  # freed
-    live_v = [i for i, p in enumerate(xy) if p is not None]
-    remap = np.full(len(xy), -1, dtype=np.int64)
-    remap[live_v] = np.arange(len(live_v))
-    t_out = np.array([t for t, ok in zip(tris, alive, strict=True) if ok], dtype=np.int64).reshape(-1, 3)
-    return Mesh(w, h, np.array([xy[i] for i in live_v], dtype=np.int64).reshape(-1, 2), remap[t_out])
+        freed.append(v)
+    n_new = len(xy) - len(used)
+    every = np.concatenate([mesh.xy, np.array([xy[v] for v in range(n_v, n_v + n_new)],
+                                              dtype=np.int64).reshape(-1, 2)])
+    keep = np.ones(len(every), dtype=bool)
+    keep[freed] = False
+    remap = np.cumsum(keep) - 1
+    more = np.array([tris[k] for k in added if k not in dead], dtype=np.int64).reshape(-1, 3)
+    return Mesh(w, h, every[keep], remap[np.concatenate([mesh.tris[alive], more])])
 
 
 def border_of(mesh: Mesh) -> dict:
