@@ -220,7 +220,10 @@ def freeze_library() -> str:
     shutil.rmtree(src, ignore_errors=True)
     src.mkdir(parents=True)
     archive = subprocess.run(
-        ["git", "archive", commit, "host", "firmware"], capture_output=True, cwd=BENCH.parent, check=True
+        ["git", "archive", commit, "host", "firmware", "tests/firmware"],
+        capture_output=True,
+        cwd=BENCH.parent,
+        check=True,
     ).stdout
     subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
     build = src / "build" / "firmware-native"
