@@ -17,7 +17,6 @@ from pathlib import Path
 
 from wavemesh import __version__, api
 from wavemesh.errors import MeshInvalid, WavemeshError
-from wavemesh.io import terrain
 from wavemesh.io.georef import sidecar_path
 from wavemesh.io.meshio import formats_help, suffixes
 from wavemesh.io.outputs import Inputs, Terminated, check_path, handle_termination
@@ -710,6 +709,8 @@ def synth_command(args) -> int:
 
 
 def tiles_command(args) -> int:
+    from wavemesh.io import terrain  # only `wavemesh tiles`: 4.5M instructions (~1 ms) of every other start
+
     inputs = _inputs(args, args.input)
     check_path(args.output, None, "terrain tiles", inputs)
     hf = api.load_input(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate)

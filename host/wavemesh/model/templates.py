@@ -213,13 +213,16 @@ def template_set() -> TemplateSet:
     """Build the complete set: the templates the look-up table uses, in generator order."""
     closure = _closure()
     facts = [_facts(tris) for _, _, tris in closure]
+    by_sides: dict[int, list[int]] = {}  # every predicate asks for sides == mask: only those are tried
+    for n, f in enumerate(facts):
+        by_sides.setdefault(f[1], []).append(n)
     choice: dict[int, int] = {}  # lut index -> closure index
     for label in range(len(LABELS)):
         for mask in range(16):
             pred = _wanted(label, mask)
             if pred is None:
                 continue
-            hits = [n for n, f in enumerate(facts) if pred(*f)]
+            hits = [n for n in by_sides.get(mask, ()) if pred(*facts[n])]
             if len(hits) != 1:
                 raise AssertionError(f"label {LABELS[label]} mask {mask:04b}: {len(hits)} templates match")
             choice[label << 4 | mask] = hits[0]
