@@ -91,7 +91,7 @@ def run_process(cmd: list[str]) -> dict:
 
 
 def check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
-    from wavemesh.io.meshio import read_mesh
+    from wavemesh.io.meshread import read_mesh
 
     h, w = heights.shape
     try:

@@ -115,7 +115,7 @@ def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: flo
 
 
 def _check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
-    from wavemesh.io.meshio import read_mesh
+    from wavemesh.io.meshread import read_mesh
 
     h, w = heights.shape
     try:

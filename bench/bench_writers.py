@@ -6,7 +6,7 @@ The target: OBJ/PLY through meshio or trimesh unless wavemesh's writer is at lea
 0..1000 with full double precision, the hard case for text), split into 1,002,528 triangles.  Each writer
 writes it to a temporary file, 3 times; the time is the least CPU time of the process (time.process_time:
 what the writer costs, not what the other jobs on the machine cost).  Every file is read back with
-wavemesh.io.meshio.read_mesh: *exact* means the same triangles and the same doubles as the heights
+wavemesh.io.meshread.read_mesh: *exact* means the same triangles and the same doubles as the heights
 (the OBJ text of a lossy writer reads back rounded); *same bytes* that the 3 writes gave the same file
 (`wavemesh stream` and `wavemesh mesh` must write the same file byte for byte); *grid* that the file
 names the grid size (`# wavemesh W H`, `comment wavemesh W H`: read_mesh needs it when a mesh does not
@@ -70,7 +70,7 @@ def run() -> dict:
 
     from datasets import terrain
     from peers import code_state
-    from wavemesh.io.meshio import read_mesh
+    from wavemesh.io.meshread import read_mesh
 
     heights = terrain(N)
     mesh = grid_mesh(N)
@@ -109,7 +109,7 @@ def markdown(results: dict) -> str:
         f"Every sample of a {results['n']} x {results['n']} grid of bench/datasets.py's synthetic terrain "
         f"({results['vertices']:,} vertices, {results['triangles']:,} triangles), written by each writer: "
         "the least CPU time (time.process_time) of 3 writes of the whole file, its size, and whether "
-        "wavemesh.io.meshio.read_mesh reads back the same triangles and the same doubles (*exact*).  "
+        "wavemesh.io.meshread.read_mesh reads back the same triangles and the same doubles (*exact*).  "
         + ", ".join(f"{k} {v}" for k, v in results["versions"].items()) + ".  `make bench-writers`.",
         "",
         code_line(results.get("code")),

@@ -33,7 +33,7 @@ with atheris.instrument_imports(include=["wavemesh"]):
     from wavemesh.check import check_mesh
     from wavemesh.errors import InputError
     from wavemesh.io.heightfield import HeightField, load_heightfield
-    from wavemesh.io.meshio import read_mesh
+    from wavemesh.io.meshread import read_mesh
 
 import numpy as np  # noqa: E402  (after the instrumented imports, not traced itself)
 

@@ -41,7 +41,8 @@ from wavemesh.io.georef import (
     to_grid,
 )
 from wavemesh.io.heightfield import HeightField, from_array, load_heightfield, parse_fill
-from wavemesh.io.meshio import MESH_SUFFIXES, check_options, read_mesh, write_mesh, write_normal_map
+from wavemesh.io.meshio import MESH_SUFFIXES, check_options, write_mesh, write_normal_map
+from wavemesh.io.meshread import read_mesh
 from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
 from wavemesh.io.synth import make
 from wavemesh.mesh import Mesh

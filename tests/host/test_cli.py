@@ -11,7 +11,7 @@ from wavemesh.check import check_mesh
 from wavemesh.cli import main
 from wavemesh.io import synth
 from wavemesh.io.heightfield import from_array
-from wavemesh.io.meshio import read_mesh
+from wavemesh.io.meshread import read_mesh
 
 
 def wavemesh(*args, cwd=None):

@@ -14,7 +14,7 @@ from wavemesh.check import check_mesh, mesh_errors
 from wavemesh.errors import InputError
 from wavemesh.io import georef
 from wavemesh.io.heightfield import from_array, load_heightfield
-from wavemesh.io.meshio import read_mesh
+from wavemesh.io.meshread import read_mesh
 from wavemesh.refine import native
 
 # Non-square UTM cells (20 m east, 30 m north), sample (0, 0)'s cell corner at (500000, 4100000)

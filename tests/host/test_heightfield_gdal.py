@@ -13,7 +13,7 @@ from rasterio.transform import Affine
 from wavemesh.check import check_mesh
 from wavemesh.errors import InputError
 from wavemesh.io.heightfield import load_heightfield
-from wavemesh.io.meshio import read_mesh
+from wavemesh.io.meshread import read_mesh
 
 SRTM3 = 1201  # samples per side of a 3 arc-second SRTM tile (the smallest size GDAL's SRTMHGT takes)
 UTM = {"crs": "EPSG:32617", "transform": Affine(30.0, 0.0, 500000.0, 0.0, -30.0, 4100000.0)}

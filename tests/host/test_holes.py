@@ -267,7 +267,7 @@ def test_cli_mesh_check_min_area(tmp_path, capsys):
     assert main(["check", str(out), "--against", str(src), "--fill", "nearest", "-q"]) == 1
     small = tmp_path / "s.obj"
     assert main(["mesh", str(src), "-o", str(small), "--nodata", "hole", "--min-area", "40", "-q"]) == 0
-    from wavemesh.io.meshio import read_mesh
+    from wavemesh.io.meshread import read_mesh
 
     big, _ = read_mesh(str(out), 96, 72)
     kept, _ = read_mesh(str(small), 96, 72)

@@ -14,7 +14,8 @@ import pytest
 from wavemesh import api, check
 from wavemesh.cli import build_parser, main
 from wavemesh.io import synth
-from wavemesh.io.meshio import read_mesh, write_obj
+from wavemesh.io.meshio import write_obj
+from wavemesh.io.meshread import read_mesh
 from wavemesh.mesh import Mesh
 from wavemesh.refine import native
 

@@ -7,7 +7,8 @@ import struct
 import numpy as np
 import pytest
 from wavemesh.errors import InputError
-from wavemesh.io.meshio import read_mesh, write_mesh, write_obj, write_ply
+from wavemesh.io.meshio import write_mesh, write_obj, write_ply
+from wavemesh.io.meshread import read_mesh
 from wavemesh.mesh import Mesh
 
 

@@ -16,7 +16,7 @@ from wavemesh.errors import InputError
 from wavemesh.harness import run_cli
 from wavemesh.io import synth
 from wavemesh.io.heightfield import from_array, load_heightfield
-from wavemesh.io.meshio import read_mesh
+from wavemesh.io.meshread import read_mesh
 from wavemesh.io.outputs import Outputs
 
 

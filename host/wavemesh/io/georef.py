@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import InputError
-from wavemesh.io.heightfield import regular_file
+from wavemesh.io.readers import regular_file
 
 GRID = (1.0, 0.0, -0.5, 0.0, 1.0, -0.5)  # no georeference: sample (col, row) at (col, row)
 WGS84_A = 6378137.0  # semi-major axis, metres

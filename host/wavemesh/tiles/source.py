@@ -12,14 +12,8 @@ import numpy as np
 from wavemesh import api
 from wavemesh.errors import InputError
 from wavemesh.io.georef import apply_overrides, cropped
-from wavemesh.io.heightfield import (
-    parse_fill,
-    quant_rule,
-    raster_header,
-    read_raster_window,
-    regular_file,
-    to_samples,
-)
+from wavemesh.io.heightfield import parse_fill, quant_rule, to_samples
+from wavemesh.io.readers import raster_header, read_raster_window, regular_file
 
 if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
