@@ -11,16 +11,12 @@ parsing and printing over them.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import os
 import re
-import resource
 import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,36 +24,63 @@ import numpy as np
 from wavemesh import __version__, limits
 from wavemesh.check import ErrorReport, HoleCheck, check_holes, check_mesh, mesh_errors
 from wavemesh.errors import InputError, MeshInvalid, WavemeshError
-from wavemesh.io.bridge import bridge
-from wavemesh.io.georef import SIDECAR_SUFFIX as SIDECAR
 from wavemesh.io.georef import (
-    apply_overrides,
-    cropped,
-    grid_ground,
     ground,
-    parse_pair,
     read_sidecar,
-    sidecar_path,
     to_grid,
 )
-from wavemesh.io.heightfield import HeightField, from_array, load_heightfield, parse_fill
-from wavemesh.io.meshio import MESH_SUFFIXES, check_options, write_mesh, write_normal_map
+from wavemesh.io.heightfield import HeightField
+from wavemesh.io.load import (
+    MESH_BYTES_PER_SAMPLE,
+    READ_BYTES_PER_SAMPLE,
+    RESIDENT_BYTES_PER_SAMPLE,
+    TILE_BYTES_PER_SAMPLE,
+    TILE_CHOICES,
+    available_memory,
+    crop_window,
+    default_workers,
+    load_input,
+    memory_available,
+    memory_check,
+    parse_crop,
+    shape_heightfield,
+)
 from wavemesh.io.meshread import read_mesh
-from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
-from wavemesh.io.synth import make
+from wavemesh.io.results import (
+    PICTURE_SUFFIXES,
+    MeshFiles,
+    check_exaggeration,
+    check_outputs,
+    check_report,
+    render_file,
+    render_picture,
+    write_json,
+    write_result,
+    write_synth,
+)
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import WAVELETS, decompose, default_levels
-from wavemesh.model.holemask import stranded
 from wavemesh.model.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.model.label import Labelling, tau_counts
 from wavemesh.model.roi import mask_details, parse_roi, roi_errors, roi_report
 from wavemesh.refine import cover, native
-from wavemesh.refine.denoise import denoise_heightfield
 from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
+__all__ = [  # the public API (io.load's and io.results' functions are offered here too)
+    "BOUND_EPS", "BOUND_NOT_MET", "BUG_HINT", "DEFAULT_TAU_FRACTION", "LevelMeshes", "MAX_LEVELS",
+    "MESH_BYTES_PER_SAMPLE", "MeshFiles", "MeshJob", "MeshParams", "MeshResult", "PICTURE_SUFFIXES",
+    "Progress", "READ_BYTES_PER_SAMPLE", "RESIDENT_BYTES_PER_SAMPLE", "RefineJob", "STAGE_NAMES",
+    "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "available_memory", "bound_excess",
+    "check_exaggeration", "check_file", "check_outputs", "check_port", "check_report", "crop_window",
+    "default_levels", "default_tau", "default_workers", "device_fit_hint", "drop_holes", "level_counts",
+    "level_report", "load_input", "memory_available", "memory_check", "mesh", "native_within", "parse_crop",
+    "refine", "render_file", "render_picture", "require_proper", "shape_heightfield", "stream",
+    "triangulate", "write_json", "write_result", "write_synth",
+]
+
 # Imported where used, for their start-up cost (tests/host/test_mesh_costs.py: `wavemesh mesh` does not
-# load them): the device path (wavemesh.device: protocol, link, stream, about 16 ms), pictures
-# (wavemesh.check.render: matplotlib, about 270 ms), tiles (about 16 ms), tqdm.
+# load them): the device path (wavemesh.device: protocol, link, stream, about 16 ms), tqdm; pictures
+# (wavemesh.check.render: matplotlib, about 270 ms) in wavemesh.io.results.
 if TYPE_CHECKING:
     from wavemesh.device.link import LinkStats
     from wavemesh.device.stream import Device, DeviceInfo, Timeouts
@@ -114,224 +137,6 @@ def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> t
     if not math.isfinite(t) or t < 0:
         raise WavemeshError(f"--tau {t} is not a finite number >= 0", hint="give tau in height units")
     return m, t
-
-
-def _check_output(path: str, suffixes: tuple[str, ...], what: str, inputs=None) -> Path:
-    return check_path(path, suffixes, what, inputs)  # extension, directory, writable, not an input (outputs)
-
-
-def _write_json(path: str, data: dict, inputs=None) -> None:
-    p = _check_output(path, (".json",), "report", inputs)
-    with Outputs(inputs) as staged:  # whole or not at all
-        staged.path(p, what="report").write_text(json.dumps(data, indent=2) + "\n")
-
-
-def _load(path: str, key: str | None, fill: str | None, nodata: str | None = None,
-          invalid: float | None = None, size_check=None) -> HeightField:
-    if nodata not in (None, "error", "hole"):
-        raise InputError(f"--nodata {nodata}: not a way to treat invalid samples", hint="use hole or error")
-    if nodata == "hole" and fill is not None:
-        raise InputError("--fill and --nodata hole both say what to do with invalid samples",
-                         hint="give one of them")
-    if invalid is not None and not math.isfinite(invalid):
-        raise InputError(f"--invalid {invalid}: NaN and infinities are invalid anyway", hint="give a number")
-    return load_heightfield(path, key=key, fill=parse_fill(fill) if fill is not None else None,
-                            invalid=invalid, holes=nodata == "hole", size_check=size_check)
-
-
-def parse_crop(text: str) -> tuple[int, int, int, int]:
-    """--crop X,Y,W,H: the top-left sample (column, row) and the size in samples."""
-    try:
-        x, y, w, h = (int(v) for v in text.replace(":", ",").split(","))
-    except ValueError:
-        raise InputError(f"--crop {text}: not four integers",
-                         hint="give --crop X,Y,W,H, e.g. 0,0,256,256") from None
-    return x, y, w, h
-
-
-def crop_window(crop: str | None, decimate: int | None, width: int, height: int
-                ) -> tuple[int, int, int, int, int, list[str]]:
-    """--crop and --decimate on a ``width`` x ``height`` grid: (x0, y0, w, h, step, what), the samples
-    (x0 + step i, y0 + step j) of a w x h grid; InputError when they do not fit.  ``what`` names them for
-    the source's name.  The one place these rules live (shape_heightfield, wavemesh.tiles' windows)."""
-    x0, y0, w, h, step, what = 0, 0, width, height, 1, []
-    if crop is not None:
-        x0, y0, w, h = parse_crop(crop)
-        if x0 < 0 or y0 < 0 or w < 2 or h < 2 or x0 + w > width or y0 + h > height:
-            raise InputError(f"--crop {crop} does not fit the {width} x {height} input",
-                             hint="X + W <= width, Y + H <= height, W and H at least 2")
-        what.append(f"crop {x0},{y0},{w},{h}")
-    if decimate is not None:
-        if decimate < 1:
-            raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
-        step = decimate
-        w, h = -(-w // step), -(-h // step)
-        if min(w, h) < 2:
-            raise InputError(f"--decimate {decimate} leaves {w} x {h} samples",
-                             hint="a height field needs at least 2 x 2")
-        what.append(f"decimate {decimate}")
-    return x0, y0, w, h, step, what
-
-
-def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | None = None) -> HeightField:
-    """The part of a height field --crop and --decimate select, quantised afresh (as if it were the file)."""
-    if crop is None and decimate in (None, 1):
-        return hf
-    x0, y0, w, h, step, what = crop_window(crop, decimate, hf.width, hf.height)
-    v = hf.values[y0:y0 + step * (h - 1) + 1:step, x0:x0 + step * (w - 1) + 1:step]
-    out = from_array(np.ascontiguousarray(v), source=f"{hf.source} ({', '.join(what)})")
-    spacing = hf.spacing and (hf.spacing[0] * step, hf.spacing[1] * step)
-    mask = lone = None
-    if hf.mask is not None:  # the part of the mask the samples came from
-        part = (slice(y0, y0 + v.shape[0] * step, step), slice(x0, x0 + v.shape[1] * step, step))
-        mask = hf.mask[part]
-        if hf.lone is not None:
-            lone = hf.lone[part]
-        if mask.any():  # samples whose cells of valid samples lay outside the part are stranded now
-            new = stranded(mask)
-            lone = new if lone is None else lone | new
-            mask = mask | new
-        if mask.all():
-            raise InputError(f"{out.source}: every sample is invalid; there is nothing to mesh")
-        mask = np.ascontiguousarray(mask) if mask.any() else None
-        lone = lone if mask is not None and lone is not None and lone.any() else None
-    return replace(out, filled=hf.filled, transform=cropped(hf.transform, x0, y0, step), crs=hf.crs,
-                   spacing=spacing, mask=mask, lone=lone)
-
-
-def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
-               decimate: int | None = None, spacing: str | None = None,
-               origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
-               denoise: str | None = None, max_hole: int = 0, check_memory: bool = False) -> HeightField:
-    """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
-    and --origin (of the file's grid), then --crop and --decimate, then --max-hole (bridge.bridge), then
-    --denoise (wavemesh.refine.denoise: what every command meshes and measures).  ``check_memory``: before the
-    samples are read, the memory an untiled run of the grid takes is estimated (memory_check)."""
-    if max_hole and (nodata != "hole" or max_hole < 0):
-        raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
-                         "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
-    # the options that apply after the read, checked before it
-    if crop is not None:
-        parse_crop(crop)
-    if decimate is not None and decimate < 1:
-        raise InputError(f"--decimate {decimate} is out of range", hint="use 1 or more")
-    if spacing is not None:
-        parse_pair(spacing, "--spacing", positive=True, one_ok=True)
-    if origin is not None:
-        parse_pair(origin, "--origin", positive=False, one_ok=False)
-
-    def size_check(width: int, height: int, itemsize: int) -> None:
-        w, h = width, height
-        if crop is not None:
-            x, y, w, h = parse_crop(crop)
-            w, h = max(0, min(w, width - x)), max(0, min(h, height - y))
-        if decimate is not None and decimate >= 1:
-            w, h = -(-w // decimate), -(-h // decimate)
-        memory_check(path, width, height, itemsize, w, h)
-
-    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid,
-                                                 size_check if check_memory else None), spacing, origin),
-                           crop, decimate)
-    if max_hole:
-        hf = bridge(hf, max_hole)
-    if denoise is None:
-        return hf
-    return denoise_heightfield(hf, denoise)[0]
-
-
-# Memory of an untiled run (`wavemesh mesh`, `stream`), the least it takes whatever the mesh: the file's
-# samples as read (their own size, plus READ_BYTES_PER_SAMPLE: float64 heights and the no-data mask) and
-# MESH_BYTES_PER_SAMPLE a sample of the grid it meshes (the 16-bit samples, the filter bank, the refiner's
-# grids, the error check), in address space (what ulimit -v bounds); RESIDENT_BYTES_PER_SAMPLE of resident
-# memory a sample besides the file's samples (what MemAvailable and a cgroup bound).  The source:
-# tools/mesh_memory.py (VmPeak and VmHWM of `wavemesh mesh` on float32 N x N, the slope between N = 1025,
-# 2049, 4097; docs/tiles.md "Memory"): address space 107-111 bytes a sample for a flat field and the
-# two-ball terrain, 231-246 for noise, 830 when the mesh keeps nearly every sample (noise, --zeta 0.001);
-# resident 14.2-15.9 (flat), 25-42 (terrain), 231-246 (noise).  The estimates stay below those floors
-# (4 + 9 + 88 = 101 and 4 + 8 = 12 bytes for float32): a run they refuse would not have fitted.
-MESH_BYTES_PER_SAMPLE = 88
-READ_BYTES_PER_SAMPLE = 9
-RESIDENT_BYTES_PER_SAMPLE = 8
-
-# The tile side without --tile N, from memory (wavemesh.tiles.default_tile, and the hint of memory_check
-# below): the largest of these (2^k + 1, so that a grid of 2^j or 2^j + 1 samples a side splits evenly;
-# tiles share a border row) whose tiles in flight, at TILE_BYTES_PER_SAMPLE each, fit in half the memory
-# available.  Larger tiles cost fewer triangles at the seams, smaller ones less memory and more parallel
-# work (make bench-tiles, docs/tiles.md).
-TILE_CHOICES = (4097, 2049, 1025, 513)
-TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
-
-
-def default_workers() -> int:
-    """The tile workers without --workers N: the CPUs this process may use."""
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
-
-
-def available_memory() -> int:
-    """Bytes of memory available now (/proc/meminfo's MemAvailable; else the physical memory)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
-def memory_available() -> list[tuple[int, str, str]]:
-    """What this process may still take: (bytes, what says so, "address" or "resident"): /proc/meminfo's
-    MemAvailable and the cgroup's memory.max less its memory.current (resident memory), the address space
-    limit (RLIMIT_AS, ulimit -v) less what the process maps now."""
-    found = [(available_memory(), "memory available", "resident")]
-    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
-    if soft != resource.RLIM_INFINITY:
-        used = 0
-        try:
-            with open("/proc/self/status") as f:
-                for line in f:
-                    if line.startswith("VmSize:"):
-                        used = int(line.split()[1]) * 1024
-        except OSError:
-            pass
-        found.append((max(0, soft - used), f"the address space limit, ulimit -v {soft // 1024}", "address"))
-    try:
-        with open("/sys/fs/cgroup/memory.max") as f:
-            top = f.read().strip()
-        if top.isdigit():
-            with open("/sys/fs/cgroup/memory.current") as f:
-                left = max(0, int(top) - int(f.read().strip()))
-            found.append((left, "the cgroup's memory.max", "resident"))
-    except (OSError, ValueError):
-        pass
-    return found
-
-
-def _size(n: float) -> str:
-    return f"{n / 2 ** 30:.1f} GiB" if n >= 2 ** 30 else f"{n / 2 ** 20:.0f} MiB"
-
-
-def memory_check(source: str, width: int, height: int, itemsize: int, w: int | None = None,
-                 h: int | None = None) -> None:
-    """InputError, with the --tile N to use, when an untiled run of the ``w`` x ``h`` grid (default the
-    file's ``width`` x ``height``, of ``itemsize``-byte samples) needs more memory than this process may
-    take (memory_available; the estimates above)."""
-    w, h = (width, height) if w is None else (w, h)
-    need = {"address": width * height * (itemsize + READ_BYTES_PER_SAMPLE) + w * h * MESH_BYTES_PER_SAMPLE,
-            "resident": width * height * itemsize + w * h * RESIDENT_BYTES_PER_SAMPLE}
-    for have, what, kind in memory_available():
-        if need[kind] <= have:
-            continue
-        if kind == "address":  # per process: each worker has its own address space (the tile's float64 too)
-            fits = [t for t in TILE_CHOICES if (MESH_BYTES_PER_SAMPLE + READ_BYTES_PER_SAMPLE + 8) * t * t
-                    <= have // 2]
-        else:  # shared: every worker's tile in flight (tiles.default_tile's rule)
-            fits = [t for t in TILE_CHOICES if default_workers() * TILE_BYTES_PER_SAMPLE * t * t <= have // 2]
-        tile = fits[0] if fits else TILE_CHOICES[-1]
-        raise InputError(f"{source}: meshing the {w} x {h} grid untiled needs at least "
-                         f"{_size(need[kind])} of memory; {_size(have)} is left ({what})",
-                         hint=f"mesh it in tiles: --tile {tile}" + ("" if fits else " --workers 1")
-                         + " (docs/tiles.md)")
 
 
 @dataclass
@@ -945,122 +750,6 @@ def _stream_on_stage(hf: HeightField, dev: Device, info: DeviceInfo, params: Mes
 # Files
 
 
-@dataclass(frozen=True)
-class MeshFiles:
-    """How the mesh files are written (wavemesh.io.meshio.write_mesh): ``units`` "metres" or "crs" for a
-    georeferenced grid, ``local`` (with "crs"), per-vertex ``normals``, a solid ``base`` (thickness below
-    the lowest height), and ``normal_map``, a PNG of the heights' normals to write beside them."""
-
-    units: str = "metres"
-    local: bool = False
-    normals: bool = False
-    base: float | None = None
-    normal_map: str | None = None
-
-    def to_report(self) -> dict:
-        return {"units": self.units, "local": self.local, "normals": self.normals, "base": self.base}
-
-
-PICTURE_SUFFIXES = (".png", ".svg", ".pdf")
-
-
-def check_outputs(output: str, *, lod: str | None = None, report: str | None = None,
-                  render: str | None = None, files: MeshFiles | None = None,
-                  inputs: Inputs | list | None = None,
-                  exaggeration: float | None = None) -> tuple[Path, Path | None]:
-    """The output paths of `mesh` and `stream`, and the options of their mesh files, checked before any
-    work: (mesh file, --lod folder).  None of them (nor the mesh's sidecar) may be one of ``inputs``
-    (wavemesh.io.outputs.Inputs)."""
-    inputs = as_inputs(inputs)
-    out = _check_output(output, MESH_SUFFIXES, "mesh", inputs)
-    inputs.refuse(sidecar_path(out), "the mesh's sidecar")
-    distinct({"-o": output, "--report": report, "--render": render,
-              "--normal-map": files.normal_map if files is not None else None})
-    if files is not None:
-        check_options(out, units=files.units, local=files.local, normals=files.normals, base=files.base)
-        if files.normal_map:
-            _check_output(files.normal_map, (".png",), "normal map", inputs)
-    if render:
-        _check_output(render, PICTURE_SUFFIXES, "picture", inputs)
-        check_exaggeration(exaggeration)
-    if report:
-        _check_output(report, (".json",), "report", inputs)
-    folder = check_path(lod, None, "--lod", inputs) if lod else None
-    if folder is not None and folder.resolve() in {Path(p).resolve() for p in (output, report, render) if p}:
-        raise InputError(f"--lod {lod} names a file the run also writes", hint="give --lod its own folder")
-    return out, folder
-
-
-def write_result(result: MeshResult, output: str, *, lod: str | None = None, report: str | None = None,
-                 render: str | None = None, title: str | None = None, local: bool = False,
-                 exaggeration: float | None = None, files: MeshFiles | None = None,
-                 inputs: Inputs | list | None = None) -> list[str]:
-    """Write a result's files: the mesh (a format of wavemesh.io.meshio.FORMATS, in the frame ``files``
-    chooses, with its sidecar), each level's into ``lod``, the normal map, the JSON report and a
-    picture (true aspect, heights times ``exaggeration``: by default 1 in ground units, automatic in
-    grid steps).  ``local``: MeshFiles(units="crs", local=True), as before ``files``.  None of them may
-    be one of ``inputs`` (the input file: wavemesh.io.outputs).  Returns the level files written."""
-    if files is None:
-        files = MeshFiles(units="crs", local=True) if local else MeshFiles()
-    inputs = as_inputs(inputs)
-    out, folder = check_outputs(output, lod=lod, report=report, render=render, files=files, inputs=inputs,
-                                exaggeration=exaggeration)
-    hf = result.heightfield
-    if files.base is not None and hf.mask is not None:
-        raise InputError("--base closes a mesh of the whole grid rectangle into a solid; this one has holes",
-                         hint="leave out --base, or fill the invalid samples (--fill nearest)")
-    g = ground(hf)
-    opts = {"ground": g, "local": files.local, "units": files.units, "normals": files.normals,
-            "base": files.base}
-    written = []
-    with Outputs(inputs) as staged:  # every file whole, or none of them (wavemesh.io.outputs)
-        write_mesh(str(staged.path(out, (SIDECAR,), "mesh")), result.mesh, hf.values, comment=result.comment,
-                   **opts)
-        if folder is not None:
-            # M = 1: the initial triangulation and the refined mesh are both level 0; the refined one is kept
-            for level, m in dict(result.level_meshes).items():
-                path = folder / f"level-{level}{out.suffix.lower()}"
-                write_mesh(str(staged.path(path, (SIDECAR,), "--lod")), m, hf.values,
-                           comment=f"{result.comment} level={level}", **opts)
-                written.append(str(path))
-        if files.normal_map:
-            write_normal_map(staged.path(files.normal_map, what="normal map"), hf.values, g.spacing)
-        if report:
-            frame = ("grid positions (no georeference)" if not g.georeferenced
-                     else "x, y the CRS's map coordinates" + (" less sample (0, 0)'s" if files.local else "")
-                     if files.units == "crs" and out.suffix.lower() != ".glb"
-                     else f"x east, y north, z up in {g.ground_unit}s from sample (0, 0)")
-            data = result.report | {"output": str(out), "mesh_files": files.to_report() | {"frame": frame}}
-            if written:
-                data["lod"] = written
-            staged.path(report, what="report").write_text(json.dumps(data, indent=2) + "\n")
-        if render:
-            render_picture(result.mesh, result.mesh.z(hf.values), str(staged.path(render, what="picture")), g,
-                    exaggeration, title=title)
-    if not g.georeferenced:  # grid coordinates: a sidecar an earlier run left would misplace them
-        for path in (out, *written):
-            sidecar_path(path).unlink(missing_ok=True)
-    return written
-
-
-def render_picture(mesh: Mesh, z, output: str, g, exaggeration: float | None, **kw) -> None:
-    """A picture in true aspect: (east, north) in ground units; the exaggeration stated in it."""
-    from wavemesh.check.render import render_mesh  # matplotlib is slow to import; only when asked
-
-    check_exaggeration(exaggeration)
-    if exaggeration is None and g.georeferenced:
-        exaggeration = 1.0  # ground units: true aspect
-    east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
-    render_mesh(mesh, z, output, zscale=exaggeration, en=np.column_stack([east, north]), label=True, **kw)
-
-
-def check_exaggeration(exaggeration: float | None, name: str = "--exaggeration") -> None:
-    """A picture's vertical exaggeration: None (automatic) or a finite number > 0; checked before any
-    work."""
-    if exaggeration is not None and not (math.isfinite(exaggeration) and exaggeration > 0):
-        raise InputError(f"{name} {exaggeration} is out of range", hint="give a number > 0")
-
-
 def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> dict:
     """`wavemesh check`: whether the mesh file ``path`` is a proper triangulation of ``hf``'s grid whose
     vertices carry its heights, and its errors; the report's content (``valid``, ``problems``, ...).
@@ -1126,36 +815,3 @@ def check_port(url: str) -> None:
                          hint=f"use {m.group(1)}://HOST:PORT, PORT in 1..65535 (e.g. {m.group(1)}://127.0.0.1:7721)")
 
 
-def check_report(path: str, inputs: Inputs | list | None = None) -> Path:
-    """A JSON report's path, checked before any work (not one of ``inputs``)."""
-    return _check_output(path, (".json",), "report", inputs)
-
-
-def write_json(path: str, data: dict, inputs: Inputs | list | None = None) -> None:
-    """A JSON file (.json), not one of ``inputs``, or InputError."""
-    _write_json(path, data, inputs)
-
-
-def write_synth(name: str, output: str, size: int | None = None) -> Path:
-    """`wavemesh synth`: one of the dissertation's synthetic sets into an .npy file."""
-    out = _check_output(output, (".npy",), "height field")
-    if size is not None and not 2 <= size <= 16384:
-        raise WavemeshError(f"--size {size} is out of range", hint="use 2..16384")
-    with Outputs() as staged:
-        np.save(staged.path(out), make(name, size))
-    return out
-
-
-def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: bool = True,
-                zscale: float | None = None, title: str | None = None) -> None:
-    """`wavemesh render`: a picture of a mesh file, in true aspect when its sidecar places it
-    (``zscale``: the vertical exaggeration, stated in the picture)."""
-    inputs = Inputs([mesh_path, sidecar_path(mesh_path)])
-    _check_output(output, PICTURE_SUFFIXES, "picture", inputs)
-    check_exaggeration(zscale, "vertical exaggeration")
-    placed = read_sidecar(mesh_path)
-    m, z = read_mesh(mesh_path, to_grid=to_grid(*placed) if placed else None)
-    g = placed[0] if placed else grid_ground(m.width, m.height)
-    with Outputs(inputs) as staged:
-        render_picture(m, z, str(staged.path(output, what="picture")), g, zscale, view=view,
-                       wireframe=wireframe, title=title)
