@@ -1,4 +1,4 @@
-"""A tile's jobs (free, then conformed), a run of them, and the stitched mesh (docs/tiles.md, steps 3-6)."""
+"""A tile's jobs (free, conformed, thinned), a run of them, the stitched mesh (docs/tiles.md, steps 3-7)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,7 @@ from wavemesh import api
 from wavemesh.check import mesh_errors
 from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.io.georef import cropped
-from wavemesh.io.heightfield import (
-    HeightField,
-)
+from wavemesh.io.heightfield import HeightField
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import decompose
 from wavemesh.refine import native
@@ -31,10 +29,10 @@ from wavemesh.tiles.sides import (
     side_profile,
     thin_side,
 )
-from wavemesh.tiles.source import Source, _light_source
+from wavemesh.tiles.source import Source, light_source
 
 # ---------------------------------------------------------------------------------------------------
-# One tile's jobs: free (step 3), then conformed to its reconciled sides (steps 4 and 5)
+# One tile's jobs: free (step 3), conformed to its reconciled sides (steps 4 and 5), thinned (step 6)
 
 
 @dataclass
@@ -211,7 +209,7 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
         with Runner(workers, scheduler) as own:
             return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees)
     n = len(plan.tiles)
-    light = replace(plan, source=_light_source(plan.source))
+    light = replace(plan, source=light_source(plan.source))
     with api.Progress("tiles", 3 * n, progress) as bar:
         count = [0 if frees is None else n, 0]
 

@@ -145,7 +145,7 @@ class Quant:
         return to_samples(v, self.scale, self.offset, self.exact)
 
 
-def _light_source(src: Source) -> Source:
+def light_source(src: Source) -> Source:
     """The source without an in-memory input (each task then carries its own window)."""
     return src if src.kind != "array" else replace(src, array=None)
 
@@ -176,7 +176,7 @@ def scan(src: Source, runner: Runner | None = None) -> Quant:
     """The quantisation of the whole grid, from the strips' statistics (on ``runner``'s workers: an input
     in memory is scanned here); a second pass for the largest quantisation error unless exact."""
     rows = _strip_rows(src)
-    light = _light_source(src)
+    light = light_source(src)
     tasks = [(light, y, min(rows, src.height - y)) for y in range(0, src.height, rows)]
     here = runner is None or src.kind == "array"
 
