@@ -274,5 +274,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(BENCH))  # peers, as bench/run.py has it
     sys.exit(main())

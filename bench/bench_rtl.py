@@ -7,7 +7,7 @@ reference model) runs 256 x 256 and 512 x 512 frames of random samples through t
 clocks run from its start (the first sample offered while idle) to the hand-out of its last record,
 set-up and pipeline drain included.
 
-Resources and fmax: bench/fpga.py's synth_pnr on the ECP5-85F and the UP5K, the bank inside
+Resources and fmax: host/wavemesh/harness/fpga.py's synth_pnr on the ECP5-85F and the UP5K, the bank inside
 fpga.py's pin harness (its flip-flops and LUTs are listed apart).  The UP5K is also tried with fewer
 levels, to show what fits it.
 """
@@ -47,7 +47,7 @@ def simulate(frames: list[list[int]], idle: str, bp: str) -> list[dict]:
 
 
 def run() -> dict:
-    import fpga as fp
+    from wavemesh.harness import fpga as fp
 
     cycles = simulate([[256, 256, 7, 0], [512, 512, 7, 1]], "none", "none")
     cycles += simulate([[256, 256, 7, 2]], "none", "random")
@@ -79,7 +79,8 @@ def markdown(results: dict) -> str:
         "Clocks from the frame's start to its last record, set-up and pipeline drain included; the "
         "random back-pressure holds the output 30% of the cycles.",
         "",
-        "Yosys + nextpnr (bench/fpga.py), the bank inside a pin harness whose own flip-flops and LUTs "
+        "Yosys + nextpnr (host/wavemesh/harness/fpga.py), the bank inside a pin harness whose own "
+        "flip-flops and LUTs "
         "are in the totals and listed apart (*bank* = total less harness).  ECP5 LUTs are TRELLIS_COMB "
         "cells (LUT4s, carry halves and LUT RAM); on the UP5K, LCs are logic cells (a LUT4 and a "
         "flip-flop each) and LUTs/FFs come from Yosys.",

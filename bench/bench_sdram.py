@@ -5,8 +5,8 @@ latency 2, against its behavioural chip (every timing checked): a 16384-halfword
 read with the data always valid / ready, addressed writes of three interleaved sequences (as the
 filter bank's levels) each in a linear area (they meet in the banks as they advance) or each kept in
 a bank of its own, and CPU accesses through the cache (sequential words, hits, row misses, posted
-writes).  Resources and fmax: bench/fpga.py's synth_pnr on the ECP5-85F, the
-controller (with its cache and FIFOs) inside fpga.py's pin harness, with the default 256-byte cache
+writes).  Resources and fmax: host/wavemesh/harness/fpga.py's synth_pnr on the ECP5-85F, the
+controller (with its cache and FIFOs) inside harness/fpga.py's pin harness, with the default 256-byte cache
 and a 4 KB one.
 """
 
@@ -14,14 +14,12 @@ from __future__ import annotations
 
 import json
 import statistics
-import sys
 import tempfile
 from pathlib import Path
 
 BENCH = Path(__file__).resolve().parent
 ROOT = BENCH.parent
 RTL = ROOT / "rtl"
-sys.path.insert(0, str(BENCH))
 
 TITLE = "SDRAM controller (sdram_ctrl)"
 CLK_HZ, CL = 25_000_000, 2          # the ULX3S's board clock
@@ -46,7 +44,7 @@ CACHES = {"256 B": {}, "4 KB": {"CACHE_LINES": 256, "LINE_WORDS": 4}}
 
 
 def fpga(cache: dict) -> dict:
-    import fpga as fp
+    from wavemesh.harness import fpga as fp
 
     r = fp.synth_pnr("sdram_ctrl", SOURCES, {**PARAMS, **cache}, TARGET)
     r.pop("yosys_cells", None)
@@ -103,7 +101,8 @@ def markdown(results: dict) -> str:
     ]
     builds = r
     lines += [
-        "**FPGA** (Yosys + nextpnr from the pinned .venv, bench/fpga.py's harness, whose flip-flops "
+        "**FPGA** (Yosys + nextpnr from the pinned .venv, host/wavemesh/harness/fpga.py's harness, whose "
+        "flip-flops "
         "and LUTs are in the totals and listed apart; *controller* = total less harness), "
         f"{next(iter(builds.values()))['device']}:",
         "",

@@ -112,12 +112,9 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
     native's fixed-point parameters (HeightField.refiner_zeta for quantised input)."""
     import shlex
     import shutil
-    import sys
 
     if shutil.which("valgrind") is None:
         return None
-    if str(ROOT / "tools") not in sys.path:
-        sys.path.insert(0, str(ROOT / "tools"))
     import refiner_instructions as RI  # its callgrind runs and the CLI's job (cli_input)
     from wavemesh.refine import native
 

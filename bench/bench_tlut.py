@@ -3,8 +3,9 @@
 Cycles: the cocotb bench tests/rtl/tlut_stage_tb.py (test_bench_cycles) runs the dissertation's
 synthetic sets through the stage under Verilator with the output always ready and one record per
 cycle: once with level M's records only, once with every level's records in filter-bank order (the
-stage drops the others).  Resources and fmax: bench/fpga.py's synth_pnr on the ECP5-85F and the
-UP5K, with the stage inside fpga.py's pin harness (its flip-flops and LUTs are listed apart).
+stage drops the others).  Resources and fmax: host/wavemesh/harness/fpga.py's synth_pnr on the ECP5-85F and
+the
+UP5K, with the stage inside harness/fpga.py's pin harness (its flip-flops and LUTs are listed apart).
 """
 
 from __future__ import annotations
@@ -34,8 +35,8 @@ def cycles() -> list[dict]:
 
 
 def fpga(target: str) -> dict:
-    import fpga as fp
     from wavemesh.device.gen import write_all
+    from wavemesh.harness import fpga as fp
 
     # synth_pnr reads the sources with no include path; Yosys also looks in its working directory,
     # so the generated wm_templates.vh is written there (generated, as `make gen` does, not copied)
@@ -75,7 +76,8 @@ def markdown(results: dict) -> str:
             f"| {r['output_span'] / r['blocks']:.2f} | {r['first_latency']} | {r['drain']} |")
     lines += [
         "",
-        "**FPGA** (Yosys + nextpnr from the pinned .venv; the stage inside bench/fpga.py's harness, whose "
+        "**FPGA** (Yosys + nextpnr from the pinned .venv; the stage inside host/wavemesh/harness/fpga.py's "
+        "harness, whose "
         "own flip-flops and LUTs are in the totals and listed apart; *stage* = total less harness).",
         "",
         f"| target | LUTs (stage) | FFs (stage) | BRAM | fmax MHz "

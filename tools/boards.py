@@ -6,7 +6,8 @@
 
 bitstream: Yosys (synth_ecp5 / synth_ice40) on the board top of rtl/boards/ with the firmware image
 as FW_HEX, nextpnr with the board's constraints, then ecppack / icepack, all from the pinned YoWASP
-packages in .venv (paths handed over relative to the work folder: bench/fpga.py, "Paths").  The
+packages in .venv (paths handed over relative to the work folder: host/wavemesh/harness/fpga.py,
+"Paths").  The
 products go to build/boards/BOARD/ (BOARD.bit or BOARD.bin, the netlist, the logs, report.json).  It
 fails (exit 1, one `error:` line) when the design does not route or misses the board clock by less
 than the margin (MARGIN: fmax at least 1.2 x the clock), and otherwise writes the board's section of
@@ -29,11 +30,9 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-sys.path.insert(0, str(ROOT / "sim"))
+from wavemesh.harness.fpga import rel, run_tool  # the YoWASP runner
 
-from fpga import rel, run_tool  # noqa: E402  (bench/fpga.py: the YoWASP runner)
+ROOT = Path(__file__).resolve().parents[1]
 
 RTL = ROOT / "rtl"
 BOARDS_RTL = RTL / "boards"
@@ -142,11 +141,11 @@ def firmware_image(board: Board, fw_hex: Path | None) -> Path | None:
         if not fw_hex.exists():
             raise FlowError(f"no firmware image {fw_hex}")
         return fw_hex
-    from build import MissingToolchain, build_firmware  # sim/build.py
+    from wavemesh.harness.simboard import build  # sim/build.py, as the tests load it
 
     try:
-        return build_firmware()
-    except (MissingToolchain, RuntimeError) as e:
+        return build.build_firmware()
+    except (build.MissingToolchain, RuntimeError) as e:
         raise FlowError(str(e).splitlines()[0]) from None
 
 

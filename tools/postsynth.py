@@ -29,14 +29,11 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
-sys.path.insert(0, str(ROOT / "bench"))
-sys.path.insert(0, str(ROOT / "tests" / "rtl"))
+import boards  # tools/boards.py, beside this script: the board tops, their sources and synthesis commands
+from wavemesh.harness.fpga import rel, run_tool
+from wavemesh.harness.rtl_runner import ICEBREAKER_BENCH_PARAMETERS as BENCH_PARAMETERS
 
-import boards  # noqa: E402  (tools/boards.py: the board tops, their sources and synthesis commands)
-from fpga import rel, run_tool  # noqa: E402
-from icebreaker_tb import BENCH_PARAMETERS  # noqa: E402  (the bench's parameters for the top)
+ROOT = Path(__file__).resolve().parents[1]
 
 OUT = ROOT / "build" / "postsynth"
 BENCHES = ROOT / "tests" / "rtl"

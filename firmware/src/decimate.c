@@ -209,7 +209,7 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n)
  * the top stale, not once per neighbour removed.  Entering at zeta rather than 0 lets the removals
  * of a neighbourhood finish before its non-removable vertices are looked at again, so several of them
  * share one evaluation: 11.5 % fewer instructions over ten pairs of the quality benchmark's tuning
- * set, triangles -0.8 % to +2.3 % by pair (tools/refiner_instructions.py). */
+ * set, triangles -0.8 % to +2.3 % by pair (bench/refiner_instructions.py). */
 #define STALE INT8_MIN
 
 static void push(wm_refiner *r, int32_t v, uint32_t key, int8_t apex, int32_t *n)

@@ -34,7 +34,7 @@
 #define WM_TRI(e) ((e) / 3)
 
 /* Profiling counters (WM_PROFILE=1: the profile build, firmware/CMakeLists.txt's WM_PROFILE option, for
- * tools/refiner_instructions.py --scans; never the library the host loads nor the board's image): what
+ * bench/refiner_instructions.py --scans; never the library the host loads nor the board's image): what
  * the refiner's E(T) work costs by phase, in units the FPGA's triangle engine would take over (samples
  * visited by scans) and units left to the CPU (scans, slope factors, point errors). */
 #ifndef WM_PROFILE

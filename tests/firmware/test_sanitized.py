@@ -7,9 +7,9 @@ import subprocess
 
 import numpy as np
 import pytest
-from fwio import read_output, write_input
 from wavemesh import api
 from wavemesh.check import check_mesh
+from wavemesh.harness.fwio import read_output, write_input
 from wavemesh.io import synth
 from wavemesh.io.heightfield import from_array
 from wavemesh.model.haar import decompose

@@ -1,6 +1,6 @@
 /* File-driven runner of the refiner, for the sanitizer builds (tests/firmware/test_sanitized.py).
  *
- *   wm_run IN OUT      IN as written by tests/firmware/fwio.py, OUT the final mesh
+ *   wm_run IN OUT      IN as written by wavemesh.harness.fwio, OUT the final mesh
  *
  * IN (native byte order): "WMR1", int32 W, H, M, nv, nt, tri_cap, sizeof(wm_params); wm_params;
  * uint16 samples[W H]; int64 n; int32 details[n]; int32 xy[2 nv]; int32 tris[3 nt].

@@ -1,12 +1,13 @@
-"""bench/fpga.py and tools/boards.py run the YoWASP tools, whose sandbox mounts a private /tmp over the
+"""host/wavemesh/harness/fpga.py and tools/boards.py run the YoWASP tools, whose sandbox mounts a private
+/tmp over the
 host's: a design under /tmp (pytest's tmp_path is there) must still synthesise, place and route
-(bench/fpga.py, "Paths")."""
+(host/wavemesh/harness/fpga.py, "Paths")."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import fpga
+from wavemesh.harness import fpga
 
 
 def test_design_under_tmp_synthesises_and_routes(tmp_path: Path, monkeypatch):

