@@ -343,20 +343,14 @@ static int try_collapse(wm_refiner *r, int32_t e)
     return 0;
 }
 
-/* The middle eigenvectors of the pass's latest collapse-class vertices, by slot (direct-mapped, on the
- * stack of one pass): a vertex of class 4.33 is tested once as v and again as a neighbour of each of
- * its collapse-class neighbours, and its star has not changed in between unless its class was
- * forgotten (wm_forget_class), so while vapex still says 4.33 the vector kept is the one classify
- * would compute again. */
-#define ECACHE 16
-struct ecache {
-    int32_t v;
-    int64_t e2[3];
-};
-
-static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g, struct ecache *cache)
+/* The middle eigenvectors of the pass's latest collapse-class vertices, by slot (r->ecache, direct-
+ * mapped, emptied at the start of each pass): a vertex of class 4.33 is tested once as v and again as a
+ * neighbour of each of its collapse-class neighbours, and its star has not changed in between unless
+ * its class was forgotten (wm_forget_class), so while vapex still says 4.33 the vector kept is the one
+ * classify would compute again.  Its entries are Q30 within [-1, 1], kept in 32 bits. */
+static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g)
 {
-    struct ecache *c = &cache[v & (ECACHE - 1)];
+    struct wm_ecache_slot *c = &r->ecache[v & (WM_ECACHE_SLOTS - 1)];
     int8_t cls;
     if (r->vapex[v] == CLS_COLLAPSE && c->v == v) {
         for (int i = 0; i < 3; i++) g->vec[3 + i] = c->e2[i];
@@ -365,24 +359,28 @@ static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g, struct ec
     cls = classify(r, v, g);
     if (cls == CLS_COLLAPSE) {
         c->v = v;
-        for (int i = 0; i < 3; i++) c->e2[i] = g->vec[3 + i];
+        for (int i = 0; i < 3; i++) {
+            WM_ASSERT(g->vec[3 + i] >= -((int64_t)1 << 31) && g->vec[3 + i] < ((int64_t)1 << 31));
+            c->e2[i] = (int32_t)g->vec[3 + i];
+        }
     }
     return cls;
 }
 
 int32_t wm_reduce(wm_refiner *r)
 {
-    struct ecache cache[ECACHE];
     wm_mesh *me = &r->mesh;
     int32_t removed = 0;
     uint64_t dc = (uint64_t)r->params.delta_c << 44; /* Q16.16 -> Q60, the scale of e21 . e22 */
-    for (int i = 0; i < ECACHE; i++) cache[i].v = -1;
+    for (int i = 0; i < WM_ECACHE_SLOTS; i++) r->ecache[i].v = -1;
     for (int32_t v = 0; v < me->vert_end; v++) {
         struct eig gv, gw;
         int32_t out[WM_MAX_RING + 1], k = 0, first, h;
         int8_t cls;
         if (me->vx[v] == WM_FREE || r->vapex[v] == CLS_NONE || r->vapex[v] == CLS_REMOVE_FAILED) continue;
-        cls = classify_cached(r, v, &gv, cache);
+        /* a 4.32 class still there is its current star's (a neighbour's test below found it; the
+         * removal needs no eigenvectors) */
+        cls = r->vapex[v] == CLS_REMOVE ? CLS_REMOVE : classify_cached(r, v, &gv);
         r->vapex[v] = cls;
         if (cls == CLS_REMOVE) {
             if (try_remove(r, v)) removed++;
@@ -406,7 +404,7 @@ int32_t wm_reduce(wm_refiner *r)
             int64_t dot = 0;
             uint64_t adot;
             if (r->vapex[u] == CLS_NONE || r->vapex[u] == CLS_REMOVE || r->vapex[u] == CLS_REMOVE_FAILED) continue;
-            cls = classify_cached(r, u, &gw, cache);
+            cls = classify_cached(r, u, &gw);
             r->vapex[u] = cls;
             if (cls != CLS_COLLAPSE) continue;
             for (int c = 0; c < 3; c++) dot += gv.vec[3 + c] * gw.vec[3 + c]; /* Q60, below 3 2^60 */

@@ -185,15 +185,34 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
 
-/* angle_t: the smallest angle of WM_TRI(e), -1 when not known yet; left there when computed, and set
- * to the new one when the swap is done (the slot keeps its own corners' triangle: wm_edge_swap). */
-static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int32_t *angle_t)
+/* The smallest angle of triangle slot t, kept in r->angles for one regularisation (emptied when it
+ * begins): nothing but its own swaps changes a triangle while it runs, and each swap sets its two. */
+static int32_t slot_angle(wm_refiner *r, int32_t t)
+{
+    struct wm_angle_slot *s = &r->angles[t & (WM_ANGLE_SLOTS - 1)];
+    if (s->t != t) {
+        int32_t x[3], y[3];
+        wm_tri_xy(&r->mesh, t, x, y);
+        s->t = t;
+        s->angle = wm_min_angle(x, y);
+    }
+    return s->angle;
+}
+
+static void set_angle(wm_refiner *r, int32_t t, int32_t angle)
+{
+    struct wm_angle_slot *s = &r->angles[t & (WM_ANGLE_SLOTS - 1)];
+    s->t = angle < 0 ? -1 : t;
+    s->angle = angle;
+}
+
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
-    int32_t ox[3], oy[3], px[3], py[3], qx[3], qy[3], n1x[3], n1y[3];
-    int32_t ang_old, ang_new, a1, an1 = -1;
+    int32_t qx[3], qy[3], n1x[3], n1y[3];
+    int32_t ang_old, ang_new, a1, an1 = -1, an2 = -1;
     uint32_t e1 = 0, e2 = 0, ra;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t num = 65536u, den = 65536u; /* R_E's, as xi_above_one takes them */
@@ -206,16 +225,11 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int
     qx[2] = me->vx[c], qy[2] = me->vy[c];
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
-        if (*angle_t < 0) {
-            wm_tri_xy(me, t1, ox, oy);
-            *angle_t = wm_min_angle(ox, oy);
-        }
-        wm_tri_xy(me, t2, px, py);
-        ang_old = *angle_t;
-        a1 = wm_min_angle(px, py);
+        ang_old = slot_angle(r, t1);
+        a1 = slot_angle(r, t2);
         if (a1 < ang_old) ang_old = a1;
         ang_new = an1 = wm_min_angle(n1x, n1y);
-        a1 = wm_min_angle(qx, qy);
+        a1 = an2 = wm_min_angle(qx, qy);
         if (a1 < ang_new) ang_new = a1;
         ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
     }
@@ -272,7 +286,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, int
     }
     if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
-    *angle_t = an1;
+    set_angle(r, t1, an1);
+    set_angle(r, t2, an2);
     if (alpha < 65536u) {
         r->err[t1] = e1;
         r->err[t2] = e2;
@@ -298,6 +313,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
+    for (int i = 0; i < WM_ANGLE_SLOTS; i++) r->angles[i].t = -1;
     for (int32_t t = 0; t < me->tri_end; t++) {
         me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
         if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
@@ -305,14 +321,13 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
-            int32_t angle_t = -1; /* t's smallest angle, once for its three edges (try_swap) */
             if (me->hv[3 * t] < 0 || !(me->tflag[t] & WM_F_SWAP)) continue;
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
                 u = WM_TRI(o);
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (try_swap(r, e, alpha, emax, &angle_t)) {
+                if (try_swap(r, e, alpha, emax)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
                     swaps++;

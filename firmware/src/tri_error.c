@@ -384,12 +384,12 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
     if (D <= 0 || f->mask || bound == 0xFFFFFFFFu) return wm_point_error(f, p, x, y, px, py, kept) > bound;
     WM_PROF_ADD(WM_PC_POINTS, 1);
     av = point_v(f, x, y, D, px, py);
-    /* the vertical metric: E = min(ceil(2^16 |V| / D), 2^32 - 1) > bound iff 2^16 |V| > bound D (|V| <
-     * 2^47, bound D < 2^63), so no division */
-    if (p->metric == WM_METRIC_VERTICAL) return av * 65536u > (uint64_t)bound * (uint64_t)D;
-    ev = vertical(av, D);
-    if (ev == 0) return 0; /* E = 0 */
-    if (ev <= bound) return 0; /* E <= ev (r >= 2^16): no slope factor needed */
+    /* ev = min(ceil(2^16 |V| / D), 2^32 - 1) <= bound iff 2^16 |V| <= bound D (|V| < 2^47, bound D <
+     * 2^63), without a division: then E is within in either metric (the normal one's E <= ev, r >= 2^16,
+     * with no slope factor needed); else the vertical E is above it */
+    if (av * 65536u <= (uint64_t)bound * (uint64_t)D) return 0;
+    if (p->metric == WM_METRIC_VERTICAL) return 1;
+    ev = vertical(av, D); /* > bound */
     if (bound == 0) return 1;  /* E >= 1: r is finite */
     if (kept && *kept) return wm_ceil_q16_div(ev, *kept) > bound;
     /* The normal metric without the root: E = ceil(2^16 ev / r) > bound iff 2^16 ev > bound r iff

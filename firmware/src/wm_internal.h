@@ -269,6 +269,22 @@ struct wm_normal_slot {
     int32_t n[3];
 };
 
+/* The reduction's middle eigenvectors (e2 of 4.34, Q30) of a pass's latest collapse-class vertices, by
+ * vertex slot (direct-mapped, slot modulo WM_ECACHE_SLOTS; v = -1: empty), reduce.c. */
+#define WM_ECACHE_SLOTS 128
+struct wm_ecache_slot {
+    int32_t v;
+    int32_t e2[3];
+};
+
+/* The regularisation's smallest angles by triangle slot (direct-mapped, slot modulo WM_ANGLE_SLOTS;
+ * t = -1: empty), for one sweep (refine.c). */
+#define WM_ANGLE_SLOTS 128
+struct wm_angle_slot {
+    int32_t t;
+    int32_t angle;
+};
+
 struct wm_refiner {
     wm_mesh mesh;
     wm_field field;
@@ -289,6 +305,8 @@ struct wm_refiner {
                             changed); decimation: the triangulation that cost belongs to */
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
     struct wm_normal_slot normals[WM_NORMAL_SLOTS]; /* reduce.c's unit normals, kept */
+    struct wm_ecache_slot ecache[WM_ECACHE_SLOTS];  /* reduce.c's middle eigenvectors, kept in a pass */
+    struct wm_angle_slot angles[WM_ANGLE_SLOTS];    /* the regularisation's angles, kept in a sweep */
 };
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box

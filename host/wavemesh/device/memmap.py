@@ -42,7 +42,7 @@ STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmwar
 # The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
 # (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
 # triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
-# (47.5 B); per grid the vertex arrays' fixed part and the refiner's state (about 28 KB at 1024^2).
+# (47.5 B); per grid the vertex arrays' fixed part and the refiner's state (about 32 KB at 1024^2).
 # tests/sim/test_memmap.py checks the capacity below against a native build of wm_refine_bound.
 REFINER_TRI_BYTES = 48
 REFINER_GRID_BYTES = 32 * 1024  # for the largest grid
