@@ -64,8 +64,11 @@ def own_sides(label: int) -> int:
     return 0
 
 
+_RC = tuple(divmod(s, 3) for s in range(9))  # site -> (row, column), looked up (the set is built per process)
+
+
 def site_rc(s: int) -> tuple[int, int]:
-    return divmod(s, 3)
+    return _RC[s]
 
 
 def _g(i: int, j: int, k: int, s: int) -> int:
@@ -82,7 +85,7 @@ def _g(i: int, j: int, k: int, s: int) -> int:
 def ccw(tri) -> tuple[int, int, int]:
     """The triangle's sites in counter-clockwise order (x = column, y = row), starting at the smallest."""
     a, b, c = sorted(tri)
-    (ra, ca), (rb, cb), (rc, cc) = site_rc(a), site_rc(b), site_rc(c)
+    (ra, ca), (rb, cb), (rc, cc) = _RC[a], _RC[b], _RC[c]
     area2 = (cb - ca) * (rc - ra) - (cc - ca) * (rb - ra)
     if area2 == 0:
         raise ValueError(f"degenerate template triangle {tri}")
@@ -120,7 +123,7 @@ def _diag_type(tris) -> str:
     """'basic' if every slanted edge runs bottom-left to top-right, 'dual' if top-left to bottom-right."""
     signs = set()
     for e in _edges(tris):
-        (r0, c0), (r1, c1) = (site_rc(s) for s in e)
+        (r0, c0), (r1, c1) = (_RC[s] for s in e)
         if r0 != r1 and c0 != c1:
             signs.add((r1 - r0) * (c1 - c0) > 0)
     if signs == {False}:
