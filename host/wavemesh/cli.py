@@ -292,7 +292,19 @@ def _stream_parser(sub) -> None:
                         "warning and the job runs at --baud (default: stay at --baud)")
     p.add_argument("--timeout", type=_number, default=None, metavar="S",
                    help="seconds the device may compute without sending anything (default 120)")
+    p.add_argument("--deadline", type=_number, default=None, metavar="S",
+                   help="seconds for the whole session with the device, from HELLO to the last level; a job "
+                        "not done by then ends with one error line (default: none, each wait is bounded "
+                        "alone)")
     p.add_argument("--trace", action="store_true", help="hex dump of every frame on stderr")
+
+
+def _timeouts(args):
+    """The device session's timeouts: the defaults, with --timeout and --deadline."""
+    from wavemesh.device.stream import DEFAULT_TIMEOUTS  # start-up: the device path (about 16 ms) only here
+
+    t = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
+    return t if getattr(args, "deadline", None) is None else replace(t, deadline=args.deadline)
 
 
 def _link_baud(text: str):
@@ -428,6 +440,8 @@ def _check_options(args) -> None:
         raise WavemeshError(f"--levels {args.levels} is out of range", hint=f"use 1..{api.MAX_LEVELS}")
     if getattr(args, "timeout", None) is not None and not args.timeout > 0:
         raise WavemeshError(f"--timeout {args.timeout:g} is out of range", hint="give seconds > 0")
+    if getattr(args, "deadline", None) is not None and not args.deadline > 0:
+        raise WavemeshError(f"--deadline {args.deadline:g} is out of range", hint="give seconds > 0")
     if getattr(args, "workers", None) is not None and args.workers < 1:
         raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
 
@@ -528,6 +542,8 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
         raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
     if getattr(args, "timeout", None) is not None and not args.timeout > 0:
         raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
+    if getattr(args, "deadline", None) is not None and not args.deadline > 0:
+        raise WavemeshError(f"--deadline {args.deadline} is out of range", hint="give seconds > 0")
     tiles.check_tiled_outputs(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
                               exaggeration=args.exaggeration, inputs=inputs, files=files)
     say = None if args.quiet else (lambda text: print(text, flush=True))
@@ -544,11 +560,9 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
             results = tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
                                       log=say if args.quiet or not sys.stderr.isatty() else None)
     else:
-        from wavemesh.device.stream import DEFAULT_TIMEOUTS  # the device link: only for `stream`, as below
-
         for port in ports:
             api.check_port(port)
-        timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
+        timeouts = _timeouts(args)
         infos = tiles.hello(ports, args.baud, timeouts)
         if say:
             for port, info in zip(ports, infos, strict=True):
@@ -608,8 +622,6 @@ def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
 
 
 def stream_command(args) -> int:
-    from wavemesh.device.stream import DEFAULT_TIMEOUTS  # start-up: the device path (about 16 ms) only here
-
     _check_options(args)
     if args.tile is not None or args.tiles_dir or len(args.port) > 1:
         return _tiled_command(args, _mesh_params(args), ports=args.port, inputs=_inputs(args, args.input))
@@ -617,7 +629,7 @@ def stream_command(args) -> int:
     _check_outputs(args)
     api.check_port(args.port)
     params = _mesh_params(args)
-    timeouts = DEFAULT_TIMEOUTS if args.timeout is None else replace(DEFAULT_TIMEOUTS, job=args.timeout)
+    timeouts = _timeouts(args)
     result = api.stream(_load(args, args.input, memory=True), args.port, params, baud=args.baud,
                         link_baud=args.link_baud, timeouts=timeouts,
                         trace=sys.stderr if args.trace else None, progress=not args.quiet,

@@ -137,6 +137,85 @@ def test_a_lost_last_frame_of_the_upload_is_resent_in_time(lost, device, referen
     assert outcome == "identical", msg
 
 
+PAUSE_S = 6.0  # a stall of the device's line longer than protocol 7's ten ACK_TIMEOUT_MS (5 s)
+
+
+def test_pauses_alone_never_end_the_job(device, reference, tmp_path):
+    """The line to the host stalls for PAUSE_S after the first LEVEL_END and after the second (no byte
+    lost or damaged: only late).  The host goes on writing KEEPALIVE while nothing comes, so the device,
+    which ends a job only after its link timeout without a frame, keeps waiting: the identical mesh.
+    (Protocol 7 ended the job with NO_ACK here: it counted every ACK_TIMEOUT_MS of silence.)"""
+    import time
+
+    src, ref = reference
+    ends: list = []
+
+    def on_frame(direction, f) -> bool:
+        if direction == "down" and f.type == P.FrameType.LEVEL_END and f.fields()["index"] not in ends:
+            ends.append(f.fields()["index"])
+            if len(ends) <= 2:
+                time.sleep(PAUSE_S)  # holds this direction of the line: everything after it waits
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", device.port), on_frame) as proxy:
+        outcome, seconds, msg = stream_once(["stream", str(src), *OPTS, "--port", proxy.url, "-o", str(out),
+                                             "-q"], out, ref, RUN_LIMIT)
+    assert len(ends) >= 2
+    assert outcome == "identical", msg
+    assert seconds >= 2 * PAUSE_S
+
+
+def test_a_broken_connection_resumes_the_job(device, reference, tmp_path):
+    """The connection breaks in the middle of the second level (the proxy closes both sides): the host
+    opens it again and sends RESUME (the job's crc, the level, the bytes it has); the device kept the
+    job and sends the rest of that level: the identical mesh, one job, two connections."""
+    src, ref = reference
+    seen = {"mesh": 0, "resume": []}
+
+    def on_frame(direction, f):
+        if direction == "down" and seen["mesh"] and not seen["resume"]:
+            return FrameTap.CUT  # the frame after the second level's first MESH frame: the line breaks
+        if direction == "down" and f.type == P.FrameType.MESH and f.fields()["index"] == 1:
+            seen["mesh"] += 1
+        if direction == "up" and f.type == P.FrameType.RESUME:
+            seen["resume"].append(f.fields())
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", device.port), on_frame) as proxy:
+        outcome, _, msg = stream_once(["stream", str(src), *OPTS, "--port", proxy.url, "-o", str(out), "-q"],
+                                      out, ref, RUN_LIMIT)
+        connections = proxy.connections
+    assert outcome == "identical", msg
+    assert connections == 2
+    assert seen["resume"] and seen["resume"][0]["index"] == 1 and seen["resume"][0]["have"] > 0
+
+
+def test_the_deadline_ends_a_stalled_job_in_time_with_one_line(device, reference, tmp_path):
+    """--deadline bounds the whole session: a line that stalls for good ends the run at the deadline
+    with one error line naming it, nothing written."""
+    import time
+
+    src, ref = reference
+    stop = {"at": None}
+
+    def on_frame(direction, f) -> bool:
+        if direction == "down" and f.type == P.FrameType.MESH and stop["at"] is None:
+            stop["at"] = time.monotonic()
+        if stop["at"] is not None and direction == "down":
+            time.sleep(0.5)
+            return False  # the line to the host carries nothing from here on
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", device.port), on_frame) as proxy:
+        outcome, seconds, msg = stream_once(["stream", str(src), *OPTS, "--deadline", "3", "--port",
+                                             proxy.url, "-o", str(out), "-q"], out, ref, RUN_LIMIT)
+    assert outcome == "error" and "deadline of 3 s" in msg, msg
+    assert 2.5 < seconds < 4.5
+
+
 def test_the_host_resends_well_within_the_session_timeout():
     """One source: the host's resend interval follows from what the device states, with room for
     SESSION_RESENDS - 1 losses in a row and the line time of a lost frame and its successor."""

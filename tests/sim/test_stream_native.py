@@ -40,10 +40,13 @@ def device(wmdev_exe):
     d.stop()
 
 
+LINK_S = 3  # the ASan device's link timeout (wmdev --link-timeout): its NO_ACK tests take seconds
+
+
 @pytest.fixture(scope="module")
 def asan_device():
     """The same device built with AddressSanitizer and UBSan: garbage must not make it touch bad memory."""
-    d = NativeDevice(build_wmdev(sanitize=True), "--tri-capacity", "20000")
+    d = NativeDevice(build_wmdev(sanitize=True), "--tri-capacity", "20000", "--link-timeout", str(LINK_S))
     yield d
     d.stop()
     assert d.proc.returncode in (0, -15), "\n".join(d.lines)  # terminated, not aborted by a sanitizer
@@ -477,7 +480,7 @@ def test_garbage_in_mid_session_then_the_same_connection_recovers(asan_device):
         raw.close()
 
 
-def start_job(raw: Raw, w: int = 64, h: int = 64) -> None:
+def start_job(raw: Raw, w: int = 64, h: int = 64) -> int:
     raw.hello()
     raw.send(P.FrameType.CONFIG, raw.config(width=w, height=h, levels=3))
     raw.expect(P.FrameType.OK)
@@ -487,6 +490,7 @@ def start_job(raw: Raw, w: int = 64, h: int = 64) -> None:
         raw.send(P.FrameType.DATA, data(off, words[2 * off:2 * off + 512]))
         raw.expect(P.FrameType.DATA_ACK)
     raw.send(P.FrameType.RUN, P.RUN.pack(crc=S.samples_crc(a)))
+    return S.samples_crc(a)
 
 
 @pytest.mark.parametrize("how", ["abort", "hello", "leave"])
@@ -511,9 +515,11 @@ def test_ending_a_job_midway(how, asan_device):
 
 
 def test_a_host_that_stops_acknowledging(asan_device):
-    """LEVEL_END comes 1 + ACK_RETRIES times, ACK_TIMEOUT_MS apart, then DONE with NO_ACK, then idle."""
+    """LEVEL_END comes again every ACK_TIMEOUT_MS while the host is silent; after the device's link
+    timeout (HELLO states it) without a frame, DONE with NO_ACK, then idle."""
     raw = Raw(asan_device.url)
     try:
+        assert raw.hello()["link_timeout_s"] == LINK_S
         start_job(raw)
         ends, t0 = 0, time.monotonic()
         while True:
@@ -524,12 +530,70 @@ def test_a_host_that_stops_acknowledging(asan_device):
                 done = f.fields()
                 break
         took = time.monotonic() - t0
-        assert ends == 1 + P.ACK_RETRIES
+        assert ends >= LINK_S * 1000 // P.ACK_TIMEOUT_MS - 1
         assert done["status"] == P.ErrorCode.NO_ACK and done["levels"] == 0
-        waits = P.ACK_RETRIES * P.ACK_TIMEOUT_MS / 1000
-        assert waits * 0.9 < took < waits + 3
+        assert LINK_S * 0.9 < took < LINK_S + 3
         raw.send(P.FrameType.STATUS)
         assert raw.expect(P.FrameType.STATUS_REPLY).fields()["state"] == P.State.IDLE
+    finally:
+        raw.close()
+
+
+def test_a_host_that_pauses_but_keeps_alive_keeps_its_job(asan_device):
+    """A pause of twice the link timeout with a KEEPALIVE every second (the host at work, or a line
+    whose other direction stalls): the device repeats LEVEL_END but keeps the job, and the level is
+    acknowledged afterwards as if nothing happened.  (Protocol 7 counted every ACK_TIMEOUT_MS without
+    progress, and ended the job with NO_ACK after ten of them: five seconds of pauses.)"""
+    raw = Raw(asan_device.url)
+    try:
+        start_job(raw)
+        end = raw.expect(P.FrameType.LEVEL_END).fields()
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2 * LINK_S:
+            raw.send(P.FrameType.KEEPALIVE)
+            time.sleep(1.0)
+        raw.send(P.FrameType.STATUS)
+        assert raw.expect(P.FrameType.STATUS_REPLY).fields()["state"] == P.State.RUNNING
+        raw.send(P.FrameType.ACK, P.ACK.pack(kind=P.FrameType.LEVEL_END, index=0, have=end["total"]))
+        nxt = raw.expect(P.FrameType.LEVEL_END, 5.0).fields()
+        assert nxt["index"] == 1
+    finally:
+        raw.close()
+
+
+def test_a_job_outlives_its_connection_and_resumes(asan_device):
+    """The connection breaks after the first level went out: a new connection's RESUME (RUN's crc, the
+    level, the bytes the host has) gets the level from there, and the job goes on; a RESUME that names
+    another job gets BAD_STATE and the job goes on too."""
+    raw = Raw(asan_device.url)
+    crc = start_job(raw)
+    end = raw.expect(P.FrameType.LEVEL_END).fields()
+    raw.close()
+    raw = Raw(asan_device.url)
+    try:
+        raw.send(P.FrameType.RESUME, P.RESUME.pack(crc=crc ^ 1, index=0, have=0))
+        e = raw.error()
+        assert e["code"] == P.ErrorCode.BAD_STATE and e["request"] == P.FrameType.RESUME
+        raw.send(P.FrameType.RESUME, P.RESUME.pack(crc=crc, index=0, chunk=100, have=40))
+        pieces = []
+        while True:
+            f = raw.link.read_frame(3.0)
+            if f.type == P.FrameType.MESH:
+                pieces.append((f.fields()["offset"], len(f.tail())))
+            if f.type == P.FrameType.LEVEL_END:
+                again = f.fields()
+                break
+        assert again == end
+        assert pieces[0] == (40, 100) and sum(n for _, n in pieces) == end["total"] - 40
+        raw.send(P.FrameType.ACK, P.ACK.pack(kind=P.FrameType.LEVEL_END, index=0, have=end["total"]))
+        assert raw.expect(P.FrameType.LEVEL_END, 5.0).fields()["index"] == 1
+    finally:
+        raw.close()
+    raw = Raw(asan_device.url)  # the job ended with NO_ACK meanwhile, or this HELLO ends it
+    try:
+        raw.hello()
+        raw.send(P.FrameType.RESUME, P.RESUME.pack(crc=crc, index=1, have=0))
+        assert raw.error()["code"] == P.ErrorCode.BAD_STATE  # no job to resume
     finally:
         raw.close()
 

@@ -113,6 +113,10 @@ typedef struct wm_proto_caps {
      * whose decoding costs more cycles a sample than the line time it saves at fast rates asks for raw
      * samples there (it decodes CODING_RICE frames at every rate). */
     uint32_t rice_min_div;
+    /* A job ends with NO_ACK after link_timeout_s seconds without a valid frame from the host (0:
+     * WM_PROTO_LINK_TIMEOUT_S); stated in HELLO_REPLY.  Until then the job is kept: the host may come
+     * back (RESUME). */
+    uint16_t link_timeout_s;
 } wm_proto_caps;
 
 /* The job as CONFIG described it, checked; heights holds the W H samples (row-major). */
@@ -180,6 +184,8 @@ typedef struct wm_proto {
     /* session */
     uint8_t state;           /* WM_PROTO_STATE_* */
     uint8_t last_error, nak_sent, abort;
+    uint8_t again_now;       /* RESUME during DONE's wait: send DONE again at once */
+    uint32_t run_crc;        /* RUN's crc: the job a RESUME names */
     uint32_t last_detail;
     uint64_t last_valid;     /* cycles of the last valid frame of the session */
     wm_proto_job job;
@@ -208,6 +214,7 @@ typedef struct wm_proto {
     uint8_t llast;           /* no level follows */
     uint32_t ltotal, lcrc;
     uint32_t lwant;          /* the last ACK's want: bytes from have to send again (0: all) */
+    uint8_t lresume;         /* the answer is a RESUME: LEVEL_END goes again even when the host has all bytes */
     uint16_t chunk;          /* MESH tail bytes (the host's ACK.chunk; max_payload - 8 at RUN) */
     int32_t cur_k, cur_slot; /* triangle cursor: k-th live triangle is in slot cur_slot */
     /* LEVEL_DELTA: the coder of the stream's body, which gives its bytes in order from cpos on (a resend

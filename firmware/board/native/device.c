@@ -6,7 +6,7 @@
  *
  *   wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] [--tri-capacity N]
  *         [--max-levels N] [--window N] [--max-payload N] [--baud N] [--idle-timeout-ms N]
- *         [--write-timeout-ms N] [--no-baud-switch] [--exit-on-close] [--quiet]
+ *         [--write-timeout-ms N] [--link-timeout S] [--no-baud-switch] [--exit-on-close] [--quiet]
  *
  * Defaults are the board's sizes (wm_memmap.h: WM_GRID_MAX_W x WM_GRID_MAX_H, WM_TRI_CAPACITY
  * triangles) and 8 levels.  --port 0 picks a free port.  --baud N paces both directions at N baud
@@ -21,9 +21,15 @@
  * its first bytes, or when it sends none within WM_PROTO_BUSY_WAIT_MS) and is closed: a thread
  * accepts every connection, so this happens within a second even while a job computes.
  *
+ * A job outlives its connection: when the client leaves during a job, the next connection continues it
+ * (the host that lost its line comes back with RESUME; a HELLO ends the job as ever).  The job ends with
+ * NO_ACK when no valid frame came for --link-timeout seconds (default WM_PROTO_LINK_TIMEOUT_S; HELLO
+ * states it), connection or not.
+ *
  * Output lines on stdout: "wmdev: listening on 127.0.0.1:PORT", "wmdev: client connected",
  * "wmdev: second client refused (busy)", "wmdev: client idle, closed", "wmdev: client not reading,
- * closed", "wmdev: client left bytes-in N bytes-out N bad-frames N".
+ * closed", "wmdev: client left during the job", "wmdev: client came back",
+ * "wmdev: client left bytes-in N bytes-out N bad-frames N".
  * Exit status: 0 after --exit-on-close, 4 socket error, 64 bad command line.
  */
 #define _POSIX_C_SOURCE 200809L
@@ -60,6 +66,7 @@ typedef struct conn {
     uint64_t byte_ns;          /* --baud: nanoseconds per byte, 0 unpaced */
     uint64_t rx_clock, tx_clock;
     uint64_t bytes_in, bytes_out;
+    const wm_proto *eng;       /* its state says whether a job runs (a connection lost then is waited for) */
 } conn;
 
 static uint64_t mono_ns(void)
@@ -149,6 +156,7 @@ static pthread_mutex_t door_lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t door_cond = PTHREAD_COND_INITIALIZER;
 static int door_fd = -1; /* a connection handed over, not yet taken */
 static int door_busy;    /* a connection is handed over or being served */
+#define DOOR_GRACE_MS 200L /* a connection that comes while another is served waits this long for the door */
 
 static void drain(int fd, int ms)
 {
@@ -187,11 +195,19 @@ static void *doorman(void *arg)
             exit(4);
         }
         pthread_mutex_lock(&door_lock);
+        if (door_busy) { /* the client served may just have left during a job: give it a moment */
+            struct timespec until;
+            clock_gettime(CLOCK_REALTIME, &until);
+            until.tv_nsec += DOOR_GRACE_MS * 1000000L;
+            if (until.tv_nsec >= 1000000000L) until.tv_sec++, until.tv_nsec -= 1000000000L;
+            while (door_busy)
+                if (pthread_cond_timedwait(&door_cond, &door_lock, &until) != 0) break;
+        }
         take = !door_busy;
         if (take) {
             door_busy = 1;
             door_fd = fd;
-            pthread_cond_signal(&door_cond);
+            pthread_cond_broadcast(&door_cond);
         }
         pthread_mutex_unlock(&door_lock);
         if (!take) refuse(fd, c->quiet);
@@ -215,7 +231,48 @@ static void door_done(void)
 {
     pthread_mutex_lock(&door_lock);
     door_busy = 0;
+    pthread_cond_broadcast(&door_cond);
     pthread_mutex_unlock(&door_lock);
+}
+
+/* The next client within ms milliseconds (-1: none came). */
+static int door_wait(uint32_t ms)
+{
+    int fd;
+    struct timespec until;
+    clock_gettime(CLOCK_REALTIME, &until);
+    until.tv_sec += (time_t)(ms / 1000u);
+    until.tv_nsec += (long)(ms % 1000u) * 1000000L;
+    if (until.tv_nsec >= 1000000000L) until.tv_sec++, until.tv_nsec -= 1000000000L;
+    pthread_mutex_lock(&door_lock);
+    while (door_fd < 0)
+        if (pthread_cond_timedwait(&door_cond, &door_lock, &until) != 0) break;
+    fd = door_fd;
+    door_fd = -1;
+    pthread_mutex_unlock(&door_lock);
+    return fd;
+}
+
+/* The connection closed while a job runs: the door opens for the next client, who continues the job (a
+ * host coming back with RESUME).  1 when one came within ms milliseconds. */
+static int reconnect(conn *c, uint32_t ms)
+{
+    static const int one = 1;
+    int fd;
+    if (c->cfd >= 0) {
+        close(c->cfd);
+        c->cfd = -1;
+        door_done();
+        if (!c->quiet) printf("wmdev: client left during the job\n"), fflush(stdout);
+    }
+    fd = door_wait(ms);
+    if (fd < 0) return 0;
+    setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    c->cfd = fd;
+    c->closed = c->stalled = 0;
+    c->in_len = c->in_pos = c->out_len = 0;
+    if (!c->quiet) printf("wmdev: client came back\n"), fflush(stdout);
+    return 1;
 }
 
 static int io_getc(void *ctx, uint32_t timeout_ms)
@@ -228,18 +285,23 @@ static int io_getc(void *ctx, uint32_t timeout_ms)
         uint64_t t = mono_ns();
         int left = t >= deadline ? 0 : (int)((deadline - t + 999999u) / 1000000u), r;
         ssize_t k;
+        if (c->closed && c->eng && c->eng->state == WM_PROTO_STATE_RUNNING) {
+            if (!reconnect(c, (uint32_t)left)) return WM_PROTO_RX_TIMEOUT; /* the job's clock decides */
+            continue;
+        }
         if (c->closed) return WM_PROTO_RX_CLOSED;
         r = poll(fds, 1, left);
         if (r < 0) {
             if (errno == EINTR) continue;
-            return WM_PROTO_RX_CLOSED;
+            c->closed = 1;
+            continue;
         }
         if (fds[0].revents & (POLLIN | POLLHUP | POLLERR)) {
             k = recv(c->cfd, c->in, sizeof c->in, 0);
             if (k < 0 && errno == EINTR) continue;
             if (k <= 0) {
-                c->closed = 1;
-                return WM_PROTO_RX_CLOSED;
+                c->closed = 1; /* (a job waits for the client to come back: above) */
+                continue;
             }
             c->in_len = (size_t)k;
             c->in_pos = 0;
@@ -273,7 +335,8 @@ static int usage(const char *why)
     fprintf(stderr,
             "wmdev: %s\nusage: wmdev [--port N] [--max-width N] [--max-height N] [--max-samples N] "
             "[--tri-capacity N] [--max-levels N] [--window N] [--max-payload N] [--baud N] "
-            "[--idle-timeout-ms N] [--write-timeout-ms N] [--no-baud-switch] [--exit-on-close] [--quiet]\n",
+            "[--idle-timeout-ms N] [--write-timeout-ms N] [--link-timeout S] [--no-baud-switch] [--exit-on-close] "
+            "[--quiet]\n",
             why);
     return 64;
 }
@@ -297,7 +360,8 @@ int main(int argc, char **argv)
     conn c;
     long port = 7721, max_w = WM_GRID_MAX_W, max_h = WM_GRID_MAX_H, max_samples = -1, tri_cap = WM_TRI_CAPACITY;
     long levels = DEFAULT_LEVELS, window = DEFAULT_WINDOW, payload = WM_PROTO_MAX_PAYLOAD, baud = 0;
-    long idle_ms = WM_PROTO_IDLE_TIMEOUT_MS, write_ms = WM_PROTO_WRITE_TIMEOUT_MS;
+    long idle_ms = WM_PROTO_IDLE_TIMEOUT_MS, write_ms = WM_PROTO_WRITE_TIMEOUT_MS,
+         link_s = WM_PROTO_LINK_TIMEOUT_S;
     pthread_t door;
     int exit_on_close = 0, quiet = 0, no_switch = 0;
     uint16_t *heights;
@@ -333,6 +397,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--baud")) dst = &baud, lo = 0, hi = 100000000;
         else if (!strcmp(a, "--idle-timeout-ms")) dst = &idle_ms, lo = 1, hi = 86400000;
         else if (!strcmp(a, "--write-timeout-ms")) dst = &write_ms, lo = 1, hi = 86400000;
+        else if (!strcmp(a, "--link-timeout")) dst = &link_s, lo = 1, hi = 65535;
         else return usage("unknown option");
         if (i + 1 >= argc || !number(argv[++i], lo, hi, dst)) return usage("bad or missing number");
     }
@@ -361,6 +426,7 @@ int main(int argc, char **argv)
         caps.div_max = 1000000u; /* 1000 baud */
     }
     caps.write_timeout_ms = (uint32_t)write_ms;
+    caps.link_timeout_s = (uint16_t)link_s;
     heights = calloc((size_t)max_samples, sizeof *heights);
     mask = calloc((size_t)mask_bytes, 1); /* --nodata hole: a bit per sample */
     if (!heights || !mask) return usage("cannot allocate the height memory");
@@ -370,6 +436,7 @@ int main(int argc, char **argv)
     c.quiet = quiet;
     c.write_timeout_ms = (uint32_t)write_ms;
     c.byte_ns = baud ? 10000000000ull / (uint64_t)baud : 0;
+    c.eng = &eng;
     c.lfd = socket(AF_INET, SOCK_STREAM, 0);
     memset(&addr, 0, sizeof addr);
     addr.sin_family = AF_INET;
@@ -410,7 +477,7 @@ int main(int argc, char **argv)
         wm_proto_init(&eng, &io, &caps, heights, wm_native_job, NULL);
         wm_proto_set_mask(&eng, mask, mask_bytes);
         how = wm_proto_serve(&eng);
-        close(c.cfd);
+        if (c.cfd >= 0) close(c.cfd);
         door_done(); /* before the lines below: whoever reads them may connect at once */
         if (!quiet && how == WM_PROTO_SERVE_IDLE) printf("wmdev: client idle, closed\n"), fflush(stdout);
         if (!quiet && c.stalled) printf("wmdev: client not reading, closed\n"), fflush(stdout);

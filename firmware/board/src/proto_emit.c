@@ -262,7 +262,7 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
 {
     static const uint8_t stat_off[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_OFFSETS;
     const int32_t stat_val[WM_PROTO_STAT_FIELDS] = WM_PROTO_STAT_VALUES(st);
-    int prev = p->stage, tries = 0;
+    int prev = p->stage, tries = 0; /* ACKs in a row that asked again without progress */
     uint32_t have = 0, best = 0;
     uint64_t work;
     if (p->abort) return abort_code(p);
@@ -289,6 +289,7 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->ltotal = WM_PROTO_LEVEL_HEADER_BYTES + 4u * (uint32_t)m->vert_end + 3u * p->lib * (uint32_t)m->n_tri;
     p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
     p->llast = (uint8_t)(last != 0);
+    p->lresume = 0;
     { /* delta-coded when that is shorter (a pass of the coder that only counts) */
         uint32_t coded = coded_total(p);
         p->lcoded = coded < p->ltotal;
@@ -303,8 +304,9 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     link_begin(p); /* from here on everything waits for, or answers, the host */
     send_level_end(p);
     for (;;) {
-        if (!wm_proto_wait_ack(p, WM_PROTO_T_LEVEL_END, p->levels_sent, &have, &tries, send_level_end)) break;
-        if (have >= p->ltotal) break;
+        if (!wm_proto_wait_ack(p, WM_PROTO_T_LEVEL_END, p->levels_sent, &have, send_level_end)) break;
+        if (have >= p->ltotal && !p->lresume) break;
+        p->lresume = 0;
         if (have > best) {
             best = have; /* progress: the retry budget starts again */
             tries = 0;

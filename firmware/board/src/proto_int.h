@@ -159,10 +159,11 @@ void wm_proto_reply_error(wm_proto *p, uint8_t code, uint32_t detail);
 void wm_proto_session_end(wm_proto *p);
 /* PROGRESS of (stage, level). */
 void wm_proto_send_progress(wm_proto *p, int stage, int level);
-/* Waits for the ACK of (kind, index), sending `again` each time ACK_TIMEOUT passes without one.
- * Returns 1 with *have, or 0 when the job must stop (p->abort says why). */
-int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, int *tries,
-                      void (*again)(wm_proto *));
+/* Waits for the ACK (or RESUME) of (kind, index), sending `again` each time ACK_TIMEOUT_MS passes
+ * without a valid frame.  Returns 1 with *have, or 0 when the job must stop (p->abort says why: the
+ * host ended it, the link closed, or no valid frame came for caps.link_timeout_s: a pause of the line
+ * or of the host, however often, is not an error). */
+int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, void (*again)(wm_proto *));
 
 /* Cycle accounting (proto_session.c says how the clocks run): the cycles since the last mark go to the
  * clock that ran, the link's or the current stage's. */

@@ -6,7 +6,7 @@
  *   IDLE --[CONFIG ok]--> RECEIVING --[DATA .. last sample]--> READY --[RUN, CRC ok]--> RUNNING
  *     ^                       |  silence > SESSION_TIMEOUT: ERROR TIMEOUT                  |
  *     +-----------------------+------------------- [HELLO], [ABORT] ----------------------+
- *     +---------------- job done: DONE (repeated until ACK, at most ACK_RETRIES times) ---+
+ *     +------- job done: DONE (repeated until ACK, or the host silent for link_timeout_s) --+
  *
  * Everything a valid frame can get wrong (type, length, state, value) gets an ERROR frame with its
  * code.  During RUNNING the job has the CPU; the engine reads frames only inside wm_proto_emit_level
@@ -181,6 +181,7 @@ static void do_hello(wm_proto *p)
     put16(b + WM_PROTO_HELLO_REPLY_ACK_TIMEOUT_MS, WM_PROTO_ACK_TIMEOUT_MS);
     put32(b + WM_PROTO_HELLO_REPLY_SESSION_TIMEOUT_MS, WM_PROTO_SESSION_TIMEOUT_MS);
     put16(b + WM_PROTO_HELLO_REPLY_ACK_RETRIES, WM_PROTO_ACK_RETRIES);
+    put16(b + WM_PROTO_HELLO_REPLY_LINK_TIMEOUT_S, c->link_timeout_s);
     put32(b + WM_PROTO_HELLO_REPLY_IDLE_TIMEOUT_MS, c->idle_timeout_ms);
     put32(b + WM_PROTO_HELLO_REPLY_WRITE_TIMEOUT_MS, c->write_timeout_ms);
     put32(b + WM_PROTO_HELLO_REPLY_DIV_MIN, c->div_min);
@@ -256,6 +257,7 @@ static void do_run(wm_proto *p)
         wm_proto_reply_error(p, WM_PROTO_E_DATA_CRC, crc);
         return;
     }
+    p->run_crc = crc;
     wm_proto_reply_ok(p);
     out_flush(p);
     run_job(p);
@@ -283,7 +285,12 @@ static void handle(wm_proto *p)
     case WM_PROTO_T_DATA: wm_proto_do_data(p); break;
     case WM_PROTO_T_RUN: do_run(p); break;
     case WM_PROTO_T_BAUD: do_baud(p); break;
-    case WM_PROTO_T_ACK: break; /* a late answer to a job that is over */
+    case WM_PROTO_T_ACK: break;       /* a late answer to a job that is over */
+    case WM_PROTO_T_KEEPALIVE: break; /* never answered (the session clock restarts, as for every frame) */
+    case WM_PROTO_T_RESUME:           /* no job to resume (it ended, or another host's HELLO ended it) */
+        if (p->f_len != WM_PROTO_RESUME_BYTES) wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        else wm_proto_reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        break;
     default:
         /* the device's own types (an echo on the line) are ignored; anything else is unknown */
         if (p->f_type < 0x80u) wm_proto_reply_error(p, WM_PROTO_E_BAD_TYPE, p->f_type);
@@ -294,22 +301,60 @@ static void handle(wm_proto *p)
 /* ---------------------------------------------------------------------------------------------- */
 /* During the job */
 
+/* ACK.chunk or RESUME.chunk: the MESH tail from now on (0: the largest) */
+static void set_chunk(wm_proto *p, uint32_t c)
+{
+    uint32_t most = p->caps.max_payload - WM_PROTO_MESH_BYTES;
+    p->chunk = (uint16_t)(c == 0 || c > most ? most : c < WM_PROTO_MIN_CHUNK ? WM_PROTO_MIN_CHUNK : c);
+}
+
+/* RESUME while the job waits for (kind, index): 1 when it stands for that ACK (a level from the host's
+ * bytes on), 0 otherwise (DONE's wait: DONE again at once; another job, or a level the device does not
+ * wait for: ERROR BAD_STATE, the job goes on). */
+static int resume(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
+{
+    const uint8_t *r = p->f_pay;
+    if (p->f_len != WM_PROTO_RESUME_BYTES) {
+        wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+        return 0;
+    }
+    if (get32(r + WM_PROTO_RESUME_CRC) != p->run_crc) {
+        wm_proto_reply_error(p, WM_PROTO_E_BAD_STATE, p->state);
+        return 0;
+    }
+    set_chunk(p, get16(r + WM_PROTO_RESUME_CHUNK));
+    if (kind == WM_PROTO_T_DONE) {
+        p->again_now = 1;
+        return 0;
+    }
+    if (r[WM_PROTO_RESUME_INDEX] != index) {
+        wm_proto_reply_error(p, WM_PROTO_E_BAD_STATE, p->levels_sent);
+        return 0;
+    }
+    *have = get32(r + WM_PROTO_RESUME_HAVE);
+    if (*have > p->ltotal) *have = p->ltotal;
+    p->lwant = 0;
+    p->lresume = 1; /* the host has no LEVEL_END of this level (else it would have acknowledged it) */
+    return 1;
+}
+
 /* A frame that arrived while the job waits: 1 when it is the ACK of (kind, index), with *have. */
 static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
 {
     switch (p->f_type) {
+    case WM_PROTO_T_KEEPALIVE: return 0;
+    case WM_PROTO_T_RESUME: return resume(p, kind, index, have);
     case WM_PROTO_T_ACK:
         if (p->f_len != WM_PROTO_ACK_BYTES) {
             wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
             return 0;
         }
         if (p->f_pay[WM_PROTO_ACK_KIND] == kind && p->f_pay[WM_PROTO_ACK_INDEX] == index) {
-            uint32_t c = get16(p->f_pay + WM_PROTO_ACK_CHUNK), most = p->caps.max_payload - WM_PROTO_MESH_BYTES;
             *have = get32(p->f_pay + WM_PROTO_ACK_HAVE);
             if (kind == WM_PROTO_T_LEVEL_END) {
                 /* a host on a lossy line asks for smaller frames (and only the bytes it misses) */
                 p->lwant = get32(p->f_pay + WM_PROTO_ACK_WANT);
-                p->chunk = (uint16_t)(c == 0 || c > most ? most : c < WM_PROTO_MIN_CHUNK ? WM_PROTO_MIN_CHUNK : c);
+                set_chunk(p, get16(p->f_pay + WM_PROTO_ACK_CHUNK));
             }
             return 1;
         }
@@ -345,9 +390,9 @@ static int job_frame(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have)
     }
 }
 
-int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, int *tries,
-                      void (*again)(wm_proto *))
+int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, void (*again)(wm_proto *))
 {
+    uint64_t heard = now(p), limit = ms_to_cycles(p, 1000u * p->caps.link_timeout_s);
     for (;;) {
         int r = wm_proto_rx_frame(p, WM_PROTO_ACK_TIMEOUT_MS);
         if (r < 0) {
@@ -355,15 +400,20 @@ int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, 
             return 0;
         }
         if (r == 0) {
-            if (++*tries > WM_PROTO_ACK_RETRIES) {
+            if (now(p) - heard >= limit) { /* the host is gone: not a pause */
                 p->abort = ABORT_NO_ACK;
                 return 0;
             }
             again(p);
             continue;
         }
+        heard = now(p);
         if (job_frame(p, kind, index, have)) return 1;
         if (p->abort) return 0;
+        if (p->again_now) {
+            p->again_now = 0;
+            again(p);
+        }
     }
 }
 
@@ -376,10 +426,11 @@ static void send_done(wm_proto *p)
 static void run_job(wm_proto *p)
 {
     uint32_t detail = 0, have = 0;
-    int rc, tries = 0;
+    int rc;
     uint8_t *b = p->done;
     p->state = WM_PROTO_STATE_RUNNING;
     p->abort = 0;
+    p->again_now = 0;
     p->levels_sent = 0;
     p->chunk = (uint16_t)(p->caps.max_payload - WM_PROTO_MESH_BYTES); /* until the host asks for less */
     p->e_max = p->triangles = p->vertices = 0;
@@ -421,7 +472,7 @@ static void run_job(wm_proto *p)
     wm_proto_send_progress(p, WM_PROTO_STAGE_DONE, 0);
     if (p->abort != ABORT_NO_ACK) { /* a host that stopped answering gets one DONE, no wait */
         send_done(p);
-        wm_proto_wait_ack(p, WM_PROTO_T_DONE, 0, &have, &tries, send_done);
+        wm_proto_wait_ack(p, WM_PROTO_T_DONE, 0, &have, send_done);
     } else {
         send_done(p);
     }
@@ -442,6 +493,7 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
     if (p->caps.max_payload < WM_PROTO_MIN_PAYLOAD || p->caps.max_payload > WM_PROTO_MAX_PAYLOAD)
         p->caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     if (p->caps.max_levels > WM_PROTO_MAX_LEVELS) p->caps.max_levels = WM_PROTO_MAX_LEVELS;
+    if (p->caps.link_timeout_s == 0) p->caps.link_timeout_s = WM_PROTO_LINK_TIMEOUT_S;
     p->heights = heights;
     p->job_fn = job;
     p->job_ctx = job_ctx;

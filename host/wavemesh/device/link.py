@@ -234,6 +234,21 @@ class Link:
         self._fd = _waitable(self.port)
 
     # --- lifetime --------------------------------------------------------------------------------------
+    @property
+    def reopenable(self) -> bool:
+        """A port this link opened from a URL (it can open it again after the connection broke)."""
+        return self._own
+
+    def reopen(self) -> None:
+        """Close the port and open the URL again (a socket's new connection; the same baud), with an
+        empty receive side.  LinkError when it cannot be opened now."""
+        baud = self.baud
+        self.close()
+        self.port = open_port(self.url, baud)
+        self.decoder = SlipDecoder()
+        self.pending = []
+        self._fd = _waitable(self.port)
+
     def close(self) -> None:
         if self._own:
             try:

@@ -28,7 +28,7 @@ import numpy as np
 
 from wavemesh.device import protocol as P
 from wavemesh.device.coding import SampleEncoder, decode_level_body
-from wavemesh.device.link import DEFAULT_BAUD, Frame, Link, LinkTimeout
+from wavemesh.device.link import DEFAULT_BAUD, Frame, Link, LinkError, LinkTimeout
 from wavemesh.errors import WavemeshError
 from wavemesh.mesh import Mesh
 
@@ -47,8 +47,10 @@ class Timeouts:
     attempts: int = 5  # ... this many times over (repeated every resend interval) before giving up
     ack: float | None = None  # s: the resend interval; None: protocol.host_resend_s of the device's HELLO
     data_retries: int = 8  # upload: rewinds (a NAK, a probe finding a loss) without progress, then give up
-    level_retries: int = 16  # requests for the rest of one level without progress before giving up
+    level_retries: int = 40  # requests for the rest of one level without progress before giving up
     job: float = 120.0  # s the device may stay silent while it computes
+    deadline: float | None = None  # s for the whole session (sync to DONE); None: each wait bounded alone
+    reconnects: int = 8  # a connection lost during the job: reopened and the job resumed this many times
 
 
 DEFAULT_TIMEOUTS = Timeouts()
@@ -64,10 +66,15 @@ SMALLEST_TAIL = 64  # bytes of samples or level stream in one frame, at the leas
 GROW_AFTER = 2  # windows (DATA) or levels (MESH) without a loss before frames double again
 WANT_SPAN = 8  # holes of a level within this many frames of the first are asked for in one ACK
 # The device has written a level long before its bytes arrive when the line buffers (a socket, a USB
-# bridge) and stalls; it waits ACK_TIMEOUT_MS for the ACK, then repeats LEVEL_END, and gives up after
-# ACK_RETRIES.  So while MESH frames still come the host writes a STATUS (its answer is ignored) every
-# KEEPALIVE_S: the device, reading again, hears it and restarts its wait.
-KEEPALIVE_S = P.ACK_TIMEOUT_MS / 2000
+# bridge) and stalls; it repeats LEVEL_END after ACK_TIMEOUT_MS without a frame, and ends the job with
+# NO_ACK only after its link timeout (HELLO_REPLY.link_timeout_s) without one.  So while a job runs the
+# host writes KEEPALIVE (never answered) whenever it wrote nothing for KEEPALIVE_S, and every
+# FLOW_KEEPALIVE_S while MESH frames still come (the device, reading again, hears it and does not
+# repeat LEVEL_END for nothing): a pause of the line or of the host, however long its parts add up to,
+# never ends the job; only a silence longer than the link timeout does.
+KEEPALIVE_S = P.KEEPALIVE_MS / 1000
+FLOW_KEEPALIVE_S = P.ACK_TIMEOUT_MS / 2000
+RECONNECT_PAUSE_S = 0.2  # between attempts to open a connection that was lost during the job
 
 
 class DeviceError(WavemeshError):
@@ -81,6 +88,10 @@ class DeviceError(WavemeshError):
 
 class ProtocolError(WavemeshError):
     """The device sent something the protocol does not allow (a firmware bug, or another protocol)."""
+
+
+class DeadlineError(LinkTimeout):
+    """The session ran past the deadline the user set (Timeouts.deadline, ``--deadline``)."""
 
 
 @dataclass(frozen=True)
@@ -108,6 +119,7 @@ class DeviceInfo:
     write_timeout_ms: int  # 0: the device never gives up on a peer that does not read (a UART)
     div_min: int = 0  # BAUD: the rates clk_hz / d for d in div_min..div_max
     div_max: int = 0  # 0: the device cannot switch its rate
+    link_timeout_s: int = 0  # a job ends with NO_ACK after this silence of the host (0: not stated)
 
     @classmethod
     def from_fields(cls, f: dict) -> DeviceInfo:
@@ -116,7 +128,7 @@ class DeviceInfo:
                    f["max_width"], f["max_height"], f["max_samples"], f["tri_capacity"], f["max_levels"],
                    f["window"], f["max_payload"], f["clk_hz"], f["baud"], f["features"], f["byte_timeout_ms"],
                    f["ack_timeout_ms"], f["session_timeout_ms"], f["ack_retries"], f["idle_timeout_ms"],
-                   f["write_timeout_ms"], f["div_min"], f["div_max"])
+                   f["write_timeout_ms"], f["div_min"], f["div_max"], f["link_timeout_s"])
 
     def reachable(self, baud: int) -> tuple[int, int] | None:
         """(divisor, the device's rate) nearest to baud, or None when the device cannot switch or lands
@@ -256,7 +268,8 @@ ERROR_HINTS = {
     P.ErrorCode.TIMEOUT: "the link stalled for seconds; try again (a lower --baud on a serial line)",
     P.ErrorCode.CAPACITY: "set a smaller --max-triangles, raise --zeta, or use more --levels",
     P.ErrorCode.DATA_CRC: "the link corrupts data that the frame checks did not catch; try again",
-    P.ErrorCode.NO_ACK: "the link dropped the host's acknowledgements; try again",
+    P.ErrorCode.NO_ACK: "the device heard nothing from the host for its link timeout; check the link, "
+                        "then try again",
     P.ErrorCode.BUSY: "another program (another wavemesh) is using the device: wait until it is done, "
                       "then try again",
 }
@@ -298,6 +311,10 @@ class Device:
         self.t = timeouts
         self.seq = random.randrange(256)  # a fresh session never looks like a repeat of the last one
         self.info: DeviceInfo | None = None
+        self.t0 = time.monotonic()
+        self.deadline = None if timeouts.deadline is None else self.t0 + timeouts.deadline
+        self.where = "before the device answered"  # for the deadline's message
+        self.resumes = 0  # connections reopened and the job resumed
 
     def close(self) -> None:
         self.link.close()
@@ -307,6 +324,26 @@ class Device:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+    def _read(self, timeout: float) -> Frame:
+        """The next valid frame within ``timeout`` s (LinkTimeout), and never past the deadline
+        (DeadlineError)."""
+        if self.deadline is not None:
+            left = self.deadline - time.monotonic()
+            if left <= 0:
+                raise self._late()
+            if timeout >= left:
+                try:
+                    return self.link.read_frame(left)
+                except LinkTimeout:
+                    raise self._late() from None
+        return self.link.read_frame(timeout)
+
+    def _late(self) -> DeadlineError:
+        return DeadlineError(f"the device did not finish within the deadline of {self.t.deadline:g} s "
+                             f"({self.where})",
+                             "the link loses or stalls too much for that deadline: raise --deadline, or "
+                             "check the cable and --baud")
 
     def _next_seq(self) -> int:
         self.seq = (self.seq + 1) & 0xFF
@@ -347,7 +384,9 @@ class Device:
             deadline = min(now + every, give_up)
             while True:
                 try:
-                    f = self.link.read_frame(max(0.0, deadline - time.monotonic()))
+                    f = self._read(max(0.0, deadline - time.monotonic()))
+                except DeadlineError:
+                    raise
                 except LinkTimeout:
                     break
                 if f.type == P.FrameType.ERROR and f.fields()["request"] == 0:
@@ -370,6 +409,8 @@ class Device:
         for _ in range(attempts):
             try:
                 f = self.request(P.FrameType.HELLO, payload, P.FrameType.HELLO_REPLY, timeout, 1)
+            except DeadlineError:
+                raise
             except LinkTimeout:
                 continue
             info = DeviceInfo.from_fields(f.fields())
@@ -492,7 +533,9 @@ class Device:
                 in_flight.append(sent)
                 write_by = time.monotonic() + every
             try:
-                f = self.link.read_frame(max(0.0, write_by - time.monotonic()))
+                f = self._read(max(0.0, write_by - time.monotonic()))
+            except DeadlineError:
+                raise
             except LinkTimeout:
                 if time.monotonic() - heard >= silence:
                     raise LinkTimeout(f"the device stopped answering during the upload ({acked} of {total} "
@@ -533,6 +576,7 @@ class Device:
                 clean += done
                 if clean >= GROW_AFTER * info.window and budget < largest:
                     budget, clean = min(largest, 2 * budget), 0
+                self.where = f"during the upload: {acked} of {total} samples stored"
                 if bar:
                     bar.update(acked, f"{2 * acked // 1024} of {2 * total // 1024} KiB")
             if taken == epoch and got < before and sent > got:
@@ -543,15 +587,48 @@ class Device:
     def _ack(self, kind: int, index: int, have: int, chunk: int = 0, want: int = 0) -> None:
         payload = P.ACK.pack(kind=kind, index=index, have=have, chunk=chunk, want=want)
         now = time.monotonic()
-        if payload == self._last_ack[0] and now - self._last_ack[1] < KEEPALIVE_S:
+        if payload == self._last_ack[0] and now - self._last_ack[1] < FLOW_KEEPALIVE_S:
             return  # a LEVEL_END repeated while the first was on its way: this answer is on its way too
         self._last_ack = (payload, now)
         self._wrote = now
         self.link.write_frame(P.FrameType.ACK, self._next_seq(), payload)
 
+    def _keepalive(self) -> None:
+        self._wrote = time.monotonic()
+        self.link.write_frame(P.FrameType.KEEPALIVE, self._next_seq())
+
+    def _reconnect(self, crc: int, index: int, have: int, chunk: int, error: LinkError) -> None:
+        """The connection broke during the job: open it again (the device keeps the job for its link
+        timeout) and RESUME from the bytes the host has.  Raises ``error`` when that cannot be."""
+        if not self.link.reopenable or self.resumes >= self.t.reconnects:
+            raise error
+        window = min(self.info.link_timeout_s or P.LINK_TIMEOUT_S, self.t.reply * self.t.attempts)
+        give_up = time.monotonic() + window
+        if self.deadline is not None:
+            give_up = min(give_up, self.deadline)
+        while True:
+            time.sleep(RECONNECT_PAUSE_S)
+            try:
+                self.link.reopen()
+                break
+            except LinkError:
+                if time.monotonic() >= give_up:
+                    raise error from None
+        self.resumes += 1
+        self._resume = (P.RESUME.pack(crc=crc, index=index, chunk=chunk, have=have), time.monotonic(), error)
+        self._send_resume()
+
+    def _send_resume(self) -> None:
+        self._wrote = time.monotonic()
+        self.link.write_frame(P.FrameType.RESUME, self._next_seq(), self._resume[0])
+
     def run(self, crc: int, width: int, height: int, on_level=None, on_progress=None) -> tuple[list, dict]:
         """RUN, then the levels as they come (on_level(LevelResult) for each) until DONE.
-        Returns (levels, DONE's fields); DeviceError when the job failed."""
+        Returns (levels, DONE's fields); DeviceError when the job failed.
+
+        While the job runs the host writes KEEPALIVE whenever it wrote nothing for KEEPALIVE_S (so the
+        device tells a pause from a host that is gone), and a connection lost on the way is opened again
+        and the job resumed where the host's bytes end (RESUME)."""
         seq = self._next_seq()
         payload = P.RUN.pack(crc=crc)
         self.link.write_frame(P.FrameType.RUN, seq, payload)
@@ -572,29 +649,73 @@ class Device:
         last_have = -1
         every = min(self.t.reply, self.resend_s)  # RUN again (the device waits for it in a session)
         give_up = t0 + self.t.reply * self.t.attempts
+        link_s = self.info.link_timeout_s or P.LINK_TIMEOUT_S
+        quiet_s = min(KEEPALIVE_S, link_s / 4)  # the longest the host stays silent in the job
+        self.where = "before the first level"
+        self._resume = None  # (RESUME's payload, when the connection was opened again, why) until an answer
         while True:
-            wait = (min(every, give_up - last) if not started else self.t.job) - (time.monotonic() - last)
             try:
-                f = self.link.read_frame(max(0.0, wait))
+                now = time.monotonic()
+                if self._resume and now - self._resume[1] >= self.t.reply * self.t.attempts:
+                    raise LinkTimeout(f"{self._resume[2]}; the device did not answer after it was opened "
+                                      "again", "the device stopped (or another program holds it): run the "
+                                      "job again") from None
+                if self._resume and now - self._wrote >= every:
+                    self._send_resume()
+                elif started and now - self._wrote >= quiet_s:
+                    self._keepalive()
+                wait = (min(every, give_up - last) if not started else self.t.job) - (now - last)
+                if started:
+                    wait = min(wait, self._wrote + (every if self._resume else quiet_s) - now)
+                try:
+                    f = self._read(max(0.0, wait))
+                except DeadlineError:
+                    raise
+                except LinkTimeout:
+                    now = time.monotonic()
+                    if started and now - last < self.t.job:
+                        continue  # time to write a KEEPALIVE
+                    if not started and now < give_up - 1e-3:
+                        runs += 1
+                        self.link.write_frame(P.FrameType.RUN, seq, payload)  # same seq: not run twice
+                        last = time.monotonic()
+                        continue
+                    if not started:
+                        raise LinkTimeout(f"no answer to RUN from {self.link.url} after {runs} attempts",
+                                          "the device stopped answering") from None
+                    where = f"after level {levels[-1].level}" if levels else "before the first level"
+                    raise LinkTimeout(f"the device sent nothing for {self.t.job:g} s {where}",
+                                      "a slow device (a simulated board) may need a longer --timeout"
+                                      ) from None
+            except DeadlineError:
+                raise
             except LinkTimeout:
-                if not started and time.monotonic() < give_up - 1e-3:
-                    runs += 1
-                    self.link.write_frame(P.FrameType.RUN, seq, payload)  # same seq: not run twice
-                    last = time.monotonic()
-                    continue
+                raise
+            except LinkError as e:
                 if not started:
-                    raise LinkTimeout(f"no answer to RUN from {self.link.url} after {runs} attempts",
-                                      "the device stopped answering") from None
-                where = f"after level {levels[-1].level}" if levels else "before the first level"
-                raise LinkTimeout(f"the device sent nothing for {self.t.job:g} s {where}",
-                                  "a slow device (a simulated board) may need a longer --timeout") from None
+                    raise
+                have = got.find(0)
+                self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk, e)
+                last = time.monotonic()
+                continue
             last = time.monotonic()
+            self._resume = None
             t = f.type
             if t == P.FrameType.OK and f.seq == seq:
                 started = True
                 continue
             if t == P.FrameType.ERROR:
                 e = f.fields()
+                if e["request"] == P.FrameType.RESUME:
+                    raise DeviceError("the device no longer has the job (it ended, or another host started "
+                                      "one, while the connection was lost)", "run the job again",
+                                      e["code"], e["detail"])
+                if e["code"] == P.ErrorCode.BUSY and self.resumes:  # the device has not let the old one go
+                    have = got.find(0)
+                    self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk,
+                                    device_error(e["code"], e["detail"], e["request"]))
+                    last = time.monotonic()
+                    continue
                 if (e["request"] == P.FrameType.RUN and f.seq == seq) or e["request"] == 0:
                     raise device_error(e["code"], e["detail"], e["request"])
                 continue
@@ -602,77 +723,84 @@ class Device:
                 continue
             started = True
             x = f.fields()
-            if t == P.FrameType.PROGRESS:
-                if on_progress:
-                    on_progress(x)
-            elif t == P.FrameType.MESH:
-                if last - self._wrote >= KEEPALIVE_S:
-                    self.link.write_frame(P.FrameType.STATUS, self._next_seq())
-                    self._wrote = last
-                if x["index"] == len(levels):
-                    off, data = x["offset"], f.tail()
-                    end = off + len(data)
-                    if end <= limit:  # else not a level of this device: never asked for, ignored
-                        if end > len(buf):
-                            buf += bytes(end - len(buf))
-                            got += bytes(end - len(got))
-                        buf[off:end] = data
-                        got[off:end] = b"\1" * len(data)
-            elif t == P.FrameType.LEVEL_END:
-                idx = x["index"]
-                if idx < len(levels):  # our ACK was lost: again
-                    self._ack(P.FrameType.LEVEL_END, idx, x["total"], chunk)
-                    continue
-                if idx > len(levels):
-                    raise ProtocolError(f"level index {idx} after {len(levels)} levels")
-                total = x["total"]
-                if total > limit:
-                    raise ProtocolError(f"level {x['level']}: a stream of {total} bytes from a device of "
-                                        f"{self.info.tri_capacity} triangles")
-                if len(buf) < total:
-                    buf += bytes(total - len(buf))
-                    got += bytes(total - len(got))
-                have = got.find(0, 0, total)
-                if have < 0 and zlib.crc32(buf[:total]) == x["crc"]:
-                    hdr, mesh, stats, cycles = parse_level(bytes(buf[:total]), width, height)
-                    lv = LevelResult(hdr["level"], idx, mesh, stats, cycles, total, time.monotonic() - t0)
-                    levels.append(lv)
-                    lossless = lossless + 1 if first_pass else 0
-                    if lossless >= GROW_AFTER and chunk < largest:
-                        chunk, lossless = min(largest, 2 * chunk), 0
-                    self._ack(P.FrameType.LEVEL_END, idx, total, chunk)
-                    buf, got = bytearray(), bytearray()
-                    stale_asks, last_have, first_pass = 0, -1, True
-                    if on_level:
-                        on_level(lv)
-                    continue
-                if have < 0:  # all there but not right: everything again
-                    got[:] = bytes(len(got))
-                    have = 0
-                first_pass, lossless = False, 0
-                chunk = max(min(SMALLEST_TAIL, largest), chunk // 2)
-                if have > last_have:
-                    last_have, stale_asks = have, 0
-                else:
-                    stale_asks += 1
-                    if stale_asks > self.t.level_retries:
-                        raise LinkTimeout(f"level {x['level']} does not get through: {have} of {total} "
-                                          f"bytes after {stale_asks} requests",
-                                          "the link loses too much; check the cable and --baud")
-                # the holes that start within WANT_SPAN frames of the first, in one request
-                end, start = have, have
-                while 0 <= start < min(total, have + WANT_SPAN * chunk):
-                    end = got.find(1, start, total)
-                    end = total if end < 0 else end
-                    start = got.find(0, end, total)
-                self._ack(P.FrameType.LEVEL_END, idx, have, chunk, end - have)
-            else:  # DONE
-                self._ack(P.FrameType.DONE, 0, 0)
-                if x["status"] != 0:
-                    raise device_error(x["status"], x["detail"])
-                if x["levels"] != len(levels):
-                    raise ProtocolError(f"DONE says {x['levels']} levels, {len(levels)} arrived")
-                return levels, x
+            try:
+                if t == P.FrameType.PROGRESS:
+                    if on_progress:
+                        on_progress(x)
+                elif t == P.FrameType.MESH:
+                    if last - self._wrote >= FLOW_KEEPALIVE_S:
+                        self._keepalive()
+                    if x["index"] == len(levels):
+                        off, data = x["offset"], f.tail()
+                        end = off + len(data)
+                        if end <= limit:  # else not a level of this device: never asked for, ignored
+                            if end > len(buf):
+                                buf += bytes(end - len(buf))
+                                got += bytes(end - len(got))
+                            buf[off:end] = data
+                            got[off:end] = b"\1" * len(data)
+                elif t == P.FrameType.LEVEL_END:
+                    idx = x["index"]
+                    if idx < len(levels):  # our ACK was lost: again
+                        self._ack(P.FrameType.LEVEL_END, idx, x["total"], chunk)
+                        continue
+                    if idx > len(levels):
+                        raise ProtocolError(f"level index {idx} after {len(levels)} levels")
+                    total = x["total"]
+                    if total > limit:
+                        raise ProtocolError(f"level {x['level']}: a stream of {total} bytes from a device of "
+                                            f"{self.info.tri_capacity} triangles")
+                    if len(buf) < total:
+                        buf += bytes(total - len(buf))
+                        got += bytes(total - len(got))
+                    have = got.find(0, 0, total)
+                    if have < 0 and zlib.crc32(buf[:total]) == x["crc"]:
+                        hdr, mesh, stats, cycles = parse_level(bytes(buf[:total]), width, height)
+                        lv = LevelResult(hdr["level"], idx, mesh, stats, cycles, total, time.monotonic() - t0)
+                        levels.append(lv)
+                        self.where = f"{len(levels)} levels arrived, the last level {lv.level}"
+                        lossless = lossless + 1 if first_pass else 0
+                        if lossless >= GROW_AFTER and chunk < largest:
+                            chunk, lossless = min(largest, 2 * chunk), 0
+                        self._ack(P.FrameType.LEVEL_END, idx, total, chunk)
+                        buf, got = bytearray(), bytearray()
+                        stale_asks, last_have, first_pass = 0, -1, True
+                        if on_level:
+                            on_level(lv)
+                        continue
+                    if have < 0:  # all there but not right: everything again
+                        got[:] = bytes(len(got))
+                        have = 0
+                    first_pass, lossless = False, 0
+                    chunk = max(min(SMALLEST_TAIL, largest), chunk // 2)
+                    if have > last_have:
+                        last_have, stale_asks = have, 0
+                    else:
+                        stale_asks += 1
+                        if stale_asks > self.t.level_retries:
+                            raise LinkTimeout(f"level {x['level']} does not get through: {have} of {total} "
+                                              f"bytes after {stale_asks} requests",
+                                              "the link loses too much; check the cable and --baud")
+                    # the holes that start within WANT_SPAN frames of the first, in one request
+                    end, start = have, have
+                    while 0 <= start < min(total, have + WANT_SPAN * chunk):
+                        end = got.find(1, start, total)
+                        end = total if end < 0 else end
+                        start = got.find(0, end, total)
+                    self._ack(P.FrameType.LEVEL_END, idx, have, chunk, end - have)
+                else:  # DONE
+                    self._ack(P.FrameType.DONE, 0, 0)
+                    if x["status"] != 0:
+                        raise device_error(x["status"], x["detail"])
+                    if x["levels"] != len(levels):
+                        raise ProtocolError(f"DONE says {x['levels']} levels, {len(levels)} arrived")
+                    return levels, x
+            except LinkTimeout:
+                raise
+            except LinkError as e:  # writing an ACK or a KEEPALIVE found the connection gone
+                have = got.find(0)
+                self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk, e)
+                last = time.monotonic()
 
 
 def with_timeouts(t: Timeouts, **kw) -> Timeouts:

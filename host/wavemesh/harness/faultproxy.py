@@ -212,15 +212,20 @@ class FaultProxy:
 
 
 class FrameTap:
-    """A proxy for one connection that forwards whole frames, each after ``on_frame(direction, frame)``
-    (direction "up": host to device, "down"; a wavemesh.device.link.Frame) said True: a scripted fault (drop
-    one chosen frame) or a trigger (stop the device when the first MESH frame passes).  Bytes that are
-    not a valid frame are dropped."""
+    """A proxy that forwards whole frames, each after ``on_frame(direction, frame)`` (direction "up":
+    host to device, "down"; a wavemesh.device.link.Frame) said True: a scripted fault (drop one chosen
+    frame, or hold the line: the callback sleeps) or a trigger (stop the device when the first MESH
+    frame passes).  ``CUT`` instead: the connection breaks there (both sides closed; the next client
+    connection is forwarded anew).  Bytes that are not a valid frame are dropped.  ``connections``
+    counts the client connections forwarded."""
+
+    CUT = "cut"
 
     def __init__(self, upstream: tuple[str, int], on_frame):
         self.upstream, self.on_frame = upstream, on_frame
         self.listener = socket.create_server(("127.0.0.1", 0))
         self.port = self.listener.getsockname()[1]
+        self.connections = 0
         self._socks: list[socket.socket] = []
         threading.Thread(target=self._serve, daemon=True).start()
 
@@ -229,15 +234,21 @@ class FrameTap:
         return f"socket://127.0.0.1:{self.port}"
 
     def _serve(self) -> None:
-        try:
-            client, _ = self.listener.accept()
-            dev = socket.create_connection(self.upstream, timeout=5)
-        except OSError:
-            return
-        dev.settimeout(None)
-        self._socks += [client, dev]
-        for a, b, name in ((client, dev, "up"), (dev, client, "down")):
-            threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
+        while True:
+            try:
+                client, _ = self.listener.accept()
+            except OSError:
+                return
+            try:
+                dev = socket.create_connection(self.upstream, timeout=5)
+            except OSError:  # the device is gone: this client hears it at once
+                _close(client)
+                continue
+            dev.settimeout(None)
+            self.connections += 1
+            self._socks += [client, dev]
+            for a, b, name in ((client, dev, "up"), (dev, client, "down")):
+                threading.Thread(target=self._pump, args=(a, b, name), daemon=True).start()
 
     def _pump(self, src: socket.socket, dst: socket.socket, name: str) -> None:
         dec = SlipDecoder()
@@ -250,7 +261,10 @@ class FrameTap:
                         f = parse_frame(raw)
                     except FrameError:
                         continue
-                    if self.on_frame(name, f):
+                    verdict = self.on_frame(name, f)
+                    if verdict == self.CUT:
+                        return
+                    if verdict:
                         dst.sendall(slip_encode(raw))
         except OSError:
             pass
@@ -284,6 +298,7 @@ class Run:
     injected: int  # faults injected, both ways
     frames: int  # frames through the proxy, both ways
     message: str = ""  # the error line, or what was wrong
+    delay_s: float = 0.0  # seconds the injected delays held the line, both ways added
 
 
 def stream_once(argv: list[str], out: Path, ref: Path, run_limit: float) -> tuple[str, float, str]:
@@ -332,7 +347,8 @@ def campaign(upstream: tuple[str, int], src: Path, opts: list[str], ref: Path, f
         with FaultProxy(upstream, f) as proxy:
             argv = ["stream", str(src), *opts, "--port", proxy.url, "-o", str(out), "-q"]
             outcome, t, msg = stream_once(argv, out, ref, run_limit)
-            run = Run(f, outcome, t, len(proxy.log), proxy.frames, msg)
+            delay = sum(i.size for i in proxy.log if i.kind == "delay") / 1000
+            run = Run(f, outcome, t, len(proxy.log), proxy.frames, msg, delay)
         runs.append(run)
         if on_run:
             on_run(run)
