@@ -25,8 +25,11 @@ PARTIAL = ".wavemesh-partial-"
 
 
 def start(*args, memory=None, cwd=None):
-    """The command in a subprocess (its own session: a signal to it reaches it alone)."""
+    """The command in a subprocess (its own session: a signal to it reaches it alone), as a terminal's
+    foreground job: Ctrl-C not ignored even where pytest inherited it ignored (a background job of a shell
+    without job control), which the command, like every Python program, would keep."""
     def limit():
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
         if memory is not None:
             resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
 
@@ -322,6 +325,39 @@ def test_sigterm_ends_a_tiled_runs_workers(tmp_path, how):
             if alive(w):
                 os.kill(w, signal.SIGKILL)
     assert entries(tmp_path) == ["big.npy"]
+
+
+def test_an_ignored_sighup_stays_ignored_in_the_run_and_its_workers():
+    """nohup: a run started with SIGHUP ignored keeps it ignored (handle_termination), and so do its tile
+    workers (_worker_start, in a forked child here), which let the signals blocked over their fork through
+    (a Ctrl-C just after the fork was a KeyboardInterrupt traceback in a worker)."""
+    from wavemesh.io.outputs import handle_termination
+    from wavemesh.tiles.runner import _WORKER_SIGNALS, _worker_start
+
+    old = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    try:
+        with handle_termination():
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+            assert callable(signal.getsignal(signal.SIGTERM))  # SIGTERM unwinds as Ctrl-C
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
+            pid = os.fork()
+            if pid == 0:  # a worker's start: exit status 0 when every disposition and the mask are right
+                code = 1
+                try:
+                    _worker_start(os.getppid())
+                    right = (signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+                             and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+                             and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+                             and not set(_WORKER_SIGNALS) & signal.pthread_sigmask(signal.SIG_BLOCK, []))
+                    code = 0 if right else 3
+                finally:
+                    os._exit(code)
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+            _, status = os.waitpid(pid, 0)
+            assert os.waitstatus_to_exitcode(status) == 0
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, old)
 
 
 # --- 5. readers: regular files, bounded by the header and the file ---------------------------------

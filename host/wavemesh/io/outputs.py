@@ -73,7 +73,9 @@ class Terminated(KeyboardInterrupt):
 def handle_termination():
     """SIGTERM and SIGHUP raise :class:`Terminated` (a KeyboardInterrupt) in the block, so that every
     ``with Outputs()`` and every worker pool unwinds as on Ctrl-C; the previous handlers come back after.
-    Only in the main thread (elsewhere the block runs as it is)."""
+    A signal the process was started with ignored stays ignored (``nohup``: SIGHUP), as Python leaves an
+    ignored SIGINT (a background job of a shell script) ignored.  Only in the main thread (elsewhere the
+    block runs as it is)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -81,7 +83,8 @@ def handle_termination():
     def raise_terminated(signum, frame):
         raise Terminated(signum)
 
-    old = {s: signal.signal(s, raise_terminated) for s in (signal.SIGTERM, signal.SIGHUP)}
+    old = {s: signal.signal(s, raise_terminated) for s in (signal.SIGTERM, signal.SIGHUP)
+           if signal.getsignal(s) is not signal.SIG_IGN}
     try:
         yield
     finally:

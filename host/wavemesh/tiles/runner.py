@@ -16,6 +16,7 @@ from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
+_WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 
 def connect(address: str):
     """A distributed.Client of the Dask scheduler at ``address``, or WavemeshError."""
@@ -96,12 +97,20 @@ class Runner:
             # fork: the workers start from this process as it is (the library loaded; a script that calls
             # this needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
             ctx = multiprocessing.get_context("fork")
-            for _ in range(self.workers):
-                here, there = ctx.Pipe()
-                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
-                proc.start()
-                there.close()
-                self.pool.append((proc, here))
+            # the signals held back over the forks: a worker starts with them blocked and unblocks them
+            # once its own handlers are set (_worker_start), so a Ctrl-C just after the fork is not a
+            # KeyboardInterrupt traceback in the worker; here they are raised after the last fork, every
+            # worker in the pool by then (ended by __exit__)
+            held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
+            try:
+                for _ in range(self.workers):
+                    here, there = ctx.Pipe()
+                    proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
+                    proc.start()
+                    there.close()
+                    self.pool.append((proc, here))
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
         todo = iter(enumerate(tasks))
         busy: dict = {}  # pipe -> (process, task number)
 
@@ -160,11 +169,14 @@ def _worker_loop(pipe, parent: int) -> None:
 
 def _worker_start(parent: int) -> None:
     """A pool worker's start: Ctrl-C is the parent's to handle (it ends the workers, _end_workers), SIGTERM
-    ends the worker at once, and the worker ends when its parent does, even one killed outright (Linux's
-    PR_SET_PDEATHSIG)."""
+    ends the worker at once (SIGHUP too, unless the run ignores it: nohup), and the worker ends when its
+    parent does, even one killed outright (Linux's PR_SET_PDEATHSIG).  The signals, blocked since the fork
+    (_pool_map), are let through once these are set."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
+        signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _WORKER_SIGNALS)
     if sys.platform.startswith("linux"):
         try:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
