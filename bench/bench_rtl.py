@@ -24,7 +24,7 @@ RTL = ROOT / "rtl"
 
 TITLE = "Filter bank (haar_bank)"
 PARAMS = {"MAX_WIDTH": 512, "MAX_HEIGHT": 512, "MAX_LEVELS": 7}  # the defaults
-SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "haar_linebuf", "haar_level", "wm_fifo", "haar_bank")]
+SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "wm_linebuf", "haar_level", "wm_fifo", "haar_bank")]
 # (target, parameters): the defaults on both, and a smaller bank on the UP5K (6 levels do not fit
 # either, and nextpnr takes minutes to find that out)
 SYNTH = [("ecp5-85k", PARAMS), ("up5k", PARAMS), ("up5k", {**PARAMS, "MAX_LEVELS": 5})]

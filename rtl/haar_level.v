@@ -173,19 +173,24 @@ generate
     end
 endgenerate
 
-haar_linebuf #(
+// one address for both ports: a pair is written (even row) or read (odd row), never both in a cycle
+wire buf_wr_en = pair_done && !rec_row;
+wire buf_rd_en = pair_done && y[0] && !buf_wr_en;  // as one port: a write wins
+
+wm_linebuf #(
     .DEPTH(PAIRS),
     .ADDR_WIDTH(BX_WIDTH),
     .DATA_WIDTH(34)
 )
 linebuf_inst (
     .clk(clk),
-    .addr(pair_bx),
     // even row that is not the last: keep the pair for the row below
-    .wr_en(pair_done && !rec_row),
+    .wr_en(buf_wr_en),
+    .wr_addr(pair_bx),
     .wr_data({pair_s, pair_t}),
     // odd row: the pair above
-    .rd_en(pair_done && y[0]),
+    .rd_en(buf_rd_en),
+    .rd_addr(pair_bx),
     .rd_data(buf_rd_data)
 );
 
@@ -243,17 +248,18 @@ generate
         wire pair_f = in_flag || (x[0] && left_f_reg);
         wire buf_rd_f;
 
-        haar_linebuf #(
+        wm_linebuf #(
             .DEPTH(PAIRS),
             .ADDR_WIDTH(BX_WIDTH),
             .DATA_WIDTH(1)
         )
         flagbuf_inst (
             .clk(clk),
-            .addr(pair_bx),
-            .wr_en(pair_done && !rec_row),
+            .wr_en(buf_wr_en),
+            .wr_addr(pair_bx),
             .wr_data(pair_f),
-            .rd_en(pair_done && y[0]),
+            .rd_en(buf_rd_en),
+            .rd_addr(pair_bx),
             .rd_data(buf_rd_f)
         );
 

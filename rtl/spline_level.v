@@ -292,7 +292,7 @@ end
 wire wr_en = en && r_valid_reg && !r_flush_reg;
 wire [WORD-1:0] wr_word = {w_p, w_q, w_r};
 
-spline_linebuf #(
+wm_linebuf #(
     .DEPTH(MAX_WIDTH),
     .ADDR_WIDTH(X_WIDTH),
     .DATA_WIDTH(WORD)

@@ -34,7 +34,7 @@ RTL = ROOT / "rtl"
 GEN = ROOT / "build" / "gen"
 OUT = ROOT / "build" / "sim"
 
-CPP = ["board_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
+CPP = ["board_main.cpp", "sim_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
 # The firmware's protocol engine, compiled with the host's C compiler and linked in for its framing alone
 # (the bridge's ERROR BUSY frame, wm_proto_busy_frame: one source of the bytes for both devices).  Each
 # function in a section of its own and --gc-sections: what the bridge does not call (the engine, and
@@ -94,6 +94,7 @@ def sources(core) -> list[Path]:
     rtl = sorted(RTL.glob("*.v")) + sorted((RTL / "boards").glob("*.v"))
     return [SIM / "board_sim.v", SIM / "board_sim.vlt", SIM / "sdram_chip.v", *rtl, core.verilog_file(),
             RTL / "lint.vlt", *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
+            SIM / "sim_main.h",
             GEN / "wm_memmap.vh", *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
             PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
 
@@ -179,7 +180,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
     return _build(args, env, sources(core), outdir, exe, "the simulator", quiet)
 
 
-ICEBREAKER_CPP = ["icebreaker_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
+ICEBREAKER_CPP = ["icebreaker_main.cpp", "sim_main.cpp", "tcp_bridge.cpp", "uart_line.cpp"]
 
 
 def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
@@ -204,6 +205,7 @@ def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
     ]
     inputs = [SIM / "icebreaker_sim.v", *sorted(RTL.glob("*.v")), *sorted((RTL / "boards").glob("*.v")),
               RTL / "lint.vlt", *(SIM / c for c in ICEBREAKER_CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
+              SIM / "sim_main.h",
               *sorted(GEN.glob("*.vh")), *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
               GEN / "wm_protocol.h"]
     return _build(args, env, inputs, outdir, exe, "the iCEBreaker simulator", quiet)

@@ -15,7 +15,7 @@ import random
 import pytest
 from wavemesh.harness.rtl_runner import RTL, run
 
-SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "haar_linebuf", "haar_level", "wm_fifo", "haar_bank")]
+SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "wm_linebuf", "haar_level", "wm_fifo", "haar_bank")]
 
 # (idle, back-pressure) patterns of haar_bank_tb.pattern
 PATTERNS = [("none", "none"), ("none", "random"), ("random", "none"), ("random", "random"),

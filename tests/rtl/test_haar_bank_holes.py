@@ -5,7 +5,7 @@ haar_bank_holes_tb.py)."""
 
 from wavemesh.harness.rtl_runner import RTL, run
 
-SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "haar_linebuf", "haar_level", "wm_fifo", "haar_bank")]
+SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "wm_linebuf", "haar_level", "wm_fifo", "haar_bank")]
 
 
 def test_haar_bank_holes():

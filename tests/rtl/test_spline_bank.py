@@ -16,8 +16,8 @@ import pytest
 from test_haar_bank import TWO_PATTERNS, frames_for
 from wavemesh.harness.rtl_runner import RTL, run
 
-SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "haar_linebuf", "haar_level", "spline_linebuf",
-                                     "spline_level", "wm_fifo", "haar_bank")]
+SOURCES = [RTL / f"{m}.v" for m in ("haar_raster", "wm_linebuf", "haar_level", "spline_level", "wm_fifo",
+                                     "haar_bank")]
 
 
 def bank(frames, max_width, max_height, max_levels, idle="none", bp="none", testcase="run_frames",
