@@ -13,21 +13,21 @@ typedef struct config_range {
 
 static const config_range config_ranges[WM_PROTO_CONFIG_RANGES] = WM_PROTO_CONFIG_RANGE_TABLE;
 
+/* A CONFIG field of `bytes` bytes at c, little-endian. */
+static uint64_t field_value(const uint8_t *c, int bytes)
+{
+    return bytes == 8 ? get64(c) : bytes == 4 ? get32(c) : bytes == 2 ? get16(c) : c[0];
+}
+
 /* CONFIG's fields, checked one by one: 0, or the error code with *detail. */
 static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
 {
     const uint8_t *c = p->f_pay;
     const wm_proto_caps *cap = &p->caps;
     uint32_t w = get16(c + WM_PROTO_CONFIG_WIDTH), h = get16(c + WM_PROTO_CONFIG_HEIGHT);
-    uint32_t levels = c[WM_PROTO_CONFIG_LEVELS], metric = c[WM_PROTO_CONFIG_METRIC];
-    uint32_t nb = c[WM_PROTO_CONFIG_NEIGHBOURHOOD], k = c[WM_PROTO_CONFIG_ITERATIONS];
+    uint32_t levels = c[WM_PROTO_CONFIG_LEVELS];
     uint32_t flags = get32(c + WM_PROTO_CONFIG_FLAGS), tau = get32(c + WM_PROTO_CONFIG_TAU);
     uint32_t budget = get32(c + WM_PROTO_CONFIG_MAX_TRIANGLES), cap_tri = get32(c + WM_PROTO_CONFIG_CAPACITY);
-    uint32_t scale_m = get32(c + WM_PROTO_CONFIG_SCALE_M), scale_e = get32(c + WM_PROTO_CONFIG_SCALE_E);
-    uint32_t delta_p = get32(c + WM_PROTO_CONFIG_DELTA_P), alpha = get32(c + WM_PROTO_CONFIG_ALPHA);
-    uint32_t delta_c = get32(c + WM_PROTO_CONFIG_DELTA_C);
-    uint32_t slope_x_m = get32(c + WM_PROTO_CONFIG_SLOPE_X_M), slope_x_e = get32(c + WM_PROTO_CONFIG_SLOPE_X_E);
-    uint32_t slope_y_m = get32(c + WM_PROTO_CONFIG_SLOPE_Y_M), slope_y_e = get32(c + WM_PROTO_CONFIG_SLOPE_Y_E);
 #define BAD(field)                         \
     do {                                   \
         *detail = WM_PROTO_CONFIG_##field; \
@@ -36,10 +36,7 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
     /* every field within the protocol's range (the first one out of it is named), ... */
     for (int i = 0; i < WM_PROTO_CONFIG_RANGES; i++) {
         const config_range *r = &config_ranges[i];
-        uint64_t v = r->bytes == 8   ? get64(c + r->off)
-                     : r->bytes == 4 ? get32(c + r->off)
-                     : r->bytes == 2 ? get16(c + r->off)
-                                     : c[r->off];
+        uint64_t v = field_value(c + r->off, r->bytes);
         if (v < r->lo || v > r->hi) {
             *detail = r->off;
             return WM_PROTO_E_BAD_VALUE;
@@ -66,26 +63,13 @@ static int parse_config(wm_proto *p, wm_proto_job *j, uint32_t *detail)
     j->tau = tau;
     j->flags = flags;
     j->capacity = (int32_t)cap_tri;
-    j->params.metric = (int32_t)metric;
-    j->params.neighbourhood = (int32_t)nb;
-    j->params.iterations = (int32_t)k;
-    j->params.max_triangles = (int32_t)budget;
-    j->params.zeta = get32(c + WM_PROTO_CONFIG_ZETA);
-    j->params.scale_m = scale_m;
-    j->params.scale_e = (int32_t)scale_e;
-    j->params.delta_p = delta_p;
-    j->params.alpha = alpha;
-    j->params.delta_v = get32(c + WM_PROTO_CONFIG_DELTA_V);
+    /* the refiner's parameters: every CONFIG field that is a wm_params member (wm_protocol.h's list) */
+#define COPY(member, off, bytes, type) j->params.member = (type)field_value(c + (off), (bytes));
+    WM_PROTO_CONFIG_PARAMS(COPY)
+#undef COPY
     j->params.flags = (flags >> WM_PROTO_CONFIG_REFINER_SHIFT) & WM_FLAG_ALL; /* WM_FLAG_* */
-    j->params.delta_d = get64(c + WM_PROTO_CONFIG_DELTA_D);
-    j->delta_lambda = get32(c + WM_PROTO_CONFIG_DELTA_LAMBDA);
-    j->delta_c = delta_c;
-    j->params.delta_lambda = j->delta_lambda;
-    j->params.delta_c = delta_c;
-    j->params.slope_x_m = slope_x_m;
-    j->params.slope_x_e = (int32_t)slope_x_e;
-    j->params.slope_y_m = slope_y_m;
-    j->params.slope_y_e = (int32_t)slope_y_e;
+    j->delta_lambda = j->params.delta_lambda;
+    j->delta_c = j->params.delta_c;
     j->heights = p->heights;
     j->mask = (flags & WM_PROTO_CONFIG_MASK) ? p->mask : NULL;
     if (wm_params_check(&j->params) != WM_OK) { /* cannot happen after the checks above */
