@@ -27,6 +27,7 @@ they are reported in their own table and medians and are not for tuning.
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 import tempfile
@@ -102,16 +103,25 @@ def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: flo
     wm_out, pd_out = tmp / "wavemesh.obj", tmp / "pydelatin.obj"
     wm_cmd = P.wavemesh_argv(str(npy), zeta, str(wm_out))
     pd_cmd = P.peer_argv(str(npy), zeta, str(pd_out))
-    tw, tp, start, fail = [], [], time.perf_counter(), None
+    tw, tp, cw, cp, start, fail = [], [], [], [], time.perf_counter(), None
     while len(tw) < runs and (not tw or time.perf_counter() - start < budget):
-        for cmd, times in ((wm_cmd, tw), (pd_cmd, tp)):
-            t0 = time.perf_counter()
+        for cmd, times, cpu in ((wm_cmd, tw, cw), (pd_cmd, tp, cp)):
+            t0, c0 = time.perf_counter(), _children_cpu()
             r = subprocess.run(cmd, capture_output=True, text=True)
             times.append(time.perf_counter() - t0)
+            cpu.append(_children_cpu() - c0)
             if r.returncode != 0 and fail is None:
                 fail = f"{Path(cmd[0]).name} exit {r.returncode}: {r.stderr.strip()[-300:]}"
-    return {"wavemesh_s": P.median(tw), "pydelatin_s": P.median(tp), "runs": len(tw), "error": fail,
+    return {"wavemesh_s": P.median(tw), "pydelatin_s": P.median(tp), "wavemesh_cpu_s": P.median(cw),
+            "pydelatin_cpu_s": P.median(cp), "runs": len(tw), "error": fail,
             "wavemesh_obj": wm_out, "pydelatin_obj": pd_out}
+
+
+def _children_cpu() -> float:
+    """User + system seconds of this process's reaped children (a process run is one child: its own CPU
+    time, which other work on a shared machine changes less than its wall time)."""
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
 
 
 def _check_obj(path: Path, heights: np.ndarray, zeta: float) -> dict:
@@ -175,6 +185,7 @@ def run_pair(grid: D.Grid, label: str, zeta: float, npy: Path | None = None, *,
             proc["pydelatin_file"] = _check_obj(proc.pop("pydelatin_obj"), z, zeta)
         pair["process"] = proc
         ratios["process_time"] = _ratio(proc["wavemesh_s"], proc["pydelatin_s"])
+        ratios["process_cpu"] = _ratio(proc["wavemesh_cpu_s"], proc["pydelatin_cpu_s"])
     pair["ratios"] = ratios
     return pair
 
@@ -193,6 +204,7 @@ def summarise(pairs: list[dict]) -> dict:
         "median_native_time": P.median(col("native_time")),
         "median_call_time": P.median(col("call_time")),
         "median_process_time": P.median(col("process_time")),
+        "median_process_cpu": P.median(col("process_cpu")),
         "median_martini_triangles": P.median(col("martini_triangles")),
         "wavemesh_all_ok": all(p["wavemesh"]["within"] for p in pairs),
         "wavemesh_failed": sum(1 for p in pairs if p["wavemesh"].get("error")),
@@ -272,8 +284,8 @@ def _flags(p: dict) -> str:
 def _pair_table(pairs: list[dict], s: dict) -> list[str]:
     lines = [
         "| grid | W x H | E | wavemesh triangles | pydelatin | **ratio** | pymartini (grid) | ratio | "
-        "native refine / pydelatin call | `mesh` process / peer process | checks |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "native refine / pydelatin call | `mesh` process / peer process | CPU | checks |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for p in pairs:
         r, wm, pd, pm = p["ratios"], p["wavemesh"], p["pydelatin"], p["pymartini"]
@@ -283,11 +295,11 @@ def _pair_table(pairs: list[dict], s: dict) -> list[str]:
             f"| **{_f(r['triangles'], 3)}** "
             f"| {pm['triangles']} ({pm['grid']}) "
             f"| {_f(r['martini_triangles'], 3)} | {_f(r['native_time'])} | {_f(r.get('process_time'))} "
-            f"| {_flags(p)} |")
+            f"| {_f(r.get('process_cpu'))} | {_flags(p)} |")
     lines.append(
         f"| **median** ({s['pairs']} pairs) | | | | | **{_f(s['median_triangles'], 3)}** | | "
         f"{_f(s['median_martini_triangles'], 3)} | {_f(s['median_native_time'])} | "
-        f"{_f(s['median_process_time'])} | |")
+        f"{_f(s['median_process_time'])} | {_f(s.get('median_process_cpu'))} | |")
     return lines
 
 
@@ -318,8 +330,9 @@ def markdown(results: dict) -> str:
         "pydelatin call*: RefineJob.seconds (Haar details + the C refiner) over Delatin(...) with .vertices "
         "and .triangles, in one process; *`mesh` process / peer process*: `wavemesh mesh IN.npy -o x.obj "
         "--metric vertical --zeta E` over a `python -c` that loads the same .npy, runs pydelatin and writes "
-        "an OBJ, run alternately.  Times are medians of up to 3 runs (a call slower than a few seconds runs "
-        "once) on a 2-core machine shared with other work: read the ratios, not the seconds (in "
+        "an OBJ, run alternately (wall seconds; *CPU*: the same for each process's user + system seconds, "
+        "which a busy machine changes less).  Times are medians of up to 3 runs (a call slower than a few "
+        "seconds runs once) on a 2-core machine shared with other work: read the ratios, not the seconds (in "
         "bench/results/quality.json).",
         "",
         "**Summary** (the targets: median triangle ratio at most 1.0, no pair above 1.3, the held-out set "
@@ -327,9 +340,9 @@ def markdown(results: dict) -> str:
         f"at most {TARGET_PROCESS}):",
         "",
         "| set | grids | pairs | median triangle ratio | max | pairs > 1.3 | median native / call | "
-        "median process / process | median ratio vs pymartini | wavemesh meshes all proper and within E "
-        "| pydelatin / pymartini meshes flagged |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "median process / process | CPU | median ratio vs pymartini | wavemesh meshes all proper and "
+        "within E | pydelatin / pymartini meshes flagged |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     names = {"tuning": "tuning set", "held_out": "**held-out set**", "all": "all pairs"}
     for key in ("tuning", "held_out", "all"):
@@ -339,7 +352,8 @@ def markdown(results: dict) -> str:
         lines.append(
             f"| {names[key]} | {s['grids']} | {s['pairs']} | {_f(s['median_triangles'], 3)} "
             f"| {_f(s['max_triangles'], 3)} | {s['over_max']} | {_f(s['median_native_time'])} "
-            f"| {_f(s['median_process_time'])} | {_f(s['median_martini_triangles'], 3)} "
+            f"| {_f(s['median_process_time'])} | {_f(s.get('median_process_cpu'))} "
+            f"| {_f(s['median_martini_triangles'], 3)} "
             f"| {'yes' if s['wavemesh_all_ok'] else '**no**'}"
             f"{f' ({n} failed)' if (n := s.get('wavemesh_failed')) else ''} "
             f"| {s['pydelatin_flagged']} / {s['pymartini_flagged']} |")
