@@ -76,7 +76,8 @@ def test_one_pair_end_to_end(tiny, tmp_path):
     assert proc["pydelatin_file"]["triangles"] == pair["pydelatin"]["triangles"]
     r = pair["ratios"]
     assert r["triangles"] == pair["wavemesh"]["triangles"] / pair["pydelatin"]["triangles"]
-    assert all(r[k] > 0 for k in ("native_time", "call_time", "process_time", "process_cpu", "martini_triangles"))
+    assert all(r[k] > 0 for k in ("native_time", "call_time", "process_time", "process_cpu",
+                                  "martini_triangles"))
     results = Q.assemble([pair], ["tiny"])
     assert results["summary"]["all"]["pairs"] == 1 and "held_out" not in results["summary"]
     text = Q.markdown(results)
