@@ -138,7 +138,7 @@ fuzz: $(SETUP_STAMP) gen
 	$(VPY) fuzz/run.py run --seconds $(FUZZ_SECONDS)
 
 # The C files clang-format keeps in the style of .clang-format (the pinned PyPI clang-format).
-C_SOURCES = $(shell find firmware fuzz -name '*.[ch]' 2>/dev/null | sort)
+C_SOURCES = $(shell find firmware fuzz tests/firmware -name '*.[ch]' 2>/dev/null | sort)
 CLANG_FORMAT ?= $(VENV)/bin/clang-format
 
 format: $(SETUP_STAMP)

@@ -5,11 +5,15 @@ model the RTL and the firmware are tested against) and the host tool.  Its
 folders follow the data flow (read -> model stages -> refine -> write, and the
 device path beside it):
 
-- ``io``: reading height fields (``heightfield``), writing and reading meshes (``meshio``, ``terrain``),
-  where the samples lie (``georef``), outputs written whole or not at all (``outputs``), ``synth``
+- ``io``: reading height fields (``heightfield``, ``readers``), an input as a run takes it (``load``,
+  ``bridge``: --max-hole), writing and reading meshes (``meshio``, ``meshread``, ``terrain``), a run's
+  files (``results``), where the samples lie (``georef``), outputs written whole or not at all
+  (``outputs``), ``synth``
 - ``model``: the filter bank (``haar``, ``spline``), the templates (``template_forms``, ``templates``),
-  the labeller (``label``), the initial triangulation (``initial``), ``tri_scan``, ``roi``
-- ``refine``: the firmware refiner, built natively and loaded through ctypes (``native``), ``denoise``
+  the labeller (``label``), the initial triangulation (``initial``), the validity mask (``holemask``),
+  ``tri_scan``, ``roi``
+- ``refine``: the firmware refiner, built natively and loaded through ctypes (``native``), the cover of a
+  mesh with holes (``cover``), ``denoise``
 - ``device``: the wire protocol (``protocol``), its frames (``link``), a session (``stream``), the
   SoC memory map (``memmap``), the files generated from the single sources (``gen``)
 - ``check``: a mesh's validity and errors; ``check.render``: its picture
