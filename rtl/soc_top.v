@@ -11,11 +11,19 @@
  *   0x8000_0100  SYS     soc_sys registers (cycles, timer, LEDs, stage, halt, configuration)
  *   0x8000_0200  ACCEL   soc_accel registers: the FPGA stage (filter bank, template stage)
  *   0x8000_0300  ENGINE  soc_engine registers: the triangle error engine (E(T)'s scan of HEIGHT)
+ *   0x8000_0400  UPLOAD  soc_upload registers: frames from the UART checked, DATA's samples into HEIGHT
+ *   0x8000_0800  UPLOAD_BUF  the upload block's payload buffer (1 KB, read only)
  *   0x5000_0000  SDRAM   the 32 MB SDRAM through sdram_ctrl's CPU port (sdram_cache); its areas
  *                        HEIGHT, COEF, TOUT (the stage's) and HEAP start at the *_OFFSET bytes
  *
  * The triangle error engine (soc_engine, tri_engine) reads HEIGHT a row span at a time through the
  * same stream reader (the stage runs before the refiner, never beside it).
+ *
+ * The upload block (soc_upload, upload_rx), once the firmware enables it, takes the UART's received
+ * bytes instead of the CPU: it checks every frame, holds a good one for the CPU and writes an armed
+ * DATA frame's samples into HEIGHT through the addressed writer (beside the stage's entries: the two
+ * never run together), reading the samples before a Rice frame through the stream reader when its
+ * line buffer does not hold them.
  *
  * The FPGA stage (soc_accel) streams HEIGHT from the SDRAM (the controller's stream reader) and
  * hands its coefficient and template entries to sdram_words, which writes each as a sign- or
@@ -252,6 +260,7 @@ localparam [2:0]
     SEL_NONE   = 3'd0,
     SEL_FW     = 3'd1,
     SEL_ENGINE = 3'd2,
+    SEL_UPLOAD = 3'd3,
     SEL_UART   = 3'd5,
     SEL_SYS    = 3'd6,
     SEL_ACCEL  = 3'd7;
@@ -268,6 +277,10 @@ wire uart_hit = io_page && mem_addr[11:8] == `WM_IO_UART;
 wire sys_hit = io_page && mem_addr[11:8] == `WM_IO_SYS;
 wire accel_hit = io_page && mem_addr[11:8] == `WM_IO_ACCEL;
 wire engine_hit = io_page && mem_addr[11:8] == `WM_IO_ENGINE;
+wire upload_hit = io_page && mem_addr[11:8] == `WM_IO_UPLOAD;
+// the payload window: I/O blocks WM_IO_UPLOAD_BUF .. + 3 (1 KB)
+localparam [3:0] UPBUF_BLOCK = `WM_IO_UPLOAD_BUF;
+wire upbuf_hit = region == `WM_REGION_IO && mem_addr[27:12] == 16'd0 && mem_addr[11:10] == UPBUF_BLOCK[3:2];
 
 // a request is the first cycle of mem_valid; mem_ready answers it in the next cycle, except in the
 // SDRAM, whose port holds the request until it answers, and for a SYS.STAGE write, answered when
@@ -284,6 +297,7 @@ always @* begin
     else if (sys_hit) sel = SEL_SYS;
     else if (accel_hit) sel = SEL_ACCEL;
     else if (engine_hit) sel = SEL_ENGINE;
+    else if (upload_hit || upbuf_hit) sel = SEL_UPLOAD;
     else sel = SEL_NONE;
 end
 
@@ -307,6 +321,7 @@ wire [31:0] uart_rdata;
 wire [31:0] sys_rdata;
 wire [31:0] accel_rdata;
 wire [31:0] engine_rdata;
+wire [31:0] upload_rdata;
 
 always @* begin
     if (sdram_cpu_ready) begin
@@ -318,6 +333,7 @@ always @* begin
             SEL_SYS: mem_rdata = sys_rdata;
             SEL_ACCEL: mem_rdata = accel_rdata;
             SEL_ENGINE: mem_rdata = engine_rdata;
+            SEL_UPLOAD: mem_rdata = upload_rdata;
             default: mem_rdata = 32'd0;
         endcase
     end
@@ -405,7 +421,7 @@ wire                eng_data_valid, eng_data_ready;
 wire                engine_busy_unused;
 wire [15:0]         rd_tdata;
 wire                rd_tvalid, rd_tready;
-reg                 rd_owner_reg = 1'b0;     // 1: the engine's command was the last taken
+reg  [1:0]          rd_owner_reg = 2'd0;     // whose command was the last taken
 
 soc_engine #(
     .ADDR_BITS(HW_BITS),
@@ -428,28 +444,90 @@ soc_engine #(
     .busy(engine_busy_unused)
 );
 
-wire [HW_BITS-1:0] rd_addr = rd_cmd_valid_reg ? HEIGHT_HW : eng_rd_addr;
-wire [HW_BITS:0] rd_len = rd_cmd_valid_reg ? rd_cmd_len_reg : {{(HW_BITS-ENGINE_CB){1'b0}}, eng_rd_len};
-wire rd_valid = rd_cmd_valid_reg || eng_rd_valid;
+/*
+ * The upload block: the UART's received bytes (while it is enabled), its samples through the addressed
+ * writer (below), its line buffer's reloads through the stream reader (it never runs beside the
+ * stage or the engine: the upload ends before the job starts)
+ */
+wire [7:0]          up_rx_tdata;
+wire                up_rx_tvalid, up_rx_tready, up_rx_enable;
+wire [15:0]         up_wa_tdata;
+wire [HW_BITS-1:0]  up_wa_tuser;
+wire                up_wa_tvalid, up_wa_tready;
+wire [HW_BITS-1:0]  up_rd_addr;
+wire [HW_BITS:0]    up_rd_len;
+wire                up_rd_valid, up_rd_ready;
+wire                up_data_valid, up_data_ready;
+wire                upload_busy_unused;
+
+soc_upload #(
+    .ADDR_BITS(HW_BITS),
+    .HEIGHT_BASE(HEIGHT_HW)
+) upload_inst (
+    .clk(clk),
+    .rst(rst),
+    .bus_valid(req && upload_hit),
+    .buf_valid(req && upbuf_hit),
+    .bus_addr(mem_addr[9:0]),
+    .bus_wdata(mem_wdata),
+    .bus_wstrb(mem_wstrb),
+    .bus_rdata(upload_rdata),
+    .s_axis_rx_tdata(up_rx_tdata),
+    .s_axis_rx_tvalid(up_rx_tvalid),
+    .s_axis_rx_tready(up_rx_tready),
+    .rx_enable(up_rx_enable),
+    .m_wa_tdata(up_wa_tdata),
+    .m_wa_tuser(up_wa_tuser),
+    .m_wa_tvalid(up_wa_tvalid),
+    .m_wa_tready(up_wa_tready),
+    .wa_busy(wa_busy),
+    .m_rd_addr(up_rd_addr),
+    .m_rd_len(up_rd_len),
+    .m_rd_valid(up_rd_valid),
+    .m_rd_ready(up_rd_ready),
+    .s_rd_tdata(rd_tdata),
+    .s_rd_tvalid(up_data_valid),
+    .s_rd_tready(up_data_ready),
+    .busy(upload_busy_unused)
+);
+
+// the stream reader's commands: the stage's first, then the engine's, then the upload's; the data go to
+// whoever's command was taken last (rd_owner_reg: 0 the stage, 1 the engine, 2 the upload)
+localparam [1:0] OWN_STAGE = 2'd0, OWN_ENGINE = 2'd1, OWN_UPLOAD = 2'd2;
+wire [HW_BITS-1:0] rd_addr = rd_cmd_valid_reg ? HEIGHT_HW : eng_rd_valid ? eng_rd_addr : up_rd_addr;
+wire [HW_BITS:0] rd_len = rd_cmd_valid_reg ? rd_cmd_len_reg
+                        : eng_rd_valid ? {{(HW_BITS-ENGINE_CB){1'b0}}, eng_rd_len} : up_rd_len;
+wire rd_valid = rd_cmd_valid_reg || eng_rd_valid || up_rd_valid;
 assign eng_rd_ready = rd_cmd_ready && !rd_cmd_valid_reg;
+assign up_rd_ready = rd_cmd_ready && !rd_cmd_valid_reg && !eng_rd_valid;
 assign height_tdata = rd_tdata;
-assign height_tvalid = rd_tvalid && !rd_owner_reg;
-assign eng_data_valid = rd_tvalid && rd_owner_reg;
-assign rd_tready = rd_owner_reg ? eng_data_ready : height_tready;
+assign height_tvalid = rd_tvalid && rd_owner_reg == OWN_STAGE;
+assign eng_data_valid = rd_tvalid && rd_owner_reg == OWN_ENGINE;
+assign up_data_valid = rd_tvalid && rd_owner_reg == OWN_UPLOAD;
+assign rd_tready = rd_owner_reg == OWN_ENGINE ? eng_data_ready
+                 : rd_owner_reg == OWN_UPLOAD ? up_data_ready : height_tready;
 
 always @(posedge clk) begin
     if (rd_valid && rd_cmd_ready) begin
-        rd_owner_reg <= !rd_cmd_valid_reg;
+        rd_owner_reg <= rd_cmd_valid_reg ? OWN_STAGE : eng_rd_valid ? OWN_ENGINE : OWN_UPLOAD;
     end
     if (rst) begin
-        rd_owner_reg <= 1'b0;
+        rd_owner_reg <= OWN_STAGE;
     end
 end
 
 // entries as words: details sign-extended into COEF, template entries zero-extended into TOUT
-wire [15:0]        wa_tdata;
-wire [HW_BITS-1:0] wa_tuser;
-wire               wa_tvalid, wa_tready;
+wire [15:0]        words_tdata;
+wire [HW_BITS-1:0] words_tuser;
+wire               words_tvalid, words_tready;
+// the addressed writer takes the stage's words or the upload's samples (never both at once; the
+// stage's first)
+wire [15:0]        wa_tdata = words_tvalid ? words_tdata : up_wa_tdata;
+wire [HW_BITS-1:0] wa_tuser = words_tvalid ? words_tuser : up_wa_tuser;
+wire               wa_tvalid = words_tvalid || up_wa_tvalid;
+wire               wa_tready;
+assign words_tready = wa_tready;
+assign up_wa_tready = wa_tready && !words_tvalid;
 
 sdram_words #(
     .HW_ADDR_BITS(HW_BITS)
@@ -464,10 +542,10 @@ sdram_words #(
     .s_axis_b_tuser(TOUT_WORD + {{(HW_BITS-1-TOUT_AW){1'b0}}, tout_tuser}),
     .s_axis_b_tvalid(tout_tvalid),
     .s_axis_b_tready(tout_tready),
-    .m_axis_tdata(wa_tdata),
-    .m_axis_tuser(wa_tuser),
-    .m_axis_tvalid(wa_tvalid),
-    .m_axis_tready(wa_tready),
+    .m_axis_tdata(words_tdata),
+    .m_axis_tuser(words_tuser),
+    .m_axis_tvalid(words_tvalid),
+    .m_axis_tready(words_tready),
     .busy(words_busy)
 );
 
@@ -578,6 +656,10 @@ soc_uart #(
     .bus_rdata(uart_rdata),
     .rxd(uart_rxd),
     .txd(uart_txd),
+    .rx_redirect(up_rx_enable),
+    .m_axis_rx_tdata(up_rx_tdata),
+    .m_axis_rx_tvalid(up_rx_tvalid),
+    .m_axis_rx_tready(up_rx_tready),
     .bypass(uart_bypass),
     .s_axis_rx_tdata(s_axis_uart_rx_tdata),
     .s_axis_rx_tvalid(s_axis_uart_rx_tvalid),

@@ -9,6 +9,9 @@
  *                TX_OVERRUN (write 1 to clear); RX_COUNT [31:16]
  *   0x08 DIV     clock cycles per bit [15:0] (writes below DIV_MIN store DIV_MIN)
  *
+ * Redirect (rx_redirect, the upload block's CTRL.ENABLE): the RX FIFO's bytes go out on m_axis_rx to
+ * the upload block instead of to DATA reads (which then read EMPTY and pop nothing).
+ *
  * Bypass (simulation's fast mode; tie bypass low on a board): received bytes come from s_axis_rx
  * into the RX FIFO (with back-pressure, so none are lost) instead of from the pin, and the TX FIFO
  * drains to m_axis_tx instead of the transmitter.
@@ -65,6 +68,14 @@ module soc_uart #
     input  wire        m_axis_tx_tready,
 
     /*
+     * Received bytes to the upload block (while rx_redirect)
+     */
+    input  wire        rx_redirect,
+    output wire [7:0]  m_axis_rx_tdata,
+    output wire        m_axis_rx_tvalid,
+    input  wire        m_axis_rx_tready,
+
+    /*
      * Configuration out
      */
     output wire [15:0] div
@@ -114,10 +125,13 @@ wire tx_busy;
 wire [15:0] bus_wdata_high_unused = bus_wdata[31:16];
 wire reg_read = bus_valid && bus_wstrb == 4'd0;
 wire reg_write = bus_valid && bus_wstrb != 4'd0;
-wire data_read = reg_read && bus_addr == `WM_UART_DATA;
+wire data_read = reg_read && bus_addr == `WM_UART_DATA && !rx_redirect;
+wire rx_fifo_out_tready = rx_redirect ? m_axis_rx_tready : data_read;
 wire data_write = reg_write && bus_addr == `WM_UART_DATA;
 
 assign s_axis_rx_tready = bypass && rx_fifo_in_tready;
+assign m_axis_rx_tdata = rx_fifo_out_tdata;
+assign m_axis_rx_tvalid = rx_redirect && rx_fifo_out_tvalid;
 assign m_axis_tx_tdata = tx_fifo_out_tdata;
 assign m_axis_tx_tvalid = bypass && tx_fifo_out_tvalid;
 assign tx_fifo_out_tready = bypass ? m_axis_tx_tready : tx_pin_tready;
@@ -146,7 +160,8 @@ always @* begin
     if (reg_read) begin
         // read: registered data for the next cycle
         case (bus_addr)
-            `WM_UART_DATA: rdata_next = rx_fifo_out_tvalid ? {24'd0, rx_fifo_out_tdata} : 32'h8000_0000;
+            `WM_UART_DATA: rdata_next = rx_fifo_out_tvalid && !rx_redirect ? {24'd0, rx_fifo_out_tdata}
+                                                                           : 32'h8000_0000;
             `WM_UART_STATUS: rdata_next = status;
             `WM_UART_DIV: rdata_next = {16'd0, div_reg};
             default: rdata_next = 32'd0;
@@ -222,7 +237,7 @@ wm_fifo #(
     .s_ready(rx_fifo_in_tready),
     .m_data(rx_fifo_out_tdata),
     .m_valid(rx_fifo_out_tvalid),
-    .m_ready(data_read),
+    .m_ready(rx_fifo_out_tready),
     .count(rx_count)
 );
 

@@ -52,6 +52,8 @@ class TB:
         dut.bus_wdata.value = 0
         dut.bus_wstrb.value = 0
         dut.bypass.value = 0
+        dut.rx_redirect.value = 0
+        dut.m_axis_rx_tready.value = 0
         dut.s_axis_rx_tdata.value = 0
         dut.s_axis_rx_tvalid.value = 0
         dut.m_axis_tx_tready.value = 0

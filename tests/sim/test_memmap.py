@@ -169,3 +169,15 @@ def test_docs_embed_the_current_tables():
 def test_gen_writes_the_memmap_files(tmp_path, name):
     gen.write_all(tmp_path)
     assert (tmp_path / name).read_text() == memmap.files()[name]
+
+
+def test_upload_window_fits_the_protocol():
+    """The upload block's payload window holds the largest payload, lies in I/O blocks no register block
+    uses, and its line buffer is deeper than the widest grid (the above-left sample of a row's last one)."""
+    from wavemesh.device import protocol
+
+    assert memmap.UPLOAD_BUF_BYTES == protocol.MAX_PAYLOAD
+    window = range(memmap.UPLOAD_BUF_BLOCK, memmap.UPLOAD_BUF_BLOCK + memmap.UPLOAD_BUF_BYTES // 256)
+    assert memmap.UPLOAD_BUF_BLOCK % (memmap.UPLOAD_BUF_BYTES // 256) == 0 and max(window) < 16
+    assert not {b.index for b in BLOCKS} & set(window)
+    assert memmap.UPLOAD_LB_DEPTH > memmap.GRID_MAX_W and memmap.UPLOAD_LB_DEPTH & (memmap.UPLOAD_LB_DEPTH - 1) == 0

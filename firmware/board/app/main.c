@@ -2,11 +2,12 @@
  * wavemesh board firmware: the device program.  The protocol engine (src/proto_*.c, docs/protocol.md)
  * on the UART, with the board's job (app/board_job.c: the FPGA stage, then the refiner) behind it.
  *
- * The engine waits for bytes with board_uart_getc_timeout in chunks of at most a second (the cycle
- * counter's 32-bit intervals), takes the runs already waiting with board_uart_read, writes with
- * board_uart_write (payloads with board_uart_write_escaped) and times itself with board_cycles.
- * Uploaded samples go straight into the height memory (WM_HEIGHT_BASE), where the FPGA stage and
- * the refiner read them.  HELLO states the built sizes (SYS and ACCEL registers), the triangle
+ * The engine receives whole frames from the upload block (rtl/upload_rx.v: board_upload_frame, waiting
+ * in chunks of at most a second, the cycle counter's 32-bit intervals): the block takes the UART's
+ * bytes, checks every frame and writes DATA's samples into the height memory (WM_HEIGHT_BASE), where
+ * the FPGA stage and the refiner read them, and sums their CRC for RUN; the engine reads the frame's
+ * header and payload from the block and answers.  It writes with board_uart_write (payloads with
+ * board_uart_write_escaped) and times itself with board_cycles.  HELLO states the built sizes (SYS and ACCEL registers), the triangle
  * capacity the heap holds (app/board_job.c, board_job_capacity: the refiner's storage and the staging of
  * the initial triangulation for the largest grid), the name "wm-board" and the UART's divisor range
  * (BAUD switches the line: io_set_divisor).
@@ -81,6 +82,42 @@ static void io_set_divisor(void *ctx, uint32_t div)
     (void)ctx;
     board_uart_flush();
     board_uart_set_div(div);
+    board_upload_flush();
+}
+
+/* Frames whole from the upload block (rtl/upload_rx.v): the engine handles headers and replies, the
+ * block the bytes, their CRC and DATA's samples (into the height memory) */
+static int io_frame(void *ctx, uint32_t timeout_ms, wm_proto_frame_in *f)
+{
+    uint32_t status, header;
+    (void)ctx;
+    for (;;) {
+        uint32_t ms = timeout_ms > GETC_CHUNK_MS ? GETC_CHUNK_MS : timeout_ms;
+        if (board_upload_frame(ms * ms_cycles)) break;
+        if (timeout_ms <= ms) return WM_PROTO_RX_TIMEOUT;
+        timeout_ms -= ms;
+    }
+    status = WM_UPLOAD_STATUS;
+    header = WM_UPLOAD_HEADER;
+    f->type = (uint8_t)(header >> WM_UPLOAD_HEADER_TYPE_SHIFT);
+    f->seq = (uint8_t)(header >> WM_UPLOAD_HEADER_SEQ_SHIFT);
+    f->len = (uint16_t)(header >> WM_UPLOAD_HEADER_LEN_SHIFT);
+    f->payload = (const uint8_t *)WM_UPLOAD_BUF_BASE;
+    f->data = (status & WM_UPLOAD_STATUS_DATA) != 0;
+    f->code = (uint8_t)((status & WM_UPLOAD_STATUS_CODE_MASK) >> WM_UPLOAD_STATUS_CODE_SHIFT);
+    return 1;
+}
+
+static void io_upload(void *ctx, uint32_t width, uint32_t samples, uint32_t total)
+{
+    (void)ctx;
+    board_upload_arm(width, samples, total);
+}
+
+static uint32_t io_upload_crc(void *ctx)
+{
+    (void)ctx;
+    return WM_UPLOAD_CRC;
 }
 
 static uint64_t io_cycles(void *ctx)
@@ -131,10 +168,8 @@ int main(void)
      * decoding take, so frames may come back to back; at 921600 baud and up (17 k cycles and less) a
      * frame that comes while the one before is being checked overflows it: one frame at a time */
     caps.switched_window = 1;
-    /* decoding a CODING_RICE sample costs the PicoRV32 some 320 cycles more than storing a raw one
-     * (docs/protocol.md, "Sample coding"), and saves about a byte of line time, 10 divisor's worth of
-     * cycles: coded samples only where that is more, divisors of 32 and up (781 kbaud and slower) */
-    caps.rice_min_div = 32;
+    /* the upload block decodes CODING_RICE samples as fast as it stores raw ones: coded at every rate */
+    caps.rice_min_div = 0;
 
     io.ctx = NULL;
     io.getc = io_getc;
@@ -144,6 +179,10 @@ int main(void)
     io.cycles = io_cycles;
     io.mark = io_mark;
     io.set_divisor = io_set_divisor;
+    io.frame = io_frame;
+    io.upload = io_upload;
+    io.upload_crc = io_upload_crc;
+    board_upload_enable(WM_PROTO_BYTE_TIMEOUT_MS * ms_cycles);
 
     board_stage(STAGE_SERVE);
     for (;;) {

@@ -57,6 +57,29 @@ int board_uart_getc_timeout(uint32_t cycles);
 /* Read and clear the sticky error bits (WM_UART_STATUS_RX_OVERRUN, _RX_FRAME_ERR, _TX_OVERRUN). */
 uint32_t board_uart_take_errors(void);
 
+/* ---- the upload block (UPLOAD registers, rtl/upload_rx.v) ------------------------------------- */
+
+/*
+ * Hand the UART's received bytes to the upload block: it deframes and checks every frame itself and
+ * drops a frame with no byte for timeout_cycles.  UART DATA reads then read EMPTY.
+ */
+void board_upload_enable(uint32_t timeout_cycles);
+
+/*
+ * Release the frame held (if any), then wait up to `cycles` for the next good one: 1 when one is
+ * held (UPLOAD.STATUS, HEADER and the payload at WM_UPLOAD_BUF_BASE describe it), 0 when none came.
+ */
+int board_upload_frame(uint32_t cycles);
+
+/*
+ * From the next frame on, store the samples of DATA frames of a session of width W, W H samples and
+ * total words (a new session: nothing stored), or, with samples 0, store none.
+ */
+void board_upload_arm(uint32_t width, uint32_t samples, uint32_t total);
+
+/* Drop a frame half received (the line's rate changed); uncounted. */
+void board_upload_flush(void);
+
 /* ---- the CPU's caches ------------------------------------------------------------------------- */
 
 /*

@@ -59,6 +59,20 @@ extern "C" {
 #define WM_PROTO_CLOCK_LINK 0x100u
 
 /* The transport.  getc, write and cycles are required; read and mark may be NULL. */
+/* A frame a transport received whole (wm_proto_io.frame): deframed and checked, the payload in the
+ * transport's memory until the next call. */
+typedef struct wm_proto_frame_in {
+    uint8_t type, seq;
+    uint16_t len;
+    const uint8_t *payload;
+    /* data: an armed DATA frame whose samples below W H the transport stored itself (wm_proto_io.upload);
+     * code: then 0 (stored, or nothing to store), 1 BAD_LENGTH, 2 BAD_OFFSET, 3 a start beyond the
+     * samples stored, 4 a CODING_RICE tail that is not one (memmap.py, UPLOAD.STATUS.CODE) */
+    uint8_t data, code;
+} wm_proto_frame_in;
+
+#define WM_PROTO_UPLOAD_STREAM 4u /* wm_proto_frame_in.code: the Rice stream is not one */
+
 typedef struct wm_proto_io {
     void *ctx;
     /* The next received byte, waiting up to timeout_ms milliseconds (0: do not wait);
@@ -83,6 +97,16 @@ typedef struct wm_proto_io {
      * to div clock cycles per bit (at caps.clk_hz) once every byte written so far has left the
      * transmitter (BAUD: the OK goes out at the old rate); bytes half received are dropped. */
     void (*set_divisor)(void *ctx, uint32_t div);
+    /* Optional (NULL: the engine deframes what getc and read give): a transport that receives frames
+     * whole and stores DATA's samples itself (the board's upload block, rtl/upload_rx.v: docs/protocol.md,
+     * "The upload in hardware").  frame: the previous frame is done with; wait up to timeout_ms for the
+     * next good one: 1 (in *f), WM_PROTO_RX_TIMEOUT, WM_PROTO_RX_CLOSED.  upload: from the next frame on,
+     * DATA frames of a session of width W, samples W H and total words are stored (samples > 0: a new
+     * session, nothing stored yet) or not (samples 0).  upload_crc: the CRC-32 register (not inverted)
+     * of the samples stored in order.  All three or none. */
+    int (*frame)(void *ctx, uint32_t timeout_ms, wm_proto_frame_in *f);
+    void (*upload)(void *ctx, uint32_t width, uint32_t samples, uint32_t total);
+    uint32_t (*upload_crc)(void *ctx);
 } wm_proto_io;
 
 /* What the device states in HELLO_REPLY (docs/protocol.md, HELLO_REPLY). */
@@ -164,6 +188,9 @@ typedef struct wm_proto {
     uint8_t f_type, f_seq;   /* the frame just received */
     uint16_t f_len;
     const uint8_t *f_pay;
+    uint8_t f_data, f_code;  /* io.frame: the transport stored its samples (wm_proto_frame_in) */
+    uint8_t up_armed;        /* io.frame: the transport stores DATA frames of session up_session */
+    uint32_t up_session, session_id;
     uint32_t bad_frames;     /* damaged frames dropped (counter, for tests) */
 
     /* transmission (h: the level stream written as halfwords) */

@@ -276,6 +276,9 @@ int main(int argc, char **argv)
     io.write_escaped = NULL;
     io.cycles = io_cycles;
     io.mark = NULL;
+    io.frame = NULL; /* the engine deframes the bytes itself */
+    io.upload = NULL;
+    io.upload_crc = NULL;
     printf("work filter %d template %d refine1 %d refine0 %d\n", WORK_FILTER, WORK_TEMPLATE, WORK_REFINE1,
            WORK_REFINE0);
     wm_proto_init(&eng, &io, &caps, heights, fake_job, &h);

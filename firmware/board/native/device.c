@@ -459,6 +459,9 @@ int main(int argc, char **argv)
     io.write_escaped = NULL;
     io.cycles = io_cycles;
     io.mark = NULL;
+    io.frame = NULL; /* the engine deframes the bytes itself */
+    io.upload = NULL;
+    io.upload_crc = NULL;
     io.set_divisor = caps.div_max ? io_set_divisor : NULL;
     if (pthread_create(&door, NULL, doorman, &c) != 0) {
         fprintf(stderr, "wmdev: cannot start the accepting thread\n");

@@ -99,6 +99,7 @@ void wm_proto_do_config(wm_proto *p)
     p->next = 0;
     p->nak_sent = 0;
     p->state = WM_PROTO_STATE_RECEIVING;
+    p->session_id++; /* a transport that stores DATA itself starts afresh (proto_slip.c) */
     for (int s = 0; s < WM_PROTO_STAGE_COUNT; s++) p->cycles[s] = 0;
     p->link = 0;
     p->link_depth = 0;

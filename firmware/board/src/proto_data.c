@@ -118,7 +118,21 @@ void wm_proto_do_data(wm_proto *p)
         return;
     }
     zero(b, sizeof b);
-    if (off <= p->next && coding == WM_PROTO_CODING_RICE) {
+    if (off <= p->next && p->f_data) {
+        /* the transport stored the samples below W H and checked the Rice stream (the same checks as
+         * above, in the same order: its code is 0 here, or 4); the mask's words are ours */
+        uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height;
+        if (p->f_code == WM_PROTO_UPLOAD_STREAM) {
+            wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+            return;
+        }
+        s = p->f_pay + WM_PROTO_DATA_BYTES;
+        for (i = off < wh ? wh - off : 0; i < n; i++) put_word(p, off + i, get16(s + 2 * i));
+        if (off + n > p->next) {
+            p->next = off + n;
+            p->nak_sent = 0;
+        }
+    } else if (off <= p->next && coding == WM_PROTO_CODING_RICE) {
         /* every sample before off is stored: the predictions are the host's */
         if (rice_decode(p, off, n, p->f_pay + WM_PROTO_DATA_BYTES, tail)) {
             wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);

@@ -244,11 +244,15 @@ static void do_run(wm_proto *p)
     {
         /* the samples, then the mask's words, each as its two little-endian bytes */
         uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height, c = ~crc;
+        if (p->io.frame) {
+            c = p->io.upload_crc(p->io.ctx); /* the transport summed the samples as it stored them */
+        } else {
 #if WM_LITTLE_ENDIAN
-        c = wm_proto_crc_run(c, (const uint8_t *)p->heights, 2u * (wh < p->total ? wh : p->total));
+            c = wm_proto_crc_run(c, (const uint8_t *)p->heights, 2u * (wh < p->total ? wh : p->total));
 #else
-        for (uint32_t i = 0; i < wh && i < p->total; i++) c = crc_update16(c, p->heights[i]);
+            for (uint32_t i = 0; i < wh && i < p->total; i++) c = crc_update16(c, p->heights[i]);
 #endif
+        }
         for (uint32_t i = wh; i < p->total; i++) c = crc_update16(c, word_at(p, i));
         crc = ~c;
     }

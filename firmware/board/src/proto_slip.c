@@ -190,9 +190,43 @@ static int rx_burst(wm_proto *p, int c)
     return 0;
 }
 
+/* A transport that receives frames whole (io.frame): it stores DATA's samples while a session receives,
+ * for the session's CONFIG (told before the next frame comes in, so every DATA frame of the session is
+ * stored and none outside it). */
+static int rx_frame_whole(wm_proto *p, uint32_t wait_ms)
+{
+    wm_proto_frame_in f;
+    int r, want = p->state == WM_PROTO_STATE_RECEIVING || p->state == WM_PROTO_STATE_READY;
+    if (want != p->up_armed || (want && p->up_session != p->session_id)) {
+        uint32_t wh = (uint32_t)p->job.width * (uint32_t)p->job.height;
+        p->io.upload(p->io.ctx, want ? (uint32_t)p->job.width : 0u, want ? wh : 0u, want ? p->total : 0u);
+        p->up_armed = (uint8_t)want;
+        p->up_session = p->session_id;
+    }
+    for (;;) {
+        out_flush(p);
+        r = p->io.frame(p->io.ctx, wait_ms, &f);
+        if (r == WM_PROTO_RX_CLOSED) return -1;
+        if (r != 1) return 0;
+        p->f_type = f.type;
+        p->f_seq = f.seq;
+        p->f_len = f.len;
+        p->f_pay = f.payload;
+        p->f_data = f.data;
+        p->f_code = f.code;
+        if (p->f_len <= p->caps.max_payload) return 1;
+        /* a whole frame, but longer than this device said it takes (HELLO's max_payload) */
+        wm_proto_reply_error(p, WM_PROTO_E_BAD_LENGTH, p->f_len);
+    }
+}
+
 int wm_proto_rx_frame(wm_proto *p, uint32_t wait_ms)
 {
-    uint64_t t0 = now(p), limit = ms_to_cycles(p, wait_ms), bt = ms_to_cycles(p, WM_PROTO_BYTE_TIMEOUT_MS);
+    uint64_t t0, limit, bt;
+    if (p->io.frame) return rx_frame_whole(p, wait_ms);
+    t0 = now(p);
+    limit = ms_to_cycles(p, wait_ms);
+    bt = ms_to_cycles(p, WM_PROTO_BYTE_TIMEOUT_MS);
     for (;;) {
         uint64_t t = now(p), spent = t - t0;
         int in_frame = p->rx_len || p->rx_esc || p->rx_bad;

@@ -104,3 +104,48 @@ uint32_t board_uart_take_errors(void)
     WM_UART_STATUS = errors; /* write 1 to clear */
     return errors;
 }
+
+/* the upload block: CTRL's ENABLE and ARM as last written (CLEAR, FLUSH and RELEASE are pulses) */
+static uint32_t upload_ctrl;
+static int upload_held;
+
+void board_upload_enable(uint32_t timeout_cycles)
+{
+    WM_UPLOAD_TIMEOUT = timeout_cycles;
+    upload_ctrl = WM_UPLOAD_CTRL_ENABLE;
+    WM_UPLOAD_CTRL = upload_ctrl;
+    upload_held = 0;
+}
+
+int board_upload_frame(uint32_t cycles)
+{
+    uint32_t start;
+    if (upload_held) {
+        WM_UPLOAD_CTRL = upload_ctrl | WM_UPLOAD_CTRL_RELEASE;
+        upload_held = 0;
+    }
+    start = board_cycles32();
+    for (;;) {
+        if (WM_UPLOAD_STATUS & WM_UPLOAD_STATUS_FRAME) {
+            upload_held = 1;
+            return 1;
+        }
+        if (board_cycles32() - start >= cycles) return 0;
+    }
+}
+
+void board_upload_arm(uint32_t width, uint32_t samples, uint32_t total)
+{
+    if (samples) {
+        WM_UPLOAD_WIDTH = width;
+        WM_UPLOAD_SAMPLES = samples;
+        WM_UPLOAD_TOTAL = total;
+        upload_ctrl = WM_UPLOAD_CTRL_ENABLE | WM_UPLOAD_CTRL_ARM;
+        WM_UPLOAD_CTRL = upload_ctrl | WM_UPLOAD_CTRL_CLEAR;
+    } else {
+        upload_ctrl = WM_UPLOAD_CTRL_ENABLE;
+        WM_UPLOAD_CTRL = upload_ctrl;
+    }
+}
+
+void board_upload_flush(void) { WM_UPLOAD_CTRL = upload_ctrl | WM_UPLOAD_CTRL_FLUSH; }

@@ -316,7 +316,43 @@ ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a trian
     Register("WIDTH", 0x30, "rw", "W, samples per row of HEIGHT (hold while busy)"),
     Register("MAX_SIDE", 0x34, "r", "largest W and H the engine takes", reset=str(1 << ENGINE_COORD_BITS)),
 ))
-BLOCKS = (UART, SYS, ACCEL, ENGINE)
+# The upload block (rtl/upload_rx.v behind rtl/soc_upload.v): frames from the UART's RX FIFO deframed and
+# CRC-checked in hardware, DATA's samples (raw or Rice-decoded) written into HEIGHT; the CPU reads a held
+# frame's payload from the buffer window (I/O blocks UPLOAD_BUF_BLOCK .. + UPLOAD_BUF_BYTES / 256 - 1).
+UPLOAD_BUF_BLOCK = 0x8  # the payload buffer's window: address bits 11..10 = 2
+UPLOAD_BUF_BYTES = 1024  # the protocol's MAX_PAYLOAD (tests/sim/test_memmap.py checks)
+UPLOAD_LB_DEPTH = 1 << GRID_MAX_W.bit_length()  # line buffer: a power of two above the largest W
+UPLOAD = Block("UPLOAD", 0x4, "the upload block: frames from the UART checked in hardware, DATA's samples "
+               "stored into HEIGHT (docs/protocol.md, \"The upload in hardware\")", (
+    Register("CTRL", 0x00, "rw", "control; CLEAR, FLUSH and RELEASE act on a write of 1 and read 0", (
+        Field("ENABLE", 0, 0, "rw", "the block takes the RX FIFO's bytes (UART.DATA then reads EMPTY)"),
+        Field("ARM", 1, 1, "rw", "DATA frames go through the sample path (a session is receiving)"),
+        Field("CLEAR", 2, 2, "w", "a new session: NEXT = 0, CRC all ones, the line buffer empty"),
+        Field("FLUSH", 3, 3, "w", "drop a frame under way, uncounted (the rate changed)"),
+        Field("RELEASE", 4, 4, "w", "the CPU is done with the held frame: the next one may come in"),
+    )),
+    Register("STATUS", 0x04, "r", "the held frame", (
+        Field("FRAME", 0, 0, "r", "a good frame is held: HEADER, the buffer and CODE describe it"),
+        Field("DATA", 1, 1, "r", "it went through the sample path (an armed DATA frame)"),
+        Field("CODE", 6, 4, "r", "the sample path's verdict: 0 stored (NEXT and CRC moved), 1 BAD_LENGTH, "
+              "2 BAD_OFFSET, 3 a start beyond NEXT, 4 the Rice stream is not one (BAD_LENGTH)"),
+        Field("BUSY", 8, 8, "r", "a frame is coming in or its samples are being stored"),
+    )),
+    Register("HEADER", 0x08, "r", "the held frame's header", (
+        Field("TYPE", 7, 0, "r", "frame type"),
+        Field("SEQ", 15, 8, "r", "sequence number"),
+        Field("LEN", 31, 16, "r", "payload bytes (in the buffer window from its byte 0)"),
+    )),
+    Register("WIDTH", 0x0C, "rw", "W of the session (2 .. the line buffer's depth - 1)"),
+    Register("SAMPLES", 0x10, "rw", "W H: samples the block stores (the mask's words past them are the CPU's)"),
+    Register("TOTAL", 0x14, "rw", "words of the session (W H and the mask's): DATA's offset check"),
+    Register("TIMEOUT", 0x18, "rw", "a frame with no byte for this many cycles is dropped (0: never)"),
+    Register("NEXT", 0x1C, "r", "samples 0 .. NEXT-1 are stored (below SAMPLES)"),
+    Register("CRC", 0x20, "r", "CRC-32 register (initial all ones, not inverted) of samples 0 .. NEXT-1, "
+             "each as its two little-endian bytes"),
+    Register("BAD_FRAMES", 0x24, "r", "frames dropped (not one, a wrong CRC, a timeout) since reset"),
+))
+BLOCKS = (UART, SYS, ACCEL, ENGINE, UPLOAD)
 
 
 def reg_addr(block: Block, name: str) -> int:
@@ -346,8 +382,14 @@ ACCEL_EBR = 8
 SDRAM_CACHE_EBR = 2 * -(-SDRAM_CACHE_LINES * SDRAM_LINE_WORDS // 512)
 
 
+# The upload block: the payload buffer (four byte lanes of UPLOAD_BUF_BYTES / 4) and the line buffer
+# (UPLOAD_LB_DEPTH x 16 bit).
+UPLOAD_EBR = 4 + -(-UPLOAD_LB_DEPTH // 1024)
+
+
 def ebr_estimate() -> dict[str, int]:
-    return {"FW_RAM": ebr_blocks(FW_RAM), "SDRAM cache": SDRAM_CACHE_EBR, "ACCEL": ACCEL_EBR}
+    return {"FW_RAM": ebr_blocks(FW_RAM), "SDRAM cache": SDRAM_CACHE_EBR, "ACCEL": ACCEL_EBR,
+            "UPLOAD": UPLOAD_EBR}
 
 
 # --- generators ---------------------------------------------------------------------------------
@@ -402,6 +444,8 @@ def c_header() -> str:
         num("WM_STAGING_GRID_BYTES", STAGING_GRID_BYTES),
         num("WM_STACK_BYTES", STACK_BYTES),
         num("WM_ENGINE_COORD_BITS", ENGINE_COORD_BITS),
+        num("WM_UPLOAD_BUF_BASE", f"0x{IO_CODE << REGION_SHIFT | UPLOAD_BUF_BLOCK << IO_BLOCK_SHIFT:08X}"),
+        num("WM_UPLOAD_BUF_BYTES", UPLOAD_BUF_BYTES),
         "",
         "/* Memory regions: base address, default size in bytes and in entries. */",
     ]
@@ -445,6 +489,8 @@ def verilog_include() -> str:
         d("WM_STAGE_MAX_COLS", ACCEL_MAX_COLS),
         d("WM_ENGINE_COORD_BITS", ENGINE_COORD_BITS),
         d("WM_ENGINE_CMD_DEPTH", ENGINE_CMD_DEPTH),
+        d("WM_UPLOAD_BUF_BYTES", UPLOAD_BUF_BYTES),
+        d("WM_UPLOAD_LB_DEPTH", UPLOAD_LB_DEPTH),
         "// regions: address bits 31..28; default sizes in entries",
     ]
     for r in (*REGIONS,):
@@ -460,6 +506,7 @@ def verilog_include() -> str:
     lines += [d(f"WM_SDRAM_{k}", v) for k, v in SDRAM_TIMING.items()]
     lines += [d("WM_SDRAM_CACHE_LINES", SDRAM_CACHE_LINES), d("WM_SDRAM_LINE_WORDS", SDRAM_LINE_WORDS)]
     lines.append(d("WM_REGION_IO", f"4'h{IO_CODE:X}"))
+    lines.append(d("WM_IO_UPLOAD_BUF", f"4'h{UPLOAD_BUF_BLOCK:X}"))
     lines.append("// I/O blocks: address bits 11..8; register offsets: bits 7..0; field bit positions")
     for b in BLOCKS:
         lines.append(d(f"WM_IO_{b.name}", f"4'h{b.index:X}"))
@@ -468,6 +515,8 @@ def verilog_include() -> str:
             for f in reg.fields:
                 if f.msb == f.lsb:
                     lines.append(d(f"WM_{b.name}_{reg.name}_{f.name}", f.lsb))
+                elif f.name != reg.name:
+                    lines.append(d(f"WM_{b.name}_{reg.name}_{f.name}_SHIFT", f.lsb))
     lines += ["`endif", ""]
     return "\n".join(lines)
 
@@ -504,6 +553,9 @@ def markdown() -> str:
                      f"{r.name} | {r.access} | {r.doc} |")
     for b in BLOCKS:
         lines.append(f"| `0x{b.base:08X}` | 256 B | {b.name} | word | {b.doc} |")
+    buf = IO_CODE << REGION_SHIFT | UPLOAD_BUF_BLOCK << IO_BLOCK_SHIFT
+    lines.append(f"| `0x{buf:08X}` | {_size(UPLOAD_BUF_BYTES)} | UPLOAD_BUF | r, byte/half/word | the upload "
+                 "block's payload buffer: the held frame's payload from byte 0 |")
     lines += [
         "",
         "Sizes are parameters of `soc_top`; the SYS block reports the built sizes.  Any address outside "
@@ -527,6 +579,7 @@ def markdown() -> str:
         f"| FW_RAM | {FW_RAM.storage_bits // 1024} Kbit | {ebr['FW_RAM']} |",
         f"| SDRAM cache | {SDRAM_CACHE_LINES * SDRAM_LINE_WORDS * 32 // 1024} Kbit | {ebr['SDRAM cache']} |",
         f"| ACCEL | line buffers, template ROM | {ebr['ACCEL']} |",
+        f"| UPLOAD | payload buffer, line buffer | {ebr['UPLOAD']} |",
     ]
     total = sum(ebr.values())
     lines += [
