@@ -20,6 +20,7 @@ TITLE = "The link: sample coding and line time"
 SETS = ("jacksboro", "topobathy", "lidar_dem", "motorcycle")  # the real DEMs and range images
 BAUDS = (115_200, 921_600, 3_000_000)
 SIZES = ((256, 256), (640, 480), (1024, 1024))
+SIDE_RX = 128  # the board's receive cycles: a SIDE_RX x SIDE_RX terrain
 
 
 def upload_bytes(samples: np.ndarray, coded: bool = True) -> int:
@@ -71,8 +72,8 @@ def session_bytes(nlevels: int) -> int:
 
 def board_receive() -> dict:
     """The simulated board's receive cycles a sample (DONE's cycles_receive / samples, fast mode: the
-    bytes go straight into the UART's FIFO, so this is the CPU's work and the host's turnaround) for a
-    coded and a raw upload of a 64 x 64 terrain (`--stage initial`)."""
+    bytes go straight into the UART's FIFO, so this is the upload block's and the CPU's work and the
+    host's turnaround) for a coded and a raw upload of a 128 x 128 terrain (`--stage initial`)."""
     import json
     import tempfile
     from pathlib import Path
@@ -84,8 +85,8 @@ def board_receive() -> dict:
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "t64.npy"
-        np.save(src, datasets.terrain(64).astype(np.float32))
+        src = Path(tmp) / "t128.npy"
+        np.save(src, datasets.terrain(SIDE_RX).astype(np.float32))
         saved = S.DEFAULT_TIMEOUTS, S.Device.upload
         S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS
         board = SimBoard(build.build_sim(), build.build_firmware(), "--port", "0", "--fast", "--quiet")
@@ -101,7 +102,7 @@ def board_receive() -> dict:
                 if rc != 0:
                     raise RuntimeError(err)
                 r = json.loads((Path(tmp) / "t.json").read_text())
-                out["coded" if coded else "raw"] = r["device_cycles"]["receive"] / 4096
+                out["coded" if coded else "raw"] = r["device_cycles"]["receive"] / SIDE_RX**2
                 out["clk_hz"] = r["device"]["clk_hz"]
         finally:
             S.DEFAULT_TIMEOUTS, S.Device.upload = saved
@@ -148,20 +149,13 @@ def run() -> dict:
 
 
 def board_link_seconds(j: dict, baud: int, rx: dict) -> tuple[float, bool]:
-    """The board's link seconds of a job at baud: the upload (line time and the CPU's receive cycles: at
-    the start rate frames come back to back, so the longer of the two; at a switched rate one frame at a
-    time, so both) with the coding the board asks for there (FEATURE_RICE at divisors of 32 and up), then
-    the level streams and the session's frames at line speed.  (seconds, coded)"""
-    from wavemesh.device import memmap
-    from wavemesh.device import protocol as P
-
-    div = P.baud_divisor(rx["clk_hz"], baud)
-    coded = div >= 32
-    up = j["upload"] if coded else j["upload_raw"]
-    line_up = 10 * up / baud
-    cpu = j["samples"] * rx["coded" if coded else "raw"] / rx["clk_hz"]
-    upload = max(line_up, cpu) if baud == memmap.UART_BAUD else line_up + cpu
-    return upload + 10 * (j["mesh"] + j["session"]) / baud, coded
+    """The board's link seconds of a job at baud: the upload (line time and the receive stage's cycles:
+    the upload block takes the frames at line speed, a window of 4 at every rate, so the longer of the
+    two) with coded samples (the board states FEATURE_RICE at every rate: its upload block decodes
+    them), then the level streams and the session's frames at line speed.  (seconds, coded)"""
+    line_up = 10 * j["upload"] / baud
+    cpu = j["samples"] * rx["coded"] / rx["clk_hz"]
+    return max(line_up, cpu) + 10 * (j["mesh"] + j["session"]) / baud, True
 
 
 def markdown(r: dict) -> str:
@@ -200,16 +194,14 @@ def markdown(r: dict) -> str:
     rx = r.get("board_receive")
     if rx:
         out += ["", f"**The board's link seconds** (the ULX3S at {rx['clk_hz'] / 1e6:g} MHz): the line time "
-                "above plus what the soft CPU spends receiving: "
-                f"{rx['coded']:.0f} cycles a sample coded, {rx['raw']:.0f} raw (measured here on the "
-                "simulated board in fast mode, a 64 x 64 terrain, `--stage initial`: DONE's cycles_receive, "
-                "the host's "
-                "turnaround included).  At 115200 baud frames come back to back (window 4) and the longer of "
-                "line and CPU counts; after a switch the board takes one frame at a time and both count; the "
-                "board asks for coded samples only at 781 kbaud and slower (FEATURE_RICE); at 25 MHz its "
-                "nearest rate to 3 Mbaud is 3.125 Mbaud (divisor 8), the line time here is 3,000,000's.  "
-                "The job's own "
-                "cycles (filter bank, templates, refiner, level streams) are not in these figures.",
+                "above plus what the board spends receiving, where that is longer: "
+                f"{rx['coded']:.1f} cycles a sample coded, {rx['raw']:.1f} raw (measured here on the "
+                f"simulated board in fast mode, a {SIDE_RX} x {SIDE_RX} terrain, `--stage initial`: DONE's "
+                "cycles_receive, the host's turnaround included).  The upload block (rtl/upload_rx.v) checks "
+                "the frames and stores the samples, Rice-coded ones too, as they arrive, so the board takes "
+                "coded samples and a window of 4 at every rate; at 25 MHz its nearest rate to 3 Mbaud is "
+                "3.125 Mbaud (divisor 8), the line time here is 3,000,000's.  The job's own cycles are in "
+                "\"End to end on the board\" above.",
                 "",
                 "| input | " + " | ".join(f"{b} baud s" for b in BAUDS) + " |",
                 "|---|" + "---:|" * len(BAUDS)]

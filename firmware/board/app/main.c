@@ -34,7 +34,7 @@
 #define STAGE_SERVE 0x00010000u
 #define STAGE_CLOCK 0x00020000u
 #define LED_ALIVE 1u
-#define WINDOW 4u            /* DATA frames in flight (the RX FIFO absorbs none of them: polled) */
+#define WINDOW 4u            /* DATA frames in flight (the upload block takes them at line speed) */
 #define GETC_CHUNK_MS 1000u  /* longest single wait: 25 M cycles at 25 MHz, far below 2^31 */
 
 extern uint8_t __heap_start[], __heap_end[];
@@ -164,10 +164,10 @@ int main(void)
     caps.div = board_uart_div(); /* BAUD: any divisor the UART takes (memmap.py, UART.DIV) */
     caps.div_min = WM_UART_DIV_MIN;
     caps.div_max = WM_UART_DIV_MASK;
-    /* the RX FIFO is polled: at 115200 baud its 64 bytes last 139 k cycles, more than a frame's CRC and
-     * decoding take, so frames may come back to back; at 921600 baud and up (17 k cycles and less) a
-     * frame that comes while the one before is being checked overflows it: one frame at a time */
-    caps.switched_window = 1;
+    /* the upload block takes the bytes at line speed but for the frame the engine is answering (some 2 k
+     * cycles for a DATA frame): the RX FIFO's 64 bytes (5 k cycles at 3.125 Mbaud, 25 MHz) absorb the
+     * next frame's meanwhile, so frames may come back to back at every rate */
+    caps.switched_window = WINDOW;
     /* the upload block decodes CODING_RICE samples as fast as it stores raw ones: coded at every rate */
     caps.rice_min_div = 0;
 
