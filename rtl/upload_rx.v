@@ -229,17 +229,17 @@ function [31:0] crc_byte(input [31:0] c, input [7:0] d);
     end
 endfunction
 
-// leading ones of the next 16 bits (16: all ones, the escape)
+// leading ones of the next 16 bits (16: all ones, the escape), by halving (four levels, not a chain)
 function [4:0] ones16(input [15:0] v);
-    integer b;
-    reg stop;
+    reg [15:0] n;
     begin
+        n = ~v;
         ones16 = 5'd0;
-        stop = 1'b0;
-        for (b = 15; b >= 0; b = b - 1) begin
-            if (!stop && v[b]) ones16 = ones16 + 5'd1;
-            else stop = 1'b1;
-        end
+        if (n[15:8] == 8'd0) begin ones16 = ones16 + 5'd8; n = n << 8; end
+        if (n[15:12] == 4'd0) begin ones16 = ones16 + 5'd4; n = n << 4; end
+        if (n[15:14] == 2'd0) begin ones16 = ones16 + 5'd2; n = n << 2; end
+        if (!n[15]) begin ones16 = ones16 + 5'd1; n = n << 1; end
+        if (!n[15]) ones16 = ones16 + 5'd1;
     end
 endfunction
 
