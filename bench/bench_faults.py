@@ -10,7 +10,7 @@ unpaced socket shows that floor.  Each run (wavemesh.harness.faultproxy.campaign
 very file `wavemesh mesh` writes), with a clear error (exit 2, one `error:` line and a hint, no
 output), silently different, unclear (anything else) or hung (past the set's run limit).
 
-The sets run at once, each in a process of its own with its own device (`make bench-faults`; the short
+The sets run at once, dealt to processes that each have a device of their own (`make bench-faults`; the short
 seeded version is tests/sim/test_stream_faults.py).  Bars: at 0.2 % both ways (delays among the faults)
 at least 95 % identical, 0 different, 0 hangs, the slowest run at most 5 x the fault-free time; at 1 %
 with --deadline, no run past the deadline and every failure one clear line.
@@ -29,27 +29,29 @@ TITLE = "Fault campaign (wavemesh stream through a fault-injecting proxy)"
 OPTS = ["--key", "elevation", "--crop", "0,0,200,200", "--zeta", "4"]
 DEVICE = ["--tri-capacity", "200000", "--quiet"]
 UART = 115200
-DEADLINE = 240  # s: --deadline of the 1 % set
+DEADLINE = 300  # s: --deadline of the 1 % set
 GRACE = 5.0  # s past the deadline that still counts as "at the deadline" (the process's own ending)
-# (name, device baud (0: socket speed), fault rate per byte and direction, runs, first seed, extra options)
+# (name, device baud (0: socket speed), fault rate per byte and direction, runs, first seed, extra options,
+# shards: processes the runs are dealt to, each with a device of its own)
 SETS = [
-    ("fault-free, 115200 baud", UART, 0.0, 3, 0, []),
-    ("0.2 %, 115200 baud", UART, 0.002, 20, 2000, []),
-    (f"1 %, 115200 baud, --deadline {DEADLINE}", UART, 0.01, 6, 4000, ["--deadline", str(DEADLINE)]),
-    ("fault-free, socket", 0, 0.0, 3, 0, []),
-    ("0.2 %, socket", 0, 0.002, 5, 6000, []),
+    ("fault-free, 115200 baud", UART, 0.0, 3, 0, [], 1),
+    ("0.2 %, 115200 baud", UART, 0.002, 20, 2000, [], 3),
+    (f"1 %, 115200 baud, --deadline {DEADLINE}", UART, 0.01, 6, 4000, ["--deadline", str(DEADLINE)], 3),
+    ("fault-free, socket", 0, 0.0, 3, 0, [], 1),
+    ("0.2 %, socket", 0, 0.002, 5, 6000, [], 1),
 ]
 RUN_LIMIT = 900.0  # s: longer counts as a hang
 
 
-def _one_set(index: int, out: Path) -> None:
-    """Runs SETS[index] against a device of its own; its runs as JSON into out."""
+def _one_set(index: int, shard: int, out: Path) -> None:
+    """Runs shard `shard` of SETS[index] (every shards-th run) against a device of its own; its runs as
+    JSON into out."""
     from wavemesh import cli
     from wavemesh.harness import jacksboro
     from wavemesh.harness.faultproxy import Faults, campaign
     from wavemesh.harness.nativedev import NativeDevice, build_wmdev
 
-    name, baud, rate, runs, seed, extra = SETS[index]
+    name, baud, rate, runs, seed, extra, shards = SETS[index]
     dev = NativeDevice(build_wmdev(), *DEVICE, *(["--baud", str(baud)] if baud else []))
     try:
         with tempfile.TemporaryDirectory() as tmp:
@@ -58,7 +60,7 @@ def _one_set(index: int, out: Path) -> None:
             ref = work / "ref.obj"
             if cli.main(["mesh", str(src), *OPTS, "-o", str(ref), "-q"]) != 0:
                 raise RuntimeError("wavemesh mesh failed")
-            faults = [Faults(seed=seed + s, rate=rate, limit=None) for s in range(runs)]
+            faults = [Faults(seed=seed + s, rate=rate, limit=None) for s in range(shard, runs, shards)]
             done = campaign(("127.0.0.1", dev.port), src, [*OPTS, *extra], ref, faults, work, RUN_LIMIT,
                             on_run=lambda r: print(f"bench faults: {name}: {r.outcome} {r.seconds:.1f} s "
                                                    f"{r.message}", flush=True))
@@ -76,15 +78,19 @@ def run() -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
-        for i in range(len(SETS)):
-            out = Path(tmp) / f"set{i}.json"
-            procs.append((i, out, subprocess.Popen([sys.executable, __file__, "--set", str(i), str(out)])))
-        sets = []
-        for i, out, proc in procs:
+        for i, s in enumerate(SETS):
+            for k in range(s[-1]):
+                out = Path(tmp) / f"set{i}-{k}.json"
+                procs.append((i, out, subprocess.Popen([sys.executable, __file__, "--set", str(i), str(k),
+                                                        str(out)])))
+        for i, _, proc in procs:
             if proc.wait() != 0:
                 raise RuntimeError(f"set {SETS[i][0]!r} failed ({proc.returncode})")
-            runs = json.loads(out.read_text())
-            name, baud, rate, _, _, extra = SETS[i]
+        sets = []
+        for i, s in enumerate(SETS):
+            runs = sorted((r for j, out, _ in procs if j == i for r in json.loads(out.read_text())),
+                          key=lambda r: r["seed"])
+            name, baud, rate, _, _, extra, _ = s
             outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
             errors: dict = {}
             for r in runs:
@@ -161,5 +167,5 @@ def markdown(results: dict) -> str:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "--set":
-        _one_set(int(sys.argv[2]), Path(sys.argv[3]))
+    if len(sys.argv) == 5 and sys.argv[1] == "--set":
+        _one_set(int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[4]))

@@ -64,6 +64,8 @@ DEFAULT_TIMEOUTS = Timeouts()
 # cost about the same.
 SMALLEST_TAIL = 64  # bytes of samples or level stream in one frame, at the least
 GROW_AFTER = 2  # windows (DATA) or levels (MESH) without a loss before frames double again
+PROBE_RTTS = 3  # upload: a STATUS probe after this many smoothed round trips without progress ...
+PROBE_MIN_S = 0.05  # ... but not sooner than this
 WANT_SPAN = 8  # holes of a level within this many frames of the first are asked for in one ACK
 # The device has written a level long before its bytes arrive when the line buffers (a socket, a USB
 # bridge) and stalls; it repeats LEVEL_END after ACK_TIMEOUT_MS without a frame, and ends the job with
@@ -512,11 +514,22 @@ class Device:
         heard = time.monotonic()  # the last frame from the device
         write_by = heard + every  # the host writes again by then
         silence = self.t.reply * self.t.attempts
+        # the probe's timer: a loss that no later frame shows is found after a few round trips (the time
+        # from a DATA frame to its DATA_ACK, smoothed as TCP's), not after the resend interval: a probe
+        # taken early only costs a STATUS (the line keeps its order, so its answer never shows a loss
+        # that is not one); it backs off, doubling, up to the resend interval while none helps
+        sent_at: dict[int, float] = {}  # end (sample) of a frame sent once -> when
+        srtt: float | None = None
+        backoff = 1
+
+        def wait_s() -> float:
+            return every if srtt is None else min(every, max(PROBE_MIN_S, PROBE_RTTS * srtt) * backoff)
 
         def go_back(to: int) -> None:
             nonlocal sent, epoch, rewinds, budget, clean, in_flight
             sent, epoch = to, epoch + 1
             in_flight = []
+            sent_at.clear()  # a frame sent twice times nothing (Karn)
             rewinds += 1
             budget, clean = max(smallest, budget // 2), 0
             if rewinds > self.t.data_retries:
@@ -531,7 +544,8 @@ class Device:
                                       P.DATA.pack(offset=sent, count=n, coding=coding) + tail)
                 sent += n
                 in_flight.append(sent)
-                write_by = time.monotonic() + every
+                sent_at[sent] = time.monotonic()
+                write_by = time.monotonic() + wait_s()
             try:
                 f = self._read(max(0.0, write_by - time.monotonic()))
             except DeadlineError:
@@ -544,7 +558,8 @@ class Device:
                 seq = self._next_seq()
                 self.link.write_frame(P.FrameType.STATUS, seq)
                 probes[seq] = (epoch, sent)
-                write_by = time.monotonic() + every
+                backoff = min(2 * backoff, 64)
+                write_by = time.monotonic() + wait_s()
                 continue
             heard = time.monotonic()
             if f.type == P.FrameType.ERROR:
@@ -562,6 +577,9 @@ class Device:
             elif f.type == P.FrameType.DATA_ACK:
                 ack = f.fields()
                 got, taken, before = ack["next"], None, None
+                if got in sent_at:
+                    rtt = heard - sent_at.pop(got)
+                    srtt = rtt if srtt is None else 0.875 * srtt + 0.125 * rtt
                 if ack["flags"] & P.ACK_NAK and sent > got:
                     taken, before = epoch, sent  # the device saw a gap: go back at once
             else:
@@ -570,7 +588,7 @@ class Device:
                 raise ProtocolError(f"the device says it stored {got} of {total} samples")
             if got > acked:
                 acked = got
-                rewinds = 0
+                rewinds, backoff = 0, 1
                 done = sum(1 for e in in_flight if e <= acked)
                 in_flight = [e for e in in_flight if e > acked]
                 clean += done
