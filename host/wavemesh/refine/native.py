@@ -354,10 +354,21 @@ def _ptr(a: np.ndarray, ctype):
 class Level:
     """One resolution level's mesh and the library's statistics for it.  The Mesh is made from the
     exported slot arrays when first read: a refine call exports every level (the library's mesh moves
-    on), and most callers read only the final one (0.1 ms a call on a 128 x 128 grid)."""
+    on), and most callers read only the final one (0.1 ms a call on a 128 x 128 grid); the statistics
+    likewise become a dict when first read (a copy of the library's struct until then)."""
 
-    def __init__(self, level: int, mesh: Mesh | tuple, stats: dict):
-        self.level, self.stats, self._mesh = level, stats, mesh
+    def __init__(self, level: int, mesh: Mesh | tuple, stats: dict | LevelStats):
+        self.level, self._stats, self._mesh = level, stats, mesh
+
+    @property
+    def stats(self) -> dict:
+        if isinstance(self._stats, LevelStats):
+            self._stats = self._stats.to_dict()
+        return self._stats
+
+    @stats.setter
+    def stats(self, stats: dict) -> None:
+        self._stats = stats
 
     @property
     def mesh(self) -> Mesh:
@@ -461,12 +472,12 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[li
         return [], code
     st = LevelStats()
     lib.wm_refine_stats(handle, ctypes.byref(st))
-    levels = [Level(st.level, _export(lib, handle, width, height), st.to_dict())]
+    levels = [Level(st.level, _export(lib, handle, width, height), LevelStats.from_buffer_copy(st))]
     while not lib.wm_refine_done(handle):
         code = lib.wm_refine_step(handle, ctypes.byref(st))
         if code != WM_OK:
             return levels, code
-        levels.append(Level(st.level, _export(lib, handle, width, height), st.to_dict()))
+        levels.append(Level(st.level, _export(lib, handle, width, height), LevelStats.from_buffer_copy(st)))
     del mem
     return levels, WM_OK
 
