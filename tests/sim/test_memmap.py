@@ -180,4 +180,5 @@ def test_upload_window_fits_the_protocol():
     window = range(memmap.UPLOAD_BUF_BLOCK, memmap.UPLOAD_BUF_BLOCK + memmap.UPLOAD_BUF_BYTES // 256)
     assert memmap.UPLOAD_BUF_BLOCK % (memmap.UPLOAD_BUF_BYTES // 256) == 0 and max(window) < 16
     assert not {b.index for b in BLOCKS} & set(window)
-    assert memmap.UPLOAD_LB_DEPTH > memmap.GRID_MAX_W and memmap.UPLOAD_LB_DEPTH & (memmap.UPLOAD_LB_DEPTH - 1) == 0
+    depth = memmap.UPLOAD_LB_DEPTH
+    assert depth > memmap.GRID_MAX_W and depth & (depth - 1) == 0
