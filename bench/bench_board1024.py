@@ -118,8 +118,10 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
     from wavemesh.io.synth import ball
 
     partial = partial or RESULTS / f"board{side}.partial.json"
+    from wavemesh.device import soc_cpu
+
     head = {"side": side, "input": f"wavemesh.io.synth.ball({side})", "options": OPTIONS,
-            "code": code_state()}
+            "code": code_state(), "cpu": soc_cpu.selected().name}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         exe = Path(shutil.copy2(build.build_sim(), tmp / "wmsim"))
@@ -213,9 +215,9 @@ def markdown(results: dict) -> str:
     side = r["side"]
     lines = [
         f"wavemesh.io.synth's Ball at {side} x {side}, `wavemesh stream {' '.join(r['options'])}` through "
-        "the simulated ULX3S (`wmsim --fast`: the Verilator model of the bitstream's design, PicoRV32, FPGA "
-        "stage, SDRAM controller and the SDRAM chip's cycle model), compared byte for byte with "
-        "`wavemesh mesh`'s OBJ file.  " + code_line(r.get("code")),
+        "the simulated ULX3S (`wmsim --fast`: the Verilator model of the bitstream's design, "
+        f"{r.get('cpu', 'picorv32')}, FPGA stage, SDRAM controller and the SDRAM chip's cycle model), "
+        "compared byte for byte with `wavemesh mesh`'s OBJ file.  " + code_line(r.get("code")),
         "",
     ]
     if "error" in r:

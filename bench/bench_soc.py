@@ -1,9 +1,10 @@
 """The whole job on the simulated board: work cycles against the budget, per stage, per sample and triangle.
 
 `wavemesh stream` through the simulated board (sim/, the cycle-accurate Verilator model of soc_top:
-the PicoRV32 with the real firmware and the FPGA stage) in fast UART mode, on three inputs that fit
-the board's grid and triangle capacity: Ball and Box (wavemesh.io.synth, 256 x 256 decimated by 8) and a
-real DEM (matplotlib's Jacksboro fault DEM decimated by 16, the options of
+the soft CPU of host/wavemesh/device/soc_cpu.py with the real firmware and the FPGA stage) in fast
+UART mode, on three inputs that fit the board's grid and triangle capacity: Ball and Box
+(wavemesh.io.synth, 256 x 256 decimated by 8) and a real DEM (matplotlib's Jacksboro fault DEM
+decimated by 16, the options of
 tests/sim/test_stream_board.py); and a held-out one never used while cutting cycles,
 reported apart (bench/datasets.py's lidar DEM decimated by 8).  The device's cycles per stage come
 from `--report` (`device_cycles`: receive, filter bank, templates, refiner, emit, and the link I/O of
@@ -237,7 +238,8 @@ def markdown(results: dict) -> str:
         "accounting\"; tests/sim/test_stream_board.py compares with `==`).  *link* is the job's link "
         "I/O (PROGRESS frames, framing and writing the level streams, waiting for ACKs) and *receive* the "
         "upload: fast-mode figures here (bytes go straight into and out of the UART FIFOs), which "
-        f"depend on the host; on a board the {BAUD} baud line (2170 cycles per byte) sets their pace.  "
+        f"depend on the host; on a board the {BAUD} baud line ({10 * round(clk / BAUD):,} cycles per byte) "
+        "sets their pace.  "
         "*board s* = all six stages / clock.  *= `mesh`*: the board's mesh file equals `wavemesh mesh`'s "
         "byte for byte.  The counts are those of this firmware image: moving code (any change to the "
         "firmware) can shift them by about 1 % (docs/soc.md, \"Cycle accounting\").",

@@ -1,9 +1,9 @@
 /*
  * wavemesh: the VexRiscv as the SoC's CPU, behind the PicoRV32's native memory interface
  *
- * The CPU is the default VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv.v, never copied
- * here): RV32IM, 5 stages, 4 KiB instruction cache, 4 KiB write-through data cache, one-cycle
- * multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
+ * The CPU is the IMAC VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv_IMAC.v, never copied
+ * here; its module is VexRiscv, as in the package's other variants): RV32IMAC, 5 stages, 4 KiB
+ * instruction cache, 4 KiB write-through data cache, one-cycle multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
  * WM_CPU_VEXRISCV is defined (host/wavemesh/device/soc_cpu.py chooses; docs/soc.md, "The CPU").
  *
  * Its two Wishbone buses (classic cycles; the caches refill 32-byte lines as bursts of 8 words, one

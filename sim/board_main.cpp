@@ -15,7 +15,7 @@
 // This board's lines on stdout, beside sim_main.h's:
 //   wmsim: stage 0xVALUE cycle N              (every SYS.STAGE write)
 //   wmsim: leds 0xVALUE cycle N               (every change of the LED outputs)
-//   wmsim: halt 0xCODE cycle N                wmsim: trap cycle N
+//   wmsim: halt 0xCODE cycle N                wmsim: trap cycle N pc 0xPC
 //
 // --profile FILE writes, at exit, "PC CYCLES" lines (hex, decimal): every cycle is counted against the
 // address of the last instruction fetched (the CPU is not pipelined: the cycles an instruction takes,
@@ -128,7 +128,8 @@ public:
             status = top_->halt_code == 0 ? 0 : 1;
         }
         if (top_->trap) {
-            sim_log(opt_.quiet, "trap cycle %" PRIu64, cycles_);
+            sim_log(opt_.quiet, "trap cycle %" PRIu64 " pc 0x%08x", cycles_,
+                    static_cast<unsigned>(top_->prof_fetch_pc));
             status = 2;
         }
         if (profiling_) {

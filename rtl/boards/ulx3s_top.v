@@ -1,14 +1,17 @@
 /*
  * wavemesh: the ULX3S board top (Lattice ECP5-85F, CABGA381; 25 MHz oscillator)
  *
- * The whole SoC (rtl/soc_top.v: PicoRV32, firmware image in block RAM, FPGA stage) on the board's
- * 25 MHz clock without a PLL; its UART on the FT231X's serial port (ftdi_txd in, ftdi_rxd out: the
- * names are the FTDI chip's), the eight LEDs, FIRE1 (btn[1]) as the reset button.  wifi_gpio0 is
- * driven high: the ESP32 holds the board in reset or reconfigures it when this pin floats low.
+ * The whole SoC (rtl/soc_top.v: the CPU, firmware image in block RAM, FPGA stage) on the system clock
+ * the ECP5's PLL makes from the board's 25 MHz oscillator (ecp5_pll: the memory map's CLK_HZ, 40 MHz;
+ * the SoC stays in reset until the PLL locks); its UART on the FT231X's serial port (ftdi_txd in,
+ * ftdi_rxd out: the names are the FTDI chip's), the eight LEDs, FIRE1 (btn[1]) as the reset button.
+ * wifi_gpio0 is driven high: the ESP32 holds the board in reset or reconfigures it when this pin
+ * floats low.
  * The SDRAM: the chip's clock is the inverted system clock, so it samples every command and datum
- * in the middle of its cycle (20 ns from either edge at 25 MHz: the inverter's and the pads' few ns
- * of skew leave far more than the chip's 1.5 ns setup and 0.8 ns hold); DQ through the pads'
- * tristate buffers; every other pin straight from the controller's registers.
+ * in the middle of its cycle (12.5 ns from either edge at 40 MHz: the inverter's and the pads' few ns
+ * of skew leave far more than the chip's 1.5 ns setup and 0.8 ns hold; a read datum, valid 6 ns after
+ * the chip's edge, is sampled 12.5 ns after it); DQ through the pads' tristate buffers; every other
+ * pin straight from the controller's registers.
  * Pins: ulx3s.lpf.  `make bitstream BOARD=ulx3s` builds it with the firmware image as FW_HEX.
  */
 
@@ -44,19 +47,33 @@ module ulx3s_top #
     inout  wire [15:0] sdram_d
 );
 
+wire clk;
+wire pll_locked;
 wire rst;
 
+ecp5_pll #(
+    .CLKI_DIV(`WM_PLL_CLKI_DIV),
+    .CLKFB_DIV(`WM_PLL_CLKFB_DIV),
+    .CLKOP_DIV(`WM_PLL_CLKOP_DIV),
+    .CLKOP_CPHASE(`WM_PLL_CLKOP_CPHASE)
+) pll_inst (
+    .clk_in(clk_25mhz),
+    .clk_out(clk),
+    .locked(pll_locked)
+);
+
+// reset while the PLL has not locked, as while the button is pressed (and 2^16 clocks after either)
 wm_por #(
     .BUTTON_ACTIVE_HIGH(1)
 ) por_inst (
-    .clk(clk_25mhz),
-    .button(btn[1]),
+    .clk(clk),
+    .button(btn[1] || !pll_locked),
     .rst(rst)
 );
 
 assign wifi_gpio0 = 1'b1;
 
-assign sdram_clk = !clk_25mhz;
+assign sdram_clk = !clk;
 
 wire [15:0] sdram_dq_o;
 wire        sdram_dq_oe;
@@ -72,15 +89,15 @@ wire        halt_valid_unused;
 wire [31:0] halt_code_unused;
 wire        trap_unused;
 
-// the simulated board's configuration (sim/board_sim.v): the memory map's clock (the board's 25 MHz
-// oscillator; tests/host/test_boards_flow.py checks they agree), sizes and LEDs; only the firmware
-// comes in differently (here built in, there loaded at start-up from the same image)
+// the simulated board's configuration (sim/board_sim.v): the memory map's clock (the PLL's output;
+// tests/host/test_boards_flow.py checks they agree), sizes and LEDs; only the firmware comes in
+// differently (here built in, there loaded at start-up from the same image)
 soc_top #(
     .CLK_HZ(`WM_CLK_HZ),
     .FW_HEX(FW_HEX),
     .LED_COUNT(`WM_LED_COUNT)
 ) soc_inst (
-    .clk(clk_25mhz),
+    .clk(clk),
     .rst(rst),
     .uart_rxd(ftdi_txd),
     .uart_txd(ftdi_rxd),

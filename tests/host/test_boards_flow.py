@@ -73,10 +73,16 @@ def test_doc_section_from_the_report(boards, tmp_path):
 
 
 def test_board_sources_are_the_tops_closure(boards):
-    """Each board reads its top and what it instantiates, transitively, and nothing else of rtl/."""
+    """Each board reads its top and what it instantiates, transitively, and nothing else of rtl/; the
+    ULX3S the chosen CPU's file (VexRiscv_IMAC.v holds the module VexRiscv) and not the other's."""
+    from wavemesh.device import soc_cpu
+
     names = {b: {f.name for f in boards.sources(boards.BOARDS[b])} for b in boards.BOARDS}
-    assert {"ulx3s_top.v", "wm_por.v", "soc_top.v", "soc_accel.v", "haar_bank.v", "tlut_expand.v",
-            "uart_rx.v", "wm_fifo.v", "picorv32.v"} <= names["ulx3s"]
+    cpu = soc_cpu.selected()
+    assert {"ulx3s_top.v", "ecp5_pll.v", "wm_por.v", "soc_top.v", "soc_accel.v", "haar_bank.v",
+            "tlut_expand.v", "uart_rx.v", "wm_fifo.v", cpu.verilog_file().name} <= names["ulx3s"]
+    others = {c.verilog_file().name for c in soc_cpu.CPUS.values()} - {cpu.verilog_file().name}
+    assert not others & names["ulx3s"]
     assert {"icebreaker_top.v", "wm_por.v", "stage_uart.v", "haar_bank.v", "tlut_stage.v",
             "uart_tx.v"} <= names["icebreaker"]
     assert not {"soc_top.v", "picorv32.v", "ulx3s_top.v"} & names["icebreaker"]
@@ -85,7 +91,7 @@ def test_board_sources_are_the_tops_closure(boards):
 
 
 def test_ulx3s_clock_is_the_memory_maps(boards):
-    """The SoC's clock (memmap.CLK_HZ: SYS.CLK_HZ, the UART divisor, HELLO) is the ULX3S oscillator's, and
+    """The SoC's clock (memmap.CLK_HZ: SYS.CLK_HZ, the UART divisor, HELLO) is the ULX3S PLL's output, and
     its 8 LEDs are the memory map's: ulx3s_top.v builds soc_top with the memory map's values."""
     from wavemesh.device import memmap
 

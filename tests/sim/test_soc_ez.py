@@ -173,8 +173,9 @@ def test_fst_trace(tmp_path, verilator):
 
 def test_trap_and_cycle_limit_end_the_run(tmp_path, start_sim):
     """An illegal instruction traps the CPU (exit 2); a program that never halts meets --max-cycles
-    (exit 3)."""
-    rc, board = run(start_sim, tmp_path / "trap.hex", [0x00000000])
+    (exit 3).  The illegal word is all ones (major opcode 0x7F: no RV32 instruction); the all-zero word,
+    illegal for the PicoRV32, ran on the VexRiscv until --max-cycles."""
+    rc, board = run(start_sim, tmp_path / "trap.hex", [0xFFFFFFFF])
     assert rc == 2 and any(ln.startswith("wmsim: trap cycle") for ln in board.lines)
     hexfile = tmp_path / "spin.hex"
     hexfile.write_text(hex_words([jal(0, 0)]))

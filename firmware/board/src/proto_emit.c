@@ -323,6 +323,8 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->e_max = st->e_max;
     p->triangles = (uint32_t)m->n_tri;
     p->vertices = (uint32_t)m->n_vert;
-    stage_enter(p, prev);
+    /* after the last level the job only returns: no stage's clock runs, so the levels' cycles add up
+     * to the filter, template and refine stages' exactly */
+    stage_enter(p, last ? -1 : prev);
     return WM_PROTO_E_NONE;
 }

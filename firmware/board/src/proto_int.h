@@ -165,39 +165,50 @@ void wm_proto_send_progress(wm_proto *p, int stage, int level);
  * or of the host, however often, is not an error). */
 int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, void (*again)(wm_proto *));
 
-/* Cycle accounting (proto_session.c says how the clocks run): the cycles since the last mark go to the
- * clock that ran, the link's or the current stage's. */
+/* Cycle accounting (proto_session.c says how the clocks run): the cycles since the last charge go to
+ * the clock that ran, the link's or the current stage's. */
 void wm_proto_charge(wm_proto *p);
 
-/* Tells the transport which clock runs from now on (io.mark, for traces). */
-static inline void mark(wm_proto *p)
+/* Tells the transport which clock runs from now on: `stage`'s, or the link's while link_depth > 0
+ * (io.mark: on the board the stage marker, its sync and the CPU's cache flush).  Every switch marks
+ * first and then reads the cycle counter (wm_proto_charge): the clock that ends pays the mark, and the
+ * one that starts starts from the state the mark leaves (the SDRAM synced, the caches empty) whatever
+ * the one before left behind; the other order left the few instructions between the counter read and
+ * the flush to hit or miss a cache as the clock before had left it (docs/soc.md, "Cycle accounting"). */
+static inline void mark(const wm_proto *p, int stage, int link_depth)
 {
     if (p->io.mark) {
-        uint32_t c = p->stage >= 0 && p->stage < WM_PROTO_STAGE_COUNT ? (uint32_t)p->stage : WM_PROTO_CLOCK_NONE;
-        p->io.mark(p->io.ctx, p->link_depth ? c | WM_PROTO_CLOCK_LINK : c);
+        uint32_t c = stage >= 0 && stage < WM_PROTO_STAGE_COUNT ? (uint32_t)stage : WM_PROTO_CLOCK_NONE;
+        p->io.mark(p->io.ctx, link_depth ? c | WM_PROTO_CLOCK_LINK : c);
     }
 }
 
-/* Another stage begins (not inside link I/O). */
+/* Another stage begins (not inside link I/O); -1: no stage. */
 static inline void stage_enter(wm_proto *p, int stage)
 {
+    mark(p, stage, p->link_depth);
     wm_proto_charge(p);
     p->stage = stage;
-    mark(p);
 }
 
 /* Link I/O begins: the stage's clock stops, the link's runs (nested calls count once). */
 static inline void link_begin(wm_proto *p)
 {
-    if (p->link_depth == 0) wm_proto_charge(p); /* to the stage */
-    if (++p->link_depth == 1) mark(p);
+    if (p->link_depth == 0) {
+        mark(p, p->stage, 1);
+        wm_proto_charge(p); /* to the stage */
+    }
+    p->link_depth++;
 }
 
 /* Link I/O ends: the stage's clock runs again. */
 static inline void link_end(wm_proto *p)
 {
-    if (p->link_depth == 1) wm_proto_charge(p); /* to the link */
-    if (--p->link_depth == 0) mark(p);
+    if (p->link_depth == 1) {
+        mark(p, p->stage, 0);
+        wm_proto_charge(p); /* to the link */
+    }
+    p->link_depth--;
 }
 
 /* ---------------------------------------------------------------------------------------------- */

@@ -93,7 +93,7 @@ static void send_error(wm_proto *p, uint8_t code, uint32_t detail)
  * refine, and emit: building each level stream once) depends only on the job, so a job gives the same
  * stage counts on every run, over any link, at any host speed. */
 
-/* The cycles since the last mark go to the clock that ran: the link's or the current stage's. */
+/* The cycles since the last charge go to the clock that ran: the link's or the current stage's. */
 void wm_proto_charge(wm_proto *p)
 {
     uint64_t t = now(p);

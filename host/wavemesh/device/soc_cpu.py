@@ -26,6 +26,7 @@ class Cpu:
     name: str  # WM_CPU value; the build folders of a CPU other than the default carry it
     package: str  # the pythondata package with its Verilog
     verilog: str  # the file in the package's data_location
+    module: str  # the CPU's module in that file (the VexRiscv variants of the package all name it VexRiscv)
     define: str  # the Verilog macro that makes soc_top instantiate it ("" for the PicoRV32)
     march: str  # the firmware's -march
     doc: str
@@ -50,14 +51,16 @@ class Cpu:
 CPUS = {
     c.name: c
     for c in (
-        Cpu("picorv32", "pythondata_cpu_picorv32", "picorv32.v", "", "rv32imc",
+        Cpu("picorv32", "pythondata_cpu_picorv32", "picorv32.v", "picorv32", "", "rv32imc",
             "PicoRV32 (RV32IMC): no caches, fast multiplier, divider; soc_top's native memory bus"),
-        Cpu("vexriscv", "pythondata_cpu_vexriscv", "VexRiscv.v", "WM_CPU_VEXRISCV", "rv32im",
-            "VexRiscv default (RV32IM): 5 stages, 4 KiB instruction and data caches, one-cycle multiplier, "
-            "33-cycle divider; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on the native bus"),
+        Cpu("vexriscv", "pythondata_cpu_vexriscv", "VexRiscv_IMAC.v", "VexRiscv", "WM_CPU_VEXRISCV",
+            "rv32imc",
+            "VexRiscv IMAC (RV32IMAC): 5 stages, 4 KiB instruction and data caches, one-cycle multiplier, "
+            "33-cycle divider, compressed instructions; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on "
+            "the native bus"),
     )
 }
-CPU = "picorv32"
+CPU = "vexriscv"
 
 
 class UnknownCpu(ValueError):
