@@ -34,7 +34,7 @@ help:
 	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
 	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
 	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
-	@echo "                    (CPU=vexriscv: firmware, simulator and bitstream of the SoC with that CPU)"
+	@echo "                    (CPU=picorv32: firmware, simulator and bitstream of the SoC with that CPU)"
 	@echo "make sim            build firmware and simulator, run the simulated board on 127.0.0.1:$(PORT)"
 	@echo "                    (the ULX3S's top; BOARD=icebreaker: the iCEBreaker's, the FPGA stage alone)"
 	@echo "                    (PORT=N, SIM_FLAGS=\"--fast --exit-on-close ...\", TRACE=1 for --trace FILE.fst)"
@@ -91,7 +91,7 @@ test-sim: $(SETUP_STAMP) gen
 PORT      ?= 7720
 SIM_FLAGS ?=
 TRACE     ?=
-# CPU=vexriscv: the SoC with that CPU (host/wavemesh/device/soc_cpu.py; its own build folders) for the
+# CPU=picorv32: the SoC with that CPU (host/wavemesh/device/soc_cpu.py; its own build folders) for the
 # firmware, the simulator and the bitstream; empty: the default
 CPU       ?= $(WM_CPU)
 export WM_CPU := $(CPU)
