@@ -20,7 +20,7 @@ from wavemesh.device.link import SlipDecoder, encode_frame, parse_frame
 CAPS = dict(version=P.VERSION, fw_major=1, fw_minor=7, name=b"wm-test", max_width=300, max_height=200,
             max_samples=40000, tri_capacity=1234, max_levels=6, window=4, max_payload=1024, clk_hz=25_000_000,
             baud=115200, features=0, byte_timeout_ms=100, ack_timeout_ms=500, session_timeout_ms=5000,
-            ack_retries=8, reserved=0, idle_timeout_ms=0, write_timeout_ms=0)
+            ack_retries=8, link_timeout_s=30, idle_timeout_ms=0, write_timeout_ms=0)
 
 
 class Listener:
