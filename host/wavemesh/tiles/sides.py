@@ -102,6 +102,21 @@ def side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
     return {"top": (pos, 0), "bottom": (pos, h - 1), "left": (0, pos), "right": (w - 1, pos)}[side]
 
 
+def _ring(v: int, fan: Iterable[tuple[int, int, int]]) -> list[int]:
+    """The link of a border vertex v's star (its triangles ``fan``, counter-clockwise), walked from the side
+    neighbour: edge (v -> n1) in a triangle (v, n1, n2) continues from n2; the start is the neighbour no
+    triangle ends at."""
+    nxt = {}
+    for t in fan:
+        k = t.index(v)
+        nxt[t[(k + 1) % 3]] = t[(k + 2) % 3]
+    start = next(n for n in nxt if n not in nxt.values())
+    ring = [start]
+    while ring[-1] in nxt:
+        ring.append(nxt[ring[-1]])
+    return ring
+
+
 def conform(mesh: Mesh, sides: dict) -> Mesh:
     """``mesh`` (a proper triangulation of its grid rectangle) with exactly the decided border vertices:
     each missing one inserted by splitting the triangle on its border edge, each other border vertex
@@ -169,17 +184,7 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
         if xy[v] in want or xy[v] in corners or not any(s in sides for s, _ in _side_of(*xy[v], w, h)):
             continue
         fan = list(inc[v])
-        # the star's link, walked from the side neighbour with v's fan counter-clockwise: edge (v -> n1)
-        # in a triangle (v, n1, n2) continues from n2; the start is the neighbour no triangle ends at
-        nxt = {}
-        for t in fan:
-            tv = tris[t]
-            k = tv.index(v)
-            nxt[tv[(k + 1) % 3]] = tv[(k + 2) % 3]
-        start = next(n for n in nxt if n not in nxt.values())
-        ring = [start]
-        while ring[-1] in nxt:
-            ring.append(nxt[ring[-1]])
+        ring = _ring(v, (tris[t] for t in fan))
         cut = ear_clip([xy[r] for r in ring], fattest=True)
         if cut is None:
             raise MeshInvalid("a tile's border could not be re-triangulated (no ear)", hint=api.BUG_HINT)
@@ -244,15 +249,7 @@ class Editable:
         v = self.at.get(p)
         if v is None or v not in self.inc or len(_side_of(*p, w, h)) > 1:
             return None
-        nxt = {}
-        for k in self.inc[v]:
-            tv = self.tris[k]
-            j = tv.index(v)
-            nxt[tv[(j + 1) % 3]] = tv[(j + 2) % 3]
-        start = next(n for n in nxt if n not in nxt.values())
-        ring = [start]
-        while ring[-1] in nxt:
-            ring.append(nxt[ring[-1]])
+        ring = _ring(v, (self.tris[k] for k in self.inc[v]))
         pts = [self.xy[r] for r in ring]
         if any(s == FACING[side] for q in pts if len(_side_of(*q, w, h)) == 1 for s, _ in _side_of(*q, w, h)):
             return None
