@@ -179,8 +179,9 @@ def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray |
                 raise MeshInvalid(f"{t.name}: a seam vertex both tiles could do without could not be removed "
                                   f"({side} {pos})", hint=api.BUG_HINT)
             ed.apply(step)
-    before = border_of(Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris))
-    sides = {s: tuple(q for q in before[s] if q not in set(removed.get(s, ()))) for s in t.neighbours}
+    before = border_of(ed.source)  # r's mesh in tile coordinates, as _editable made it
+    gone = {s: set(removed.get(s, ())) for s in t.neighbours}
+    sides = {s: tuple(q for q in before[s] if q not in gone[s]) for s in t.neighbours}
     report = r.report | {"seam_removed": r.report.get("seam_removed", 0) + sum(map(len, removed.values()))}
     seconds = r.report["seconds"] + time.perf_counter() - t0
     return _checked(plan, r.index, hf, ed.mesh(), sides, report, seconds, plan.zeta_used)
