@@ -159,8 +159,7 @@ class HeightField:
         quantisation a sample is off its input value by at most q, and so is a plane through three samples,
         so zeta - 2q on the samples keeps the vertical bound on the input values (docs/refiner.md,
         "Quantised input"); never below 0."""
-        q = self.max_quantisation_error
-        return max(0.0, zeta - 2 * q) if q > 0 else zeta
+        return refiner_zeta(zeta, self.max_quantisation_error)
 
     def to_report(self) -> dict:
         """A JSON-able summary for reports."""
@@ -182,6 +181,12 @@ class HeightField:
 
 # ---------------------------------------------------------------------------
 # Public entry points
+
+
+def refiner_zeta(zeta: float, q: float) -> float:
+    """zeta on the 16-bit samples for a quantisation whose largest error is q (HeightField.refiner_zeta,
+    a tiled run's whole grid): zeta - 2q, never below 0; zeta itself when lossless."""
+    return max(0.0, zeta - 2 * q) if q > 0 else zeta
 
 
 def parse_fill(text: str | float | None) -> None | str | float:

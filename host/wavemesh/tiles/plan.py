@@ -12,6 +12,7 @@ from wavemesh import api
 from wavemesh.api import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
 from wavemesh.errors import InputError, WavemeshError
 from wavemesh.io.georef import ground
+from wavemesh.io.heightfield import refiner_zeta
 
 if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
@@ -102,8 +103,7 @@ def plan_tiles(src: Source, params, tile: int | None = None, *, runner: Runner |
     tau = params.tau if params.tau is not None else api.DEFAULT_TAU_FRACTION * (quant.vmax - quant.vmin)
     if not math.isfinite(tau) or tau < 0:
         raise WavemeshError(f"--tau {tau} is not a finite number >= 0", hint="give tau in height units")
-    p = params.refine
-    zeta = max(0.0, p.zeta - 2 * quant.q) if quant.q > 0 else p.zeta
+    zeta = refiner_zeta(params.refine.zeta, quant.q)
     plan = TilePlan(src, params, tile, quant, params.levels, tau, zeta, ground(src.grid()).spacing,
                     cuts(src.width, tile), cuts(src.height, tile))
     nx, ny = len(plan.xcuts) - 1, len(plan.ycuts) - 1
