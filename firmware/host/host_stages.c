@@ -11,10 +11,12 @@
 
 #define SAMPLE_MAX 65535.0
 #define MAX_THREADS 64
-#define TRI_CHUNK 512
-#define PART_MIN \
-    ((int64_t)1 << 18) /* samples a thread takes at least: starting one costs about what a
-                                    * pass over this many does, more on a busy machine */
+#define TRI_CHUNK 512 /* triangles a thread takes at a time (their sizes vary a lot) */
+/* samples a thread takes at least: starting one costs about what a pass over this many does, more on
+ * a busy machine */
+#define PART_MIN ((int64_t)1 << 18)
+#define EXACT ((int64_t)1 << 52) /* E_k below this: E_k(xl) + a_k k exact in doubles (each term < 2^53) */
+#define ABS(v) ((v) < 0 ? -(v) : (v))
 
 static int64_t part_min = PART_MIN;
 
@@ -24,8 +26,6 @@ int64_t wm_host_part_min(int64_t n)
     if (n > 0) part_min = n;
     return old;
 }
-#define EXACT ((int64_t)1 << 52) /* E_k below this: E_k(xl) + a_k k exact in doubles (each term < 2^53) */
-#define ABS(v) ((v) < 0 ? -(v) : (v)) /* triangles a thread takes at a time (their sizes vary a lot) */
 
 typedef void (*part_fn)(void *ctx, int32_t part, int32_t parts);
 
@@ -379,9 +379,9 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
 /* The proper-triangulation check (check.py's check_mesh) for a mesh that passes it */
 
 #define CHECK_CELLS ((int64_t)1 << 30)   /* the occupancy bitmap's largest grid (128 MiB) */
-#define LATTICE_PER_ELEMENT 64 /* inner lattice points visited: per vertex and triangle, */
-#define LINEAR_DEGREE 16 /* out-neighbours searched one by one up to this many, else sorted */
+#define LATTICE_PER_ELEMENT 64          /* inner lattice points visited: per vertex and triangle, */
 #define LATTICE_FREE ((int64_t)1 << 24) /* and these (~20 ms) besides, at most */
+#define LINEAR_DEGREE 16 /* out-neighbours searched one by one up to this many, else sorted */
 
 static int64_t gcd64(int64_t a, int64_t b) /* a, b >= 0; most edges are short: no division for them */
 {
