@@ -98,6 +98,12 @@ def _side_of(x: int, y: int, w: int, h: int) -> list[tuple[str, int]]:
                                     ("right", y, x == w - 1)) if on]
 
 
+def _on_sides(xy: np.ndarray, w: int, h: int) -> dict[str, np.ndarray]:
+    """side -> (V,) bool: the vertices ``xy`` on that side of the w x h rectangle."""
+    x, y = xy[:, 0], xy[:, 1]
+    return {"top": y == 0, "right": x == w - 1, "bottom": y == h - 1, "left": x == 0}
+
+
 def side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
     return {"top": (pos, 0), "bottom": (pos, h - 1), "left": (0, pos), "right": (w - 1, pos)}[side]
 
@@ -125,7 +131,7 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
     next step's business.  Only the triangles at the border are held as Python objects."""
     w, h = mesh.width, mesh.height
     n_v, n_t = len(mesh.xy), len(mesh.tris)
-    bset = (mesh.xy[:, 0] == 0) | (mesh.xy[:, 0] == w - 1) | (mesh.xy[:, 1] == 0) | (mesh.xy[:, 1] == h - 1)
+    bset = np.logical_or.reduce(list(_on_sides(mesh.xy, w, h).values()))
     near = np.flatnonzero(bset[mesh.tris].any(axis=1))
     tris = {k: tuple(t) for k, t in zip(near.tolist(), mesh.tris[near].tolist(), strict=True)}
     used = np.unique(mesh.tris[near])
@@ -206,10 +212,9 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
 
 def border_of(mesh: Mesh) -> dict:
     """A mesh's vertices on each side of its rectangle, as positions along the side (sorted)."""
-    x, y = mesh.xy[:, 0], mesh.xy[:, 1]
-    w, h = mesh.width, mesh.height
-    return {"top": tuple(sorted(x[y == 0].tolist())), "bottom": tuple(sorted(x[y == h - 1].tolist())),
-            "left": tuple(sorted(y[x == 0].tolist())), "right": tuple(sorted(y[x == w - 1].tolist()))}
+    on = _on_sides(mesh.xy, mesh.width, mesh.height)
+    return {s: tuple(sorted(mesh.xy[on[s], 0 if s in ("top", "bottom") else 1].tolist()))
+            for s in ("top", "bottom", "left", "right")}
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -223,10 +228,10 @@ class Editable:
 
     def __init__(self, mesh: Mesh, within, sides: Iterable[str]):
         self.w, self.h, self.within, self.source = mesh.width, mesh.height, within, mesh
-        x, y = mesh.xy[:, 0], mesh.xy[:, 1]
+        masks = _on_sides(mesh.xy, self.w, self.h)
         on = np.zeros(len(mesh.xy), dtype=bool)
         for side in sides:
-            on |= {"top": y == 0, "bottom": y == self.h - 1, "left": x == 0, "right": x == self.w - 1}[side]
+            on |= masks[side]
         near = on[mesh.tris].any(axis=1)
         self.rest = mesh.tris[~near]
         self.tris = [tuple(t) for t in mesh.tris[near].tolist()]
