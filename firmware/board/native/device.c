@@ -156,7 +156,18 @@ static pthread_mutex_t door_lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t door_cond = PTHREAD_COND_INITIALIZER;
 static int door_fd = -1; /* a connection handed over, not yet taken */
 static int door_busy;    /* a connection is handed over or being served */
-#define DOOR_GRACE_MS 200L /* a connection that comes while another is served waits this long for the door */
+#define DOOR_GRACE_MS 200u /* a connection that comes while another is served waits this long for the door */
+
+/* ms milliseconds from now, on door_cond's clock (pthread_cond_timedwait's absolute time) */
+static struct timespec door_deadline(uint32_t ms)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_REALTIME, &t);
+    t.tv_sec += (time_t)(ms / 1000u);
+    t.tv_nsec += (long)(ms % 1000u) * 1000000L;
+    if (t.tv_nsec >= 1000000000L) t.tv_sec++, t.tv_nsec -= 1000000000L;
+    return t;
+}
 
 static void drain(int fd, int ms)
 {
@@ -196,10 +207,7 @@ static void *doorman(void *arg)
         }
         pthread_mutex_lock(&door_lock);
         if (door_busy) { /* the client served may just have left during a job: give it a moment */
-            struct timespec until;
-            clock_gettime(CLOCK_REALTIME, &until);
-            until.tv_nsec += DOOR_GRACE_MS * 1000000L;
-            if (until.tv_nsec >= 1000000000L) until.tv_sec++, until.tv_nsec -= 1000000000L;
+            struct timespec until = door_deadline(DOOR_GRACE_MS);
             while (door_busy)
                 if (pthread_cond_timedwait(&door_cond, &door_lock, &until) != 0) break;
         }
@@ -239,11 +247,7 @@ static void door_done(void)
 static int door_wait(uint32_t ms)
 {
     int fd;
-    struct timespec until;
-    clock_gettime(CLOCK_REALTIME, &until);
-    until.tv_sec += (time_t)(ms / 1000u);
-    until.tv_nsec += (long)(ms % 1000u) * 1000000L;
-    if (until.tv_nsec >= 1000000000L) until.tv_sec++, until.tv_nsec -= 1000000000L;
+    struct timespec until = door_deadline(ms);
     pthread_mutex_lock(&door_lock);
     while (door_fd < 0)
         if (pthread_cond_timedwait(&door_cond, &door_lock, &until) != 0) break;
