@@ -544,12 +544,7 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
     if files.normal_map:
         raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
                             hint="leave out --tile, or --normal-map")
-    if getattr(args, "workers", None) is not None and args.workers < 1:
-        raise WavemeshError(f"--workers {args.workers} is out of range", hint="use 1 or more")
-    if getattr(args, "timeout", None) is not None and not args.timeout > 0:
-        raise WavemeshError(f"--timeout {args.timeout} is out of range", hint="give seconds > 0")
-    if getattr(args, "deadline", None) is not None and not args.deadline > 0:
-        raise WavemeshError(f"--deadline {args.deadline} is out of range", hint="give seconds > 0")
+    # --workers, --timeout, --deadline: _check_options, which both callers run first
     tiles.check_tiled_outputs(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
                               exaggeration=args.exaggeration, inputs=inputs, files=files)
     say = None if args.quiet else (lambda text: print(text, flush=True))
