@@ -301,12 +301,12 @@ def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
     along = 1 if side in ("left", "right") else 0
     line = sorted((p for p in a.at if any(s == side for s, _ in _side_of(*p, a.w, a.h))),
                   key=lambda p: p[along])
-    removed = []
+    removed, done = [], set()
     while True:
         more = False
         for p in line:
             pos = p[along]
-            if pos in removed:
+            if pos in done:
                 continue
             ra = a.removal(p, side)
             rb = ra and b.removal(side_point(other, pos, b.w, b.h), other)
@@ -314,6 +314,7 @@ def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
                 a.apply(ra)
                 b.apply(rb)
                 removed.append(pos)
+                done.add(pos)
                 more = True
         if not more:
             return tuple(removed)
