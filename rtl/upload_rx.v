@@ -621,32 +621,25 @@ always @* begin
                 lb_hi_next = lb_hi_bad;
                 lb_lo_next = lb_lo_bad;
             end
-            if (state_next == S_BYTE) begin
-                // dropped: ready for the next frame
-                pos_next = 11'd0;
-                esc_next = 1'b0;
-                bad_next = 1'b0;
-                fcrc_next = 32'hFFFFFFFF;
-                dp_next = 1'b0;
-                st_next = 1'b0;
-                idle_next = 32'd0;
-                quiet_next = 1'b0;
-            end
         end
         S_HOLD: begin
-            if (frame_release) begin
-                state_next = S_BYTE;
-                pos_next = 11'd0;
-                esc_next = 1'b0;
-                bad_next = 1'b0;
-                fcrc_next = 32'hFFFFFFFF;
-                dp_next = 1'b0;
-                st_next = 1'b0;
-                idle_next = 32'd0;
-            end
+            if (frame_release) state_next = S_BYTE;
         end
         default: state_next = S_BYTE;
     endcase
+
+    if ((state_reg == S_END || state_reg == S_HOLD) && state_next == S_BYTE) begin
+        // the frame dropped or released: ready for the next (quiet is already clear in S_HOLD:
+        // a flushed frame ends with ended clear, so it is never good)
+        pos_next = 11'd0;
+        esc_next = 1'b0;
+        bad_next = 1'b0;
+        fcrc_next = 32'hFFFFFFFF;
+        dp_next = 1'b0;
+        st_next = 1'b0;
+        idle_next = 32'd0;
+        quiet_next = 1'b0;
+    end
 
     // the line buffer's range never spans more than it holds
     if (lb_hi_next > LB_SIZE && lb_lo_next < lb_hi_next - LB_SIZE) lb_lo_next = lb_hi_next - LB_SIZE;
