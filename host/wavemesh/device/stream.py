@@ -671,6 +671,13 @@ class Device:
         quiet_s = min(KEEPALIVE_S, link_s / 4)  # the longest the host stays silent in the job
         self.where = "before the first level"
         self._resume = None  # (RESUME's payload, when the connection was opened again, why) until an answer
+
+        def resume_after(error: LinkError) -> float:
+            """Reopen and RESUME from the current level's first missing byte; returns when."""
+            have = got.find(0)
+            self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk, error)
+            return time.monotonic()
+
         while True:
             try:
                 now = time.monotonic()
@@ -705,16 +712,12 @@ class Device:
                     raise LinkTimeout(f"the device sent nothing for {self.t.job:g} s {where}",
                                       "a slow device (a simulated board) may need a longer --timeout"
                                       ) from None
-            except DeadlineError:
-                raise
             except LinkTimeout:
                 raise
             except LinkError as e:
                 if not started:
                     raise
-                have = got.find(0)
-                self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk, e)
-                last = time.monotonic()
+                last = resume_after(e)
                 continue
             last = time.monotonic()
             self._resume = None
@@ -729,10 +732,7 @@ class Device:
                                       "one, while the connection was lost)", "run the job again",
                                       e["code"], e["detail"])
                 if e["code"] == P.ErrorCode.BUSY and self.resumes:  # the device has not let the old one go
-                    have = got.find(0)
-                    self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk,
-                                    device_error(e["code"], e["detail"], e["request"]))
-                    last = time.monotonic()
+                    last = resume_after(device_error(e["code"], e["detail"], e["request"]))
                     continue
                 if (e["request"] == P.FrameType.RUN and f.seq == seq) or e["request"] == 0:
                     raise device_error(e["code"], e["detail"], e["request"])
@@ -816,9 +816,7 @@ class Device:
             except LinkTimeout:
                 raise
             except LinkError as e:  # writing an ACK or a KEEPALIVE found the connection gone
-                have = got.find(0)
-                self._reconnect(crc, len(levels), len(got) if have < 0 else have, chunk, e)
-                last = time.monotonic()
+                last = resume_after(e)
 
 
 def with_timeouts(t: Timeouts, **kw) -> Timeouts:
