@@ -474,12 +474,9 @@ static void run_job(wm_proto *p)
         p->last_detail = detail;
     }
     wm_proto_send_progress(p, WM_PROTO_STAGE_DONE, 0);
-    if (p->abort != ABORT_NO_ACK) { /* a host that stopped answering gets one DONE, no wait */
-        send_done(p);
+    send_done(p);
+    if (p->abort != ABORT_NO_ACK) /* a host that stopped answering gets one DONE, no wait */
         wm_proto_wait_ack(p, WM_PROTO_T_DONE, 0, &have, send_done);
-    } else {
-        send_done(p);
-    }
     wm_proto_session_end(p);
 }
 
