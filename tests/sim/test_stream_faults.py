@@ -14,6 +14,7 @@ request.
 from __future__ import annotations
 
 import filecmp
+import time
 
 import numpy as np
 import pytest
@@ -145,8 +146,6 @@ def test_pauses_alone_never_end_the_job(device, reference, tmp_path):
     lost or damaged: only late).  The host goes on writing KEEPALIVE while nothing comes, so the device,
     which ends a job only after its link timeout without a frame, keeps waiting: the identical mesh.
     (Protocol 7 ended the job with NO_ACK here: it counted every ACK_TIMEOUT_MS of silence.)"""
-    import time
-
     src, ref = reference
     ends: list = []
 
@@ -195,8 +194,6 @@ def test_a_broken_connection_resumes_the_job(device, reference, tmp_path):
 def test_the_deadline_ends_a_stalled_job_in_time_with_one_line(device, reference, tmp_path):
     """--deadline bounds the whole session: a line that stalls for good ends the run at the deadline
     with one error line naming it, nothing written."""
-    import time
-
     src, ref = reference
     stop = {"at": None}
 
