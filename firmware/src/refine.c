@@ -167,15 +167,35 @@ static uint32_t ratio_q16(uint64_t num, uint64_t den)
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
-/* xi = alpha R_A + (1 - alpha) R_E > 1 with R_A = ra and R_E = ratio_q16(num, den) (den > 0, both below
- * 2^42), as try_swap rounds it; at alpha = 0 (step 2(d)) R_E > 1 without the division: floor(2^16 num /
- * den) > 2^16 iff 2^16 num >= (2^16 + 1) den (both sides below 2^59), and at alpha = 1 R_A alone. */
-static int xi_above_one(uint32_t alpha, uint32_t ra, uint64_t num, uint64_t den)
+/* The largest den > 0 with xi = alpha R_A + (1 - alpha) R_E > 1, R_A = ra and R_E = ratio_q16(num, den)
+ * (num below 2^42), as the swap rounds it: 0 when there is none,
+ * UINT64_MAX when every den has it.  xi > 1 iff alpha ra + (2^16 - alpha) re >= 65537 2^16 iff
+ * re >= R = ceil((65537 2^16 - alpha ra) / (2^16 - alpha)), and re = min(floor(2^16 num / den),
+ * 2^32 - 1) >= R (R < 2^32) iff 2^16 num >= R den; at alpha = 0, R = 65537.  So a swap's test is a
+ * comparison of den with this, and bounds each new E(T) before it is scanned (try_swap). */
+static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
 {
-    uint64_t re;
-    if (alpha == 0) return (num << 16) >= 65537u * den;
-    re = alpha == 65536u ? 0 : ratio_q16(num, den);
-    return (((uint64_t)alpha * ra + (uint64_t)(65536u - alpha) * re) >> 16) > 65536u;
+    int64_t t;
+    uint64_t rq;
+    if (alpha == 65536u) return ra > 65536u ? UINT64_MAX : 0;
+    t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
+    if (t <= 0) return UINT64_MAX;
+    rq = ((uint64_t)t + (65535u - alpha)) / (65536u - alpha);
+    if (rq > 0xFFFFFFFFu) return 0;
+    return (num << 16) / rq;
+}
+
+/* The largest E with wm_scale_mul(p, E, 1, 0, cap) <= X (cap = 2^40), saturated at 2^32 - 1: that
+ * product is min(cap, floor(E m / 2^e)) (m = scale_m < 2^16), and floor(E m / 2^e) <= X iff
+ * E m <= (X + 1) 2^e - 1; every E below 2^32 has it when (X + 1) 2^e >= 2^48. */
+static uint32_t scale_inv(const wm_params *p, uint64_t X)
+{
+    uint64_t q;
+    int e = p->scale_e;
+    if (X >= ((uint64_t)1 << 40) || p->scale_m == 0 || e >= 48 || X + 1 >= ((uint64_t)1 << (48 - e)))
+        return 0xFFFFFFFFu;
+    q = (((X + 1) << e) - 1) / p->scale_m;
+    return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
 /* (px, py) in the closed counter-clockwise triangle. */
@@ -213,9 +233,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old, ang_new, a1, an1 = -1, an2 = -1;
-    uint32_t e1 = 0, e2 = 0, ra;
+    uint32_t e1 = 0, e2 = 0, ra, bnd;
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
-    uint64_t num = 65536u, den = 65536u; /* R_E's, as xi_above_one takes them */
     uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
     /* new triangles (a, d, c) and (d, b, c) */
@@ -233,56 +252,63 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         if (a1 < ang_new) ang_new = a1;
         ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
     }
+    /* The swap's bound: no new triangle over the mesh's E_max when the sweep began, so a swap never
+     * makes E_max grow and each level's mesh stays a level of detail (unbounded, eq. 4.22 trades error
+     * for angles: Box at k = 2 went from E_max 3.5 at level 2 to 200 at level 1); with the levels alone,
+     * max(zeta, the pair's E(T)), the reduction's bound (docs/refiner.md). */
+    bnd = emax;
+    if (r->params.flags & WM_FLAG_NO_BOUND) {
+        bnd = r->params.zeta;
+        if (r->err[t1] > bnd) bnd = r->err[t1];
+        if (r->err[t2] > bnd) bnd = r->err[t2];
+    }
     if (alpha < 65536u) {
         const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
         uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
         uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
-        /* First an upper bound of xi without a scan: the old triangles' worst samples, measured
-         * against the new triangle(s) holding them, bound the new E(T) from below (rounded as E(T)
-         * is), so R_E from above; every step is monotone, so xi_ub <= 1 means xi <= 1. */
-        {
-            uint32_t lb1 = 0, lb2 = 0;
-            for (int k = 0; k < 2; k++) {
-                int32_t s = r->worst[k ? t2 : t1], sx = s % r->field.width, sy = s / r->field.width;
-                if (in_tri(n1x, n1y, sx, sy)) {
-                    uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
-                    if (v > lb1) lb1 = v;
-                }
-                if (in_tri(qx, qy, sx, sy)) {
-                    uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
-                    if (v > lb2) lb2 = v;
-                }
+        uint64_t dmax, s1, s2;
+        uint32_t lb1 = 0, lb2 = 0, lim;
+        /* xi > 1 iff den <= dmax (den_max).  First the old triangles' worst samples, measured against
+         * the new triangle(s) holding them: they bound the new E(T) from below (rounded as E(T) is),
+         * so den from below, without a scan. */
+        for (int k = 0; k < 2; k++) {
+            int32_t s = r->worst[k ? t2 : t1], sx = s % r->field.width, sy = s / r->field.width;
+            if (in_tri(n1x, n1y, sx, sy)) {
+                uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
+                if (v > lb1) lb1 = v;
             }
-            num = o1 + o2 + one;
-            den = wm_scale_mul(&r->params, lb1, 1, 0, cap) + wm_scale_mul(&r->params, lb2, 1, 0, cap) + one;
-            if (!xi_above_one(alpha, ra, num, den)) return 0;
+            if (in_tri(qx, qy, sx, sy)) {
+                uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
+                if (v > lb2) lb2 = v;
+            }
         }
+        dmax = den_max(alpha, ra, o1 + o2 + one);
+        s1 = wm_scale_mul(&r->params, lb1, 1, 0, cap);
+        s2 = wm_scale_mul(&r->params, lb2, 1, 0, cap);
+        if (s1 + s2 + one > dmax) return 0;
+        /* Then each scan stops as soon as its E(T) is too large for the swap (the bound, or den over
+         * dmax with the other triangle's lower bound, then its measure): the E(T) and worst sample of
+         * a scan that stays within are the whole scan's. */
+        lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - s2);
+        if (lim > bnd) lim = bnd;
         e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
-                    : wm_tri_error_kept(&r->field, &r->params, n1x, n1y, &w1x, &w1y, &r1);
+                    : wm_tri_error_within(&r->field, &r->params, n1x, n1y, lim, &w1x, &w1y, &r1);
+        if (e1 > lim) return 0;
+        s1 = wm_scale_mul(&r->params, e1, 1, 0, cap);
+        lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - s1);
+        if (lim > bnd) lim = bnd;
         e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
-                    : wm_tri_error_kept(&r->field, &r->params, qx, qy, &w2x, &w2y, &r2);
-        den = wm_scale_mul(&r->params, e1, 1, 0, cap) + wm_scale_mul(&r->params, e2, 1, 0, cap) + one;
-    }
-    if (!xi_above_one(alpha, ra, num, den)) return 0;
-    /* The swap's bound (regularise): no new triangle over the mesh's E_max when the sweep began, so a
-     * swap never makes E_max grow and each level's mesh stays a level of detail (unbounded, eq. 4.22
-     * trades error for angles: Box at k = 2 went from E_max 3.5 at level 2 to 200 at level 1); with the
-     * levels alone, max(zeta, the pair's E(T)), the reduction's bound (docs/refiner.md). */
-    {
-        uint32_t bnd = emax;
-        if (r->params.flags & WM_FLAG_NO_BOUND) {
-            bnd = r->params.zeta;
-            if (r->err[t1] > bnd) bnd = r->err[t1];
-            if (r->err[t2] > bnd) bnd = r->err[t2];
-        }
-        if (alpha == 65536u) {
-            e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
-                        : wm_tri_error_within(&r->field, &r->params, n1x, n1y, bnd, &w1x, &w1y, NULL);
-            if (e1 > bnd) return 0;
-            e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
-                        : wm_tri_error_within(&r->field, &r->params, qx, qy, bnd, &w2x, &w2y, NULL);
-        }
-        if (e1 > bnd || e2 > bnd) return 0;
+                    : wm_tri_error_within(&r->field, &r->params, qx, qy, lim, &w2x, &w2y, &r2);
+        if (e2 > lim) return 0;
+        WM_ASSERT(s1 + wm_scale_mul(&r->params, e2, 1, 0, cap) + one <= dmax);
+    } else {
+        if (ra <= 65536u) return 0; /* xi = R_A */
+        e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
+                    : wm_tri_error_within(&r->field, &r->params, n1x, n1y, bnd, &w1x, &w1y, NULL);
+        if (e1 > bnd) return 0;
+        e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
+                    : wm_tri_error_within(&r->field, &r->params, qx, qy, bnd, &w2x, &w2y, NULL);
+        if (e2 > bnd) return 0;
     }
     if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
