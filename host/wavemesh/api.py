@@ -16,7 +16,7 @@ import re
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -63,6 +63,7 @@ from wavemesh.model.haar import WAVELETS, decompose, default_levels
 from wavemesh.model.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.model.label import Labelling, tau_counts
 from wavemesh.model.roi import mask_details, parse_roi, roi_errors, roi_report
+from wavemesh.record import record
 from wavemesh.refine import cover, native
 from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
@@ -94,7 +95,7 @@ def default_tau(hf: HeightField) -> float:
     return DEFAULT_TAU_FRACTION * float(np.max(hf.values) - np.min(hf.values))
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class MeshJob:
     heightfield: HeightField
     levels: int
@@ -139,7 +140,7 @@ def _levels_and_tau(hf: HeightField, levels: int | None, tau: float | None) -> t
     return m, t
 
 
-@dataclass
+@record
 class RefineJob:
     """The full pipeline: the initial triangulation, then the firmware refiner (docs/refiner.md)."""
 
@@ -312,7 +313,7 @@ def level_counts(lv, hf: HeightField) -> dict:
 # them, wavemesh.cli).
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class MeshParams:
     """The job of `wavemesh mesh` and `wavemesh stream`: every option that is not a file."""
 
@@ -345,7 +346,7 @@ class LevelMeshes(Sequence):
         return lv.level, lv.mesh
 
 
-@dataclass(kw_only=True)
+@record(kw_only=True)
 class MeshResult:
     """What a job made: the final mesh, every level's, their errors, and the JSON report's content."""
 
@@ -386,7 +387,7 @@ class MeshResult:
                 f"{p.max_triangles})")
 
 
-@dataclass(kw_only=True)
+@record(kw_only=True)
 class StreamResult(MeshResult):
     """A job done on a device: MeshResult, and what the device and the link reported."""
 

@@ -19,13 +19,14 @@ Conventions (docs/model.md, "Mesh conventions"):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
+from wavemesh.record import record
 
-@dataclass(frozen=True)
+
+@record(frozen=True)
 class Mesh:
     """A triangulation of the W x H grid rectangle with grid-sample vertices."""
 

@@ -61,13 +61,14 @@ approximates the height field at every grid sample.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import numpy as np
 
 from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.mesh import Mesh
 from wavemesh.model.holemask import cover_counts, coverable, coverage
+from wavemesh.record import record
 
 __all__ = ["CheckResult", "check_mesh", "ErrorReport", "mesh_errors", "HoleCheck", "check_holes"]
 
@@ -82,7 +83,7 @@ _FLOAT_FLOOR_LIMIT = 1 << 53  # integers below this are exact doubles: their quo
 _SAMPLE_KEY_LIMIT = 1 << 63  # (sample index, occurrence) packed in one int64 key below this
 
 
-@dataclass
+@record
 class CheckResult:
     """The verdict of :func:`check_mesh`."""
 
@@ -443,7 +444,7 @@ def _t_junctions(probs: _Problems, x: np.ndarray, y: np.ndarray, elo: np.ndarray
 # Error metrics
 
 
-@dataclass
+@record
 class ErrorReport:
     """How far the mesh surface is from the height field (x, y in grid steps, z in height units)."""
 
@@ -678,7 +679,7 @@ def mesh_errors(
 # The check of a mesh with holes (--nodata hole)
 
 
-@dataclass
+@record
 class HoleCheck:
     """What check() found: the problems (empty: the mesh passes) and the counts behind them."""
 

@@ -31,13 +31,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from wavemesh.errors import InputError
 from wavemesh.io.readers import regular_file
+from wavemesh.record import record
 
 GRID = (1.0, 0.0, -0.5, 0.0, 1.0, -0.5)  # no georeference: sample (col, row) at (col, row)
 WGS84_A = 6378137.0  # semi-major axis, metres
@@ -60,7 +61,7 @@ def metres_per_degree(lat: float) -> tuple[float, float]:
     return math.pi / 180.0 * n * math.cos(phi), math.pi / 180.0 * m
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Ground:
     """A grid's place on the ground: its map coordinates and its cell size in ground units."""
 

@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import os
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import cached_property
 
 import numpy as np
@@ -94,13 +94,14 @@ from wavemesh.io.readers import (
     _sniff,
 )
 from wavemesh.model.holemask import stranded
+from wavemesh.record import record
 
 SAMPLE_MAX = 65535  # largest 16-bit unsigned sample
 # A raster's header can claim any size (300 bytes of TIFF saying 6 x 16777221 samples took GDAL and the
 # fill 3.7 GB and minutes): a side longer than the refiner's (MAX_SIDE) is refused before GDAL reads it.
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class HeightField:
     """Heights on a W x H grid together with their quantised 16-bit samples."""
 

@@ -23,7 +23,6 @@ import math
 import os
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +30,7 @@ import numpy as np
 from wavemesh.errors import InputError
 from wavemesh.io.georef import UNITS, grid_ground, sidecar_path, write_sidecar
 from wavemesh.mesh import Mesh
+from wavemesh.record import record
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "write_mesh", "vertex_normals", "normal_map"]
 
@@ -94,7 +94,7 @@ def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
     return ("v %d %d %r\n" * n) % tuple(flat)
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class _Surface:
     """What a writer writes: vertices (x, y as grid positions (ints) or in the output frame (floats); z),
     triangles, per-vertex unit normals or None, the grid size and the comment."""
@@ -224,7 +224,7 @@ def _write_glb(path, s: _Surface) -> None:
 # ---- The output formats: one registry (the CLI's help, the checks of -o, the docs table read it)
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Format:
     """An output mesh format: its writer and what it can hold."""
 

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +26,7 @@ from wavemesh.io.meshread import read_mesh
 from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
 from wavemesh.io.synth import make
 from wavemesh.mesh import Mesh
+from wavemesh.record import record
 
 if TYPE_CHECKING:
     from wavemesh.api import MeshResult
@@ -42,7 +42,7 @@ def _write_json(path: str, data: dict, inputs=None) -> None:
         staged.path(p, what="report").write_text(json.dumps(data, indent=2) + "\n")
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class MeshFiles:
     """How the mesh files are written (wavemesh.io.meshio.write_mesh): ``units`` "metres" or "crs" for a
     georeferenced grid, ``local`` (with "crs"), per-vertex ``normals``, a solid ``base`` (thickness below

@@ -36,18 +36,18 @@ has to pair the odd last sample of a row (or the last row) with itself.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from wavemesh.limits import MAX_LEVELS  # one source: the model's and the protocol's limits, wm_protocol.h
 from wavemesh.model.spline import spline_step
+from wavemesh.record import record
 
 DETAIL_BITS = 18  # signed width of d1, d2, d3 (|d| <= 2 * 65535)
 APPROX_BITS = 16  # unsigned width of a
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class HaarLevel:
     """Coefficients of one level m: arrays of ceil(H/2^m) x ceil(W/2^m)."""
 

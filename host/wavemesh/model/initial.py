@@ -7,17 +7,16 @@ share their boundary vertices, so the union of the templates is one mesh.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import HaarLevel, decompose
 from wavemesh.model.label import Labelling, label_blocks, tau_counts
 from wavemesh.model.templates import LABELS, template_set
+from wavemesh.record import record
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class InitialResult:
     mesh: Mesh
     labelling: Labelling

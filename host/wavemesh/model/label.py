@@ -27,8 +27,6 @@ never add midpoints of their own, so one pass settles every block.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from wavemesh.limits import TAU_MAX  # one source: the wire protocol's CONFIG range too, wm_protocol.h
@@ -44,6 +42,7 @@ from wavemesh.model.templates import (
     SIDE_TOP,
     template_set,
 )
+from wavemesh.record import record
 
 
 def block_edges(n: int, size: int) -> np.ndarray:
@@ -66,7 +65,7 @@ def tau_counts(tau: float, scale: float) -> int:
     return TAU_MAX if q >= TAU_MAX else int(np.floor(q))
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Labelling:
     """Per-block results of the template stage, each array (block rows, block columns)."""
 

@@ -34,9 +34,9 @@ The look-up table index is ``label << 4 | mask``.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
 
 from wavemesh.model import template_forms
+from wavemesh.record import record
 
 LABELS = "FfVvHhD"  # code -> letter
 KIND_FLAT, KIND_VERTICAL, KIND_HORIZONTAL, KIND_DIAGONAL = 0, 1, 2, 3
@@ -92,7 +92,7 @@ def ccw(tri) -> tuple[int, int, int]:
     return (a, b, c) if area2 > 0 else (a, c, b)
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Template:
     """One template of the complete set."""
 
@@ -199,7 +199,7 @@ def _sides(sites) -> int:
     return sum(bit for bit, site in SIDE_SITES if site in sites)
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class TemplateSet:
     templates: tuple[Template, ...]
     lut: tuple[int, ...]  # LUT_SIZE entries: label << 4 | mask -> template id or LUT_INVALID

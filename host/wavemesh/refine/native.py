@@ -17,7 +17,7 @@ from __future__ import annotations
 import ctypes
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import field
 from fractions import Fraction
 from math import floor
 from pathlib import Path
@@ -28,6 +28,7 @@ from wavemesh.errors import WavemeshError
 from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (board/src/wm_job.c checks it); the stats
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import HaarLevel
+from wavemesh.record import record
 
 ROOT = Path(__file__).resolve().parents[3]
 FIRMWARE = ROOT / "firmware"
@@ -215,7 +216,7 @@ def error_text(code: int) -> str:
 # Parameters
 
 
-@dataclass
+@record
 class RefineParams:
     """Table 4.3's parameters in user units (height units, grid steps), dissertation defaults.
 
@@ -381,7 +382,7 @@ class Level:
         self._mesh = mesh
 
 
-@dataclass
+@record
 class RefineOutput:
     levels: list[Level]  # from the initial triangulation (level M-1) down to level 0
     capacity: int  # the triangle storage used
