@@ -50,6 +50,7 @@ from wavemesh.tiles.jobs import (
     stitch,
     thin_seam,
     thin_tile,
+    tile_graph,
     tile_heightfield,
 )
 from wavemesh.tiles.plan import (
@@ -66,15 +67,16 @@ from wavemesh.tiles.plan import (
     default_workers,
     plan_tiles,
 )
-from wavemesh.tiles.runner import Runner, connect
+from wavemesh.tiles.runner import Node, Ref, Runner, connect
 from wavemesh.tiles.sides import SIDES, Editable, border_of, conform, reconcile, simplify_profile, thin_side
 from wavemesh.tiles.source import Quant, Source, open_source, scan
 
 __all__ = [
-    "Editable", "FreeTile", "MIN_TILE", "Quant", "Runner", "SIDES", "Source", "TILE_BYTES_PER_SAMPLE",
-    "TILE_CHOICES", "Tile", "TilePlan", "TileResult", "TiledResult", "available_memory", "border_of",
-    "check_tiled_outputs", "check_tiling", "conform", "connect", "cuts", "dask_tile", "default_tile",
-    "default_workers", "device_tile", "finish_tile", "free_tile", "hello", "mesh_tiled", "open_source",
-    "plan_tiles", "reconcile", "run_tiles", "scan", "simplify_profile", "stitch", "stream_tile",
-    "stream_tiles", "thin_seam", "thin_side", "thin_tile", "tile_heightfield", "write_tiled",
+    "Editable", "FreeTile", "MIN_TILE", "Node", "Quant", "Ref", "Runner", "SIDES", "Source",
+    "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "Tile", "TilePlan", "TileResult", "TiledResult",
+    "available_memory", "border_of", "check_tiled_outputs", "check_tiling", "conform", "connect", "cuts",
+    "dask_tile", "default_tile", "default_workers", "device_tile", "finish_tile", "free_tile", "hello",
+    "mesh_tiled", "open_source", "plan_tiles", "reconcile", "run_tiles", "scan", "simplify_profile",
+    "stitch", "stream_tile", "stream_tiles", "thin_seam", "thin_side", "thin_tile", "tile_graph",
+    "tile_heightfield", "write_tiled",
 ]

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -17,7 +20,7 @@ from wavemesh.mesh import Mesh
 from wavemesh.model.haar import decompose
 from wavemesh.refine import native
 from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles
-from wavemesh.tiles.runner import Runner
+from wavemesh.tiles.runner import Here, Node, Ref, Runner
 from wavemesh.tiles.sides import (
     FACING,
     SIDES,
@@ -62,9 +65,64 @@ class TileResult:
     device: str | None = None  # the port that made it (stream)
 
 
+# a process's tiles kept by tile_heightfield (1025^2: 10.5 MiB each; a tile's steps wait for the next two rows
+# of tiles: 8192^2 in tiles of 1025, one worker, reads each tile once with 320 MiB, 136 reads with 256, 470
+# without), none above a sixth of it (4097^2: 168 MiB, read again)
+TILE_CACHE_BYTES = 320 << 20
+_TILE_CACHE: OrderedDict = OrderedDict()  # key -> HeightField, the last used last
+_TILE_LOCK = threading.Lock()  # stream's threads read tiles at once
+
+
 def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None) -> HeightField:
     """The tile as a HeightField: its window of the input with the whole grid's quantisation, its
-    place on the ground, and the whole grid's cell size."""
+    place on the ground, and the whole grid's cell size.  A file's tiles are kept by the process that read
+    them (the last TILE_CACHE_BYTES of them, read-only): every phase of a tile reads it (free, conformed,
+    its sides thinned), and the pool gives a tile's tasks to the worker that read it first (Runner.graph).
+    A file replaced under the same name is read anew."""
+    key = _cache_key(plan, t, window)
+    if key is None:
+        return _tile_heightfield(plan, t, window)
+    with _TILE_LOCK:
+        hf = _TILE_CACHE.get(key)
+        if hf is not None:
+            _TILE_CACHE.move_to_end(key)
+            return hf
+    hf = _tile_heightfield(plan, t, None)
+    for a in (hf.values, hf.samples):
+        a.flags.writeable = False
+    with _TILE_LOCK:
+        _TILE_CACHE[key] = hf
+        while sum(h.values.nbytes + h.samples.nbytes for h in _TILE_CACHE.values()) > TILE_CACHE_BYTES \
+                and len(_TILE_CACHE) > 1:
+            _TILE_CACHE.popitem(last=False)
+    return hf
+
+
+def _cache_key(plan: TilePlan, t: Tile, window: np.ndarray | None) -> tuple | None:
+    src = plan.source
+    if window is not None or src.kind == "array" or src.path is None \
+            or 10 * t.width * t.height > TILE_CACHE_BYTES // 6:
+        return None
+    st = os.stat(src.path)
+    return (src, plan.quant, plan.spacing, t.x, t.y, t.width, t.height,
+            (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns))
+
+
+def forget_tile(plan: TilePlan, index: int) -> None:
+    """The tile out of this process's tiles (its last step is done): its memory for the next tiles."""
+    key = _cache_key(plan, plan.tiles[index], None)
+    if key is not None:
+        with _TILE_LOCK:
+            _TILE_CACHE.pop(key, None)
+
+
+def clear_tile_cache() -> None:
+    """Forget the tiles tile_heightfield kept in this process."""
+    with _TILE_LOCK:
+        _TILE_CACHE.clear()
+
+
+def _tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None) -> HeightField:
     src, quant = plan.source, plan.quant
     v = src.read(t.x, t.y, t.width, t.height) if window is None else window
     if not np.all(np.isfinite(v)):
@@ -195,57 +253,126 @@ def _window(plan: TilePlan, index: int) -> np.ndarray | None:
     return plan.source.read(t.x, t.y, t.width, t.height)
 
 
-def _facing(plan: TilePlan, frees: list, index: int) -> dict:
-    return {s: frees[k].sides[FACING[s]] for s, k in plan.tiles[index].neighbours.items()}
+def _side_top(free: FreeTile) -> tuple:
+    return free.sides["top"]
+
+
+def _side_right(free: FreeTile) -> tuple:
+    return free.sides["right"]
+
+
+def _side_bottom(free: FreeTile) -> tuple:
+    return free.sides["bottom"]
+
+
+def _side_left(free: FreeTile) -> tuple:
+    return free.sides["left"]
+
+
+_SIDE_OF = {"top": _side_top, "right": _side_right, "bottom": _side_bottom, "left": _side_left}
+
+
+def _finish_node(plan: TilePlan, free: FreeTile, window, last: bool, sides: tuple, *facing) -> TileResult:
+    """finish_tile, ``facing`` the neighbours' sides in the order of ``sides`` (Runner.graph's args);
+    ``last``: the tile's last step (its heights forgotten then)."""
+    r = finish_tile(plan, free, dict(zip(sides, facing, strict=True)), window)
+    if last:
+        forget_tile(plan, free.index)
+    return r
+
+
+def _thin_node(plan: TilePlan, r: TileResult, window, last: bool, sides: tuple, *cuts) -> TileResult:
+    """thin_tile with ``removed`` as the seams' cuts in the order of ``sides`` (Runner.graph's args)."""
+    out = thin_tile(plan, r, dict(zip(sides, cuts, strict=True)), window)
+    if last:
+        forget_tile(plan, r.index)
+    return out
+
+
+def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], dict]:
+    """Every tile's jobs as Runner.graph nodes: free (unless ``frees`` has them), conformed (once the
+    tile's and its neighbours' free meshes are done), each column side thinned (once both tiles are
+    conformed), each tile without its column sides' thinned vertices, then the same for the row sides.
+    Ranked by the last tile (row by row) their inputs wait for, then the step: a tile goes on through its
+    steps while the next tiles are made.  Also {"free": nodes, "finish": nodes, "last": nodes} in tile order
+    and "homes" (Runner.graph's: a block of columns of tiles per worker)."""
+    n = len(plan.tiles)
+    light = replace(plan, source=light_source(plan.source))
+    win = [Here(_window, (plan, i)) if plan.source.kind == "array" else None for i in range(n)]
+    nodes: list[Node] = []
+    wave: list[int] = []  # each node's rank's first number
+
+    def add(fn, args: tuple, step: int, tiles: tuple, waits: tuple = ()) -> int:
+        w = max([*tiles, *waits, *(wave[a.node] for a in args if isinstance(a, Ref))])
+        nodes.append(Node(fn, args, (w, step), tiles))
+        wave.append(w)
+        return len(nodes) - 1
+
+    free_of: list = [add(free_tile, (light, i, win[i]), 0, (i,)) for i in range(n)] if frees is None \
+        else [None] * n
+
+    def free_arg(i: int, pick=None):
+        return Ref(free_of[i], pick) if frees is None else (frees[i] if pick is None else pick(frees[i]))
+
+    cur = []
+    phases = [s for s in ("right", "bottom") if any(s in t.neighbours for t in plan.tiles)]
+    for i, t in enumerate(plan.tiles):
+        sides = tuple(t.neighbours)
+        facing = [free_arg(k, _SIDE_OF[FACING[s]]) for s, k in t.neighbours.items()]
+        cur.append(add(_finish_node, (light, free_arg(i), win[i], not phases, sides, *facing), 1, (i,),
+                       tuple(t.neighbours.values())))
+    finish = list(cur)
+    step = 2
+    for side in phases:  # the columns' sides, then the rows': two opposite sides at a time
+        pairs = [(i, k) for i, t in enumerate(plan.tiles) for s, k in t.neighbours.items() if s == side]
+        cut: list[dict] = [{} for _ in range(n)]
+        for i, k in pairs:
+            c = add(thin_seam, (light, Ref(cur[i]), Ref(cur[k]), side, win[i], win[k]), step, (i, k))
+            cut[i][side] = cut[k][FACING[side]] = c
+        last = side == phases[-1]
+        cur = [add(_thin_node, (light, Ref(cur[i]), win[i], last, tuple(cut[i]), *map(Ref, cut[i].values())),
+                   step + 1, (i,)) for i in range(n)]
+        step += 2
+    nx = len(plan.xcuts) - 1
+    homes = {i: t.col / nx for i, t in enumerate(plan.tiles)}  # columns of tiles, a block per worker
+    return nodes, {"free": free_of if frees is None else [], "finish": finish, "last": cur, "homes": homes}
 
 
 def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, runner: Runner | None = None,
               progress: bool = False, log: Callable[[str], None] | None = None,
               frees: list | None = None) -> list[TileResult]:
-    """Every tile's jobs on ``runner`` (or a Runner of ``workers`` / ``scheduler`` for this call): the free
-    meshes (unless ``frees`` has them, as stream_tiles makes them), each tile conformed to its reconciled
-    sides, each shared side thinned (thin_seam), each tile without its sides' thinned vertices (thin_tile);
-    the results in tile order whatever order they finish in.  A failed task ends the run with its error."""
+    """Every tile's jobs (tile_graph) on ``runner`` (or a Runner of ``workers`` / ``scheduler`` for this
+    call): the free meshes (unless ``frees`` has them, as stream_tiles makes them), each tile conformed to
+    its reconciled sides, each shared side thinned (thin_seam), each tile without its sides' thinned
+    vertices (thin_tile), each step of a tile as soon as its inputs are done; the results in tile order
+    whatever order they finish in.  A failed task ends the run with its error."""
     if runner is None:
         with Runner(workers, scheduler) as own:
             return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees)
     n = len(plan.tiles)
-    light = replace(plan, source=light_source(plan.source))
-    with api.Progress("tiles", 3 * n, progress) as bar:
-        count = [0 if frees is None else n, 0]
+    nodes, roles = tile_graph(plan, frees)
+    counted = set(roles["free"]) | set(roles["finish"])
+    last = {k: i for i, k in enumerate(roles["last"])}
+    try:
+        with api.Progress("tiles", 3 * n, progress) as bar:
+            count = [0 if frees is None else n, 0]
 
-        def freed(r: FreeTile) -> None:
-            count[0] += 1
-            bar.update(count[0] + count[1])
+            def done(k: int, r) -> None:
+                if k in counted:
+                    count[0] += 1
+                    bar.update(count[0] + count[1])
+                if k in last:
+                    count[1] += 1
+                    note = f"{r.name}: {len(r.tris)} triangles, {r.report['seconds']:.2f} s"
+                    bar.update(count[0] + count[1], note)
+                    if log:
+                        log(f"  {count[1]}/{n} {note}")
 
-        def finished(r: TileResult) -> None:
-            count[1] += 1
-            note = f"{r.name}: {len(r.tris)} triangles, {r.report['seconds']:.2f} s"
-            bar.update(count[0] + count[1], note)
-            if log:
-                log(f"  {count[1]}/{n} {note}")
-
-        if frees is None:
-            frees = runner.map(free_tile, [(light, i, _window(plan, i)) for i in range(n)], freed)
-        results = runner.map(finish_tile, [(light, frees[i], _facing(plan, frees, i), _window(plan, i))
-                                           for i in range(n)], freed)
-        for side in ("right", "bottom"):  # the columns' sides, then the rows': two opposite sides at a time
-            pairs = [(i, k) for i, t in enumerate(plan.tiles) for s, k in t.neighbours.items() if s == side]
-            if not pairs:
-                continue
-            cuts = runner.map(thin_seam, [(light, results[i], results[k], side, _window(plan, i),
-                                           _window(plan, k)) for i, k in pairs])
-            removed: list[dict] = [{} for _ in range(n)]
-            for (i, k), cut in zip(pairs, cuts, strict=True):
-                removed[i][side] = removed[k][FACING[side]] = cut
-            last = side == "bottom" or not any("bottom" in t.neighbours for t in plan.tiles)
-            results = runner.map(thin_tile, [(light, results[i], removed[i], _window(plan, i))
-                                             for i in range(n)], finished if last else None)
-        if not any(plan.tiles[i].neighbours for i in range(n)):
-            for r in results:
-                finished(r)
-        bar.finish(f"{n} tiles")
-    return results
+            results = runner.graph(nodes, done, roles["homes"])
+            bar.finish(f"{n} tiles")
+    finally:
+        clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers
+    return [results[k] for k in roles["last"]]
 
 
 # ---------------------------------------------------------------------------------------------------

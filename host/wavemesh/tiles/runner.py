@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import bisect
 import ctypes
 import multiprocessing
 import os
 import signal
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from multiprocessing.connection import wait
 
 from wavemesh.errors import WavemeshError
@@ -16,6 +19,7 @@ from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
+PIPELINE = 2  # Runner.graph's nodes sent to a pool worker at a time
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -56,6 +60,47 @@ def connect(address: str):
         raise WavemeshError(f"--scheduler {address}: no Dask scheduler answers ({e})",
                             hint="start one (dask scheduler; dask worker ADDRESS), or check the address") \
             from None
+
+
+@dataclass(frozen=True)
+class Ref:
+    """In a Node's args: node ``node``'s result (``pick`` of it when given: a module-level function)."""
+
+    node: int
+    pick: Callable | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Here:
+    """In a Node's args: fn(*args) computed in this process when the node is given out (a tile's window of
+    an input in memory); on Dask once for every node that names it, and scattered."""
+
+    fn: Callable
+    args: tuple
+
+
+@dataclass(frozen=True)
+class Node:
+    """A task of Runner.graph: fn(*args), each Ref in args (at the top level) replaced by that node's result;
+    ``rank``: the order among the ready nodes (least first); ``tiles``: the tiles whose data it reads (the
+    pool gives it to the worker that read them first, whose cache holds them)."""
+
+    fn: Callable
+    args: tuple
+    rank: tuple = ()
+    tiles: tuple = ()
+
+    def deps(self) -> set[int]:
+        return {a.node for a in self.args if isinstance(a, Ref)}
+
+
+def _resolve(node: Node, results: list) -> tuple:
+    def one(a):
+        if isinstance(a, Ref):
+            return a.pick(results[a.node]) if a.pick else results[a.node]
+        return a.fn(*a.args) if isinstance(a, Here) else a
+
+    return tuple(one(a) for a in node.args)
 
 
 class Runner:
@@ -113,30 +158,110 @@ class Runner:
             self._pool_map(fn, tasks, got)
         return results
 
+    def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None) -> list:
+        """Every node's result, in node order; a node runs once the nodes its Refs name are done (no
+        barrier between phases); ``done(i, result)`` as each finishes.  Refs name earlier nodes only.  The
+        same results however it runs: each node depends only on its args.  ``homes``: tile -> a number in
+        [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
+        one worker: fewer tiles read twice)."""
+        results: list = [None] * len(nodes)
+
+        def got(i: int, r) -> None:
+            results[i] = r
+            if done:
+                done(i, r)
+
+        self.n_maps += 1
+        if self.client is not None:
+            key = f"wavemesh-{self.run_id}-{self.n_maps}"
+            futures: list = []
+            here: dict = {}  # id of a Here (the nodes share one per tile) -> its value, scattered once
+            for i, node in enumerate(nodes):
+                args = []
+                for a in node.args:
+                    if isinstance(a, Ref):
+                        f = futures[a.node]
+                        if a.pick is not None:
+                            f = self.client.submit(a.pick, f, pure=False, key=f"{key}-{i}-{len(args)}")
+                        args.append(f)
+                    elif isinstance(a, Here):
+                        if id(a) not in here:
+                            here[id(a)] = self.client.scatter(a.fn(*a.args))
+                        args.append(here[id(a)])
+                    else:
+                        args.append(a)
+                futures.append(self.client.submit(node.fn, *args, pure=False, key=f"{key}-{i}"))
+            from distributed import as_completed  # with connect's package
+
+            index = {f.key: i for i, f in enumerate(futures)}
+            for fut in as_completed(futures):
+                got(index[fut.key], fut.result())
+        elif self.workers == 1 or len(nodes) == 1:
+            tune_malloc()
+            sched = _Schedule(nodes)
+            while (i := sched.take(None)) is not None:
+                got(i, nodes[i].fn(*_resolve(nodes[i], results)))
+                sched.finished(i)
+        else:
+            self._start_pool()
+            sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
+            sent: list[deque] = [deque() for _ in self.pool]  # the nodes each worker has, in order
+
+            def give(w: int) -> None:
+                # two at a time while there is work for every worker: the next waits in the worker's pipe,
+                # not for this process to answer (which a loaded machine may not schedule at once)
+                while len(sent[w]) < PIPELINE and (not sent[w] or len(sched.ready) >= len(self.pool)):
+                    i = sched.take(w)
+                    if i is None:
+                        return
+                    self.pool[w][1].send((nodes[i].fn, _resolve(nodes[i], results)))
+                    sent[w].append(i)
+
+            for w in range(len(self.pool)):
+                give(w)
+            while any(sent):
+                live = [w for w in range(len(self.pool)) if sent[w]]
+                ready = wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
+                for w in live:
+                    proc, pipe = self.pool[w]
+                    if pipe in ready:
+                        i = sent[w].popleft()
+                        got(i, _reply(proc, pipe))
+                        sched.finished(i)
+                    elif proc.sentinel in ready and not pipe.poll():
+                        _lost(proc)
+                for w in (*live, *range(len(self.pool))):  # the workers that answered first
+                    give(w)
+        return results
+
+    def _start_pool(self) -> None:
+        if self.pool:
+            return
+        native.load()  # built once here, not by every worker at once
+        # fork: the workers start from this process as it is (the library loaded; a script that calls
+        # this needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
+        ctx = multiprocessing.get_context("fork")
+        # the signals held back over the forks: a worker starts with them blocked and unblocks them
+        # once its own handlers are set (_worker_start), so a Ctrl-C just after the fork is not a
+        # KeyboardInterrupt traceback in the worker; here they are raised after the last fork, every
+        # worker in the pool by then (ended by __exit__)
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
+        try:
+            for _ in range(self.workers):
+                here, there = ctx.Pipe()
+                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
+                proc.start()
+                there.close()
+                self.pool.append((proc, here))
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
     def _pool_map(self, fn, tasks: list, got) -> None:
         """The tasks on the forked workers, one each at a time, each result through the worker's own pipe.
         The parent has no threads of its own for them: a run that ends early kills its workers and returns
         at once (concurrent.futures' pool could wait forever at exit for a result a killed worker had half
         sent)."""
-        if not self.pool:
-            native.load()  # built once here, not by every worker at once
-            # fork: the workers start from this process as it is (the library loaded; a script that calls
-            # this needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
-            ctx = multiprocessing.get_context("fork")
-            # the signals held back over the forks: a worker starts with them blocked and unblocks them
-            # once its own handlers are set (_worker_start), so a Ctrl-C just after the fork is not a
-            # KeyboardInterrupt traceback in the worker; here they are raised after the last fork, every
-            # worker in the pool by then (ended by __exit__)
-            held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
-            try:
-                for _ in range(self.workers):
-                    here, there = ctx.Pipe()
-                    proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
-                    proc.start()
-                    there.close()
-                    self.pool.append((proc, here))
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        self._start_pool()
         todo = iter(enumerate(tasks))
         busy: dict = {}  # pipe -> (process, task number)
 
@@ -152,19 +277,66 @@ class Runner:
             ready = wait([*busy, *(p.sentinel for p, _ in busy.values())])
             for pipe in [c for c in busy if c in ready]:
                 proc, i = busy.pop(pipe)
-                try:
-                    kind, value, hint = pipe.recv()
-                except (EOFError, OSError):
-                    _lost(proc)
-                if kind == "error":
-                    if isinstance(value, WavemeshError) and hint is not None:
-                        value.hint = hint
-                    raise value
-                got(i, value)
+                got(i, _reply(proc, pipe))
                 give(proc, pipe)
             for pipe, (proc, _) in list(busy.items()):
                 if proc.sentinel in ready and pipe not in ready and not pipe.poll():
                     _lost(proc)
+
+
+class _Schedule:
+    """Which node a worker runs next, of the ready ones (every Ref's node done), in rank order: the first
+    whose tiles are all the worker's (a tile is the worker's that first read it, whose cache holds it; one
+    nobody read yet, its home's), else the first with one of its tiles, else the first (another worker's
+    tiles, read again here rather than wait).  ``take(None)``: the first (one worker)."""
+
+    def __init__(self, nodes: list[Node], homes: dict | None = None):
+        self.nodes = nodes
+        self.homes = homes or {}
+        self.waiting = [len(n.deps()) for n in nodes]
+        self.users: list[list[int]] = [[] for _ in nodes]
+        for i, n in enumerate(nodes):
+            for d in n.deps():
+                if d >= i:
+                    raise ValueError(f"node {i} refers to node {d}: only earlier nodes")
+                self.users[d].append(i)
+        self.ready = sorted((n.rank, i) for i, n in enumerate(nodes) if not self.waiting[i])
+        self.owner: dict = {}  # tile -> the worker that first read it
+
+    def take(self, worker: int | None) -> int | None:
+        if not self.ready:
+            return None
+        choice = self.ready[0]
+        if worker is not None:
+            mine = [[self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[i].tiles]
+                    for _, i in self.ready]
+            k = next((k for k, m in enumerate(mine) if all(m)), None)
+            if k is None:
+                k = next((k for k, m in enumerate(mine) if any(m)), 0)
+            choice = self.ready[k]
+            for t in self.nodes[choice[1]].tiles:
+                self.owner.setdefault(t, worker)
+        self.ready.remove(choice)
+        return choice[1]
+
+    def finished(self, i: int) -> None:
+        for u in self.users[i]:
+            self.waiting[u] -= 1
+            if not self.waiting[u]:
+                bisect.insort(self.ready, (self.nodes[u].rank, u))
+
+
+def _reply(proc, pipe):
+    """A worker's result from its pipe, or its error raised here."""
+    try:
+        kind, value, hint = pipe.recv()
+    except (EOFError, OSError):
+        _lost(proc)
+    if kind == "error":
+        if isinstance(value, WavemeshError) and hint is not None:
+            value.hint = hint
+        raise value
+    return value
 
 
 def _lost(proc) -> None:

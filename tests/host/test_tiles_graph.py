@@ -1,0 +1,126 @@
+"""A tiled run's task graph (tiles.Runner.graph, tiles.tile_graph): every node after the nodes it reads,
+the same results in this process and on a pool of 2 workers, the ready nodes in rank order and a tile's
+nodes on the worker that read it first; the free meshes given (stream) or made give the same tiles; a
+process's kept tiles are read-only, forgotten after their last step, and read anew from a replaced file."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from wavemesh import api, tiles
+from wavemesh.refine.native import RefineParams
+from wavemesh.tiles import jobs
+from wavemesh.tiles.runner import Node, Ref, _Schedule
+
+
+def _add(*xs):
+    return sum(xs)
+
+
+def _first(pair):
+    return pair[0]
+
+
+def _pair(a, b):
+    return (a, b)
+
+
+def _pid_after(_):
+    return os.getpid()
+
+
+def test_graph_results_in_order_any_runner():
+    # a diamond and a chain: each node sums its inputs; Ref with pick takes a part of a result
+    nodes = [Node(_add, (1,)), Node(_add, (Ref(0), 10)), Node(_add, (Ref(0), 100)),
+             Node(_pair, (Ref(1), Ref(2))), Node(_add, (Ref(3, _first), Ref(2), 1000))]
+    want = [1, 11, 101, (11, 101), 1112]
+    for workers in (1, 2):
+        seen: list = []
+        with tiles.Runner(workers) as run:
+            assert run.graph(nodes, lambda i, r, seen=seen: seen.append(i)) == want
+        assert sorted(seen) == list(range(len(nodes)))
+        assert seen.index(0) < min(seen.index(1), seen.index(2)) and seen.index(3) < seen.index(4)
+    with pytest.raises(ValueError, match="only earlier nodes"):
+        _Schedule([Node(_add, (Ref(1),)), Node(_add, (1,))])
+
+
+def test_graph_failure_raises_and_pool_ends():
+    with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:
+        run.graph([Node(_add, (1,)), Node(divmod, (1, 0)), Node(_add, (Ref(0), 1))])
+    assert all(not p.is_alive() for p, _ in run.pool) or run.pool == []
+
+
+def test_schedule_rank_and_homes():
+    # one worker: the ready node of least rank first, whatever the node order
+    nodes = [Node(_add, (1,), (2, 0), (0,)), Node(_add, (1,), (0, 0), (1,)),
+             Node(_add, (Ref(1),), (0, 1), (1,))]
+    s = _Schedule(nodes)
+    order = []
+    while (i := s.take(None)) is not None:
+        order.append(i)
+        s.finished(i)
+    assert order == [1, 2, 0]
+    # two workers: a tile nobody read goes to its home, a tile read once to the worker that read it
+    nodes = [Node(_add, (1,), (0, 0), (0,)), Node(_add, (1,), (1, 0), (1,)),
+             Node(_add, (Ref(0),), (2, 1), (0,)), Node(_add, (Ref(1),), (2, 1), (1,))]
+    s = _Schedule(nodes, {0: 1, 1: 0})
+    assert s.take(0) == 1 and s.take(1) == 0
+    s.finished(0)
+    s.finished(1)
+    assert s.take(1) == 2 and s.take(0) == 3
+    # nothing of its own ready: a worker takes another's rather than wait
+    s = _Schedule(nodes[:2], {0: 1, 1: 1})
+    assert s.take(0) == 0
+
+
+@pytest.fixture(scope="module")
+def plan(tmp_path_factory):
+    rng = np.random.default_rng(4)
+    y, x = np.mgrid[0:150, 0:190].astype(np.float64)
+    z = 300 * np.sin(x / 17) * np.cos(y / 23) + 40 * np.sin((x + 2 * y) / 5) + rng.normal(0, 2, x.shape)
+    path = tmp_path_factory.mktemp("graph") / "z.npy"
+    np.save(path, z.astype(np.float32))
+    return tiles.plan_tiles(tiles.open_source(str(path)), api.MeshParams(refine=RefineParams(zeta=4.0)), 64)
+
+
+def test_given_free_meshes_equal_made_ones(plan):
+    """stream's path (the free meshes made elsewhere, given) and mesh's: the same tiles."""
+    made = tiles.run_tiles(plan, workers=1)
+    frees = [tiles.free_tile(plan, i) for i in range(len(plan.tiles))]
+    given = tiles.run_tiles(plan, workers=2, frees=frees)
+    for a, b in zip(made, given, strict=True):
+        assert np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris)
+        assert {k: v for k, v in a.report.items() if k != "seconds"} == \
+            {k: v for k, v in b.report.items() if k != "seconds"}
+    assert len(plan.tiles) == 9 and sum(r.report["seam_removed"] for r in made) > 0
+
+
+def test_graph_steps_and_last_nodes(plan):
+    nodes, roles = tiles.tile_graph(plan)
+    n = len(plan.tiles)
+    assert len(roles["free"]) == len(roles["finish"]) == len(roles["last"]) == n
+    assert {nodes[k].fn for k in roles["last"]} == {jobs._thin_node}
+    for k, node in enumerate(nodes):  # a node waits for the tiles its rank names, never a later tile
+        assert all(a.node < k and nodes[a.node].rank <= node.rank for a in node.args
+                   if isinstance(a, Ref))
+
+
+def test_kept_tiles(plan, tmp_path):
+    jobs.clear_tile_cache()
+    t = plan.tiles[5]
+    hf = tiles.tile_heightfield(plan, t)
+    assert tiles.tile_heightfield(plan, t) is hf and not hf.values.flags.writeable
+    jobs.forget_tile(plan, 5)
+    assert tiles.tile_heightfield(plan, t) is not hf
+    # the file replaced under its name: read anew
+    path = tmp_path / "r.npy"
+    np.save(path, np.arange(64 * 64, dtype=np.float32).reshape(64, 64))
+    p = tiles.plan_tiles(tiles.open_source(str(path)), api.MeshParams(refine=RefineParams(zeta=4.0)), 64)
+    before = tiles.tile_heightfield(p, p.tiles[0]).values.copy()
+    np.save(path, np.arange(64 * 64, dtype=np.float32).reshape(64, 64)[::-1].copy())
+    os.utime(path, ns=(1, 1))
+    after = tiles.tile_heightfield(p, p.tiles[0]).values
+    assert not np.array_equal(before, after) and np.array_equal(after, before[::-1])
+    jobs.clear_tile_cache()
