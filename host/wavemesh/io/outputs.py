@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import signal
 import threading
 from collections.abc import Iterable
@@ -318,6 +317,8 @@ class Outputs:
                 try:
                     stage.rmdir()  # committed and nothing replaced: empty
                 except OSError:
+                    import shutil  # start-up: shutil loads bz2 and lzma (~8M instructions), wanted only here
+
                     shutil.rmtree(stage, ignore_errors=True)
             self._stages.clear()
             self._files.clear()
