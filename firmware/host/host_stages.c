@@ -557,3 +557,37 @@ done:
     free(dst);
     return code;
 }
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The OBJ face lines (meshio.write_obj) */
+
+static char *put_index(char *p, int64_t i)
+{
+    char digits[20];
+    int n = 0;
+    uint64_t u = (uint64_t)i + 1u; /* index + 1, wrapping as numpy's int64 addition does */
+    if ((int64_t)u < 0) {
+        *p++ = '-';
+        u = 0u - u;
+    }
+    do {
+        digits[n++] = (char)('0' + u % 10u);
+        u /= 10u;
+    } while (u != 0u);
+    while (n > 0) *p++ = digits[--n];
+    return p;
+}
+
+int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out)
+{
+    char *p = out;
+    for (int64_t k = 0; k < 3 * t; k += 3) {
+        *p++ = 'f';
+        for (int c = 0; c < 3; c++) {
+            *p++ = ' ';
+            p = put_index(p, tris[k + c]);
+        }
+        *p++ = '\n';
+    }
+    return (int64_t)(p - out);
+}

@@ -55,6 +55,12 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
 int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t v, const int64_t *tris, int64_t t,
                        int32_t threads, int64_t *border);
 
+/* The OBJ writer's face lines (meshio.write_obj): for each of the t triangles "f a b c\n" with its three
+ * vertex indices plus one in decimal, as Python's "%d" writes them, into out (at least
+ * WM_HOST_OBJ_FACE_MAX bytes a triangle); returns the bytes written. */
+#define WM_HOST_OBJ_FACE_MAX 65
+int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,7 +1,7 @@
-"""The host stages in C (firmware/host, native.quantise / quant_error / tri_max, the C filter bank for the
-labeller) against their Python models (heightfield.quantise, check.mesh_errors, haar.decompose), bit for
-bit, on random and real grids, at several thread counts; and `wavemesh mesh` writes the same mesh
-whatever --threads says."""
+"""The host stages in C (firmware/host, native.quantise / quant_error / tri_max / obj_faces, the C filter
+bank for the labeller) against their Python models (heightfield.quantise, check.mesh_errors,
+haar.decompose, the OBJ writer's face format), bit for bit, on random and real grids, at several thread
+counts; and `wavemesh mesh` writes the same mesh whatever --threads says."""
 
 from __future__ import annotations
 
@@ -202,3 +202,22 @@ def test_proper_mesh_check_in_c_agrees_with_the_model():
             assert check_mesh(mesh) == ref
         seen.add(ref.valid)
     assert seen == {True, False}
+
+
+def test_obj_face_lines_in_c_equal_the_format(tmp_path, monkeypatch):
+    rng = np.random.default_rng(5)
+    cases = [np.zeros((0, 3), np.int64), rng.integers(0, 10**6, (5000, 3)),
+             np.array([[0, 9, 99], [2**62, -5, -1], [2**63 - 1, -2**63, 7]], np.int64)]  # signs, wrap-around
+    for t in cases:
+        with np.errstate(over="ignore"):
+            want = ("f %d %d %d\n" * len(t)) % tuple((t + 1).ravel().tolist())
+        assert native.obj_faces(t) == want
+    # a whole file: the same bytes with the library and without it (the Python format)
+    from wavemesh.io.meshio import write_obj
+
+    hf = from_array(real_grids()["topobathy"])
+    mesh = api.mesh(hf, api.MeshParams()).mesh
+    write_obj(tmp_path / "c.obj", mesh, hf.values)
+    monkeypatch.setattr(native, "host_lib", lambda: None)
+    write_obj(tmp_path / "py.obj", mesh, hf.values)
+    assert (tmp_path / "c.obj").read_bytes() == (tmp_path / "py.obj").read_bytes()

@@ -31,6 +31,7 @@ from wavemesh.errors import InputError
 from wavemesh.io.georef import UNITS, grid_ground, sidecar_path, write_sidecar
 from wavemesh.mesh import Mesh
 from wavemesh.record import record
+from wavemesh.refine import native
 
 __all__ = ["FORMATS", "write_obj", "write_ply", "write_mesh", "vertex_normals", "normal_map"]
 
@@ -133,6 +134,9 @@ def _write_obj(path, s: _Surface) -> None:
                     n = s.normals[a : a + _CHUNK]
                     f.write(("vn %.7g %.7g %.7g\n" * len(n)) % tuple(n.ravel().tolist()))
             for a in range(0, len(tris), _CHUNK):
+                if s.normals is None and (text := native.obj_faces(tris[a : a + _CHUNK])) is not None:
+                    f.write(text)  # the same text, formatted in C (tests/host/test_host_stages.py)
+                    continue
                 t = tris[a : a + _CHUNK] + 1
                 if s.normals is not None:
                     t = np.repeat(t, 2, axis=1)

@@ -200,6 +200,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
+        "wm_host_obj_faces": (i64, [pi64, i64, ctypes.c_char_p]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -633,6 +634,22 @@ def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray,
                         _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64),
                         len(tris), _ptr(out, ctypes.c_double), threads())
     return out
+
+
+OBJ_FACE_MAX = 65  # WM_HOST_OBJ_FACE_MAX: the longest "f a b c" line, three int64 indices
+
+
+def obj_faces(tris: np.ndarray) -> str | None:
+    """The OBJ face lines of (T, 3) vertex indices, "f a b c\\n" with each index plus one, as the text
+    ``("f %d %d %d\\n" * T) % tuple((tris + 1).ravel().tolist())`` (wm_host_obj_faces; about a tenth of
+    its time); None without the library."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    t = np.ascontiguousarray(tris, dtype=np.int64)
+    buf = ctypes.create_string_buffer(OBJ_FACE_MAX * len(t) + 1)
+    n = lib.wm_host_obj_faces(_ptr(t, ctypes.c_int64), len(t), buf)
+    return ctypes.string_at(buf, n).decode("ascii")
 
 
 def check_proper(mesh: Mesh) -> tuple[bool, int] | None:
