@@ -173,60 +173,85 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
     return vmax;
 }
 
+/* floor(u / a) and u mod a (a > 0), for a span's end stepped row by row (scan32). */
+static void span_start(int32_t u, int32_t a, int32_t *q, int32_t *rem)
+{
+    *q = floor_div32(u, a);
+    *rem = u - *q * a;
+}
+
 /* scan in 32-bit arithmetic, exact on grids of at most 2^14 a side for D < 2^15: every E_k and its row
  * part B y + C fit 30 bits, and S = sum E_k z_k <= D (2^16 - 1) and D h lie in [0, 2^31) at every
  * sample of a span, so S - D h taken modulo 2^32 (unsigned: no overflow) is V with its sign.  Most
- * triangles of a board job and of a fine mesh take this path: a few 32-bit operations and three
- * hardware divisions per row on the soft CPU instead of 64-bit library calls. */
+ * triangles of a board job and of a fine mesh take this path.
+ *
+ * The rows from the top corner to the middle one (by y) lie between the long edge (top to bottom) and
+ * the upper short edge, the rest between the long edge and the lower short edge: on each row the span
+ * is bounded by those two edges alone (the third one's half-plane holds the whole row of the triangle,
+ * so its bound, like the bounding box's, never binds, rounded or not).  Each bound is floor(u / a):
+ * the left end ceil(-E / A) for A > 0 with u = A - 1 - (B py + C), a = A, the right end floor(E / -A)
+ * for A < 0 with u = B py + C, a = -A; u moves by the same step every row, so the quotient and its
+ * remainder are stepped (a carry when the remainder reaches a) instead of divided: two divisions a
+ * bound and half, exactly the spans of a division per edge and row. */
 static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d, uint64_t limit,
                        int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
-    int32_t A[3], B[3], C[3], xmin = x[0], xmax = x[0], ymin = y[0], ymax = y[0], bx = x[0], by = y[0];
-    uint32_t z[3], dS = 0, dSy = 0, Sr = 0, vm = 0;
+    int32_t A[3], B[3], C[3], bx = x[0], by = y[0], t = 0, b = 0, m, py;
+    uint32_t z[3], dS = 0, dSy = 0, Sr, vm = 0;
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
         A[k] = y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C, as setup's */
         B[k] = x[k2] - x[k1];
         C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
-        if (y[k] < ymin) ymin = y[k];
-        if (y[k] > ymax) ymax = y[k];
-        if (x[k] < xmin) xmin = x[k];
-        if (x[k] > xmax) xmax = x[k];
+        if (y[k] < y[t]) t = k;
+        if (y[k] >= y[b]) b = k;
     }
+    if (t == b) b = wm_k1(t); /* all on one row: D = 0, not called */
+    m = 3 - t - b;
     /* S = dS px + dSy py + S0 modulo 2^32 (V is taken modulo 2^32 anyway): one product a row */
     for (int k = 0; k < 3; k++) {
         dS += (uint32_t)A[k] * z[k];
         dSy += (uint32_t)B[k] * z[k];
-        Sr += (uint32_t)(B[k] * ymin + C[k]) * z[k];
     }
-    for (int32_t py = ymin; py <= ymax; py++, Sr += dSy) {
-        int32_t lo = xmin, hi = xmax, num[3];
-        const uint16_t *row = h + py * f->width, *at = NULL;
-        int empty = 0;
-        for (int k = 0; k < 3; k++) {
-            num[k] = B[k] * py + C[k]; /* E_k = A x + num >= 0 */
-            if (A[k] > 0) {
-                int32_t l = ceil_div32(-num[k], A[k]);
-                if (l > lo) lo = l;
-            } else if (A[k] < 0) {
-                int32_t r = floor_div32(num[k], -A[k]);
-                if (r < hi) hi = r;
-            } else if (num[k] < 0) {
-                empty = 1;
+    py = y[t];
+    Sr = 0;
+    for (int k = 0; k < 3; k++) Sr += (uint32_t)(B[k] * py + C[k]) * z[k];
+    /* the long edge is opposite the middle corner, the upper short one opposite the bottom corner,
+     * the lower one opposite the top corner; a half with no rows is skipped (its edge is level) */
+    for (int half = 0; half < 2; half++) {
+        int32_t ks = half == 0 ? b : t, kl, kh, ql, rl, dql, drl, al, qh, rh, dqh, drh, ah, last, num;
+        last = half == 0 ? (y[m] == y[b] ? y[b] : y[m] - 1) : y[b];
+        if (half == 1 && y[m] == y[b]) break;
+        if (py > last) continue;
+        kl = A[m] > 0 ? m : ks; /* the left end's edge (A > 0) and the right end's (A < 0) */
+        kh = A[m] > 0 ? ks : m;
+        al = A[kl], ah = -A[kh];
+        num = B[kl] * py + C[kl];
+        span_start(al - 1 - num, al, &ql, &rl);
+        span_start(-B[kl], al, &dql, &drl);
+        num = B[kh] * py + C[kh];
+        span_start(num, ah, &qh, &rh);
+        span_start(B[kh], ah, &dqh, &drh);
+        for (const uint16_t *row = h + py * f->width; py <= last; py++, Sr += dSy, row += f->width) {
+            int32_t lo = ql, hi = qh;
+            const uint16_t *at = NULL;
+            ql += dql, rl += drl, qh += dqh, rh += drh;
+            if (rl >= al) rl -= al, ql++;
+            if (rh >= ah) rh -= ah, qh++;
+            if (lo > hi) continue;
+            vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, limit, &at);
+            if (at) {
+                bx = (int32_t)(at - row);
+                by = py;
             }
+            WM_PROF_ADD(WM_PC_ROWS, 1);
+            WM_PROF_ADD(WM_PC_SAMPLES, vm > limit ? bx - lo + 1 : hi - lo + 1);
+            if (vm > limit) goto done;
         }
-        if (empty || lo > hi) continue;
-        vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, limit, &at);
-        if (at) {
-            bx = (int32_t)(at - row);
-            by = py;
-        }
-        WM_PROF_ADD(WM_PC_ROWS, 1);
-        WM_PROF_ADD(WM_PC_SAMPLES, vm > limit ? bx - lo + 1 : hi - lo + 1);
-        if (vm > limit) break;
     }
+done:
     if (wx) *wx = bx;
     if (wy) *wy = by;
     return vm;
