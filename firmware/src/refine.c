@@ -268,24 +268,33 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
         uint64_t dmax, s1, s2;
         uint32_t lb1 = 0, lb2 = 0, lim;
-        /* xi > 1 iff den <= dmax (den_max).  First the old triangles' worst samples, measured against
-         * the new triangle(s) holding them: they bound the new E(T) from below (rounded as E(T) is),
-         * so den from below, without a scan. */
-        for (int k = 0; k < 2; k++) {
-            int32_t s = r->worst[k ? t2 : t1], sx = s % r->field.width, sy = s / r->field.width;
+        /* xi > 1 iff den <= dmax (den_max), and den >= one: R_A alone may refuse the swap.  Then the
+         * old triangles' worst samples, measured against the new triangle(s) holding them: they bound
+         * the new E(T) from below (rounded as E(T) is), so den from below, without a scan; each
+         * point error is tested as it comes. */
+        dmax = den_max(alpha, ra, o1 + o2 + one);
+        if (one > dmax) return 0;
+        s1 = s2 = 0;
+        for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
+            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1], sx = s % r->field.width,
+                    sy = s / r->field.width;
             if (in_tri(n1x, n1y, sx, sy)) {
                 uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
-                if (v > lb1) lb1 = v;
+                if (v > lb1) {
+                    lb1 = v;
+                    s1 = wm_scale_mul(&r->params, lb1, 1, 0, cap);
+                    if (s1 + s2 + one > dmax) return 0;
+                }
             }
             if (in_tri(qx, qy, sx, sy)) {
                 uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
-                if (v > lb2) lb2 = v;
+                if (v > lb2) {
+                    lb2 = v;
+                    s2 = wm_scale_mul(&r->params, lb2, 1, 0, cap);
+                    if (s1 + s2 + one > dmax) return 0;
+                }
             }
         }
-        dmax = den_max(alpha, ra, o1 + o2 + one);
-        s1 = wm_scale_mul(&r->params, lb1, 1, 0, cap);
-        s2 = wm_scale_mul(&r->params, lb2, 1, 0, cap);
-        if (s1 + s2 + one > dmax) return 0;
         /* Then each scan stops as soon as its E(T) is too large for the swap (the bound, or den over
          * dmax with the other triangle's lower bound, then its measure): the E(T) and worst sample of
          * a scan that stays within are the whole scan's. */
