@@ -17,7 +17,6 @@ from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.io.georef import cropped
 from wavemesh.io.heightfield import HeightField
 from wavemesh.mesh import Mesh
-from wavemesh.model.haar import decompose
 from wavemesh.refine import native
 from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles
 from wavemesh.tiles.runner import Here, Node, Ref, Runner
@@ -138,8 +137,9 @@ def free_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> F
     hf = tile_heightfield(plan, plan.tiles[index], window)
     p = plan.params.refine
     job = api.triangulate(hf, plan.levels, plan.tau, plan.params.wavelet)
-    out = native.refine(hf.samples, decompose(hf.samples, job.levels, job.wavelet), job.mesh, p,
-                        scale=hf.scale, zeta=hf.refiner_zeta(p.zeta), spacing=plan.spacing)
+    # the details by the library's filter bank, as api.refine (the templates' own when triangulate made them)
+    out = native.refine(hf.samples, job.levels, job.mesh, p, scale=hf.scale, zeta=hf.refiner_zeta(p.zeta),
+                        spacing=plan.spacing, wavelet=job.wavelet, details=job.details)
     final = out.final
     return FreeTile(index, final.mesh, final.stats["over"], final.stats["bound_splits"],
                     border_of(final.mesh), time.perf_counter() - t0, {"levels": job.levels})
@@ -172,7 +172,7 @@ def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray
     out = _Levels(_Level(free.mesh, {"over": free.over, "bound_splits": free.bound_splits}))
     if any(sides[s] != free.sides[s] for s in sides):
         bound = replace(p, reduce=False, decimate=False, max_triangles=None, capacity=None)
-        out = native.refine(hf.samples, decompose(hf.samples, 1), conform(free.mesh, sides), bound,
+        out = native.refine(hf.samples, 1, conform(free.mesh, sides), bound,
                             scale=hf.scale, zeta=plan.zeta_used, spacing=plan.spacing)
     if out.final.stats["over"]:
         raise MeshInvalid(f"{t.name}: {out.final.stats['over']} triangles above zeta after the border's "

@@ -29,15 +29,22 @@ _TUNED: list = []
 
 
 def tune_malloc() -> None:
-    """glibc's malloc, once in a process that runs tiles: a tile's arrays (1025^2 float64: 8 MiB, and the
-    refiner's storage) from the heap and the heap kept between tasks, not mapped and unmapped for every
-    tile.  glibc raises its mmap threshold itself only after it has freed such a mapping, which a forked
-    worker may never do: 8192^2 in tiles of 1025, 2 pool workers, measured 464,000 page faults and 1.2 s
-    of system time in the free and conformed phases without this, 5,600 and 0.3 s with it (and 5.4 s of
-    the workers' CPU in all, not 6.7).  No-op elsewhere (no mallopt: musl, macOS)."""
+    """The memory of a process that runs tiles, once: glibc's malloc gives a tile's arrays (1025^2 float64:
+    8 MiB, and the refiner's storage) from the heap and keeps the heap between tasks, rather than mapping
+    and unmapping them for every tile (glibc raises its mmap threshold itself only after it has freed
+    such a mapping, which a forked worker may never do); and numpy asks for no transparent huge pages for
+    its arrays (each fresh one zeroed, or compacted for, at its first touch).  8192^2 in tiles of 1025, 2
+    pool workers: the mallopt took the free and conformed steps from 464,000 page faults and 1.2 s of
+    system time to 5,600 and 0.3 s; the huge pages cost the free step 0.7 s of system time in 2.4 s of CPU,
+    0.15 in 1.75 without them (numbers: docs/tiles.md).  mallopt only where there is one (glibc)."""
     if _TUNED:
         return
     _TUNED.append(True)
+    try:
+        from numpy._core import multiarray  # numpy 2
+    except ImportError:
+        from numpy.core import multiarray
+    getattr(multiarray, "_set_madvise_hugepage", lambda _: None)(False)
     if not sys.platform.startswith("linux"):
         return
     try:
