@@ -262,6 +262,7 @@ struct trimax {
     const double *zv;
     int64_t t;
     double *per_v;
+    double *nfac, sx, sy; /* the normal factors (NULL: not asked) and the cell size */
     pthread_mutex_t lock;
     int64_t next; /* the next chunk of triangles to take */
 };
@@ -279,6 +280,12 @@ static double tri_max(const struct trimax *m, int64_t t)
     int64_t x2 = m->x[tri[2]], y2 = m->y[tri[2]];
     int64_t d = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
     double best = -INFINITY;
+    if (m->nfac != NULL) { /* check.mesh_errors's numpy expressions, term for term (inf or NaN when d = 0) */
+        double z0 = m->zv[tri[0]], dz1 = m->zv[tri[1]] - z0, dz2 = m->zv[tri[2]] - z0, df = (double)d;
+        double sa = (dz1 * (double)(y2 - y0) - dz2 * (double)(y1 - y0)) / df / m->sx;
+        double sb = ((double)(x1 - x0) * dz2 - (double)(x2 - x0) * dz1) / df / m->sy;
+        m->nfac[t] = hypot(1.0, hypot(sa, sb));
+    }
     if (d == 0) return best;
     int64_t sg = d > 0 ? 1 : -1;
     int64_t a[3] = {(y1 - y2) * sg, (y2 - y0) * sg, (y0 - y1) * sg};
@@ -354,7 +361,8 @@ static void trimax_part(void *ctx, int32_t part, int32_t parts)
 }
 
 int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
-                    const double *zv, const int64_t *tris, int64_t t, double *per_v, int32_t threads)
+                    const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
+                    double sy, int32_t threads)
 {
     struct trimax m;
     int32_t parts = parts_for(threads, (int64_t)width * height); /* the triangles cover the grid once */
@@ -368,6 +376,9 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
     m.zv = zv;
     m.t = t;
     m.per_v = per_v;
+    m.nfac = nfac;
+    m.sx = sx;
+    m.sy = sy;
     m.next = 0;
     if (parts > 1 && pthread_mutex_init(&m.lock, NULL) != 0) parts = 1;
     if (run_parts(trimax_part, &m, parts) != WM_HOST_OK) trimax_part(&m, 0, 1); /* the chunks left */

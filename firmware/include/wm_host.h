@@ -40,10 +40,13 @@ double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double
 /* mesh_errors()'s per-triangle vertical maxima: for each of the t triangles (vertex indices tris[3 i..],
  * vertex columns x, rows y, heights zv) the largest |h - plane| over the samples of the W x H height
  * field h in the closed triangle, the plane z0 + (E1 dz1 + E2 dz2) / |D| evaluated with the exact
- * integer edge functions; -inf for a degenerate triangle or one with no sample in the grid.
+ * integer edge functions; -inf for a degenerate triangle or one with no sample in the grid.  With nfac
+ * (else NULL) also each triangle's normal factor sqrt(1 + a^2 + b^2) as mesh_errors writes it, the slopes
+ * a, b per ground unit (cell size sx, sy), in the same operations (inf or NaN for a degenerate one).
  * Coordinates must be below 2^30 in size (the caller checks). */
 int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
-                    const double *zv, const int64_t *tris, int64_t t, double *per_v, int32_t threads);
+                    const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
+                    double sy, int32_t threads);
 
 /* check.py's check_mesh when the mesh is proper: 1 when every one of its checks passes (vertices in the
  * W x H rectangle, distinct and used; indices in range; every triangle counter-clockwise; the doubled

@@ -118,7 +118,18 @@ def test_error_measure_of_odd_meshes():
             native.set_threads(n)
             fast = mesh_errors(mesh, heights, z, rms=False)
             assert np.array_equal(fast.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
+            assert np.array_equal(fast.per_triangle_normal, ref.per_triangle_normal, equal_nan=True)
             assert np.isnan(fast.e_max_vertical) == np.isnan(ref.e_max_vertical)
+    # the normal factors (the slopes' terms, hypot) of degenerate and sloped triangles, spacings included
+    for spacing in ((1.0, 1.0), (0.3, 7.0)):
+        got = native.tri_max(h, xy[:, 0], xy[:, 1], z, tris, spacing)[1]
+        x, y = xy[:, 0][tris], xy[:, 1][tris]
+        d = ((x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])) * 1.0
+        dz1, dz2 = z[tris[:, 1]] - z[tris[:, 0]], z[tris[:, 2]] - z[tris[:, 0]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (dz1 * (y[:, 2] - y[:, 0]) - dz2 * (y[:, 1] - y[:, 0])) / d / spacing[0]
+            b = ((x[:, 1] - x[:, 0]) * dz2 - (x[:, 2] - x[:, 0]) * dz1) / d / spacing[1]
+            assert np.array_equal(got, np.hypot(1.0, np.hypot(a, b)), equal_nan=True)
 
 
 @pytest.mark.parametrize("wavelet", ["haar", "spline"])

@@ -197,7 +197,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_spline_scratch": (ctypes.c_int64, [i32, i32]),
         "wm_host_quantise": (ctypes.c_int, [pf64, i64, i32, pu16, pf64, pi32]),
         "wm_host_quant_error": (ctypes.c_double, [pf64, pu16, i64, ctypes.c_double, ctypes.c_double, i32]),
-        "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, i32]),
+        "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
+                                           ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
         "wm_host_obj_faces": (i64, [pi64, i64, ctypes.c_char_p]),
@@ -618,10 +619,11 @@ def quant_error(values: np.ndarray, samples: np.ndarray, offset: float, scale: f
                                          float(offset), float(scale), threads()))
 
 
-def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray,
-            tris: np.ndarray) -> np.ndarray | None:
+def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray, tris: np.ndarray,
+            spacing: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
     """Per triangle, the largest |height - plane| over the samples in the closed triangle (-inf: none),
-    as check.mesh_errors measures it (wm_host_tri_max); None without the library."""
+    as check.mesh_errors measures it (wm_host_tri_max), and with ``spacing`` (the cell size) the normal
+    factors sqrt(1 + a^2 + b^2) it computes (else None); None without the library."""
     lib = host_lib()
     if lib is None:
         return None
@@ -630,10 +632,13 @@ def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray,
     zv = np.ascontiguousarray(zv, dtype=np.float64)
     tris = np.ascontiguousarray(tris, dtype=np.int64)
     out = np.empty(len(tris), dtype=np.float64)
+    nfac = None if spacing is None else np.empty(len(tris), dtype=np.float64)
+    sx, sy = (1.0, 1.0) if spacing is None else (float(spacing[0]), float(spacing[1]))
     lib.wm_host_tri_max(_ptr(h, ctypes.c_double), h.shape[1], h.shape[0], _ptr(x, ctypes.c_int64),
                         _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64),
-                        len(tris), _ptr(out, ctypes.c_double), threads())
-    return out
+                        len(tris), _ptr(out, ctypes.c_double),
+                        None if nfac is None else _ptr(nfac, ctypes.c_double), sx, sy, threads())
+    return out, nfac
 
 
 OBJ_FACE_MAX = 65  # WM_HOST_OBJ_FACE_MAX: the longest "f a b c" line, three int64 indices
