@@ -461,6 +461,63 @@ def markdown(r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int = 5) -> dict:
+    """`wavemesh mesh` of the n^2 terrain in tiles of ``tile`` with 1 worker and with ``workers``, whole
+    processes in turn (1, w, 1, w, ...; one of each first, not counted): each run's wall and CPU seconds
+    (its process tree), the medians, t1 / tw of the medians and the median of the pairs' ratios, and
+    whether both wrote the same bytes."""
+    import statistics
+
+    path = terrain_file(n)
+    root = BENCH.parent
+    out = WORK / "pair"
+    out.mkdir(parents=True, exist_ok=True)
+
+    def run1(w: int) -> tuple[float, float]:
+        cmd = [
+            sys.executable,
+            "-m",
+            "wavemesh.cli",
+            "mesh",
+            str(path),
+            "-o",
+            str(out / f"w{w}.obj"),
+            "--tile",
+            str(tile),
+            "--metric",
+            "vertical",
+            "--zeta",
+            str(ZETA),
+            "--workers",
+            str(w),
+            "--quiet",
+        ]
+        c0, t0 = os.times(), time.perf_counter()
+        subprocess.run(cmd, cwd=root, check=True)
+        t, c1 = time.perf_counter() - t0, os.times()
+        return t, c1.children_user + c1.children_system - c0.children_user - c0.children_system
+
+    run1(1), run1(workers)
+    got: dict = {1: [], workers: []}
+    for _ in range(runs):
+        for w in (1, workers):
+            got[w].append(run1(w))
+            print(
+                f"  {n}^2 tile {tile} x{w}: {got[w][-1][0]:.2f} s wall, {got[w][-1][1]:.2f} s CPU", flush=True
+            )
+    med = {
+        w: (statistics.median(x[0] for x in v), statistics.median(x[1] for x in v)) for w, v in got.items()
+    }
+    ratio = statistics.median(a[0] / b[0] for a, b in zip(got[1], got[workers], strict=True))
+    same = (out / "w1.obj").read_bytes() == (out / f"w{workers}.obj").read_bytes()
+    print(
+        f"{n}^2 tile {tile}: 1 worker {med[1][0]:.2f} s ({med[1][1]:.2f} CPU s), {workers} workers "
+        f"{med[workers][0]:.2f} s ({med[workers][1]:.2f} CPU s): {med[1][0] / med[workers][0]:.2f}x "
+        f"(pairs' median {ratio:.2f}x); the same bytes: {'yes' if same else 'NO'}"
+    )
+    return {"median": med, "pairs": ratio, "same": same}
+
+
 def _child(args: list[str]) -> str:
     return subprocess.run(
         [sys.executable, str(Path(__file__)), *args], capture_output=True, text=True, cwd=BENCH, check=True
@@ -473,6 +530,16 @@ if __name__ == "__main__":
     if sys.argv[1:2] == ["one"]:
         n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
         print(json.dumps(one(n, tile, workers, bool(untiled), *sys.argv[6:8])))
+    elif sys.argv[1:2] == ["pair"]:  # 1 worker against w, whole `wavemesh mesh` processes in turn
+        import argparse
+
+        ap = argparse.ArgumentParser(prog="bench_tiles.py pair", description=pair.__doc__)
+        ap.add_argument("--n", type=int, default=TILE_N)
+        ap.add_argument("--tile", type=int, default=WORKERS_TILE)
+        ap.add_argument("--workers", type=int, default=2)
+        ap.add_argument("--runs", type=int, default=5)
+        a = ap.parse_args(sys.argv[2:])
+        sys.exit(0 if pair(a.n, a.tile, a.workers, a.runs)["same"] else 1)
     elif sys.argv[1:2] != ["dems"]:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
         import argparse
 
