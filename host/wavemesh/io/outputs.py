@@ -30,7 +30,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import threading
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -75,15 +74,18 @@ def handle_termination():
     A signal the process was started with ignored stays ignored (``nohup``: SIGHUP), as Python leaves an
     ignored SIGINT (a background job of a shell script) ignored.  Only in the main thread (elsewhere the
     block runs as it is)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
 
     def raise_terminated(signum, frame):
         raise Terminated(signum)
 
-    old = {s: signal.signal(s, raise_terminated) for s in (signal.SIGTERM, signal.SIGHUP)
-           if signal.getsignal(s) is not signal.SIG_IGN}
+    try:
+        old = {s: signal.signal(s, raise_terminated) for s in (signal.SIGTERM, signal.SIGHUP)
+               if signal.getsignal(s) is not signal.SIG_IGN}
+    except ValueError:  # not the main thread, where alone handlers can be set: the first refusal sets none
+        old = None  # (asked of signal, not of threading: importing threading costs 5M instructions a run)
+    if old is None:
+        yield
+        return
     try:
         yield
     finally:
