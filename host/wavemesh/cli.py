@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import math
 import sys
 from dataclasses import replace
@@ -707,6 +706,8 @@ def devices_command(args) -> int:
 
     reports = scan(args.port, args.baud, do_probe=not args.no_probe)
     if args.json:
+        import json  # start-up: json (5M instructions) only for --json
+
         print(json.dumps([r.__dict__ for r in reports], indent=1))
     else:
         for r in reports:

@@ -29,7 +29,6 @@ geographic one are refused: reproject them first (gdalwarp).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -322,6 +321,8 @@ def sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> dict:
 
 
 def write_sidecar(g: Ground, mesh_path, local: bool, units: str = "crs") -> Path:
+    import json  # start-up: json (5M instructions) only where a report or a sidecar is written or read
+
     p = sidecar_path(mesh_path)
     try:
         p.write_text(json.dumps(sidecar(g, mesh_path, local, units), indent=2) + "\n")
@@ -337,6 +338,8 @@ def read_sidecar(mesh_path) -> tuple[Ground, tuple[float, float], str, bool] | N
     p = sidecar_path(mesh_path)
     if not p.exists():
         return None
+
+    import json  # start-up: json (5M instructions) only where a report or a sidecar is written or read
 
     regular_file(str(p), "sidecar")
     try:

@@ -5,7 +5,6 @@ mesh (--lod), the JSON report, the picture (--render), the normal map; `wavemesh
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,6 +36,8 @@ def _check_output(path: str, suffixes: tuple[str, ...], what: str, inputs=None) 
 
 
 def _write_json(path: str, data: dict, inputs=None) -> None:
+    import json  # start-up: json (5M instructions) only where a report or a sidecar is written or read
+
     p = _check_output(path, (".json",), "report", inputs)
     with Outputs(inputs) as staged:  # whole or not at all
         staged.path(p, what="report").write_text(json.dumps(data, indent=2) + "\n")
@@ -130,6 +131,8 @@ def write_result(result: MeshResult, output: str, *, lod: str | None = None, rep
             data = result.report | {"output": str(out), "mesh_files": files.to_report() | {"frame": frame}}
             if written:
                 data["lod"] = written
+            import json  # start-up: json (5M instructions) only where a report is written
+
             staged.path(report, what="report").write_text(json.dumps(data, indent=2) + "\n")
         if render:
             render_picture(result.mesh, result.mesh.z(hf.values), str(staged.path(render, what="picture")), g,
