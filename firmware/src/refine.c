@@ -180,7 +180,8 @@ static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
     if (alpha == 65536u) return ra > 65536u ? UINT64_MAX : 0;
     t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
     if (t <= 0) return UINT64_MAX;
-    rq = ((uint64_t)t + (65535u - alpha)) / (65536u - alpha);
+    rq = (uint64_t)t + (65535u - alpha);
+    rq = rq >> 32 ? rq / (65536u - alpha) : (uint32_t)rq / (65536u - alpha); /* 32 bits unless ra < 2 */
     if (rq > 0xFFFFFFFFu) return 0;
     return (num << 16) / rq;
 }
