@@ -138,3 +138,33 @@ def test_deterministic():
     v = synth.ball()
     a, b = run(v, 5), run(v.copy(), 5)
     assert np.array_equal(a.mesh.xy, b.mesh.xy) and np.array_equal(a.mesh.tris, b.mesh.tris)
+
+
+def _assemble_block_by_block(lab, width, height):
+    """The assembly written out block by block, site by site (the model of initial.assemble's arrays)."""
+    from wavemesh.mesh import Mesh
+    from wavemesh.model.templates import template_set
+
+    ts, tris_xy = template_set(), []
+    for j in range(lab.label.shape[0]):
+        y0, y1 = int(lab.ys[j]), int(lab.ys[j + 1])
+        ry = (y0, y0 + (y1 - y0) // 2, y1)
+        for i in range(lab.label.shape[1]):
+            x0, x1 = int(lab.xs[i]), int(lab.xs[i + 1])
+            rx = (x0, x0 + (x1 - x0) // 2, x1)
+            for tri in ts.templates[lab.template[j, i]].triangles:
+                tris_xy.append([(rx[s % 3], ry[s // 3]) for s in tri])
+    pts = np.asarray(tris_xy, dtype=np.int64).reshape(-1, 2)
+    uniq, inverse = np.unique(pts[:, 1] * width + pts[:, 0], return_inverse=True)
+    xy = np.stack([uniq % width, uniq // width], axis=1)
+    return Mesh(width, height, xy, inverse.reshape(-1, 3)).canonical()
+
+
+@pytest.mark.parametrize("shape", [(128, 128), (91, 120), (33, 200), (7, 9)])
+def test_assembly_equals_the_block_by_block_model(shape):
+    rng = np.random.default_rng(shape[0])
+    v = np.cumsum(np.cumsum(rng.normal(0, 1, shape), 0), 1)
+    for levels in (1, 2, 3, 4):
+        r = run(v, levels)
+        ref = _assemble_block_by_block(r.labelling, shape[1], shape[0])
+        assert np.array_equal(r.mesh.xy, ref.xy) and np.array_equal(r.mesh.tris, ref.tris)

@@ -7,6 +7,8 @@ share their boundary vertices, so the union of the templates is one mesh.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from wavemesh.mesh import Mesh
@@ -43,21 +45,33 @@ class InitialResult:
 
 def assemble(lab: Labelling, width: int, height: int) -> Mesh:
     """The mesh made of every block's template, in canonical form."""
-    ts = template_set()
-    tris_xy = []
-    for j in range(lab.label.shape[0]):
-        y0, y1 = int(lab.ys[j]), int(lab.ys[j + 1])
-        ry = (y0, y0 + (y1 - y0) // 2, y1)
-        for i in range(lab.label.shape[1]):
-            x0, x1 = int(lab.xs[i]), int(lab.xs[i + 1])
-            rx = (x0, x0 + (x1 - x0) // 2, x1)
-            for tri in ts.templates[lab.template[j, i]].triangles:
-                tris_xy.append([(rx[s % 3], ry[s // 3]) for s in tri])
-    pts = np.asarray(tris_xy, dtype=np.int64).reshape(-1, 2)
-    keys = pts[:, 1] * width + pts[:, 0]
+    table, counts = _site_table()
+    tmpl = np.asarray(lab.template, dtype=np.int64).ravel()  # blocks row by row, as the mesh lists them
+    xs, ys = np.asarray(lab.xs, dtype=np.int64), np.asarray(lab.ys, dtype=np.int64)
+    bw = len(xs) - 1
+    # each block's sites in column 0, 1, 2 (and row 0, 1, 2): its edges and their midpoint (floored)
+    rx = np.stack([xs[:-1], xs[:-1] + (xs[1:] - xs[:-1]) // 2, xs[1:]], axis=1)  # (block columns, 3)
+    ry = np.stack([ys[:-1], ys[:-1] + (ys[1:] - ys[:-1]) // 2, ys[1:]], axis=1)  # (block rows, 3)
+    n = counts[tmpl]
+    block = np.repeat(np.arange(len(tmpl)), n)  # each triangle's block, the blocks' triangles in turn
+    k = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)  # its place in its template
+    sites = table[tmpl[block], k]  # (triangles, 3) sites 0..8 (column s % 3, row s // 3)
+    px = rx[(block % bw)[:, None], sites % 3]
+    py = ry[(block // bw)[:, None], sites // 3]
+    keys = (py * width + px).ravel()
     uniq, inverse = np.unique(keys, return_inverse=True)
     xy = np.stack([uniq % width, uniq // width], axis=1)
     return Mesh(width, height, xy, inverse.reshape(-1, 3)).canonical()
+
+
+@functools.cache
+def _site_table() -> tuple[np.ndarray, np.ndarray]:
+    """The templates' triangles as sites, (templates, most triangles, 3) padded with 0, and their counts."""
+    ts = template_set().templates
+    table = np.zeros((len(ts), max(len(t.triangles) for t in ts), 3), dtype=np.int64)
+    for i, t in enumerate(ts):
+        table[i, : len(t.triangles)] = t.triangles
+    return table, np.array([len(t.triangles) for t in ts], dtype=np.int64)
 
 
 def last_level(details: np.ndarray, width: int, height: int, levels: int) -> HaarLevel:
