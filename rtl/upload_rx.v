@@ -27,9 +27,13 @@
  * frame, a repeat, a bad frame that wrote junk) first reloads the W + 1 samples before its offset
  * from the SDRAM through the stream reader (m_rd, s_rd), once the addressed writer is idle.
  *
- * Timing: one byte a cycle at most; a raw sample one cycle more, a Rice sample two (a line-buffer
- * read, then the prediction and the stores); per DATA frame 8 cycles of checks, 32 of the division
- * that finds the offset's column (Rice), 3 line-buffer reads and the reload when one is needed.
+ * Timing: one byte a cycle at most; a raw sample one cycle more, a Rice sample four (the quotient's
+ * leading ones, the bits and the line-buffer read, the prediction, the sum and the stores) and a
+ * block header two; per DATA frame 8 cycles of checks, 32 of the division that finds the offset's
+ * column (Rice), 3 line-buffer reads and the reload when one is needed; per frame two cycles at its
+ * end (its code, then the commit).  Every comparison of a frame's position with its length is a
+ * register, computed a cycle ahead from pos_next and len_next, so no 16-bit compare sits between a
+ * byte and the state it selects; the longest paths left are a carry chain or two deep.
  */
 
 `resetall
@@ -130,25 +134,28 @@ initial begin
     end
 end
 
-localparam [3:0]
-    S_BYTE = 4'd0,      // take the next byte
-    S_CHECK = 4'd1,     // the DATA header is in: its checks
-    S_DIV = 4'd2,       // the offset's column (offset mod W), a bit a cycle
-    S_RLD_WAIT = 4'd3,  // reload: wait until every sample written is in the SDRAM
-    S_RLD_CMD = 4'd4,   // reload: the read command
-    S_RLD_DATA = 4'd5,  // reload: the samples into the line buffer
-    S_INIT1 = 4'd6,     // read the left sample
-    S_INIT2 = 4'd7,     // read the above-left sample
-    S_INIT3 = 4'd8,
-    S_DEC = 4'd9,       // Rice: a block header, or a sample's bits and its above sample's read
-    S_DEC2 = 4'd10,     // Rice: the prediction, the sample stored
-    S_RAW = 4'd11,      // raw: a word stored
-    S_END = 4'd12,      // the frame ended: good or not, commit or not
-    S_HOLD = 4'd13;     // a good frame waits for the CPU
+localparam [4:0]
+    S_BYTE = 5'd0,      // take the next byte
+    S_CHECK = 5'd1,     // the DATA header is in: its checks
+    S_DIV = 5'd2,       // the offset's column (offset mod W), a bit a cycle
+    S_RLD_WAIT = 5'd3,  // reload: wait until every sample written is in the SDRAM
+    S_RLD_CMD = 5'd4,   // reload: the read command
+    S_RLD_DATA = 5'd5,  // reload: the samples into the line buffer
+    S_INIT1 = 5'd6,     // read the left sample
+    S_INIT2 = 5'd7,     // read the above-left sample
+    S_INIT3 = 5'd8,
+    S_DECQ = 5'd9,      // Rice: the leading ones of the next bits (q)
+    S_DEC = 5'd10,      // Rice: a block header, or a sample's bits and its above sample's read
+    S_PRED = 5'd11,     // Rice: the prediction
+    S_DEC2 = 5'd12,     // Rice: the sample (prediction + residual) stored
+    S_RAW = 5'd13,      // raw: a word stored
+    S_END = 5'd14,      // the frame ended: good or not, its code
+    S_COMMIT = 5'd15,   // commit or not
+    S_HOLD = 5'd16;     // a good frame waits for the CPU
 
 localparam [2:0] CODE_OK = 3'd0, CODE_LENGTH = 3'd1, CODE_OFFSET = 3'd2, CODE_GAP = 3'd3, CODE_STREAM = 3'd4;
 
-reg [3:0]  state_reg = S_BYTE, state_next;
+reg [4:0]  state_reg = S_BYTE, state_next;
 
 // the frame
 reg [10:0] pos_reg = 11'd0, pos_next;           // unescaped bytes so far
@@ -163,6 +170,18 @@ reg [31:0] idle_reg = 32'd0, idle_next;
 reg [31:0] bad_frames_reg = 32'd0, bad_frames_next;
 reg        flush_reg = 1'b0, flush_next;        // a flush waits for S_BYTE
 reg        quiet_reg = 1'b0, quiet_next;        // the frame was flushed: not counted
+// pos against len, a cycle ahead (from pos_next and len_next): the byte at pos is ...
+reg        pay_reg = 1'b0, pay_next;            // ... a payload byte (4 <= pos < len + 4)
+reg        over_reg = 1'b0, over_next;          // ... after the CRC (pos >= 4, pos >= len + 8)
+reg        last_reg = 1'b0, last_next;          // ... the payload's last (pos == len + 3)
+reg        tail_reg = 1'b0, tail_next;          // no payload byte is left (pos >= len + 4, 11 bits)
+reg        full_reg = 1'b0, full_next;          // the frame has its length (pos == len + 8)
+// S_END's outcome, carried out in S_COMMIT
+reg        good_reg = 1'b0, good_next;          // the frame is good: held
+reg        commit_reg = 1'b0, commit_next;      // its samples are committed
+reg        junk_reg = 1'b0, junk_next;          // junk reached the line buffer
+reg [31:0] cand_lo_reg = 32'd0, cand_lo_next;   // the line buffer's range after the commit or the junk
+reg [31:0] cand_hi_reg = 32'd0, cand_hi_next;
 
 // the sample path
 reg        dp_reg = 1'b0, dp_next;              // this frame is an armed DATA frame
@@ -191,6 +210,10 @@ reg [15:0] ul_reg = 16'd0, ul_next;
 reg [31:0] lb_end_reg = 32'd0, lb_end_next;     // one past the last sample written to the line buffer
 reg [31:0] scrc_reg = 32'hFFFFFFFF, scrc_next;  // tentative CRC of the samples from next on
 reg [ADDR_BITS:0] rld_reg = {(ADDR_BITS+1){1'b0}}, rld_next;  // reload: samples left
+reg [4:0]  q_reg = 5'd0;                        // Rice: the leading ones (S_DECQ)
+reg [15:0] pred_reg = 16'd0;                    // Rice: the prediction (S_PRED)
+reg [31:0] rld_m_reg = 32'd0;                   // rld_m and off - rld_m, registered (off and W are
+reg [31:0] off_lo_reg = 32'd0;                  // steady through the division's 33 cycles)
 
 // the session
 reg [31:0] next_reg = 32'd0, next_next;
@@ -214,6 +237,7 @@ reg [15:0] lb_rdata_reg = 16'd0;
 
 // the byte's write into the payload buffer and the line buffer's ports (from the next-state logic)
 reg        pb_we;
+reg [10:0] pos_la;
 reg [PB_AW+1:0] pb_waddr;
 reg        lb_we;
 reg [LB_AW-1:0] lb_waddr, lb_raddr;
@@ -286,11 +310,11 @@ wire        chk_gap = off_reg > next_reg && off_reg < cfg_samples;
 // Rice: the W + 1 samples before the offset (fewer at the start) must be in the line buffer
 wire [31:0] w_plus = {16'd0, cfg_width} + 32'd1;
 wire [31:0] rld_m = off_reg < w_plus ? off_reg : w_plus;
-wire        need_reload = rld_m != 32'd0 && (lb_lo_reg > off_reg - rld_m || off_reg > lb_hi_reg);
+wire        need_reload = rld_m_reg != 32'd0 && (lb_lo_reg > off_lo_reg || off_reg > lb_hi_reg);
 
 // Rice: the next item from the bits
-wire        can_decode = nb_reg >= 6'd32 || (pos_reg >= len_reg[10:0] + 11'd4);  // or no tail byte is left
-wire [4:0]  q = ones16(acc_reg[39:24]);
+wire        can_decode = nb_reg >= 6'd32 || tail_reg;  // or no tail byte is left
+wire [4:0]  q = q_reg;
 wire        escape = q == 5'd16;
 wire [5:0]  need = escape ? 6'd32 : {1'b0, q} + 6'd1 + {2'd0, k_reg};
 wire [39:0] acc_q = acc_reg << (q + 5'd1);
@@ -313,7 +337,7 @@ wire [15:0] pred = row0 ? (x_reg != 16'd0 ? left_reg : 16'd0)
                  : (pick_reg == WM_PROTO_RICE_PRED_PLANE[0] || (ul_reg < hi_ab && ul_reg > lo_ab)) ? plane
                  : ul_reg >= hi_ab ? lo_ab : hi_ab;
 wire [15:0] resid = z_reg[16:1] ^ {16{z_reg[0]}};
-wire [15:0] dec_val = pred + resid;
+wire [15:0] dec_val = pred_reg + resid;
 
 // a sample is put (S_DEC2, S_RAW): line buffer, and from next on the SDRAM and the CRC
 wire [15:0] put_val = state_reg == S_DEC2 ? dec_val : val_reg;
@@ -332,7 +356,7 @@ wire [31:0] lb_lo_bad = off_reg < lb_lo_reg ? 32'd0
                       : lb_end_reg > LB_SIZE && lb_end_reg - LB_SIZE > lb_lo_reg ? lb_end_reg - LB_SIZE : lb_lo_reg;
 wire [31:0] lb_hi_bad = off_reg < lb_lo_reg ? 32'd0 : off_reg < lb_hi_reg ? off_reg : lb_hi_reg;
 wire [31:0] store_end = end_reg > {1'b0, cfg_samples} ? cfg_samples : end_reg[31:0];
-wire        frame_good = !bad_reg && !esc_reg && ended_reg && {5'd0, pos_reg} == len_reg + 16'd8
+wire        frame_good = !bad_reg && !esc_reg && ended_reg && full_reg
                          && fcrc_reg == WM_PROTO_CRC_RESIDUE;
 wire        in_frame = pos_reg != 11'd0 || esc_reg || bad_reg;
 
@@ -380,6 +404,11 @@ always @* begin
     crc_next = crc_reg;
     lb_lo_next = lb_lo_reg;
     lb_hi_next = lb_hi_reg;
+    good_next = good_reg;
+    commit_next = commit_reg;
+    junk_next = junk_reg;
+    cand_lo_next = cand_lo_reg;
+    cand_hi_next = cand_hi_reg;
     wa_valid_next = wa_valid_reg && !m_wa_tready;
     wa_data_next = wa_data_reg;
     wa_addr_next = wa_addr_reg;
@@ -426,9 +455,9 @@ always @* begin
                         st_next = 1'b0;
                         code_next = CODE_OK;
                     end
-                    if (pos_reg >= 11'd4 && {5'd0, pos_reg} >= len_reg + 16'd8) begin
+                    if (over_reg) begin
                         bad_next = 1'b1;                          // bytes after the CRC
-                    end else if (pos_reg >= 11'd4 && {5'd0, pos_reg} < len_reg + 16'd4) begin
+                    end else if (pay_reg) begin
                         // a payload byte: into the buffer, and for an armed DATA frame into its fields
                         pb_we = 1'b1;
                         if (dp_reg) begin
@@ -456,8 +485,8 @@ always @* begin
                                         end else begin
                                             acc_next = acc_reg | ({32'd0, data_byte} << (6'd32 - nb_reg));
                                             nb_next = nb_reg + 6'd8;
-                                            if (nb_reg + 6'd8 >= 6'd32 || pay_idx + 16'd1 == len_reg) begin
-                                                state_next = S_DEC;
+                                            if (nb_reg + 6'd8 >= 6'd32 || last_reg) begin
+                                                state_next = S_DECQ;
                                             end
                                         end
                                     end
@@ -506,7 +535,7 @@ always @* begin
             // restoring division of the offset by W, a bit a cycle: the remainder is its column
             if (div_reg == 6'd32) begin
                 x_next = rem_reg[15:0];
-                rld_next = rld_m[ADDR_BITS:0];
+                rld_next = rld_m_reg[ADDR_BITS:0];
                 state_next = need_reload ? S_RLD_WAIT : S_INIT1;
             end else begin
                 if ({rem_reg[15:0], off_reg[31 - div_reg[4:0]]} >= {1'b0, cfg_width}) begin
@@ -523,8 +552,8 @@ always @* begin
         end
         S_RLD_CMD: begin
             if (m_rd_ready) begin
-                lb_lo_next = off_reg - rld_m;
-                lb_hi_next = off_reg - rld_m;
+                lb_lo_next = off_lo_reg;
+                lb_hi_next = off_lo_reg;
                 state_next = S_RLD_DATA;
             end
         end
@@ -551,6 +580,10 @@ always @* begin
             ul_next = lb_rdata_reg;
             state_next = S_BYTE;
         end
+        S_DECQ: begin
+            // q_reg: the leading ones of the next bits
+            state_next = S_DEC;
+        end
         S_DEC: begin
             // the next item when its bits are all here (32 is the longest), or no byte is left
             if (i_reg == end_reg[31:0] || fail_reg || !can_decode) begin
@@ -565,6 +598,7 @@ always @* begin
                     acc_next = acc_reg << 5;
                     nb_next = nb_reg - 6'd5;
                     blk_next = 5'd16;
+                    state_next = S_DECQ;
                 end
             end else if (need > nb_reg) begin
                 fail_next = 1'b1;                 // the stream ends inside a sample
@@ -573,8 +607,12 @@ always @* begin
                 z_next = z_full[16:0];
                 acc_next = acc_used;
                 nb_next = nb_reg - need;
-                state_next = S_DEC2;              // lb_raddr: the above sample
+                state_next = S_PRED;              // lb_raddr: the above sample
             end
+        end
+        S_PRED: begin
+            // pred_reg: the prediction from left, above (read in S_DEC) and above-left
+            state_next = S_DEC2;
         end
         S_DEC2, S_RAW: begin
             if (!put_stall) begin
@@ -595,31 +633,36 @@ always @* begin
                 end
                 i_next = i_reg + 32'd1;
                 x_next = x_reg + 16'd1 == cfg_width ? 16'd0 : x_reg + 16'd1;
-                state_next = state_reg == S_DEC2 ? S_DEC : S_BYTE;
+                state_next = state_reg == S_DEC2 ? S_DECQ : S_BYTE;
             end
         end
         S_END: begin
-            // the frame is over: good or not; an armed DATA frame commits when good and stored
-            state_next = S_BYTE;
+            // the frame is over: good or not, its code; an armed DATA frame commits (S_COMMIT) when
+            // good and stored
+            state_next = S_COMMIT;
             if (dp_reg && {16'd0, len_reg} < WM_PROTO_DATA_BYTES) code_next = CODE_LENGTH;   // no whole DATA header
             if (st_reg && is_rice && !(i_reg == end_reg[31:0] && !fail_reg && !extra_reg && nb_reg < 6'd8)) begin
                 code_next = CODE_STREAM;
             end
-            if (frame_good) begin
-                state_next = S_HOLD;
-                if (st_reg && code_next == CODE_OK) begin
-                    if (store_end > next_reg) next_next = store_end;
-                    crc_next = scrc_reg;
-                    lb_hi_next = lb_hi_good;
-                    lb_lo_next = lb_lo_good;
-                end
-            end else if (!quiet_reg) begin
+            good_next = frame_good;
+            commit_next = frame_good && st_reg && code_next == CODE_OK && !clear;
+            // junk may have reached the line buffer from off on
+            junk_next = st_reg && !(frame_good && code_next == CODE_OK) && lb_end_reg > off_reg && !clear;
+            cand_hi_next = frame_good && code_next == CODE_OK ? lb_hi_good : lb_hi_bad;
+            cand_lo_next = frame_good && code_next == CODE_OK ? lb_lo_good : lb_lo_bad;
+            if (!frame_good && !quiet_reg) begin
                 bad_frames_next = bad_frames_reg + 32'd1;
             end
-            if (st_reg && !(frame_good && code_next == CODE_OK) && lb_end_reg > off_reg) begin
-                // junk may have reached the line buffer from off on
-                lb_hi_next = lb_hi_bad;
-                lb_lo_next = lb_lo_bad;
+        end
+        S_COMMIT: begin
+            state_next = good_reg ? S_HOLD : S_BYTE;
+            if (commit_reg) begin
+                if (store_end > next_reg) next_next = store_end;
+                crc_next = scrc_reg;
+            end
+            if (commit_reg || junk_reg) begin
+                lb_hi_next = cand_hi_reg;
+                lb_lo_next = cand_lo_reg;
             end
         end
         S_HOLD: begin
@@ -628,7 +671,7 @@ always @* begin
         default: state_next = S_BYTE;
     endcase
 
-    if ((state_reg == S_END || state_reg == S_HOLD) && state_next == S_BYTE) begin
+    if ((state_reg == S_COMMIT || state_reg == S_HOLD) && state_next == S_BYTE) begin
         // the frame dropped or released: ready for the next (quiet is already clear in S_HOLD:
         // a flushed frame ends with ended clear, so it is never good)
         pos_next = 11'd0;
@@ -651,6 +694,14 @@ always @* begin
         lb_lo_next = 32'd0;
         lb_hi_next = 32'd0;
     end
+
+    // pos against len for the next cycle (pos is 0 after a reset)
+    pos_la = rst ? 11'd0 : pos_next;
+    pay_next = pos_la >= 11'd4 && {5'd0, pos_la} < len_next + 16'd4;
+    over_next = pos_la >= 11'd4 && {5'd0, pos_la} >= len_next + 16'd8;
+    last_next = {5'd0, pos_la} - 16'd4 + 16'd1 == len_next;
+    tail_next = pos_la >= len_next[10:0] + 11'd4;
+    full_next = {5'd0, pos_la} == len_next + 16'd8;
 end
 
 always @(posedge clk) begin
@@ -667,6 +718,20 @@ always @(posedge clk) begin
     bad_frames_reg <= bad_frames_next;
     flush_reg <= flush_next;
     quiet_reg <= quiet_next;
+    pay_reg <= pay_next;
+    over_reg <= over_next;
+    last_reg <= last_next;
+    tail_reg <= tail_next;
+    full_reg <= full_next;
+    good_reg <= good_next;
+    commit_reg <= commit_next;
+    junk_reg <= junk_next;
+    cand_lo_reg <= cand_lo_next;
+    cand_hi_reg <= cand_hi_next;
+    rld_m_reg <= rld_m;
+    off_lo_reg <= off_reg - rld_m_reg;
+    if (state_reg == S_DECQ) q_reg <= ones16(acc_reg[39:24]);
+    if (state_reg == S_PRED) pred_reg <= pred;
     dp_reg <= dp_next;
     st_reg <= st_next;
     code_reg <= code_next;
