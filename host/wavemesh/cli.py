@@ -15,6 +15,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import wavemesh
 from wavemesh import __version__, api
 from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.io.georef import sidecar_path
@@ -25,6 +26,10 @@ from wavemesh.model.haar import WAVELETS
 from wavemesh.refine import native
 from wavemesh.refine.denoise import METHODS
 from wavemesh.refine.native import RefineParams
+
+if wavemesh._COMMAND_IMPORTS and not gc.isenabled():  # the command's imports are done (wavemesh/__init__.py)
+    gc.freeze()
+    gc.enable()
 
 
 class _Parser(argparse.ArgumentParser):

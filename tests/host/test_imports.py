@@ -134,3 +134,17 @@ def test_the_import_reader_sees_a_bare_function_import(tmp_path):
     p.write_text("import os\n\ndef f():\n    import json\n    from x import y  # x is slow (12 ms)\n"
                  "    import z  # noqa: F401\n")
     assert [line for line, _ in function_level(p)] == [4, 6]
+
+
+def test_the_command_collects_after_its_imports(tmp_path):
+    """Run as the `wavemesh` command (a __main__ file of that name, as the console script), the package
+    holds the collector while the command's imports are made and wavemesh.cli freezes them and turns it
+    back on; imported by any other program it leaves the collector alone."""
+    import subprocess
+    import sys
+
+    probe = "import gc\nfrom wavemesh.cli import main\nprint(gc.isenabled(), gc.get_freeze_count() > 10000)\n"
+    for name, want in (("wavemesh", "True True"), ("other.py", "True False")):
+        (tmp_path / name).write_text(probe)
+        out = subprocess.run([sys.executable, str(tmp_path / name)], capture_output=True, text=True)
+        assert out.stdout.split() == want.split(), (name, out.stderr[-500:])
