@@ -142,12 +142,16 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
     }
     /* err and worst, then list and pos: at least 3 tri_cap words in one run (8 + 2 x 2 bytes per
      * slot with 16-bit indices), the build's scratch. */
+    r->swept = 0;
     rc = wm_mesh_build(&r->mesh, xy, nv, tris, nt, (uint32_t *)r->err);
     if (rc != WM_OK) return rc;
     for (int32_t t = 0; t < r->mesh.tri_end; t++) {
         wm_touch(r, t);
         r->mesh.tflag[t] = 0;
+        r->pos[t] = -1;
     }
+    r->swept = 1; /* until the error bound, which takes pos[] for its heap */
+    r->swap_stamp = 0;
     if (!(p->flags & WM_FLAG_NO_REDUCE)) enhance(r);
     *out = r;
     return WM_OK;
@@ -233,8 +237,11 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t qx[3], qy[3], n1x[3], n1y[3];
-    int32_t ang_old, ang_new, a1, an1 = -1, an2 = -1;
-    uint32_t e1 = 0, e2 = 0, ra, bnd;
+    int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
+    uint32_t e1 = 0, e2 = 0, ra, bnd, oe1 = r->err[t1], oe2 = r->err[t2];
+    const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
+    uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
+    int back = 1;                    /* whether the swap back would be made */
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
     if (!wm_edge_swappable(me, e)) return 0;
@@ -264,10 +271,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         if (r->err[t2] > bnd) bnd = r->err[t2];
     }
     if (alpha < 65536u) {
-        const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
-        uint64_t o1 = wm_scale_mul(&r->params, r->err[t1], 1, 0, cap);
-        uint64_t o2 = wm_scale_mul(&r->params, r->err[t2], 1, 0, cap);
         uint64_t dmax, s1, s2;
+        o1 = wm_scale_mul(&r->params, oe1, 1, 0, cap);
+        o2 = wm_scale_mul(&r->params, oe2, 1, 0, cap);
         uint32_t lb1 = 0, lb2 = 0, lim;
         /* xi > 1 iff den <= dmax (den_max), and den >= one: R_A alone may refuse the swap.  Then the
          * old triangles' worst samples, measured against the new triangle(s) holding them: they bound
@@ -310,7 +316,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
                     : wm_tri_error_within(&r->field, &r->params, qx, qy, lim, &w2x, &w2y, &r2);
         if (e2 > lim) return 0;
-        WM_ASSERT(s1 + wm_scale_mul(&r->params, e2, 1, 0, cap) + one <= dmax);
+        sn = s1 + wm_scale_mul(&r->params, e2, 1, 0, cap);
+        WM_ASSERT(sn + one <= dmax);
     } else {
         if (ra <= 65536u) return 0; /* xi = R_A */
         e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
@@ -319,6 +326,22 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
                     : wm_tri_error_within(&r->field, &r->params, qx, qy, bnd, &w2x, &w2y, NULL);
         if (e2 > bnd) return 0;
+    }
+    /* The swap back (the next pass examines the new diagonal): its new triangles are the old ones,
+     * whose E(T) and angles are known, so its answer is known now, exactly as try_swap would find it
+     * (a smaller angle or E(T) for a rotation of the same corners is the same number). */
+    {
+        uint32_t bb = emax, rb = 0;
+        if (r->params.flags & WM_FLAG_NO_BOUND) {
+            bb = r->params.zeta;
+            if (e1 > bb) bb = e1;
+            if (e2 > bb) bb = e2;
+        }
+        if (oe1 > bb || oe2 > bb) back = 0;
+        else {
+            if (alpha > 0) rb = ratio_q16((uint64_t)ang_old, (uint64_t)(an1 < an2 ? an1 : an2));
+            back = alpha == 65536u ? rb > 65536u : o1 + o2 + one <= den_max(alpha, rb, sn + one);
+        }
     }
     if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
@@ -337,6 +360,10 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         wm_touch(r, t1);
         wm_touch(r, t2);
     }
+    if (!back && r->swept && r->swap_stamp < WM_INDEX_MAX - 1) {
+        r->swap_stamp++;
+        r->pos[t1] = r->pos[t2] = (wm_index)r->swap_stamp;
+    }
     return 1;
 }
 
@@ -349,11 +376,17 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
+    int32_t first;     /* this sweep's first swap number */
     for (int i = 0; i < WM_ANGLE_SLOTS; i++) r->angles[i].t = -1;
     for (int32_t t = 0; t < me->tri_end; t++) {
         me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
         if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
     }
+    if (r->swap_stamp > WM_INDEX_MAX / 2) { /* stamps of earlier sweeps are never trusted: start again */
+        for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
+        r->swap_stamp = 0;
+    }
+    first = r->swap_stamp + 1;
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
@@ -363,6 +396,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
                 u = WM_TRI(o);
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
+                if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) continue; /* a swap back: "no" */
                 if (try_swap(r, e, alpha, emax)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
@@ -510,6 +544,7 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
         }
     }
     if (rc == WM_OK && r->level == 0) {
+        r->swept = 0; /* pos[] is the heaps' from here on */
         if (!(r->params.flags & WM_FLAG_NO_BOUND)) {
             WM_PROF_SET(WM_PH_BOUND);
             rc = error_bound(r, st);

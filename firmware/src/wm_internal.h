@@ -296,6 +296,10 @@ struct wm_refiner {
     int32_t budget_hit;  /* set when the budget stopped an operation (this step) */
     int32_t failed;      /* a WM_ERR_* code that ended the refinement, or 0 */
     int32_t flips, removals; /* this step's legalisation flips and vertex removals */
+    /* The regularisation's swaps whose swap back is known to be refused (refine.c): while the levels run
+     * (swept = 1; pos[] is free then) pos[t] of both triangles a swap made holds its number (swap_stamp
+     * counts them), until either changes (wm_forget_class sets pos[t] = -1). */
+    int32_t swept, swap_stamp;
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
     wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
@@ -363,6 +367,7 @@ int wm_room(wm_refiner *r, int32_t added);
 static inline void wm_forget_class(wm_refiner *r, int32_t t)
 {
     for (int c = 0; c < 3; c++) r->vapex[r->mesh.hv[3 * t + c]] = WM_CLASS_UNKNOWN;
+    if (r->swept) r->pos[t] = -1; /* the regularisation's swaps (refine.c) */
 }
 /* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles
  * touched[0..n) until every such edge is locally Delaunay (hmm's design), then E(T) of touched[] and
