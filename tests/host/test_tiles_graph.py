@@ -46,6 +46,29 @@ def test_graph_results_in_order_any_runner():
         _Schedule([Node(_add, (Ref(1),)), Node(_add, (1,))])
 
 
+def _big(n, *_):
+    return np.full(n, 7, dtype=np.int64)
+
+
+def test_graph_large_messages_both_ways():
+    """Tasks and results larger than a socket's buffer (4 MiB each way): the pool never has the parent and
+    a worker both blocked sending (a second task sent while the worker sends its result)."""
+    import signal
+
+    n = 1 << 19
+    nodes = [Node(_big, (n,)) for _ in range(4)]
+    nodes += [Node(_big, (n, Ref(k % 4), Ref((k + 1) % 4)), (k,)) for k in range(12)]
+    old = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("deadlock")))
+    signal.alarm(60)
+    try:
+        with tiles.Runner(2) as run:
+            out = run.graph(nodes)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    assert len(out) == 16 and all(len(x) == n and x[0] == 7 for x in out)
+
+
 def test_graph_failure_raises_and_pool_ends():
     with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:
         run.graph([Node(_add, (1,)), Node(divmod, (1, 0)), Node(_add, (Ref(0), 1))])

@@ -19,7 +19,9 @@ from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
-PIPELINE = 2  # Runner.graph's nodes sent to a pool worker at a time
+# Runner.graph's nodes sent to a pool worker at a time: one (a second one in its pipe while it sends its
+# result back can fill both directions of the socket: the parent blocked in send, the worker too)
+PIPELINE = 1
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -215,8 +217,6 @@ class Runner:
             sent: list[deque] = [deque() for _ in self.pool]  # the nodes each worker has, in order
 
             def give(w: int) -> None:
-                # two at a time while there is work for every worker: the next waits in the worker's pipe,
-                # not for this process to answer (which a loaded machine may not schedule at once)
                 while len(sent[w]) < PIPELINE and (not sent[w] or len(sched.ready) >= len(self.pool)):
                     i = sched.take(w)
                     if i is None:

@@ -1,0 +1,139 @@
+#!/usr/bin/env python3
+"""Where a tiled run spends its time: `wavemesh mesh --tile` with every task's CPU counted in its worker.
+
+    .venv/bin/python tools/tiles_steps.py INPUT --workers N [wavemesh mesh options ...]
+
+Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--tile 1025 --metric
+vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
+it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
+quantised, tile_heightfield's misses).  Prints, for the quantisation's strips and for the task graph: the
+wall time, each worker's CPU and busy time and the time it waited (the span less its tasks: at a barrier,
+for the parent, for a task's inputs), then each step's CPU summed over the workers; and the model of the
+speed-up over one worker, the CPU outside the workers (this process's) plus the busiest worker's CPU in
+each part.  CPU seconds, page faults and reads hold on a loaded machine where wall times do not; run it
+with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import sys
+import tempfile
+import time
+
+from wavemesh import cli
+from wavemesh.tiles import jobs, runner
+
+READS = [0]
+_READER = "_tile_heightfield" if hasattr(jobs, "_tile_heightfield") else "tile_heightfield"  # or no cache
+_read = getattr(jobs, _READER)
+
+
+def _counted(*args):
+    READS[0] += 1
+    return _read(*args)
+
+
+setattr(jobs, _READER, _counted)  # before the pool forks: the workers count their own
+
+
+def timed(fn, *args):
+    """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads)."""
+    u0, t0, r0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0]
+    out = fn(*args)
+    u1 = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime
+    return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
+                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0)
+
+
+def _result(r):
+    return r[0]
+
+
+def _picked(pick):
+    """pick of a timed result (a module-level function per pick, for Dask's pickling)."""
+    return _PICKS[pick]
+
+
+def _top(r):
+    return r[0].sides["top"]
+
+
+def _right(r):
+    return r[0].sides["right"]
+
+
+def _bottom(r):
+    return r[0].sides["bottom"]
+
+
+def _left(r):
+    return r[0].sides["left"]
+
+
+_PICKS = {getattr(jobs, f"_side_{k}", k): f for k, f in
+          (("top", _top), ("right", _right), ("bottom", _bottom), ("left", _left))}
+LOG: list = []  # (part, start, end, [(step, info)])
+_map, _graph = runner.Runner.map, getattr(runner.Runner, "graph", None)  # no graph: every step a map
+
+
+def _timed_map(self, fn, tasks, done=None):
+    t0 = time.perf_counter()
+    out = _map(self, timed, [(fn, *t) for t in tasks], (lambda r: done(r[0])) if done else None)
+    LOG.append((f"map {fn.__name__}", t0, time.perf_counter(), [(fn.__name__, o[1]) for o in out]))
+    return [o[0] for o in out]
+
+
+def _timed_graph(self, nodes, done=None, homes=None):
+    def wrap(a):
+        if isinstance(a, runner.Ref):
+            return runner.Ref(a.node, _picked(a.pick) if a.pick else _result)
+        return a
+
+    wrapped = [runner.Node(timed, (n.fn, *map(wrap, n.args)), n.rank, n.tiles) for n in nodes]
+    t0 = time.perf_counter()
+    out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes)
+    steps = [f"{n.rank[1]} {n.fn.__name__.strip('_')}" for n in nodes]
+    LOG.append(("graph", t0, time.perf_counter(), [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
+    return [o[0] for o in out]
+
+
+def main(argv: list[str]) -> int:
+    runner.Runner.map = _timed_map
+    if _graph is not None:
+        runner.Runner.graph = _timed_graph
+    out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
+    t0, c0 = time.perf_counter(), os.times()
+    rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
+    wall, c1 = time.perf_counter() - t0, os.times()
+    here = c1.user + c1.system - c0.user - c0.system
+    there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
+    tasks_here = sum(i[1] for _, _, _, infos in LOG for _, i in infos if i[0] == os.getpid())
+    print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
+          f"{here - tasks_here:.2f}), the workers {there:.2f} s")
+    model = here - tasks_here
+    for part, a, b, infos in LOG:
+        per: dict = {}
+        steps: dict = {}
+        for step, (pid, cpu, s, e, sys_, flt, reads) in infos:
+            w = per.setdefault(pid, [0.0, 0.0, 0])
+            w[0], w[1], w[2] = w[0] + cpu, w[1] + e - s, w[2] + 1
+            x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0])
+            x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
+        model += max(w[0] for w in per.values())
+        print(f"{part}: wall {b - a:.2f} s; per worker CPU / busy / waiting s (tasks): "
+              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]})" for w in per.values()))
+        for step, x in steps.items():
+            print(f"  {step:<16} {x[0]:4d} tasks  CPU {x[1]:6.2f} s  system {x[2]:5.2f} s  "
+                  f"page faults {x[3]:8d}  tiles read {x[4]}")
+    print(f"model: this process's own CPU + the busiest worker's CPU in each part = {model:.2f} s")
+    return rc
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        sys.exit(0 if len(sys.argv) >= 2 else 2)
+    sys.exit(main(sys.argv[1:]))
