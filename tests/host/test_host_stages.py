@@ -232,3 +232,12 @@ def test_obj_face_lines_in_c_equal_the_format(tmp_path, monkeypatch):
     monkeypatch.setattr(native, "host_lib", lambda: None)
     write_obj(tmp_path / "py.obj", mesh, hf.values)
     assert (tmp_path / "c.obj").read_bytes() == (tmp_path / "py.obj").read_bytes()
+
+
+@pytest.mark.parametrize("name", sorted(ALL))
+def test_quantisation_error_kept_from_the_quantising_pass(name):
+    """from_array keeps wm_host_quantise's own error measure as max_quantisation_error: the model's value."""
+    hf = from_array(ALL[name])
+    recon = hf.offset + hf.scale * hf.samples.astype(np.float64)
+    assert "max_quantisation_error" in hf.__dict__  # set by the pass, not measured again
+    assert hf.max_quantisation_error == float(np.max(np.abs(hf.values - recon)))

@@ -308,8 +308,12 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
         fast = native.quantise(values)
         if isinstance(fast, tuple):
             samples, scale, offset, lossless = fast[:4]
-            return HeightField(values=values, samples=samples, scale=scale, offset=offset, lossless=lossless,
-                               source=source)
+            hf = HeightField(values=values, samples=samples, scale=scale, offset=offset, lossless=lossless,
+                             source=source)
+            # the same pass measured max_quantisation_error (wm_host_quantise: quant_error's terms, tested
+            # equal): kept as that cached property's value, not measured again (a pass over the grid)
+            hf.__dict__["max_quantisation_error"] = 0.0 if lossless else fast[4]
+            return hf
     bad = ~np.isfinite(values)
     if invalid is not None:
         bad |= values == invalid
