@@ -359,6 +359,11 @@ wire [31:0] store_end = end_reg > {1'b0, cfg_samples} ? cfg_samples : end_reg[31
 wire        frame_good = !bad_reg && !esc_reg && ended_reg && full_reg
                          && fcrc_reg == WM_PROTO_CRC_RESIDUE;
 wire        in_frame = pos_reg != 11'd0 || esc_reg || bad_reg;
+// the range after a commit or junk never spans more than the line buffer holds (the only ranges that
+// can: a reload's spans rld_m <= W + 1 < LB_DEPTH samples, a clear none)
+wire [31:0] cand_lo_span = cand_hi_reg > LB_SIZE && cand_lo_reg < cand_hi_reg - LB_SIZE ? cand_hi_reg - LB_SIZE
+                         : cand_lo_reg;
+wire [31:0] cand_lo_clamp = cand_lo_span > cand_hi_reg ? cand_hi_reg : cand_lo_span;
 
 always @* begin
     state_next = state_reg;
@@ -662,7 +667,7 @@ always @* begin
             end
             if (commit_reg || junk_reg) begin
                 lb_hi_next = cand_hi_reg;
-                lb_lo_next = cand_lo_reg;
+                lb_lo_next = cand_lo_clamp;
             end
         end
         S_HOLD: begin
@@ -683,10 +688,6 @@ always @* begin
         idle_next = 32'd0;
         quiet_next = 1'b0;
     end
-
-    // the line buffer's range never spans more than it holds
-    if (lb_hi_next > LB_SIZE && lb_lo_next < lb_hi_next - LB_SIZE) lb_lo_next = lb_hi_next - LB_SIZE;
-    if (lb_lo_next > lb_hi_next) lb_lo_next = lb_hi_next;
 
     if (clear) begin
         next_next = 32'd0;
