@@ -86,7 +86,7 @@ def _timed_map(self, fn, tasks, done=None):
     return [o[0] for o in out]
 
 
-def _timed_graph(self, nodes, done=None, homes=None):
+def _timed_graph(self, nodes, done=None, homes=None, shared=()):
     def wrap(a):
         if isinstance(a, runner.Ref):
             return runner.Ref(a.node, _picked(a.pick) if a.pick else _result)
@@ -94,7 +94,7 @@ def _timed_graph(self, nodes, done=None, homes=None):
 
     wrapped = [runner.Node(timed, (n.fn, *map(wrap, n.args)), n.rank, n.tiles) for n in nodes]
     t0 = time.perf_counter()
-    out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes)
+    out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes, shared)
     steps = [f"{n.rank[1]} {n.fn.__name__.strip('_')}" for n in nodes]
     LOG.append(("graph", t0, time.perf_counter(), [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
     return [o[0] for o in out]

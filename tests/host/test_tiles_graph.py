@@ -40,6 +40,11 @@ def test_graph_results_in_order_any_runner():
         seen: list = []
         with tiles.Runner(workers) as run:
             assert run.graph(nodes, lambda i, r, seen=seen: seen.append(i)) == want
+            # an arg sent once to each worker and kept there: the same results, a second graph too
+            ten = 10
+            kept = [Node(_add, (1,)), Node(_add, (Ref(0), ten)), Node(_add, (Ref(0), ten, ten))]
+            assert run.graph(kept, shared=(ten,)) == [1, 11, 21]
+            assert run.graph(kept[:2], shared=(ten,)) == [1, 11]
         assert sorted(seen) == list(range(len(nodes)))
         assert seen.index(0) < min(seen.index(1), seen.index(2)) and seen.index(3) < seen.index(4)
     with pytest.raises(ValueError, match="only earlier nodes"):

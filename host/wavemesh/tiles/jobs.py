@@ -295,7 +295,7 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
     conformed), each tile without its column sides' thinned vertices, then the same for the row sides.
     Ranked by the last tile (row by row) their inputs wait for, then the step: a tile goes on through its
     steps while the next tiles are made.  Also {"free": nodes, "finish": nodes, "last": nodes} in tile order
-    and "homes" (Runner.graph's: a block of columns of tiles per worker)."""
+    and "homes" and "shared" (Runner.graph's: a block of columns of tiles per worker; the plan)."""
     n = len(plan.tiles)
     light = replace(plan, source=light_source(plan.source))
     win = [Here(_window, (plan, i)) if plan.source.kind == "array" else None for i in range(n)]
@@ -335,7 +335,8 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
         step += 2
     nx = len(plan.xcuts) - 1
     homes = {i: t.col / nx for i, t in enumerate(plan.tiles)}  # columns of tiles, a block per worker
-    return nodes, {"free": free_of if frees is None else [], "finish": finish, "last": cur, "homes": homes}
+    return nodes, {"free": free_of if frees is None else [], "finish": finish, "last": cur, "homes": homes,
+                   "shared": (light,)}
 
 
 def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, runner: Runner | None = None,
@@ -368,7 +369,7 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
                     if log:
                         log(f"  {count[1]}/{n} {note}")
 
-            results = runner.graph(nodes, done, roles["homes"])
+            results = runner.graph(nodes, done, roles["homes"], roles["shared"])
             bar.finish(f"{n} tiles")
     finally:
         clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers

@@ -167,12 +167,14 @@ class Runner:
             self._pool_map(fn, tasks, got)
         return results
 
-    def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None) -> list:
+    def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None,
+              shared: tuple = ()) -> list:
         """Every node's result, in node order; a node runs once the nodes its Refs name are done (no
         barrier between phases); ``done(i, result)`` as each finishes.  Refs name earlier nodes only.  The
         same results however it runs: each node depends only on its args.  ``homes``: tile -> a number in
         [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
-        one worker: fewer tiles read twice)."""
+        one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
+        keeps (the plan every task reads), not with every task."""
         results: list = [None] * len(nodes)
 
         def got(i: int, r) -> None:
@@ -215,13 +217,22 @@ class Runner:
             self._start_pool()
             sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
             sent: list[deque] = [deque() for _ in self.pool]  # the nodes each worker has, in order
+            keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
+            kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
             def give(w: int) -> None:
                 while len(sent[w]) < PIPELINE and (not sent[w] or len(sched.ready) >= len(self.pool)):
                     i = sched.take(w)
                     if i is None:
                         return
-                    self.pool[w][1].send((nodes[i].fn, _resolve(nodes[i], results)))
+                    args = _resolve(nodes[i], results)
+                    pipe = self.pool[w][1]
+                    for a in args:
+                        key = keys.get(id(a))
+                        if key is not None and key not in kept[w]:
+                            pipe.send(("keep", key, a))  # no answer: the worker keeps it
+                            kept[w].add(key)
+                    pipe.send((nodes[i].fn, tuple(keys.get(id(a), a) for a in args)))
                     sent[w].append(i)
 
             for w in range(len(self.pool)):
@@ -352,9 +363,19 @@ def _lost(proc) -> None:
                         hint="out of memory? try a smaller --tile or fewer --workers") from None
 
 
+@dataclass(frozen=True)
+class _Kept:
+    """In a task's args sent to a pool worker: an arg it was sent before (Runner.graph's ``shared``)."""
+
+    graph: int
+    index: int
+
+
 def _worker_loop(pipe, parent: int) -> None:
-    """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back."""
+    """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
+    ("keep", key, value): an arg its next tasks name by the key."""
     _worker_start(parent)
+    kept: dict = {}
     while True:
         try:
             task = pipe.recv()
@@ -362,8 +383,12 @@ def _worker_loop(pipe, parent: int) -> None:
             return
         if task is None:
             return
+        if isinstance(task[0], str):  # ("keep", key, value)
+            kept[task[1]] = task[2]
+            continue
         try:
-            reply = ("ok", task[0](*task[1]), None)
+            args = tuple(kept[a] if isinstance(a, _Kept) else a for a in task[1])
+            reply = ("ok", task[0](*args), None)
         except Exception as e:  # the parent raises it (WavemeshError with its hint)
             reply = ("error", e, getattr(e, "hint", None))
         try:
