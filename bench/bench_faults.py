@@ -1,19 +1,31 @@
 """Fault campaign: `wavemesh stream` of a big job through a proxy that corrupts, drops, duplicates and
-delays bytes both ways, with the host's default timeouts, against the native stand-in device.
+delays bytes both ways, with the host's default timeouts, against the native stand-in device, and of a
+small job against the pin-accurate simulated board switched to 3 Mbaud.
 
 The job: a 200 x 200 crop of the Jacksboro DEM at full resolution, zeta 4 m: 25,001 triangles in the
 final level, some 260 KB of level streams down and 28 KB up (samples, ACKs).  The device (wmdev) runs
 paced like the board's UART at 115200 baud, so that a run's fault-free time is a line's and not a
 socket's: an injected delay holds the line for up to 0.3 s whatever its rate, and on a socket the
 delays alone (some 20 s a run at 0.2 %) are twenty times the fault-free second.  A smaller set on the
-unpaced socket shows that floor.  Each run (wavemesh.harness.faultproxy.campaign) ends identical (the
-very file `wavemesh mesh` writes), with a clear error (exit 2, one `error:` line and a hint, no
-output), silently different, unclear (anything else) or hung (past the set's run limit).
+unpaced socket shows that floor.  The 3 Mbaud sets: wmdev paced at 115200 baud and switched by the
+host (`--link-baud 3000000`), and the simulated board (wmsim without --fast: every byte bit by bit over
+the UART pins, the upload block in the path) switched to its nearest rate, 3.125 Mbaud (divisor 8 at
+25 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the template
+stage alone; the simulator runs about a hundredth of the board's speed on a loaded machine) and the
+host's timeouts for the simulator (harness.simboard.SIM_TIMEOUTS).  A fault that hits the switch
+leaves the job at the start rate with one warning line (the run still counts by its mesh).  Each run
+(wavemesh.harness.faultproxy.campaign) ends identical (the very file `wavemesh mesh` writes), with a
+clear error (exit 2, one `error:` line and a hint, no output), silently different, unclear (anything
+else) or hung (past the set's run limit).  On the board one more run, not faulted at random: the
+switch fails (a line model passes frames only while the board runs at the host's start rate, and
+the host's port never leaves it), the board goes back by itself after its probe window, the host
+says so in one warning line and the job runs at 115200 baud.
 
 The sets run at once, dealt to processes that each have a device of their own (`make bench-faults`; the short
-seeded version is tests/sim/test_stream_faults.py).  Bars: at 0.2 % both ways (delays among the faults)
-at least 95 % identical, 0 different, 0 hangs, the slowest run at most 5 x the fault-free time; at 1 %
-with --deadline, no run past the deadline and every failure one clear line.
+seeded version is tests/sim/test_stream_faults.py, and tests/sim/test_stream_board_3mbaud.py on the
+board).  Bars: at 0.2 % both ways (delays among the faults) at least 95 % identical, 0 different, 0
+hangs, the slowest run at most 5 x the fault-free time; at 1 % with --deadline, no run past the
+deadline and every failure one clear line.
 """
 
 from __future__ import annotations
@@ -29,16 +41,24 @@ TITLE = "Fault campaign (wavemesh stream through a fault-injecting proxy)"
 OPTS = ["--key", "elevation", "--crop", "0,0,200,200", "--zeta", "4"]
 DEVICE = ["--tri-capacity", "200000", "--quiet"]
 UART = 115200
+LINK_3M = ["--link-baud", "3000000"]
+# the board: its rate nearest to 3 Mbaud (3,000,000 itself is 4.2 % off, which the host refuses)
+BOARD_OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 DEADLINE = 300  # s: --deadline of the 1 % set
 GRACE = 5.0  # s past the deadline that still counts as "at the deadline" (the process's own ending)
-# (name, device baud (0: socket speed), fault rate per byte and direction, runs, first seed, extra options,
-# shards: processes the runs are dealt to, each with a device of its own)
+# (name, device baud (0: socket speed; "board": the pin-accurate simulated board), fault rate per byte
+# and direction, runs, first seed, extra options, shards: processes the runs are dealt to, each with a
+# device of its own)
 SETS = [
     ("fault-free, 115200 baud", UART, 0.0, 3, 0, [], 1),
     ("0.2 %, 115200 baud", UART, 0.002, 20, 2000, [], 3),
     (f"1 %, 115200 baud, --deadline {DEADLINE}", UART, 0.01, 6, 4000, ["--deadline", str(DEADLINE)], 3),
     ("fault-free, socket", 0, 0.0, 3, 0, [], 1),
     ("0.2 %, socket", 0, 0.002, 5, 6000, [], 1),
+    ("fault-free, 3 Mbaud", UART, 0.0, 3, 0, LINK_3M, 1),
+    ("0.2 %, 3 Mbaud", UART, 0.002, 20, 3000, LINK_3M, 2),
+    ("fault-free, board at 3.125 Mbaud", "board", 0.0, 2, 0, [], 1),
+    ("0.2 %, board at 3.125 Mbaud", "board", 0.002, 20, 5000, [], 3),
 ]
 RUN_LIMIT = 900.0  # s: longer counts as a hang
 
@@ -49,26 +69,96 @@ def _one_set(index: int, shard: int, out: Path) -> None:
     from wavemesh import cli
     from wavemesh.harness import jacksboro
     from wavemesh.harness.faultproxy import Faults, campaign
-    from wavemesh.harness.nativedev import NativeDevice, build_wmdev
 
     name, baud, rate, runs, seed, extra, shards = SETS[index]
-    dev = NativeDevice(build_wmdev(), *DEVICE, *(["--baud", str(baud)] if baud else []))
+    board = baud == "board"
+    dev = _board() if board else _native(baud)
+    opts = BOARD_OPTS if board else OPTS
     try:
         with tempfile.TemporaryDirectory() as tmp:
             work = Path(tmp)
             src = Path(jacksboro())
             ref = work / "ref.obj"
-            if cli.main(["mesh", str(src), *OPTS, "-o", str(ref), "-q"]) != 0:
+            if cli.main(["mesh", str(src), *opts, "-o", str(ref), "-q"]) != 0:
                 raise RuntimeError("wavemesh mesh failed")
+            if board:
+                extra = ["--link-baud", str(_board_rate())]
             faults = [Faults(seed=seed + s, rate=rate, limit=None) for s in range(shard, runs, shards)]
-            done = campaign(("127.0.0.1", dev.port), src, [*OPTS, *extra], ref, faults, work, RUN_LIMIT,
+            done = campaign(("127.0.0.1", dev.port), src, [*opts, *extra], ref, faults, work, RUN_LIMIT,
                             on_run=lambda r: print(f"bench faults: {name}: {r.outcome} {r.seconds:.1f} s "
                                                    f"{r.message}", flush=True))
+            rows = [{"seed": r.faults.seed, "outcome": r.outcome, "seconds": round(r.seconds, 3),
+                     "faults": r.injected, "frames": r.frames, "delay_s": round(r.delay_s, 3),
+                     "message": r.message} for r in done]
+            if board and rate == 0 and shard == 0:
+                try:
+                    rows.append(_failed_switch(dev, src, ref, work))
+                except Exception as e:  # noqa: BLE001 - reported as the run's outcome, the sets go on
+                    rows.append({"seed": -1, "outcome": "unclear", "seconds": 0.0, "faults": 0, "frames": 0,
+                                 "delay_s": 0.0, "switch": True, "message": repr(e)[-300:]})
     finally:
         dev.stop()
-    out.write_text(json.dumps([{"seed": r.faults.seed, "outcome": r.outcome, "seconds": round(r.seconds, 3),
-                                "faults": r.injected, "frames": r.frames, "delay_s": round(r.delay_s, 3),
-                                "message": r.message} for r in done]))
+    out.write_text(json.dumps(rows))
+
+
+def _native(baud: int):
+    from wavemesh.harness.nativedev import NativeDevice, build_wmdev
+
+    return NativeDevice(build_wmdev(), *DEVICE, *(["--baud", str(baud)] if baud else []))
+
+
+def _board():
+    """The pin-accurate simulated board, and the host's timeouts for it (this process's runs)."""
+    from wavemesh.device import stream as S
+    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+
+    S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS
+    return SimBoard(build.build_sim(), build.build_firmware(), "--port", "0")
+
+
+def _board_rate() -> int:
+    from wavemesh.device import memmap
+    from wavemesh.device import protocol as P
+
+    return P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))
+
+
+def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
+    """`--link-baud` to the board's 3.125 Mbaud through a line that stays at the start rate: the host's
+    port takes the new rate but the line never follows it, so nothing passes while the board runs at
+    another rate (the OK to BAUD, sent at the old rate, excepted).  The host's proof fails, the board goes
+    back after its probe window (BAUD_PROBE_MS of its clock, minutes of simulation: the host's HELLOs
+    at the start rate are given as many tries), the host says so in one warning line, and the job runs
+    at the start rate: the reference mesh, the report's line_baud the start rate."""
+    import time
+
+    from wavemesh.device import memmap
+    from wavemesh.device import protocol as P
+    from wavemesh.device import stream as S
+    from wavemesh.harness import run_cli
+    from wavemesh.harness.faultproxy import FrameTap
+
+    start = P.baud_divisor(memmap.CLK_HZ, UART)
+
+    def on_frame(direction, f) -> bool:
+        div = (board.events("uart divisor") or [(start, 0)])[-1][0]
+        return div == start or (f.type == P.FrameType.OK and f.fields()["request"] == P.FrameType.BAUD)
+
+    S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=60)
+    out = work / "switch.obj"
+    with FrameTap(("127.0.0.1", board.port), on_frame) as tap:
+        t0 = time.monotonic()
+        rc, _, err = run_cli("stream", str(src), *BOARD_OPTS, "--link-baud", str(_board_rate()), "--port",
+                             tap.url, "-o", str(out), "--report", str(work / "switch.json"), "-q")
+        seconds = time.monotonic() - t0
+    warnings = [ln for ln in err.splitlines() if ln.startswith("warning:")]
+    back = [d for d, _ in board.events("uart divisor")]
+    ok = (rc == 0 and out.exists() and out.read_bytes() == ref.read_bytes() and len(warnings) == 1
+          and json.loads((work / "switch.json").read_text())["transfer"]["line_baud"] == UART
+          and back[-2:] == [P.baud_divisor(memmap.CLK_HZ, _board_rate()), start])
+    return {"seed": -1, "outcome": "identical" if ok else "different", "seconds": round(seconds, 3),
+            "faults": 0, "frames": 0, "delay_s": 0.0, "switch": True,
+            "message": warnings[0] if len(warnings) == 1 else err.strip()[-300:]}
 
 
 def run() -> dict:
@@ -86,10 +176,12 @@ def run() -> dict:
         for i, _, proc in procs:
             if proc.wait() != 0:
                 raise RuntimeError(f"set {SETS[i][0]!r} failed ({proc.returncode})")
-        sets = []
+        sets, switch = [], None
         for i, s in enumerate(SETS):
             runs = sorted((r for j, out, _ in procs if j == i for r in json.loads(out.read_text())),
                           key=lambda r: r["seed"])
+            switch = next((r for r in runs if r.get("switch")), switch)
+            runs = [r for r in runs if not r.get("switch")]
             name, baud, rate, _, _, extra, _ = s
             outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
             errors: dict = {}
@@ -105,7 +197,8 @@ def run() -> dict:
                          "delay_max_s": max(r["delay_s"] for r in runs)})
     h, w = np.load(jacksboro())["elevation"][:200, :200].shape
     return {"commit": _commit(), "input": f"Jacksboro DEM, {w} x {h} crop, zeta 4 m",
-            "options": OPTS, "deadline": DEADLINE, "sets": sets}
+            "options": OPTS, "board_options": BOARD_OPTS, "board_baud": _board_rate(), "deadline": DEADLINE,
+            "sets": sets, "failed_switch": switch}
 
 
 def _commit() -> str:
@@ -120,7 +213,10 @@ def _commit() -> str:
 
 def markdown(results: dict) -> str:
     sets = results["sets"]
-    base = {s["baud"]: s["median_s"] for s in sets if s["rate"] == 0}
+    def line(s) -> tuple:  # a device and its rate: the fault-free runs the others are compared with
+        return s["baud"], tuple(s["options"])
+
+    base = {line(s): s["median_s"] for s in sets if s["rate"] == 0}
     lines = [
         f"Code measured: {results.get('commit', 'not recorded')}.",
         "",
@@ -129,7 +225,15 @@ def markdown(results: dict) -> str:
         "timeouts.  Faults per byte and direction, no bound (as on a real lossy line), a quarter each "
         "corrupted bytes, dropped runs of 1-64 bytes, duplicated runs and delays of up to 0.3 s that hold "
         "the line at the byte they strike.  *x fault-free*: the slowest run over the median fault-free run "
-        "of the same device; *delays*: the most that the injected delays held the line in one run.",
+        "of the same device at the same rate; *delays*: the most that the injected delays held the line in "
+        "one run.  *3 Mbaud*: wmdev paced at 115200 baud and switched by the host (`--link-baud 3000000`); "
+        "*board at 3.125 Mbaud*: the pin-accurate simulated board (every byte bit by bit over the UART pins, "
+        "through the upload block) switched to its nearest rate (`--link-baud "
+        f"{results.get('board_baud', 3125000)}`), with "
+        f"`{' '.join(results.get('board_options', BOARD_OPTS))}` "
+        "(what the simulator, at about a hundredth of the board's speed, runs in seconds) and the host's "
+        "timeouts for the simulator (harness.simboard.SIM_TIMEOUTS; its seconds are the simulator's, "
+        "not the board's).  A fault that hits the switch leaves a run at 115200 baud with one warning.",
         "",
         "| set | runs | frames | faults | identical | clear error | different | unclear | hang | median "
         "| slowest | x fault-free | delays |",
@@ -137,7 +241,7 @@ def markdown(results: dict) -> str:
     ]
     for s in sets:
         o = s["outcomes"]
-        ratio = s["slowest_s"] / base[s["baud"]] if base.get(s["baud"]) else 0.0
+        ratio = s["slowest_s"] / base[line(s)] if base.get(line(s)) else 0.0
         lines.append(f"| {s['name']} | {len(s['runs'])} | {s['frames']} | {s['faults']} | {o['identical']} "
                      f"| {o['error']} | {o['different']} | {o['unclear']} | {o['hang']} "
                      f"| {s['median_s']:.1f} s | {s['slowest_s']:.1f} s | {ratio:.1f} "
@@ -150,12 +254,25 @@ def markdown(results: dict) -> str:
     lo = lossy["outcomes"]
     lines += ["", f"At 0.2 % on the line at 115200 baud: {100 * share:.0f} % of the runs identical (the bar: "
               f"at least 95 %), {lo['different']} different, {lo['hang']} hung, the slowest "
-              f"{lossy['slowest_s'] / base[lossy['baud']]:.1f} x the fault-free time (the bar: at most "
+              f"{lossy['slowest_s'] / base[line(lossy)]:.1f} x the fault-free time (the bar: at most "
               "5 x).  "
               f"At 1 % with --deadline {results['deadline']}: {len(late)} runs past the deadline, "
               f"{unclear} runs that ended otherwise than identical or with one clear error line.  On the "
               "socket the delays alone hold the line for many times the fault-free second, so its ratio "
               "measures them, not the protocol."]
+    for s in sets:
+        if s["rate"] == 0.002 and s["name"] != lossy["name"] and s["baud"]:
+            o = s["outcomes"]
+            lines += ["", f"At 0.2 %, {s['name']}: {100 * o['identical'] / len(s['runs']):.0f} % of the runs "
+                      f"identical, {o['different']} different, {o['hang']} hung."]
+    sw = results.get("failed_switch")
+    if sw:
+        lines += ["", "A failed switch on the board (the line stays at 115200 baud, the host's port "
+                  "believes it switched; bench_faults._failed_switch): "
+                  + ("the board went back by itself, the host said so in one line "
+                     f"(`{sw['message']}`) and the job ran at 115200 baud, the reference mesh"
+                     if sw["outcome"] == "identical" else f"NOT as it should: {sw['message']}")
+                  + f", {sw['seconds']:.0f} s of simulation."]
     kinds: dict = {}
     for s in sets:
         for k, v in s["errors"].items():

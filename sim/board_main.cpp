@@ -16,6 +16,8 @@
 //   wmsim: stage 0xVALUE cycle N              (every SYS.STAGE write)
 //   wmsim: leds 0xVALUE cycle N               (every change of the LED outputs)
 //   wmsim: halt 0xCODE cycle N                wmsim: trap cycle N pc 0xPC
+//   wmsim: uart divisor 0xN cycle N           (every change of the UART's divisor: a baud switch, the
+//                                              switch back; a test's line model reads the board's rate)
 //
 // --profile FILE writes, at exit, "PC CYCLES" lines (hex, decimal): every cycle is counted against the
 // address of the last instruction fetched (the CPU is not pipelined: the cycles an instruction takes,
@@ -81,6 +83,7 @@ public:
         for (int i = 0; i < RESET_CYCLES; ++i) tick_raw();
         top_->rst = 0;
         leds_ = top_->led;
+        div_ = top_->uart_div;
     }
 
     ~Board() {
@@ -122,6 +125,10 @@ public:
         if (top_->led != leds_) {
             leds_ = top_->led;
             sim_log(opt_.quiet, "leds 0x%02x cycle %" PRIu64, leds_, cycles_);
+        }
+        if (top_->uart_div != div_) {
+            div_ = top_->uart_div;
+            sim_log(opt_.quiet, "uart divisor 0x%x cycle %" PRIu64, static_cast<unsigned>(div_), cycles_);
         }
         if (top_->halt_valid) {
             sim_log(opt_.quiet, "halt 0x%08x cycle %" PRIu64, top_->halt_code, cycles_);
@@ -224,6 +231,7 @@ private:
     UartLineSampler line_in_;
     uint64_t cycles_ = 0;
     uint32_t leds_ = 0;
+    uint32_t div_ = 0;  // the UART divisor last logged
     bool rx_valid_ = false;
     bool profiling_ = !opt_.profile.empty();
     uint32_t pc_ = 0;

@@ -51,6 +51,8 @@ class Timeouts:
     job: float = 120.0  # s the device may stay silent while it computes
     deadline: float | None = None  # s for the whole session (sync to DONE); None: each wait bounded alone
     reconnects: int = 8  # a connection lost during the job: reopened and the job resumed this many times
+    keepalive: float | None = None  # s the host stays silent in a job at most; None: KEEPALIVE_S (a device
+    # slower than real time, the simulated board, needs more: see harness.simboard.SIM_TIMEOUTS)
 
 
 DEFAULT_TIMEOUTS = Timeouts()
@@ -668,7 +670,7 @@ class Device:
         every = min(self.t.reply, self.resend_s)  # RUN again (the device waits for it in a session)
         give_up = t0 + self.t.reply * self.t.attempts
         link_s = self.info.link_timeout_s or P.LINK_TIMEOUT_S
-        quiet_s = min(KEEPALIVE_S, link_s / 4)  # the longest the host stays silent in the job
+        quiet_s = self.t.keepalive or min(KEEPALIVE_S, link_s / 4)  # the longest the host stays silent
         self.where = "before the first level"
         self._resume = None  # (RESUME's payload, when the connection was opened again, why) until an answer
 

@@ -1,0 +1,162 @@
+"""The link's fault and hardening tests on the pin-accurate simulated board at its fastest rate.
+
+One board (wmsim without --fast: every byte goes bit by bit over the UART pins at the board's current
+divisor, through the upload block, rtl/upload_rx.v) is switched by `--link-baud` (or
+Device.change_baud) to its nearest rate to 3 Mbaud: divisor 8 at 25 MHz, 3.125 Mbaud.  At that rate:
+
+- seeded corruption, loss, duplication and delays both ways (wavemesh.harness.faultproxy): the
+  reference mesh or one clear error line, the board serving a clean request afterwards;
+- the last DATA frame, or its DATA_ACK, lost (nothing after it shows the loss; the upload block holds
+  the samples, the host's STATUS probe finds what is missing): the reference mesh;
+- a frame longer than the stated max_payload, and ABORT, STATUS or ACK with a payload during a job:
+  BAD_LENGTH, nothing ended.
+
+The job is the 10 x 9 ball of test_stream_board.py with two levels and without the reduction and the
+final decimation (the link is under test; a job is some 1.3 million cycles, seconds of simulation).
+The killed board is in test_device_hardening.py, the bigger campaign in `make bench-faults` (its
+simulated-board sets), the failed switch on this board, whose probe window is 25 million cycles of
+simulation, in that bench too (tests/sim/test_stream_baud.py has it on the native stand-in device).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from wavemesh.device import memmap
+from wavemesh.device import protocol as P
+from wavemesh.device import stream as S
+from wavemesh.harness import run_cli
+from wavemesh.harness.faultproxy import FaultProxy, Faults, FrameTap, stream_once
+from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
+from wavemesh.io.synth import make
+
+pytestmark = pytest.mark.sim
+
+RATE = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))  # 3,125,000 at 25 MHz
+OPTS = ["--levels", "2", "--reduce", "off", "--simplify", "off"]
+LINK = ["--link-baud", str(RATE)]
+RUN_LIMIT = 600.0  # s: a run that takes longer counts as a hang
+
+
+@pytest.fixture(scope="module")
+def board(sim_exe, firmware_hex):
+    b = SimBoard(sim_exe, firmware_hex, "--port", "0", "--quiet")
+    yield b
+    b.stop()
+
+
+@pytest.fixture(scope="module")
+def job(tmp_path_factory):
+    d = tmp_path_factory.mktemp("board3m")
+    np.save(d / "tiny.npy", make("ball", 16)[3:12, 2:12])  # 10 x 9
+    rc, _, err = run_cli("mesh", str(d / "tiny.npy"), *OPTS, "-o", str(d / "ref.obj"), "-q")
+    assert rc == 0, err
+    return d / "tiny.npy", d / "ref.obj"
+
+
+@pytest.fixture(autouse=True)
+def sim_timeouts(monkeypatch):
+    monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", SIM_TIMEOUTS)
+
+
+def clean_run(board, job, tmp: Path) -> dict:
+    """A job without faults at 3.125 Mbaud: the reference mesh; the report."""
+    src, ref = job
+    out = tmp / "clean.obj"
+    rc, _, err = run_cli("stream", str(src), *OPTS, *LINK, "--port", board.url, "-o", str(out), "--report",
+                         str(tmp / "clean.json"), "-q")
+    assert rc == 0, err
+    assert out.read_bytes() == ref.read_bytes()
+    report = json.loads((tmp / "clean.json").read_text())
+    assert report["transfer"]["line_baud"] == RATE
+    return report
+
+
+# Each fault that takes a frame waits out a resend interval (SIM_TIMEOUTS' seconds), so one seed with at
+# most 3 faults a direction; make bench-faults runs 20 seeds without a bound.
+@pytest.mark.parametrize("seed", [1])
+def test_faults_at_3_mbaud(seed, board, job, tmp_path):
+    """Seeded corruption, loss and duplication both ways, after the switch too: the reference mesh, or
+    one clear error line; the board then serves a clean request at 3.125 Mbaud."""
+    src, ref = job
+    out = tmp_path / "out.obj"
+    faults = Faults(seed=seed, rate=0.004, limit=3, run=48, max_delay=0.2)
+    with FaultProxy(("127.0.0.1", board.port), faults) as proxy:
+        outcome, _, msg = stream_once(["stream", str(src), *OPTS, *LINK, "--port", proxy.url, "-o", str(out),
+                                       "-q"], out, ref, RUN_LIMIT)
+    assert sum(proxy.summary().values()) > 0  # the seed's faults fell inside the session
+    assert outcome in ("identical", "error"), msg
+    clean_run(board, job, tmp_path)
+
+
+@pytest.mark.parametrize("lost", ["DATA", "DATA_ACK"])
+def test_a_lost_last_upload_frame_at_3_mbaud(lost, board, job, tmp_path):
+    """The last DATA frame (the upload block never sees it) or its DATA_ACK (the block stored it) is lost
+    after the switch: the host's STATUS probe finds out and the job ends with the reference mesh."""
+    src, ref = job
+    total = int(np.load(src).size)
+    dropped: list = []
+    switched = []
+
+    def on_frame(direction, f) -> bool:
+        if direction == "down" and f.type == P.FrameType.OK and f.fields()["request"] == P.FrameType.BAUD:
+            switched.append(True)
+        if dropped or f.name != lost:
+            return True
+        fields = f.fields()
+        last = (fields["offset"] + fields["count"] == total if lost == "DATA" else fields["next"] == total)
+        if last:
+            dropped.append(f.name)
+            return False
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", board.port), on_frame) as tap:
+        outcome, _, msg = stream_once(["stream", str(src), *OPTS, *LINK, "--port", tap.url, "-o", str(out),
+                                       "-q"], out, ref, RUN_LIMIT)
+    assert switched and dropped == [lost]
+    assert outcome == "identical", msg
+
+
+def test_lengths_are_checked_at_3_mbaud(board):
+    """After the switch: a valid frame longer than the stated max_payload gets BAD_LENGTH with its
+    length; during a job ABORT, STATUS and ACK with a payload get BAD_LENGTH and the job goes on."""
+    from wavemesh.refine.native import RefineParams, fixed_params
+
+    with S.Device(board.url, timeouts=SIM_TIMEOUTS) as host:
+        host.sync()
+        info, problem = host.change_baud(RATE)
+        assert problem is None and info.baud == RATE
+        n = info.max_payload + 1
+        host.link.write_frame(P.FrameType.DATA, 7, bytes(n))
+        f = host.link.read_frame(SIM_TIMEOUTS.reply)
+        assert (f.type, f.seq) == (P.FrameType.ERROR, 7)
+        assert f.fields()["code"] == P.ErrorCode.BAD_LENGTH and f.fields()["detail"] == n
+        a = (np.arange(12 * 10, dtype=np.uint16).reshape(10, 12) * 37) % 4001
+        fixed = fixed_params(RefineParams(reduce=False, decimate=False), 1.0)
+        host.configure(S.config_payload(12, 10, 2, 10, fixed))
+        host.upload(a)
+        seen, got = [], []
+        read = host.link.read_frame
+
+        def read_and_keep(timeout):
+            f = read(timeout)
+            seen.append(f)
+            return f
+
+        host.link.read_frame = read_and_keep
+
+        def on_level(lv):
+            if not got:
+                for t in (P.FrameType.ABORT, P.FrameType.STATUS, P.FrameType.ACK):
+                    host.link.write_frame(t, 200 + t, b"\x01")
+            got.append(lv)
+
+        levels, done = host.run(S.samples_crc(a), 12, 10, on_level=on_level)
+        assert done["status"] == 0 and len(levels) == 2
+        refused = {f.seq - 200: f.fields()["code"] for f in seen if f.type == P.FrameType.ERROR}
+        assert refused == {t: P.ErrorCode.BAD_LENGTH for t in (P.FrameType.ABORT, P.FrameType.STATUS,
+                                                               P.FrameType.ACK)}
