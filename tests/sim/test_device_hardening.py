@@ -6,7 +6,7 @@ without reading); the next client is served.  Frames longer than the stated max_
 STATUS or ACK of the wrong length during a job, get BAD_LENGTH without ending anything.  A device
 killed in the middle of a job (the native device; the simulated board, marked `sim`) ends `wavemesh
 stream` with one clear error at once (the connection breaks), with no output file, and the next run
-against a restarted device gives the reference mesh.
+against a restarted device gives the reference mesh (the board: pin-accurate, at 3.125 Mbaud).
 """
 
 from __future__ import annotations
@@ -213,6 +213,9 @@ def _board_budget() -> int:
 
 @pytest.mark.sim
 def test_simulated_board_killed_mid_job(start_sim, firmware_hex, tmp_path, monkeypatch):
+    """The pin-accurate board (every byte over the UART pins) switched to its rate nearest to 3 Mbaud
+    (3.125 Mbaud), killed when its first MESH frame passes."""
+    from wavemesh.device import memmap
     from wavemesh.harness.simboard import SIM_TIMEOUTS
 
     monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", SIM_TIMEOUTS)
@@ -220,7 +223,9 @@ def test_simulated_board_killed_mid_job(start_sim, firmware_hex, tmp_path, monke
     np.save(src, make("ball", 16)[3:12, 2:12])  # 10 x 9
     opts = ["--levels", "2", "--reduce", "off", "--simplify", "off"]
     assert cli.main(["mesh", str(src), *opts, "-o", str(tmp_path / "ref.obj"), "-q"]) == 0
-    def board():
-        return start_sim(firmware_hex, "--fast", "--quiet")
+    rate = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))
 
-    kill_mid_job(board, src, opts, tmp_path / "ref.obj", tmp_path)
+    def board():
+        return start_sim(firmware_hex, "--quiet")
+
+    kill_mid_job(board, src, [*opts, "--link-baud", str(rate)], tmp_path / "ref.obj", tmp_path)

@@ -8,11 +8,12 @@ Device.change_baud) to its nearest rate to 3 Mbaud: divisor 8 at 25 MHz, 3.125 M
   reference mesh or one clear error line, the board serving a clean request afterwards;
 - the last DATA frame, or its DATA_ACK, lost (nothing after it shows the loss; the upload block holds
   the samples, the host's STATUS probe finds what is missing): the reference mesh;
-- a frame longer than the stated max_payload, and ABORT, STATUS or ACK with a payload during a job:
-  BAD_LENGTH, nothing ended.
+- a frame longer than the stated max_payload (longer than MAX_FRAME: dropped unanswered), and ABORT,
+  STATUS or ACK with a payload during a job (BAD_LENGTH): nothing ended.
 
-The job is the 10 x 9 ball of test_stream_board.py with two levels and without the reduction and the
-final decimation (the link is under test; a job is some 1.3 million cycles, seconds of simulation).
+The job is a 64 x 64 crop of the Jacksboro DEM, the template stage alone (the link is under test: 8 KB
+of samples, 2.7 KB Rice-coded in four DATA frames, and some 1.4 KB of level stream back; the job is
+about a million cycles of the board, seconds of simulation).
 The killed board is in test_device_hardening.py, the bigger campaign in `make bench-faults` (its
 simulated-board sets), the failed switch on this board, whose probe window is 25 million cycles of
 simulation, in that bench too (tests/sim/test_stream_baud.py has it on the native stand-in device).
@@ -21,6 +22,8 @@ simulation, in that bench too (tests/sim/test_stream_baud.py has it on the nativ
 from __future__ import annotations
 
 import json
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -28,15 +31,15 @@ import pytest
 from wavemesh.device import memmap
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
-from wavemesh.harness import run_cli
+from wavemesh.device.link import _HEAD, slip_encode
+from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.faultproxy import FaultProxy, Faults, FrameTap, stream_once
 from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
-from wavemesh.io.synth import make
 
 pytestmark = pytest.mark.sim
 
 RATE = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))  # 3,125,000 at 25 MHz
-OPTS = ["--levels", "2", "--reduce", "off", "--simplify", "off"]
+OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 LINK = ["--link-baud", str(RATE)]
 RUN_LIMIT = 600.0  # s: a run that takes longer counts as a hang
 
@@ -51,10 +54,9 @@ def board(sim_exe, firmware_hex):
 @pytest.fixture(scope="module")
 def job(tmp_path_factory):
     d = tmp_path_factory.mktemp("board3m")
-    np.save(d / "tiny.npy", make("ball", 16)[3:12, 2:12])  # 10 x 9
-    rc, _, err = run_cli("mesh", str(d / "tiny.npy"), *OPTS, "-o", str(d / "ref.obj"), "-q")
+    rc, _, err = run_cli("mesh", jacksboro(), *OPTS, "-o", str(d / "ref.obj"), "-q")
     assert rc == 0, err
-    return d / "tiny.npy", d / "ref.obj"
+    return Path(jacksboro()), d / "ref.obj"
 
 
 @pytest.fixture(autouse=True)
@@ -75,9 +77,12 @@ def clean_run(board, job, tmp: Path) -> dict:
     return report
 
 
-# Each fault that takes a frame waits out a resend interval (SIM_TIMEOUTS' seconds), so one seed with at
-# most 3 faults a direction; make bench-faults runs 20 seeds without a bound.
-@pytest.mark.parametrize("seed", [1])
+# One seed with at most 3 faults a direction (a lost LEVEL_END or ACK costs the board's ACK_TIMEOUT_MS,
+# 12.5 million cycles, a minute of simulation on a loaded machine); seed 2's fall on the HELLO_REPLY at
+# the start rate, on three DATA frames at 3.125 Mbaud (two dropped runs and a duplicated one: the upload
+# block's checks and the host's go-back) and the level stream.  make bench-faults runs 20 seeds at 0.2 %
+# without a bound.
+@pytest.mark.parametrize("seed", [2])
 def test_faults_at_3_mbaud(seed, board, job, tmp_path):
     """Seeded corruption, loss and duplication both ways, after the switch too: the reference mesh, or
     one clear error line; the board then serves a clean request at 3.125 Mbaud."""
@@ -97,7 +102,7 @@ def test_a_lost_last_upload_frame_at_3_mbaud(lost, board, job, tmp_path):
     """The last DATA frame (the upload block never sees it) or its DATA_ACK (the block stored it) is lost
     after the switch: the host's STATUS probe finds out and the job ends with the reference mesh."""
     src, ref = job
-    total = int(np.load(src).size)
+    total = 64 * 64
     dropped: list = []
     switched = []
 
@@ -122,19 +127,22 @@ def test_a_lost_last_upload_frame_at_3_mbaud(lost, board, job, tmp_path):
 
 
 def test_lengths_are_checked_at_3_mbaud(board):
-    """After the switch: a valid frame longer than the stated max_payload gets BAD_LENGTH with its
-    length; during a job ABORT, STATUS and ACK with a payload get BAD_LENGTH and the job goes on."""
+    """After the switch: a frame longer than the stated max_payload (the board states protocol.MAX_PAYLOAD,
+    so it is longer than MAX_FRAME: docs/protocol.md, dropped without an answer) costs nothing, the next
+    request is answered; during a job ABORT, STATUS and ACK with a payload get BAD_LENGTH and the job
+    goes on."""
     from wavemesh.refine.native import RefineParams, fixed_params
 
     with S.Device(board.url, timeouts=SIM_TIMEOUTS) as host:
         host.sync()
         info, problem = host.change_baud(RATE)
-        assert problem is None and info.baud == RATE
-        n = info.max_payload + 1
-        host.link.write_frame(P.FrameType.DATA, 7, bytes(n))
+        assert problem is None and info.baud == RATE and info.max_payload == P.MAX_PAYLOAD
+        for t in (P.FrameType.DATA, P.FrameType.STATUS):
+            head = _HEAD.pack(t, 7, P.MAX_PAYLOAD + 1) + bytes(P.MAX_PAYLOAD + 1)
+            host.link.write_raw(slip_encode(head + struct.pack("<I", zlib.crc32(head))))
+        host.link.write_frame(P.FrameType.STATUS, 8)
         f = host.link.read_frame(SIM_TIMEOUTS.reply)
-        assert (f.type, f.seq) == (P.FrameType.ERROR, 7)
-        assert f.fields()["code"] == P.ErrorCode.BAD_LENGTH and f.fields()["detail"] == n
+        assert (f.type, f.seq) == (P.FrameType.STATUS_REPLY, 8)
         a = (np.arange(12 * 10, dtype=np.uint16).reshape(10, 12) * 37) % 4001
         fixed = fixed_params(RefineParams(reduce=False, decimate=False), 1.0)
         host.configure(S.config_payload(12, 10, 2, 10, fixed))

@@ -63,17 +63,27 @@ def test_stage_labels_as_the_model(icebreaker):
         assert np.array_equal(getattr(got, name), getattr(want, name)), name
 
 
-@pytest.mark.parametrize("shape,opts", [((33, 33), []), ((37, 29), ["--levels", "3", "--zeta", "0.002"]),
-                                        ((20, 40), ["--stage", "initial", "--levels", "1"])],
-                         ids=["33x33-default", "37x29-M3", "20x40-initial"])
-def test_stream_equals_mesh(icebreaker, tmp_path, shape, opts):
+# the last case asks for a faster line: the stage cannot change its rate (its divisor is the bitstream's
+# BAUD parameter), so one warning line and the job at 115200 baud
+@pytest.mark.parametrize("shape,opts,link", [((33, 33), [], []),
+                                             ((37, 29), ["--levels", "3", "--zeta", "0.002"], []),
+                                             ((20, 40), ["--stage", "initial", "--levels", "1"],
+                                              ["--link-baud", "921600"])],
+                         ids=["33x33-default", "37x29-M3", "20x40-initial-link-baud"])
+def test_stream_equals_mesh(icebreaker, tmp_path, capsys, shape, opts, link):
     w, h = shape
     src = tmp_path / "in.npy"
     np.save(src, synth.f1(max(w, h))[:h, :w])
     assert main(["mesh", str(src), "-o", str(tmp_path / "mesh.obj"), "-q", *opts]) == 0
+    capsys.readouterr()
     assert main(["stream", str(src), "-o", str(tmp_path / "stream.obj"), "--port", icebreaker.url, "-q",
-                 "--timeout", "60", *opts]) == 0
+                 "--timeout", "60", *opts, *link]) == 0
     assert (tmp_path / "stream.obj").read_bytes() == (tmp_path / "mesh.obj").read_bytes()
+    warnings = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
+    if link:
+        assert len(warnings) == 1 and "cannot change its rate: staying at 115200" in warnings[0], warnings
+    else:
+        assert warnings == []
 
 
 def test_job_beyond_the_stage_is_refused_on_the_host(icebreaker, tmp_path, capsys):
