@@ -6,17 +6,17 @@
  * instruction cache, 4 KiB write-through data cache, one-cycle multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
  * WM_CPU_VEXRISCV is defined (host/wavemesh/device/soc_cpu.py chooses; docs/soc.md, "The CPU").
  *
- * Its two Wishbone buses (classic cycles; the caches refill 32-byte lines as bursts of 8 words, one
- * word per ACK) share the native bus: mem_valid, mem_addr, mem_wdata, mem_wstrb are the granted
- * master's STB, ADR, DAT_MOSI, SEL (a read has wstrb 0), held until mem_ready, which is that master's
- * ACK with mem_rdata its DAT_MISO.  A master keeps the bus while its CYC is high (a whole line
- * refill); otherwise the data bus goes first.  Each word takes what the native bus takes (2 cycles in
- * block RAM and on an SDRAM cache hit); no cycle is lost between words or masters.
+ * Its two Wishbone buses use classic cycles; the caches refill 32-byte lines as bursts of 8 words, one
+ * word per ACK.  The data bus is the native bus: mem_valid, mem_addr, mem_wdata, mem_wstrb are its
+ * STB, ADR, DAT_MOSI, SEL (a read has wstrb 0), held until mem_ready, its ACK, with mem_rdata its
+ * DAT_MISO; each word takes what the native bus takes (2 cycles in block RAM and on an SDRAM cache
+ * hit).  The instruction bus reads the firmware RAM's port B (ibus_*, soc_ram): a word a cycle after
+ * the first, 9 cycles a line refill, beside the data bus.
  *
  * The data cache treats only addresses with bit 31 set as I/O (uncached): the memory map puts the
  * I/O region there.  It does not see the FPGA stage's writes into the SDRAM: the firmware flushes it
- * after the stage (wm_sys.h, wm_dcache_flush).  mem_instr is high while the instruction bus holds
- * the bus (sim/board_sim.v's profile counts fetches by it; with the cache they are line refills).
+ * after the stage (wm_sys.h, wm_dcache_flush).  mem_instr is low: no fetch uses the native bus
+ * (sim/board_sim.v's profile counts the refills on port B).
  * trap: an instruction fetch outside the firmware RAM (the VexRiscv has no trap output; an
  * exception jumps to mtvec, which the firmware never sets; sim/board_sim.v adds the CPU's own
  * exception flag to the simulator's trap).
@@ -47,7 +47,14 @@ module soc_cpu_vexriscv #
     output wire [31:0]  mem_addr,
     output wire [31:0]  mem_wdata,
     output wire [3:0]   mem_wstrb,
-    input  wire [31:0]  mem_rdata
+    input  wire [31:0]  mem_rdata,
+
+    /*
+     * the instruction bus: a read port of the firmware RAM (soc_ram's port B; word address)
+     */
+    output wire         ibus_en,
+    output wire [29:0]  ibus_addr,
+    input  wire [31:0]  ibus_rdata
 );
 
 wire        i_cyc, i_stb, i_we;
@@ -63,32 +70,37 @@ wire [3:0]  d_sel;
 wire [2:0]  d_cti_unused;
 wire [1:0]  d_bte_unused;
 
-// the grant: the master that held the bus in the last cycle keeps it while its CYC stays high
-reg  hold_reg = 1'b0;
-reg  owner_d_reg = 1'b0;
-wire owner_cyc = owner_d_reg ? d_cyc : i_cyc;
-wire grant_d = (hold_reg && owner_cyc) ? owner_d_reg : d_cyc;
+// the data bus is the native bus's only master
+assign mem_valid = d_cyc && d_stb;
+assign mem_instr = 1'b0;
+assign mem_addr = {d_adr, 2'b00};
+assign mem_wdata = d_dat_mosi;
+assign mem_wstrb = d_we ? d_sel : 4'd0;
+wire d_ack = mem_ready;
+
+// the instruction bus reads the firmware RAM's port B: the word addressed in one cycle is there in
+// the next, acknowledged when it is the one the bus still asks for; with an acknowledge the port
+// reads the next word of the line (the cache's refill asks for them in order), so a refill of 8
+// words takes 9 cycles
+wire       i_req = i_cyc && i_stb;
+reg        i_rd_valid_reg = 1'b0;
+reg [29:0] i_rd_addr_reg = 30'd0;
+wire       i_ack = i_req && i_rd_valid_reg && i_rd_addr_reg == i_adr;
+assign ibus_en = i_req;
+assign ibus_addr = i_ack ? {i_adr[29:3], i_adr[2:0] + 3'd1} : i_adr;
 
 always @(posedge clk) begin
-    hold_reg <= grant_d ? d_cyc : i_cyc;
-    owner_d_reg <= grant_d;
+    i_rd_valid_reg <= i_req;
+    i_rd_addr_reg <= ibus_addr;
     if (rst) begin
-        hold_reg <= 1'b0;
-        owner_d_reg <= 1'b0;
+        i_rd_valid_reg <= 1'b0;
     end
 end
 
-assign mem_valid = grant_d ? (d_cyc && d_stb) : (i_cyc && i_stb);
-assign mem_instr = !grant_d;
-assign mem_addr = {grant_d ? d_adr : i_adr, 2'b00};
-assign mem_wdata = d_dat_mosi;
-assign mem_wstrb = grant_d && d_we ? d_sel : 4'd0;
-wire i_ack = mem_ready && !grant_d;
-wire d_ack = mem_ready && grant_d;
 // the instruction bus only reads whole words
 wire i_unused = i_we | ^i_sel;
 
-assign trap = mem_valid && !grant_d && mem_addr >= FETCH_LIMIT;
+assign trap = i_req && {i_adr, 2'b00} >= FETCH_LIMIT;
 
 VexRiscv cpu_inst (
     .externalResetVector(PROGADDR_RESET),
@@ -100,7 +112,7 @@ VexRiscv cpu_inst (
     .iBusWishbone_ACK(i_ack),
     .iBusWishbone_WE(i_we),
     .iBusWishbone_ADR(i_adr),
-    .iBusWishbone_DAT_MISO(mem_rdata),
+    .iBusWishbone_DAT_MISO(ibus_rdata),
     .iBusWishbone_DAT_MOSI(i_dat_mosi_unused),
     .iBusWishbone_SEL(i_sel),
     .iBusWishbone_ERR(1'b0),

@@ -11,6 +11,10 @@
  * Reads of a narrow RAM are zero-extended, or sign-extended when SIGNED is 1.  INIT_FILE, when not
  * empty, names a $readmemh file of DEPTH (or fewer) entries, one hex word per line, loaded at
  * build time (firmware image).
+ *
+ * A second port reads only: b_rdata holds the entry b_addr addressed in the last cycle b_en was high
+ * (the VexRiscv's instruction cache refills through it, soc_cpu_vexriscv.v).  Tied off
+ * (b_en low) it is no hardware.
  */
 
 `resetall
@@ -35,7 +39,11 @@ module soc_ram #
     input  wire [3:0]                wstrb,   // 0: read
     input  wire [$clog2(DEPTH)-1:0]  addr,    // entry index
     input  wire [31:0]               wdata,
-    output wire [31:0]               rdata
+    output wire [31:0]               rdata,
+
+    input  wire                      b_en,    // read port B this cycle
+    input  wire [$clog2(DEPTH)-1:0]  b_addr,
+    output wire [31:0]               b_rdata
 );
 
 // check configuration
@@ -46,8 +54,19 @@ initial begin
     end
 end
 
+// no_rw_check: a read in the cycle of a write to the same entry may see either word (yosys then maps the
+// two ports on one true dual-port block RAM, not a copy for each read port): port A's reads of a
+// write cycle are not used, and nothing writes the code port B reads while it runs
+(* no_rw_check *)
 reg [WIDTH-1:0] mem[0:DEPTH-1];
 reg [WIDTH-1:0] rdata_reg = {WIDTH{1'b0}};
+reg [WIDTH-1:0] b_rdata_reg = {WIDTH{1'b0}};
+
+always @(posedge clk) begin
+    if (b_en) begin
+        b_rdata_reg <= mem[b_addr];
+    end
+end
 
 generate
     if (INIT_FILE != "") begin : g_init
@@ -58,10 +77,13 @@ generate
 
     if (WIDTH == 32) begin : g_word
         assign rdata = rdata_reg;
+        assign b_rdata = b_rdata_reg;
     end else if (SIGNED) begin : g_signed
         assign rdata = {{(32 - WIDTH){rdata_reg[WIDTH-1]}}, rdata_reg};
+        assign b_rdata = {{(32 - WIDTH){b_rdata_reg[WIDTH-1]}}, b_rdata_reg};
     end else begin : g_unsigned
         assign rdata = {{(32 - WIDTH){1'b0}}, rdata_reg};
+        assign b_rdata = {{(32 - WIDTH){1'b0}}, b_rdata_reg};
     end
 endgenerate
 

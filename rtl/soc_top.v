@@ -174,8 +174,14 @@ wire [31:0] sdram_cpu_rdata;
 wire        mem_ready = mem_ready_reg || sdram_cpu_ready;
 reg  [31:0] mem_rdata;
 
+// the VexRiscv's instruction bus: the firmware RAM's port B (word address, the RAM's own bits)
+wire        ibus_en;
+wire [29:0] ibus_addr;
+wire [31:0] ibus_rdata;
+
 `ifdef WM_CPU_VEXRISCV
-// the VexRiscv with its caches, its Wishbone buses on the native bus (host/wavemesh/device/soc_cpu.py chooses)
+// the VexRiscv with its caches: its data bus on the native bus, its instruction bus on the firmware
+// RAM's port B (host/wavemesh/device/soc_cpu.py chooses)
 soc_cpu_vexriscv #(
     .PROGADDR_RESET(32'h0000_0000),
     .FETCH_LIMIT(FW_LIMIT)
@@ -189,9 +195,17 @@ soc_cpu_vexriscv #(
     .mem_addr(mem_addr),
     .mem_wdata(mem_wdata),
     .mem_wstrb(mem_wstrb),
-    .mem_rdata(mem_rdata)
+    .mem_rdata(mem_rdata),
+    .ibus_en(ibus_en),
+    .ibus_addr(ibus_addr),
+    .ibus_rdata(ibus_rdata)
 );
 `else
+// the PicoRV32 fetches on the native bus
+assign ibus_en = 1'b0;
+assign ibus_addr = 30'd0;
+wire ibus_rdata_unused = ^ibus_rdata;
+
 wire        mem_la_read_unused;
 wire        mem_la_write_unused;
 wire [31:0] mem_la_addr_unused;
@@ -635,8 +649,12 @@ soc_ram #(
     .wstrb(mem_wstrb),
     .addr(mem_addr[FW_AW+1:2]),
     .wdata(mem_wdata),
-    .rdata(fw_rdata)
+    .rdata(fw_rdata),
+    .b_en(ibus_en),
+    .b_addr(ibus_addr[FW_AW-1:0]),
+    .b_rdata(ibus_rdata)
 );
+wire ibus_addr_unused = ^ibus_addr[29:FW_AW];
 
 /*
  * Peripherals

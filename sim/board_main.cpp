@@ -26,6 +26,9 @@
 // byte address in hex; the cycles data accesses to it waited beyond the 2 of a block RAM's answer,
 // and the reads and writes it took): where the SDRAM's misses and write-through cost go
 // (tools/board_profile.py --data maps them to the memory map's areas and the refiner's arrays).
+// FILE.ibus gets the cycles instruction fetches waited for memory, by the 32-byte line fetched:
+// "LINE CYCLES" (the VexRiscv's instruction cache refills from the firmware RAM's port B; every fetch
+// of the PicoRV32, on the memory bus).
 //
 // Exit status: 0 halt with code 0; 1 halt with another code; 2 CPU trap; the others sim_main.h's.
 #include <cinttypes>
@@ -145,6 +148,7 @@ public:
                 ++profile_fw_[pc_ / 2];  // the firmware RAM: an array (a map lookup a cycle halved the rate)
             else
                 ++profile_[pc_];
+            if (top_->prof_ibus) ++ibus_[top_->prof_ibus_addr >> 5];
             if (top_->prof_data_wait) {
                 ++data_wait_;
             } else if (top_->prof_data_done) {
@@ -175,6 +179,10 @@ public:
         for (const auto &kv : data_)
             fprintf(f, "%08x %" PRIu64 " %" PRIu64 " %" PRIu64 "\n", kv.first << 6, kv.second.wait, kv.second.reads,
                     kv.second.writes);
+        if (fclose(f) != 0) return false;
+        f = fopen((path + ".ibus").c_str(), "w");
+        if (!f) return false;
+        for (const auto &kv : ibus_) fprintf(f, "%08x %" PRIu64 "\n", kv.first << 5, kv.second);
         return fclose(f) == 0;
     }
 
@@ -241,6 +249,7 @@ private:
         uint64_t wait = 0, reads = 0, writes = 0;
     };
     uint64_t data_wait_ = 0;  // cycles the current data access has waited
+    std::map<uint32_t, uint64_t> ibus_;  // by 32-byte line: cycles instruction fetches waited
     std::map<uint32_t, DataBlock> data_;
 };
 

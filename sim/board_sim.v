@@ -57,7 +57,11 @@ module board_sim
     // or completes; its address (prof_pc) and whether it writes
     output wire         prof_data_wait,
     output wire         prof_data_done,
-    output wire         prof_data_write
+    output wire         prof_data_write,
+    // for wmsim --profile: an instruction fetch waits this cycle (the PicoRV32's on the memory bus;
+    // the VexRiscv's instruction cache's line refills, on the firmware RAM's port B)
+    output wire         prof_ibus,
+    output wire [31:0]  prof_ibus_addr
 );
 
 wire        wifi_gpio0;
@@ -137,6 +141,13 @@ assign prof_data_wait = top_inst.soc_inst.mem_valid && !top_inst.soc_inst.mem_in
 assign prof_data_done = top_inst.soc_inst.mem_valid && !top_inst.soc_inst.mem_instr_unused
                         && top_inst.soc_inst.mem_ready;
 assign prof_data_write = |top_inst.soc_inst.mem_wstrb;
+`ifdef WM_CPU_VEXRISCV
+assign prof_ibus = top_inst.soc_inst.cpu_inst.i_req;
+assign prof_ibus_addr = {top_inst.soc_inst.cpu_inst.i_adr, 2'b00};
+`else
+assign prof_ibus = top_inst.soc_inst.mem_valid && top_inst.soc_inst.mem_instr_unused;
+assign prof_ibus_addr = top_inst.soc_inst.mem_addr;
+`endif
 
 // the ESP32 must see wifi_gpio0 high (docs/boards.md): a top that let it go low would fail here
 always @(posedge clk) begin

@@ -90,6 +90,9 @@ def main(argv: list[str] | None = None) -> int:
             data = [[int(f, 16) if i == 0 else int(f) for i, f in enumerate(ln.split())]
                     for ln in Path(str(prof) + ".data").read_text().splitlines()]
             areas = _areas(rep, elf)
+        ibus_file = Path(str(prof) + ".ibus")
+        ibus = ([(int(a, 16), int(c)) for a, c in (ln.split() for ln in ibus_file.read_text().splitlines())]
+                if ibus_file.exists() else None)
         syms = _symbols(elf)
     addrs = [a for a, _ in syms]
     per: dict[str, int] = {}
@@ -106,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         print("the mesh equals wavemesh mesh's" if same else "THE MESH DIFFERS from wavemesh mesh's")
     for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: args.top]:
         print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
+    if ibus is not None:
+        _ibus_report(ibus, syms, addrs, total, args.top)
     if args.data:
         _data_report(data, areas, total)
     return 0
@@ -136,6 +141,21 @@ def _refiner_struct_bytes() -> int:
         out = subprocess.run(["riscv64-unknown-elf-nm", "-S", str(obj)], check=True, capture_output=True,
                              text=True).stdout
     return int(out.split()[1], 16)
+
+
+def _ibus_report(ibus: list[tuple[int, int]], syms: list[tuple[int, str]], addrs: list[int], total: int,
+                 top: int) -> None:
+    """The cycles instruction fetches waited (the VexRiscv's cache refills), by the function fetched."""
+    per: dict[str, int] = {}
+    for line, cyc in ibus:
+        i = bisect.bisect_right(addrs, line) - 1
+        name = syms[i][1] if i >= 0 else "?"
+        per[name] = per.get(name, 0) + cyc
+    n = sum(per.values())
+    print(f"\ninstruction fetches: {n:,} cycles waited for memory ({100 * n / total:.2f} % of all), "
+          "by the function at the start of the line fetched")
+    for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: min(top, 15)]:
+        print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
 
 
 def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
