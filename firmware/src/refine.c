@@ -166,8 +166,9 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
 static uint32_t ratio_q16(uint64_t num, uint64_t den)
 {
     uint64_t q;
+    uint32_t rem;
     if (den == 0) return num ? 0xFFFFFFFFu : 65536u;
-    q = (num << 16) / den;
+    q = WM_NARROW_DIV && den < 65536u ? wm_udiv_small(num << 16, (uint32_t)den, &rem) : (num << 16) / den;
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
@@ -181,13 +182,14 @@ static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
 {
     int64_t t;
     uint64_t rq;
+    uint32_t rem;
     if (alpha == 65536u) return ra > 65536u ? UINT64_MAX : 0;
     t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
     if (t <= 0) return UINT64_MAX;
     rq = (uint64_t)t + (65535u - alpha);
     rq = rq >> 32 ? rq / (65536u - alpha) : (uint32_t)rq / (65536u - alpha); /* 32 bits unless ra < 2 */
     if (rq > 0xFFFFFFFFu) return 0;
-    return (num << 16) / rq;
+    return WM_NARROW_DIV && rq < 65536u ? wm_udiv_small(num << 16, (uint32_t)rq, &rem) : (num << 16) / rq;
 }
 
 /* The largest E with wm_scale_mul(p, E, 1, 0, cap) <= X (cap = 2^40), saturated at 2^32 - 1: that
@@ -196,10 +198,11 @@ static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
 static uint32_t scale_inv(const wm_params *p, uint64_t X)
 {
     uint64_t q;
+    uint32_t rem;
     int e = p->scale_e;
     if (X >= ((uint64_t)1 << 40) || p->scale_m == 0 || e >= 48 || X + 1 >= ((uint64_t)1 << (48 - e)))
         return 0xFFFFFFFFu;
-    q = (((X + 1) << e) - 1) / p->scale_m;
+    q = WM_NARROW_DIV ? wm_udiv_small(((X + 1) << e) - 1, p->scale_m, &rem) : (((X + 1) << e) - 1) / p->scale_m;
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
