@@ -660,9 +660,8 @@ def mesh_errors(
     if live is not None:
         measured &= live
     per_v[~measured] = np.nan
-    with np.errstate(invalid="ignore"):
-        per_n = per_v / nfac
-    per_n[~measured] = np.nan
+    per_n = np.full_like(per_v, np.nan)
+    per_n[measured] = per_v[measured] / nfac[measured]  # a dead triangle's factor may be 0 (no warning)
     mv, mn = per_v[measured], per_n[measured]
     e_max_v = float(mv.max()) if len(mv) else math.nan
     e_max_n = float(mn.max()) if len(mn) else math.nan
