@@ -562,7 +562,7 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
             if tile is None:  # from memory: the Dask workers' limits, or this machine's
                 tile = (tiles.dask_tile(runner.client) if runner.client
                         else tiles.default_tile(args.workers or tiles.default_workers()))
-            plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say)
+            plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say, defer_error=True)
             results = tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
                                       log=say if args.quiet or not sys.stderr.isatty() else None)
     else:

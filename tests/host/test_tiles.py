@@ -150,27 +150,34 @@ def test_one_tile_is_the_untiled_mesh(tmp_path):
 
 def test_dask_equals_local(dem, tmp_path):
     """The same tiles on a Dask LocalCluster of 2 worker processes, on the local pool of 2 processes and in
-    this process: the same files, byte for byte."""
+    this process: the same files, byte for byte; a lossy quantisation's largest error found before the
+    tiles (plan_tiles) or in their task graph beside the free meshes (defer_error): the same plan after."""
     distributed = pytest.importorskip("distributed")
-    src = tiles.open_source(str(dem))
+    path = tmp_path / "f.npy"
+    np.save(path, np.load(dem) + 0.25)  # not integers: a lossy quantisation, q > 0
+    src = tiles.open_source(str(path))
     params = api.MeshParams(refine=RefineParams(zeta=3.0, metric="vertical"))
-    plan = tiles.plan_tiles(src, params, 64)
 
-    def files(results, name):
+    def files(name, defer, **kw):
+        with tiles.Runner(**kw) as runner:
+            plan = tiles.plan_tiles(src, params, 64, runner=runner, defer_error=defer)
+            assert (plan.quant.q is None) == defer and (plan.zeta_used is None) == defer
+            tiled = tiles.stitch(plan, tiles.run_tiles(plan, runner=runner))
         out = tmp_path / name
         out.mkdir()
-        tiled = tiles.stitch(plan, results)
         tiles.write_tiled(tiled, plan, str(out / "m.obj"), tiles_dir=str(out / "t"))
-        return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*.obj"))}
+        return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*.obj"))}, \
+            (plan.quant, plan.zeta_used, tiled.report["quantisation"])
 
-    here = files(tiles.run_tiles(plan, workers=1), "here")
-    pool = files(tiles.run_tiles(plan, workers=2), "pool")
+    here = files("here", False, workers=1)
+    one = files("one", True, workers=1)
+    pool = files("pool", True, workers=2)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as c, distributed.Client(c) as client:
-        dask = files(tiles.run_tiles(plan, scheduler=client), "dask")
+        dask = files("dask", True, scheduler=client)
         assert len(client.scheduler_info()["workers"]) == 2
-    assert len(here) == 13
-    assert here == pool == dask
+    assert len(here[0]) == 13 and here[1][0].q > 0 and here[1][1] < 3.0
+    assert here == one == pool == dask
 
 
 def test_lazy_sources_read_the_same(dem, tmp_path):

@@ -152,3 +152,28 @@ def test_kept_tiles(plan, tmp_path):
     after = tiles.tile_heightfield(p, p.tiles[0]).values
     assert not np.array_equal(before, after) and np.array_equal(after, before[::-1])
     jobs.clear_tile_cache()
+
+
+def test_graph_finds_the_quantisation_error(plan):
+    """A plan without its largest quantisation error (plan_tiles' defer_error): the graph's strips find it
+    beside the free meshes (which do not read it), every later step reads it, and the plan has it after:
+    the same q, zeta and tiles as a plan that found it first."""
+    from dataclasses import replace
+
+    from wavemesh.tiles.source import strip_error
+
+    deferred = replace(plan, quant=replace(plan.quant, q=None), zeta_used=None)
+    nodes, roles = tiles.tile_graph(deferred)
+    q = roles["q"]
+    assert nodes[q].fn is jobs._largest and nodes[q].args
+    assert all(nodes[a.node].fn is strip_error for a in nodes[q].args)
+    assert not any(Ref(q) in nodes[k].args for k in roles["free"])
+    steps = (jobs._finish_node, jobs._seam_node, jobs._thin_node)
+    later = [k for k in range(len(nodes)) if nodes[k].fn in steps]
+    assert later and all(Ref(q) in nodes[k].args for k in later)
+    assert nodes[q].rank < min(nodes[k].rank for k in roles["finish"])  # before the first tile conformed
+    assert nodes[q].rank > nodes[roles["free"][0]].rank  # after the first free meshes
+    made = tiles.run_tiles(deferred, workers=2)
+    assert plan.quant.q > 0 and (deferred.quant, deferred.zeta_used) == (plan.quant, plan.zeta_used)
+    for a, b in zip(tiles.run_tiles(plan, workers=1), made, strict=True):
+        assert np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris) and np.array_equal(a.z, b.z)

@@ -18,7 +18,7 @@ from wavemesh.io.georef import cropped
 from wavemesh.io.heightfield import HeightField
 from wavemesh.mesh import Mesh
 from wavemesh.refine import native
-from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles
+from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles, with_error
 from wavemesh.tiles.runner import Here, Node, Ref, Runner
 from wavemesh.tiles.sides import (
     FACING,
@@ -31,7 +31,7 @@ from wavemesh.tiles.sides import (
     side_profile,
     thin_side,
 )
-from wavemesh.tiles.source import Source, light_source
+from wavemesh.tiles.source import Source, light_source, strip_error, strip_tasks
 
 # ---------------------------------------------------------------------------------------------------
 # One tile's jobs: free (step 3), conformed to its reconciled sides (steps 4 and 5), thinned (step 6)
@@ -103,7 +103,8 @@ def _cache_key(plan: TilePlan, t: Tile, window: np.ndarray | None) -> tuple | No
             or 10 * t.width * t.height > TILE_CACHE_BYTES // 6:
         return None
     st = os.stat(src.path)
-    return (src, plan.quant, plan.spacing, t.x, t.y, t.width, t.height,
+    quant = plan.quant  # its q aside: the samples do not depend on it (tile_graph may find it later)
+    return (src, quant.scale, quant.offset, quant.exact, plan.spacing, t.x, t.y, t.width, t.height,
             (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns))
 
 
@@ -272,17 +273,33 @@ def _side_left(free: FreeTile) -> tuple:
 _SIDE_OF = {"top": _side_top, "right": _side_right, "bottom": _side_bottom, "left": _side_left}
 
 
-def _finish_node(plan: TilePlan, free: FreeTile, window, last: bool, sides: tuple, *facing) -> TileResult:
-    """finish_tile, ``facing`` the neighbours' sides in the order of ``sides`` (Runner.graph's args);
-    ``last``: the tile's last step (its heights forgotten then)."""
+def _largest(*errors: float) -> float:
+    """The whole grid's largest quantisation error from its strips' (tile_graph's node)."""
+    return max(errors)
+
+
+def _finish_node(plan: TilePlan, free: FreeTile, window, last: bool, sides: tuple, q: float, *facing
+                 ) -> TileResult:
+    """finish_tile, ``facing`` the neighbours' sides in the order of ``sides`` (Runner.graph's args), ``q``
+    the whole grid's largest quantisation error; ``last``: the tile's last step (its heights forgotten
+    then)."""
+    plan = with_error(plan, q)
     r = finish_tile(plan, free, dict(zip(sides, facing, strict=True)), window)
     if last:
         forget_tile(plan, free.index)
     return r
 
 
-def _thin_node(plan: TilePlan, r: TileResult, window, last: bool, sides: tuple, *cuts) -> TileResult:
-    """thin_tile with ``removed`` as the seams' cuts in the order of ``sides`` (Runner.graph's args)."""
+def _seam_node(plan: TilePlan, q: float, a: TileResult, b: TileResult, side: str, win_a, win_b) -> tuple:
+    """thin_seam, ``q`` the whole grid's largest quantisation error."""
+    return thin_seam(with_error(plan, q), a, b, side, win_a, win_b)
+
+
+def _thin_node(plan: TilePlan, r: TileResult, window, last: bool, sides: tuple, q: float, *cuts
+               ) -> TileResult:
+    """thin_tile with ``removed`` as the seams' cuts in the order of ``sides`` (Runner.graph's args), ``q``
+    the whole grid's largest quantisation error."""
+    plan = with_error(plan, q)
     out = thin_tile(plan, r, dict(zip(sides, cuts, strict=True)), window)
     if last:
         forget_tile(plan, r.index)
@@ -294,8 +311,11 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
     tile's and its neighbours' free meshes are done), each column side thinned (once both tiles are
     conformed), each tile without its column sides' thinned vertices, then the same for the row sides.
     Ranked by the last tile (row by row) their inputs wait for, then the step: a tile goes on through its
-    steps while the next tiles are made.  Also {"free": nodes, "finish": nodes, "last": nodes} in tile order
-    and "homes" and "shared" (Runner.graph's: a block of columns of tiles per worker; the plan)."""
+    steps while the next tiles are made.  A plan without its largest quantisation error yet (plan_tiles'
+    ``defer_error``): the quantisation's strips (strip_error) and their largest ("q") too, ranked after the
+    first row of free meshes and before the first conformed tile, which (as every later step) reads it.
+    Also {"free": nodes, "finish": nodes, "last": nodes} in tile order, "q" (the node or None) and "homes"
+    and "shared" (Runner.graph's: a block of columns of tiles per worker; the plan)."""
     n = len(plan.tiles)
     light = replace(plan, source=light_source(plan.source))
     win = [Here(_window, (plan, i)) if plan.source.kind == "array" else None for i in range(n)]
@@ -311,6 +331,14 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
     free_of: list = [add(free_tile, (light, i, win[i]), 0, (i,)) for i in range(n)] if frees is None \
         else [None] * n
 
+    nx = len(plan.xcuts) - 1
+    q_node = None
+    q: object = plan.quant.q
+    if q is None:
+        strips = [add(strip_error, (*task, plan.quant), -1, (), (nx,)) for task in strip_tasks(light.source)]
+        q_node = add(_largest, tuple(map(Ref, strips)), -1, (), (nx,))
+        q = Ref(q_node)
+
     def free_arg(i: int, pick=None):
         return Ref(free_of[i], pick) if frees is None else (frees[i] if pick is None else pick(frees[i]))
 
@@ -319,7 +347,7 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
     for i, t in enumerate(plan.tiles):
         sides = tuple(t.neighbours)
         facing = [free_arg(k, _SIDE_OF[FACING[s]]) for s, k in t.neighbours.items()]
-        cur.append(add(_finish_node, (light, free_arg(i), win[i], not phases, sides, *facing), 1, (i,),
+        cur.append(add(_finish_node, (light, free_arg(i), win[i], not phases, sides, q, *facing), 1, (i,),
                        tuple(t.neighbours.values())))
     finish = list(cur)
     step = 2
@@ -327,16 +355,15 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
         pairs = [(i, k) for i, t in enumerate(plan.tiles) for s, k in t.neighbours.items() if s == side]
         cut: list[dict] = [{} for _ in range(n)]
         for i, k in pairs:
-            c = add(thin_seam, (light, Ref(cur[i]), Ref(cur[k]), side, win[i], win[k]), step, (i, k))
+            c = add(_seam_node, (light, q, Ref(cur[i]), Ref(cur[k]), side, win[i], win[k]), step, (i, k))
             cut[i][side] = cut[k][FACING[side]] = c
         last = side == phases[-1]
-        cur = [add(_thin_node, (light, Ref(cur[i]), win[i], last, tuple(cut[i]), *map(Ref, cut[i].values())),
-                   step + 1, (i,)) for i in range(n)]
+        cur = [add(_thin_node, (light, Ref(cur[i]), win[i], last, tuple(cut[i]), q,
+                                *map(Ref, cut[i].values())), step + 1, (i,)) for i in range(n)]
         step += 2
-    nx = len(plan.xcuts) - 1
     homes = {i: t.col / nx for i, t in enumerate(plan.tiles)}  # columns of tiles, a block per worker
-    return nodes, {"free": free_of if frees is None else [], "finish": finish, "last": cur, "homes": homes,
-                   "shared": (light,)}
+    return nodes, {"free": free_of if frees is None else [], "finish": finish, "last": cur, "q": q_node,
+                   "homes": homes, "shared": (light,)}
 
 
 def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, runner: Runner | None = None,
@@ -371,6 +398,9 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
 
             results = runner.graph(nodes, done, roles["homes"], roles["shared"])
             bar.finish(f"{n} tiles")
+        if roles["q"] is not None:  # the plan complete for stitch's report
+            known = with_error(plan, results[roles["q"]])
+            plan.quant, plan.zeta_used = known.quant, known.zeta_used
     finally:
         clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers
     return [results[k] for k in roles["last"]]
@@ -420,5 +450,5 @@ def mesh_tiled(src: Source, params, tile: int | None = None, *, workers: int | N
                progress: bool = False, log: Callable[[str], None] | None = None) -> TiledResult:
     """`wavemesh mesh --tile`: plan, run the tiles, stitch (one Runner for every phase)."""
     with Runner(workers, scheduler) as runner:
-        plan = plan_tiles(src, params, tile, runner=runner, log=log)
+        plan = plan_tiles(src, params, tile, runner=runner, log=log, defer_error=True)
         return stitch(plan, run_tiles(plan, runner=runner, progress=progress, log=log))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from wavemesh import api
@@ -59,7 +59,8 @@ class TilePlan:
     quant: Quant
     levels: int | None  # M per tile (None: each tile's default)
     tau: float  # tau_M in height units, one for every tile (default: 1% of the whole grid's range)
-    zeta_used: float  # the refiner's zeta on the samples (zeta - 2q for lossy quantisation)
+    zeta_used: float | None  # the refiner's zeta on the samples (zeta - 2q for lossy quantisation; None: q
+    # not found yet, plan_tiles' ``defer_error``)
     spacing: tuple[float, float]  # the whole grid's cell size (the normal metric's)
     xcuts: list[int]
     ycuts: list[int]
@@ -88,9 +89,20 @@ def check_tiling(params) -> None:
                             hint="leave them out (each tile's storage is sized for its grid)")
 
 
+def with_error(plan: TilePlan, q: float) -> TilePlan:
+    """The plan with the whole grid's largest quantisation error ``q`` (and the refiner's zeta from it) when
+    it had none yet, else the plan as it is."""
+    if plan.quant.q is not None:
+        return plan
+    return replace(plan, quant=replace(plan.quant, q=q), zeta_used=refiner_zeta(plan.params.refine.zeta, q))
+
+
 def plan_tiles(src: Source, params, tile: int | None = None, *, runner: Runner | None = None,
-               log: Callable[[str], None] | None = None) -> TilePlan:
-    """The layout and the whole grid's quantisation (its strips scanned on ``runner``'s workers)."""
+               log: Callable[[str], None] | None = None, defer_error: bool = False) -> TilePlan:
+    """The layout and the whole grid's quantisation (its strips scanned on ``runner``'s workers).
+    ``defer_error`` (with a runner, an input the workers read themselves): the quantisation's second pass,
+    the largest error, left to the tiles' task graph (run_tiles: its strips beside the free meshes, which
+    need only the scale and offset; no barrier), q and zeta_used None until then."""
     check_tiling(params)
     params.refine.check()
     tile = default_tile(default_workers()) if tile is None else tile
@@ -99,11 +111,11 @@ def plan_tiles(src: Source, params, tile: int | None = None, *, runner: Runner |
     if params.levels is not None and not 1 <= params.levels <= api.MAX_LEVELS:
         raise WavemeshError(f"--levels {params.levels} is out of range", hint=f"use 1..{api.MAX_LEVELS}")
     t0 = time.perf_counter()
-    quant = scan(src, runner)
+    quant = scan(src, runner, error=not (defer_error and runner is not None and src.kind != "array"))
     tau = params.tau if params.tau is not None else api.DEFAULT_TAU_FRACTION * (quant.vmax - quant.vmin)
     if not math.isfinite(tau) or tau < 0:
         raise WavemeshError(f"--tau {tau} is not a finite number >= 0", hint="give tau in height units")
-    zeta = refiner_zeta(params.refine.zeta, quant.q)
+    zeta = None if quant.q is None else refiner_zeta(params.refine.zeta, quant.q)
     plan = TilePlan(src, params, tile, quant, params.levels, tau, zeta, ground(src.grid()).spacing,
                     cuts(src.width, tile), cuts(src.height, tile))
     nx, ny = len(plan.xcuts) - 1, len(plan.ycuts) - 1

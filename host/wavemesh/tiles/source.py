@@ -126,18 +126,19 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
 @dataclass(frozen=True)
 class Quant:
     """The whole grid's quantisation (heightfield.quant_rule of its range): samples = the heights less
-    offset, over scale (rounded and clipped unless ``exact``); ``q`` the largest quantisation error."""
+    offset, over scale (rounded and clipped unless ``exact``); ``q`` the largest quantisation error (None:
+    not found yet, scan's ``error=False``)."""
 
     scale: float
     offset: float
     exact: bool  # integers within SAMPLE_MAX of each other: the lossless case of heightfield.quantise
-    q: float
+    q: float | None
     vmin: float
     vmax: float
 
     @property
     def lossless(self) -> bool:
-        return self.q == 0
+        return self.exact if self.q is None else self.q == 0
 
     def samples(self, v: np.ndarray) -> np.ndarray:
         return to_samples(v, self.scale, self.offset, self.exact)
@@ -180,18 +181,24 @@ def _strip_stats(src: Source, y: int, rows: int) -> tuple[float, float, bool, in
     return float(v.min()), float(v.max()), bool(np.all(v == np.floor(v))), bad
 
 
-def _strip_error(src: Source, y: int, rows: int, quant: Quant) -> float:
+def strip_tasks(src: Source) -> list[tuple[Source, int, int]]:
+    """The quantisation passes' strips: (the light source, first row, rows) each."""
+    rows = _strip_rows(src)
+    light = light_source(src)
+    return [(light, y, min(rows, src.height - y)) for y in range(0, src.height, rows)]
+
+
+def strip_error(src: Source, y: int, rows: int, quant: Quant) -> float:
     """The largest quantisation error of rows y .. y + rows - 1."""
     v = src.read(0, y, src.width, rows)
     return float(np.max(np.abs(v - (quant.offset + quant.scale * quant.samples(v).astype(np.float64)))))
 
 
-def scan(src: Source, runner: Runner | None = None) -> Quant:
+def scan(src: Source, runner: Runner | None = None, error: bool = True) -> Quant:
     """The quantisation of the whole grid, from the strips' statistics (on ``runner``'s workers: an input
-    in memory is scanned here); a second pass for the largest quantisation error unless exact."""
-    rows = _strip_rows(src)
-    light = light_source(src)
-    tasks = [(light, y, min(rows, src.height - y)) for y in range(0, src.height, rows)]
+    in memory is scanned here); a second pass for the largest quantisation error unless exact (``error``
+    False: q left None, for the tiles' task graph to find, strip_error)."""
+    tasks = strip_tasks(src)
     here = runner is None or src.kind == "array"
 
     def each(fn, extra=()):
@@ -209,4 +216,6 @@ def scan(src: Source, runner: Runner | None = None) -> Quant:
     quant = Quant(scale, offset, exact, 0.0, vmin, vmax)
     if exact:
         return quant
-    return replace(quant, q=max(each(_strip_error, (quant,))))
+    if not error:
+        return replace(quant, q=None)
+    return replace(quant, q=max(each(strip_error, (quant,))))
