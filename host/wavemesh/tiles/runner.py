@@ -324,18 +324,21 @@ class _Schedule:
     def take(self, worker: int | None) -> int | None:
         if not self.ready:
             return None
-        choice = self.ready[0]
-        if worker is not None:
-            mine = [[self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[i].tiles]
-                    for _, i in self.ready]
-            k = next((k for k, m in enumerate(mine) if all(m)), None)
-            if k is None:
-                k = next((k for k, m in enumerate(mine) if any(m)), 0)
-            choice = self.ready[k]
-            for t in self.nodes[choice[1]].tiles:
+        k = 0
+        if worker is not None:  # the first all its own (the scan stops there), else the first with one
+            some = None
+            for j, (_, i) in enumerate(self.ready):
+                mine = [self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[i].tiles]
+                if all(mine):
+                    k = j
+                    break
+                if some is None and any(mine):
+                    some = j
+            else:
+                k = 0 if some is None else some
+            for t in self.nodes[self.ready[k][1]].tiles:
                 self.owner.setdefault(t, worker)
-        self.ready.remove(choice)
-        return choice[1]
+        return self.ready.pop(k)[1]
 
     def finished(self, i: int) -> None:
         for u in self.users[i]:
