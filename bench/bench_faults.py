@@ -132,7 +132,7 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
     port takes the new rate but the line never follows it, so nothing passes while the board runs at
     another rate (the OK to BAUD, sent at the old rate, excepted).  The host's proof fails, the board goes
     back after its probe window (BAUD_PROBE_MS of its clock, minutes of simulation: the host's HELLOs
-    at the start rate are given as many tries), the host says so in one warning line, and the job runs
+    at the start rate are given that many tries), the host says so in one warning line, and the job runs
     at the start rate: the reference mesh, the report's line_baud the start rate."""
     import time
 
@@ -148,7 +148,9 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
         div = (board.events("uart divisor") or [(start, 0)])[-1][0]
         return div == start or (f.type == P.FrameType.OK and f.fields()["request"] == P.FrameType.BAUD)
 
-    S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=60)
+    # the probe window is 25 million cycles: 2 minutes of simulation alone, 10 beside the campaign's boards
+    # (40 kHz each on a loaded machine: 60 HELLOs of 8 s were not enough); the run ends when it answers
+    S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=250)
     out = work / "switch.obj"
     with FrameTap(("127.0.0.1", board.port), on_frame) as tap:
         t0 = time.monotonic()
