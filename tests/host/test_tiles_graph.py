@@ -177,3 +177,22 @@ def test_graph_finds_the_quantisation_error(plan):
     assert plan.quant.q > 0 and (deferred.quant, deferred.zeta_used) == (plan.quant, plan.zeta_used)
     for a, b in zip(tiles.run_tiles(plan, workers=1), made, strict=True):
         assert np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris) and np.array_equal(a.z, b.z)
+
+
+def test_schedule_chains_a_node_with_its_follower():
+    """A node given out takes with it the node that waits for it alone, if its tiles are the worker's: that
+    node is not made ready again; a node that waits for another too, or reads another worker's tile, is
+    not taken.  The pool runs a chain in one round trip, a picked result passed on in the worker."""
+    nodes = [Node(_add, (1,), (0, 0), (0,)), Node(_add, (Ref(0), 1), (0, 1), (0,)),
+             Node(_add, (Ref(0), Ref(1)), (0, 2), (0,)), Node(_add, (Ref(0),), (0, 3), (1,))]
+    s = _Schedule(nodes, {0: 0, 1: 1})
+    assert s.take(0) == 0 and s.follower(0, 0) == 1
+    assert s.follower(0, 0) is None  # 2 waits for 1 too, 3 reads worker 1's tile
+    s.finished(0)
+    assert [i for _, i in s.ready] == [3]
+    s.finished(1)
+    assert [i for _, i in s.ready] == [2, 3]
+    chain = [Node(_pair, (1, 2)), Node(_add, (Ref(0, _first), 10)), Node(_add, (Ref(1), Ref(0, _first)))]
+    for workers in (1, 2):
+        with tiles.Runner(workers) as run:
+            assert run.graph(chain) == [(1, 2), 11, 12]

@@ -22,6 +22,9 @@ DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 # Runner.graph's nodes sent to a pool worker at a time: one (a second one in its pipe while it sends its
 # result back can fill both directions of the socket: the parent blocked in send, the worker too)
 PIPELINE = 1
+# a node sent to a pool worker takes with it the next node that waits for it alone and whose tiles are that
+# worker's (its result goes on to it in the worker): one round trip of the parent for both
+CHAIN = True
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -103,8 +106,19 @@ class Node:
         return {a.node for a in self.args if isinstance(a, Ref)}
 
 
-def _resolve(node: Node, results: list) -> tuple:
+@dataclass(frozen=True)
+class _Prev:
+    """In a chained node's args sent to a pool worker: the chain's previous node's result (``pick`` of it)."""
+
+    pick: Callable | None = None
+
+
+def _resolve(node: Node, results: list, prev: int | None = None) -> tuple:
+    """The node's args, each Ref replaced by its result (a Ref to ``prev``: _Prev, the worker's)."""
+
     def one(a):
+        if isinstance(a, Ref) and a.node == prev:
+            return _Prev(a.pick)
         if isinstance(a, Ref):
             return a.pick(results[a.node]) if a.pick else results[a.node]
         return a.fn(*a.args) if isinstance(a, Here) else a
@@ -174,7 +188,8 @@ class Runner:
         same results however it runs: each node depends only on its args.  ``homes``: tile -> a number in
         [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
-        keeps (the plan every task reads), not with every task."""
+        keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
+        node that waits for it alone, if its tiles are the worker's (CHAIN; _Schedule.follower)."""
         results: list = [None] * len(nodes)
 
         def got(i: int, r) -> None:
@@ -225,15 +240,20 @@ class Runner:
                     i = sched.take(w)
                     if i is None:
                         return
-                    args = _resolve(nodes[i], results)
+                    j = sched.follower(i, w) if CHAIN else None
+                    chain = [i] if j is None else [i, j]
                     pipe = self.pool[w][1]
-                    for a in args:
-                        key = keys.get(id(a))
-                        if key is not None and key not in kept[w]:
-                            pipe.send(("keep", key, a))  # no answer: the worker keeps it
-                            kept[w].add(key)
-                    pipe.send((nodes[i].fn, tuple(keys.get(id(a), a) for a in args)))
-                    sent[w].append(i)
+                    steps = []
+                    for k in chain:
+                        args = _resolve(nodes[k], results, i)
+                        for a in args:
+                            key = keys.get(id(a))
+                            if key is not None and key not in kept[w]:
+                                pipe.send(("keep", key, a))  # no answer: the worker keeps it
+                                kept[w].add(key)
+                        steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
+                    pipe.send(steps[0] if j is None else ("chain", steps))
+                    sent[w].append(chain)
 
             for w in range(len(self.pool)):
                 give(w)
@@ -243,9 +263,11 @@ class Runner:
                 for w in live:
                     proc, pipe = self.pool[w]
                     if pipe in ready:
-                        i = sent[w].popleft()
-                        got(i, _reply(proc, pipe))
-                        sched.finished(i)
+                        chain = sent[w].popleft()
+                        reply = _reply(proc, pipe)
+                        for i, r in zip(chain, reply if len(chain) > 1 else [reply], strict=True):
+                            got(i, r)
+                            sched.finished(i)
                     elif proc.sentinel in ready and not pipe.poll():
                         _lost(proc)
                 for w in (*live, *range(len(self.pool))):  # the workers that answered first
@@ -320,6 +342,7 @@ class _Schedule:
                 self.users[d].append(i)
         self.ready = sorted((n.rank, i) for i, n in enumerate(nodes) if not self.waiting[i])
         self.owner: dict = {}  # tile -> the worker that first read it
+        self.chained = [False] * len(nodes)  # taken with the node it waits for (follower)
 
     def take(self, worker: int | None) -> int | None:
         if not self.ready:
@@ -340,10 +363,25 @@ class _Schedule:
                 self.owner.setdefault(t, worker)
         return self.ready.pop(k)[1]
 
+    def follower(self, i: int, worker: int) -> int | None:
+        """Of the nodes that wait for node ``i`` (just taken by ``worker``) alone, the first by rank whose
+        tiles are all the worker's (as take counts them), taken with it; None if none."""
+        best = None
+        for u in self.users[i]:
+            if self.waiting[u] == 1 and not self.chained[u] and all(
+                    self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[u].tiles):
+                if best is None or (self.nodes[u].rank, u) < (self.nodes[best].rank, best):
+                    best = u
+        if best is not None:
+            self.chained[best] = True
+            for t in self.nodes[best].tiles:
+                self.owner.setdefault(t, worker)
+        return best
+
     def finished(self, i: int) -> None:
         for u in self.users[i]:
             self.waiting[u] -= 1
-            if not self.waiting[u]:
+            if not self.waiting[u] and not self.chained[u]:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
 
 
@@ -376,7 +414,8 @@ class _Kept:
 
 def _worker_loop(pipe, parent: int) -> None:
     """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
-    ("keep", key, value): an arg its next tasks name by the key."""
+    ("keep", key, value): an arg its next tasks name by the key; ("chain", [(fn, args), ...]): each in turn,
+    a _Prev in args the one before's result, the results back as a list."""
     _worker_start(parent)
     kept: dict = {}
     while True:
@@ -386,12 +425,17 @@ def _worker_loop(pipe, parent: int) -> None:
             return
         if task is None:
             return
-        if isinstance(task[0], str):  # ("keep", key, value)
+        if task[0] == "keep":  # ("keep", key, value)
             kept[task[1]] = task[2]
             continue
         try:
-            args = tuple(kept[a] if isinstance(a, _Kept) else a for a in task[1])
-            reply = ("ok", task[0](*args), None)
+            out: list = []
+            for fn, args in (task[1] if task[0] == "chain" else [task]):  # ("chain", [(fn, args), ...])
+                args = tuple(kept[a] if isinstance(a, _Kept) else
+                             (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else a
+                             for a in args)
+                out.append(fn(*args))
+            reply = ("ok", out if task[0] == "chain" else out[0], None)
         except Exception as e:  # the parent raises it (WavemeshError with its hint)
             reply = ("error", e, getattr(e, "hint", None))
         try:
