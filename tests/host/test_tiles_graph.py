@@ -193,6 +193,8 @@ def test_schedule_chains_a_node_with_its_follower():
     s.finished(1)
     assert [i for _, i in s.ready] == [2, 3]
     chain = [Node(_pair, (1, 2)), Node(_add, (Ref(0, _first), 10)), Node(_add, (Ref(1), Ref(0, _first)))]
+    line = [Node(_add, (1,))] + [Node(_add, (Ref(k), k)) for k in range(6)]  # longer than runner.CHAIN
     for workers in (1, 2):
         with tiles.Runner(workers) as run:
             assert run.graph(chain) == [(1, 2), 11, 12]
+            assert run.graph(line) == [1, 1, 2, 4, 7, 11, 16]

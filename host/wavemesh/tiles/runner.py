@@ -23,8 +23,9 @@ DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 # result back can fill both directions of the socket: the parent blocked in send, the worker too)
 PIPELINE = 1
 # a node sent to a pool worker takes with it the next node that waits for it alone and whose tiles are that
-# worker's (its result goes on to it in the worker): one round trip of the parent for both
-CHAIN = True
+# worker's (its result goes on to it in the worker), and so on, up to CHAIN nodes: one round trip of the
+# parent for them all (1: none)
+CHAIN = 4
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -189,7 +190,7 @@ class Runner:
         [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
         keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
-        node that waits for it alone, if its tiles are the worker's (CHAIN; _Schedule.follower)."""
+        node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower)."""
         results: list = [None] * len(nodes)
 
         def got(i: int, r) -> None:
@@ -240,19 +241,20 @@ class Runner:
                     i = sched.take(w)
                     if i is None:
                         return
-                    j = sched.follower(i, w) if CHAIN else None
-                    chain = [i] if j is None else [i, j]
+                    chain = [i]
+                    while len(chain) < CHAIN and (j := sched.follower(chain[-1], w)) is not None:
+                        chain.append(j)
                     pipe = self.pool[w][1]
                     steps = []
-                    for k in chain:
-                        args = _resolve(nodes[k], results, i)
+                    for n, k in enumerate(chain):
+                        args = _resolve(nodes[k], results, chain[n - 1] if n else None)
                         for a in args:
                             key = keys.get(id(a))
                             if key is not None and key not in kept[w]:
                                 pipe.send(("keep", key, a))  # no answer: the worker keeps it
                                 kept[w].add(key)
                         steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
-                    pipe.send(steps[0] if j is None else ("chain", steps))
+                    pipe.send(steps[0] if len(chain) == 1 else ("chain", steps))
                     sent[w].append(chain)
 
             for w in range(len(self.pool)):
