@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Whole processes in instructions: `wavemesh mesh` against the quality benchmark's peer process.
 
-    .venv/bin/python bench/process_instructions.py [GRID:LABEL ...]
+    .venv/bin/python bench/process_instructions.py [GRID:LABEL ...]   (GRID:2048^2: bench_big.py's grid)
 
 For pairs of the quality benchmark (bench/bench_quality.py's grids and errors; default: four of the
 tuning set and three held out, reported apart), the grid saved as .npy, then each process run once under
@@ -42,15 +42,23 @@ def instructions(argv: list[str]) -> int:
 
 def pair(spec: str, tmp: Path) -> dict:
     name, _, label = spec.partition(":")
-    grid = D.load(name)
-    zeta = dict(Q.zetas(grid)).get(label)
-    if zeta is None:
-        raise SystemExit(f"error: {spec}: no such error for {name}; have {', '.join(dict(Q.zetas(grid)))}")
+    if label.endswith("^2") and label[:-2].isdigit():  # NAME:2048^2: bench_big.py's grid and error
+        import bench_big as B
+
+        values, _ = B.make_grid(name, int(label[:-2]))
+        zeta, held = B.FRACTION * float(values.max() - values.min()), name in B.HELD_OUT
+    else:
+        grid = D.load(name)
+        zeta = dict(Q.zetas(grid)).get(label)
+        if zeta is None:
+            have = ", ".join(dict(Q.zetas(grid)))
+            raise SystemExit(f"error: {spec}: no such error for {name}; have {have}")
+        values, held = grid.values, name in Q.HELD_OUT
     npy = tmp / f"{name}.npy"
-    np.save(npy, grid.values)
+    np.save(npy, values)
     wm = instructions(P.wavemesh_argv(str(npy), zeta, str(tmp / "wm.obj")))
     pd = instructions(P.peer_argv(str(npy), zeta, str(tmp / "pd.obj")))
-    return {"pair": f"{name} {label}", "held_out": name in Q.HELD_OUT, "wavemesh": wm, "pydelatin": pd}
+    return {"pair": f"{name} {label}", "held_out": held, "wavemesh": wm, "pydelatin": pd}
 
 
 def main(argv: list[str]) -> int:
