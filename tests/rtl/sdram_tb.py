@@ -530,7 +530,9 @@ async def test_cpu_port(dut):
     for k in range(4):
         last.append((await tb.cpu(join(6, 2, LINE_HW * k + LINE_HW - 2) << 1))[1])   # other lines
         await tb.cycles(LINE_HW + 4)
-    assert max(first[1:]) + 4 <= min(last[1:]), (first, last)          # [0]: the row was closed
+    # [0]: the row was closed; a refresh may fall into one of the others (at 40 MHz its 312-cycle
+    # interval met the second first-word miss: 15 cycles, the others 9): the middle of three
+    assert sorted(first[1:])[1] + 4 <= sorted(last[1:])[1], (first, last)
     await tb.cycles(LINE_HW + 4)
     hits = [(await tb.cpu((join(5, 2, 64) + 2 * w) << 1))[1] for w in range(4)]
     assert hits == [2, 2, 2, 2], hits

@@ -1,9 +1,9 @@
 """rtl/sdram_ctrl.v (with sdram_cache.v and wm_fifo.v) against a behavioural SDRAM that checks the
 datasheet's timings, and a scoreboard of every datum (bench: sdram_tb.py).
 
-Two builds: the ULX3S's 25 MHz board clock with CAS latency 2 (most timings are one cycle there)
-and the default cache (16 lines of 4 words), and 125 MHz with CAS latency 3, where tRCD, tRP, tRAS,
-tRC, tRFC, tWR, tRRD and the read-to-write turnaround take several cycles each, with a larger cache
+Two builds: the ULX3S SoC's clock (memmap.CLK_HZ) with its CAS latency (most timings are one or two
+cycles there) and the default cache (16 lines of 4 words), and 125 MHz with CAS latency 3, where tRCD,
+tRP, tRAS, tRC, tRFC, tWR, tRRD and the read-to-write turnaround take several cycles each, with a larger cache
 (64 lines of 8 words, lines across two banks); the second also shows that the chip model catches a
 controller that is too fast for it.
 """
@@ -14,7 +14,7 @@ from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / "sdram_ctrl.v", RTL / "sdram_cache.v", RTL / "wm_fifo.v"]
 # (CLK_HZ, CAS_LATENCY, CACHE_LINES, LINE_WORDS)
-CONFIGS = [(25_000_000, 2, 16, 4), (125_000_000, 3, 64, 8)]
+CONFIGS = [(memmap.CLK_HZ, memmap.SDRAM_CAS_LATENCY, 16, 4), (125_000_000, 3, 64, 8)]
 
 
 @pytest.mark.parametrize("clk_hz,cl,lines,words", CONFIGS,
