@@ -46,10 +46,8 @@ def tune_malloc() -> None:
     if _TUNED:
         return
     _TUNED.append(True)
-    try:
-        from numpy._core import multiarray  # numpy 2
-    except ImportError:
-        from numpy.core import multiarray
+    from numpy._core import multiarray  # private to numpy (2, pinned): read only where tiles run
+
     getattr(multiarray, "_set_madvise_hugepage", lambda _: None)(False)
     if not sys.platform.startswith("linux"):
         return
