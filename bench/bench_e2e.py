@@ -4,11 +4,11 @@
 Board seconds = line time + job time.  Line time: the session's bytes both ways (the samples as the host
 codes them in DATA frames, every level's stream in MESH frames as the device codes them, the small frames:
 HELLO, CONFIG, RUN, ACKs, DONE; counted by the real encoder and framing, bench/bench_link.py's functions,
-on a clean line) x 10 bits / the rate the board reaches, clk_hz / round(clk_hz / baud) (at 25 MHz 3.125
-Mbaud for 3,000,000).  The receive stage runs within it (the upload block checks and stores the samples
-as they arrive: about 13 cycles a sample, "The link" below), and so does sending the level streams.  Job
-time: the job's own cycles (filter, template, refine and emit: the FPGA stage, the refiner on the soft
-CPU, building the level streams) at the board clock, from the cost model of "The whole job on the
+on a clean line) x 10 bits / the rate the board reaches, clk_hz / round(clk_hz / baud) (at 30 MHz
+3 Mbaud exactly for 3,000,000).  The receive stage runs within it (the upload block checks and stores
+the samples as they arrive: about 13 cycles a sample, "The link" below), and so does sending the level
+streams.  Job time: the job's own cycles (filter, template, refine and emit: the FPGA stage, the refiner
+on the soft CPU, building the level streams) at the board clock, from the cost model of "The whole job on the
 simulated board" (bench/bench_soc.py's last run, bench/results/soc.json): its measured cases' work cycles
 per input sample times the input's samples, the median case's (in brackets the cheapest and the dearest
 case's).  The jobs themselves are not simulated here: at these cycle counts one would take the

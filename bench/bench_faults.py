@@ -9,8 +9,8 @@ socket's: an injected delay holds the line for up to 0.3 s whatever its rate, an
 delays alone (some 20 s a run at 0.2 %) are twenty times the fault-free second.  A smaller set on the
 unpaced socket shows that floor.  The 3 Mbaud sets: wmdev paced at 115200 baud and switched by the
 host (`--link-baud 3000000`), and the simulated board (wmsim without --fast: every byte bit by bit over
-the UART pins, the upload block in the path) switched to its nearest rate, 3.125 Mbaud (divisor 8 at
-25 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the template
+the UART pins, the upload block in the path) switched to its nearest rate, 3 Mbaud (divisor 10 at
+30 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the template
 stage alone; the simulator runs about a hundredth of the board's speed on a loaded machine) and the
 host's timeouts for the simulator (harness.simboard.SIM_TIMEOUTS).  A fault that hits the switch
 leaves the job at the start rate with one warning line (the run still counts by its mesh).  Each run
@@ -42,7 +42,7 @@ OPTS = ["--key", "elevation", "--crop", "0,0,200,200", "--zeta", "4"]
 DEVICE = ["--tri-capacity", "200000", "--quiet"]
 UART = 115200
 LINK_3M = ["--link-baud", "3000000"]
-# the board: its rate nearest to 3 Mbaud (3,000,000 itself is 4.2 % off, which the host refuses)
+# the board: its rate nearest to 3 Mbaud (3,000,000 exactly at 30 MHz: _board_rate)
 BOARD_OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 DEADLINE = 300  # s: --deadline of the 1 % set
 GRACE = 5.0  # s past the deadline that still counts as "at the deadline" (the process's own ending)
@@ -57,8 +57,8 @@ SETS = [
     ("0.2 %, socket", 0, 0.002, 5, 6000, [], 1),
     ("fault-free, 3 Mbaud", UART, 0.0, 3, 0, LINK_3M, 1),
     ("0.2 %, 3 Mbaud", UART, 0.002, 20, 3000, LINK_3M, 2),
-    ("fault-free, board at 3.125 Mbaud", "board", 0.0, 2, 0, [], 1),
-    ("0.2 %, board at 3.125 Mbaud", "board", 0.002, 20, 5000, [], 3),
+    ("fault-free, board at 3 Mbaud", "board", 0.0, 2, 0, [], 1),
+    ("0.2 %, board at 3 Mbaud", "board", 0.002, 20, 5000, [], 3),
 ]
 RUN_LIMIT = 900.0  # s: longer counts as a hang
 
@@ -91,7 +91,7 @@ def _one_set(index: int, shard: int, out: Path) -> None:
                      "faults": r.injected, "frames": r.frames, "delay_s": round(r.delay_s, 3),
                      "message": r.message} for r in done]
             if board and rate == 0 and shard == 0:
-                # on a board that never switched: the one above keeps 3.125 Mbaud for BAUD_IDLE_MS after
+                # on a board that never switched: the one above keeps 3 Mbaud for BAUD_IDLE_MS after
                 # each run (75 million cycles, minutes of simulation), which a line at 115200 would not pass
                 dev.stop()
                 dev = _board()
@@ -128,7 +128,7 @@ def _board_rate() -> int:
 
 
 def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
-    """`--link-baud` to the board's 3.125 Mbaud through a line that stays at the start rate: the host's
+    """`--link-baud` to the board's 3 Mbaud through a line that stays at the start rate: the host's
     port takes the new rate but the line never follows it, so nothing passes while the board runs at
     another rate (the OK to BAUD, sent at the old rate, excepted).  The host's proof fails, the board goes
     back after its probe window (BAUD_PROBE_MS of its clock, minutes of simulation: the host's HELLOs
@@ -234,9 +234,9 @@ def markdown(results: dict) -> str:
         "the line at the byte they strike.  *x fault-free*: the slowest run over the median fault-free run "
         "of the same device at the same rate; *delays*: the most that the injected delays held the line in "
         "one run.  *3 Mbaud*: wmdev paced at 115200 baud and switched by the host (`--link-baud 3000000`); "
-        "*board at 3.125 Mbaud*: the pin-accurate simulated board (every byte bit by bit over the UART pins, "
+        "*board at 3 Mbaud*: the pin-accurate simulated board (every byte bit by bit over the UART pins, "
         "through the upload block) switched to its nearest rate (`--link-baud "
-        f"{results.get('board_baud', 3125000)}`), with "
+        f"{results.get('board_baud', 3000000)}`), with "
         f"`{' '.join(results.get('board_options', BOARD_OPTS))}` "
         "(what the simulator, at about a hundredth of the board's speed, runs in seconds) and the host's "
         "timeouts for the simulator (harness.simboard.SIM_TIMEOUTS; its seconds are the simulator's, "

@@ -199,8 +199,9 @@ def markdown(r: dict) -> str:
                 f"simulated board in fast mode, a {SIDE_RX} x {SIDE_RX} terrain, `--stage initial`: DONE's "
                 "cycles_receive, the host's turnaround included).  The upload block (rtl/upload_rx.v) checks "
                 "the frames and stores the samples, Rice-coded ones too, as they arrive, so the board takes "
-                "coded samples and a window of 4 at every rate; at 25 MHz its nearest rate to 3 Mbaud is "
-                "3.125 Mbaud (divisor 8), the line time here is 3,000,000's.  The job's own cycles are in "
+                "coded samples and a window of 4 at every rate; its nearest rate to 3 Mbaud is clk_hz / "
+                "round(clk_hz / 3,000,000) (3 Mbaud exactly at 30 MHz), the line time here is 3,000,000's.  "
+                "The job's own cycles are in "
                 "\"End to end on the board\" above.",
                 "",
                 "| input | " + " | ".join(f"{b} baud s" for b in BAUDS) + " |",

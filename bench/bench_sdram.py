@@ -1,6 +1,6 @@
 """SDRAM controller (rtl/sdram_ctrl.v): cycles in simulation, resources and fmax on the ECP5-85F.
 
-Cycles: the cocotb bench tests/rtl/sdram_tb.py (test_bench_cycles) at the ULX3S's 25 MHz with CAS
+Cycles: the cocotb bench tests/rtl/sdram_tb.py (test_bench_cycles) at 25 MHz (the ULX3S's oscillator) with CAS
 latency 2, against its behavioural chip (every timing checked): a 16384-halfword stream write and
 read with the data always valid / ready, addressed writes of three interleaved sequences (as the
 filter bank's levels) each in a linear area (they meet in the banks as they advance) or each kept in
@@ -22,7 +22,7 @@ ROOT = BENCH.parent
 RTL = ROOT / "rtl"
 
 TITLE = "SDRAM controller (sdram_ctrl)"
-CLK_HZ, CL = 25_000_000, 2          # the ULX3S's board clock
+CLK_HZ, CL = 25_000_000, 2  # the bench's fixed clock, for comparable figures (the SoC: memmap.CLK_HZ)
 PARAMS = {"CLK_HZ": CLK_HZ, "CAS_LATENCY": CL}
 SOURCES = [RTL / "sdram_ctrl.v", RTL / "sdram_cache.v", RTL / "wm_fifo.v"]
 TARGET = "ecp5-85k"

@@ -6,7 +6,7 @@ without reading); the next client is served.  Frames longer than the stated max_
 STATUS or ACK of the wrong length during a job, get BAD_LENGTH without ending anything.  A device
 killed in the middle of a job (the native device; the simulated board, marked `sim`) ends `wavemesh
 stream` with one clear error at once (the connection breaks), with no output file, and the next run
-against a restarted device gives the reference mesh (the board: pin-accurate, at 3.125 Mbaud).
+against a restarted device gives the reference mesh (the board: pin-accurate, at 3 Mbaud).
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ def _board_budget() -> int:
 @pytest.mark.sim
 def test_simulated_board_killed_mid_job(start_sim, firmware_hex, tmp_path, monkeypatch):
     """The pin-accurate board (every byte over the UART pins) switched to its rate nearest to 3 Mbaud
-    (3.125 Mbaud), killed when its first MESH frame passes."""
+    (3 Mbaud), killed when its first MESH frame passes."""
     from wavemesh.device import memmap
     from wavemesh.harness.simboard import SIM_TIMEOUTS
 

@@ -192,7 +192,7 @@ def test_pin_accurate_mode_gives_the_same_mesh_and_cycles(sim_exe, firmware_hex,
     # interval by interval: every stretch of a stage's clock between two switches is the same
     assert_same_trace(pin_trace, fast_trace)
     dev = pin["device"]
-    byte_cycles = 10 * dev["clk_hz"] // dev["baud"]  # 2170 at 25 MHz and 115200 baud
+    byte_cycles = 10 * dev["clk_hz"] // dev["baud"]  # 2600 at 30 MHz and 115200 baud
     mesh_bytes = pin["transfer"]["mesh_bytes"]
     assert pin["device_cycles"]["link"] >= byte_cycles * mesh_bytes
     assert fast["device_cycles"]["link"] < byte_cycles * mesh_bytes
@@ -201,8 +201,8 @@ def test_pin_accurate_mode_gives_the_same_mesh_and_cycles(sim_exe, firmware_hex,
 
 
 def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs, tmp_path, sim_timeouts):
-    """The tiny job bit by bit after `--link-baud` to the board's nearest rate to 3 Mbaud (divisor 8 at
-    25 MHz: 3.125 Mbaud; 3,000,000 itself is 4.2 % off, which the host refuses): the same mesh as
+    """The tiny job bit by bit after `--link-baud` to the board's nearest rate to 3 Mbaud (divisor 10 at
+    30 MHz: 3 Mbaud exactly): the same mesh as
     `wavemesh mesh`, the same stage cycles as the fast mode's, and the link's cycles hold the line time
     of the mesh bytes at the new rate, less than a 115200-baud byte each.  Then, at that rate (the board
     keeps it for BAUD_IDLE_MS, tens of seconds of simulation): garbage on the line and a clean job again.

@@ -2,7 +2,7 @@
 
 One board (wmsim without --fast: every byte goes bit by bit over the UART pins at the board's current
 divisor, through the upload block, rtl/upload_rx.v) is switched by `--link-baud` (or
-Device.change_baud) to its nearest rate to 3 Mbaud: divisor 8 at 25 MHz, 3.125 Mbaud.  At that rate:
+Device.change_baud) to its nearest rate to 3 Mbaud: divisor 10 at 30 MHz, 3 Mbaud exactly.  At that rate:
 
 - seeded corruption, loss, duplication and delays both ways (wavemesh.harness.faultproxy): the
   reference mesh or one clear error line, the board serving a clean request afterwards;
@@ -38,7 +38,7 @@ from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
 
 pytestmark = pytest.mark.sim
 
-RATE = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))  # 3,125,000 at 25 MHz
+RATE = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))  # 3,000,000 at 30 MHz
 OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 LINK = ["--link-baud", str(RATE)]
 RUN_LIMIT = 600.0  # s: a run that takes longer counts as a hang
@@ -65,7 +65,7 @@ def sim_timeouts(monkeypatch):
 
 
 def clean_run(board, job, tmp: Path) -> dict:
-    """A job without faults at 3.125 Mbaud: the reference mesh; the report."""
+    """A job without faults at RATE: the reference mesh; the report."""
     src, ref = job
     out = tmp / "clean.obj"
     rc, _, err = run_cli("stream", str(src), *OPTS, *LINK, "--port", board.url, "-o", str(out), "--report",
@@ -79,13 +79,13 @@ def clean_run(board, job, tmp: Path) -> dict:
 
 # One seed with at most 3 faults a direction (a lost LEVEL_END or ACK costs the board's ACK_TIMEOUT_MS,
 # 12.5 million cycles, a minute of simulation on a loaded machine); seed 2's fall on the HELLO_REPLY at
-# the start rate, on three DATA frames at 3.125 Mbaud (two dropped runs and a duplicated one: the upload
+# the start rate, on three DATA frames at RATE (two dropped runs and a duplicated one: the upload
 # block's checks and the host's go-back) and the level stream.  make bench-faults runs 20 seeds at 0.2 %
 # without a bound.
 @pytest.mark.parametrize("seed", [2])
 def test_faults_at_3_mbaud(seed, board, job, tmp_path):
     """Seeded corruption, loss and duplication both ways, after the switch too: the reference mesh, or
-    one clear error line; the board then serves a clean request at 3.125 Mbaud."""
+    one clear error line; the board then serves a clean request at RATE."""
     src, ref = job
     out = tmp_path / "out.obj"
     faults = Faults(seed=seed, rate=0.004, limit=3, run=48, max_delay=0.2)

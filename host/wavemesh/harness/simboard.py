@@ -29,7 +29,7 @@ build = _load_sim_build()
 # Host timeouts for the simulated board: it runs at a tenth of the board's speed, far less on a loaded
 # machine, and a level of the refiner takes it minutes then (job: the longest silence, not a bound on
 # the job).  sync: in pin-accurate mode a HELLO and its answer are some 92 bytes on the line, 320 k
-# cycles at 40 MHz and 115200 baud (3470 cycles a byte; 200 k at 25 MHz), two seconds of a simulator
+# cycles at 40 MHz and 115200 baud (3470 cycles a byte; 240 k at 30 MHz), two seconds of a simulator
 # slowed to 170 kHz
 # by a loaded machine (measured), more with a CPU hog beside it (4 s each was not enough at a load of
 # 15 on two cores): 8 s each; reply likewise (RUN's answer did not come in 12 tries of 5 s there).
