@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from jobs import REFUSED_IN_A_JOB, run_with_payloads  # tests/sim/jobs.py
 from wavemesh import cli
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
@@ -125,29 +126,9 @@ def test_lengths_are_checked_against_max_payload_and_during_a_job(wmdev_exe):
             assert f.fields()["code"] == P.ErrorCode.BAD_LENGTH and f.fields()["detail"] == 300
             # during a job: ABORT, STATUS and ACK with a payload get BAD_LENGTH, the job goes on
             a = np.arange(64 * 64, dtype=np.uint16).reshape(64, 64) * 7
-            host.configure(S.config_payload(64, 64, 3, 10, _fixed()))
-            host.upload(a)
-            got, seen = [], []
-            read = host.link.read_frame
-
-            def read_and_keep(timeout):
-                f = read(timeout)
-                seen.append(f)
-                return f
-
-            host.link.read_frame = read_and_keep
-
-            def on_level(lv):
-                if not got:
-                    for t in (P.FrameType.ABORT, P.FrameType.STATUS, P.FrameType.ACK):
-                        host.link.write_frame(t, 200 + t, b"\x01")
-                got.append(lv)
-
-            levels, done = host.run(S.samples_crc(a), 64, 64, on_level=on_level)
+            levels, done, refused = run_with_payloads(host, a, 3, _fixed())
             assert done["status"] == 0 and len(levels) == 3
-            refused = {f.seq - 200: f.fields()["code"] for f in seen if f.type == P.FrameType.ERROR}
-            assert refused == {t: P.ErrorCode.BAD_LENGTH for t in (P.FrameType.ABORT, P.FrameType.STATUS,
-                                                                   P.FrameType.ACK)}
+            assert refused == dict.fromkeys(REFUSED_IN_A_JOB, P.ErrorCode.BAD_LENGTH)
     finally:
         dev.stop()
 

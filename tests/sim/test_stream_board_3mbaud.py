@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from jobs import REFUSED_IN_A_JOB, run_with_payloads  # tests/sim/jobs.py
 from wavemesh.device import memmap
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
@@ -145,26 +146,6 @@ def test_lengths_are_checked_at_3_mbaud(board):
         assert (f.type, f.seq) == (P.FrameType.STATUS_REPLY, 8)
         a = (np.arange(12 * 10, dtype=np.uint16).reshape(10, 12) * 37) % 4001
         fixed = fixed_params(RefineParams(reduce=False, decimate=False), 1.0)
-        host.configure(S.config_payload(12, 10, 2, 10, fixed))
-        host.upload(a)
-        seen, got = [], []
-        read = host.link.read_frame
-
-        def read_and_keep(timeout):
-            f = read(timeout)
-            seen.append(f)
-            return f
-
-        host.link.read_frame = read_and_keep
-
-        def on_level(lv):
-            if not got:
-                for t in (P.FrameType.ABORT, P.FrameType.STATUS, P.FrameType.ACK):
-                    host.link.write_frame(t, 200 + t, b"\x01")
-            got.append(lv)
-
-        levels, done = host.run(S.samples_crc(a), 12, 10, on_level=on_level)
+        levels, done, refused = run_with_payloads(host, a, 2, fixed)
         assert done["status"] == 0 and len(levels) == 2
-        refused = {f.seq - 200: f.fields()["code"] for f in seen if f.type == P.FrameType.ERROR}
-        assert refused == {t: P.ErrorCode.BAD_LENGTH for t in (P.FrameType.ABORT, P.FrameType.STATUS,
-                                                               P.FrameType.ACK)}
+        assert refused == dict.fromkeys(REFUSED_IN_A_JOB, P.ErrorCode.BAD_LENGTH)
