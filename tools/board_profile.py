@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
             subprocess.run([str(VENV_BIN / "wavemesh"), "mesh", args.input, *stream_opts, "-o", str(soft),
                             "-q"], check=True)
             same = soft.read_bytes() == (Path(tmp) / "out.obj").read_bytes()
-        hist = [(int(a, 16), int(c)) for a, c in (ln.split() for ln in prof.read_text().splitlines())]
+        hist = _histogram(prof)
         rep = json.loads(report.read_text())
         stages = rep["device_cycles"]
         if args.data:
@@ -91,15 +91,10 @@ def main(argv: list[str] | None = None) -> int:
                     for ln in Path(str(prof) + ".data").read_text().splitlines()]
             areas = _areas(rep, elf)
         ibus_file = Path(str(prof) + ".ibus")
-        ibus = ([(int(a, 16), int(c)) for a, c in (ln.split() for ln in ibus_file.read_text().splitlines())]
-                if ibus_file.exists() else None)
+        ibus = _histogram(ibus_file) if ibus_file.exists() else None
         syms = _symbols(elf)
     addrs = [a for a, _ in syms]
-    per: dict[str, int] = {}
-    for pc, cyc in hist:
-        i = bisect.bisect_right(addrs, pc) - 1
-        name = syms[i][1] if i >= 0 else "?"
-        per[name] = per.get(name, 0) + cyc
+    per = _by_function(hist, syms, addrs)
     total = sum(per.values())
     print(f"{total:,} cycles")
     print("stages (DONE's counters): "
@@ -114,6 +109,22 @@ def main(argv: list[str] | None = None) -> int:
     if args.data:
         _data_report(data, areas, total)
     return 0
+
+
+def _histogram(path: Path) -> list[tuple[int, int]]:
+    """(address, cycles) from a profile file's "HEXADDR COUNT" lines."""
+    return [(int(a, 16), int(c)) for a, c in (ln.split() for ln in path.read_text().splitlines())]
+
+
+def _by_function(hist: list[tuple[int, int]], syms: list[tuple[int, str]],
+                 addrs: list[int]) -> dict[str, int]:
+    """The cycles of (address, cycles) pairs summed by the function the address is in ("?": before all)."""
+    per: dict[str, int] = {}
+    for pc, cyc in hist:
+        i = bisect.bisect_right(addrs, pc) - 1
+        name = syms[i][1] if i >= 0 else "?"
+        per[name] = per.get(name, 0) + cyc
+    return per
 
 
 def _per_unit(rep: dict) -> list[tuple[str, float, str]]:
@@ -146,11 +157,7 @@ def _refiner_struct_bytes() -> int:
 def _ibus_report(ibus: list[tuple[int, int]], syms: list[tuple[int, str]], addrs: list[int], total: int,
                  top: int) -> None:
     """The cycles instruction fetches waited (the VexRiscv's cache refills), by the function fetched."""
-    per: dict[str, int] = {}
-    for line, cyc in ibus:
-        i = bisect.bisect_right(addrs, line) - 1
-        name = syms[i][1] if i >= 0 else "?"
-        per[name] = per.get(name, 0) + cyc
+    per = _by_function(ibus, syms, addrs)
     n = sum(per.values())
     print(f"\ninstruction fetches: {n:,} cycles waited for memory ({100 * n / total:.2f} % of all), "
           "by the function at the start of the line fetched")
