@@ -351,7 +351,7 @@ class _Schedule:
         if worker is not None:  # the first all its own (the scan stops there), else the first with one
             some = None
             for j, (_, i) in enumerate(self.ready):
-                mine = [self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[i].tiles]
+                mine = [self._mine(t, worker) for t in self.nodes[i].tiles]
                 if all(mine):
                     k = j
                     break
@@ -359,8 +359,7 @@ class _Schedule:
                     some = j
             else:
                 k = 0 if some is None else some
-            for t in self.nodes[self.ready[k][1]].tiles:
-                self.owner.setdefault(t, worker)
+            self._claim(self.ready[k][1], worker)
         return self.ready.pop(k)[1]
 
     def follower(self, i: int, worker: int) -> int | None:
@@ -369,14 +368,22 @@ class _Schedule:
         best = None
         for u in self.users[i]:
             if self.waiting[u] == 1 and not self.chained[u] and all(
-                    self.owner.get(t, self.homes.get(t, worker)) == worker for t in self.nodes[u].tiles):
+                    self._mine(t, worker) for t in self.nodes[u].tiles):
                 if best is None or (self.nodes[u].rank, u) < (self.nodes[best].rank, best):
                     best = u
         if best is not None:
             self.chained[best] = True
-            for t in self.nodes[best].tiles:
-                self.owner.setdefault(t, worker)
+            self._claim(best, worker)
         return best
+
+    def _mine(self, tile, worker: int) -> bool:
+        """Whether ``tile`` is the worker's: it read it first, or nobody did and it is the tile's home."""
+        return self.owner.get(tile, self.homes.get(tile, worker)) == worker
+
+    def _claim(self, i: int, worker: int) -> None:
+        """Node ``i``'s tiles that nobody read yet: the worker's from now on (it reads them)."""
+        for t in self.nodes[i].tiles:
+            self.owner.setdefault(t, worker)
 
     def finished(self, i: int) -> None:
         for u in self.users[i]:
