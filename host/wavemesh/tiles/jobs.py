@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections import OrderedDict
@@ -31,7 +30,7 @@ from wavemesh.tiles.sides import (
     side_profile,
     thin_side,
 )
-from wavemesh.tiles.source import Source, light_source, strip_error, strip_tasks
+from wavemesh.tiles.source import Source, file_identity, light_source, strip_error, strip_tasks
 
 # ---------------------------------------------------------------------------------------------------
 # One tile's jobs: free (step 3), conformed to its reconciled sides (steps 4 and 5), thinned (step 6)
@@ -102,10 +101,9 @@ def _cache_key(plan: TilePlan, t: Tile, window: np.ndarray | None) -> tuple | No
     if window is not None or src.kind == "array" or src.path is None \
             or 10 * t.width * t.height > TILE_CACHE_BYTES // 6:
         return None
-    st = os.stat(src.path)
     quant = plan.quant  # its q aside: the samples do not depend on it (tile_graph may find it later)
     return (src, quant.scale, quant.offset, quant.exact, plan.spacing, t.x, t.y, t.width, t.height,
-            (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns))
+            file_identity(src.path))
 
 
 def forget_tile(plan: TilePlan, index: int) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -153,11 +154,17 @@ def _npy_map(path) -> np.ndarray:
     8192^2 in tiles of 1025, one worker: 2.2 s of system time and 7.5 s wall with a mapping per read,
     0.6 s and 5.7 s with this one).  One file at a time (a long-lived process, a Dask worker, holds no
     other input's mapping); a file replaced under the same name is mapped anew."""
-    st = Path(path).stat()
-    key = (str(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    key = (str(path), file_identity(path))
     if not _NPY_MAP or _NPY_MAP[0][0] != key:
         _NPY_MAP[:] = [(key, np.load(path, mmap_mode="r", allow_pickle=False))]
     return _NPY_MAP[0][1]
+
+
+def file_identity(path) -> tuple[int, int, int, int]:
+    """The file at ``path`` as the caches of its reads tell it apart (device, inode, size, modification
+    time): a file replaced under the same name is another."""
+    st = os.stat(path)
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
 def light_source(src: Source) -> Source:
