@@ -3,8 +3,9 @@
  *
  * The CPU is the IMAC VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv_IMAC.v, never copied
  * here; its module is VexRiscv, as in the package's other variants): RV32IMAC, 5 stages, 4 KiB
- * instruction cache, 4 KiB write-through data cache, one-cycle multiplier, 33-cycle divider.  soc_top instantiates this module instead of picorv32 when
- * WM_CPU_VEXRISCV is defined (host/wavemesh/device/soc_cpu.py chooses; docs/soc.md, "The CPU").
+ * instruction cache, 4 KiB write-through data cache, one-cycle multiplier, 33-cycle divider.  soc_top
+ * instantiates this module instead of picorv32 when WM_CPU_VEXRISCV is defined
+ * (host/wavemesh/device/soc_cpu.py chooses; docs/soc.md, "The CPU").
  *
  * Its two Wishbone buses use classic cycles; the caches refill 32-byte lines as bursts of 8 words, one
  * word per ACK.  The data bus is the native bus: mem_valid, mem_addr, mem_wdata, mem_wstrb are its
