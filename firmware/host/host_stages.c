@@ -275,6 +275,23 @@ static void local_free(struct local *l)
     free(l->tri_old);
 }
 
+/* out = the v indices in (NULL: 0 .. v - 1) stably sorted by c[index * stride] clamped into [0, n - 1]: a
+ * counting sort, start (n + 1 entries) its scratch. */
+static void by_coord(const int64_t *c, int64_t stride, int64_t n, int64_t v, const int32_t *in, int32_t *out,
+                     int64_t *start)
+{
+    for (int64_t i = 0; i <= n; i++) start[i] = 0;
+    for (int64_t i = 0; i < v; i++) {
+        int64_t k = c[i * stride];
+        start[(k < 0 ? 0 : k > n - 1 ? n - 1 : k) + 1]++;
+    }
+    for (int64_t i = 0; i < n; i++) start[i + 1] += start[i];
+    for (int64_t i = 0; i < v; i++) {
+        int64_t o = in != NULL ? in[i] : i, k = c[o * stride];
+        out[start[k < 0 ? 0 : k > n - 1 ? n - 1 : k]++] = (int32_t)o;
+    }
+}
+
 /* Vertex i at (x[i * stride], y[i * stride]), height z[i] (z may be NULL); v vertices, or -1: as many as
  * the triangles name.  0 with *l filled; -1 (nothing kept) when an index is out of range, the counts are
  * beyond int32 or memory is short: the caller then works in the numbering given. */
@@ -307,26 +324,8 @@ static int local_order(const int64_t *x, const int64_t *y, int64_t stride, const
     if (ok) {
         /* the vertices by column, then (stable) by row: two counting sorts, coordinates clamped into the
          * grid (a vertex outside it only sorts at its edge) */
-        for (int64_t i = 0; i <= width; i++) start[i] = 0;
-        for (int64_t i = 0; i < v; i++) {
-            int64_t c = x[i * stride];
-            start[(c < 0 ? 0 : c > width - 1 ? width - 1 : c) + 1]++;
-        }
-        for (int64_t i = 0; i < width; i++) start[i + 1] += start[i];
-        for (int64_t i = 0; i < v; i++) {
-            int64_t c = x[i * stride];
-            tmp[start[c < 0 ? 0 : c > width - 1 ? width - 1 : c]++] = (int32_t)i;
-        }
-        for (int64_t i = 0; i <= height; i++) start[i] = 0;
-        for (int64_t i = 0; i < v; i++) {
-            int64_t r = y[i * stride];
-            start[(r < 0 ? 0 : r > height - 1 ? height - 1 : r) + 1]++;
-        }
-        for (int64_t i = 0; i < height; i++) start[i + 1] += start[i];
-        for (int64_t i = 0; i < v; i++) {
-            int64_t r = y[(int64_t)tmp[i] * stride];
-            order[start[r < 0 ? 0 : r > height - 1 ? height - 1 : r]++] = tmp[i];
-        }
+        by_coord(x, stride, width, v, NULL, tmp, start);
+        by_coord(y, stride, height, v, tmp, order, start);
         for (int64_t i = 0; i < v; i++) {
             int64_t o = order[i];
             inv[o] = (int32_t)i;
