@@ -16,6 +16,7 @@ with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
 
 from __future__ import annotations
 
+import functools
 import os
 import resource
 import sys
@@ -26,8 +27,7 @@ from wavemesh import cli
 from wavemesh.tiles import jobs, runner
 
 READS = [0]
-_READER = "_tile_heightfield" if hasattr(jobs, "_tile_heightfield") else "tile_heightfield"  # or no cache
-_read = getattr(jobs, _READER)
+_read = jobs._tile_heightfield  # the reads tile_heightfield's cache missed
 
 
 def _counted(*args):
@@ -35,7 +35,7 @@ def _counted(*args):
     return _read(*args)
 
 
-setattr(jobs, _READER, _counted)  # before the pool forks: the workers count their own
+jobs._tile_heightfield = _counted  # before the pool forks: the workers count their own
 
 
 def timed(fn, *args):
@@ -52,31 +52,13 @@ def _result(r):
     return r[0]
 
 
-def _picked(pick):
-    """pick of a timed result (a module-level function per pick, for Dask's pickling)."""
-    return _PICKS[pick]
+def _picked(pick, r):
+    """pick of a timed result (as functools.partial(_picked, pick): it pickles, for the pool and Dask)."""
+    return pick(r[0])
 
 
-def _top(r):
-    return r[0].sides["top"]
-
-
-def _right(r):
-    return r[0].sides["right"]
-
-
-def _bottom(r):
-    return r[0].sides["bottom"]
-
-
-def _left(r):
-    return r[0].sides["left"]
-
-
-_PICKS = {getattr(jobs, f"_side_{k}", k): f for k, f in
-          (("top", _top), ("right", _right), ("bottom", _bottom), ("left", _left))}
 LOG: list = []  # (part, start, end, [(step, info)])
-_map, _graph = runner.Runner.map, getattr(runner.Runner, "graph", None)  # no graph: every step a map
+_map, _graph = runner.Runner.map, runner.Runner.graph
 
 
 def _timed_map(self, fn, tasks, done=None):
@@ -89,7 +71,7 @@ def _timed_map(self, fn, tasks, done=None):
 def _timed_graph(self, nodes, done=None, homes=None, shared=()):
     def wrap(a):
         if isinstance(a, runner.Ref):
-            return runner.Ref(a.node, _picked(a.pick) if a.pick else _result)
+            return runner.Ref(a.node, functools.partial(_picked, a.pick) if a.pick else _result)
         return a
 
     wrapped = [runner.Node(timed, (n.fn, *map(wrap, n.args)), n.rank, n.tiles) for n in nodes]
@@ -127,8 +109,7 @@ def simulate(nodes, homes: dict, cost: list, workers: int) -> float:
 
 def main(argv: list[str]) -> int:
     runner.Runner.map = _timed_map
-    if _graph is not None:
-        runner.Runner.graph = _timed_graph
+    runner.Runner.graph = _timed_graph
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
     t0, c0 = time.perf_counter(), os.times()
     rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
