@@ -61,6 +61,11 @@ def make_grid(name: str, n: int) -> tuple[np.ndarray, str]:
     return mirror_tile(g.values, n), f"{name} ({g.shape[1]} x {g.shape[0]}, {g.kind}) mirror-tiled"
 
 
+def zeta_of(z: np.ndarray) -> float:
+    """E: FRACTION of the grid's height range."""
+    return FRACTION * float(z.max() - z.min())
+
+
 # A small launcher between this process and the measured one: a child's ru_maxrss starts from its
 # parent's resident size when it is forked (Linux keeps the high-water mark across exec), and this
 # process holds the grids; the launcher (a bare interpreter, ~10 MiB) forks, execs, reaps with os.wait4 and
@@ -111,7 +116,7 @@ def _summary(runs: list[dict]) -> dict:
 
 def run_grid(name: str, n: int, tmp: Path, runs: int = RUNS) -> dict:
     z, made = make_grid(name, n)
-    zeta = FRACTION * float(z.max() - z.min())
+    zeta = zeta_of(z)
     npy = tmp / f"{name}-{n}.npy"
     np.save(npy, z)
     outs = {k: tmp / f"{k}.obj" for k in ("wavemesh", "pydelatin", "threads1")}

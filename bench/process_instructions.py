@@ -46,7 +46,7 @@ def pair(spec: str, tmp: Path) -> dict:
         import bench_big as B
 
         values, _ = B.make_grid(name, int(label[:-2]))
-        zeta, held = B.FRACTION * float(values.max() - values.min()), name in B.HELD_OUT
+        zeta, held = B.zeta_of(values), name in B.HELD_OUT
     else:
         grid = D.load(name)
         zeta = dict(Q.zetas(grid)).get(label)
