@@ -206,6 +206,17 @@ static uint32_t scale_inv(const wm_params *p, uint64_t X)
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
+/* The bound of a swap whose old triangles have E(T) e1 and e2 (try_swap): the mesh's E_max when the
+ * sweep began, with the levels alone max(zeta, e1, e2). */
+static uint32_t swap_bound(const wm_refiner *r, uint32_t emax, uint32_t e1, uint32_t e2)
+{
+    uint32_t b = r->params.zeta;
+    if (!(r->params.flags & WM_FLAG_NO_BOUND)) return emax;
+    if (e1 > b) b = e1;
+    if (e2 > b) b = e2;
+    return b;
+}
+
 /* (px, py) in the closed counter-clockwise triangle. */
 static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
@@ -267,12 +278,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
      * makes E_max grow and each level's mesh stays a level of detail (unbounded, eq. 4.22 trades error
      * for angles: Box at k = 2 went from E_max 3.5 at level 2 to 200 at level 1); with the levels alone,
      * max(zeta, the pair's E(T)), the reduction's bound (docs/refiner.md). */
-    bnd = emax;
-    if (r->params.flags & WM_FLAG_NO_BOUND) {
-        bnd = r->params.zeta;
-        if (r->err[t1] > bnd) bnd = r->err[t1];
-        if (r->err[t2] > bnd) bnd = r->err[t2];
-    }
+    bnd = swap_bound(r, emax, oe1, oe2);
     if (alpha < 65536u) {
         uint64_t dmax, s1, s2;
         o1 = wm_scale_mul(&r->params, oe1, 1, 0, cap);
@@ -334,12 +340,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
      * whose E(T) and angles are known, so its answer is known now, exactly as try_swap would find it
      * (a smaller angle or E(T) for a rotation of the same corners is the same number). */
     {
-        uint32_t bb = emax, rb = 0;
-        if (r->params.flags & WM_FLAG_NO_BOUND) {
-            bb = r->params.zeta;
-            if (e1 > bb) bb = e1;
-            if (e2 > bb) bb = e2;
-        }
+        uint32_t bb = swap_bound(r, emax, e1, e2), rb = 0;
         if (oe1 > bb || oe2 > bb) back = 0;
         else {
             if (alpha > 0) rb = ratio_q16((uint64_t)ang_old, (uint64_t)(an1 < an2 ? an1 : an2));
