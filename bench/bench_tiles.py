@@ -527,7 +527,7 @@ def _child(args: list[str]) -> str:
 if __name__ == "__main__":
     if sys.argv[1:2] == ["dems"]:
         print(json.dumps(dem_overhead()))
-    if sys.argv[1:2] == ["one"]:
+    elif sys.argv[1:2] == ["one"]:
         n, tile, workers, untiled = (int(a) for a in sys.argv[2:6])
         print(json.dumps(one(n, tile, workers, bool(untiled), *sys.argv[6:8])))
     elif sys.argv[1:2] == ["pair"]:  # 1 worker against w, whole `wavemesh mesh` processes in turn
@@ -540,7 +540,7 @@ if __name__ == "__main__":
         ap.add_argument("--runs", type=int, default=5)
         a = ap.parse_args(sys.argv[2:])
         sys.exit(0 if pair(a.n, a.tile, a.workers, a.runs)["same"] else 1)
-    elif sys.argv[1:2] != ["dems"]:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
+    else:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
         import argparse
 
         import run as bench_run
