@@ -57,11 +57,25 @@ static ALWAYS_INLINE uint32_t opaque(uint32_t q)
     return q;
 }
 
+/* One 16-bit digit of the quotient (divlu's step): (un * 2^16 + next) / (vn1 * 2^16 + vn0), the divisor
+ * normalised and the quotient below 2^16, estimated from vn1 and corrected at most twice. */
+static ALWAYS_INLINE uint32_t digit(uint32_t un, uint32_t next, uint32_t vn1, uint32_t vn0)
+{
+    const uint32_t b = 0x10000u;
+    uint32_t q = opaque(un / vn1), rhat = un - q * vn1;
+    while (q >= b || q * vn0 > b * rhat + next) {
+        q--;
+        rhat += vn1;
+        if (rhat >= b) break;
+    }
+    return q;
+}
+
 /* (u1 * 2^32 + u0) / v for u1 < v (so the quotient fits in 32 bits). */
 static ALWAYS_INLINE uint32_t div_64_32(uint32_t u1, uint32_t u0, uint32_t v)
 {
     const uint32_t b = 0x10000u;
-    uint32_t vn1, vn0, un32, un10, un1, un0, un21, q1, q0, rhat;
+    uint32_t vn1, vn0, un32, un10, un1, un0, un21, q1, q0;
     int s = clz32(v); /* v > u1 >= 0 */
     v <<= s;
     vn1 = v >> 16;
@@ -70,21 +84,9 @@ static ALWAYS_INLINE uint32_t div_64_32(uint32_t u1, uint32_t u0, uint32_t v)
     un10 = u0 << s;
     un1 = un10 >> 16;
     un0 = un10 & 0xFFFFu;
-    q1 = opaque(un32 / vn1);
-    rhat = un32 - q1 * vn1;
-    while (q1 >= b || q1 * vn0 > b * rhat + un1) {
-        q1--;
-        rhat += vn1;
-        if (rhat >= b) break;
-    }
+    q1 = digit(un32, un1, vn1, vn0);
     un21 = un32 * b + un1 - q1 * v;
-    q0 = opaque(un21 / vn1);
-    rhat = un21 - q0 * vn1;
-    while (q0 >= b || q0 * vn0 > b * rhat + un0) {
-        q0--;
-        rhat += vn1;
-        if (rhat >= b) break;
-    }
+    q0 = digit(un21, un0, vn1, vn0);
     return q1 * b + q0;
 }
 
