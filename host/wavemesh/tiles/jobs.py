@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import threading
 import time
 from collections import OrderedDict
@@ -252,23 +253,12 @@ def _window(plan: TilePlan, index: int) -> np.ndarray | None:
     return plan.source.read(t.x, t.y, t.width, t.height)
 
 
-def _side_top(free: FreeTile) -> tuple:
-    return free.sides["top"]
+def _side(side: str, free: FreeTile) -> tuple:
+    return free.sides[side]
 
 
-def _side_right(free: FreeTile) -> tuple:
-    return free.sides["right"]
-
-
-def _side_bottom(free: FreeTile) -> tuple:
-    return free.sides["bottom"]
-
-
-def _side_left(free: FreeTile) -> tuple:
-    return free.sides["left"]
-
-
-_SIDE_OF = {"top": _side_top, "right": _side_right, "bottom": _side_bottom, "left": _side_left}
+# a Ref's pick of a free mesh's side (partials of a module-level function: they pickle, for the pool and Dask)
+_SIDE_OF = {s: functools.partial(_side, s) for s in SIDES}
 
 
 def _largest(*errors: float) -> float:
