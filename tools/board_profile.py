@@ -102,8 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     print("per unit: " + ", ".join(f"{k} {v:,.1f} per {u}" for k, v, u in _per_unit(rep)))
     if same is not None:
         print("the mesh equals wavemesh mesh's" if same else "THE MESH DIFFERS from wavemesh mesh's")
-    for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: args.top]:
-        print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
+    _print_top(per, total, args.top)
     if ibus is not None:
         _ibus_report(ibus, syms, addrs, total, args.top)
     if args.data:
@@ -125,6 +124,12 @@ def _by_function(hist: list[tuple[int, int]], syms: list[tuple[int, str]],
         name = syms[i][1] if i >= 0 else "?"
         per[name] = per.get(name, 0) + cyc
     return per
+
+
+def _print_top(per: dict[str, int], total: int, top: int) -> None:
+    """The ``top`` functions of ``per`` by cycles, each with its share of ``total``."""
+    for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[:top]:
+        print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
 
 
 def _per_unit(rep: dict) -> list[tuple[str, float, str]]:
@@ -161,8 +166,7 @@ def _ibus_report(ibus: list[tuple[int, int]], syms: list[tuple[int, str]], addrs
     n = sum(per.values())
     print(f"\ninstruction fetches: {n:,} cycles waited for memory ({100 * n / total:.2f} % of all), "
           "by the function at the start of the line fetched")
-    for name, cyc in sorted(per.items(), key=lambda kv: -kv[1])[: min(top, 15)]:
-        print(f"{cyc:>14,} {100 * cyc / total:6.2f} %  {name}")
+    _print_top(per, total, min(top, 15))
 
 
 def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
