@@ -69,6 +69,8 @@ def _timed_map(self, fn, tasks, done=None):
 
 
 def _timed_graph(self, nodes, done=None, homes=None, shared=()):
+    if nodes and nodes[0].fn is timed:  # a map's tasks (Runner.map makes a graph of them), timed there
+        return _graph(self, nodes, done, homes, shared)
     def wrap(a):
         if isinstance(a, runner.Ref):
             return runner.Ref(a.node, functools.partial(_picked, a.pick) if a.pick else _result)

@@ -154,31 +154,9 @@ class Runner:
             self.client.close()
 
     def map(self, fn: Callable, tasks: Iterable[tuple], done: Callable | None = None) -> list:
-        """fn(*task) of every task, in task order; ``done(result)`` called as each finishes (any order)."""
-        tasks = list(tasks)
-        results: list = [None] * len(tasks)
-
-        def got(i: int, r) -> None:
-            results[i] = r
-            if done:
-                done(r)
-
-        self.n_maps += 1
-        if self.client is not None:
-            from distributed import as_completed  # with connect's package
-
-            key = f"wavemesh-{self.run_id}-{self.n_maps}"  # this run's tasks alone
-            futures = {self.client.submit(fn, *task, pure=False, key=f"{key}-{i}"): i
-                       for i, task in enumerate(tasks)}
-            for fut in as_completed(futures):
-                got(futures[fut], fut.result())
-        elif self.workers == 1 or len(tasks) == 1:
-            tune_malloc()
-            for i, task in enumerate(tasks):
-                got(i, fn(*task))
-        else:
-            self._pool_map(fn, tasks, got)
-        return results
+        """fn(*task) of every task, in task order; ``done(result)`` called as each finishes (any order): a
+        graph of nodes that wait for none."""
+        return self.graph([Node(fn, tuple(task)) for task in tasks], (lambda _, r: done(r)) if done else None)
 
     def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None,
               shared: tuple = ()) -> list:
@@ -227,7 +205,9 @@ class Runner:
             while (i := sched.take(None)) is not None:
                 got(i, nodes[i].fn(*_resolve(nodes[i], results)))
                 sched.finished(i)
-        else:
+        else:  # each worker's tasks and results through its own pipe; the parent has no threads of its own
+            # for them: a run that ends early kills its workers and returns at once (concurrent.futures'
+            # pool could wait forever at exit for a result a killed worker had half sent)
             self._start_pool()
             sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
             sent: list[deque] = [deque() for _ in self.pool]  # the nodes each worker has, in order
@@ -295,33 +275,6 @@ class Runner:
                 self.pool.append((proc, here))
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, held)
-
-    def _pool_map(self, fn, tasks: list, got) -> None:
-        """The tasks on the forked workers, one each at a time, each result through the worker's own pipe.
-        The parent has no threads of its own for them: a run that ends early kills its workers and returns
-        at once (concurrent.futures' pool could wait forever at exit for a result a killed worker had half
-        sent)."""
-        self._start_pool()
-        todo = iter(enumerate(tasks))
-        busy: dict = {}  # pipe -> (process, task number)
-
-        def give(proc, pipe) -> None:
-            nxt = next(todo, None)
-            if nxt is not None:
-                pipe.send((fn, nxt[1]))
-                busy[pipe] = (proc, nxt[0])
-
-        for proc, pipe in self.pool:
-            give(proc, pipe)
-        while busy:
-            ready = wait([*busy, *(p.sentinel for p, _ in busy.values())])
-            for pipe in [c for c in busy if c in ready]:
-                proc, i = busy.pop(pipe)
-                got(i, _reply(proc, pipe))
-                give(proc, pipe)
-            for pipe, (proc, _) in list(busy.items()):
-                if proc.sentinel in ready and pipe not in ready and not pipe.poll():
-                    _lost(proc)
 
 
 class _Schedule:
@@ -455,7 +408,7 @@ def _worker_start(parent: int) -> None:
     """A pool worker's start: Ctrl-C is the parent's to handle (it ends the workers, _end_workers), SIGTERM
     ends the worker at once (SIGHUP too, unless the run ignores it: nohup), and the worker ends when its
     parent does, even one killed outright (Linux's PR_SET_PDEATHSIG).  The signals, blocked since the fork
-    (_pool_map), are let through once these are set."""
+    (_start_pool), are let through once these are set."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
