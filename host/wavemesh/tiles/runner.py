@@ -9,7 +9,6 @@ import os
 import signal
 import sys
 import time
-from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from multiprocessing.connection import wait
@@ -19,9 +18,6 @@ from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
-# Runner.graph's nodes sent to a pool worker at a time: one (a second one in its pipe while it sends its
-# result back can fill both directions of the socket: the parent blocked in send, the worker too)
-PIPELINE = 1
 # a node sent to a pool worker takes with it the next node that waits for it alone and whose tiles are that
 # worker's (its result goes on to it in the worker), and so on, up to CHAIN nodes: one round trip of the
 # parent for them all (1: none)
@@ -210,30 +206,31 @@ class Runner:
             # pool could wait forever at exit for a result a killed worker had half sent)
             self._start_pool()
             sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
-            sent: list[deque] = [deque() for _ in self.pool]  # the nodes each worker has, in order
+            # the nodes each worker has (None: none), one chain at a time: a second one in its pipe while it
+            # sends its result back can fill both directions of the socket (the parent blocked in send, the
+            # worker too)
+            sent: list[list | None] = [None] * len(self.pool)
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
             kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
             def give(w: int) -> None:
-                while len(sent[w]) < PIPELINE and (not sent[w] or len(sched.ready) >= len(self.pool)):
-                    i = sched.take(w)
-                    if i is None:
-                        return
-                    chain = [i]
-                    while len(chain) < CHAIN and (j := sched.follower(chain[-1], w)) is not None:
-                        chain.append(j)
-                    pipe = self.pool[w][1]
-                    steps = []
-                    for n, k in enumerate(chain):
-                        args = _resolve(nodes[k], results, chain[n - 1] if n else None)
-                        for a in args:
-                            key = keys.get(id(a))
-                            if key is not None and key not in kept[w]:
-                                pipe.send(("keep", key, a))  # no answer: the worker keeps it
-                                kept[w].add(key)
-                        steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
-                    pipe.send(steps[0] if len(chain) == 1 else ("chain", steps))
-                    sent[w].append(chain)
+                if sent[w] is not None or (i := sched.take(w)) is None:
+                    return
+                chain = [i]
+                while len(chain) < CHAIN and (j := sched.follower(chain[-1], w)) is not None:
+                    chain.append(j)
+                pipe = self.pool[w][1]
+                steps = []
+                for n, k in enumerate(chain):
+                    args = _resolve(nodes[k], results, chain[n - 1] if n else None)
+                    for a in args:
+                        key = keys.get(id(a))
+                        if key is not None and key not in kept[w]:
+                            pipe.send(("keep", key, a))  # no answer: the worker keeps it
+                            kept[w].add(key)
+                    steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
+                pipe.send(steps[0] if len(chain) == 1 else ("chain", steps))
+                sent[w] = chain
 
             for w in range(len(self.pool)):
                 give(w)
@@ -243,7 +240,7 @@ class Runner:
                 for w in live:
                     proc, pipe = self.pool[w]
                     if pipe in ready:
-                        chain = sent[w].popleft()
+                        chain, sent[w] = sent[w], None
                         reply = _reply(proc, pipe)
                         for i, r in zip(chain, reply if len(chain) > 1 else [reply], strict=True):
                             got(i, r)
