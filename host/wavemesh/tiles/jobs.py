@@ -384,7 +384,8 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
                     if log:
                         log(f"  {count[1]}/{n} {note}")
 
-            results = runner.graph(nodes, done, roles["homes"], roles["shared"])
+            keep = {*roles["last"], *([roles["q"]] if roles["q"] is not None else [])}
+            results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep)
             bar.finish(f"{n} tiles")
         if roles["q"] is not None:  # the plan complete for stitch's report
             known = with_error(plan, results[roles["q"]])

@@ -155,20 +155,39 @@ class Runner:
         return self.graph([Node(fn, tuple(task)) for task in tasks], (lambda _, r: done(r)) if done else None)
 
     def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None,
-              shared: tuple = ()) -> list:
+              shared: tuple = (), keep: Iterable[int] | None = None) -> list:
         """Every node's result, in node order; a node runs once the nodes its Refs name are done (no
-        barrier between phases); ``done(i, result)`` as each finishes.  Refs name earlier nodes only.  The
+        barrier between phases); ``done(i, result)`` as each finishes.  ``keep``: the nodes whose results
+        are returned (None: all); another's is let go once every node that reads it has been given it
+        (None in the list), so that the parent holds a tiled run's meshes a step at a time, not every
+        step's of every tile.  Refs name earlier nodes only.  The
         same results however it runs: each node depends only on its args.  ``homes``: tile -> a number in
         [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
         keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
         node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower)."""
         results: list = [None] * len(nodes)
+        kept_nodes = None if keep is None else set(keep)
+        readers = [0] * len(nodes)  # the nodes not yet given each node's result (a local run's)
+        for node in nodes:
+            for d in node.deps():
+                readers[d] += 1
 
         def got(i: int, r) -> None:
-            results[i] = r
+            if kept_nodes is None or i in kept_nodes or (self.client is None and readers[i]):
+                results[i] = r
             if done:
                 done(i, r)
+
+        def given(k: int) -> None:
+            """Node ``k``'s args are out (resolved): a result nobody else reads and graph does not return
+            goes."""
+            if kept_nodes is None:
+                return
+            for d in nodes[k].deps():
+                readers[d] -= 1
+                if not readers[d] and d not in kept_nodes:
+                    results[d] = None
 
         self.n_maps += 1
         if self.client is not None:
@@ -199,7 +218,12 @@ class Runner:
             tune_malloc()
             sched = _Schedule(nodes)
             while (i := sched.take(None)) is not None:
-                got(i, nodes[i].fn(*_resolve(nodes[i], results)))
+                args = _resolve(nodes[i], results)
+                given(i)
+                r = nodes[i].fn(*args)
+                del args  # the inputs let go before done sees the result
+                got(i, r)
+                del r
                 sched.finished(i)
         else:  # each worker's tasks and results through its own pipe; the parent has no threads of its own
             # for them: a run that ends early kills its workers and returns at once (concurrent.futures'
@@ -223,6 +247,7 @@ class Runner:
                 steps = []
                 for n, k in enumerate(chain):
                     args = _resolve(nodes[k], results, chain[n - 1] if n else None)
+                    given(k)
                     for a in args:
                         key = keys.get(id(a))
                         if key is not None and key not in kept[w]:
