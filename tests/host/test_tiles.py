@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from wavemesh import api, tiles
 from wavemesh.check import check_mesh, mesh_errors
+from wavemesh.errors import InputError
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.io.synth import make
 from wavemesh.refine.native import RefineParams, fixed_params
@@ -203,6 +204,38 @@ def test_lazy_sources_read_the_same(dem, tmp_path):
         assert np.array_equal(quant.samples(hf.values), hf.samples)
     src = tiles.open_source(str(tif))
     assert api.ground(src.grid()).spacing == (5.0, 5.0)
+
+
+@pytest.mark.parametrize("block", [1, 300, 1 << 16])
+def test_strips_in_blocks(tmp_path, monkeypatch, block):
+    """The quantisation's strips taken block by block (a row, a few rows, the whole strip; strips of 7
+    rows): the whole grid's range, integers, non-finite count and largest quantisation error, as numpy
+    finds them on the whole grid at once."""
+    from wavemesh.io.heightfield import quant_rule
+
+    monkeypatch.setattr(tiles.source, "BLOCK_SAMPLES", block)
+    monkeypatch.setattr(tiles.source, "STRIP_BYTES", 7 * 8 * 61)
+    rng = np.random.default_rng(3)
+    v = rng.normal(0, 300, (45, 61)) + 0.5
+    path = tmp_path / "f.npy"
+    np.save(path, v.astype(np.float32))
+    w = np.load(path).astype(np.float64)
+    src = tiles.open_source(str(path))
+    assert len(tiles.source.strip_tasks(src)) == 7
+    quant = tiles.scan(src)
+    scale, offset, exact = quant_rule(w.min(), w.max(), False)
+    recon = offset + scale * np.clip(np.rint((w - offset) / scale), 0, 65535)
+    assert (quant.vmin, quant.vmax, quant.scale, quant.offset, quant.exact) == (w.min(), w.max(), scale,
+                                                                                 offset, exact)
+    assert quant.q == np.max(np.abs(w - recon)) > 0
+    np.save(path, np.rint(v))  # integers
+    assert tiles.scan(tiles.open_source(str(path))).exact
+    v[[3, 20, 44], [60, 0, 7]] = (np.nan, np.inf, -np.inf)
+    np.save(path, v)
+    with pytest.raises(InputError, match="3 samples are NaN"):
+        tiles.scan(tiles.open_source(str(path)))
+    filled = tiles.scan(tiles.open_source(str(path), fill="-5000"))
+    assert (filled.vmin, filled.vmax) == (-5000, np.nanmax(np.where(np.isfinite(v), v, np.nan)))
 
 
 def test_float_input_within_zeta_on_the_input(tmp_path):

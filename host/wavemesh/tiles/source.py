@@ -21,6 +21,9 @@ if TYPE_CHECKING:
 
 
 STRIP_BYTES = 16 << 20  # the quantisation pass reads the input in row strips of about this many float64 bytes
+# and takes each strip's numbers this many samples at a time (whole rows, 512 KiB of float64: in a core's own
+# cache, where a whole strip's float64 copy and its temporaries went out to memory, which two workers share)
+BLOCK_SAMPLES = 1 << 16
 
 # ---------------------------------------------------------------------------------------------------
 # The input, read window by window
@@ -176,16 +179,34 @@ def _strip_rows(src: Source) -> int:
     return max(1, STRIP_BYTES // (8 * src.width))
 
 
+def _blocks(src: Source, y: int, rows: int):
+    """The heights (float64, filled as Source.read fills them) of rows y .. y + rows - 1, in blocks of whole
+    rows of about BLOCK_SAMPLES each: read block by block from a .npy's memmap or an array, a raster's strip
+    read at once (one window) and cut."""
+    step = max(1, BLOCK_SAMPLES // src.width)
+    if src.kind == "raster":
+        v = src.read(0, y, src.width, rows)
+        for b in range(0, rows, step):
+            yield v[b : b + step]
+    else:
+        for b in range(y, y + rows, step):
+            yield src.read(0, b, src.width, min(step, y + rows - b))
+
+
 def _strip_stats(src: Source, y: int, rows: int) -> tuple[float, float, bool, int]:
     """(least, largest, all integers, non-finite count) of the heights of rows y .. y + rows - 1."""
-    v = src.read(0, y, src.width, rows)
-    ok = np.isfinite(v)
-    bad = int(v.size - np.count_nonzero(ok))
-    if bad:
-        v = v[ok]
-    if not v.size:
-        return math.inf, -math.inf, True, bad
-    return float(v.min()), float(v.max()), bool(np.all(v == np.floor(v))), bad
+    least, largest, integers, bad = math.inf, -math.inf, True, 0
+    for v in _blocks(src, y, rows):
+        ok = np.isfinite(v)
+        n_bad = int(v.size - np.count_nonzero(ok))
+        if n_bad:
+            bad += n_bad
+            v = v[ok]
+            if not v.size:
+                continue
+        least, largest = min(least, float(v.min())), max(largest, float(v.max()))
+        integers = integers and bool(np.all(v == np.floor(v)))
+    return least, largest, integers, bad
 
 
 def strip_tasks(src: Source) -> list[tuple[Source, int, int]]:
@@ -197,8 +218,8 @@ def strip_tasks(src: Source) -> list[tuple[Source, int, int]]:
 
 def strip_error(src: Source, y: int, rows: int, quant: Quant) -> float:
     """The largest quantisation error of rows y .. y + rows - 1."""
-    v = src.read(0, y, src.width, rows)
-    return float(np.max(np.abs(v - (quant.offset + quant.scale * quant.samples(v).astype(np.float64)))))
+    return max(float(np.max(np.abs(v - (quant.offset + quant.scale * quant.samples(v).astype(np.float64)))))
+               for v in _blocks(src, y, rows))
 
 
 def scan(src: Source, runner: Runner | None = None, error: bool = True) -> Quant:
