@@ -68,9 +68,11 @@ def _timed_map(self, fn, tasks, done=None):
     return [o[0] for o in out]
 
 
-def _timed_graph(self, nodes, done=None, homes=None, shared=()):
+def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None):
+    """Runner.graph with every node timed; every result kept until the end (each carries its timing), the
+    ones outside ``keep`` None in what it returns, as Runner.graph's."""
     if nodes and nodes[0].fn is timed:  # a map's tasks (Runner.map makes a graph of them), timed there
-        return _graph(self, nodes, done, homes, shared)
+        return _graph(self, nodes, done, homes, shared, keep)
     def wrap(a):
         if isinstance(a, runner.Ref):
             return runner.Ref(a.node, functools.partial(_picked, a.pick) if a.pick else _result)
@@ -82,7 +84,8 @@ def _timed_graph(self, nodes, done=None, homes=None, shared=()):
     steps = [f"{n.rank[1]} {n.fn.__name__.strip('_')}" for n in nodes]
     LOG.append(("graph", t0, time.perf_counter(), [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
     GRAPH.append((nodes, homes or {}, [o[1][1] for o in out], self.workers))
-    return [o[0] for o in out]
+    kept = set(range(len(nodes)) if keep is None else keep)
+    return [o[0] if i in kept else None for i, o in enumerate(out)]
 
 
 GRAPH: list = []  # (nodes, homes, each node's CPU seconds, workers)
