@@ -238,6 +238,27 @@ def test_strips_in_blocks(tmp_path, monkeypatch, block):
     assert (filled.vmin, filled.vmax) == (-5000, np.nanmax(np.where(np.isfinite(v), v, np.nan)))
 
 
+@pytest.mark.parametrize("block", [1, 300, 1 << 16])
+def test_tile_quantised_in_blocks(tmp_path, monkeypatch, block):
+    """A tile's samples and its own largest quantisation error taken block by block: heightfield's
+    to_samples and HeightField.max_quantisation_error (the C pass) on the whole tile at once."""
+    from wavemesh.io.heightfield import HeightField, to_samples
+
+    monkeypatch.setattr(tiles.source, "BLOCK_SAMPLES", block)
+    v = np.random.default_rng(5).normal(0, 300, (45, 61))
+    for quant in (tiles.source.Quant(np.ptp(v) / 65535, v.min(), False, None, v.min(), v.max()),
+                  tiles.source.Quant(1.0, -2000.0, True, None, v.min(), v.max())):
+        samples, error = quant.quantised(v if not quant.exact else np.rint(v))
+        assert np.array_equal(samples, to_samples(v if not quant.exact else np.rint(v), quant.scale,
+                                                  quant.offset, quant.exact))
+        if quant.exact:
+            assert error is None
+        else:
+            hf = HeightField(values=v, samples=samples, scale=quant.scale, offset=quant.offset,
+                             lossless=False, source="t")
+            assert error == hf.max_quantisation_error > 0
+
+
 def test_float_input_within_zeta_on_the_input(tmp_path):
     """Lossy quantisation (float heights over a range wider than 16 bits): one zeta on the samples for every
     tile, the vertical bound on the input heights."""

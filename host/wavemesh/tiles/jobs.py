@@ -126,9 +126,13 @@ def _tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None) -> Hei
     v = src.read(t.x, t.y, t.width, t.height) if window is None else window
     if not np.all(np.isfinite(v)):
         raise InputError(f"{src.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
-    return HeightField(values=v, samples=quant.samples(v), scale=quant.scale, offset=quant.offset,
-                       lossless=quant.lossless, source=f"{src.name} {t.name}",
-                       transform=cropped(src.transform, t.x, t.y, 1), crs=src.crs, spacing=plan.spacing)
+    samples, error = quant.quantised(v)
+    hf = HeightField(values=v, samples=samples, scale=quant.scale, offset=quant.offset,
+                     lossless=quant.lossless, source=f"{src.name} {t.name}",
+                     transform=cropped(src.transform, t.x, t.y, 1), crs=src.crs, spacing=plan.spacing)
+    if not hf.lossless:  # the tile's own largest error, from the same pass (that cached property's value)
+        hf.__dict__["max_quantisation_error"] = error
+    return hf
 
 
 def free_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> FreeTile:

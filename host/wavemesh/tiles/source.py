@@ -145,7 +145,22 @@ class Quant:
         return self.exact if self.q is None else self.q == 0
 
     def samples(self, v: np.ndarray) -> np.ndarray:
-        return to_samples(v, self.scale, self.offset, self.exact)
+        return self.quantised(v)[0]
+
+    def quantised(self, v: np.ndarray) -> tuple[np.ndarray, float | None]:
+        """The samples of the heights ``v`` (2-D) and, unless exact, their largest quantisation error (max
+        |v - (offset + scale samples)|, as HeightField.max_quantisation_error measures it; None when exact),
+        a block of rows at a time (BLOCK_SAMPLES: each block's temporaries stay in the core's own cache)."""
+        out = np.empty(v.shape, dtype=np.uint16)
+        err = None if self.exact else 0.0
+        step = max(1, BLOCK_SAMPLES // max(1, v.shape[1]))
+        for b in range(0, v.shape[0], step):
+            block, s = v[b : b + step], out[b : b + step]
+            s[...] = to_samples(block, self.scale, self.offset, self.exact)
+            if err is not None:
+                recon = self.offset + self.scale * s.astype(np.float64)
+                err = max(err, float(np.max(np.abs(block - recon))))
+        return out, err
 
 
 _NPY_MAP: list = []  # [(path, the file's identity, its memmap)]: the last .npy input this process read
@@ -218,8 +233,7 @@ def strip_tasks(src: Source) -> list[tuple[Source, int, int]]:
 
 def strip_error(src: Source, y: int, rows: int, quant: Quant) -> float:
     """The largest quantisation error of rows y .. y + rows - 1."""
-    return max(float(np.max(np.abs(v - (quant.offset + quant.scale * quant.samples(v).astype(np.float64)))))
-               for v in _blocks(src, y, rows))
+    return max(quant.quantised(v)[1] for v in _blocks(src, y, rows))
 
 
 def scan(src: Source, runner: Runner | None = None, error: bool = True) -> Quant:
