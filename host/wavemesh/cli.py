@@ -550,47 +550,49 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
         raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
                             hint="leave out --tile, or --normal-map")
     # --workers, --timeout, --deadline: _check_options, which both callers run first
-    tiles.check_tiled_outputs(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
-                              exaggeration=args.exaggeration, inputs=inputs, files=files)
+    out = tiles.TiledFiles(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
+                           exaggeration=args.exaggeration, title=Path(args.input).name, inputs=inputs,
+                           files=files)  # every path checked before any work
     say = None if args.quiet else (lambda text: print(text, flush=True))
     src = tiles.open_source(args.input, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
                             spacing=args.spacing, origin=args.origin)
     params = replace(params, check_levels=False, rms=False)
-    if ports is None:
-        with tiles.Runner(args.workers, args.scheduler) as runner:
-            tile = args.tile
-            if tile is None:  # from memory: the Dask workers' limits, or this machine's
-                tile = (tiles.dask_tile(runner.client) if runner.client
-                        else tiles.default_tile(args.workers or tiles.default_workers()))
-            plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say, defer_error=True)
-            results = tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
-                                      log=say if args.quiet or not sys.stderr.isatty() else None)
-    else:
-        for port in ports:
-            api.check_port(port)
-        timeouts = _timeouts(args)
-        infos = tiles.hello(ports, args.baud, timeouts)
-        if say:
-            for port, info in zip(ports, infos, strict=True):
-                say(f"device {port}: {info.summary()}")
-        tile = args.tile if args.tile is not None else tiles.device_tile(infos)
-        plan = tiles.plan_tiles(src, params, tile, log=say)
-        results = tiles.stream_tiles(plan, ports, baud=args.baud, timeouts=timeouts, progress=not args.quiet,
-                                     log=say)
-    tiled = tiles.stitch(plan, results)
     p = params.refine
-    comment = f"wavemesh tiled mesh, tile={plan.tile} tau={plan.tau:g} zeta={p.zeta:g} metric={p.metric}"
-    written = tiles.write_tiled(tiled, plan, args.output, tiles_dir=args.tiles_dir, report=args.report,
-                                comment=comment, files=files, render=args.render,
-                                exaggeration=args.exaggeration, title=Path(args.input).name, inputs=inputs)
+
+    def comment(plan) -> str:
+        return f"wavemesh tiled mesh, tile={plan.tile} tau={plan.tau:g} zeta={p.zeta:g} metric={p.metric}"
+
+    with out:  # the files written as the tiles finish, in tile order; moved into place at the end
+        if ports is None:
+            with tiles.Runner(args.workers, args.scheduler) as runner:
+                tile = args.tile
+                if tile is None:  # from memory: the Dask workers' limits, or this machine's
+                    tile = (tiles.dask_tile(runner.client) if runner.client
+                            else tiles.default_tile(args.workers or tiles.default_workers()))
+                plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say, defer_error=True)
+                tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
+                                log=say if args.quiet or not sys.stderr.isatty() else None,
+                                sink=out.start(plan, comment(plan)))
+        else:
+            for port in ports:
+                api.check_port(port)
+            timeouts = _timeouts(args)
+            infos = tiles.hello(ports, args.baud, timeouts)
+            if say:
+                for port, info in zip(ports, infos, strict=True):
+                    say(f"device {port}: {info.summary()}")
+            tile = args.tile if args.tile is not None else tiles.device_tile(infos)
+            plan = tiles.plan_tiles(src, params, tile, log=say)
+            tiles.stream_tiles(plan, ports, baud=args.baud, timeouts=timeouts, progress=not args.quiet,
+                               log=say, sink=out.start(plan, comment(plan)))
+        r = out.finish()
     if say:
-        r = tiled.report
         say(f"{args.input}: {plan.width} x {plan.height} in {r['layout'][0]} x {r['layout'][1]} tiles of "
-            f"at most {plan.tile}: {tiled.mesh.n_vertices} vertices, {tiled.mesh.n_triangles} triangles, "
+            f"at most {plan.tile}: {r['vertices']} vertices, {r['triangles']} triangles, "
             f"E_max normal {r['e_max_normal']:.6g}, vertical {r['e_max_vertical']:.6g} (zeta {p.zeta:g}, "
-            f"{p.metric}); the stitched mesh is proper")
+            f"{p.metric}); the tiles' shared sides match: the mesh is proper")
         say(f"wrote {args.output}" + "".join(f", {q}" for q in (args.report, args.render) if q)
-            + (f", {len(written)} tiles and index.json in {args.tiles_dir}" if written else ""))
+            + (f", {len(out.written)} tiles and index.json in {args.tiles_dir}" if out.written else ""))
     return 0
 
 

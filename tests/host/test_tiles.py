@@ -7,12 +7,13 @@ by window; bad options end in one error line."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from wavemesh import api, tiles
 from wavemesh.check import check_mesh, mesh_errors
-from wavemesh.errors import InputError
+from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.io.synth import make
 from wavemesh.refine.native import RefineParams, fixed_params
@@ -160,15 +161,21 @@ def test_dask_equals_local(dem, tmp_path):
     params = api.MeshParams(refine=RefineParams(zeta=3.0, metric="vertical"))
 
     def files(name, defer, **kw):
+        out = tmp_path / name
+        out.mkdir()
         with tiles.Runner(**kw) as runner:
             plan = tiles.plan_tiles(src, params, 64, runner=runner, defer_error=defer)
             assert (plan.quant.q is None) == defer and (plan.zeta_used is None) == defer
-            tiled = tiles.stitch(plan, tiles.run_tiles(plan, runner=runner))
-        out = tmp_path / name
-        out.mkdir()
-        tiles.write_tiled(tiled, plan, str(out / "m.obj"), tiles_dir=str(out / "t"))
+            if name == "here":  # every tile first, stitched, then written
+                tiled = tiles.stitch(plan, tiles.run_tiles(plan, runner=runner))
+                tiles.write_tiled(tiled, plan, str(out / "m.obj"), tiles_dir=str(out / "t"))
+                report = tiled.report
+            else:  # as `wavemesh mesh --tile`: written as the tiles finish
+                with tiles.TiledFiles(str(out / "m.obj"), tiles_dir=str(out / "t")) as written:
+                    tiles.run_tiles(plan, runner=runner, sink=written.start(plan))
+                    report = written.finish()
         return {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*.obj"))}, \
-            (plan.quant, plan.zeta_used, tiled.report["quantisation"])
+            (plan.quant, plan.zeta_used, report["quantisation"])
 
     here = files("here", False, workers=1)
     one = files("one", True, workers=1)
@@ -179,6 +186,111 @@ def test_dask_equals_local(dem, tmp_path):
         assert len(client.scheduler_info()["workers"]) == 2
     assert len(here[0]) == 13 and here[1][0].q > 0 and here[1][1] < 3.0
     assert here == one == pool == dask
+
+
+@pytest.fixture(scope="module")
+def tiled_dem(dem):
+    """The dem's 4 x 3 tiles of 64 (every tile's result, the plan) and their stitched mesh."""
+    src = tiles.open_source(str(dem))
+    plan = tiles.plan_tiles(src, api.MeshParams(refine=RefineParams(zeta=3.0, metric="vertical")), 64)
+    results = tiles.run_tiles(plan, workers=1)
+    return plan, results, tiles.stitch(plan, results)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl"])
+def test_written_as_tiles_finish(tiled_dem, tmp_path, suffix):
+    """The mesh file written tile by tile, the tiles given in any order (reversed: each waits for those
+    before it), is the stitched mesh: read back (OBJ: its v and f lines tile by tile), or byte for byte what
+    write_mesh writes of it whole (PLY, STL); the run's counts are the mesh's."""
+    from wavemesh.io.meshio import write_mesh
+    from wavemesh.io.meshread import read_mesh
+
+    plan, results, tiled = tiled_dem
+    out = tmp_path / f"m{suffix}"
+    with tiles.TiledFiles(str(out)) as files:
+        add = files.start(plan, "c")
+        for r in reversed(results):
+            assert not out.exists()
+            add(r)
+        report = files.finish()
+    assert (report["vertices"], report["triangles"]) == (tiled.mesh.n_vertices, tiled.mesh.n_triangles)
+    assert not list(tmp_path.glob(".wavemesh-*"))  # the staging folder gone, nothing else left
+    if suffix == ".obj":
+        mesh, z = read_mesh(str(out))
+        assert np.array_equal(mesh.xy, tiled.mesh.xy) and np.array_equal(mesh.tris, tiled.mesh.tris)
+        assert np.array_equal(z, tiled.z) and check_mesh(mesh).valid
+        lines = out.read_text().splitlines()
+        first_f = next(i for i, ln in enumerate(lines) if ln.startswith("f "))
+        assert any(ln.startswith("v ") for ln in lines[first_f:])  # the second tile's vertices after faces
+    whole = tmp_path / f"whole{suffix}"
+    write_mesh(str(whole), tiled.mesh, tiled.z, comment="c")
+    if suffix != ".obj":
+        assert out.read_bytes() == whole.read_bytes()
+
+
+def test_written_as_tiles_finish_georeferenced(dem, tmp_path):
+    """A georeferenced grid (a GeoTIFF whose rows run south): the streamed PLY in the CRS's units and STL
+    in metres (their triangles reversed to face up) are write_mesh's files of the stitched mesh, and so
+    are their sidecars."""
+    import rasterio
+    from rasterio.transform import from_origin
+    from wavemesh.io.georef import ground
+    from wavemesh.io.meshio import write_mesh
+
+    tif = tmp_path / "g.tif"
+    a = np.load(dem)
+    with rasterio.open(tif, "w", driver="GTiff", width=a.shape[1], height=a.shape[0], count=1,
+                       dtype="float64", crs="EPSG:32614", transform=from_origin(500000, 4000000, 5, 5)) as ds:
+        ds.write(a, 1)
+    src = tiles.open_source(str(tif))
+    plan = tiles.plan_tiles(src, api.MeshParams(refine=RefineParams(zeta=3.0, metric="vertical")), 64)
+    tiled = tiles.stitch(plan, tiles.run_tiles(plan, workers=1))
+    g = ground(src.grid())
+    for name, units in (("c.ply", "crs"), ("m.stl", "metres")):
+        tiles.write_tiled(tiled, plan, str(tmp_path / name), files=api.MeshFiles(units=units), comment="c")
+        write_mesh(str(tmp_path / f"whole-{name}"), tiled.mesh, tiled.z, comment="c", ground=g, units=units)
+        for suffix in ("", ".georef.json"):
+            a, b = tmp_path / f"{name}{suffix}", tmp_path / f"whole-{name}{suffix}"
+            assert a.exists() and b.exists(), name
+            assert a.read_bytes() == b.read_bytes().replace(b"whole-", b""), name  # a sidecar names its mesh
+
+
+def test_written_whole_where_a_format_needs_it(tiled_dem, tmp_path):
+    """--normals, --base and .glb: the mesh gathered tile by tile and written whole, as write_mesh writes
+    the stitched mesh; --render draws it beside a streamed file."""
+    from wavemesh.io.meshio import write_mesh
+
+    plan, results, tiled = tiled_dem
+    for name, files, kw in (("n.obj", api.MeshFiles(normals=True), {"normals": True}),
+                            ("b.ply", api.MeshFiles(base=5.0), {"base": 5.0}), ("g.glb", None, {})):
+        out = tmp_path / name
+        tiles.write_tiled(tiled, plan, str(out), files=files, comment="c")
+        write_mesh(str(tmp_path / f"whole-{name}"), tiled.mesh, tiled.z, comment="c", **kw)
+        assert out.read_bytes() == (tmp_path / f"whole-{name}").read_bytes(), name
+    tiles.write_tiled(tiled, plan, str(tmp_path / "r.obj"), render=str(tmp_path / "r.png"), comment="c")
+    assert (tmp_path / "r.png").stat().st_size > 0
+
+
+def test_written_as_tiles_finish_leaves_nothing_on_failure(tiled_dem, tmp_path):
+    """A run that fails after some tiles were written (a shared side that does not match: a tile's vertex
+    its neighbour lacks) leaves no file, no staging folder, and the old output as it was."""
+    plan, results, _ = tiled_dem
+    out = tmp_path / "m.ply"
+    out.write_bytes(b"old")
+    t = plan.tiles[1]
+    r = results[1]
+    left = np.flatnonzero((r.xy[:, 0] == t.x) & (r.xy[:, 1] > t.y) & (r.xy[:, 1] < t.y + t.height - 2))
+    have = set(map(tuple, r.xy.tolist()))
+    k = next(i for i in left if (t.x, int(r.xy[i, 1]) + 1) not in have)
+    xy = r.xy.copy()
+    xy[k, 1] += 1  # moved along the side: not the left neighbour's vertex
+    bad = [results[0], replace(r, xy=xy), *results[2:]]
+    with pytest.raises(MeshInvalid, match="tile-000-001: its vertex .* on a shared side is not its neighbo"):
+        with tiles.TiledFiles(str(out)) as files:
+            add = files.start(plan)
+            for x in bad:
+                add(x)
+    assert out.read_bytes() == b"old" and sorted(p.name for p in tmp_path.iterdir()) == ["m.ply"]
 
 
 def test_lazy_sources_read_the_same(dem, tmp_path):

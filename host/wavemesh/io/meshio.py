@@ -95,6 +95,15 @@ def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
     return ("v %d %d %r\n" * n) % tuple(flat)
 
 
+def _obj_face_lines(tris: np.ndarray) -> str:
+    """``f a b c`` lines of (T, 3) 0-based vertex indices (formatted in C when the library is there: the
+    same text, tests/host/test_host_stages.py)."""
+    text = native.obj_faces(tris)
+    if text is None:
+        text = ("f %d %d %d\n" * len(tris)) % tuple((tris + 1).ravel().tolist())
+    return text
+
+
 @record(frozen=True)
 class _Surface:
     """What a writer writes: vertices (x, y as grid positions (ints) or in the output frame (floats); z),
@@ -134,12 +143,10 @@ def _write_obj(path, s: _Surface) -> None:
                     n = s.normals[a : a + _CHUNK]
                     f.write(("vn %.7g %.7g %.7g\n" * len(n)) % tuple(n.ravel().tolist()))
             for a in range(0, len(tris), _CHUNK):
-                if s.normals is None and (text := native.obj_faces(tris[a : a + _CHUNK])) is not None:
-                    f.write(text)  # the same text, formatted in C (tests/host/test_host_stages.py)
+                if s.normals is None:
+                    f.write(_obj_face_lines(tris[a : a + _CHUNK]))
                     continue
-                t = tris[a : a + _CHUNK] + 1
-                if s.normals is not None:
-                    t = np.repeat(t, 2, axis=1)
+                t = np.repeat(tris[a : a + _CHUNK] + 1, 2, axis=1)
                 f.write((face * len(t)) % tuple(t.ravel().tolist()))
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
@@ -153,47 +160,69 @@ def write_ply(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None,
                                     None, comment))
 
 
-def _write_ply(path, s: _Surface) -> None:
-    V, T = len(s.xy), len(s.tris)
+def _ply_head(width: int, height: int, comment: str | None, V: int, T: int, normals: bool) -> bytes:
     if V >= 1 << 31:
         raise InputError(f"{V} vertices do not fit the PLY 'int' vertex index")
-    head = ["ply", "format binary_little_endian 1.0", f"comment {GRID_TAG} {s.width} {s.height}"]
-    head += [f"comment {c}" if c else "comment" for c in _comment_lines(s.comment)]
+    head = ["ply", "format binary_little_endian 1.0", f"comment {GRID_TAG} {width} {height}"]
+    head += [f"comment {c}" if c else "comment" for c in _comment_lines(comment)]
     head += [f"element vertex {V}", "property double x", "property double y", "property double z"]
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
-    if s.normals is not None:
+    if normals:
         head += ["property float nx", "property float ny", "property float nz"]
-        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
     head += [f"element face {T}", "property list uchar int vertex_indices", "end_header"]
-    verts = np.empty(V, dtype=fields)
-    verts["x"], verts["y"], verts["z"] = s.xy[:, 0], s.xy[:, 1], s.z
-    if s.normals is not None:
-        verts["nx"], verts["ny"], verts["nz"] = s.normals.T
-    faces = np.empty(T, dtype=[("n", "u1"), ("v", "<i4", (3,))])
+    return ("\n".join(head) + "\n").encode("utf-8")
+
+
+def _ply_vertices(xy: np.ndarray, z: np.ndarray, normals: np.ndarray | None = None) -> bytes:
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    if normals is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    verts = np.empty(len(xy), dtype=fields)
+    verts["x"], verts["y"], verts["z"] = xy[:, 0], xy[:, 1], z
+    if normals is not None:
+        verts["nx"], verts["ny"], verts["nz"] = normals.T
+    return verts.tobytes()
+
+
+def _ply_faces(tris: np.ndarray) -> bytes:
+    faces = np.empty(len(tris), dtype=[("n", "u1"), ("v", "<i4", (3,))])
     faces["n"] = 3
-    faces["v"] = s.tris
+    faces["v"] = tris
+    return faces.tobytes()
+
+
+def _write_ply(path, s: _Surface) -> None:
+    head = _ply_head(s.width, s.height, s.comment, len(s.xy), len(s.tris), s.normals is not None)
     with _open_for_writing(path, binary=True) as f:
         try:
-            f.write(("\n".join(head) + "\n").encode("utf-8"))
-            f.write(verts.tobytes())
-            f.write(faces.tobytes())
+            f.write(head)
+            f.write(_ply_vertices(s.xy, s.z, s.normals))
+            f.write(_ply_faces(s.tris))
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
+
+
+def _stl_head(width: int, height: int, comment: str | None) -> bytes:
+    head = f"{GRID_TAG} {width} {height} binary STL; {' '.join(_comment_lines(comment))}".encode()
+    return head[:80].ljust(80, b" ")
+
+
+def _stl_facets(xy: np.ndarray, z: np.ndarray, tris: np.ndarray) -> bytes:
+    pos = np.column_stack([xy, z]).astype(np.float64)
+    corners = pos[tris]
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1), np.finfo(np.float64).tiny)[:, None]
+    rec = np.zeros(len(tris), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["n"], rec["v"] = n, corners
+    return rec.tobytes()
 
 
 def _write_stl(path, s: _Surface) -> None:
     """Binary STL: an 80-byte header (not starting with "solid", which would read as ASCII STL), the
     triangle count, and per triangle its unit normal and three corners as float32."""
-    pos = np.column_stack([s.xy, s.z]).astype(np.float64)
-    corners = pos[s.tris]
-    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1), np.finfo(np.float64).tiny)[:, None]
-    rec = np.zeros(len(s.tris), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("a", "<u2")])
-    rec["n"], rec["v"] = n, corners
-    head = f"{GRID_TAG} {s.width} {s.height} binary STL; {' '.join(_comment_lines(s.comment))}".encode()
     with _open_for_writing(path, binary=True) as f:
         try:
-            f.write(head[:80].ljust(80, b" ") + struct.pack("<I", len(s.tris)) + rec.tobytes())
+            f.write(_stl_head(s.width, s.height, s.comment) + struct.pack("<I", len(s.tris))
+                    + _stl_facets(s.xy, s.z, s.tris))
         except OSError as e:
             raise InputError(f"cannot write mesh file {os.fspath(path)}: {e.strerror or e}") from None
 
@@ -360,37 +389,184 @@ def write_mesh(path, mesh: Mesh, heights: np.ndarray, comment: str | None = None
     geo = ground is not None and ground.georeferenced
     fmt = check_options(path, units=units, local=local, normals=normals, base=base, georeferenced=geo)
     z = _vertex_z(mesh, heights)
-    g = ground if geo else grid_ground(mesh.width, mesh.height)
-    en = None
-    if fmt.suffix == ".glb" or geo:
-        east, north = g.ground_xy(mesh.xy[:, 0], mesh.xy[:, 1])
-        en = np.column_stack([east, north])
-    if fmt.suffix == ".glb":
-        xy, mirror = en, g.mirrors("metres")
-    elif not geo:
-        xy, mirror = mesh.xy, False  # (col, row, z): right-handed, the grid's triangles face up
-    elif units == "metres":
-        xy, mirror = en, g.mirrors("metres")
-    else:
-        x, y = g.map_xy(mesh.xy[:, 0], mesh.xy[:, 1])
-        if local:
-            x0, y0 = g.origin
-            x, y = x - x0, y - y0
-        xy, mirror = np.column_stack([x, y]), g.mirrors("crs")
-    tris = mesh.tris[:, ::-1] if mirror else mesh.tris
+    frame = _Frame(mesh.width, mesh.height, fmt.suffix, ground, units, local)
+    xy = frame.place(mesh.xy)
+    tris = mesh.tris[:, ::-1] if frame.mirror else mesh.tris
     if base is not None:
         xy, z, tris = solid(xy, z, tris, base)
-        if fmt.suffix == ".glb":
-            en = xy
     pos = np.column_stack([xy, z]).astype(np.float64) if normals else None
     surface = _Surface(mesh.width, mesh.height, xy, z, tris,
                        vertex_normals(pos, tris) if normals else None, comment,
-                       (g, en) if fmt.suffix == ".glb" else ())
+                       (frame.ground, xy) if fmt.suffix == ".glb" else ())
     fmt.writer(path, surface)
-    if geo and fmt.suffix != ".glb":
-        write_sidecar(g, path, local, units)
-    else:  # grid coordinates, or a .glb (which says where it is): an older sidecar would misplace it
-        sidecar_path(path).unlink(missing_ok=True)
+    frame.sidecar(path)
+
+
+class _Frame:
+    """Where a file of ``suffix`` puts the grid's vertices (write_mesh's options): ``place(xy)`` their x, y
+    in it (grid positions as they are without a georeference; east and north in ground units from sample
+    (0, 0), as the .glb always is; or the CRS's map coordinates, less sample (0, 0)'s when ``local``),
+    ``mirror``: the triangles reversed to stay counter-clockwise seen from above; ``sidecar(path)`` the
+    georeference's sidecar beside the file (or an older one removed)."""
+
+    def __init__(self, width: int, height: int, suffix: str, ground, units: str, local: bool):
+        self.geo = ground is not None and ground.georeferenced
+        self.ground = ground if self.geo else grid_ground(width, height)
+        self.suffix, self.units, self.local = suffix, units, local
+        if suffix == ".glb" or (self.geo and units == "metres"):
+            self.mirror = self.ground.mirrors("metres")
+        elif not self.geo:
+            self.mirror = False  # (col, row, z): right-handed, the grid's triangles face up
+        else:
+            self.mirror = self.ground.mirrors("crs")
+
+    def place(self, xy: np.ndarray) -> np.ndarray:
+        g = self.ground
+        if self.suffix == ".glb" or (self.geo and self.units == "metres"):
+            return np.column_stack(g.ground_xy(xy[:, 0], xy[:, 1]))
+        if not self.geo:
+            return xy
+        x, y = g.map_xy(xy[:, 0], xy[:, 1])
+        if self.local:
+            x0, y0 = g.origin
+            x, y = x - x0, y - y0
+        return np.column_stack([x, y])
+
+    def sidecar(self, path) -> None:
+        if self.geo and self.suffix != ".glb":
+            write_sidecar(self.ground, path, self.local, self.units)
+        else:  # grid coordinates, or a .glb (which says where it is): an older sidecar would misplace it
+            sidecar_path(path).unlink(missing_ok=True)
+
+
+# ---- A mesh file written piece by piece (a tiled run's tiles as they finish)
+
+
+class MeshStream:
+    """A mesh file of write_mesh's formats and frame written piece by piece: each :meth:`add` appends a
+    piece's vertices not written before and its triangles, numbered as the caller says; :meth:`finish`
+    completes the file (and its sidecar).  The same file write_mesh writes of the same vertices and
+    triangles in the same order, except that OBJ's ``v`` and ``f`` lines come piece by piece (faces name
+    only vertices above them, as OBJ asks).  Formats: :data:`STREAMS` (.obj, .ply, .stl); not with
+    per-vertex normals or a base (they need every triangle of a vertex, the whole border).  A failure
+    leaves the file unfinished: write it where wavemesh.io.outputs stages it."""
+
+    binary = True
+
+    def __init__(self, path, width: int, height: int, comment: str | None = None, *, ground=None,
+                 units: str = "metres", local: bool = False):
+        geo = ground is not None and ground.georeferenced
+        fmt = check_options(path, units=units, local=local, georeferenced=geo)
+        if fmt.suffix not in STREAMS:
+            raise InputError(f"a {fmt.suffix} file is written whole, not piece by piece")
+        self.path, self.width, self.height, self.comment = path, width, height, comment
+        self.frame = _Frame(width, height, fmt.suffix, ground, units, local)
+        self.vertices = self.triangles = 0
+        self.file = _open_for_writing(path, binary=self.binary)
+        self._io(self.start)
+
+    def add(self, xy: np.ndarray, z: np.ndarray, tris: np.ndarray, number: np.ndarray, start: int) -> None:
+        """A piece: its vertices ``xy`` (grid positions) and heights ``z``, of which those from ``start`` on
+        are new (numbered next, in order: ``number[start:]`` is ``vertices, vertices + 1, ...``), the first
+        ``start`` written before with the numbers ``number[:start]``; ``tris`` (counter-clockwise) index
+        ``xy``."""
+        if len(number) - start and number[start] != self.vertices:
+            raise ValueError(f"the piece's new vertices start at {number[start]}, not {self.vertices}")
+        tris = tris[:, ::-1] if self.frame.mirror else tris
+        self._io(self._add, xy, z, tris, number, start)
+        self.vertices += len(xy) - start
+        self.triangles += len(tris)
+
+    def finish(self) -> None:
+        """The file complete (the counts in its header), closed; its sidecar."""
+        try:
+            self._io(self.end)
+        finally:
+            self.close()
+        self.frame.sidecar(self.path)
+
+    def close(self) -> None:
+        self.file.close()
+
+    def _io(self, fn, *args) -> None:
+        try:
+            fn(*args)
+        except OSError as e:
+            self.close()
+            raise InputError(f"cannot write mesh file {os.fspath(self.path)}: {e.strerror or e}") from None
+
+    def start(self) -> None: ...
+    def _add(self, xy, z, tris, number, start) -> None: ...
+    def end(self) -> None: ...
+
+
+class _ObjStream(MeshStream):
+    binary = False
+
+    def start(self) -> None:
+        head = [f"# {GRID_TAG} {self.width} {self.height}"]
+        head += [f"# {c}" if c else "#" for c in _comment_lines(self.comment)]
+        self.file.write("\n".join(head) + "\n")
+
+    def _add(self, xy, z, tris, number, start) -> None:
+        xy, z = self.frame.place(xy[start:]), z[start:]
+        for a in range(0, len(xy), _CHUNK):
+            self.file.write(_obj_vertex_lines(xy[a : a + _CHUNK], z[a : a + _CHUNK]))
+        for a in range(0, len(tris), _CHUNK):
+            self.file.write(_obj_face_lines(number[tris[a : a + _CHUNK]]))
+
+
+class _PlyStream(MeshStream):
+    """The vertices and the faces into two unnamed temporary files beside the output (gone with the
+    process whatever happens), then the header with their counts, and both copied after it."""
+
+    def start(self) -> None:
+        import tempfile  # only a streamed PLY needs it
+
+        where = os.path.dirname(os.path.abspath(self.path))
+        self.parts = [tempfile.TemporaryFile(dir=where), tempfile.TemporaryFile(dir=where)]
+
+    def _add(self, xy, z, tris, number, start) -> None:
+        self.parts[0].write(_ply_vertices(self.frame.place(xy[start:]), z[start:]))
+        self.parts[1].write(_ply_faces(number[tris]))
+
+    def end(self) -> None:
+        import shutil
+
+        self.file.write(_ply_head(self.width, self.height, self.comment, self.vertices, self.triangles,
+                                  False))
+        for part in self.parts:
+            part.seek(0)
+            shutil.copyfileobj(part, self.file, 1 << 20)
+
+    def close(self) -> None:
+        for part in getattr(self, "parts", ()):
+            part.close()
+        super().close()
+
+
+class _StlStream(MeshStream):
+    """The header, a triangle count to fill in at the end, the facets as they come."""
+
+    def start(self) -> None:
+        self.file.write(_stl_head(self.width, self.height, self.comment) + struct.pack("<I", 0))
+
+    def _add(self, xy, z, tris, number, start) -> None:
+        self.file.write(_stl_facets(self.frame.place(xy), z, tris))
+
+    def end(self) -> None:
+        if self.triangles >= 1 << 32:
+            raise InputError(f"{self.triangles} triangles do not fit binary STL's count")
+        self.file.seek(80)
+        self.file.write(struct.pack("<I", self.triangles))
+
+
+STREAMS = {".obj": _ObjStream, ".ply": _PlyStream, ".stl": _StlStream}  # the formats written piece by piece
+
+
+def mesh_stream(path, width: int, height: int, comment: str | None = None, **frame) -> MeshStream:
+    """A MeshStream of the format ``path`` names (STREAMS); ``frame``: ground, units, local (write_mesh's)."""
+    return STREAMS.get(_format_of(path).suffix, MeshStream)(path, width, height, comment, **frame)
 
 
 def normal_map(values: np.ndarray, spacing: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:

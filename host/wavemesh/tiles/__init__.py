@@ -3,6 +3,9 @@
     with Runner(workers=2) as run:                             # or Runner(scheduler="tcp://host:8786")
         plan = plan_tiles(source, MeshParams(...), 1025, runner=run)   # the layout, the quantisation
         tiled = stitch(plan, run_tiles(plan, runner=run))       # the tiles, their borders; one mesh, checked
+        with TiledFiles("dem.obj") as out:                      # or: the file written as the tiles finish
+            run_tiles(plan, runner=run, sink=out.start(plan))
+            out.finish()
 
 The steps (docs/tiles.md says why each is so); every one but the last runs in the workers:
 
@@ -30,18 +33,22 @@ The steps (docs/tiles.md says why each is so); every one but the last runs in th
 6. **Each shared side, thinned** (:func:`thin_seam`, then :func:`thin_tile`): every vertex on it both
    neighbours can do without (its hole in each tile re-triangulated within zeta by the refiner's own E(T)
    test, its ring off the tile's other sides) removed from both.
-7. **Stitch** (the parent): the tiles' vertices merged by grid position (the shared sides are identical),
-   the triangles renumbered, and the whole mesh checked (check_mesh: proper, no T-junctions, no cracks).
+7. **Written as the tiles finish** (the parent, :class:`TiledFiles`): each tile, once every tile before it
+   (row by row) is done, appended to the mesh file: its vertices not on a side an earlier tile wrote,
+   numbered next, and its triangles (:class:`TileOrder`, which checks that each shared side has the same
+   vertices in both tiles: with each tile proper, the whole mesh is).  :func:`stitch` gathers the same
+   mesh in memory and checks it whole (check_mesh: proper, no T-junctions, no cracks).
 
 The same tile jobs run on devices (``wavemesh stream --tile``, :func:`stream_tiles`): the device does step
 3, the host steps 4 and 5, so the mesh equals ``wavemesh mesh --tile``'s byte for byte.
 """
 
 from wavemesh.tiles.devices import device_tile, hello, stream_tile, stream_tiles
-from wavemesh.tiles.files import check_tiled_outputs, write_tiled
+from wavemesh.tiles.files import TiledFiles, check_tiled_outputs, write_tiled
 from wavemesh.tiles.jobs import (
     FreeTile,
     TiledResult,
+    TileOrder,
     TileResult,
     finish_tile,
     free_tile,
@@ -73,7 +80,8 @@ from wavemesh.tiles.source import Quant, Source, open_source, scan
 
 __all__ = [
     "Editable", "FreeTile", "MIN_TILE", "Node", "Quant", "Ref", "Runner", "SIDES", "Source",
-    "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "Tile", "TilePlan", "TileResult", "TiledResult",
+    "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "Tile", "TileOrder", "TilePlan", "TileResult", "TiledFiles",
+    "TiledResult",
     "available_memory", "border_of", "check_tiled_outputs", "check_tiling", "conform", "connect", "cuts",
     "dask_tile", "default_tile", "default_workers", "device_tile", "finish_tile", "free_tile", "hello",
     "mesh_tiled", "open_source", "plan_tiles", "reconcile", "run_tiles", "scan", "simplify_profile",

@@ -50,12 +50,13 @@ def stream_tile(plan: TilePlan, index: int, port, *, baud: int, timeouts) -> Fre
 
 
 def stream_tiles(plan: TilePlan, ports: list[str], *, baud: int, timeouts, progress: bool = False,
-                 log: Callable[[str], None] | None = None, runner: Runner | None = None) -> list[TileResult]:
+                 log: Callable[[str], None] | None = None, runner: Runner | None = None,
+                 sink: Callable[[TileResult], None] | None = None) -> list[TileResult]:
     """Every tile's free mesh on the devices behind ``ports``, one tile per device at a time, each device
     taking the next tile when it is done; then the tiles' sides (run_tiles, on ``runner``).  A tile whose
     device fails (no answer, a broken link, an error) is put back and done by another device, and the run
     says so; the failed device takes no more tiles.  When no device is left, DeviceError names each
-    failure."""
+    failure.  ``sink``: run_tiles's (each tile's result as it finishes)."""
     from wavemesh.device.stream import DeviceError  # with hello's package
 
     n = len(plan.tiles)
@@ -114,4 +115,4 @@ def stream_tiles(plan: TilePlan, ports: list[str], *, baud: int, timeouts, progr
                               f"failed: " + "; ".join(failures),
                               hint="check the devices (wavemesh devices) and run again")
         bar.finish(f"{n} tiles on {len(ports)} device{'s' if len(ports) != 1 else ''}")
-    return run_tiles(plan, workers=1 if runner is None else None, runner=runner, frees=frees)
+    return run_tiles(plan, workers=1 if runner is None else None, runner=runner, frees=frees, sink=sink)

@@ -360,15 +360,18 @@ def tile_graph(plan: TilePlan, frees: list | None = None) -> tuple[list[Node], d
 
 def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, runner: Runner | None = None,
               progress: bool = False, log: Callable[[str], None] | None = None,
-              frees: list | None = None) -> list[TileResult]:
+              frees: list | None = None, sink: Callable[[TileResult], None] | None = None
+              ) -> list[TileResult]:
     """Every tile's jobs (tile_graph) on ``runner`` (or a Runner of ``workers`` / ``scheduler`` for this
     call): the free meshes (unless ``frees`` has them, as stream_tiles makes them), each tile conformed to
     its reconciled sides, each shared side thinned (thin_seam), each tile without its sides' thinned
     vertices (thin_tile), each step of a tile as soon as its inputs are done; the results in tile order
-    whatever order they finish in.  A failed task ends the run with its error."""
+    whatever order they finish in.  ``sink``: each tile's result given to it as it finishes (any order;
+    files.TiledFiles writes them in tile order), none kept here (the list is empty).  A failed task ends
+    the run with its error."""
     if runner is None:
         with Runner(workers, scheduler) as own:
-            return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees)
+            return run_tiles(plan, runner=own, progress=progress, log=log, frees=frees, sink=sink)
     n = len(plan.tiles)
     nodes, roles = tile_graph(plan, frees)
     counted = set(roles["free"]) | set(roles["finish"])
@@ -387,16 +390,18 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
                     bar.update(count[0] + count[1], note)
                     if log:
                         log(f"  {count[1]}/{n} {note}")
+                    if sink:
+                        sink(r)
+                if k == roles["q"]:  # the plan complete (every tile's last step reads q: before them)
+                    known = with_error(plan, r)
+                    plan.quant, plan.zeta_used = known.quant, known.zeta_used
 
-            keep = {*roles["last"], *([roles["q"]] if roles["q"] is not None else [])}
+            keep = () if sink else roles["last"]
             results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep)
             bar.finish(f"{n} tiles")
-        if roles["q"] is not None:  # the plan complete for stitch's report
-            known = with_error(plan, results[roles["q"]])
-            plan.quant, plan.zeta_used = known.quant, known.zeta_used
     finally:
         clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers
-    return [results[k] for k in roles["last"]]
+    return [] if sink else [results[k] for k in roles["last"]]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -413,30 +418,106 @@ class TiledResult:
     report: dict
 
 
-def stitch(plan: TilePlan, results: list[TileResult]) -> TiledResult:
-    """One mesh of the whole grid from the tiles' (their shared border vertices merged by position),
-    checked: a proper triangulation (check_mesh: no T-junctions, no cracks)."""
-    W = plan.width
-    keys = np.concatenate([r.xy[:, 1] * W + r.xy[:, 0] for r in results])
-    z_all = np.concatenate([r.z for r in results])
-    uniq, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    offsets = np.cumsum([0] + [len(r.xy) for r in results])
-    tris = np.concatenate([inverse[r.tris + offsets[k]] for k, r in enumerate(results)])
-    xy = np.column_stack([uniq % W, uniq // W]).astype(np.int64)
-    mesh = Mesh(W, plan.height, xy, tris).canonical()  # vertices already in (y, x) order: same z order
-    z = z_all[first]
-    api.require_proper(mesh, "the stitched mesh")
-    report = {
+class TileOrder:
+    """The whole mesh's vertex numbers, given tile by tile in tile order (row by row, each row left to
+    right: :meth:`number` of every tile in turn), so that a file can be written as the tiles come: a
+    tile's vertices on a side it shares with a tile before it (its top side, its left side) keep the
+    numbers that tile gave them; its others are numbered next, by (y, x); its triangles are renumbered,
+    each started at its smallest number, and sorted.  Only the shared sides' vertices the next tiles need
+    are kept (a row of tiles' bottom sides and the current row's right sides).  Checks that every shared
+    side has the same vertices in both tiles: with each tile proper (checked in its worker, _checked) and
+    the tiles covering the grid (the plan), the whole mesh is then a proper triangulation, no T-junction,
+    no crack."""
+
+    def __init__(self, plan: TilePlan):
+        self.plan = plan
+        self.next = 0  # the tile number() expects
+        self.vertices = self.triangles = 0
+        self._known: dict[int, int] = {}  # y W + x -> the vertex's number, for the sides the next tiles share
+        self._counts: dict[tuple, int] = {}  # (tile, side) -> its vertices on that side (bottom, right)
+
+    def number(self, r: TileResult) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+        """Tile ``r`` (the next in tile order): its vertices (grid positions) and heights, first those an
+        earlier tile numbered, then its new ones in their order; its triangles into them; each vertex's
+        number; and how many were numbered before (wavemesh.io.meshio.MeshStream.add's piece)."""
+        plan, W = self.plan, self.plan.width
+        if r.index != self.next:
+            raise ValueError(f"tile {r.index} given where tile {self.next} is next")
+        t = plan.tiles[r.index]
+        x, y = r.xy[:, 0], r.xy[:, 1]
+        if t.col == 0:  # a new row of tiles: the sides above its top are read no more
+            self._known = {k: v for k, v in self._known.items() if k >= t.y * W}
+        old = np.zeros(len(x), dtype=bool)
+        for side, on in (("top", y == t.y), ("left", x == t.x)):
+            if side in t.neighbours:
+                k = t.neighbours[side]
+                had = self._counts.pop((k, "bottom" if side == "top" else "right"))
+                if int(np.count_nonzero(on)) != had:
+                    raise MeshInvalid(f"{t.name} has {np.count_nonzero(on)} vertices on its {side} side, "
+                                      f"{plan.tiles[k].name} {had} on the same side", hint=api.BUG_HINT)
+                old |= on
+        was = np.flatnonzero(old)
+        try:
+            before = [self._known[k] for k in (y[was] * W + x[was]).tolist()]
+        except KeyError as e:
+            raise MeshInvalid(f"{t.name}: its vertex ({e.args[0] % W}, {e.args[0] // W}) on a shared side is "
+                              "not its neighbour's", hint=api.BUG_HINT) from None
+        new = np.flatnonzero(~old)
+        new = new[np.lexsort((x[new], y[new]))]
+        perm = np.concatenate([was, new])
+        number = np.concatenate([np.asarray(before, dtype=np.int64),
+                                 np.arange(self.vertices, self.vertices + len(new), dtype=np.int64)])
+        where = np.empty(len(perm), dtype=np.int64)
+        where[perm] = np.arange(len(perm))
+        tris = where[r.tris]
+        if len(tris):  # each from its smallest number (orientation kept), sorted by their numbers
+            g = number[tris]
+            rows = np.arange(len(tris))[:, None]
+            turn = (np.argmin(g, axis=1)[:, None] + np.arange(3)[None, :]) % 3
+            tris, g = tris[rows, turn], g[rows, turn]
+            tris = tris[np.lexsort((g[:, 2], g[:, 1], g[:, 0]))]
+        xy, z = r.xy[perm], r.z[perm]
+        ends = (("bottom", xy[:, 1] == t.y + t.height - 1), ("right", xy[:, 0] == t.x + t.width - 1))
+        for side, on in ends:
+            if side in t.neighbours:
+                self._counts[r.index, side] = int(np.count_nonzero(on))
+                keys = (xy[on, 1] * W + xy[on, 0]).tolist()
+                self._known.update(zip(keys, number[on].tolist(), strict=True))
+        self.next += 1
+        self.vertices += len(new)
+        self.triangles += len(tris)
+        return xy, z, tris, number, len(was)
+
+
+def tiled_report(plan: TilePlan, reports: list[dict], vertices: int, triangles: int) -> dict:
+    """A tiled run's report: the layout, the quantisation, the whole mesh's counts, each tile's report."""
+    return {
         "tile": plan.tile, "layout": [len(plan.xcuts) - 1, len(plan.ycuts) - 1],
         "xcuts": plan.xcuts, "ycuts": plan.ycuts, "tau": plan.tau, "zeta_refiner": plan.zeta_used,
         "quantisation": {"scale": plan.quant.scale, "offset": plan.quant.offset,
                          "max_quantisation_error": plan.quant.q},
-        "vertices": mesh.n_vertices, "triangles": mesh.n_triangles,
-        "e_max_normal": max(r.report["e_max_normal"] for r in results),
-        "e_max_vertical": max(r.report["e_max_vertical"] for r in results), "scan_seconds": plan.scan_seconds,
-        "tiles": [r.report for r in results],
+        "vertices": vertices, "triangles": triangles,
+        "e_max_normal": max(r["e_max_normal"] for r in reports),
+        "e_max_vertical": max(r["e_max_vertical"] for r in reports), "scan_seconds": plan.scan_seconds,
+        "tiles": reports,
     }
-    return TiledResult(mesh, z, results, report)
+
+
+def stitch(plan: TilePlan, results: list[TileResult]) -> TiledResult:
+    """One mesh of the whole grid from the tiles' (in tile order), numbered as TileOrder numbers them (the
+    order `wavemesh mesh --tile` writes them in as the tiles finish), checked: a proper triangulation
+    (check_mesh: no T-junctions, no cracks)."""
+    order = TileOrder(plan)
+    xys, zs, triss = [], [], []
+    for r in results:
+        xy, z, tris, number, start = order.number(r)
+        xys.append(xy[start:])
+        zs.append(z[start:])
+        triss.append(number[tris])
+    mesh = Mesh(plan.width, plan.height, np.concatenate(xys), np.concatenate(triss))
+    api.require_proper(mesh, "the stitched mesh")
+    report = tiled_report(plan, [r.report for r in results], mesh.n_vertices, mesh.n_triangles)
+    return TiledResult(mesh, np.concatenate(zs), results, report)
 
 
 def mesh_tiled(src: Source, params, tile: int | None = None, *, workers: int | None = None, scheduler=None,
