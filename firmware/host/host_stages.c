@@ -8,8 +8,18 @@
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #define SAMPLE_MAX 65535.0
+#define RINT_MAGIC 4503599627370496.0 /* 2^52: (c + 2^52) - 2^52 is rint(c) for 0 <= c < 2^52 */
+/* The passes over every sample, compiled twice, for AVX2 too (the loader picks the one the processor
+ * runs): the same IEEE operations on twice the lanes, so the same results (no contraction into FMAs:
+ * -ffp-contract=off). */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+#define CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define CLONES
+#endif
 #define MAX_THREADS 64
 #define TRI_CHUNK 512 /* triangles a thread takes at a time (their sizes vary a lot) */
 /* samples a thread takes at least: starting one costs about what a pass over this many does, more on
@@ -17,6 +27,24 @@
 #define PART_MIN ((int64_t)1 << 18)
 #define EXACT ((int64_t)1 << 52) /* E_k below this: E_k(xl) + a_k k exact in doubles (each term < 2^53) */
 #define ABS(v) ((v) < 0 ? -(v) : (v))
+#define NAN_BITS ((int64_t)0x7FF0000000000000) /* the bits of +inf: a NaN's (sign clear) are above them */
+
+/* A double >= 0 (or a NaN, sign clear) as its bits, which order as the numbers do (a NaN above every
+ * number): the maxima of the passes below are integer maxima, which the compiler vectorises (a double's
+ * maximum it may not, without -ffast-math). */
+static inline int64_t bits_of(double v)
+{
+    int64_t b;
+    memcpy(&b, &v, sizeof b);
+    return b;
+}
+
+static inline double of_bits(int64_t b)
+{
+    double v;
+    memcpy(&v, &b, sizeof v);
+    return v;
+}
 
 static int64_t part_min = PART_MIN;
 
@@ -95,25 +123,46 @@ struct scan {
     int32_t finite[MAX_THREADS], integer[MAX_THREADS];
 };
 
-static void scan_part(void *ctx, int32_t part, int32_t parts)
+/* A double's bits as an integer that orders as the doubles do (-0.0 just below +0.0; a NaN's, never
+ * used, anywhere), and back. */
+static inline int64_t key_of(double v)
+{
+    int64_t b = bits_of(v);
+    return b < 0 ? b ^ INT64_MAX : b;
+}
+
+static inline double of_key(int64_t k) { return of_bits(k < 0 ? k ^ INT64_MAX : k); }
+
+#define SCAN_BLOCK 4096 /* samples between the scan's looks at whether one was not finite */
+
+/* The least and largest height, whether all are finite and whether all are whole numbers, in blocks whose
+ * loop has no branch (the compiler vectorises it: integer extremes of key_of, see bits_of). */
+static CLONES void scan_part(void *ctx, int32_t part, int32_t parts)
 {
     struct scan *s = ctx;
-    int64_t lo, hi;
-    double mn = INFINITY, mx = -INFINITY;
+    const double *v = s->v;
+    int64_t lo, hi, mn = key_of(INFINITY), mx = key_of(-INFINITY);
     int32_t finite = 1, integer = 1;
     part_range(s->n, part, parts, &lo, &hi);
-    for (int64_t i = lo; i < hi; i++) {
-        double x = s->v[i];
-        if (!isfinite(x)) {
+    for (int64_t b = lo; b < hi; b += SCAN_BLOCK) {
+        int64_t end = hi - b < SCAN_BLOCK ? hi : b + SCAN_BLOCK, bad = 0, frac = 0;
+        for (int64_t i = b; i < end; i++) {
+            double x = v[i];
+            int64_t k = key_of(x);
+            bad |= (bits_of(x) & NAN_BITS) == NAN_BITS; /* inf or NaN: every exponent bit set */
+            double ax = fabs(x); /* whole when 2^52 or more, else when (ax + 2^52) - 2^52, rint, is ax */
+            frac |= (ax < RINT_MAGIC) & (((ax + RINT_MAGIC) - RINT_MAGIC) != ax);
+            mn = k < mn ? k : mn;
+            mx = k > mx ? k : mx;
+        }
+        if (bad) {
             finite = 0;
             break;
         }
-        if (x < mn) mn = x;
-        if (x > mx) mx = x;
-        if (integer && floor(x) != x) integer = 0;
+        integer &= !frac;
     }
-    s->min[part] = mn;
-    s->max[part] = mx;
+    s->min[part] = of_key(mn);
+    s->max[part] = of_key(mx);
     s->finite[part] = finite;
     s->integer[part] = integer;
 }
@@ -127,29 +176,42 @@ struct apply {
     double err[MAX_THREADS];
 };
 
-static void apply_part(void *ctx, int32_t part, int32_t parts)
+/* Each mode a loop of its own, without branches, which the compiler vectorises.  Mode 2's
+ * rint((v - offset) / scale) is (c + 2^52) - 2^52 for the quotient c, as rint rounds (half to even in
+ * the default mode) for 0 <= c < 2^51: offset is the least v, so v - offset >= 0, and c is at most
+ * span / scale = 65535 and its rounding; clipped to 0..65535 as an integer. */
+static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
 {
     struct apply *a = ctx;
-    int64_t lo, hi;
-    double err = 0.0;
+    int64_t lo, hi, err = 0; /* the largest error's bits (bits_of) */
+    const double *v = a->v, offset = a->offset, scale = a->scale;
+    uint16_t *samples = a->samples;
     part_range(a->n, part, parts, &lo, &hi);
-    for (int64_t i = lo; i < hi; i++) {
-        double x = a->v[i], c;
-        uint16_t s;
-        if (a->mode == 0) {
-            s = (uint16_t)(x - a->offset);
-        } else if (a->mode == 1) {
-            s = 0;
-        } else {
-            c = rint((x - a->offset) / a->scale);
-            s = (uint16_t)(c < 0.0 ? 0.0 : c > SAMPLE_MAX ? SAMPLE_MAX : c);
+    if (a->mode == 0) {
+        for (int64_t i = lo; i < hi; i++) {
+            uint16_t s = (uint16_t)(int32_t)(v[i] - offset);
+            int64_t e = bits_of(fabs(v[i] - (offset + scale * (double)s)));
+            samples[i] = s;
+            err = e > err ? e : err;
         }
-        a->samples[i] = s;
-        double r = a->offset + a->scale * (double)s;
-        double e = fabs(x - r);
-        if (e > err) err = e;
+    } else if (a->mode == 1) {
+        for (int64_t i = lo; i < hi; i++) {
+            int64_t e = bits_of(fabs(v[i] - (offset + scale * 0.0)));
+            samples[i] = 0;
+            err = e > err ? e : err;
+        }
+    } else {
+        for (int64_t i = lo; i < hi; i++) {
+            int32_t r = (int32_t)(((v[i] - offset) / scale + RINT_MAGIC) - RINT_MAGIC);
+            r = r < 0 ? 0 : r;
+            r = r > 65535 ? 65535 : r;
+            uint16_t s = (uint16_t)r;
+            int64_t e = bits_of(fabs(v[i] - (offset + scale * (double)s)));
+            samples[i] = s;
+            err = e > err ? e : err;
+        }
     }
-    a->err[part] = err;
+    a->err[part] = of_bits(err);
 }
 
 int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samples, double *out,
@@ -176,6 +238,7 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
         if (s->max[p] > mx) mx = s->max[p];
         integer &= s->integer[p];
     }
+    mn += 0.0; /* a least height of -0.0 is 0.0 (heightfield.quant_rule's offset) */
     double span = mx - mn;
     if (!isfinite(span)) {
         code = WM_HOST_SPAN;
@@ -387,7 +450,7 @@ static int64_t floor_div(int64_t a, int64_t b) /* b > 0 */
     return (a % b != 0 && a < 0) ? q - 1 : q;
 }
 
-static double tri_max(const struct trimax *m, int64_t t, int64_t out)
+static inline __attribute__((always_inline)) double tri_max(const struct trimax *m, int64_t t, int64_t out)
 {
     const int64_t *tri = m->tris + 3 * t, st = m->stride;
     int64_t x0 = m->x[tri[0] * st], y0 = m->y[tri[0] * st], x1 = m->x[tri[1] * st], y1 = m->y[tri[1] * st];
@@ -434,17 +497,17 @@ static double tri_max(const struct trimax *m, int64_t t, int64_t out)
         if (ABS(e1l) < EXACT && ABS(e2l) < EXACT && ABS(e1r) < EXACT && ABS(e2r) < EXACT) {
             /* every E_k on the row is an integer below 2^52: e_k(xl) + a_k k in doubles is exact, as
              * numpy's conversion of the int64 E_k is; a loop the compiler vectorises */
-            double e1 = (double)e1l, e2 = (double)e2l, da1 = (double)a[1], da2 = (double)a[2], rb = best;
-            int32_t n = (int32_t)(xr - xl + 1), nan = 0;
+            double e1 = (double)e1l, e2 = (double)e2l, da1 = (double)a[1], da2 = (double)a[2];
+            int32_t n = (int32_t)(xr - xl + 1);
+            int64_t rb = 0; /* the row's largest |h - plane| as its bits (bits_of) */
             for (int32_t k = 0; k < n; k++) {
                 double kd = (double)k;
                 double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;
-                double v = fabs(row[k] - plane);
+                int64_t v = bits_of(fabs(row[k] - plane));
                 rb = v > rb ? v : rb;
-                nan |= v != v;
             }
-            if (nan) return NAN; /* numpy's maximum keeps a NaN */
-            best = rb;
+            if (rb > NAN_BITS) return NAN; /* numpy's maximum keeps a NaN */
+            best = of_bits(rb) > best ? of_bits(rb) : best;
             continue;
         }
         for (int64_t xx = xl; xx <= xr; xx++) {
@@ -458,7 +521,7 @@ static double tri_max(const struct trimax *m, int64_t t, int64_t out)
     return best;
 }
 
-static void trimax_part(void *ctx, int32_t part, int32_t parts)
+static CLONES void trimax_part(void *ctx, int32_t part, int32_t parts)
 {
     struct trimax *m = ctx;
     (void)part;

@@ -47,7 +47,19 @@ def random_grids() -> dict[str, np.ndarray]:
         "halves": np.round(rng.uniform(0, 10, (33, 33)) * 2) / 2,
         "float32": rng.uniform(-1, 1, (16, 64)).astype(np.float32).astype(np.float64),
         "big": rng.normal(0.0, 1e6, (300, 301)),
+        # a zero extreme keeps the sign of the grid's first zero (offset = the least height, -0.0 or 0.0)
+        "zeros, +0 first": _zeros(rng, 1.0, (0.0, -0.0)),
+        "zeros, -0 first": _zeros(rng, 1.0, (-0.0, 0.0)),
+        "zeros at the top": _zeros(rng, -1.0, (-0.0, 0.0)),
+        "zeros, wide": _zeros(rng, 1e6, (-0.0, 0.0)),
     }
+
+
+def _zeros(rng, sign: float, first: tuple[float, float]) -> np.ndarray:
+    """Heights of one sign, with zeros of both signs far apart (first[0] before first[1])."""
+    v = sign * rng.uniform(1.0, 9.5, (90, 101))
+    v[40, 7], v[80, 99] = first
+    return v
 
 
 ALL = {**random_grids(), **real_grids()}
@@ -63,6 +75,7 @@ def test_quantise_equals_the_model(name):
         fast = native.quantise(v)
         assert np.array_equal(fast[0], ref[0]) and fast[0].dtype == np.uint16
         assert fast[1:4] == ref[1:4]
+        assert np.array(fast[1:3]).view(np.int64).tolist() == np.array(ref[1:3]).view(np.int64).tolist()
         assert fast[4] == (0.0 if ref[3] else want_err)
         assert native.quant_error(v, ref[0], ref[2], ref[1]) == want_err
         hf = from_array(v)  # the fast path, and the property's cached value
@@ -75,6 +88,13 @@ def test_quantise_refuses_what_the_model_refuses():
         assert native.quantise(bad) == "non-finite"
         with pytest.raises(InputError, match="non-finite"):
             quantise(bad)
+    for at in (0, 4095, 4096, 9999):  # the C pass looks at whether all were finite block by block
+        for value in (np.nan, -np.inf):
+            v = np.arange(10000.0).reshape(100, 100)
+            v.flat[at] = value
+            for n in THREADS:
+                native.set_threads(n)
+                assert native.quantise(v) == "non-finite"
     huge = np.array([[-1.7e308, 1.7e308], [0.0, 0.0]])
     assert native.quantise(huge) == "span"
     with pytest.raises(InputError, match="too large"):

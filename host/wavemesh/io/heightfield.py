@@ -62,8 +62,8 @@ Quantisation (the contract the RTL and the firmware rely on; ``quantise``):
   ``max - min <= 65535``.  Then ``scale = 1.0``; ``offset = 0.0`` when
   ``0 <= min`` and ``max <= 65535``, else ``offset = min``; ``samples = v - offset``
   and ``lossless = True``.
-- Otherwise: ``offset = min``; ``scale = (max - min) / 65535`` (``scale = 1.0`` when
-  ``max == min``); ``samples = clip(rint((v - offset) / scale), 0, 65535)`` where
+- Otherwise: ``offset = min`` (0.0 for a least height of -0.0); ``scale = (max - min) / 65535``
+  (``scale = 1.0`` when ``max == min``); ``samples = clip(rint((v - offset) / scale), 0, 65535)`` where
   ``rint`` rounds half to even; the quantisation error is at most ``scale / 2``.
   ``lossless`` is True only when ``offset + scale * samples == v`` exactly
   (e.g. a constant non-integer field).
@@ -246,6 +246,7 @@ def quant_rule(vmin: float, vmax: float, integers: bool) -> tuple[float, float, 
     """quantise's scale and offset for finite heights in vmin..vmax (``integers``: all of them whole
     numbers): ``(scale, offset, exact)``, exact for integers within SAMPLE_MAX of each other (scale 1).
     wavemesh.tiles finds vmin, vmax and ``integers`` strip by strip and quantises every tile by them."""
+    vmin += 0.0  # a least height of -0.0 is 0.0: a zero offset is +0.0 (whichever zero np.min returns)
     span = vmax - vmin
     if not np.isfinite(span):
         raise InputError(f"height range {vmin:g} .. {vmax:g} is too large to quantise; rescale the heights")
