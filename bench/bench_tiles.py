@@ -465,13 +465,18 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
     """`wavemesh mesh` of the n^2 terrain in tiles of ``tile`` with 1 worker and with ``workers``, whole
     processes in turn (1, w, 1, w, ...; one of each first, not counted): each run's wall and CPU seconds
     (its process tree), the medians, t1 / tw of the medians and the median of the pairs' ratios, and
-    whether both wrote the same bytes."""
+    whether both wrote the same bytes.  The runs import compiled modules, as an installed package does:
+    compiled by the first two runs (not counted) into a cache of their own (PYTHONPYCACHEPREFIX under the
+    bench's folder, PYTHONDONTWRITEBYTECODE dropped; with it set and no cache, every run compiled the
+    package's modules again at its start)."""
     import statistics
 
     path = terrain_file(n)
     root = BENCH.parent
     out = WORK / "pair"
     out.mkdir(parents=True, exist_ok=True)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPYCACHEPREFIX"] = str(WORK / "pycache")
 
     def run1(w: int) -> tuple[float, float]:
         cmd = [
@@ -493,7 +498,7 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
             "--quiet",
         ]
         c0, t0 = os.times(), time.perf_counter()
-        subprocess.run(cmd, cwd=root, check=True)
+        subprocess.run(cmd, cwd=root, check=True, env=env)
         t, c1 = time.perf_counter() - t0, os.times()
         return t, c1.children_user + c1.children_system - c0.children_user - c0.children_system
 
