@@ -57,27 +57,29 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
  * d_k-1 x d_k, d_k x d_a = -f(k) and d_a x d_k-1 = f(k - 1), so v's own error against it (a lower
  * bound of its E(T), rounded the same way) needs no more orientations: 2^16 |V| <= zeta D says it is
  * within zeta in either metric (as wm_point_above); above it, the vertical metric refuses the fan at
- * once and the normal one asks wm_point_above.  0 when v's error is above zeta: that fan cannot go,
- * valid or not; else 1 (also when no triangle holds v, which only an invalid fan allows: wm_ring_plan
- * then refuses it). */
+ * once and the normal one takes the slope factor's test (wm_point_above_v).  0 when v's error is above
+ * zeta: that fan cannot go, valid or not; else 1 (also when no triangle holds v, which only an invalid
+ * fan allows: wm_ring_plan then refuses it).  D < 2^31 (the grid's sides are below 2^15): its
+ * products are 32 by 32 bits. */
 struct fans {
-    int32_t n, k;                                             /* ring size; the pointer, unwrapped */
-    int32_t dx[WM_MAX_RING], dy[WM_MAX_RING];                 /* d_i */
-    int64_t z[WM_MAX_RING], zv;                               /* the samples of p_i and of v */
+    int32_t n, k;                             /* ring size; the pointer, unwrapped */
+    int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
+    int32_t z[WM_MAX_RING], zv;               /* the samples of p_i and of v */
 };
 
-static int64_t cross(const struct fans *q, int32_t i, int32_t j)
+/* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64, for the soft CPU a multiply pair). */
+static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 {
-    return (int64_t)q->dx[i] * q->dy[j] - (int64_t)q->dx[j] * q->dy[i];
+    return (int32_t)((int64_t)q->dx[i] * q->dy[j] - (int64_t)q->dx[j] * q->dy[i]);
 }
 
 static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, const int32_t *ry, int32_t a,
                        int32_t vx, int32_t vy)
 {
     const wm_refiner *r = t->r;
-    int32_t n = q->n, k, j;
-    int64_t fk, fj, e0, D, V;
-    uint64_t av;
+    int32_t n = q->n, k, j, fk, fj, e0;
+    int64_t D, V;
+    uint64_t av = 0;
     if (q->k < a + 2) q->k = a + 2;
     for (;;) {
         if (q->k > a + n - 1) return 1;
@@ -89,17 +91,23 @@ static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, cons
     j = k == 0 ? n - 1 : k - 1;
     fj = cross(q, a, j);
     e0 = cross(q, j, k);
-    D = e0 - fk + fj;
-    if (D > 0 && r->field.mask == NULL) {
-        V = e0 * q->z[a] - fk * q->z[j] + fj * q->z[k] - D * q->zv;
+    D = (int64_t)e0 - fk + fj;
+    if (D > 0 && r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu) {
+        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k] - (int64_t)(int32_t)D * q->zv;
         av = (uint64_t)(V < 0 ? -V : V);
+        WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
-        if (av * 65536u <= (uint64_t)r->params.zeta * (uint64_t)D) return 1;
+        if (av * 65536u <= (uint64_t)r->params.zeta * (uint32_t)D) return 1;
         if (r->params.metric == WM_METRIC_VERTICAL) return 0;
     }
     {
         int32_t x[3] = {rx[a], rx[j], rx[k]}, y[3] = {ry[a], ry[j], ry[k]};
-        return !test_point(t, x, y, vx, vy);
+        int above;
+        if (D <= 0 || r->field.mask || r->params.zeta == 0xFFFFFFFFu) return !test_point(t, x, y, vx, vy);
+        above = wm_point_above_v(&r->field, &r->params, x, y, D, av, r->params.zeta, &t->kept);
+        if (t->kept) /* as test_point */
+            for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
+        return !above;
     }
 }
 

@@ -403,9 +403,7 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
                    int32_t py, uint32_t bound, uint64_t *kept)
 {
     int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
-    uint64_t av, c, X;
-    uint32_t ev;
-    int k;
+    uint64_t av;
     if (D <= 0 || f->mask || bound == 0xFFFFFFFFu) return wm_point_error(f, p, x, y, px, py, kept) > bound;
     WM_PROF_ADD(WM_PC_POINTS, 1);
     av = point_v(f, x, y, D, px, py);
@@ -413,6 +411,15 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
      * 2^63), without a division: then E is within in either metric (the normal one's E <= ev, r >= 2^16,
      * with no slope factor needed); else the vertical E is above it */
     if (av * 65536u <= (uint64_t)bound * (uint64_t)D) return 0;
+    return wm_point_above_v(f, p, x, y, D, av, bound, kept);
+}
+
+int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
+                     uint64_t av, uint32_t bound, uint64_t *kept)
+{
+    uint64_t c, X;
+    uint32_t ev;
+    int k;
     if (p->metric == WM_METRIC_VERTICAL) return 1;
     ev = vertical(av, D); /* > bound */
     if (bound == 0) return 1;  /* E >= 1: r is finite */

@@ -222,6 +222,11 @@ uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3
  * answer is 0, as the caller then measures the triangle). */
 int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                    int32_t py, uint32_t bound, uint64_t *kept);
+/* wm_point_above's answer once 2^16 |V| > bound D is known (D = twice the area > 0, av = |V| at the
+ * sample, no mask, bound < 2^32 - 1): 1 in the vertical metric, the slope factor's test in the normal
+ * one (for a caller that has V from its own orientations: decimate.c's fans). */
+int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
+                     uint64_t av, uint32_t bound, uint64_t *kept);
 /* wm_tri_error with a kept word. */
 uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                            int32_t *wx, int32_t *wy, uint64_t *kept);
