@@ -202,17 +202,17 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
     return z < 0 ? 0 : z;
 }
 
-int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
+void wm_min_corner(const int32_t x[3], const int32_t y[3], int64_t *dot, int64_t *cross)
 {
     /* The smallest angle is the one opposite the shortest side (law of sines), so one atan2 does.
      * Two equally short sides have equal angles opposite them, and those corners have the same dot
      * and cross products (the cross product is twice the area at every corner, the dot product
      * |u||v| cos): the same integers, the same CORDIC result, whichever corner is taken. */
     int k = 0;
-    int64_t len[3], ux, uy, vx, vy, cross, dot;
+    int64_t len[3], ux, uy, vx, vy, c;
     for (int i = 0; i < 3; i++) {
-        int b = wm_k1(i), c = wm_k2(i); /* the side opposite corner i */
-        int64_t dx = (int64_t)x[c] - x[b], dy = (int64_t)y[c] - y[b];
+        int b = wm_k1(i), cc = wm_k2(i); /* the side opposite corner i */
+        int64_t dx = (int64_t)x[cc] - x[b], dy = (int64_t)y[cc] - y[b];
         len[i] = dx * dx + dy * dy;
         if (len[i] < len[k]) k = i;
     }
@@ -220,9 +220,32 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
     uy = (int64_t)y[wm_k1(k)] - y[k];
     vx = (int64_t)x[wm_k2(k)] - x[k];
     vy = (int64_t)y[wm_k2(k)] - y[k];
-    cross = ux * vy - uy * vx;
-    dot = ux * vx + uy * vy;
-    return wm_angle_q16(dot, cross < 0 ? -cross : cross);
+    c = ux * vy - uy * vx;
+    *cross = c < 0 ? -c : c;
+    *dot = ux * vx + uy * vy;
+}
+
+int32_t wm_min_angle(const int32_t x[3], const int32_t y[3])
+{
+    int64_t dot, cross;
+    wm_min_corner(x, y, &dot, &cross);
+    return wm_angle_q16(dot, cross);
+}
+
+/* wm_angle_q16 is within 10 of atan2 in Q16 (its 17 table entries rounded to nearest, 1/2 each; the
+ * angle left after the 17th rotation below atan 2^-16 < 1; the shifts' truncations of vectors of at
+ * least 2^27 far below 1), and the smallest angle theta is at most pi/3 (68,629.06 in Q16), so
+ * theta <= tan theta = |cross| / dot bounds it (tight for the small angles that decide swaps). */
+#define ANGLE_SLACK 16
+
+int32_t wm_angle_above(int64_t dot, int64_t cross)
+{
+    const int32_t cap = 68630 + ANGLE_SLACK;
+    uint64_t n, q;
+    if (dot <= 0) return cap; /* not a triangle of a proper mesh: its smallest angle is below 90 degrees */
+    n = (uint64_t)cross << 16; /* < 2^47: cross < 2^31 (sides below 2^15) */
+    q = n >> 32 == 0 && (uint64_t)dot >> 32 == 0 ? (uint32_t)n / (uint32_t)dot : n / (uint64_t)dot;
+    return q + 1 + ANGLE_SLACK >= (uint64_t)cap ? cap : (int32_t)q + 1 + ANGLE_SLACK;
 }
 
 uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64_t cap)

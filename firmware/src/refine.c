@@ -252,6 +252,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
     int32_t qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
+    int64_t dot1 = 0, cross1 = 0, dot2 = 0, cross2 = 0; /* the new triangles' smallest angles (fixed.c) */
     uint32_t e1 = 0, e2 = 0, ra, bnd, oe1 = r->err[t1], oe2 = r->err[t2];
     const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
     uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
@@ -269,9 +270,17 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         ang_old = slot_angle(r, t1);
         a1 = slot_angle(r, t2);
         if (a1 < ang_old) ang_old = a1;
-        ang_new = an1 = wm_min_angle(n1x, n1y);
-        a1 = an2 = wm_min_angle(qx, qy);
-        if (a1 < ang_new) ang_new = a1;
+        wm_min_corner(n1x, n1y, &dot1, &cross1);
+        wm_min_corner(qx, qy, &dot2, &cross2);
+        if (alpha < 65536u) { /* first a bound of R_A from above: the new angles below */
+            ang_new = wm_angle_above(dot1, cross1);
+            a1 = wm_angle_above(dot2, cross2);
+            if (a1 < ang_new) ang_new = a1;
+        } else {
+            ang_new = an1 = wm_angle_q16(dot1, cross1);
+            a1 = an2 = wm_angle_q16(dot2, cross2);
+            if (a1 < ang_new) ang_new = a1;
+        }
         ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
     }
     /* The swap's bound: no new triangle over the mesh's E_max when the sweep began, so a swap never
@@ -287,7 +296,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         /* xi > 1 iff den <= dmax (den_max), and den >= one: R_A alone may refuse the swap.  Then the
          * old triangles' worst samples, measured against the new triangle(s) holding them: they bound
          * the new E(T) from below (rounded as E(T) is), so den from below, without a scan; each
-         * point error is tested as it comes. */
+         * point error is tested as it comes.  dmax grows with R_A, so these first take R_A's bound
+         * from above (wm_min_angle_above, no CORDIC): a swap they refuse with it is refused with R_A
+         * itself (most swaps end here); then the new angles, and the same tests on their R_A. */
         dmax = den_max(alpha, ra, o1 + o2 + one);
         if (one > dmax) return 0;
         s1 = s2 = 0;
@@ -310,6 +321,14 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
                     if (s1 + s2 + one > dmax) return 0;
                 }
             }
+        }
+        if (alpha > 0) {
+            ang_new = an1 = wm_angle_q16(dot1, cross1);
+            a1 = an2 = wm_angle_q16(dot2, cross2);
+            if (a1 < ang_new) ang_new = a1;
+            ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
+            dmax = den_max(alpha, ra, o1 + o2 + one);
+            if (s1 + s2 + one > dmax) return 0; /* one > dmax with it */
         }
         /* Then each scan stops as soon as its E(T) is too large for the swap (the bound, or den over
          * dmax with the other triangle's lower bound, then its measure): the E(T) and worst sample of

@@ -205,6 +205,11 @@ static inline void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int
 }
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
+/* wm_min_angle in two steps: the dot and |cross| products at the corner opposite the shortest side
+ * (wm_min_angle is wm_angle_q16 of them), and an upper bound of that angle without the CORDIC (the
+ * tangent, with the CORDIC's error added; a counter-clockwise triangle: dot > 0). */
+void wm_min_corner(const int32_t x[3], const int32_t y[3], int64_t *dot, int64_t *cross);
+int32_t wm_angle_above(int64_t dot, int64_t cross);
 /* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside
  * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
 int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy);

@@ -498,6 +498,36 @@ static void test_incircle(void)
     CHECK(wm_incircle(M, 0, M, M, 0, M, 0, 1) > 0);
     /* atan2(3, 4) = 0.6435 rad, the angle at (4, 0) opposite the shortest side */
     CHECK(wm_min_angle(x, y) > 42100 && wm_min_angle(x, y) < 42200);
+    /* wm_angle_above bounds the CORDIC's smallest angle from above (refine.c's swaps refuse on it):
+     * random counter-clockwise triangles over the whole range, slivers and near-equilateral ones */
+    {
+        uint32_t seed = 12345u;
+        int32_t worst = 1 << 30;
+        for (int i = 0; i < 200000; i++) {
+            int64_t dot, cross;
+            int32_t a, ab;
+            int32_t span = i % 4 == 0 ? 8 : i % 4 == 1 ? 200 : M;
+            for (int c = 0; c < 3; c++) {
+                seed = seed * 1103515245u + 12345u;
+                x[c] = (int32_t)((seed >> 8) % (uint32_t)(span + 1));
+                seed = seed * 1103515245u + 12345u;
+                y[c] = (int32_t)((seed >> 8) % (uint32_t)(span + 1));
+            }
+            if (i % 7 == 0) x[2] = (x[0] + x[1]) / 2 + 1, y[2] = (y[0] + y[1]) / 2; /* a sliver */
+            if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) < 0) {
+                int32_t t = x[1];
+                x[1] = x[2], x[2] = t, t = y[1], y[1] = y[2], y[2] = t;
+            }
+            if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0) continue;
+            wm_min_corner(x, y, &dot, &cross);
+            a = wm_min_angle(x, y);
+            ab = wm_angle_above(dot, cross);
+            CHECK(a == wm_angle_q16(dot, cross));
+            CHECK(ab >= a);
+            if (ab - a < worst) worst = ab - a;
+        }
+        CHECK(worst < 32); /* and close for small angles */
+    }
 }
 
 /* R(v)'s eigen-decomposition (autocorr.c): a rank-one matrix n n^T, a diagonal one, a rotated one. */
