@@ -146,6 +146,12 @@ def test_kept_tiles(plan, tmp_path):
     assert tiles.tile_heightfield(plan, t) is hf and not hf.values.flags.writeable
     jobs.forget_tile(plan, 5)
     assert tiles.tile_heightfield(plan, t) is not hf
+    # keep=False (a seam's other tile): a kept tile as it is, one not kept read and not kept
+    assert tiles.tile_heightfield(plan, t, keep=False) is tiles.tile_heightfield(plan, t)
+    other = tiles.tile_heightfield(plan, plan.tiles[6], keep=False)
+    assert other is not tiles.tile_heightfield(plan, plan.tiles[6], keep=False)
+    assert np.array_equal(other.samples, tiles.tile_heightfield(plan, plan.tiles[6]).samples)
+    assert len(jobs._TILE_CACHE) == 2
     # the file replaced under its name: read anew
     path = tmp_path / "r.npy"
     np.save(path, np.arange(64 * 64, dtype=np.float32).reshape(64, 64))

@@ -72,12 +72,14 @@ _TILE_CACHE: OrderedDict = OrderedDict()  # key -> HeightField, the last used la
 _TILE_LOCK = threading.Lock()  # stream's threads read tiles at once
 
 
-def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None) -> HeightField:
+def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None, keep: bool = True
+                     ) -> HeightField:
     """The tile as a HeightField: its window of the input with the whole grid's quantisation, its
     place on the ground, and the whole grid's cell size.  A file's tiles are kept by the process that read
     them (the last TILE_CACHE_BYTES of them, read-only): every phase of a tile reads it (free, conformed,
     its sides thinned), and the pool gives a tile's tasks to the worker that read it first (Runner.graph).
-    A file replaced under the same name is read anew."""
+    A file replaced under the same name is read anew.  ``keep`` False: a tile this process does not hold
+    is read and not kept (a seam's neighbour another worker holds: it would stay here, never forgotten)."""
     key = _cache_key(plan, t, window)
     if key is None:
         return _tile_heightfield(plan, t, window)
@@ -87,6 +89,8 @@ def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None) 
             _TILE_CACHE.move_to_end(key)
             return hf
     hf = _tile_heightfield(plan, t, None)
+    if not keep:
+        return hf
     for a in (hf.values, hf.samples):
         a.flags.writeable = False
     with _TILE_LOCK:
@@ -211,10 +215,10 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
                       final.tris, final.z(hf.values), report, report.get("device"))
 
 
-def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str]
+def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str], keep: bool = True
               ) -> tuple[Editable, HeightField]:
     t = plan.tiles[r.index]
-    hf = tile_heightfield(plan, t, window)
+    hf = tile_heightfield(plan, t, window, keep)
     fp = native.fixed_params(plan.params.refine, hf.scale, plan.zeta_used, plan.spacing)
     mesh = Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris)
     return Editable(mesh, native.error_within(hf.samples, fp), sides), hf
@@ -222,8 +226,10 @@ def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: l
 
 def thin_seam(plan: TilePlan, a: TileResult, b: TileResult, side: str, win_a=None, win_b=None) -> tuple:
     """Step 6 for one shared side (``a``'s ``side``, facing ``b``): the positions of the vertices on it
-    both tiles can do without (sides.thin_side), found on copies of both meshes."""
-    return thin_side(_editable(plan, a, win_a, [side])[0], _editable(plan, b, win_b, [FACING[side]])[0], side)
+    both tiles can do without (sides.thin_side), found on copies of both meshes.  A tile this process does
+    not hold (the other tile of a seam between two workers' tiles) is read for it alone, not kept."""
+    return thin_side(_editable(plan, a, win_a, [side], False)[0],
+                     _editable(plan, b, win_b, [FACING[side]], False)[0], side)
 
 
 def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray | None = None) -> TileResult:
