@@ -406,3 +406,16 @@ def test_default_tile_from_memory():
     assert tiles.default_tile(4, 4 * per * 1025**2) == 1025
     assert tiles.default_tile(64, 1) == 513
     assert tiles.cuts(8192, 4097) == [0, 4096, 8191] and tiles.cuts(4097, 4097) == [0, 4096]
+
+
+def test_quiet_tiled_run_imports_no_progress_bar(dem, tmp_path):
+    """--quiet: no bar and no line are drawn, and tqdm is not imported for them (a serial 20 ms between the
+    quantisation's strips and the tiles with a pool)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from wavemesh import cli; rc = cli.main(['mesh', sys.argv[1], '-o', sys.argv[2], "
+            "'--tile', '64', '--workers', '2', '--quiet']); print(rc, 'tqdm' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, str(dem), str(tmp_path / "m.obj")], capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr
