@@ -424,6 +424,9 @@ class TiledResult:
     report: dict
 
 
+_TURNS = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])  # a triangle's corners from corner 0, 1 or 2
+
+
 class TileOrder:
     """The whole mesh's vertex numbers, given tile by tile in tile order (row by row, each row left to
     right: :meth:`number` of every tile in turn), so that a file can be written as the tiles come: a
@@ -477,11 +480,18 @@ class TileOrder:
         where[perm] = np.arange(len(perm))
         tris = where[r.tris]
         if len(tris):  # each from its smallest number (orientation kept), sorted by their numbers
-            g = number[tris]
-            rows = np.arange(len(tris))[:, None]
-            turn = (np.argmin(g, axis=1)[:, None] + np.arange(3)[None, :]) % 3
-            tris, g = tris[rows, turn], g[rows, turn]
-            tris = tris[np.lexsort((g[:, 2], g[:, 1], g[:, 0]))]
+            n = len(number)  # their order within the tile: the earlier tiles' numbers (sorted), then the new
+            rank = np.empty(n, dtype=np.int64)
+            rank[np.argsort(number[: len(was)])] = np.arange(len(was))
+            rank[len(was):] = np.arange(len(was), n)
+            g = rank[tris]
+            turn = _TURNS[np.argmin(g, axis=1)]
+            tris, g = np.take_along_axis(tris, turn, 1), np.take_along_axis(g, turn, 1)
+            if n < 1 << 21:  # one key: (g0 n + g1) n + g2 < 2^63
+                order = np.argsort((g[:, 0] * n + g[:, 1]) * n + g[:, 2])
+            else:
+                order = np.lexsort((g[:, 2], g[:, 1], g[:, 0]))
+            tris = tris[order]
         xy, z = r.xy[perm], r.z[perm]
         ends = (("bottom", xy[:, 1] == t.y + t.height - 1), ("right", xy[:, 0] == t.x + t.width - 1))
         for side, on in ends:
