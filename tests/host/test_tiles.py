@@ -228,6 +228,19 @@ def test_written_as_tiles_finish(tiled_dem, tmp_path, suffix):
         assert out.read_bytes() == whole.read_bytes()
 
 
+def test_tile_order_one_key_or_three(tiled_dem, monkeypatch):
+    """TileOrder's triangles sorted by one key of their ranks (tiles of fewer than 2^21 vertices) or by
+    their three numbers (larger tiles): the same order."""
+    from wavemesh.tiles import jobs
+
+    plan, results, tiled = tiled_dem
+    monkeypatch.setattr(jobs, "ONE_KEY", 0)
+    three = tiles.stitch(plan, results)
+    assert np.array_equal(three.mesh.tris, tiled.mesh.tris) and np.array_equal(three.mesh.xy, tiled.mesh.xy)
+    t = three.mesh.tris
+    assert np.all(t[:, 0] < t[:, 1:].min(axis=1)) and len(t) > 1000
+
+
 def test_written_as_tiles_finish_georeferenced(dem, tmp_path):
     """A georeferenced grid (a GeoTIFF whose rows run south): the streamed PLY in the CRS's units and STL
     in metres (their triangles reversed to face up) are write_mesh's files of the stitched mesh, and so

@@ -424,6 +424,7 @@ class TiledResult:
     report: dict
 
 
+ONE_KEY = 1 << 21  # TileOrder sorts the triangles of a tile of fewer vertices by one key, n^3 < 2^63
 _TURNS = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])  # a triangle's corners from corner 0, 1 or 2
 
 
@@ -487,7 +488,7 @@ class TileOrder:
             g = rank[tris]
             turn = _TURNS[np.argmin(g, axis=1)]
             tris, g = np.take_along_axis(tris, turn, 1), np.take_along_axis(g, turn, 1)
-            if n < 1 << 21:  # one key: (g0 n + g1) n + g2 < 2^63
+            if n < ONE_KEY:  # one key: (g0 n + g1) n + g2 < 2^63
                 order = np.argsort((g[:, 0] * n + g[:, 1]) * n + g[:, 2])
             else:
                 order = np.lexsort((g[:, 2], g[:, 1], g[:, 0]))
