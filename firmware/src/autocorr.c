@@ -151,6 +151,23 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     }
 }
 
+/* floor(x / (k 2^26)) for 1 <= k <= WM_MAX_RING, as floor(floor(x / 2^26) / k) (and ceil likewise for
+ * x < 0): the same integer as wm_floor_div(x, k << 26), with the division by k in 32-bit steps on the
+ * soft CPU (wm_udiv_small), where a 64-bit one is a library call. */
+static int64_t floor_div_k26(int64_t x, int32_t k)
+{
+    uint64_t m = x < 0 ? (uint64_t)0 - (uint64_t)x : (uint64_t)x, q;
+    uint32_t rem;
+    if (x >= 0) {
+        m >>= 26;
+        q = WM_NARROW_DIV ? wm_udiv_small(m, (uint32_t)k, &rem) : m / (uint32_t)k;
+        return (int64_t)q;
+    }
+    m = ((m + ((uint64_t)1 << 26) - 1) >> 26) + (uint32_t)k - 1; /* ceil(|x| / 2^26), then ceil(. / k) */
+    q = WM_NARROW_DIV ? wm_udiv_small(m, (uint32_t)k, &rem) : m / (uint32_t)k;
+    return -(int64_t)q;
+}
+
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
                 struct wm_normal_slot *kept)
 {
@@ -187,7 +204,7 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
         h = wm_rot_ccw(m, h);
     } while (h >= 0 && h != first);
     /* Q56 sums / k -> Q30, rounded (half up) */
-    for (int i = 0; i < 6; i++) r[i] = wm_floor_div(sum[i] + ((int64_t)k << 25), (int64_t)k << 26);
+    for (int i = 0; i < 6; i++) r[i] = floor_div_k26(sum[i] + ((int64_t)k << 25), k);
     return (int)k;
 }
 
