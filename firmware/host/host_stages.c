@@ -238,6 +238,8 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
         if (s->max[p] > mx) mx = s->max[p];
         integer &= s->integer[p];
     }
+    out[3] = mn;
+    out[4] = mx;
     mn += 0.0; /* a least height of -0.0 is 0.0 (heightfield.quant_rule's offset) */
     double span = mx - mn;
     if (!isfinite(span)) {

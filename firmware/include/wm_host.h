@@ -26,7 +26,8 @@ extern "C" {
 int64_t wm_host_part_min(int64_t n);
 
 /* quantise(): n finite heights v to 16-bit samples.  out[0] = scale, out[1] = offset, out[2] = the
- * largest |v - (offset + scale * sample)|; *lossless = 1 when that is 0 (every height reconstructed).
+ * largest |v - (offset + scale * sample)|, out[3] and out[4] the least and the largest height (of zeros,
+ * -0.0 is the lesser); *lossless = 1 when out[2] is 0 (every height reconstructed).
  * The rules are heightfield.py's: integers within 65535 of each other are kept exactly (offset 0
  * when they lie in 0..65535, else their minimum); otherwise offset = min, scale = (max - min) / 65535,
  * sample = rint((v - offset) / scale) clipped to 0..65535 (scale 1, samples 0 for a constant). */

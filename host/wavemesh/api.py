@@ -92,7 +92,8 @@ BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget sto
 
 
 def default_tau(hf: HeightField) -> float:
-    return DEFAULT_TAU_FRACTION * float(np.max(hf.values) - np.min(hf.values))
+    lo, hi = hf.extremes
+    return DEFAULT_TAU_FRACTION * (hi - lo)
 
 
 @record(frozen=True)

@@ -76,11 +76,13 @@ def test_quantise_equals_the_model(name):
         assert np.array_equal(fast[0], ref[0]) and fast[0].dtype == np.uint16
         assert fast[1:4] == ref[1:4]
         assert np.array(fast[1:3]).view(np.int64).tolist() == np.array(ref[1:3]).view(np.int64).tolist()
+        assert fast[5:7] == (float(np.min(v)), float(np.max(v)))  # found by the same pass
         assert fast[4] == (0.0 if ref[3] else want_err)
         assert native.quant_error(v, ref[0], ref[2], ref[1]) == want_err
         hf = from_array(v)  # the fast path, and the property's cached value
         assert np.array_equal(hf.samples, ref[0])
         assert hf.max_quantisation_error == (0.0 if ref[3] else want_err)
+        assert hf.extremes == fast[5:7] and api.default_tau(hf) == 0.01 * float(np.max(v) - np.min(v))
 
 
 def test_quantise_refuses_what_the_model_refuses():

@@ -155,6 +155,11 @@ class HeightField:
         recon = self.offset + self.scale * self.samples.astype(np.float64)
         return float(np.max(np.abs(self.values - recon)))
 
+    @cached_property  # once per height field (from_array's quantising pass finds them: no pass of its own)
+    def extremes(self) -> tuple[float, float]:
+        """The least and the largest height (default_tau's range, the report's)."""
+        return float(np.min(self.values)), float(np.max(self.values))
+
     def refiner_zeta(self, zeta: float) -> float:
         """The zeta the refiner is given on the 16-bit samples (`mesh`, `stream`, every tile): for lossy
         quantisation a sample is off its input value by at most q, and so is a plane through three samples,
@@ -174,8 +179,8 @@ class HeightField:
             "quantisation_step": float(self.scale),
             "max_quantisation_error": self.max_quantisation_error,
             "filled": int(self.filled),
-            "min": float(np.min(self.values)),
-            "max": float(np.max(self.values)),
+            "min": self.extremes[0],
+            "max": self.extremes[1],
         } | ({"invalid": int(np.count_nonzero(self.mask)) - self.stranded, "stranded": self.stranded}
              if self.mask is not None else {})
 
@@ -311,9 +316,11 @@ def from_array(array, source: str = "<array>", fill: str | float | None = None, 
             samples, scale, offset, lossless = fast[:4]
             hf = HeightField(values=values, samples=samples, scale=scale, offset=offset, lossless=lossless,
                              source=source)
-            # the same pass measured max_quantisation_error (wm_host_quantise: quant_error's terms, tested
-            # equal): kept as that cached property's value, not measured again (a pass over the grid)
+            # the same passes measured max_quantisation_error (wm_host_quantise: quant_error's terms, tested
+            # equal) and found the extremes: kept as those cached properties' values, not measured again
+            # (a pass over the grid each)
             hf.__dict__["max_quantisation_error"] = 0.0 if lossless else fast[4]
+            hf.__dict__["extremes"] = fast[5:7]
             return hf
     bad = ~np.isfinite(values)
     if invalid is not None:
@@ -397,12 +404,12 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
     if fmt == "raster":
         array, transform, crs = _read_raster(path, ext, size_check)
         hf = from_array(array, source=path, fill=fill_mode, owned=True, **marks)
-        return replace(hf, transform=transform, crs=crs)
+        return _measured(hf, replace(hf, transform=transform, crs=crs))
     if fmt == "npz":
         with _library_warnings_quiet():
             array, transform = _read_npz(path, key, size_check)
         hf = from_array(array, source=path, fill=fill_mode, owned=True, **marks)
-        return replace(hf, transform=transform)
+        return _measured(hf, replace(hf, transform=transform))
     reader = {
         "npy": _read_npy,
         "pgm": _read_pgm,
@@ -411,6 +418,15 @@ def load_heightfield(path: str, key: str | None = None, fill: str | float | None
     with _library_warnings_quiet():
         array = reader(path, size_check)
     return from_array(array, source=path, fill=fill_mode, owned=True, **marks)
+
+
+def _measured(hf: HeightField, new: HeightField) -> HeightField:
+    """``new``, a copy of ``hf`` with other georeference, with what was measured of hf's heights (the
+    cached properties: the same heights, no pass over them again)."""
+    for name in ("max_quantisation_error", "extremes"):
+        if name in hf.__dict__:
+            new.__dict__[name] = hf.__dict__[name]
+    return new
 
 
 # ---------------------------------------------------------------------------

@@ -608,15 +608,16 @@ def host_lib() -> ctypes.CDLL | None:
 QUANTISE_ERRORS = {1: "non-finite", 2: "span"}
 
 
-def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float] | str | None:
-    """wm_host_quantise on float64 heights: (samples, scale, offset, lossless, max error), or the kind of
-    problem ("non-finite", "span") for the caller's message, or None without the library."""
+def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float, float, float] | str | None:
+    """wm_host_quantise on float64 heights: (samples, scale, offset, lossless, max error, least height,
+    largest height), or the kind of problem ("non-finite", "span") for the caller's message, or None
+    without the library."""
     lib = host_lib()
     if lib is None:
         return None
     v = np.ascontiguousarray(values, dtype=np.float64)
     samples = np.empty(v.shape, dtype=np.uint16)
-    out = np.zeros(3, dtype=np.float64)
+    out = np.zeros(5, dtype=np.float64)
     lossless = ctypes.c_int32(0)
     for n in (threads(), 1):  # a thread that cannot start: once more on this one
         code = lib.wm_host_quantise(_ptr(v, ctypes.c_double), v.size, n, _ptr(samples, ctypes.c_uint16),
@@ -627,7 +628,8 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float]
         return QUANTISE_ERRORS[code]
     if code != 0:
         return None
-    return samples, float(out[0]), float(out[1]), bool(lossless.value), float(out[2])
+    scale, offset, err, lo, hi = (float(x) for x in out)
+    return samples, scale, offset, bool(lossless.value), err, lo, hi
 
 
 def quant_error(values: np.ndarray, samples: np.ndarray, offset: float, scale: float) -> float | None:
