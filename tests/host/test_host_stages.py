@@ -263,3 +263,52 @@ def test_quantisation_error_kept_from_the_quantising_pass(name):
     recon = hf.offset + hf.scale * hf.samples.astype(np.float64)
     assert "max_quantisation_error" in hf.__dict__  # set by the pass, not measured again
     assert hf.max_quantisation_error == float(np.max(np.abs(hf.values - recon)))
+
+
+@pytest.fixture
+def c_scan():
+    """Runs the test body's refiner with host_scan.c's scan (yield True) and tri_error.c's (False)."""
+    lib = native.load()
+    old = lib.wm_host_scan(-1)
+    yield lib
+    lib.wm_host_scan(old)
+
+
+@pytest.mark.parametrize("name", ["floats", "halves", "big", "jacksboro", "topobathy", "mri"])
+def test_refiner_scan_in_avx2_equals_the_c_scan(name, c_scan):
+    """The host library's E(T) scan (host_scan.c, AVX2) against tri_error.c's: the same meshes and
+    statistics at every level, bound met or stopped by a budget, in both metrics (every scan's Vmax, first
+    worst sample and early stop at a limit shape them)."""
+    v = ALL[name]
+    hf = from_array(v)
+    span = float(v.max() - v.min())
+    for metric in ("vertical", "normal"):
+        for zeta, budget in ((0.002 * span, None), (0.02 * span, None), (0.002 * span, 60)):
+            params = api.MeshParams(refine=native.RefineParams(zeta=zeta, metric=metric, max_triangles=budget))
+            got = []
+            for on in (0, 1):
+                c_scan.wm_host_scan(on)
+                r = api.mesh(hf, params)
+                got.append((r.mesh.xy.tolist(), r.mesh.tris.tolist(), r.rows))
+            assert got[0] == got[1], (metric, zeta, budget)
+
+
+def test_triangle_scan_in_avx2_equals_the_c_scan(c_scan):
+    """E(T) of random triangles, small (the 32-bit lanes) and large or on a grid wider than 2^14 (the
+    64-bit lanes), by both scans: the same value, bit for bit."""
+    rng = np.random.default_rng(5)
+    for shape in ((300, 301), (3, 17000)):
+        samples = rng.integers(0, 65536, shape).astype(np.uint16)
+        samples[:, : shape[1] // 2] //= 64  # smooth half: maxima reached late and often
+        h, w = shape
+        for _ in range(300):
+            x = rng.integers(0, w, 3)
+            y = rng.integers(0, h, 3)
+            if (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]) <= 0:
+                continue
+            for metric in ("vertical", "normal"):
+                e = []
+                for on in (0, 1):
+                    c_scan.wm_host_scan(on)
+                    e.append(native.tri_error(samples, x, y, metric))
+                assert e[0] == e[1], (x, y, metric)

@@ -201,6 +201,7 @@ def _declare(lib: ctypes.CDLL) -> None:
                                            ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
+        "wm_host_scan": (i32, [i32]),
         "wm_host_obj_faces": (i64, [pi64, i64, ctypes.c_char_p]),
     }
     for name, (res, args) in sig.items():

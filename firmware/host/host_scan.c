@@ -1,0 +1,248 @@
+/* E(T)'s scan of a triangle's samples for the host's library, in AVX2 (firmware/src/tri_error.c's
+ * scan_any hands it every triangle through the hook the board's FPGA engine uses, WM_TRI_ENGINE: the
+ * shared library is built so; the static one, the C runner's, keeps the C scan).  The same result as the
+ * C scan: Vmax = the largest |S - D h| over the samples in the closed triangle (S = sum E_k z_k, D the
+ * doubled area), the first sample reaching it in row order (rows top down, each left to right; the first
+ * corner when no sample beats 0), or, as soon as a sample's V exceeds limit, that V and that sample.
+ *
+ * Each row's span is the C scan's: for each edge k with A_k != 0 its bound floor(u / a) on the row, u
+ * stepped from row to row with the quotient and its remainder (no division a row); a level edge (A_k = 0)
+ * empties the rows outside it.  The row's samples go 8 (32-bit lanes, where the C scan's scan32 takes
+ * the triangle: V is exact modulo 2^32 there) or 4 (64-bit lanes) at a time: each lane's V against the
+ * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
+ * the first one and stops at the limit as the C scan does.  Processors without AVX2 (and other
+ * compilers) answer 0: the C scan runs.  wm_host_scan(0) turns it off (the tests compare both). */
+#define _POSIX_C_SOURCE 200809L
+#include "wm_host.h"
+#include "wm_internal.h"
+
+#include <stdint.h>
+
+static int32_t enabled = 1;
+
+int32_t wm_host_scan(int32_t on)
+{
+    int32_t old = enabled;
+    if (on >= 0) enabled = on != 0;
+    return old;
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#include <immintrin.h>
+
+#define AVX2 __attribute__((target("avx2")))
+
+#define PREFETCH_LINES 16 /* of the next row's span: 512 samples */
+
+/* floor(u / a) and its remainder for a > 0, and the step of both when u grows by s every row. */
+struct bound {
+    int64_t q, r, dq, dr, a;
+};
+
+static int64_t floor_div64(int64_t u, int64_t a) /* a > 0 */
+{
+    if (u == (int32_t)u && a == (int32_t)a) { /* most: a 32-bit division is several times faster */
+        int32_t q = (int32_t)u / (int32_t)a;
+        return ((int32_t)u % (int32_t)a != 0 && u < 0) ? q - 1 : q;
+    }
+    int64_t q = u / a;
+    return (u % a != 0 && u < 0) ? q - 1 : q;
+}
+
+static void bound_start(struct bound *b, int64_t u, int64_t s, int64_t a)
+{
+    b->a = a;
+    b->q = floor_div64(u, a);
+    b->r = u - b->q * a;
+    b->dq = floor_div64(s, a);
+    b->dr = s - b->dq * a;
+}
+
+static inline AVX2 void bound_step(struct bound *b)
+{
+    b->q += b->dq;
+    b->r += b->dr;
+    if (b->r >= b->a) b->r -= b->a, b->q++;
+}
+
+struct best {
+    uint64_t vm, limit;
+    int32_t bx, by, over; /* over: a V above limit was found (the scan stops) */
+};
+
+/* The C scan's loop over samples [lo, hi] of row py from S at lo: new maxima, the first one kept. */
+static inline AVX2 void tail64(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, int64_t S,
+                               int64_t dS, int64_t D)
+{
+    for (int64_t px = lo; px <= hi; px++, S += dS) {
+        int64_t v = S - D * (int64_t)row[px];
+        uint64_t av = (uint64_t)(v < 0 ? -v : v);
+        if (av > b->vm) {
+            b->vm = av;
+            b->bx = (int32_t)px;
+            b->by = py;
+            if (av > b->limit) {
+                b->over = 1;
+                return;
+            }
+        }
+    }
+}
+
+/* scan32's loop (modulo 2^32, its row_max32), for the 32-bit lanes' blocks. */
+static inline AVX2 void tail32(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, uint32_t S,
+                               uint32_t dS, uint32_t d)
+{
+    for (int64_t px = lo; px <= hi; px++, S += dS) {
+        uint32_t u = S - d * row[px], v = u >> 31 ? 0u - u : u;
+        if (v > b->vm) {
+            b->vm = v;
+            b->bx = (int32_t)px;
+            b->by = py;
+            if (v > b->limit) {
+                b->over = 1;
+                return;
+            }
+        }
+    }
+}
+
+static inline AVX2 __attribute__((always_inline)) void
+row64(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, int64_t S, int64_t dS, int64_t D)
+{
+    int64_t px = lo;
+    if (hi - lo + 1 >= 8) {
+        const __m256i zero = _mm256_setzero_si256(), Dv = _mm256_set1_epi64x(D);
+        const __m256i step = _mm256_set1_epi64x(4 * dS);
+        __m256i Sv = _mm256_add_epi64(_mm256_set1_epi64x(S), _mm256_set_epi64x(3 * dS, 2 * dS, dS, 0));
+        __m256i vmv = _mm256_set1_epi64x((int64_t)b->vm);
+        for (; px + 8 <= hi + 1; px += 8) {
+            __m256i h0 = _mm256_cvtepu16_epi64(_mm_loadl_epi64((const __m128i *)(row + px)));
+            __m256i h1 = _mm256_cvtepu16_epi64(_mm_loadl_epi64((const __m128i *)(row + px + 4)));
+            __m256i S1 = _mm256_add_epi64(Sv, step);
+            __m256i v0 = _mm256_sub_epi64(Sv, _mm256_mul_epu32(h0, Dv)); /* D < 2^32, h < 2^16 */
+            __m256i v1 = _mm256_sub_epi64(S1, _mm256_mul_epu32(h1, Dv));
+            __m256i s0 = _mm256_cmpgt_epi64(zero, v0), s1 = _mm256_cmpgt_epi64(zero, v1);
+            v0 = _mm256_sub_epi64(_mm256_xor_si256(v0, s0), s0); /* |V| < 2^63 */
+            v1 = _mm256_sub_epi64(_mm256_xor_si256(v1, s1), s1);
+            __m256i gt = _mm256_or_si256(_mm256_cmpgt_epi64(v0, vmv), _mm256_cmpgt_epi64(v1, vmv));
+            if (!_mm256_testz_si256(gt, gt)) {
+                tail64(b, row, px, px + 7, py, S + (px - lo) * dS, dS, D);
+                if (b->over) return;
+                vmv = _mm256_set1_epi64x((int64_t)b->vm);
+            }
+            Sv = _mm256_add_epi64(S1, step);
+        }
+    }
+    if (px <= hi) tail64(b, row, px, hi, py, S + (px - lo) * dS, dS, D);
+}
+
+static inline AVX2 __attribute__((always_inline)) void
+row32(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, uint32_t S, uint32_t dS, uint32_t d)
+{
+    int64_t px = lo;
+    if (hi - lo + 1 >= 8) {
+        const __m256i dv = _mm256_set1_epi32((int32_t)d), step = _mm256_set1_epi32((int32_t)(8 * dS));
+        __m256i Sv = _mm256_add_epi32(
+            _mm256_set1_epi32((int32_t)S),
+            _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0)));
+        __m256i vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
+        for (; px + 8 <= hi + 1; px += 8) {
+            __m256i h = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(row + px)));
+            __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(h, dv))); /* as unsigned */
+            __m256i same = _mm256_cmpeq_epi32(_mm256_max_epu32(v, vmv), vmv); /* v <= vm */
+            if (_mm256_movemask_epi8(same) != -1) {
+                tail32(b, row, px, px + 7, py, S + (uint32_t)(px - lo) * dS, dS, d);
+                if (b->over) return;
+                vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
+            }
+            Sv = _mm256_add_epi32(Sv, step);
+        }
+    }
+    if (px <= hi) tail32(b, row, px, hi, py, S + (uint32_t)(px - lo) * dS, dS, d);
+}
+
+static int have_avx2(void)
+{
+    static int known = -1;
+    if (known < 0) known = __builtin_cpu_supports("avx2") ? 1 : 0;
+    return known;
+}
+
+static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t x[3], const int32_t y[3],
+                                               uint64_t limit, uint64_t *vmax, int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    int64_t A[3], B[3], C[3], z[3], dS = 0, D;
+    int32_t ymin = y[0], ymax = y[0];
+    struct bound lo_b[3], hi_b[3];
+    int n_lo = 0, n_hi = 0, n_level = 0, level[3];
+    struct best b = {0, limit, x[0], y[0], 0};
+    for (int k = 0; k < 3; k++) {
+        int k1 = wm_k1(k), k2 = wm_k2(k);
+        z[k] = h[(int64_t)y[k] * f->width + x[k]];
+        A[k] = -((int64_t)y[k2] - y[k1]); /* E_k(px, py) = A px + B py + C, as the C scan's */
+        B[k] = (int64_t)x[k2] - x[k1];
+        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
+        dS += A[k] * z[k];
+        if (y[k] < ymin) ymin = y[k];
+        if (y[k] > ymax) ymax = y[k];
+    }
+    D = A[0] * x[0] + B[0] * y[0] + C[0]; /* E_0 at its own corner: the doubled area */
+    if (D <= 0 || D >= ((int64_t)1 << 32)) return 0;
+    int narrow = f->width <= (1 << 14) && f->height <= (1 << 14) && D < (1 << 15); /* scan32's */
+    for (int k = 0; k < 3; k++) {
+        int64_t num = B[k] * ymin + C[k]; /* E_k = A x + num >= 0 on the row */
+        if (A[k] > 0) /* x >= ceil(-num / A) = floor((A - 1 - num) / A) */
+            bound_start(&lo_b[n_lo++], A[k] - 1 - num, -B[k], A[k]);
+        else if (A[k] < 0) /* x <= floor(num / -A) */ bound_start(&hi_b[n_hi++], num, B[k], -A[k]);
+        else level[n_level++] = k;
+    }
+    for (int32_t py = ymin; py <= ymax && !b.over; py++) {
+        int64_t lo = 0, hi = f->width - 1;
+        int empty = 0;
+        for (int i = 0; i < n_lo; i++) {
+            if (lo_b[i].q > lo) lo = lo_b[i].q;
+            bound_step(&lo_b[i]);
+        }
+        for (int i = 0; i < n_hi; i++) {
+            if (hi_b[i].q < hi) hi = hi_b[i].q;
+            bound_step(&hi_b[i]);
+        }
+        for (int i = 0; i < n_level; i++)
+            if (B[level[i]] * py + C[level[i]] < 0) empty = 1;
+        if (py < ymax) { /* the next row's span (the bounds stepped to it) on its way into the cache */
+            int64_t nlo = 0, nhi = f->width - 1;
+            for (int i = 0; i < n_lo; i++)
+                if (lo_b[i].q > nlo) nlo = lo_b[i].q;
+            for (int i = 0; i < n_hi; i++)
+                if (hi_b[i].q < nhi) nhi = hi_b[i].q;
+            const char *p = (const char *)(h + (int64_t)(py + 1) * f->width + nlo);
+            const char *e = (const char *)(h + (int64_t)(py + 1) * f->width + nhi);
+            for (int i = 0; i < PREFETCH_LINES && p <= e + 63; i++, p += 64) __builtin_prefetch(p);
+        }
+        if (empty || lo > hi) continue;
+        const uint16_t *row = h + (int64_t)py * f->width;
+        int64_t S = 0;
+        for (int k = 0; k < 3; k++) S += (A[k] * lo + B[k] * py + C[k]) * z[k];
+        if (narrow) row32(&b, row, lo, hi, py, (uint32_t)S, (uint32_t)dS, (uint32_t)D);
+        else row64(&b, row, lo, hi, py, S, dS, D);
+    }
+    *vmax = b.vm;
+    if (wx) *wx = b.bx;
+    if (wy) *wy = b.by;
+    return 1;
+}
+int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
+                       int32_t *wx, int32_t *wy)
+{
+    return enabled && have_avx2() ? scan(f, x, y, limit, vmax, wx, wy) : 0;
+}
+#else
+int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
+                       int32_t *wx, int32_t *wy)
+{
+    (void)f, (void)x, (void)y, (void)limit, (void)vmax, (void)wx, (void)wy;
+    return 0;
+}
+#endif
