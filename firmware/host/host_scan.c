@@ -107,57 +107,60 @@ static inline AVX2 void tail32(struct best *b, const uint16_t *row, int64_t lo, 
     }
 }
 
-static inline AVX2 __attribute__((always_inline)) void
-row64(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, int64_t S, int64_t dS, int64_t D)
+/* Rows in blocks of 4 samples (64-bit lanes) or 8 (32-bit), the last block of a row less than full, its
+ * lanes past the row's end cleared (V = 0 never beats the largest so far), except where its load would
+ * pass the end of the samples (end): that one sample by sample. */
+static inline AVX2 __attribute__((always_inline)) void row64(struct best *b, const uint16_t *row,
+                                                             const uint16_t *end, int64_t lo, int64_t hi,
+                                                             int32_t py, int64_t S, int64_t dS, int64_t D)
 {
+    const __m256i zero = _mm256_setzero_si256(), Dv = _mm256_set1_epi64x(D), lane = _mm256_set_epi64x(3, 2, 1, 0);
+    const __m256i step = _mm256_set1_epi64x(4 * dS);
+    __m256i Sv = _mm256_add_epi64(_mm256_set1_epi64x(S), _mm256_set_epi64x(3 * dS, 2 * dS, dS, 0));
+    __m256i vmv = _mm256_set1_epi64x((int64_t)b->vm);
     int64_t px = lo;
-    if (hi - lo + 1 >= 8) {
-        const __m256i zero = _mm256_setzero_si256(), Dv = _mm256_set1_epi64x(D);
-        const __m256i step = _mm256_set1_epi64x(4 * dS);
-        __m256i Sv = _mm256_add_epi64(_mm256_set1_epi64x(S), _mm256_set_epi64x(3 * dS, 2 * dS, dS, 0));
-        __m256i vmv = _mm256_set1_epi64x((int64_t)b->vm);
-        for (; px + 8 <= hi + 1; px += 8) {
-            __m256i h0 = _mm256_cvtepu16_epi64(_mm_loadl_epi64((const __m128i *)(row + px)));
-            __m256i h1 = _mm256_cvtepu16_epi64(_mm_loadl_epi64((const __m128i *)(row + px + 4)));
-            __m256i S1 = _mm256_add_epi64(Sv, step);
-            __m256i v0 = _mm256_sub_epi64(Sv, _mm256_mul_epu32(h0, Dv)); /* D < 2^32, h < 2^16 */
-            __m256i v1 = _mm256_sub_epi64(S1, _mm256_mul_epu32(h1, Dv));
-            __m256i s0 = _mm256_cmpgt_epi64(zero, v0), s1 = _mm256_cmpgt_epi64(zero, v1);
-            v0 = _mm256_sub_epi64(_mm256_xor_si256(v0, s0), s0); /* |V| < 2^63 */
-            v1 = _mm256_sub_epi64(_mm256_xor_si256(v1, s1), s1);
-            __m256i gt = _mm256_or_si256(_mm256_cmpgt_epi64(v0, vmv), _mm256_cmpgt_epi64(v1, vmv));
-            if (!_mm256_testz_si256(gt, gt)) {
-                tail64(b, row, px, px + 7, py, S + (px - lo) * dS, dS, D);
-                if (b->over) return;
-                vmv = _mm256_set1_epi64x((int64_t)b->vm);
-            }
-            Sv = _mm256_add_epi64(S1, step);
+    for (; px <= hi; px += 4) {
+        int64_t n = hi - px + 1;
+        if (n < 4 && row + px + 4 > end) break;
+        __m256i h = _mm256_cvtepu16_epi64(_mm_loadl_epi64((const __m128i *)(row + px)));
+        __m256i v = _mm256_sub_epi64(Sv, _mm256_mul_epu32(h, Dv)); /* D < 2^32, h < 2^16 */
+        __m256i sg = _mm256_cmpgt_epi64(zero, v);
+        v = _mm256_sub_epi64(_mm256_xor_si256(v, sg), sg); /* |V| < 2^63 */
+        if (n < 4) v = _mm256_and_si256(v, _mm256_cmpgt_epi64(_mm256_set1_epi64x(n), lane));
+        __m256i gt = _mm256_cmpgt_epi64(v, vmv);
+        if (!_mm256_testz_si256(gt, gt)) {
+            tail64(b, row, px, n < 4 ? hi : px + 3, py, S + (px - lo) * dS, dS, D);
+            if (b->over) return;
+            vmv = _mm256_set1_epi64x((int64_t)b->vm);
         }
+        Sv = _mm256_add_epi64(Sv, step);
     }
     if (px <= hi) tail64(b, row, px, hi, py, S + (px - lo) * dS, dS, D);
 }
 
-static inline AVX2 __attribute__((always_inline)) void
-row32(struct best *b, const uint16_t *row, int64_t lo, int64_t hi, int32_t py, uint32_t S, uint32_t dS, uint32_t d)
+static inline AVX2 __attribute__((always_inline)) void row32(struct best *b, const uint16_t *row,
+                                                             const uint16_t *end, int64_t lo, int64_t hi,
+                                                             int32_t py, uint32_t S, uint32_t dS, uint32_t d)
 {
+    const __m256i lane = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0);
+    const __m256i dv = _mm256_set1_epi32((int32_t)d), step = _mm256_set1_epi32((int32_t)(8 * dS));
+    __m256i Sv =
+        _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane));
+    __m256i vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
     int64_t px = lo;
-    if (hi - lo + 1 >= 8) {
-        const __m256i dv = _mm256_set1_epi32((int32_t)d), step = _mm256_set1_epi32((int32_t)(8 * dS));
-        __m256i Sv = _mm256_add_epi32(
-            _mm256_set1_epi32((int32_t)S),
-            _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0)));
-        __m256i vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
-        for (; px + 8 <= hi + 1; px += 8) {
-            __m256i h = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(row + px)));
-            __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(h, dv))); /* as unsigned */
-            __m256i same = _mm256_cmpeq_epi32(_mm256_max_epu32(v, vmv), vmv); /* v <= vm */
-            if (_mm256_movemask_epi8(same) != -1) {
-                tail32(b, row, px, px + 7, py, S + (uint32_t)(px - lo) * dS, dS, d);
-                if (b->over) return;
-                vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
-            }
-            Sv = _mm256_add_epi32(Sv, step);
+    for (; px <= hi; px += 8) {
+        int64_t n = hi - px + 1;
+        if (n < 8 && row + px + 8 > end) break;
+        __m256i h = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)(row + px)));
+        __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(h, dv))); /* as unsigned */
+        if (n < 8) v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32((int32_t)n), lane));
+        __m256i same = _mm256_cmpeq_epi32(_mm256_max_epu32(v, vmv), vmv); /* v <= vm */
+        if (_mm256_movemask_epi8(same) != -1) {
+            tail32(b, row, px, n < 8 ? hi : px + 7, py, S + (uint32_t)(px - lo) * dS, dS, d);
+            if (b->over) return;
+            vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
         }
+        Sv = _mm256_add_epi32(Sv, step);
     }
     if (px <= hi) tail32(b, row, px, hi, py, S + (uint32_t)(px - lo) * dS, dS, d);
 }
@@ -172,7 +175,7 @@ static int have_avx2(void)
 static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t x[3], const int32_t y[3],
                                                uint64_t limit, uint64_t *vmax, int32_t *wx, int32_t *wy)
 {
-    const uint16_t *h = f->samples;
+    const uint16_t *h = f->samples, *end = h + (int64_t)f->width * f->height;
     int64_t A[3], B[3], C[3], z[3], dS = 0, D;
     int32_t ymin = y[0], ymax = y[0];
     struct bound lo_b[3], hi_b[3];
@@ -225,8 +228,8 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
         const uint16_t *row = h + (int64_t)py * f->width;
         int64_t S = 0;
         for (int k = 0; k < 3; k++) S += (A[k] * lo + B[k] * py + C[k]) * z[k];
-        if (narrow) row32(&b, row, lo, hi, py, (uint32_t)S, (uint32_t)dS, (uint32_t)D);
-        else row64(&b, row, lo, hi, py, S, dS, D);
+        if (narrow) row32(&b, row, end, lo, hi, py, (uint32_t)S, (uint32_t)dS, (uint32_t)D);
+        else row64(&b, row, end, lo, hi, py, S, dS, D);
     }
     *vmax = b.vm;
     if (wx) *wx = b.bx;
