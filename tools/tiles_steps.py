@@ -6,9 +6,10 @@
 Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--tile 1025 --metric
 vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
 it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
-quantised, tile_heightfield's misses).  Prints, for the quantisation's strips and for the task graph: the
-wall time, each worker's CPU and busy time and the time it waited (the span less its tasks: at a barrier,
-for the parent, for a task's inputs), then each step's CPU summed over the workers; and the model of the
+quantised, tile_heightfield's misses; the tiles it holds after).  Prints, for the quantisation's strips
+and for the task graph: the wall time, each worker's CPU and busy time, the time it waited (the span less
+its tasks: at a barrier, for the parent, for a task's inputs) and the most tiles it held, then each step's
+CPU summed over the workers; and the model of the
 speed-up over one worker, the CPU outside the workers (this process's) plus the busiest worker's CPU in
 each part.  CPU seconds, page faults and reads hold on a loaded machine where wall times do not; run it
 with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
@@ -39,13 +40,14 @@ jobs._tile_heightfield = _counted  # before the pool forks: the workers count th
 
 
 def timed(fn, *args):
-    """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads)."""
+    """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads, the
+    tiles this process holds after it)."""
     u0, t0, r0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0]
     out = fn(*args)
     u1 = resource.getrusage(resource.RUSAGE_SELF)
     cpu = u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime
     return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
-                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0)
+                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE))
 
 
 def _result(r):
@@ -128,14 +130,15 @@ def main(argv: list[str]) -> int:
     for part, a, b, infos in LOG:
         per: dict = {}
         steps: dict = {}
-        for step, (pid, cpu, s, e, sys_, flt, reads) in infos:
-            w = per.setdefault(pid, [0.0, 0.0, 0])
-            w[0], w[1], w[2] = w[0] + cpu, w[1] + e - s, w[2] + 1
+        for step, (pid, cpu, s, e, sys_, flt, reads, held) in infos:
+            w = per.setdefault(pid, [0.0, 0.0, 0, 0])
+            w[0], w[1], w[2], w[3] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held)
             x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0])
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
         model += max(w[0] for w in per.values())
-        print(f"{part}: wall {b - a:.2f} s; per worker CPU / busy / waiting s (tasks): "
-              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]})" for w in per.values()))
+        print(f"{part}: wall {b - a:.2f} s; per worker CPU / busy / waiting s (tasks, the most tiles held): "
+              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]})"
+                          for w in per.values()))
         for step, x in steps.items():
             print(f"  {step:<16} {x[0]:4d} tasks  CPU {x[1]:6.2f} s  system {x[2]:5.2f} s  "
                   f"page faults {x[3]:8d}  tiles read {x[4]}")
