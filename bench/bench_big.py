@@ -12,9 +12,11 @@ Grids, each made n x n (bench/datasets.py):
 At E = FRACTION of each grid's height range (vertical), for each grid: the grid saved as .npy, then run
 in turn (A B C A B C ...) RUNS times each:
 
-- A: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (its defaults: every core);
+- A: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (its defaults: a grid of 2048^2 samples
+  and more in tiles over every core, docs/usage.md "Threads and tiles");
 - B: the peer process of bench/peers.py: load the same .npy, run pydelatin, write an OBJ;
-- C: A with `--threads 1` (one core for the host stages; the refiner runs on one anyway), once.
+- C: A with `--workers 1 --threads 1` (one core: the tiles in this process, the host stages on one
+  thread; the refiner runs on one anyway), once.
 
 Each process's CPU time (user + sys) and peak memory (ru_maxrss) come from the operating system
 (os.wait4, in a small launcher: see LAUNCH).  Both OBJ files are read back and checked by wavemesh.check
@@ -122,7 +124,8 @@ def run_grid(name: str, n: int, tmp: Path, runs: int = RUNS) -> dict:
     outs = {k: tmp / f"{k}.obj" for k in ("wavemesh", "pydelatin", "threads1")}
     cmds = {"wavemesh": P.wavemesh_argv(str(npy), zeta, str(outs["wavemesh"])),
             "pydelatin": P.peer_argv(str(npy), zeta, str(outs["pydelatin"])),
-            "threads1": P.wavemesh_argv(str(npy), zeta, str(outs["threads1"])) + ["--threads", "1"]}
+            "threads1": P.wavemesh_argv(str(npy), zeta, str(outs["threads1"]))
+            + ["--workers", "1", "--threads", "1"]}
     got = {k: [] for k in cmds}
     for i in range(runs):
         for k, cmd in cmds.items():
@@ -179,14 +182,15 @@ def _ok(r: dict) -> str:
 def markdown(results: dict) -> str:
     rows = results["rows"]
     lines = [
-        f"`wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (every core; and `--threads 1`) against "
+        "`wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` (every core; and one core, `--workers 1 "
+        "--threads 1`) against "
         "a process that loads the same .npy, runs pydelatin and writes an OBJ (bench/peers.py), at E = "
         f"{100 * results['fraction']:g}% of each grid's height range, run in turn {results['runs']} times "
-        "each (`--threads 1` once); medians of wall and CPU (user + sys) seconds, the largest peak memory "
+        "each (one core once); medians of wall and CPU (user + sys) seconds, the largest peak memory "
         "(ru_maxrss), from "
         "os.wait4.  Grids n x n: the seeded terrain, and real height fields mirror-tiled to n x n "
         "(bench/bench_big.py).  Both OBJ files checked by wavemesh.check (*checks*: wavemesh / pydelatin); "
-        "*same*: the `--threads 1` mesh is byte for byte the default's.  "
+        "*same*: the one-core mesh is byte for byte the default's.  "
         f"Machine: {results['cores']} cores, shared (load average {results['load_before'][0]:.1f} at the "
         f"start, {results.get('load_after', results['load_before'])[0]:.1f} at the end): the ratios (runs "
         "interleaved) are the figures to read.",
@@ -194,7 +198,7 @@ def markdown(results: dict) -> str:
         P.code_line(results.get("code")),
         "",
         "| grid | n | E | triangles wm / pd | **wall wm / pd** | cpu wm / pd | peak MiB wm / pd | wall s wm, "
-        "`--threads 1`, pd | cpu s wm, pd | checks | same |",
+        "one core, pd | cpu s wm, pd | checks | same |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for held in (False, True):
@@ -229,11 +233,59 @@ def markdown(results: dict) -> str:
     return "\n".join(lines)
 
 
+# `wavemesh mesh`'s default tile (api.AUTO_TILE) and threshold (api.AUTO_TILE_SAMPLES), measured: the grid
+# whole (--tile off), in tiles of each side on 2 workers and of 513 and 1025 on 1, against the peer process;
+# CPU seconds (user + sys of the process and its workers: what a loaded machine does not change as it does
+# wall) and triangles / the untiled mesh's.  Tuning grids only (terrain, jacksboro); held out: see run().
+TILE_CONFIGS = {"whole": ["--tile", "off"], **{f"{t} x2": ["--tile", str(t), "--workers", "2"]
+                                               for t in (513, 1025, 2049)},
+                **{f"{t} x1": ["--tile", str(t), "--workers", "1"] for t in (513, 1025)}}
+
+
+def tile_sizes(n: int, grids=("terrain", "jacksboro"), runs: int = 2) -> str:
+    """`python bench/bench_big.py tiles N [GRID ...]`: the markdown table docs/usage.md's "Threads and
+    tiles" quotes (CPU s, median of ``runs`` in turn; triangles / the whole grid's)."""
+    P.compile_wavemesh()
+    lines = [f"n = {n}: CPU s (triangles / whole's); load average {os.getloadavg()[0]:.1f} at the start",
+             "", "| grid | " + " | ".join([*TILE_CONFIGS, "pydelatin"]) + " |",
+             "|---" * (len(TILE_CONFIGS) + 2) + "|"]
+    with tempfile.TemporaryDirectory() as t:
+        for name in grids:
+            z, _ = make_grid(name, n)
+            zeta = zeta_of(z)
+            npy = Path(t) / f"{name}.npy"
+            np.save(npy, z)
+            del z
+            cpu, tris = {}, {}
+            for i in range(runs):
+                for k, extra in [*TILE_CONFIGS.items(), ("pydelatin", None)]:
+                    out = Path(t) / f"{k.replace(' ', '')}.obj"
+                    cmd = (P.peer_argv(str(npy), zeta, str(out)) if extra is None
+                           else P.wavemesh_argv(str(npy), zeta, str(out)) + extra)
+                    r = run_process(cmd)
+                    cpu.setdefault(k, []).append(r["cpu_s"] if not r["rc"] else float("nan"))
+                    if i == 0:
+                        with open(out, "rb") as f:
+                            tris[k] = sum(1 for line in f if line.startswith(b"f "))
+            cells = [f"{P.median(cpu[k]):.2f}" + ("" if k in ("whole", "pydelatin") else
+                                                  f" ({tris[k] / tris['whole']:.4f})")
+                     for k in [*TILE_CONFIGS, "pydelatin"]]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+            print(lines[-1], flush=True)
+    lines.append(f"(load average {os.getloadavg()[0]:.1f} at the end)")
+    return "\n".join(lines)
+
+
 if __name__ == "__main__":  # python bench/bench_big.py [N] [GRID ...]: a quick look
     import json
     import sys
 
     args = sys.argv[1:]
+    if args and args[0] == "tiles":  # python bench/bench_big.py tiles N [GRID ...] [--runs R]
+        runs = int(args.pop(args.index("--runs") + 1)) if "--runs" in args else 2
+        names = tuple(a for a in args[2:] if a != "--runs") or ("terrain", "jacksboro")
+        print(tile_sizes(int(args[1]), names, runs))
+        sys.exit(0)
     sizes = (int(args.pop(0)),) if args and args[0].isdigit() else SIZES
     res = run(sizes, tuple(args) or GRIDS)
     print(json.dumps([r["ratios"] for r in res["rows"]], indent=1))

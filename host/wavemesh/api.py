@@ -31,11 +31,15 @@ from wavemesh.io.georef import (
 )
 from wavemesh.io.heightfield import HeightField
 from wavemesh.io.load import (
+    AUTO_TILE,
+    AUTO_TILE_SAMPLES,
     MESH_BYTES_PER_SAMPLE,
     READ_BYTES_PER_SAMPLE,
     RESIDENT_BYTES_PER_SAMPLE,
     TILE_BYTES_PER_SAMPLE,
     TILE_CHOICES,
+    TileInstead,
+    auto_tile,
     available_memory,
     crop_window,
     default_workers,
@@ -68,15 +72,15 @@ from wavemesh.refine import cover, native
 from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
 __all__ = [  # the public API (io.load's and io.results' functions are offered here too)
-    "BOUND_EPS", "BOUND_NOT_MET", "BUG_HINT", "DEFAULT_TAU_FRACTION", "LevelMeshes", "MAX_LEVELS",
-    "MESH_BYTES_PER_SAMPLE", "MeshFiles", "MeshJob", "MeshParams", "MeshResult", "PICTURE_SUFFIXES",
-    "Progress", "READ_BYTES_PER_SAMPLE", "RESIDENT_BYTES_PER_SAMPLE", "RefineJob", "STAGE_NAMES",
-    "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "available_memory", "bound_excess",
-    "check_exaggeration", "check_file", "check_outputs", "check_port", "check_report", "crop_window",
-    "default_levels", "default_tau", "default_workers", "device_fit_hint", "drop_holes", "level_counts",
-    "level_report", "load_input", "memory_available", "memory_check", "mesh", "native_within", "parse_crop",
-    "refine", "render_file", "render_picture", "require_proper", "shape_heightfield", "stream",
-    "triangulate", "write_json", "write_result", "write_synth",
+    "AUTO_TILE", "AUTO_TILE_SAMPLES", "BOUND_EPS", "BOUND_NOT_MET", "BUG_HINT", "DEFAULT_TAU_FRACTION",
+    "LevelMeshes", "MAX_LEVELS", "MESH_BYTES_PER_SAMPLE", "MeshFiles", "MeshJob", "MeshParams", "MeshResult",
+    "PICTURE_SUFFIXES", "Progress", "READ_BYTES_PER_SAMPLE", "RESIDENT_BYTES_PER_SAMPLE", "RefineJob",
+    "STAGE_NAMES", "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "TileInstead", "auto_tile",
+    "available_memory", "bound_excess", "check_exaggeration", "check_file", "check_outputs", "check_port",
+    "check_report", "crop_window", "default_levels", "default_tau", "default_workers", "device_fit_hint",
+    "drop_holes", "level_counts", "level_report", "load_input", "memory_available", "memory_check", "mesh",
+    "native_within", "parse_crop", "refine", "render_file", "render_picture", "require_proper",
+    "shape_heightfield", "stream", "triangulate", "write_json", "write_result", "write_synth",
 ]
 
 # Imported where used, for their start-up cost (tests/host/test_mesh_costs.py: `wavemesh mesh` does not

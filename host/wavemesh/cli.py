@@ -232,19 +232,39 @@ def _shape_options(p: argparse.ArgumentParser) -> None:
                    help="use every N-th sample of every N-th row (after --crop)")
 
 
+def _tile_side(text: str) -> int | str:
+    """--tile's value: a tile side in samples, or off."""
+    if text == "off":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a tile side: give N samples a side, or off"
+                                         ) from None
+
+
 def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
     """Seamless tiles (wavemesh.tiles, docs/tiles.md): `mesh` and `stream` of an input of any size."""
-    p.add_argument("--tile", type=int, metavar="N",
-                   help="mesh in tiles of at most N x N samples with shared, decided borders, stitched into "
-                        "one mesh (also without N with --scheduler, --tiles-dir or several --port: N from "
-                        "the memory available, or the devices' capacity)")
+    if local:
+        p.add_argument("--tile", type=_tile_side, metavar="N|off",
+                       help="mesh in tiles of at most N x N samples with shared, decided borders, stitched "
+                            f"into one mesh; off: the grid whole (default: tiles of {api.AUTO_TILE} for a "
+                            f"grid of {math.isqrt(api.AUTO_TILE_SAMPLES)}^2 samples and more, if the job can "
+                            f"be tiled, docs/usage.md; with --tiles-dir {api.AUTO_TILE} too, with "
+                            "--scheduler N from the workers' memory)")
+    else:
+        p.add_argument("--tile", type=_tile_side, metavar="N|off",
+                       help="mesh in tiles of at most N x N samples with shared, decided borders, stitched "
+                            "into one mesh (also without N with --tiles-dir or several --port: N from the "
+                            "devices' capacity); off (default with one --port): the grid whole")
     p.add_argument("--tiles-dir", metavar="DIR",
                    help="with tiles: also each tile's mesh and index.json into DIR")
     if local:
         p.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="with --tile: tiles in N local processes at once (default: one per CPU)")
+                       help="tiles in N local processes at once (default: one per CPU; 1: in this process, "
+                            "one core); the same mesh whatever N")
         p.add_argument("--scheduler", metavar="ADDRESS",
-                       help="with --tile: run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
+                       help="run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -463,12 +483,14 @@ def _inputs(args, *paths):
     return Inputs([*paths, *(getattr(args, "roi", None) or ())])
 
 
-def _load(args, path: str, memory: bool = False):
+def _load(args, path: str, memory: bool = False, tile_from=None):
     """The input as `mesh`, `stream` and `check` read it; ``memory``: an untiled run's memory is estimated
-    first (wavemesh.api.check_memory: refused, with the --tile to use, when it will not fit)."""
+    first (wavemesh.api.check_memory: refused, with the --tile to use, when it will not fit); ``tile_from``:
+    api.load_input's (api.auto_tile: api.TileInstead for a grid to mesh in tiles)."""
     return api.load_input(path, key=args.key, fill=args.fill, crop=args.crop, decimate=args.decimate,
                           spacing=args.spacing, origin=args.origin, nodata=args.nodata, invalid=args.invalid,
-                          denoise=args.denoise, max_hole=args.max_hole, check_memory=memory)
+                          denoise=args.denoise, max_hole=args.max_hole, check_memory=memory,
+                          tile_from=tile_from)
 
 
 def _bridged_line(hf, max_hole: int) -> str:
@@ -566,9 +588,9 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
         if ports is None:
             with tiles.Runner(args.workers, args.scheduler) as runner:
                 tile = args.tile
-                if tile is None:  # from memory: the Dask workers' limits, or this machine's
-                    tile = (tiles.dask_tile(runner.client) if runner.client
-                            else tiles.default_tile(args.workers or tiles.default_workers()))
+                if tile is None:  # the default's on this machine (the grid's mesh wherever it runs, whatever
+                    # --workers); on a Dask cluster from its workers' memory limits
+                    tile = tiles.dask_tile(runner.client) if runner.client else api.AUTO_TILE
                 plan = tiles.plan_tiles(src, params, tile, runner=runner, log=say, defer_error=True)
                 tiles.run_tiles(plan, runner=runner, progress=not args.quiet,
                                 log=say if args.quiet or not sys.stderr.isatty() else None,
@@ -596,15 +618,45 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
     return 0
 
 
+def _untiled_only(args, params: api.MeshParams) -> str | None:
+    """Why the job must be meshed whole (the options a tiled run does not do: they need the whole grid at
+    once, or are per job), or None when tiles can do it."""
+    p = params.refine
+    for name, why in (("lod", args.lod), ("check_levels", args.check_levels), ("roi", args.roi),
+                      ("nodata", args.nodata == "hole"), ("invalid", args.invalid is not None),
+                      ("denoise", args.denoise), ("normal_map", args.normal_map),
+                      ("max_triangles", p.max_triangles is not None), ("capacity", p.capacity is not None)):
+        if why:
+            return "--" + name.replace("_", "-")
+    if params.initial_only:
+        return "--stage initial"
+    if not p.bound:
+        return "--bound off"
+    return None
+
+
 def mesh_command(args) -> int:
     _check_options(args)
     if args.threads is not None:
         native.set_threads(args.threads)  # InputError-like: one error line when out of range
-    if args.tile is not None or args.scheduler or args.tiles_dir:
+    if args.tile == "off":
+        if args.scheduler or args.tiles_dir:
+            needs = "--scheduler" if args.scheduler else "--tiles-dir"
+            raise WavemeshError(f"--tile off meshes the grid whole: {needs} needs tiles",
+                                hint="leave out --tile off, or give --tile N")
+    elif args.tile is not None or args.scheduler or args.tiles_dir:
         return _tiled_command(args, _mesh_params(args), inputs=_inputs(args, args.input))
     _check_outputs(args)
     params = _mesh_params(args)
-    result = api.mesh(_load(args, args.input, memory=True), params)
+    # the default: a large grid in tiles (api.auto_tile: its W x H decides, from the header, before any
+    # sample is read), unless --tile off or an option only an untiled run does
+    auto = None if args.tile == "off" or _untiled_only(args, params) else api.auto_tile
+    try:
+        hf = _load(args, args.input, memory=True, tile_from=auto)
+    except api.TileInstead as t:
+        args.tile = t.tile
+        return _tiled_command(args, params, inputs=_inputs(args, args.input))
+    result = api.mesh(hf, params)
     table = _refiner_table(result, params)
     roi = result.report.get("roi")
     if roi:
@@ -631,7 +683,12 @@ def _refiner_table(result: api.MeshResult, params: api.MeshParams) -> list[str]:
 
 def stream_command(args) -> int:
     _check_options(args)
-    if args.tile is not None or args.tiles_dir or len(args.port) > 1:
+    if args.tile == "off":
+        if args.tiles_dir or len(args.port) > 1:
+            raise WavemeshError(f"--tile off meshes the grid whole on one device: "
+                                f"{'--tiles-dir' if args.tiles_dir else 'several --port'} needs tiles",
+                                hint="leave out --tile off, or give --tile N")
+    elif args.tile is not None or args.tiles_dir or len(args.port) > 1:
         return _tiled_command(args, _mesh_params(args), ports=args.port, inputs=_inputs(args, args.input))
     args.port = args.port[0]
     _check_outputs(args)

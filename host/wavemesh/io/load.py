@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import os
 import resource
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -100,11 +101,14 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
                origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
-               denoise: str | None = None, max_hole: int = 0, check_memory: bool = False) -> HeightField:
+               denoise: str | None = None, max_hole: int = 0, check_memory: bool = False,
+               tile_from: Callable[[int, int], int | None] | None = None) -> HeightField:
     """A height field file as the commands read it: --key, --fill (or --nodata hole, --invalid), --spacing
     and --origin (of the file's grid), then --crop and --decimate, then --max-hole (bridge.bridge), then
     --denoise (wavemesh.refine.denoise: what every command meshes and measures).  ``check_memory``: before the
-    samples are read, the memory an untiled run of the grid takes is estimated (memory_check)."""
+    samples are read, the memory an untiled run of the grid takes is estimated (memory_check).
+    ``tile_from(w, h)`` (`wavemesh mesh`'s default, auto_tile): asked first, once the header has told the
+    W x H grid to mesh; a tile side from it raises TileInstead before any sample is read."""
     if max_hole and (nodata != "hole" or max_hole < 0):
         raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
                          "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
@@ -125,10 +129,14 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
             w, h = max(0, min(w, width - x)), max(0, min(h, height - y))
         if decimate is not None and decimate >= 1:
             w, h = -(-w // decimate), -(-h // decimate)
-        memory_check(path, width, height, itemsize, w, h)
+        tile = tile_from(w, h) if tile_from is not None else None
+        if tile is not None:
+            raise TileInstead(tile, w, h)
+        if check_memory:
+            memory_check(path, width, height, itemsize, w, h)
 
-    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid,
-                                                 size_check if check_memory else None), spacing, origin),
+    check = size_check if check_memory or tile_from else None
+    hf = shape_heightfield(apply_overrides(_load(path, key, fill, nodata, invalid, check), spacing, origin),
                            crop, decimate)
     if max_hole:
         hf = bridge(hf, max_hole)
@@ -165,6 +173,33 @@ TILE_CHOICES = (4097, 2049, 1025, 513)
 
 
 TILE_BYTES_PER_SAMPLE = 48  # a worker's peak per sample of its tile (make bench-tiles measured about 40)
+
+
+# `wavemesh mesh` without --tile (docs/usage.md, "Threads and tiles"): a grid of at least AUTO_TILE_SAMPLES
+# samples, more than AUTO_TILE on a side, is meshed in tiles of AUTO_TILE (its tiles spread over the
+# cores, --workers); a smaller one whole.  The grid's W x H alone decides, never the machine (its cores,
+# its memory), so the mesh is the same wherever it runs and whatever --workers.  The numbers: measured on
+# the tuning grids of bench/bench_big.py (docs/usage.md says which).
+AUTO_TILE = 513
+AUTO_TILE_SAMPLES = 2048 * 2048
+
+
+def auto_tile(width: int, height: int) -> int | None:
+    """The tile side `wavemesh mesh` meshes a ``width`` x ``height`` grid in without --tile: AUTO_TILE when
+    the grid has at least AUTO_TILE_SAMPLES samples and AUTO_TILE cuts it (a side longer than AUTO_TILE),
+    else None (untiled)."""
+    if width * height < AUTO_TILE_SAMPLES or max(width, height) <= AUTO_TILE:
+        return None
+    return AUTO_TILE
+
+
+class TileInstead(Exception):  # noqa: N818 - not an error: load_input's answer that the grid goes in tiles
+    """load_input's ``tile_from`` chose tiles of ``tile`` for the ``width`` x ``height`` grid: the caller
+    meshes it tiled (the samples were not read)."""
+
+    def __init__(self, tile: int, width: int, height: int) -> None:
+        super().__init__(f"{width} x {height}: tiles of {tile}")
+        self.tile, self.width, self.height = tile, width, height
 
 
 def default_workers() -> int:

@@ -1,0 +1,94 @@
+"""`wavemesh mesh`'s default on a large grid (api.auto_tile, docs/usage.md "Threads and tiles"): over the
+threshold it is `--tile AUTO_TILE`'s mesh, byte for byte, on one worker and on two; under it, and with
+`--tile off` or an option tiles do not do, the untiled mesh; bad --tile values end in one error line.
+
+The product's threshold (4M samples) would make these tests slow: they lower api.AUTO_TILE_SAMPLES and
+api.AUTO_TILE (io.load's, which auto_tile reads) on a 203 x 170 grid; the last test pins the product's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_tiles import terrain
+from wavemesh import api
+from wavemesh.harness import run_cli
+from wavemesh.io import load
+
+
+@pytest.fixture(scope="module")
+def dem(tmp_path_factory):
+    path = tmp_path_factory.mktemp("auto") / "t.npy"
+    np.save(path, terrain(203, 170))
+    return path
+
+
+def mesh(dem, out, *args) -> tuple[bytes, str]:
+    rc, stdout, err = run_cli("mesh", str(dem), "-o", str(out), "--zeta", "3", *args)
+    assert rc == 0, err
+    return out.read_bytes(), stdout
+
+
+@pytest.fixture
+def small(monkeypatch):
+    """The default's threshold lowered under the test grid (203 x 170 = 34510 samples), tiles of 64."""
+    monkeypatch.setattr(load, "AUTO_TILE_SAMPLES", 30000)
+    monkeypatch.setattr(load, "AUTO_TILE", 64)
+
+
+def test_over_the_threshold_the_default_is_tiled(dem, tmp_path, small):
+    tiled, said = mesh(dem, tmp_path / "t.obj", "--tile", "64", "--workers", "1")
+    one, said1 = mesh(dem, tmp_path / "w1.obj", "--workers", "1")
+    two, _ = mesh(dem, tmp_path / "w2.obj", "--workers", "2", "--metric", "normal")  # normal: the default
+    assert one == tiled and "4 x 3 tiles of at most 64" in said1
+    assert two == tiled
+    untiled, _ = mesh(dem, tmp_path / "u.obj", "--tile", "off")
+    assert untiled != tiled and b"tiled mesh" not in untiled and b"tiled mesh, tile=64" in tiled
+
+
+def test_under_the_threshold_the_default_is_untiled(dem, tmp_path, monkeypatch):
+    monkeypatch.setattr(load, "AUTO_TILE_SAMPLES", 203 * 170 + 1)
+    monkeypatch.setattr(load, "AUTO_TILE", 64)
+    default, said = mesh(dem, tmp_path / "d.obj", "--workers", "2")
+    off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off")
+    hf = api.load_input(str(dem))
+    assert default == off and "refiner:" in said and "tiles:" not in said
+    assert api.mesh(hf, api.MeshParams(refine=api.RefineParams(zeta=3.0))).mesh.n_triangles \
+        == default.count(b"\nf ")
+
+
+@pytest.mark.parametrize("option", [("--check-levels",), ("--roi", "10,10,100,80"), ("--bound", "off"),
+                                    ("--stage", "initial")])
+def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option):
+    default, said = mesh(dem, tmp_path / "d.obj", *option)
+    off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off", *option)
+    assert default == off and "tiles:" not in said
+
+
+@pytest.mark.parametrize("args,expect", [
+    (("--tile", "x"), "argument --tile: 'x' is not a tile side"),
+    (("--tile", "1.5"), "argument --tile: '1.5' is not a tile side"),
+    (("--tile", "8"), "--tile 8 is too small"),
+    (("--tile", "off", "--tiles-dir", "d"), "--tile off meshes the grid whole: --tiles-dir needs tiles"),
+    (("--tile", "off", "--scheduler", "tcp://127.0.0.1:9"), "--scheduler needs tiles"),
+    (("--workers", "0"), "--workers 0 is out of range"),
+])
+def test_bad_tile_values(dem, tmp_path, small, args, expect):
+    out = tmp_path / "m.obj"
+    rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
+    assert rc == 2 and err.startswith("error: ") and expect in err.splitlines()[0], err
+    assert len(err.splitlines()) <= 2 and not out.exists()
+
+
+def test_stream_tile_off_is_one_device(dem, tmp_path):
+    rc, _, err = run_cli("stream", str(dem), "-o", str(tmp_path / "m.obj"), "--tile", "off",
+                         "--port", "loop://", "--port", "loop://")
+    assert rc == 2 and err.startswith("error: --tile off meshes the grid whole on one device"), err
+
+
+def test_the_product_default():
+    """The measured default (docs/usage.md): grids of 2048^2 samples and more, in tiles of 513; the
+    decision reads the grid's size alone."""
+    assert (api.AUTO_TILE, api.AUTO_TILE_SAMPLES) == (513, 2048 * 2048)
+    assert api.auto_tile(2048, 2048) == 513 and api.auto_tile(4096, 4096) == 513
+    assert api.auto_tile(2048, 2047) is None and api.auto_tile(1025, 8192) == 513
+    assert api.auto_tile(8192, 512) == 513
