@@ -555,7 +555,8 @@ def _finish(args, result: api.MeshResult, table: list[str]) -> int:
 
 def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None, inputs=None) -> int:
     """`wavemesh mesh --tile N` (``ports`` None) or `wavemesh stream` of tiles on ``ports`` (wavemesh.tiles):
-    read the input lazily, plan, run the tiles, stitch, write; print a summary unless --quiet."""
+    read the input lazily, plan, run the tiles, write each as it finishes (in tile order); print a summary
+    unless --quiet."""
     from wavemesh import tiles  # start-up: tiles (20-50 ms over api, measured) only for a tiled run
 
     if getattr(args, "lod", None):
