@@ -261,8 +261,8 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
                    help="with tiles: also each tile's mesh and index.json into DIR")
     if local:
         p.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="tiles in N local processes at once (default: one per CPU; 1: in this process, "
-                            "one core); the same mesh whatever N")
+                       help="tiles in N local processes at once (default: one per CPU, at most one per tile; "
+                            "1: in this process, one core); the same mesh whatever N")
         p.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
 
@@ -587,7 +587,12 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
 
     with out:  # the files written as the tiles finish, in tile order; moved into place at the end
         if ports is None:
-            with tiles.Runner(args.workers, args.scheduler) as runner:
+            workers = args.workers
+            if workers is None and not args.scheduler:  # one per CPU, but no more processes than tiles
+                side = args.tile if args.tile is not None else api.AUTO_TILE
+                count = (len(tiles.cuts(src.width, side)) - 1) * (len(tiles.cuts(src.height, side)) - 1)
+                workers = min(tiles.default_workers(), count)
+            with tiles.Runner(workers, args.scheduler) as runner:
                 tile = args.tile
                 if tile is None:  # the default's on this machine (the grid's mesh wherever it runs, whatever
                     # --workers); on a Dask cluster from its workers' memory limits
