@@ -147,6 +147,7 @@ static inline AVX2 __attribute__((always_inline)) void row32(struct best *b, con
     __m256i Sv =
         _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane));
     __m256i vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
+    const __m256i Lv = _mm256_set1_epi32((int32_t)(b->limit > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)b->limit));
     int64_t px = lo;
     for (; px <= hi; px += 8) {
         int64_t n = hi - px + 1;
@@ -155,10 +156,22 @@ static inline AVX2 __attribute__((always_inline)) void row32(struct best *b, con
         __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(h, dv))); /* as unsigned */
         if (n < 8) v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32((int32_t)n), lane));
         __m256i same = _mm256_cmpeq_epi32(_mm256_max_epu32(v, vmv), vmv); /* v <= vm */
-        if (_mm256_movemask_epi8(same) != -1) {
-            tail32(b, row, px, n < 8 ? hi : px + 7, py, S + (uint32_t)(px - lo) * dS, dS, d);
-            if (b->over) return;
-            vmv = _mm256_set1_epi32((int32_t)(uint32_t)b->vm);
+        if (_mm256_movemask_epi8(same) != -1) { /* a V above vm: the block's new maximum in the vector */
+            __m256i over = _mm256_cmpeq_epi32(_mm256_max_epu32(v, Lv), Lv); /* v <= limit */
+            uint32_t lanes[8];
+            _mm256_storeu_si256((__m256i *)lanes, v);
+            int out = ~_mm256_movemask_ps(_mm256_castsi256_ps(over)) & 0xFF;
+            if (out) { /* the first sample above limit: the C scan stops there (vm <= limit before it) */
+                int i = __builtin_ctz((unsigned)out);
+                b->vm = lanes[i], b->bx = (int32_t)(px + i), b->by = py, b->over = 1;
+                return;
+            }
+            __m256i m = _mm256_max_epu32(v, _mm256_permute2x128_si256(v, v, 1)); /* every lane the max */
+            m = _mm256_max_epu32(m, _mm256_shuffle_epi32(m, _MM_SHUFFLE(1, 0, 3, 2)));
+            m = _mm256_max_epu32(m, _mm256_shuffle_epi32(m, _MM_SHUFFLE(2, 3, 0, 1)));
+            int i = __builtin_ctz((unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(v, m))));
+            b->vm = lanes[i], b->bx = (int32_t)(px + i), b->by = py; /* where the C scan's last rise is */
+            vmv = _mm256_set1_epi32((int32_t)lanes[i]);
         }
         Sv = _mm256_add_epi32(Sv, step);
     }
