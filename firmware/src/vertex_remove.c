@@ -269,12 +269,14 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
     {
         int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0;
         for (int32_t j = 0; j < n_tris; j++) {
+            int32_t at[3]; /* the ring positions of the triangle's corners (hv[3 slot + c] = tris[3 j + c]) */
             for (int32_t c = 0; c < 3; c++) {
-                int32_t h = 3 * slot[j] + c, a = m->hv[h], b = m->hv[WM_NEXT(h)], pa = -1, pb = -1, f = -1, q;
-                for (int32_t i = 0; i < n; i++) {
-                    if (ring[i] == a) pa = i;
-                    if (ring[i] == b) pb = i;
-                }
+                at[c] = -1;
+                for (int32_t i = 0; i < n; i++)
+                    if (ring[i] == tris[3 * j + c]) at[c] = i;
+            }
+            for (int32_t c = 0; c < 3; c++) {
+                int32_t h = 3 * slot[j] + c, pa = at[c], pb = at[wm_k1(c)], f = -1, q;
                 WM_ASSERT(pa >= 0 && pb >= 0);
                 if (pa < 0 || pb < 0) { /* cannot happen for a plan of this mesh */
                     wm_link(m, h, -1);
