@@ -224,25 +224,26 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
 
-/* The smallest angle of triangle slot t, kept in r->angles for one regularisation (emptied when it
- * begins): nothing but its own swaps changes a triangle while it runs, and each swap sets its two. */
-static int32_t slot_angle(wm_refiner *r, int32_t t)
-{
-    struct wm_angle_slot *s = &r->angles[t & (WM_ANGLE_SLOTS - 1)];
-    if (s->t != t) {
-        int32_t x[3], y[3];
-        wm_tri_xy(&r->mesh, t, x, y);
-        s->t = t;
-        s->angle = wm_min_angle(x, y);
-    }
-    return s->angle;
-}
+/* The smallest angle of triangle slot t, kept in r->list[t] for one regularisation (the iteration's
+ * plan is done by then; emptied when it begins): nothing but its own swaps changes a triangle while it
+ * runs, and each swap sets its two.  Stored as angle - 2^15, which fits a wm_index of 16 bits for
+ * angles 0 .. 2^16 - 2 (a smallest angle is below pi/3, 68,630 in Q16: the few above are computed
+ * each time); ANGLE_UNKNOWN (angle 2^16 - 1) is none kept. */
+#define ANGLE_UNKNOWN ((wm_index)32767)
 
 static void set_angle(wm_refiner *r, int32_t t, int32_t angle)
 {
-    struct wm_angle_slot *s = &r->angles[t & (WM_ANGLE_SLOTS - 1)];
-    s->t = angle < 0 ? -1 : t;
-    s->angle = angle;
+    r->list[t] = angle >= 0 && angle < 65535 ? (wm_index)(angle - 32768) : ANGLE_UNKNOWN;
+}
+
+static int32_t slot_angle(wm_refiner *r, int32_t t)
+{
+    int32_t x[3], y[3], a;
+    if (r->list[t] != ANGLE_UNKNOWN) return (int32_t)r->list[t] + 32768;
+    wm_tri_xy(&r->mesh, t, x, y);
+    a = wm_min_angle(x, y);
+    set_angle(r, t, a);
+    return a;
 }
 
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
@@ -400,8 +401,8 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
     int32_t first;     /* this sweep's first swap number */
-    for (int i = 0; i < WM_ANGLE_SLOTS; i++) r->angles[i].t = -1;
     for (int32_t t = 0; t < me->tri_end; t++) {
+        r->list[t] = ANGLE_UNKNOWN;
         me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
         if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
     }

@@ -287,14 +287,6 @@ struct wm_ecache_slot {
     int32_t e2[3];
 };
 
-/* The regularisation's smallest angles by triangle slot (direct-mapped, slot modulo WM_ANGLE_SLOTS;
- * t = -1: empty), for one sweep (refine.c). */
-#define WM_ANGLE_SLOTS 128
-struct wm_angle_slot {
-    int32_t t;
-    int32_t angle;
-};
-
 struct wm_refiner {
     wm_mesh mesh;
     wm_field field;
@@ -312,7 +304,8 @@ struct wm_refiner {
     int32_t swept, swap_stamp;
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
-    wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the heaps */
+    wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the regularisation's
+                            smallest angles (refine.c), the heaps */
     wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
@@ -320,7 +313,6 @@ struct wm_refiner {
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
     struct wm_normal_slot normals[WM_NORMAL_SLOTS]; /* reduce.c's unit normals, kept */
     struct wm_ecache_slot ecache[WM_ECACHE_SLOTS];  /* reduce.c's middle eigenvectors, kept in a pass */
-    struct wm_angle_slot angles[WM_ANGLE_SLOTS];    /* the regularisation's angles, kept in a sweep */
 };
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
