@@ -225,6 +225,29 @@ static void down(wm_refiner *r, int32_t i, int32_t n)
     put(r, i, v);
 }
 
+/* down(r, i, n) for an entry that most likely sinks to the bottom (the heap's last one, moved into a
+ * hole): the hole first goes down the smaller children to a leaf, one comparison a level, then the
+ * entry comes up from there, past what it is not before.  The same places as down's (the children
+ * it passes are the ones down moves up, the order total), in about half the comparisons. */
+static void sink(wm_refiner *r, int32_t i, int32_t n)
+{
+    int32_t v = r->list[i], j = i;
+    for (;;) {
+        int32_t c = 2 * j + 1;
+        if (c >= n) break;
+        if (c + 1 < n && before(r, r->list[c + 1], r->list[c])) c++;
+        put(r, j, r->list[c]);
+        j = c;
+    }
+    while (j > i) {
+        int32_t p = (j - 1) / 2;
+        if (!before(r, v, r->list[p])) break;
+        put(r, j, r->list[p]);
+        j = p;
+    }
+    put(r, j, v);
+}
+
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 {
     int32_t i = r->pos[v];
@@ -236,7 +259,7 @@ static void take_out(wm_refiner *r, int32_t v, int32_t *n)
         int32_t moved = r->list[*n];
         put(r, i, moved);
         up(r, i);
-        down(r, r->pos[moved], *n);
+        if (r->pos[moved] == i) sink(r, i, *n);
     }
 }
 
