@@ -5,9 +5,10 @@
 
 For pairs of the quality benchmark (bench/bench_quality.py's grids and errors; default: four of the
 tuning set and three held out, reported apart), the grid saved as .npy, then each process run once under
-`valgrind --tool=callgrind`: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E` and the peer
-process (bench/peers.py: load the .npy, run pydelatin, write an OBJ), as `make bench-quality` times
-them.  Instructions (every thread's) do not depend on the machine's load, unlike the benchmark's
+`valgrind --tool=callgrind`: `wavemesh mesh IN.npy -o x.obj --metric vertical --zeta E --workers 1` and
+the peer process (bench/peers.py: load the .npy, run pydelatin, write an OBJ), as `make bench-quality`
+times them (`--workers 1`: a tiled grid's tiles in the one process, every instruction of the job
+counted).  Instructions (every thread's) do not depend on the machine's load, unlike the benchmark's
 wall times, so the process/process ratio can be read on a shared machine.  Then where the processes'
 start-up goes: `import numpy` (both), wavemesh's own imports (`wavemesh.cli` over numpy) and pydelatin's
 (over numpy).  Needs valgrind.
@@ -56,7 +57,10 @@ def pair(spec: str, tmp: Path) -> dict:
         values, held = grid.values, name in Q.HELD_OUT
     npy = tmp / f"{name}.npy"
     np.save(npy, values)
-    wm = instructions(P.wavemesh_argv(str(npy), zeta, str(tmp / "wm.obj")))
+    # --workers 1: a grid of 2048^2 samples and more is tiled by default; its tiles then run in this one
+    # process (the same mesh): callgrind counts every instruction of the job (a forked worker's own count
+    # would start from the parent's at the fork)
+    wm = instructions(P.wavemesh_argv(str(npy), zeta, str(tmp / "wm.obj")) + ["--workers", "1"])
     pd = instructions(P.peer_argv(str(npy), zeta, str(tmp / "pd.obj")))
     return {"pair": f"{name} {label}", "held_out": held, "wavemesh": wm, "pydelatin": pd}
 
