@@ -17,6 +17,18 @@
  *   0x24 RES_VMAX_LO, 0x28 RES_VMAX_HI  r  the oldest result's Vmax
  *   0x2C RES_AT                 r   its sample: x in 15..0, y in 30..16, bit 31 EMPTY; the read takes it
  *   0x30 WIDTH                  rw  W, samples per row of HEIGHT       0x34 MAX_SIDE  r  2^COORD_BITS
+ *   0x38 SLOPE_X, 0x3C SLOPE_Y  rw  the slope scales: m in bits 15..0, e in 22..16
+ *   0x40 SLOPE_GO               w   the slope unit (tri_slope) takes V0..Z2 and the scales (ignored while busy)
+ *   0x44 SLOPE_STATUS           r   bit 0 DONE, 1 BUSY, bits 13..8 the result's k
+ *   0x48 SLOPE_ROOT             r   the result's floor(sqrt(X)): the slope factor is SLOPE_ROOT << k
+ *   0x4C SQRT_LO, 0x50 SQRT_HI  rw  x of a root command; a SQRT_HI write starts floor(sqrt(x)) (k 0)
+ *   0x54 DIV_N_LO, 0x58 DIV_N_HI, 0x5C DIV_D_LO, 0x60 DIV_D_HI  rw  the divider's n and d (unsigned);
+ *                               a DIV_D_HI write starts n / d (udiv64; ignored while busy)
+ *   0x64 DIV_STATUS             r   bit 0 DONE, 1 BUSY
+ *   0x68 DIV_Q_LO, 0x6C DIV_Q_HI, 0x70 DIV_R_LO, 0x74 DIV_R_HI  r  the last division's n / d, n % d
+ *
+ * The slope unit works beside the scan, from its own copy of the staging registers (taken at
+ * SLOPE_GO); its result stays in SLOPE_ROOT and SLOPE_STATUS.K until the next SLOPE_GO.
  *
  * Every access is answered in the next cycle (registered read data), as the other register blocks.
  * The corners' coordinates are taken modulo 2^COORD_BITS: the firmware gives the engine only grids of
@@ -38,7 +50,11 @@ module soc_engine #
     // halfword address bits of the read port (the SDRAM's); COORD_BITS + 2 .. 32
     parameter ADDR_BITS = 24,
     // halfword address of HEIGHT's sample 0
-    parameter [ADDR_BITS-1:0] HEIGHT_BASE = 0
+    parameter [ADDR_BITS-1:0] HEIGHT_BASE = 0,
+    // 1: the slope unit (tri_slope) is built; 0: SLOPE_GO is ignored and SLOPE_STATUS reads 0
+    parameter SLOPE = 1,
+    // 1: the 64-bit divider (udiv64) is built; 0: DIV_D_HI starts nothing and DIV_STATUS reads 0
+    parameter DIV = 1
 )
 (
     input  wire                   clk,
@@ -84,6 +100,14 @@ reg [15:0] z2_reg = 16'd0;
 reg [31:0] limit_lo_reg = 32'hFFFF_FFFF, limit_hi_reg = 32'hFFFF_FFFF;
 reg [CB:0] width_reg = {(CB+1){1'b0}};
 reg overrun_reg = 1'b0;
+reg [22:0] slope_x_reg = 23'd0, slope_y_reg = 23'd0;
+reg [31:0] sqrt_lo_reg = 32'd0, sqrt_hi_reg = 32'd0;
+reg [63:0] div_n_reg = 64'd0, div_q_reg = 64'd0, div_r_reg = 64'd0;
+reg [31:0] div_d_lo_reg = 32'd0, div_d_hi_reg = 32'd0;
+reg div_done_reg = 1'b0;
+reg [31:0] slope_root_reg = 32'd0;
+reg [5:0] slope_k_reg = 6'd0;
+reg slope_done_reg = 1'b0;
 reg [31:0] rdata_reg = 32'd0;
 
 assign bus_rdata = rdata_reg;
@@ -92,6 +116,9 @@ wire reg_read = bus_valid && bus_wstrb == 4'd0;
 wire reg_write = bus_valid && bus_wstrb != 4'd0;
 wire push = reg_write && bus_addr == `WM_ENGINE_PUSH;
 wire take = reg_read && bus_addr == `WM_ENGINE_RES_AT;
+wire slope_go = reg_write && bus_addr == `WM_ENGINE_SLOPE_GO;
+wire sqrt_go = reg_write && bus_addr == `WM_ENGINE_SQRT_HI;
+wire div_go = reg_write && bus_addr == `WM_ENGINE_DIV_D_HI;
 
 wire cmd_ready;
 wire [VW-1:0] res_vmax;
@@ -131,6 +158,102 @@ tri_engine #(
     .busy(busy)
 );
 
+/*
+ * The slope unit: the staging registers and the scales at SLOPE_GO; its result into SLOPE_ROOT, K
+ */
+wire slope_ready, slope_res_valid, slope_busy;
+wire [31:0] slope_res_root;
+wire [5:0] slope_res_k;
+
+generate
+    if (SLOPE != 0) begin : g_slope
+        tri_slope #(
+            .COORD_BITS(CB)
+        ) slope_inst (
+            .clk(clk),
+            .rst(rst),
+            .s_cmd_x({v2_reg[CB-1:0], v1_reg[CB-1:0], v0_reg[CB-1:0]}),
+            .s_cmd_y({v2_reg[16 +: CB], v1_reg[16 +: CB], v0_reg[16 +: CB]}),
+            .s_cmd_z({z2_reg, z01_reg}),
+            .s_cmd_sx(slope_x_reg),
+            .s_cmd_sy(slope_y_reg),
+            .s_cmd_valid(slope_go),
+            .s_cmd_ready(slope_ready),
+            .s_root_x({bus_wdata, sqrt_lo_reg}),
+            .s_root_valid(sqrt_go),
+            .m_res_root(slope_res_root),
+            .m_res_k(slope_res_k),
+            .m_res_valid(slope_res_valid),
+            .m_res_ready(1'b1),
+            .busy(slope_busy)
+        );
+    end else begin : g_no_slope
+        assign slope_ready = 1'b0;
+        assign slope_res_valid = 1'b0;
+        assign slope_busy = 1'b0;
+        assign slope_res_root = 32'd0;
+        assign slope_res_k = 6'd0;
+    end
+endgenerate
+
+/*
+ * The divider: n and d at the DIV_D_HI write; its quotient and remainder into DIV_Q, DIV_R
+ */
+wire div_ready, div_res_valid, div_busy;
+wire [63:0] div_res_q, div_res_r;
+
+generate
+    if (DIV != 0) begin : g_div
+        udiv64 div_inst (
+            .clk(clk),
+            .rst(rst),
+            .s_n(div_n_reg),
+            .s_d({bus_wdata, div_d_lo_reg}),
+            .s_valid(div_go),
+            .s_ready(div_ready),
+            .m_q(div_res_q),
+            .m_r(div_res_r),
+            .m_valid(div_res_valid),
+            .m_ready(1'b1),
+            .busy(div_busy)
+        );
+    end else begin : g_no_div
+        assign div_ready = 1'b0;
+        assign div_res_valid = 1'b0;
+        assign div_busy = 1'b0;
+        assign div_res_q = 64'd0;
+        assign div_res_r = 64'd0;
+    end
+endgenerate
+
+always @(posedge clk) begin
+    if (div_go && div_ready) begin
+        div_done_reg <= 1'b0;
+    end
+    if (div_res_valid) begin
+        div_q_reg <= div_res_q;
+        div_r_reg <= div_res_r;
+        div_done_reg <= 1'b1;
+    end
+    if (rst) begin
+        div_done_reg <= 1'b0;
+    end
+end
+
+always @(posedge clk) begin
+    if ((slope_go || sqrt_go) && slope_ready) begin
+        slope_done_reg <= 1'b0;
+    end
+    if (slope_res_valid) begin
+        slope_root_reg <= slope_res_root;
+        slope_k_reg <= slope_res_k;
+        slope_done_reg <= 1'b1;
+    end
+    if (rst) begin
+        slope_done_reg <= 1'b0;
+    end
+end
+
 always @(posedge clk) begin
     // reads: registered, answered in the next cycle
     rdata_reg <= 32'd0;
@@ -149,6 +272,21 @@ always @(posedge clk) begin
             `WM_ENGINE_RES_AT: rdata_reg <= {!res_valid, res_y16[14:0], res_x16};
             `WM_ENGINE_WIDTH: rdata_reg <= {{(31-CB){1'b0}}, width_reg};
             `WM_ENGINE_MAX_SIDE: rdata_reg <= MAX_SIDE;
+            `WM_ENGINE_SLOPE_X: rdata_reg <= {9'd0, slope_x_reg};
+            `WM_ENGINE_SLOPE_Y: rdata_reg <= {9'd0, slope_y_reg};
+            `WM_ENGINE_SLOPE_STATUS: rdata_reg <= {18'd0, slope_k_reg, 6'd0, slope_busy, slope_done_reg};
+            `WM_ENGINE_SLOPE_ROOT: rdata_reg <= slope_root_reg;
+            `WM_ENGINE_SQRT_LO: rdata_reg <= sqrt_lo_reg;
+            `WM_ENGINE_SQRT_HI: rdata_reg <= sqrt_hi_reg;
+            `WM_ENGINE_DIV_N_LO: rdata_reg <= div_n_reg[31:0];
+            `WM_ENGINE_DIV_N_HI: rdata_reg <= div_n_reg[63:32];
+            `WM_ENGINE_DIV_D_LO: rdata_reg <= div_d_lo_reg;
+            `WM_ENGINE_DIV_D_HI: rdata_reg <= div_d_hi_reg;
+            `WM_ENGINE_DIV_STATUS: rdata_reg <= {30'd0, div_busy, div_done_reg};
+            `WM_ENGINE_DIV_Q_LO: rdata_reg <= div_q_reg[31:0];
+            `WM_ENGINE_DIV_Q_HI: rdata_reg <= div_q_reg[63:32];
+            `WM_ENGINE_DIV_R_LO: rdata_reg <= div_r_reg[31:0];
+            `WM_ENGINE_DIV_R_HI: rdata_reg <= div_r_reg[63:32];
             default: rdata_reg <= 32'd0;
         endcase
     end
@@ -164,6 +302,14 @@ always @(posedge clk) begin
             `WM_ENGINE_LIMIT_LO: limit_lo_reg <= bus_wdata;
             `WM_ENGINE_LIMIT_HI: limit_hi_reg <= bus_wdata;
             `WM_ENGINE_WIDTH: width_reg <= bus_wdata[CB:0];
+            `WM_ENGINE_SLOPE_X: slope_x_reg <= bus_wdata[22:0];
+            `WM_ENGINE_SLOPE_Y: slope_y_reg <= bus_wdata[22:0];
+            `WM_ENGINE_SQRT_LO: sqrt_lo_reg <= bus_wdata;
+            `WM_ENGINE_SQRT_HI: sqrt_hi_reg <= bus_wdata;
+            `WM_ENGINE_DIV_N_LO: div_n_reg[31:0] <= bus_wdata;
+            `WM_ENGINE_DIV_N_HI: div_n_reg[63:32] <= bus_wdata;
+            `WM_ENGINE_DIV_D_LO: div_d_lo_reg <= bus_wdata;
+            `WM_ENGINE_DIV_D_HI: div_d_hi_reg <= bus_wdata;
             `WM_ENGINE_STATUS: if (bus_wdata[`WM_ENGINE_STATUS_OVERRUN]) overrun_reg <= 1'b0;
             default: ;
         endcase

@@ -274,9 +274,11 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
 }
 
 /* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric, before its
- * root: r = floor(sqrt(X)) << *k for the X returned. */
+ * root: r = floor(sqrt(X)) << *k for the X returned.  The board's refiner (WM_TRI_ENGINE) hands it to
+ * the FPGA's slope unit, which returns floor(sqrt(X)) itself: then *root is that (>= 1) and X is not
+ * returned (0); else *root is 0. */
 static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                             int64_t D, int *k)
+                             int64_t D, int *k, uint32_t *root)
 {
     uint64_t ga, gb;
     int64_t z0, dz1, dz2, Na, Nb;
@@ -284,6 +286,10 @@ static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_
     int32_t se;
     uint64_t one;
     WM_PROF_ADD(WM_PC_SLOPES, 1);
+    *root = 0;
+#ifdef WM_TRI_ENGINE
+    if (wm_tri_engine_slope(f, p, x, y, root, k)) return 0;
+#endif
     z0 = f->samples[(int64_t)y[0] * f->width + x[0]];
     dz1 = (int64_t)f->samples[(int64_t)y[1] * f->width + x[1]] - z0;
     dz2 = (int64_t)f->samples[(int64_t)y[2] * f->width + x[2]] - z0;
@@ -309,10 +315,11 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
                              int64_t D, uint64_t *kept)
 {
     int k;
+    uint32_t root;
     uint64_t r;
     if (kept && *kept) return *kept;
-    r = slope_square(f, p, x, y, D, &k);
-    r = wm_isqrt64(r) << k;
+    r = slope_square(f, p, x, y, D, &k, &root);
+    r = (root ? root : wm_isqrt64(r)) << k;
     if (kept) *kept = r;
     return r;
 }
@@ -418,7 +425,7 @@ int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], 
                      uint64_t av, uint32_t bound, uint64_t *kept)
 {
     uint64_t c, X;
-    uint32_t ev;
+    uint32_t ev, root;
     int k;
     if (p->metric == WM_METRIC_VERTICAL) return 1;
     ev = vertical(av, D); /* > bound */
@@ -428,10 +435,10 @@ int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], 
      * r < c = ceil(2^16 ev / bound) (r an integer), and with r = floor(sqrt(X)) 2^k iff
      * floor(sqrt(X)) < c' = ceil(c / 2^k) iff X < c'^2 (X < 2^64 <= c'^2 when c' >= 2^32). */
     c = wm_ceil_q16_div(ev, bound); /* < 2^48 */
-    X = slope_square(f, p, x, y, D, &k);
+    X = slope_square(f, p, x, y, D, &k, &root);
     c = (c + ((uint64_t)1 << k) - 1) >> k;
-    if (c >> 32 == 0 && X >= c * c) {
-        if (kept) *kept = wm_isqrt64(X) << k; /* within: the caller goes on to measure the triangle */
+    if (root ? root >= c : c >> 32 == 0 && X >= c * c) { /* floor(sqrt(X)) >= c' iff X >= c'^2 */
+        if (kept) *kept = (uint64_t)(root ? root : wm_isqrt64(X)) << k; /* within: the caller measures it */
         return 0;
     }
     return 1;

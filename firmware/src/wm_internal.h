@@ -249,6 +249,13 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
  * *vmax, *wx, *wy (each may be NULL but vmax); 0 when it cannot take the field (the C scan runs). */
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy);
+/* The engine's slope unit alone: floor(sqrt(x)), wm_isqrt64's root (firmware/board/src/tri_engine.c). */
+uint32_t wm_tri_engine_root(uint64_t x);
+/* The engine's slope unit: the normal metric's slope factor of the counter-clockwise triangle (x, y) as
+ * tri_error.c's slope_square and wm_isqrt64 compute it, floor(sqrt(X)) into *root and k into *k (the
+ * slope factor is *root << *k); 0 when it cannot take the field (the C computes it). */
+int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                        uint32_t *root, int *k);
 #endif
 
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */

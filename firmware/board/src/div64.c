@@ -16,8 +16,16 @@
  * The results are the C operators' (truncated quotients; a zero divisor is the caller's error, as
  * with libgcc's): tests/firmware/test_div64.py checks them natively against Python's integers, and
  * the board meshes against the native build's.  WM_DIV64_UDIV / WM_DIV64_SDIV rename the two for
- * that test (a native build calls no such helpers). */
+ * that test (a native build calls no such helpers).
+ *
+ * The board's program (WM_DIV64_ENGINE, firmware/board/CMakeLists.txt) hands every division that needs
+ * more than one 32-bit division to the FPGA's 64-bit divider (rtl/udiv64.v behind the ENGINE registers:
+ * four register writes, 16 to 64 steps two a clock, the quotient's two words), and keeps the 32 / 32
+ * division and the n < d answer here. */
 #include <stdint.h>
+#ifdef WM_DIV64_ENGINE
+#include "wm_memmap.h"
+#endif
 
 #ifndef WM_DIV64_UDIV
 #define WM_DIV64_UDIV __udivdi3
@@ -95,6 +103,19 @@ uint64_t WM_DIV64_UDIV(uint64_t n, uint64_t d)
     uint32_t nh = (uint32_t)(n >> 32), nl = (uint32_t)n, dh = (uint32_t)(d >> 32), dl = (uint32_t)d;
     uint32_t qh, q;
     int s;
+#ifdef WM_DIV64_ENGINE
+    if (nh == 0 && dh == 0) return nl / dl;
+    if (nh < dh) return 0; /* n < d */
+    WM_ENGINE_DIV_N_LO = nl;
+    WM_ENGINE_DIV_N_HI = nh;
+    WM_ENGINE_DIV_D_LO = dl;
+    WM_ENGINE_DIV_D_HI = dh; /* starts it */
+    while (!(WM_ENGINE_DIV_STATUS & WM_ENGINE_DIV_STATUS_DONE)) {
+        /* the divider's steps */
+    }
+    qh = WM_ENGINE_DIV_Q_HI;
+    return (uint64_t)qh << 32 | WM_ENGINE_DIV_Q_LO;
+#endif
     if (dh == 0) {
         if (nh == 0) return nl / dl;
         if (nh < dl) return div_64_32(nh, nl, dl);

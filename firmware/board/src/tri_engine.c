@@ -1,5 +1,6 @@
 /* The triangle error engine on the board (rtl/soc_engine.v, the ENGINE registers): E(T)'s scan of a
- * triangle's samples in the FPGA, for tri_error.c's scan_any (built into the board's refiner with
+ * triangle's samples in the FPGA, for tri_error.c's scan_any, and its slope unit (rtl/tri_slope.v) for
+ * tri_error.c's slope_square (built into the board's refiner with
  * WM_TRI_ENGINE: firmware/board/CMakeLists.txt; the native build keeps the C scan).
  *
  * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
@@ -40,4 +41,47 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
     if (wx) *wx = (int32_t)(at & WM_ENGINE_RES_AT_X_MASK);
     if (wy) *wy = (int32_t)((at & WM_ENGINE_RES_AT_Y_MASK) >> WM_ENGINE_RES_AT_Y_SHIFT);
     return 1;
+}
+
+/* The slope unit: the corners, their heights (through the cache, as the C reads them) and the two slope
+ * scales (wm_slope_scale) into the staging registers, SLOPE_GO, then floor(sqrt(X)) and k once
+ * SLOPE_STATUS says DONE: the C's slope_square and wm_isqrt64 (tests/rtl/test_tri_slope.py).  The same
+ * fields as the scan (HEIGHT, at most 2^WM_ENGINE_COORD_BITS a side); the scales' exponents fit 7 bits. */
+int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                        uint32_t *root, int *k)
+{
+    const uint16_t *h = f->samples;
+    int32_t w = f->width, ex, ey;
+    uint32_t mx, my, st;
+    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
+        f->height > (1 << WM_ENGINE_COORD_BITS))
+        return 0;
+    wm_slope_scale(p, 0, &mx, &ex);
+    wm_slope_scale(p, 1, &my, &ey);
+    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
+    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
+    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
+    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
+    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+    WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
+    WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
+    WM_ENGINE_SLOPE_GO = 1;
+    do {
+        st = WM_ENGINE_SLOPE_STATUS; /* the unit divides and takes the root */
+    } while (!(st & WM_ENGINE_SLOPE_STATUS_DONE));
+    *root = WM_ENGINE_SLOPE_ROOT;
+    *k = (int)((st & WM_ENGINE_SLOPE_STATUS_K_MASK) >> WM_ENGINE_SLOPE_STATUS_K_SHIFT);
+    return 1;
+}
+
+/* The slope unit's root command: floor(sqrt(x)) of {SQRT_HI, SQRT_LO}, the SQRT_HI write starting it, for
+ * fixed.c's wm_isqrt64 (the reduction's unit normals and rotations; the same root: tests/rtl). */
+uint32_t wm_tri_engine_root(uint64_t x)
+{
+    WM_ENGINE_SQRT_LO = (uint32_t)x;
+    WM_ENGINE_SQRT_HI = (uint32_t)(x >> 32);
+    while (!(WM_ENGINE_SLOPE_STATUS & WM_ENGINE_SLOPE_STATUS_DONE)) {
+        /* the unit takes the root */
+    }
+    return WM_ENGINE_SLOPE_ROOT;
 }

@@ -307,7 +307,9 @@ ACCEL = Block("ACCEL", 0x2, "the FPGA stage: height memory -> filter bank -> COE
 ENGINE_COORD_BITS = max(GRID_MAX_W, GRID_MAX_H).bit_length()  # 11 for 1024: coordinates 0..2047
 ENGINE_VMAX_BITS = 2 * ENGINE_COORD_BITS + 18  # V modulo 2^VMAX_BITS (V < 2^16 D < 2^(VMAX_BITS-1))
 ENGINE_CMD_DEPTH = 4  # triangles the CPU may queue
-ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT", (
+ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT, "
+               "the slope unit (the normal metric's slope factor of a triangle, square roots) and a 64-bit "
+               "divider", (
     Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)", (
         Field("X", 15, 0, "rw", "column"),
         Field("Y", 31, 16, "rw", "row"),
@@ -339,6 +341,40 @@ ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a trian
     )),
     Register("WIDTH", 0x30, "rw", "W, samples per row of HEIGHT (hold while busy)"),
     Register("MAX_SIDE", 0x34, "r", "largest W and H the engine takes", reset=str(1 << ENGINE_COORD_BITS)),
+    Register("SLOPE_X", 0x38, "rw", "the slope unit's scale along x, s_x = M / 2^E (the normal metric's "
+             "height units per ground unit)", (
+        Field("M", 15, 0, "rw", "mantissa"),
+        Field("E", 22, 16, "rw", "exponent, 0..126"),
+    )),
+    Register("SLOPE_Y", 0x3C, "rw", "the scale along y, as SLOPE_X"),
+    Register("SLOPE_GO", 0x40, "w", "write: the slope unit takes V0, V1, V2, Z01, Z2, SLOPE_X and SLOPE_Y "
+             "(ignored while SLOPE_STATUS.BUSY)"),
+    Register("SLOPE_STATUS", 0x44, "r", "the slope unit's state and the shift of its result", (
+        Field("DONE", 0, 0, "r", "SLOPE_ROOT and K hold the last command's result (cleared by SLOPE_GO and "
+              "a write of SQRT_HI)"),
+        Field("BUSY", 1, 1, "r", "a triangle is in work"),
+        Field("K", 13, 8, "r", "k: the slope factor is SLOPE_ROOT << k"),
+    )),
+    Register("SLOPE_ROOT", 0x48, "r", "floor(sqrt(X)) of the last triangle: X = 2^32 / 4^k + (ga >> k)^2 + "
+             "(gb >> k)^2, ga = min(floor(2^16 |Na| s_x / D), 2^62), gb alike (docs/soc.md, \"The slope "
+             "unit\"); 0 when D <= 0"),
+    Register("SQRT_LO", 0x4C, "rw", "x of the slope unit's root command, bits 31..0"),
+    Register("SQRT_HI", 0x50, "rw", "bits 63..32; write: the slope unit takes floor(sqrt(x)) of "
+             "{SQRT_HI, SQRT_LO} into SLOPE_ROOT, with K 0 (ignored while SLOPE_STATUS.BUSY)"),
+    Register("DIV_N_LO", 0x54, "rw", "the divider's dividend n, bits 31..0 (unsigned)"),
+    Register("DIV_N_HI", 0x58, "rw", "n, bits 63..32"),
+    Register("DIV_D_LO", 0x5C, "rw", "the divisor d, bits 31..0 (unsigned, > 0)"),
+    Register("DIV_D_HI", 0x60, "rw", "d, bits 63..32; write: the divider takes n and d (ignored while "
+             "DIV_STATUS.BUSY)"),
+    Register("DIV_STATUS", 0x64, "r", "the divider's state", (
+        Field("DONE", 0, 0, "r", "DIV_Q and DIV_R hold the last division's n / d and n % d (cleared by a "
+              "DIV_D_HI write)"),
+        Field("BUSY", 1, 1, "r", "a division is in work"),
+    )),
+    Register("DIV_Q_LO", 0x68, "r", "the quotient n / d, bits 31..0"),
+    Register("DIV_Q_HI", 0x6C, "r", "its bits 63..32"),
+    Register("DIV_R_LO", 0x70, "r", "the remainder n % d, bits 31..0"),
+    Register("DIV_R_HI", 0x74, "r", "its bits 63..32"),
 ))
 # The upload block (rtl/upload_rx.v behind rtl/soc_upload.v): frames from the UART's RX FIFO deframed and
 # CRC-checked in hardware, DATA's samples (raw or Rice-decoded) written into HEIGHT; the CPU reads a held
