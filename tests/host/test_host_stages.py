@@ -284,7 +284,8 @@ def test_refiner_scan_in_avx2_equals_the_c_scan(name, c_scan):
     span = float(v.max() - v.min())
     for metric in ("vertical", "normal"):
         for zeta, budget in ((0.002 * span, None), (0.02 * span, None), (0.002 * span, 60)):
-            params = api.MeshParams(refine=native.RefineParams(zeta=zeta, metric=metric, max_triangles=budget))
+            params = api.MeshParams(refine=native.RefineParams(zeta=zeta, metric=metric,
+                                                               max_triangles=budget))
             got = []
             for on in (0, 1):
                 c_scan.wm_host_scan(on)
