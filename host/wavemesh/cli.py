@@ -656,7 +656,8 @@ def mesh_command(args) -> int:
     params = _mesh_params(args)
     # the default: a large grid in tiles (api.auto_tile: its W x H decides, from the header, before any
     # sample is read), unless --tile off or an option only an untiled run does
-    auto = None if args.tile == "off" or _untiled_only(args, params) else api.auto_tile
+    whole = _untiled_only(args, params) if args.tile is None else None  # the default, but untiled: why
+    auto = None if args.tile == "off" or whole else api.auto_tile
     try:
         hf = _load(args, args.input, memory=True, tile_from=auto)
     except api.TileInstead as t:
@@ -664,6 +665,10 @@ def mesh_command(args) -> int:
         return _tiled_command(args, params, inputs=_inputs(args, args.input))
     result = api.mesh(hf, params)
     table = _refiner_table(result, params)
+    tile = api.auto_tile(hf.width, hf.height) if whole else None
+    if tile is not None:  # a grid the default tiles, meshed whole: say so, and which option made it
+        table.insert(0, f"  meshed whole: {whole} is not done in tiles (without it this grid goes in tiles "
+                        f"of {tile}; docs/usage.md, \"Threads and tiles\")")
     roi = result.report.get("roi")
     if roi:
         table.append(f"  ROI: {roi['samples']} samples ({100 * roi['fraction']:.1f} %), E_max inside "

@@ -51,17 +51,23 @@ def test_under_the_threshold_the_default_is_untiled(dem, tmp_path, monkeypatch):
     default, said = mesh(dem, tmp_path / "d.obj", "--workers", "2")
     off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off")
     hf = api.load_input(str(dem))
-    assert default == off and "refiner:" in said and "tiles:" not in said
+    assert default == off and "refiner:" in said and "tiles of at most" not in said
+    assert "meshed whole" not in mesh(dem, tmp_path / "c.obj", "--check-levels")[1]  # under: nothing to say
     assert api.mesh(hf, api.MeshParams(refine=api.RefineParams(zeta=3.0))).mesh.n_triangles \
         == default.count(b"\nf ")
 
 
-@pytest.mark.parametrize("option", [("--check-levels",), ("--roi", "10,10,100,80"), ("--bound", "off"),
-                                    ("--stage", "initial")])
-def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option):
+@pytest.mark.parametrize("option,name", [(("--check-levels",), "--check-levels"),
+                                         (("--roi", "10,10,100,80"), "--roi"),
+                                         (("--bound", "off"), "--bound off"),
+                                         (("--stage", "initial"), "--stage initial")])
+def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option, name):
     default, said = mesh(dem, tmp_path / "d.obj", *option)
-    off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off", *option)
-    assert default == off and "tiles:" not in said
+    off, said_off = mesh(dem, tmp_path / "off.obj", "--tile", "off", *option)
+    assert default == off and "tiles of at most" not in said
+    # the run says why it is whole, which the user who asked for it (--tile off) need not be told
+    assert f"meshed whole: {name} is not done in tiles (without it this grid goes in tiles of 64" in said
+    assert "meshed whole" not in said_off
 
 
 @pytest.mark.parametrize("args,expect", [
