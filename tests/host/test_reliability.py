@@ -179,6 +179,10 @@ def test_a_raster_claiming_billions_of_samples_is_refused_before_reading(tmp_pat
     (tmp_path / "h.tif").write_bytes(bytes(data))
     r = wavemesh("mesh", tmp_path / "h.tif", "-o", tmp_path / "h.obj", "--fill", "nearest", memory=3 << 30)
     assert r.returncode == 2 and f"6 x {rows} samples; wavemesh meshes at most 32767" in one_error(r.stderr)
+    # in tiles (as `wavemesh mesh` meshes a grid this large by default): read window by window, the first
+    # window's read fails: one error line, not rasterio's traceback
+    r = wavemesh("mesh", tmp_path / "h.tif", "-o", tmp_path / "h.obj", "--tile", "513", memory=3 << 30)
+    assert r.returncode == 2 and "h.tif: raster data is corrupt" in one_error(r.stderr)
 
 
 def test_a_pgm_header_beyond_any_grid_is_refused(tmp_path):

@@ -502,11 +502,16 @@ def raster_header(path: str) -> tuple[int, int, tuple[float, ...] | None, str | 
 def read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
     """The w x h window at (x, y) of band 1 of a GDAL raster as float64: masked samples NaN, the band's
     scale and offset applied (as _read_raster reads the whole raster)."""
-    from rasterio.windows import Window  # as rasterio's (_open_raster)
+    from rasterio._err import CPLE_BaseError  # as rasterio's (_open_raster)
+    from rasterio.errors import RasterioError
+    from rasterio.windows import Window
 
-    with _open_raster(path) as ds:
-        a = ds.read(1, window=Window(x, y, w, h), masked=True)
-        scale, offset = ds.scales[0], ds.offsets[0]
+    try:
+        with _open_raster(path) as ds:
+            a = ds.read(1, window=Window(x, y, w, h), masked=True)
+            scale, offset = ds.scales[0], ds.offsets[0]
+    except (RasterioError, CPLE_BaseError, *_read_errors()) as e:  # as _read_raster's
+        raise InputError(f"cannot read {path}: raster data is corrupt ({_gdal_message(e, path)})") from None
     v = np.ma.filled(a.astype(np.float64), np.nan)
     return v * scale + offset if (scale, offset) != (1.0, 0.0) else v
 
