@@ -432,3 +432,45 @@ def test_quiet_tiled_run_imports_no_progress_bar(dem, tmp_path):
     out = subprocess.run([sys.executable, "-c", code, str(dem), str(tmp_path / "m.obj")], capture_output=True,
                          text=True, check=True)
     assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr
+
+
+def test_seam_cut_carries_the_removals(dem, monkeypatch):
+    """thin_seam works each removal out once (Editable.removal keeps an answer until the vertex's star
+    changes) and hands the removals to thin_tile in its Cut: the same cut as every removal worked out
+    anew each time; every tile thinned by them equals the tile thinned by its removals worked out again
+    from the positions alone; a Cut pickles (pool, Dask); a removal from another mesh is refused."""
+    import pickle
+
+    from wavemesh.tiles.sides import FACING, Cut
+
+    plan = tiles.plan_tiles(tiles.open_source(str(dem)), api.MeshParams(refine=RefineParams(zeta=2.0)), 64)
+    frees = [tiles.free_tile(plan, i) for i in range(len(plan.tiles))]
+    done = [tiles.finish_tile(plan, frees[i], {s: frees[k].sides[FACING[s]] for s, k in t.neighbours.items()})
+            for i, t in enumerate(plan.tiles)]
+    cuts: list[dict] = [{} for _ in plan.tiles]
+    for i, t in enumerate(plan.tiles):
+        if "right" in t.neighbours:
+            k = t.neighbours["right"]
+            cut = tiles.thin_seam(plan, done[i], done[k], "right")
+            again = pickle.loads(pickle.dumps(cut))
+            assert again == cut and again.plans == cut.plans and set(cut.plans) == {"right", "left"}
+            assert all(len(p) == len(cut) for p in cut.plans.values())
+            cuts[i]["right"] = cuts[k]["left"] = cut
+    with monkeypatch.context() as m:  # no answer kept: each removal worked out anew
+        m.setattr(tiles.Editable, "removal", tiles.Editable._removal)
+        for i, t in enumerate(plan.tiles):
+            if "right" in t.neighbours:
+                fresh = tiles.thin_seam(plan, done[i], done[t.neighbours["right"]], "right")
+                assert fresh == cuts[i]["right"] and fresh.plans == cuts[i]["right"].plans
+    removed = 0
+    for i, r in enumerate(done):
+        a = tiles.thin_tile(plan, r, cuts[i])
+        b = tiles.thin_tile(plan, r, {s: tuple(c) for s, c in cuts[i].items()})
+        assert np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris)
+        removed += a.report["seam_removed"]
+    assert removed > 0
+    i, cut = next((i, c["right"]) for i, c in enumerate(cuts) if c.get("right"))
+    wrong = Cut(cut, {"right": [(cut.plans["right"][0][0] + 1, cut.plans["right"][0][1])]
+                                  + cut.plans["right"][1:]})
+    with pytest.raises(MeshInvalid):
+        tiles.thin_tile(plan, done[i], {"right": wrong})

@@ -234,15 +234,23 @@ def thin_seam(plan: TilePlan, a: TileResult, b: TileResult, side: str, win_a=Non
 
 def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray | None = None) -> TileResult:
     """Step 6 for one tile: the vertices ``removed`` (side -> positions, as thin_seam found them) taken
-    out, side by side (the sides' removals touch no common triangle), the result checked again."""
+    out, side by side (the sides' removals touch no common triangle), the result checked again.  A side
+    given as thin_seam's Cut is taken out by the removals it found on this same mesh (each vertex's star
+    there is its star here: the other sides' removals never touch it); plain positions are worked out
+    again."""
     if not any(removed.values()):  # nothing to take out: the mesh as it was checked
         return replace(r, report=r.report | {"seam_removed": r.report.get("seam_removed", 0)})
     t0 = time.perf_counter()
     t = plan.tiles[r.index]
     ed, hf = _editable(plan, r, window, [s for s in SIDES if removed.get(s)])
     for side in SIDES:
-        for pos in removed.get(side, ()):
-            step = ed.removal(side_point(side, pos, t.width, t.height), side)
+        cut = removed.get(side, ())
+        plans = getattr(cut, "plans", {}).get(side)
+        for k, pos in enumerate(cut):
+            p = side_point(side, pos, t.width, t.height)
+            step = ed.removal(p, side) if plans is None else plans[k]
+            if step is not None and ed.at.get(p) != step[0]:
+                step = None
             if step is None:
                 raise MeshInvalid(f"{t.name}: a seam vertex both tiles could do without could not be removed "
                                   f"({side} {pos})", hint=api.BUG_HINT)

@@ -243,13 +243,22 @@ class Editable:
         self.xy = {v: tuple(mesh.xy[v].tolist()) for v in self.inc}
         self.at = {p: v for v, p in self.xy.items()}
         self.gone: list[int] = []
+        self._found: dict = {}  # position -> removal()'s answer, until the vertex's star changes (apply)
+        self._tested: dict = {}  # a triangle's corners (in that order) -> within's answer
 
     def removal(self, p: tuple[int, int], side: str):
         """(vertex, new triangles) that remove the vertex at ``p`` on ``side``, or None: a corner, a vertex
         whose ring reaches the opposite side of the tile (off its corners: the two sides' removals then
         never touch the same triangles, whatever their order), or no triangulation of its hole within zeta
         (ear clipping, the fattest ear first, then the first ear, then every triangulation of a small
-        ring: wavemesh.holes' search)."""
+        ring: wavemesh.holes' search).  Each answer is worked out once and kept until :meth:`apply` changes
+        the vertex's star (it depends on nothing else)."""
+        if p in self._found:
+            return self._found[p]
+        self._found[p] = found = self._removal(p, side)
+        return found
+
+    def _removal(self, p: tuple[int, int], side: str):
         w, h = self.w, self.h
         v = self.at.get(p)
         if v is None or v not in self.inc or len(_side_of(*p, w, h)) > 1:
@@ -258,9 +267,15 @@ class Editable:
         pts = [self.xy[r] for r in ring]
         if any(s == FACING[side] for q in pts if len(_side_of(*q, w, h)) == 1 for s, _ in _side_of(*q, w, h)):
             return None
+        tested = self._tested
+
         def ok(t) -> bool:
-            a, b, c = (pts[k] for k in t)
-            return self.within([a[0], b[0], c[0]], [a[1], b[1], c[1]])
+            key = (pts[t[0]], pts[t[1]], pts[t[2]])
+            good = tested.get(key)
+            if good is None:
+                a, b, c = key
+                tested[key] = good = self.within([a[0], b[0], c[0]], [a[1], b[1], c[1]])
+            return good
 
         for fattest in (True, False):
             cut = ear_clip(pts, fattest=fattest)
@@ -272,11 +287,16 @@ class Editable:
         return None
 
     def apply(self, plan) -> None:
+        """Vertex v's star replaced by the triangles ``new`` of its ring (``plan``: a removal() of this
+        mesh, or of another Editable of the same mesh whose changes never touched v's star)."""
         v, new = plan
+        if v not in self.inc:
+            raise MeshInvalid(f"vertex {v} is not on this mesh's edited sides", hint=api.BUG_HINT)
         for k in list(self.inc[v]):
             self.alive[k] = False
             for u in self.tris[k]:
                 self.inc[u].discard(k)
+                self._found.pop(self.xy[u], None)  # its star changes (v and its ring)
         for t in new:
             self.tris.append(t)
             self.alive.append(True)
@@ -294,14 +314,33 @@ class Editable:
         return Mesh(self.w, self.h, self.source.xy[keep], remap[tris])
 
 
-def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
+class Cut(tuple):
+    """thin_side's answer: the positions along the side of the vertices removed, in order (a tuple), and
+    ``plans``: side -> the removals (vertex, new triangles) that took them out of the tile whose side that
+    is (the two tiles' meshes as thin_side was given them), so that each tile applies them as found
+    (jobs.thin_tile) instead of working every removal out again."""
+
+    plans: dict
+
+    def __new__(cls, positions, plans: dict):
+        cut = super().__new__(cls, positions)
+        cut.plans = plans
+        return cut
+
+    def __reduce__(self):
+        return (Cut, (tuple(self), self.plans))
+
+
+def thin_side(a: Editable, b: Editable, side: str) -> Cut:
     """The vertices of ``a``'s shared ``side`` (facing ``b``'s FACING side) that both can do without,
-    removed from both in order along the side: their positions along it."""
+    removed from both in order along the side: their positions along it, with each tile's removals (Cut).
+    Round after round until none goes; a vertex's removal is worked out again only once its star changed
+    (Editable.removal)."""
     other = FACING[side]
     along = 1 if side in ("left", "right") else 0
     line = sorted((p for p in a.at if any(s == side for s, _ in _side_of(*p, a.w, a.h))),
                   key=lambda p: p[along])
-    removed, done = [], set()
+    removed, done, plans_a, plans_b = [], set(), [], []
     while True:
         more = False
         for p in line:
@@ -313,8 +352,10 @@ def thin_side(a: Editable, b: Editable, side: str) -> tuple[int, ...]:
             if ra and rb:
                 a.apply(ra)
                 b.apply(rb)
+                plans_a.append(ra)
+                plans_b.append(rb)
                 removed.append(pos)
                 done.add(pos)
                 more = True
         if not more:
-            return tuple(removed)
+            return Cut(removed, {side: plans_a, other: plans_b})
