@@ -98,3 +98,22 @@ def test_the_product_default():
     assert api.auto_tile(2048, 2048) == 513 and api.auto_tile(4096, 4096) == 513
     assert api.auto_tile(2048, 2047) is None and api.auto_tile(1025, 8192) == 513
     assert api.auto_tile(8192, 512) == 513
+
+
+def test_a_raster_wider_than_the_refiner_goes_in_tiles(tmp_path):
+    """A GeoTIFF more than MAX_SIDE wide (which the refiner cannot take whole) and large enough for the
+    default: in tiles (TileInstead from its header), not refused; whole (--tile off) it is refused."""
+    import rasterio
+    from wavemesh.errors import InputError
+    from wavemesh.limits import MAX_SIDE
+
+    path = tmp_path / "wide.tif"
+    w, h = MAX_SIDE + 1, -(-api.AUTO_TILE_SAMPLES // (MAX_SIDE + 1))
+    with rasterio.open(path, "w", driver="GTiff", width=w, height=h, count=1, dtype="uint8",
+                       compress="deflate", tiled=True, transform=rasterio.Affine(1, 0, 0, 0, -1, h)) as ds:
+        ds.write(np.zeros((1, h, w), dtype=np.uint8))
+    with pytest.raises(api.TileInstead) as got:
+        api.load_input(str(path), check_memory=True, tile_from=api.auto_tile)
+    assert (got.value.tile, got.value.width, got.value.height) == (api.AUTO_TILE, w, h)
+    with pytest.raises(InputError, match=f"wavemesh meshes at most {MAX_SIDE} per side"):
+        api.load_input(str(path), check_memory=True)

@@ -443,18 +443,19 @@ def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
                         f"{what} has {ds.count} bands ({ds.height} x {ds.width}); a height field needs "
                         f"a single band, extract one (e.g. gdal_translate -b 1)"
                     )
+                if ds.driver == "AAIGrid":
+                    _check_ascii_grid(path, ds.height, ds.width)
+                if ds.driver in _RAW_DRIVERS:
+                    _check_raw_size(path, ds)
+                check_nodata(path, ds)
+                # first: a grid `wavemesh mesh` tiles by default goes in tiles, whatever its width
+                size_check(ds.width, ds.height, np.dtype(ds.dtypes[0]).itemsize)
                 if max(ds.width, ds.height) > MAX_SIDE:
                     raise InputError(
                         f"{what} is {ds.width} x {ds.height} samples; wavemesh meshes at most {MAX_SIDE} per "
                         f"side (--crop and --decimate apply after reading)",
                         hint="cut a window or shrink it first (gdal_translate -srcwin or -outsize)",
                     )
-                if ds.driver == "AAIGrid":
-                    _check_ascii_grid(path, ds.height, ds.width)
-                if ds.driver in _RAW_DRIVERS:
-                    _check_raw_size(path, ds)
-                check_nodata(path, ds)
-                size_check(ds.width, ds.height, np.dtype(ds.dtypes[0]).itemsize)
                 array = ds.read(1, masked=True)
                 scale, offset = ds.scales[0], ds.offsets[0]
                 georeferenced = ds.crs is not None or not ds.transform.is_identity
