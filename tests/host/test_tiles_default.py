@@ -117,3 +117,17 @@ def test_a_raster_wider_than_the_refiner_goes_in_tiles(tmp_path):
     assert (got.value.tile, got.value.width, got.value.height) == (api.AUTO_TILE, w, h)
     with pytest.raises(InputError, match=f"wavemesh meshes at most {MAX_SIDE} per side"):
         api.load_input(str(path), check_memory=True)
+
+
+def test_the_default_tiles_before_the_memory_estimate(tmp_path, monkeypatch):
+    """docs/tiles.md "Memory": a grid too large to mesh whole is refused with --tile off only; by default
+    (over the threshold) it goes in tiles, decided from the header before the untiled run's estimate."""
+    from wavemesh.errors import InputError
+
+    path = tmp_path / "z.npy"
+    np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=(2048, 2048)).flush()
+    monkeypatch.setattr(load, "memory_available", lambda: [(1 << 20, "a test's 1 MiB", "resident")])
+    with pytest.raises(InputError, match="untiled needs at least"):
+        api.load_input(str(path), check_memory=True)
+    with pytest.raises(api.TileInstead):
+        api.load_input(str(path), check_memory=True, tile_from=api.auto_tile)
