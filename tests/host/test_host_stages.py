@@ -267,7 +267,8 @@ def test_quantisation_error_kept_from_the_quantising_pass(name):
 
 @pytest.fixture
 def c_scan():
-    """Runs the test body's refiner with host_scan.c's scan (yield True) and tri_error.c's (False)."""
+    """The library, its scan setting put back after the test (wm_host_scan: 0 the C scan, 2 host_scan.c's on
+    every grid, as the test grids are smaller than the default's 2^20 samples)."""
     lib = native.load()
     old = lib.wm_host_scan(-1)
     yield lib
@@ -288,7 +289,7 @@ def test_refiner_scan_in_avx2_equals_the_c_scan(name, c_scan):
                                                                max_triangles=budget))
             got = []
             for on in (0, 1):
-                c_scan.wm_host_scan(on)
+                c_scan.wm_host_scan(2 * on)
                 r = api.mesh(hf, params)
                 got.append((r.mesh.xy.tolist(), r.mesh.tris.tolist(), r.rows))
             assert got[0] == got[1], (metric, zeta, budget)
@@ -310,6 +311,6 @@ def test_triangle_scan_in_avx2_equals_the_c_scan(c_scan):
             for metric in ("vertical", "normal"):
                 e = []
                 for on in (0, 1):
-                    c_scan.wm_host_scan(on)
+                    c_scan.wm_host_scan(2 * on)
                     e.append(native.tri_error(samples, x, y, metric))
                 assert e[0] == e[1], (x, y, metric)
