@@ -36,8 +36,9 @@ def heights(kind: str, n: int) -> np.ndarray:
 
 
 def peaks(path: Path, extra: list[str]) -> tuple[int, int]:
+    # --tile off: untiled at every size (from 2048^2 samples on `wavemesh mesh` tiles by default)
     r = subprocess.run([sys.executable, "-c", RUN, "mesh", str(path), "-o", str(path.with_suffix(".obj")),
-                        "-q", *extra], capture_output=True, text=True, check=True)
+                        "-q", "--tile", "off", *extra], capture_output=True, text=True, check=True)
     peak, hwm = map(int, r.stdout.split()[-2:])
     return peak, hwm
 
