@@ -88,7 +88,7 @@ uint64_t wm_isqrt64(uint64_t x)
     int t;
     uint32_t a, r0, c;
     uint64_t hi, c64;
-#ifdef WM_TRI_ENGINE
+#ifdef WM_SLOPE_ENGINE
     if (x >= 256) return wm_tri_engine_root(x); /* the board's refiner: the FPGA's slope unit takes the root */
 #endif
     if (x < ((uint64_t)1 << 32)) return isqrt32((uint32_t)x);

@@ -274,7 +274,7 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
 }
 
 /* sqrt(1 + g^2) in Q16.16, rounded down (the file's head comment), for the normal metric, before its
- * root: r = floor(sqrt(X)) << *k for the X returned.  The board's refiner (WM_TRI_ENGINE) hands it to
+ * root: r = floor(sqrt(X)) << *k for the X returned.  The board's refiner (WM_SLOPE_ENGINE) hands it to
  * the FPGA's slope unit, which returns floor(sqrt(X)) itself: then *root is that (>= 1) and X is not
  * returned (0); else *root is 0. */
 static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
@@ -287,7 +287,7 @@ static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_
     uint64_t one;
     WM_PROF_ADD(WM_PC_SLOPES, 1);
     *root = 0;
-#ifdef WM_TRI_ENGINE
+#ifdef WM_SLOPE_ENGINE
     if (wm_tri_engine_slope(f, p, x, y, root, k)) return 0;
 #endif
     z0 = f->samples[(int64_t)y[0] * f->width + x[0]];

@@ -249,6 +249,11 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
  * *vmax, *wx, *wy (each may be NULL but vmax); 0 when it cannot take the field (the C scan runs). */
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy);
+#endif
+
+#ifdef WM_SLOPE_ENGINE
+/* (the board's refiner alone: firmware/board/CMakeLists.txt; the host's library takes the scan's hook
+ * above, WM_TRI_ENGINE, but not these) */
 /* The engine's slope unit alone: floor(sqrt(x)), wm_isqrt64's root (firmware/board/src/tri_engine.c). */
 uint32_t wm_tri_engine_root(uint64_t x);
 /* The engine's slope unit: the normal metric's slope factor of the counter-clockwise triangle (x, y) as
