@@ -114,3 +114,14 @@ def test_bench_big_harness(tmp_path):
     text = B.markdown({"code": None, "fraction": B.FRACTION, "runs": 1, "cores": 2, "load_before": (1.0,),
                        "rows": [r]})
     assert "| terrain | 48 |" in text
+
+
+def test_bench_big_tile_sizes():
+    """bench_big's table of tile sides (docs/usage.md quotes it) on a grid smaller than every tile: each
+    tiled run is one tile, the whole grid's mesh (triangles 1.0000 of the whole's), every figure there."""
+    import bench_big as B
+
+    text = B.tile_sizes(48, ("terrain",), runs=1)
+    cells = next(line for line in text.splitlines() if line.startswith("| terrain |")).split("|")[2:-1]
+    assert len(cells) == len(B.TILE_CONFIGS) + 1 and all(float(c.split()[0]) > 0 for c in cells)
+    assert all(c.strip().endswith("(1.0000)") for c in cells[1:-1]), cells
