@@ -41,6 +41,7 @@ from wavemesh.io.load import (
     TileInstead,
     auto_tile,
     available_memory,
+    check_hole_options,
     crop_window,
     default_workers,
     load_input,
@@ -76,11 +77,12 @@ __all__ = [  # the public API (io.load's and io.results' functions are offered h
     "LevelMeshes", "MAX_LEVELS", "MESH_BYTES_PER_SAMPLE", "MeshFiles", "MeshJob", "MeshParams", "MeshResult",
     "PICTURE_SUFFIXES", "Progress", "READ_BYTES_PER_SAMPLE", "RESIDENT_BYTES_PER_SAMPLE", "RefineJob",
     "STAGE_NAMES", "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "TileInstead", "auto_tile",
-    "available_memory", "bound_excess", "check_exaggeration", "check_file", "check_outputs", "check_port",
-    "check_report", "crop_window", "default_levels", "default_tau", "default_workers", "device_fit_hint",
-    "drop_holes", "level_counts", "level_report", "load_input", "memory_available", "memory_check", "mesh",
-    "native_within", "parse_crop", "refine", "render_file", "render_picture", "require_proper",
-    "shape_heightfield", "stream", "triangulate", "write_json", "write_result", "write_synth",
+    "available_memory", "bound_excess", "check_exaggeration", "check_file", "check_hole_options",
+    "check_outputs", "check_port", "check_report", "crop_window", "default_levels", "default_tau",
+    "default_workers", "device_fit_hint", "drop_holes", "level_counts", "level_report", "load_input",
+    "memory_available", "memory_check", "mesh", "native_within", "parse_crop", "refine", "render_file",
+    "render_picture", "require_proper", "shape_heightfield", "stream", "triangulate", "write_json",
+    "write_result", "write_synth",
 ]
 
 # Imported where used, for their start-up cost (tests/host/test_mesh_costs.py: `wavemesh mesh` does not

@@ -465,6 +465,7 @@ def _check_options(args) -> None:
     if args.min_area < 0:
         raise WavemeshError(f"--min-area {args.min_area:g} is out of range",
                             hint="give square grid steps >= 0")
+    api.check_hole_options(args.nodata, args.max_hole, args.min_area)  # a tiled run reads neither
     if args.tau is not None and args.tau < 0:
         raise WavemeshError(f"--tau {args.tau:g} is out of range", hint="give tau in height units, >= 0")
     if args.levels is not None and not 1 <= args.levels <= api.MAX_LEVELS:

@@ -131,3 +131,17 @@ def test_the_default_tiles_before_the_memory_estimate(tmp_path, monkeypatch):
         api.load_input(str(path), check_memory=True)
     with pytest.raises(api.TileInstead):
         api.load_input(str(path), check_memory=True, tile_from=api.auto_tile)
+
+
+@pytest.mark.parametrize("args,expect", [
+    (("--max-hole", "3", "--tile", "64"), "error: --max-hole 3: fills the enclosed dropouts"),
+    (("--min-area", "5"), "error: --min-area drops pieces of a mesh with holes"),
+    (("--min-area", "5", "--tile", "64"), "error: --min-area drops pieces of a mesh with holes"),
+])
+def test_hole_options_without_nodata_hole_are_refused_tiled_too(dem, tmp_path, small, args, expect):
+    """--max-hole and --min-area only act with --nodata hole: an untiled run refused them without it, a
+    tiled one (the default over the threshold) took them and did nothing."""
+    out = tmp_path / "m.obj"
+    rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
+    assert rc == 2 and err.startswith(expect) and "hint: use it with --nodata hole" in err, err
+    assert not out.exists()

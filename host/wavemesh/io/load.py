@@ -98,6 +98,16 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
                    spacing=spacing, mask=mask, lone=lone)
 
 
+def check_hole_options(nodata: str | None, max_hole: int = 0, min_area: float = 0.0) -> None:
+    """--max-hole and --min-area: only with --nodata hole (load_input's check; `mesh` and `stream` make it
+    before any work, for a tiled run too, which reads neither)."""
+    if max_hole and (nodata != "hole" or max_hole < 0):
+        raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
+                         "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
+    if min_area > 0 and nodata != "hole":
+        raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
+
+
 def load_input(path: str, *, key: str | None = None, fill: str | None = None, crop: str | None = None,
                decimate: int | None = None, spacing: str | None = None,
                origin: str | None = None, nodata: str | None = None, invalid: float | None = None,
@@ -109,9 +119,7 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
     samples are read, the memory an untiled run of the grid takes is estimated (memory_check).
     ``tile_from(w, h)`` (`wavemesh mesh`'s default, auto_tile): asked first, once the header has told the
     W x H grid to mesh; a tile side from it raises TileInstead before any sample is read."""
-    if max_hole and (nodata != "hole" or max_hole < 0):
-        raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
-                         "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
+    check_hole_options(nodata, max_hole)
     # the options that apply after the read, checked before it
     if crop is not None:
         parse_crop(crop)
