@@ -34,15 +34,6 @@ int32_t wm_host_scan(int32_t on)
     return old;
 }
 
-/* The board's slope unit, the hook's other half (tri_error.c's slope_square asks it under WM_TRI_ENGINE):
- * none on the host, the C computes the slope factor. */
-int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                        uint32_t *root, int *k)
-{
-    (void)f, (void)p, (void)x, (void)y, (void)root, (void)k;
-    return 0;
-}
-
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #include <immintrin.h>
 
