@@ -562,6 +562,9 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
 
     if getattr(args, "lod", None):
         raise WavemeshError("--lod is not written for a tiled run", hint="leave out --lod, or --tile")
+    if getattr(args, "check_levels", False):  # the tiles' levels are not the grid's
+        raise WavemeshError("--check-levels is not done in a tiled run (each tile's levels are its own)",
+                            hint="leave out --check-levels, or --tile")
     for name in ("roi", "nodata", "invalid", "denoise"):  # they need the whole grid at once
         if getattr(args, name, None) not in (None, "error"):
             raise WavemeshError(f"--{name} is not tiled yet", hint="leave out --tile")

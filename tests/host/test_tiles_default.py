@@ -77,6 +77,7 @@ def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option, name
     (("--tile", "off", "--tiles-dir", "d"), "--tile off meshes the grid whole: --tiles-dir needs tiles"),
     (("--tile", "off", "--scheduler", "tcp://127.0.0.1:9"), "--scheduler needs tiles"),
     (("--workers", "0"), "--workers 0 is out of range"),
+    (("--tile", "64", "--check-levels"), "--check-levels is not done in a tiled run"),  # was ignored
 ])
 def test_bad_tile_values(dem, tmp_path, small, args, expect):
     out = tmp_path / "m.obj"
