@@ -441,6 +441,7 @@ def test_seam_cut_carries_the_removals(dem, monkeypatch):
     from the positions alone; a Cut pickles (pool, Dask); a removal from another mesh is refused."""
     import pickle
 
+    from wavemesh.mesh import Mesh
     from wavemesh.tiles.sides import FACING, Cut
 
     plan = tiles.plan_tiles(tiles.open_source(str(dem)), api.MeshParams(refine=RefineParams(zeta=2.0)), 64)
@@ -462,12 +463,17 @@ def test_seam_cut_carries_the_removals(dem, monkeypatch):
             if "right" in t.neighbours:
                 fresh = tiles.thin_seam(plan, done[i], done[t.neighbours["right"]], "right")
                 assert fresh == cuts[i]["right"] and fresh.plans == cuts[i]["right"].plans
-    removed = 0
+    removed, z = 0, np.load(dem)
     for i, r in enumerate(done):
         a = tiles.thin_tile(plan, r, cuts[i])
         b = tiles.thin_tile(plan, r, {s: tuple(c) for s, c in cuts[i].items()})
         assert np.array_equal(a.xy, b.xy) and np.array_equal(a.tris, b.tris)
         removed += a.report["seam_removed"]
+        # only the triangles at the shared sides measured again: the whole tile's E_max all the same
+        t = plan.tiles[i]
+        e = mesh_errors(Mesh(t.width, t.height, a.xy - [t.x, t.y], a.tris),
+                        z[t.y:t.y + t.height, t.x:t.x + t.width], rms=False)
+        assert (a.report["e_max_vertical"], a.report["e_max_normal"]) == (e.e_max_vertical, e.e_max_normal)
     assert removed > 0
     i, cut = next((i, c["right"]) for i, c in enumerate(cuts) if c.get("right"))
     wrong = Cut(cut, {"right": [(cut.plans["right"][0][0] + 1, cut.plans["right"][0][1])]

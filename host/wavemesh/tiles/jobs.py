@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import functools
+import math
 import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from wavemesh.tiles.sides import (
     FACING,
     SIDES,
     Editable,
+    _on_sides,
     border_of,
     conform,
     reconcile,
@@ -62,6 +65,9 @@ class TileResult:
     z: np.ndarray  # (V,) float64 heights
     report: dict
     device: str | None = None  # the port that made it (stream)
+    # E_max (vertical, normal) of its triangles that touch none of its shared sides (_checked): thin_tile
+    # keeps those as they are and measures only the others
+    inner: tuple[float, float] | None = None
 
 
 # a process's tiles kept by tile_heightfield (1025^2: 10.5 MiB each; a tile's steps wait for the next two rows
@@ -193,9 +199,28 @@ def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray
     return _checked(plan, free.index, hf, out.final.mesh, sides, report, seconds, zeta)
 
 
+def _measured(mesh: Mesh, hf: HeightField, spacing, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """E(T) vertical and normal of ``mesh``'s triangles ``which`` (mesh_errors' per-triangle values: each
+    triangle's are its own, however many are measured with it)."""
+    if not which.any():
+        return np.empty(0), np.empty(0)
+    e = mesh_errors(Mesh(mesh.width, mesh.height, mesh.xy, mesh.tris[which]), hf.values, rms=False,
+                    spacing=spacing)
+    return e.per_triangle_vertical, e.per_triangle_normal
+
+
+def _top(*parts) -> float:
+    """The largest of the measured values (NaN: not measured) in ``parts``, -inf when there are none."""
+    return max((float(np.nanmax(a)) for a in parts if len(a) and not np.isnan(a).all()), default=-np.inf)
+
+
 def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: dict, report: dict,
-             seconds: float, zeta_used: float) -> TileResult:
-    """A tile's last mesh checked (proper, exactly the decided ``sides``, within zeta) and measured."""
+             seconds: float, zeta_used: float, inner: tuple | None = None, new: np.ndarray | None = None
+             ) -> TileResult:
+    """A tile's last mesh checked (proper, exactly the decided ``sides``, within zeta) and measured.
+    ``inner``, ``new``: the E_max of the triangles of the mesh before that touch none of the tile's shared
+    sides (TileResult.inner) and which triangles are new: those kept as they were are not measured
+    again (thin_tile: each removal only replaces triangles at a shared side)."""
     p, t = plan.params.refine, plan.tiles[index]
     api.require_proper(final, f"{t.name}'s mesh")
     got = border_of(final)
@@ -203,7 +228,24 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
     if diff:
         raise MeshInvalid(f"{t.name}: the mesh's border is not the decided one ({', '.join(diff)})",
                           hint=api.BUG_HINT)
-    errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
+    on = np.zeros(len(final.xy), dtype=bool)
+    for s, m in _on_sides(final.xy, final.width, final.height).items():
+        if s in t.neighbours:
+            on |= m
+    shared = on[final.tris].any(axis=1)  # the triangles that touch a shared side
+    if inner is None:
+        errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
+        per_v, per_n = errors.per_triangle_vertical, errors.per_triangle_normal
+        inner = (_top(per_v[~shared]), _top(per_n[~shared]))
+    else:  # the triangles touching no shared side that were there before: within inner
+        which = shared | new
+        per_v, per_n = _measured(final, hf, plan.spacing, which)
+        away = ~shared[which]  # the new ones touching no shared side
+        e_v, e_n = _top(per_v), _top(per_n)
+        errors = SimpleNamespace(e_max_vertical=max(inner[0], e_v), e_max_normal=max(inner[1], e_n))
+        if errors.e_max_vertical == -np.inf:
+            errors = SimpleNamespace(e_max_vertical=math.nan, e_max_normal=math.nan)
+        inner = (max(inner[0], _top(per_v[away])), max(inner[1], _top(per_n[away])))
     rjob = api.RefineJob(None, p, zeta_used, _Levels(_Level(final, {"over": 0})), 0.0)
     excess = api.bound_excess(hf, rjob, errors)
     if excess:
@@ -212,7 +254,7 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
                        "border_vertices": {s: len(v) for s, v in sides.items()}, "seconds": seconds,
                        "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical}
     return TileResult(index, t.name, final.xy + np.array([t.x, t.y], dtype=np.int64),
-                      final.tris, final.z(hf.values), report, report.get("device"))
+                      final.tris, final.z(hf.values), report, report.get("device"), inner)
 
 
 def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str], keep: bool = True
@@ -260,7 +302,7 @@ def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray |
     sides = {s: tuple(q for q in before[s] if q not in gone[s]) for s in t.neighbours}
     report = r.report | {"seam_removed": r.report.get("seam_removed", 0) + sum(map(len, removed.values()))}
     seconds = r.report["seconds"] + time.perf_counter() - t0
-    return _checked(plan, r.index, hf, ed.mesh(), sides, report, seconds, plan.zeta_used)
+    return _checked(plan, r.index, hf, ed.mesh(), sides, report, seconds, plan.zeta_used, r.inner, ed.new())
 
 
 def _window(plan: TilePlan, index: int) -> np.ndarray | None:

@@ -236,6 +236,7 @@ class Editable:
         self.rest = mesh.tris[~near]
         self.tris = [tuple(t) for t in mesh.tris[near].tolist()]
         self.alive = [True] * len(self.tris)
+        self.made = len(self.tris)  # the triangles from here on are the removals'
         self.inc: dict[int, set[int]] = {}
         for k, t in enumerate(self.tris):
             for v in t:
@@ -304,6 +305,12 @@ class Editable:
                 self.inc[u].add(len(self.tris) - 1)
         del self.inc[v]
         self.gone.append(v)
+
+    def new(self) -> np.ndarray:
+        """(T,) bool over :meth:`mesh`'s triangles: those the removals made (the others are the mesh's
+        own, as they were)."""
+        made = [k >= self.made for k, ok in enumerate(self.alive) if ok]
+        return np.concatenate([np.zeros(len(self.rest), dtype=bool), np.array(made, dtype=bool)])
 
     def mesh(self) -> Mesh:
         keep = np.ones(len(self.source.xy), dtype=bool)
