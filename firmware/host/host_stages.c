@@ -14,8 +14,10 @@
 #define RINT_MAGIC 4503599627370496.0 /* 2^52: (c + 2^52) - 2^52 is rint(c) for 0 <= c < 2^52 */
 /* The passes over every sample, compiled twice, for AVX2 too (the loader picks the one the processor
  * runs): the same IEEE operations on twice the lanes, so the same results (no contraction into FMAs:
- * -ffp-contract=off). */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__)
+ * -ffp-contract=off).  WM_NO_CLONES: the default alone, as a processor without AVX2 runs it
+ * (tests/host/test_host_stages_default.py builds it so and compares). */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_ADDRESS__) && \
+    !defined(WM_NO_CLONES)
 #define CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define CLONES
