@@ -632,16 +632,14 @@ def _untiled_only(args, params: api.MeshParams) -> str | None:
     """Why the job must be meshed whole (the options a tiled run does not do: they need the whole grid at
     once, or are per job), or None when tiles can do it."""
     p = params.refine
-    for name, why in (("lod", args.lod), ("check_levels", args.check_levels), ("roi", args.roi),
-                      ("nodata", args.nodata == "hole"), ("invalid", args.invalid is not None),
-                      ("denoise", args.denoise), ("normal_map", args.normal_map),
-                      ("max_triangles", p.max_triangles is not None), ("capacity", p.capacity is not None)):
+    for option, why in (("--lod", args.lod), ("--check-levels", args.check_levels), ("--roi", args.roi),
+                        ("--nodata hole", args.nodata == "hole"), ("--invalid", args.invalid is not None),
+                        ("--denoise", args.denoise), ("--normal-map", args.normal_map),
+                        ("--max-triangles", p.max_triangles is not None),
+                        ("--capacity", p.capacity is not None), ("--stage initial", params.initial_only),
+                        ("--bound off", not p.bound)):
         if why:
-            return "--" + name.replace("_", "-")
-    if params.initial_only:
-        return "--stage initial"
-    if not p.bound:
-        return "--bound off"
+            return option
     return None
 
 

@@ -60,7 +60,8 @@ def test_under_the_threshold_the_default_is_untiled(dem, tmp_path, monkeypatch):
 @pytest.mark.parametrize("option,name", [(("--check-levels",), "--check-levels"),
                                          (("--roi", "10,10,100,80"), "--roi"),
                                          (("--bound", "off"), "--bound off"),
-                                         (("--stage", "initial"), "--stage initial")])
+                                         (("--stage", "initial"), "--stage initial"),
+                                         (("--nodata", "hole"), "--nodata hole")])
 def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option, name):
     default, said = mesh(dem, tmp_path / "d.obj", *option)
     off, said_off = mesh(dem, tmp_path / "off.obj", "--tile", "off", *option)
