@@ -147,3 +147,17 @@ def test_hole_options_without_nodata_hole_are_refused_tiled_too(dem, tmp_path, s
     rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
     assert rc == 2 and err.startswith(expect) and "hint: use it with --nodata hole" in err, err
     assert not out.exists()
+
+
+def test_no_data_refused_in_tiles_and_the_hint_works(dem, tmp_path, small):
+    """A large grid with no-data samples, tiled by default: one error line whose hint names --nodata hole,
+    and that run (untiled, holes) then succeeds without any --tile."""
+    v = np.load(dem)
+    v[50, 60] = np.nan
+    path = tmp_path / "nan.npy"
+    np.save(path, v)
+    rc, _, err = run_cli("mesh", str(path), "-o", str(tmp_path / "m.obj"))
+    assert rc == 2 and "1 samples are NaN" in err.splitlines()[0], err
+    assert "--nodata hole to leave holes (the grid then meshed whole, not in tiles)" in err
+    _, said = mesh(path, tmp_path / "h.obj", "--nodata", "hole")
+    assert "meshed whole: --nodata hole is not done in tiles" in said

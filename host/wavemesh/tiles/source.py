@@ -253,7 +253,7 @@ def scan(src: Source, runner: Runner | None = None, error: bool = True) -> Quant
     if bad:
         raise InputError(f"{src.name}: {bad} samples are NaN, infinite or no-data",
                          hint="use --fill VALUE (or --fill nearest, which reads the whole grid), or --nodata "
-                              "hole to leave holes (untiled: --tile off)")
+                              "hole to leave holes (the grid then meshed whole, not in tiles)")
     vmin, vmax = min(s[0] for s in stats), max(s[1] for s in stats)
     scale, offset, exact = quant_rule(vmin, vmax, all(s[2] for s in stats))
     quant = Quant(scale, offset, exact, 0.0, vmin, vmax)
