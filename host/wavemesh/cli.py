@@ -22,6 +22,7 @@ from wavemesh.io.georef import sidecar_path
 from wavemesh.io.meshio import formats_help, suffixes
 from wavemesh.io.outputs import Inputs, Terminated, check_path, handle_termination
 from wavemesh.io.synth import ALIASES, DATASETS
+from wavemesh.limits import MAX_SIDE
 from wavemesh.model.haar import WAVELETS
 from wavemesh.refine import native
 from wavemesh.refine.denoise import METHODS
@@ -249,8 +250,9 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
         p.add_argument("--tile", type=_tile_side, metavar="N|off",
                        help="mesh in tiles of at most N x N samples with shared, decided borders, stitched "
                             f"into one mesh; off: the grid whole (default: tiles of {api.AUTO_TILE} for a "
-                            f"grid of {math.isqrt(api.AUTO_TILE_SAMPLES)}^2 samples and more, if the job can "
-                            f"be tiled, docs/usage.md; with --tiles-dir {api.AUTO_TILE} too, with "
+                            f"grid of {math.isqrt(api.AUTO_TILE_SAMPLES)}^2 samples and more or a side over "
+                            f"{MAX_SIDE}, if the job can be tiled, docs/usage.md; with --tiles-dir "
+                            f"{api.AUTO_TILE} too, with "
                             "--scheduler N from the workers' memory)")
     else:
         p.add_argument("--tile", type=_tile_side, metavar="N|off",

@@ -100,6 +100,20 @@ def test_the_product_default():
     assert api.auto_tile(2048, 2048) == 513 and api.auto_tile(4096, 4096) == 513
     assert api.auto_tile(2048, 2047) is None and api.auto_tile(1025, 8192) == 513
     assert api.auto_tile(8192, 512) == 513
+    # a side the refiner cannot take whole (over MAX_SIDE, 32767): in tiles, however few its samples
+    assert api.auto_tile(32768, 2) == 513 and api.auto_tile(3, 40000) == 513
+    assert api.auto_tile(32767, 2) is None
+
+
+def test_a_side_over_the_refiners_goes_in_tiles(tmp_path):
+    """32768 x 3 samples: refused whole (one error line: the filter bank and the refiner take at most 32767
+    a side), meshed in tiles by default."""
+    path = tmp_path / "long.npy"
+    np.save(path, np.sin(np.arange(3 * 32768) / 500.0).reshape(3, 32768) * 50)
+    rc, _, err = run_cli("mesh", str(path), "-o", str(tmp_path / "off.obj"), "--tile", "off")
+    assert rc == 2 and err.startswith("error: "), err
+    _, said = mesh(path, tmp_path / "m.obj", "-q")
+    assert (tmp_path / "m.obj").read_bytes().count(b"\nf ") > 64  # every tile's triangles
 
 
 def test_a_raster_wider_than_the_refiner_goes_in_tiles(tmp_path):

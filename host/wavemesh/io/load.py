@@ -21,6 +21,7 @@ from wavemesh.io.georef import (
     parse_pair,
 )
 from wavemesh.io.heightfield import HeightField, from_array, load_heightfield, parse_fill
+from wavemesh.limits import MAX_SIDE
 from wavemesh.model.holemask import stranded
 from wavemesh.refine.denoise import denoise_heightfield
 
@@ -195,7 +196,9 @@ AUTO_TILE_SAMPLES = 2048 * 2048
 def auto_tile(width: int, height: int) -> int | None:
     """The tile side `wavemesh mesh` meshes a ``width`` x ``height`` grid in without --tile: AUTO_TILE when
     the grid has at least AUTO_TILE_SAMPLES samples and AUTO_TILE cuts it (a side longer than AUTO_TILE),
-    else None (untiled)."""
+    or a side is longer than MAX_SIDE (the refiner cannot take it whole), else None (untiled)."""
+    if max(width, height) > MAX_SIDE:
+        return AUTO_TILE
     if width * height < AUTO_TILE_SAMPLES or max(width, height) <= AUTO_TILE:
         return None
     return AUTO_TILE
