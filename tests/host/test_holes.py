@@ -221,6 +221,38 @@ def test_check_finds_what_is_wrong():
         assert not check.check_holes(over, invalid).valid_mesh
 
 
+def test_long_thin_triangles_leave_no_crack():
+    # The refiner's full mesh of a 5 x 4 grid with one invalid sample P = (3, 2): five thin triangles
+    # around P (doubled area 1, E(T) 0), the rest valid.  Dropping the thin ones leaves a crack: the thin
+    # triangle (P, (0, 1), (1, 1)) reaches from P into the valid region, so edge (0, 1)-(1, 1) has one
+    # triangle though every cell it borders has four valid corners (Motorcycle's disparity, --decimate 2
+    # --zeta 1, failed so).  cover.flip_thin swaps it with a thin neighbour: the other diagonal gives a
+    # triangle of three valid corners on that edge, which closes the crack.
+    from types import SimpleNamespace
+
+    from wavemesh.mesh import ear_clip
+
+    P = (3, 2)
+    star = [(4, 2), (3, 3), (2, 2), (0, 1), (1, 1)]
+    tris = [(P, star[i], star[(i + 1) % 5]) for i in range(5)] + [((4, 2), (4, 3), (3, 3))]
+    for poly in ([(0, 0), (4, 0), (4, 2), (1, 1), (0, 1)], [(0, 1), (2, 2), (3, 3), (0, 3)]):
+        tris += [tuple(poly[i] for i in c) for c in ear_clip(poly)]
+    pts = sorted({p for t in tris for p in t})
+    ix = {p: i for i, p in enumerate(pts)}
+    full = Mesh(5, 4, np.array(pts, dtype=np.int64), np.array([[ix[p] for p in t] for t in tris]))
+    assert check.check_mesh(full).valid  # a proper triangulation of the rectangle
+    invalid = np.zeros((4, 5), dtype=bool)
+    invalid[P[1], P[0]] = True
+    level = SimpleNamespace(mesh=full, stats={"over": 0})
+    verdict = api.drop_holes([level], SimpleNamespace(mask=invalid))  # MeshInvalid before the flip
+    assert verdict.valid_mesh and verdict.hole_edges == 4  # the hole: a quadrilateral around P
+    # the crack's edge is in two kept triangles, the one it had and a flipped one, of three valid corners
+    xy = [tuple(p) for p in level.mesh.xy.tolist()]
+    at = [t for t in level.mesh.tris.tolist() if {(0, 1), (1, 1)} <= {xy[v] for v in t}]
+    assert len(at) == 2
+    independent_check(level.mesh, invalid, np.zeros((4, 5)), ZETA)
+
+
 def test_overlap_sweep_agrees_with_every_pair():
     # check.check_holes's overlap test (a sweep of bounding boxes, chunked) against the brute force over every
     # pair, on a hole mesh with vertices moved at random (some moves make overlaps, some do not)

@@ -30,9 +30,12 @@ def compact(width: int, height: int, xy: np.ndarray, tris: np.ndarray) -> Mesh:
 def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
     """The refiner's full triangulation with its thin triangles over both kinds of samples (doubled area
     1: no sample but their corners, E(T) 0; wm_tri_cover's THIN) flipped in pairs where that makes a
-    triangle of three valid corners with a corner in no such triangle yet: two such triangles sharing an
-    edge form a strictly convex quadrilateral of four samples whose other diagonal may give one, which
-    the mesh then keeps (a valid sample at a hole's rim covered that the first diagonal left out).  Each
+    triangle of three valid corners with a corner in no such triangle yet, or where one of the pair is
+    long (a corner two samples or more from each of its invalid corners: dropped, it would leave a crack
+    through grid cells of four valid corners, an edge of one triangle away from the hole; Motorcycle
+    at --decimate 2, zeta 1): two such triangles sharing an edge form a strictly convex quadrilateral of
+    four samples whose other diagonal may give one, which the mesh then keeps (a valid sample at a
+    hole's rim covered that the first diagonal left out, or the crack closed).  Each
     flip keeps the triangulation proper and makes one more triangle kept, so the work ends; triangles
     from the lowest slot, a stack of the ones a flip changed (deterministic)."""
     X = mesh.xy[:, 0].tolist()
@@ -46,6 +49,12 @@ def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
     def thin_mixed(tri) -> bool:
         k = bad[tri[0]] + bad[tri[1]] + bad[tri[2]]
         return 0 < k < 3 and orient(*tri) == 1
+
+    def long(tri) -> bool:
+        """A corner two samples or more from each invalid corner (Chebyshev): the triangle then crosses
+        grid cells with no invalid corner, a crack in the valid region when it is dropped."""
+        bads = [c for c in tri if bad[c]]
+        return any(all(max(abs(X[c] - X[b]), abs(Y[c] - Y[b])) > 1 for b in bads) for c in tri)
 
     kept = [0] * len(X)  # triangles of three valid corners at each vertex (the refiner done: kept ones)
     for a, b, c in t:
@@ -72,8 +81,10 @@ def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
             if orient(w, u, z) <= 0 or orient(w, z, v) <= 0:
                 continue  # not strictly convex
             keep = [w, u, z] if not (bad[w] or bad[u] or bad[z]) else [w, z, v]
-            if bad[keep[0]] or bad[keep[1]] or bad[keep[2]] or all(kept[c] for c in keep):
-                continue  # the other diagonal keeps nothing, or nothing not kept already
+            if bad[keep[0]] or bad[keep[1]] or bad[keep[2]]:
+                continue  # the other diagonal keeps nothing
+            if all(kept[c] for c in keep) and not (long(t[i]) or long(t[j])):
+                continue  # nothing not kept already, and no crack closed
             for c in keep:
                 kept[c] += 1
             for tri in (t[i], t[j]):
