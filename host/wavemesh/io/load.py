@@ -141,6 +141,10 @@ def load_input(path: str, *, key: str | None = None, fill: str | None = None, cr
         tile = tile_from(w, h) if tile_from is not None else None
         if tile is not None:
             raise TileInstead(tile, w, h)
+        if check_memory and max(w, h) > MAX_SIDE:  # else the filter bank's "argument out of range"
+            raise InputError(f"{path}: the {w} x {h} grid has a side over {MAX_SIDE} samples, more than an "
+                             "untiled run takes", hint="mesh it in tiles (--tile N), or --crop or --decimate "
+                                                       "it")
         if check_memory:
             memory_check(path, width, height, itemsize, w, h)
 
