@@ -25,9 +25,9 @@
  * bit-by-bit restoring square root, two bits of X (one root bit) a step, SQRT_STEPS steps a clock.
  *
  * Timing: 1 clock to take the command, 2 of products, ceil((NW - e) / DIV_STEPS) of division (the
- * longer of the two axes; NW = COORD_BITS + 49 rounded up to DIV_STEPS), 2 of k, 2 of squares, 32 /
- * SQRT_STEPS of root, 1 to hand out the result: some 50 clocks for the SoC's 11-bit coordinates and
- * a scale of e = 15.
+ * longer of the two axes; NW = COORD_BITS + 49 rounded up to DIV_STEPS), 2 of k, 3 of squares, 32 /
+ * SQRT_STEPS of root, 1 to hand out the result: 48 clocks for the SoC's 11-bit coordinates and a
+ * scale of e = 15.  No path holds more than one multiplier (the SoC's 30 MHz with room).
  */
 
 `resetall
@@ -103,17 +103,20 @@ initial begin
     end
 end
 
-localparam [2:0]
-    ST_IDLE = 3'd0,
-    ST_PROD = 3'd1,
-    ST_DIV = 3'd2,
-    ST_NORM = 3'd3,
-    ST_SQA = 3'd4,
-    ST_SQB = 3'd5,
-    ST_ROOT = 3'd6,
-    ST_DONE = 3'd7;
+localparam [3:0]
+    ST_IDLE = 4'd0,
+    ST_PRODA = 4'd1,
+    ST_PRODB = 4'd2,
+    ST_DIV = 4'd3,
+    ST_NORMA = 4'd4,
+    ST_NORMB = 4'd5,
+    ST_SQA = 4'd6,
+    ST_SQB = 4'd7,
+    ST_SQC = 4'd8,
+    ST_ROOT = 4'd9,
+    ST_DONE = 4'd10;
 
-reg [2:0] state_reg = ST_IDLE;
+reg [3:0] state_reg = ST_IDLE;
 
 // the command's differences (signed)
 reg signed [CB:0] dx1_reg = 0, dy1_reg = 0, dx2_reg = 0, dy2_reg = 0;
@@ -144,15 +147,17 @@ assign m_res_valid = state_reg == ST_DONE;
 assign busy = state_reg != ST_IDLE;
 
 /*
- * The products (ST_PROD, from the differences' registers)
+ * The products: D, Na, Nb from the differences' registers (ST_PRODA), then |Na| m, |Nb| m from theirs
+ * (ST_PRODB): two clocks, so that no path holds two multipliers
  */
 wire signed [2*CB+2:0] d_full = dx1_reg * dy2_reg - dx2_reg * dy1_reg;
 wire signed [CB+18:0] na_full = dz1_reg * dy2_reg - dz2_reg * dy1_reg;
 wire signed [CB+18:0] nb_full = dx1_reg * dz2_reg - dx2_reg * dz1_reg;
-wire [CB+18:0] na_mag = na_full[CB+18] ? -na_full : na_full;
-wire [CB+18:0] nb_mag = nb_full[CB+18] ? -nb_full : nb_full;
-wire [NAW+15:0] p_a = na_mag[NAW-1:0] * mx_reg;
-wire [NAW+15:0] p_b = nb_mag[NAW-1:0] * my_reg;
+reg signed [CB+18:0] na_reg = 0, nb_reg = 0;
+wire [CB+18:0] na_mag = na_reg[CB+18] ? -na_reg : na_reg;
+wire [CB+18:0] nb_mag = nb_reg[CB+18] ? -nb_reg : nb_reg;
+wire [NW-17:0] p_a = na_mag[NAW-1:0] * mx_reg;
+wire [NW-17:0] p_b = nb_mag[NAW-1:0] * my_reg;
 wire [NW-1:0] n_a = {p_a, 16'd0};
 wire [NW-1:0] n_b = {p_b, 16'd0};
 
@@ -217,7 +222,8 @@ always @* begin
 end
 
 /*
- * k and the shifted slopes (ST_NORM): ga, gb capped at 2^62, k = max(0, bit length of ga | gb - 31)
+ * k (ST_NORMA) and the shifted slopes (ST_NORMB): ga, gb capped at 2^62, k = max(0, bit length of
+ * ga | gb - 31)
  */
 wire [63:0] qa64 = quo_a_reg;
 wire [63:0] qb64 = quo_b_reg;
@@ -235,14 +241,16 @@ always @* begin
 end
 
 wire [5:0] k_new = glen > 6'd31 ? glen - 6'd31 : 6'd0;
-wire [62:0] ga_sh = ga >> k_new;
-wire [62:0] gb_sh = gb >> k_new;
+wire [62:0] ga_sh = ga >> k_reg;
+wire [62:0] gb_sh = gb >> k_reg;
 
 /*
- * The squares (ST_SQA, ST_SQB: one multiplier) and the root's steps (ST_ROOT)
+ * The squares (ST_SQA, ST_SQB into sq_reg: one multiplier; summed in ST_SQB, ST_SQC) and the root's
+ * steps (ST_ROOT)
  */
 wire [30:0] sq_in = state_reg == ST_SQA ? a_reg : b_reg;
 wire [61:0] sq = sq_in * sq_in;
+reg [61:0] sq_reg = 62'd0;
 wire [32:0] one = k_reg > 6'd16 ? 33'd0 : 33'h1_0000_0000 >> {k_reg, 1'b0};
 
 reg [63:0] rx;
@@ -281,7 +289,7 @@ always @(posedge clk) begin
                 ex_reg <= s_cmd_sx[22:16];
                 my_reg <= s_cmd_sy[15:0];
                 ey_reg <= s_cmd_sy[22:16];
-                state_reg <= ST_PROD;
+                state_reg <= ST_PRODA;
             end else if (s_root_valid) begin
                 x_reg <= s_root_x;
                 k_reg <= 6'd0;
@@ -292,9 +300,14 @@ always @(posedge clk) begin
                 state_reg <= ST_ROOT;
             end
         end
-        ST_PROD: begin
+        ST_PRODA: begin
             bad_reg <= d_full[2*CB+2] || d_full == 0;
             d_reg <= d_full[DW-1:0];
+            na_reg <= na_full;
+            nb_reg <= nb_full;
+            state_reg <= ST_PRODB;
+        end
+        ST_PRODB: begin
             num_a_reg <= div_load(n_a, ex_reg[0]);
             num_b_reg <= div_load(n_b, ey_reg[0]);
             quo_a_reg <= 64'd0;
@@ -318,20 +331,28 @@ always @(posedge clk) begin
                 rem_b_reg <= dr_b;
                 left_b_reg <= left_b_reg - DSTEP;
             end
-            if (left_a_reg <= DSTEP && left_b_reg <= DSTEP) state_reg <= ST_NORM;
+            if (left_a_reg <= DSTEP && left_b_reg <= DSTEP) state_reg <= ST_NORMA;
         end
-        ST_NORM: begin
+        ST_NORMA: begin
             k_reg <= k_new;
+            state_reg <= ST_NORMB;
+        end
+        ST_NORMB: begin
             a_reg <= ga_sh[30:0];
             b_reg <= gb_sh[30:0];
             state_reg <= ST_SQA;
         end
         ST_SQA: begin
-            x_reg <= {31'd0, one} + {2'd0, sq};
+            sq_reg <= sq;
             state_reg <= ST_SQB;
         end
         ST_SQB: begin
-            x_reg <= x_reg + {2'd0, sq};
+            sq_reg <= sq;
+            x_reg <= {31'd0, one} + {2'd0, sq_reg};
+            state_reg <= ST_SQC;
+        end
+        ST_SQC: begin
+            x_reg <= x_reg + {2'd0, sq_reg};
             rrem_reg <= 34'd0;
             root_reg <= 32'd0;
             rcount_reg <= 5'd0;
@@ -362,7 +383,7 @@ always @(posedge clk) begin
 end
 
 // bits never used: the products' tops (below their bounds), the divisions' remainders' last values
-wire unused = ^{na_full[CB+18:NAW], nb_full[CB+18:NAW], d_full[2*CB+2:DW], ga_sh[62:31], gb_sh[62:31],
+wire unused = ^{d_full[2*CB+2:DW], ga_sh[62:31], gb_sh[62:31],
                 na_mag[CB+18:NAW], nb_mag[CB+18:NAW]};
 
 endmodule
