@@ -31,13 +31,13 @@ def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
     """The refiner's full triangulation with its thin triangles over both kinds of samples (doubled area
     1: no sample but their corners, E(T) 0; wm_tri_cover's THIN) flipped in pairs where that makes a
     triangle of three valid corners with a corner in no such triangle yet, or where one of the pair is
-    long (a corner two samples or more from each of its invalid corners: dropped, it would leave a crack
-    through grid cells of four valid corners, an edge of one triangle away from the hole; Motorcycle
-    at --decimate 2, zeta 1): two such triangles sharing an edge form a strictly convex quadrilateral of
-    four samples whose other diagonal may give one, which the mesh then keeps (a valid sample at a
-    hole's rim covered that the first diagonal left out, or the crack closed).  Each
-    flip keeps the triangulation proper and makes one more triangle kept, so the work ends; triangles
-    from the lowest slot, a stack of the ones a flip changed (deterministic)."""
+    long (a corner two samples or more from each of its invalid corners: it may cross grid cells of four
+    valid corners, and dropped, leave a crack there, an edge of one triangle away from every invalid
+    sample; Motorcycle's disparity at --decimate 2, zeta 1): two such triangles sharing an edge form a
+    strictly convex quadrilateral of four samples whose other diagonal may give one, which the mesh then
+    keeps (a valid sample at a hole's rim covered that the first diagonal left out, or the crack
+    closed).  Each flip keeps the triangulation proper and makes one more triangle kept, so the work
+    ends; triangles from the lowest slot, a stack of the ones a flip changed (deterministic)."""
     X = mesh.xy[:, 0].tolist()
     Y = mesh.xy[:, 1].tolist()
     bad = np.asarray(mask, dtype=bool)[mesh.xy[:, 1], mesh.xy[:, 0]].tolist()  # per vertex
@@ -51,8 +51,8 @@ def flip_thin(mesh: Mesh, mask: np.ndarray) -> Mesh:
         return 0 < k < 3 and orient(*tri) == 1
 
     def long(tri) -> bool:
-        """A corner two samples or more from each invalid corner (Chebyshev): the triangle then crosses
-        grid cells with no invalid corner, a crack in the valid region when it is dropped."""
+        """A corner two samples or more from each invalid corner (Chebyshev): the triangle may then cross
+        grid cells of four valid corners, a crack in the valid region when it is dropped."""
         bads = [c for c in tri if bad[c]]
         return any(all(max(abs(X[c] - X[b]), abs(Y[c] - Y[b])) > 1 for b in bads) for c in tri)
 
