@@ -460,34 +460,17 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
     return RefineOutput(out, cap, fp)
 
 
-def _storage(nbytes: int):
-    """The refiner's storage: (the object that holds it, its address, 16-byte aligned), mapped lazily.
-    Its tables are sized for the most triangles the grid can have (380 MiB at 2048^2) and the refiner
-    touches the first few pages of each: in transparent huge pages (2 MiB, where the system makes them
-    by default) each touch had the kernel clear 2 MiB (26 MiB at 2048^2 for a mesh of 8k triangles,
-    peak memory 114 -> 91 MiB), so the mapping asks for small pages (madvise MADV_NOHUGEPAGE)."""
-    import mmap  # numpy imports it (np.memmap): no start-up cost
-
-    try:
-        mem = mmap.mmap(-1, nbytes)
-    except (OSError, ValueError, OverflowError):
-        mem = None
-    if mem is None or not hasattr(mmap, "MADV_NOHUGEPAGE"):  # elsewhere: malloc's lazily mapped block
-        mem = np.empty(nbytes + 16, dtype=np.uint8)
-        return mem, mem.ctypes.data + (-mem.ctypes.data) % 16
-    try:
-        mem.madvise(mmap.MADV_NOHUGEPAGE)
-    except OSError:  # a kernel without transparent huge pages: nothing to ask
-        pass
-    view = (ctypes.c_char * nbytes).from_buffer(mem)  # page-aligned; keeps the mapping while held
-    return view, ctypes.addressof(view)
-
-
 def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[list[Level], int]:
     nbytes = lib.wm_refine_bound(width, height, cap)
     if nbytes == 0:
         return [], -1
-    mem, base = _storage(nbytes)
+    # malloc: large blocks are mapped lazily, in transparent huge pages where the system makes them.  The
+    # refiner touches the start of each of its tables (sized for the most triangles the grid can have),
+    # so a small mesh has the kernel clear 2 MiB pages it hardly uses (26 MiB at 2048^2 for 8k triangles);
+    # small pages (madvise MADV_NOHUGEPAGE) saved that but cost a large mesh its TLB reach: 4 % of
+    # api.mesh's CPU on Jacksboro mirror-tiled to 2048^2 (1.26M triangles), so huge pages stay.
+    mem = np.empty(nbytes + 16, dtype=np.uint8)
+    base = mem.ctypes.data + (-mem.ctypes.data) % 16
     handle = ctypes.c_void_p()
     code = lib.wm_refine_init(ctypes.byref(handle), ctypes.c_void_p(base), nbytes, ctypes.byref(fld),
                               ctypes.byref(fp),
