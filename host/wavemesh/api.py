@@ -484,8 +484,8 @@ class Progress:
     FORMAT = "{desc:<9} [{bar:28}] {percentage:5.1f}%{postfix}"
 
     def __init__(self, label: str, total: int, enabled: bool):
-        if enabled:  # only when a bar or its line is drawn (tqdm's import: about 20 ms of CPU)
-            from tqdm import tqdm
+        if enabled:
+            from tqdm import tqdm  # only when a bar or its line is drawn (its import: about 20 ms of CPU)
         else:
             tqdm = None
         self.tqdm, self.label, self.total, self.enabled = tqdm, label, total, enabled

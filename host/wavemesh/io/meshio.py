@@ -531,7 +531,7 @@ class _PlyStream(MeshStream):
         self.parts[1].write(_ply_faces(number[tris]))
 
     def end(self) -> None:
-        import shutil
+        import shutil  # imported here: only a streamed .ply copies its parts (kept off start-up)
 
         self.file.write(_ply_head(self.width, self.height, self.comment, self.vertices, self.triangles,
                                   False))

@@ -504,8 +504,8 @@ def read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
     """The w x h window at (x, y) of band 1 of a GDAL raster as float64: masked samples NaN, the band's
     scale and offset applied (as _read_raster reads the whole raster)."""
     from rasterio._err import CPLE_BaseError  # as rasterio's (_open_raster)
-    from rasterio.errors import RasterioError
-    from rasterio.windows import Window
+    from rasterio.errors import RasterioError  # imported here: only GDAL rasters need rasterio
+    from rasterio.windows import Window  # (and its start-up cost), as _open_raster
 
     try:
         with _open_raster(path) as ds:
