@@ -37,7 +37,13 @@ __version__ = "0.1.0"
 # wavemesh.cli freezes them once imported and turns it back on.  Collecting while they are made cost 42M
 # instructions (python -c 'import numpy; import wavemesh.cli' under callgrind: 479M, 437M so): 9 % of a
 # small run.  An import of the package by any other program leaves its collector alone.
-_COMMAND = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or "") == "wavemesh"
+# The command is the console script or `python -m wavemesh` / `python -m wavemesh.cli` (whose __main__
+# is not yet set while the package is imported: the interpreter's own arguments say it).
+_ARGV = getattr(sys, "orig_argv", [])
+_SCRIPT = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or "")
+_COMMAND = _SCRIPT == "wavemesh" or any(
+    a == "-m" and m in ("wavemesh", "wavemesh.cli") for a, m in zip(_ARGV, _ARGV[1:], strict=False)
+)
 _COMMAND_IMPORTS = gc.isenabled() and _COMMAND
 if _COMMAND_IMPORTS:
     gc.disable()

@@ -148,3 +148,36 @@ def test_the_command_collects_after_its_imports(tmp_path):
         (tmp_path / name).write_text(probe)
         out = subprocess.run([sys.executable, str(tmp_path / name)], capture_output=True, text=True)
         assert out.stdout.split() == want.split(), (name, out.stderr[-500:])
+
+
+
+def test_python_m_is_the_command(tmp_path):
+    """`python -m wavemesh` and `python -m wavemesh.cli` are the command too (their __main__ is not set
+    while the package is imported, so the interpreter's arguments, sys.orig_argv, say it):
+    OPENBLAS_NUM_THREADS=1 unless the user set it; another `-m` module that imports the package, or a
+    program that does, is left alone."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "probe_m").mkdir()
+    (tmp_path / "probe_m" / "__init__.py").write_text("")
+    main = "import os, wavemesh\nprint(os.environ.get('OPENBLAS_NUM_THREADS'))\n"
+    (tmp_path / "probe_m" / "__main__.py").write_text(main)
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), *sys.path])
+
+    def blas(argv: list[str], as_m: str | None = None, **extra: str) -> str:
+        """OPENBLAS_NUM_THREADS after the package's import; as_m: run as `python -m as_m` would set it."""
+        fake = f"import sys; sys.orig_argv = [sys.executable, '-m', {as_m!r}]; " if as_m else ""
+        probe = fake + "import os, wavemesh; print(os.environ.get('OPENBLAS_NUM_THREADS'))"
+        cmd = argv or ["-c", probe]
+        out = subprocess.run([sys.executable, *cmd], capture_output=True, text=True, env={**env, **extra})
+        return out.stdout.strip() or out.stderr[-300:]
+
+    assert blas([], as_m="wavemesh") == "1"
+    assert blas([], as_m="wavemesh.cli") == "1"
+    assert blas([], as_m="wavemesh", OPENBLAS_NUM_THREADS="4") == "4"  # the user's value kept
+    assert blas([], as_m="wavemesh.io") == "None"
+    assert blas(["-m", "probe_m"]) == "None"  # another module's run that imports the package
+    assert blas([]) == "None"  # a program that imports it
