@@ -14,11 +14,11 @@ from __future__ import annotations
 import math
 import os
 import random
-from collections import deque
 
 import cocotb
+import one_in_work
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, FallingEdge, ReadOnly
+from cocotb.triggers import ClockCycles, FallingEdge
 from tri_engine_tb import random_triangles
 from wavemesh.model.tri_slope import slope_root
 
@@ -75,55 +75,29 @@ class Bench:
         await FallingEdge(dut.clk)
         dut.rst.value = 0
 
+    def offer(self, beat) -> None:
+        """Drive a triangle command (tri, z, sx, sy), a root command ("root", x) or none."""
+        dut = self.dut
+        is_root = beat is not None and beat[0] == "root"
+        if is_root:
+            dut.s_root_x.value = beat[1]
+        elif beat is not None:
+            tri, z, sx, sy = beat
+            dut.s_cmd_x.value = sum(p[0] << (CB * k) for k, p in enumerate(tri))
+            dut.s_cmd_y.value = sum(p[1] << (CB * k) for k, p in enumerate(tri))
+            dut.s_cmd_z.value = sum(v << (16 * k) for k, v in enumerate(z))
+            dut.s_cmd_sx.value = sx[0] | sx[1] << 16
+            dut.s_cmd_sy.value = sy[0] | sy[1] << 16
+        dut.s_cmd_valid.value = int(beat is not None and not is_root)
+        dut.s_root_valid.value = int(is_root)
+
     async def run(self, jobs, cmd_rate=1.0, res_rate=1.0, max_cycles=1_000_000):
         """Pass jobs [(tri, z, sx, sy)] and [("root", x)] through; returns (results, cycles)."""
-        dut, rng = self.dut, self.rng
-        cmds = deque(jobs)
-        results: list[tuple[int, int]] = []
-        beat = None
-        offered = None
-        in_work = 0
-        cycles = 0
-        while len(results) < len(jobs):
-            cycles += 1
-            assert cycles < max_cycles, f"stuck: {len(results)} of {len(jobs)} results"
-            await FallingEdge(dut.clk)
-            if beat is None and cmds and rng.random() < cmd_rate:
-                beat = cmds.popleft()
-            is_root = beat is not None and beat[0] == "root"
-            if is_root:
-                dut.s_root_x.value = beat[1]
-            elif beat is not None:
-                tri, z, sx, sy = beat
-                dut.s_cmd_x.value = sum(p[0] << (CB * k) for k, p in enumerate(tri))
-                dut.s_cmd_y.value = sum(p[1] << (CB * k) for k, p in enumerate(tri))
-                dut.s_cmd_z.value = sum(v << (16 * k) for k, v in enumerate(z))
-                dut.s_cmd_sx.value = sx[0] | sx[1] << 16
-                dut.s_cmd_sy.value = sy[0] | sy[1] << 16
-            dut.s_cmd_valid.value = int(beat is not None and not is_root)
-            dut.s_root_valid.value = int(is_root)
-            dut.m_res_ready.value = int(rng.random() < res_rate)
-            await ReadOnly()
-            if offered is not None:
-                assert int(dut.m_res_valid.value) == 1, "a result was withdrawn"
-                assert (int(dut.m_res_root.value), int(dut.m_res_k.value)) == offered, "a result changed"
-            if beat is not None and int(dut.s_cmd_ready.value):
-                assert in_work == 0, "a command taken while another is in work"
-                beat = None
-                in_work += 1
-            if int(dut.m_res_valid.value):
-                got = (int(dut.m_res_root.value), int(dut.m_res_k.value))
-                if int(dut.m_res_ready.value):
-                    results.append(got)
-                    offered = None
-                    in_work -= 1
-                else:
-                    offered = got
-        await FallingEdge(dut.clk)
-        dut.s_cmd_valid.value = 0
-        dut.s_root_valid.value = 0
-        dut.m_res_ready.value = 0
-        return results, cycles
+        dut = self.dut
+        return await one_in_work.run(
+            dut, self.rng, jobs, offer=self.offer, s_ready=dut.s_cmd_ready, m_valid=dut.m_res_valid,
+            m_ready=dut.m_res_ready, result=lambda: (int(dut.m_res_root.value), int(dut.m_res_k.value)),
+            cmd_rate=cmd_rate, res_rate=res_rate, max_cycles=max_cycles)
 
     def check(self, jobs, results):
         for i, (job, got) in enumerate(zip(jobs, results, strict=True)):

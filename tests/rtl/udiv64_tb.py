@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import os
 import random
-from collections import deque
 
 import cocotb
+import one_in_work
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, FallingEdge, ReadOnly
+from cocotb.triggers import ClockCycles, FallingEdge
 
 SEED = int(os.environ.get("UDIV64_SEED", "1"))
 STEPS = int(os.environ.get("UDIV64_STEPS", "2"))
@@ -46,42 +46,16 @@ def random_pair(rng: random.Random) -> tuple[int, int]:
 
 async def run(dut, rng, jobs, cmd_rate=1.0, res_rate=1.0, max_cycles=1_000_000):
     """Pass jobs [(n, d)] through; returns (results [(q, r)], cycles)."""
-    cmds = deque(jobs)
-    results: list[tuple[int, int]] = []
-    beat = None
-    offered = None
-    in_work = 0
-    cycles = 0
-    while len(results) < len(jobs):
-        cycles += 1
-        assert cycles < max_cycles, f"stuck: {len(results)} of {len(jobs)} results"
-        await FallingEdge(dut.clk)
-        if beat is None and cmds and rng.random() < cmd_rate:
-            beat = cmds.popleft()
+
+    def offer(beat) -> None:
         if beat is not None:
             dut.s_n.value, dut.s_d.value = beat
         dut.s_valid.value = int(beat is not None)
-        dut.m_ready.value = int(rng.random() < res_rate)
-        await ReadOnly()
-        if offered is not None:
-            assert int(dut.m_valid.value) == 1, "a result was withdrawn"
-            assert (int(dut.m_q.value), int(dut.m_r.value)) == offered, "a result changed"
-        if beat is not None and int(dut.s_ready.value):
-            assert in_work == 0, "a command taken while another is in work"
-            beat = None
-            in_work += 1
-        if int(dut.m_valid.value):
-            got = (int(dut.m_q.value), int(dut.m_r.value))
-            if int(dut.m_ready.value):
-                results.append(got)
-                offered = None
-                in_work -= 1
-            else:
-                offered = got
-    await FallingEdge(dut.clk)
-    dut.s_valid.value = 0
-    dut.m_ready.value = 0
-    return results, cycles
+
+    return await one_in_work.run(
+        dut, rng, jobs, offer=offer, s_ready=dut.s_ready, m_valid=dut.m_valid, m_ready=dut.m_ready,
+        result=lambda: (int(dut.m_q.value), int(dut.m_r.value)), cmd_rate=cmd_rate, res_rate=res_rate,
+        max_cycles=max_cycles)
 
 
 async def start(dut):
