@@ -240,9 +240,13 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
                 if (lo_b[i].q > nlo) nlo = lo_b[i].q;
             for (int i = 0; i < n_hi; i++)
                 if (hi_b[i].q < nhi) nhi = hi_b[i].q;
-            const char *p = (const char *)(h + (int64_t)(py + 1) * f->width + nlo);
-            const char *e = (const char *)(h + (int64_t)(py + 1) * f->width + nhi);
-            for (int i = 0; i < PREFETCH_LINES && p <= e + 63; i++, p += 64) __builtin_prefetch(p);
+            if (nlo <= nhi) { /* offsets, not pointers past the span: those could leave the samples */
+                const char *p = (const char *)(h + (int64_t)(py + 1) * f->width + nlo);
+                size_t span = (size_t)(nhi - nlo) * sizeof *h, off = 0;
+                int i = 0;
+                for (; i < PREFETCH_LINES && off < span; i++, off += 64) __builtin_prefetch(p + off);
+                if (i < PREFETCH_LINES) __builtin_prefetch(p + span); /* the line of the span's end */
+            }
         }
         if (empty || lo > hi) continue;
         const uint16_t *row = h + (int64_t)py * f->width;
