@@ -49,7 +49,7 @@ if _COMMAND_IMPORTS:
     gc.disable()
 # The command, before numpy is imported: numpy's OpenBLAS would start a thread per core at import that
 # spins waiting for work, and the command does no BLAS work worth threads (a few norms, a picture's
-# products): on a 2048^2 grid that thread took 12 % of the process's CPU time (0.419 -> 0.369 s).  A
-# value the user set is kept; a program that imports the package keeps its own.
+# products; what it costs: docs/usage.md, "What a run costs").  A value the user set is kept; a program
+# that imports the package keeps its own.
 if _COMMAND and "numpy" not in sys.modules:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
