@@ -42,7 +42,7 @@ OPTS = ["--key", "elevation", "--crop", "0,0,200,200", "--zeta", "4"]
 DEVICE = ["--tri-capacity", "200000", "--quiet"]
 UART = 115200
 LINK_3M = ["--link-baud", "3000000"]
-# the board: its rate nearest to 3 Mbaud (3,000,000 exactly at 30 MHz: _board_rate)
+# the board: the rate `--link-baud auto` takes on it (3,000,000 exactly at 30 MHz: _board_rate)
 BOARD_OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 DEADLINE = 300  # s: --deadline of the 1 % set
 GRACE = 5.0  # s past the deadline that still counts as "at the deadline" (the process's own ending)
@@ -92,7 +92,8 @@ def _one_set(index: int, shard: int, out: Path) -> None:
                      "message": r.message} for r in done]
             if board and rate == 0 and shard == 0:
                 # on a board that never switched: the one above keeps 3 Mbaud for BAUD_IDLE_MS after
-                # each run (75 million cycles, minutes of simulation), which a line at 115200 would not pass
+                # each run (90 million cycles at 30 MHz, minutes of simulation), which a line at 115200
+                # would not pass
                 dev.stop()
                 dev = _board()
                 try:
@@ -121,10 +122,11 @@ def _board():
 
 
 def _board_rate() -> int:
-    from wavemesh.device import memmap
-    from wavemesh.device import protocol as P
+    """The board's rate after the switch: what `--link-baud auto` takes on it, from the clock and the
+    divisors its HELLO_REPLY states (memmap.py, protocol.COMMON_BAUDS; harness.simboard.fastest_rate)."""
+    from wavemesh.harness.simboard import fastest_rate
 
-    return P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))
+    return fastest_rate()
 
 
 def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
@@ -148,8 +150,9 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
         div = (board.events("uart divisor") or [(start, 0)])[-1][0]
         return div == start or (f.type == P.FrameType.OK and f.fields()["request"] == P.FrameType.BAUD)
 
-    # the probe window is 25 million cycles: 2 minutes of simulation alone, 10 beside the campaign's boards
-    # (40 kHz each on a loaded machine: 60 HELLOs of 8 s were not enough); the run ends when it answers
+    # the probe window is BAUD_PROBE_MS of the board's clock (30 million cycles at 30 MHz): minutes of
+    # simulation alone, 10 or more beside the campaign's boards (40 kHz each on a loaded machine: 60 HELLOs
+    # of 8 s were not enough); the run ends when it answers
     S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=250)
     out = work / "switch.obj"
     with FrameTap(("127.0.0.1", board.port), on_frame) as tap:
@@ -168,44 +171,90 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
             "message": warnings[0] if len(warnings) == 1 else err.strip()[-300:]}
 
 
-def run() -> dict:
+def run(board_only: bool = False) -> dict:
+    """Every set (`make bench-faults`), or with board_only the simulated board's sets and its failed
+    switch alone (board()): the board's part of the results."""
     import numpy as np
     from wavemesh.harness import jacksboro
-    from wavemesh.harness.faultproxy import OUTCOMES
 
+    chosen = [i for i, s in enumerate(SETS) if not board_only or s[1] == "board"]
     with tempfile.TemporaryDirectory() as tmp:
         procs = []
-        for i, s in enumerate(SETS):
-            for k in range(s[-1]):
+        for i in chosen:
+            for k in range(SETS[i][-1]):
                 out = Path(tmp) / f"set{i}-{k}.json"
                 procs.append((i, out, subprocess.Popen([sys.executable, __file__, "--set", str(i), str(k),
                                                         str(out)])))
         for i, _, proc in procs:
             if proc.wait() != 0:
                 raise RuntimeError(f"set {SETS[i][0]!r} failed ({proc.returncode})")
-        sets, switch = [], None
-        for i, s in enumerate(SETS):
-            runs = sorted((r for j, out, _ in procs if j == i for r in json.loads(out.read_text())),
-                          key=lambda r: r["seed"])
-            switch = next((r for r in runs if r.get("switch")), switch)
-            runs = [r for r in runs if not r.get("switch")]
-            name, baud, rate, _, _, extra, _ = s
-            outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
-            errors: dict = {}
-            for r in runs:
-                if r["outcome"] == "error":
-                    key = r["message"].split(":")[1].strip() if ":" in r["message"] else r["message"]
-                    errors[key] = errors.get(key, 0) + 1
-            sets.append({"name": name, "baud": baud, "rate": rate, "options": extra, "runs": runs,
-                         "outcomes": outcomes, "errors": errors,
-                         "frames": sum(r["frames"] for r in runs), "faults": sum(r["faults"] for r in runs),
-                         "median_s": statistics.median(r["seconds"] for r in runs),
-                         "slowest_s": max(r["seconds"] for r in runs),
-                         "delay_max_s": max(r["delay_s"] for r in runs)})
+        sets, switch = summarise({i: [json.loads(out.read_text()) for j, out, _ in procs if j == i]
+                                  for i in chosen})
+    if board_only:
+        return board_part(sets, switch, _commit())
     h, w = np.load(jacksboro())["elevation"][:200, :200].shape
     return {"commit": _commit(), "input": f"Jacksboro DEM, {w} x {h} crop, zeta 4 m",
-            "options": OPTS, "board_options": BOARD_OPTS, "board_baud": _board_rate(), "deadline": DEADLINE,
-            "sets": sets, "failed_switch": switch}
+            "options": OPTS, "board_options": BOARD_OPTS, "board_baud": _board_rate(),
+            "board_clk_hz": _board_clk(), "deadline": DEADLINE, "sets": sets, "failed_switch": switch}
+
+
+def summarise(shards: dict) -> tuple[list, dict | None]:
+    """The sets' rows from their shards' runs ({index in SETS: [runs of each shard]}), and the failed
+    switch's run (None when no shard ran it)."""
+    from wavemesh.harness.faultproxy import OUTCOMES
+
+    sets, switch = [], None
+    for i, parts in sorted(shards.items()):
+        runs = sorted((r for part in parts for r in part), key=lambda r: r["seed"])
+        switch = next((r for r in runs if r.get("switch")), switch)
+        runs = [r for r in runs if not r.get("switch")]
+        name, baud, rate, _, _, extra, _ = SETS[i]
+        outcomes = {k: sum(r["outcome"] == k for r in runs) for k in OUTCOMES}
+        errors: dict = {}
+        for r in runs:
+            if r["outcome"] == "error":
+                key = r["message"].split(":")[1].strip() if ":" in r["message"] else r["message"]
+                errors[key] = errors.get(key, 0) + 1
+        sets.append({"name": name, "baud": baud, "rate": rate, "options": extra, "runs": runs,
+                     "outcomes": outcomes, "errors": errors,
+                     "frames": sum(r["frames"] for r in runs), "faults": sum(r["faults"] for r in runs),
+                     "median_s": statistics.median(r["seconds"] for r in runs),
+                     "slowest_s": max(r["seconds"] for r in runs),
+                     "delay_max_s": max(r["delay_s"] for r in runs)})
+    return sets, switch
+
+
+def board_part(sets: list, switch: dict | None, commit: str) -> dict:
+    """The results' keys that the board's sets give (board()), with the commit and the day they ran."""
+    import datetime
+
+    return {"board_sets": sets, "failed_switch": switch, "board_commit": commit,
+            "board_date": datetime.date.today().isoformat(), "board_options": BOARD_OPTS,
+            "board_baud": _board_rate(), "board_clk_hz": _board_clk()}
+
+
+def merge_board(results: dict, part: dict) -> dict:
+    """results (a whole run's) with the board's sets and failed switch replaced by part's."""
+    sets = [s for s in results["sets"] if s["baud"] != "board"] + part["board_sets"]
+    order = {s[0]: i for i, s in enumerate(SETS)}
+    sets.sort(key=lambda s: order.get(s["name"], len(SETS)))
+    return {**results, **{k: v for k, v in part.items() if k != "board_sets"}, "sets": sets}
+
+
+def board(path: Path) -> None:
+    """Runs the board's sets and failed switch alone (the other sets need no simulator and keep their
+    results) into the results file at path, and rebuilds docs/benchmarks.md (bench/run.py)."""
+    import run as bench_run  # bench/run.py: this script's folder is on the path
+
+    results = merge_board(json.loads(path.read_text()), run(board_only=True))
+    path.write_text(json.dumps(results, indent=1) + "\n")
+    bench_run.write_doc()
+
+
+def _board_clk() -> int:
+    from wavemesh.device import memmap
+
+    return memmap.CLK_HZ
 
 
 def _commit() -> str:
@@ -223,9 +272,17 @@ def markdown(results: dict) -> str:
     def line(s) -> tuple:  # a device and its rate: the fault-free runs the others are compared with
         return s["baud"], "--link-baud" in s["options"]
 
+    from wavemesh.device import protocol as P
+
     base = {line(s): s["median_s"] for s in sets if s["rate"] == 0}
+    # the board's clock when its sets ran (25 MHz before it was recorded)
+    ack_cycles = P.ACK_TIMEOUT_MS * results.get("board_clk_hz", 25_000_000) // 1000
+    measured = f"Code measured: {results.get('commit', 'not recorded')}"
+    if "board_commit" in results:
+        measured += (f"; the simulated board's sets and its failed switch again on {results['board_commit']} "
+                     f"({results['board_date']}, `python bench/bench_faults.py --board`)")
     lines = [
-        f"Code measured: {results.get('commit', 'not recorded')}.",
+        measured + ".",
         "",
         f"`wavemesh stream` of the {results['input']} (`{' '.join(results['options'])}`; 25,001 triangles) "
         "through wavemesh.harness.faultproxy to the native stand-in device, with the host's default "
@@ -268,8 +325,8 @@ def markdown(results: dict) -> str:
               "socket the delays alone hold the line for many times the fault-free second, so its ratio "
               "measures them, not the protocol; so at 3 Mbaud (a fault-free run of a few seconds, some 40 s "
               "of delays in a run at 0.2 %).  On the simulated board a lost LEVEL_END, DONE or ACK waits out "
-              "the board's ACK_TIMEOUT_MS, 12.5 million cycles of its clock, a minute or more of "
-              "simulation: its ratio measures the simulator's speed."]
+              f"the board's ACK_TIMEOUT_MS, {ack_cycles / 1e6:g} million cycles of its clock, a minute or "
+              "more of simulation: its ratio measures the simulator's speed."]
     for s in sets:
         if s["rate"] == 0.002 and s["name"] != lossy["name"] and s["baud"]:
             o = s["outcomes"]
@@ -296,3 +353,8 @@ def markdown(results: dict) -> str:
 if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--set":
         _one_set(int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[4]))
+    elif sys.argv[1:] == ["--board"]:
+        board(Path(__file__).resolve().parent / "results" / "faults.json")
+    else:
+        sys.exit("usage: bench_faults.py --board (the simulated board's sets alone; the whole bench: "
+                 "make bench-faults)")

@@ -196,15 +196,14 @@ def _board_budget() -> int:
 def test_simulated_board_killed_mid_job(start_sim, firmware_hex, tmp_path, monkeypatch):
     """The pin-accurate board (every byte over the UART pins) switched to its rate nearest to 3 Mbaud
     (3 Mbaud), killed when its first MESH frame passes."""
-    from wavemesh.device import memmap
-    from wavemesh.harness.simboard import SIM_TIMEOUTS
+    from wavemesh.harness.simboard import SIM_TIMEOUTS, fastest_rate
 
     monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", SIM_TIMEOUTS)
     src = tmp_path / "tiny.npy"
     np.save(src, make("ball", 16)[3:12, 2:12])  # 10 x 9
     opts = ["--levels", "2", "--reduce", "off", "--simplify", "off"]
     assert cli.main(["mesh", str(src), *opts, "-o", str(tmp_path / "ref.obj"), "-q"]) == 0
-    rate = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))
+    rate = fastest_rate()
 
     def board():
         return start_sim(firmware_hex, "--quiet")

@@ -33,7 +33,7 @@ from wavemesh.device import memmap
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
 from wavemesh.harness import jacksboro, run_cli
-from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
+from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, fastest_rate
 from wavemesh.io.synth import make
 
 pytestmark = pytest.mark.sim
@@ -207,8 +207,7 @@ def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs,
     of the mesh bytes at the new rate, less than a 115200-baud byte each.  Then, at that rate (the board
     keeps it for BAUD_IDLE_MS, tens of seconds of simulation): garbage on the line and a clean job again.
     (Faults at that rate: tests/sim/test_stream_board_3mbaud.py and make bench-faults.)"""
-    clk = memmap.CLK_HZ
-    rate = P.divisor_baud(clk, P.baud_divisor(clk, 3_000_000))
+    rate = fastest_rate()  # what --link-baud auto takes: 3,000,000 at 30 MHz
     link = ("--link-baud", str(rate))
     src = str(inputs / "tiny.npy")
     b = SimBoard(sim_exe, firmware_hex, "--port", "0")
@@ -226,7 +225,7 @@ def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs,
     assert rep["device"]["features"] & P.FEATURE_RICE  # the upload block decodes: coded samples at every rate
     if TINY_CYCLES:
         assert_same_work(job_cycles(rep), TINY_CYCLES)
-    byte_cycles = 10 * P.baud_divisor(clk, rate)
+    byte_cycles = 10 * P.baud_divisor(memmap.CLK_HZ, rate)
     mesh_bytes = rep["transfer"]["mesh_bytes"]
     assert byte_cycles * mesh_bytes <= rep["device_cycles"]["link"]
 

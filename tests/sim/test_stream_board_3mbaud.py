@@ -29,17 +29,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from jobs import REFUSED_IN_A_JOB, run_with_payloads  # tests/sim/jobs.py
-from wavemesh.device import memmap
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
 from wavemesh.device.link import _HEAD, slip_encode
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.faultproxy import FaultProxy, Faults, FrameTap, stream_once
-from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard
+from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, fastest_rate
 
 pytestmark = pytest.mark.sim
 
-RATE = P.divisor_baud(memmap.CLK_HZ, P.baud_divisor(memmap.CLK_HZ, 3_000_000))  # 3,000,000 at 30 MHz
+RATE = fastest_rate()  # what --link-baud auto takes on the board: 3,000,000 at 30 MHz
 OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 LINK = ["--link-baud", str(RATE)]
 RUN_LIMIT = 600.0  # s: a run that takes longer counts as a hang

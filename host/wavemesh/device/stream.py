@@ -98,6 +98,17 @@ class DeadlineError(LinkTimeout):
     """The session ran past the deadline the user set (Timeouts.deadline, ``--deadline``)."""
 
 
+def reachable(clk_hz: int, div_min: int, div_max: int, baud: int) -> tuple[int, int] | None:
+    """(divisor, the device's rate) nearest to baud for a device whose HELLO_REPLY states clk_hz and the
+    divisors div_min..div_max, or None when it cannot switch (div_max 0) or lands farther than
+    protocol.BAUD_TOLERANCE from baud."""
+    if not div_max or baud <= 0:
+        return None
+    div = min(max(P.baud_divisor(clk_hz, baud), div_min), div_max)
+    rate = P.divisor_baud(clk_hz, div)
+    return (div, rate) if abs(rate - baud) <= P.BAUD_TOLERANCE * baud else None
+
+
 @dataclass(frozen=True)
 class DeviceInfo:
     """HELLO_REPLY: what the device is and can do."""
@@ -137,11 +148,7 @@ class DeviceInfo:
     def reachable(self, baud: int) -> tuple[int, int] | None:
         """(divisor, the device's rate) nearest to baud, or None when the device cannot switch or lands
         farther than protocol.BAUD_TOLERANCE from it."""
-        if not self.div_max or baud <= 0:
-            return None
-        div = min(max(P.baud_divisor(self.clk_hz, baud), self.div_min), self.div_max)
-        rate = P.divisor_baud(self.clk_hz, div)
-        return (div, rate) if abs(rate - baud) <= P.BAUD_TOLERANCE * baud else None
+        return reachable(self.clk_hz, self.div_min, self.div_max, baud)
 
     @property
     def resend_s(self) -> float:

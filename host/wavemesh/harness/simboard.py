@@ -43,6 +43,20 @@ SIM_TIMEOUTS = Timeouts(sync=8.0, sync_attempts=5, reply=10.0, attempts=3, ack=5
                         keepalive=120.0)
 
 
+def fastest_rate() -> int:
+    """The rate `--link-baud auto` takes on the simulated board (and the ULX3S it models): the first of
+    protocol.COMMON_BAUDS that the divisors its HELLO_REPLY states reach (memmap: CLK_HZ, UART_DIV_MIN up
+    to the largest the UART's DIV field holds; firmware/board/app/main.c); 3,000,000 at 30 MHz."""
+    from wavemesh.device import memmap
+    from wavemesh.device import protocol as P
+    from wavemesh.device.stream import reachable
+
+    div = next(f for r in memmap.UART.registers if r.name == "DIV" for f in r.fields if f.name == "DIV")
+    div_max = div.mask >> div.lsb
+    return next(hit[1] for b in P.COMMON_BAUDS
+                if (hit := reachable(memmap.CLK_HZ, memmap.UART_DIV_MIN, div_max, b)))
+
+
 class SimBoard(DeviceProcess):
     """A running wmsim process: its URL and everything it printed."""
 
