@@ -164,7 +164,7 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
     back = [d for d, _ in board.events("uart divisor")]
     ok = (rc == 0 and out.exists() and out.read_bytes() == ref.read_bytes() and len(warnings) == 1
           and json.loads((work / "switch.json").read_text())["transfer"]["line_baud"]
-          == P.divisor_baud(memmap.CLK_HZ, start)  # (115,207: the board states the rate its divisor gives)
+          == P.divisor_baud(memmap.CLK_HZ, start)  # (115,385 at 30 MHz: the rate its divisor gives)
           and back[-2:] == [P.baud_divisor(memmap.CLK_HZ, _board_rate()), start])
     return {"seed": -1, "outcome": "identical" if ok else "different", "seconds": round(seconds, 3),
             "faults": 0, "frames": 0, "delay_s": 0.0, "switch": True,

@@ -172,3 +172,39 @@ def test_samples_crc_is_zlib_of_little_endian_samples():
 
     a = np.arange(12, dtype=np.uint16).reshape(3, 4) * 4099
     assert samples_crc(a) == zlib.crc32(a.astype("<u2").tobytes())
+
+
+def _prose() -> str:
+    """docs/protocol.md without its generated tables (between the markers)."""
+    text = (ROOT / "docs" / "protocol.md").read_text()
+    return text[:text.index(P.MD_BEGIN)] + text[text.index(P.MD_END):]
+
+
+def test_docs_prose_states_the_module_constants():
+    """The written text of docs/protocol.md quotes constants as `NAME` (value) or value (`NAME`): each
+    such value must be the module's (the generated tables hold the rest)."""
+    prose = _prose()
+    quoted = [(n, v) for n, v in re.findall(r"`([A-Z][A-Z0-9_]+)` \((\d+)\)", prose)]
+    quoted += [(n, v) for v, n in re.findall(r"(\d+) \(`([A-Z][A-Z0-9_]+)`\)", prose)]
+    quoted = [(n, int(v)) for n, v in quoted if isinstance(getattr(P, n, None), int)]
+    assert len(quoted) >= 5, quoted  # the pattern still finds them
+    assert [(n, v) for n, v in quoted if getattr(P, n) != v] == []
+    tol = re.search(r"`BAUD_TOLERANCE` \(([\d.]+) %", prose)
+    assert tol and float(tol.group(1)) / 100 == P.BAUD_TOLERANCE
+    bauds = re.search(r"`COMMON_BAUDS` \(([^:)]+)", prose).group(1)
+    as_int = [int(float(b[:-1]) * 1e6) if b.endswith("M") else int(b) for b in bauds.split(", ")]
+    assert tuple(as_int) == P.COMMON_BAUDS
+
+
+def test_docs_timeouts_table_states_the_defaults():
+    """The table of the host's timeouts (stream.Timeouts) gives each field's default."""
+    from dataclasses import fields
+
+    from wavemesh.device.stream import Timeouts
+
+    table = re.search(r"^\| name \| default \| meaning \|\n((?:\|.*\n)+)", _prose(), re.M).group(1)
+    rows = dict(re.findall(r"^\| `(\w+)` \| ([^|]+) \|", table, re.M))
+    defaults = {f.name: f.default for f in fields(Timeouts)}
+    assert set(rows) == set(defaults)
+    stated = {k: None if v.strip() == "None" else float(v) for k, v in rows.items()}
+    assert {k: (stated[k], v) for k, v in defaults.items() if stated[k] != v} == {}
