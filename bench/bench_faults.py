@@ -5,27 +5,29 @@ small job against the pin-accurate simulated board switched to 3 Mbaud.
 The job: a 200 x 200 crop of the Jacksboro DEM at full resolution, zeta 4 m: 25,001 triangles in the
 final level, some 260 KB of level streams down and 28 KB up (samples, ACKs).  The device (wmdev) runs
 paced like the board's UART at 115200 baud, so that a run's fault-free time is a line's and not a
-socket's: an injected delay holds the line for up to 0.3 s whatever its rate, and on a socket the
-delays alone (some 20 s a run at 0.2 %) are twenty times the fault-free second.  A smaller set on the
-unpaced socket shows that floor.  The 3 Mbaud sets: wmdev paced at 115200 baud and switched by the
-host (`--link-baud 3000000`), and the simulated board (wmsim without --fast: every byte bit by bit over
-the UART pins, the upload block in the path) switched to its nearest rate, 3 Mbaud (divisor 10 at
-30 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the template
-stage alone; the simulator runs about a hundredth of the board's speed on a loaded machine) and the
-host's timeouts for the simulator (harness.simboard.SIM_TIMEOUTS).  A fault that hits the switch
+socket's: an injected delay holds the line for up to 0.3 s whatever its rate, and on a socket the delays
+alone (some 20 s a run at 0.2 %) are twenty times the fault-free second.  A smaller set on the unpaced
+socket shows that floor.  The 3 Mbaud sets: wmdev paced at 115200 baud and switched by the host
+(`--link-baud 3000000`), and the simulated board (wmsim without --fast: every byte bit by bit over the
+UART pins, the upload block in the path) switched to the rate `--link-baud auto` takes on it, 3 Mbaud
+(divisor 10 at 30 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the
+template stage alone; the simulator runs about a hundredth of the board's speed on a loaded machine) and
+the host's timeouts for the simulator (harness.simboard.SIM_TIMEOUTS).  A fault that hits the switch
 leaves the job at the start rate with one warning line (the run still counts by its mesh).  Each run
 (wavemesh.harness.faultproxy.campaign) ends identical (the very file `wavemesh mesh` writes), with a
 clear error (exit 2, one `error:` line and a hint, no output), silently different, unclear (anything
-else) or hung (past the set's run limit).  On the board one more run, not faulted at random: the
-switch fails (a line model passes frames only while the board runs at the host's start rate, and
-the host's port never leaves it), the board goes back by itself after its probe window, the host
-says so in one warning line and the job runs at 115200 baud.
+else) or hung (past the set's run limit).  On the board one more run, not faulted at random: the switch
+fails (a line model passes frames only while the board runs at the host's start rate, and the host's port
+never leaves it), the board goes back by itself after its probe window, the host says so in one warning
+line and the job runs at 115200 baud.
 
-The sets run at once, dealt to processes that each have a device of their own (`make bench-faults`; the short
-seeded version is tests/sim/test_stream_faults.py, and tests/sim/test_stream_board_3mbaud.py on the
-board).  Bars: at 0.2 % both ways (delays among the faults) at least 95 % identical, 0 different, 0
-hangs, the slowest run at most 5 x the fault-free time; at 1 % with --deadline, no run past the
-deadline and every failure one clear line.
+The sets run at once, dealt to processes that each have a device of their own (`make bench-faults`;
+`python bench/bench_faults.py --board` runs the simulated board's sets and its failed switch alone and
+puts them into bench/results/faults.json beside the other sets' results, with the commit each part
+measured; the short seeded version is tests/sim/test_stream_faults.py, and
+tests/sim/test_stream_board_3mbaud.py on the board).  Bars: at 0.2 % both ways (delays among the faults)
+at least 95 % identical, 0 different, 0 hangs, the slowest run at most 5 x the fault-free time; at 1 %
+with --deadline, no run past the deadline and every failure one clear line.
 """
 
 from __future__ import annotations
@@ -292,7 +294,7 @@ def markdown(results: dict) -> str:
         "of the same device at the same rate; *delays*: the most that the injected delays held the line in "
         "one run.  *3 Mbaud*: wmdev paced at 115200 baud and switched by the host (`--link-baud 3000000`); "
         "*board at 3 Mbaud*: the pin-accurate simulated board (every byte bit by bit over the UART pins, "
-        "through the upload block) switched to its nearest rate (`--link-baud "
+        "through the upload block) switched to the rate `--link-baud auto` takes on it (`--link-baud "
         f"{results.get('board_baud', 3000000)}`), with "
         f"`{' '.join(results.get('board_options', BOARD_OPTS))}` "
         "(what the simulator, at about a hundredth of the board's speed, runs in seconds) and the host's "
