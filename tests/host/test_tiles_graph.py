@@ -105,6 +105,16 @@ def test_schedule_rank_and_homes():
     # nothing of its own ready: a worker takes another's rather than wait
     s = _Schedule(nodes[:2], {0: 1, 1: 1})
     assert s.take(0) == 0
+    # a node on two workers' tiles: its first tile's worker's in rank order, before that worker's later
+    # nodes; the other worker takes its own
+    nodes = [Node(_add, (1,), (0, 0), (0,)), Node(_add, (1,), (0, 0), (1,)),
+             Node(_add, (Ref(0), Ref(1)), (1, 2), (0, 1)), Node(_add, (Ref(0),), (2, 0), (0,)),
+             Node(_add, (Ref(1),), (2, 0), (1,))]
+    s = _Schedule(nodes, {0: 0, 1: 1})
+    assert s.take(0) == 0 and s.take(1) == 1
+    s.finished(0)
+    s.finished(1)
+    assert s.take(1) == 4 and s.take(0) == 2 and s.take(0) == 3
 
 
 @pytest.fixture(scope="module")

@@ -302,8 +302,11 @@ class Runner:
 class _Schedule:
     """Which node a worker runs next, of the ready ones (every Ref's node done), in rank order: the first
     whose tiles are all the worker's (a tile is the worker's that first read it, whose cache holds it; one
-    nobody read yet, its home's), else the first with one of its tiles, else the first (another worker's
-    tiles, read again here rather than wait).  ``take(None)``: the first (one worker)."""
+    nobody read yet, its home's) or whose first tile is (a node on two workers' tiles, a side between
+    their blocks, is its first tile's worker's in its turn: left to whichever worker had nothing of its
+    own it came last, both tiles and the steps after them held till then), else the first with one of its
+    tiles, else the first (another worker's tiles, read again here rather than wait).  ``take(None)``: the
+    first (one worker)."""
 
     def __init__(self, nodes: list[Node], homes: dict | None = None):
         self.nodes = nodes
@@ -323,11 +326,11 @@ class _Schedule:
         if not self.ready:
             return None
         k = 0
-        if worker is not None:  # the first all its own (the scan stops there), else the first with one
+        if worker is not None:  # the first its own (the scan stops there), else the first with one
             some = None
             for j, (_, i) in enumerate(self.ready):
                 mine = [self._mine(t, worker) for t in self.nodes[i].tiles]
-                if all(mine):
+                if all(mine) or mine[0]:
                     k = j
                     break
                 if some is None and any(mine):
