@@ -445,13 +445,13 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
     int legal = !(r->params.flags & WM_FLAG_NO_LEGALISE);
-    /* Only the slots in use: pos[] of a slot allocated later is never trusted before it is filed
-     * (heap_remove checks membership), so storage beyond tri_end is never touched. */
+    /* Only the slots in use; a slot a split adds beyond them gets pos[] = -1 when it is made, so no
+     * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
         if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, &n);
     while (n > 0) {
-        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p;
+        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
         wm_tri_xy(me, t, x, y);
         wx = r->worst[t] % r->field.width;
@@ -466,8 +466,10 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         room = wm_room(r, on < 0 ? 2 : (me->ho[on] >= 0 ? 2 : 1));
         if (room < 0) return room;
         if (room > 0) break; /* the budget: stop with E_max > zeta */
+        te = me->tri_end;
         rc = on < 0 ? wm_tri_split(me, t, wx, wy, touched, &nt) : wm_edge_split(me, on, wx, wy, touched, &nt);
         if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH; /* cannot happen */
+        while (te < me->tri_end) r->pos[te++] = -1; /* slots new to the mesh: in no heap */
         p = -1;
         if (!legal)
             for (int32_t i = 0; i < nt; i++) {

@@ -15,10 +15,9 @@
  *
  * Nothing an earlier job left behind reaches a stage (its cycle counts depend only on this job): the
  * staging is written before it is read, COEF, TOUT and HEIGHT are read only where this job's FPGA
- * stage and upload wrote them, and the storage handed to the refiner (or to the mesh of an
- * initial-only job) is cleared first (wm_job_refine, wm_job_emit_initial): the refiner may read
- * entries it has not written (a heap position it then checks), and what such a read finds must not be
- * the last job's data.
+ * stage and upload wrote them, the refiner writes every entry of its storage before it reads it (so
+ * that storage is not cleared: valgrind's memcheck on the native runner, tests/firmware), and the
+ * storage of an initial-only job's mesh is cleared first (wm_job_emit_initial).
  */
 #include "board_job.h"
 
@@ -75,9 +74,9 @@ static int run_stage(const wm_proto_job *j)
 int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
 {
     /* The refiner's storage holds no more triangles than a triangulation of all the grid's samples
-     * (wm_tri_cap_max): with the SDRAM's heap the device's capacity is some 400k triangles, and the
-     * storage of that many, cleared before every job (wm_job_refine), would cost a small job 20 MB
-     * of stores.  The refiner cannot reach either limit, so the mesh is the same. */
+     * (wm_tri_cap_max): with the SDRAM's heap the device's capacity is some 400k triangles, and a
+     * small job's storage is laid out for the grid's instead (the staging of the initial mesh above it
+     * starts lower).  The refiner cannot reach either limit, so the mesh is the same. */
     wm_proto_job jc = *job;
     const wm_proto_job *j = &jc;
     int32_t m = j->levels, nt;

@@ -353,7 +353,6 @@ int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const w
     wm_level_stats st;
     int rc, lib;
     wm_proto_stage(p, WM_PROTO_STAGE_REFINE, j->levels - 1);
-    wm_job_clear(mem, bytes);
     lib = wm_refine_init(&r, mem, bytes, f, &j->params, init->xy, init->nv, init->tris, init->nt, j->capacity);
     if (lib != WM_OK) return refiner_error(lib, j->levels - 1, detail);
     memset(&st, 0, sizeof st); /* wm_refine_stats fills only the counts it knows (as the host's ctypes) */
