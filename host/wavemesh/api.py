@@ -76,12 +76,13 @@ __all__ = [  # the public API (io.load's and io.results' functions are offered h
     "AUTO_TILE", "AUTO_TILE_SAMPLES", "BOUND_EPS", "BOUND_NOT_MET", "BUG_HINT", "DEFAULT_TAU_FRACTION",
     "LevelMeshes", "MAX_LEVELS", "MESH_BYTES_PER_SAMPLE", "MeshFiles", "MeshJob", "MeshParams", "MeshResult",
     "PICTURE_SUFFIXES", "Progress", "READ_BYTES_PER_SAMPLE", "RESIDENT_BYTES_PER_SAMPLE", "RefineJob",
-    "STAGE_NAMES", "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "TileInstead", "auto_tile",
-    "available_memory", "bound_excess", "check_exaggeration", "check_file", "check_hole_options",
+    "STAGE_NAMES", "StreamResult", "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "TileInstead", "UNTILED_ONLY",
+    "auto_tile", "available_memory", "bound_excess", "check_exaggeration", "check_file", "check_hole_options",
     "check_outputs", "check_port", "check_report", "crop_window", "default_levels", "default_tau",
     "default_workers", "device_fit_hint", "drop_holes", "level_counts", "level_report", "load_input",
     "memory_available", "memory_check", "mesh", "native_within", "parse_crop", "refine", "render_file",
-    "render_picture", "require_proper", "shape_heightfield", "stream", "triangulate", "write_json",
+    "render_picture", "require_proper", "shape_heightfield", "stream", "triangulate", "untiled_error",
+    "untiled_options", "write_json",
     "write_result", "write_synth",
 ]
 
@@ -333,6 +334,45 @@ class MeshParams:
     rms: bool = False  # RMS errors too (the report's), not only the maxima
     roi: tuple | np.ndarray | None = None  # --roi: rectangles "X,Y,W,H" / mask files, or a bool array
     min_area: float = 0.0  # --min-area: with holes, drop pieces of the mesh smaller (square grid steps)
+
+
+# The options a tiled run does not do, and why: the one list.  A tiled run (--tile N, --tiles-dir,
+# --scheduler, `stream`'s tiles; tiles.plan_tiles for the parameters it has) refuses each with one error
+# line; the default meshes a large grid whole when the job has one (cli; docs/usage.md, "Threads and
+# tiles", which points at `wavemesh mesh --help`: --tile's help lists them from here).
+UNTILED_ONLY = {
+    "--lod": "every level's mesh is one of the whole grid",
+    "--check-levels": "each tile's levels are its own",
+    "--roi": "it needs the whole grid at once",
+    "--nodata hole": "it needs the whole grid at once (so do --max-hole and --min-area, which go with it)",
+    "--invalid": "it needs the whole grid at once",
+    "--denoise": "it needs the whole grid at once",
+    "--normal-map": "it needs the whole grid at once",
+    "--stage initial": "the tiles' shared sides are decided by the refiner",
+    "--bound off": "the tiles' shared sides are decided within zeta",
+    "--max-triangles": "a budget is the job's, not a tile's",
+    "--capacity": "the refiner's storage is sized for each tile's grid",
+}
+
+
+def untiled_options(params: MeshParams, *, check_levels: bool | None = None, lod=None, nodata=None,
+                    invalid=None, denoise=None, normal_map=None) -> list[str]:
+    """The options of UNTILED_ONLY the job has, in its order: from ``params`` (``check_levels``: instead of
+    params.check_levels, which --report sets too) and from the other options' values as the command has
+    them (None: not given)."""
+    p = params.refine
+    has = {"--lod": lod, "--check-levels": params.check_levels if check_levels is None else check_levels,
+           "--roi": params.roi is not None, "--nodata hole": nodata == "hole",
+           "--invalid": invalid is not None, "--denoise": denoise, "--normal-map": normal_map,
+           "--stage initial": params.initial_only, "--bound off": not p.bound,
+           "--max-triangles": p.max_triangles is not None, "--capacity": p.capacity is not None}
+    return [option for option in UNTILED_ONLY if has[option]]
+
+
+def untiled_error(option: str) -> WavemeshError:
+    """The error a tiled run gives for an option of UNTILED_ONLY."""
+    return WavemeshError(f"{option} is not done in tiles: {UNTILED_ONLY[option]}",
+                         hint=f"leave out {option}, or mesh the grid whole (--tile off)")
 
 
 class LevelMeshes(Sequence):

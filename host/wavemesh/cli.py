@@ -251,14 +251,15 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
                        help="mesh in tiles of at most N x N samples with shared, decided borders, stitched "
                             f"into one mesh; off: the grid whole (default: tiles of {api.AUTO_TILE} for a "
                             f"grid of {math.isqrt(api.AUTO_TILE_SAMPLES)}^2 samples and more or a side over "
-                            f"{MAX_SIDE}, if the job can be tiled, docs/usage.md; with --tiles-dir "
-                            f"{api.AUTO_TILE} too, with "
-                            "--scheduler N from the workers' memory)")
+                            f"{MAX_SIDE}, docs/usage.md; with --tiles-dir {api.AUTO_TILE} too, with "
+                            "--scheduler N from the workers' memory). Not in tiles (a large grid then "
+                            f"meshed whole): {', '.join(api.UNTILED_ONLY)}")
     else:
         p.add_argument("--tile", type=_tile_side, metavar="N|off",
                        help="mesh in tiles of at most N x N samples with shared, decided borders, stitched "
                             "into one mesh (also without N with --tiles-dir or several --port: N from the "
-                            "devices' capacity); off (default with one --port): the grid whole")
+                            "devices' capacity); off (default with one --port): the grid whole. Not in "
+                            f"tiles: {', '.join(api.UNTILED_ONLY)}")
     p.add_argument("--tiles-dir", metavar="DIR",
                    help="with tiles: also each tile's mesh and index.json into DIR")
     if local:
@@ -562,22 +563,14 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
     unless --quiet."""
     from wavemesh import tiles  # start-up: tiles (20-50 ms over api, measured) only for a tiled run
 
-    if getattr(args, "lod", None):
-        raise WavemeshError("--lod is not written for a tiled run", hint="leave out --lod, or --tile")
-    if getattr(args, "check_levels", False):  # the tiles' levels are not the grid's
-        raise WavemeshError("--check-levels is not done in a tiled run (each tile's levels are its own)",
-                            hint="leave out --check-levels, or --tile")
-    for name in ("roi", "nodata", "invalid", "denoise"):  # they need the whole grid at once
-        if getattr(args, name, None) not in (None, "error"):
-            raise WavemeshError(f"--{name} is not tiled yet", hint="leave out --tile")
+    untiled = _untiled_options(args, params)
+    if untiled:
+        raise api.untiled_error(untiled[0])
     if getattr(args, "tile", None) is not None and args.tile < tiles.MIN_TILE:
         raise WavemeshError(f"--tile {args.tile} is too small",
                             hint=f"use at least {tiles.MIN_TILE} samples a side")
     files = api.MeshFiles(units=args.units or ("crs" if args.local else "metres"), local=args.local,
                           normals=args.normals, base=args.base, normal_map=args.normal_map)
-    if files.normal_map:
-        raise WavemeshError("--normal-map is not tiled yet (it needs the whole grid at once)",
-                            hint="leave out --tile, or --normal-map")
     # --workers, --timeout, --deadline: _check_options, which both callers run first
     out = tiles.TiledFiles(args.output, tiles_dir=args.tiles_dir, report=args.report, render=args.render,
                            exaggeration=args.exaggeration, title=Path(args.input).name, inputs=inputs,
@@ -630,19 +623,12 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
     return 0
 
 
-def _untiled_only(args, params: api.MeshParams) -> str | None:
-    """Why the job must be meshed whole (the options a tiled run does not do: they need the whole grid at
-    once, or are per job), or None when tiles can do it."""
-    p = params.refine
-    for option, why in (("--lod", args.lod), ("--check-levels", args.check_levels), ("--roi", args.roi),
-                        ("--nodata hole", args.nodata == "hole"), ("--invalid", args.invalid is not None),
-                        ("--denoise", args.denoise), ("--normal-map", args.normal_map),
-                        ("--max-triangles", p.max_triangles is not None),
-                        ("--capacity", p.capacity is not None), ("--stage initial", params.initial_only),
-                        ("--bound off", not p.bound)):
-        if why:
-            return option
-    return None
+def _untiled_options(args, params: api.MeshParams) -> list[str]:
+    """The options of the job that a tiled run does not do (api.UNTILED_ONLY: the one list)."""
+    return api.untiled_options(params, check_levels=bool(getattr(args, "check_levels", False)),
+                               lod=getattr(args, "lod", None), nodata=getattr(args, "nodata", None),
+                               invalid=getattr(args, "invalid", None), denoise=getattr(args, "denoise", None),
+                               normal_map=getattr(args, "normal_map", None))
 
 
 def mesh_command(args) -> int:
@@ -660,7 +646,7 @@ def mesh_command(args) -> int:
     params = _mesh_params(args)
     # the default: a large grid in tiles (api.auto_tile: its W x H decides, from the header, before any
     # sample is read), unless --tile off or an option only an untiled run does
-    whole = _untiled_only(args, params) if args.tile is None else None  # the default, but untiled: why
+    whole = next(iter(_untiled_options(args, params)), None) if args.tile is None else None  # untiled: why
     auto = None if args.tile == "off" or whole else api.auto_tile
     try:
         hf = _load(args, args.input, memory=True, tile_from=auto)

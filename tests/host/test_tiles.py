@@ -399,8 +399,8 @@ def test_float_input_within_zeta_on_the_input(tmp_path):
 
 @pytest.mark.parametrize("args,expect", [
     (("--tile", "4"), "--tile 4 is too small"),
-    (("--tile", "64", "--max-triangles", "100"), "not with --tile"),
-    (("--tile", "64", "--bound", "off"), "--tile needs the error bound"),
+    (("--tile", "64", "--max-triangles", "100"), "--max-triangles is not done in tiles"),
+    (("--tile", "64", "--bound", "off"), "--bound off is not done in tiles"),
     (("--tile", "64", "--scheduler", "tcp://127.0.0.1:9"), "no Dask scheduler answers"),
     (("--tile", "64", "--workers", "0"), "--workers 0 is out of range"),
 ])

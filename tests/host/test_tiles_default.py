@@ -78,13 +78,43 @@ def test_options_tiles_do_not_do_stay_untiled(dem, tmp_path, small, option, name
     (("--tile", "off", "--tiles-dir", "d"), "--tile off meshes the grid whole: --tiles-dir needs tiles"),
     (("--tile", "off", "--scheduler", "tcp://127.0.0.1:9"), "--scheduler needs tiles"),
     (("--workers", "0"), "--workers 0 is out of range"),
-    (("--tile", "64", "--check-levels"), "--check-levels is not done in a tiled run"),  # was ignored
+    (("--tile", "64", "--check-levels"), "--check-levels is not done in tiles"),  # was ignored
 ])
 def test_bad_tile_values(dem, tmp_path, small, args, expect):
     out = tmp_path / "m.obj"
     rc, _, err = run_cli("mesh", str(dem), "-o", str(out), *args)
     assert rc == 2 and err.startswith("error: ") and expect in err.splitlines()[0], err
     assert len(err.splitlines()) <= 2 and not out.exists()
+
+
+# an example of each option of api.UNTILED_ONLY, the one list of what tiles do not do
+UNTILED_EXAMPLES = {
+    "--lod": ("--lod", "lod"), "--check-levels": ("--check-levels",), "--roi": ("--roi", "10,10,100,80"),
+    "--nodata hole": ("--nodata", "hole"), "--invalid": ("--invalid", "-9999"),
+    "--denoise": ("--denoise", "median"), "--normal-map": ("--normal-map", "n.png"),
+    "--stage initial": ("--stage", "initial"), "--bound off": ("--bound", "off"),
+    "--max-triangles": ("--max-triangles", "100000"), "--capacity": ("--capacity", "100000"),
+}
+
+
+def test_every_option_tiles_do_not_do_is_refused_with_tiles(dem, tmp_path, small):
+    """Each option of the one list: one error line naming it and why with --tile N (nothing written), the
+    --tile help names it, and the default meshes the grid whole (one of them run: test above)."""
+    assert set(UNTILED_EXAMPLES) == set(api.UNTILED_ONLY)
+    from wavemesh import cli
+
+    sub = cli.build_parser("mesh")._subparsers._group_actions[0].choices["mesh"]
+    assert ", ".join(api.UNTILED_ONLY) in next(a.help for a in sub._actions if a.dest == "tile")
+    for option, args in UNTILED_EXAMPLES.items():
+        out = tmp_path / "m.obj"
+        rc, _, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64", *args)
+        line = f"error: {option} is not done in tiles: {api.UNTILED_ONLY[option]}"
+        assert rc == 2 and err.splitlines()[0] == line, (option, err)
+        assert not out.exists()
+    default = api.MeshParams()
+    assert api.untiled_options(default) == []
+    assert api.untiled_options(api.MeshParams(roi=((10, 10, 5, 5),), initial_only=True),
+                               lod="d") == ["--lod", "--roi", "--stage initial"]
 
 
 def test_stream_tile_off_is_one_device(dem, tmp_path):

@@ -77,16 +77,11 @@ class TilePlan:
 
 
 def check_tiling(params) -> None:
-    """WavemeshError unless the job can be tiled: the error bound on, no triangle budget or storage."""
-    p = params.refine
-    if params.initial_only:
-        raise WavemeshError("--tile needs the refiner: --stage initial is not tiled", hint="use --stage full")
-    if not p.bound:
-        raise WavemeshError("--tile needs the error bound: the tiles' borders are decided within zeta",
-                            hint="use --bound on")
-    if p.max_triangles is not None or p.capacity is not None:
-        raise WavemeshError("--max-triangles and --capacity are per job, not per tile: not with --tile",
-                            hint="leave them out (each tile's storage is sized for its grid)")
+    """WavemeshError unless the job can be tiled: none of api.UNTILED_ONLY's options that ``params`` has
+    (--check-levels, --roi, --stage initial, --bound off, --max-triangles, --capacity)."""
+    untiled = api.untiled_options(params)
+    if untiled:
+        raise api.untiled_error(untiled[0])
 
 
 def with_error(plan: TilePlan, q: float) -> TilePlan:
