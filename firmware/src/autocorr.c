@@ -169,7 +169,7 @@ static int64_t floor_div_k26(int64_t x, int32_t k)
 }
 
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
-                struct wm_normal_slot *kept)
+                struct wm_normal_slot *kept, int32_t kept_mask)
 {
     int64_t sum[6] = {0, 0, 0, 0, 0, 0};
     int32_t first, h, k = 0;
@@ -182,7 +182,7 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
         if (k >= WM_MAX_RING) return WM_ERR_REFUSED; /* keeps the sums below 2^61 */
         wm_tri_xy(m, WM_TRI(h), x, y);
         if (kept) { /* the slot's normal when its corners are the ones it was computed for */
-            struct wm_normal_slot *s = &kept[WM_TRI(h) & (WM_NORMAL_SLOTS - 1)];
+            struct wm_normal_slot *s = &kept[WM_TRI(h) & kept_mask];
             int32_t key[3];
             for (int c = 0; c < 3; c++) key[c] = y[c] * m->width + x[c];
             if (s->key[0] != key[0] || s->key[1] != key[1] || s->key[2] != key[2]) {
@@ -212,7 +212,7 @@ int wm_vertex_autocorr(const wm_mesh *m, const wm_field *f, const wm_params *p, 
                        int64_t lambda[3], int64_t vec[9])
 {
     int64_t mean[3];
-    int k = wm_vertex_r(m, f, p, v, r, mean, NULL);
+    int k = wm_vertex_r(m, f, p, v, r, mean, NULL, 0);
     if (k < 0) return k;
     wm_sym3_eigen(r, lambda, vec);
     return k;

@@ -202,7 +202,7 @@ static int8_t classify(wm_refiner *r, int32_t v, struct eig *g)
 {
     int64_t mean[3];
     int8_t cls;
-    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean, r->normals) < 0) return CLS_NONE;
+    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean, r->normals, r->cache_mask) < 0) return CLS_NONE;
     cls = class_of(g->r, r->params.delta_lambda);
     if (cls == CLS_COLLAPSE) wm_sym3_eigen(g->r, g->lambda, g->vec);
     return cls;
@@ -343,14 +343,15 @@ static int try_collapse(wm_refiner *r, int32_t e)
     return 0;
 }
 
-/* The middle eigenvectors of the pass's latest collapse-class vertices, by slot (r->ecache, direct-
- * mapped, emptied at the start of each pass): a vertex of class 4.33 is tested once as v and again as a
- * neighbour of each of its collapse-class neighbours, and its star has not changed in between unless
- * its class was forgotten (wm_forget_class), so while vapex still says 4.33 the vector kept is the one
- * classify would compute again.  Its entries are Q30 within [-1, 1], kept in 32 bits. */
+/* The middle eigenvectors of the latest collapse-class vertices, by slot (r->ecache, direct-mapped,
+ * emptied when the refiner starts): a vertex of class 4.33 is tested once as v and again as a
+ * neighbour of each of its collapse-class neighbours, in this pass and the next ones, and its star has
+ * not changed in between unless its class was forgotten (wm_forget_class), so while vapex still says
+ * 4.33 the vector kept is the one classify would compute again.  Its entries are Q30 within [-1, 1],
+ * kept in 32 bits. */
 static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g)
 {
-    struct wm_ecache_slot *c = &r->ecache[v & (WM_ECACHE_SLOTS - 1)];
+    struct wm_ecache_slot *c = &r->ecache[v & r->cache_mask];
     int8_t cls;
     if (r->vapex[v] == CLS_COLLAPSE && c->v == v) {
         for (int i = 0; i < 3; i++) g->vec[3 + i] = c->e2[i];
@@ -372,7 +373,6 @@ int32_t wm_reduce(wm_refiner *r)
     wm_mesh *me = &r->mesh;
     int32_t removed = 0;
     uint64_t dc = (uint64_t)r->params.delta_c << 44; /* Q16.16 -> Q60, the scale of e21 . e22 */
-    for (int i = 0; i < WM_ECACHE_SLOTS; i++) r->ecache[i].v = -1;
     for (int32_t v = 0; v < me->vert_end; v++) {
         struct eig gv, gw;
         int32_t out[WM_MAX_RING + 1], k = 0, first, h;

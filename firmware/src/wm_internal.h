@@ -281,19 +281,19 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 #define WM_F_MEASURE 128u /* decimation: made by a removal, E(T) not measured yet */
 #define WM_F_UNPAIRED WM_F_MEASURE /* levels: planned as unpaired (cleared after the iteration's splits) */
 
-/* The reduction's unit normals by triangle slot (direct-mapped, slot modulo WM_NORMAL_SLOTS), each with
+/* The reduction's unit normals by triangle slot (direct-mapped, slot modulo the cache's size), each with
  * its triangle's corners (y W + x, in the slot's order; key[0] = -1: empty): a normal depends on its
  * corners alone, and R(v) takes every triangle of a star, so each triangle's is asked for by each of its
- * corners (Ball 128 x 128: 74 % of the normals; Jacksboro: 43 %). */
-#define WM_NORMAL_SLOTS 128
+ * corners.  And the middle eigenvectors (e2 of 4.34, Q30) of the latest collapse-class vertices, by
+ * vertex slot (direct-mapped likewise; v = -1: empty), reduce.c.  Both caches have
+ * wm_cache_slots(vert_cap) entries in the refiner's storage (refine.c): 128 for a small mesh, up to
+ * WM_CACHE_SLOTS_MAX for a large one, whose stars' slot numbers lie farther apart. */
+#define WM_CACHE_SLOTS_MAX 1024
 struct wm_normal_slot {
     int32_t key[3];
     int32_t n[3];
 };
 
-/* The reduction's middle eigenvectors (e2 of 4.34, Q30) of a pass's latest collapse-class vertices, by
- * vertex slot (direct-mapped, slot modulo WM_ECACHE_SLOTS; v = -1: empty), reduce.c. */
-#define WM_ECACHE_SLOTS 128
 struct wm_ecache_slot {
     int32_t v;
     int32_t e2[3];
@@ -323,8 +323,9 @@ struct wm_refiner {
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
                             changed); decimation: the triangulation that cost belongs to */
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
-    struct wm_normal_slot normals[WM_NORMAL_SLOTS]; /* reduce.c's unit normals, kept */
-    struct wm_ecache_slot ecache[WM_ECACHE_SLOTS];  /* reduce.c's middle eigenvectors, kept in a pass */
+    struct wm_normal_slot *normals; /* [cache_mask + 1] reduce.c's unit normals, kept */
+    struct wm_ecache_slot *ecache;  /* [cache_mask + 1] reduce.c's middle eigenvectors, kept */
+    int32_t cache_mask;             /* wm_cache_slots(vert_cap) - 1 */
 };
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
@@ -398,9 +399,10 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st);
  * max(zeta, the largest E(T) of the triangles it replaces).  Returns the vertices removed. */
 int32_t wm_reduce(wm_refiner *r);
 /* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition, and the sum of the Q28 unit
- * normals around v (below 2^33); the triangle count or an error. */
+ * normals around v (below 2^33); the triangle count or an error.  kept: NULL, or the normals' cache
+ * of kept_mask + 1 slots (a power of two). */
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
-                struct wm_normal_slot *kept);
+                struct wm_normal_slot *kept, int32_t kept_mask);
 /* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
  * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
  * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL. */
