@@ -6,7 +6,8 @@
 Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--tile 1025 --metric
 vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
 it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
-quantised, tile_heightfield's misses; the tiles it holds after).  Prints, for the quantisation's strips
+quantised, tile_heightfield's misses, and the samples of the windows it read, bands of seams included;
+the tiles it holds after).  Prints, for the quantisation's strips
 and for the task graph: the wall time, each worker's CPU and busy time, the time it waited (the span less
 its tasks: at a barrier, for the parent, for a task's inputs) and the most tiles it held, then each step's
 CPU summed over the workers; and the model of the
@@ -18,6 +19,7 @@ with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
 from __future__ import annotations
 
 import functools
+import gc
 import os
 import resource
 import sys
@@ -25,10 +27,10 @@ import tempfile
 import time
 
 from wavemesh import cli
-from wavemesh.tiles import jobs, runner
+from wavemesh.tiles import jobs, runner, source
 
-READS = [0]
-_read = jobs._tile_heightfield  # the reads tile_heightfield's cache missed
+READS = [0, 0]  # the reads tile_heightfield's cache missed; the samples of every window read
+_read, _window = jobs._tile_heightfield, source.Source.read
 
 
 def _counted(*args):
@@ -36,18 +38,24 @@ def _counted(*args):
     return _read(*args)
 
 
+def _window_counted(src, x, y, w, h):
+    READS[1] += w * h
+    return _window(src, x, y, w, h)
+
+
 jobs._tile_heightfield = _counted  # before the pool forks: the workers count their own
+source.Source.read = _window_counted
 
 
 def timed(fn, *args):
     """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads, the
-    tiles this process holds after it)."""
-    u0, t0, r0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0]
+    tiles this process holds after it, the samples read)."""
+    u0, t0, r0, n0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0], READS[1]
     out = fn(*args)
     u1 = resource.getrusage(resource.RUSAGE_SELF)
     cpu = u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime
     return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
-                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE))
+                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE), READS[1] - n0)
 
 
 def _result(r):
@@ -118,6 +126,7 @@ def main(argv: list[str]) -> int:
     runner.Runner.map = _timed_map
     runner.Runner.graph = _timed_graph
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
+    gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
     rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
     wall, c1 = time.perf_counter() - t0, os.times()
@@ -130,18 +139,19 @@ def main(argv: list[str]) -> int:
     for part, a, b, infos in LOG:
         per: dict = {}
         steps: dict = {}
-        for step, (pid, cpu, s, e, sys_, flt, reads, held) in infos:
+        for step, (pid, cpu, s, e, sys_, flt, reads, held, samples) in infos:
             w = per.setdefault(pid, [0.0, 0.0, 0, 0])
             w[0], w[1], w[2], w[3] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held)
-            x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0])
+            x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0, 0])
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
+            x[5] += samples
         model += max(w[0] for w in per.values())
         print(f"{part}: wall {b - a:.2f} s; per worker CPU / busy / waiting s (tasks, the most tiles held): "
               + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]})"
                           for w in per.values()))
         for step, x in steps.items():
             print(f"  {step:<16} {x[0]:4d} tasks  CPU {x[1]:6.2f} s  system {x[2]:5.2f} s  "
-                  f"page faults {x[3]:8d}  tiles read {x[4]}")
+                  f"page faults {x[3]:8d}  tiles read {x[4]:3d}  samples read {x[5] / 1e6:6.2f} M")
     print(f"model: this process's own CPU + the busiest worker's CPU in each part = {model:.2f} s")
     for nodes, homes, cost, workers in GRAPH:
         span = {w: simulate(nodes, homes, cost, w) for w in sorted({1, workers})}

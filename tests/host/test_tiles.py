@@ -434,6 +434,38 @@ def test_quiet_tiled_run_imports_no_progress_bar(dem, tmp_path):
     assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr
 
 
+def test_seam_reads_only_the_band_of_a_tile_it_does_not_hold(dem, monkeypatch):
+    """A seam's tile this process does not hold (another worker's) is read only in its band at the side,
+    the box of the triangles that touch it: the same cuts as with every tile held; a triangle off the band
+    is refused, not measured on samples that were not read."""
+    from wavemesh.tiles import jobs
+    from wavemesh.tiles.sides import FACING
+    from wavemesh.tiles.source import Source
+
+    plan = tiles.plan_tiles(tiles.open_source(str(dem)), api.MeshParams(refine=RefineParams(zeta=2.0)), 64)
+    frees = [tiles.free_tile(plan, i) for i in range(len(plan.tiles))]
+    done = [tiles.finish_tile(plan, frees[i], {s: frees[k].sides[FACING[s]] for s, k in t.neighbours.items()})
+            for i, t in enumerate(plan.tiles)]
+    seams = [(i, k, s) for i, t in enumerate(plan.tiles) for s, k in t.neighbours.items()
+             if s in ("right", "bottom")]
+    held = [tiles.thin_seam(plan, done[i], done[k], s) for i, k, s in seams]  # every tile held (finish_tile)
+    assert sum(map(len, held)) > 0
+    jobs.clear_tile_cache()
+    reads, read = [], Source.read
+    monkeypatch.setattr(Source, "read", lambda src, x, y, w, h: reads.append(w * h) or read(src, x, y, w, h))
+    for (i, k, s), cut in zip(seams, held, strict=True):
+        band = tiles.thin_seam(plan, done[i], done[k], s)
+        assert band == cut and band.plans == cut.plans
+    area = [plan.tiles[i].width * plan.tiles[i].height for i, _, _ in seams]
+    assert len(reads) == 2 * len(seams) and sum(reads) < sum(area)  # two bands a seam, less than a tile each
+    assert not jobs._TILE_CACHE  # nothing kept
+    ed = jobs._seam_editable(plan, done[0], None, "right")
+    t = plan.tiles[0]
+    with pytest.raises(MeshInvalid, match="off the band"):
+        ed.within([0, 1, 0], [0, 0, 1])  # the tile's top left corner: far from its right side
+    assert ed.within([t.width - 2, t.width - 1, t.width - 1], [0, 0, 1])
+
+
 def test_seam_cut_carries_the_removals(dem, monkeypatch):
     """thin_seam works each removal out once (Editable.removal keeps an answer until the vertex's star
     changes) and hands the removals to thin_tile in its Cut: the same cut as every removal worked out

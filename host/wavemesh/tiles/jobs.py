@@ -266,12 +266,47 @@ def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: l
     return Editable(mesh, native.error_within(hf.samples, fp), sides), hf
 
 
+def _seam_editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, side: str) -> Editable:
+    """Tile ``r`` as thin_seam edits it at its ``side``.  A tile this process does not hold (the other tile
+    of a seam between two workers' tiles; a tile too large to keep) is read for it alone, not kept, and only
+    its band at the side: the box of the triangles that touch the side.  Every triangle the thinning tests
+    lies in it (each is of a side vertex's ring, within its star: within those triangles or the ones made
+    from them), and E(T) reads only the samples in its triangle; a triangle outside it is an error."""
+    t = plan.tiles[r.index]
+    mesh = Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris)
+    fp = native.fixed_params(plan.params.refine, plan.quant.scale, plan.zeta_used, plan.spacing)
+    key = _cache_key(plan, t, window)
+    with _TILE_LOCK:
+        held = _TILE_CACHE.get(key) if key is not None else None
+        if held is not None:
+            _TILE_CACHE.move_to_end(key)
+    if held is not None or window is not None:
+        hf = held if held is not None else tile_heightfield(plan, t, window, False)
+        return Editable(mesh, native.error_within(hf.samples, fp), [side])
+    on = _on_sides(mesh.xy, t.width, t.height)[side]
+    at = mesh.xy[np.unique(mesh.tris[on[mesh.tris].any(axis=1)])]
+    (x0, y0), (x1, y1) = at.min(axis=0).tolist(), at.max(axis=0).tolist()
+    v = plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1)
+    if not np.all(np.isfinite(v)):
+        raise InputError(f"{plan.source.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
+    samples = np.zeros((t.height, t.width), dtype=np.uint16)
+    samples[y0 : y1 + 1, x0 : x1 + 1] = plan.quant.quantised(v)[0]
+    test = native.error_within(samples, fp)
+
+    def within(x, y) -> bool:
+        if not (x0 <= min(x) and max(x) <= x1 and y0 <= min(y) and max(y) <= y1):
+            raise MeshInvalid(f"{t.name}: a triangle off the band read at its {side} side", hint=api.BUG_HINT)
+        return test(x, y)
+
+    return Editable(mesh, within, [side])
+
+
 def thin_seam(plan: TilePlan, a: TileResult, b: TileResult, side: str, win_a=None, win_b=None) -> tuple:
     """Step 6 for one shared side (``a``'s ``side``, facing ``b``): the positions of the vertices on it
     both tiles can do without (sides.thin_side), found on copies of both meshes.  A tile this process does
-    not hold (the other tile of a seam between two workers' tiles) is read for it alone, not kept."""
-    return thin_side(_editable(plan, a, win_a, [side], False)[0],
-                     _editable(plan, b, win_b, [FACING[side]], False)[0], side)
+    not hold (the other tile of a seam between two workers' tiles) is read for it alone, not kept: only its
+    band at the side (_seam_editable)."""
+    return thin_side(_seam_editable(plan, a, win_a, side), _seam_editable(plan, b, win_b, FACING[side]), side)
 
 
 def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray | None = None) -> TileResult:
