@@ -193,32 +193,41 @@ int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
         if (y[k] > ymax) ymax = y[k];
     }
     /* The interior grid point nearest the barycentre: |3p - (v0 + v1 + v2)|^2 smallest, the first
-     * row and then the smaller x on ties.  Per row the interior run is E_k >= 1 for all k. */
-    for (int32_t py = ymin; py <= ymax; py++) {
-        int64_t lo = INT64_MIN / 4, hi = INT64_MAX / 4, px, d;
-        int empty = 0;
-        for (int k = 0; k < 3; k++) {
-            int64_t num = B[k] * py + C[k] - 1; /* A x + num >= 0 */
-            if (A[k] > 0) {
-                int64_t l = wm_ceil_div(-num, A[k]);
-                if (l > lo) lo = l;
-            } else if (A[k] < 0) {
-                int64_t h = wm_floor_div(num, -A[k]);
-                if (h < hi) hi = h;
-            } else if (num < 0) {
-                empty = 1;
+     * row and then the smaller x on ties.  Per row the interior run is E_k >= 1 for all k.  The rows
+     * are taken outward from the barycentre's, each way until the row's own term (3 py - sy)^2 alone
+     * exceeds the best so far: no row beyond can do better, so the point is the one a scan of every
+     * row finds (a tie goes to the smaller row). */
+    for (int dir = 0; dir < 2; dir++) {
+        int32_t pc = (int32_t)wm_floor_div(sy, 3), py = dir == 0 ? pc : pc + 1, step = dir == 0 ? -1 : 1;
+        if (py > ymax) py = ymax + (dir == 0 ? 0 : 1);
+        if (py < ymin) py = ymin - (dir == 0 ? 1 : 0);
+        for (; py >= ymin && py <= ymax; py += step) {
+            int64_t lo = INT64_MIN / 4, hi = INT64_MAX / 4, px, d, ry = 3 * (int64_t)py - sy;
+            int empty = 0;
+            if (best >= 0 && ry * ry > best) break;
+            for (int k = 0; k < 3; k++) {
+                int64_t num = B[k] * py + C[k] - 1; /* A x + num >= 0 */
+                if (A[k] > 0) {
+                    int64_t l = wm_ceil_div(-num, A[k]);
+                    if (l > lo) lo = l;
+                } else if (A[k] < 0) {
+                    int64_t h = wm_floor_div(num, -A[k]);
+                    if (h < hi) hi = h;
+                } else if (num < 0) {
+                    empty = 1;
+                }
             }
-        }
-        if (empty || lo > hi) continue;
-        px = wm_floor_div(sx, 3);
-        if (sx - 3 * px > 1) px++; /* nearest to sx / 3, the smaller on a tie (never: thirds) */
-        if (px < lo) px = lo;
-        if (px > hi) px = hi;
-        d = (3 * px - sx) * (3 * px - sx) + (3 * (int64_t)py - sy) * (3 * (int64_t)py - sy);
-        if (best < 0 || d < best) {
-            best = d;
-            bx = (int32_t)px;
-            by = py;
+            if (empty || lo > hi) continue;
+            px = wm_floor_div(sx, 3);
+            if (sx - 3 * px > 1) px++; /* nearest to sx / 3, the smaller on a tie (never: thirds) */
+            if (px < lo) px = lo;
+            if (px > hi) px = hi;
+            d = (3 * px - sx) * (3 * px - sx) + ry * ry;
+            if (best < 0 || d < best || (d == best && py < by)) {
+                best = d;
+                bx = (int32_t)px;
+                by = py;
+            }
         }
     }
     if (best >= 0) {
