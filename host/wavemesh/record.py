@@ -4,9 +4,10 @@ without the cost of ``@dataclass`` at import.
 ``dataclasses.dataclass`` writes each class's ``__init__``, ``__repr__``, ``__eq__`` (and a frozen
 class's ``__setattr__``, ``__delattr__``, ``__hash__``) as source text and compiles it: about 6 M
 instructions a class, 125 M for the 21 classes `wavemesh mesh` imports, most of wavemesh's start-up
-(bench/process_instructions.py counts it).  ``@record`` takes the same class body (annotated fields,
+(bench/process_instructions.py counts it); the 15 of a tiled run's wavemesh.tiles another 50 M (`import
+numpy, wavemesh.cli, wavemesh.tiles` under callgrind, over `import numpy`: 163 M as dataclasses, 113 M).  ``@record`` takes the same class body (annotated fields,
 defaults, ``dataclasses.field(default_factory=...)``, ``__post_init__``) and the options used here
-(``frozen``, ``kw_only``), and gives the class generic methods made once in this module, so a class costs
+(``frozen``, ``kw_only``, ``eq=False``), and gives the class generic methods made once in this module, so a class costs
 only the reading of its annotations.  The methods behave as dataclasses' do: the same positional and
 keyword arguments, ``repr``, equality over the fields (same class only), hashing of a frozen record,
 ``dataclasses.FrozenInstanceError`` on assignment to a frozen one.
@@ -26,14 +27,15 @@ import dataclasses
 _MISSING = dataclasses.MISSING
 
 
-def record(cls=None, /, *, frozen: bool = False, kw_only: bool = False):
-    """The class decorator: ``@record``, ``@record(frozen=True)``, ``@record(kw_only=True)``."""
+def record(cls=None, /, *, frozen: bool = False, kw_only: bool = False, eq: bool = True):
+    """The class decorator: ``@record``, ``@record(frozen=True)``, ``@record(kw_only=True)``; ``eq=False``:
+    no ``__eq__`` (nor a hash of the fields): instances compare and hash by identity, as dataclasses'."""
     if cls is None:
-        return lambda c: _make(c, frozen, kw_only)
-    return _make(cls, frozen, kw_only)
+        return lambda c: _make(c, frozen, kw_only, eq)
+    return _make(cls, frozen, kw_only, eq)
 
 
-def _make(cls, frozen: bool, kw_only: bool):
+def _make(cls, frozen: bool, kw_only: bool, eq: bool = True):
     table: dict[str, dataclasses.Field] = {}
     for base in reversed(cls.__mro__[1:]):
         table.update(getattr(base, "__dataclass_fields__", {}))
@@ -93,7 +95,9 @@ def _make(cls, frozen: bool, kw_only: bool):
             return NotImplemented
         return tuple(getattr(self, n) for n in names) == tuple(getattr(other, n) for n in names)
 
-    methods = {"__init__": __init__, "__repr__": __repr__, "__eq__": __eq__}
+    methods = {"__init__": __init__, "__repr__": __repr__}
+    if eq:
+        methods["__eq__"] = __eq__
     if frozen:
         def __setattr__(self, name, value):
             raise dataclasses.FrozenInstanceError(f"cannot assign to field {name!r}")
@@ -104,8 +108,10 @@ def _make(cls, frozen: bool, kw_only: bool):
         def __hash__(self):
             return hash(tuple(getattr(self, n) for n in names))
 
-        methods.update(__setattr__=__setattr__, __delattr__=__delattr__, __hash__=__hash__)
-    else:
+        methods.update(__setattr__=__setattr__, __delattr__=__delattr__)
+        if eq:
+            methods["__hash__"] = __hash__
+    elif eq:
         methods["__hash__"] = None  # as dataclasses: a mutable class with __eq__ is unhashable
     for name, fn in methods.items():
         if name in cls.__dict__:

@@ -1,6 +1,6 @@
 """wavemesh.record against dataclasses: the same class body as a ``@record`` and as a ``@dataclass`` behave
-the same (construction, defaults, factories, keyword-only, __post_init__, repr, equality, hashing, frozen
-assignment, and dataclasses.fields / replace / asdict / is_dataclass on the record)."""
+the same (construction, defaults, factories, keyword-only, __post_init__, repr, equality, hashing, eq=False,
+frozen assignment, and dataclasses.fields / replace / asdict / is_dataclass on the record)."""
 
 from __future__ import annotations
 
@@ -61,6 +61,17 @@ def test_behaves_as_dataclass(options):
     # a factory's value is new for each instance
     if not options.get("kw_only"):
         assert r(1).c is not r(1).c
+
+
+@pytest.mark.parametrize("options", [{"eq": False}, {"frozen": True, "eq": False}])
+def test_without_eq_identity_as_dataclass(options):
+    """eq=False: equality and hashing by identity, as dataclasses' (a frozen one still refuses assignment)."""
+    d, r = pair(**options)
+    for cls in (d, r):
+        x, y = cls(1, "y", [2]), cls(1, "y", [2])
+        assert x == x and x != y and hash(x) == object.__hash__(x) and len({x, y}) == 2
+        assert repr(x).endswith("(a=1, b='y', c=[2])")
+    assert same(setattr, d(1), "a", 9)[0] == same(setattr, r(1), "a", 9)[0]
 
 
 def test_inheritance_post_init_and_pickle():

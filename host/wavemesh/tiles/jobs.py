@@ -8,7 +8,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -19,6 +19,7 @@ from wavemesh.errors import InputError, MeshInvalid
 from wavemesh.io.georef import cropped
 from wavemesh.io.heightfield import HeightField
 from wavemesh.mesh import Mesh
+from wavemesh.record import record
 from wavemesh.refine import native
 from wavemesh.tiles.plan import Tile, TilePlan, plan_tiles, with_error
 from wavemesh.tiles.runner import Here, Node, Ref, Runner
@@ -40,7 +41,7 @@ from wavemesh.tiles.source import Source, file_identity, light_source, strip_err
 # One tile's jobs: free (step 3), conformed to its reconciled sides (steps 4 and 5), thinned (step 6)
 
 
-@dataclass
+@record
 class FreeTile:
     """A tile's mesh by the full pipeline (tile coordinates), the refiner's last statistics, its sides'
     vertices, and its numbers."""
@@ -54,7 +55,7 @@ class FreeTile:
     extra: dict
 
 
-@dataclass
+@record
 class TileResult:
     """A tile's mesh in grid coordinates of the whole input, its vertices' heights, and its numbers."""
 
@@ -159,7 +160,7 @@ def free_tile(plan: TilePlan, index: int, window: np.ndarray | None = None) -> F
                     border_of(final.mesh), time.perf_counter() - t0, {"levels": job.levels})
 
 
-@dataclass
+@record
 class _Level:
     """The shape of a refiner level (wavemesh.native's) that api.RefineJob reads."""
 
@@ -167,7 +168,7 @@ class _Level:
     stats: dict
 
 
-@dataclass
+@record
 class _Levels:
     final: _Level
 
@@ -499,7 +500,7 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
 # Stitching
 
 
-@dataclass
+@record
 class TiledResult:
     """The stitched mesh, the vertices' heights, and the run's report."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import field, replace
 from typing import TYPE_CHECKING
 
 from wavemesh import api
@@ -13,6 +13,7 @@ from wavemesh.api import TILE_BYTES_PER_SAMPLE, TILE_CHOICES, default_workers
 from wavemesh.errors import InputError, WavemeshError
 from wavemesh.io.georef import ground
 from wavemesh.io.heightfield import refiner_zeta
+from wavemesh.record import record
 
 if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
@@ -31,7 +32,7 @@ def cuts(n: int, tile: int) -> list[int]:
     return [round(i * (n - 1) / k) for i in range(k + 1)]
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Tile:
     """One tile: its place in the layout and on the grid, and its neighbours across its shared sides
     (side name -> the neighbour's index in the plan)."""
@@ -49,7 +50,7 @@ class Tile:
         return f"tile-{self.row:03d}-{self.col:03d}"
 
 
-@dataclass
+@record
 class TilePlan:
     """A tiled job before any tile runs: the input, the parameters, the quantisation, the tiles."""
 

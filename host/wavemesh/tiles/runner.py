@@ -10,10 +10,10 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from multiprocessing.connection import wait
 
 from wavemesh.errors import WavemeshError
+from wavemesh.record import record
 from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
@@ -69,7 +69,7 @@ def connect(address: str):
             from None
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Ref:
     """In a Node's args: node ``node``'s result (``pick`` of it when given: a module-level function)."""
 
@@ -77,7 +77,7 @@ class Ref:
     pick: Callable | None = None
 
 
-@dataclass(frozen=True, eq=False)
+@record(frozen=True, eq=False)
 class Here:
     """In a Node's args: fn(*args) computed in this process when the node is given out (a tile's window of
     an input in memory); on Dask once for every node that names it, and scattered."""
@@ -86,7 +86,7 @@ class Here:
     args: tuple
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Node:
     """A task of Runner.graph: fn(*args), each Ref in args (at the top level) replaced by that node's result;
     ``rank``: the order among the ready nodes (least first); ``tiles``: the tiles whose data it reads (the
@@ -101,7 +101,7 @@ class Node:
         return {a.node for a in self.args if isinstance(a, Ref)}
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class _Prev:
     """In a chained node's args sent to a pool worker: the chain's previous node's result (``pick`` of it)."""
 
@@ -389,7 +389,7 @@ def _lost(proc) -> None:
                         hint="out of memory? try a smaller --tile or fewer --workers") from None
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class _Kept:
     """In a task's args sent to a pool worker: an arg it was sent before (Runner.graph's ``shared``)."""
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -15,6 +15,7 @@ from wavemesh.errors import InputError
 from wavemesh.io.georef import apply_overrides, cropped
 from wavemesh.io.heightfield import parse_fill, quant_rule, to_samples
 from wavemesh.io.readers import raster_header, read_raster_window, regular_file
+from wavemesh.record import record
 
 if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
@@ -29,7 +30,7 @@ BLOCK_SAMPLES = 1 << 16
 # The input, read window by window
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Source:
     """Where a tiled job's heights come from, picklable: a worker opens it and reads its own window.
 
@@ -73,7 +74,7 @@ class Source:
         return _Grid(self.width, self.height, self.transform, self.crs, self.spacing, self.name)
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class _Grid:
     """What wavemesh.georef.ground needs of a height field, without its samples."""
 
@@ -127,7 +128,7 @@ def open_source(path: str, *, key: str | None = None, fill: str | None = None, c
 # One quantisation for the whole grid: wavemesh.heightfield's rules, its statistics found strip by strip
 
 
-@dataclass(frozen=True)
+@record(frozen=True)
 class Quant:
     """The whole grid's quantisation (heightfield.quant_rule of its range): samples = the heights less
     offset, over scale (rounded and clipped unless ``exact``); ``q`` the largest quantisation error (None:
