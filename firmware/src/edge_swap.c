@@ -34,9 +34,16 @@ int wm_edge_swappable(const wm_mesh *m, int32_t e)
 
 int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
 {
-    int32_t f, t1, t2, a, b, c, d, o_bc, o_ca, o_ad, o_db;
     if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
     if (!wm_edge_swappable(m, e)) return WM_ERR_REFUSED;
+    wm_edge_swap_convex(m, e, touched, n_touched);
+    return WM_OK;
+}
+
+void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
+{
+    int32_t f, t1, t2, a, b, c, d, o_bc, o_ca, o_ad, o_db;
+    WM_ASSERT(wm_edge_swappable(m, e));
     f = m->ho[e];
     t1 = WM_TRI(e);
     t2 = WM_TRI(f);
@@ -63,5 +70,4 @@ int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
     }
     if (n_touched) *n_touched = 2;
     WM_CHECK_MESH(m);
-    return WM_OK;
 }

@@ -385,7 +385,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
             back = alpha == 65536u ? rb > 65536u : o1 + o2 + one <= den_max(alpha, rb, sn + one);
         }
     }
-    if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) return 0;
+    wm_edge_swap_convex(me, e, NULL, NULL); /* wm_edge_swappable above */
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
     set_angle(r, t1, an1);
     set_angle(r, t2, an2);

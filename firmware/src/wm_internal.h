@@ -91,6 +91,8 @@ static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
 }
 /* Points vh of triangle t's vertices at t's half-edges. */
 void wm_tri_claim(wm_mesh *m, int32_t t);
+/* wm_edge_swap of an edge the caller has found wm_edge_swappable (the mesh unchanged since). */
+void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched);
 
 /* Rotation around a vertex: e is a half-edge leaving v.  Counter-clockwise: the next half-edge
  * leaving v, or -1 at the border.  wm_fan_first: the most clockwise half-edge leaving v (vh[v] for an
