@@ -131,7 +131,7 @@ static int is_fan(const int32_t *tris, int32_t nt)
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
 {
     const wm_mesh *me = &r->mesh;
-    int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt;
+    int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt, big;
     uint32_t best = NONE;
     int32_t vx = me->vx[v], vy = me->vy[v];
     struct wm_plan_probe probe;
@@ -166,14 +166,18 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
          * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
         if (a >= 0 && !fan_may_fit(&q, &tested, rx, ry, a, vx, vy)) continue;
-        if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe) != WM_OK) continue;
+        if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe, &big) != WM_OK) continue;
         if (a < 0 && n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
+        /* Then the scans, the plan's largest triangle first (the plan found it: big): a candidate is
+         * refused by any triangle over zeta and otherwise costs the largest E(T) of them all, so their
+         * order changes no result, and the triangle that refuses a candidate is most often its largest
+         * (it holds the most samples): scanned first, it saves the scans of the others. */
         for (j = 0; j < nt; j++) {
-            int32_t x[3], y[3];
+            int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
             for (int c = 0; c < 3; c++) {
-                x[c] = me->vx[tris[3 * j + c]];
-                y[c] = me->vy[tris[3 * j + c]];
+                x[c] = me->vx[tris[3 * t + c]];
+                y[c] = me->vy[tris[3 * t + c]];
             }
             e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, kept_for(&tested, x, y));
             if (e > worst) worst = e;

@@ -109,13 +109,15 @@ static int probed(const struct wm_plan_probe *pr, int *done, int32_t ax, int32_t
 int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
                  int32_t *n_tris)
 {
-    return wm_ring_plan_probe(m, ring, n, apex, tris, n_tris, NULL);
+    return wm_ring_plan_probe(m, ring, n, apex, tris, n_tris, NULL, NULL);
 }
 
 int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
-                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr)
+                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr,
+                       int32_t *big)
 {
-    int32_t poly[WM_MAX_RING], nt = 0;
+    int32_t poly[WM_MAX_RING], nt = 0, at = 0;
+    int64_t most = -1, d;
     int done = 0;
     if (n < 3 || n > WM_MAX_RING || apex >= n) return WM_ERR_ARG;
     if (apex >= 0) {
@@ -127,12 +129,15 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             int32_t c, cx, cy;
             i = i + 1 == n ? 0 : i + 1;
             c = ring[i], cx = m->vx[c], cy = m->vy[c];
-            if (wm_orient(ax, ay, bx, by, cx, cy) <= 0) return WM_ERR_REFUSED;
+            d = wm_orient(ax, ay, bx, by, cx, cy);
+            if (d <= 0) return WM_ERR_REFUSED;
+            if (d > most) most = d, at = nt;
             tris[3 * nt] = a, tris[3 * nt + 1] = b, tris[3 * nt + 2] = c;
             nt++;
             b = c, bx = cx, by = cy;
         }
         *n_tris = nt;
+        if (big) *big = at;
         return WM_OK;
     }
     /* The polygon as a list over the ring positions (nx, pv; cut ones not alive), walked in position
@@ -146,6 +151,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
      * else the first valid one. */
     {
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
+        int64_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
         int32_t left = n, i0 = 0;
         for (int32_t i = 0; i < n; i++) {
@@ -165,7 +171,8 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
                     int32_t x0, x1, y0, y1;
-                    if (wm_orient(ax, ay, bx, by, cx, cy) <= 0) continue;
+                    area[i] = wm_orient(ax, ay, bx, by, cx, cy);
+                    if (area[i] <= 0) continue;
                     x0 = ax < bx ? ax : bx;
                     if (cx < x0) x0 = cx;
                     x1 = ax > bx ? ax : bx;
@@ -206,6 +213,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             WM_ASSERT(best >= 0);
             if (best < 0) return WM_ERR_REFUSED;
             tris[3 * nt] = ring[pv[best]], tris[3 * nt + 1] = ring[best], tris[3 * nt + 2] = ring[nx[best]];
+            if (area[best] > most) most = area[best], at = nt;
             nt++;
             if (probed(pr, &done, px[pv[best]], py[pv[best]], px[best], py[best], px[nx[best]], py[nx[best]]))
                 return WM_ERR_REFUSED;
@@ -218,12 +226,15 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         while (!alive[i0]) i0++;
         poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
     }
-    if (orient3(m, poly[0], poly[1], poly[2]) <= 0) return WM_ERR_REFUSED;
+    d = orient3(m, poly[0], poly[1], poly[2]);
+    if (d <= 0) return WM_ERR_REFUSED;
+    if (d > most) at = nt;
     if (probed(pr, &done, m->vx[poly[0]], m->vy[poly[0]], m->vx[poly[1]], m->vy[poly[1]], m->vx[poly[2]],
                m->vy[poly[2]]))
         return WM_ERR_REFUSED;
     tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
     *n_tris = nt + 1;
+    if (big) *big = at;
     return WM_OK;
 }
 

@@ -407,14 +407,17 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
                 struct wm_normal_slot *kept, int32_t kept_mask);
 /* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
  * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
- * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL. */
+ * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL.  *big
+ * (when big is not NULL) gets the index of the plan's largest triangle (the first of them): the plan
+ * works out every triangle's area anyway. */
 struct wm_plan_probe {
     int32_t px, py;
     int (*above)(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py);
     void *ctx;
 };
 int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
-                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr);
+                       int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr,
+                       int32_t *big);
 /* The hole of a removed vertex triangulated by ear clipping with a heap of ears (O(h log h)): the
  * ring (n vertices, counter-clockwise, as wm_vertex_ring gives it) is star-shaped from (kx, ky),
  * the removed vertex, and an ear (a, b, c) is cut only when it is strictly convex and (kx, ky) is
