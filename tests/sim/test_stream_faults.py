@@ -165,6 +165,38 @@ def test_pauses_alone_never_end_the_job(device, reference, tmp_path):
     assert seconds >= 2 * PAUSE_S
 
 
+@pytest.mark.parametrize("lost", ["LEVEL_END", "DONE"])
+def test_a_lost_level_end_or_done_comes_again_whatever_the_keepalive(lost, device, reference, tmp_path,
+                                                                      monkeypatch):
+    """The first LEVEL_END (or DONE) is lost, and the host's KEEPALIVE comes more often than the device's
+    ACK_TIMEOUT_MS passes (as on the simulated board, where that is minutes of simulation against the
+    host's 120 s): every KEEPALIVE restarts the device's wait, so it never repeats the frame by itself.
+    The host, silent-waiting for a level it has bytes of (or for DONE after the last level), sends
+    RESUME instead of KEEPALIVE; the device sends the rest again: the identical mesh, not the host's
+    job timeout."""
+    monkeypatch.setattr(S, "DEFAULT_TIMEOUTS", S.with_timeouts(S.DEFAULT_TIMEOUTS, keepalive=0.2, job=5.0))
+    assert S.DEFAULT_TIMEOUTS.keepalive < P.ACK_TIMEOUT_MS / 1000
+    src, ref = reference
+    seen = {"lost": [], "resume": []}
+
+    def on_frame(direction, f) -> bool:
+        if direction == "down" and f.name == lost and not seen["lost"]:
+            seen["lost"].append(f.fields())
+            return False
+        if direction == "up" and f.type == P.FrameType.RESUME:
+            seen["resume"].append(f.fields())
+        return True
+
+    out = tmp_path / "out.obj"
+    with FrameTap(("127.0.0.1", device.port), on_frame) as proxy:
+        outcome, _, msg = stream_once(["stream", str(src), *OPTS, "--port", proxy.url, "-o", str(out), "-q"],
+                                      out, ref, RUN_LIMIT)
+    assert seen["lost"] and outcome == "identical", msg
+    if lost == "LEVEL_END":  # the level it had whole but for its LEVEL_END
+        index, total = seen["lost"][0]["index"], seen["lost"][0]["total"]
+        assert (seen["resume"][0]["index"], seen["resume"][0]["have"]) == (index, total)
+
+
 def test_a_broken_connection_resumes_the_job(device, reference, tmp_path):
     """The connection breaks in the middle of the second level (the proxy closes both sides): the host
     opens it again and sends RESUME (the job's crc, the level, the bytes it has); the device kept the

@@ -75,7 +75,9 @@ WANT_SPAN = 8  # holes of a level within this many frames of the first are asked
 # host writes KEEPALIVE (never answered) whenever it wrote nothing for KEEPALIVE_S, and every
 # FLOW_KEEPALIVE_S while MESH frames still come (the device, reading again, hears it and does not
 # repeat LEVEL_END for nothing): a pause of the line or of the host, however long its parts add up to,
-# never ends the job; only a silence longer than the link timeout does.
+# never ends the job; only a silence longer than the link timeout does.  Since every frame postpones the
+# device's repeat, a silence while the host waits for the rest of a level (or for DONE) gets RESUME
+# instead of KEEPALIVE: the device sends what is missing at once (Device.run).
 KEEPALIVE_S = P.KEEPALIVE_MS / 1000
 FLOW_KEEPALIVE_S = P.ACK_TIMEOUT_MS / 2000
 RECONNECT_PAUSE_S = 0.2  # between attempts to open a connection that was lost during the job
@@ -680,6 +682,19 @@ class Device:
         quiet_s = self.t.keepalive or min(KEEPALIVE_S, link_s / 4)  # the longest the host stays silent
         self.where = "before the first level"
         self._resume = None  # (RESUME's payload, when the connection was opened again, why) until an answer
+        done_next = False  # the last level (LEVEL_LAST) arrived whole: DONE comes next
+
+        def nudge() -> bytes | None:
+            """RESUME's payload when the device must be waiting for the host's answer to a frame that did
+            not come (a LEVEL_END of the level whose bytes came, the DONE after the last level), else None
+            (the device may be computing: a RESUME would make it send a level twice)."""
+            if got:
+                have = got.find(0)
+                have = len(got) if have < 0 else have
+                return P.RESUME.pack(crc=crc, index=len(levels), chunk=chunk, have=have)
+            if done_next:  # it waits for DONE's ACK, or for this level's (ours was lost): either comes again
+                return P.RESUME.pack(crc=crc, index=len(levels) - 1, chunk=chunk, have=levels[-1].nbytes)
+            return None
 
         def resume_after(error: LinkError) -> float:
             """Reopen and RESUME from the current level's first missing byte; returns when."""
@@ -697,7 +712,15 @@ class Device:
                 if self._resume and now - self._wrote >= every:
                     self._send_resume()
                 elif started and now - self._wrote >= quiet_s:
-                    self._keepalive()
+                    # the device repeats LEVEL_END and DONE only after ACK_TIMEOUT_MS without any frame, so
+                    # a KEEPALIVE more often than that (a device slower than real time: the simulated board)
+                    # would keep it from ever repeating one that was lost: after a silence the host asks
+                    again = nudge() if now - last >= quiet_s else None
+                    if again:
+                        self._wrote = now
+                        self.link.write_frame(P.FrameType.RESUME, self._next_seq(), again)
+                    else:
+                        self._keepalive()
                 wait = (min(every, give_up - last) if not started else self.t.job) - (now - last)
                 if started:
                     wait = min(wait, self._wrote + (every if self._resume else quiet_s) - now)
@@ -785,6 +808,7 @@ class Device:
                         hdr, mesh, stats, cycles = parse_level(bytes(buf[:total]), width, height)
                         lv = LevelResult(hdr["level"], idx, mesh, stats, cycles, total, time.monotonic() - t0)
                         levels.append(lv)
+                        done_next = bool(x["flags"] & P.LEVEL_LAST)
                         self.where = f"{len(levels)} levels arrived, the last level {lv.level}"
                         lossless = lossless + 1 if first_pass else 0
                         if lossless >= GROW_AFTER and chunk < largest:

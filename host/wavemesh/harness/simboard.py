@@ -34,11 +34,11 @@ build = _load_sim_build()
 # by a loaded machine (measured), more with a CPU hog beside it (4 s each was not enough at a load of
 # 15 on two cores): 8 s each; reply likewise (RUN's answer did not come in 12 tries of 5 s there).
 # keepalive: the device repeats a LEVEL_END or DONE whose ACK was lost only after ACK_TIMEOUT_MS of its
-# own clock without any frame (12.5 million cycles, 15 to 80 s of simulation); a host writing KEEPALIVE
-# every real second would keep postponing that for good (the job stalled until the host's job timeout
-# on the pin-accurate board at 3 Mbaud, a lost LEVEL_END), so the host here stays silent about as long
-# in real seconds as the board's KEEPALIVE_MS takes in simulated ones (its link timeout, 30 s of the
-# board's clock, is hours of simulation).
+# own clock without any frame (15 million cycles at 30 MHz: one to several minutes of simulation, longer
+# than any keepalive here on a loaded machine); every KEEPALIVE postpones that, so after a silence of
+# keepalive with a level under way (or DONE due) the host sends RESUME instead (stream.Device.run).  The
+# host here stays silent about as long in real seconds as the board's KEEPALIVE_MS takes in simulated
+# ones (its link timeout, 30 s of the board's clock, is hours of simulation).
 SIM_TIMEOUTS = Timeouts(sync=8.0, sync_attempts=5, reply=10.0, attempts=3, ack=5.0, job=900.0,
                         keepalive=120.0)
 
