@@ -88,7 +88,8 @@ def _one_set(index: int, shard: int, out: Path) -> None:
             faults = [Faults(seed=seed + s, rate=rate, limit=None) for s in range(shard, runs, shards)]
             done = campaign(("127.0.0.1", dev.port), src, [*opts, *extra], ref, faults, work, RUN_LIMIT,
                             on_run=lambda r: print(f"bench faults: {name}: {r.outcome} {r.seconds:.1f} s "
-                                                   f"{r.message}", flush=True))
+                                                   f"{r.message}", flush=True, file=sys.__stdout__))
+            # (sys.__stdout__: a hung run's thread keeps sys.stdout redirected, faultproxy.stream_once)
             rows = [{"seed": r.faults.seed, "outcome": r.outcome, "seconds": round(r.seconds, 3),
                      "faults": r.injected, "frames": r.frames, "delay_s": round(r.delay_s, 3),
                      "message": r.message} for r in done]
