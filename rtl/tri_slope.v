@@ -20,9 +20,10 @@
  *   command -> differences -> products (D, Na, Nb) -> two dividers (ga, gb) -> k -> squares -> root
  *
  * The divisions: floor(2^16 |Na| m / 2^e / D) = floor((N >> e) / D) with N = 2^16 |Na| m, so each
- * divider is a restoring division that takes N's bits from the top and stops e bits early (no
- * shifter for e: a larger e is a shorter division), DIV_STEPS quotient bits a clock.  The root: the
- * bit-by-bit restoring square root, two bits of X (one root bit) a step, SQRT_STEPS steps a clock.
+ * divider is a restoring division (udiv_step.v) that takes N's bits from the top and stops e bits
+ * early (no shifter for e: a larger e is a shorter division), DIV_STEPS quotient bits a clock.  The
+ * root: the bit-by-bit restoring square root, two bits of X (one root bit) a step, SQRT_STEPS steps a
+ * clock.
  *
  * Timing: 1 clock to take the command, 2 of products, ceil((NW - e) / DIV_STEPS) of division (the
  * longer of the two axes; NW = COORD_BITS + 49 rounded up to DIV_STEPS), 2 of k, 3 of squares, 32 /
@@ -184,42 +185,43 @@ function [NW-1:0] div_load;
 endfunction
 
 /*
- * One clock of a divider: DIV_STEPS restoring steps
+ * One clock of each divider: DIV_STEPS restoring steps
  */
-reg [NW-1:0] dn_a, dn_b;
-reg [63:0] dq_a, dq_b;
-reg [DW-1:0] dr_a, dr_b;
-reg [DW:0] dt;
-integer i;
+wire [NW-1:0] dn_a, dn_b;
+wire [63:0] dq_a, dq_b;
+wire [DW-1:0] dr_a, dr_b;
 
-always @* begin
-    dn_a = num_a_reg;
-    dq_a = quo_a_reg;
-    dr_a = rem_a_reg;
-    dn_b = num_b_reg;
-    dq_b = quo_b_reg;
-    dr_b = rem_b_reg;
-    for (i = 0; i < DIV_STEPS; i = i + 1) begin
-        dt = {dr_a, dn_a[NW-1]};
-        dn_a = dn_a << 1;
-        if (dt >= {1'b0, d_reg}) begin
-            dr_a = dt[DW-1:0] - d_reg;
-            dq_a = {dq_a[62:0], 1'b1};
-        end else begin
-            dr_a = dt[DW-1:0];
-            dq_a = {dq_a[62:0], 1'b0};
-        end
-        dt = {dr_b, dn_b[NW-1]};
-        dn_b = dn_b << 1;
-        if (dt >= {1'b0, d_reg}) begin
-            dr_b = dt[DW-1:0] - d_reg;
-            dq_b = {dq_b[62:0], 1'b1};
-        end else begin
-            dr_b = dt[DW-1:0];
-            dq_b = {dq_b[62:0], 1'b0};
-        end
-    end
-end
+udiv_step #(
+    .NW(NW),
+    .RW(DW),
+    .QW(64),
+    .STEPS(DIV_STEPS)
+)
+step_a_inst (
+    .n(num_a_reg),
+    .q(quo_a_reg),
+    .r(rem_a_reg),
+    .d(d_reg),
+    .n_next(dn_a),
+    .q_next(dq_a),
+    .r_next(dr_a)
+);
+
+udiv_step #(
+    .NW(NW),
+    .RW(DW),
+    .QW(64),
+    .STEPS(DIV_STEPS)
+)
+step_b_inst (
+    .n(num_b_reg),
+    .q(quo_b_reg),
+    .r(rem_b_reg),
+    .d(d_reg),
+    .n_next(dn_b),
+    .q_next(dq_b),
+    .r_next(dr_b)
+);
 
 /*
  * k (ST_NORMA) and the shifted slopes (ST_NORMB): ga, gb capped at 2^62, k = max(0, bit length of

@@ -3,10 +3,10 @@
  *
  * The board's firmware divides 64-bit integers in the refiner (E(T)'s rounding, the unit normals, the
  * Jacobi rotations, R_A: firmware/board/src/div64.c's __udivdi3 and __divdi3), where the soft CPU has a
- * 32-bit divider only.  This is a restoring division, STEPS quotient bits a clock, from the top of n's
- * highest non-zero 16-bit digit (the quotient's bits above it are zeros): 64, 48, 32 or 16 steps.  The
- * result is the C operators' n / d and n % d; d = 0 gives the quotient all ones in the bits taken and
- * the remainder n (the firmware never divides by 0: the C leaves it undefined).
+ * 32-bit divider only.  This is a restoring division (udiv_step.v), STEPS quotient bits a clock, from
+ * the top of n's highest non-zero 16-bit digit (the quotient's bits above it are zeros): 64, 48, 32
+ * or 16 steps.  The result is the C operators' n / d and n % d; d = 0 gives the quotient all ones in
+ * the bits taken and the remainder n (the firmware never divides by 0: the C leaves it undefined).
  *
  * Timing: 1 clock to take the command, 64 / STEPS of division (48, 32, 16 / STEPS when n < 2^48, 2^32,
  * 2^16), 1 to hand out the result: 34 clocks at STEPS = 2 for a 64-bit n, 26 for a 48-bit one.
@@ -63,26 +63,24 @@ assign m_r = rem_reg;
 assign m_valid = state_reg == ST_DONE;
 assign busy = state_reg != ST_IDLE;
 
-reg [63:0] dn, dq, dr;
-reg [64:0] dt;
-integer i;
+// one clock: STEPS restoring steps
+wire [63:0] dn, dq, dr;
 
-always @* begin
-    dn = num_reg;
-    dq = quo_reg;
-    dr = rem_reg;
-    for (i = 0; i < STEPS; i = i + 1) begin
-        dt = {dr, dn[63]};
-        dn = dn << 1;
-        if (dt >= {1'b0, d_reg}) begin
-            dr = dt[63:0] - d_reg;
-            dq = {dq[62:0], 1'b1};
-        end else begin
-            dr = dt[63:0];
-            dq = {dq[62:0], 1'b0};
-        end
-    end
-end
+udiv_step #(
+    .NW(64),
+    .RW(64),
+    .QW(64),
+    .STEPS(STEPS)
+)
+step_inst (
+    .n(num_reg),
+    .q(quo_reg),
+    .r(rem_reg),
+    .d(d_reg),
+    .n_next(dn),
+    .q_next(dq),
+    .r_next(dr)
+);
 
 always @(posedge clk) begin
     case (state_reg)

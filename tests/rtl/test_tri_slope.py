@@ -30,7 +30,8 @@ def test_tri_slope(params):
     env = {"TRI_SLOPE_SEED": str(params["COORD_BITS"]), "TRI_SLOPE_COORD_BITS": str(params["COORD_BITS"]),
            "TRI_SLOPE_DIV_STEPS": str(params.get("DIV_STEPS", 2)),
            "TRI_SLOPE_SQRT_STEPS": str(params.get("SQRT_STEPS", 2))}
-    run("tri_slope", [RTL / "tri_slope.v"], "tri_slope_tb", parameters=params, extra_env=env)
+    run("tri_slope", [RTL / "tri_slope.v", RTL / "udiv_step.v"], "tri_slope_tb", parameters=params,
+        extra_env=env)
 
 
 def _point_error(lib):

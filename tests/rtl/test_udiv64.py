@@ -12,4 +12,5 @@ from wavemesh.harness.rtl_runner import RTL, run
 @pytest.mark.parametrize("steps", [2, 1])
 def test_udiv64(steps):
     env = {"UDIV64_SEED": str(steps), "UDIV64_STEPS": str(steps)}
-    run("udiv64", [RTL / "udiv64.v"], "udiv64_tb", parameters={"STEPS": steps}, extra_env=env)
+    run("udiv64", [RTL / "udiv64.v", RTL / "udiv_step.v"], "udiv64_tb", parameters={"STEPS": steps},
+        extra_env=env)
