@@ -26,6 +26,9 @@
  *                               a DIV_D_HI write starts n / d (udiv64; ignored while busy)
  *   0x64 DIV_STATUS             r   bit 0 DONE, 1 BUSY
  *   0x68 DIV_Q_LO, 0x6C DIV_Q_HI, 0x70 DIV_R_LO, 0x74 DIV_R_HI  r  the last division's n / d, n % d
+ *   0x78 ANGLE_X, 0x7C ANGLE_Y  rw  x (signed) and y (>= 0) of the angle unit; an ANGLE_Y write starts
+ *                               atan2(y, x) (tri_angle; ignored while busy)
+ *   0x80 ANGLE                  r   bits 17..0 the last command's angle (Q16 radians), 30 BUSY, 31 DONE
  *
  * The slope unit works beside the scan, from its own copy of the staging registers (taken at
  * SLOPE_GO); its result stays in SLOPE_ROOT and SLOPE_STATUS.K until the next SLOPE_GO.
@@ -54,7 +57,9 @@ module soc_engine #
     // 1: the slope unit (tri_slope) is built; 0: SLOPE_GO is ignored and SLOPE_STATUS reads 0
     parameter SLOPE = 1,
     // 1: the 64-bit divider (udiv64) is built; 0: DIV_D_HI starts nothing and DIV_STATUS reads 0
-    parameter DIV = 1
+    parameter DIV = 1,
+    // 1: the angle unit (tri_angle) is built; 0: ANGLE_Y starts nothing and ANGLE reads 0
+    parameter ANGLE = 1
 )
 (
     input  wire                   clk,
@@ -105,6 +110,9 @@ reg [31:0] sqrt_lo_reg = 32'd0, sqrt_hi_reg = 32'd0;
 reg [63:0] div_n_reg = 64'd0, div_q_reg = 64'd0, div_r_reg = 64'd0;
 reg [31:0] div_d_lo_reg = 32'd0, div_d_hi_reg = 32'd0;
 reg div_done_reg = 1'b0;
+reg [31:0] angle_x_reg = 32'd0, angle_y_reg = 32'd0;
+reg [17:0] angle_z_reg = 18'd0;
+reg angle_done_reg = 1'b0;
 reg [31:0] slope_root_reg = 32'd0;
 reg [5:0] slope_k_reg = 6'd0;
 reg slope_done_reg = 1'b0;
@@ -119,6 +127,7 @@ wire take = reg_read && bus_addr == `WM_ENGINE_RES_AT;
 wire slope_go = reg_write && bus_addr == `WM_ENGINE_SLOPE_GO;
 wire sqrt_go = reg_write && bus_addr == `WM_ENGINE_SQRT_HI;
 wire div_go = reg_write && bus_addr == `WM_ENGINE_DIV_D_HI;
+wire angle_go = reg_write && bus_addr == `WM_ENGINE_ANGLE_Y;
 
 wire cmd_ready;
 wire [VW-1:0] res_vmax;
@@ -240,6 +249,47 @@ always @(posedge clk) begin
     end
 end
 
+/*
+ * The angle unit: x and y at the ANGLE_Y write; its result into ANGLE.Z
+ */
+wire angle_ready, angle_res_valid, angle_busy;
+wire [17:0] angle_res_z;
+
+generate
+    if (ANGLE != 0) begin : g_angle
+        tri_angle angle_inst (
+            .clk(clk),
+            .rst(rst),
+            .s_cmd_x(angle_x_reg),
+            .s_cmd_y(bus_wdata[30:0]),
+            .s_cmd_valid(angle_go),
+            .s_cmd_ready(angle_ready),
+            .m_res_angle(angle_res_z),
+            .m_res_valid(angle_res_valid),
+            .m_res_ready(1'b1),
+            .busy(angle_busy)
+        );
+    end else begin : g_no_angle
+        assign angle_ready = 1'b0;
+        assign angle_res_valid = 1'b0;
+        assign angle_busy = 1'b0;
+        assign angle_res_z = 18'd0;
+    end
+endgenerate
+
+always @(posedge clk) begin
+    if (angle_go && angle_ready) begin
+        angle_done_reg <= 1'b0;
+    end
+    if (angle_res_valid) begin
+        angle_z_reg <= angle_res_z;
+        angle_done_reg <= 1'b1;
+    end
+    if (rst) begin
+        angle_done_reg <= 1'b0;
+    end
+end
+
 always @(posedge clk) begin
     if ((slope_go || sqrt_go) && slope_ready) begin
         slope_done_reg <= 1'b0;
@@ -287,6 +337,9 @@ always @(posedge clk) begin
             `WM_ENGINE_DIV_Q_HI: rdata_reg <= div_q_reg[63:32];
             `WM_ENGINE_DIV_R_LO: rdata_reg <= div_r_reg[31:0];
             `WM_ENGINE_DIV_R_HI: rdata_reg <= div_r_reg[63:32];
+            `WM_ENGINE_ANGLE_X: rdata_reg <= angle_x_reg;
+            `WM_ENGINE_ANGLE_Y: rdata_reg <= angle_y_reg;
+            `WM_ENGINE_ANGLE: rdata_reg <= {angle_done_reg, angle_busy, 12'd0, angle_z_reg};
             default: rdata_reg <= 32'd0;
         endcase
     end
@@ -310,6 +363,8 @@ always @(posedge clk) begin
             `WM_ENGINE_DIV_N_HI: div_n_reg[63:32] <= bus_wdata;
             `WM_ENGINE_DIV_D_LO: div_d_lo_reg <= bus_wdata;
             `WM_ENGINE_DIV_D_HI: div_d_hi_reg <= bus_wdata;
+            `WM_ENGINE_ANGLE_X: angle_x_reg <= bus_wdata;
+            `WM_ENGINE_ANGLE_Y: angle_y_reg <= bus_wdata;
             `WM_ENGINE_STATUS: if (bus_wdata[`WM_ENGINE_STATUS_OVERRUN]) overrun_reg <= 1'b0;
             default: ;
         endcase

@@ -159,6 +159,10 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
 {
     int32_t z = 0;
     WM_ASSERT(y >= 0);
+#ifdef WM_ANGLE_ENGINE
+    if (x >= INT32_MIN && x <= INT32_MAX && y <= INT32_MAX) /* the board's refiner: the FPGA's angle unit */
+        return wm_tri_engine_angle((int32_t)x, (uint32_t)y);
+#endif
     /* Scale both down (toward zero, exactly the same everywhere) below 2^28: CORDIC grows them by
      * 1.65 and adds shifted copies, all inside int64. */
     while (x > ((int64_t)1 << 28) || x < -((int64_t)1 << 28) || y > ((int64_t)1 << 28)) {

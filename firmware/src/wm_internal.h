@@ -253,6 +253,12 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
                        int32_t *wx, int32_t *wy);
 #endif
 
+#ifdef WM_ANGLE_ENGINE
+/* The engine's angle unit (the board's refiner alone, firmware/board/src/tri_engine.c): wm_angle_q16(x, y)
+ * of an x and a y >= 0 of 32 bits, the same CORDIC in the FPGA. */
+int32_t wm_tri_engine_angle(int32_t x, uint32_t y);
+#endif
+
 #ifdef WM_SLOPE_ENGINE
 /* (the board's refiner alone: firmware/board/CMakeLists.txt; the host's library takes the scan's hook
  * above, WM_TRI_ENGINE, but not these) */

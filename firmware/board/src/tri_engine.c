@@ -1,7 +1,8 @@
 /* The triangle error engine on the board (rtl/soc_engine.v, the ENGINE registers): E(T)'s scan of a
- * triangle's samples in the FPGA, for tri_error.c's scan_any, and its slope unit (rtl/tri_slope.v) for
- * tri_error.c's slope_square (built into the board's refiner with
- * WM_TRI_ENGINE: firmware/board/CMakeLists.txt; the native build keeps the C scan).
+ * triangle's samples in the FPGA, for tri_error.c's scan_any, its slope unit (rtl/tri_slope.v) for
+ * tri_error.c's slope_square and its angle unit (rtl/tri_angle.v) for fixed.c's wm_angle_q16 (built into
+ * the board's refiner with WM_TRI_ENGINE, WM_SLOPE_ENGINE, WM_ANGLE_ENGINE: firmware/board/CMakeLists.txt;
+ * the native build keeps the C).
  *
  * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
  * (the board job's: app/board_job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
@@ -72,6 +73,20 @@ int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3
     *root = WM_ENGINE_SLOPE_ROOT;
     *k = (int)((st & WM_ENGINE_SLOPE_STATUS_K_MASK) >> WM_ENGINE_SLOPE_STATUS_K_SHIFT);
     return 1;
+}
+
+/* The angle unit: x and y into ANGLE_X and ANGLE_Y, the ANGLE_Y write starting it, then the angle once
+ * ANGLE says DONE (one register: the result and its state): fixed.c's wm_angle_q16 of 32-bit arguments
+ * (the same CORDIC: tests/rtl/test_tri_angle.py). */
+int32_t wm_tri_engine_angle(int32_t x, uint32_t y)
+{
+    uint32_t v;
+    WM_ENGINE_ANGLE_X = (uint32_t)x;
+    WM_ENGINE_ANGLE_Y = y;
+    do {
+        v = WM_ENGINE_ANGLE; /* the unit rotates */
+    } while (!(v & WM_ENGINE_ANGLE_DONE));
+    return (int32_t)(v & WM_ENGINE_ANGLE_Z_MASK);
 }
 
 /* The slope unit's root command: floor(sqrt(x)) of {SQRT_HI, SQRT_LO}, the SQRT_HI write starting it, for

@@ -308,8 +308,8 @@ ENGINE_COORD_BITS = max(GRID_MAX_W, GRID_MAX_H).bit_length()  # 11 for 1024: coo
 ENGINE_VMAX_BITS = 2 * ENGINE_COORD_BITS + 18  # V modulo 2^VMAX_BITS (V < 2^16 D < 2^(VMAX_BITS-1))
 ENGINE_CMD_DEPTH = 4  # triangles the CPU may queue
 ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT, "
-               "the slope unit (the normal metric's slope factor of a triangle, square roots) and a 64-bit "
-               "divider", (
+               "the slope unit (the normal metric's slope factor of a triangle, square roots), a 64-bit "
+               "divider and the angle unit (atan2 by CORDIC)", (
     Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)", (
         Field("X", 15, 0, "rw", "column"),
         Field("Y", 31, 16, "rw", "row"),
@@ -375,6 +375,15 @@ ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a trian
     Register("DIV_Q_HI", 0x6C, "r", "its bits 63..32"),
     Register("DIV_R_LO", 0x70, "r", "the remainder n % d, bits 31..0"),
     Register("DIV_R_HI", 0x74, "r", "its bits 63..32"),
+    Register("ANGLE_X", 0x78, "rw", "the angle unit's x (signed)"),
+    Register("ANGLE_Y", 0x7C, "rw", "its y, 0 .. 2^31 - 1; write: the angle unit takes atan2(y, x) of "
+             "ANGLE_X and y (ignored while ANGLE.BUSY)"),
+    Register("ANGLE", 0x80, "r", "the angle unit's result and state", (
+        Field("Z", 17, 0, "r", "atan2(y, x) of the last command in Q16 radians, 0 .. pi, as fixed.c's "
+              "wm_angle_q16 (CORDIC, docs/soc.md, \"The angle unit\")"),
+        Field("BUSY", 30, 30, "r", "a command is in work"),
+        Field("DONE", 31, 31, "r", "Z holds the last command's result (cleared by an ANGLE_Y write)"),
+    )),
 ))
 # The upload block (rtl/upload_rx.v behind rtl/soc_upload.v): frames from the UART's RX FIFO deframed and
 # CRC-checked in hardware, DATA's samples (raw or Rice-decoded) written into HEIGHT; the CPU reads a held
