@@ -559,7 +559,7 @@ class TileOrder:
             raise MeshInvalid(f"{t.name}: its vertex ({e.args[0] % W}, {e.args[0] // W}) on a shared side is "
                               "not its neighbour's", hint=api.BUG_HINT) from None
         new = np.flatnonzero(~old)
-        new = new[np.lexsort((x[new], y[new]))]
+        new = new[np.argsort(y[new] * W + x[new])]  # by (y, x): one key (no two vertices at one place)
         perm = np.concatenate([was, new])
         number = np.concatenate([np.asarray(before, dtype=np.int64),
                                  np.arange(self.vertices, self.vertices + len(new), dtype=np.int64)])
@@ -572,8 +572,8 @@ class TileOrder:
             rank[np.argsort(number[: len(was)])] = np.arange(len(was))
             rank[len(was):] = np.arange(len(was), n)
             g = rank[tris]
-            turn = _TURNS[np.argmin(g, axis=1)]
-            tris, g = np.take_along_axis(tris, turn, 1), np.take_along_axis(g, turn, 1)
+            at = _TURNS[np.argmin(g, axis=1)] + 3 * np.arange(len(g))[:, None]  # flat, from the smallest
+            tris, g = tris.ravel()[at], g.ravel()[at]
             if n < ONE_KEY:  # one key: (g0 n + g1) n + g2 < 2^63
                 order = np.argsort((g[:, 0] * n + g[:, 1]) * n + g[:, 2])
             else:
