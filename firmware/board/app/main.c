@@ -159,7 +159,8 @@ int main(void)
     caps.window = WINDOW;
     caps.max_payload = WM_PROTO_MAX_PAYLOAD;
     caps.clk_hz = config.clk_hz;
-    caps.baud = config.clk_hz / board_uart_div();
+    /* the rate the divisor gives, rounded to a whole baud as after a switch (protocol.divisor_baud) */
+    caps.baud = (config.clk_hz + board_uart_div() / 2u) / board_uart_div();
     caps.features = WM_PROTO_FEATURE_INITIAL_ONLY | WM_PROTO_FEATURE_HOLES | WM_PROTO_FEATURE_RICE;
     caps.div = board_uart_div(); /* BAUD: any divisor the UART takes (memmap.py, UART.DIV) */
     caps.div_min = WM_UART_DIV_MIN;
