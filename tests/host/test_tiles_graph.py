@@ -104,7 +104,7 @@ def test_schedule_rank_and_homes():
     assert s.take(1) == 2 and s.take(0) == 3
     # nothing of its own ready: a worker takes another's rather than wait
     s = _Schedule(nodes[:2], {0: 1, 1: 1})
-    assert s.take(0) == 0
+    assert s.take(0, own=True) is None and s.take(0) == 0  # own: only its own
     # a node on two workers' tiles: its first tile's worker's in rank order, before that worker's later
     # nodes; the other worker takes its own
     nodes = [Node(_add, (1,), (0, 0), (0,)), Node(_add, (1,), (0, 0), (1,)),
@@ -214,10 +214,16 @@ def test_schedule_chains_a_node_with_its_follower():
     assert [i for _, i in s.ready] == [2, 3]
     chain = [Node(_pair, (1, 2)), Node(_add, (Ref(0, _first), 10)), Node(_add, (Ref(1), Ref(0, _first)))]
     line = [Node(_add, (1,))] + [Node(_add, (Ref(k), k)) for k in range(6)]  # longer than runner.CHAIN
+    # many ready nodes of its own: a worker is given the next ones with a chain that has no follower
+    # (runner.BATCH_READY), each its own args; the same results
+    wide = [Node(_add, (k, 1), (k, 0), (k % 2,)) for k in range(24)]
+    wide += [Node(_add, (Ref(k), Ref(k + 1)), (k + 1, 1), (k % 2,)) for k in range(23)]
     for workers in (1, 2):
         with tiles.Runner(workers) as run:
             assert run.graph(chain) == [(1, 2), 11, 12]
             assert run.graph(line) == [1, 1, 2, 4, 7, 11, 16]
+            assert run.graph(wide, homes={0: 0.0, 1: 0.5}) == \
+                [k + 1 for k in range(24)] + [2 * k + 3 for k in range(23)]
 
 
 class _Box:

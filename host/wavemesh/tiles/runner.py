@@ -22,6 +22,9 @@ DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
 # worker's (its result goes on to it in the worker), and so on, up to CHAIN nodes: one round trip of the
 # parent for them all (1: none)
 CHAIN = 4
+# and, while more nodes are ready than BATCH_READY per worker, the next ready node of its own after a chain
+# that has no follower (and that node's followers), up to CHAIN in all
+BATCH_READY = 2
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -165,7 +168,8 @@ class Runner:
         [0, 1), the pool worker (of the workers in order) that should read it first (neighbouring tiles on
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
         keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
-        node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower)."""
+        node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower),
+        and while many nodes are ready the next ready nodes of its own (BATCH_READY)."""
         results: list = [None] * len(nodes)
         kept_nodes = None if keep is None else set(keep)
         readers = [0] * len(nodes)  # the nodes not yet given each node's result (a local run's)
@@ -241,7 +245,12 @@ class Runner:
                 if sent[w] is not None or (i := sched.take(w)) is None:
                     return
                 chain = [i]
-                while len(chain) < CHAIN and (j := sched.follower(chain[-1], w)) is not None:
+                while len(chain) < CHAIN:
+                    j = sched.follower(chain[-1], w)
+                    if j is None and len(sched.ready) > BATCH_READY * len(self.pool):
+                        j = sched.take(w, own=True)  # another of its own, while there are plenty
+                    if j is None:
+                        break
                     chain.append(j)
                 pipe = self.pool[w][1]
                 steps = []
@@ -322,7 +331,8 @@ class _Schedule:
         self.owner: dict = {}  # tile -> the worker that first read it
         self.chained = [False] * len(nodes)  # taken with the node it waits for (follower)
 
-    def take(self, worker: int | None) -> int | None:
+    def take(self, worker: int | None, own: bool = False) -> int | None:
+        """The node ``worker`` runs next (None: none ready); ``own``: only one of its own (None if none)."""
         if not self.ready:
             return None
         k = 0
@@ -336,6 +346,8 @@ class _Schedule:
                 if some is None and any(mine):
                     some = j
             else:
+                if own:
+                    return None
                 k = 0 if some is None else some
             self._claim(self.ready[k][1], worker)
         return self.ready.pop(k)[1]
