@@ -281,10 +281,17 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
         int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0;
         for (int32_t j = 0; j < n_tris; j++) {
             int32_t at[3]; /* the ring positions of the triangle's corners (hv[3 slot + c] = tris[3 j + c]) */
-            for (int32_t c = 0; c < 3; c++) {
-                at[c] = -1;
-                for (int32_t i = 0; i < n; i++)
-                    if (ring[i] == tris[3 * j + c]) at[c] = i;
+            /* The corners of a counter-clockwise triangle over the ring polygon come in ring order, so
+             * each is looked for from the one before it on, round the ring (found at once in a fan's
+             * (a, p_i, p_i+1) but the first); the ring's vertices are distinct. */
+            for (int32_t c = 0, i = 0; c < 3; c++) {
+                int32_t left = n;
+                while (left > 0 && ring[i] != tris[3 * j + c]) {
+                    i = i + 1 == n ? 0 : i + 1;
+                    left--;
+                }
+                at[c] = left > 0 ? i : -1;
+                i = i + 1 == n ? 0 : i + 1;
             }
             for (int32_t c = 0; c < 3; c++) {
                 int32_t h = 3 * slot[j] + c, pa = at[c], pb = at[wm_k1(c)], f = -1, q;
