@@ -186,20 +186,26 @@ def test_help_documents_check_levels():
     assert "--check-levels" in commands["stream"].format_help()  # stream takes mesh's options
 
 
-def test_mesh_imports_only_what_it_runs(tmp_path, ball):
+@pytest.mark.parametrize("tiled", [False, True])
+def test_mesh_imports_only_what_it_runs(tmp_path, ball, tiled):
     """A plain `wavemesh mesh` imports neither the wire protocol, the device session, pictures nor tiles
     (start-up is most of a short run's time; api.py and cli.py import them where used, for the cost each
-    comment states; the model's limits come from wavemesh.limits), nor the optional readers' libraries."""
+    comment states; the model's limits come from wavemesh.limits), nor the optional readers' libraries;
+    nor numpy.ma (47M instructions), which a plain np.unique imports on its first call.  A tiled run
+    (its tiles here in this process, as --workers 1 runs them) the same, but the tiles."""
+    extra = ", '--tile', '32', '--workers', '1'" if tiled else ""
     code = ("import sys; from wavemesh.cli import main; "
-            f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q']); "
+            f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q'{extra}]); "
             "print(status, *sorted(sys.modules))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     status, *modules = r.stdout.split()
     assert status == "0" and "wavemesh.refine.native" in modules  # it did run the refiner
+    assert ("wavemesh.tiles.jobs" in modules) == tiled
     unused = ("wavemesh.device.protocol", "wavemesh.device.stream", "wavemesh.device.link",
-              "wavemesh.device.devices", "wavemesh.check.render", "wavemesh.tiles", "serial", "matplotlib",
+              "wavemesh.device.devices", "wavemesh.check.render", "serial", "matplotlib", "numpy.ma",
               "tqdm", "PIL", "rasterio", "scipy", "trimesh", "secrets", "zipfile")
+    unused += () if tiled else ("wavemesh.tiles",)
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
 
 

@@ -285,7 +285,7 @@ def _seam_editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sid
         hf = held if held is not None else tile_heightfield(plan, t, window, False)
         return Editable(mesh, native.error_within(hf.samples, fp), [side])
     on = _on_sides(mesh.xy, t.width, t.height)[side]
-    at = mesh.xy[np.unique(mesh.tris[on[mesh.tris].any(axis=1)])]
+    at = mesh.xy[mesh.tris[on[mesh.tris].any(axis=1)].ravel()]  # their box (no np.unique: sides.conform)
     (x0, y0), (x1, y1) = at.min(axis=0).tolist(), at.max(axis=0).tolist()
     v = plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1)
     if not np.all(np.isfinite(v)):
