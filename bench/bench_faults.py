@@ -329,7 +329,9 @@ def markdown(results: dict) -> str:
               "measures them, not the protocol; so at 3 Mbaud (a fault-free run of a few seconds, some 40 s "
               "of delays in a run at 0.2 %).  On the simulated board a lost LEVEL_END, DONE or ACK waits out "
               f"the board's ACK_TIMEOUT_MS, {ack_cycles / 1e6:g} million cycles of its clock, a minute or "
-              "more of simulation: its ratio measures the simulator's speed."]
+              "more of simulation, or the host's keepalive interval for the simulator (SIM_TIMEOUTS."
+              "keepalive, after which it asks with RESUME), whichever ends first: its ratio measures the "
+              "simulator's speed."]
     for s in sets:
         if s["rate"] == 0.002 and s["name"] != lossy["name"] and s["baud"]:
             o = s["outcomes"]
