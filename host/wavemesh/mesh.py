@@ -113,8 +113,7 @@ def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | N
             pi, pj, pm = pts[i], pts[j], pts[m]
             if orient(pi, pj, pm) <= 0:
                 continue
-            if any(orient(pi, pj, pts[o]) >= 0 and orient(pj, pm, pts[o]) >= 0 and orient(pm, pi, pts[o]) >= 0
-                   for o in idx if o not in (i, j, m)):
+            if _holds_corner(pts, idx, i, j, m):
                 continue
             if not fattest:
                 best = k
@@ -133,11 +132,41 @@ def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | N
     return out + [tuple(idx)]
 
 
+def _holds_corner(pts: list, idx, i: int, j: int, m: int) -> bool:
+    """Whether the closed triangle pts[i], pts[j], pts[m] holds a corner pts[o] (o in ``idx``, not i, j, m):
+    orient(pi, pj, o) >= 0 and orient(pj, pm, o) >= 0 and orient(pm, pi, o) >= 0, written out (the
+    seams' hottest loop: a tiled run's tiles clip thousands of small polygons)."""
+    (ax, ay), (bx, by), (cx, cy) = pts[i], pts[j], pts[m]
+    abx, aby, bcx, bcy, cax, cay = bx - ax, by - ay, cx - bx, cy - by, ax - cx, ay - cy
+    for o in idx:
+        if o == i or o == j or o == m:
+            continue
+        px, py = pts[o]
+        if abx * (py - ay) - (px - ax) * aby >= 0 and bcx * (py - by) - (px - bx) * bcy >= 0 \
+                and cax * (py - cy) - (px - cx) * cay >= 0:
+            return True
+    return False
+
+
 def _crosses(p, q, r, s) -> bool:
     """Segments p-q and r-s cross at a point inside both (not at a shared end, not collinear)."""
     d1, d2 = orient(p, q, r), orient(p, q, s)
     d3, d4 = orient(r, s, p), orient(r, s, q)
     return d1 * d2 < 0 and d3 * d4 < 0
+
+
+def _crosses_any(p, q, edges: list) -> bool:
+    """any(_crosses(p, q, r, s) for r, s in edges), written out."""
+    (px, py), (qx, qy) = p, q
+    dx, dy = qx - px, qy - py
+    for (rx, ry), (sx, sy) in edges:
+        d1 = dx * (ry - py) - (rx - px) * dy  # orient(p, q, r)
+        d2 = dx * (sy - py) - (sx - px) * dy  # orient(p, q, s)
+        if d1 * d2 < 0:
+            ex, ey = sx - rx, sy - ry
+            if (ex * (py - ry) - (px - rx) * ey) * (ex * (qy - ry) - (qx - rx) * ey) < 0:  # orient(r, s, p/q)
+                return True
+    return False
 
 
 def _inside(pts: list, x3: int, y3: int) -> bool:
@@ -163,16 +192,17 @@ def triangulate_within(pts: list, ok, limit: int = 16) -> list | None:
         return None
     edges = [(pts[i - 1], pts[i]) for i in range(n)]
 
+    everyone = range(n)
+
     def fits(i, j, k) -> bool:
         p, q, r = pts[i], pts[j], pts[k]
         if orient(p, q, r) <= 0:
             return False
-        for o in range(n):
-            if o not in (i, j, k) and orient(p, q, pts[o]) >= 0 and orient(q, r, pts[o]) >= 0 \
-                    and orient(r, p, pts[o]) >= 0:
-                return False  # a corner in the closed triangle
-        if any(_crosses(a, b, c, d) for a, b in ((p, q), (q, r), (r, p)) for c, d in edges):
-            return False
+        if _holds_corner(pts, everyone, i, j, k):
+            return False  # a corner in the closed triangle
+        for a, b in ((p, q), (q, r), (r, p)):
+            if _crosses_any(a, b, edges):
+                return False
         return _inside(pts, p[0] + q[0] + r[0], p[1] + q[1] + r[1]) and ok((i, j, k))
 
     @lru_cache(maxsize=None)
