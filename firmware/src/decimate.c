@@ -65,12 +65,62 @@ struct fans {
     int32_t n, k;                             /* ring size; the pointer, unwrapped */
     int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
     int32_t z[WM_MAX_RING], zv;               /* the samples of p_i and of v */
+    int32_t vx, vy;                           /* v */
+    int64_t D;                                /* the fan triangle's, for normal_above */
+    uint64_t av;                              /* v's |V| against it */
 };
+
+/* ceil(n m / 2^e) for n < 2^33, m < 2^16 and e >= 0: s |N| rounded up, for the scale s = m / 2^e. */
+static uint64_t scaled_up(uint64_t n, uint32_t m, int32_t e)
+{
+    uint64_t t = n * m;
+    return e >= 49 ? (t != 0) : (t + ((uint64_t)1 << e) - 1) >> e;
+}
+
+/* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
+ * |V| (av, above zeta D / 2^16: the vertical test failed) and the plane's gradient numerators Na, Nb
+ * (wm_tri_error.c's slope factor), without the slope factor's divisions and root: with T = D + s_x |Na|
+ * + s_y |Nb| >= D sqrt(1 + g^2) (sqrt(a^2 + b^2 + c^2) <= a + b + c), the rounded-down r <= 2^16 T / D,
+ * and c = ceil(2^16 ev / zeta) >= 2^32 av / (D zeta) (ev >= 2^16 av / D, never saturated: v lies in the
+ * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
+ * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
+ * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
+static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_t j, int32_t k, int64_t D,
+                     uint64_t av)
+{
+    uint32_t sx, sy;
+    int32_t ex, ey;
+    int64_t dz1 = (int64_t)q->z[j] - q->z[a], dz2 = (int64_t)q->z[k] - q->z[a];
+    int64_t Na = dz1 * ((int64_t)q->dy[k] - q->dy[a]) - dz2 * ((int64_t)q->dy[j] - q->dy[a]);
+    int64_t Nb = ((int64_t)q->dx[j] - q->dx[a]) * dz2 - ((int64_t)q->dx[k] - q->dx[a]) * dz1;
+    uint64_t T;
+    wm_slope_scale(p, 0, &sx, &ex);
+    wm_slope_scale(p, 1, &sy, &ey);
+    if (ex < 0 || ey < 0) return 0; /* not in wm_frac_mul's range */
+    T = (uint64_t)D + scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex) +
+        scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey);
+    return T < ((uint64_t)1 << 31) && (uint64_t)p->zeta * T < (av << 16);
+}
 
 /* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64, for the soft CPU a multiply pair). */
 static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 {
     return (int32_t)((int64_t)q->dx[i] * q->dy[j] - (int64_t)q->dx[j] * q->dy[i]);
+}
+
+/* fan_may_fit's test of v against the fan triangle (p_a, p_j, p_k) in the normal metric, its |V| (av)
+ * above zeta D / 2^16: far_above, else wm_point_above_v (which keeps the slope factor when v is within). */
+WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+{
+    const wm_refiner *r = t->r;
+    int32_t x[3] = {q->vx + q->dx[a], q->vx + q->dx[j], q->vx + q->dx[k]};
+    int32_t y[3] = {q->vy + q->dy[a], q->vy + q->dy[j], q->vy + q->dy[k]};
+    int above;
+    if (far_above(q, &r->params, a, j, k, q->D, q->av)) return 1;
+    above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
+    if (t->kept) /* as test_point */
+        for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
+    return above;
 }
 
 static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, const int32_t *ry, int32_t a,
@@ -99,15 +149,12 @@ static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, cons
         t->kept = 0;
         if (av * 65536u <= (uint64_t)r->params.zeta * (uint32_t)D) return 1;
         if (r->params.metric == WM_METRIC_VERTICAL) return 0;
+        q->D = D, q->av = av;
+        return !normal_above(q, t, a, j, k);
     }
     {
         int32_t x[3] = {rx[a], rx[j], rx[k]}, y[3] = {ry[a], ry[j], ry[k]};
-        int above;
-        if (D <= 0 || r->field.mask || r->params.zeta == 0xFFFFFFFFu) return !test_point(t, x, y, vx, vy);
-        above = wm_point_above_v(&r->field, &r->params, x, y, D, av, r->params.zeta, &t->kept);
-        if (t->kept) /* as test_point */
-            for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
-        return !above;
+        return !test_point(t, x, y, vx, vy);
     }
 }
 
@@ -144,6 +191,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
     q.n = n;
     q.k = 0;
     q.zv = r->field.samples[(int64_t)vy * r->field.width + vx];
+    q.vx = vx, q.vy = vy;
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
