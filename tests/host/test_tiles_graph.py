@@ -51,6 +51,23 @@ def test_graph_results_in_order_any_runner():
         _Schedule([Node(_add, (Ref(1),)), Node(_add, (1,))])
 
 
+def test_last_graph_lets_its_workers_go():
+    """``last``: the same results; the pool's workers told to end once nothing is left to give out (they
+    end without the Runner's exit), and a later graph still runs (on a new pool)."""
+    nodes = [Node(_add, (1,)), Node(_add, (Ref(0), 10)), Node(_add, (Ref(0), 100)),
+             Node(_pair, (Ref(1), Ref(2))), Node(_add, (Ref(3, _first), Ref(2), 1000))]
+    with tiles.Runner(2) as run:
+        assert run.graph(nodes[:3]) == [1, 11, 101] and len(run.pool) == 2 and not run.ended
+        first = [p for p, _ in run.pool]
+        assert run.graph(nodes, last=True) == [1, 11, 101, (11, 101), 1112]
+        assert run.pool == [] and [p for p, _ in run.ended] == first
+        for p in first:
+            p.join(10)
+            assert p.exitcode == 0  # ended by itself, before the Runner's exit
+        assert run.graph(nodes[:2]) == [1, 11] and len(run.pool) == 2
+    assert run.pool == [] == run.ended
+
+
 def _big(n, *_):
     return np.full(n, 7, dtype=np.int64)
 

@@ -489,7 +489,7 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
                     plan.quant, plan.zeta_used = known.quant, known.zeta_used
 
             keep = () if sink else roles["last"]
-            results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep)
+            results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep, last=True)
             bar.finish(f"{n} tiles")
     finally:
         clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers

@@ -138,6 +138,7 @@ class Runner:
         self.client = None
         self.own_client = scheduler is not None and not hasattr(scheduler, "submit")
         self.pool: list[tuple] = []  # (process, pipe)
+        self.ended: list[tuple] = []  # workers let go by the last graph, reaped by __exit__
         self.run_id = f"{time.time_ns()}-{os.getpid()}"
         self.n_maps = 0
 
@@ -147,8 +148,8 @@ class Runner:
         return self
 
     def __exit__(self, kind, *exc) -> None:
-        _end_workers(self.pool, gently=kind is None)
-        self.pool = []
+        _end_workers(self.ended + self.pool, gently=kind is None)
+        self.pool, self.ended = [], []
         if self.own_client and self.client is not None:
             self.client.close()
 
@@ -158,7 +159,7 @@ class Runner:
         return self.graph([Node(fn, tuple(task)) for task in tasks], (lambda _, r: done(r)) if done else None)
 
     def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None,
-              shared: tuple = (), keep: Iterable[int] | None = None) -> list:
+              shared: tuple = (), keep: Iterable[int] | None = None, last: bool = False) -> list:
         """Every node's result, in node order; a node runs once the nodes its Refs name are done (no
         barrier between phases); ``done(i, result)`` as each finishes.  ``keep``: the nodes whose results
         are returned (None: all); another's is let go once every node that reads it has been given it
@@ -169,7 +170,10 @@ class Runner:
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
         keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
         node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower),
-        and while many nodes are ready the next ready nodes of its own (BATCH_READY)."""
+        and while many nodes are ready the next ready nodes of its own (BATCH_READY).  ``last``: the
+        Runner's last graph: a pool worker is let go as soon as no node is left to give out (its exit,
+        which frees its memory, then runs beside the other's last nodes and the parent's handling of the
+        last results, not after them; a later graph starts a new pool)."""
         results: list = [None] * len(nodes)
         kept_nodes = None if keep is None else set(keep)
         readers = [0] * len(nodes)  # the nodes not yet given each node's result (a local run's)
@@ -266,6 +270,16 @@ class Runner:
                 pipe.send(steps[0] if len(chain) == 1 else ("chain", steps))
                 sent[w] = chain
 
+            gone: set[int] = set()
+
+            def let_go() -> None:
+                """The idle workers let go once nothing is left to give out (``last``)."""
+                if last and not sched.left:
+                    for w in range(len(self.pool)):
+                        if sent[w] is None and w not in gone:
+                            _let_go(self.pool[w][1])
+                            gone.add(w)
+
             for w in range(len(self.pool)):
                 give(w)
             while any(sent):
@@ -276,6 +290,7 @@ class Runner:
                     if pipe in ready:
                         chain, sent[w] = sent[w], None
                         reply = _reply(proc, pipe)
+                        let_go()  # before its results are handled
                         for i, r in zip(chain, reply if len(chain) > 1 else [reply], strict=True):
                             got(i, r)
                             sched.finished(i)
@@ -283,6 +298,10 @@ class Runner:
                         _lost(proc)
                 for w in (*live, *range(len(self.pool))):  # the workers that answered first
                     give(w)
+                let_go()
+            if gone:  # reaped when the Runner ends; a later graph forks a new pool
+                self.ended += self.pool
+                self.pool = []
         return results
 
     def _start_pool(self) -> None:
@@ -330,6 +349,7 @@ class _Schedule:
         self.ready = sorted((n.rank, i) for i, n in enumerate(nodes) if not self.waiting[i])
         self.owner: dict = {}  # tile -> the worker that first read it
         self.chained = [False] * len(nodes)  # taken with the node it waits for (follower)
+        self.left = len(nodes)  # not taken yet (by take or follower)
 
     def take(self, worker: int | None, own: bool = False) -> int | None:
         """The node ``worker`` runs next (None: none ready); ``own``: only one of its own (None if none)."""
@@ -350,6 +370,7 @@ class _Schedule:
                     return None
                 k = 0 if some is None else some
             self._claim(self.ready[k][1], worker)
+        self.left -= 1
         return self.ready.pop(k)[1]
 
     def follower(self, i: int, worker: int) -> int | None:
@@ -364,6 +385,7 @@ class _Schedule:
         if best is not None:
             self.chained[best] = True
             self._claim(best, worker)
+            self.left -= 1
         return best
 
     def _mine(self, tile, worker: int) -> bool:
@@ -380,6 +402,14 @@ class _Schedule:
             self.waiting[u] -= 1
             if not self.waiting[u] and not self.chained[u]:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
+
+
+def _let_go(pipe) -> None:
+    """A pool worker told to end (its loop returns at the None), not waited for here."""
+    try:
+        pipe.send(None)
+    except OSError:
+        pass
 
 
 def _reply(proc, pipe):
