@@ -123,8 +123,15 @@ WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int3
     return above;
 }
 
-static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, const int32_t *ry, int32_t a,
-                       int32_t vx, int32_t vy)
+/* fan_may_fit's test where its own does not apply (no triangle, a holes mask, no bound): test_point's. */
+WM_NOINLINE static int other_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+{
+    int32_t x[3] = {q->vx + q->dx[a], q->vx + q->dx[j], q->vx + q->dx[k]};
+    int32_t y[3] = {q->vy + q->dy[a], q->vy + q->dy[j], q->vy + q->dy[k]};
+    return test_point(t, x, y, q->vx, q->vy);
+}
+
+static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
 {
     const wm_refiner *r = t->r;
     int32_t n = q->n, k, j, fk, fj, e0;
@@ -152,10 +159,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, const int32_t *rx, cons
         q->D = D, q->av = av;
         return !normal_above(q, t, a, j, k);
     }
-    {
-        int32_t x[3] = {rx[a], rx[j], rx[k]}, y[3] = {ry[a], ry[j], ry[k]};
-        return !test_point(t, x, y, vx, vy);
-    }
+    return !other_above(q, t, a, j, k);
 }
 
 /* The probe of the ear clipping's plan (wm_ring_plan_probe): v's sample above zeta. */
@@ -213,7 +217,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
         /* First the cheap test: v's own sample against the new triangle that holds it (a lower bound
          * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
-        if (a >= 0 && !fan_may_fit(&q, &tested, rx, ry, a, vx, vy)) continue;
+        if (a >= 0 && !fan_may_fit(&q, &tested, a)) continue;
         if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe, &big) != WM_OK) continue;
         if (a < 0 && n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
         /* Then the scans, the plan's largest triangle first (the plan found it: big): a candidate is
