@@ -78,11 +78,11 @@ def _timed_map(self, fn, tasks, done=None):
     return [o[0] for o in out]
 
 
-def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None):
+def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None, last=False):
     """Runner.graph with every node timed; every result kept until the end (each carries its timing), the
     ones outside ``keep`` None in what it returns, as Runner.graph's."""
     if nodes and nodes[0].fn is timed:  # a map's tasks (Runner.map makes a graph of them), timed there
-        return _graph(self, nodes, done, homes, shared, keep)
+        return _graph(self, nodes, done, homes, shared, keep, last)
     def wrap(a):
         if isinstance(a, runner.Ref):
             return runner.Ref(a.node, functools.partial(_picked, a.pick) if a.pick else _result)
@@ -90,7 +90,7 @@ def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None):
 
     wrapped = [runner.Node(timed, (n.fn, *map(wrap, n.args)), n.rank, n.tiles) for n in nodes]
     t0 = time.perf_counter()
-    out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes, shared)
+    out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes, shared, last=last)
     steps = [f"{n.rank[1]} {n.fn.__name__.strip('_')}" for n in nodes]
     LOG.append(("graph", t0, time.perf_counter(), [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
     GRAPH.append((nodes, homes or {}, [o[1][1] for o in out], self.workers))
