@@ -4,11 +4,12 @@ without the cost of ``@dataclass`` at import.
 ``dataclasses.dataclass`` writes each class's ``__init__``, ``__repr__``, ``__eq__`` (and a frozen
 class's ``__setattr__``, ``__delattr__``, ``__hash__``) as source text and compiles it: about 6 M
 instructions a class, 125 M for the 21 classes `wavemesh mesh` imports, most of wavemesh's start-up
-(bench/process_instructions.py counts it); the 15 of a tiled run's wavemesh.tiles another 50 M (`import
-numpy, wavemesh.cli, wavemesh.tiles` under callgrind, over `import numpy`: 163 M as dataclasses, 113 M).  ``@record`` takes the same class body (annotated fields,
-defaults, ``dataclasses.field(default_factory=...)``, ``__post_init__``) and the options used here
-(``frozen``, ``kw_only``, ``eq=False``), and gives the class generic methods made once in this module, so a class costs
-only the reading of its annotations.  The methods behave as dataclasses' do: the same positional and
+(bench/process_instructions.py counts it); the 15 of a tiled run's wavemesh.tiles another 50 M
+(`import numpy, wavemesh.cli, wavemesh.tiles` under callgrind, over `import numpy`: 163 M as
+dataclasses, 113 M).  ``@record`` takes the same class body (annotated fields, defaults,
+``dataclasses.field(default_factory=...)``, ``__post_init__``) and the options used here (``frozen``,
+``kw_only``, ``eq=False``), and gives the class generic methods made once in this module, so a class
+costs only the reading of its annotations.  The methods behave as dataclasses' do: the same positional and
 keyword arguments, ``repr``, equality over the fields (same class only), hashing of a frozen record,
 ``dataclasses.FrozenInstanceError`` on assignment to a frozen one.
 
