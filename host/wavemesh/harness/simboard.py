@@ -11,7 +11,9 @@ import importlib.util
 import re
 from pathlib import Path
 
-from wavemesh.device.stream import Timeouts
+from wavemesh.device import memmap
+from wavemesh.device import protocol as P
+from wavemesh.device.stream import Timeouts, reachable
 from wavemesh.harness.devproc import DeviceProcess
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -47,10 +49,6 @@ def fastest_rate() -> int:
     """The rate `--link-baud auto` takes on the simulated board (and the ULX3S it models): the first of
     protocol.COMMON_BAUDS that the divisors its HELLO_REPLY states reach (memmap: CLK_HZ, UART_DIV_MIN up
     to the largest the UART's DIV field holds; firmware/board/app/main.c); 3,000,000 at 30 MHz."""
-    from wavemesh.device import memmap
-    from wavemesh.device import protocol as P
-    from wavemesh.device.stream import reachable
-
     div = next(f for r in memmap.UART.registers if r.name == "DIV" for f in r.fields if f.name == "DIV")
     div_max = div.mask >> div.lsb
     return next(hit[1] for b in P.COMMON_BAUDS
