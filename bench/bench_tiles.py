@@ -375,8 +375,9 @@ def markdown(r: dict) -> str:
             f"**Workers** ({TILE_N}^2, tile {WORKERS_TILE}, {'Dask ' + via if via else 'the local pool'}): "
             "the speed-up t1 / tw, the parallel efficiency t1 / (w tw), and the parent's own CPU time (its "
             "workers apart) against t1, the serial part that bounds the speed-up (at most t1 / parent).  "
-            "One worker runs in the run's own process (its parent time is all the work).  Wall times on a "
-            "machine shared with other jobs are noisy; CPU seconds beside them.",
+            "One worker runs in the run's own process (its parent time is all the work).  One run each: wall "
+            "times on a machine shared with other jobs are noisy, CPU seconds beside them; the 2-core bar's "
+            "measure is `bench_tiles.py pair` (whole processes in turn, medians: docs/tiles.md).",
             "",
             "| workers | wall s | speed-up | efficiency | CPU s | parent CPU s | parent / t1 | peak MiB |",
             "|---|---|---|---|---|---|---|---|",
