@@ -614,8 +614,10 @@ def _tiled_command(args, params: api.MeshParams, ports: list[str] | None = None,
                                log=say, sink=out.start(plan, comment(plan)))
         r = out.finish()
     if say:
+        default = " (the default for a grid this large; --tile off meshes it whole)" \
+            if getattr(args, "tile_default", False) else ""
         say(f"{args.input}: {plan.width} x {plan.height} in {r['layout'][0]} x {r['layout'][1]} tiles of "
-            f"at most {plan.tile}: {r['vertices']} vertices, {r['triangles']} triangles, "
+            f"at most {plan.tile}{default}: {r['vertices']} vertices, {r['triangles']} triangles, "
             f"E_max normal {r['e_max_normal']:.6g}, vertical {r['e_max_vertical']:.6g} (zeta {p.zeta:g}, "
             f"{p.metric}); the tiles' shared sides match: the mesh is proper")
         say(f"wrote {args.output}" + "".join(f", {q}" for q in (args.report, args.render) if q)
@@ -651,7 +653,7 @@ def mesh_command(args) -> int:
     try:
         hf = _load(args, args.input, memory=True, tile_from=auto)
     except api.TileInstead as t:
-        args.tile = t.tile
+        args.tile, args.tile_default = t.tile, True  # the summary says the default chose the tiles
         return _tiled_command(args, params, inputs=_inputs(args, args.input))
     result = api.mesh(hf, params)
     table = _refiner_table(result, params)
@@ -659,6 +661,10 @@ def mesh_command(args) -> int:
     if tile is not None:  # a grid the default tiles, meshed whole: say so, and which option made it
         table.insert(0, f"  meshed whole: {whole} is not done in tiles (without it this grid goes in tiles "
                         f"of {tile}; docs/usage.md, \"Threads and tiles\")")
+    elif args.workers is not None and args.workers > 1:  # workers spread tiles: none here
+        why = "--tile off" if args.tile == "off" else \
+            f"below {api.AUTO_TILE_SAMPLES:,} samples the default meshes whole; --tile N tiles it"
+        table.insert(0, f"  meshed whole by one process: --workers {args.workers} spreads tiles ({why})")
     roi = result.report.get("roi")
     if roi:
         table.append(f"  ROI: {roi['samples']} samples ({100 * roi['fraction']:.1f} %), E_max inside "

@@ -40,6 +40,8 @@ def test_over_the_threshold_the_default_is_tiled(dem, tmp_path, small):
     one, said1 = mesh(dem, tmp_path / "w1.obj", "--workers", "1")
     two, _ = mesh(dem, tmp_path / "w2.obj", "--workers", "2", "--metric", "normal")  # normal: the default
     assert one == tiled and "4 x 3 tiles of at most 64" in said1
+    assert "tiles of at most 64 (the default for a grid this large; --tile off meshes it whole)" in said1
+    assert "the default" not in said  # --tile 64: the user's choice
     assert two == tiled
     untiled, _ = mesh(dem, tmp_path / "u.obj", "--tile", "off")
     assert untiled != tiled and b"tiled mesh" not in untiled and b"tiled mesh, tile=64" in tiled
@@ -52,6 +54,10 @@ def test_under_the_threshold_the_default_is_untiled(dem, tmp_path, monkeypatch):
     off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off")
     hf = api.load_input(str(dem))
     assert default == off and "refiner:" in said and "tiles of at most" not in said
+    assert "meshed whole by one process: --workers 2 spreads tiles (below" in said  # not silently ignored
+    assert "--workers 3 spreads tiles (--tile off)" in mesh(dem, tmp_path / "o3.obj", "--tile", "off",
+                                                            "--workers", "3")[1]
+    assert "spreads tiles" not in mesh(dem, tmp_path / "w1.obj", "--workers", "1")[1]
     assert "meshed whole" not in mesh(dem, tmp_path / "c.obj", "--check-levels")[1]  # under: nothing to say
     assert api.mesh(hf, api.MeshParams(refine=api.RefineParams(zeta=3.0))).mesh.n_triangles \
         == default.count(b"\nf ")
