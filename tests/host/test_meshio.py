@@ -69,6 +69,21 @@ def test_round_trip(tmp_path, ext, seed):
     assert same_bits(z, heights[mesh.xy[:, 1], mesh.xy[:, 0]])
 
 
+@pytest.mark.parametrize("ext,kind", [(".stl", "binary STL"), (".glb", "glTF binary")])
+def test_formats_not_read_back_say_which_are(tmp_path, ext, kind):
+    # STL and glTF are written, not read back: one line that names the format and the ones that are read,
+    # whatever the file is called; other binary data stays "not a mesh file"
+    mesh = Mesh(9, 7, [(0, 0), (3, 0), (3, 2), (0, 2)], [(0, 1, 2), (0, 2, 3)])
+    write_mesh(tmp_path / f"m{ext}", mesh, np.zeros((7, 9)))
+    (tmp_path / "renamed.obj").write_bytes((tmp_path / f"m{ext}").read_bytes())
+    for path in (tmp_path / f"m{ext}", tmp_path / "renamed.obj"):
+        with pytest.raises(InputError, match=f"a {kind} file: meshes are read back from OBJ and PLY only"):
+            read_mesh(path)
+    (tmp_path / "noise.stl").write_bytes(bytes(range(256)) * 3)
+    with pytest.raises(InputError, match="not a mesh file"):
+        read_mesh(tmp_path / "noise.stl")
+
+
 @pytest.mark.parametrize("ext", [".obj", ".ply"])
 def test_grid_size_comes_from_the_comment(tmp_path, ext):
     # A mesh that does not reach the last row and column: W, H must come from the file's comment.

@@ -183,8 +183,22 @@ def _parse_obj_fast(lines: list[str]):
     return xyz[:, 0], xyz[:, 1], xyz[:, 2], idx.reshape(-1, 3) - 1, comments, 1
 
 
+def _written_kind(data: bytes) -> str | None:
+    """"glTF binary" or "binary STL" when ``data`` is one (glTF's magic; STL's 80-byte header and triangle
+    count that give the file's length), else None."""
+    if data[:4] == b"glTF":
+        return "glTF binary"
+    if len(data) >= 84 and 84 + 50 * struct.unpack_from("<I", data, 80)[0] == len(data):
+        return "binary STL"
+    return None
+
+
 def _parse_obj(data: bytes):
     if b"\0" in data:
+        kind = _written_kind(data)
+        if kind:  # a format wavemesh writes but does not read back: say which can be
+            raise _Bad(f"a {kind} file: meshes are read back from OBJ and PLY only (mesh again with "
+                       f"-o NAME.obj or NAME.ply to check or render it)")
         raise _Bad("not a mesh file (binary data, and not PLY)")
     text = data.decode("utf-8", errors="replace")  # only comments and names may be non-ASCII
     text = text.replace("\\\r\n", " ").replace("\\\n", " ")  # OBJ line continuations
