@@ -110,12 +110,19 @@ static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 
 /* fan_may_fit's test of v against the fan triangle (p_a, p_j, p_k) in the normal metric, its |V| (av)
  * above zeta D / 2^16: far_above, else wm_point_above_v (which keeps the slope factor when v is within). */
+/* The fan triangle (p_a, p_j, p_k)'s corners. */
+static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, int32_t x[3], int32_t y[3])
+{
+    x[0] = q->vx + q->dx[a], x[1] = q->vx + q->dx[j], x[2] = q->vx + q->dx[k];
+    y[0] = q->vy + q->dy[a], y[1] = q->vy + q->dy[j], y[2] = q->vy + q->dy[k];
+}
+
 WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
 {
     const wm_refiner *r = t->r;
-    int32_t x[3] = {q->vx + q->dx[a], q->vx + q->dx[j], q->vx + q->dx[k]};
-    int32_t y[3] = {q->vy + q->dy[a], q->vy + q->dy[j], q->vy + q->dy[k]};
+    int32_t x[3], y[3];
     int above;
+    fan_corners(q, a, j, k, x, y);
     if (far_above(q, &r->params, a, j, k, q->D, q->av)) return 1;
     above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
@@ -126,8 +133,8 @@ WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int3
 /* fan_may_fit's test where its own does not apply (no triangle, a holes mask, no bound): test_point's. */
 WM_NOINLINE static int other_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
 {
-    int32_t x[3] = {q->vx + q->dx[a], q->vx + q->dx[j], q->vx + q->dx[k]};
-    int32_t y[3] = {q->vy + q->dy[a], q->vy + q->dy[j], q->vy + q->dy[k]};
+    int32_t x[3], y[3];
+    fan_corners(q, a, j, k, x, y);
     return test_point(t, x, y, q->vx, q->vy);
 }
 

@@ -138,7 +138,7 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->cache_mask = cache_slots(vc) - 1;
         r->normals = (struct wm_normal_slot *)(void *)q;
         r->ecache =
-            (struct wm_ecache_slot *)(void *)(q + sizeof(struct wm_normal_slot) * (uint64_t)cache_slots(vc));
+            (struct wm_ecache_slot *)(void *)(q + sizeof(struct wm_normal_slot) * (uint64_t)(r->cache_mask + 1));
     }
     r->field = *f;
     r->params = *p;

@@ -7,14 +7,8 @@ test_sanitized.py's refinements, and any use of an undefined value fails the run
 import shutil
 import subprocess
 
-import numpy as np
 import pytest
-from test_sanitized import CASES
-from wavemesh import api
-from wavemesh.harness.fwio import write_input
-from wavemesh.io.heightfield import from_array
-from wavemesh.model.haar import decompose
-from wavemesh.refine import native
+from test_sanitized import CASES, write_case
 
 pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None,
                                 reason="valgrind is not installed (tools/debian-packages.txt)")
@@ -22,12 +16,7 @@ pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None,
 
 @pytest.mark.parametrize("name,make,levels,params", CASES, ids=[c[0] for c in CASES])
 def test_no_storage_read_before_written(name, make, levels, params, release_build, tmp_path):
-    hf = from_array(make(np.random.default_rng(5)))
-    job = api.triangulate(hf, levels)
-    fp = native.fixed_params(params, hf.scale)
-    det = native.details_array(decompose(hf.samples, levels))
-    cap = max(2 * (hf.width - 1) * (hf.height - 1), 8)
-    write_input(tmp_path / "in.bin", hf.samples, det, levels, job.mesh, fp, cap)
+    write_case(make, levels, params, tmp_path / "in.bin")
     r = subprocess.run(["valgrind", "--tool=memcheck", "--error-exitcode=99", "--track-origins=yes",
                         str(release_build / "wm_run"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
                        capture_output=True, text=True, timeout=300)

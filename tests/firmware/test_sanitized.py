@@ -26,14 +26,21 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("name,make,levels,params", CASES, ids=[c[0] for c in CASES])
-def test_refine_under_sanitizers(name, make, levels, params, check_build, release_build, tmp_path):
+def write_case(make, levels, params, path):
+    """A case's runner input (tests/firmware/wm_run.c) written to ``path``: its height field and initial
+    mesh (returned: the height field and the initial job)."""
     hf = from_array(make(np.random.default_rng(5)))
     job = api.triangulate(hf, levels)
     fp = native.fixed_params(params, hf.scale)
     det = native.details_array(decompose(hf.samples, levels))
     cap = max(2 * (hf.width - 1) * (hf.height - 1), 8)
-    write_input(tmp_path / "in.bin", hf.samples, det, levels, job.mesh, fp, cap)
+    write_input(path, hf.samples, det, levels, job.mesh, fp, cap)
+    return hf, job
+
+
+@pytest.mark.parametrize("name,make,levels,params", CASES, ids=[c[0] for c in CASES])
+def test_refine_under_sanitizers(name, make, levels, params, check_build, release_build, tmp_path):
+    hf, job = write_case(make, levels, params, tmp_path / "in.bin")
     meshes = []
     for build in (check_build, release_build):
         r = subprocess.run([str(build / "wm_run"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
