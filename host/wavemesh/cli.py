@@ -662,8 +662,9 @@ def mesh_command(args) -> int:
         table.insert(0, f"  meshed whole: {whole} is not done in tiles (without it this grid goes in tiles "
                         f"of {tile}; docs/usage.md, \"Threads and tiles\")")
     elif args.workers is not None and args.workers > 1:  # workers spread tiles: none here
-        why = "--tile off" if args.tile == "off" else \
-            f"below {api.AUTO_TILE_SAMPLES:,} samples the default meshes whole; --tile N tiles it"
+        # why: the option, else api.auto_tile's answer for this grid (the threshold is its own)
+        why = "--tile off" if args.tile == "off" else f"{whole} is not done in tiles" if whole else \
+            f"the default meshes a {hf.width} x {hf.height} grid whole; --tile N tiles it"
         table.insert(0, f"  meshed whole by one process: --workers {args.workers} spreads tiles ({why})")
     roi = result.report.get("roi")
     if roi:

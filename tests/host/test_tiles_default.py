@@ -54,7 +54,12 @@ def test_under_the_threshold_the_default_is_untiled(dem, tmp_path, monkeypatch):
     off, _ = mesh(dem, tmp_path / "off.obj", "--tile", "off")
     hf = api.load_input(str(dem))
     assert default == off and "refiner:" in said and "tiles of at most" not in said
-    assert "meshed whole by one process: --workers 2 spreads tiles (below" in said  # not silently ignored
+    # not silently ignored; why: the grid under the default's threshold (as the test lowered it), or
+    # the option that keeps it whole (--tile N would refuse it: not "--tile N tiles it")
+    assert "meshed whole by one process: --workers 2 spreads tiles (the default meshes a 203 x 170 grid " \
+           "whole; --tile N tiles it)" in said
+    assert "--workers 2 spreads tiles (--lod is not done in tiles)" in mesh(
+        dem, tmp_path / "lod.obj", "--workers", "2", "--lod", str(tmp_path / "lod"))[1]
     assert "--workers 3 spreads tiles (--tile off)" in mesh(dem, tmp_path / "o3.obj", "--tile", "off",
                                                             "--workers", "3")[1]
     assert "spreads tiles" not in mesh(dem, tmp_path / "w1.obj", "--workers", "1")[1]
