@@ -746,10 +746,8 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
 def _switch_baud(dev, info, link_baud, say, warn):
     """--link-baud: the device's HELLO at the rate the line runs at from now on (the start rate after a
     switch that did not happen or failed: one line to ``warn`` says so)."""
-    from wavemesh.device import protocol as P  # start-up: the device path only for `stream` (see the top)
-
     if link_baud == "auto":
-        rate = next((b for b in P.COMMON_BAUDS if info.reachable(b)), None)
+        rate = info.auto_rate
         if rate is None:
             if info.div_max:
                 warn(f"--link-baud auto: the device reaches none of the common rates; staying at "

@@ -111,6 +111,12 @@ def reachable(clk_hz: int, div_min: int, div_max: int, baud: int) -> tuple[int, 
     return (div, rate) if abs(rate - baud) <= P.BAUD_TOLERANCE * baud else None
 
 
+def auto_rate(clk_hz: int, div_min: int, div_max: int) -> int | None:
+    """The rate `--link-baud auto` asks of a device whose HELLO_REPLY states clk_hz and the divisors
+    div_min..div_max: the first of protocol.COMMON_BAUDS it reaches (reachable), or None."""
+    return next((b for b in P.COMMON_BAUDS if reachable(clk_hz, div_min, div_max, b)), None)
+
+
 @dataclass(frozen=True)
 class DeviceInfo:
     """HELLO_REPLY: what the device is and can do."""
@@ -151,6 +157,11 @@ class DeviceInfo:
         """(divisor, the device's rate) nearest to baud, or None when the device cannot switch or lands
         farther than protocol.BAUD_TOLERANCE from it."""
         return reachable(self.clk_hz, self.div_min, self.div_max, baud)
+
+    @property
+    def auto_rate(self) -> int | None:
+        """The rate `--link-baud auto` asks of the device (auto_rate), or None."""
+        return auto_rate(self.clk_hz, self.div_min, self.div_max)
 
     @property
     def resend_s(self) -> float:

@@ -12,8 +12,7 @@ import re
 from pathlib import Path
 
 from wavemesh.device import memmap
-from wavemesh.device import protocol as P
-from wavemesh.device.stream import Timeouts, reachable
+from wavemesh.device.stream import Timeouts, auto_rate, reachable
 from wavemesh.harness.devproc import DeviceProcess
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -51,8 +50,8 @@ def fastest_rate() -> int:
     to the largest the UART's DIV field holds; firmware/board/app/main.c); 3,000,000 at 30 MHz."""
     div = next(f for r in memmap.UART.registers if r.name == "DIV" for f in r.fields if f.name == "DIV")
     div_max = div.mask >> div.lsb
-    return next(hit[1] for b in P.COMMON_BAUDS
-                if (hit := reachable(memmap.CLK_HZ, memmap.UART_DIV_MIN, div_max, b)))
+    return reachable(memmap.CLK_HZ, memmap.UART_DIV_MIN, div_max,
+                     auto_rate(memmap.CLK_HZ, memmap.UART_DIV_MIN, div_max))[1]
 
 
 class SimBoard(DeviceProcess):
