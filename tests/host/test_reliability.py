@@ -182,7 +182,7 @@ def test_a_raster_claiming_billions_of_samples_is_refused_before_reading(tmp_pat
     # in tiles (as `wavemesh mesh` meshes a grid this large by default): read window by window, the first
     # window's read fails: one error line, not rasterio's traceback
     r = wavemesh("mesh", tmp_path / "h.tif", "-o", tmp_path / "h.obj", "--tile", "513", memory=3 << 30)
-    assert r.returncode == 2 and "h.tif: raster data is corrupt" in one_error(r.stderr)
+    assert r.returncode == 2 and "h.tif: TIFF data is corrupt" in one_error(r.stderr)
 
 
 def test_a_pgm_header_beyond_any_grid_is_refused(tmp_path):
@@ -284,3 +284,26 @@ def test_64_bit_integers_exact_or_refused(tmp_path):
         with pytest.raises(InputError, match="53 significant bits"):
             from_array(np.full((3, 3), extreme, dtype))
     assert from_array(np.array([[-(1 << 63), 0], [0, 0]], np.int64)).values[0, 0] == -(2.0 ** 63)
+
+
+def test_a_corrupt_raster_is_one_error_whole_or_by_windows(tmp_path):
+    """A GeoTIFF whose header reads but whose strips do not: the whole read (an untiled run) and the
+    window read (a tiled one, wavemesh.tiles) give the same error line."""
+    import rasterio
+    from wavemesh.io import readers
+
+    path = tmp_path / "c.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=64, height=64, count=1, dtype="float32",
+                       compress="deflate", transform=rasterio.Affine(1, 0, 0, 0, -1, 64)) as ds:
+        ds.write(np.random.default_rng(1).random((1, 64, 64)).astype(np.float32))
+    data = bytearray(path.read_bytes())
+    for i in range(200, len(data) - 400):  # the compressed strips, not the header or its tags
+        data[i] ^= 0x5A
+    path.write_bytes(bytes(data))
+    said = []
+    for read in (lambda: load_heightfield(str(path)),
+                 lambda: readers.read_raster_window(str(path), 0, 0, 64, 64)):
+        with pytest.raises(InputError) as e:
+            read()
+        said.append(str(e.value))
+    assert said[0] == said[1] and said[0].startswith(f"cannot read {path}: TIFF data is corrupt ("), said

@@ -407,13 +407,12 @@ def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
     ``crs`` then also None.
     """
     import rasterio  # imported here: only GDAL rasters need rasterio (and its start-up cost)
-    from rasterio._err import CPLE_BaseError  # as rasterio's
-    from rasterio.errors import NotGeoreferencedWarning, RasterioError  # as rasterio's
+    from rasterio.errors import NotGeoreferencedWarning  # as rasterio's
 
     _quiet_rasterio_logs()
     regular_file(path)
     kind = _RASTER_KINDS.get(ext)
-    errors = (RasterioError, CPLE_BaseError, *_read_errors())
+    errors = _raster_errors()
     try:
         # AAIGRID_DATATYPE: ESRI ASCII grids as float64, not float32 (their text holds any precision)
         env = rasterio.Env(AAIGRID_DATATYPE="Float64")
@@ -462,12 +461,25 @@ def _read_raster(path: str, ext: str, size_check=lambda w, h, itemsize: None
                 transform = tuple(float(t) for t in ds.transform[:6]) if georeferenced else None
                 crs = ds.crs.to_string() if ds.crs is not None else None
     except errors as e:
-        raise InputError(
-            f"cannot read {path}: {kind or 'raster'} data is corrupt ({_gdal_message(e, path)})"
-        ) from None
+        raise _corrupt_raster(path, e) from None
     if (scale, offset) != (1.0, 0.0):
         array = array.astype(np.float64) * scale + offset
     return array, transform, crs
+
+
+def _raster_errors() -> tuple[type[BaseException], ...]:
+    """What rasterio and the thin readers raise for a raster they cannot read (_read_errors)."""
+    from rasterio._err import CPLE_BaseError  # as rasterio's
+    from rasterio.errors import RasterioError  # imported here: only GDAL rasters need rasterio
+
+    return (RasterioError, CPLE_BaseError, *_read_errors())
+
+
+def _corrupt_raster(path: str, e: BaseException) -> InputError:
+    """The error of a raster whose samples cannot be read, whole (_read_raster) or by windows (a tiled
+    run: read_raster_window): the same line."""
+    kind = _RASTER_KINDS.get(os.path.splitext(path)[1].lower()) or "raster"
+    return InputError(f"cannot read {path}: {kind} data is corrupt ({_gdal_message(e, path)})")
 
 
 def _open_raster(path: str):
@@ -503,16 +515,14 @@ def raster_header(path: str) -> tuple[int, int, tuple[float, ...] | None, str | 
 def read_raster_window(path: str, x: int, y: int, w: int, h: int) -> np.ndarray:
     """The w x h window at (x, y) of band 1 of a GDAL raster as float64: masked samples NaN, the band's
     scale and offset applied (as _read_raster reads the whole raster)."""
-    from rasterio._err import CPLE_BaseError  # as rasterio's (_open_raster)
-    from rasterio.errors import RasterioError  # imported here: only GDAL rasters need rasterio
-    from rasterio.windows import Window  # (and its start-up cost), as _open_raster
+    from rasterio.windows import Window  # imported here: only GDAL rasters need rasterio (_open_raster)
 
     try:
         with _open_raster(path) as ds:
             a = ds.read(1, window=Window(x, y, w, h), masked=True)
             scale, offset = ds.scales[0], ds.offsets[0]
-    except (RasterioError, CPLE_BaseError, *_read_errors()) as e:  # as _read_raster's
-        raise InputError(f"cannot read {path}: raster data is corrupt ({_gdal_message(e, path)})") from None
+    except _raster_errors() as e:
+        raise _corrupt_raster(path, e) from None
     v = np.ma.filled(a.astype(np.float64), np.nan)
     return v * scale + offset if (scale, offset) != (1.0, 0.0) else v
 
