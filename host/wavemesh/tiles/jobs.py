@@ -90,11 +90,9 @@ def tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None = None, 
     key = _cache_key(plan, t, window)
     if key is None:
         return _tile_heightfield(plan, t, window)
-    with _TILE_LOCK:
-        hf = _TILE_CACHE.get(key)
-        if hf is not None:
-            _TILE_CACHE.move_to_end(key)
-            return hf
+    hf = _held(key)
+    if hf is not None:
+        return hf
     hf = _tile_heightfield(plan, t, None)
     if not keep:
         return hf
@@ -118,6 +116,24 @@ def _cache_key(plan: TilePlan, t: Tile, window: np.ndarray | None) -> tuple | No
             file_identity(src.path))
 
 
+def _held(key: tuple | None) -> HeightField | None:
+    """The tile this process holds under ``key`` (_cache_key; now the last used), or None."""
+    if key is None:
+        return None
+    with _TILE_LOCK:
+        hf = _TILE_CACHE.get(key)
+        if hf is not None:
+            _TILE_CACHE.move_to_end(key)
+    return hf
+
+
+def _finite(plan: TilePlan, t: Tile, v: np.ndarray) -> np.ndarray:
+    """``v``, heights of tile ``t``, or InputError when one is NaN or infinite."""
+    if not np.all(np.isfinite(v)):
+        raise InputError(f"{plan.source.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
+    return v
+
+
 def forget_tile(plan: TilePlan, index: int) -> None:
     """The tile out of this process's tiles (its last step is done): its memory for the next tiles."""
     key = _cache_key(plan, plan.tiles[index], None)
@@ -134,9 +150,7 @@ def clear_tile_cache() -> None:
 
 def _tile_heightfield(plan: TilePlan, t: Tile, window: np.ndarray | None) -> HeightField:
     src, quant = plan.source, plan.quant
-    v = src.read(t.x, t.y, t.width, t.height) if window is None else window
-    if not np.all(np.isfinite(v)):
-        raise InputError(f"{src.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
+    v = _finite(plan, t, src.read(t.x, t.y, t.width, t.height) if window is None else window)
     samples, error = quant.quantised(v)
     hf = HeightField(values=v, samples=samples, scale=quant.scale, offset=quant.offset,
                      lossless=quant.lossless, source=f"{src.name} {t.name}",
@@ -276,20 +290,14 @@ def _seam_editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sid
     t = plan.tiles[r.index]
     mesh = Mesh(t.width, t.height, r.xy - np.array([t.x, t.y], dtype=np.int64), r.tris)
     fp = native.fixed_params(plan.params.refine, plan.quant.scale, plan.zeta_used, plan.spacing)
-    key = _cache_key(plan, t, window)
-    with _TILE_LOCK:
-        held = _TILE_CACHE.get(key) if key is not None else None
-        if held is not None:
-            _TILE_CACHE.move_to_end(key)
+    held = _held(_cache_key(plan, t, window))
     if held is not None or window is not None:
         hf = held if held is not None else tile_heightfield(plan, t, window, False)
         return Editable(mesh, native.error_within(hf.samples, fp), [side])
     on = _on_sides(mesh.xy, t.width, t.height)[side]
     at = mesh.xy[mesh.tris[on[mesh.tris].any(axis=1)].ravel()]  # their box (no np.unique: sides.conform)
     (x0, y0), (x1, y1) = at.min(axis=0).tolist(), at.max(axis=0).tolist()
-    v = plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1)
-    if not np.all(np.isfinite(v)):
-        raise InputError(f"{plan.source.name}: non-finite samples in {t.name}", hint="use --fill VALUE")
+    v = _finite(plan, t, plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1))
     samples = np.zeros((t.height, t.width), dtype=np.uint16)
     samples[y0 : y1 + 1, x0 : x1 + 1] = plan.quant.quantised(v)[0]
     test = native.error_within(samples, fp)
