@@ -69,7 +69,3 @@ def min_corner(x, y) -> tuple[int, int]:
     cross = sx[1] * sy[2] - sy[1] * sx[2]
     return dot, abs(cross)
 
-
-def min_angle(x, y) -> int:
-    """The smallest angle of the triangle in Q16 radians: wm_min_angle."""
-    return angle_q16(*min_corner(x, y))
