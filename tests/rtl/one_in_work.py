@@ -1,13 +1,24 @@
-"""The loop the benches of one-command-at-a-time units share (tri_slope_tb.py, udiv64_tb.py): commands into
-a port whose writer holds its beat once offered, results out of a port read with random ready, both
-driven each cycle after the falling edge and read with the inputs settled.  Checked on the way: a
-result, once offered, is held until taken; the unit takes no command while one is in work."""
+"""The loop the benches of one-command-at-a-time units share (tri_slope_tb.py, udiv64_tb.py, tri_angle_tb.py),
+and their reset: commands into a port whose writer holds its beat once offered, results out of a port read
+with random ready, both driven each cycle after the falling edge and read with the inputs settled.  Checked
+on the way: a result, once offered, is held until taken; the unit takes no command while one is in work."""
 
 from __future__ import annotations
 
 from collections import deque
 
-from cocotb.triggers import FallingEdge, ReadOnly
+from cocotb.triggers import ClockCycles, FallingEdge, ReadOnly
+
+
+async def reset(dut, *inputs) -> None:
+    """rst held three clocks with the given input handles (valids, data, ready) at 0; released after a
+    falling edge."""
+    dut.rst.value = 1
+    for h in inputs:
+        h.value = 0
+    await ClockCycles(dut.clk, 3)
+    await FallingEdge(dut.clk)
+    dut.rst.value = 0
 
 
 async def run(dut, rng, jobs, *, offer, s_ready, m_valid, m_ready, result, cmd_rate=1.0, res_rate=1.0,

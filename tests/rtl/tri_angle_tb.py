@@ -17,7 +17,6 @@ import random
 import cocotb
 import one_in_work
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, FallingEdge
 from tri_engine_tb import random_triangles
 from wavemesh.model.angle import angle_q16, min_corner
 
@@ -55,14 +54,7 @@ class Bench:
 
     async def reset(self):
         dut = self.dut
-        dut.rst.value = 1
-        dut.s_cmd_valid.value = 0
-        dut.s_cmd_x.value = 0
-        dut.s_cmd_y.value = 0
-        dut.m_res_ready.value = 0
-        await ClockCycles(dut.clk, 3)
-        await FallingEdge(dut.clk)
-        dut.rst.value = 0
+        await one_in_work.reset(dut, dut.s_cmd_valid, dut.s_cmd_x, dut.s_cmd_y, dut.m_res_ready)
 
     def offer(self, beat) -> None:
         dut = self.dut

@@ -18,7 +18,6 @@ import random
 import cocotb
 import one_in_work
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, FallingEdge
 from tri_engine_tb import random_triangles
 from wavemesh.model.tri_slope import slope_root
 
@@ -61,19 +60,8 @@ class Bench:
 
     async def reset(self):
         dut = self.dut
-        dut.rst.value = 1
-        dut.s_cmd_valid.value = 0
-        dut.s_cmd_x.value = 0
-        dut.s_cmd_y.value = 0
-        dut.s_cmd_z.value = 0
-        dut.s_cmd_sx.value = 0
-        dut.s_cmd_sy.value = 0
-        dut.s_root_x.value = 0
-        dut.s_root_valid.value = 0
-        dut.m_res_ready.value = 0
-        await ClockCycles(dut.clk, 3)
-        await FallingEdge(dut.clk)
-        dut.rst.value = 0
+        await one_in_work.reset(dut, dut.s_cmd_valid, dut.s_cmd_x, dut.s_cmd_y, dut.s_cmd_z, dut.s_cmd_sx,
+                                dut.s_cmd_sy, dut.s_root_x, dut.s_root_valid, dut.m_res_ready)
 
     def offer(self, beat) -> None:
         """Drive a triangle command (tri, z, sx, sy), a root command ("root", x) or none."""

@@ -18,7 +18,6 @@ import random
 import cocotb
 import one_in_work
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, FallingEdge
 
 SEED = int(os.environ.get("UDIV64_SEED", "1"))
 STEPS = int(os.environ.get("UDIV64_STEPS", "2"))
@@ -60,14 +59,7 @@ async def run(dut, rng, jobs, cmd_rate=1.0, res_rate=1.0, max_cycles=1_000_000):
 
 async def start(dut):
     cocotb.start_soon(Clock(dut.clk, 10, unit="ns").start())
-    dut.rst.value = 1
-    dut.s_valid.value = 0
-    dut.s_n.value = 0
-    dut.s_d.value = 0
-    dut.m_ready.value = 0
-    await ClockCycles(dut.clk, 3)
-    await FallingEdge(dut.clk)
-    dut.rst.value = 0
+    await one_in_work.reset(dut, dut.s_valid, dut.s_n, dut.s_d, dut.m_ready)
 
 
 def check(jobs, results):
