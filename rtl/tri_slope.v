@@ -384,7 +384,7 @@ always @(posedge clk) begin
     end
 end
 
-// bits never used: the products' tops (below their bounds), the divisions' remainders' last values
+// bits never used: the products' tops (below their bounds), the shifted slopes' tops (below 2^31)
 wire unused = ^{d_full[2*CB+2:DW], ga_sh[62:31], gb_sh[62:31],
                 na_mag[CB+18:NAW], nb_mag[CB+18:NAW]};
 

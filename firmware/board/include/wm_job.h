@@ -83,7 +83,8 @@ int wm_job_emit_initial(wm_proto *p, const wm_proto_job *j, const wm_job_initial
 /*
  * The refine-and-emit loop: the refiner (firmware/src) from the initial triangulation in mem[0..bytes)
  * (wm_refine_bound(W, H, j->capacity) bytes, not cleared: the refiner writes every entry before it reads
- * it, so what an earlier job left there never reaches this one), each level sent through wm_proto_emit_level as soon as it is made, the initial first.
+ * it, so what an earlier job left there never reaches this one), each level sent through
+ * wm_proto_emit_level as soon as it is made, the initial first.
  * Returns wm_proto_emit_level's code when it asks to stop, WM_PROTO_E_NONE when every level went out,
  * WM_PROTO_E_CAPACITY (detail: the level) when the storage ran out, WM_PROTO_E_JOB (detail: the
  * library's code) on any other refiner error.
