@@ -171,7 +171,7 @@ async def steep_and_degenerate(dut):
 
 @cocotb.test()
 async def latency(dut):
-    """Nothing stalls: a usual triangle and scale (e = 15) takes 1 + 2 clocks, the division's (CB + 49
+    """Nothing stalls: a usual triangle and scale (e = 15) takes exactly 1 + 2 clocks, the division's (CB + 49
     - 15) / DIV_STEPS, 5, the root's 32 / SQRT_STEPS and 1 (48 on the SoC's)."""
     rng = random.Random(SEED + 2)
     tb = Bench(dut, rng)
@@ -180,5 +180,5 @@ async def latency(dut):
     results, cycles = await tb.run(jobs)
     tb.check(jobs, results)
     dut._log.info("one triangle: %d cycles", cycles)
-    bound = 3 + -(-(CB + 49 - 15) // DIV_STEPS) + 5 + 32 // SQRT_STEPS + 1 + 3
-    assert cycles <= bound, f"{cycles} cycles for one slope factor (bound {bound})"
+    want = 3 + -(-(CB + 49 - 15) // DIV_STEPS) + 5 + 32 // SQRT_STEPS + 1
+    assert cycles == want, f"{cycles} cycles for one slope factor (the timing's {want})"
