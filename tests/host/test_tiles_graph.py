@@ -243,6 +243,23 @@ def test_schedule_chains_a_node_with_its_follower():
                 [k + 1 for k in range(24)] + [2 * k + 3 for k in range(23)]
 
 
+def test_schedule_takes_only_its_own_when_asked():
+    """take(w, own=True) (Runner.graph's batches: BATCH_READY): the first ready node of w's own (its first
+    tile w's: a side between two workers' tiles is its first tile's worker's), or None when only other
+    workers' are ready, which it leaves as they were; take without it gives another's rather than wait.
+    ``left``: the nodes not yet taken (a last graph lets its idle workers go at 0)."""
+    nodes = [Node(_add, (k,), (0, k), tiles) for k, tiles in enumerate(((1,), (1, 0), (0,), (1,)))]
+    s = _Schedule(nodes, {0: 0, 1: 1})
+    assert s.left == 4
+    assert s.take(0, own=True) == 2 and s.left == 3
+    assert s.take(0, own=True) is None and [i for _, i in s.ready] == [0, 1, 3] and s.left == 3  # (1, 0) not
+    assert s.take(1, own=True) == 0
+    assert s.take(1, own=True) == 1  # (1, 0): its first tile worker 1's
+    assert s.take(0, own=True) is None
+    assert s.take(0) == 3 and s.left == 0 and s.ready == []  # another's rather than wait
+    assert s.take(0) is None and s.left == 0
+
+
 class _Box:
     """A result a weak reference can follow."""
 
