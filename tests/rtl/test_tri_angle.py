@@ -7,17 +7,25 @@ extremes, and the smallest corners of random triangles, under random back-pressu
 """
 
 import ctypes
+import math
 import random
 
 from tri_angle_tb import random_xy
 from tri_engine_tb import random_triangles
 from wavemesh.harness.rtl_runner import RTL, run
-from wavemesh.model.angle import angle_q16, min_corner
+from wavemesh.model.angle import ATAN_Q16, HALF_PI_Q16, angle_q16, min_corner
 from wavemesh.refine import native
 
 
 def test_tri_angle():
     run("tri_angle", [RTL / "tri_angle.v"], "tri_angle_tb", extra_env={"TRI_ANGLE_SEED": "1"})
+
+
+def test_model_tables_are_rounded_atan():
+    """The model's constants from math, not from the C they are checked against: atan(2^-i) and pi / 2
+    in Q16, rounded to nearest (fixed.c's error bound assumes it)."""
+    assert list(ATAN_Q16) == [round(math.atan(2.0**-i) * 65536) for i in range(17)]
+    assert round(math.pi / 2 * 65536) == HALF_PI_Q16
 
 
 def test_model_matches_c():
