@@ -148,15 +148,10 @@ def _holds_corner(pts: list, idx, i: int, j: int, m: int) -> bool:
     return False
 
 
-def _crosses(p, q, r, s) -> bool:
-    """Segments p-q and r-s cross at a point inside both (not at a shared end, not collinear)."""
-    d1, d2 = orient(p, q, r), orient(p, q, s)
-    d3, d4 = orient(r, s, p), orient(r, s, q)
-    return d1 * d2 < 0 and d3 * d4 < 0
-
-
 def _crosses_any(p, q, edges: list) -> bool:
-    """any(_crosses(p, q, r, s) for r, s in edges), written out."""
+    """Whether segment p-q and one of the segments r-s of ``edges`` cross at a point inside both (not at a
+    shared end, not collinear): orient(p, q, r) orient(p, q, s) < 0 and orient(r, s, p) orient(r, s, q) < 0,
+    written out."""
     (px, py), (qx, qy) = p, q
     dx, dy = qx - px, qy - py
     for (rx, ry), (sx, sy) in edges:
