@@ -7,10 +7,10 @@ Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--t
 vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
 it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
 quantised, tile_heightfield's misses, and the samples of the windows it read, bands of seams included;
-the tiles it holds after).  Prints, for the quantisation's strips
-and for the task graph: the wall time, each worker's CPU and busy time, the time it waited (the span less
-its tasks: at a barrier, for the parent, for a task's inputs) and the most tiles it held, then each step's
-CPU summed over the workers; and the model of the
+the tiles it holds after).  Prints, for the quantisation's strips and for the task graph: the wall time,
+the tasks and the parent's round trips to the pool for them (runner.CHAIN, BATCH_READY), each worker's CPU
+and busy time, the time it waited (the span less its tasks: at a barrier, for the parent, for a task's
+inputs) and the most tiles it held, then each step's CPU summed over the workers; and the model of the
 speed-up over one worker, the CPU outside the workers (this process's) plus the busiest worker's CPU in
 each part.  CPU seconds, page faults and reads hold on a loaded machine where wall times do not; run it
 with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
@@ -67,14 +67,21 @@ def _picked(pick, r):
     return pick(r[0])
 
 
-LOG: list = []  # (part, start, end, [(step, info)])
-_map, _graph = runner.Runner.map, runner.Runner.graph
+LOG: list = []  # (part, start, end, the pool's round trips, [(step, info)])
+_map, _graph, _reply = runner.Runner.map, runner.Runner.graph, runner._reply
+TRIPS = [0]  # the parent's round trips to a pool worker (runner._reply: one for each task or chain sent)
+
+
+def _counted_reply(proc, pipe):
+    TRIPS[0] += 1
+    return _reply(proc, pipe)
 
 
 def _timed_map(self, fn, tasks, done=None):
-    t0 = time.perf_counter()
+    t0, n0 = time.perf_counter(), TRIPS[0]
     out = _map(self, timed, [(fn, *t) for t in tasks], (lambda r: done(r[0])) if done else None)
-    LOG.append((f"map {fn.__name__}", t0, time.perf_counter(), [(fn.__name__, o[1]) for o in out]))
+    LOG.append((f"map {fn.__name__}", t0, time.perf_counter(), TRIPS[0] - n0,
+                [(fn.__name__, o[1]) for o in out]))
     return [o[0] for o in out]
 
 
@@ -89,10 +96,11 @@ def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None, last=
         return a
 
     wrapped = [runner.Node(timed, (n.fn, *map(wrap, n.args)), n.rank, n.tiles) for n in nodes]
-    t0 = time.perf_counter()
+    t0, n0 = time.perf_counter(), TRIPS[0]
     out = _graph(self, wrapped, (lambda i, r: done(i, r[0])) if done else None, homes, shared, last=last)
     steps = [f"{n.rank[1]} {n.fn.__name__.strip('_')}" for n in nodes]
-    LOG.append(("graph", t0, time.perf_counter(), [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
+    LOG.append(("graph", t0, time.perf_counter(), TRIPS[0] - n0,
+                [(s, o[1]) for s, o in zip(steps, out, strict=True)]))
     GRAPH.append((nodes, homes or {}, [o[1][1] for o in out], self.workers))
     kept = set(range(len(nodes)) if keep is None else keep)
     return [o[0] if i in kept else None for i, o in enumerate(out)]
@@ -125,6 +133,7 @@ def simulate(nodes, homes: dict, cost: list, workers: int) -> float:
 def main(argv: list[str]) -> int:
     runner.Runner.map = _timed_map
     runner.Runner.graph = _timed_graph
+    runner._reply = _counted_reply
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
@@ -132,11 +141,11 @@ def main(argv: list[str]) -> int:
     wall, c1 = time.perf_counter() - t0, os.times()
     here = c1.user + c1.system - c0.user - c0.system
     there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
-    tasks_here = sum(i[1] for _, _, _, infos in LOG for _, i in infos if i[0] == os.getpid())
+    tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
           f"{here - tasks_here:.2f}), the workers {there:.2f} s")
     model = here - tasks_here
-    for part, a, b, infos in LOG:
+    for part, a, b, trips, infos in LOG:
         per: dict = {}
         steps: dict = {}
         for step, (pid, cpu, s, e, sys_, flt, reads, held, samples) in infos:
@@ -146,7 +155,8 @@ def main(argv: list[str]) -> int:
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
             x[5] += samples
         model += max(w[0] for w in per.values())
-        print(f"{part}: wall {b - a:.2f} s; per worker CPU / busy / waiting s (tasks, the most tiles held): "
+        print(f"{part}: wall {b - a:.2f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
+              "per worker CPU / busy / waiting s (tasks, the most tiles held): "
               + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]})"
                           for w in per.values()))
         for step, x in steps.items():
