@@ -359,11 +359,11 @@ class _Schedule:
         if worker is not None:  # the first its own (the scan stops there), else the first with one
             some = None
             for j, (_, i) in enumerate(self.ready):
-                mine = [self._mine(t, worker) for t in self.nodes[i].tiles]
-                if all(mine) or mine[0]:
+                tiles = self.nodes[i].tiles
+                if not tiles or self._mine(tiles[0], worker):  # its first tile the worker's: its own
                     k = j
                     break
-                if some is None and any(mine):
+                if some is None and any(self._mine(t, worker) for t in tiles[1:]):
                     some = j
             else:
                 if own:
