@@ -31,7 +31,7 @@ help:
 	@echo "make format         clang-format -i every C file (the style of .clang-format)"
 	@echo "make demo           stream a real DEM through the simulated board, and mesh it in software, into $(OUT)/"
 	@echo "make docs           regenerate the pictures and tables in docs/"
-	@echo "make gen            generate the template ROM include and C header into $(GEN)/"
+	@echo "make gen            generate the C headers and Verilog includes both sides share into $(GEN)/"
 	@echo "make firmware       the native refiner library and its C tests (CMake) into build/firmware-native/"
 	@echo "make firmware-board the board firmware (riscv64-unknown-elf-gcc) into build/firmware-board/"
 	@echo "                    (CPU=picorv32: firmware, simulator and bitstream of the SoC with that CPU)"
@@ -77,7 +77,7 @@ test-firmware: $(SETUP_STAMP) gen
 
 # The native refiner (firmware/): the library the host loads (host/wavemesh/refine/native.py also builds it on
 # first use when it is missing or stale), its C unit tests and runner.
-firmware:
+firmware: gen
 	cmake -S firmware -B build/firmware-native -DCMAKE_BUILD_TYPE=Release >/dev/null
 	cmake --build build/firmware-native -j2
 	build/firmware-native/wm_unit

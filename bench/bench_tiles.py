@@ -226,6 +226,9 @@ def freeze_library() -> str:
         check=True,
     ).stdout
     subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    # the generated headers the firmware includes (fixed.c's wm_angle.h), by HEAD's own generator
+    subprocess.run([sys.executable, "-m", "wavemesh.device.gen", str(src / "build" / "gen")], check=True,
+                   capture_output=True, env={**os.environ, "PYTHONPATH": str(src / "host")})
     build = src / "build" / "firmware-native"
     subprocess.run(
         ["cmake", "-S", str(src / "firmware"), "-B", str(build), "-DCMAKE_BUILD_TYPE=Release"],

@@ -197,7 +197,10 @@ SCAN_COUNTS = ("scans", "samples", "rows", "slopes", "points")
 
 def profile_runner() -> Path:
     """The runner of the profile build (WM_PROFILE: the E(T) counters), built from this tree."""
+    from wavemesh.device.gen import write_all
+
     out = ROOT / "build" / "firmware-profile"
+    write_all(ROOT / "build" / "gen")  # fixed.c's wm_angle.h
     subprocess.run(["cmake", "-S", str(ROOT / "firmware"), "-B", str(out), "-DCMAKE_BUILD_TYPE=Release",
                     "-DWM_PROFILE=ON"], check=True, capture_output=True)
     subprocess.run(["cmake", "--build", str(out), "-j2", "--target", "wm_run"], check=True,
@@ -280,6 +283,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.phases and args.base:
         ap.error("--phases measures one runner: leave out --base")
     if args.runner == ap.get_default("runner"):
+        from wavemesh.device.gen import write_all
+
+        write_all(ROOT / "build" / "gen")  # fixed.c's wm_angle.h
         subprocess.run(["cmake", "-S", str(ROOT / "firmware"), "-B", str(args.runner.parent),
                         "-DCMAKE_BUILD_TYPE=Release"], check=True, capture_output=True)
         subprocess.run(["cmake", "--build", str(args.runner.parent), "-j2", "--target", "wm_run"], check=True,

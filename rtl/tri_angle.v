@@ -57,8 +57,6 @@ localparam [2:0]
     ST_ROT = 3'd3,
     ST_DONE = 3'd4;
 
-localparam signed [18:0] HALF_PI = 19'sd102944;
-
 reg [2:0] state_reg = ST_IDLE;
 
 // the magnitudes while halving, x's sign
@@ -76,32 +74,9 @@ assign m_res_angle = z_reg[18] ? 18'd0 : z_reg[17:0];
 assign m_res_valid = state_reg == ST_DONE;
 assign busy = state_reg != ST_IDLE;
 
-// atan(2^-i) in Q16 radians, i = 0..16 (fixed.c's atan_q16)
-function signed [18:0] atan_q16;
-    input [4:0] i;
-    begin
-        case (i)
-            5'd0: atan_q16 = 19'sd51472;
-            5'd1: atan_q16 = 19'sd30386;
-            5'd2: atan_q16 = 19'sd16055;
-            5'd3: atan_q16 = 19'sd8150;
-            5'd4: atan_q16 = 19'sd4091;
-            5'd5: atan_q16 = 19'sd2047;
-            5'd6: atan_q16 = 19'sd1024;
-            5'd7: atan_q16 = 19'sd512;
-            5'd8: atan_q16 = 19'sd256;
-            5'd9: atan_q16 = 19'sd128;
-            5'd10: atan_q16 = 19'sd64;
-            5'd11: atan_q16 = 19'sd32;
-            5'd12: atan_q16 = 19'sd16;
-            5'd13: atan_q16 = 19'sd8;
-            5'd14: atan_q16 = 19'sd4;
-            5'd15: atan_q16 = 19'sd2;
-            5'd16: atan_q16 = 19'sd1;
-            default: atan_q16 = 19'sd0;
-        endcase
-    end
-endfunction
+// atan(2^-i) in Q16 radians (wm_atan_q16(i), i = 0..16), the last i (WM_ANGLE_LAST = 16) and pi / 2
+// (WM_HALF_PI_Q16): the generated wm_angle.vh (host/wavemesh/model/angle.py, their one source and fixed.c's)
+`include "wm_angle.vh"
 
 /*
  * The halvings (ST_DOWN): one while either magnitude is above 2^28; then the quadrant
@@ -154,7 +129,7 @@ always @(posedge clk) begin
             end else begin
                 ux_reg <= {3'd0, qx};
                 iy_reg <= $signed({3'd0, qy});
-                z_reg <= rot90 ? HALF_PI : 19'sd0;
+                z_reg <= rot90 ? WM_HALF_PI_Q16 : 19'sd0;
                 state_reg <= ST_UP;
             end
         end
@@ -171,14 +146,14 @@ always @(posedge clk) begin
                 ux_reg <= ux_reg + ys;
                 if (iy_reg[31]) begin
                     iy_reg <= iy_reg + $signed(xs);
-                    z_reg <= z_reg - atan_q16(i_reg);
+                    z_reg <= z_reg - wm_atan_q16(i_reg);
                 end else begin
                     iy_reg <= iy_reg - $signed(xs);
-                    z_reg <= z_reg + atan_q16(i_reg);
+                    z_reg <= z_reg + wm_atan_q16(i_reg);
                 end
             end
             i_reg <= i_reg + 5'd1;
-            if (iy_reg == 0 || i_reg == 5'd16) state_reg <= ST_DONE;
+            if (iy_reg == 0 || i_reg == WM_ANGLE_LAST) state_reg <= ST_DONE;
         end
         ST_DONE: begin
             if (m_res_ready) state_reg <= ST_IDLE;

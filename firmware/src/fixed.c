@@ -1,6 +1,7 @@
 /* Exact integer and fixed-point helpers.  Everything here gives the same bits on any C99 target
  * with 32- or 64-bit registers: no floating point, no signed right shifts, no division of negative
  * numbers except through wm_floor_div / wm_ceil_div. */
+#include "wm_angle.h" /* generated (make gen): the CORDIC's constants */
 #include "wm_internal.h"
 
 /* Square roots by Newton steps from below, each exact: with a = floor(sqrt(x >> 2s)) where x >> 2s lies
@@ -150,10 +151,8 @@ static int64_t shr0(int64_t v, int s)
     return v >= 0 ? (int64_t)((uint64_t)v >> s) : -(int64_t)((uint64_t)(-v) >> s);
 }
 
-/* atan(2^-i) in Q16 radians, i = 0..16. */
-static const int32_t atan_q16[17] = {51472, 30386, 16055, 8150, 4091, 2047, 1024, 512, 256,
-                                     128,   64,    32,    16,   8,    4,    2,    1};
-#define WM_HALF_PI_Q16 102944
+/* The CORDIC's wm_atan_q16[i] = atan(2^-i) in Q16 radians, i = 0..16 (WM_ANGLE_STEPS), and WM_HALF_PI_Q16
+ * come from the generated wm_angle.h (host/wavemesh/model/angle.py, their one source, and the angle unit's). */
 
 int32_t wm_angle_q16(int64_t x, int64_t y)
 {
@@ -190,17 +189,17 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
     {
         uint32_t ux = (uint32_t)x;
         int32_t iy = (int32_t)y;
-        for (int i = 0; i < 17; i++) {
+        for (int i = 0; i < WM_ANGLE_STEPS; i++) {
             uint32_t xs = ux >> i;
             int32_t ys = iy >= 0 ? (int32_t)((uint32_t)iy >> i) : -(int32_t)((uint32_t)-iy >> i);
             if (iy > 0) {
                 ux += (uint32_t)ys;
                 iy -= (int32_t)xs;
-                z += atan_q16[i];
+                z += wm_atan_q16[i];
             } else if (iy < 0) {
                 ux -= (uint32_t)ys; /* ys < 0: x grows */
                 iy += (int32_t)xs;
-                z -= atan_q16[i];
+                z -= wm_atan_q16[i];
             } else {
                 break;
             }

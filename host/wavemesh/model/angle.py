@@ -18,9 +18,13 @@ angle), and of the angle unit (rtl/tri_angle.v).
 
 from __future__ import annotations
 
-# atan(2^-i) in Q16 radians, i = 0..16: fixed.c's atan_q16
-ATAN_Q16 = (51472, 30386, 16055, 8150, 4091, 2047, 1024, 512, 256, 128, 64, 32, 16, 8, 4, 2, 1)
-HALF_PI_Q16 = 102944
+import math
+
+# The one source of the CORDIC's constants: the firmware's (wm_angle.h) and the angle unit's (wm_angle.vh)
+# are generated from these (wavemesh.device.gen).  atan(2^-i) in Q16 radians, i = 0..16, and pi / 2, each
+# rounded to nearest (fixed.c's error bound assumes it): 51472, 30386, ..., 2, 1 and 102,944.
+ATAN_Q16 = tuple(round(math.atan(2.0**-i) * 65536) for i in range(17))
+HALF_PI_Q16 = round(math.pi / 2 * 65536)
 
 
 def _shr0(v: int, s: int) -> int:

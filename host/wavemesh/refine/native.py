@@ -33,6 +33,7 @@ from wavemesh.record import record
 ROOT = Path(__file__).resolve().parents[3]
 FIRMWARE = ROOT / "firmware"
 BUILD = ROOT / "build" / "firmware-native"
+GEN = ROOT / "build" / "gen"  # the generated headers (wavemesh.device.gen): fixed.c's wm_angle.h
 LIB_NAME = "libwavemesh.so"
 
 WM_OK, WM_ERR_CAPACITY = 0, -3  # wavemesh.h's (tests/host/test_native_abi.py); the texts: wm_strerror
@@ -105,14 +106,22 @@ def _stale(lib: Path) -> bool:
         with os.scandir(FIRMWARE / d) as entries:
             if any(e.name.endswith((".c", ".h")) and e.stat().st_mtime > built for e in entries):
                 return True
+    try:
+        if os.stat(GEN / "wm_angle.h").st_mtime > built:
+            return True
+    except OSError:
+        return True
     return any(os.stat(FIRMWARE / name).st_mtime > built for name in ("CMakeLists.txt", "sources.cmake"))
 
 
 def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str, ...] = (),
           targets: tuple[str, ...] = ("wavemesh_shared",)) -> Path:
-    """Configure (once) and build the firmware with CMake into build_dir; returns build_dir."""
+    """Generate build/gen's headers, configure (once) and build the firmware with CMake into build_dir;
+    returns build_dir."""
     import fcntl  # building is rare: a run that only loads the library does not import these
     import shutil  # as fcntl
+
+    from wavemesh.device.gen import write_all  # as fcntl
 
     cmake = shutil.which("cmake")
     if cmake is None:
@@ -122,6 +131,7 @@ def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str
     with open(build_dir / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # concurrent first uses build once
         try:
+            write_all(GEN)  # fixed.c's wm_angle.h (rewritten only when its text changes)
             if not (build_dir / "CMakeCache.txt").exists():
                 _run([cmake, "-S", str(FIRMWARE), "-B", str(build_dir), f"-DCMAKE_BUILD_TYPE={build_type}",
                       *extra])
