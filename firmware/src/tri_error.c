@@ -108,14 +108,20 @@ static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / 
 /* One row of the 32-bit path (scan): the largest V = |S - d h| over the samples [q, end) with S
  * growing by dS per sample, above vm, and where it is first reached (*at; untouched when no sample
  * beats vm); it stops at the first sample above limit.  A function of its own so that the few values of
- * the loop stay in registers on the soft CPU. */
+ * the loop stay in registers on the soft CPU.  Without the absolute value: for |u| < 2^31 and
+ * vm < 2^31, |u| > vm iff u + vm > 2 vm modulo 2^32 (u in [-vm, vm] maps to [0, 2 vm], the rest of
+ * (-2^31, 2^31) above it), so the loop steps T = S + vm and compares T - d h with 2 vm. */
 WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS, uint32_t d,
-                                      uint32_t vm, uint64_t limit, const uint16_t **at)
+                                      uint32_t vm, uint32_t limit, const uint16_t **at)
 {
-    for (; q < end; q++, S += dS) {
-        uint32_t u = S - d * *q, v = u >> 31 ? 0u - u : u;
-        if (v > vm) {
+    uint32_t T = S + vm, twice = 2 * vm;
+    for (; q < end; q++, T += dS) {
+        uint32_t w = T - d * *q;
+        if (w > twice) {
+            uint32_t u = w - vm, v = u >> 31 ? 0u - u : u;
+            T += v - vm;
             vm = v;
+            twice = 2 * v;
             *at = q;
             if (vm > limit) break;
         }
@@ -197,8 +203,10 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
                        int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
-    int32_t A[3], B[3], C[3], bx = x[0], by = y[0], t = 0, b = 0, m, py;
+    int32_t A[3], B[3], C[3], t = 0, b = 0, m, py;
     uint32_t z[3], dS = 0, dSy = 0, Sr, vm = 0;
+    const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
+    uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit; /* the same stops: V < 2^31 */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
@@ -236,24 +244,26 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         span_start(B[kh], ah, &dqh, &drh);
         for (const uint16_t *row = h + py * f->width; py <= last; py++, Sr += dSy, row += f->width) {
             int32_t lo = ql, hi = qh;
-            const uint16_t *at = NULL;
             ql += dql, rl += drl, qh += dqh, rh += drh;
             if (rl >= al) rl -= al, ql++;
             if (rh >= ah) rh -= ah, qh++;
             if (lo > hi) continue;
-            vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, limit, &at);
-            if (at) {
-                bx = (int32_t)(at - row);
-                by = py;
-            }
+            vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, lim, &at);
             WM_PROF_ADD(WM_PC_ROWS, 1);
-            WM_PROF_ADD(WM_PC_SAMPLES, vm > limit ? bx - lo + 1 : hi - lo + 1);
-            if (vm > limit) goto done;
+            WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? (at - row) - lo + 1 : hi - lo + 1);
+            if (vm > lim) goto done;
         }
     }
 done:
-    if (wx) *wx = bx;
-    if (wy) *wy = by;
+    /* the sample's place from its address, once (not at each row that raised V) */
+    if (at) {
+        int32_t i = (int32_t)(at - h), ay = i / f->width;
+        if (wx) *wx = i - ay * f->width;
+        if (wy) *wy = ay;
+    } else {
+        if (wx) *wx = x[0];
+        if (wy) *wy = y[0];
+    }
     return vm;
 }
 
