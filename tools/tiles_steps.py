@@ -7,7 +7,9 @@ Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--t
 vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
 it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
 quantised, tile_heightfield's misses, and the samples of the windows it read, bands of seams included;
-the tiles it holds after).  Prints, for the quantisation's strips and for the task graph: the wall time,
+the tiles it holds after).  Prints the run's wall time and CPU (the workers' counted to their end, after
+the run's for those still exiting as it ended, which it does not wait for), then, for the quantisation's
+strips and for the task graph: the wall time,
 the tasks and the parent's round trips to the pool for them (runner.CHAIN, BATCH_READY), each worker's CPU
 and busy time, the time it waited (the span less its tasks: at a barrier, for the parent, for a task's
 inputs) and the most tiles it held, then each step's CPU summed over the workers; and the model of the
@@ -138,12 +140,17 @@ def main(argv: list[str]) -> int:
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
     rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
-    wall, c1 = time.perf_counter() - t0, os.times()
+    wall, exiting = time.perf_counter() - t0, list(runner._EXITING)
+    for proc in exiting:  # the pool's workers still exiting as the run ended (not waited for by it)
+        proc.join()
+    after, c1 = time.perf_counter() - t0 - wall, os.times()
     here = c1.user + c1.system - c0.user - c0.system
     there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
     tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
-          f"{here - tasks_here:.2f}), the workers {there:.2f} s")
+          f"{here - tasks_here:.2f}), the workers {there:.2f} s"
+          + (f" ({len(exiting)} still exiting as the run ended, for {1000 * after:.0f} ms more)" if exiting
+             else ""))
     model = here - tasks_here
     for part, a, b, trips, infos in LOG:
         per: dict = {}

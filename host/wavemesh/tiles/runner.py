@@ -491,9 +491,21 @@ def _worker_start(parent: int) -> None:
         os._exit(1)
 
 
+# the pool workers a run let go that were still exiting (freeing their memory) when it ended: reaped by a
+# later Runner, or by init once this process has ended (_end_workers)
+_EXITING: list = []
+
+
 def _end_workers(pool: list, gently: bool) -> None:
-    """End the workers: ``gently`` (the run is done) by closing their pipes; else at once (SIGTERM, then
-    SIGKILL after a second).  Reaped either way."""
+    """End the workers: ``gently`` (the run is done) by closing their pipes, not waited for: a worker still
+    exiting (the kernel freeing its memory, tens of milliseconds for a tile worker's heap, after its last
+    result) is left to end beside this process's own end, and reaped by a later Runner or, once this
+    process has ended, by init (multiprocessing's exit handler would wait for it: it is taken off its list
+    of children); else at once (SIGTERM, then SIGKILL after a second), reaped here."""
+    for proc in list(_EXITING):  # a past run's, ended by now: reaped
+        proc.join(0)
+        if proc.exitcode is not None:
+            _EXITING.remove(proc)
     for proc, pipe in pool:
         if gently:
             try:
@@ -502,7 +514,15 @@ def _end_workers(pool: list, gently: bool) -> None:
                 pass
         elif proc.is_alive():
             proc.terminate()
-    deadline = time.monotonic() + (10.0 if gently else 1.0)
+    if gently:
+        for proc, pipe in pool:
+            pipe.close()
+            proc.join(0)
+            if proc.exitcode is None:
+                _EXITING.append(proc)
+                getattr(multiprocessing.process, "_children", set()).discard(proc)
+        return
+    deadline = time.monotonic() + 1.0
     for proc, pipe in pool:
         proc.join(max(0.0, deadline - time.monotonic()))
         if proc.is_alive():
