@@ -180,8 +180,12 @@ struct apply {
 
 /* Each mode a loop of its own, without branches, which the compiler vectorises.  Mode 2's
  * rint((v - offset) / scale) is (c + 2^52) - 2^52 for the quotient c, as rint rounds (half to even in
- * the default mode) for 0 <= c < 2^51: offset is the least v, so v - offset >= 0, and c is at most
- * span / scale = 65535 and its rounding; clipped to 0..65535 as an integer. */
+ * the default mode) for 0 <= c < 2^51.  c is clipped to 0..65535 first (the same samples as rint then
+ * clip: the bounds are whole numbers), so a height outside the range the scale was made for (a tile's,
+ * wm_host_quantise_with) is clipped as the model clips it; clipped as its bits, an integer (a double's
+ * clip the compiler does not vectorise without -ffast-math): a negative number's bits (sign set) are
+ * below 0, a positive one's order as the numbers do (bits_of). */
+#define SAMPLE_MAX_BITS ((int64_t)0x40EFFFE000000000) /* bits_of(65535.0) */
 static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
 {
     struct apply *a = ctx;
@@ -204,10 +208,10 @@ static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
         }
     } else {
         for (int64_t i = lo; i < hi; i++) {
-            int32_t r = (int32_t)(((v[i] - offset) / scale + RINT_MAGIC) - RINT_MAGIC);
-            r = r < 0 ? 0 : r;
-            r = r > 65535 ? 65535 : r;
-            uint16_t s = (uint16_t)r;
+            int64_t c = bits_of((v[i] - offset) / scale); /* clipped as bits (see clip_bits) */
+            c = c < 0 ? 0 : c;
+            c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;
+            uint16_t s = (uint16_t)(int32_t)((of_bits(c) + RINT_MAGIC) - RINT_MAGIC);
             int64_t e = bits_of(fabs(v[i] - (offset + scale * (double)s)));
             samples[i] = s;
             err = e > err ? e : err;
@@ -275,6 +279,27 @@ done:
     free(s);
     free(a);
     return code;
+}
+
+double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
+                             int32_t threads, uint16_t *samples)
+{
+    struct apply a;
+    int32_t parts = parts_for(threads, n);
+    double err = 0.0;
+    a.v = v;
+    a.samples = samples;
+    a.n = n;
+    a.offset = offset;
+    a.scale = scale;
+    a.mode = exact ? 0 : 2;
+    if (run_parts(apply_part, &a, parts) != WM_HOST_OK) {
+        parts = 1;
+        apply_part(&a, 0, 1);
+    }
+    for (int32_t p = 0; p < parts; p++)
+        if (a.err[p] > err) err = a.err[p];
+    return err;
 }
 
 struct qerr {

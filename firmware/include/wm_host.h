@@ -39,6 +39,13 @@ int32_t wm_host_scan(int32_t on);
 int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samples, double *out,
                      int32_t *lossless);
 
+/* quantise()'s samples of n finite heights v by a scale and offset found before (a tile's window by the
+ * whole grid's, wavemesh.tiles.source.Quant): v - offset when exact (integers within 0..65535 of
+ * offset), else rint((v - offset) / scale) clipped to 0..65535.  Returns the largest
+ * |v - (offset + scale * sample)| (0 for none). */
+double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
+                             int32_t threads, uint16_t *samples);
+
 /* The largest |v - (offset + scale * s)| over n heights and their samples (0 for none). */
 double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double offset, double scale,
                            int32_t threads);

@@ -85,6 +85,32 @@ def test_quantise_equals_the_model(name):
         assert hf.extremes == fast[5:7] and api.default_tau(hf) == 0.01 * float(np.max(v) - np.min(v))
 
 
+@pytest.mark.parametrize("name", list(ALL))
+def test_quantise_with_a_given_scale_equals_the_model(name):
+    """A tile's window by the whole grid's scale and offset (wm_host_quantise_with, tiles.source.Quant's
+    quantised): its Python model's samples and largest error bit for bit; heights outside the range the
+    scale was made for (a window of a grid whose range is another's) clipped as the model clips them."""
+    from wavemesh.io.heightfield import quant_rule
+    from wavemesh.tiles.source import Quant
+
+    v = ALL[name]
+    lo, hi = float(np.min(v)), float(np.max(v))
+    whole = quant_rule(lo, hi, bool(np.all(v == np.floor(v))))
+    mid = (lo + hi) / 2
+    rules = [whole, quant_rule(mid, hi, False), quant_rule(lo, mid, False)]  # the last two clip some
+    for scale, offset, exact in rules:
+        for window in (v, v[1:-1, 2:-1], v[:, ::2]):  # a window's rows are not contiguous in the grid
+            quant = Quant(scale, offset, exact, None, lo, hi)
+            want = quant.quantised_model(window)
+            for n in THREADS:
+                native.set_threads(n)
+                got = quant.quantised(window)
+                assert got[0].dtype == np.uint16 and np.array_equal(got[0], want[0])
+                assert got[1] == want[1] and (got[1] is None) == exact
+                if not exact:
+                    assert np.float64(got[1]).view(np.int64) == np.float64(want[1]).view(np.int64)
+
+
 def test_quantise_refuses_what_the_model_refuses():
     for bad in (np.array([[1.0, np.nan], [0.0, 2.0]]), np.array([[1.0, np.inf], [0.0, 2.0]])):
         assert native.quantise(bad) == "non-finite"

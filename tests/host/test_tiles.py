@@ -365,15 +365,16 @@ def test_strips_in_blocks(tmp_path, monkeypatch, block):
 
 @pytest.mark.parametrize("block", [1, 300, 1 << 16])
 def test_tile_quantised_in_blocks(tmp_path, monkeypatch, block):
-    """A tile's samples and its own largest quantisation error taken block by block: heightfield's
-    to_samples and HeightField.max_quantisation_error (the C pass) on the whole tile at once."""
+    """A tile's samples and its own largest quantisation error taken block by block (Quant's model of
+    its C pass, quantised_model): heightfield's to_samples and HeightField.max_quantisation_error (the C
+    pass) on the whole tile at once."""
     from wavemesh.io.heightfield import HeightField, to_samples
 
     monkeypatch.setattr(tiles.source, "BLOCK_SAMPLES", block)
     v = np.random.default_rng(5).normal(0, 300, (45, 61))
     for quant in (tiles.source.Quant(np.ptp(v) / 65535, v.min(), False, None, v.min(), v.max()),
                   tiles.source.Quant(1.0, -2000.0, True, None, v.min(), v.max())):
-        samples, error = quant.quantised(v if not quant.exact else np.rint(v))
+        samples, error = quant.quantised_model(v if not quant.exact else np.rint(v))
         assert np.array_equal(samples, to_samples(v if not quant.exact else np.rint(v), quant.scale,
                                                   quant.offset, quant.exact))
         if quant.exact:

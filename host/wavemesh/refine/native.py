@@ -207,6 +207,8 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_spline_scratch": (ctypes.c_int64, [i32, i32]),
         "wm_host_quantise": (ctypes.c_int, [pf64, i64, i32, pu16, pf64, pi32]),
         "wm_host_quant_error": (ctypes.c_double, [pf64, pu16, i64, ctypes.c_double, ctypes.c_double, i32]),
+        "wm_host_quantise_with": (ctypes.c_double, [pf64, i64, ctypes.c_double, ctypes.c_double, i32, i32,
+                                                    pu16]),
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
                                            ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
@@ -624,6 +626,20 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float,
         return None
     scale, offset, err, lo, hi = (float(x) for x in out)
     return samples, scale, offset, bool(lossless.value), err, lo, hi
+
+
+def quantise_with(values: np.ndarray, scale: float, offset: float, exact: bool
+                  ) -> tuple[np.ndarray, float] | None:
+    """wm_host_quantise_with on finite float64 heights (a tile's window) by a scale and offset found
+    before: (samples, their largest quantisation error), or None without the library."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    v = np.ascontiguousarray(values, dtype=np.float64)
+    samples = np.empty(v.shape, dtype=np.uint16)
+    err = lib.wm_host_quantise_with(_ptr(v, ctypes.c_double), v.size, float(offset), float(scale),
+                                    int(bool(exact)), threads(), _ptr(samples, ctypes.c_uint16))
+    return samples, float(err)
 
 
 def quant_error(values: np.ndarray, samples: np.ndarray, offset: float, scale: float) -> float | None:

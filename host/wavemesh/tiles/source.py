@@ -16,6 +16,7 @@ from wavemesh.io.georef import apply_overrides, cropped
 from wavemesh.io.heightfield import parse_fill, quant_rule, to_samples
 from wavemesh.io.readers import raster_header, read_raster_window, regular_file
 from wavemesh.record import record
+from wavemesh.refine import native
 
 if TYPE_CHECKING:
     from wavemesh.tiles.runner import Runner
@@ -149,9 +150,18 @@ class Quant:
         return self.quantised(v)[0]
 
     def quantised(self, v: np.ndarray) -> tuple[np.ndarray, float | None]:
-        """The samples of the heights ``v`` (2-D) and, unless exact, their largest quantisation error (max
-        |v - (offset + scale samples)|, as HeightField.max_quantisation_error measures it; None when exact),
-        a block of rows at a time (BLOCK_SAMPLES: each block's temporaries stay in the core's own cache)."""
+        """The samples of the finite heights ``v`` (2-D) and, unless exact, their largest quantisation
+        error (max |v - (offset + scale samples)|, as HeightField.max_quantisation_error measures it; None
+        when exact): in C (wm_host_quantise_with, firmware/host), else by quantised_model, its model (the
+        same samples and error, tests/host/test_host_stages.py)."""
+        got = native.quantise_with(v, self.scale, self.offset, self.exact)
+        if got is None:
+            return self.quantised_model(v)
+        return got[0], None if self.exact else got[1]
+
+    def quantised_model(self, v: np.ndarray) -> tuple[np.ndarray, float | None]:
+        """quantised in numpy, a block of rows at a time (BLOCK_SAMPLES: each block's temporaries stay in
+        the core's own cache)."""
         out = np.empty(v.shape, dtype=np.uint16)
         err = None if self.exact else 0.0
         step = max(1, BLOCK_SAMPLES // max(1, v.shape[1]))
