@@ -60,10 +60,15 @@ static inline int wm_k2(int k) { return k == 0 ? 2 : k - 1; }
 /* wm_mesh_check, returning 0 or the source line of the first failed invariant (for debugging). */
 int wm_mesh_check_line(const wm_mesh *m);
 
-/* Twice the signed area of (a, b, c): > 0 counter-clockwise. */
+/* Twice the signed area of (a, b, c): > 0 counter-clockwise.  Exact in 32-bit arithmetic for grid
+ * coordinates (0..WM_MAX_SIDE - 1, WM_MAX_SIDE < 2^15, as every caller's are): each difference is below
+ * 2^15 - 1 in magnitude, each product below 2^30 and their difference below 2^31 (on the soft CPU a
+ * multiply each, not a multiply pair and a 64-bit subtraction); the result widened for the callers. */
 static inline int64_t wm_orient(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy)
 {
-    return (int64_t)(bx - ax) * (int64_t)(cy - ay) - (int64_t)(cx - ax) * (int64_t)(by - ay);
+    WM_ASSERT((uint32_t)ax < WM_MAX_SIDE && (uint32_t)ay < WM_MAX_SIDE && (uint32_t)bx < WM_MAX_SIDE &&
+              (uint32_t)by < WM_MAX_SIDE && (uint32_t)cx < WM_MAX_SIDE && (uint32_t)cy < WM_MAX_SIDE);
+    return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay);
 }
 
 static inline int32_t wm_dest(const wm_mesh *m, int32_t e) { return m->hv[WM_NEXT(e)]; }
