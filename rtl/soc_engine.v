@@ -29,6 +29,13 @@
  *   0x78 ANGLE_X, 0x7C ANGLE_Y  rw  x (signed) and y (>= 0) of the angle unit; an ANGLE_Y write starts
  *                               atan2(y, x) (tri_angle; ignored while busy)
  *   0x80 ANGLE                  r   bits 17..0 the last command's angle (Q16 radians), 30 BUSY, 31 DONE
+ *   0x84 POINT_P                rw  the point-error unit's sample: x in bits 15..0, y in 31..16
+ *   0x88 POINT_R_LO, 0x8C POINT_R_HI  rw  mode 1's slope factor r
+ *   0x90 POINT_GO               w   bits 15..0 the sample's height, 17..16 the mode: the point-error unit
+ *                               (tri_point) takes V0..Z2 and POINT_P; mode 2 also starts the slope unit as
+ *                               SLOPE_GO does and takes its r (ignored while either is busy)
+ *   0x94 POINT                  r   the last command's point error e
+ *   0x98 POINT_STATUS           r   bit 0 DONE, 1 BUSY
  *
  * The slope unit works beside the scan, from its own copy of the staging registers (taken at
  * SLOPE_GO); its result stays in SLOPE_ROOT and SLOPE_STATUS.K until the next SLOPE_GO.
@@ -59,7 +66,9 @@ module soc_engine #
     // 1: the 64-bit divider (udiv64) is built; 0: DIV_D_HI starts nothing and DIV_STATUS reads 0
     parameter DIV = 1,
     // 1: the angle unit (tri_angle) is built; 0: ANGLE_Y starts nothing and ANGLE reads 0
-    parameter ANGLE = 1
+    parameter ANGLE = 1,
+    // 1: the point-error unit (tri_point; needs SLOPE) is built; 0: POINT_GO starts nothing, POINT reads 0
+    parameter POINT = 1
 )
 (
     input  wire                   clk,
@@ -98,6 +107,10 @@ initial begin
         $error("Error: COORD_BITS must be 2..15 (instance %m)");
         $finish;
     end
+    if (POINT != 0 && (SLOPE == 0 || COORD_BITS > 14)) begin
+        $error("Error: POINT needs SLOPE and COORD_BITS <= 14 (instance %m)");
+        $finish;
+    end
 end
 
 reg [31:0] v0_reg = 32'd0, v1_reg = 32'd0, v2_reg = 32'd0, z01_reg = 32'd0;
@@ -116,6 +129,8 @@ reg angle_done_reg = 1'b0;
 reg [31:0] slope_root_reg = 32'd0;
 reg [5:0] slope_k_reg = 6'd0;
 reg slope_done_reg = 1'b0;
+reg [31:0] point_p_reg = 32'd0, point_r_lo_reg = 32'd0, point_r_hi_reg = 32'd0, point_e_reg = 32'd0;
+reg point_done_reg = 1'b0;
 reg [31:0] rdata_reg = 32'd0;
 
 assign bus_rdata = rdata_reg;
@@ -128,6 +143,11 @@ wire slope_go = reg_write && bus_addr == `WM_ENGINE_SLOPE_GO;
 wire sqrt_go = reg_write && bus_addr == `WM_ENGINE_SQRT_HI;
 wire div_go = reg_write && bus_addr == `WM_ENGINE_DIV_D_HI;
 wire angle_go = reg_write && bus_addr == `WM_ENGINE_ANGLE_Y;
+wire point_go = reg_write && bus_addr == `WM_ENGINE_POINT_GO;
+wire point_slope = bus_wdata[17:16] == 2'd2;   // POINT_GO's mode 2
+wire point_ready, slope_ready;
+// a point command is taken when its unit is idle, and in mode 2 the slope unit too (which it starts)
+wire point_take = point_go && point_ready && (!point_slope || slope_ready);
 
 wire cmd_ready;
 wire [VW-1:0] res_vmax;
@@ -170,7 +190,7 @@ tri_engine #(
 /*
  * The slope unit: the staging registers and the scales at SLOPE_GO; its result into SLOPE_ROOT, K
  */
-wire slope_ready, slope_res_valid, slope_busy;
+wire slope_res_valid, slope_busy;
 wire [31:0] slope_res_root;
 wire [5:0] slope_res_k;
 
@@ -186,7 +206,7 @@ generate
             .s_cmd_z({z2_reg, z01_reg}),
             .s_cmd_sx(slope_x_reg),
             .s_cmd_sy(slope_y_reg),
-            .s_cmd_valid(slope_go),
+            .s_cmd_valid(slope_go || (point_take && point_slope)),
             .s_cmd_ready(slope_ready),
             .s_root_x({bus_wdata, sqrt_lo_reg}),
             .s_root_valid(sqrt_go),
@@ -290,8 +310,60 @@ always @(posedge clk) begin
     end
 end
 
+/*
+ * The point-error unit: the staging registers, POINT_P and the height and mode at the POINT_GO write; mode
+ * 2's r is the slope unit's result once SLOPE_STATUS.DONE (cleared as the command is taken); e into POINT
+ */
+wire point_res_valid, point_busy;
+wire [31:0] point_res_e;
+
+generate
+    if (POINT != 0) begin : g_point
+        tri_point #(
+            .COORD_BITS(CB)
+        ) point_inst (
+            .clk(clk),
+            .rst(rst),
+            .s_cmd_x({v2_reg[CB-1:0], v1_reg[CB-1:0], v0_reg[CB-1:0]}),
+            .s_cmd_y({v2_reg[16 +: CB], v1_reg[16 +: CB], v0_reg[16 +: CB]}),
+            .s_cmd_z({z2_reg, z01_reg}),
+            .s_cmd_px(point_p_reg[CB-1:0]),
+            .s_cmd_py(point_p_reg[16 +: CB]),
+            .s_cmd_h(bus_wdata[15:0]),
+            .s_cmd_r({point_r_hi_reg, point_r_lo_reg}),
+            .s_cmd_mode(bus_wdata[17:16]),
+            .s_cmd_valid(point_take),
+            .s_cmd_ready(point_ready),
+            .s_r({32'd0, slope_root_reg} << slope_k_reg),
+            .s_r_valid(slope_done_reg),
+            .m_res_e(point_res_e),
+            .m_res_valid(point_res_valid),
+            .m_res_ready(1'b1),
+            .busy(point_busy)
+        );
+    end else begin : g_no_point
+        assign point_ready = 1'b0;
+        assign point_res_valid = 1'b0;
+        assign point_busy = 1'b0;
+        assign point_res_e = 32'd0;
+    end
+endgenerate
+
 always @(posedge clk) begin
-    if ((slope_go || sqrt_go) && slope_ready) begin
+    if (point_take) begin
+        point_done_reg <= 1'b0;
+    end
+    if (point_res_valid) begin
+        point_e_reg <= point_res_e;
+        point_done_reg <= 1'b1;
+    end
+    if (rst) begin
+        point_done_reg <= 1'b0;
+    end
+end
+
+always @(posedge clk) begin
+    if ((slope_go || sqrt_go || (point_take && point_slope)) && slope_ready) begin
         slope_done_reg <= 1'b0;
     end
     if (slope_res_valid) begin
@@ -340,6 +412,11 @@ always @(posedge clk) begin
             `WM_ENGINE_ANGLE_X: rdata_reg <= angle_x_reg;
             `WM_ENGINE_ANGLE_Y: rdata_reg <= angle_y_reg;
             `WM_ENGINE_ANGLE: rdata_reg <= {angle_done_reg, angle_busy, 12'd0, angle_z_reg};
+            `WM_ENGINE_POINT_P: rdata_reg <= point_p_reg;
+            `WM_ENGINE_POINT_R_LO: rdata_reg <= point_r_lo_reg;
+            `WM_ENGINE_POINT_R_HI: rdata_reg <= point_r_hi_reg;
+            `WM_ENGINE_POINT: rdata_reg <= point_e_reg;
+            `WM_ENGINE_POINT_STATUS: rdata_reg <= {30'd0, point_busy, point_done_reg};
             default: rdata_reg <= 32'd0;
         endcase
     end
@@ -365,6 +442,9 @@ always @(posedge clk) begin
             `WM_ENGINE_DIV_D_HI: div_d_hi_reg <= bus_wdata;
             `WM_ENGINE_ANGLE_X: angle_x_reg <= bus_wdata;
             `WM_ENGINE_ANGLE_Y: angle_y_reg <= bus_wdata;
+            `WM_ENGINE_POINT_P: point_p_reg <= bus_wdata;
+            `WM_ENGINE_POINT_R_LO: point_r_lo_reg <= bus_wdata;
+            `WM_ENGINE_POINT_R_HI: point_r_hi_reg <= bus_wdata;
             `WM_ENGINE_STATUS: if (bus_wdata[`WM_ENGINE_STATUS_OVERRUN]) overrun_reg <= 1'b0;
             default: ;
         endcase
@@ -382,7 +462,8 @@ end
 
 // bits the engine does not take: the corners' beyond COORD_BITS, the top of RES_AT's row
 wire bits_unused = ^{v0_reg[31:16+CB], v0_reg[15:CB], v1_reg[31:16+CB], v1_reg[15:CB], v2_reg[31:16+CB],
-                     v2_reg[15:CB], res_y16[15], bus_wdata[31:CB+1]};
+                     v2_reg[15:CB], res_y16[15], bus_wdata[31:CB+1], point_p_reg[31:16+CB],
+                     point_p_reg[15:CB]};
 
 endmodule
 

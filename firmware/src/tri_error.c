@@ -409,7 +409,12 @@ static ALWAYS_INLINE uint64_t point_v(const wm_field *f, const int32_t x[3], con
 uint32_t wm_point_error(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                         int32_t py, uint64_t *kept)
 {
-    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    int64_t D;
+#ifdef WM_POINT_ENGINE
+    uint32_t e;
+    if (wm_tri_engine_point(f, p, x, y, px, py, kept, &e)) return e; /* the board's point-error unit */
+#endif
+    D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     if (D <= 0) return 0xFFFFFFFFu;
     WM_PROF_ADD(WM_PC_POINTS, 1);
     if (f->mask && wm_hole_at(f, px, py)) return 0; /* never above E(T) (holes.c) */

@@ -264,6 +264,13 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
 int32_t wm_tri_engine_angle(int32_t x, uint32_t y);
 #endif
 
+#ifdef WM_POINT_ENGINE
+/* The engine's point-error unit (the board's refiner alone): wm_point_error(f, p, x, y, px, py, kept) into
+ * *e, the same integers in the FPGA; 0 when it cannot take the field (the C computes it). */
+int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                        int32_t py, uint64_t *kept, uint32_t *e);
+#endif
+
 #ifdef WM_SLOPE_ENGINE
 /* (the board's refiner alone: firmware/board/CMakeLists.txt; the host's library takes the scan's hook
  * above, WM_TRI_ENGINE, but not these) */

@@ -1,7 +1,8 @@
-"""The loop the benches of one-command-at-a-time units share (tri_slope_tb.py, udiv64_tb.py, tri_angle_tb.py),
-and their reset: commands into a port whose writer holds its beat once offered, results out of a port read
-with random ready, both driven each cycle after the falling edge and read with the inputs settled.  Checked
-on the way: a result, once offered, is held until taken; the unit takes no command while one is in work."""
+"""The loop the benches of one-command-at-a-time units share (tri_slope_tb.py, udiv64_tb.py, tri_angle_tb.py,
+tri_point_tb.py), and their reset: commands into a port whose writer holds its beat once offered, results out
+of a port read with random ready, both driven each cycle after the falling edge and read with the inputs
+settled.  Checked on the way: a result, once offered, is held until taken; the unit takes no command while
+one is in work."""
 
 from __future__ import annotations
 
@@ -22,10 +23,11 @@ async def reset(dut, *inputs) -> None:
 
 
 async def run(dut, rng, jobs, *, offer, s_ready, m_valid, m_ready, result, cmd_rate=1.0, res_rate=1.0,
-              max_cycles=1_000_000):
+              max_cycles=1_000_000, taken=None):
     """Pass jobs through; returns (results in the order taken, cycles).  offer(beat): drive a command's
     inputs and valid (beat None: no command); s_ready, m_valid, m_ready: the handshake's handles;
-    result(): the offered result as a tuple."""
+    result(): the offered result as a tuple; taken(beat), when given: told of each command as the unit
+    takes it (read-only: drive nothing there, offer() runs next cycle)."""
     cmds = deque(jobs)
     results: list[tuple] = []
     beat = None
@@ -46,6 +48,8 @@ async def run(dut, rng, jobs, *, offer, s_ready, m_valid, m_ready, result, cmd_r
             assert result() == offered, "a result changed"
         if beat is not None and int(s_ready.value):
             assert in_work == 0, "a command taken while another is in work"
+            if taken is not None:
+                taken(beat)
             beat = None
             in_work += 1
         if int(m_valid.value):

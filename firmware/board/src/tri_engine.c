@@ -1,8 +1,9 @@
 /* The triangle error engine on the board (rtl/soc_engine.v, the ENGINE registers): E(T)'s scan of a
  * triangle's samples in the FPGA, for tri_error.c's scan_any, its slope unit (rtl/tri_slope.v) for
- * tri_error.c's slope_square and its angle unit (rtl/tri_angle.v) for fixed.c's wm_angle_q16 (built into
- * the board's refiner with WM_TRI_ENGINE, WM_SLOPE_ENGINE, WM_ANGLE_ENGINE: firmware/board/CMakeLists.txt;
- * the native build keeps the C).
+ * tri_error.c's slope_square, its angle unit (rtl/tri_angle.v) for fixed.c's wm_angle_q16 and its
+ * point-error unit (rtl/tri_point.v) for tri_error.c's wm_point_error (built into the board's refiner with
+ * WM_TRI_ENGINE, WM_SLOPE_ENGINE, WM_ANGLE_ENGINE, WM_POINT_ENGINE: firmware/board/CMakeLists.txt; the
+ * native build keeps the C).
  *
  * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
  * (the board job's: app/board_job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
@@ -99,4 +100,51 @@ uint32_t wm_tri_engine_root(uint64_t x)
         /* the unit takes the root */
     }
     return WM_ENGINE_SLOPE_ROOT;
+}
+
+/* The point-error unit: the corners, their heights and the sample into the staging registers, the
+ * sample's height and the mode with POINT_GO, then e once POINT_STATUS says DONE: tri_error.c's
+ * wm_point_error (tests/rtl/test_tri_point.py).  The vertical metric takes ev (mode 0); the normal one
+ * divides by the kept slope factor when there is one (mode 1), else by the one the slope unit computes
+ * for the same command (mode 2), which is then kept as slope_factor keeps it (when e > 0: ev > 0).  The
+ * same fields as the scan, and no holes mask (wm_hole_at runs first in the C). */
+int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
+                        int32_t py, uint64_t *kept, uint32_t *e)
+{
+    const uint16_t *h = f->samples;
+    int32_t w = f->width, ex, ey;
+    uint32_t mode, mx, my, st;
+    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
+        f->height > (1 << WM_ENGINE_COORD_BITS) || f->mask)
+        return 0;
+    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
+    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
+    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
+    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
+    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+    WM_ENGINE_POINT_P = (uint32_t)px | (uint32_t)py << 16;
+    if (p->metric == WM_METRIC_VERTICAL) {
+        mode = 0;
+    } else if (kept && *kept) {
+        WM_ENGINE_POINT_R_LO = (uint32_t)*kept;
+        WM_ENGINE_POINT_R_HI = (uint32_t)(*kept >> 32);
+        mode = 1;
+    } else {
+        wm_slope_scale(p, 0, &mx, &ex);
+        wm_slope_scale(p, 1, &my, &ey);
+        WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
+        WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
+        mode = 2;
+    }
+    WM_ENGINE_POINT_GO = (uint32_t)h[py * w + px] | mode << WM_ENGINE_POINT_GO_MODE_SHIFT;
+    while (!(WM_ENGINE_POINT_STATUS & WM_ENGINE_POINT_STATUS_DONE)) {
+        /* the unit measures */
+    }
+    *e = WM_ENGINE_POINT;
+    if (mode == 2 && kept && *e) {
+        st = WM_ENGINE_SLOPE_STATUS;
+        *kept = (uint64_t)WM_ENGINE_SLOPE_ROOT
+                << ((st & WM_ENGINE_SLOPE_STATUS_K_MASK) >> WM_ENGINE_SLOPE_STATUS_K_SHIFT);
+    }
+    return 1;
 }

@@ -309,7 +309,8 @@ ENGINE_VMAX_BITS = 2 * ENGINE_COORD_BITS + 18  # V modulo 2^VMAX_BITS (V < 2^16 
 ENGINE_CMD_DEPTH = 4  # triangles the CPU may queue
 ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT, "
                "the slope unit (the normal metric's slope factor of a triangle, square roots), a 64-bit "
-               "divider and the angle unit (atan2 by CORDIC)", (
+               "divider, the angle unit (atan2 by CORDIC) and the point-error unit (one sample against a "
+               "triangle's plane)", (
     Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)", (
         Field("X", 15, 0, "rw", "column"),
         Field("Y", 31, 16, "rw", "row"),
@@ -383,6 +384,27 @@ ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a trian
               "wm_angle_q16 (CORDIC, docs/soc.md, \"The angle unit\")"),
         Field("BUSY", 30, 30, "r", "a command is in work"),
         Field("DONE", 31, 31, "r", "Z holds the last command's result (cleared by an ANGLE_Y write)"),
+    )),
+    Register("POINT_P", 0x84, "rw", "the point-error unit's sample p", (
+        Field("X", 15, 0, "rw", "column"),
+        Field("Y", 31, 16, "rw", "row"),
+    )),
+    Register("POINT_R_LO", 0x88, "rw", "the slope factor r of mode 1 (>= 2^16), bits 31..0"),
+    Register("POINT_R_HI", 0x8C, "rw", "r, bits 63..32"),
+    Register("POINT_GO", 0x90, "w", "write: the point-error unit takes V0, V1, V2, Z01, Z2, POINT_P, the "
+             "sample's height and the mode (ignored while POINT_STATUS.BUSY, and in mode 2 while "
+             "SLOPE_STATUS.BUSY)", (
+        Field("H", 15, 0, "w", "the height at p"),
+        Field("MODE", 17, 16, "w", "0: the vertical error ev; 1: the normal one with r of POINT_R; 2: the "
+              "normal one with the slope factor the slope unit computes, started by this write as by "
+              "SLOPE_GO (its root and k into SLOPE_ROOT and SLOPE_STATUS.K)"),
+    )),
+    Register("POINT", 0x94, "r", "the last command's point error e, Q16.16: tri_error.c's wm_point_error "
+             "(docs/soc.md, \"The point-error unit\"; all ones when D <= 0)"),
+    Register("POINT_STATUS", 0x98, "r", "the point-error unit's state", (
+        Field("DONE", 0, 0, "r", "POINT holds the last command's e (and in mode 2 SLOPE_ROOT, K its r; "
+              "cleared by a POINT_GO write)"),
+        Field("BUSY", 1, 1, "r", "a command is in work"),
     )),
 ))
 # The upload block (rtl/upload_rx.v behind rtl/soc_upload.v): frames from the UART's RX FIFO deframed and
