@@ -242,16 +242,29 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         num = B[kh] * py + C[kh];
         span_start(num, ah, &qh, &rh);
         span_start(B[kh], ah, &dqh, &drh);
-        for (const uint16_t *row = h + py * f->width; py <= last; py++, Sr += dSy, row += f->width) {
-            int32_t lo = ql, hi = qh;
-            ql += dql, rl += drl, qh += dqh, rh += drh;
-            if (rl >= al) rl -= al, ql++;
-            if (rh >= ah) rh -= ah, qh++;
-            if (lo > hi) continue;
-            vm = row_max32(row + lo, row + hi + 1, Sr + (uint32_t)lo * dS, dS, d, vm, lim, &at);
-            WM_PROF_ADD(WM_PC_ROWS, 1);
-            WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? (at - row) - lo + 1 : hi - lo + 1);
-            if (vm > lim) goto done;
+        {
+            /* each end as a pointer, stepped by a row and the quotient's step (one more at a carry),
+             * and S at the left end with it: no product a row.  Every row of a half lies within the
+             * triangle's rows, and its ends within [x_min - 1, x_max + 1] (a row without a sample has
+             * lo = hi + 1 within [x_min, x_max]; the first rows of the grid hold a corner): in the
+             * samples' array. */
+            const uint16_t *pl = h + py * f->width + ql, *ph = h + py * f->width + qh;
+            int32_t stl = f->width + dql, sth = f->width + dqh, rows = last - py + 1;
+            uint32_t Sl = Sr + (uint32_t)ql * dS, dSl = dSy + (uint32_t)dql * dS;
+            Sr += (uint32_t)rows * dSy;
+            py = last + 1;
+            for (;;) {
+                if (pl <= ph) {
+                    vm = row_max32(pl, ph + 1, Sl, dS, d, vm, lim, &at);
+                    WM_PROF_ADD(WM_PC_ROWS, 1);
+                    WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? at - pl + 1 : ph - pl + 1);
+                    if (vm > lim) goto done;
+                }
+                if (--rows == 0) break;
+                pl += stl, Sl += dSl, rl += drl, ph += sth, rh += drh;
+                if (rl >= al) rl -= al, pl++, Sl += dS;
+                if (rh >= ah) rh -= ah, ph++;
+            }
         }
     }
 done:
