@@ -325,7 +325,8 @@ static uint64_t slope_square(const wm_field *f, const wm_params *p, const int32_
     /* steep slopes are shifted right by k first (ga, gb keep >= 30 significant bits), and the root
      * shifted back */
     *k = 0;
-    while ((ga >> *k) >= ((uint64_t)1 << 31) || (gb >> *k) >= ((uint64_t)1 << 31)) (*k)++;
+    if ((ga | gb) >> 31) /* most slopes are below it: no shift */
+        while ((ga >> *k) >= ((uint64_t)1 << 31) || (gb >> *k) >= ((uint64_t)1 << 31)) (*k)++;
     one = 2 * *k >= 33 ? 0 : ((uint64_t)1 << 32) >> (2 * *k);
     ga >>= *k;
     gb >>= *k; /* both below 2^31 now: 32-bit squares (a multiply and a multiply-high each on rv32) */
