@@ -116,12 +116,12 @@ def _stale(lib: Path) -> bool:
 
 def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str, ...] = (),
           targets: tuple[str, ...] = ("wavemesh_shared",)) -> Path:
-    """Generate build/gen's headers, configure (once) and build the firmware with CMake into build_dir;
-    returns build_dir."""
+    """Write fixed.c's generated build/gen/wm_angle.h, configure (once) and build the firmware with CMake
+    into build_dir; returns build_dir."""
     import fcntl  # building is rare: a run that only loads the library does not import these
     import shutil  # as fcntl
 
-    from wavemesh.device.gen import write_all  # as fcntl
+    from wavemesh.device import cordic  # as fcntl
 
     cmake = shutil.which("cmake")
     if cmake is None:
@@ -131,7 +131,7 @@ def build(build_dir: Path = BUILD, build_type: str = "Release", extra: tuple[str
     with open(build_dir / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # concurrent first uses build once
         try:
-            write_all(GEN)  # fixed.c's wm_angle.h (rewritten only when its text changes)
+            cordic.write(GEN)  # fixed.c's wm_angle.h (rewritten only when its text changes)
             if not (build_dir / "CMakeCache.txt").exists():
                 _run([cmake, "-S", str(FIRMWARE), "-B", str(build_dir), f"-DCMAKE_BUILD_TYPE={build_type}",
                       *extra])
