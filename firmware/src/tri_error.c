@@ -186,6 +186,35 @@ static void span_start(int32_t u, int32_t a, int32_t *q, int32_t *rem)
     *rem = u - *q * a;
 }
 
+/* One end of scan32's rows: floor(u / a) stepped row by row (the remainder r, its step dr), as a pointer
+ * into the samples (p, stepped by a row and the quotient's step, st). */
+struct end32 {
+    const uint16_t *p;
+    int32_t r, dr, a, st, q, dq;
+};
+
+/* The end at a row (its first sample row): u and du, the numerator and its step a row. */
+static ALWAYS_INLINE void end_start(struct end32 *e, const uint16_t *row, int32_t width, int32_t u, int32_t du,
+                                    int32_t a)
+{
+    span_start(u, a, &e->q, &e->r);
+    span_start(du, a, &e->dq, &e->dr);
+    e->a = a;
+    e->p = row + e->q;
+    e->st = width + e->dq;
+}
+
+/* The end on the next row; 1 when the remainder carried (the quotient one more than its step). */
+static ALWAYS_INLINE int end_step(struct end32 *e)
+{
+    e->p += e->st;
+    e->r += e->dr;
+    if (e->r < e->a) return 0;
+    e->r -= e->a;
+    e->p++;
+    return 1;
+}
+
 /* scan in 32-bit arithmetic, exact on grids of at most 2^14 a side for D < 2^15: every E_k and its row
  * part B y + C fit 30 bits, and S = sum E_k z_k <= D (2^16 - 1) and D h lie in [0, 2^31) at every
  * sample of a span, so S - D h taken modulo 2^32 (unsigned: no overflow) is V with its sign.  Most
@@ -195,24 +224,25 @@ static void span_start(int32_t u, int32_t a, int32_t *q, int32_t *rem)
  * the upper short edge, the rest between the long edge and the lower short edge: on each row the span
  * is bounded by those two edges alone (the third one's half-plane holds the whole row of the triangle,
  * so its bound, like the bounding box's, never binds, rounded or not).  Each bound is floor(u / a):
- * the left end ceil(-E / A) for A > 0 with u = A - 1 - (B py + C), a = A, the right end floor(E / -A)
- * for A < 0 with u = B py + C, a = -A; u moves by the same step every row, so the quotient and its
- * remainder are stepped (a carry when the remainder reaches a) instead of divided: two divisions a
- * bound and half, exactly the spans of a division per edge and row. */
+ * the left end ceil(-E / A) for A > 0 with u = A - 1 - E(0, py), a = A, the right end floor(E / -A)
+ * for A < 0 with u = E(0, py), a = -A; u moves by the same step every row, so the quotient and its
+ * remainder are stepped (a carry when the remainder reaches a) instead of divided: two divisions an
+ * edge (the long edge's carried from the upper half to the lower), exactly the spans of a division per
+ * edge and row. */
 static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d, uint64_t limit,
                        int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
-    int32_t A[3], B[3], C[3], t = 0, b = 0, m, py;
-    uint32_t z[3], dS = 0, dSy = 0, Sr, vm = 0;
+    int32_t A[3], B[3], t = 0, b = 0, m, py, lm, kept_s = 0;
+    uint32_t z[3], dS = 0, dSy = 0, Sl = 0, dSl = 0, vm = 0;
     const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
     uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit; /* the same stops: V < 2^31 */
+    struct end32 lo = {0}, hi = {0}; /* the left and right ends (each set before a row reads it) */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
-        A[k] = y[k1] - y[k2]; /* E_k(px, py) = A px + B py + C, as setup's */
+        A[k] = y[k1] - y[k2]; /* E_k(px, py) = A (px - x_k1) + B (py - y_k1), as setup's */
         B[k] = x[k2] - x[k1];
-        C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
         if (y[k] < y[t]) t = k;
         if (y[k] >= y[b]) b = k;
     }
@@ -223,48 +253,47 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         dS += (uint32_t)A[k] * z[k];
         dSy += (uint32_t)B[k] * z[k];
     }
+    /* The long edge (opposite the middle corner) bounds every row on one side, the left when A > 0;
+     * the upper short edge (opposite the bottom corner) the other side down to the middle corner's
+     * row, the lower one (opposite the top corner) from there.  Each bound is floor(u / a): the left
+     * end ceil(-E / A) for A > 0 with u = A - 1 - E(0, py), a = A, the right end floor(E / -A) for A < 0
+     * with u = E(0, py), a = -A; u moves by the same step every row (-B, B).  At the row of a corner c
+     * on the edge, E(0, py) = -A x_c, and S(0, py) = D z_c - dS x_c (S at c is D z_c). */
+    lm = A[m] > 0;
     py = y[t];
-    Sr = 0;
-    for (int k = 0; k < 3; k++) Sr += (uint32_t)(B[k] * py + C[k]) * z[k];
-    /* the long edge is opposite the middle corner, the upper short one opposite the bottom corner,
-     * the lower one opposite the top corner; a half with no rows is skipped (its edge is level) */
+    if (lm) end_start(&lo, h + py * f->width, f->width, A[m] - 1 + A[m] * x[t], -B[m], A[m]);
+    else end_start(&hi, h + py * f->width, f->width, -A[m] * x[t], B[m], -A[m]);
     for (int half = 0; half < 2; half++) {
-        int32_t ks = half == 0 ? b : t, kl, kh, ql, rl, dql, drl, al, qh, rh, dqh, drh, ah, last, num;
+        int32_t ks = half == 0 ? b : t, c = half == 0 ? t : m, last, rows;
         last = half == 0 ? (y[m] == y[b] ? y[b] : y[m] - 1) : y[b];
         if (half == 1 && y[m] == y[b]) break;
-        if (py > last) continue;
-        kl = A[m] > 0 ? m : ks; /* the left end's edge (A > 0) and the right end's (A < 0) */
-        kh = A[m] > 0 ? ks : m;
-        al = A[kl], ah = -A[kh];
-        num = B[kl] * py + C[kl];
-        span_start(al - 1 - num, al, &ql, &rl);
-        span_start(-B[kl], al, &dql, &drl);
-        num = B[kh] * py + C[kh];
-        span_start(num, ah, &qh, &rh);
-        span_start(B[kh], ah, &dqh, &drh);
-        {
-            /* each end as a pointer, stepped by a row and the quotient's step (one more at a carry),
-             * and S at the left end with it: no product a row.  Every row of a half lies within the
-             * triangle's rows, and its ends within [x_min - 1, x_max + 1] (a row without a sample has
-             * lo = hi + 1 within [x_min, x_max]; the first rows of the grid hold a corner): in the
-             * samples' array. */
-            const uint16_t *pl = h + py * f->width + ql, *ph = h + py * f->width + qh;
-            int32_t stl = f->width + dql, sth = f->width + dqh, rows = last - py + 1;
-            uint32_t Sl = Sr + (uint32_t)ql * dS, dSl = dSy + (uint32_t)dql * dS;
-            Sr += (uint32_t)rows * dSy;
-            py = last + 1;
-            for (;;) {
-                if (pl <= ph) {
-                    vm = row_max32(pl, ph + 1, Sl, dS, d, vm, lim, &at);
-                    WM_PROF_ADD(WM_PC_ROWS, 1);
-                    WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? at - pl + 1 : ph - pl + 1);
-                    if (vm > lim) goto done;
-                }
-                if (--rows == 0) break;
-                pl += stl, Sl += dSl, rl += drl, ph += sth, rh += drh;
-                if (rl >= al) rl -= al, pl++, Sl += dS;
-                if (rh >= ah) rh -= ah, ph++;
+        if (py > last) continue; /* a level upper edge: no upper half */
+        if (!lm) end_start(&lo, h + py * f->width, f->width, A[ks] - 1 + A[ks] * x[c], -B[ks], A[ks]);
+        else end_start(&hi, h + py * f->width, f->width, -A[ks] * x[c], B[ks], -A[ks]);
+        if (!lm || !kept_s) { /* S at the left end, from the corner's row (the long edge's: kept once set) */
+            kept_s = 1;
+            Sl = d * z[c] - dS * (uint32_t)x[c] + (uint32_t)lo.q * dS;
+            dSl = dSy + (uint32_t)lo.dq * dS;
+        }
+        rows = last - py + 1;
+        py = last + 1;
+        /* Every row lies within the triangle's rows, and its ends within [x_min - 1, x_max + 1] (a row
+         * without a sample has lo = hi + 1 within [x_min, x_max]; a corner's row holds the corner): in
+         * the samples' array. */
+        for (;;) {
+            if (lo.p <= hi.p) {
+                vm = row_max32(lo.p, hi.p + 1, Sl, dS, d, vm, lim, &at);
+                WM_PROF_ADD(WM_PC_ROWS, 1);
+                WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? at - lo.p + 1 : hi.p - lo.p + 1);
+                if (vm > lim) goto done;
             }
+            if (--rows == 0) break;
+            Sl += dSl + (end_step(&lo) ? dS : 0);
+            end_step(&hi);
+        }
+        if (half == 0 && y[m] != y[b]) { /* the long edge's end on the middle corner's row */
+            if (lm) Sl += dSl + (end_step(&lo) ? dS : 0);
+            else end_step(&hi);
         }
     }
 done:
