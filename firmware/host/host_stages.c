@@ -823,3 +823,153 @@ int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out)
     }
     return (int64_t)(p - out);
 }
+
+/* ---------------------------------------------------------------------------------------------- */
+/* The OBJ vertex lines (meshio.write_obj): "v x y z", z as Python's repr(float) writes it, the shortest
+ * decimal that reads back to the same double and of those the nearest (a tie to the even last digit).
+ * Exact in integers: for 1e-4 <= |z| < 2^53, z = m 2^q, the doubles that read back to z are those within
+ * half a step of it (2^(q-1); 2^(q-2) below a power of two; the ends only for an even m, as a reader
+ * rounds ties to even), here in units of 2^(q-2): 4m - 2 (4m - 1) .. 4m + 2.  Scaled by 10^g to 17
+ * digits (10^16 <= 4m 10^g 2^(q-2) < 10^17), the decimals of 17 - j digits are the multiples of 10^j
+ * there; the largest j with one between the ends gives the shortest, the nearest of them the digits
+ * (every product below 2^125; a tie between two to the even one, as repr's).  Other heights are left to
+ * the caller's repr: see wm_host_obj_vertices. */
+
+#ifdef __SIZEOF_INT128__
+__extension__ typedef unsigned __int128 u128; /* GCC's and Clang's on 64-bit hosts */
+
+static const uint64_t POW10[17] = {1u,
+                                   10u,
+                                   100u,
+                                   1000u,
+                                   10000u,
+                                   100000u,
+                                   1000000u,
+                                   10000000u,
+                                   100000000u,
+                                   1000000000u,
+                                   10000000000u,
+                                   100000000000u,
+                                   1000000000000u,
+                                   10000000000000u,
+                                   100000000000000u,
+                                   1000000000000000u,
+                                   10000000000000000u};
+
+static u128 pow10_128(int g)
+{
+    u128 r = 1u;
+    while (g-- > 0) r *= 10u;
+    return r;
+}
+
+static char *put_int(char *p, int64_t i)
+{
+    char digits[20];
+    int n = 0;
+    uint64_t u = (uint64_t)i;
+    if (i < 0) {
+        *p++ = '-';
+        u = 0u - u;
+    }
+    do {
+        digits[n++] = (char)('0' + u % 10u);
+        u /= 10u;
+    } while (u != 0u);
+    while (n > 0) *p++ = digits[--n];
+    return p;
+}
+
+/* repr(v) at p; NULL for a height left to the caller. */
+static char *put_repr(char *p, double v)
+{
+    uint64_t b = (uint64_t)bits_of(v), frac = b & ((UINT64_C(1) << 52) - 1u);
+    int bexp = (int)((b >> 52) & 0x7FFu), neg = (int)(b >> 63);
+    if (bexp == 0 && frac == 0) { /* 0.0, -0.0 */
+        if (neg) *p++ = '-';
+        memcpy(p, "0.0", 3);
+        return p + 3;
+    }
+    double a = fabs(v);
+    if (!(a >= 1e-4 && a < 9007199254740992.0)) return NULL; /* 2^53; a NaN fails too */
+    uint64_t m = frac | (UINT64_C(1) << 52);
+    int s = 2 - (bexp - 1075); /* units of 2^-s: z is 4m; 2 <= s <= 68 */
+    int incl = (m & 1u) == 0u;
+    u128 mask = ((u128)1 << s) - 1u;
+    uint64_t four = m << 2, low = four - ((frac == 0 && bexp > 1) ? 1u : 2u), high = four + 2u;
+    int g = 16 - (int)floor(log10(a));
+    u128 vg = (u128)four * pow10_128(g);
+    while ((vg >> s) < POW10[16]) vg = (u128)four * pow10_128(++g);
+    while ((vg >> s) >= POW10[16] * 10u) vg = (u128)four * pow10_128(--g);
+    u128 lg = (u128)low * pow10_128(g), hg = (u128)high * pow10_128(g);
+    uint64_t vf = (uint64_t)(vg >> s), lf = (uint64_t)(lg >> s), hf = (uint64_t)(hg >> s);
+    u128 vr = vg & mask;
+    uint64_t lo = lf + (((lg & mask) != 0u || !incl) ? 1u : 0u);
+    uint64_t hi = ((hg & mask) != 0u || incl) ? hf : hf - 1u;
+    if (lo > hi) return NULL;
+    int j = 16;
+    while (j > 0 && hi / POW10[j] * POW10[j] < lo) j--;
+    uint64_t pw = POW10[j], d = vf / pw;
+    u128 twice = ((u128)(vf % pw) << (s + 1)) + (vr << 1), unit = (u128)pw << s;
+    if (twice > unit || (twice == unit && (d & 1u))) d++; /* a tie to the even digit, as repr's */
+    if (d * pw < lo || d * pw > hi) return NULL;
+    char digits[20];
+    int n = 0;
+    while (d % 10u == 0u) { /* the trailing zeros: the point's place counts them */
+        d /= 10u;
+        j++;
+    }
+    do {
+        digits[n++] = (char)('0' + d % 10u);
+        d /= 10u;
+    } while (d != 0u);
+    int point = n + j - g; /* z = 0.d1 d2 ... 10^point */
+    if (point <= -4 || point > 16) return NULL;
+    if (neg) *p++ = '-';
+    if (point <= 0) {
+        *p++ = '0';
+        *p++ = '.';
+        for (int k = 0; k < -point; k++) *p++ = '0';
+        while (n > 0) *p++ = digits[--n];
+    } else {
+        for (int k = 0; k < point; k++) *p++ = k < n ? digits[n - 1 - k] : '0';
+        *p++ = '.';
+        if (point >= n) *p++ = '0';
+        for (int k = point; k < n; k++) *p++ = digits[n - 1 - k];
+    }
+    return p;
+}
+
+#endif
+
+int64_t wm_host_obj_vertices(const int64_t *xy, const double *z, int64_t n, char *out, int64_t *left,
+                             int64_t *n_left)
+{
+    char *p = out;
+    *n_left = 0;
+#ifndef __SIZEOF_INT128__
+    (void)xy;
+    (void)z;
+    (void)n;
+    (void)left;
+    return -1; /* the caller writes every line */
+#else
+    for (int64_t i = 0; i < n; i++) {
+        *p++ = 'v';
+        *p++ = ' ';
+        p = put_int(p, xy[2 * i]);
+        *p++ = ' ';
+        p = put_int(p, xy[2 * i + 1]);
+        *p++ = ' ';
+        char *after = put_repr(p, z[i]);
+        if (after == NULL) {
+            *p++ = '\0';
+            left[(*n_left)++] = i;
+        } else {
+            p = after;
+        }
+        *p++ = '\n';
+    }
+    return (int64_t)(p - out);
+#endif
+}

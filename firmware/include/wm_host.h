@@ -77,6 +77,16 @@ int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t
 #define WM_HOST_OBJ_FACE_MAX 65
 int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out);
 
+/* The OBJ writer's vertex lines: for each of the n vertices "v x y z\n" with the integers x, y
+ * (xy[2 i], xy[2 i + 1]) as Python's "%d" and z[i] as its repr(float) write them, into out (at least
+ * WM_HOST_OBJ_VERTEX_MAX bytes a vertex).  A z it leaves to the caller's repr (not finite, or not zero
+ * and below 1e-4 or from 2^53 in size) is written as one NUL byte and its vertex added to left (n entries
+ * at most), *n_left of them.  Returns the bytes written (-1: none, on a host without 128-bit integers,
+ * where the caller writes them all). */
+#define WM_HOST_OBJ_VERTEX_MAX 72
+int64_t wm_host_obj_vertices(const int64_t *xy, const double *z, int64_t n, char *out, int64_t *left,
+                             int64_t *n_left);
+
 #ifdef __cplusplus
 }
 #endif

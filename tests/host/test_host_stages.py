@@ -5,6 +5,8 @@ counts; and `wavemesh mesh` writes the same mesh whatever --threads says."""
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 import pytest
 from wavemesh import api
@@ -280,6 +282,55 @@ def test_obj_face_lines_in_c_equal_the_format(tmp_path, monkeypatch):
     monkeypatch.setattr(native, "host_lib", lambda: None)
     write_obj(tmp_path / "py.obj", mesh, hf.values)
     assert (tmp_path / "c.obj").read_bytes() == (tmp_path / "py.obj").read_bytes()
+
+
+def _vertex_heights() -> dict[str, np.ndarray]:
+    """Heights of every kind a grid has, and the edges of what the C writes itself (1e-4 .. 2^53)."""
+    rng = np.random.default_rng(11)
+    n = 100_000
+    near = [np.nextafter(x, d) for x in [2.0**k for k in range(-16, 55)] + [10.0**k for k in range(-6, 18)]
+            for d in (-np.inf, np.inf)]
+    return {
+        "uniform": rng.uniform(-1000.0, 5000.0, n),
+        "float32": rng.uniform(-500.0, 9000.0, n).astype(np.float32).astype(np.float64),
+        "small float32": rng.uniform(-1.0, 1.0, n).astype(np.float32).astype(np.float64),
+        "decimals": np.round(rng.uniform(-1e6, 1e6, n)) / 10.0 ** rng.integers(0, 5, n),
+        "integers": rng.integers(-10**6, 10**6, n).astype(np.float64),
+        "any size": rng.uniform(0.0, 1.0, n) * 10.0 ** rng.integers(-6, 18, n),
+        "any bits": rng.integers(0, 2**64, n, dtype=np.uint64).view(np.float64),  # NaNs, huge, tiny
+        "powers and their neighbours": np.array([2.0**k for k in range(-16, 55)] + near),
+        "edges": np.array([0.0, -0.0, 1e-4, -1e-4, 2.0**53, 2.0**53 - 1, np.inf, -np.inf, np.nan, 5e-324,
+                           0.1, 0.3, 1 / 3, 1234567890123456.5, 4503599627370496.5, 9.999999999999999e15]),
+    }
+
+
+@pytest.mark.parametrize("name", list(_vertex_heights()))
+def test_obj_vertex_lines_in_c_equal_the_format(name, tmp_path, monkeypatch):
+    """native.obj_vertices: "v x y z" with z as repr writes it (the shortest decimal that reads back, the
+    nearest of them), the text of the Python format, on every kind of height (those the C leaves to repr
+    too); and a whole file the same bytes with the library and without it."""
+    from wavemesh.io import meshio
+
+    z = _vertex_heights()[name]
+    xy = np.random.default_rng(3).integers(-9, 10**5, (len(z), 2))
+    with np.errstate(invalid="ignore"):
+        assert native.obj_vertices(xy, z) == meshio._obj_vertex_lines_model(xy, z)
+    # the C writes the heights in its range itself: repr gets only its ties (none of these)
+    lib, ptr = native.host_lib(), native._ptr
+    left, n_left = np.empty(len(z), dtype=np.int64), ctypes.c_int64(0)
+    lib.wm_host_obj_vertices(ptr(np.ascontiguousarray(xy), ctypes.c_int64), ptr(z, ctypes.c_double), len(z),
+                             ctypes.create_string_buffer(native.OBJ_VERTEX_MAX * len(z)),
+                             ptr(left, ctypes.c_int64), ctypes.byref(n_left))
+    mine = (z == 0) | ((np.abs(z) >= 1e-4) & (np.abs(z) < 2.0**53))
+    assert sorted(left[: n_left.value]) == np.flatnonzero(~mine).tolist()
+    if name == "uniform":
+        assert native.obj_vertices(xy[:0], z[:0]) == ""
+        hf = from_array(real_grids()["topobathy"])
+        mesh = api.mesh(hf, api.MeshParams()).mesh
+        meshio.write_obj(tmp_path / "c.obj", mesh, hf.values)
+        monkeypatch.setattr(native, "host_lib", lambda: None)
+        meshio.write_obj(tmp_path / "py.obj", mesh, hf.values)
+        assert (tmp_path / "c.obj").read_bytes() == (tmp_path / "py.obj").read_bytes()
 
 
 @pytest.mark.parametrize("name", sorted(ALL))

@@ -79,11 +79,19 @@ def _open_for_writing(path, binary: bool):
 
 
 def _obj_vertex_lines(xy: np.ndarray, z: np.ndarray) -> str:
-    """``v x y z`` lines, z as ``repr(float(z))``; formatted by one %-format in C, not line by line.
-    Float x, y (map coordinates) are written as ``repr`` too."""
+    """``v x y z`` lines, z as ``repr(float(z))``: for integer x, y in C when the library is there
+    (native.obj_vertices: the same text, tests/host/test_host_stages.py; a tenth of repr's time), else by
+    one %-format, not line by line.  Float x, y (map coordinates) are written as ``repr`` too."""
     n = len(xy)
     if xy.dtype.kind == "f":
         return ("v %r %r %r\n" * n) % tuple(np.column_stack([xy, z]).ravel().tolist())
+    text = native.obj_vertices(xy, z)
+    return text if text is not None else _obj_vertex_lines_model(xy, z)
+
+
+def _obj_vertex_lines_model(xy: np.ndarray, z: np.ndarray) -> str:
+    """_obj_vertex_lines' text for integer x, y in Python (its model)."""
+    n = len(xy)
     flat: list = [None] * (3 * n)
     flat[0::3] = xy[:, 0].tolist()
     flat[1::3] = xy[:, 1].tolist()

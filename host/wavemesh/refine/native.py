@@ -215,6 +215,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_host_part_min": (i64, [i64]),
         "wm_host_scan": (i32, [i32]),
         "wm_host_obj_faces": (i64, [pi64, i64, ctypes.c_char_p]),
+        "wm_host_obj_vertices": (i64, [pi64, pf64, i64, ctypes.c_char_p, pi64, pi64]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -686,9 +687,46 @@ def obj_faces(tris: np.ndarray) -> str | None:
     if lib is None:
         return None
     t = np.ascontiguousarray(tris, dtype=np.int64)
-    buf = ctypes.create_string_buffer(OBJ_FACE_MAX * len(t) + 1)
-    n = lib.wm_host_obj_faces(_ptr(t, ctypes.c_int64), len(t), buf)
-    return ctypes.string_at(buf, n).decode("ascii")
+    buf = _text_buffer(OBJ_FACE_MAX * len(t))
+    n = lib.wm_host_obj_faces(_ptr(t, ctypes.c_int64), len(t), buf.ctypes.data_as(ctypes.c_char_p))
+    return buf[:n].tobytes().decode("ascii")
+
+
+def _text_buffer(n: int) -> np.ndarray:
+    """n bytes for the C to write text into, not cleared (a ctypes string buffer is: 83 MB for Jacksboro's
+    1.27M triangles at 2048^2, 25 ms); only the pages it writes are touched."""
+    return np.empty(n + 1, dtype=np.uint8)
+
+
+OBJ_VERTEX_MAX = 72  # WM_HOST_OBJ_VERTEX_MAX: the longest "v x y z" line it writes
+
+
+def obj_vertices(xy: np.ndarray, z: np.ndarray) -> str | None:
+    """The OBJ vertex lines of (V, 2) integer positions and (V,) heights, "v x y z\n" with z as
+    ``repr(float(z))``, as the text ``("v %d %d %r\n" * V) % ...`` (wm_host_obj_vertices; the heights it
+    leaves, not finite, or not zero and below 1e-4 or from 2^53 in size, by repr here); None without the
+    library."""
+    lib = host_lib()
+    if lib is None:
+        return None
+    xy = np.ascontiguousarray(xy, dtype=np.int64)
+    z = np.ascontiguousarray(z, dtype=np.float64)
+    buf = _text_buffer(OBJ_VERTEX_MAX * len(z))
+    left = np.empty(len(z), dtype=np.int64)
+    n_left = ctypes.c_int64(0)
+    k = lib.wm_host_obj_vertices(_ptr(xy, ctypes.c_int64), _ptr(z, ctypes.c_double), len(z),
+                                 buf.ctypes.data_as(ctypes.c_char_p), _ptr(left, ctypes.c_int64),
+                                 ctypes.byref(n_left))
+    if k < 0:  # a host without 128-bit integers
+        return None
+    text = buf[:k].tobytes().decode("ascii")
+    if not n_left.value:
+        return text
+    pieces = text.split("\0")  # the heights left, in order
+    out = [pieces[0]]
+    for r, piece in zip(map(repr, z[left[: n_left.value]].tolist()), pieces[1:], strict=True):
+        out += [r, piece]
+    return "".join(out)
 
 
 def check_proper(mesh: Mesh) -> tuple[bool, int] | None:
