@@ -179,6 +179,25 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
     return vmax;
 }
 
+/* row_max32 without the stop: the largest V of the row (the rows of scan32; a row whose V goes above
+ * the limit is scanned again by row_max32 for the first sample that does, its stop). */
+WM_NOINLINE static uint32_t row_max32_all(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS,
+                                          uint32_t d, uint32_t vm, const uint16_t **at)
+{
+    uint32_t T = S + vm, twice = 2 * vm;
+    for (; q < end; q++, T += dS) {
+        uint32_t w = T - d * *q;
+        if (w > twice) {
+            uint32_t u = w - vm, v = u >> 31 ? 0u - u : u;
+            T += v - vm;
+            vm = v;
+            twice = 2 * v;
+            *at = q;
+        }
+    }
+    return vm;
+}
+
 /* floor(u / a) and u mod a (a > 0), for a span's end stepped row by row (scan32). */
 static void span_start(int32_t u, int32_t a, int32_t *q, int32_t *rem)
 {
@@ -282,7 +301,10 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
          * the samples' array. */
         for (;;) {
             if (lo.p <= hi.p) {
-                vm = row_max32(lo.p, hi.p + 1, Sl, dS, d, vm, lim, &at);
+                vm = row_max32_all(lo.p, hi.p + 1, Sl, dS, d, vm, &at);
+                /* above the limit: the row again, for its first sample above it (any V of the row
+                 * above the limit is above the V_max before the row, so from 0 the same stop) */
+                if (vm > lim) vm = row_max32(lo.p, hi.p + 1, Sl, dS, d, 0, lim, &at);
                 WM_PROF_ADD(WM_PC_ROWS, 1);
                 WM_PROF_ADD(WM_PC_SAMPLES, vm > lim ? at - lo.p + 1 : hi.p - lo.p + 1);
                 if (vm > lim) goto done;
