@@ -8,14 +8,15 @@ vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so t
 it measures it (getrusage: user + system CPU, system CPU, minor page faults; the tile windows it read and
 quantised, tile_heightfield's misses, and the samples of the windows it read, bands of seams included;
 the tiles it holds after).  Prints the run's wall time and CPU (the workers' counted to their end, after
-the run's for those still exiting as it ended, which it does not wait for), then, for the quantisation's
-strips and for the task graph: the wall time,
-the tasks and the parent's round trips to the pool for them (runner.CHAIN, BATCH_READY), each worker's CPU
-and busy time, the time it waited (the span less its tasks: at a barrier, for the parent, for a task's
-inputs) and the most tiles it held, then each step's CPU summed over the workers; and the model of the
-speed-up over one worker, the CPU outside the workers (this process's) plus the busiest worker's CPU in
-each part.  CPU seconds, page faults and reads hold on a loaded machine where wall times do not; run it
-with --workers 1 and 2 to compare (docs/tiles.md, "Running the tiles").
+the run's for those still exiting as it ended, which it does not wait for) and its end (from the last
+task's end to the command's return: the parent's last writing, the files moved into place); then, for
+the quantisation's strips and for the task graph: the wall time, the tasks and the parent's round trips
+to the pool for them (runner.CHAIN, BATCH_READY), each worker's CPU and busy time, the time it waited
+(the span less its tasks: at a barrier, for the parent, for a task's inputs) and the most tiles it held,
+then each step's CPU summed over the workers; and the model of the speed-up over one worker, the CPU
+outside the workers (this process's) plus the busiest worker's CPU in each part.  CPU seconds, page
+faults and reads hold on a loaded machine where wall times do not; run it with --workers 1 and 2 to
+compare (docs/tiles.md, "Running the tiles").
 """
 
 from __future__ import annotations
@@ -140,17 +141,20 @@ def main(argv: list[str]) -> int:
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
     rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
-    wall, exiting = time.perf_counter() - t0, list(runner._EXITING)
+    end = time.perf_counter()  # CLOCK_MONOTONIC, as the workers' task times (timed)
+    wall, exiting = end - t0, list(runner._EXITING)
     for proc in exiting:  # the pool's workers still exiting as the run ended (not waited for by it)
         proc.join()
     after, c1 = time.perf_counter() - t0 - wall, os.times()
     here = c1.user + c1.system - c0.user - c0.system
     there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
     tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
+    last = max(i[3] for *_, infos in LOG for _, i in infos)
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
           f"{here - tasks_here:.2f}), the workers {there:.2f} s"
           + (f" ({len(exiting)} still exiting as the run ended, for {1000 * after:.0f} ms more)" if exiting
-             else ""))
+             else "")
+          + f"; the run's end, from its last task's to the command's return: {1000 * (end - last):.0f} ms")
     model = here - tasks_here
     for part, a, b, trips, infos in LOG:
         per: dict = {}

@@ -449,8 +449,9 @@ def _worker_loop(pipe, parent: int) -> None:
         try:
             task = pipe.recv()
         except (EOFError, OSError):
-            return
+            task = None
         if task is None:
+            _worker_end()
             return
         if task[0] == "keep":  # ("keep", key, value)
             kept[task[1]] = task[2]
@@ -494,6 +495,17 @@ def _worker_start(parent: int) -> None:
 # the pool workers a run let go that were still exiting (freeing their memory) when it ended: reaped by a
 # later Runner, or by init once this process has ended (_end_workers)
 _EXITING: list = []
+
+
+def _worker_end() -> None:
+    """A pool worker's end: its exit (the kernel freeing its heap, tens of milliseconds of system time) at
+    the lowest priority, so that it takes a CPU only when the parent and the other workers leave one (the
+    run's last tasks, the parent's writing and its own end): not waited for (_end_workers), it need not be
+    early."""
+    try:
+        os.nice(19)
+    except OSError:
+        pass
 
 
 def _end_workers(pool: list, gently: bool) -> None:
