@@ -4,6 +4,7 @@ to them (docs/tiles.md, steps 4-5)."""
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Iterable
 
 import numpy as np
@@ -166,13 +167,19 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
                 inc[v].discard(t)
 
     want = {side_point(s, pos, w, h) for s, ps in sides.items() for pos in ps}
+    # each side's vertices by their place along it, sorted (a new vertex's neighbours there by bisection,
+    # not a pass over every border vertex for each: 0.69 of Jacksboro 2048^2's 6.96 s on one worker)
+    lines: dict[str, tuple[list[int], list[int]]] = {}  # side -> (places, vertices)
+    for place, u, s in sorted((pos, v, s) for v in inc for s, pos in _side_of(*xy[v], w, h)):
+        line = lines.setdefault(s, ([], []))
+        line[0].append(place)
+        line[1].append(u)
     # 1. insert the decided vertices the mesh lacks: split the triangle whose border edge holds each
     for p in sorted(want - set(xy.values())):
         side, pos = _side_of(p[0], p[1], w, h)[0]
-        line = [v for v in inc if any(s == side for s, _ in _side_of(*xy[v], w, h))]
-        coord = (lambda v: xy[v][0]) if side in ("top", "bottom") else (lambda v: xy[v][1])
-        a = max((v for v in line if coord(v) < pos), key=coord)
-        b = min((v for v in line if coord(v) > pos), key=coord)
+        ps, vs = lines[side]
+        i = bisect_left(ps, pos)  # the side's vertices before and after pos (never at it: it lacks p)
+        a, b = vs[i - 1], vs[i]
         t = next(t for t in inc[a] & inc[b])
         ta = tris[t]
         k = ta.index(a)
@@ -183,6 +190,8 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
         v = n_v + len(xy) - len(used)  # the next new vertex
         xy[v] = p
         inc[v] = set()
+        ps.insert(i, pos)
+        vs.insert(i, v)
         kill(t)
         add((a, v, c))
         add((v, b, c))
