@@ -252,11 +252,11 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
                        int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
-    int32_t A[3], B[3], t = 0, b = 0, m, py, lm, kept_s = 0;
+    int32_t A[3], B[3], t = 0, b = 0, m, py, lm;
     uint32_t z[3], dS = 0, dSy = 0, Sl = 0, dSl = 0, vm = 0;
     const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
     uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit; /* the same stops: V < 2^31 */
-    struct end32 lo = {0}, hi = {0}; /* the left and right ends (each set before a row reads it) */
+    struct end32 lo, hi; /* the left and right ends */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
@@ -280,19 +280,36 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
      * on the edge, E(0, py) = -A x_c, and S(0, py) = D z_c - dS x_c (S at c is D z_c). */
     lm = A[m] > 0;
     py = y[t];
-    if (lm) end_start(&lo, h + py * f->width, f->width, A[m] - 1 + A[m] * x[t], -B[m], A[m]);
-    else end_start(&hi, h + py * f->width, f->width, -A[m] * x[t], B[m], -A[m]);
+    {
+        /* both ends on the top row: the long edge's from the top corner, the upper short edge's from
+         * there too, or with a level upper edge (no upper half) the lower one's from the middle corner */
+        int32_t ks = y[t] == y[m] ? t : b, c = y[t] == y[m] ? m : t;
+        int32_t kl = lm ? m : ks, kh = lm ? ks : m, cl = lm ? t : c, ch = lm ? c : t;
+        const uint16_t *row = h + py * f->width;
+        end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
+        end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
+        Sl = d * z[t] - dS * (uint32_t)x[t] + (uint32_t)lo.q * dS;
+        dSl = dSy + (uint32_t)lo.dq * dS;
+    }
     for (int half = 0; half < 2; half++) {
-        int32_t ks = half == 0 ? b : t, c = half == 0 ? t : m, last, rows;
+        int32_t last, rows;
         last = half == 0 ? (y[m] == y[b] ? y[b] : y[m] - 1) : y[b];
-        if (half == 1 && y[m] == y[b]) break;
-        if (py > last) continue; /* a level upper edge: no upper half */
-        if (!lm) end_start(&lo, h + py * f->width, f->width, A[ks] - 1 + A[ks] * x[c], -B[ks], A[ks]);
-        else end_start(&hi, h + py * f->width, f->width, -A[ks] * x[c], B[ks], -A[ks]);
-        if (!lm || !kept_s) { /* S at the left end, from the corner's row (the long edge's: kept once set) */
-            kept_s = 1;
-            Sl = d * z[c] - dS * (uint32_t)x[c] + (uint32_t)lo.q * dS;
-            dSl = dSy + (uint32_t)lo.dq * dS;
+        if (half == 0 && py > last) continue; /* a level upper edge: no upper half */
+        if (half == 1) {
+            if (y[m] == y[b]) break; /* a level lower edge: no lower half */
+            if (y[t] != y[m]) { /* after the upper half: the long edge's end a row on, the lower short
+                                 * edge's from the middle corner */
+                const uint16_t *row = h + py * f->width;
+                if (lm) {
+                    Sl += dSl + (end_step(&lo) ? dS : 0);
+                    end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
+                } else {
+                    end_step(&hi);
+                    end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
+                    Sl = d * z[m] - dS * (uint32_t)x[m] + (uint32_t)lo.q * dS;
+                    dSl = dSy + (uint32_t)lo.dq * dS;
+                }
+            }
         }
         rows = last - py + 1;
         py = last + 1;
@@ -312,10 +329,6 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
             if (--rows == 0) break;
             Sl += dSl + (end_step(&lo) ? dS : 0);
             end_step(&hi);
-        }
-        if (half == 0 && y[m] != y[b]) { /* the long edge's end on the middle corner's row */
-            if (lm) Sl += dSl + (end_step(&lo) ? dS : 0);
-            else end_step(&hi);
         }
     }
 done:
