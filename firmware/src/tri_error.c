@@ -184,14 +184,16 @@ static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], 
 WM_NOINLINE static uint32_t row_max32_all(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS,
                                           uint32_t d, uint32_t vm, const uint16_t **at)
 {
-    uint32_t T = S + vm, twice = 2 * vm;
-    for (; q < end; q++, T += dS) {
-        uint32_t w = T - d * *q;
-        if (w > twice) {
-            uint32_t u = w - vm, v = u >> 31 ? 0u - u : u;
-            T += v - vm;
+    /* with U = S + vm + 1: ~(S + vm - d h) = d h - U, and x > 2 vm iff ~x < ~(2 vm) (no copy of U a
+     * sample for the subtraction) */
+    uint32_t U = S + vm + 1, nt = ~(2 * vm);
+    for (; q < end; q++, U += dS) {
+        uint32_t w = d * *q - U;
+        if (w < nt) {
+            uint32_t u = ~w - vm, v = u >> 31 ? 0u - u : u;
+            U += v - vm;
             vm = v;
-            twice = 2 * v;
+            nt = ~(2 * v);
             *at = q;
         }
     }
