@@ -52,3 +52,21 @@ def test_codes_flags_and_limits_are_the_headers():
 def test_error_texts_come_from_the_library():
     assert native.error_text(define("WM_ERR_CAPACITY")) == "capacity exhausted"
     assert native.error_text(define("WM_ERR_ARG")) == "argument out of range"
+
+
+def test_fixed_params_kept_are_the_same_and_a_copy():
+    """fixed_params keeps its answers: each is the one worked out anew (every field, byte for byte), for
+    parameters that differ in one field, the scale, zeta or the cell size; the caller gets a copy."""
+    from wavemesh.api import RefineParams
+
+    cases = [(RefineParams(), 0.01, None, (1.0, 1.0)),
+             (RefineParams(metric="vertical"), 0.01, None, (1.0, 1.0)),
+             (RefineParams(delta_d=0.2), 0.01, None, (1.0, 1.0)), (RefineParams(), 0.02, None, (1.0, 1.0)),
+             (RefineParams(), 0.01, 3.5, (1.0, 1.0)), (RefineParams(), 0.01, 3.5, (2.0, 0.5)),
+             (RefineParams(max_triangles=99, reduce=False), 1.0, 7.0, (30.0, 30.0))]
+    for _ in range(2):  # worked out, then kept
+        got = [native.fixed_params(*c) for c in cases]
+        assert [bytes(g) for g in got] == [bytes(native._fixed_params(*c)) for c in cases]
+        assert len({bytes(g) for g in got}) == len(cases)
+    got[0].zeta = 12345
+    assert native.fixed_params(*cases[0]).zeta != 12345

@@ -311,11 +311,25 @@ def scale_fixed(scale: float | Fraction) -> tuple[int, int]:
     return (n << e) // d, e
 
 
+_FIXED: dict = {}  # fixed_params' answers by its arguments (a tiled run asks 8 times a tile, the same)
+
+
 def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
                  spacing: tuple[float, float] = (1.0, 1.0)) -> Params:
     """The library's wm_params for p, the height scale and the cell size ``spacing`` = (dx, dy), the
     ground distance between neighbouring samples in height units (docs/refiner.md, "Fixed-point
-    formats")."""
+    formats").  Each answer is kept (by p's repr, every field's value, and the other arguments: about
+    0.1 ms of Fraction arithmetic each) and a copy of it returned."""
+    key = (repr(p), scale, zeta, tuple(spacing))
+    out = _FIXED.get(key)
+    if out is None:
+        if len(_FIXED) >= 64:
+            _FIXED.clear()
+        _FIXED[key] = out = _fixed_params(p, scale, zeta, spacing)
+    return Params.from_buffer_copy(out)
+
+
+def _fixed_params(p: RefineParams, scale: float, zeta: float | None, spacing: tuple[float, float]) -> Params:
     s = Fraction(scale)
     z = Fraction(p.zeta if zeta is None else zeta)
     m, e = scale_fixed(scale)
