@@ -68,6 +68,40 @@ def test_last_graph_lets_its_workers_go():
     assert run.pool == [] == run.ended
 
 
+def _in_runner() -> None:
+    with tiles.Runner(1):
+        pass
+
+
+def test_ended_workers_reaped_by_a_later_runner():
+    """A worker let go gently and still running is not waited for: kept for a later Runner to reap, off
+    multiprocessing's children (whose exit handler would wait for it); reaped once it has ended, no zombie
+    left; a child forked meanwhile runs its own Runner without it (not its child to join)."""
+    import multiprocessing
+    import time
+
+    from wavemesh.tiles import runner
+
+    ctx = multiprocessing.get_context("fork")
+    here, there = ctx.Pipe()
+    slow = ctx.Process(target=time.sleep, args=(0.5,), daemon=True)  # deaf to the pipe: still running
+    slow.start()
+    there.close()
+    runner._end_workers([(slow, here)], gently=True)
+    assert slow in runner._EXITING and slow.exitcode is None
+    assert slow not in multiprocessing.active_children()
+    child = ctx.Process(target=_in_runner)
+    child.start()
+    child.join(30)
+    assert child.exitcode == 0
+    os.waitid(os.P_PID, slow.pid, os.WEXITED | os.WNOWAIT)  # ended, not reaped yet
+    with tiles.Runner(1):
+        pass
+    assert slow.exitcode == 0 and slow not in runner._EXITING
+    with pytest.raises(ChildProcessError):
+        os.waitpid(slow.pid, os.WNOHANG)
+
+
 def _big(n, *_):
     return np.full(n, 7, dtype=np.int64)
 

@@ -493,8 +493,11 @@ def _worker_start(parent: int) -> None:
 
 
 # the pool workers a run let go that were still exiting (freeing their memory) when it ended: reaped by a
-# later Runner, or by init once this process has ended (_end_workers)
+# later Runner, or by init once this process has ended (_end_workers); a forked child starts without them
+# (they are not its children: joining one there fails)
 _EXITING: list = []
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_EXITING.clear)
 
 
 def _worker_end() -> None:
