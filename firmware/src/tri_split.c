@@ -17,6 +17,8 @@ int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3]
     a = m->hv[3 * t];
     b = m->hv[3 * t + 1];
     c = m->hv[3 * t + 2];
+    /* a point off the grid is in no triangle, and wm_orient is exact for grid points only */
+    if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_REFUSED;
     if (wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) <= 0 ||
         wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
         wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)

@@ -121,6 +121,8 @@ static void test_tri_split(void)
     t = WM_TRI(e); /* (0,0) (4,4) (0,4) */
     CHECK(wm_tri_split(&m, t, 2, 2, touched, &n) == WM_ERR_REFUSED); /* on an edge */
     CHECK(wm_tri_split(&m, t, 3, 1, touched, &n) == WM_ERR_REFUSED); /* in the other triangle */
+    /* off the grid, and inside t if the orientations wrapped around in 32 bits */
+    CHECK(wm_tri_split(&m, t, 1442100146, -234560211, touched, &n) == WM_ERR_REFUSED);
     CHECK(wm_tri_split(&m, t, 1, 3, touched, &n) == WM_OK);
     CHECK(n == 3 && m.n_tri == 4 && m.n_vert == 5 && wm_mesh_check(&m) == WM_OK);
     CHECK(find_edge(&m, 1, 3, 0, 0) >= 0 || find_edge(&m, 0, 0, 1, 3) >= 0);
