@@ -484,6 +484,29 @@ static void test_vertex_remove(void)
     CHECK(wm_mesh_check(&m) == WM_OK);
 }
 
+/* wm_orient in 32-bit arithmetic over the whole coordinate range (0..WM_MAX_SIDE - 1): the 64-bit
+ * products' difference, corners at the range's ends among them (the checking build's UBSan sees any
+ * overflow). */
+static void test_orient(void)
+{
+    const int32_t M = WM_MAX_SIDE - 1, ends[4] = {0, 1, WM_MAX_SIDE - 2, WM_MAX_SIDE - 1};
+    uint64_t seed = 0x9E3779B97F4A7C15u;
+    int wrong = 0;
+    CHECK(wm_orient(0, 0, M, 0, 0, M) == (int64_t)M * M && wm_orient(0, 0, 0, M, M, 0) == -(int64_t)M * M);
+    CHECK(wm_orient(M, 0, M, M, 0, 0) == (int64_t)M * M && wm_orient(0, M, M, 0, M, M) == (int64_t)M * M);
+    for (int i = 0; i < 200000; i++) {
+        int32_t p[6];
+        int64_t want;
+        for (int c = 0; c < 6; c++) {
+            uint64_t r = rand64(&seed);
+            p[c] = (r & 3u) == 0u ? ends[(r >> 2) & 3u] : (int32_t)((r >> 8) % (uint64_t)WM_MAX_SIDE);
+        }
+        want = ((int64_t)p[2] - p[0]) * ((int64_t)p[5] - p[1]) - ((int64_t)p[4] - p[0]) * ((int64_t)p[3] - p[1]);
+        wrong += wm_orient(p[0], p[1], p[2], p[3], p[4], p[5]) != want;
+    }
+    CHECK(wrong == 0);
+}
+
 /* The in-circle predicate at the extremes of the coordinate range, and the smallest angle taken
  * opposite the shortest side. */
 static void test_incircle(void)
@@ -658,6 +681,7 @@ int main(void)
     test_haar();
     test_refine();
     test_vertex_remove();
+    test_orient();
     test_incircle();
     test_eigen();
     test_edge_collapse();
