@@ -27,8 +27,10 @@
  * were shared (a call and its spills cost the native build some 1 % of the refiner's instructions). */
 #if defined(__GNUC__)
 #define ALWAYS_INLINE inline __attribute__((always_inline))
+#define NEVER_INLINE __attribute__((noinline))
 #else
 #define ALWAYS_INLINE inline
+#define NEVER_INLINE
 #endif
 
 #if WM_PROFILE
@@ -132,9 +134,10 @@ WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, ui
 /* Scans the closed triangle row by row; returns Vmax and the first sample reaching it, or, as soon as
  * a sample's V exceeds limit, that V (the caller only learns that E(T) is above its bound).  64-bit
  * arithmetic (the span of each row from 32-bit divisions on grids of at most 2^14 a side, where every
- * E_k fits 30 bits); scan32 below is the same scan for small triangles. */
-static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
-                     int32_t *wx, int32_t *wy)
+ * E_k fits 30 bits); scan32 below is the same scan for small triangles.  Out of line: the few large
+ * triangles take it, and inlined in scan_any it cost every scan32 registers and saves. */
+NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
+                                  uint64_t limit, int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     struct tri_setup t;
