@@ -1,7 +1,8 @@
 """A tiled run's task graph (tiles.Runner.graph, tiles.tile_graph): every node after the nodes it reads,
 the same results in this process and on a pool of 2 workers, the ready nodes in rank order and a tile's
 nodes on the worker that read it first; the free meshes given (stream) or made give the same tiles; a
-process's kept tiles are read-only, forgotten after their last step, and read anew from a replaced file."""
+process's kept tiles are read-only, forgotten after their last step, and read anew from a replaced file;
+a worker told to end lowers its priority, one still exiting as its run ends is reaped by a later Runner."""
 
 from __future__ import annotations
 
@@ -100,6 +101,33 @@ def test_ended_workers_reaped_by_a_later_runner():
     assert slow.exitcode == 0 and slow not in runner._EXITING
     with pytest.raises(ChildProcessError):
         os.waitpid(slow.pid, os.WNOHANG)
+
+
+def _loop_then_nice(pipe, out) -> None:
+    from wavemesh.tiles import runner
+
+    runner._worker_loop(pipe, os.getppid())
+    out.send(os.nice(0))  # its priority as it would exit
+
+
+def test_worker_told_to_end_lowers_its_priority():
+    """A pool worker told to end (None down its pipe) lowers its priority to the lowest before it exits,
+    so that its exit takes a CPU only where the parent and the other workers leave one."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    here, there = ctx.Pipe()
+    out_r, out_w = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_loop_then_nice, args=(there, out_w))
+    proc.start()
+    there.close()
+    out_w.close()
+    here.send((_add, (1, 2)))
+    assert here.recv() == ("ok", 3, None)
+    here.send(None)
+    assert out_r.poll(30) and out_r.recv() == 19
+    proc.join(30)
+    assert proc.exitcode == 0
 
 
 def _big(n, *_):
