@@ -149,12 +149,13 @@ def main(argv: list[str]) -> int:
     here = c1.user + c1.system - c0.user - c0.system
     there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
     tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
-    last = max(i[3] for *_, infos in LOG for _, i in infos)
+    last = max((i[3] for *_, infos in LOG for _, i in infos), default=None)  # None: no task (untiled, failed)
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
           f"{here - tasks_here:.2f}), the workers {there:.2f} s"
           + (f" ({len(exiting)} still exiting as the run ended, for {1000 * after:.0f} ms more)" if exiting
              else "")
-          + f"; the run's end, from its last task's to the command's return: {1000 * (end - last):.0f} ms")
+          + (f"; the run's end, from its last task's to the command's return: {1000 * (end - last):.0f} ms"
+             if last is not None else "; no tile task ran"))
     model = here - tasks_here
     for part, a, b, trips, infos in LOG:
         per: dict = {}
