@@ -24,7 +24,8 @@
  *
  * Timing: 1 clock to take the command, 4 to V and the first division's set-up, 32 / DIV_STEPS of
  * division, then for e 1 to take r, 1 of set-up and 32 / DIV_STEPS more, 1 to hand out the result: 22
- * clocks for ev at DIV_STEPS = 2, 40 for e (in mode 2 at least until r is there), 6 when ev saturates.
+ * clocks for ev at DIV_STEPS = 2, 40 for e (in mode 2 at least until r is there); when ev saturates 6
+ * for ev, 24 for e (its division alone).
  */
 
 `resetall

@@ -141,8 +141,8 @@ async def random_commands_backpressure(dut):
 async def latency(dut):
     """Nothing stalls: 22 clocks for ev (take, edge functions, products, V, set-up, 16 of division,
     result), 40 for e (its set-up and division after a clock that takes r), 23 when ev = 0, 6 when ev
-    saturates, 4 for a clockwise triangle; mode 2 waits for r (16 clocks a division at DIV_STEPS = 2,
-    32 at 1)."""
+    saturates (24 for e: its division alone), 4 for a clockwise triangle; mode 2 waits for r (16 clocks a
+    division at DIV_STEPS = 2, 32 at 1)."""
     rng = random.Random(SEED + 2)
     tb = Bench(dut, rng)
     await tb.reset()
@@ -153,6 +153,7 @@ async def latency(dut):
              ((tri, z, (3, 3), 12345, 1 << 20, 1), 8 + 2 * DIV),
              ((tri, z, (0, 0), 100, 1 << 20, 1), 7 + DIV),  # ev = 0: no second division
              (([(0, 0), (m, 0), (m, 1)], [0, 0, 65535], (0, m), 0, 1 << 20, 0), 6),  # saturated
+             (([(0, 0), (m, 0), (m, 1)], [0, 0, 65535], (0, m), 0, 1 << 16, 1), 8 + DIV),  # and e
              (([(0, 0), (2, 7), (9, 1)], z, (3, 3), 1, 1 << 20, 1), 4)]  # clockwise
     for job, clocks in cases:
         results, cycles = await tb.run([job])
