@@ -19,7 +19,8 @@ in turn (A B C A B C ...) RUNS times each:
   thread; the refiner runs on one anyway), once.
 
 Each process's CPU time (user + sys) and peak memory (ru_maxrss) come from the operating system
-(os.wait4, in a small launcher: see LAUNCH).  Both OBJ files are read back and checked by wavemesh.check
+(os.wait4, in a small launcher: see LAUNCH; a tiled run's pool workers counted, those still exiting
+when the command returns too).  Both OBJ files are read back and checked by wavemesh.check
 (proper, grid-sample vertices carrying the grid's heights, E_max vertical within E); A's and C's files
 must be byte for byte equal.
 """
@@ -71,9 +72,14 @@ def zeta_of(z: np.ndarray) -> float:
 # A small launcher between this process and the measured one: a child's ru_maxrss starts from its
 # parent's resident size when it is forked (Linux keeps the high-water mark across exec), and this
 # process holds the grids; the launcher (a bare interpreter, ~10 MiB) forks, execs, reaps with os.wait4 and
-# prints the measured process's figures.
+# prints the measured process's figures.  It is the reaper of the process's descendants too (Linux:
+# PR_SET_CHILD_SUBREAPER): a tiled run's pool workers still exiting when the command returns (it does not
+# wait for them) come to it, and their CPU and peak memory are the command's, as its own waited-for
+# children's are; the wall time is the command's, to its return.
 LAUNCH = """\
-import json, os, sys, time
+import ctypes, json, os, sys, time
+if sys.platform.startswith("linux"):
+    ctypes.CDLL(None).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
 t0 = time.perf_counter()
 pid = os.fork()
 if pid == 0:
@@ -81,8 +87,15 @@ if pid == 0:
     os.dup2(fd, 1)
     os.execv(sys.argv[1], sys.argv[1:])
 _, status, ru = os.wait4(pid, 0)
-print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": ru.ru_utime + ru.ru_stime,
-                  "peak_mib": ru.ru_maxrss / 1024, "rc": os.waitstatus_to_exitcode(status)}))
+wall, cpu, peak = time.perf_counter() - t0, ru.ru_utime + ru.ru_stime, ru.ru_maxrss
+while True:
+    try:
+        _, _, r = os.wait4(-1, 0)
+    except ChildProcessError:
+        break
+    cpu, peak = cpu + r.ru_utime + r.ru_stime, max(peak, r.ru_maxrss)
+print(json.dumps({"wall_s": wall, "cpu_s": cpu, "peak_mib": peak / 1024,
+                  "rc": os.waitstatus_to_exitcode(status)}))
 """
 
 
