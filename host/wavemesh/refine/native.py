@@ -188,15 +188,17 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_strerror": (ctypes.c_char_p, [ctypes.c_int]),
         "wm_refine_bound": (sz, [i32, i32, i32]),
         "wm_tri_cap_max": (i32, [i32, i32]),
+        # the arrays refine passes by address (an int: a.ctypes.data, half data_as's time; a ctypes pointer
+        # still converts)
         "wm_refine_init": (ctypes.c_int, [ctypes.POINTER(vp), vp, sz, ctypes.POINTER(Field),
                                           ctypes.POINTER(Params),
-                                          pi32, i32, pi32, i32, i32]),
+                                          vp, i32, vp, i32, i32]),
         "wm_refine_set_roi": (ctypes.c_int, [vp, pi32]),
         "wm_refine_step": (ctypes.c_int, [vp, ctypes.POINTER(LevelStats)]),
         "wm_refine_stats": (None, [vp, ctypes.POINTER(LevelStats)]),
         "wm_refine_done": (ctypes.c_int, [vp]),
         "wm_refine_mesh": (vp, [vp]),
-        "wm_mesh_export": (i32, [vp, pi32, pi32]),
+        "wm_mesh_export": (i32, [vp, vp, vp]),
         "wm_tri_error": (u32, [ctypes.POINTER(Field), ctypes.POINTER(Params), pi32, pi32, pi32, pi32]),
         "wm_haar": (ctypes.c_int, [ctypes.POINTER(ctypes.c_uint16), i32, i32, i32, pi32,
                                    ctypes.POINTER(ctypes.c_uint16)]),
@@ -423,14 +425,13 @@ class RefineOutput:
         return self.levels[-1]
 
 
-def _export(lib, handle, width: int, height: int) -> tuple:
-    mesh_ptr = lib.wm_refine_mesh(handle)
+def _export(lib, mesh_ptr: int, width: int, height: int) -> tuple:
     # wm_mesh's first eight int32 fields: width, height, tri_cap, vert_cap, tri_end, vert_end, n_tri, n_vert
     hdr = (ctypes.c_int32 * 8).from_address(mesh_ptr)
     vert_end, n_tri = hdr[5], hdr[6]
     xy = np.empty((vert_end, 2), dtype=np.int32)
     tris = np.empty((n_tri, 3), dtype=np.int32)
-    n = lib.wm_mesh_export(mesh_ptr, _ptr(xy, ctypes.c_int32), _ptr(tris, ctypes.c_int32))
+    n = lib.wm_mesh_export(mesh_ptr, xy.ctypes.data, tris.ctypes.data)
     assert n == n_tri
     return width, height, xy, tris
 
@@ -497,23 +498,23 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[li
     # small pages (madvise MADV_NOHUGEPAGE) saved that but cost a large mesh its TLB reach: 4 % of
     # api.mesh's CPU on Jacksboro mirror-tiled to 2048^2 (1.26M triangles), so huge pages stay.
     mem = np.empty(nbytes + 16, dtype=np.uint8)
-    base = mem.ctypes.data + (-mem.ctypes.data) % 16
+    addr = mem.ctypes.data
     handle = ctypes.c_void_p()
-    code = lib.wm_refine_init(ctypes.byref(handle), ctypes.c_void_p(base), nbytes, ctypes.byref(fld),
-                              ctypes.byref(fp),
-                              _ptr(xy, ctypes.c_int32), len(xy), _ptr(tris, ctypes.c_int32), len(tris), cap)
+    code = lib.wm_refine_init(ctypes.byref(handle), addr + (-addr) % 16, nbytes, ctypes.byref(fld),
+                              ctypes.byref(fp), xy.ctypes.data, len(xy), tris.ctypes.data, len(tris), cap)
     if code == WM_OK and rows is not None:
         code = lib.wm_refine_set_roi(handle, _ptr(rows, ctypes.c_int32))
     if code != WM_OK:
         return [], code
+    mesh_ptr = lib.wm_refine_mesh(handle)  # the refiner's own mesh: the same one at every level
     st = LevelStats()
     lib.wm_refine_stats(handle, ctypes.byref(st))
-    levels = [Level(st.level, _export(lib, handle, width, height), LevelStats.from_buffer_copy(st))]
+    levels = [Level(st.level, _export(lib, mesh_ptr, width, height), LevelStats.from_buffer_copy(st))]
     while not lib.wm_refine_done(handle):
         code = lib.wm_refine_step(handle, ctypes.byref(st))
         if code != WM_OK:
             return levels, code
-        levels.append(Level(st.level, _export(lib, handle, width, height), LevelStats.from_buffer_copy(st)))
+        levels.append(Level(st.level, _export(lib, mesh_ptr, width, height), LevelStats.from_buffer_copy(st)))
     del mem
     return levels, WM_OK
 
