@@ -20,6 +20,7 @@ import re
 from dataclasses import field
 from fractions import Fraction
 from math import floor
+from operator import attrgetter
 from pathlib import Path
 
 import numpy as np
@@ -314,15 +315,19 @@ def scale_fixed(scale: float | Fraction) -> tuple[int, int]:
 
 
 _FIXED: dict = {}  # fixed_params' answers by its arguments (a tiled run asks 8 times a tile, the same)
+# every field _fixed_params reads: its cache key (a repr of p took 3 us)
+_fixed_fields = attrgetter("zeta", "metric", "delta_d", "delta_p", "delta_v", "alpha", "delta_lambda",
+                           "delta_c", "iterations", "neighbourhood", "bound", "legalise", "decimate",
+                           "reduce", "max_triangles")
 
 
 def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
                  spacing: tuple[float, float] = (1.0, 1.0)) -> Params:
     """The library's wm_params for p, the height scale and the cell size ``spacing`` = (dx, dy), the
     ground distance between neighbouring samples in height units (docs/refiner.md, "Fixed-point
-    formats").  Each answer is kept (by p's repr, every field's value, and the other arguments: about
-    0.1 ms of Fraction arithmetic each) and a copy of it returned."""
-    key = (repr(p), scale, zeta, tuple(spacing))
+    formats").  Each answer is kept (by the values of the fields it reads, equal values giving equal
+    answers, and the other arguments: about 0.1 ms of Fraction arithmetic each) and a copy of it returned."""
+    key = (_fixed_fields(p), scale, zeta, tuple(spacing))
     out = _FIXED.get(key)
     if out is None:
         if len(_FIXED) >= 64:
@@ -429,11 +434,11 @@ def _export(lib, mesh_ptr: int, width: int, height: int) -> tuple:
     # wm_mesh's first eight int32 fields: width, height, tri_cap, vert_cap, tri_end, vert_end, n_tri, n_vert
     hdr = (ctypes.c_int32 * 8).from_address(mesh_ptr)
     vert_end, n_tri = hdr[5], hdr[6]
-    xy = np.empty((vert_end, 2), dtype=np.int32)
-    tris = np.empty((n_tri, 3), dtype=np.int32)
-    n = lib.wm_mesh_export(mesh_ptr, xy.ctypes.data, tris.ctypes.data)
+    buf = np.empty(2 * vert_end + 3 * n_tri, dtype=np.int32)  # one allocation: the vertices, the triangles
+    addr = buf.ctypes.data
+    n = lib.wm_mesh_export(mesh_ptr, addr, addr + 8 * vert_end)
     assert n == n_tri
-    return width, height, xy, tris
+    return width, height, buf[: 2 * vert_end].reshape(vert_end, 2), buf[2 * vert_end :].reshape(n_tri, 3)
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, params: RefineParams,
