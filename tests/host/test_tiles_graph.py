@@ -79,22 +79,26 @@ def test_ended_workers_reaped_by_a_later_runner():
     multiprocessing's children (whose exit handler would wait for it); reaped once it has ended, no zombie
     left; a child forked meanwhile runs its own Runner without it (not its child to join)."""
     import multiprocessing
-    import time
 
     from wavemesh.tiles import runner
 
     ctx = multiprocessing.get_context("fork")
     here, there = ctx.Pipe()
-    slow = ctx.Process(target=time.sleep, args=(0.5,), daemon=True)  # deaf to the pipe: still running
+    gate, opened = ctx.Pipe(duplex=False)
+    # deaf to its pipe: running until the gate opens (a minute at most, whatever happens here)
+    slow = ctx.Process(target=gate.poll, args=(60,), daemon=True)
     slow.start()
     there.close()
-    runner._end_workers([(slow, here)], gently=True)
-    assert slow in runner._EXITING and slow.exitcode is None
-    assert slow not in multiprocessing.active_children()
-    child = ctx.Process(target=_in_runner)
-    child.start()
-    child.join(30)
-    assert child.exitcode == 0
+    try:
+        runner._end_workers([(slow, here)], gently=True)
+        assert slow in runner._EXITING and slow.exitcode is None
+        assert slow not in multiprocessing.active_children()
+        child = ctx.Process(target=_in_runner)
+        child.start()
+        child.join(30)
+        assert child.exitcode == 0
+    finally:
+        opened.send(None)
     os.waitid(os.P_PID, slow.pid, os.WEXITED | os.WNOWAIT)  # ended, not reaped yet
     with tiles.Runner(1):
         pass
