@@ -34,6 +34,7 @@ from wavemesh.tiles.sides import (
     side_point,
     side_profile,
     thin_side,
+    touching,
 )
 from wavemesh.tiles.source import Source, file_identity, light_source, strip_error, strip_tasks
 
@@ -247,7 +248,7 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
     for s, m in _on_sides(final.xy, final.width, final.height).items():
         if s in t.neighbours:
             on |= m
-    shared = on[final.tris].any(axis=1)  # the triangles that touch a shared side
+    shared = touching(on, final.tris)  # the triangles that touch a shared side
     if inner is None:
         errors = mesh_errors(final, hf.values, rms=False, spacing=plan.spacing)
         per_v, per_n = errors.per_triangle_vertical, errors.per_triangle_normal
@@ -295,7 +296,7 @@ def _seam_editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sid
         hf = held if held is not None else tile_heightfield(plan, t, window, False)
         return Editable(mesh, native.error_within(hf.samples, fp), [side])
     on = _on_sides(mesh.xy, t.width, t.height)[side]
-    at = mesh.xy[mesh.tris[on[mesh.tris].any(axis=1)].ravel()]  # their box (no np.unique: sides.conform)
+    at = mesh.xy[mesh.tris[touching(on, mesh.tris)].ravel()]  # their box (no np.unique: sides.conform)
     (x0, y0), (x1, y1) = at.min(axis=0).tolist(), at.max(axis=0).tolist()
     v = _finite(plan, t, plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1))
     samples = np.zeros((t.height, t.width), dtype=np.uint16)

@@ -105,6 +105,13 @@ def _on_sides(xy: np.ndarray, w: int, h: int) -> dict[str, np.ndarray]:
     return {"top": y == 0, "right": x == w - 1, "bottom": y == h - 1, "left": x == 0}
 
 
+def touching(on: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(T,) bool: the triangles ``tris`` with a corner ``on`` (a (V,) bool) -- one gather per corner column
+    (``on[tris].any(axis=1)``, the same answer, is a numpy reduce along a short axis: about 9 times the
+    time on a tile's 80,000 triangles)."""
+    return on[tris[:, 0]] | on[tris[:, 1]] | on[tris[:, 2]]
+
+
 def side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
     return {"top": (pos, 0), "bottom": (pos, h - 1), "left": (0, pos), "right": (w - 1, pos)}[side]
 
@@ -133,7 +140,7 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
     w, h = mesh.width, mesh.height
     n_v, n_t = len(mesh.xy), len(mesh.tris)
     bset = np.logical_or.reduce(list(_on_sides(mesh.xy, w, h).values()))
-    near = np.flatnonzero(bset[mesh.tris].any(axis=1))
+    near = np.flatnonzero(touching(bset, mesh.tris))
     tris = {k: tuple(t) for k, t in zip(near.tolist(), mesh.tris[near].tolist(), strict=True)}
     # the vertices of those, sorted (np.unique's answer; its plain call imports numpy.ma, 47M instructions
     # in each worker)
@@ -243,7 +250,7 @@ class Editable:
         on = np.zeros(len(mesh.xy), dtype=bool)
         for side in sides:
             on |= masks[side]
-        near = on[mesh.tris].any(axis=1)
+        near = touching(on, mesh.tris)
         self.rest = mesh.tris[~near]
         self.tris = [tuple(t) for t in mesh.tris[near].tolist()]
         self.alive = [True] * len(self.tris)
