@@ -70,3 +70,21 @@ def test_fixed_params_kept_are_the_same_and_a_copy():
         assert len({bytes(g) for g in got}) == len(cases)
     got[0].zeta = 12345
     assert native.fixed_params(*cases[0]).zeta != 12345
+
+
+def test_fixed_params_kept_answer_follows_every_field():
+    """A kept answer is never another parameter set's: every field of RefineParams changed alone (all of
+    them, so a field fixed_params comes to read is in its cache key or fails here) gives the answer worked
+    out anew, with the default's kept."""
+    from wavemesh.api import RefineParams
+
+    other = {"zeta": 2.5, "metric": "vertical", "delta_d": 0.3, "delta_p": 0.7, "delta_v": 3.0, "alpha": 0.4,
+             "delta_lambda": 0.05, "delta_c": 0.9, "iterations": 2, "neighbourhood": "vertex", "bound": False,
+             "legalise": False, "decimate": False, "reduce": False, "max_triangles": 99, "capacity": 500,
+             "extra": {"x": 1}}
+    assert set(other) == set(RefineParams.__annotations__)
+    rest = (0.01, None, (1.0, 1.0))
+    native.fixed_params(RefineParams(), *rest)
+    for name, value in other.items():
+        p = RefineParams(**{name: value})
+        assert bytes(native.fixed_params(p, *rest)) == bytes(native._fixed_params(p, *rest)), name
