@@ -99,6 +99,11 @@ def _side_of(x: int, y: int, w: int, h: int) -> list[tuple[str, int]]:
                                     ("right", y, x == w - 1)) if on]
 
 
+def _line(side: str, w: int, h: int) -> tuple[int, int]:
+    """(k, c): a point p of the w x h rectangle is on ``side`` when p[k] == c (_side_of's test)."""
+    return {"top": (1, 0), "bottom": (1, h - 1), "left": (0, 0), "right": (0, w - 1)}[side]
+
+
 def _on_sides(xy: np.ndarray, w: int, h: int) -> dict[str, np.ndarray]:
     """side -> (V,) bool: the vertices ``xy`` on that side of the w x h rectangle."""
     x, y = xy[:, 0], xy[:, 1]
@@ -246,20 +251,20 @@ class Editable:
 
     def __init__(self, mesh: Mesh, within, sides: Iterable[str]):
         self.w, self.h, self.within, self.source = mesh.width, mesh.height, within, mesh
-        masks = _on_sides(mesh.xy, self.w, self.h)
         on = np.zeros(len(mesh.xy), dtype=bool)
         for side in sides:
-            on |= masks[side]
-        near = touching(on, mesh.tris)
-        self.rest = mesh.tris[~near]
-        self.tris = [tuple(t) for t in mesh.tris[near].tolist()]
+            k, at = _line(side, self.w, self.h)
+            on |= mesh.xy[:, k] == at
+        self.near = touching(on, mesh.tris)  # the mesh's others (the rest) taken only by mesh() and new()
+        self.tris = list(map(tuple, mesh.tris[self.near].tolist()))
         self.alive = [True] * len(self.tris)
         self.made = len(self.tris)  # the triangles from here on are the removals'
         self.inc: dict[int, set[int]] = {}
         for k, t in enumerate(self.tris):
             for v in t:
                 self.inc.setdefault(v, set()).add(k)
-        self.xy = {v: tuple(mesh.xy[v].tolist()) for v in self.inc}
+        vs = list(self.inc)
+        self.xy = dict(zip(vs, map(tuple, mesh.xy[vs].tolist()), strict=True))
         self.at = {p: v for v, p in self.xy.items()}
         self.gone: list[int] = []
         self._found: dict = {}  # position -> removal()'s answer, until the vertex's star changes (apply)
@@ -284,7 +289,8 @@ class Editable:
             return None
         ring = _ring(v, (self.tris[k] for k in self.inc[v]))
         pts = [self.xy[r] for r in ring]
-        if any(s == FACING[side] for q in pts if len(_side_of(*q, w, h)) == 1 for s, _ in _side_of(*q, w, h)):
+        k, at = _line(FACING[side], w, h)  # a ring vertex on the facing side, off its corners
+        if any(q[k] == at and len(_side_of(*q, w, h)) == 1 for q in pts):
             return None
         tested = self._tested
 
@@ -328,14 +334,15 @@ class Editable:
         """(T,) bool over :meth:`mesh`'s triangles: those the removals made (the others are the mesh's
         own, as they were)."""
         made = [k >= self.made for k, ok in enumerate(self.alive) if ok]
-        return np.concatenate([np.zeros(len(self.rest), dtype=bool), np.array(made, dtype=bool)])
+        rest = len(self.near) - int(np.count_nonzero(self.near))
+        return np.concatenate([np.zeros(rest, dtype=bool), np.array(made, dtype=bool)])
 
     def mesh(self) -> Mesh:
         keep = np.ones(len(self.source.xy), dtype=bool)
         keep[self.gone] = False
         remap = np.cumsum(keep) - 1
         near = np.array([t for t, ok in zip(self.tris, self.alive, strict=True) if ok], dtype=np.int64)
-        tris = np.concatenate([self.rest, near.reshape(-1, 3)])
+        tris = np.concatenate([self.source.tris[~self.near], near.reshape(-1, 3)])
         return Mesh(self.w, self.h, self.source.xy[keep], remap[tris])
 
 
@@ -363,8 +370,8 @@ def thin_side(a: Editable, b: Editable, side: str) -> Cut:
     (Editable.removal)."""
     other = FACING[side]
     along = 1 if side in ("left", "right") else 0
-    line = sorted((p for p in a.at if any(s == side for s, _ in _side_of(*p, a.w, a.h))),
-                  key=lambda p: p[along])
+    k, at = _line(side, a.w, a.h)
+    line = sorted((p for p in a.at if p[k] == at), key=lambda p: p[along])
     removed, done, plans_a, plans_b = [], set(), [], []
     while True:
         more = False
