@@ -220,8 +220,8 @@ def _measured(mesh: Mesh, hf: HeightField, spacing, which: np.ndarray) -> tuple[
     triangle's are its own, however many are measured with it)."""
     if not which.any():
         return np.empty(0), np.empty(0)
-    e = mesh_errors(Mesh(mesh.width, mesh.height, mesh.xy, mesh.tris[which]), hf.values, rms=False,
-                    spacing=spacing)
+    tris = np.compress(which, mesh.tris, axis=0)  # mesh.tris[which]'s rows, in a quarter of its time
+    e = mesh_errors(Mesh(mesh.width, mesh.height, mesh.xy, tris), hf.values, rms=False, spacing=spacing)
     return e.per_triangle_vertical, e.per_triangle_normal
 
 
@@ -296,7 +296,8 @@ def _seam_editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sid
         hf = held if held is not None else tile_heightfield(plan, t, window, False)
         return Editable(mesh, native.error_within(hf.samples, fp), [side])
     on = _on_sides(mesh.xy, t.width, t.height)[side]
-    at = mesh.xy[mesh.tris[touching(on, mesh.tris)].ravel()]  # their box (no np.unique: sides.conform)
+    # their box (no np.unique: sides.conform)
+    at = mesh.xy[np.compress(touching(on, mesh.tris), mesh.tris, axis=0).ravel()]
     (x0, y0), (x1, y1) = at.min(axis=0).tolist(), at.max(axis=0).tolist()
     v = _finite(plan, t, plan.source.read(t.x + x0, t.y + y0, x1 - x0 + 1, y1 - y0 + 1))
     samples = np.zeros((t.height, t.width), dtype=np.uint16)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left
 from collections.abc import Iterable
+from itertools import chain, compress
 
 import numpy as np
 
@@ -230,7 +231,7 @@ def conform(mesh: Mesh, sides: dict) -> Mesh:
     keep[freed] = False
     remap = np.cumsum(keep) - 1
     more = np.array([tris[k] for k in added if k not in dead], dtype=np.int64).reshape(-1, 3)
-    return Mesh(w, h, every[keep], remap[np.concatenate([mesh.tris[alive], more])])
+    return Mesh(w, h, every[keep], remap[np.concatenate([np.compress(alive, mesh.tris, axis=0), more])])
 
 
 def border_of(mesh: Mesh) -> dict:
@@ -256,7 +257,7 @@ class Editable:
             k, at = _line(side, self.w, self.h)
             on |= mesh.xy[:, k] == at
         self.near = touching(on, mesh.tris)  # the mesh's others (the rest) taken only by mesh() and new()
-        self.tris = list(map(tuple, mesh.tris[self.near].tolist()))
+        self.tris = list(map(tuple, np.compress(self.near, mesh.tris, axis=0).tolist()))
         self.alive = [True] * len(self.tris)
         self.made = len(self.tris)  # the triangles from here on are the removals'
         self.inc: dict[int, set[int]] = {}
@@ -341,9 +342,10 @@ class Editable:
         keep = np.ones(len(self.source.xy), dtype=bool)
         keep[self.gone] = False
         remap = np.cumsum(keep) - 1
-        near = np.array([t for t, ok in zip(self.tris, self.alive, strict=True) if ok], dtype=np.int64)
-        tris = np.concatenate([self.source.tris[~self.near], near.reshape(-1, 3)])
-        return Mesh(self.w, self.h, self.source.xy[keep], remap[tris])
+        made = np.fromiter(chain.from_iterable(compress(self.tris, self.alive)), dtype=np.int64)
+        # np.compress: a (N, 3) array's rows by a mask in a quarter of the time of tris[mask]
+        tris = np.concatenate([np.compress(~self.near, self.source.tris, axis=0), made.reshape(-1, 3)])
+        return Mesh(self.w, self.h, np.compress(keep, self.source.xy, axis=0), remap.take(tris))
 
 
 class Cut(tuple):
