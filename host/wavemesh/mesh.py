@@ -19,7 +19,6 @@ Conventions (docs/model.md, "Mesh conventions"):
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 
@@ -200,17 +199,24 @@ def triangulate_within(pts: list, ok, limit: int = 16) -> list | None:
                 return False
         return _inside(pts, p[0] + q[0] + r[0], p[1] + q[1] + r[1]) and ok((i, j, k))
 
-    @lru_cache(maxsize=None)
+    memo: dict = {}  # (i, k) -> solve's answer (a plain dict: functools.lru_cache's wrapper, made at each
+    # call, was a tenth of a tiled run's seam removals)
+
     def solve(i, k):
         if k - i < 2:
             return ()
+        if (i, k) in memo:
+            return memo[i, k]
+        out = None
         for j in range(i + 1, k):
             if fits(i, j, k):
                 a = solve(i, j)
                 b = solve(j, k) if a is not None else None
                 if b is not None:
-                    return a + b + ((i, j, k),)
-        return None
+                    out = a + b + ((i, j, k),)
+                    break
+        memo[i, k] = out
+        return out
 
     out = solve(0, n - 1)
     return None if out is None else list(out)
