@@ -110,14 +110,14 @@ def ear_clip(pts: list, fattest: bool = False) -> list[tuple[int, int, int]] | N
         for k in range(n):
             i, j, m = idx[k - 1], idx[k], idx[(k + 1) % n]
             pi, pj, pm = pts[i], pts[j], pts[m]
-            if orient(pi, pj, pm) <= 0:
+            d2 = orient(pi, pj, pm)
+            if d2 <= 0:
                 continue
             if _holds_corner(pts, idx, i, j, m):
                 continue
             if not fattest:
                 best = k
                 break
-            d2 = orient(pi, pj, pm)
             la, lb, lc = math.dist(pj, pm), math.dist(pi, pm), math.dist(pi, pj)
             q = d2 / max(la * lb, lb * lc, lc * la)
             if q > best_q:
