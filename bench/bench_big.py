@@ -27,6 +27,8 @@ must be byte for byte equal.
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
 import subprocess
 import tempfile
@@ -289,17 +291,33 @@ def tile_sizes(n: int, grids=("terrain", "jacksboro"), runs: int = 2) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":  # python bench/bench_big.py [N] [GRID ...]: a quick look
-    import json
-    import sys
-
-    args = sys.argv[1:]
-    if args and args[0] == "tiles":  # python bench/bench_big.py tiles N [GRID ...] [--runs R]
-        runs = int(args.pop(args.index("--runs") + 1)) if "--runs" in args else 2
-        names = tuple(a for a in args[2:] if a != "--runs") or ("terrain", "jacksboro")
-        print(tile_sizes(int(args[1]), names, runs))
-        sys.exit(0)
-    sizes = (int(args.pop(0)),) if args and args[0].isdigit() else SIZES
-    res = run(sizes, tuple(args) or GRIDS)
+def main(argv: list[str] | None = None) -> None:
+    """bench/bench_big.py [N] [GRID ...]: a quick look; ... tiles N [GRID ...] [--runs R]: tile sizes."""
+    ap = argparse.ArgumentParser(prog="bench/bench_big.py", description=__doc__.split("\n\n")[0])
+    ap.add_argument("what", nargs="*", metavar="[tiles] [N] [GRID ...]",
+                    help=f"'tiles N' compares tile sizes at N^2; N alone: that size only (default {SIZES}); "
+                         f"grids: {', '.join(GRIDS)} (default all)")
+    ap.add_argument("--runs", type=int, default=None, help="runs of each (default: tiles 2, else %d)" % RUNS)
+    a = ap.parse_args(argv)
+    args = list(a.what)
+    tiles = bool(args) and args[0] == "tiles"
+    if tiles:
+        args.pop(0)
+        if not args or not args[0].isdigit():
+            ap.error("tiles needs the side N, e.g. 'tiles 2048'")
+    size = int(args.pop(0)) if args and args[0].isdigit() else None
+    unknown = [g for g in args if g != "terrain" and g not in D.SETS]
+    if unknown:
+        ap.error(f"unknown grid {unknown[0]!r}: one of {', '.join(GRIDS)} (bench/datasets.py names more)")
+    if a.runs is not None and a.runs < 1:
+        ap.error("--runs must be at least 1")
+    if tiles:
+        print(tile_sizes(size, tuple(args) or ("terrain", "jacksboro"), a.runs or 2))
+        return
+    res = run((size,) if size else SIZES, tuple(args) or GRIDS, a.runs or RUNS)
     print(json.dumps([r["ratios"] for r in res["rows"]], indent=1))
     print(markdown(res))
+
+
+if __name__ == "__main__":
+    main()
