@@ -793,12 +793,13 @@ done:
 /* ---------------------------------------------------------------------------------------------- */
 /* The OBJ face lines (meshio.write_obj) */
 
-static char *put_index(char *p, int64_t i)
+/* i in decimal at p (the OBJ lines' integers) */
+static char *put_int(char *p, int64_t i)
 {
     char digits[20];
     int n = 0;
-    uint64_t u = (uint64_t)i + 1u; /* index + 1, wrapping as numpy's int64 addition does */
-    if ((int64_t)u < 0) {
+    uint64_t u = (uint64_t)i;
+    if (i < 0) {
         *p++ = '-';
         u = 0u - u;
     }
@@ -808,6 +809,11 @@ static char *put_index(char *p, int64_t i)
     } while (u != 0u);
     while (n > 0) *p++ = digits[--n];
     return p;
+}
+
+static char *put_index(char *p, int64_t i)
+{
+    return put_int(p, (int64_t)((uint64_t)i + 1u)); /* index + 1, wrapping as numpy's int64 addition does */
 }
 
 int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out)
@@ -861,23 +867,6 @@ static u128 pow10_128(int g)
     u128 r = 1u;
     while (g-- > 0) r *= 10u;
     return r;
-}
-
-static char *put_int(char *p, int64_t i)
-{
-    char digits[20];
-    int n = 0;
-    uint64_t u = (uint64_t)i;
-    if (i < 0) {
-        *p++ = '-';
-        u = 0u - u;
-    }
-    do {
-        digits[n++] = (char)('0' + u % 10u);
-        u /= 10u;
-    } while (u != 0u);
-    while (n > 0) *p++ = digits[--n];
-    return p;
 }
 
 /* repr(v) at p; NULL for a height left to the caller. */
