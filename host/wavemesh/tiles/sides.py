@@ -107,8 +107,7 @@ def _line(side: str, w: int, h: int) -> tuple[int, int]:
 
 def _on_sides(xy: np.ndarray, w: int, h: int) -> dict[str, np.ndarray]:
     """side -> (V,) bool: the vertices ``xy`` on that side of the w x h rectangle."""
-    x, y = xy[:, 0], xy[:, 1]
-    return {"top": y == 0, "right": x == w - 1, "bottom": y == h - 1, "left": x == 0}
+    return {s: xy[:, k] == c for s in ("top", "right", "bottom", "left") for k, c in (_line(s, w, h),)}
 
 
 def touching(on: np.ndarray, tris: np.ndarray) -> np.ndarray:
