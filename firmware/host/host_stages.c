@@ -72,33 +72,27 @@ static void *part_main(void *arg)
     return NULL;
 }
 
-/* fn(ctx, p, parts) for p in 0..parts-1, part 0 on this thread; WM_HOST_NOMEM when a thread could
- * not be started (the parts that ran are not undone: every caller's parts write disjoint results, and
- * the caller then runs again on one thread). */
-static int run_parts(part_fn fn, void *ctx, int32_t parts)
+/* fn(ctx, p, parts) for p in 0..parts-1, part 0 on this thread, and on it too, after part 0, each part
+ * whose thread would not start: every part runs, whatever the threads (every caller's parts write
+ * disjoint results). */
+static void run_parts(part_fn fn, void *ctx, int32_t parts)
 {
     pthread_t tid[MAX_THREADS];
     struct part_job jobs[MAX_THREADS];
-    int32_t started = 0, ok = 1;
+    int32_t started = 0;
     if (parts > MAX_THREADS) parts = MAX_THREADS;
-    if (parts <= 1) {
-        fn(ctx, 0, 1);
-        return WM_HOST_OK;
-    }
+    if (parts < 1) parts = 1;
     for (int32_t p = 1; p < parts; p++) {
         jobs[p].fn = fn;
         jobs[p].ctx = ctx;
         jobs[p].part = p;
         jobs[p].parts = parts;
-        if (pthread_create(&tid[p], NULL, part_main, &jobs[p]) != 0) {
-            ok = 0;
-            break;
-        }
+        if (pthread_create(&tid[p], NULL, part_main, &jobs[p]) != 0) break;
         started = p;
     }
-    if (ok) fn(ctx, 0, parts);
+    fn(ctx, 0, parts);
+    for (int32_t p = started + 1; p < parts; p++) fn(ctx, p, parts);
     for (int32_t p = 1; p <= started; p++) pthread_join(tid[p], NULL);
-    return ok ? WM_HOST_OK : WM_HOST_NOMEM;
 }
 
 /* How many parts n samples are split into: at most `threads`, each of part_min samples or more. */
@@ -234,7 +228,7 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
     }
     s->v = v;
     s->n = n;
-    if ((code = run_parts(scan_part, s, parts)) != WM_HOST_OK) goto done;
+    run_parts(scan_part, s, parts);
     for (int32_t p = 0; p < parts; p++) {
         if (!s->finite[p]) {
             code = WM_HOST_NONFINITE;
@@ -268,7 +262,7 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
         a->scale = span / SAMPLE_MAX;
         a->mode = 2;
     }
-    if ((code = run_parts(apply_part, a, parts)) != WM_HOST_OK) goto done;
+    run_parts(apply_part, a, parts);
     for (int32_t p = 0; p < parts; p++)
         if (a->err[p] > err) err = a->err[p];
     out[0] = a->scale;
@@ -293,10 +287,7 @@ double wm_host_quantise_with(const double *v, int64_t n, double offset, double s
     a.offset = offset;
     a.scale = scale;
     a.mode = exact ? 0 : 2;
-    if (run_parts(apply_part, &a, parts) != WM_HOST_OK) {
-        parts = 1;
-        apply_part(&a, 0, 1);
-    }
+    run_parts(apply_part, &a, parts);
     for (int32_t p = 0; p < parts; p++)
         if (a.err[p] > err) err = a.err[p];
     return err;
@@ -335,10 +326,7 @@ double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double
     q.n = n;
     q.offset = offset;
     q.scale = scale;
-    if (run_parts(qerr_part, &q, parts) != WM_HOST_OK) {
-        parts = 1;
-        qerr_part(&q, 0, 1);
-    }
+    run_parts(qerr_part, &q, parts);
     for (int32_t p = 0; p < parts; p++)
         if (q.err[p] > err || q.err[p] != q.err[p]) err = q.err[p];
     return err;
@@ -594,7 +582,7 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
     m.sy = sy;
     m.next = 0;
     if (parts > 1 && pthread_mutex_init(&m.lock, NULL) != 0) parts = 1;
-    if (run_parts(trimax_part, &m, parts) != WM_HOST_OK) trimax_part(&m, 0, 1); /* the chunks left */
+    run_parts(trimax_part, &m, parts);
     if (parts > 1) pthread_mutex_destroy(&m.lock);
     if (local) local_free(&l);
     return WM_HOST_OK;
@@ -770,11 +758,7 @@ int wm_host_check_mesh(int64_t width, int64_t height, const int64_t *xy, int64_t
         struct edges e = {xy, start, dst, grid, W, H, v, (LATTICE_PER_ELEMENT * (v + t) + LATTICE_FREE), {0}};
         int32_t parts = parts_for(threads, 3 * t);
         e.budget /= parts; /* each part's share: a part over it answers -1 (Python decides) */
-        if (run_parts(edges_part, &e, parts) != WM_HOST_OK) { /* a thread would not start: all on this one */
-            e.budget *= parts;
-            parts = 1;
-            edges_part(&e, 0, 1);
-        }
+        run_parts(edges_part, &e, parts);
         code = 1; /* every part passed: proper; any failed: not; else one over its budget: undecided */
         for (int32_t p = 0; p < parts; p++)
             if (e.code[p] == -1) code = -1;

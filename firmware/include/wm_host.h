@@ -19,7 +19,7 @@ extern "C" {
 #define WM_HOST_OK 0
 #define WM_HOST_NONFINITE 1 /* a height is NaN or infinite */
 #define WM_HOST_SPAN 2      /* max - min overflows a double */
-#define WM_HOST_NOMEM 3     /* a thread could not be started: the caller may retry with 1 */
+#define WM_HOST_NOMEM 3     /* no memory for a pass's state (a thread that will not start is not an error) */
 
 /* Each thread takes at least this many samples (default 2^18: a smaller grid runs on the calling
  * thread alone); n > 0 sets it (the tests: 1, to split small grids too).  Returns the value before. */

@@ -636,11 +636,10 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float,
     samples = np.empty(v.shape, dtype=np.uint16)
     out = np.zeros(5, dtype=np.float64)
     lossless = ctypes.c_int32(0)
-    for n in (threads(), 1):  # a thread that cannot start: once more on this one
-        code = lib.wm_host_quantise(_ptr(v, ctypes.c_double), v.size, n, _ptr(samples, ctypes.c_uint16),
-                                    _ptr(out, ctypes.c_double), ctypes.byref(lossless))
-        if code != 3:
-            break
+    # a part whose thread will not start runs on the calling one (host_stages.c's run_parts); code 3, no
+    # memory for the passes' state, returns None below: the caller quantises in numpy
+    code = lib.wm_host_quantise(_ptr(v, ctypes.c_double), v.size, threads(), _ptr(samples, ctypes.c_uint16),
+                                _ptr(out, ctypes.c_double), ctypes.byref(lossless))
     if code in QUANTISE_ERRORS:
         return QUANTISE_ERRORS[code]
     if code != 0:
