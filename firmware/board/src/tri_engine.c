@@ -15,15 +15,21 @@
 #include "wm_internal.h"
 #include "wm_memmap.h"
 
+/* Whether the units read this field's samples: the height memory's (HEIGHT), on a grid of at most
+ * 2^WM_ENGINE_COORD_BITS a side (the coordinate registers' width). */
+static int on_engine(const wm_field *f)
+{
+    return f->samples == (const uint16_t *)WM_HEIGHT_BASE && f->width <= (1 << WM_ENGINE_COORD_BITS) &&
+           f->height <= (1 << WM_ENGINE_COORD_BITS);
+}
+
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     int32_t w = f->width;
     uint32_t at, lo, hi;
-    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
-        f->height > (1 << WM_ENGINE_COORD_BITS))
-        return 0;
+    if (!on_engine(f)) return 0;
     WM_ENGINE_WIDTH = (uint32_t)w;
     WM_ENGINE_LIMIT_LO = (uint32_t)limit;
     WM_ENGINE_LIMIT_HI = (uint32_t)(limit >> 32);
@@ -55,9 +61,7 @@ int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3
     const uint16_t *h = f->samples;
     int32_t w = f->width, ex, ey;
     uint32_t mx, my, st;
-    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
-        f->height > (1 << WM_ENGINE_COORD_BITS))
-        return 0;
+    if (!on_engine(f)) return 0;
     wm_slope_scale(p, 0, &mx, &ex);
     wm_slope_scale(p, 1, &my, &ey);
     WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
@@ -114,9 +118,7 @@ int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3
     const uint16_t *h = f->samples;
     int32_t w = f->width, ex, ey;
     uint32_t mode, mx, my, st;
-    if (h != (const uint16_t *)WM_HEIGHT_BASE || w > (1 << WM_ENGINE_COORD_BITS) ||
-        f->height > (1 << WM_ENGINE_COORD_BITS) || f->mask)
-        return 0;
+    if (!on_engine(f) || f->mask) return 0;
     WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
     WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
     WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
