@@ -31,6 +31,7 @@ import argparse
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -101,12 +102,10 @@ print(json.dumps({"wall_s": wall, "cpu_s": cpu, "peak_mib": peak / 1024,
 """
 
 
-def run_process(cmd: list[str]) -> dict:
-    """One whole process: wall seconds, CPU seconds (user + sys) and peak memory (MiB) by os.wait4."""
-    import json
-    import sys
-
-    r = subprocess.run([sys.executable, "-c", LAUNCH, *cmd], capture_output=True, text=True)
+def run_process(cmd: list[str], cwd: Path | None = None, env: dict | None = None) -> dict:
+    """One whole process (in ``cwd``, with ``env``): wall seconds, CPU seconds (user + sys) and peak memory
+    (MiB) by os.wait4, its descendants' CPU and peak included (LAUNCH)."""
+    r = subprocess.run([sys.executable, "-c", LAUNCH, *cmd], capture_output=True, text=True, cwd=cwd, env=env)
     out = json.loads(r.stdout.strip().splitlines()[-1])
     out["error"] = r.stderr.strip()[-300:] if out["rc"] else None
     return out

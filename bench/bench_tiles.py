@@ -482,6 +482,8 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
     package's modules again at its start)."""
     import statistics
 
+    from bench_big import run_process  # bench/ is on the path (as mirror_tile's import)
+
     path = terrain_file(n)
     root = BENCH.parent
     out = WORK / "pair"
@@ -508,14 +510,12 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
             str(w),
             "--quiet",
         ]
-        c0, t0 = os.times(), time.perf_counter()
-        subprocess.run(cmd, cwd=root, check=True, env=env)
-        t = time.perf_counter() - t0
-        _reap_orphans()  # its workers still exiting, not in its wall time, in its CPU, before the next run
-        c1 = os.times()
-        return t, c1.children_user + c1.children_system - c0.children_user - c0.children_system
-
-    _subreaper()
+        # its wall time to its return; its CPU with its workers' that were still exiting (reaped before the
+        # next run starts)
+        r = run_process(cmd, cwd=root, env=env)
+        if r["rc"]:
+            raise RuntimeError(f"{' '.join(cmd)}: exit status {r['rc']}: {r['error']}")
+        return r["wall_s"], r["cpu_s"]
 
     run1(1), run1(workers)
     got: dict = {1: [], workers: []}
@@ -536,25 +536,6 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
         f"(pairs' median {ratio:.2f}x); the same bytes: {'yes' if same else 'NO'}"
     )
     return {"median": med, "pairs": ratio, "same": same}
-
-
-def _subreaper() -> None:
-    """This process made the reaper of its descendants (Linux: PR_SET_CHILD_SUBREAPER): a run's pool
-    workers that are still exiting when the run's process ends (runner._end_workers does not wait for
-    them) come to it, for _reap_orphans."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        ctypes.CDLL(None).prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
-
-
-def _reap_orphans() -> None:
-    """Wait for every child this process has left (the orphaned workers of the run just ended)."""
-    while True:
-        try:
-            os.wait()
-        except ChildProcessError:
-            return
 
 
 def _child(args: list[str]) -> str:
