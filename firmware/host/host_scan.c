@@ -10,27 +10,31 @@
  * empties the rows outside it.  The row's samples go 8 (32-bit lanes, where the C scan's scan32 takes
  * the triangle: V is exact modulo 2^32 there) or 4 (64-bit lanes) at a time: each lane's V against the
  * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
- * the first one and stops at the limit as the C scan does.  Processors without AVX2 (and other
- * compilers) answer 0, as do grids under 2^20 samples (below): the C scan runs.  wm_host_scan(0) turns it
- * off, (2) on for every grid (the tests compare both). */
+ * the first one and stops at the limit as the C scan does.  On grids under 2^20 samples (below) this
+ * scan is left to the C scan, and only scan32's small triangles are taken, in lanes without a branch a
+ * row (scan_lanes).  Processors without AVX2 (and other compilers) answer 0: the C scan runs.
+ * wm_host_scan(0) turns both off, (2) puts the blocks on every grid, (3) the lanes on every grid (the
+ * tests compare each with the C scan). */
 #define _POSIX_C_SOURCE 200809L
 #include "wm_host.h"
 #include "wm_internal.h"
 
 #include <stdint.h>
 
-/* Grids of fewer samples keep the C scan (wm_host_scan(1)): their samples stay in a core's cache, where
- * this scan's set-up costs more than its lanes and prefetches save (in-process refine and check, CPU,
- * against the C scan: Jacksboro 403 x 344 1.08 - 1.10 x, terrain 724^2 1.04 x, 1024^2 0.97 x, 2048^2
- * 0.72 x). */
+/* Grids of fewer samples keep the C scan for all but scan32's triangles (wm_host_scan(1)): their samples
+ * stay in a core's cache, where the blocks' set-up costs more than their lanes and prefetches save
+ * (in-process refine and check, CPU, against the C scan: Jacksboro 403 x 344 1.08 - 1.10 x, terrain 724^2
+ * 1.04 x, 1024^2 0.97 x, 2048^2 0.72 x). */
 #define SCAN_MIN_SAMPLES ((int64_t)1 << 20)
 
-static int32_t enabled = 1; /* 0: off, 1: on grids of SCAN_MIN_SAMPLES or more, 2: on every grid */
+/* 0: off, 1: the blocks on grids of SCAN_MIN_SAMPLES or more, the lanes on smaller ones, 2: the blocks on
+ * every grid, 3: the lanes on every grid */
+static int32_t enabled = 1;
 
 int32_t wm_host_scan(int32_t on)
 {
     int32_t old = enabled;
-    if (on >= 0) enabled = on > 2 ? 2 : on;
+    if (on >= 0) enabled = on > 3 ? 3 : on;
     return old;
 }
 
@@ -260,10 +264,170 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
     if (wy) *wy = b.by;
     return 1;
 }
+/* The small triangles' scan (tri_error.c's scan32: D < 2^15 on a grid of at most 2^14 a side, V exact
+ * modulo 2^32) with each row's samples in 32-bit lanes, 8 a block: most rows are a few samples, so a row
+ * is one block, and neither the end of a row nor a new largest V is a branch (each a guess that missed
+ * about as often as it held in the C scan's loop).  The spans are scan32's: the rows from the top corner
+ * to the middle one between the long edge and the upper short edge, the rest between the long edge and
+ * the lower one, each end floor(u / a) stepped row by row as a pointer with its remainder (the carry
+ * without a branch too).  A block's largest V (all lanes, those past the row's end cleared) above the
+ * largest so far takes its first lane; above the limit, the block's first lane above it, where the C
+ * scan stops. */
+struct end32 {
+    const uint16_t *p;
+    int32_t r, dr, a, st, q, dq;
+};
+
+static int32_t floor_div32(int32_t u, int32_t a) { return u >= 0 ? u / a : -((-u + a - 1) / a); } /* a > 0 */
+
+static inline void end_start(struct end32 *e, const uint16_t *row, int32_t width, int32_t u, int32_t du, int32_t a)
+{
+    e->q = floor_div32(u, a);
+    e->r = u - e->q * a;
+    e->dq = floor_div32(du, a);
+    e->dr = du - e->dq * a;
+    e->a = a;
+    e->p = row + e->q;
+    e->st = width + e->dq;
+}
+
+/* The end on the next row; the carry (1: the quotient one more than its step), without a branch. */
+static inline __attribute__((always_inline)) uint32_t end_step(struct end32 *e)
+{
+    int32_t r = e->r + e->dr; /* both below a < 2^15 */
+    uint32_t c = r >= e->a;
+    e->r = r - (e->a & -(int32_t)c);
+    e->p += e->st + (int32_t)c;
+    return c;
+}
+
+static AVX2 __attribute__((noinline)) int scan_lanes(const wm_field *f, const int32_t x[3], const int32_t y[3],
+                                                     uint32_t d, uint64_t limit, uint64_t *vmax, int32_t *wx,
+                                                     int32_t *wy)
+{
+    const uint16_t *h = f->samples, *end = h + (int64_t)f->width * f->height;
+    int32_t A[3], B[3], t = 0, b = 0, m, py, lm;
+    uint32_t z[3], dS = 0, dSy = 0, Sl, dSl, vm = 0;
+    const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
+    uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit;
+    struct end32 lo, hi;
+    for (int k = 0; k < 3; k++) {
+        int k1 = wm_k1(k), k2 = wm_k2(k);
+        z[k] = h[y[k] * f->width + x[k]];
+        A[k] = y[k1] - y[k2];
+        B[k] = x[k2] - x[k1];
+        if (y[k] < y[t]) t = k;
+        if (y[k] >= y[b]) b = k;
+    }
+    if (t == b) b = wm_k1(t);
+    m = 3 - t - b;
+    for (int k = 0; k < 3; k++) {
+        dS += (uint32_t)A[k] * z[k];
+        dSy += (uint32_t)B[k] * z[k];
+    }
+    const __m256i lane = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0), dv = _mm256_set1_epi32((int32_t)d);
+    const __m256i Ld = _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane);
+    const __m256i Lv = _mm256_set1_epi32((int32_t)lim);
+    lm = A[m] > 0;
+    py = y[t];
+    {
+        int32_t ks = y[t] == y[m] ? t : b, c = y[t] == y[m] ? m : t;
+        int32_t kl = lm ? m : ks, kh = lm ? ks : m, cl = lm ? t : c, ch = lm ? c : t;
+        const uint16_t *row = h + py * f->width;
+        end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
+        end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
+        Sl = d * z[t] - dS * (uint32_t)x[t] + (uint32_t)lo.q * dS;
+        dSl = dSy + (uint32_t)lo.dq * dS;
+    }
+    for (int half = 0; half < 2; half++) {
+        int32_t last = half == 0 ? (y[m] == y[b] ? y[b] : y[m] - 1) : y[b], rows;
+        if (half == 0 && py > last) continue;
+        if (half == 1) {
+            if (y[m] == y[b]) break;
+            if (y[t] != y[m]) {
+                const uint16_t *row = h + py * f->width;
+                if (lm) {
+                    Sl += dSl + (dS & (0u - end_step(&lo)));
+                    end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
+                } else {
+                    end_step(&hi);
+                    end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
+                    Sl = d * z[m] - dS * (uint32_t)x[m] + (uint32_t)lo.q * dS;
+                    dSl = dSy + (uint32_t)lo.dq * dS;
+                }
+            }
+        }
+        rows = last - py + 1;
+        py = last + 1;
+        for (;;) {
+            /* the row's samples lo.p .. hi.p (none when n <= 0: every lane cleared, nothing read) */
+            int32_t n = (int32_t)(hi.p - lo.p) + 1;
+            const uint16_t *q = lo.p;
+            uint32_t S = Sl;
+            do {
+                __m256i hv;
+                if (q + 8 <= end) {
+                    hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)q));
+                } else { /* the last samples of the grid: no load past them */
+                    uint16_t buf[8] = {0};
+                    for (int j = 0; j < n && j < 8; j++) buf[j] = q[j];
+                    hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
+                }
+                __m256i Sv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), Ld);
+                __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))); /* |V| < 2^31 */
+                v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lane));
+                __m256i mv = _mm256_max_epu32(v, _mm256_permute2x128_si256(v, v, 1)); /* every lane the max */
+                mv = _mm256_max_epu32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
+                mv = _mm256_max_epu32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
+                uint32_t mx = (uint32_t)_mm256_cvtsi256_si32(mv);
+                unsigned first = (unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(v, mv)));
+                const uint16_t *here = q + __builtin_ctz(first | 0x100u);
+                int up = mx > vm;
+                at = up ? here : at;
+                vm = up ? mx : vm;
+                if (vm > lim) { /* the block's first sample above the limit: the C scan stops there */
+                    __m256i ok = _mm256_cmpeq_epi32(_mm256_max_epu32(v, Lv), Lv); /* v <= lim */
+                    uint32_t lanes[8];
+                    int i = __builtin_ctz(~(unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(ok)) & 0xFFu);
+                    _mm256_storeu_si256((__m256i *)lanes, v);
+                    vm = lanes[i];
+                    at = q + i;
+                    goto done;
+                }
+                q += 8;
+                S += 8 * dS;
+                n -= 8;
+            } while (n > 0);
+            if (--rows == 0) break;
+            Sl += dSl + (dS & (0u - end_step(&lo)));
+            end_step(&hi);
+        }
+    }
+done:
+    *vmax = vm;
+    if (wx == NULL && wy == NULL) return 1;
+    if (at) {
+        int32_t i = (int32_t)(at - h), ay = i / f->width;
+        if (wx) *wx = i - ay * f->width;
+        if (wy) *wy = ay;
+    } else {
+        if (wx) *wx = x[0];
+        if (wy) *wy = y[0];
+    }
+    return 1;
+}
+
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy)
 {
-    if (!enabled || (enabled == 1 && (int64_t)f->width * f->height < SCAN_MIN_SAMPLES)) return 0;
+    if (!enabled) return 0;
+    if (enabled == 3 || (enabled == 1 && (int64_t)f->width * f->height < SCAN_MIN_SAMPLES)) {
+        /* scan32's triangles in lanes (the rest: the C scan) */
+        int64_t D =
+            ((int64_t)y[1] - y[2]) * ((int64_t)x[0] - x[1]) + ((int64_t)x[2] - x[1]) * ((int64_t)y[0] - y[1]);
+        if (f->width > (1 << 14) || f->height > (1 << 14) || D <= 0 || D >= (1 << 15) || !have_avx2()) return 0;
+        return scan_lanes(f, x, y, (uint32_t)D, limit, vmax, wx, wy);
+    }
     return have_avx2() ? scan(f, x, y, limit, vmax, wx, wy) : 0;
 }
 #else

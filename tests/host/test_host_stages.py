@@ -344,19 +344,22 @@ def test_quantisation_error_kept_from_the_quantising_pass(name):
 
 @pytest.fixture
 def c_scan():
-    """The library, its scan setting put back after the test (wm_host_scan: 0 the C scan, 2 host_scan.c's on
-    every grid, as the test grids are smaller than the default's 2^20 samples)."""
+    """The library, its scan setting put back after the test (wm_host_scan: 0 the C scan, 2 host_scan.c's
+    blocks on every grid, as the test grids are smaller than their default's 2^20 samples, 3 its small
+    triangles' lanes on every grid)."""
     lib = native.load()
     old = lib.wm_host_scan(-1)
     yield lib
     lib.wm_host_scan(old)
 
 
+@pytest.mark.parametrize("mode", [2, 3])
 @pytest.mark.parametrize("name", ["floats", "halves", "big", "jacksboro", "topobathy", "mri"])
-def test_refiner_scan_in_avx2_equals_the_c_scan(name, c_scan):
-    """The host library's E(T) scan (host_scan.c, AVX2) against tri_error.c's: the same meshes and
-    statistics at every level, bound met or stopped by a budget, in both metrics (every scan's Vmax, first
-    worst sample and early stop at a limit shape them)."""
+def test_refiner_scan_in_avx2_equals_the_c_scan(name, mode, c_scan):
+    """The host library's E(T) scans (host_scan.c, AVX2: its blocks, mode 2, and its small triangles'
+    lanes, mode 3) against tri_error.c's: the same meshes and statistics at every level, bound met or
+    stopped by a budget, in both metrics (every scan's Vmax, first worst sample and early stop at a limit
+    shape them)."""
     v = ALL[name]
     hf = from_array(v)
     span = float(v.max() - v.min())
@@ -365,8 +368,8 @@ def test_refiner_scan_in_avx2_equals_the_c_scan(name, c_scan):
             params = api.MeshParams(refine=native.RefineParams(zeta=zeta, metric=metric,
                                                                max_triangles=budget))
             got = []
-            for on in (0, 1):
-                c_scan.wm_host_scan(2 * on)
+            for on in (0, mode):
+                c_scan.wm_host_scan(on)
                 r = api.mesh(hf, params)
                 got.append((r.mesh.xy.tolist(), r.mesh.tris.tolist(), r.rows))
             assert got[0] == got[1], (metric, zeta, budget)
@@ -391,3 +394,40 @@ def test_triangle_scan_in_avx2_equals_the_c_scan(c_scan):
                     c_scan.wm_host_scan(2 * on)
                     e.append(native.tri_error(samples, x, y, metric))
                 assert e[0] == e[1], (x, y, metric)
+
+
+def test_small_triangle_lanes_equal_the_c_scan(c_scan):
+    """E(T) and its worst sample of random small triangles (D < 2^15: scan32's, which host_scan.c takes in
+    lanes), by the C scan and the lanes, bit for bit; on small grids many touch the last samples, which the
+    lanes read without loading past them."""
+    rng = np.random.default_rng(7)
+    lib = native.load()
+    for shape, ties in (((300, 301), False), ((37, 40), False), ((9, 8), False), ((60, 50), True)):
+        samples = rng.integers(0, 65536, shape).astype(np.uint16)
+        samples[:, : shape[1] // 2] //= 64  # smooth half: maxima reached late and often
+        if ties:  # two heights: many samples share the largest V, the first must be named
+            samples = (rng.integers(0, 2, shape) * 1000).astype(np.uint16)
+        h, w = shape
+        fld = native.Field(w, h, 1, native._ptr(samples, ctypes.c_uint16), None)
+        taken = 0
+        for _ in range(1500):
+            x0, y0 = rng.integers(0, w), rng.integers(0, h)
+            r = int(rng.choice([3, 8, 20, 60]))
+            x = np.clip(x0 + rng.integers(-r, r + 1, 3), 0, w - 1)
+            y = np.clip(y0 + rng.integers(-r, r + 1, 3), 0, h - 1)
+            d = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+            if d <= 0 or d >= 1 << 15:
+                continue
+            taken += 1
+            xs, ys = (ctypes.c_int32 * 3)(*map(int, x)), (ctypes.c_int32 * 3)(*map(int, y))
+            for metric in ("vertical", "normal"):
+                fp = native.fixed_params(native.RefineParams(metric=metric), 1.0)
+                got = []
+                for on in (0, 3):
+                    c_scan.wm_host_scan(on)
+                    wx, wy = ctypes.c_int32(-1), ctypes.c_int32(-1)
+                    e = lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, ctypes.byref(wx),
+                                         ctypes.byref(wy))
+                    got.append((e, wx.value, wy.value))
+                assert got[0] == got[1], (x, y, metric)
+        assert taken > 300
