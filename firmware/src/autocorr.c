@@ -33,11 +33,26 @@
 
 static uint64_t mag(int64_t a) { return a < 0 ? (uint64_t)0 - (uint64_t)a : (uint64_t)a; }
 
-/* round(a b / 2^30), half away from zero (|a b| < 2^63). */
+/* x y for x, y < 2^32 (always here: the entries, t, c and s are within [-1, 1] in Q30) as one 32 x 32
+ * bit product (on rv32 a mul and a mulhu instead of a 64 x 64 bit one's four multiplies), else in 64
+ * bits: the same integer. */
+static uint64_t umul(uint64_t x, uint64_t y)
+{
+    if ((x | y) >> 32) return x * y;
+    return (uint64_t)(uint32_t)x * (uint32_t)y;
+}
+
+/* round(a b / 2^30), half away from zero, for |a|, |b| < 2^31 (every matrix entry, t, c and s is
+ * within [-1, 1] in Q30, above, but for a few units of rounding): p = a b + 2^29 - [a b < 0], below
+ * 2^62 + 2^29 in magnitude, and floor(p / 2^30) by an unsigned shift of p + 2^63 (no shift of a
+ * negative number, which C99 leaves to the implementation).  The same integer as rounding the
+ * magnitudes' product; on rv32 one 32 x 32 bit product (mul, mulh) and some ten more instructions, no
+ * branch, where the 64-bit magnitudes' product took four multiplies and the signs' branches. */
 static int64_t mulq(int64_t a, int64_t b)
 {
-    uint64_t p = (mag(a) * mag(b) + ((uint64_t)1 << 29)) >> 30;
-    return ((a < 0) != (b < 0)) ? -(int64_t)p : (int64_t)p;
+    int64_t ab = (int64_t)(int32_t)a * (int32_t)b;
+    uint64_t p = (uint64_t)ab + ((uint64_t)1 << 29) - (uint64_t)(ab < 0);
+    return (int64_t)((p ^ ((uint64_t)1 << 63)) >> 30) - ((int64_t)1 << 33);
 }
 
 static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
@@ -47,12 +62,12 @@ static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
     int neg;
     if (mag(apq) <= SETTLED) return;
     /* t = sgn(theta) |2 a_pq| / (|a_qq - a_pp| + sqrt((a_qq - a_pp)^2 + (2 a_pq)^2)), |t| <= 1 */
-    sq = wm_isqrt64(mag(num) * mag(num) + den * den);
+    sq = wm_isqrt64(umul(mag(num), mag(num)) + umul(den, den));
     tt = (den << 30) / (mag(num) + sq);
     neg = (num < 0) != (apq < 0);
     t = neg ? -(int64_t)tt : (int64_t)tt;
     /* c = 1 / sqrt(1 + t^2), s = t c */
-    sq = wm_isqrt64(((uint64_t)1 << 60) + tt * tt);
+    sq = wm_isqrt64(((uint64_t)1 << 60) + umul(tt, tt));
     c = (int64_t)((((uint64_t)1 << 60) + sq / 2) / sq);
     s = mulq(t, c);
     {
