@@ -270,9 +270,10 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
  * about as often as it held in the C scan's loop).  The spans are scan32's: the rows from the top corner
  * to the middle one between the long edge and the upper short edge, the rest between the long edge and
  * the lower one, each end floor(u / a) stepped row by row as a pointer with its remainder (the carry
- * without a branch too).  A block's largest V (all lanes, those past the row's end cleared) above the
- * largest so far takes its first lane; above the limit, the block's first lane above it, where the C
- * scan stops. */
+ * without a branch too).  Each lane keeps its largest V and the place of its first sample (lanes past
+ * the row's end cleared), with no horizontal step a row: at the end the largest of all and the least
+ * place holding it, the first sample in row order.  A block with a V above the limit gives its first
+ * such lane, where the C scan stops. */
 struct end32 {
     const uint16_t *p;
     int32_t r, dr, a, st, q, dq;
@@ -327,7 +328,12 @@ static AVX2 __attribute__((noinline)) int scan_lanes(const wm_field *f, const in
     }
     const __m256i lane = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0), dv = _mm256_set1_epi32((int32_t)d);
     const __m256i Ld = _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane);
-    const __m256i Lv = _mm256_set1_epi32((int32_t)lim);
+    /* V < 2^31: a limit at or above 2^31 - 1 stops no scan */
+    const __m256i Lv = _mm256_set1_epi32((int32_t)(lim > 0x7FFFFFFFu ? 0x7FFFFFFFu : lim));
+    /* each lane's largest V and the place (sample number) of its first sample: the largest of all is then
+     * the lanes' largest, its first sample the least place among the lanes that hold it (a larger place is
+     * a later sample in row order) */
+    __m256i best = _mm256_setzero_si256(), place = _mm256_setzero_si256();
     lm = A[m] > 0;
     py = y[t];
     {
@@ -376,24 +382,18 @@ static AVX2 __attribute__((noinline)) int scan_lanes(const wm_field *f, const in
                 __m256i Sv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), Ld);
                 __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))); /* |V| < 2^31 */
                 v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lane));
-                __m256i mv = _mm256_max_epu32(v, _mm256_permute2x128_si256(v, v, 1)); /* every lane the max */
-                mv = _mm256_max_epu32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
-                mv = _mm256_max_epu32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
-                uint32_t mx = (uint32_t)_mm256_cvtsi256_si32(mv);
-                unsigned first = (unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(v, mv)));
-                const uint16_t *here = q + __builtin_ctz(first | 0x100u);
-                int up = mx > vm;
-                at = up ? here : at;
-                vm = up ? mx : vm;
-                if (vm > lim) { /* the block's first sample above the limit: the C scan stops there */
-                    __m256i ok = _mm256_cmpeq_epi32(_mm256_max_epu32(v, Lv), Lv); /* v <= lim */
+                __m256i over = _mm256_cmpgt_epi32(v, Lv);
+                if (!_mm256_testz_si256(over, over)) { /* the first sample above the limit: the C scan stops */
                     uint32_t lanes[8];
-                    int i = __builtin_ctz(~(unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(ok)) & 0xFFu);
+                    int i = __builtin_ctz((unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(over)));
                     _mm256_storeu_si256((__m256i *)lanes, v);
                     vm = lanes[i];
                     at = q + i;
-                    goto done;
+                    goto stop;
                 }
+                __m256i gt = _mm256_cmpgt_epi32(v, best); /* each lane's first sample of its largest V */
+                best = _mm256_max_epi32(best, v);
+                place = _mm256_blendv_epi8(place, _mm256_add_epi32(_mm256_set1_epi32((int32_t)(q - h)), lane), gt);
                 q += 8;
                 S += 8 * dS;
                 n -= 8;
@@ -403,7 +403,20 @@ static AVX2 __attribute__((noinline)) int scan_lanes(const wm_field *f, const in
             end_step(&hi);
         }
     }
-done:
+    {
+        __m256i mv = _mm256_max_epi32(best, _mm256_permute2x128_si256(best, best, 1)); /* every lane the max */
+        mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
+        mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
+        vm = (uint32_t)_mm256_cvtsi256_si32(mv);
+        if (vm) {
+            __m256i pl = _mm256_blendv_epi8(_mm256_set1_epi32(INT32_MAX), place, _mm256_cmpeq_epi32(best, mv));
+            pl = _mm256_min_epi32(pl, _mm256_permute2x128_si256(pl, pl, 1));
+            pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(1, 0, 3, 2)));
+            pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(2, 3, 0, 1)));
+            at = h + _mm256_cvtsi256_si32(pl);
+        }
+    }
+stop:
     *vmax = vm;
     if (wx == NULL && wy == NULL) return 1;
     if (at) {
