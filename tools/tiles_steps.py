@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Where a tiled run spends its time: `wavemesh mesh --tile` with every task's CPU counted in its worker.
 
-    .venv/bin/python tools/tiles_steps.py INPUT --workers N [wavemesh mesh options ...]
+    .venv/bin/python tools/tiles_steps.py INPUT --workers N [wavemesh mesh options ...] [--runner NAME=VALUE]
 
 Runs `wavemesh mesh INPUT -o /tmp/... --quiet` with the options given (e.g. `--tile 1025 --metric
 vertical --zeta 10`) in this process, each task of the tiles.Runner wrapped so that the worker that runs
@@ -9,14 +9,17 @@ it measures it (getrusage: user + system CPU, system CPU, minor page faults; the
 quantised, tile_heightfield's misses, and the samples of the windows it read, bands of seams included;
 the tiles it holds after).  Prints the run's wall time and CPU (the workers' counted to their end, after
 the run's for those still exiting as it ended, which it does not wait for) and its end (from the last
-task's end to the command's return: the parent's last writing, the files moved into place); then, for
+task's end to the command's return: the parent's last writing, the files moved into place), and its
+writes to the workers' pipes (wall against CPU: a woken worker that preempts it mid-send); then, for
 the quantisation's strips and for the task graph: the wall time, the tasks and the parent's round trips
-to the pool for them (runner.CHAIN, BATCH_READY), each worker's CPU and busy time, the time it waited
-(the span less its tasks: at a barrier, for the parent, for a task's inputs) and the most tiles it held,
+to the pool for them (runner.CHAIN, BATCH_READY, AHEAD), each worker's CPU and busy time, the time it waited
+(the span less its tasks: at a barrier, for the parent, for a task's inputs), the most tiles it held and
+how often it found no task in its pipe (it waited for the parent: a count that holds on a loaded machine),
 then each step's CPU summed over the workers; and the model of the speed-up over one worker, the CPU
 outside the workers (this process's) plus the busiest worker's CPU in each part.  CPU seconds, page
 faults and reads hold on a loaded machine where wall times do not; run it with --workers 1 and 2 to
-compare (docs/tiles.md, "Running the tiles").
+compare (docs/tiles.md, "Running the tiles").  ``--runner NAME=VALUE`` sets one of tiles.runner's
+settings for the run (CHAIN=2, AHEAD=0, BATCH_POLICY=0, ...).
 """
 
 from __future__ import annotations
@@ -28,11 +31,40 @@ import resource
 import sys
 import tempfile
 import time
+from multiprocessing import connection
 
 from wavemesh import cli
 from wavemesh.tiles import jobs, runner, source
 
 READS = [0, 0]  # the reads tile_heightfield's cache missed; the samples of every window read
+# a pool worker's receives that found nothing in its pipe (it waited for the parent) and their seconds
+STALLS = [0, 0.0]
+_recv = connection.Connection.recv
+
+
+SENDS = [0, 0.0, 0.0]  # this process's writes to its workers' pipes: count, wall and CPU seconds
+_send = connection.Connection._send
+
+
+def _send_timed(conn, buf, *args):
+    t0, c0 = time.perf_counter(), time.thread_time()
+    try:
+        return _send(conn, buf, *args)
+    finally:
+        SENDS[0] += 1
+        SENDS[1] += time.perf_counter() - t0
+        SENDS[2] += time.thread_time() - c0
+
+
+def _recv_counted(conn):
+    if conn.poll(0):
+        return _recv(conn)
+    t0 = time.perf_counter()
+    try:
+        return _recv(conn)
+    finally:
+        STALLS[0] += 1
+        STALLS[1] += time.perf_counter() - t0
 _read, _window = jobs._tile_heightfield, source.Source.read
 
 
@@ -52,13 +84,14 @@ source.Source.read = _window_counted
 
 def timed(fn, *args):
     """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads, the
-    tiles this process holds after it, the samples read)."""
+    tiles this process holds after it, the samples read, and the process's waits for the parent so far:
+    count, seconds)."""
     u0, t0, r0, n0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0], READS[1]
     out = fn(*args)
     u1 = resource.getrusage(resource.RUSAGE_SELF)
     cpu = u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime
     return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
-                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE), READS[1] - n0)
+                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE), READS[1] - n0, *STALLS)
 
 
 def _result(r):
@@ -134,9 +167,18 @@ def simulate(nodes, homes: dict, cost: list, workers: int) -> float:
 
 
 def main(argv: list[str]) -> int:
+    while "--runner" in argv:  # --runner NAME=VALUE: a setting of tiles.runner (CHAIN=2, AHEAD=0, ...)
+        k = argv.index("--runner")
+        name, value = argv[k + 1].split("=")
+        if not name.isupper() or not hasattr(runner, name):
+            raise SystemExit(f"--runner {argv[k + 1]}: tiles.runner has no setting {name}")
+        setattr(runner, name, type(getattr(runner, name))(int(value)))
+        del argv[k : k + 2]
     runner.Runner.map = _timed_map
     runner.Runner.graph = _timed_graph
     runner._reply = _counted_reply
+    connection.Connection.recv = _recv_counted  # in the pool's workers (forked after this)
+    connection.Connection._send = _send_timed
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
@@ -160,20 +202,25 @@ def main(argv: list[str]) -> int:
     for part, a, b, trips, infos in LOG:
         per: dict = {}
         steps: dict = {}
-        for step, (pid, cpu, s, e, sys_, flt, reads, held, samples) in infos:
-            w = per.setdefault(pid, [0.0, 0.0, 0, 0])
+        for step, (pid, cpu, s, e, sys_, flt, reads, held, samples, *stalls) in infos:
+            w = per.setdefault(pid, [0.0, 0.0, 0, 0, stalls, stalls])  # its waits at its first and last task
             w[0], w[1], w[2], w[3] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held)
+            w[4], w[5] = min(w[4], stalls), max(w[5], stalls)
             x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0, 0])
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
             x[5] += samples
         model += max(w[0] for w in per.values())
         print(f"{part}: wall {b - a:.2f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
-              "per worker CPU / busy / waiting s (tasks, the most tiles held): "
-              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]})"
-                          for w in per.values()))
+              "per worker CPU / busy / waiting s (tasks, the most tiles held; the times it found no task "
+              "in its pipe between its first and last, and their ms): "
+              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]}; "
+                          f"{w[5][0] - w[4][0]}, {1000 * (w[5][1] - w[4][1]):.0f})" for w in per.values()))
         for step, x in steps.items():
             print(f"  {step:<16} {x[0]:4d} tasks  CPU {x[1]:6.2f} s  system {x[2]:5.2f} s  "
                   f"page faults {x[3]:8d}  tiles read {x[4]:3d}  samples read {x[5] / 1e6:6.2f} M")
+    if SENDS[0]:  # a woken worker that takes this process's CPU in the middle of a send: wall above CPU
+        print(f"this process's writes to the pool's pipes: {SENDS[0]}, {1000 * SENDS[1]:.1f} ms wall, "
+              f"{1000 * SENDS[2]:.1f} ms CPU")
     print(f"model: this process's own CPU + the busiest worker's CPU in each part = {model:.2f} s")
     for nodes, homes, cost, workers in GRAPH:
         span = {w: simulate(nodes, homes, cost, w) for w in sorted({1, workers})}

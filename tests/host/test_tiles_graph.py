@@ -157,6 +157,46 @@ def test_graph_large_messages_both_ways():
     assert len(out) == 16 and all(len(x) == n and x[0] == 7 for x in out)
 
 
+def _policy(*_):
+    return os.getpid(), os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else None
+
+
+def test_graph_ahead_large_and_small_messages():
+    """Many ready nodes: a worker is sent its next chain while it runs one (runner.AHEAD) when both fit in
+    its pipe's buffer, else it is held and written as the first one's result comes: the same results with
+    and without, large args and results (4 MiB, more than the buffer) in the mix never block both ends; the
+    workers run as batch tasks (runner.BATCH_POLICY, Linux's SCHED_BATCH)."""
+    import signal
+
+    from wavemesh.tiles import runner
+
+    n = 1 << 19
+    nodes = [Node(_big, (n if k % 5 == 0 else 3,), (k, 0), (k % 4,)) for k in range(40)]
+    nodes += [Node(_big, (n if k % 3 == 0 else 5, Ref(k), Ref(k + 1)), (k + 1, 1), (k % 4,)) for k in range(39)]
+    nodes += [Node(_policy, (k,), (0, 2), (k % 4,)) for k in range(8)]
+    homes = {t: t / 4 for t in range(4)}
+    old = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("deadlock")))
+    signal.alarm(60)
+    try:
+        outs = []
+        for ahead in (False, True):
+            runner.AHEAD = ahead
+            with tiles.Runner(2) as run:
+                outs.append(run.graph(nodes, homes=homes))
+    finally:
+        runner.AHEAD = True
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    for out in outs:
+        assert [len(x) for x in out[:79]] == [n if k % 5 == 0 else 3 for k in range(40)] + \
+            [n if k % 3 == 0 else 5 for k in range(39)]
+        assert all(x[0] == 7 for x in out[:79])
+        pids = {pid for pid, _ in out[79:]}
+        assert os.getpid() not in pids and len(pids) <= 2
+        if hasattr(os, "SCHED_BATCH"):
+            assert {policy for _, policy in out[79:]} == {os.SCHED_BATCH}
+
+
 def test_graph_failure_raises_and_pool_ends():
     procs: list = []
     with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:
@@ -324,6 +364,16 @@ def test_schedule_takes_only_its_own_when_asked():
     assert s.take(0, own=True) is None
     assert s.take(0) == 3 and s.left == 0 and s.ready == []  # another's rather than wait
     assert s.take(0) is None and s.left == 0
+    # held (a chain sent ahead, Runner.graph's AHEAD): only a node whose tiles the worker has read already
+    # (taken before; a home tile nobody read yet is not), or one without tiles
+    nodes = [Node(_add, (k,), (0, k), tiles) for k, tiles in enumerate(((0,), (), (1,), (0,), (0, 1)))]
+    s = _Schedule(nodes, {0: 0, 1: 0})
+    assert s.take(0, own=True, held=True) == 1  # no tiles; (0,) is its home's, not read yet
+    assert s.take(0, own=True, held=True) is None and len(s.ready) == 4
+    assert s.take(0, own=True) == 0  # read now
+    assert s.take(0, own=True, held=True) == 3  # (0,) again; not (1,), nor (0, 1)
+    assert s.take(1, own=True) is None and s.take(0, own=True, held=True) is None
+    assert s.take(0) == 2 and s.take(0, own=True, held=True) == 4  # (1,) read by worker 0: both its now
 
 
 class _Box:

@@ -11,6 +11,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 from multiprocessing.connection import wait
+from multiprocessing.reduction import ForkingPickler
 
 from wavemesh.errors import WavemeshError
 from wavemesh.record import record
@@ -25,6 +26,13 @@ CHAIN = 4
 # and, while more nodes are ready than BATCH_READY per worker, the next ready node of its own after a chain
 # that has no follower (and that node's followers), up to CHAIN in all
 BATCH_READY = 2
+# and, while as many are ready, a worker running a chain is given its next one too (sent while it fits in the
+# pipe's buffer, else as the first one's result comes), so that it goes on without waiting for the parent
+AHEAD = True
+# a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
+# preempt the task running where it wakes): woken by the parent's send, it waits till the parent blocks
+# instead of taking its CPU in the middle of handing out the other workers' tasks
+BATCH_POLICY = True
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -181,10 +189,10 @@ class Runner:
             for d in node.deps():
                 readers[d] += 1
 
-        def got(i: int, r) -> None:
+        def got(i: int, r, report: bool = True) -> None:
             if kept_nodes is None or i in kept_nodes or (self.client is None and readers[i]):
                 results[i] = r
-            if done:
+            if done and report:
                 done(i, r)
 
         def given(k: int) -> None:
@@ -238,25 +246,36 @@ class Runner:
             # pool could wait forever at exit for a result a killed worker had half sent)
             self._start_pool()
             sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
-            # the nodes each worker has (None: none), one chain at a time: a second one in its pipe while it
-            # sends its result back can fill both directions of the socket (the parent blocked in send, the
-            # worker too)
-            sent: list[list | None] = [None] * len(self.pool)
+            # each worker's chains, in the order sent: the first written to its pipe, a second one (decided
+            # while the worker runs the first, so that it starts it without waiting for the parent) written
+            # only while both fit in the pipe's buffer, else held here and written as the first one's result
+            # comes (a message that could block the parent's send while the worker sends its result back
+            # would block both ends: one of any size goes only to a worker that waits for it)
+            sent: list[list] = [[] for _ in self.pool]  # [chain, its bytes, written]
+            room = [_pipe_room(pipe) for _, pipe in self.pool]
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
             kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
             def give(w: int) -> None:
-                if sent[w] is not None or (i := sched.take(w)) is None:
+                """Worker ``w``'s next chain when it has none; while more than BATCH_READY nodes a worker are
+                ready, its second one too while it runs the first (AHEAD): its first node one of its own, the
+                followers as ever, the batch only of tiles it has read already (a chain sent ahead takes at
+                most one tile more than the worker would otherwise hold)."""
+                ahead = bool(sent[w])
+                plenty = len(sched.ready) > BATCH_READY * len(self.pool)
+                if len(sent[w]) > 1 or ahead and not (AHEAD and plenty):
+                    return
+                if (i := sched.take(w, own=ahead)) is None:
                     return
                 chain = [i]
                 while len(chain) < CHAIN:
                     j = sched.follower(chain[-1], w)
                     if j is None and len(sched.ready) > BATCH_READY * len(self.pool):
-                        j = sched.take(w, own=True)  # another of its own, while there are plenty
+                        j = sched.take(w, own=True, held=ahead)  # another of its own, while there are plenty
                     if j is None:
                         break
                     chain.append(j)
-                pipe = self.pool[w][1]
+                out = []
                 steps = []
                 for n, k in enumerate(chain):
                     args = _resolve(nodes[k], results, chain[n - 1] if n else None)
@@ -264,11 +283,24 @@ class Runner:
                     for a in args:
                         key = keys.get(id(a))
                         if key is not None and key not in kept[w]:
-                            pipe.send(("keep", key, a))  # no answer: the worker keeps it
+                            out.append(_DUMPS(("keep", key, a)))  # no answer: the worker keeps it
                             kept[w].add(key)
                     steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
-                pipe.send(steps[0] if len(chain) == 1 else ("chain", steps))
-                sent[w] = chain
+                out.append(_DUMPS(steps[0] if len(chain) == 1 else ("chain", steps)))
+                sent[w].append([chain, out, False])
+                write(w)
+
+            def write(w: int) -> None:
+                """Worker ``w``'s chains not yet written that may be: the first, or a second that fits."""
+                for n, item in enumerate(sent[w]):
+                    if item[2]:
+                        continue
+                    size = sum(map(len, item[1]))
+                    if n and size + sum(sum(map(len, x[1])) for x in sent[w][:n]) > room[w]:
+                        return
+                    for buf in item[1]:
+                        self.pool[w][1].send_bytes(buf)
+                    item[2] = True
 
             gone: set[int] = set()
 
@@ -276,7 +308,7 @@ class Runner:
                 """The idle workers let go once nothing is left to give out (``last``)."""
                 if last and not sched.left:
                     for w in range(len(self.pool)):
-                        if sent[w] is None and w not in gone:
+                        if not sent[w] and w not in gone:
                             _let_go(self.pool[w][1])
                             gone.add(w)
 
@@ -285,20 +317,27 @@ class Runner:
             while any(sent):
                 live = [w for w in range(len(self.pool)) if sent[w]]
                 ready = wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
+                came = []
                 for w in live:
                     proc, pipe = self.pool[w]
                     if pipe in ready:
-                        chain, sent[w] = sent[w], None
+                        chain = sent[w].pop(0)[0]
                         reply = _reply(proc, pipe)
+                        write(w)  # a second chain held back: the worker waits for it
                         let_go()  # before its results are handled
                         for i, r in zip(chain, reply if len(chain) > 1 else [reply], strict=True):
-                            got(i, r)
+                            got(i, r, False)
                             sched.finished(i)
+                            came.append((i, r))
                     elif proc.sentinel in ready and not pipe.poll():
                         _lost(proc)
-                for w in (*live, *range(len(self.pool))):  # the workers that answered first
+                idle = [w for w in (*live, *range(len(self.pool))) if not sent[w]]  # answered first
+                for w in (*idle, *live):  # a worker with nothing first, then the second chains
                     give(w)
                 let_go()
+                if done:  # the results handled (a finished tile written) once the workers have their next
+                    for i, r in came:
+                        done(i, r)
             if gone:  # reaped when the Runner ends; a later graph forks a new pool
                 self.ended += self.pool
                 self.pool = []
@@ -351,8 +390,9 @@ class _Schedule:
         self.chained = [False] * len(nodes)  # taken with the node it waits for (follower)
         self.left = len(nodes)  # not taken yet (by take or follower)
 
-    def take(self, worker: int | None, own: bool = False) -> int | None:
-        """The node ``worker`` runs next (None: none ready); ``own``: only one of its own (None if none)."""
+    def take(self, worker: int | None, own: bool = False, held: bool = False) -> int | None:
+        """The node ``worker`` runs next (None: none ready); ``own``: only one of its own (None if none);
+        ``held``: only one of its own whose tiles it has read already (none read anew)."""
         if not self.ready:
             return None
         k = 0
@@ -360,6 +400,11 @@ class _Schedule:
             some = None
             for j, (_, i) in enumerate(self.ready):
                 tiles = self.nodes[i].tiles
+                if held:
+                    if all(self.owner.get(t) == worker for t in tiles):
+                        k = j
+                        break
+                    continue
                 if not tiles or self._mine(tiles[0], worker):  # its first tile the worker's: its own
                     k = j
                     break
@@ -402,6 +447,21 @@ class _Schedule:
             self.waiting[u] -= 1
             if not self.waiting[u] and not self.chained[u]:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
+
+
+_DUMPS = ForkingPickler.dumps  # as Connection.send pickles: Connection.recv reads it
+
+
+def _pipe_room(pipe) -> int:
+    """The bytes a second chain's messages may take in a worker's pipe with the first's: half its socket's
+    send buffer (the parent's send never waits on them), 0 where that is not known."""
+    import socket
+
+    try:
+        with socket.socket(fileno=os.dup(pipe.fileno())) as sock:
+            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF) // 2
+    except OSError:
+        return 0
 
 
 def _let_go(pipe) -> None:
@@ -483,6 +543,11 @@ def _worker_start(parent: int) -> None:
         signal.signal(signal.SIGHUP, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _WORKER_SIGNALS)
     tune_malloc()
+    if BATCH_POLICY and hasattr(os, "sched_setscheduler"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+        except OSError:
+            pass
     if sys.platform.startswith("linux"):
         try:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
