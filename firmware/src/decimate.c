@@ -70,17 +70,10 @@ struct fans {
     uint64_t av;                              /* v's |V| against it */
 };
 
-/* ceil(n m / 2^e) for n < 2^33, m < 2^16 and e >= 0: s |N| rounded up, for the scale s = m / 2^e. */
-static uint64_t scaled_up(uint64_t n, uint32_t m, int32_t e)
-{
-    uint64_t t = n * m;
-    return e >= 49 ? (t != 0) : (t + ((uint64_t)1 << e) - 1) >> e;
-}
-
 /* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
  * |V| (av, above zeta D / 2^16: the vertical test failed) and the plane's gradient numerators Na, Nb
- * (wm_tri_error.c's slope factor), without the slope factor's divisions and root: with T = D + s_x |Na|
- * + s_y |Nb| >= D sqrt(1 + g^2) (sqrt(a^2 + b^2 + c^2) <= a + b + c), the rounded-down r <= 2^16 T / D,
+ * (wm_tri_error.c's slope factor), without the slope factor's divisions and root: with T >= sqrt(D^2 +
+ * (s_x Na)^2 + (s_y Nb)^2) = D sqrt(1 + g^2) (wm_hypot_up twice), the rounded-down r <= 2^16 T / D,
  * and c = ceil(2^16 ev / zeta) >= 2^32 av / (D zeta) (ev >= 2^16 av / D, never saturated: v lies in the
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
@@ -97,8 +90,9 @@ static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_
     wm_slope_scale(p, 0, &sx, &ex);
     wm_slope_scale(p, 1, &sy, &ey);
     if (ex < 0 || ey < 0) return 0; /* not in wm_frac_mul's range */
-    T = (uint64_t)D + scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex) +
-        scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey);
+    T = wm_hypot_up(wm_hypot_up(wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex),
+                                wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey)),
+                    (uint64_t)D);
     return T < ((uint64_t)1 << 31) && (uint64_t)p->zeta * T < (av << 16);
 }
 
@@ -238,7 +232,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
                 x[c] = me->vx[tris[3 * t + c]];
                 y[c] = me->vy[tris[3 * t + c]];
             }
-            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, kept_for(&tested, x, y));
+            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, worst, kept_for(&tested, x, y));
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }

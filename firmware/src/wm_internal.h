@@ -210,6 +210,20 @@ static inline void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int
     *m = sm ? sm : p->scale_m;
     *e = sm ? (axis ? p->slope_y_e : p->slope_x_e) : p->scale_e;
 }
+/* ceil(n m / 2^e) for n < 2^33, m < 2^16 and e >= 0: s |N| rounded up, for the scale s = m / 2^e (the
+ * normal metric's slope numerators, bounded from above without a division). */
+static inline uint64_t wm_scaled_up(uint64_t n, uint32_t m, int32_t e)
+{
+    uint64_t t = n * m;
+    return e >= 49 ? (t != 0) : (t + ((uint64_t)1 << e) - 1) >> e;
+}
+/* An upper bound of sqrt(a^2 + b^2) for a, b < 2^56: max + (sqrt 2 - 1) min rounded up (the chord of
+ * the convex sqrt(1 + t^2) over [0, 1] lies above it; 107 / 256 > sqrt 2 - 1), at most 8.4 % above it. */
+static inline uint64_t wm_hypot_up(uint64_t a, uint64_t b)
+{
+    uint64_t hi = a > b ? a : b, lo = a > b ? b : a;
+    return hi + ((lo * 107 + 255) >> 8);
+}
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
 /* wm_min_angle in two steps: the dot and |cross| products at the corner opposite the shortest side
@@ -245,10 +259,12 @@ uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t 
 /* wm_tri_error_upto, and while E(T) <= bound also the worst sample as wm_tri_error finds it. */
 uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                              uint32_t bound, int32_t *wx, int32_t *wy, uint64_t *kept);
-/* E(T) when it is at most bound; otherwise some value above bound, found with the scan stopped at the
- * first sample that puts E(T) over it (the tests of the reduction and the decimation need no more). */
+/* For a candidate triangulation whose largest E(T) so far is least (<= bound): some value above bound
+ * when E(T) is above it, found with the scan stopped early; else E(T) when it is above least, and
+ * otherwise some value at most least (E(T) itself or more).  The decimation's tests need no more, and
+ * in the normal metric a triangle that stays within least needs no slope factor. */
 uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound, uint64_t *kept);
+                           uint32_t bound, uint32_t least, uint64_t *kept);
 
 #ifdef WM_TRI_ENGINE
 /* The board's triangle error engine (firmware/board/src/tri_engine.c): E(T)'s scan of the counter-
