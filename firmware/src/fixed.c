@@ -189,20 +189,13 @@ int32_t wm_angle_q16(int64_t x, int64_t y)
     {
         uint32_t ux = (uint32_t)x;
         int32_t iy = (int32_t)y;
-        for (int i = 0; i < WM_ANGLE_STEPS; i++) {
-            uint32_t xs = ux >> i;
-            int32_t ys = iy >= 0 ? (int32_t)((uint32_t)iy >> i) : -(int32_t)((uint32_t)-iy >> i);
-            if (iy > 0) {
-                ux += (uint32_t)ys;
-                iy -= (int32_t)xs;
-                z += wm_atan_q16[i];
-            } else if (iy < 0) {
-                ux -= (uint32_t)ys; /* ys < 0: x grows */
-                iy += (int32_t)xs;
-                z -= wm_atan_q16[i];
-            } else {
-                break;
-            }
+        /* each step turns toward y = 0, by the sign of y: as a mask m (all ones for y < 0), not a branch
+         * (which went either way about as often) */
+        for (int i = 0; i < WM_ANGLE_STEPS && iy != 0; i++) {
+            uint32_t m = 0u - ((uint32_t)iy >> 31), ay = ((uint32_t)iy ^ m) - m, xs = ux >> i; /* ay = |y| */
+            ux += ay >> i;                                      /* x grows by |y| 2^-i */
+            iy -= (int32_t)((xs ^ m) - m);                      /* y moves toward 0 by x 2^-i */
+            z += (int32_t)(((uint32_t)wm_atan_q16[i] ^ m) - m); /* by the step's angle, signed as y */
         }
     }
     return z < 0 ? 0 : z;
