@@ -10,7 +10,8 @@ quantised, tile_heightfield's misses, and the samples of the windows it read, ba
 the tiles it holds after).  Prints the run's wall time and CPU (the workers' counted to their end, after
 the run's for those still exiting as it ended, which it does not wait for) and its end (from the last
 task's end to the command's return: the parent's last writing, the files moved into place), and its
-writes to the workers' pipes (wall against CPU: a woken worker that preempts it mid-send); then, for
+writes to the workers' pipes (wall against CPU: a woken worker that preempts it mid-send), and the
+times no task runs (the command's start to the first task, between the parts, the end); then, for
 the quantisation's strips and for the task graph: the wall time, the tasks and the parent's round trips
 to the pool for them (runner.CHAIN, BATCH_READY, AHEAD), each worker's CPU and busy time, the time it waited
 (the span less its tasks: at a barrier, for the parent, for a task's inputs), the most tiles it held and
@@ -198,6 +199,13 @@ def main(argv: list[str]) -> int:
              else "")
           + (f"; the run's end, from its last task's to the command's return: {1000 * (end - last):.0f} ms"
              if last is not None else "; no tile task ran"))
+    spans = [(min(i[2] for _, i in infos), max(i[3] for _, i in infos)) for *_, infos in LOG if infos]
+    if spans:  # the serial parts: the parent's own work (and the pool's start) while no task runs
+        gaps = [1000 * (b[0] - a[1]) for a, b in zip(spans, spans[1:], strict=False)]
+        print(f"no task running: from the command's start to the first task {1000 * (spans[0][0] - t0):.1f} "
+              "ms" + "".join(f", between part {k + 1}'s last and part {k + 2}'s first {g:.1f} ms"
+                             for k, g in enumerate(gaps))
+              + f", the end {1000 * (end - spans[-1][1]):.1f} ms")
     model = here - tasks_here
     for part, a, b, trips, infos in LOG:
         per: dict = {}

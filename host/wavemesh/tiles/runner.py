@@ -184,9 +184,10 @@ class Runner:
         last results, not after them; a later graph starts a new pool)."""
         results: list = [None] * len(nodes)
         kept_nodes = None if keep is None else set(keep)
+        deps = [node.deps() for node in nodes]  # once (given, _Schedule)
         readers = [0] * len(nodes)  # the nodes not yet given each node's result (a local run's)
-        for node in nodes:
-            for d in node.deps():
+        for ds in deps:
+            for d in ds:
                 readers[d] += 1
 
         def got(i: int, r, report: bool = True) -> None:
@@ -200,7 +201,7 @@ class Runner:
             goes."""
             if kept_nodes is None:
                 return
-            for d in nodes[k].deps():
+            for d in deps[k]:
                 readers[d] -= 1
                 if not readers[d] and d not in kept_nodes:
                     results[d] = None
@@ -232,7 +233,7 @@ class Runner:
                 got(index[fut.key], fut.result())
         elif self.workers == 1 or len(nodes) == 1:
             tune_malloc()
-            sched = _Schedule(nodes)
+            sched = _Schedule(nodes, deps=deps)
             while (i := sched.take(None)) is not None:
                 args = _resolve(nodes[i], results)
                 given(i)
@@ -245,7 +246,7 @@ class Runner:
             # for them: a run that ends early kills its workers and returns at once (concurrent.futures'
             # pool could wait forever at exit for a result a killed worker had half sent)
             self._start_pool()
-            sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()})
+            sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()}, deps)
             # each worker's chains, in the order sent: the first written to its pipe, a second one (decided
             # while the worker runs the first, so that it starts it without waiting for the parent) written
             # only while both fit in the pipe's buffer, else held here and written as the first one's result
@@ -375,13 +376,14 @@ class _Schedule:
     tiles, else the first (another worker's tiles, read again here rather than wait).  ``take(None)``: the
     first (one worker)."""
 
-    def __init__(self, nodes: list[Node], homes: dict | None = None):
+    def __init__(self, nodes: list[Node], homes: dict | None = None, deps: list | None = None):
         self.nodes = nodes
         self.homes = homes or {}
-        self.waiting = [len(n.deps()) for n in nodes]
+        deps = [n.deps() for n in nodes] if deps is None else deps  # each node's (Node.deps)
+        self.waiting = [len(ds) for ds in deps]
         self.users: list[list[int]] = [[] for _ in nodes]
-        for i, n in enumerate(nodes):
-            for d in n.deps():
+        for i, ds in enumerate(deps):
+            for d in ds:
                 if d >= i:
                     raise ValueError(f"node {i} refers to node {d}: only earlier nodes")
                 self.users[d].append(i)
@@ -401,7 +403,8 @@ class _Schedule:
             for j, (_, i) in enumerate(self.ready):
                 tiles = self.nodes[i].tiles
                 if held:
-                    if all(self.owner.get(t) == worker for t in tiles):
+                    if not tiles or self.owner.get(tiles[0]) == worker and all(
+                            self.owner.get(t) == worker for t in tiles[1:]):
                         k = j
                         break
                     continue
