@@ -163,6 +163,27 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     return !other_above(q, t, a, j, k);
 }
 
+/* The fan from ring position a (wm_ring_plan_probe's, the same triangles in the same order) as ring
+ * positions into tp, from v's d_i at hand: each orientation (p_b - p_a) x (p_c - p_a), differences of
+ * grid coordinates below 2^15 - 1 as wm_orient's, exact in 32 bits; 0 when a triangle is not
+ * counter-clockwise; *big the first of the largest. */
+static int fan_plan(const struct fans *q, int32_t a, int32_t *tp, int32_t *nt, int32_t *big)
+{
+    int32_t n = q->n, b = a + 1 == n ? 0 : a + 1, k = 0, at = 0, most = -1;
+    for (int32_t j = 1; j + 1 < n; j++) {
+        int32_t c = b + 1 == n ? 0 : b + 1;
+        int32_t d = (q->dx[b] - q->dx[a]) * (q->dy[c] - q->dy[a]) - (q->dy[b] - q->dy[a]) * (q->dx[c] - q->dx[a]);
+        if (d <= 0) return 0;
+        if (d > most) most = d, at = k;
+        tp[3 * k] = a, tp[3 * k + 1] = b, tp[3 * k + 2] = c;
+        k++;
+        b = c;
+    }
+    *nt = k;
+    *big = at;
+    return 1;
+}
+
 /* The probe of the ear clipping's plan (wm_ring_plan_probe): v's sample above zeta. */
 static int v_above(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
@@ -183,7 +204,8 @@ static int is_fan(const int32_t *tris, int32_t nt)
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
 {
     const wm_mesh *me = &r->mesh;
-    int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], n, nt, big;
+    int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt,
+        big;
     uint32_t best = NONE;
     int32_t vx = me->vx[v], vy = me->vy[v];
     struct wm_plan_probe probe;
@@ -218,9 +240,12 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
         /* First the cheap test: v's own sample against the new triangle that holds it (a lower bound
          * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
-        if (a >= 0 && !fan_may_fit(&q, &tested, a)) continue;
-        if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, a >= 0 ? NULL : &probe, &big) != WM_OK) continue;
-        if (a < 0 && n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
+        if (a >= 0) {
+            if (!fan_may_fit(&q, &tested, a) || !fan_plan(&q, a, tp, &nt, &big)) continue;
+        } else {
+            if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, &probe, &big) != WM_OK) continue;
+            if (n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
+        }
         /* Then the scans, the plan's largest triangle first (the plan found it: big): a candidate is
          * refused by any triangle over zeta and otherwise costs the largest E(T) of them all, so their
          * order changes no result, and the triangle that refuses a candidate is most often its largest
@@ -229,15 +254,18 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
             int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
             for (int c = 0; c < 3; c++) {
-                x[c] = me->vx[tris[3 * t + c]];
-                y[c] = me->vy[tris[3 * t + c]];
+                x[c] = a >= 0 ? vx + q.dx[tp[3 * t + c]] : me->vx[tris[3 * t + c]];
+                y[c] = a >= 0 ? vy + q.dy[tp[3 * t + c]] : me->vy[tris[3 * t + c]];
             }
             e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, worst, kept_for(&tested, x, y));
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }
         if (j < nt) continue;
-        if (r->field.mask && !wm_hole_keeps_cover(r, v, ring, n, tris, nt)) continue; /* holes.c */
+        if (r->field.mask) { /* holes.c */
+            for (int32_t k = 0; a >= 0 && k < 3 * nt; k++) tris[k] = ring[tp[k]];
+            if (!wm_hole_keeps_cover(r, v, ring, n, tris, nt)) continue;
+        }
         best = worst;
         *apex = a;
         break;
