@@ -172,7 +172,8 @@ def test_graph_ahead_large_and_small_messages():
 
     n = 1 << 19
     nodes = [Node(_big, (n if k % 5 == 0 else 3,), (k, 0), (k % 4,)) for k in range(40)]
-    nodes += [Node(_big, (n if k % 3 == 0 else 5, Ref(k), Ref(k + 1)), (k + 1, 1), (k % 4,)) for k in range(39)]
+    nodes += [Node(_big, (n if k % 3 == 0 else 5, Ref(k), Ref(k + 1)), (k + 1, 1), (k % 4,))
+              for k in range(39)]
     nodes += [Node(_policy, (k,), (0, 2), (k % 4,)) for k in range(8)]
     homes = {t: t / 4 for t in range(4)}
     old = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("deadlock")))
