@@ -10,7 +10,8 @@ quantised, tile_heightfield's misses, and the samples of the windows it read, ba
 the tiles it holds after).  Prints the run's wall time and CPU (the workers' counted to their end, after
 the run's for those still exiting as it ended, which it does not wait for) and its end (from the last
 task's end to the command's return: the parent's last writing, the files moved into place), and its
-writes to the workers' pipes (wall against CPU: a woken worker that preempts it mid-send), and the
+writes to the workers' pipes (wall against CPU: a woken worker that preempts it mid-send; the bytes
+both ways), and the
 times no task runs (the command's start to the first task, between the parts, the end); then, for
 the quantisation's strips and for the task graph: the wall time, the tasks and the parent's round trips
 to the pool for them (runner.CHAIN, BATCH_READY, AHEAD), each worker's CPU and busy time, the time it waited
@@ -43,8 +44,9 @@ STALLS = [0, 0.0]
 _recv = connection.Connection.recv
 
 
-SENDS = [0, 0.0, 0.0]  # this process's writes to its workers' pipes: count, wall and CPU seconds
-_send = connection.Connection._send
+# this process's writes to its workers' pipes: count, wall and CPU seconds, bytes; and the bytes it read
+SENDS = [0, 0.0, 0.0, 0, 0]
+_send, _recv_bytes = connection.Connection._send, connection.Connection._recv_bytes
 
 
 def _send_timed(conn, buf, *args):
@@ -55,6 +57,13 @@ def _send_timed(conn, buf, *args):
         SENDS[0] += 1
         SENDS[1] += time.perf_counter() - t0
         SENDS[2] += time.thread_time() - c0
+        SENDS[3] += len(buf)
+
+
+def _recv_bytes_counted(conn, *args):
+    buf = _recv_bytes(conn, *args)
+    SENDS[4] += buf.getbuffer().nbytes
+    return buf
 
 
 def _recv_counted(conn):
@@ -180,6 +189,7 @@ def main(argv: list[str]) -> int:
     runner._reply = _counted_reply
     connection.Connection.recv = _recv_counted  # in the pool's workers (forked after this)
     connection.Connection._send = _send_timed
+    connection.Connection._recv_bytes = _recv_bytes_counted
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
     t0, c0 = time.perf_counter(), os.times()
@@ -228,7 +238,8 @@ def main(argv: list[str]) -> int:
                   f"page faults {x[3]:8d}  tiles read {x[4]:3d}  samples read {x[5] / 1e6:6.2f} M")
     if SENDS[0]:  # a woken worker that takes this process's CPU in the middle of a send: wall above CPU
         print(f"this process's writes to the pool's pipes: {SENDS[0]}, {1000 * SENDS[1]:.1f} ms wall, "
-              f"{1000 * SENDS[2]:.1f} ms CPU")
+              f"{1000 * SENDS[2]:.1f} ms CPU, {SENDS[3] / 1e6:.2f} MB; read from them "
+              f"{SENDS[4] / 1e6:.2f} MB")
     print(f"model: this process's own CPU + the busiest worker's CPU in each part = {model:.2f} s")
     for nodes, homes, cost, workers in GRAPH:
         span = {w: simulate(nodes, homes, cost, w) for w in sorted({1, workers})}
