@@ -176,6 +176,43 @@ def simulate(nodes, homes: dict, cost: list, workers: int) -> float:
         idle.insert(0, w)
 
 
+def simulate_pool(nodes, homes: dict, cost: list, workers: int, latency: float, ahead: bool = True
+                  ) -> float:
+    """The graph's makespan on ``workers`` pool workers given chains as Runner.graph gives them
+    (runner._Schedule.chain: CHAIN, BATCH_READY and, with ``ahead``, AHEAD), each node taking its measured
+    CPU time, the parent answering each chain's results at once but its next chain reaching a worker
+    that has none ``latency`` seconds later (a worker with a chain sent ahead goes straight on)."""
+    import heapq
+
+    sched = runner._Schedule(nodes, {t: int(h * workers) for t, h in homes.items()})
+    saved, runner.AHEAD = runner.AHEAD, ahead
+    try:
+        given: list[list] = [[] for _ in range(workers)]  # each worker's chains, the first running
+        ends: list = []  # (the running chain's end, worker)
+
+        def give(now: float) -> None:
+            for w in range(workers):  # the workers with none first, then the chains ahead
+                if not given[w] and (chain := sched.chain(w, workers)):
+                    given[w].append(chain)
+                    heapq.heappush(ends, (now + latency + sum(cost[i] for i in chain), w))
+            for w in range(workers):
+                if len(given[w]) == 1 and (chain := sched.chain(w, workers, ahead=True)):
+                    given[w].append(chain)
+
+        give(0.0)
+        now = 0.0
+        while ends:
+            now, w = heapq.heappop(ends)
+            for i in given[w].pop(0):
+                sched.finished(i)
+            if given[w]:
+                heapq.heappush(ends, (now + sum(cost[i] for i in given[w][0]), w))
+            give(now)
+        return now
+    finally:
+        runner.AHEAD = saved
+
+
 def main(argv: list[str]) -> int:
     while "--runner" in argv:  # --runner NAME=VALUE: a setting of tiles.runner (CHAIN=2, AHEAD=0, ...)
         k = argv.index("--runner")
@@ -247,6 +284,10 @@ def main(argv: list[str]) -> int:
               "for inputs and at the end included): "
               + ", ".join(f"{w} worker{'s' if w > 1 else ''} {t:.2f} s" for w, t in span.items())
               + (f" ({span[1] / span[workers]:.2f}x)" if workers > 1 else ""))
+        if workers > 1:  # the round trips' cost: the pool's chains, the parent answering in 0.5 ms
+            pool = {a: simulate_pool(nodes, homes, cost, workers, 0.0005, a) for a in (False, True)}
+            print(f"  as the pool gives chains, the parent's answer reaching a worker without one in 0.5 ms: "
+                  f"{pool[True]:.3f} s with chains sent ahead (AHEAD), {pool[False]:.3f} s without")
     return rc
 
 

@@ -258,24 +258,11 @@ class Runner:
             kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
             def give(w: int) -> None:
-                """Worker ``w``'s next chain when it has none; while more than BATCH_READY nodes a worker are
-                ready, its second one too while it runs the first (AHEAD): its first node one of its own, the
-                followers as ever, the batch only of tiles it has read already (a chain sent ahead takes at
-                most one tile more than the worker would otherwise hold)."""
-                ahead = bool(sent[w])
-                plenty = len(sched.ready) > BATCH_READY * len(self.pool)
-                if len(sent[w]) > 1 or ahead and not (AHEAD and plenty):
+                """Worker ``w``'s next chain (_Schedule.chain) when it has none, or its second while it runs
+                the first (AHEAD; a chain sent ahead takes at most one tile more than the worker would
+                otherwise hold: its batch only of tiles it has read already)."""
+                if len(sent[w]) > 1 or not (chain := sched.chain(w, len(self.pool), bool(sent[w]))):
                     return
-                if (i := sched.take(w, own=ahead)) is None:
-                    return
-                chain = [i]
-                while len(chain) < CHAIN:
-                    j = sched.follower(chain[-1], w)
-                    if j is None and len(sched.ready) > BATCH_READY * len(self.pool):
-                        j = sched.take(w, own=True, held=ahead)  # another of its own, while there are plenty
-                    if j is None:
-                        break
-                    chain.append(j)
                 out = []
                 steps = []
                 for n, k in enumerate(chain):
@@ -420,6 +407,26 @@ class _Schedule:
             self._claim(self.ready[k][1], worker)
         self.left -= 1
         return self.ready.pop(k)[1]
+
+    def chain(self, worker: int, workers: int, ahead: bool = False) -> list[int]:
+        """The nodes ``worker`` (of ``workers``) is given next, in order (Runner.graph): the node take gives
+        it, the node that waits for it alone (follower), and so on, up to CHAIN; while more than
+        BATCH_READY nodes a worker are ready, after a node without a follower the next ready node of its
+        own.  ``ahead``: the worker is running a chain: none unless AHEAD and that many are ready, its first
+        node one of its own, the batch only of tiles it has read already.  Empty: nothing to give."""
+        if ahead and not (AHEAD and len(self.ready) > BATCH_READY * workers):
+            return []
+        if (i := self.take(worker, own=ahead)) is None:
+            return []
+        chain = [i]
+        while len(chain) < CHAIN:
+            j = self.follower(chain[-1], worker)
+            if j is None and len(self.ready) > BATCH_READY * workers:
+                j = self.take(worker, own=True, held=ahead)  # another of its own, while there are plenty
+            if j is None:
+                break
+            chain.append(j)
+        return chain
 
     def follower(self, i: int, worker: int) -> int | None:
         """Of the nodes that wait for node ``i`` (just taken by ``worker``) alone, the first by rank whose
