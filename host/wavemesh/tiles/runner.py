@@ -26,8 +26,8 @@ CHAIN = 4
 # and, while more nodes are ready than BATCH_READY per worker, the next ready node of its own after a chain
 # that has no follower (and that node's followers), up to CHAIN in all
 BATCH_READY = 2
-# and, while as many are ready, a worker running a chain is given its next one too (sent while it fits in the
-# pipe's buffer, else as the first one's result comes), so that it goes on without waiting for the parent
+# and a worker running a chain is given its next one too, when one of its own is ready (sent while it fits in
+# the pipe's buffer, else as the first one's result comes), so that it goes on without waiting for the parent
 AHEAD = True
 # a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
 # preempt the task running where it wakes): woken by the parent's send, it waits till the parent blocks
@@ -412,9 +412,9 @@ class _Schedule:
         """The nodes ``worker`` (of ``workers``) is given next, in order (Runner.graph): the node take gives
         it, the node that waits for it alone (follower), and so on, up to CHAIN; while more than
         BATCH_READY nodes a worker are ready, after a node without a follower the next ready node of its
-        own.  ``ahead``: the worker is running a chain: none unless AHEAD and that many are ready, its first
-        node one of its own, the batch only of tiles it has read already.  Empty: nothing to give."""
-        if ahead and not (AHEAD and len(self.ready) > BATCH_READY * workers):
+        own.  ``ahead``: the worker is running a chain: none unless AHEAD, its first node one of its own,
+        the batch only of tiles it has read already.  Empty: nothing to give."""
+        if ahead and not AHEAD:
             return []
         if (i := self.take(worker, own=ahead)) is None:
             return []
