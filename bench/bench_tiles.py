@@ -470,16 +470,32 @@ def markdown(r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int = 5) -> dict:
+# `wavemesh` as its console script runs it (the package sees the command: wavemesh/__init__.py), with the
+# tiles.runner settings of WAVEMESH_BENCH_RUNNER ("NAME=VALUE,...") set first: pair's --against runs
+LAUNCHER = """\
+import os, sys
+from wavemesh.tiles import runner
+for kv in filter(None, os.environ.get("WAVEMESH_BENCH_RUNNER", "").split(",")):
+    k, v = kv.split("=")
+    setattr(runner, k, type(getattr(runner, k))(int(v)))
+from wavemesh.cli import main
+sys.exit(main())
+"""
+
+
+def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int = 5,
+         against: str | None = None) -> dict:
     """`wavemesh mesh` of the n^2 terrain in tiles of ``tile`` with 1 worker and with ``workers``, whole
     processes in turn (1, w, 1, w, ...; one of each first, not counted): each run's wall and CPU seconds
     (its process tree), the medians, t1 / tw of the medians and the median of the pairs' ratios, and
-    whether both wrote the same bytes.  A run's wall time ends with its process (the pool's workers may
-    still be exiting then: the bench waits for them before the next run and counts their CPU).  The runs
-    import compiled modules, as an installed package does:
-    compiled by the first two runs (not counted) into a cache of their own (PYTHONPYCACHEPREFIX under the
-    bench's folder, PYTHONDONTWRITEBYTECODE dropped; with it set and no cache, every run compiled the
-    package's modules again at its start)."""
+    whether both wrote the same bytes.  ``against`` ("NAME=VALUE,...", tiles.runner's settings, e.g.
+    "AHEAD=0,BATCH_POLICY=0"): ``workers`` workers with those settings in place of 1 worker (both through
+    a launcher that the package takes for the command, as the console script), the ratio theirs / ours.
+    A run's wall time ends with its process (the pool's workers may still be exiting then: the bench waits
+    for them before the next run and counts their CPU).  The runs import compiled modules, as an installed
+    package does: compiled by the first two runs (not counted) into a cache of their own
+    (PYTHONPYCACHEPREFIX under the bench's folder, PYTHONDONTWRITEBYTECODE dropped; with it set and no
+    cache, every run compiled the package's modules again at its start)."""
     import statistics
 
     from bench_big import run_process  # bench/ is on the path (as mirror_tile's import)
@@ -491,11 +507,16 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPYCACHEPREFIX"] = str(WORK / "pycache")
 
+    launcher = WORK / "launch" / "wavemesh"
+    if against is not None:
+        launcher.parent.mkdir(parents=True, exist_ok=True)
+        launcher.write_text(LAUNCHER)
+
     def run1(w: int) -> tuple[float, float]:
+        other = against is not None and w == 1  # the settings' run in 1's place
         cmd = [
             sys.executable,
-            "-m",
-            "wavemesh.cli",
+            *((str(launcher),) if against is not None else ("-m", "wavemesh.cli")),
             "mesh",
             str(path),
             "-o",
@@ -507,12 +528,12 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
             "--zeta",
             str(ZETA),
             "--workers",
-            str(w),
+            str(workers if other else w),
             "--quiet",
         ]
         # its wall time to its return; its CPU with its workers' that were still exiting (reaped before the
         # next run starts)
-        r = run_process(cmd, cwd=root, env=env)
+        r = run_process(cmd, cwd=root, env=env | {"WAVEMESH_BENCH_RUNNER": against if other else ""})
         if r["rc"]:
             raise RuntimeError(f"{' '.join(cmd)}: exit status {r['rc']}: {r['error']}")
         return r["wall_s"], r["cpu_s"]
@@ -522,16 +543,19 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
     for _ in range(runs):
         for w in (1, workers):
             got[w].append(run1(w))
+            name = f"x{workers} {against}" if against is not None and w == 1 else f"x{w}"
             print(
-                f"  {n}^2 tile {tile} x{w}: {got[w][-1][0]:.2f} s wall, {got[w][-1][1]:.2f} s CPU", flush=True
+                f"  {n}^2 tile {tile} {name}: {got[w][-1][0]:.2f} s wall, {got[w][-1][1]:.2f} s CPU",
+                flush=True,
             )
     med = {
         w: (statistics.median(x[0] for x in v), statistics.median(x[1] for x in v)) for w, v in got.items()
     }
     ratio = statistics.median(a[0] / b[0] for a, b in zip(got[1], got[workers], strict=True))
     same = (out / "w1.obj").read_bytes() == (out / f"w{workers}.obj").read_bytes()
+    first = f"{workers} workers with {against}" if against is not None else "1 worker"
     print(
-        f"{n}^2 tile {tile}: 1 worker {med[1][0]:.2f} s ({med[1][1]:.2f} CPU s), {workers} workers "
+        f"{n}^2 tile {tile}: {first} {med[1][0]:.2f} s ({med[1][1]:.2f} CPU s), {workers} workers "
         f"{med[workers][0]:.2f} s ({med[workers][1]:.2f} CPU s): {med[1][0] / med[workers][0]:.2f}x "
         f"(pairs' median {ratio:.2f}x); the same bytes: {'yes' if same else 'NO'}"
     )
@@ -558,8 +582,10 @@ if __name__ == "__main__":
         ap.add_argument("--tile", type=int, default=WORKERS_TILE)
         ap.add_argument("--workers", type=int, default=2)
         ap.add_argument("--runs", type=int, default=5)
+        ap.add_argument("--against", metavar="NAME=VALUE,...",
+                        help="in place of 1 worker: --workers with these tiles.runner settings (AHEAD=0,...)")
         a = ap.parse_args(sys.argv[2:])
-        sys.exit(0 if pair(a.n, a.tile, a.workers, a.runs)["same"] else 1)
+        sys.exit(0 if pair(a.n, a.tile, a.workers, a.runs, a.against)["same"] else 1)
     else:  # make bench-tiles on a bigger machine: --workers-max N [--scheduler S]
         import argparse
 
