@@ -12,7 +12,7 @@
  * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
  * the first one and stops at the limit as the C scan does.  On grids under 2^20 samples (below) this
  * scan is left to the C scan, and only scan32's small triangles are taken, in lanes without a branch a
- * row (scan_lanes).  Processors without AVX2 (and other compilers) answer 0: the C scan runs.
+ * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box).  Processors without AVX2 (and other compilers) answer 0: the C scan runs.
  * wm_host_scan(0) turns both off, (2) puts the blocks on every grid, (3) the lanes on every grid (the
  * tests compare each with the C scan). */
 #define _POSIX_C_SOURCE 200809L
@@ -302,6 +302,110 @@ static inline __attribute__((always_inline)) uint32_t end_step(struct end32 *e)
     return c;
 }
 
+/* The lanes' largest V (each lane's in best) and, when above 0, its first sample into *at: the least
+ * place (sample number, in place) among the lanes that hold it, a larger place a later sample in row
+ * order. */
+static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i best, __m256i place,
+                                                                       const uint16_t *h, const uint16_t **at)
+{
+    __m256i mv = _mm256_max_epi32(best, _mm256_permute2x128_si256(best, best, 1)); /* every lane the max */
+    uint32_t vm;
+    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
+    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
+    vm = (uint32_t)_mm256_cvtsi256_si32(mv);
+    if (vm) {
+        __m256i pl = _mm256_blendv_epi8(_mm256_set1_epi32(INT32_MAX), place, _mm256_cmpeq_epi32(best, mv));
+        pl = _mm256_min_epi32(pl, _mm256_permute2x128_si256(pl, pl, 1));
+        pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(1, 0, 3, 2)));
+        pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(2, 3, 0, 1)));
+        *at = h + _mm256_cvtsi256_si32(pl);
+    }
+    return vm;
+}
+
+/* scan_lanes for a triangle whose box is at most 8 samples wide (most of a fine mesh's: on Jacksboro at 10
+ * m, bench/refine_time.py, the native call 0.88 - 0.95 x scan_lanes' time, MRI 0.91 - 0.93 x): each row of the box one block from the
+ * box's left column, its samples inside the closed triangle by the three edge functions (all >= 0: the
+ * spans' very samples, no division), the edge functions and S stepped row by row in the lanes; each
+ * lane's largest V and first place as scan_lanes keeps them.  S is the triangle's S at the box's top
+ * left sample (modulo 2^32, as V is taken). */
+static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *f, const int32_t x[3],
+                                                                const int32_t y[3], uint32_t d, int32_t x0,
+                                                                uint64_t limit, uint64_t *vmax, int32_t *wx,
+                                                                int32_t *wy)
+{
+    const uint16_t *h = f->samples, *end = h + (int64_t)f->width * f->height, *at = NULL;
+    int32_t A[3], B[3], t = 0, b = 0, width = f->width, y0, y1;
+    uint32_t z[3], dS = 0, dSy = 0, S, lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit, vm;
+    for (int k = 0; k < 3; k++) {
+        int k1 = wm_k1(k), k2 = wm_k2(k);
+        z[k] = h[y[k] * width + x[k]];
+        A[k] = y[k1] - y[k2];
+        B[k] = x[k2] - x[k1];
+        dS += (uint32_t)A[k] * z[k];
+        dSy += (uint32_t)B[k] * z[k];
+        if (y[k] < y[t]) t = k;
+        if (y[k] > y[b]) b = k;
+    }
+    y0 = y[t], y1 = y[b];
+    S = d * z[t] + dS * (uint32_t)(x0 - x[t]); /* at (x0, y0): S is D z_t at corner t, dS a column on */
+    const __m256i Lv = _mm256_set1_epi32((int32_t)(lim > 0x7FFFFFFFu ? 0x7FFFFFFFu : lim));
+    const __m256i lane = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0), dv = _mm256_set1_epi32((int32_t)d);
+    const __m256i none = _mm256_set1_epi32(-1), dSyv = _mm256_set1_epi32((int32_t)dSy);
+    const __m256i Wv = _mm256_set1_epi32(width);
+    __m256i E[3], Bv[3], best = _mm256_setzero_si256(), place = _mm256_setzero_si256();
+    __m256i Sv =
+        _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane));
+    __m256i P = _mm256_add_epi32(_mm256_set1_epi32(y0 * width + x0), lane);
+    const uint16_t *q = h + y0 * width + x0;
+    for (int k = 0; k < 3; k++) { /* E_k = A (px - x_k1) + B (py - y_k1), below 2^29 in size in the box */
+        int k1 = wm_k1(k);
+        E[k] = _mm256_add_epi32(_mm256_set1_epi32(A[k] * (x0 - x[k1]) + B[k] * (y0 - y[k1])),
+                                _mm256_mullo_epi32(_mm256_set1_epi32(A[k]), lane));
+        Bv[k] = _mm256_set1_epi32(B[k]);
+    }
+    for (int32_t py = y0; py <= y1; py++, q += width) {
+        __m256i hv;
+        if (q + 8 <= end) {
+            hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)q));
+        } else { /* the last samples of the grid: no load past them (the lanes past them are outside) */
+            uint16_t buf[8] = {0};
+            for (int j = 0; j < 8 && q + j < end; j++) buf[j] = q[j];
+            hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
+        }
+        __m256i in = _mm256_cmpgt_epi32(_mm256_or_si256(_mm256_or_si256(E[0], E[1]), E[2]), none); /* all >= 0 */
+        __m256i v = _mm256_and_si256(_mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))), in);
+        __m256i over = _mm256_cmpgt_epi32(v, Lv);
+        if (!_mm256_testz_si256(over, over)) { /* the first sample above the limit: the C scan stops */
+            uint32_t lanes[8];
+            int i = __builtin_ctz((unsigned)_mm256_movemask_ps(_mm256_castsi256_ps(over)));
+            _mm256_storeu_si256((__m256i *)lanes, v);
+            at = q + i;
+            vm = lanes[i];
+            goto stop;
+        }
+        __m256i gt = _mm256_cmpgt_epi32(v, best);
+        best = _mm256_max_epi32(best, v);
+        place = _mm256_blendv_epi8(place, P, gt);
+        for (int k = 0; k < 3; k++) E[k] = _mm256_add_epi32(E[k], Bv[k]);
+        Sv = _mm256_add_epi32(Sv, dSyv);
+        P = _mm256_add_epi32(P, Wv);
+    }
+    vm = lanes_first(best, place, h, &at);
+stop:
+    *vmax = vm;
+    if (wx == NULL && wy == NULL) return 1;
+    if (at) {
+        int32_t i = (int32_t)(at - h), ay = i / width;
+        if (wx) *wx = i - ay * width;
+        if (wy) *wy = ay;
+    } else {
+        if (wx) *wx = x[0];
+        if (wy) *wy = y[0];
+    }
+    return 1;
+}
+
 /* Its start on a cache line: where it lands otherwise moves with every change elsewhere in the library,
  * and so its loop's place in the lines the processor fetches (bench/refine_time.py: one such move cost
  * f2 and Box 4-5 %, the median pair 1.3 %). */
@@ -406,19 +510,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
             end_step(&hi);
         }
     }
-    {
-        __m256i mv = _mm256_max_epi32(best, _mm256_permute2x128_si256(best, best, 1)); /* every lane the max */
-        mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
-        mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
-        vm = (uint32_t)_mm256_cvtsi256_si32(mv);
-        if (vm) {
-            __m256i pl = _mm256_blendv_epi8(_mm256_set1_epi32(INT32_MAX), place, _mm256_cmpeq_epi32(best, mv));
-            pl = _mm256_min_epi32(pl, _mm256_permute2x128_si256(pl, pl, 1));
-            pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(1, 0, 3, 2)));
-            pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(2, 3, 0, 1)));
-            at = h + _mm256_cvtsi256_si32(pl);
-        }
-    }
+    vm = lanes_first(best, place, h, &at);
 stop:
     *vmax = vm;
     if (wx == NULL && wy == NULL) return 1;
@@ -442,6 +534,10 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
         int64_t D =
             ((int64_t)y[1] - y[2]) * ((int64_t)x[0] - x[1]) + ((int64_t)x[2] - x[1]) * ((int64_t)y[0] - y[1]);
         if (f->width > (1 << 14) || f->height > (1 << 14) || D <= 0 || D >= (1 << 15) || !have_avx2()) return 0;
+        int32_t x0 = x[0] < x[1] ? x[0] : x[1], x1 = x[0] < x[1] ? x[1] : x[0];
+        x0 = x[2] < x0 ? x[2] : x0;
+        x1 = x[2] > x1 ? x[2] : x1;
+        if (x1 - x0 < 8) return scan_box(f, x, y, (uint32_t)D, x0, limit, vmax, wx, wy); /* a row a block */
         return scan_lanes(f, x, y, (uint32_t)D, limit, vmax, wx, wy);
     }
     return have_avx2() ? scan(f, x, y, limit, vmax, wx, wy) : 0;
