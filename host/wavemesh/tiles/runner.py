@@ -178,7 +178,8 @@ class Runner:
         one worker: fewer tiles read twice).  ``shared``: args (by identity) a pool worker is sent once and
         keeps (the plan every task reads), not with every task.  A pool worker given a node takes with it the
         node that waits for it alone, if its tiles are the worker's, and so on (CHAIN; _Schedule.follower),
-        and while many nodes are ready the next ready nodes of its own (BATCH_READY).  ``last``: the
+        and while many nodes are ready the next ready nodes of its own (BATCH_READY); while it runs a chain,
+        its next one (AHEAD; _Schedule.chain).  ``last``: the
         Runner's last graph: a pool worker is let go as soon as no node is left to give out (its exit,
         which frees its memory, then runs beside the other's last nodes and the parent's handling of the
         last results, not after them; a later graph starts a new pool)."""
