@@ -198,6 +198,23 @@ def test_graph_ahead_large_and_small_messages():
             assert {policy for _, policy in out[79:]} == {os.SCHED_BATCH}
 
 
+def test_pipe_room_of_a_socket_and_of_a_plain_pipe():
+    """runner._pipe_room: half a socket pipe's send buffer; 0 for a pipe that is no socket (no chain sent
+    ahead there), its duplicate descriptor closed again."""
+    import multiprocessing
+
+    from wavemesh.tiles import runner
+
+    here, there = multiprocessing.Pipe()
+    r, w = multiprocessing.Pipe(duplex=False)  # os.pipe: no socket
+    with here, there, r, w:
+        assert runner._pipe_room(here) > 0
+        before = len(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else None
+        assert runner._pipe_room(w) == 0
+        if before is not None:
+            assert len(os.listdir("/proc/self/fd")) == before
+
+
 def test_graph_failure_raises_and_pool_ends():
     procs: list = []
     with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:

@@ -7,6 +7,7 @@ import ctypes
 import multiprocessing
 import os
 import signal
+import socket
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -465,14 +466,19 @@ _DUMPS = ForkingPickler.dumps  # as Connection.send pickles: Connection.recv rea
 
 def _pipe_room(pipe) -> int:
     """The bytes a second chain's messages may take in a worker's pipe with the first's: half its socket's
-    send buffer (the parent's send never waits on them), 0 where that is not known."""
-    import socket
-
+    send buffer (the parent's send never waits on them: the other half is for the kernel's own cost of each
+    message, some 770 bytes, and two chains are a few messages), 0 where that is not known."""
+    fd = os.dup(pipe.fileno())
     try:
-        with socket.socket(fileno=os.dup(pipe.fileno())) as sock:
-            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF) // 2
-    except OSError:
+        sock = socket.socket(fileno=fd)
+    except OSError:  # not a socket: the duplicate closed here
+        os.close(fd)
         return 0
+    with sock:
+        try:
+            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF) // 2
+        except OSError:
+            return 0
 
 
 def _let_go(pipe) -> None:
