@@ -164,8 +164,8 @@ def _policy(*_):
 def test_graph_ahead_large_and_small_messages():
     """Many ready nodes: a worker is sent its next chain while it runs one (runner.AHEAD) when both fit in
     its pipe's buffer, else it is held and written as the first one's result comes: the same results with
-    and without, large args and results (4 MiB, more than the buffer) in the mix never block both ends; the
-    workers run as batch tasks (runner.BATCH_POLICY, Linux's SCHED_BATCH)."""
+    and without, large args and results (4 MiB, more than the buffer) in the mix never block both ends; with
+    runner.BATCH_POLICY the workers run as batch tasks (Linux's SCHED_BATCH), without it as the parent."""
     import signal
 
     from wavemesh.tiles import runner
@@ -181,21 +181,22 @@ def test_graph_ahead_large_and_small_messages():
     try:
         outs = []
         for ahead in (False, True):
-            runner.AHEAD = ahead
+            runner.AHEAD = runner.BATCH_POLICY = ahead
             with tiles.Runner(2) as run:
                 outs.append(run.graph(nodes, homes=homes))
     finally:
-        runner.AHEAD = True
+        runner.AHEAD, runner.BATCH_POLICY = True, False
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
-    for out in outs:
+    for batch, out in zip((False, True), outs, strict=True):
         assert [len(x) for x in out[:79]] == [n if k % 5 == 0 else 3 for k in range(40)] + \
             [n if k % 3 == 0 else 5 for k in range(39)]
         assert all(x[0] == 7 for x in out[:79])
         pids = {pid for pid, _ in out[79:]}
         assert os.getpid() not in pids and len(pids) <= 2
         if hasattr(os, "SCHED_BATCH"):
-            assert {policy for _, policy in out[79:]} == {os.SCHED_BATCH}
+            want = os.SCHED_BATCH if batch else os.sched_getscheduler(0)  # the parent's (the test's)
+            assert {policy for _, policy in out[79:]} == {want}
 
 
 def test_pipe_room_of_a_socket_and_of_a_plain_pipe():

@@ -30,10 +30,11 @@ BATCH_READY = 2
 # and a worker running a chain is given its next one too, when one of its own is ready (sent while it fits in
 # the pipe's buffer, else as the first one's result comes), so that it goes on without waiting for the parent
 AHEAD = True
-# a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
-# preempt the task running where it wakes): woken by the parent's send, it waits till the parent blocks
-# instead of taking its CPU in the middle of handing out the other workers' tasks
-BATCH_POLICY = True
+# True: a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
+# preempt the task running where it wakes), so that, woken by the parent's send, it waits till the parent
+# blocks instead of taking its CPU in the middle of handing out the other worker's chain; off: no gain in the
+# wall time measured, and a woken worker then waits for the parent's writing too (docs/tiles.md)
+BATCH_POLICY = False
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
