@@ -1,9 +1,13 @@
 """Whole refinements in the checking build (asserts, the invariant check after every operator,
 AddressSanitizer, UndefinedBehaviorSanitizer) through the file-driven runner tests/firmware/wm_run.c;
 the meshes are identical, slot for slot, to the release library's (-O0 and -O2 agree bit for bit, and
-so do 16-bit indices, the checking build's, and 32-bit ones)."""
+so do 16-bit indices, the checking build's, and 32-bit ones).  And the host library's own AVX2 scans
+(firmware/host/host_scan.c) in that build, against the C scan (tests/firmware/wm_scan_check.c)."""
 
+import re
+import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -53,3 +57,28 @@ def test_refine_under_sanitizers(name, make, levels, params, check_build, releas
     for m in meshes[1:] + [via_ctypes.final.mesh]:
         np.testing.assert_array_equal(m.xy, meshes[0].xy)
         np.testing.assert_array_equal(m.tris, meshes[0].tris)
+
+
+def test_host_scans_under_sanitizers(check_build, tmp_path):
+    """host_scan.c's AVX2 scans, which only the host's shared library has (the runner above keeps the C
+    scan), in the checking build's shared library with ASan and UBSan: tests/firmware/wm_scan_check.c
+    compares them with the C scan on random triangles of grids allocated to their last sample (E(T), the
+    worst sample, the stop at a bound; the 32-bit lanes, the boxes and the 64-bit blocks)."""
+    native.build(check_build, "Debug", ("-DWM_SANITIZE=ON", "-DWM_INDEX_BITS=16"),
+                 targets=("wavemesh_shared",))
+    cc = shutil.which("cc") or shutil.which("gcc")
+    assert cc, "a C compiler builds the check"
+    here = Path(__file__).resolve().parent
+    firmware = here.parents[1] / "firmware"
+    exe = tmp_path / "wm_scan_check"
+    subprocess.run([cc, "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
+                    "-DWM_INDEX_BITS=16", "-I", str(firmware / "include"), "-I", str(firmware / "src"),
+                    "-I", str(native.GEN),
+                    str(here / "wm_scan_check.c"), "-o", str(exe), "-L", str(check_build), "-lwavemesh",
+                    f"-Wl,-rpath,{check_build}"], check=True, capture_output=True)
+    r = subprocess.run([str(exe), "200000"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "runtime error" not in r.stderr and "Sanitizer" not in r.stderr, r.stderr
+    checked, narrow = (int(v) for v in re.fullmatch(r"(\d+) triangles \((\d+) at most 8 samples wide\), 0 "
+                                                     r"differences\n", r.stdout).groups())
+    assert checked > 50000 and narrow > 20000, r.stdout
