@@ -316,9 +316,11 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
 /* The reduction criteria (4.31-4.34): the autocorrelation matrix R(v) of the unit normals around a
  * vertex and its eigen-decomposition, in fixed point (firmware/src/autocorr.c) */
 
-/* Eigenvalues and eigenvectors of the symmetric 3 x 3 matrix a (a00, a01, a02, a11, a12, a22, Q30,
- * entries within [-2, 2]) by cyclic Jacobi rotations, a fixed number of sweeps: lambda[0] <= lambda[1]
- * <= lambda[2] (Q30) and vec[3 i .. 3 i + 2] the unit eigenvector of lambda[i] (Q30). */
+/* Eigenvalues and eigenvectors of the symmetric 3 x 3 matrix a (a00, a01, a02, a11, a12, a22, Q30) by
+ * cyclic Jacobi rotations, a fixed number of sweeps: lambda[0] <= lambda[1] <= lambda[2] (Q30) and
+ * vec[3 i .. 3 i + 2] the unit eigenvector of lambda[i] (Q30).  For a matrix of Frobenius norm at most 1,
+ * as R(v) (autocorr.c: every product then within 64 bits); larger ones are out of its range (all entries
+ * 1.9: eigenvalues -0.64, 0, 6.34, not 0, 0, 5.7; 2, -2, 2 in turn: a division by zero). */
 void wm_sym3_eigen(const int64_t a[6], int64_t lambda[3], int64_t vec[9]);
 
 /* The unit normal (Q28) of the triangle (x, y, z = samples there) with the height scale of p:
