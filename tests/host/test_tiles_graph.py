@@ -216,6 +216,40 @@ def test_pipe_room_of_a_socket_and_of_a_plain_pipe():
             assert len(os.listdir("/proc/self/fd")) == before
 
 
+def _threads(*_):
+    from wavemesh.refine import native
+
+    return native.threads(), frozenset(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+
+
+def test_pool_workers_share_the_cpus_host_threads():
+    """A pool worker's host stages (native.threads) run on its share of the CPUs, the CPUs this process may
+    use over the workers (at least 1), not on every one; a count the run set (--threads) is kept.  A pool
+    of one worker a CPU (runner.PIN) keeps each worker on a CPU of its own, another pool where the kernel
+    puts it."""
+    from wavemesh.refine import native
+
+    cpus = native.cores()
+    mine = frozenset(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    for workers in (cpus, cpus + 1):
+        nodes = [Node(_threads, (k,), (0, k), (k % workers,)) for k in range(2 * workers)]
+        homes = {t: t / workers for t in range(workers)}
+        with tiles.Runner(workers) as run:
+            out = run.graph(nodes, homes=homes)
+        assert {t for t, _ in out} == {max(1, cpus // workers)}
+        if mine is not None and workers == len(mine):
+            pinned = {a for _, a in out}
+            assert pinned <= {frozenset({c}) for c in mine} and len(pinned) == workers
+        elif mine is not None:
+            assert {a for _, a in out} == {mine}
+    native.set_threads(3)
+    try:
+        with tiles.Runner(2) as run:
+            assert {t for t, _ in run.graph(nodes[:4], homes={0: 0.0, 1: 0.5})} == {3}
+    finally:
+        native.set_threads(None)
+
+
 def test_graph_failure_raises_and_pool_ends():
     procs: list = []
     with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:

@@ -30,6 +30,9 @@ BATCH_READY = 2
 # and a worker running a chain is given its next one too, when one of its own is ready (sent while it fits in
 # the pipe's buffer, else as the first one's result comes), so that it goes on without waiting for the parent
 AHEAD = True
+# a pool of one worker a CPU (of those this process may use, the default --workers): each worker kept on a CPU
+# of its own (sched_setaffinity; the parent moves between them), its tiles in that core's caches
+PIN = True
 # True: a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
 # preempt the task running where it wakes), so that, woken by the parent's send, it waits till the parent
 # blocks instead of taking its CPU in the middle of handing out the other worker's chain; off: no gain in the
@@ -347,10 +350,19 @@ class Runner:
         # worker in the pool by then (ended by __exit__)
         held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
         try:
-            for _ in range(self.workers):
+            # each worker's host stages (quantisation, error measure, checks) on its share of the CPUs, not
+            # on every one as a process of its own would: one thread each with one worker a CPU
+            share = max(1, native.cores() // self.workers)
+            cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
+            for k in range(self.workers):
                 here, there = ctx.Pipe()
-                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid()), daemon=True)
+                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share), daemon=True)
                 proc.start()
+                if len(cpus) == self.workers:  # one worker a CPU: each its own (PIN)
+                    try:
+                        os.sched_setaffinity(proc.pid, {cpus[k]})
+                    except OSError:  # a CPU taken away meanwhile: the worker goes where the kernel puts it
+                        pass
                 there.close()
                 self.pool.append((proc, here))
         finally:
@@ -517,11 +529,11 @@ class _Kept:
     index: int
 
 
-def _worker_loop(pipe, parent: int) -> None:
+def _worker_loop(pipe, parent: int, threads: int | None = None) -> None:
     """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
     ("keep", key, value): an arg its next tasks name by the key; ("chain", [(fn, args), ...]): each in turn,
     a _Prev in args the one before's result, the results back as a list."""
-    _worker_start(parent)
+    _worker_start(parent, threads)
     kept: dict = {}
     while True:
         try:
@@ -550,17 +562,20 @@ def _worker_loop(pipe, parent: int) -> None:
             pipe.send(("error", RuntimeError(f"{type(e).__name__}: {e}"), None))
 
 
-def _worker_start(parent: int) -> None:
+def _worker_start(parent: int, threads: int | None = None) -> None:
     """A pool worker's start: Ctrl-C is the parent's to handle (it ends the workers, _end_workers), SIGTERM
     ends the worker at once (SIGHUP too, unless the run ignores it: nohup), and the worker ends when its
     parent does, even one killed outright (Linux's PR_SET_PDEATHSIG).  The signals, blocked since the fork
-    (_start_pool), are let through once these are set."""
+    (_start_pool), are let through once these are set.  ``threads``: the host stages' threads in this
+    worker (native.set_threads), unless the run gave its own (--threads)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
         signal.signal(signal.SIGHUP, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _WORKER_SIGNALS)
     tune_malloc()
+    if threads is not None and native._THREADS is None:  # the host stages' threads (--threads: as given)
+        native.set_threads(threads)
     if BATCH_POLICY and hasattr(os, "sched_setscheduler"):
         try:
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
