@@ -33,8 +33,8 @@
  * Address bits 31..28 select the region; an offset beyond a region's size, or any other address,
  * reads 0 and ignores writes.  Every access but the SDRAM's and a SYS.STAGE write completes in two
  * cycles (request, then mem_ready with the registered read data), so a bad address never stalls the
- * CPU; an SDRAM access takes 2 cycles on a cache hit and 9-17 on a miss (rtl/README.md, "SDRAM
- * controller").
+ * CPU, and with the VexRiscv a write into the firmware RAM in one; an SDRAM access takes 2 cycles on a
+ * cache hit and 9-25 on a miss (rtl/README.md, "SDRAM controller").
  *
  * Stage sync: a SYS.STAGE write (the firmware's marker at every switch of its cycle clocks) also
  * starts sdram_ctrl's stage sync and is answered when that ends, a fixed number of cycles later
@@ -171,7 +171,7 @@ wire [3:0]  mem_wstrb;
 reg         mem_ready_reg = 1'b0;   // the two-cycle answer of every region but the SDRAM
 wire        sdram_cpu_ready;
 wire [31:0] sdram_cpu_rdata;
-wire        mem_ready = mem_ready_reg || sdram_cpu_ready;
+wire        mem_ready;
 reg  [31:0] mem_rdata;
 
 // the VexRiscv's instruction bus: the firmware RAM's port B (word address, the RAM's own bits)
@@ -302,6 +302,16 @@ wire upbuf_hit = region == `WM_REGION_IO && mem_addr[27:12] == 16'd0 && mem_addr
 reg sync_wait_reg = 1'b0;
 wire sdram_sync_busy;
 wire req = mem_valid && !mem_ready_reg && !sdram_hit && !sync_wait_reg;
+// With the VexRiscv a write into the firmware RAM is answered in its own cycle (the RAM takes it at
+// that cycle's edge), so that its write-through stores (a call's saved registers, the stack's spills)
+// go one a cycle instead of one every two; the PicoRV32 keeps the two-cycle answer.
+`ifdef WM_CPU_VEXRISCV
+localparam FW_WRITE_NOW = 1'b1;
+`else
+localparam FW_WRITE_NOW = 1'b0;
+`endif
+wire fw_write_now = FW_WRITE_NOW && req && fw_hit && mem_wstrb != 4'd0;
+assign mem_ready = mem_ready_reg || sdram_cpu_ready || fw_write_now;
 wire stage_write = req && sys_hit && mem_wstrb != 4'd0 && mem_addr[7:0] == `WM_SYS_STAGE;
 
 reg [2:0] sel;
@@ -317,7 +327,7 @@ end
 
 always @(posedge clk) begin
     // every other request is answered in the next cycle, mapped or not
-    mem_ready_reg <= (req && !stage_write) || (sync_wait_reg && !sdram_sync_busy);
+    mem_ready_reg <= (req && !stage_write && !fw_write_now) || (sync_wait_reg && !sdram_sync_busy);
     sync_wait_reg <= sync_wait_reg ? sdram_sync_busy : stage_write;
     if (req) begin
         sel_reg <= sel;
