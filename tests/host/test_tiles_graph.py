@@ -176,6 +176,7 @@ def test_graph_ahead_large_and_small_messages():
               for k in range(39)]
     nodes += [Node(_policy, (k,), (0, 2), (k % 4,)) for k in range(8)]
     homes = {t: t / 4 for t in range(4)}
+    saved = runner.AHEAD, runner.BATCH_POLICY  # put back after, whatever the defaults are
     old = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("deadlock")))
     signal.alarm(60)
     try:
@@ -185,7 +186,7 @@ def test_graph_ahead_large_and_small_messages():
             with tiles.Runner(2) as run:
                 outs.append(run.graph(nodes, homes=homes))
     finally:
-        runner.AHEAD, runner.BATCH_POLICY = True, False
+        runner.AHEAD, runner.BATCH_POLICY = saved
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
     for batch, out in zip((False, True), outs, strict=True):
