@@ -184,6 +184,20 @@ static int fan_plan(const struct fans *q, int32_t a, int32_t *tp, int32_t *nt, i
     return 1;
 }
 
+#if WM_CHECK
+/* The checking build: fan_plan's answer and plan are wm_ring_plan_probe's from the mesh's arrays, the plan
+ * the removal makes (wm_decimate's wm_ring_plan), triangle for triangle. */
+static void check_fan_plan(const struct fans *q, const wm_mesh *me, const int32_t *ring, int32_t a)
+{
+    int32_t tp[3 * WM_MAX_RING], tris[3 * WM_MAX_RING], nt = 0, big = 0, n2 = 0, big2 = 0;
+    int ok = fan_plan(q, a, tp, &nt, &big);
+    WM_ASSERT(ok == (wm_ring_plan_probe(me, ring, q->n, a, tris, &n2, NULL, &big2) == WM_OK));
+    if (!ok) return;
+    WM_ASSERT(n2 == nt && big2 == big);
+    for (int32_t k = 0; k < 3 * nt; k++) WM_ASSERT(tris[k] == ring[tp[k]]);
+}
+#endif
+
 /* The probe of the ear clipping's plan (wm_ring_plan_probe): v's sample above zeta. */
 static int v_above(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
@@ -241,6 +255,9 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
          * of that triangle's E(T), rounded the same way); most candidates stop here.  A fan's before
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
         if (a >= 0) {
+#if WM_CHECK
+            check_fan_plan(&q, me, ring, a);
+#endif
             if (!fan_may_fit(&q, &tested, a) || !fan_plan(&q, a, tp, &nt, &big)) continue;
         } else {
             if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, &probe, &big) != WM_OK) continue;
