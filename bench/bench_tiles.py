@@ -489,7 +489,7 @@ def pair(n: int = TILE_N, tile: int = WORKERS_TILE, workers: int = 2, runs: int 
     processes in turn (1, w, 1, w, ...; one of each first, not counted): each run's wall and CPU seconds
     (its process tree), the medians, t1 / tw of the medians and the median of the pairs' ratios, and
     whether both wrote the same bytes.  ``against`` ("NAME=VALUE,...", tiles.runner's settings, e.g.
-    "AHEAD=0,BATCH_POLICY=0"): ``workers`` workers with those settings in place of 1 worker (both through
+    "AHEAD=0,PIN=0"): ``workers`` workers with those settings in place of 1 worker (both through
     a launcher that the package takes for the command, as the console script), the ratio theirs / ours.
     A run's wall time ends with its process (the pool's workers may still be exiting then: the bench waits
     for them before the next run and counts their CPU).  The runs import compiled modules, as an installed

@@ -21,7 +21,7 @@ then each step's CPU summed over the workers; and the model of the speed-up over
 outside the workers (this process's) plus the busiest worker's CPU in each part.  CPU seconds, page
 faults and reads hold on a loaded machine where wall times do not; run it with --workers 1 and 2 to
 compare (docs/tiles.md, "Running the tiles").  ``--runner NAME=VALUE`` sets one of tiles.runner's
-settings for the run (CHAIN=2, AHEAD=0, BATCH_POLICY=0, ...).
+settings for the run (CHAIN=2, AHEAD=0, PIN=0, ...).
 """
 
 from __future__ import annotations

@@ -157,15 +157,14 @@ def test_graph_large_messages_both_ways():
     assert len(out) == 16 and all(len(x) == n and x[0] == 7 for x in out)
 
 
-def _policy(*_):
-    return os.getpid(), os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else None
+def _pid(*_):
+    return os.getpid()
 
 
 def test_graph_ahead_large_and_small_messages():
     """Many ready nodes: a worker is sent its next chain while it runs one (runner.AHEAD) when both fit in
     its pipe's buffer, else it is held and written as the first one's result comes: the same results with
-    and without, large args and results (4 MiB, more than the buffer) in the mix never block both ends; with
-    runner.BATCH_POLICY the workers run as batch tasks (Linux's SCHED_BATCH), without it as the parent."""
+    and without, large args and results (4 MiB, more than the buffer) in the mix never block both ends."""
     import signal
 
     from wavemesh.tiles import runner
@@ -174,30 +173,27 @@ def test_graph_ahead_large_and_small_messages():
     nodes = [Node(_big, (n if k % 5 == 0 else 3,), (k, 0), (k % 4,)) for k in range(40)]
     nodes += [Node(_big, (n if k % 3 == 0 else 5, Ref(k), Ref(k + 1)), (k + 1, 1), (k % 4,))
               for k in range(39)]
-    nodes += [Node(_policy, (k,), (0, 2), (k % 4,)) for k in range(8)]
+    nodes += [Node(_pid, (k,), (0, 2), (k % 4,)) for k in range(8)]
     homes = {t: t / 4 for t in range(4)}
-    saved = runner.AHEAD, runner.BATCH_POLICY  # put back after, whatever the defaults are
+    saved = runner.AHEAD  # put back after, whatever the default is
     old = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("deadlock")))
     signal.alarm(60)
     try:
         outs = []
         for ahead in (False, True):
-            runner.AHEAD = runner.BATCH_POLICY = ahead
+            runner.AHEAD = ahead
             with tiles.Runner(2) as run:
                 outs.append(run.graph(nodes, homes=homes))
     finally:
-        runner.AHEAD, runner.BATCH_POLICY = saved
+        runner.AHEAD = saved
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
-    for batch, out in zip((False, True), outs, strict=True):
+    for out in outs:
         assert [len(x) for x in out[:79]] == [n if k % 5 == 0 else 3 for k in range(40)] + \
             [n if k % 3 == 0 else 5 for k in range(39)]
         assert all(x[0] == 7 for x in out[:79])
-        pids = {pid for pid, _ in out[79:]}
+        pids = set(out[79:])  # run in the workers
         assert os.getpid() not in pids and len(pids) <= 2
-        if hasattr(os, "SCHED_BATCH"):
-            want = os.SCHED_BATCH if batch else os.sched_getscheduler(0)  # the parent's (the test's)
-            assert {policy for _, policy in out[79:]} == {want}
 
 
 def test_pipe_room_of_a_socket_and_of_a_plain_pipe():

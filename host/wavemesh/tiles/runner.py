@@ -33,11 +33,6 @@ AHEAD = True
 # a pool of one worker a CPU (of those this process may use, the default --workers): each worker kept on a CPU
 # of its own (sched_setaffinity; the parent moves between them), its tiles in that core's caches
 PIN = True
-# True: a pool worker runs as a batch task (Linux's SCHED_BATCH: the same share of the CPUs, but it does not
-# preempt the task running where it wakes), so that, woken by the parent's send, it waits till the parent
-# blocks instead of taking its CPU in the middle of handing out the other worker's chain; off: no gain in the
-# wall time measured, and a woken worker then waits for the parent's writing too (docs/tiles.md)
-BATCH_POLICY = False
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -576,11 +571,6 @@ def _worker_start(parent: int, threads: int | None = None) -> None:
     tune_malloc()
     if threads is not None and native._THREADS is None:  # the host stages' threads (--threads: as given)
         native.set_threads(threads)
-    if BATCH_POLICY and hasattr(os, "sched_setscheduler"):
-        try:
-            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-        except OSError:
-            pass
     if sys.platform.startswith("linux"):
         try:
             ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG
