@@ -274,32 +274,34 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
  * the row's end cleared), with no horizontal step a row: at the end the largest of all and the least
  * place holding it, the first sample in row order.  A block with a V above the limit gives its first
  * such lane, where the C scan stops. */
-struct end32 {
-    const uint16_t *p;
-    int32_t r, dr, a, st, q, dq;
-};
-
-static int32_t floor_div32(int32_t u, int32_t a) { return u >= 0 ? u / a : -((-u + a - 1) / a); } /* a > 0 */
-
-static inline void end_start(struct end32 *e, const uint16_t *row, int32_t width, int32_t u, int32_t du, int32_t a)
-{
-    e->q = floor_div32(u, a);
-    e->r = u - e->q * a;
-    e->dq = floor_div32(du, a);
-    e->dr = du - e->dq * a;
-    e->a = a;
-    e->p = row + e->q;
-    e->st = width + e->dq;
-}
-
 /* The end on the next row; the carry (1: the quotient one more than its step), without a branch. */
-static inline __attribute__((always_inline)) uint32_t end_step(struct end32 *e)
+static WM_ALWAYS_INLINE uint32_t end_step(struct wm_end32 *e)
 {
     int32_t r = e->r + e->dr; /* both below a < 2^15 */
     uint32_t c = r >= e->a;
     e->r = r - (e->a & -(int32_t)c);
     e->p += e->st + (int32_t)c;
     return c;
+}
+
+/* The 8 samples from q as 32-bit lanes; at the grid's end none read past its last sample (lanes past it
+ * are zero, and outside every span). */
+static inline AVX2 __attribute__((always_inline)) __m256i load8(const uint16_t *q, const uint16_t *end)
+{
+    if (q + 8 <= end) return _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)q));
+    uint16_t buf[8] = {0};
+    for (int j = 0; j < 8 && q + j < end; j++) buf[j] = q[j];
+    return _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
+}
+
+/* The worst sample's grid place from its address (none: the first corner, as the C scan gives). */
+static void place_at(const wm_field *f, const uint16_t *at, const int32_t x[3], const int32_t y[3], int32_t *wx,
+                     int32_t *wy)
+{
+    if (wx == NULL && wy == NULL) return;
+    int32_t i = at ? (int32_t)(at - f->samples) : 0, ay = i / f->width;
+    if (wx) *wx = at ? i - ay * f->width : x[0];
+    if (wy) *wy = at ? ay : y[0];
 }
 
 /* The lanes' largest V (each lane's in best) and, when above 0, its first sample into *at: the least
@@ -365,14 +367,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *
         Bv[k] = _mm256_set1_epi32(B[k]);
     }
     for (int32_t py = y0; py <= y1; py++, q += width) {
-        __m256i hv;
-        if (q + 8 <= end) {
-            hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)q));
-        } else { /* the last samples of the grid: no load past them (the lanes past them are outside) */
-            uint16_t buf[8] = {0};
-            for (int j = 0; j < 8 && q + j < end; j++) buf[j] = q[j];
-            hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
-        }
+        __m256i hv = load8(q, end);
         __m256i in = _mm256_cmpgt_epi32(_mm256_or_si256(_mm256_or_si256(E[0], E[1]), E[2]), none); /* all >= 0 */
         __m256i v = _mm256_and_si256(_mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))), in);
         __m256i over = _mm256_cmpgt_epi32(v, Lv);
@@ -394,15 +389,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *
     vm = lanes_first(best, place, h, &at);
 stop:
     *vmax = vm;
-    if (wx == NULL && wy == NULL) return 1;
-    if (at) {
-        int32_t i = (int32_t)(at - h), ay = i / width;
-        if (wx) *wx = i - ay * width;
-        if (wy) *wy = ay;
-    } else {
-        if (wx) *wx = x[0];
-        if (wy) *wy = y[0];
-    }
+    place_at(f, at, x, y, wx, wy);
     return 1;
 }
 
@@ -418,7 +405,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
     uint32_t z[3], dS = 0, dSy = 0, Sl, dSl, vm = 0;
     const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
     uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit;
-    struct end32 lo, hi;
+    struct wm_end32 lo, hi;
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
@@ -447,8 +434,8 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
         int32_t ks = y[t] == y[m] ? t : b, c = y[t] == y[m] ? m : t;
         int32_t kl = lm ? m : ks, kh = lm ? ks : m, cl = lm ? t : c, ch = lm ? c : t;
         const uint16_t *row = h + py * f->width;
-        end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
-        end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
+        wm_end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
+        wm_end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
         Sl = d * z[t] - dS * (uint32_t)x[t] + (uint32_t)lo.q * dS;
         dSl = dSy + (uint32_t)lo.dq * dS;
     }
@@ -461,10 +448,10 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
                 const uint16_t *row = h + py * f->width;
                 if (lm) {
                     Sl += dSl + (dS & (0u - end_step(&lo)));
-                    end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
+                    wm_end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
                 } else {
                     end_step(&hi);
-                    end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
+                    wm_end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
                     Sl = d * z[m] - dS * (uint32_t)x[m] + (uint32_t)lo.q * dS;
                     dSl = dSy + (uint32_t)lo.dq * dS;
                 }
@@ -473,19 +460,12 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
         rows = last - py + 1;
         py = last + 1;
         for (;;) {
-            /* the row's samples lo.p .. hi.p (none when n <= 0: every lane cleared, nothing read) */
+            /* the row's samples lo.p .. hi.p (none when n <= 0: every lane cleared) */
             int32_t n = (int32_t)(hi.p - lo.p) + 1;
             const uint16_t *q = lo.p;
             uint32_t S = Sl;
             do {
-                __m256i hv;
-                if (q + 8 <= end) {
-                    hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)q));
-                } else { /* the last samples of the grid: no load past them */
-                    uint16_t buf[8] = {0};
-                    for (int j = 0; j < n && j < 8; j++) buf[j] = q[j];
-                    hv = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
-                }
+                __m256i hv = load8(q, end);
                 __m256i Sv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), Ld);
                 __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))); /* |V| < 2^31 */
                 v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lane));
@@ -513,15 +493,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
     vm = lanes_first(best, place, h, &at);
 stop:
     *vmax = vm;
-    if (wx == NULL && wy == NULL) return 1;
-    if (at) {
-        int32_t i = (int32_t)(at - h), ay = i / f->width;
-        if (wx) *wx = i - ay * f->width;
-        if (wy) *wy = ay;
-    } else {
-        if (wx) *wx = x[0];
-        if (wy) *wy = y[0];
-    }
+    place_at(f, at, x, y, wx, wy);
     return 1;
 }
 

@@ -27,13 +27,12 @@
  * lidar_dem: each within 0.15 % from 64 to 1024). */
 #define WM_SLOPE_LATER_D 256
 
-/* The small steps every measure takes (finish, point_v): inline in each, as one copy was before they
- * were shared (a call and its spills cost the native build some 1 % of the refiner's instructions). */
+/* The small steps every measure takes (finish, point_v) are WM_ALWAYS_INLINE: inline in each, as one
+ * copy was before they were shared (a call and its spills cost the native build some 1 % of the
+ * refiner's instructions). */
 #if defined(__GNUC__)
-#define ALWAYS_INLINE inline __attribute__((always_inline))
 #define NEVER_INLINE __attribute__((noinline))
 #else
-#define ALWAYS_INLINE inline
 #define NEVER_INLINE
 #endif
 
@@ -106,9 +105,7 @@ static void setup(const wm_field *f, const int32_t x[3], const int32_t y[3], str
     t->dS = t->A[0] * t->z[0] + t->A[1] * t->z[1] + t->A[2] * t->z[2];
 }
 
-/* floor(a / b) and ceil(a / b) for b > 0 in 32 bits (the soft CPU divides 32-bit numbers in hardware,
- * 64-bit ones in a library routine many times slower). */
-static int32_t floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+/* ceil(a / b) for b > 0 in 32 bits (wm_floor_div32's twin). */
 static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
 
 /* One row of the 32-bit path (scan): the largest V = |S - d h| over the samples [q, end) with S
@@ -159,7 +156,7 @@ NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const i
                 int64_t l = small ? ceil_div32((int32_t)-num, (int32_t)t.A[k]) : wm_ceil_div(-num, t.A[k]);
                 if (l > lo) lo = l;
             } else if (t.A[k] < 0) {
-                int64_t r = small ? floor_div32((int32_t)num, (int32_t)-t.A[k]) : wm_floor_div(num, -t.A[k]);
+                int64_t r = small ? wm_floor_div32((int32_t)num, (int32_t)-t.A[k]) : wm_floor_div(num, -t.A[k]);
                 if (r < hi) hi = r;
             } else if (num < 0) {
                 empty = 1;
@@ -207,33 +204,8 @@ WM_NOINLINE static uint32_t row_max32_all(const uint16_t *q, const uint16_t *end
     return vm;
 }
 
-/* floor(u / a) and u mod a (a > 0), for a span's end stepped row by row (scan32). */
-static void span_start(int32_t u, int32_t a, int32_t *q, int32_t *rem)
-{
-    *q = floor_div32(u, a);
-    *rem = u - *q * a;
-}
-
-/* One end of scan32's rows: floor(u / a) stepped row by row (the remainder r, its step dr), as a pointer
- * into the samples (p, stepped by a row and the quotient's step, st). */
-struct end32 {
-    const uint16_t *p;
-    int32_t r, dr, a, st, q, dq;
-};
-
-/* The end at a row (its first sample row): u and du, the numerator and its step a row. */
-static ALWAYS_INLINE void end_start(struct end32 *e, const uint16_t *row, int32_t width, int32_t u, int32_t du,
-                                    int32_t a)
-{
-    span_start(u, a, &e->q, &e->r);
-    span_start(du, a, &e->dq, &e->dr);
-    e->a = a;
-    e->p = row + e->q;
-    e->st = width + e->dq;
-}
-
 /* The end on the next row; 1 when the remainder carried (the quotient one more than its step). */
-static ALWAYS_INLINE int end_step(struct end32 *e)
+static WM_ALWAYS_INLINE int end_step(struct wm_end32 *e)
 {
     e->p += e->st;
     e->r += e->dr;
@@ -265,7 +237,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
     uint32_t z[3], dS = 0, dSy = 0, Sl = 0, dSl = 0, vm = 0;
     const uint16_t *at = NULL; /* the first sample of the largest V so far (none while V = 0) */
     uint32_t lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit; /* the same stops: V < 2^31 */
-    struct end32 lo, hi; /* the left and right ends */
+    struct wm_end32 lo, hi; /* the left and right ends */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
         z[k] = h[y[k] * f->width + x[k]];
@@ -295,8 +267,8 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         int32_t ks = y[t] == y[m] ? t : b, c = y[t] == y[m] ? m : t;
         int32_t kl = lm ? m : ks, kh = lm ? ks : m, cl = lm ? t : c, ch = lm ? c : t;
         const uint16_t *row = h + py * f->width;
-        end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
-        end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
+        wm_end_start(&lo, row, f->width, A[kl] - 1 + A[kl] * x[cl], -B[kl], A[kl]);
+        wm_end_start(&hi, row, f->width, -A[kh] * x[ch], B[kh], -A[kh]);
         Sl = d * z[t] - dS * (uint32_t)x[t] + (uint32_t)lo.q * dS;
         dSl = dSy + (uint32_t)lo.dq * dS;
     }
@@ -311,10 +283,10 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
                 const uint16_t *row = h + py * f->width;
                 if (lm) {
                     Sl += dSl + (end_step(&lo) ? dS : 0);
-                    end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
+                    wm_end_start(&hi, row, f->width, -A[t] * x[m], B[t], -A[t]);
                 } else {
                     end_step(&hi);
-                    end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
+                    wm_end_start(&lo, row, f->width, A[t] - 1 + A[t] * x[m], -B[t], A[t]);
                     Sl = d * z[m] - dS * (uint32_t)x[m] + (uint32_t)lo.q * dS;
                     dSl = dSy + (uint32_t)lo.dq * dS;
                 }
@@ -371,8 +343,8 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
 }
 
 /* The plane's gradient numerators Na, Nb (the file's head comment) from the corner samples. */
-static ALWAYS_INLINE void gradient(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t *Na,
-                                   int64_t *Nb)
+static WM_ALWAYS_INLINE void gradient(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t *Na,
+                                      int64_t *Nb)
 {
     int64_t z0 = f->samples[(int64_t)y[0] * f->width + x[0]];
     int64_t dz1 = (int64_t)f->samples[(int64_t)y[1] * f->width + x[1]] - z0;
@@ -382,9 +354,9 @@ static ALWAYS_INLINE void gradient(const wm_field *f, const int32_t x[3], const 
 }
 
 /* slope_square with the numerators at hand (have: Na, Nb are the triangle's; else they are worked out). */
-static ALWAYS_INLINE uint64_t slope_square_n(const wm_field *f, const wm_params *p, const int32_t x[3],
-                                             const int32_t y[3], int64_t D, int have, int64_t Na, int64_t Nb,
-                                             int *k, uint32_t *root)
+static WM_ALWAYS_INLINE uint64_t slope_square_n(const wm_field *f, const wm_params *p, const int32_t x[3],
+                                                const int32_t y[3], int64_t D, int have, int64_t Na, int64_t Nb,
+                                                int *k, uint32_t *root)
 {
     uint64_t ga, gb;
     uint32_t sm;
@@ -444,8 +416,8 @@ static uint32_t vertical(uint64_t vmax, int64_t D)
 }
 
 /* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  kept: as slope_factor's. */
-static ALWAYS_INLINE uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                                     int64_t D, uint64_t vmax, uint64_t *kept)
+static WM_ALWAYS_INLINE uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3],
+                                        const int32_t y[3], int64_t D, uint64_t vmax, uint64_t *kept)
 {
     uint32_t ev = vertical(vmax, D);
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return ev;
@@ -542,8 +514,8 @@ uint32_t wm_tri_error_upto(const wm_field *f, const wm_params *p, const int32_t 
 }
 
 /* |V| at sample (px, py) (the file's head comment) for the triangle of D = twice its area. */
-static ALWAYS_INLINE uint64_t point_v(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
-                                      int32_t px, int32_t py)
+static WM_ALWAYS_INLINE uint64_t point_v(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
+                                         int32_t px, int32_t py)
 {
     int64_t S = 0, v;
     for (int k = 0; k < 3; k++) {

@@ -119,6 +119,34 @@ int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 #define WM_NOINLINE
 #endif
 #define WM_CLASS_UNKNOWN (-1) /* r->vapex: no class known for the vertex's current star (reduce.c) */
+/* Inlined wherever it is called, also where the compiler would not choose to (GCC, Clang). */
+#if defined(__GNUC__)
+#define WM_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define WM_ALWAYS_INLINE inline
+#endif
+/* floor(a / b) for b > 0 in 32 bits (the soft CPU divides 32-bit numbers in hardware, 64-bit ones in a
+ * library routine many times slower). */
+static inline int32_t wm_floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+/* One end of a 32-bit scan's rows (tri_error.c's scan32, host_scan.c's scan_lanes): floor(u / a) stepped
+ * row by row (the remainder r, its step dr), as a pointer into the samples (p, stepped by a row and the
+ * quotient's step, st).  Each scan steps it its own way (scan32 with a branch, scan_lanes without). */
+struct wm_end32 {
+    const uint16_t *p;
+    int32_t r, dr, a, st, q, dq;
+};
+/* The end at a row (its first sample row): u and du, the numerator and its step a row. */
+static WM_ALWAYS_INLINE void wm_end_start(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t u,
+                                          int32_t du, int32_t a)
+{
+    e->q = wm_floor_div32(u, a);
+    e->r = u - e->q * a;
+    e->dq = wm_floor_div32(du, a);
+    e->dr = du - e->dq * a;
+    e->a = a;
+    e->p = row + e->q;
+    e->st = width + e->dq;
+}
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
