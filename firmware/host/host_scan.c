@@ -12,7 +12,8 @@
  * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
  * the first one and stops at the limit as the C scan does.  On grids under 2^20 samples (below) this
  * scan is left to the C scan, and only scan32's small triangles are taken, in lanes without a branch a
- * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box).  Processors without AVX2 (and other compilers) answer 0: the C scan runs.
+ * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box).  Processors without
+ * AVX2 (and other compilers) answer 0: the C scan runs.
  * wm_host_scan(0) turns both off, (2) puts the blocks on every grid, (3) the lanes on every grid (the
  * tests compare each with the C scan). */
 #define _POSIX_C_SOURCE 200809L
@@ -325,12 +326,12 @@ static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i b
     return vm;
 }
 
-/* scan_lanes for a triangle whose box is at most 8 samples wide (most of a fine mesh's: on Jacksboro at 10
- * m, bench/refine_time.py, the native call 0.88 - 0.95 x scan_lanes' time, MRI 0.91 - 0.93 x): each row of the box one block from the
- * box's left column, its samples inside the closed triangle by the three edge functions (all >= 0: the
- * spans' very samples, no division), the edge functions and S stepped row by row in the lanes; each
- * lane's largest V and first place as scan_lanes keeps them.  S is the triangle's S at the box's top
- * left sample (modulo 2^32, as V is taken). */
+/* scan_lanes for a triangle whose box is at most 8 samples wide (most of a fine mesh's: on Jacksboro at
+ * 10 m, bench/refine_time.py, the native call 0.88 - 0.95 x scan_lanes' time, MRI 0.91 - 0.93 x): each
+ * row of the box one block from the box's left column, its samples inside the closed triangle by the
+ * three edge functions (all >= 0: the spans' very samples, no division), the edge functions and S
+ * stepped row by row in the lanes; each lane's largest V and first place as scan_lanes keeps them.  S is
+ * the triangle's S at the box's top left sample (modulo 2^32, as V is taken). */
 static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *f, const int32_t x[3],
                                                                 const int32_t y[3], uint32_t d, int32_t x0,
                                                                 uint64_t limit, uint64_t *vmax, int32_t *wx,

@@ -1,6 +1,6 @@
 /* The host stages of `wavemesh mesh` in C (include/wm_host.h): quantisation and the final check (the
- * proper-mesh check, the error measure), split over threads.  Compiled with -ffp-contract=off: every product and sum rounds
- * on its own, as numpy's do, so the results equal the Python model's bit for bit. */
+ * proper-mesh check, the error measure), split over threads.  Compiled with -ffp-contract=off: every
+ * product and sum rounds on its own, as numpy's do, so the results equal the Python model's bit for bit. */
 #define _POSIX_C_SOURCE 200809L
 #include "wm_host.h"
 

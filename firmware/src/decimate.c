@@ -111,7 +111,7 @@ static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, i
     y[0] = q->vy + q->dy[a], y[1] = q->vy + q->dy[j], y[2] = q->vy + q->dy[k];
 }
 
-WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+WM_NOINLINE_32 static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
 {
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
@@ -125,7 +125,7 @@ WM_NOINLINE static int normal_above(const struct fans *q, struct tested *t, int3
 }
 
 /* fan_may_fit's test where its own does not apply (no triangle, a holes mask, no bound): test_point's. */
-WM_NOINLINE static int other_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+WM_NOINLINE_32 static int other_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
 {
     int32_t x[3], y[3];
     fan_corners(q, a, j, k, x, y);

@@ -284,7 +284,8 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
     G = wm_gcd((int32_t)cx, (int32_t)cy);
     if (G < 2) {
         /* No grid sample inside the common edge: the pair cannot be split there; each triangle is
-         * subdivided as an unpaired one, the partner only when it is not yet within zeta (a dependent partner often is: splitting it adds a vertex the bound never needs). */
+         * subdivided as an unpaired one, the partner only when it is not yet within zeta (a dependent
+         * partner often is: splitting it adds a vertex the bound never needs). */
         int32_t t2 = f >= 0 ? WM_TRI(f) : -1, rc = wm_split_unpaired(r, WM_TRI(e), st);
         if (rc == WM_OK && t2 >= 0 && r->err[t2] > r->params.zeta) rc = wm_split_unpaired(r, t2, st);
         return rc;

@@ -27,15 +27,6 @@
  * lidar_dem: each within 0.15 % from 64 to 1024). */
 #define WM_SLOPE_LATER_D 256
 
-/* The small steps every measure takes (finish, point_v) are WM_ALWAYS_INLINE: inline in each, as one
- * copy was before they were shared (a call and its spills cost the native build some 1 % of the
- * refiner's instructions). */
-#if defined(__GNUC__)
-#define NEVER_INLINE __attribute__((noinline))
-#else
-#define NEVER_INLINE
-#endif
-
 #if WM_PROFILE
 int wm_prof_phase;
 uint64_t wm_prof_count[WM_PH_COUNT][WM_PC_COUNT];
@@ -114,8 +105,8 @@ static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / 
  * the loop stay in registers on the soft CPU.  Without the absolute value: for |u| < 2^31 and
  * vm < 2^31, |u| > vm iff u + vm > 2 vm modulo 2^32 (u in [-vm, vm] maps to [0, 2 vm], the rest of
  * (-2^31, 2^31) above it), so the loop steps T = S + vm and compares T - d h with 2 vm. */
-WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS, uint32_t d,
-                                      uint32_t vm, uint32_t limit, const uint16_t **at)
+WM_NOINLINE_32 static uint32_t row_max32(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS,
+                                         uint32_t d, uint32_t vm, uint32_t limit, const uint16_t **at)
 {
     uint32_t T = S + vm, twice = 2 * vm;
     for (; q < end; q++, T += dS) {
@@ -137,8 +128,8 @@ WM_NOINLINE static uint32_t row_max32(const uint16_t *q, const uint16_t *end, ui
  * arithmetic (the span of each row from 32-bit divisions on grids of at most 2^14 a side, where every
  * E_k fits 30 bits); scan32 below is the same scan for small triangles.  Out of line: the few large
  * triangles take it, and inlined in scan_any it cost every scan32 registers and saves. */
-NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
-                                  uint64_t limit, int32_t *wx, int32_t *wy)
+WM_NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
+                                     uint64_t limit, int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     struct tri_setup t;
@@ -185,8 +176,8 @@ NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const i
 
 /* row_max32 without the stop: the largest V of the row (the rows of scan32; a row whose V goes above
  * the limit is scanned again by row_max32 for the first sample that does, its stop). */
-WM_NOINLINE static uint32_t row_max32_all(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS,
-                                          uint32_t d, uint32_t vm, const uint16_t **at)
+WM_NOINLINE_32 static uint32_t row_max32_all(const uint16_t *q, const uint16_t *end, uint32_t S, uint32_t dS,
+                                             uint32_t d, uint32_t vm, const uint16_t **at)
 {
     /* with U = S + vm + 1: ~(S + vm - d h) = d h - U, and x > 2 vm iff ~x < ~(2 vm) (no copy of U a
      * sample for the subtraction) */
@@ -415,7 +406,9 @@ static uint32_t vertical(uint64_t vmax, int64_t D)
     return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
 }
 
-/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  kept: as slope_factor's. */
+/* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  kept: as slope_factor's.
+ * This and point_v, the small steps every measure takes, are inlined in each, as one copy was before they
+ * were shared (a call and its spills cost the native build some 1 % of the refiner's instructions). */
 static WM_ALWAYS_INLINE uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3],
                                         const int32_t y[3], int64_t D, uint64_t vmax, uint64_t *kept)
 {
@@ -469,8 +462,8 @@ uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_
  * bounds E(T) from above, and the exact E(T), with the slope factor from the same Na, Nb, is taken
  * only when ev is above least: a scan that refuses, and a triangle that is not its candidate's
  * largest, take no slope factor. */
-NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *p, const int32_t x[3],
-                                         const int32_t y[3], uint32_t bound, uint32_t least, uint64_t *kept)
+WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *p, const int32_t x[3],
+                                            const int32_t y[3], uint32_t bound, uint32_t least, uint64_t *kept)
 {
     int64_t D, Na, Nb;
     uint64_t Ga, Gb, T, vmax, X, r;

@@ -31,6 +31,26 @@
 #define WM_NARROW_DIV (UINTPTR_MAX <= 0xFFFFFFFFu || WM_CHECK)
 #endif
 
+/* Inlining (GCC, Clang; other compilers choose for themselves), the three kinds the sources ask for:
+ * WM_ALWAYS_INLINE: inlined wherever it is called, also where the compiler would not choose to.
+ * WM_NEVER_INLINE: never inlined, on every CPU (a path few calls take, whose registers and saves would
+ *   cost its caller's common path).
+ * WM_NOINLINE_32: never inlined on a 32-bit CPU, the compiler's choice on a 64-bit one: a small hot
+ *   function whose loop gets the registers out of its caller there (the soft CPU); a 64-bit host has
+ *   registers enough and saves the call. */
+#if defined(__GNUC__)
+#define WM_ALWAYS_INLINE inline __attribute__((always_inline))
+#define WM_NEVER_INLINE __attribute__((noinline))
+#else
+#define WM_ALWAYS_INLINE inline
+#define WM_NEVER_INLINE
+#endif
+#if UINTPTR_MAX == 0xFFFFFFFFu
+#define WM_NOINLINE_32 WM_NEVER_INLINE
+#else
+#define WM_NOINLINE_32
+#endif
+
 #define WM_TRI(e) ((e) / 3)
 
 /* Profiling counters (WM_PROFILE=1: the profile build, firmware/CMakeLists.txt's WM_PROFILE option, for
@@ -110,21 +130,9 @@ static inline int32_t wm_rot_cw(const wm_mesh *m, int32_t e)
 }
 int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 
-/* Fixed-point and exact integer helpers (fixed.c). */
-/* Keeps a small hot function out of its caller on a 32-bit CPU (GCC, Clang), so that its loop gets the
- * registers there (the soft CPU); a 64-bit host has registers enough and saves the call. */
-#if defined(__GNUC__) && UINTPTR_MAX == 0xFFFFFFFFu
-#define WM_NOINLINE __attribute__((noinline))
-#else
-#define WM_NOINLINE
-#endif
 #define WM_CLASS_UNKNOWN (-1) /* r->vapex: no class known for the vertex's current star (reduce.c) */
-/* Inlined wherever it is called, also where the compiler would not choose to (GCC, Clang). */
-#if defined(__GNUC__)
-#define WM_ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define WM_ALWAYS_INLINE inline
-#endif
+
+/* Fixed-point and exact integer helpers (fixed.c). */
 /* floor(a / b) for b > 0 in 32 bits (the soft CPU divides 32-bit numbers in hardware, 64-bit ones in a
  * library routine many times slower). */
 static inline int32_t wm_floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }

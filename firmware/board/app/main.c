@@ -7,10 +7,10 @@
  * bytes, checks every frame and writes DATA's samples into the height memory (WM_HEIGHT_BASE), where
  * the FPGA stage and the refiner read them, and sums their CRC for RUN; the engine reads the frame's
  * header and payload from the block and answers.  It writes with board_uart_write (payloads with
- * board_uart_write_escaped) and times itself with board_cycles.  HELLO states the built sizes (SYS and ACCEL registers), the triangle
- * capacity the heap holds (app/board_job.c, board_job_capacity: the refiner's storage and the staging of
- * the initial triangulation for the largest grid), the name "wm-board" and the UART's divisor range
- * (BAUD switches the line: io_set_divisor).
+ * board_uart_write_escaped) and times itself with board_cycles.  HELLO states the built sizes (SYS and
+ * ACCEL registers), the triangle capacity the heap holds (app/board_job.c, board_job_capacity: the
+ * refiner's storage and the staging of the initial triangulation for the largest grid), the name
+ * "wm-board" and the UART's divisor range (BAUD switches the line: io_set_divisor).
  *
  * Stage markers (SYS.STAGE, logged by the simulator): 0x00010000 the engine starts serving;
  * 0x00020000 | clock whenever another of the engine's cycle clocks starts to run (proto.h,

@@ -1,8 +1,8 @@
 /*
  * The native stand-in device's job: what the board's FPGA stage and CPU do, on the host CPU.
  *
- *   heights --wm_haar (or wm_spline)--> details --wm_job_label--> template entries --wm_job_initial--> initial mesh
- *           --wm_job_refine--> levels
+ *   heights --wm_haar (or wm_spline)--> details --wm_job_label--> template entries
+ *           --wm_job_initial--> initial mesh --wm_job_refine--> levels
  *
  * The filter bank is the firmware library's (firmware/src), the labeller, the assembly and the
  * refine-and-emit loop the job library's (wm_job.h), the same code the board runs after its FPGA

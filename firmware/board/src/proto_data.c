@@ -19,8 +19,9 @@ static void put_word(wm_proto *p, uint32_t k, uint16_t v)
 
 /* CODING_RICE (docs/protocol.md, "Sample coding"; host/wavemesh/device/coding.py encodes): n samples from off,
  * each a prediction from the samples stored before it (the block's predictor: MED or the plane) plus a
- * zig-zag residual, Rice-coded in blocks of WM_PROTO_RICE_BLOCK with a k each, bits most significant first.  0, or -1 when the len bytes at s are
- * not such a stream (too short, or a byte or more left over). */
+ * zig-zag residual, Rice-coded in blocks of WM_PROTO_RICE_BLOCK with a k each, bits most significant
+ * first.  0, or -1 when the len bytes at s are not such a stream (too short, or a byte or more left
+ * over). */
 static int rice_decode(wm_proto *p, uint32_t off, uint32_t n, const uint8_t *s, uint32_t len)
 {
     /* The bits left-aligned in acc (the next one is bit 31), nb of them valid; refilled a byte at a time
