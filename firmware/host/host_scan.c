@@ -429,6 +429,7 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
      * the lanes' largest, its first sample the least place among the lanes that hold it (a larger place is
      * a later sample in row order) */
     __m256i best = _mm256_setzero_si256(), place = _mm256_setzero_si256();
+    /* the span walk is scan32's, written out again (tri_error.c says why): keep the two in step */
     lm = A[m] > 0;
     py = y[t];
     {

@@ -219,7 +219,14 @@ static WM_ALWAYS_INLINE int end_step(struct wm_end32 *e)
  * for A < 0 with u = E(0, py), a = -A; u moves by the same step every row, so the quotient and its
  * remainder are stepped (a carry when the remainder reaches a) instead of divided: two divisions an
  * edge (the long edge's carried from the upper half to the lower), exactly the spans of a division per
- * edge and row. */
+ * edge and row.
+ *
+ * host_scan.c's scan_lanes walks the same spans and writes the walk out again (the set-up, the top row's
+ * ends, the switch to the lower half); keep the two in step.  Shared through a struct of the ends and
+ * always-inlined start and lower-half functions, the walk cost this function instructions (register
+ * allocation and spills in its set-up; bench/refiner_instructions.py, callgrind, against the copies:
+ * JACKSBORO --zeta 10 +0.05 % to +0.5 % in three forms, ball.npy --decimate 2 +0.2 %), so each keeps
+ * its copy. */
 static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d, uint64_t limit,
                        int32_t *wx, int32_t *wy)
 {
@@ -287,8 +294,9 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
         py = last + 1;
         /* Every row lies within the triangle's rows, and its ends within [x_min - 1, x_max + 1] (a row
          * without a sample has lo = hi + 1 within [x_min, x_max]; a corner's row holds the corner): in
-         * the samples' array. */
+         * the samples' array (no pointer before its start or past its end is formed). */
         for (;;) {
+            WM_ASSERT(hi.p + 1 >= h && lo.p <= h + (int64_t)f->width * f->height);
             if (lo.p <= hi.p) {
                 vm = row_max32_all(lo.p, hi.p + 1, Sl, dS, d, vm, &at);
                 /* above the limit: the row again, for its first sample above it (any V of the row
