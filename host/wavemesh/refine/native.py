@@ -610,6 +610,11 @@ def threads() -> int:
     return _THREADS if _THREADS is not None else cores()
 
 
+def threads_set() -> int | None:
+    """The count set_threads() was given (``--threads``), or None when none was."""
+    return _THREADS
+
+
 def host_lib() -> ctypes.CDLL | None:
     """The library for the host stages, or None when it cannot be built or loaded (then the callers run
     the Python model; `wavemesh mesh` needs the library anyway and says so)."""

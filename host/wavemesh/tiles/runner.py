@@ -569,7 +569,7 @@ def _worker_start(parent: int, threads: int | None = None) -> None:
         signal.signal(signal.SIGHUP, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _WORKER_SIGNALS)
     tune_malloc()
-    if threads is not None and native._THREADS is None:  # the host stages' threads (--threads: as given)
+    if threads is not None and native.threads_set() is None:  # the host stages' threads (--threads: as given)
         native.set_threads(threads)
     if sys.platform.startswith("linux"):
         try:
