@@ -93,7 +93,7 @@ if TYPE_CHECKING:
     from wavemesh.device.link import LinkStats
     from wavemesh.device.stream import Device, DeviceInfo, Timeouts
 
-MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits, the one source)
+MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits: the refiner's header, the one statement)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
 BOUND_NOT_MET = 3  # exit status of `wavemesh mesh` when the triangle budget stopped it above zeta
 

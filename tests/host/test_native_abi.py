@@ -1,6 +1,7 @@
 """The ctypes side of the native library (wavemesh.refine.native) against the C header it mirrors, field by
 field: the structures' member names, types and order, and the codes and limits the host uses.  The
-header (firmware/include/wavemesh.h) is the truth for the library; protocol.py for the limits."""
+header (firmware/include/wavemesh.h) is the truth for the library and its limits (wavemesh.limits reads
+them from it)."""
 
 from __future__ import annotations
 
@@ -43,8 +44,8 @@ def test_codes_flags_and_limits_are_the_headers():
     assert native.METRICS == {"normal": define("WM_METRIC_NORMAL"), "vertical": define("WM_METRIC_VERTICAL")}
     assert native.NEIGHBOURHOODS == {"face": define("WM_NEIGHBOURHOOD_FACE"),
                                      "vertex": define("WM_NEIGHBOURHOOD_VERTEX")}
-    # protocol.py is the one source of the limits; the header states them too (board/src/wm_job.c checks that
-    # at compile time, and this for the host)
+    # the header is the one statement of the limits: wavemesh.limits reads them, protocol.py states them to
+    # devices (board/src/wm_job.c checks the generated wm_protocol.h against the header at compile time)
     assert (P.MAX_SIDE, P.MAX_LEVELS) == (define("WM_MAX_SIDE"), define("WM_MAX_LEVELS"))
     assert native.MAX_SIDE == P.MAX_SIDE
 

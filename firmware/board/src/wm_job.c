@@ -29,8 +29,9 @@
 
 #define ALIGN8(n) (((size_t)(n) + 7u) & ~(size_t)7u)
 
-/* One source for the limits: host/wavemesh/device/protocol.py (wm_protocol.h) states the refiner's own
- * (wavemesh.h), checked here at compile time on both devices (C99: an array of negative size). */
+/* The limits' one statement is the refiner's (wavemesh.h); host/wavemesh/limits.py reads it there and
+ * protocol.py states it in the generated wm_protocol.h: checked here at compile time on both devices, so
+ * that a stale generated header is caught (C99: an array of negative size). */
 typedef char
     wm_job_limits_agree[WM_PROTO_MAX_SIDE == WM_MAX_SIDE && WM_PROTO_MAX_LEVELS == WM_MAX_LEVELS ? 1 : -1];
 

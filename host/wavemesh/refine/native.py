@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import WavemeshError
-from wavemesh.limits import MAX_SIDE, STAT_FIELDS  # WM_MAX_SIDE (board/src/wm_job.c checks it); the stats
+from wavemesh.limits import HEADER, MAX_SIDE, STAT_FIELDS  # wavemesh.h, its WM_MAX_SIDE; the stats
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import HaarLevel
 from wavemesh.record import record
@@ -48,7 +48,7 @@ class NativeError(WavemeshError):
     """The library could not be built or loaded, or it returned an error code."""
 
 
-HEADER = FIRMWARE / "include" / "wavemesh.h"  # the one statement of the structures the library takes
+# HEADER (wavemesh.h, wavemesh.limits): the one statement of the structures the library takes
 _C_TYPES = {"int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint64_t": ctypes.c_uint64,
             "const uint16_t *": ctypes.POINTER(ctypes.c_uint16),
             "const int32_t *": ctypes.POINTER(ctypes.c_int32),
