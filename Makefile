@@ -151,7 +151,7 @@ format: $(SETUP_STAMP)
 CPU_DIRS = $(shell $(VPY) -c 'from wavemesh.device import soc_cpu; print(" ".join(f"-y {d}" for d in soc_cpu.lint_folders()))')
 
 lint: $(SETUP_STAMP) gen
-	$(VPY) -m ruff check host tests tools bench fuzz
+	$(VPY) -m ruff check host tests tools bench fuzz sim firmware/tools
 	$(CLANG_FORMAT) --dry-run -Werror $(C_SOURCES)
 	@for f in rtl/*.v rtl/boards/*.v; do \
 	    $(VERILATOR) --lint-only -Wall --quiet -I$(GEN) -y rtl -y rtl/boards $(CPU_DIRS) rtl/lint.vlt \
