@@ -458,3 +458,56 @@ def test_graph_keeps_only_what_it_returns():
             out = run.graph(nodes, done, keep=[0, 3])
         assert [None if r is None else r.v for r in out] == [1, None, None, 1112]
         assert seen == {0: 1, 1: 11, 2: 111, 3: 1112}
+
+
+class _Made:
+    """A result that says which process made it and how many times it was unpickled on its way."""
+
+    def __init__(self, value, pid=None, copies=0):
+        self.value, self.pid, self.copies = value, os.getpid() if pid is None else pid, copies
+
+    def __reduce__(self):
+        rest = {k: v for k, v in self.__dict__.items() if k not in ("value", "pid", "copies")}
+        return (_Made, (self.value, self.pid, self.copies + 1), rest)
+
+
+def _made(*xs):
+    """A _Made of the sum of the values; ``seen``: for each arg, whether this process made it and how many
+    times it was unpickled; ``held``: the results this worker keeps (runner._HELD) as it runs."""
+    from wavemesh.tiles import runner
+
+    out = _Made(sum(x.value for x in xs) + 1)
+    out.seen = [(x.pid == os.getpid(), x.copies) for x in xs]
+    out.held = len(runner._HELD)
+    return out
+
+
+def test_pool_worker_keeps_the_results_it_made():
+    """runner.HOLD: a node given to the worker that made a result it reads gets that object itself (never
+    pickled), not the parent's copy sent down the pipe again; the same values as in this process and
+    without HOLD (where such an arg comes as a copy); a new graph starts with nothing kept."""
+    from wavemesh.tiles import runner
+
+    nodes = [Node(_made, (), (0, k), (k % 2,)) for k in range(8)]
+    nodes += [Node(_made, (Ref(k), Ref((k + 2) % 8)), (1, k), (k % 2,)) for k in range(8)]
+    nodes += [Node(_made, (Ref(8 + k), Ref(k), Ref(8 + (k + 2) % 8)), (2, k), (k % 2,)) for k in range(8)]
+    homes = {0: 0.0, 1: 0.5}
+    want = [r.value for r in tiles.Runner(1).graph(nodes)]
+    saved = runner.HOLD
+    copied = {}
+    try:
+        for hold in (True, False):
+            runner.HOLD = hold
+            with tiles.Runner(2) as run:
+                out = run.graph(nodes, homes=homes)
+                assert [r.value for r in out] == want
+                own = [c for r in out[8:] for mine, c in r.seen if mine]  # args this worker made
+                assert own  # the homes put most readers with their inputs
+                copied[hold] = sum(c > 1 for c in own)  # unpickled in the parent and again here
+                if hold:
+                    assert copied[hold] == 0
+                    assert max(r.held for r in out) > 0
+                    assert run.graph([Node(_made, ()), Node(_made, ())])[0].held == 0  # a new graph
+    finally:
+        runner.HOLD = saved
+    assert copied[False] > 0

@@ -6,6 +6,7 @@ import bisect
 import ctypes
 import multiprocessing
 import os
+import select
 import signal
 import socket
 import sys
@@ -33,6 +34,9 @@ AHEAD = True
 # a pool of one worker a CPU (of those this process may use, the default --workers): each worker kept on a CPU
 # of its own (sched_setaffinity; the parent moves between them), its tiles in that core's caches
 PIN = True
+# a pool worker keeps each result it made that other nodes read, until the parent has given out every one of
+# them: a node given to that worker names it (_Held) instead of carrying it down the pipe again
+HOLD = True
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -119,12 +123,25 @@ class _Prev:
     pick: Callable | None = None
 
 
-def _resolve(node: Node, results: list, prev: int | None = None) -> tuple:
-    """The node's args, each Ref replaced by its result (a Ref to ``prev``: _Prev, the worker's)."""
+@record(frozen=True)
+class _Held:
+    """In a node's args sent to a pool worker: the result of node ``node`` that worker made and holds
+    (``pick`` of it)."""
+
+    node: int
+    pick: Callable | None = None
+
+
+def _resolve(node: Node, results: list, prev: int | None = None, held: set | frozenset = frozenset()
+             ) -> tuple:
+    """The node's args, each Ref replaced by its result (a Ref to ``prev``: _Prev, the worker's; to a node in
+    ``held``: _Held, the worker's)."""
 
     def one(a):
         if isinstance(a, Ref) and a.node == prev:
             return _Prev(a.pick)
+        if isinstance(a, Ref) and a.node in held:
+            return _Held(a.node, a.pick)
         if isinstance(a, Ref):
             return a.pick(results[a.node]) if a.pick else results[a.node]
         return a.fn(*a.args) if isinstance(a, Here) else a
@@ -197,17 +214,25 @@ class Runner:
             if done and report:
                 done(i, r)
 
+        holds: list[set] = []  # a pool's: the results each worker holds (HOLD)
+        drops: list[list] = []  # and those it may let go, told with its next chain
+
         def given(k: int) -> None:
             """Node ``k``'s args are out (resolved): a result nobody else reads and graph does not return
-            goes."""
-            if kept_nodes is None:
-                return
+            goes (here, and from the worker that holds it)."""
             for d in deps[k]:
                 readers[d] -= 1
-                if not readers[d] and d not in kept_nodes:
+                if readers[d]:
+                    continue
+                if kept_nodes is not None and d not in kept_nodes:
                     results[d] = None
+                for w, has in enumerate(holds):
+                    if d in has:
+                        has.discard(d)
+                        drops[w].append(d)
 
         self.n_maps += 1
+        hold = HOLD and self.client is None and self.workers > 1 and len(nodes) > 1
         if self.client is not None:
             key = f"wavemesh-{self.run_id}-{self.n_maps}"
             futures: list = []
@@ -256,6 +281,9 @@ class Runner:
             sent: list[list] = [[] for _ in self.pool]  # [chain, its bytes, written]
             room = [_pipe_room(pipe) for _, pipe in self.pool]
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
+            holds[:] = [set() for _ in self.pool]
+            drops[:] = [[] for _ in self.pool]
+            read = [bool(r) for r in readers]  # a result some node reads: kept by the worker that makes it
             kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
             def give(w: int) -> None:
@@ -267,7 +295,7 @@ class Runner:
                 out = []
                 steps = []
                 for n, k in enumerate(chain):
-                    args = _resolve(nodes[k], results, chain[n - 1] if n else None)
+                    args = _resolve(nodes[k], results, chain[n - 1] if n else None, holds[w])
                     given(k)
                     for a in args:
                         key = keys.get(id(a))
@@ -275,7 +303,9 @@ class Runner:
                             out.append(_DUMPS(("keep", key, a)))  # no answer: the worker keeps it
                             kept[w].add(key)
                     steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
-                out.append(_DUMPS(steps[0] if len(chain) == 1 else ("chain", steps)))
+                store = tuple(k if hold and read[k] else -1 for k in chain)
+                out.append(_DUMPS(("chain", steps, self.n_maps, store, tuple(drops[w]))))
+                drops[w].clear()
                 sent[w].append([chain, out, False])
                 write(w)
 
@@ -301,24 +331,27 @@ class Runner:
                             _let_go(self.pool[w][1])
                             gone.add(w)
 
+            ready = _Ready()
             for w in range(len(self.pool)):
                 give(w)
             while any(sent):
                 live = [w for w in range(len(self.pool)) if sent[w]]
-                ready = wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
+                fds = ready.wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
                 came = []
                 for w in live:
                     proc, pipe = self.pool[w]
-                    if pipe in ready:
+                    if pipe.fileno() in fds:
                         chain = sent[w].pop(0)[0]
                         reply = _reply(proc, pipe)
                         write(w)  # a second chain held back: the worker waits for it
                         let_go()  # before its results are handled
-                        for i, r in zip(chain, reply if len(chain) > 1 else [reply], strict=True):
+                        for i, r in zip(chain, reply, strict=True):
+                            if hold and read[i]:
+                                holds[w].add(i)
                             got(i, r, False)
                             sched.finished(i)
                             came.append((i, r))
-                    elif proc.sentinel in ready and not pipe.poll():
+                    elif proc.sentinel in fds and not pipe.poll():
                         _lost(proc)
                 idle = [w for w in (*live, *range(len(self.pool))) if not sent[w]]  # answered first
                 for w in (*idle, *live):  # a worker with nothing first, then the second chains
@@ -469,6 +502,28 @@ class _Schedule:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
 
 
+class _Ready:
+    """What multiprocessing.connection.wait does for the pool's loop, with one poll object kept for the graph
+    and only the changes registered (wait makes a selector and registers every pipe and sentinel anew at
+    each call: a few per cent of the parent's CPU over a run's round trips)."""
+
+    def __init__(self):
+        self.poller = select.poll() if hasattr(select, "poll") else None
+        self.fds: set[int] = set()
+
+    def wait(self, objs: list) -> set[int]:
+        """The file descriptors of ``objs`` (connections, sentinels) ready to read (or ended), once one is."""
+        if self.poller is None:
+            return {o if isinstance(o, int) else o.fileno() for o in wait(objs)}
+        fds = {o if isinstance(o, int) else o.fileno() for o in objs}
+        for fd in self.fds - fds:
+            self.poller.unregister(fd)
+        for fd in fds - self.fds:
+            self.poller.register(fd, select.POLLIN)
+        self.fds = fds
+        return {fd for fd, _ in self.poller.poll()}
+
+
 _DUMPS = ForkingPickler.dumps  # as Connection.send pickles: Connection.recv reads it
 
 
@@ -524,12 +579,20 @@ class _Kept:
     index: int
 
 
+_HELD: dict = {}  # a pool worker's results kept for a _Held (_worker_loop)
+
+
 def _worker_loop(pipe, parent: int, threads: int | None = None) -> None:
     """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
     ("keep", key, value): an arg its next tasks name by the key; ("chain", [(fn, args), ...]): each in turn,
-    a _Prev in args the one before's result, the results back as a list."""
+    a _Prev in args the one before's result, the results back as a list; ("chain", steps, graph, store,
+    drops): the same, then each step's result kept under its node in ``store`` (-1: not kept), for a _Held
+    in a later task's args, and the results named in ``drops`` let go (a new graph: every one)."""
     _worker_start(parent, threads)
     kept: dict = {}
+    held = _HELD  # node -> the result this worker made, of the graph held_graph
+    held.clear()
+    held_graph = None
     while True:
         try:
             task = pipe.recv()
@@ -541,14 +604,25 @@ def _worker_loop(pipe, parent: int, threads: int | None = None) -> None:
         if task[0] == "keep":  # ("keep", key, value)
             kept[task[1]] = task[2]
             continue
+        chain = task[0] == "chain"
+        if chain and len(task) > 2 and task[2] != held_graph:
+            held.clear()
+            held_graph = task[2]
         try:
             out: list = []
-            for fn, args in (task[1] if task[0] == "chain" else [task]):  # ("chain", [(fn, args), ...])
+            for fn, args in (task[1] if chain else [task]):  # ("chain", [(fn, args), ...], ...)
                 args = tuple(kept[a] if isinstance(a, _Kept) else
-                             (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else a
+                             (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else
+                             (a.pick(held[a.node]) if a.pick else held[a.node]) if isinstance(a, _Held) else a
                              for a in args)
                 out.append(fn(*args))
-            reply = ("ok", out if task[0] == "chain" else out[0], None)
+            if chain and len(task) > 2:
+                for k, r in zip(task[3], out, strict=True):
+                    if k >= 0:
+                        held[k] = r
+                for k in task[4]:
+                    held.pop(k, None)
+            reply = ("ok", out if chain else out[0], None)
         except Exception as e:  # the parent raises it (WavemeshError with its hint)
             reply = ("error", e, getattr(e, "hint", None))
         try:
