@@ -237,14 +237,25 @@ def test_pool_workers_share_the_cpus_host_threads():
         if mine is not None and workers == len(mine):
             pinned = {a for _, a in out}
             assert pinned <= {frozenset({c}) for c in mine} and len(pinned) == workers
+            assert {frozenset({c}) for c in run.pinned} == pinned  # what the pool writes to first knows
         elif mine is not None:
             assert {a for _, a in out} == {mine}
+            assert run.pinned == [None] * workers
     native.set_threads(3)
     try:
         with tiles.Runner(2) as run:
             assert {t for t, _ in run.graph(nodes[:4], homes={0: 0.0, 1: 0.5})} == {3}
     finally:
         native.set_threads(None)
+
+
+def test_this_cpu_is_one_this_process_may_use():
+    """runner._this_cpu: the CPU this process runs on (the pool writes an idle worker kept on it last)."""
+    from wavemesh.tiles import runner
+
+    cpu = runner._this_cpu()
+    if hasattr(os, "sched_getaffinity") and cpu is not None:
+        assert cpu in os.sched_getaffinity(0)
 
 
 def test_graph_failure_raises_and_pool_ends():

@@ -163,6 +163,7 @@ class Runner:
         self.client = None
         self.own_client = scheduler is not None and not hasattr(scheduler, "submit")
         self.pool: list[tuple] = []  # (process, pipe)
+        self.pinned: list[int | None] = []  # the CPU each worker of the pool is kept on (PIN), or None
         self.ended: list[tuple] = []  # workers let go by the last graph, reaped by __exit__
         self.run_id = f"{time.time_ns()}-{os.getpid()}"
         self.n_maps = 0
@@ -286,10 +287,10 @@ class Runner:
             read = [bool(r) for r in readers]  # a result some node reads: kept by the worker that makes it
             kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
 
-            def give(w: int) -> None:
+            def give(w: int, now: bool = True) -> None:
                 """Worker ``w``'s next chain (_Schedule.chain) when it has none, or its second while it runs
                 the first (AHEAD; a chain sent ahead takes at most one tile more than the worker would
-                otherwise hold: its batch only of tiles it has read already)."""
+                otherwise hold: its batch only of tiles it has read already); ``now``: written at once."""
                 if len(sent[w]) > 1 or not (chain := sched.chain(w, len(self.pool), bool(sent[w]))):
                     return
                 out = []
@@ -307,7 +308,8 @@ class Runner:
                 out.append(_DUMPS(("chain", steps, self.n_maps, store, tuple(drops[w]))))
                 drops[w].clear()
                 sent[w].append([chain, out, False])
-                write(w)
+                if now:
+                    write(w)
 
             def write(w: int) -> None:
                 """Worker ``w``'s chains not yet written that may be: the first, or a second that fits."""
@@ -331,9 +333,24 @@ class Runner:
                             _let_go(self.pool[w][1])
                             gone.add(w)
 
+            def hand_out(idle: Iterable[int], busy: Iterable[int] = ()) -> None:
+                """The ``idle`` workers' next chains, every one made before the first is written (a worker
+                its chain wakes may take the CPU this process makes the next one on: the other idle worker
+                would wait for it; the one kept on this process's CPU is written last), then the second
+                chains of ``busy`` ones."""
+                idle = [w for w in dict.fromkeys(idle) if not sent[w]]
+                if len(idle) > 1:
+                    cpu = _this_cpu()
+                    idle.sort(key=lambda w: self.pinned[w] == cpu)
+                for w in idle:
+                    give(w, False)
+                for w in idle:
+                    write(w)
+                for w in busy:
+                    give(w)
+
             ready = _Ready()
-            for w in range(len(self.pool)):
-                give(w)
+            hand_out(range(len(self.pool)))
             while any(sent):
                 live = [w for w in range(len(self.pool)) if sent[w]]
                 fds = ready.wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
@@ -354,8 +371,7 @@ class Runner:
                     elif proc.sentinel in fds and not pipe.poll():
                         _lost(proc)
                 idle = [w for w in (*live, *range(len(self.pool))) if not sent[w]]  # answered first
-                for w in (*idle, *live):  # a worker with nothing first, then the second chains
-                    give(w)
+                hand_out(idle, (*idle, *live))  # a worker with nothing first, then the second chains
                 let_go()
                 if done:  # the results handled (a finished tile written) once the workers have their next
                     for i, r in came:
@@ -382,13 +398,16 @@ class Runner:
             # on every one as a process of its own would: one thread each with one worker a CPU
             share = max(1, native.cores() // self.workers)
             cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
+            self.pinned = []
             for k in range(self.workers):
                 here, there = ctx.Pipe()
                 proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share), daemon=True)
                 proc.start()
+                self.pinned.append(None)
                 if len(cpus) == self.workers:  # one worker a CPU: each its own (PIN)
                     try:
                         os.sched_setaffinity(proc.pid, {cpus[k]})
+                        self.pinned[k] = cpus[k]
                     except OSError:  # a CPU taken away meanwhile: the worker goes where the kernel puts it
                         pass
                 there.close()
@@ -500,6 +519,20 @@ class _Schedule:
             self.waiting[u] -= 1
             if not self.waiting[u] and not self.chained[u]:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
+
+
+def _this_cpu() -> int | None:
+    """The CPU this thread runs on now (glibc's sched_getcpu), None where that is not known."""
+    if not _GETCPU:
+        try:
+            _GETCPU.append(ctypes.CDLL(None, use_errno=True).sched_getcpu)
+        except (OSError, AttributeError):
+            _GETCPU.append(None)
+    cpu = _GETCPU[0]() if _GETCPU[0] is not None else -1
+    return cpu if cpu >= 0 else None
+
+
+_GETCPU: list = []
 
 
 class _Ready:
