@@ -107,6 +107,7 @@ def bad_inputs(tmp_path):
     data = (tmp_path / "ok.npy").read_bytes()
     (tmp_path / "cut.npy").write_bytes(data[: len(data) // 2])
     (tmp_path / "junk.xyz").write_bytes(b"\x00\x01garbage" * 10)
+    (tmp_path / "junk.npy").write_bytes(b"garbage")
     (tmp_path / "text.png").write_text("not a png")
     ok = tmp_path / "ok.npy"
     o = str(tmp_path / "o.obj")
@@ -117,6 +118,7 @@ def bad_inputs(tmp_path):
         "empty": ["mesh", tmp_path / "empty.npy", "-o", o],
         "all NaN": ["mesh", tmp_path / "nan.npy", "-o", o],
         "unknown format": ["mesh", tmp_path / "junk.xyz", "-o", o],
+        "not an npy": ["mesh", tmp_path / "junk.npy", "-o", o],
         "corrupt png": ["mesh", tmp_path / "text.png", "-o", o],
         "bad levels": ["mesh", ok, "-o", o, "--levels", "0"],
         "levels not a number": ["mesh", ok, "-o", o, "--levels", "x"],
@@ -145,6 +147,8 @@ def test_bad_input_gives_one_line_and_no_traceback(tmp_path):
         errors = [line for line in r.stderr.splitlines() if line.startswith("error:")]
         assert len(errors) == 1, (name, r.stderr)
         assert not (tmp_path / "o.obj").exists(), name
+        if name == "not an npy":  # not numpy's advice to load it as a pickle
+            assert "not a .npy file" in errors[0] and "pickle" not in errors[0], errors
 
 
 def test_module_and_version():

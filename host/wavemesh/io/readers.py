@@ -148,14 +148,20 @@ def npy_layout(path: str, f) -> tuple[tuple[int, ...], np.dtype, int] | None:
 
 
 def _check_npy_size(path: str, size_check) -> None:
-    """An .npy file's header against the file: the samples it claims must be in the file (numpy would
-    set aside the claimed size first) and, to the caller, fit in memory (``size_check``)."""
+    """An .npy file's header against the file: numpy's magic first (or a .npz archive's), the samples it
+    claims must be in the file (numpy would set aside the claimed size first) and, to the caller, fit in
+    memory (``size_check``)."""
     size = regular_file(path)
     try:
         with open(path, "rb") as f:
+            magic = f.read(6)
+            f.seek(0)
             layout = npy_layout(path, f)
     except OSError as e:
         raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
+    if magic != b"\x93NUMPY" and not magic.startswith(b"PK\x03\x04"):  # (a .npz archive: said below)
+        # else numpy tries it as a pickle and says to allow pickles
+        raise InputError(f"cannot read {path}: not a .npy file (it does not begin with numpy's \\x93NUMPY)")
     if layout is None or layout[1].hasobject:
         return
     shape, dtype, offset = layout
