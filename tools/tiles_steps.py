@@ -17,6 +17,7 @@ the quantisation's strips and for the task graph: the wall time, the tasks and t
 to the pool for them (runner.CHAIN, BATCH_READY, AHEAD), each worker's CPU and busy time, the time it waited
 (the span less its tasks: at a barrier, for the parent, for a task's inputs), the most tiles it held and
 how often it found no task in its pipe (it waited for the parent: a count that holds on a loaded machine),
+how far apart the workers' first tasks started (the parent's first chains written one after the other),
 then each step's CPU summed over the workers; and the model of the speed-up over one worker, the CPU
 outside the workers (this process's) plus the busiest worker's CPU in each part.  CPU seconds, page
 faults and reads hold on a loaded machine where wall times do not; run it with --workers 1 and 2 to
@@ -265,11 +266,14 @@ def main(argv: list[str]) -> int:
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
             x[5] += samples
         model += max(w[0] for w in per.values())
+        firsts = [min(i[2] for _, i in infos if i[0] == pid) for pid in per]  # each worker's first start
         print(f"{part}: wall {b - a:.2f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
               "per worker CPU / busy / waiting s (tasks, the most tiles held; the times it found no task "
               "in its pipe between its first and last, and their ms): "
               + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]}; "
-                          f"{w[5][0] - w[4][0]}, {1000 * (w[5][1] - w[4][1]):.0f})" for w in per.values()))
+                          f"{w[5][0] - w[4][0]}, {1000 * (w[5][1] - w[4][1]):.0f})" for w in per.values())
+              + (f"; the workers' first tasks started within {1000 * (max(firsts) - min(firsts)):.1f} ms"
+                 if len(firsts) > 1 else ""))
         for step, x in steps.items():
             print(f"  {step:<16} {x[0]:4d} tasks  CPU {x[1]:6.2f} s  system {x[2]:5.2f} s  "
                   f"page faults {x[3]:8d}  tiles read {x[4]:3d}  samples read {x[5] / 1e6:6.2f} M")
