@@ -18,7 +18,9 @@ to the pool for them (runner.CHAIN, BATCH_READY, AHEAD), each worker's CPU and b
 (the span less its tasks: at a barrier, for the parent, for a task's inputs), the most tiles it held and
 how often it found no task in its pipe (it waited for the parent: a count that holds on a loaded machine),
 how far apart the workers' first tasks started (the parent's first chains written one after the other),
-then each step's CPU summed over the workers; and the model of the speed-up over one worker, the CPU
+then each step's CPU summed over the workers; what the tasks' page faults cost at this machine's price
+of a fresh page (page_cost: the CPU of a page's first write, measured after the run); and the model
+of the speed-up over one worker, the CPU
 outside the workers (this process's) plus the busiest worker's CPU in each part.  CPU seconds, page
 faults and reads hold on a loaded machine where wall times do not; run it with --workers 1 and 2 to
 compare (docs/tiles.md, "Running the tiles").  ``--runner NAME=VALUE`` sets one of tiles.runner's
@@ -292,7 +294,35 @@ def main(argv: list[str]) -> int:
             pool = {a: simulate_pool(nodes, homes, cost, workers, 0.0005, a) for a in (False, True)}
             print(f"  as the pool gives chains, the parent's answer reaching a worker without one in 0.5 ms: "
                   f"{pool[True]:.3f} s with chains sent ahead (AHEAD), {pool[False]:.3f} s without")
+    faults = sum(i[5] for *_, infos in LOG for _, i in infos)
+    if faults:  # what the tasks' page faults cost, at this machine's price of a fresh page
+        each = page_cost()
+        print(f"a fresh page here: {1e6 * each:.2f} us of CPU (written one by one, {PAGE_TEST >> 20} MiB): "
+              f"the tasks' {faults} page faults about {faults * each:.2f} s of their CPU at that price")
     return rc
+
+
+PAGE_TEST = 64 << 20
+
+
+def page_cost() -> float:
+    """CPU seconds a fresh page of anonymous memory costs this process at its first write (the fault, the
+    kernel's zeroing and accounting): PAGE_TEST bytes mapped and written a byte a page, the best of 3."""
+    import mmap
+
+    import numpy as np
+
+    best = float("inf")
+    for _ in range(3):
+        with mmap.mmap(-1, PAGE_TEST) as m:
+            a = np.frombuffer(m, dtype=np.uint8)
+            u0 = resource.getrusage(resource.RUSAGE_SELF)
+            a[:: mmap.PAGESIZE] = 1
+            u1 = resource.getrusage(resource.RUSAGE_SELF)
+            del a
+        pages = max(1, u1.ru_minflt - u0.ru_minflt)
+        best = min(best, (u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime) / pages)
+    return best
 
 
 if __name__ == "__main__":
