@@ -127,6 +127,7 @@ def bad_inputs(tmp_path):
         "output dir missing": ["mesh", ok, "-o", tmp_path / "no" / "o.obj"],
         "bad fill": ["mesh", ok, "-o", o, "--fill", "sideways"],
         "negative zeta": ["mesh", ok, "-o", o, "--zeta", "-1"],
+        "negative max-hole": ["mesh", ok, "-o", o, "--nodata", "hole", "--max-hole", "-3"],
         "bad metric": ["mesh", ok, "-o", o, "--metric", "sideways"],
         "too many iterations": ["mesh", ok, "-o", o, "--iterations", "5"],
         "alpha above 1": ["mesh", ok, "-o", o, "--alpha", "2"],
@@ -149,6 +150,8 @@ def test_bad_input_gives_one_line_and_no_traceback(tmp_path):
         assert not (tmp_path / "o.obj").exists(), name
         if name == "not an npy":  # not numpy's advice to load it as a pickle
             assert "not a .npy file" in errors[0] and "pickle" not in errors[0], errors
+        if name == "negative max-hole":  # what is wrong, not what the option does
+            assert errors[0] == "error: --max-hole -3 is out of range", errors
 
 
 def test_module_and_version():

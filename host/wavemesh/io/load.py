@@ -102,9 +102,12 @@ def shape_heightfield(hf: HeightField, crop: str | None = None, decimate: int | 
 def check_hole_options(nodata: str | None, max_hole: int = 0, min_area: float = 0.0) -> None:
     """--max-hole and --min-area: only with --nodata hole (load_input's check; `mesh` and `stream` make it
     before any work, for a tiled run too, which reads neither)."""
-    if max_hole and (nodata != "hole" or max_hole < 0):
+    if max_hole < 0:
+        raise InputError(f"--max-hole {max_hole} is out of range",
+                         hint="use 0 or more: the enclosed dropouts of at most that many samples are filled")
+    if max_hole and nodata != "hole":
         raise InputError(f"--max-hole {max_hole}: fills the enclosed dropouts of at most that many samples "
-                         "and keeps the others holes", hint="use it with --nodata hole, N >= 0")
+                         "and keeps the others holes", hint="use it with --nodata hole")
     if min_area > 0 and nodata != "hole":
         raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
 
