@@ -12,8 +12,9 @@
  * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
  * the first one and stops at the limit as the C scan does.  On grids under 2^20 samples (below) this
  * scan is left to the C scan, and only scan32's small triangles are taken, in lanes without a branch a
- * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box).  Processors without
- * AVX2 (and other compilers) answer 0: the C scan runs.
+ * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box; each without the
+ * worst sample's place when the caller asks for none).  Processors without AVX2 (and other compilers)
+ * answer 0: the C scan runs.
  * wm_host_scan(0) turns both off, (2) puts the blocks on every grid, (3) the lanes on every grid (the
  * tests compare each with the C scan). */
 #define _POSIX_C_SOURCE 200809L
@@ -326,16 +327,25 @@ static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i b
     return vm;
 }
 
+/* The lanes' largest V alone (a scan whose caller asks for no worst sample). */
+static inline AVX2 __attribute__((always_inline)) uint32_t lanes_max(__m256i best)
+{
+    __m256i mv = _mm256_max_epi32(best, _mm256_permute2x128_si256(best, best, 1));
+    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
+    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
+    return (uint32_t)_mm256_cvtsi256_si32(mv);
+}
+
 /* scan_lanes for a triangle whose box is at most 8 samples wide (most of a fine mesh's: on Jacksboro at
  * 10 m, bench/refine_time.py, the native call 0.88 - 0.95 x scan_lanes' time, MRI 0.91 - 0.93 x): each
  * row of the box one block from the box's left column, its samples inside the closed triangle by the
  * three edge functions (all >= 0: the spans' very samples, no division), the edge functions and S
  * stepped row by row in the lanes; each lane's largest V and first place as scan_lanes keeps them.  S is
  * the triangle's S at the box's top left sample (modulo 2^32, as V is taken). */
-static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *f, const int32_t x[3],
-                                                                const int32_t y[3], uint32_t d, int32_t x0,
-                                                                uint64_t limit, uint64_t *vmax, int32_t *wx,
-                                                                int32_t *wy)
+static inline AVX2 __attribute__((always_inline)) int box_body(const wm_field *f, const int32_t x[3],
+                                                               const int32_t y[3], uint32_t d, int32_t x0,
+                                                               uint64_t limit, uint64_t *vmax, int32_t *wx,
+                                                               int32_t *wy, const int placed)
 {
     const uint16_t *h = f->samples, *end = h + (int64_t)f->width * f->height, *at = NULL;
     int32_t A[3], B[3], t = 0, b = 0, width = f->width, y0, y1;
@@ -380,26 +390,24 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *
             vm = lanes[i];
             goto stop;
         }
-        __m256i gt = _mm256_cmpgt_epi32(v, best);
+        if (placed) place = _mm256_blendv_epi8(place, P, _mm256_cmpgt_epi32(v, best));
         best = _mm256_max_epi32(best, v);
-        place = _mm256_blendv_epi8(place, P, gt);
         for (int k = 0; k < 3; k++) E[k] = _mm256_add_epi32(E[k], Bv[k]);
         Sv = _mm256_add_epi32(Sv, dSyv);
         P = _mm256_add_epi32(P, Wv);
     }
-    vm = lanes_first(best, place, h, &at);
+    vm = placed ? lanes_first(best, place, h, &at) : lanes_max(best);
 stop:
     *vmax = vm;
     place_at(f, at, x, y, wx, wy);
     return 1;
 }
 
-/* Its start on a cache line: where it lands otherwise moves with every change elsewhere in the library,
- * and so its loop's place in the lines the processor fetches (bench/refine_time.py: one such move cost
- * f2 and Box 4-5 %, the median pair 1.3 %). */
-static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field *f, const int32_t x[3],
-                                                                  const int32_t y[3], uint32_t d, uint64_t limit,
-                                                                  uint64_t *vmax, int32_t *wx, int32_t *wy)
+/* The scan of scan32's triangles in lanes, the rows' spans as scan32's (its head comment). */
+static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field *f, const int32_t x[3],
+                                                                 const int32_t y[3], uint32_t d, uint64_t limit,
+                                                                 uint64_t *vmax, int32_t *wx, int32_t *wy,
+                                                                 const int placed)
 {
     const uint16_t *h = f->samples, *end = h + (int64_t)f->width * f->height;
     int32_t A[3], B[3], t = 0, b = 0, m, py, lm;
@@ -480,9 +488,10 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
                     at = q + i;
                     goto stop;
                 }
-                __m256i gt = _mm256_cmpgt_epi32(v, best); /* each lane's first sample of its largest V */
+                if (placed) /* each lane's first sample of its largest V */
+                    place = _mm256_blendv_epi8(place, _mm256_add_epi32(_mm256_set1_epi32((int32_t)(q - h)), lane),
+                                               _mm256_cmpgt_epi32(v, best));
                 best = _mm256_max_epi32(best, v);
-                place = _mm256_blendv_epi8(place, _mm256_add_epi32(_mm256_set1_epi32((int32_t)(q - h)), lane), gt);
                 q += 8;
                 S += 8 * dS;
                 n -= 8;
@@ -492,11 +501,47 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field
             end_step(&hi);
         }
     }
-    vm = lanes_first(best, place, h, &at);
+    vm = placed ? lanes_first(best, place, h, &at) : lanes_max(best);
 stop:
     *vmax = vm;
     place_at(f, at, x, y, wx, wy);
     return 1;
+}
+
+/* Each of scan_box and scan_lanes twice: with the worst sample's place, and without it for a caller that
+ * asks for none (the decimation's candidates, wm_tri_error_upto: the same Vmax and the same stop), whose
+ * blocks then keep no place (a compare, a broadcast, an add and a blend a block fewer: the native call
+ * 0.985x in the median of the quality benchmark's 52 pairs, bench/refine_time.py).  Each starts on a cache
+ * line: where it lands otherwise moves with every change elsewhere in the library, and so its loop's
+ * place in the lines the processor fetches (bench/refine_time.py: one such move cost f2 and Box 4-5 %, the
+ * median pair 1.3 %). */
+static AVX2 __attribute__((noinline, aligned(64))) int scan_box(const wm_field *f, const int32_t x[3],
+                                                                const int32_t y[3], uint32_t d, int32_t x0,
+                                                                uint64_t limit, uint64_t *vmax, int32_t *wx,
+                                                                int32_t *wy)
+{
+    return box_body(f, x, y, d, x0, limit, vmax, wx, wy, 1);
+}
+
+static AVX2 __attribute__((noinline, aligned(64))) int scan_box_max(const wm_field *f, const int32_t x[3],
+                                                                    const int32_t y[3], uint32_t d, int32_t x0,
+                                                                    uint64_t limit, uint64_t *vmax)
+{
+    return box_body(f, x, y, d, x0, limit, vmax, NULL, NULL, 0);
+}
+
+static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes(const wm_field *f, const int32_t x[3],
+                                                                  const int32_t y[3], uint32_t d, uint64_t limit,
+                                                                  uint64_t *vmax, int32_t *wx, int32_t *wy)
+{
+    return lanes_body(f, x, y, d, limit, vmax, wx, wy, 1);
+}
+
+static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes_max(const wm_field *f, const int32_t x[3],
+                                                                      const int32_t y[3], uint32_t d,
+                                                                      uint64_t limit, uint64_t *vmax)
+{
+    return lanes_body(f, x, y, d, limit, vmax, NULL, NULL, 0);
 }
 
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
@@ -511,6 +556,9 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
         int32_t x0 = x[0] < x[1] ? x[0] : x[1], x1 = x[0] < x[1] ? x[1] : x[0];
         x0 = x[2] < x0 ? x[2] : x0;
         x1 = x[2] > x1 ? x[2] : x1;
+        if (wx == NULL && wy == NULL)
+            return x1 - x0 < 8 ? scan_box_max(f, x, y, (uint32_t)D, x0, limit, vmax)
+                               : scan_lanes_max(f, x, y, (uint32_t)D, limit, vmax);
         if (x1 - x0 < 8) return scan_box(f, x, y, (uint32_t)D, x0, limit, vmax, wx, wy); /* a row a block */
         return scan_lanes(f, x, y, (uint32_t)D, limit, vmax, wx, wy);
     }

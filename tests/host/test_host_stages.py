@@ -398,8 +398,8 @@ def test_triangle_scan_in_avx2_equals_the_c_scan(c_scan):
 
 def test_small_triangle_lanes_equal_the_c_scan(c_scan):
     """E(T) and its worst sample of random small triangles (D < 2^15: scan32's, which host_scan.c takes in
-    lanes), by the C scan and the lanes, bit for bit; on small grids many touch the last samples, which the
-    lanes read without loading past them."""
+    lanes), by the C scan and the lanes, bit for bit, and E(T) alone (the lanes that keep no place); on
+    small grids many touch the last samples, which the lanes read without loading past them."""
     rng = np.random.default_rng(7)
     lib = native.load()
     for shape, ties in (((300, 301), False), ((37, 40), False), ((9, 8), False), ((60, 50), True)):
@@ -428,6 +428,8 @@ def test_small_triangle_lanes_equal_the_c_scan(c_scan):
                     wx, wy = ctypes.c_int32(-1), ctypes.c_int32(-1)
                     e = lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, ctypes.byref(wx),
                                          ctypes.byref(wy))
-                    got.append((e, wx.value, wy.value))
+                    # and without the worst sample asked for (the lanes that keep no place)
+                    e0 = lib.wm_tri_error(ctypes.byref(fld), ctypes.byref(fp), xs, ys, None, None)
+                    got.append((e, wx.value, wy.value, e0))
                 assert got[0] == got[1], (x, y, metric)
         assert taken > 300
