@@ -60,3 +60,56 @@ def test_the_choice_is_checked(monkeypatch):
     monkeypatch.setenv("WM_CPU", "z80")
     with pytest.raises(soc_cpu.UnknownCpu, match="picorv32, vexriscv"):
         build.build_sim()
+
+
+def _module(text: str, name: str) -> str:
+    start = text.index(f"module {name} (")
+    return text[start:text.index("endmodule", start)]
+
+
+@pytest.mark.parametrize("kib", [8, 16, 32])
+def test_icache_resized(kib, verilator, tmp_path):
+    """The VexRiscv with a larger instruction cache (soc_cpu.icache_resized): only the cache module
+    changes, its memories as deep as the size asks, its flush sweeping every line, and Verilator finds
+    no width or other warning in the result that the package's own file does not have (the whole
+    firmware running on the default CPU's cache is tests/sim/test_stream_board.py's)."""
+    import re
+    import subprocess
+
+    cpu = soc_cpu.CPUS["vexriscv"]
+    shipped = (cpu.folder() / cpu.verilog).read_text()
+    lines, words = kib * 32, kib * 256
+    lb, top = lines.bit_length() - 1, 12 + (kib // 4).bit_length() - 1
+    text = soc_cpu.icache_resized(shipped, kib)
+    old_i, new_i = _module(shipped, "InstructionCache"), _module(text, "InstructionCache")
+    assert text.replace(new_i, old_i) == shipped  # nothing outside the cache module
+    assert f"reg [31:0] banks_0 [0:{words - 1}];" in new_i and f"ways_0_tags [0:{lines - 1}];" in new_i
+    assert f"io_cpu_prefetch_pc[{top - 1} : 2]" in new_i and f"io_cpu_prefetch_pc[{top - 1} : 5]" in new_i
+    assert f"reg        [{lb}:0]    lineLoader_flushCounter;" in new_i  # line index bits and a done bit
+    assert "[11 : 5]" not in new_i and "[11 : 2]" not in new_i
+
+    exe, env = verilator
+
+    def warnings(src: str, name: str) -> set[str]:
+        f = tmp_path / name / "VexRiscv.v"
+        f.parent.mkdir()
+        f.write_text(src)
+        r = subprocess.run([exe, "--lint-only", "-Wall", "-Wno-fatal", "--top-module", "VexRiscv", str(f)],
+                           capture_output=True, text=True, env=env)
+        assert "%Error" not in r.stderr, r.stderr[-3000:]
+        # (which bits of an address go unused moves with the cache's size)
+        return {re.sub(r"\S*\.v:\d+:\d+:|\[[0-9:,]+\]$", "", ln) for ln in r.stderr.splitlines()
+                if ln.startswith("%Warning")}
+
+    assert warnings(text, "resized") <= warnings(shipped, "shipped")
+
+
+def test_icache_resized_refuses():
+    """Another size, or a core whose cache is not the one expected (the Lite's 2 KiB), is an error."""
+    cpu = soc_cpu.CPUS["vexriscv"]
+    shipped = (cpu.folder() / cpu.verilog).read_text()
+    lite = (cpu.folder() / "VexRiscv_Lite.v").read_text()
+    with pytest.raises(ValueError, match="8, 16 or 32"):
+        soc_cpu.icache_resized(shipped, 64)
+    with pytest.raises(ValueError, match="not the InstructionCache expected"):
+        soc_cpu.icache_resized(lite, 16)

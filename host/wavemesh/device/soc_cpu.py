@@ -30,6 +30,8 @@ class Cpu:
     define: str  # the Verilog macro that makes soc_top instantiate it ("" for the PicoRV32)
     march: str  # the firmware's -march
     doc: str
+    # the VexRiscv's instruction cache made this size (icache_resized; docs/soc.md, "The CPU"); 0: as shipped
+    icache_kib: int = 0
 
     def folder(self) -> Path:
         try:
@@ -41,7 +43,19 @@ class Cpu:
         return Path(module.data_location)
 
     def verilog_file(self) -> Path:
-        return self.folder() / self.verilog
+        """The CPU's Verilog: the package's file, or for a resized cache the file derived from it in
+        build/gen/cpu/ (written when missing or different; never committed, like the rest of build/)."""
+        shipped = self.folder() / self.verilog
+        if not self.icache_kib:
+            return shipped
+        text = icache_resized(shipped.read_text(), self.icache_kib)
+        out = GEN_CPU / f"{shipped.stem}_ic{self.icache_kib}k.v"
+        if not out.exists() or out.read_text() != text:
+            out.parent.mkdir(parents=True, exist_ok=True)
+            tmp = out.with_suffix(f".{os.getpid()}.tmp")  # pytest sessions may share the tree
+            tmp.write_text(text)
+            tmp.replace(out)
+        return out
 
     @property
     def c_macro(self) -> str:
@@ -55,12 +69,66 @@ CPUS = {
             "PicoRV32 (RV32IMC): no caches, fast multiplier, divider; soc_top's native memory bus"),
         Cpu("vexriscv", "pythondata_cpu_vexriscv", "VexRiscv_IMAC.v", "VexRiscv", "WM_CPU_VEXRISCV",
             "rv32imc",
-            "VexRiscv IMAC (RV32IMAC): 5 stages, 4 KiB instruction and data caches, one-cycle multiplier, "
-            "33-cycle divider, compressed instructions; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on "
-            "the native bus"),
+            "VexRiscv IMAC (RV32IMAC): 5 stages, a 16 KiB instruction cache (the package's 4 KiB one made "
+            "larger: icache_resized) and a 4 KiB data cache, one-cycle multiplier, 33-cycle divider, "
+            "compressed instructions; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on the native bus",
+            icache_kib=16),
     )
 }
 CPU = "vexriscv"
+
+# where a CPU's derived Verilog is written (Cpu.verilog_file)
+GEN_CPU = Path(__file__).resolve().parents[3] / "build" / "gen" / "cpu"
+
+
+def _sizes(kib: int) -> tuple[int, int, int]:
+    """(the first address bit above a cache of `kib` KiB, its line index bits, its word index bits)."""
+    if kib not in (8, 16, 32):
+        raise ValueError(f"a cache of {kib} KiB: 8, 16 or 32")
+    lb = (kib * 32).bit_length() - 1  # 32-byte lines
+    return lb + 5, lb, lb + 3
+
+
+def _resize(text: str, module: str, edits: list[tuple[str, str, int]]) -> str:
+    """`text` with `module`'s body edited: each (old, new, count) replaces exactly count occurrences."""
+    start = text.index(f"module {module} (")
+    end = text.index("endmodule", start)
+    body = text[start:end]
+    for old, new, count in edits:
+        if body.count(old) != count:
+            raise ValueError(f"not the {module} expected: {old!r} {body.count(old)} times, not {count}")
+        body = body.replace(old, new)
+    return text[:start] + body + text[end:]
+
+
+def icache_resized(text: str, kib: int) -> str:
+    """The VexRiscv Verilog `text` (a GenCoreDefault core with the package's one-way 4 KiB instruction
+    cache of 32-byte lines) with that cache made `kib` KiB (8, 16 or 32): the same module, its data
+    memory and tag memory deeper, their indices wider, the flush sweep over every line.  The tags keep
+    the address bits 31..12, the bits above 4 KiB being then both index and tag (equal by construction),
+    so the hit test is unchanged.  Raises ValueError when the text is not the cache this expects."""
+    top, lb, wb = _sizes(kib)
+    return _resize(text, "InstructionCache", [
+        ("reg        [7:0]    lineLoader_flushCounter;",
+         f"reg        [{lb}:0]    lineLoader_flushCounter;", 1),
+        ("lineLoader_flushCounter[7]", f"lineLoader_flushCounter[{lb}]", 5),
+        ("lineLoader_flushCounter[6 : 0]", f"lineLoader_flushCounter[{lb - 1} : 0]", 1),
+        ("lineLoader_flushCounter + 8'h01", f"lineLoader_flushCounter + {lb + 1}'h001", 1),
+        ("lineLoader_flushCounter <= 8'h0;", f"lineLoader_flushCounter <= {lb + 1}'h000;", 1),
+        ("wire       [6:0]    lineLoader_write_tag_0_payload_address;",
+         f"wire       [{lb - 1}:0]    lineLoader_write_tag_0_payload_address;", 1),
+        ("wire       [9:0]    lineLoader_write_data_0_payload_address;",
+         f"wire       [{wb - 1}:0]    lineLoader_write_data_0_payload_address;", 1),
+        ("wire       [9:0]    _zz_fetchStage_read_banksValue_0_dataMem;",
+         f"wire       [{wb - 1}:0]    _zz_fetchStage_read_banksValue_0_dataMem;", 1),
+        ("wire       [6:0]    _zz_fetchStage_read_waysValues_0_tag_valid;",
+         f"wire       [{lb - 1}:0]    _zz_fetchStage_read_waysValues_0_tag_valid;", 1),
+        ("reg [31:0] banks_0 [0:1023];", f"reg [31:0] banks_0 [0:{2**wb - 1}];", 1),
+        ("reg [21:0] ways_0_tags [0:127];", f"reg [21:0] ways_0_tags [0:{2**lb - 1}];", 1),
+        ("lineLoader_address[11 : 5]", f"lineLoader_address[{top - 1} : 5]", 2),
+        ("io_cpu_prefetch_pc[11 : 2]", f"io_cpu_prefetch_pc[{top - 1} : 2]", 1),
+        ("io_cpu_prefetch_pc[11 : 5]", f"io_cpu_prefetch_pc[{top - 1} : 5]", 1),
+    ])
 
 
 class UnknownCpu(ValueError):
