@@ -68,11 +68,11 @@ def _module(text: str, name: str) -> str:
 
 
 @pytest.mark.parametrize("kib", [8, 16, 32])
-def test_icache_resized(kib, verilator, tmp_path):
-    """The VexRiscv with a larger instruction cache (soc_cpu.icache_resized): only the cache module
-    changes, its memories as deep as the size asks, its flush sweeping every line, and Verilator finds
-    no width or other warning in the result that the package's own file does not have (the whole
-    firmware running on the default CPU's cache is tests/sim/test_stream_board.py's)."""
+def test_caches_resized(kib, verilator, tmp_path):
+    """The VexRiscv with larger caches (soc_cpu.icache_resized, dcache_resized): only the cache modules
+    change, their memories as deep as the size asks, their flushes sweeping every line, and Verilator
+    finds no width or other warning in the result that the package's own file does not have (the whole
+    firmware running on the default CPU's caches is tests/sim/test_stream_board.py's)."""
     import re
     import subprocess
 
@@ -80,13 +80,21 @@ def test_icache_resized(kib, verilator, tmp_path):
     shipped = (cpu.folder() / cpu.verilog).read_text()
     lines, words = kib * 32, kib * 256
     lb, top = lines.bit_length() - 1, 12 + (kib // 4).bit_length() - 1
-    text = soc_cpu.icache_resized(shipped, kib)
+    icache = soc_cpu.icache_resized(shipped, kib)
+    text = soc_cpu.dcache_resized(icache, kib)
     old_i, new_i = _module(shipped, "InstructionCache"), _module(text, "InstructionCache")
-    assert text.replace(new_i, old_i) == shipped  # nothing outside the cache module
+    old_d, new_d = _module(shipped, "DataCache"), _module(text, "DataCache")
+    assert text.replace(new_i, old_i).replace(new_d, old_d) == shipped  # nothing outside the two modules
+    assert _module(icache, "DataCache") == old_d  # each function its own cache
     assert f"reg [31:0] banks_0 [0:{words - 1}];" in new_i and f"ways_0_tags [0:{lines - 1}];" in new_i
     assert f"io_cpu_prefetch_pc[{top - 1} : 2]" in new_i and f"io_cpu_prefetch_pc[{top - 1} : 5]" in new_i
     assert f"reg        [{lb}:0]    lineLoader_flushCounter;" in new_i  # line index bits and a done bit
-    assert "[11 : 5]" not in new_i and "[11 : 2]" not in new_i
+    assert f"ways_0_data_symbol3 [0:{words - 1}];" in new_d and f"ways_0_tags [0:{lines - 1}];" in new_d
+    assert f"io_cpu_execute_address[{top - 1} : 2]" in new_d
+    assert f"io_cpu_memory_address[{top - 1} : 2]" in new_d
+    assert f"reg        [{lb}:0]    stageB_flusher_counter;" in new_d
+    for body in (new_i, new_d):
+        assert "[11 : 5]" not in body and "[11 : 2]" not in body
 
     exe, env = verilator
 
@@ -104,12 +112,14 @@ def test_icache_resized(kib, verilator, tmp_path):
     assert warnings(text, "resized") <= warnings(shipped, "shipped")
 
 
-def test_icache_resized_refuses():
-    """Another size, or a core whose cache is not the one expected (the Lite's 2 KiB), is an error."""
+def test_caches_resized_refuse():
+    """Another size, or a core whose caches are not the ones expected (the Lite's: a 2 KiB instruction
+    cache, no data cache), is an error."""
     cpu = soc_cpu.CPUS["vexriscv"]
     shipped = (cpu.folder() / cpu.verilog).read_text()
     lite = (cpu.folder() / "VexRiscv_Lite.v").read_text()
-    with pytest.raises(ValueError, match="8, 16 or 32"):
-        soc_cpu.icache_resized(shipped, 64)
-    with pytest.raises(ValueError, match="not the InstructionCache expected"):
-        soc_cpu.icache_resized(lite, 16)
+    for resize in (soc_cpu.icache_resized, soc_cpu.dcache_resized):
+        with pytest.raises(ValueError, match="8, 16 or 32"):
+            resize(shipped, 64)
+        with pytest.raises(ValueError, match="not the .*Cache expected"):
+            resize(lite, 16)

@@ -32,6 +32,7 @@ class Cpu:
     doc: str
     # the VexRiscv's instruction cache made this size (icache_resized; docs/soc.md, "The CPU"); 0: as shipped
     icache_kib: int = 0
+    dcache_kib: int = 0  # ... and its data cache (dcache_resized)
 
     def folder(self) -> Path:
         try:
@@ -46,10 +47,14 @@ class Cpu:
         """The CPU's Verilog: the package's file, or for a resized cache the file derived from it in
         build/gen/cpu/ (written when missing or different; never committed, like the rest of build/)."""
         shipped = self.folder() / self.verilog
-        if not self.icache_kib:
+        if not self.icache_kib and not self.dcache_kib:
             return shipped
-        text = icache_resized(shipped.read_text(), self.icache_kib)
-        out = GEN_CPU / f"{shipped.stem}_ic{self.icache_kib}k.v"
+        text, name = shipped.read_text(), shipped.stem
+        if self.icache_kib:
+            text, name = icache_resized(text, self.icache_kib), f"{name}_ic{self.icache_kib}k"
+        if self.dcache_kib:
+            text, name = dcache_resized(text, self.dcache_kib), f"{name}_dc{self.dcache_kib}k"
+        out = GEN_CPU / f"{name}.v"
         if not out.exists() or out.read_text() != text:
             out.parent.mkdir(parents=True, exist_ok=True)
             tmp = out.with_suffix(f".{os.getpid()}.tmp")  # pytest sessions may share the tree
@@ -69,10 +74,10 @@ CPUS = {
             "PicoRV32 (RV32IMC): no caches, fast multiplier, divider; soc_top's native memory bus"),
         Cpu("vexriscv", "pythondata_cpu_vexriscv", "VexRiscv_IMAC.v", "VexRiscv", "WM_CPU_VEXRISCV",
             "rv32imc",
-            "VexRiscv IMAC (RV32IMAC): 5 stages, a 16 KiB instruction cache (the package's 4 KiB one made "
-            "larger: icache_resized) and a 4 KiB data cache, one-cycle multiplier, 33-cycle divider, "
+            "VexRiscv IMAC (RV32IMAC): 5 stages, 16 KiB instruction and data caches (the package's 4 KiB "
+            "ones made larger: icache_resized, dcache_resized), one-cycle multiplier, 33-cycle divider, "
             "compressed instructions; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on the native bus",
-            icache_kib=16),
+            icache_kib=16, dcache_kib=16),
     )
 }
 CPU = "vexriscv"
@@ -91,7 +96,9 @@ def _sizes(kib: int) -> tuple[int, int, int]:
 
 def _resize(text: str, module: str, edits: list[tuple[str, str, int]]) -> str:
     """`text` with `module`'s body edited: each (old, new, count) replaces exactly count occurrences."""
-    start = text.index(f"module {module} (")
+    start = text.find(f"module {module} (")
+    if start < 0:
+        raise ValueError(f"not the {module} expected: the core has no such module")
     end = text.index("endmodule", start)
     body = text[start:end]
     for old, new, count in edits:
@@ -129,6 +136,36 @@ def icache_resized(text: str, kib: int) -> str:
         ("io_cpu_prefetch_pc[11 : 2]", f"io_cpu_prefetch_pc[{top - 1} : 2]", 1),
         ("io_cpu_prefetch_pc[11 : 5]", f"io_cpu_prefetch_pc[{top - 1} : 5]", 1),
     ])
+
+
+def dcache_resized(text: str, kib: int) -> str:
+    """`text` with the VexRiscv's one-way 4 KiB data cache made `kib` KiB, as icache_resized does the
+    instruction cache: its tag and data memories deeper, their indices (and the write-collision
+    compares) wider, the flush sweep over every line, the tags still the address bits 31..12."""
+    top, lb, wb = _sizes(kib)
+    edits = [(f"reg        [6:0]    {n};", f"reg        [{lb - 1}:0]    {n};", 1)
+             for n in ("tagsReadCmd_payload", "tagsWriteCmd_payload_address",
+                       "tagsWriteLastCmd_payload_address")]
+    edits += [(f"reg        [9:0]    {n};", f"reg        [{wb - 1}:0]    {n};", 1)
+              for n in ("dataReadCmd_payload", "dataWriteCmd_payload_address")]
+    edits += [(f"wire       [9:0]    {n};", f"wire       [{wb - 1}:0]    {n};", 1)
+              for n in ("_zz_stage0_dataColisions", "_zz__zz_stageA_dataColisions")]
+    edits += [(f"reg [7:0] ways_0_data_symbol{k} [0:1023];",
+               f"reg [7:0] ways_0_data_symbol{k} [0:{2**wb - 1}];", 1) for k in range(4)]
+    edits += [
+        ("reg [21:0] ways_0_tags [0:127];", f"reg [21:0] ways_0_tags [0:{2**lb - 1}];", 1),
+        ("reg        [7:0]    stageB_flusher_counter;", f"reg        [{lb}:0]    stageB_flusher_counter;", 1),
+        ("stageB_flusher_counter[7]", f"stageB_flusher_counter[{lb}]", 2),
+        ("stageB_flusher_counter[6:0]", f"stageB_flusher_counter[{lb - 1}:0]", 1),
+        ("stageB_flusher_counter + 8'h01", f"stageB_flusher_counter + {lb + 1}'h001", 1),
+        ("stageB_flusher_counter <= 8'h0;", f"stageB_flusher_counter <= {lb + 1}'h000;", 2),
+        # (the 10-bit ones before the 7-bit ones: a 32 KiB cache has 10-bit line numbers)
+        ("10'bxxxxxxxxxx", f"{wb}'b" + "x" * wb, 2),
+        ("7'bxxxxxxx", f"{lb}'b" + "x" * lb, 2),
+        ("[11 : 2]", f"[{top - 1} : 2]", 4),
+        ("[11 : 5]", f"[{top - 1} : 5]", 3),
+    ]
+    return _resize(text, "DataCache", edits)
 
 
 class UnknownCpu(ValueError):
