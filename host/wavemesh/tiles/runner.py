@@ -398,18 +398,15 @@ class Runner:
             # on every one as a process of its own would: one thread each with one worker a CPU
             share = max(1, native.cores() // self.workers)
             cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
-            self.pinned = []
+            # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
+            # (_worker_start): set from here, the call waited while the new process, running on the other
+            # CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
+            self.pinned = list(cpus) if len(cpus) == self.workers else [None] * self.workers
             for k in range(self.workers):
                 here, there = ctx.Pipe()
-                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share), daemon=True)
+                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share, self.pinned[k]),
+                                   daemon=True)
                 proc.start()
-                self.pinned.append(None)
-                if len(cpus) == self.workers:  # one worker a CPU: each its own (PIN)
-                    try:
-                        os.sched_setaffinity(proc.pid, {cpus[k]})
-                        self.pinned[k] = cpus[k]
-                    except OSError:  # a CPU taken away meanwhile: the worker goes where the kernel puts it
-                        pass
                 there.close()
                 self.pool.append((proc, here))
         finally:
@@ -615,13 +612,13 @@ class _Kept:
 _HELD: dict = {}  # a pool worker's results kept for a _Held (_worker_loop)
 
 
-def _worker_loop(pipe, parent: int, threads: int | None = None) -> None:
+def _worker_loop(pipe, parent: int, threads: int | None = None, cpu: int | None = None) -> None:
     """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
     ("keep", key, value): an arg its next tasks name by the key; ("chain", [(fn, args), ...]): each in turn,
     a _Prev in args the one before's result, the results back as a list; ("chain", steps, graph, store,
     drops): the same, then each step's result kept under its node in ``store`` (-1: not kept), for a _Held
     in a later task's args, and the results named in ``drops`` let go (a new graph: every one)."""
-    _worker_start(parent, threads)
+    _worker_start(parent, threads, cpu)
     kept: dict = {}
     held = _HELD  # node -> the result this worker made, of the graph held_graph
     held.clear()
@@ -664,12 +661,18 @@ def _worker_loop(pipe, parent: int, threads: int | None = None) -> None:
             pipe.send(("error", RuntimeError(f"{type(e).__name__}: {e}"), None))
 
 
-def _worker_start(parent: int, threads: int | None = None) -> None:
+def _worker_start(parent: int, threads: int | None = None, cpu: int | None = None) -> None:
     """A pool worker's start: Ctrl-C is the parent's to handle (it ends the workers, _end_workers), SIGTERM
     ends the worker at once (SIGHUP too, unless the run ignores it: nohup), and the worker ends when its
     parent does, even one killed outright (Linux's PR_SET_PDEATHSIG).  The signals, blocked since the fork
     (_start_pool), are let through once these are set.  ``threads``: the host stages' threads in this
-    worker (native.set_threads), unless the run gave its own (--threads)."""
+    worker (native.set_threads), unless the run gave its own (--threads); ``cpu``: the CPU it is kept on
+    (PIN), first (a CPU taken away meanwhile: it goes where the kernel puts it)."""
+    if cpu is not None:
+        try:
+            os.sched_setaffinity(0, {cpu})
+        except OSError:
+            pass
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:
