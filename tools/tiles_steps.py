@@ -269,7 +269,7 @@ def main(argv: list[str]) -> int:
             x[5] += samples
         model += max(w[0] for w in per.values())
         firsts = [min(i[2] for _, i in infos if i[0] == pid) for pid in per]  # each worker's first start
-        print(f"{part}: wall {b - a:.2f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
+        print(f"{part}: wall {b - a:.3f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
               "per worker CPU / busy / waiting s (tasks, the most tiles held; the times it found no task "
               "in its pipe between its first and last, and their ms): "
               + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]}; "

@@ -272,26 +272,29 @@ class Runner:
         else:  # each worker's tasks and results through its own pipe; the parent has no threads of its own
             # for them: a run that ends early kills its workers and returns at once (concurrent.futures'
             # pool could wait forever at exit for a result a killed worker had half sent)
-            self._start_pool()
-            sched = _Schedule(nodes, {t: int(h * len(self.pool)) for t, h in (homes or {}).items()}, deps)
+            # a new pool's first worker is given its first chain before the others are forked: it starts its
+            # tasks while they fork and start
+            self._start_pool(1)
+            size = self.workers  # the pool's once every worker is forked
+            sched = _Schedule(nodes, {t: int(h * size) for t, h in (homes or {}).items()}, deps)
             # each worker's chains, in the order sent: the first written to its pipe, a second one (decided
             # while the worker runs the first, so that it starts it without waiting for the parent) written
             # only while both fit in the pipe's buffer, else held here and written as the first one's result
             # comes (a message that could block the parent's send while the worker sends its result back
             # would block both ends: one of any size goes only to a worker that waits for it)
-            sent: list[list] = [[] for _ in self.pool]  # [chain, its bytes, written]
-            room = [_pipe_room(pipe) for _, pipe in self.pool]
+            sent: list[list] = [[] for _ in range(size)]  # [chain, its bytes, written]
+            room = [_pipe_room(pipe) for _, pipe in self.pool] + [0] * (size - len(self.pool))
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
-            holds[:] = [set() for _ in self.pool]
-            drops[:] = [[] for _ in self.pool]
+            holds[:] = [set() for _ in range(size)]
+            drops[:] = [[] for _ in range(size)]
             read = [bool(r) for r in readers]  # a result some node reads: kept by the worker that makes it
-            kept: list[set] = [set() for _ in self.pool]  # the shared args each worker has
+            kept: list[set] = [set() for _ in range(size)]  # the shared args each worker has
 
             def give(w: int, now: bool = True) -> None:
                 """Worker ``w``'s next chain (_Schedule.chain) when it has none, or its second while it runs
                 the first (AHEAD; a chain sent ahead takes at most one tile more than the worker would
                 otherwise hold: its batch only of tiles it has read already); ``now``: written at once."""
-                if len(sent[w]) > 1 or not (chain := sched.chain(w, len(self.pool), bool(sent[w]))):
+                if len(sent[w]) > 1 or not (chain := sched.chain(w, size, bool(sent[w]))):
                     return
                 out = []
                 steps = []
@@ -351,6 +354,11 @@ class Runner:
 
             ready = _Ready()
             hand_out(range(len(self.pool)))
+            if len(self.pool) < size:  # the rest of a new pool, then their first chains
+                started = len(self.pool)
+                self._start_pool()
+                room[started:] = [_pipe_room(pipe) for _, pipe in self.pool[started:]]
+                hand_out(range(started, size))
             while any(sent):
                 live = [w for w in range(len(self.pool)) if sent[w]]
                 fds = ready.wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
@@ -381,8 +389,10 @@ class Runner:
                 self.pool = []
         return results
 
-    def _start_pool(self) -> None:
-        if self.pool:
+    def _start_pool(self, upto: int | None = None) -> None:
+        """The pool's workers forked, up to ``upto`` of them (None: all)."""
+        upto = self.workers if upto is None else min(upto, self.workers)
+        if len(self.pool) >= upto:
             return
         native.load()  # built once here, not by every worker at once
         # fork: the workers start from this process as it is (the library loaded; a script that calls
@@ -390,19 +400,22 @@ class Runner:
         ctx = multiprocessing.get_context("fork")
         # the signals held back over the forks: a worker starts with them blocked and unblocks them
         # once its own handlers are set (_worker_start), so a Ctrl-C just after the fork is not a
-        # KeyboardInterrupt traceback in the worker; here they are raised after the last fork, every
-        # worker in the pool by then (ended by __exit__)
+        # KeyboardInterrupt traceback in the worker; here they are raised after this call's last fork,
+        # every worker forked in the pool by then (ended by __exit__)
         held = signal.pthread_sigmask(signal.SIG_BLOCK, _WORKER_SIGNALS)
         try:
             # each worker's host stages (quantisation, error measure, checks) on its share of the CPUs, not
             # on every one as a process of its own would: one thread each with one worker a CPU
             share = max(1, native.cores() // self.workers)
-            cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
-            # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
-            # (_worker_start): set from here, the call waited while the new process, running on the other
-            # CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
-            self.pinned = list(cpus) if len(cpus) == self.workers else [None] * self.workers
-            for k in range(self.workers):
+            if not self.pool:
+                cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
+                # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
+                # (_worker_start): set from here, the call waited while the new process, running on the
+                # other CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
+                here = _this_cpu() if len(cpus) == self.workers else None
+                cpus.sort(key=lambda c: c == here)  # this process's CPU last: the first worker starts at once
+                self.pinned = list(cpus) if len(cpus) == self.workers else [None] * self.workers
+            for k in range(len(self.pool), upto):
                 here, there = ctx.Pipe()
                 proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share, self.pinned[k]),
                                    daemon=True)
