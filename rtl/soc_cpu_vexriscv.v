@@ -2,8 +2,8 @@
  * wavemesh: the VexRiscv as the SoC's CPU, behind the PicoRV32's native memory interface
  *
  * The CPU is the IMAC VexRiscv of the pythondata-cpu-vexriscv package (VexRiscv_IMAC.v, never copied
- * here; its module is VexRiscv, as in the package's other variants): RV32IMAC, 5 stages, a 16 KiB
- * instruction cache and a 16 KiB write-through data cache (the package's 4 KiB ones made larger in a
+ * here; its module is VexRiscv, as in the package's other variants): RV32IMAC, 5 stages, a 32 KiB
+ * instruction cache and a 32 KiB write-through data cache (the package's 4 KiB ones made larger in a
  * derived copy of the file: host/wavemesh/device/soc_cpu.py, icache_resized and dcache_resized),
  * one-cycle multiplier, 33-cycle divider.  soc_top
  * instantiates this module instead of picorv32 when WM_CPU_VEXRISCV is defined

@@ -74,10 +74,10 @@ CPUS = {
             "PicoRV32 (RV32IMC): no caches, fast multiplier, divider; soc_top's native memory bus"),
         Cpu("vexriscv", "pythondata_cpu_vexriscv", "VexRiscv_IMAC.v", "VexRiscv", "WM_CPU_VEXRISCV",
             "rv32imc",
-            "VexRiscv IMAC (RV32IMAC): 5 stages, 16 KiB instruction and data caches (the package's 4 KiB "
+            "VexRiscv IMAC (RV32IMAC): 5 stages, 32 KiB instruction and data caches (the package's 4 KiB "
             "ones made larger: icache_resized, dcache_resized), one-cycle multiplier, 33-cycle divider, "
             "compressed instructions; rtl/soc_cpu_vexriscv.v puts its Wishbone buses on the native bus",
-            icache_kib=16, dcache_kib=16),
+            icache_kib=32, dcache_kib=32),
     )
 }
 CPU = "vexriscv"
