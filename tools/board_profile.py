@@ -183,7 +183,11 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
         if len(parts) == 3:
             syms[parts[2]] = int(parts[0], 16)
     w, h = rep["input"]["width"], rep["input"]["height"]
-    cap = min(rep["device"]["tri_capacity"], 2 * (w - 1) * (h - 1))  # board_job.c's clamp (wm_tri_cap_max)
+    cap = rep["device"]["tri_capacity"]
+    grid = 2 * (w - 1) * (h - 1)  # board_job.c's clamp (wm_tri_cap_max), skewed as its skewed_capacity
+    if 2 <= grid < cap:
+        cap = next((c for c in range(grid, min(cap, grid + 8192) + 1, 2)
+                    if 1024 <= a8(2 * (c // 2 + w + h + 2)) % 8192 <= 8192 - 1024), grid)
     vc = cap // 2 + w + h + 2  # wm_vert_cap_for
     items = max(cap, vc)
     out = [(mm.FW_RAM.base, "firmware RAM: code, rodata"), (syms["__data_start"], "firmware RAM: data, bss"),
