@@ -522,3 +522,29 @@ def test_pool_worker_keeps_the_results_it_made():
     finally:
         runner.HOLD = saved
     assert copied[False] > 0
+
+
+def test_pool_worker_lets_go_of_held_results():
+    """runner.HOLD: a held result is let go once every node that reads it has been given out, so a worker
+    holds about a level's results of a deep graph, not every result it ever made (fifteen levels of four
+    nodes, each reading two of the level before, both made by the same worker)."""
+    from wavemesh.tiles import runner
+
+    width, depth = 4, 15
+    nodes = [Node(_made, (), (0, k), (k % 2,)) for k in range(width)]
+    for d in range(1, depth):
+        base = (d - 1) * width
+        nodes += [Node(_made, (Ref(base + k), Ref(base + (k + 2) % width)), (d, k), (k % 2,))
+                  for k in range(width)]
+    want = [r.value for r in tiles.Runner(1).graph(nodes)]
+    saved = runner.HOLD
+    try:
+        runner.HOLD = True
+        with tiles.Runner(2) as run:
+            out = run.graph(nodes, homes={0: 0.0, 1: 0.5})
+    finally:
+        runner.HOLD = saved
+    assert [r.value for r in out] == want
+    held = [r.held for r in out]
+    assert max(held) > 0  # results were held at all
+    assert max(held) <= 2 * width  # two levels' at most: without letting go, up to depth * width / 2
