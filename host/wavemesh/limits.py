@@ -19,10 +19,9 @@ def _define(text: str, name: str) -> int:
     return int(re.search(rf"^#define {name} (\d+)\b", text, re.M).group(1))
 
 
-_TEXT = HEADER.read_text()
-MAX_SIDE = _define(_TEXT, "WM_MAX_SIDE")  # largest W or H (every exact product of the refiner within 64 bits)
-MAX_LEVELS = _define(_TEXT, "WM_MAX_LEVELS")  # largest M (16-bit approximations, 18-bit details each level)
-del _TEXT
+HEADER_TEXT = HEADER.read_text()  # read once: wavemesh.refine.native makes its structures from it too
+MAX_SIDE = _define(HEADER_TEXT, "WM_MAX_SIDE")  # largest W or H (the refiner's exact products in 64 bits)
+MAX_LEVELS = _define(HEADER_TEXT, "WM_MAX_LEVELS")  # largest M (16-bit approximations, 18-bit details each)
 TAU_MAX = (1 << 18) - 1  # largest tau in coefficient units (every 18-bit detail below it: all flat)
 
 # The refiner's per-level statistics: the int32 fields of wm_level_stats (firmware/include/wavemesh.h)

@@ -11,7 +11,7 @@ import re
 from wavemesh.device import protocol as P
 from wavemesh.refine import native
 
-HEADER = native.HEADER.read_text()
+HEADER = (native.FIRMWARE / "include" / "wavemesh.h").read_text()
 
 
 def test_structures_are_read_from_the_header():

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from wavemesh.errors import WavemeshError
-from wavemesh.limits import HEADER, MAX_SIDE, STAT_FIELDS  # wavemesh.h, its WM_MAX_SIDE; the stats
+from wavemesh.limits import HEADER_TEXT, MAX_SIDE, STAT_FIELDS  # wavemesh.h's text, WM_MAX_SIDE; the stats
 from wavemesh.mesh import Mesh
 from wavemesh.model.haar import HaarLevel
 from wavemesh.record import record
@@ -48,7 +48,8 @@ class NativeError(WavemeshError):
     """The library could not be built or loaded, or it returned an error code."""
 
 
-# HEADER (wavemesh.h, wavemesh.limits): the one statement of the structures the library takes
+# HEADER_TEXT (wavemesh.h, read once by wavemesh.limits): the one statement of the structures the library
+# takes
 _C_TYPES = {"int32_t": ctypes.c_int32, "uint32_t": ctypes.c_uint32, "uint64_t": ctypes.c_uint64,
             "const uint16_t *": ctypes.POINTER(ctypes.c_uint16),
             "const int32_t *": ctypes.POINTER(ctypes.c_int32),
@@ -59,7 +60,7 @@ def c_struct(name: str, header: str | None = None) -> list[tuple[str, object]]:
     """The ctypes fields of ``typedef struct NAME { ... } NAME;`` in wavemesh.h: (member, type), in order.
     The structures below are made from the header, so a member added there is one here too (their sizes
     are checked against the library's wm_abi_size when it loads)."""
-    text = HEADER.read_text() if header is None else header
+    text = HEADER_TEXT if header is None else header
     body = re.search(rf"typedef struct {name} \{{(.*?)\}} {name};", text, re.S).group(1)
     body = re.sub(r"/\*.*?\*/", "", body, flags=re.S)
     out = []
