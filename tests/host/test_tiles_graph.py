@@ -548,3 +548,23 @@ def test_pool_worker_lets_go_of_held_results():
     held = [r.held for r in out]
     assert max(held) > 0  # results were held at all
     assert max(held) <= 2 * width  # two levels' at most: without letting go, up to depth * width / 2
+
+
+def test_pool_worker_keeps_no_result_only_its_chain_reads():
+    """runner.HOLD: a result whose one reader runs next in the same chain (given it as _Prev) is not held:
+    two lines of 30 nodes, each reading the one before on its tile (the chains' followers), leave a worker
+    at most the last chain's end held (22 when such results were kept to the graph's end)."""
+    from wavemesh.tiles import runner
+
+    nodes = [Node(_made, (), (0, k), (k,)) for k in range(2)]
+    nodes += [Node(_made, (Ref(k - 2),), (0, k), (k % 2,)) for k in range(2, 60)]
+    want = [r.value for r in tiles.Runner(1).graph(nodes)]
+    saved = runner.HOLD
+    try:
+        runner.HOLD = True
+        with tiles.Runner(2) as run:
+            out = run.graph(nodes, homes={0: 0.0, 1: 0.5})
+    finally:
+        runner.HOLD = saved
+    assert [r.value for r in out] == want
+    assert max(r.held for r in out) <= 1

@@ -233,7 +233,6 @@ class Runner:
                         drops[w].append(d)
 
         self.n_maps += 1
-        hold = HOLD and self.client is None and self.workers > 1 and len(nodes) > 1
         if self.client is not None:
             key = f"wavemesh-{self.run_id}-{self.n_maps}"
             futures: list = []
@@ -287,7 +286,6 @@ class Runner:
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
             holds[:] = [set() for _ in range(size)]
             drops[:] = [[] for _ in range(size)]
-            read = [bool(r) for r in readers]  # a result some node reads: kept by the worker that makes it
             kept: list[set] = [set() for _ in range(size)]  # the shared args each worker has
 
             def give(w: int, now: bool = True) -> None:
@@ -307,7 +305,9 @@ class Runner:
                             out.append(_DUMPS(("keep", key, a)))  # no answer: the worker keeps it
                             kept[w].add(key)
                     steps.append((nodes[k].fn, tuple(keys.get(id(a), a) for a in args)))
-                store = tuple(k if hold and read[k] else -1 for k in chain)
+                # a result a node not yet given reads: kept by the worker that makes it (one only its chain
+                # reads comes to the next step as _Prev and is not kept; no node given later reads it)
+                store = tuple(k if HOLD and readers[k] else -1 for k in chain)
                 out.append(_DUMPS(("chain", steps, self.n_maps, store, tuple(drops[w]))))
                 drops[w].clear()
                 sent[w].append([chain, out, False])
@@ -371,7 +371,7 @@ class Runner:
                         write(w)  # a second chain held back: the worker waits for it
                         let_go()  # before its results are handled
                         for i, r in zip(chain, reply, strict=True):
-                            if hold and read[i]:
+                            if HOLD and readers[i]:  # as store said (only its chain gave a reader since)
                                 holds[w].add(i)
                             got(i, r, False)
                             sched.finished(i)
