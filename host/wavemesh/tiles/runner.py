@@ -412,9 +412,12 @@ class Runner:
                 # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
                 # (_worker_start): set from here, the call waited while the new process, running on the
                 # other CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
-                here = _this_cpu() if len(cpus) == self.workers else None
-                cpus.sort(key=lambda c: c == here)  # this process's CPU last: the first worker starts at once
-                self.pinned = list(cpus) if len(cpus) == self.workers else [None] * self.workers
+                if len(cpus) == self.workers:
+                    now = _this_cpu()
+                    cpus.sort(key=lambda c: c == now)  # this process's CPU last: the first starts at once
+                    self.pinned = cpus
+                else:
+                    self.pinned = [None] * self.workers
             for k in range(len(self.pool), upto):
                 here, there = ctx.Pipe()
                 proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share, self.pinned[k]),
