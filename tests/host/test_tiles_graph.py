@@ -126,8 +126,8 @@ def test_worker_told_to_end_lowers_its_priority():
     proc.start()
     there.close()
     out_w.close()
-    here.send((_add, (1, 2)))
-    assert here.recv() == ("ok", 3, None)
+    here.send(("chain", [(_add, (1, 2))], 1, (-1,), ()))
+    assert here.recv() == ("ok", [3], None)
     here.send(None)
     assert out_r.poll(30) and out_r.recv() == 19
     proc.join(30)

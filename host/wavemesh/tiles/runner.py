@@ -629,11 +629,11 @@ _HELD: dict = {}  # a pool worker's results kept for a _Held (_worker_loop)
 
 
 def _worker_loop(pipe, parent: int, threads: int | None = None, cpu: int | None = None) -> None:
-    """A pool worker: tasks (fn, args) from its pipe until it closes; each result, or the error, back;
-    ("keep", key, value): an arg its next tasks name by the key; ("chain", [(fn, args), ...]): each in turn,
-    a _Prev in args the one before's result, the results back as a list; ("chain", steps, graph, store,
-    drops): the same, then each step's result kept under its node in ``store`` (-1: not kept), for a _Held
-    in a later task's args, and the results named in ``drops`` let go (a new graph: every one)."""
+    """A pool worker: tasks from its pipe until it closes (None); ("keep", key, value): an arg its next tasks
+    name by the key; ("chain", [(fn, args), ...], graph, store, drops): each step in turn, a _Prev in args
+    the one before's result, the results (or the error) back as a list, each step's result kept under its
+    node in ``store`` (-1: not kept) for a _Held in a later task's args, and the results named in ``drops``
+    let go (a new graph: every one)."""
     _worker_start(parent, threads, cpu)
     kept: dict = {}
     held = _HELD  # node -> the result this worker made, of the graph held_graph
@@ -650,25 +650,24 @@ def _worker_loop(pipe, parent: int, threads: int | None = None, cpu: int | None 
         if task[0] == "keep":  # ("keep", key, value)
             kept[task[1]] = task[2]
             continue
-        chain = task[0] == "chain"
-        if chain and len(task) > 2 and task[2] != held_graph:
+        _, steps, graph, store, drops = task  # ("chain", steps, graph, store, drops)
+        if graph != held_graph:
             held.clear()
-            held_graph = task[2]
+            held_graph = graph
         try:
             out: list = []
-            for fn, args in (task[1] if chain else [task]):  # ("chain", [(fn, args), ...], ...)
+            for fn, args in steps:
                 args = tuple(kept[a] if isinstance(a, _Kept) else
                              (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else
                              (a.pick(held[a.node]) if a.pick else held[a.node]) if isinstance(a, _Held) else a
                              for a in args)
                 out.append(fn(*args))
-            if chain and len(task) > 2:
-                for k, r in zip(task[3], out, strict=True):
-                    if k >= 0:
-                        held[k] = r
-                for k in task[4]:
-                    held.pop(k, None)
-            reply = ("ok", out if chain else out[0], None)
+            for k, r in zip(store, out, strict=True):
+                if k >= 0:
+                    held[k] = r
+            for k in drops:
+                held.pop(k, None)
+            reply = ("ok", out, None)
         except Exception as e:  # the parent raises it (WavemeshError with its hint)
             reply = ("error", e, getattr(e, "hint", None))
         try:
