@@ -159,7 +159,7 @@ def _check_npy_size(path: str, size_check) -> None:
             layout = npy_layout(path, f)
     except OSError as e:
         raise InputError(f"cannot read {path}: {e.strerror or _one_line(e)}") from None
-    if magic != b"\x93NUMPY" and not magic.startswith(b"PK\x03\x04"):  # (a .npz archive: said below)
+    if _sniff(magic) not in ("npy", "npz"):  # (a .npz archive: said below)
         # else numpy tries it as a pickle and says to allow pickles
         raise InputError(f"cannot read {path}: not a .npy file (it does not begin with numpy's \\x93NUMPY)")
     if layout is None or layout[1].hasobject:
