@@ -306,9 +306,9 @@ static void place_at(const wm_field *f, const uint16_t *at, const int32_t x[3], 
     if (wy) *wy = at ? ay : y[0];
 }
 
-/* The lanes' largest V (each lane's in best) and, when above 0, its first sample into *at: the least
- * place (sample number, in place) among the lanes that hold it, a larger place a later sample in row
- * order. */
+/* The lanes' largest V (each lane's in best) and, when above 0 and at is given, its first sample into *at:
+ * the least place (sample number, in place) among the lanes that hold it, a larger place a later sample
+ * in row order (no at: a scan whose caller asks for no worst sample, its lanes without places). */
 static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i best, __m256i place,
                                                                        const uint16_t *h, const uint16_t **at)
 {
@@ -317,7 +317,7 @@ static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i b
     mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
     mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
     vm = (uint32_t)_mm256_cvtsi256_si32(mv);
-    if (vm) {
+    if (vm && at) {
         __m256i pl = _mm256_blendv_epi8(_mm256_set1_epi32(INT32_MAX), place, _mm256_cmpeq_epi32(best, mv));
         pl = _mm256_min_epi32(pl, _mm256_permute2x128_si256(pl, pl, 1));
         pl = _mm256_min_epi32(pl, _mm256_shuffle_epi32(pl, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -325,15 +325,6 @@ static inline AVX2 __attribute__((always_inline)) uint32_t lanes_first(__m256i b
         *at = h + _mm256_cvtsi256_si32(pl);
     }
     return vm;
-}
-
-/* The lanes' largest V alone (a scan whose caller asks for no worst sample). */
-static inline AVX2 __attribute__((always_inline)) uint32_t lanes_max(__m256i best)
-{
-    __m256i mv = _mm256_max_epi32(best, _mm256_permute2x128_si256(best, best, 1));
-    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(1, 0, 3, 2)));
-    mv = _mm256_max_epi32(mv, _mm256_shuffle_epi32(mv, _MM_SHUFFLE(2, 3, 0, 1)));
-    return (uint32_t)_mm256_cvtsi256_si32(mv);
 }
 
 /* scan_lanes for a triangle whose box is at most 8 samples wide (most of a fine mesh's: on Jacksboro at
@@ -396,7 +387,7 @@ static inline AVX2 __attribute__((always_inline)) int box_body(const wm_field *f
         Sv = _mm256_add_epi32(Sv, dSyv);
         P = _mm256_add_epi32(P, Wv);
     }
-    vm = placed ? lanes_first(best, place, h, &at) : lanes_max(best);
+    vm = lanes_first(best, place, h, placed ? &at : NULL);
 stop:
     *vmax = vm;
     place_at(f, at, x, y, wx, wy);
@@ -501,7 +492,7 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
             end_step(&hi);
         }
     }
-    vm = placed ? lanes_first(best, place, h, &at) : lanes_max(best);
+    vm = lanes_first(best, place, h, placed ? &at : NULL);
 stop:
     *vmax = vm;
     place_at(f, at, x, y, wx, wy);
