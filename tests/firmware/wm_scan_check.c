@@ -2,7 +2,8 @@
  * (AddressSanitizer, UndefinedBehaviorSanitizer; tests/firmware/test_sanitized.py builds and runs it):
  * random triangles on grids allocated to their last sample (a load past it is a report), E(T) and its
  * worst sample by wm_tri_error_within with the scan set to 0 (the C scan), 2 (the blocks) and 3 (the
- * small triangles' lanes and boxes), with and without a bound that stops the scan.  Grids from 2 x 2 to
+ * small triangles' lanes and boxes), with and without a bound that stops the scan, and E(T) alone (no
+ * worst sample asked for: the lanes and boxes that keep no place).  Grids from 2 x 2 to
  * 70 x 70, a few wider than 2^14 (the 64-bit lanes; the small triangles' scans then decline) and a few
  * 3000 rows tall; heights random, in two values (ties: the first worst sample must be named) or small.
  * Prints the triangles compared and the differences; exits 1 on any difference.
@@ -53,7 +54,7 @@ int main(int argc, char **argv)
         for (long t = 0; t < triangles / grids; t++) {
             int32_t x[3], y[3], wx[3], wy[3], r = t % 4 == 0 ? reach : t % 4 == 1 ? 4 : 9;
             int32_t cx = (int32_t)(rnd() % (uint32_t)w), cy = (int32_t)(rnd() % (uint32_t)h), lo, hi;
-            uint32_t e[3], bound = t % 5 == 0 ? 0xFFFFFFFFu : rnd() % (1u << (rnd() % 26));
+            uint32_t e[3], e0[3], bound = t % 5 == 0 ? 0xFFFFFFFFu : rnd() % (1u << (rnd() % 26));
             for (int k = 0; k < 3; k++) {
                 x[k] = clamp(cx + (int32_t)(rnd() % (uint32_t)(2 * r + 1)) - r, w);
                 y[k] = clamp(cy + (int32_t)(rnd() % (uint32_t)(2 * r + 1)) - r, h);
@@ -63,18 +64,19 @@ int main(int argc, char **argv)
                 wm_host_scan(modes[m]);
                 wx[m] = wy[m] = -1;
                 e[m] = wm_tri_error_within(&f, &p, x, y, bound, &wx[m], &wy[m], NULL);
+                e0[m] = wm_tri_error_within(&f, &p, x, y, bound, NULL, NULL, NULL); /* the scans without place */
             }
             lo = hi = x[0];
             for (int k = 1; k < 3; k++) lo = x[k] < lo ? x[k] : lo, hi = x[k] > hi ? x[k] : hi;
             narrow += hi - lo < 8;
             checked++;
             for (int m = 1; m < 3; m++) /* the worst sample is named only within the bound */
-                if (e[m] != e[0] || (e[0] <= bound && (wx[m] != wx[0] || wy[m] != wy[0]))) {
+                if (e[m] != e[0] || e0[m] != e[0] || (e[0] <= bound && (wx[m] != wx[0] || wy[m] != wy[0]))) {
                     if (diff++ < 10)
                         printf("scan %d: (%d, %d) (%d, %d) (%d, %d) on %d x %d, bound %u: %u at (%d, %d), the C "
-                               "scan %u at (%d, %d)\n",
+                               "scan %u at (%d, %d); without the place %u, the C scan %u\n",
                                modes[m], x[0], y[0], x[1], y[1], x[2], y[2], w, h, bound, e[m], wx[m], wy[m], e[0],
-                               wx[0], wy[0]);
+                               wx[0], wy[0], e0[m], e0[0]);
                 }
         }
         free(s);
