@@ -86,6 +86,12 @@ CPU = "vexriscv"
 GEN_CPU = Path(__file__).resolve().parents[3] / "build" / "gen" / "cpu"
 
 
+# the package's caches: 4 KiB of 32-byte lines, 128 lines (7 index bits) of 8 words (10 word index bits)
+_LINE_BITS, _WORD_BITS = 7, 10
+
+Edit = tuple[str, str, int]  # (old, new, count): _resize replaces exactly count occurrences of old
+
+
 def _sizes(kib: int) -> tuple[int, int, int]:
     """(the first address bit above a cache of `kib` KiB, its line index bits, its word index bits)."""
     if kib not in (8, 16, 32):
@@ -94,7 +100,7 @@ def _sizes(kib: int) -> tuple[int, int, int]:
     return lb + 5, lb, lb + 3
 
 
-def _resize(text: str, module: str, edits: list[tuple[str, str, int]]) -> str:
+def _resize(text: str, module: str, edits: list[Edit]) -> str:
     """`text` with `module`'s body edited: each (old, new, count) replaces exactly count occurrences."""
     start = text.find(f"module {module} (")
     if start < 0:
@@ -108,6 +114,29 @@ def _resize(text: str, module: str, edits: list[tuple[str, str, int]]) -> str:
     return text[:start] + body + text[end:]
 
 
+def _widened(kind: str, bits: int, new_bits: int, *names: str) -> list[Edit]:
+    """The declarations ``kind [bits-1:0] name;`` of `names` (in the core's columns) made new_bits wide."""
+    return [(f"{kind:<11}[{bits - 1}:0]    {n};", f"{kind:<11}[{new_bits - 1}:0]    {n};", 1) for n in names]
+
+
+def _deepened(memory: str, bits: int, new_bits: int) -> Edit:
+    """The memory declared ``memory [0:2**bits-1];`` made 2**new_bits deep."""
+    return f"{memory} [0:{2**bits - 1}];", f"{memory} [0:{2**new_bits - 1}];", 1
+
+
+def _flush_sweep(counter: str, lb: int, sep: str, reads: int, resets: int) -> list[Edit]:
+    """A cache's flush sweep over lb line index bits: its `counter` (a line index and a done bit above it)
+    declared, its done bit read `reads` times, its line index (sliced ``[6{sep}:{sep}0]``), its increment
+    and its `resets` resets, all lb + 1 bits wide."""
+    return [
+        *_widened("reg", _LINE_BITS + 1, lb + 1, counter),
+        (f"{counter}[{_LINE_BITS}]", f"{counter}[{lb}]", reads),
+        (f"{counter}[{_LINE_BITS - 1}{sep}:{sep}0]", f"{counter}[{lb - 1}{sep}:{sep}0]", 1),
+        (f"{counter} + 8'h01", f"{counter} + {lb + 1}'h001", 1),
+        (f"{counter} <= 8'h0;", f"{counter} <= {lb + 1}'h000;", resets),
+    ]
+
+
 def icache_resized(text: str, kib: int) -> str:
     """The VexRiscv Verilog `text` (a GenCoreDefault core with the package's one-way 4 KiB instruction
     cache of 32-byte lines) with that cache made `kib` KiB (8, 16 or 32): the same module, its data
@@ -116,22 +145,13 @@ def icache_resized(text: str, kib: int) -> str:
     so the hit test is unchanged.  Raises ValueError when the text is not the cache this expects."""
     top, lb, wb = _sizes(kib)
     return _resize(text, "InstructionCache", [
-        ("reg        [7:0]    lineLoader_flushCounter;",
-         f"reg        [{lb}:0]    lineLoader_flushCounter;", 1),
-        ("lineLoader_flushCounter[7]", f"lineLoader_flushCounter[{lb}]", 5),
-        ("lineLoader_flushCounter[6 : 0]", f"lineLoader_flushCounter[{lb - 1} : 0]", 1),
-        ("lineLoader_flushCounter + 8'h01", f"lineLoader_flushCounter + {lb + 1}'h001", 1),
-        ("lineLoader_flushCounter <= 8'h0;", f"lineLoader_flushCounter <= {lb + 1}'h000;", 1),
-        ("wire       [6:0]    lineLoader_write_tag_0_payload_address;",
-         f"wire       [{lb - 1}:0]    lineLoader_write_tag_0_payload_address;", 1),
-        ("wire       [9:0]    lineLoader_write_data_0_payload_address;",
-         f"wire       [{wb - 1}:0]    lineLoader_write_data_0_payload_address;", 1),
-        ("wire       [9:0]    _zz_fetchStage_read_banksValue_0_dataMem;",
-         f"wire       [{wb - 1}:0]    _zz_fetchStage_read_banksValue_0_dataMem;", 1),
-        ("wire       [6:0]    _zz_fetchStage_read_waysValues_0_tag_valid;",
-         f"wire       [{lb - 1}:0]    _zz_fetchStage_read_waysValues_0_tag_valid;", 1),
-        ("reg [31:0] banks_0 [0:1023];", f"reg [31:0] banks_0 [0:{2**wb - 1}];", 1),
-        ("reg [21:0] ways_0_tags [0:127];", f"reg [21:0] ways_0_tags [0:{2**lb - 1}];", 1),
+        *_flush_sweep("lineLoader_flushCounter", lb, " ", reads=5, resets=1),
+        *_widened("wire", _LINE_BITS, lb, "lineLoader_write_tag_0_payload_address"),
+        *_widened("wire", _WORD_BITS, wb, "lineLoader_write_data_0_payload_address",
+                  "_zz_fetchStage_read_banksValue_0_dataMem"),
+        *_widened("wire", _LINE_BITS, lb, "_zz_fetchStage_read_waysValues_0_tag_valid"),
+        _deepened("reg [31:0] banks_0", _WORD_BITS, wb),
+        _deepened("reg [21:0] ways_0_tags", _LINE_BITS, lb),
         ("lineLoader_address[11 : 5]", f"lineLoader_address[{top - 1} : 5]", 2),
         ("io_cpu_prefetch_pc[11 : 2]", f"io_cpu_prefetch_pc[{top - 1} : 2]", 1),
         ("io_cpu_prefetch_pc[11 : 5]", f"io_cpu_prefetch_pc[{top - 1} : 5]", 1),
@@ -143,29 +163,20 @@ def dcache_resized(text: str, kib: int) -> str:
     instruction cache: its tag and data memories deeper, their indices (and the write-collision
     compares) wider, the flush sweep over every line, the tags still the address bits 31..12."""
     top, lb, wb = _sizes(kib)
-    edits = [(f"reg        [6:0]    {n};", f"reg        [{lb - 1}:0]    {n};", 1)
-             for n in ("tagsReadCmd_payload", "tagsWriteCmd_payload_address",
-                       "tagsWriteLastCmd_payload_address")]
-    edits += [(f"reg        [9:0]    {n};", f"reg        [{wb - 1}:0]    {n};", 1)
-              for n in ("dataReadCmd_payload", "dataWriteCmd_payload_address")]
-    edits += [(f"wire       [9:0]    {n};", f"wire       [{wb - 1}:0]    {n};", 1)
-              for n in ("_zz_stage0_dataColisions", "_zz__zz_stageA_dataColisions")]
-    edits += [(f"reg [7:0] ways_0_data_symbol{k} [0:1023];",
-               f"reg [7:0] ways_0_data_symbol{k} [0:{2**wb - 1}];", 1) for k in range(4)]
-    edits += [
-        ("reg [21:0] ways_0_tags [0:127];", f"reg [21:0] ways_0_tags [0:{2**lb - 1}];", 1),
-        ("reg        [7:0]    stageB_flusher_counter;", f"reg        [{lb}:0]    stageB_flusher_counter;", 1),
-        ("stageB_flusher_counter[7]", f"stageB_flusher_counter[{lb}]", 2),
-        ("stageB_flusher_counter[6:0]", f"stageB_flusher_counter[{lb - 1}:0]", 1),
-        ("stageB_flusher_counter + 8'h01", f"stageB_flusher_counter + {lb + 1}'h001", 1),
-        ("stageB_flusher_counter <= 8'h0;", f"stageB_flusher_counter <= {lb + 1}'h000;", 2),
+    return _resize(text, "DataCache", [
+        *_widened("reg", _LINE_BITS, lb, "tagsReadCmd_payload", "tagsWriteCmd_payload_address",
+                  "tagsWriteLastCmd_payload_address"),
+        *_widened("reg", _WORD_BITS, wb, "dataReadCmd_payload", "dataWriteCmd_payload_address"),
+        *_widened("wire", _WORD_BITS, wb, "_zz_stage0_dataColisions", "_zz__zz_stageA_dataColisions"),
+        *(_deepened(f"reg [7:0] ways_0_data_symbol{k}", _WORD_BITS, wb) for k in range(4)),
+        _deepened("reg [21:0] ways_0_tags", _LINE_BITS, lb),
+        *_flush_sweep("stageB_flusher_counter", lb, "", reads=2, resets=2),
         # (the 10-bit ones before the 7-bit ones: a 32 KiB cache has 10-bit line numbers)
         ("10'bxxxxxxxxxx", f"{wb}'b" + "x" * wb, 2),
         ("7'bxxxxxxx", f"{lb}'b" + "x" * lb, 2),
         ("[11 : 2]", f"[{top - 1} : 2]", 4),
         ("[11 : 5]", f"[{top - 1} : 5]", 3),
-    ]
-    return _resize(text, "DataCache", edits)
+    ])
 
 
 class UnknownCpu(ValueError):
