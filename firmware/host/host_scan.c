@@ -296,16 +296,6 @@ static inline AVX2 __attribute__((always_inline)) __m256i load8(const uint16_t *
     return _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)buf));
 }
 
-/* The worst sample's grid place from its address (none: the first corner, as the C scan gives). */
-static void place_at(const wm_field *f, const uint16_t *at, const int32_t x[3], const int32_t y[3], int32_t *wx,
-                     int32_t *wy)
-{
-    if (wx == NULL && wy == NULL) return;
-    int32_t i = at ? (int32_t)(at - f->samples) : 0, ay = i / f->width;
-    if (wx) *wx = at ? i - ay * f->width : x[0];
-    if (wy) *wy = at ? ay : y[0];
-}
-
 /* The lanes' largest V (each lane's in best) and, when above 0 and at is given, its first sample into *at:
  * the least place (sample number, in place) among the lanes that hold it, a larger place a later sample
  * in row order (no at: a scan whose caller asks for no worst sample, its lanes without places). */
@@ -390,7 +380,7 @@ static inline AVX2 __attribute__((always_inline)) int box_body(const wm_field *f
     vm = lanes_first(best, place, h, placed ? &at : NULL);
 stop:
     *vmax = vm;
-    place_at(f, at, x, y, wx, wy);
+    wm_place_at(f, at, x, y, wx, wy);
     return 1;
 }
 
@@ -495,7 +485,7 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
     vm = lanes_first(best, place, h, placed ? &at : NULL);
 stop:
     *vmax = vm;
-    place_at(f, at, x, y, wx, wy);
+    wm_place_at(f, at, x, y, wx, wy);
     return 1;
 }
 

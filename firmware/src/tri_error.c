@@ -314,14 +314,7 @@ static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3]
 done:
     /* the sample's place from its address, once (not at each row that raised V), when asked */
     if (wx == NULL && wy == NULL) return vm;
-    if (at) {
-        int32_t i = (int32_t)(at - h), ay = i / f->width;
-        if (wx) *wx = i - ay * f->width;
-        if (wy) *wy = ay;
-    } else {
-        if (wx) *wx = x[0];
-        if (wy) *wy = y[0];
-    }
+    wm_place_at(f, at, x, y, wx, wy);
     return vm;
 }
 

@@ -155,6 +155,21 @@ static WM_ALWAYS_INLINE void wm_end_start(struct wm_end32 *e, const uint16_t *ro
     e->p = row + e->q;
     e->st = width + e->dq;
 }
+/* A 32-bit scan's worst sample as its grid place, from its address at (NULL while no V beat 0: the first
+ * corner), into whichever of wx, wy is not NULL: at the scan's end, once (tri_error.c's scan32, host_scan.c's
+ * lanes; a caller asking for neither skips the division). */
+static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, const int32_t x[3],
+                                         const int32_t y[3], int32_t *wx, int32_t *wy)
+{
+    if (at) {
+        int32_t i = (int32_t)(at - f->samples), ay = i / f->width;
+        if (wx) *wx = i - ay * f->width;
+        if (wy) *wy = ay;
+    } else {
+        if (wx) *wx = x[0];
+        if (wy) *wy = y[0];
+    }
+}
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
