@@ -99,22 +99,35 @@ def triangles(params: dict, results: Path = Path(__file__).parent / "results" / 
 
 
 def _run_processes(npy: Path, zeta: float, tmp: Path, runs: int = 3, budget: float = 6.0) -> dict:
-    """Both whole processes, alternately, up to `runs` times each within about `budget` seconds."""
-    wm_out, pd_out = tmp / "wavemesh.obj", tmp / "pydelatin.obj"
-    wm_cmd = P.wavemesh_argv(str(npy), zeta, str(wm_out))
-    pd_cmd = P.peer_argv(str(npy), zeta, str(pd_out))
-    tw, tp, cw, cp, start, fail = [], [], [], [], time.perf_counter(), None
-    while len(tw) < runs and (not tw or time.perf_counter() - start < budget):
-        for cmd, times, cpu in ((wm_cmd, tw, cw), (pd_cmd, tp, cp)):
+    """`wavemesh mesh` and the pydelatin script (bench/peers.py) as whole processes, in turns (wavemesh,
+    pydelatin, wavemesh, ...): rounds of both until each ran `runs` times or, after the first round, some
+    `budget` seconds are spent.  Each one's median wall seconds and CPU seconds (_children_cpu), and the
+    OBJ files they wrote.  A process that fails ends the rounds: `error` names it, and no times are given
+    (a failed run's time is not the job's)."""
+    objs = {"wavemesh": tmp / "wavemesh.obj", "pydelatin": tmp / "pydelatin.obj"}
+    cmds = {"wavemesh": P.wavemesh_argv(str(npy), zeta, str(objs["wavemesh"])),
+            "pydelatin": P.peer_argv(str(npy), zeta, str(objs["pydelatin"]))}
+    wall: dict[str, list[float]] = {who: [] for who in cmds}
+    cpu: dict[str, list[float]] = {who: [] for who in cmds}
+    error, rounds, start = None, 0, time.perf_counter()
+    while error is None and rounds < runs and (rounds == 0 or time.perf_counter() - start < budget):
+        for who, cmd in cmds.items():
             t0, c0 = time.perf_counter(), _children_cpu()
             r = subprocess.run(cmd, capture_output=True, text=True)
-            times.append(time.perf_counter() - t0)
-            cpu.append(_children_cpu() - c0)
-            if r.returncode != 0 and fail is None:
-                fail = f"{Path(cmd[0]).name} exit {r.returncode}: {r.stderr.strip()[-300:]}"
-    return {"wavemesh_s": P.median(tw), "pydelatin_s": P.median(tp), "wavemesh_cpu_s": P.median(cw),
-            "pydelatin_cpu_s": P.median(cp), "runs": len(tw), "error": fail,
-            "wavemesh_obj": wm_out, "pydelatin_obj": pd_out}
+            if r.returncode != 0:
+                error = f"{who} exit {r.returncode}: {r.stderr.strip()[-300:]}"
+                break
+            wall[who].append(time.perf_counter() - t0)
+            cpu[who].append(_children_cpu() - c0)
+        rounds += 1
+
+    def median(times: list[float]) -> float | None:
+        return None if error else P.median(times)
+
+    return {"wavemesh_s": median(wall["wavemesh"]), "pydelatin_s": median(wall["pydelatin"]),
+            "wavemesh_cpu_s": median(cpu["wavemesh"]), "pydelatin_cpu_s": median(cpu["pydelatin"]),
+            "runs": 0 if error else rounds, "error": error,
+            "wavemesh_obj": objs["wavemesh"], "pydelatin_obj": objs["pydelatin"]}
 
 
 def _children_cpu() -> float:

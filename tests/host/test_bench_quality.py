@@ -84,6 +84,15 @@ def test_one_pair_end_to_end(tiny, tmp_path):
     assert "| tiny | 37 x 23 | 2%" in text and "**median** (1 pairs)" in text
 
 
+def test_failed_process_is_reported_not_timed(tmp_path):
+    """A whole process that fails (here: an input that is not there) ends the runs: the error names it and
+    no time stands for it, so no ratio is made of a failed run."""
+    proc = Q._run_processes(tmp_path / "missing.npy", 1.0, tmp_path)
+    assert proc["error"].startswith("wavemesh exit ") and "missing.npy" in proc["error"], proc["error"]
+    assert proc["runs"] == 0
+    assert all(proc[k] is None for k in ("wavemesh_s", "pydelatin_s", "wavemesh_cpu_s", "pydelatin_cpu_s"))
+
+
 def test_split_and_errors():
     assert set(Q.HELD_OUT) <= set(Q.GRIDS)
     assert abs(len(Q.HELD_OUT) - len(Q.GRIDS) / 3) < 1  # a third of the grids, not of the pairs
