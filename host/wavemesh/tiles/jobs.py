@@ -499,7 +499,8 @@ def run_tiles(plan: TilePlan, *, workers: int | None = None, scheduler=None, run
                     plan.quant, plan.zeta_used = known.quant, known.zeta_used
 
             keep = () if sink else roles["last"]
-            results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep, last=True)
+            seen = [*roles["last"], *([roles["q"]] if roles["q"] is not None else [])]  # what done reads
+            results = runner.graph(nodes, done, roles["homes"], roles["shared"], keep, last=True, seen=seen)
             bar.finish(f"{n} tiles")
     finally:
         clear_tile_cache()  # this process's (run here: one worker); a pool's ends with its workers

@@ -167,6 +167,7 @@ class Runner:
         self.ended: list[tuple] = []  # workers let go by the last graph, reaped by __exit__
         self.run_id = f"{time.time_ns()}-{os.getpid()}"
         self.n_maps = 0
+        self.dask_started = False  # _dask_start run on the cluster's workers
 
     def __enter__(self) -> Runner:
         if self.scheduler is not None:
@@ -185,7 +186,8 @@ class Runner:
         return self.graph([Node(fn, tuple(task)) for task in tasks], (lambda _, r: done(r)) if done else None)
 
     def graph(self, nodes: list[Node], done: Callable | None = None, homes: dict | None = None,
-              shared: tuple = (), keep: Iterable[int] | None = None, last: bool = False) -> list:
+              shared: tuple = (), keep: Iterable[int] | None = None, last: bool = False,
+              seen: Iterable[int] | None = None) -> list:
         """Every node's result, in node order; a node runs once the nodes its Refs name are done (no
         barrier between phases); ``done(i, result)`` as each finishes.  ``keep``: the nodes whose results
         are returned (None: all); another's is let go once every node that reads it has been given it
@@ -200,7 +202,9 @@ class Runner:
         its next one (AHEAD; _Schedule.chain).  ``last``: the
         Runner's last graph: a pool worker is let go as soon as no node is left to give out (its exit,
         which frees its memory, then runs beside the other's last nodes and the parent's handling of the
-        last results, not after them; a later graph starts a new pool)."""
+        last results, not after them; a later graph starts a new pool).  ``seen``: the nodes whose results
+        ``done`` reads (None: every node's); on a Dask cluster another's stays on the workers (done is
+        given None for it)."""
         results: list = [None] * len(nodes)
         kept_nodes = None if keep is None else set(keep)
         deps = [node.deps() for node in nodes]  # once (given, _Schedule)
@@ -234,29 +238,7 @@ class Runner:
 
         self.n_maps += 1
         if self.client is not None:
-            key = f"wavemesh-{self.run_id}-{self.n_maps}"
-            futures: list = []
-            here: dict = {}  # id of a Here (the nodes share one per tile) -> its value, scattered once
-            for i, node in enumerate(nodes):
-                args = []
-                for a in node.args:
-                    if isinstance(a, Ref):
-                        f = futures[a.node]
-                        if a.pick is not None:
-                            f = self.client.submit(a.pick, f, pure=False, key=f"{key}-{i}-{len(args)}")
-                        args.append(f)
-                    elif isinstance(a, Here):
-                        if id(a) not in here:
-                            here[id(a)] = self.client.scatter(a.fn(*a.args))
-                        args.append(here[id(a)])
-                    else:
-                        args.append(a)
-                futures.append(self.client.submit(node.fn, *args, pure=False, key=f"{key}-{i}"))
-            from distributed import as_completed  # with connect's package
-
-            index = {f.key: i for i, f in enumerate(futures)}
-            for fut in as_completed(futures):
-                got(index[fut.key], fut.result())
+            self._dask_graph(nodes, got, shared, kept_nodes, seen)
         elif self.workers == 1 or len(nodes) == 1:
             tune_malloc()
             sched = _Schedule(nodes, deps=deps)
@@ -388,6 +370,59 @@ class Runner:
                 self.ended += self.pool
                 self.pool = []
         return results
+
+    def _dask_graph(self, nodes: list[Node], got: Callable, shared: tuple, keep: set | None,
+                    seen: Iterable[int] | None) -> None:
+        """Runner.graph on a Dask cluster: one task a node, each submitted with the futures of the nodes it
+        reads (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's
+        (Dask's priority: the least rank first); ``shared`` args and each Here scattered once (the plan
+        every task reads: sent to every worker, not with each task); only the results the caller reads
+        (``keep``, ``seen``) come back to this process, each node's future let go once it is done (Dask
+        keeps a result until the nodes that read it are done)."""
+        client = self.client
+        if not self.dask_started:  # each worker set up once, before its first task (_dask_start)
+            self.dask_started = True
+            hosts: dict = {}
+            for addr, w in client.scheduler_info().get("workers", {}).items():
+                host = _host(addr)
+                hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
+            client.run(_dask_start, hosts, native.threads_set())
+        key = f"wavemesh-{self.run_id}-{self.n_maps}"
+        order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
+        priority = [0] * len(nodes)
+        for p, i in enumerate(order):
+            priority[i] = len(nodes) - p
+        scattered: dict = {}  # id of a shared arg or a Here (the nodes share one per tile) -> its future
+        for obj in shared:
+            scattered[id(obj)] = client.scatter(obj, broadcast=True, hash=False)
+        wanted = None if keep is None or seen is None else keep | set(seen)
+        futures: list = []
+        for i, node in enumerate(nodes):
+            args, picks = [], []
+            for a in node.args:
+                if isinstance(a, Ref):
+                    if a.pick is not None:
+                        picks.append((len(args), a.pick))
+                    a = futures[a.node]
+                elif isinstance(a, Here):
+                    if id(a) not in scattered:
+                        scattered[id(a)] = client.scatter(a.fn(*a.args), hash=False)
+                    a = scattered[id(a)]
+                else:
+                    a = scattered.get(id(a), a)
+                args.append(a)
+            futures.append(client.submit(_dask_call, node.fn, tuple(picks), *args, pure=False,
+                                         key=f"{key}-{i}", priority=priority[i]))
+        from distributed import as_completed  # with connect's package
+
+        index = {f.key: i for i, f in enumerate(futures)}
+        pending = as_completed(futures)
+        futures.clear()
+        scattered.clear()
+        for fut in pending:
+            i = index[fut.key]
+            got(i, fut.result() if wanted is None or i in wanted else None)
+            del fut
 
     def _start_pool(self, upto: int | None = None) -> None:
         """The pool's workers forked, up to ``upto`` of them (None: all)."""
@@ -532,6 +567,33 @@ class _Schedule:
             self.waiting[u] -= 1
             if not self.waiting[u] and not self.chained[u]:
                 bisect.insort(self.ready, (self.nodes[u].rank, u))
+
+
+def _host(address: str) -> str:
+    """The host of a Dask worker's address (tcp://10.0.0.5:40123 -> 10.0.0.5)."""
+    return address.rsplit("://", 1)[-1].rsplit(":", 1)[0]
+
+
+def _dask_start(hosts: dict, threads: int | None, dask_worker=None) -> None:
+    """A Dask worker set up for a tiled run's tasks, as a pool worker is (_worker_start): its memory
+    (tune_malloc: Dask's MALLOC_TRIM_THRESHOLD_ maps and unmaps every tile's arrays again), its host
+    stages' threads (the run's --threads, else its share of the host's CPUs: ``hosts``, each host's
+    worker threads), and the tiles' modules imported before its first task."""
+    import wavemesh.tiles.jobs  # noqa: F401  (the tasks' functions)
+
+    tune_malloc()
+    here = hosts.get(_host(dask_worker.address), 1) if dask_worker is not None else 1
+    native.set_threads(threads if threads is not None else max(1, native.cores() // here))
+
+
+def _dask_call(fn: Callable, picks: tuple, *args):
+    """A node's task on a Dask worker: fn(*args), each (position, pick) of ``picks`` applied to that arg
+    first (a Ref's pick, done here rather than in a task of its own)."""
+    if picks:
+        args = list(args)
+        for k, pick in picks:
+            args[k] = pick(args[k])
+    return fn(*args)
 
 
 def _this_cpu() -> int | None:
