@@ -40,6 +40,9 @@
  * The slope unit works beside the scan, from its own copy of the staging registers (taken at
  * SLOPE_GO); its result stays in SLOPE_ROOT and SLOPE_STATUS.K until the next SLOPE_GO.
  *
+ * The words with fields are packed and unpacked by wm_memmap.vh's field macros (WM_ENGINE_<REG>_WORD,
+ * _SHIFT), the positions the firmware's wm_memmap.h gives too.
+ *
  * Every access is answered in the next cycle (registered read data), as the other register blocks.
  * The corners' coordinates are taken modulo 2^COORD_BITS: the firmware gives the engine only grids of
  * at most MAX_SIDE a side.
@@ -144,10 +147,16 @@ wire sqrt_go = reg_write && bus_addr == `WM_ENGINE_SQRT_HI;
 wire div_go = reg_write && bus_addr == `WM_ENGINE_DIV_D_HI;
 wire angle_go = reg_write && bus_addr == `WM_ENGINE_ANGLE_Y;
 wire point_go = reg_write && bus_addr == `WM_ENGINE_POINT_GO;
-wire point_slope = bus_wdata[17:16] == 2'd2;   // POINT_GO's mode 2
+wire [1:0] point_mode = bus_wdata[`WM_ENGINE_POINT_GO_MODE_SHIFT +: 2];
+wire point_slope = point_mode == 2'd2;
 wire point_ready, slope_ready;
 // a point command is taken when its unit is idle, and in mode 2 the slope unit too (which it starts)
 wire point_take = point_go && point_ready && (!point_slope || slope_ready);
+
+// the corners' coordinates (V1 and V2 as V0), for the units that take the staged triangle
+localparam VX = `WM_ENGINE_V0_X_SHIFT, VY = `WM_ENGINE_V0_Y_SHIFT;
+wire [3*CB-1:0] corners_x = {v2_reg[VX +: CB], v1_reg[VX +: CB], v0_reg[VX +: CB]};
+wire [3*CB-1:0] corners_y = {v2_reg[VY +: CB], v1_reg[VY +: CB], v0_reg[VY +: CB]};
 
 wire cmd_ready;
 wire [VW-1:0] res_vmax;
@@ -166,8 +175,8 @@ tri_engine #(
     .rst(rst),
     .cfg_base(HEIGHT_BASE),
     .cfg_width(width_reg),
-    .s_cmd_x({v2_reg[CB-1:0], v1_reg[CB-1:0], v0_reg[CB-1:0]}),
-    .s_cmd_y({v2_reg[16 +: CB], v1_reg[16 +: CB], v0_reg[16 +: CB]}),
+    .s_cmd_x(corners_x),
+    .s_cmd_y(corners_y),
     .s_cmd_z({z2_reg, z01_reg}),
     .s_cmd_limit({limit_hi_reg, limit_lo_reg}),
     .s_cmd_valid(push),         // one cycle: the command FIFO takes it or it is lost (OVERRUN)
@@ -201,8 +210,8 @@ generate
         ) slope_inst (
             .clk(clk),
             .rst(rst),
-            .s_cmd_x({v2_reg[CB-1:0], v1_reg[CB-1:0], v0_reg[CB-1:0]}),
-            .s_cmd_y({v2_reg[16 +: CB], v1_reg[16 +: CB], v0_reg[16 +: CB]}),
+            .s_cmd_x(corners_x),
+            .s_cmd_y(corners_y),
             .s_cmd_z({z2_reg, z01_reg}),
             .s_cmd_sx(slope_x_reg),
             .s_cmd_sy(slope_y_reg),
@@ -324,14 +333,14 @@ generate
         ) point_inst (
             .clk(clk),
             .rst(rst),
-            .s_cmd_x({v2_reg[CB-1:0], v1_reg[CB-1:0], v0_reg[CB-1:0]}),
-            .s_cmd_y({v2_reg[16 +: CB], v1_reg[16 +: CB], v0_reg[16 +: CB]}),
+            .s_cmd_x(corners_x),
+            .s_cmd_y(corners_y),
             .s_cmd_z({z2_reg, z01_reg}),
-            .s_cmd_px(point_p_reg[CB-1:0]),
-            .s_cmd_py(point_p_reg[16 +: CB]),
-            .s_cmd_h(bus_wdata[15:0]),
+            .s_cmd_px(point_p_reg[`WM_ENGINE_POINT_P_X_SHIFT +: CB]),
+            .s_cmd_py(point_p_reg[`WM_ENGINE_POINT_P_Y_SHIFT +: CB]),
+            .s_cmd_h(bus_wdata[`WM_ENGINE_POINT_GO_H_SHIFT +: 16]),
             .s_cmd_r({point_r_hi_reg, point_r_lo_reg}),
-            .s_cmd_mode(bus_wdata[17:16]),
+            .s_cmd_mode(point_mode),
             .s_cmd_valid(point_take),
             .s_cmd_ready(point_ready),
             .s_r({32'd0, slope_root_reg} << slope_k_reg),
@@ -388,15 +397,16 @@ always @(posedge clk) begin
             `WM_ENGINE_Z2: rdata_reg <= {16'd0, z2_reg};
             `WM_ENGINE_LIMIT_LO: rdata_reg <= limit_lo_reg;
             `WM_ENGINE_LIMIT_HI: rdata_reg <= limit_hi_reg;
-            `WM_ENGINE_STATUS: rdata_reg <= {23'd0, overrun_reg, 5'd0, busy, !cmd_ready, res_valid};
+            `WM_ENGINE_STATUS: rdata_reg <= `WM_ENGINE_STATUS_WORD(res_valid, !cmd_ready, busy, overrun_reg);
             `WM_ENGINE_RES_VMAX_LO: rdata_reg <= res_vmax64[31:0];
             `WM_ENGINE_RES_VMAX_HI: rdata_reg <= res_vmax64[63:32];
-            `WM_ENGINE_RES_AT: rdata_reg <= {!res_valid, res_y16[14:0], res_x16};
+            `WM_ENGINE_RES_AT: rdata_reg <= `WM_ENGINE_RES_AT_WORD(res_x16, res_y16[14:0], !res_valid);
             `WM_ENGINE_WIDTH: rdata_reg <= {{(31-CB){1'b0}}, width_reg};
             `WM_ENGINE_MAX_SIDE: rdata_reg <= MAX_SIDE;
-            `WM_ENGINE_SLOPE_X: rdata_reg <= {9'd0, slope_x_reg};
-            `WM_ENGINE_SLOPE_Y: rdata_reg <= {9'd0, slope_y_reg};
-            `WM_ENGINE_SLOPE_STATUS: rdata_reg <= {18'd0, slope_k_reg, 6'd0, slope_busy, slope_done_reg};
+            `WM_ENGINE_SLOPE_X: rdata_reg <= `WM_ENGINE_SLOPE_X_WORD(slope_x_reg[15:0], slope_x_reg[22:16]);
+            `WM_ENGINE_SLOPE_Y: rdata_reg <= `WM_ENGINE_SLOPE_X_WORD(slope_y_reg[15:0], slope_y_reg[22:16]);
+            `WM_ENGINE_SLOPE_STATUS:
+                rdata_reg <= `WM_ENGINE_SLOPE_STATUS_WORD(slope_done_reg, slope_busy, slope_k_reg);
             `WM_ENGINE_SLOPE_ROOT: rdata_reg <= slope_root_reg;
             `WM_ENGINE_SQRT_LO: rdata_reg <= sqrt_lo_reg;
             `WM_ENGINE_SQRT_HI: rdata_reg <= sqrt_hi_reg;
@@ -404,19 +414,19 @@ always @(posedge clk) begin
             `WM_ENGINE_DIV_N_HI: rdata_reg <= div_n_reg[63:32];
             `WM_ENGINE_DIV_D_LO: rdata_reg <= div_d_lo_reg;
             `WM_ENGINE_DIV_D_HI: rdata_reg <= div_d_hi_reg;
-            `WM_ENGINE_DIV_STATUS: rdata_reg <= {30'd0, div_busy, div_done_reg};
+            `WM_ENGINE_DIV_STATUS: rdata_reg <= `WM_ENGINE_DIV_STATUS_WORD(div_done_reg, div_busy);
             `WM_ENGINE_DIV_Q_LO: rdata_reg <= div_q_reg[31:0];
             `WM_ENGINE_DIV_Q_HI: rdata_reg <= div_q_reg[63:32];
             `WM_ENGINE_DIV_R_LO: rdata_reg <= div_r_reg[31:0];
             `WM_ENGINE_DIV_R_HI: rdata_reg <= div_r_reg[63:32];
             `WM_ENGINE_ANGLE_X: rdata_reg <= angle_x_reg;
             `WM_ENGINE_ANGLE_Y: rdata_reg <= angle_y_reg;
-            `WM_ENGINE_ANGLE: rdata_reg <= {angle_done_reg, angle_busy, 12'd0, angle_z_reg};
+            `WM_ENGINE_ANGLE: rdata_reg <= `WM_ENGINE_ANGLE_WORD(angle_z_reg, angle_busy, angle_done_reg);
             `WM_ENGINE_POINT_P: rdata_reg <= point_p_reg;
             `WM_ENGINE_POINT_R_LO: rdata_reg <= point_r_lo_reg;
             `WM_ENGINE_POINT_R_HI: rdata_reg <= point_r_hi_reg;
             `WM_ENGINE_POINT: rdata_reg <= point_e_reg;
-            `WM_ENGINE_POINT_STATUS: rdata_reg <= {30'd0, point_busy, point_done_reg};
+            `WM_ENGINE_POINT_STATUS: rdata_reg <= `WM_ENGINE_POINT_STATUS_WORD(point_done_reg, point_busy);
             default: rdata_reg <= 32'd0;
         endcase
     end

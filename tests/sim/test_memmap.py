@@ -128,6 +128,12 @@ def verilog_checks() -> list[tuple[str, int]]:
     for b in BLOCKS:
         checks.append((f"WM_IO_{b.name}", b.index))
         checks += [(f"WM_{b.name}_{reg.name}", reg.offset) for reg in b.registers]
+        for reg in b.registers:  # each field alone all ones in its register's _WORD: its bits, no others
+            fields = sorted(reg.fields, key=lambda f: f.lsb)
+            for f in fields:
+                args = ", ".join(f"{g.msb - g.lsb + 1}'d{(1 << g.msb - g.lsb + 1) - 1 if g is f else 0}"
+                                 for g in fields)
+                checks.append((f"WM_{b.name}_{reg.name}_WORD({args})", f.mask))
     return checks
 
 

@@ -5,7 +5,7 @@ template files; nothing generated is committed):
 
 - ``wm_memmap.h``: C header for the firmware (addresses, sizes, bit masks, capabilities)
 - ``wm_memmap.vh``: Verilog include for the RTL (`` `define`` macros: region codes, register offsets,
-  bit positions, default sizes)
+  bit positions, default sizes, and each register with fields as a word of them, ``WM_<BLOCK>_<REG>_WORD``)
 - ``wm_memmap.ld``: the linker script's MEMORY block and size symbols
 - ``memmap.md``: the memory map and register tables; docs/soc.md embeds the same text between
   ``<!-- memmap:begin -->`` and ``<!-- memmap:end -->`` (``python -m wavemesh.device.memmap --update
@@ -563,6 +563,25 @@ def c_header() -> str:
     return "\n".join(lines)
 
 
+def _lsb_first(reg: Register) -> list[Field]:
+    return sorted(reg.fields, key=lambda f: f.lsb)
+
+
+def _verilog_word(reg: Register) -> str:
+    """`reg`'s fields (the macro arguments of their names) concatenated into 32 bits, zeros between."""
+    parts, bit = [], 32
+    for f in reversed(_lsb_first(reg)):
+        if f.msb >= bit:
+            raise ValueError(f"{reg.name}.{f.name} overlaps the field above it or passes bit 31")
+        if f.msb < bit - 1:
+            parts.append(f"{bit - 1 - f.msb}'d0")
+        parts.append(f"({f.name})")
+        bit = f.lsb
+    if bit:
+        parts.append(f"{bit}'d0")
+    return "{" + ", ".join(parts) + "}"
+
+
 def verilog_include() -> str:
     def d(name, value):
         return f"`define {name} {value}"
@@ -605,6 +624,8 @@ def verilog_include() -> str:
     lines.append(d("WM_REGION_IO", f"4'h{IO_CODE:X}"))
     lines.append(d("WM_IO_UPLOAD_BUF", f"4'h{UPLOAD_BUF_BLOCK:X}"))
     lines.append("// I/O blocks: address bits 11..8; register offsets: bits 7..0; field bit positions")
+    lines.append("// a register with fields as a word, 0 between them: WM_<BLOCK>_<REG>_WORD(its fields,")
+    lines.append("// bit 0's first), each argument its field's width (lint's WIDTH warnings catch others)")
     for b in BLOCKS:
         lines.append(d(f"WM_IO_{b.name}", f"4'h{b.index:X}"))
         for reg in b.registers:
@@ -614,6 +635,9 @@ def verilog_include() -> str:
                     lines.append(d(f"WM_{b.name}_{reg.name}_{f.name}", f.lsb))
                 elif f.name != reg.name:
                     lines.append(d(f"WM_{b.name}_{reg.name}_{f.name}_SHIFT", f.lsb))
+            if reg.fields:
+                lines.append(d(f"WM_{b.name}_{reg.name}_WORD({', '.join(f.name for f in _lsb_first(reg))})",
+                               _verilog_word(reg)))
     lines += ["`endif", ""]
     return "\n".join(lines)
 
