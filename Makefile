@@ -47,7 +47,7 @@ help:
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make bench-big      whole processes at 2048^2 and 4096^2 against pydelatin: time, memory (minutes; not in make bench)"
 	@echo "make bench-board1024  1024 x 1024, 100k+ triangles, through the simulated board (hours; not in make bench)"
-	@echo "make bench-e2e      end-to-end board seconds at 115200 / 921600 / 3M baud (simulated board; not in make bench)"
+	@echo "make bench-e2e      end-to-end board seconds at 115200 / 921600 / 3M baud (line time + bench-soc's cycle model)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
 setup: $(SETUP_STAMP)
