@@ -37,6 +37,9 @@ PIN = True
 # a pool worker keeps each result it made that other nodes read, until the parent has given out every one of
 # them: a node given to that worker names it (_Held) instead of carrying it down the pipe again
 HOLD = True
+# on Dask, each tile's tasks are asked of one worker (Runner.graph's homes: a block of tiles a worker), which
+# reads the tile once; another takes them when that one is busy (Dask's loose restrictions: its work stealing)
+DASK_HOMES = True
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -238,7 +241,7 @@ class Runner:
 
         self.n_maps += 1
         if self.client is not None:
-            self._dask_graph(nodes, got, shared, kept_nodes, seen)
+            self._dask_graph(nodes, got, shared, kept_nodes, seen, homes)
         elif self.workers == 1 or len(nodes) == 1:
             tune_malloc()
             sched = _Schedule(nodes, deps=deps)
@@ -372,7 +375,7 @@ class Runner:
         return results
 
     def _dask_graph(self, nodes: list[Node], got: Callable, shared: tuple, keep: set | None,
-                    seen: Iterable[int] | None) -> None:
+                    seen: Iterable[int] | None, homes: dict | None) -> None:
         """Runner.graph on a Dask cluster: one task a node, each submitted with the futures of the nodes it
         reads (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's
         (Dask's priority: the least rank first); ``shared`` args and each Here scattered once (the plan
@@ -388,6 +391,7 @@ class Runner:
                 hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
             client.run(_dask_start, hosts, native.threads_set())
         key = f"wavemesh-{self.run_id}-{self.n_maps}"
+        where = _dask_homes(client, homes) if DASK_HOMES and homes else {}
         order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
         priority = [0] * len(nodes)
         for p, i in enumerate(order):
@@ -411,8 +415,10 @@ class Runner:
                 else:
                     a = scattered.get(id(a), a)
                 args.append(a)
+            home = where.get(node.tiles[0]) if node.tiles else None
             futures.append(client.submit(_dask_call, node.fn, tuple(picks), *args, pure=False,
-                                         key=f"{key}-{i}", priority=priority[i]))
+                                         key=f"{key}-{i}", priority=priority[i],
+                                         workers=home, allow_other_workers=home is not None))
         from distributed import as_completed  # with connect's package
 
         index = {f.key: i for i, f in enumerate(futures)}
@@ -572,6 +578,15 @@ class _Schedule:
 def _host(address: str) -> str:
     """The host of a Dask worker's address (tcp://10.0.0.5:40123 -> 10.0.0.5)."""
     return address.rsplit("://", 1)[-1].rsplit(":", 1)[0]
+
+
+def _dask_homes(client, homes: dict) -> dict:
+    """Tile -> the Dask worker (its address) whose tasks its nodes are: the tiles in the order of their
+    ``homes`` (Runner.graph's; columns of tiles), an equal block of them a worker, the workers in the order
+    of their addresses (a host's together)."""
+    workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
+    tiles = sorted(homes, key=lambda t: (homes[t], t))
+    return {t: [workers[p * len(workers) // len(tiles)]] for p, t in enumerate(tiles)} if workers else {}
 
 
 def _dask_start(hosts: dict, threads: int | None, dask_worker=None) -> None:
