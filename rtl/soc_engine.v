@@ -153,10 +153,12 @@ wire point_ready, slope_ready;
 // a point command is taken when its unit is idle, and in mode 2 the slope unit too (which it starts)
 wire point_take = point_go && point_ready && (!point_slope || slope_ready);
 
-// the corners' coordinates (V1 and V2 as V0), for the units that take the staged triangle
+// the corners' coordinates (V1 and V2 as V0) and heights, for the units that take the staged triangle
 localparam VX = `WM_ENGINE_V0_X_SHIFT, VY = `WM_ENGINE_V0_Y_SHIFT;
 wire [3*CB-1:0] corners_x = {v2_reg[VX +: CB], v1_reg[VX +: CB], v0_reg[VX +: CB]};
 wire [3*CB-1:0] corners_y = {v2_reg[VY +: CB], v1_reg[VY +: CB], v0_reg[VY +: CB]};
+wire [47:0] corners_z = {z2_reg, z01_reg[`WM_ENGINE_Z01_Z1_SHIFT +: 16],
+                         z01_reg[`WM_ENGINE_Z01_Z0_SHIFT +: 16]};
 
 wire cmd_ready;
 wire [VW-1:0] res_vmax;
@@ -177,7 +179,7 @@ tri_engine #(
     .cfg_width(width_reg),
     .s_cmd_x(corners_x),
     .s_cmd_y(corners_y),
-    .s_cmd_z({z2_reg, z01_reg}),
+    .s_cmd_z(corners_z),
     .s_cmd_limit({limit_hi_reg, limit_lo_reg}),
     .s_cmd_valid(push),         // one cycle: the command FIFO takes it or it is lost (OVERRUN)
     .s_cmd_ready(cmd_ready),
@@ -212,7 +214,7 @@ generate
             .rst(rst),
             .s_cmd_x(corners_x),
             .s_cmd_y(corners_y),
-            .s_cmd_z({z2_reg, z01_reg}),
+            .s_cmd_z(corners_z),
             .s_cmd_sx(slope_x_reg),
             .s_cmd_sy(slope_y_reg),
             .s_cmd_valid(slope_go || (point_take && point_slope)),
@@ -335,7 +337,7 @@ generate
             .rst(rst),
             .s_cmd_x(corners_x),
             .s_cmd_y(corners_y),
-            .s_cmd_z({z2_reg, z01_reg}),
+            .s_cmd_z(corners_z),
             .s_cmd_px(point_p_reg[`WM_ENGINE_POINT_P_X_SHIFT +: CB]),
             .s_cmd_py(point_p_reg[`WM_ENGINE_POINT_P_Y_SHIFT +: CB]),
             .s_cmd_h(bus_wdata[`WM_ENGINE_POINT_GO_H_SHIFT +: 16]),

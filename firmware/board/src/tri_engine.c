@@ -23,6 +23,24 @@ static int on_engine(const wm_field *f)
            f->height <= (1 << WM_ENGINE_COORD_BITS);
 }
 
+/* A grid place as the V0..V2 and POINT_P words hold it. */
+static WM_ALWAYS_INLINE uint32_t place_word(int32_t x, int32_t y)
+{
+    return (uint32_t)x << WM_ENGINE_V0_X_SHIFT | (uint32_t)y << WM_ENGINE_V0_Y_SHIFT;
+}
+
+/* The triangle's corners and their heights (read here through the cache, as the C reads them) into the
+ * staging registers V0, V1, V2, Z01 and Z2, which every unit takes. */
+static WM_ALWAYS_INLINE void stage(const uint16_t *h, int32_t w, const int32_t x[3], const int32_t y[3])
+{
+    WM_ENGINE_V0 = place_word(x[0], y[0]);
+    WM_ENGINE_V1 = place_word(x[1], y[1]);
+    WM_ENGINE_V2 = place_word(x[2], y[2]);
+    WM_ENGINE_Z01 = ((uint32_t)h[y[0] * w + x[0]] << WM_ENGINE_Z01_Z0_SHIFT) |
+                    ((uint32_t)h[y[1] * w + x[1]] << WM_ENGINE_Z01_Z1_SHIFT);
+    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+}
+
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy)
 {
@@ -33,11 +51,7 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
     WM_ENGINE_WIDTH = (uint32_t)w;
     WM_ENGINE_LIMIT_LO = (uint32_t)limit;
     WM_ENGINE_LIMIT_HI = (uint32_t)(limit >> 32);
-    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
-    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
-    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
-    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
-    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+    stage(h, w, x, y);
     WM_ENGINE_PUSH = 1;
     while (!(WM_ENGINE_STATUS & WM_ENGINE_STATUS_RES_VALID)) {
         /* the engine scans */
@@ -64,11 +78,7 @@ int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3
     if (!on_engine(f)) return 0;
     wm_slope_scale(p, 0, &mx, &ex);
     wm_slope_scale(p, 1, &my, &ey);
-    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
-    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
-    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
-    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
-    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
+    stage(h, w, x, y);
     WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
     WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
     WM_ENGINE_SLOPE_GO = 1;
@@ -119,12 +129,8 @@ int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3
     int32_t w = f->width, ex, ey;
     uint32_t mode, mx, my, st;
     if (!on_engine(f) || f->mask) return 0;
-    WM_ENGINE_V0 = (uint32_t)x[0] | (uint32_t)y[0] << 16;
-    WM_ENGINE_V1 = (uint32_t)x[1] | (uint32_t)y[1] << 16;
-    WM_ENGINE_V2 = (uint32_t)x[2] | (uint32_t)y[2] << 16;
-    WM_ENGINE_Z01 = (uint32_t)h[y[0] * w + x[0]] | (uint32_t)h[y[1] * w + x[1]] << 16;
-    WM_ENGINE_Z2 = h[y[2] * w + x[2]];
-    WM_ENGINE_POINT_P = (uint32_t)px | (uint32_t)py << 16;
+    stage(h, w, x, y);
+    WM_ENGINE_POINT_P = place_word(px, py);
     if (p->metric == WM_METRIC_VERTICAL) {
         mode = 0;
     } else if (kept && *kept) {

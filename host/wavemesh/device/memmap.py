@@ -309,18 +309,19 @@ ACCEL = Block("ACCEL", 0x2, "the FPGA stage: height memory -> filter bank -> COE
 ENGINE_COORD_BITS = max(GRID_MAX_W, GRID_MAX_H).bit_length()  # 11 for 1024: coordinates 0..2047
 ENGINE_VMAX_BITS = 2 * ENGINE_COORD_BITS + 18  # V modulo 2^VMAX_BITS (V < 2^16 D < 2^(VMAX_BITS-1))
 ENGINE_CMD_DEPTH = 4  # triangles the CPU may queue
+ENGINE_PLACE = (Field("X", 15, 0, "rw", "column"), Field("Y", 31, 16, "rw", "row"))  # V0..V2's, POINT_P's
 ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a triangle's samples in HEIGHT, "
                "the slope unit (the normal metric's slope factor of a triangle, square roots), a 64-bit "
                "divider, the angle unit (atan2 by CORDIC) and the point-error unit (one sample against a "
                "triangle's plane)", (
-    Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)", (
-        Field("X", 15, 0, "rw", "column"),
-        Field("Y", 31, 16, "rw", "row"),
-    )),
+    Register("V0", 0x00, "rw", "corner 0 of the next triangle (counter-clockwise, twice the area > 0)",
+             ENGINE_PLACE),
     Register("V1", 0x04, "rw", "corner 1, as V0"),
     Register("V2", 0x08, "rw", "corner 2, as V0"),
-    Register("Z01", 0x0C, "rw", "the corner heights: z0 in bits 15..0, z1 in 31..16 (the samples at the "
-             "corners)"),
+    Register("Z01", 0x0C, "rw", "the heights of corners 0 and 1 (the samples there)", (
+        Field("Z0", 15, 0, "rw", "z0"),
+        Field("Z1", 31, 16, "rw", "z1"),
+    )),
     Register("Z2", 0x10, "rw", "z2 in bits 15..0"),
     Register("LIMIT_LO", 0x14, "rw", "the limit, bits 31..0: the scan stops at the first sample whose V "
              "exceeds it (all ones: no limit)"),
@@ -387,10 +388,7 @@ ENGINE = Block("ENGINE", 0x3, "the triangle error engine: E(T)'s scan of a trian
         Field("BUSY", 30, 30, "r", "a command is in work"),
         Field("DONE", 31, 31, "r", "Z holds the last command's result (cleared by an ANGLE_Y write)"),
     )),
-    Register("POINT_P", 0x84, "rw", "the point-error unit's sample p", (
-        Field("X", 15, 0, "rw", "column"),
-        Field("Y", 31, 16, "rw", "row"),
-    )),
+    Register("POINT_P", 0x84, "rw", "the point-error unit's sample p", ENGINE_PLACE),
     Register("POINT_R_LO", 0x88, "rw", "the slope factor r of mode 1 (>= 2^16), bits 31..0"),
     Register("POINT_R_HI", 0x8C, "rw", "r, bits 63..32"),
     Register("POINT_GO", 0x90, "w", "write: the point-error unit takes V0, V1, V2, Z01, Z2, POINT_P, the "
