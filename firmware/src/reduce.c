@@ -74,55 +74,77 @@ static void ear_down(struct ears *s, int32_t at)
     ear_put(s, at, i);
 }
 
-/* The key of the ear at ring position i: its smallest angle (Q16 radians) when it may be cut, else -1. */
+/* The key of the ear at ring position i: its smallest angle (Q16 radians) when it may be cut, else -1;
+ * with angle 0, 0 for an ear that may be cut (no angle measured). */
 static int32_t ear_key(const wm_mesh *m, const int32_t *ring, const struct ears *s, int32_t i, int32_t kx,
-                       int32_t ky)
+                       int32_t ky, int angle)
 {
     int32_t a = ring[s->prev[i]], b = ring[i], c = ring[s->next[i]];
     int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
     if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0) return -1;
     if (wm_orient(x[0], y[0], x[2], y[2], kx, ky) < 0) return -1; /* k strictly on b's side of a-c */
-    return wm_min_angle(x, y);
+    return angle ? wm_min_angle(x, y) : 0;
+}
+
+/* The ear the heap would hold first once three ring positions are left (i, next, next of next): the
+ * three ears are one triangle, so those that may be cut share one key (its smallest angle: the same
+ * integers at any corner, wm_min_corner) and the others have -1; the heap's order (key, then the lower
+ * position) then takes the lowest position that may be cut, else the lowest of the three.  Without
+ * measuring the angle (two ear_key updates a plan, three a ring of three). */
+static int32_t last_ear(const wm_mesh *m, const int32_t *ring, const struct ears *s, int32_t i, int32_t kx,
+                        int32_t ky)
+{
+    int32_t e[3] = {i, s->next[i], s->next[s->next[i]]}, best = -1, low = e[0];
+    for (int q = 0; q < 3; q++) {
+        if (e[q] < low) low = e[q];
+        if ((best < 0 || e[q] < best) && ear_key(m, ring, s, e[q], kx, ky, 0) == 0) best = e[q];
+    }
+    return best >= 0 ? best : low;
 }
 
 int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, int32_t ky,
                  int32_t tris[3 * WM_MAX_RING], int32_t *n_tris)
 {
     struct ears s;
-    int32_t left = n, nt = 0;
+    int32_t left = n, nt = 0, last = 0;
     if (n < 3 || n > WM_MAX_RING) return WM_ERR_ARG;
     for (int32_t i = 0; i < n; i++) {
         s.prev[i] = (i + n - 1) % n;
         s.next[i] = (i + 1) % n;
     }
-    for (int32_t i = 0; i < n; i++) {
-        s.key[i] = ear_key(m, ring, &s, i, kx, ky);
-        s.heap[i] = i;
-        s.pos[i] = i;
+    if (n > 3) {
+        for (int32_t i = 0; i < n; i++) {
+            s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
+            s.heap[i] = i;
+            s.pos[i] = i;
+        }
+        s.n = n;
+        for (int32_t at = n / 2 - 1; at >= 0; at--) ear_down(&s, at);
     }
-    s.n = n;
-    for (int32_t at = n / 2 - 1; at >= 0; at--) ear_down(&s, at);
     while (left > 3) {
         int32_t b = s.heap[0], a = s.prev[b], c = s.next[b];
         if (s.key[b] < 0) return WM_ERR_REFUSED; /* no ear may be cut */
         tris[3 * nt] = ring[a], tris[3 * nt + 1] = ring[b], tris[3 * nt + 2] = ring[c];
         nt++;
-        /* b leaves the heap (the last entry takes its place) and the polygon */
+        /* b leaves the polygon and the heap (the last entry takes its place) */
+        s.next[a] = c;
+        s.prev[c] = a;
+        if (--left == 3) {
+            last = a; /* last_ear finds the first of the three without the heap */
+            break;
+        }
         s.n--;
         ear_put(&s, 0, s.heap[s.n]);
         ear_down(&s, 0);
-        s.next[a] = c;
-        s.prev[c] = a;
-        left--;
         for (int q = 0; q < 2; q++) {
             int32_t i = q == 0 ? a : c, old = s.key[i];
-            s.key[i] = ear_key(m, ring, &s, i, kx, ky);
+            s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
             if (s.key[i] > old) ear_up(&s, s.pos[i]);
             else ear_down(&s, s.pos[i]);
         }
     }
     {
-        int32_t b = s.heap[0], a = s.prev[b], c = s.next[b];
+        int32_t b = last_ear(m, ring, &s, last, kx, ky), a = s.prev[b], c = s.next[b];
         if (wm_orient(m->vx[ring[a]], m->vy[ring[a]], m->vx[ring[b]], m->vy[ring[b]], m->vx[ring[c]],
                       m->vy[ring[c]]) <= 0)
             return WM_ERR_REFUSED;
