@@ -385,6 +385,27 @@ def test_tile_quantised_in_blocks(tmp_path, monkeypatch, block):
             assert error == hf.max_quantisation_error > 0
 
 
+@pytest.mark.parametrize("block", [1, 300, 1 << 16])
+def test_tile_checked_finite_in_blocks(monkeypatch, block):
+    """A tile's heights checked finite a block of rows at a time (jobs._finite): an InputError naming the
+    tile exactly when np.isfinite finds a NaN or an infinity anywhere in it (first row, a middle one, the
+    last), the heights themselves returned otherwise."""
+    monkeypatch.setattr(tiles.jobs, "BLOCK_SAMPLES", block)
+    plan = tiles.plan_tiles(tiles.Source("array", 61, 45, array=np.zeros((45, 61))), api.MeshParams(), 33)
+    t = plan.tiles[0]
+    v = np.random.default_rng(6).normal(0, 300, (45, 61))
+    assert tiles.jobs._finite(plan, t, v) is v
+    for (r, c), bad in zip([(0, 0), (22, 30), (44, 60), (7, 59)], [np.nan, np.inf, -np.inf, np.nan],
+                           strict=True):
+        w = v.copy()
+        w[r, c] = bad
+        assert not np.isfinite(w).all()
+        with pytest.raises(InputError, match=f"non-finite samples in {t.name}"):
+            tiles.jobs._finite(plan, t, w)
+        with pytest.raises(InputError, match="non-finite"):
+            tiles.jobs._finite(plan, t, w[r : r + 1])  # one row: a band at a seam
+
+
 def test_float_input_within_zeta_on_the_input(tmp_path):
     """Lossy quantisation (float heights over a range wider than 16 bits): one zeta on the samples for every
     tile, the vertical bound on the input heights."""

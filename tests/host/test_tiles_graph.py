@@ -134,6 +134,25 @@ def test_worker_told_to_end_lowers_its_priority():
     assert proc.exitcode == 0
 
 
+def _frozen(_):
+    import gc
+
+    return gc.get_freeze_count(), gc.isenabled()
+
+
+def test_pool_worker_freezes_what_it_was_forked_with():
+    """A pool worker starts with the objects it was forked with frozen for its collector (its collections
+    never walk them, never write into the parent's pages), and its collector on; this process's is left
+    as it was (nothing frozen here by the pool)."""
+    import gc
+
+    before = gc.get_freeze_count()
+    with tiles.Runner(2) as run:
+        got = run.map(_frozen, [(i,) for i in range(4)])
+    assert all(count > 0 and on for count, on in got)
+    assert gc.get_freeze_count() == before
+
+
 def _big(n, *_):
     return np.full(n, 7, dtype=np.int64)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bisect
 import ctypes
+import gc
 import multiprocessing
 import os
 import select
@@ -759,7 +760,10 @@ def _worker_start(parent: int, threads: int | None = None, cpu: int | None = Non
     parent does, even one killed outright (Linux's PR_SET_PDEATHSIG).  The signals, blocked since the fork
     (_start_pool), are let through once these are set.  ``threads``: the host stages' threads in this
     worker (native.set_threads), unless the run gave its own (--threads); ``cpu``: the CPU it is kept on
-    (PIN), first (a CPU taken away meanwhile: it goes where the kernel puts it)."""
+    (PIN), first (a CPU taken away meanwhile: it goes where the kernel puts it).  The objects it was forked
+    with are frozen for its collector (gc.freeze: a list splice, no object touched), which then never walks
+    them: its collections wrote into their headers, the parent's pages copied for it as it did."""
+    gc.freeze()
     if cpu is not None:
         try:
             os.sched_setaffinity(0, {cpu})
