@@ -134,11 +134,12 @@ def _timed_map(self, fn, tasks, done=None):
     return [o[0] for o in out]
 
 
-def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None, last=False):
+def _timed_graph(self, nodes, done=None, homes=None, shared=(), keep=None, last=False, seen=None):
     """Runner.graph with every node timed; every result kept until the end (each carries its timing), the
-    ones outside ``keep`` None in what it returns, as Runner.graph's."""
+    ones outside ``keep`` None in what it returns, as Runner.graph's; every result comes back (``seen``
+    not passed on: done is given each one)."""
     if nodes and nodes[0].fn is timed:  # a map's tasks (Runner.map makes a graph of them), timed there
-        return _graph(self, nodes, done, homes, shared, keep, last)
+        return _graph(self, nodes, done, homes, shared, keep, last, seen)
     def wrap(a):
         if isinstance(a, runner.Ref):
             return runner.Ref(a.node, functools.partial(_picked, a.pick) if a.pick else _result)

@@ -587,3 +587,29 @@ def test_pool_worker_keeps_no_result_only_its_chain_reads():
     nodes = [Node(_made, (), (0, k), (k,)) for k in range(2)]
     nodes += [Node(_made, (Ref(k - 2),), (0, k), (k % 2,)) for k in range(2, 60)]
     assert max(_held_counts(nodes)) <= 1
+
+
+def test_tiles_steps_tool_counts_every_task(tmp_path):
+    """tools/tiles_steps.py (where a tiled run's time goes) runs `wavemesh mesh --tile` with every task
+    of the graph counted once in its worker: the steps it lists add up to tile_graph's nodes."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    v = np.random.default_rng(8).normal(0, 30, (150, 170)).cumsum(axis=0).cumsum(axis=1)
+    np.save(tmp_path / "h.npy", v.astype(np.float32))
+    out = subprocess.run([sys.executable, str(root / "tools" / "tiles_steps.py"), str(tmp_path / "h.npy"),
+                          "--workers", "2", "--tile", "65", "--metric", "vertical", "--zeta", "5"],
+                         capture_output=True, text=True, cwd=root, timeout=120)
+    assert out.returncode == 0, out.stderr
+    graph = re.search(r"^graph: wall [\d.]+ s; (\d+) tasks", out.stdout, re.M)
+    counts = [(m[0], int(m[1])) for m in re.findall(r"^  (?:-?\d+ )?(\w+) +(\d+) tasks", out.stdout, re.M)]
+    src = tiles.open_source(str(tmp_path / "h.npy"))
+    plan = tiles.plan_tiles(src, api.MeshParams(refine=RefineParams(metric="vertical", zeta=5.0)), 65,
+                            defer_error=True, runner=tiles.Runner(1))
+    nodes, _ = tiles.tile_graph(plan)
+    assert graph and int(graph[1]) == len(nodes)
+    assert sum(n for k, n in counts if k != "_strip_stats") == len(nodes), counts
+    assert dict(counts)["free_tile"] == len(plan.tiles)
