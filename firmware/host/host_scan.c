@@ -21,7 +21,21 @@
 #include "wm_host.h"
 #include "wm_internal.h"
 
+#include <math.h>
 #include <stdint.h>
+
+/* floor(sqrt(x)) for fixed.c's wm_isqrt64 (its hook WM_ROOT_ENGINE, the board's slope unit's, in the shared
+ * library): the processor's square root of x rounded to a double is within one of it, and the integer
+ * steps after it make it exact, the same root as the C's three dependent divisions (the reduction's unit
+ * normals take one each; tests/host/test_host_stages.py compares them with math.isqrt). */
+uint32_t wm_tri_engine_root(uint64_t x)
+{
+    uint64_t r = (uint64_t)sqrt((double)x);
+    if (r > 0xFFFFFFFFu) r = 0xFFFFFFFFu;
+    while (r * r > x) r--;
+    while (r < 0xFFFFFFFFu && (r + 1) * (r + 1) <= x) r++;
+    return (uint32_t)r;
+}
 
 /* Grids of fewer samples keep the C scan for all but scan32's triangles (wm_host_scan(1)): their samples
  * stay in a core's cache, where the blocks' set-up costs more than their lanes and prefetches save

@@ -89,8 +89,8 @@ uint64_t wm_isqrt64(uint64_t x)
     int t;
     uint32_t a, r0, c;
     uint64_t hi, c64;
-#ifdef WM_SLOPE_ENGINE
-    if (x >= 256) return wm_tri_engine_root(x); /* the board's refiner: the FPGA's slope unit takes the root */
+#if defined(WM_SLOPE_ENGINE) || defined(WM_ROOT_ENGINE)
+    if (x >= 256) return wm_tri_engine_root(x); /* the board's FPGA slope unit, the host's hardware root */
 #endif
     if (x < ((uint64_t)1 << 32)) return isqrt32((uint32_t)x);
     t = (WM_NARROW_DIV ? clz32((uint32_t)(x >> 32)) : __builtin_clzll(x)) & ~1; /* x >= 2^32: the high word's */

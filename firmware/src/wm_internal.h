@@ -338,11 +338,16 @@ int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3
                         int32_t py, uint64_t *kept, uint32_t *e);
 #endif
 
+#if defined(WM_SLOPE_ENGINE) || defined(WM_ROOT_ENGINE)
+/* The engine's slope unit alone: floor(sqrt(x)), wm_isqrt64's root (firmware/board/src/tri_engine.c); in
+ * the host's shared library (WM_ROOT_ENGINE, firmware/CMakeLists.txt) the processor's square root made
+ * exact (firmware/host/host_scan.c): the same integers. */
+uint32_t wm_tri_engine_root(uint64_t x);
+#endif
+
 #ifdef WM_SLOPE_ENGINE
 /* (the board's refiner alone: firmware/board/CMakeLists.txt; the host's library takes the scan's hook
- * above, WM_TRI_ENGINE, but not these) */
-/* The engine's slope unit alone: floor(sqrt(x)), wm_isqrt64's root (firmware/board/src/tri_engine.c). */
-uint32_t wm_tri_engine_root(uint64_t x);
+ * above, WM_TRI_ENGINE, and the root's, WM_ROOT_ENGINE, but not these) */
 /* The engine's slope unit: the normal metric's slope factor of the counter-clockwise triangle (x, y) as
  * tri_error.c's slope_square and wm_isqrt64 compute it, floor(sqrt(X)) into *root and k into *k (the
  * slope factor is *root << *k); 0 when it cannot take the field (the C computes it). */

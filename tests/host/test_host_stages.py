@@ -6,6 +6,7 @@ counts; and `wavemesh mesh` writes the same mesh whatever --threads says."""
 from __future__ import annotations
 
 import ctypes
+import math
 
 import numpy as np
 import pytest
@@ -433,3 +434,22 @@ def test_small_triangle_lanes_equal_the_c_scan(c_scan):
                     got.append((e, wx.value, wy.value, e0))
                 assert got[0] == got[1], (x, y, metric)
         assert taken > 300
+
+
+def test_square_root_hook_equals_isqrt():
+    """The shared library's wm_isqrt64 (fixed.c), whose roots from 256 on come from host_scan.c's hook
+    (WM_ROOT_ENGINE: the processor's square root made exact), is floor(sqrt(x)): against math.isqrt at
+    every x below 4096, around every square of a power of two and its neighbours (where a double's
+    rounding lands on the wrong side), up to 2^64 - 1, and at random values of every bit length."""
+    lib = native.load()
+    root = lib.wm_isqrt64
+    root.restype, root.argtypes = ctypes.c_uint64, [ctypes.c_uint64]
+    values = list(range(4096)) + [2**64 - 1, 2**64 - 2, 2**63, 2**63 - 1]
+    for k in range(1, 33):
+        for r in (2**k - 1, 2**k, 2**k + 1, 3 * 2 ** (k - 1), 2**k - 3):
+            values += [v for v in (r * r - 2, r * r - 1, r * r, r * r + 1, r * r + 2 * r, r * r + 2 * r + 1)
+                       if 0 <= v < 2**64]
+    rng = np.random.default_rng(11)
+    values += [int(v) >> s for s in range(64) for v in rng.integers(0, 2**63, 200, dtype=np.uint64) * 2 + 1]
+    bad = [v for v in values if root(v) != math.isqrt(v)]
+    assert not bad, bad[:5]
