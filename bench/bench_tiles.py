@@ -81,21 +81,33 @@ def one(
 ) -> dict:
     """One run in this process (the child): the tiled mesh (on a Runner of ``workers`` local processes,
     or through Dask: ``scheduler`` "local" for a LocalCluster of ``workers`` processes, or an address),
-    or the untiled one.  The parent's own CPU time (os.times: this process, its workers apart)."""
+    or the untiled one.  The parent's own CPU time (os.times: this process, its workers apart; with a
+    LocalCluster, its scheduler's too); on Dask the workers' CPU apart (each one's os.times before and
+    after: idle workers' counted too) and in cpu_seconds.  WAVEMESH_BENCH_RUNNER ("NAME=VALUE,..."):
+    tiles.runner's settings for the run (DASK_CHAINS=0, ...)."""
     from wavemesh import api, tiles
     from wavemesh.refine.native import RefineParams
 
     path = str(terrain_file(n, grid))
     zeta = ZETA if grid == "terrain" else REAL_ZETA * float(np.ptp(np.load(path, mmap_mode="r")))
     params = api.MeshParams(refine=RefineParams(zeta=zeta, metric="vertical"))
-    cluster = None
-    if scheduler == "local":
-        from distributed import LocalCluster
+    from wavemesh.tiles import runner as pool
 
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
-        scheduler = cluster.scheduler_address
+    for kv in filter(None, os.environ.get("WAVEMESH_BENCH_RUNNER", "").split(",")):  # as LAUNCHER's
+        k, v = kv.split("=")
+        setattr(pool, k, type(getattr(pool, k))(int(v)))
+    cluster = client = None
+    via = scheduler
+    if scheduler:
+        from distributed import Client, LocalCluster
+
+        if scheduler == "local":
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            )
+        client = Client(cluster or scheduler)
+        scheduler = client
+    dask0 = _dask_cpu(client)
     t0, c0 = time.perf_counter(), os.times()
     if untiled:
         r = api.mesh(api.load_input(path), params)
@@ -111,20 +123,30 @@ def one(
             "scan_seconds": plan.scan_seconds,
         }
     seconds = time.perf_counter() - t0
-    from wavemesh.tiles import runner as pool
-
+    dask_cpu = _dask_cpu(client) - dask0
     for proc in pool._EXITING:  # the workers still exiting (not waited for by the run): their CPU counted
         proc.join()
     c1 = os.times()
+    if client is not None:
+        client.close()
     if cluster is not None:
         cluster.close()
     parent = c1.user + c1.system - c0.user - c0.system
     return out | {
         "seconds": seconds,
         "parent_cpu_seconds": parent,
-        "cpu_seconds": parent + c1.children_user + c1.children_system - c0.children_user - c0.children_system,
-        "scheduler": scheduler and ("dask" if cluster is not None else "dask " + scheduler),
+        "cpu_seconds": parent + c1.children_user + c1.children_system - c0.children_user - c0.children_system
+        + dask_cpu,
+        "dask_workers_cpu_seconds": dask_cpu,
+        "scheduler": via and ("dask" if cluster is not None else "dask " + via),
     }
+
+
+def _dask_cpu(client) -> float:
+    """The Dask workers' CPU seconds so far (their processes' os.times, summed; 0 without a client)."""
+    if client is None:
+        return 0.0
+    return sum(client.run(lambda: (lambda t: t.user + t.system)(os.times())).values())
 
 
 def run_child(

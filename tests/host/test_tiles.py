@@ -150,10 +150,11 @@ def test_one_tile_is_the_untiled_mesh(tmp_path):
     assert tiled.mesh.same_as(untiled.mesh)
 
 
-def test_dask_equals_local(dem, tmp_path):
-    """The same tiles on a Dask LocalCluster of 2 worker processes, on the local pool of 2 processes and in
-    this process: the same files, byte for byte; a lossy quantisation's largest error found before the
-    tiles (plan_tiles) or in their task graph beside the free meshes (defer_error): the same plan after."""
+def test_dask_equals_local(dem, tmp_path, monkeypatch):
+    """The same tiles on a Dask LocalCluster of 2 worker processes (chains of nodes, as the pool gives them
+    out, and one task a node: runner.DASK_CHAINS), on the local pool of 2 processes and in this process:
+    the same files, byte for byte; a lossy quantisation's largest error found before the tiles
+    (plan_tiles) or in their task graph beside the free meshes (defer_error): the same plan after."""
     distributed = pytest.importorskip("distributed")
     path = tmp_path / "f.npy"
     np.save(path, np.load(dem) + 0.25)  # not integers: a lossy quantisation, q > 0
@@ -183,9 +184,11 @@ def test_dask_equals_local(dem, tmp_path):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as c, distributed.Client(c) as client:
         dask = files("dask", True, scheduler=client)
+        monkeypatch.setattr(tiles.runner, "DASK_CHAINS", False)
+        nodes = files("nodes", True, scheduler=client)
         assert len(client.scheduler_info()["workers"]) == 2
     assert len(here[0]) == 13 and here[1][0].q > 0 and here[1][1] < 3.0
-    assert here == one == pool == dask
+    assert here == one == pool == dask == nodes
 
 
 @pytest.fixture(scope="module")

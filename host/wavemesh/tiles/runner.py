@@ -41,6 +41,9 @@ HOLD = True
 # on Dask, each tile's tasks are asked of one worker (Runner.graph's homes: a block of tiles a worker), which
 # reads the tile once; another takes them when that one is busy (Dask's loose restrictions: its work stealing)
 DASK_HOMES = True
+# on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead), a chain a task, rather than
+# every node submitted at once as a task of its own
+DASK_CHAINS = True
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -155,9 +158,10 @@ def _resolve(node: Node, results: list, prev: int | None = None, held: set | fro
 
 class Runner:
     """Where a tiled run's tasks run, as a context manager: ``scheduler`` (a Dask scheduler's address or
-    a distributed.Client: one task per job, the workers read their own windows), else ``workers`` forked
-    local processes (default: the CPUs this process may use; 1: in this process), started at the first
-    task and kept for every phase.  Leaving it early (an error, Ctrl-C, SIGTERM) kills the workers."""
+    a distributed.Client: a Dask task a chain of nodes, given out as the pool gives them; the workers read
+    their own windows), else ``workers`` forked local processes (default: the CPUs this process may use;
+    1: in this process), started at the first task and kept for every phase.  Leaving it early (an
+    error, Ctrl-C, SIGTERM) kills the workers."""
 
     def __init__(self, workers: int | None = None, scheduler=None):
         workers = default_workers() if workers is None else workers
@@ -377,12 +381,10 @@ class Runner:
 
     def _dask_graph(self, nodes: list[Node], got: Callable, shared: tuple, keep: set | None,
                     seen: Iterable[int] | None, homes: dict | None) -> None:
-        """Runner.graph on a Dask cluster: one task a node, each submitted with the futures of the nodes it
-        reads (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's
-        (Dask's priority: the least rank first); ``shared`` args and each Here scattered once (the plan
-        every task reads: sent to every worker, not with each task); only the results the caller reads
-        (``keep``, ``seen``) come back to this process, each node's future let go once it is done (Dask
-        keeps a result until the nodes that read it are done)."""
+        """Runner.graph on a Dask cluster: as the pool, chains of nodes (DASK_CHAINS: _dask_chains), else one
+        task a node (_dask_nodes); ``shared`` args and each Here scattered once (the plan every task reads:
+        sent to every worker, not with each task); only the results the caller reads (``keep``, ``seen``)
+        come back to this process."""
         client = self.client
         if not self.dask_started:  # each worker set up once, before its first task (_dask_start)
             self.dask_started = True
@@ -391,16 +393,29 @@ class Runner:
                 host = _host(addr)
                 hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
             client.run(_dask_start, hosts, native.threads_set())
+        scattered: dict = {}  # id of a shared arg or a Here (the nodes share one per tile) -> its future
+        for obj in shared:
+            scattered[id(obj)] = client.scatter(obj, broadcast=True, hash=False)
+        wanted = None if keep is None or seen is None else keep | set(seen)
+        workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
+        if DASK_CHAINS and workers:
+            self._dask_chains(nodes, got, scattered, wanted, homes, workers)
+        else:
+            self._dask_nodes(nodes, got, scattered, wanted, homes)
+
+    def _dask_nodes(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
+                    homes: dict | None) -> None:
+        """_dask_graph with one task a node, each submitted at once with the futures of the nodes it reads
+        (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's (Dask's
+        priority: the least rank first), each tile's asked of one worker (DASK_HOMES); each node's future
+        let go once it is done (Dask keeps a result until the nodes that read it are done)."""
+        client = self.client
         key = f"wavemesh-{self.run_id}-{self.n_maps}"
         where = _dask_homes(client, homes) if DASK_HOMES and homes else {}
         order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
         priority = [0] * len(nodes)
         for p, i in enumerate(order):
             priority[i] = len(nodes) - p
-        scattered: dict = {}  # id of a shared arg or a Here (the nodes share one per tile) -> its future
-        for obj in shared:
-            scattered[id(obj)] = client.scatter(obj, broadcast=True, hash=False)
-        wanted = None if keep is None or seen is None else keep | set(seen)
         futures: list = []
         for i, node in enumerate(nodes):
             args, picks = [], []
@@ -428,8 +443,87 @@ class Runner:
         scattered.clear()
         for fut in pending:
             i = index[fut.key]
-            got(i, fut.result() if wanted is None or i in wanted else None)
+            got(i, fut.result() if wanted is None or i in wanted or fut.status == "error" else None)
             del fut
+
+    def _dask_chains(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
+                     homes: dict | None, workers: list[str]) -> None:
+        """_dask_graph as the pool gives out its nodes: the Dask worker ``w`` (of ``workers``) is given
+        _Schedule.chain's nodes as one task (its first node's tiles its own: the tiles' ``homes``), asked of
+        that worker (another takes it only if it leaves: Dask's loose restrictions), with the futures of
+        the chains whose results it reads; while it runs one, its next chain (ahead).  A chain's results
+        stay on its worker until every node that reads them has been given out, and come back here only
+        for the nodes the caller reads (``wanted``)."""
+        from distributed import as_completed  # with connect's package
+
+        client, size = self.client, len(workers)
+        key = f"wavemesh-{self.run_id}-{self.n_maps}"
+        deps = [n.deps() for n in nodes]
+        readers = [0] * len(nodes)
+        for ds in deps:
+            for d in ds:
+                readers[d] += 1
+        sched = _Schedule(nodes, {t: int(h * size) for t, h in (homes or {}).items()}, deps)
+        made: dict = {}  # node -> (the future of the chain that made it, its place in the chain)
+        flight: list[list] = [[] for _ in range(size)]  # each worker's chains given out, not yet done
+        chains: dict = {}  # a chain's key -> (worker, its nodes)
+        pending = as_completed()
+
+        def give(w: int) -> None:
+            if len(flight[w]) > 1 or not (chain := sched.chain(w, size, bool(flight[w]))):
+                return
+            ext: dict = {}  # key of a future the chain reads -> (its place in the task's args, the future)
+            steps = []
+            for n, k in enumerate(chain):
+                args = []
+                for a in nodes[k].args:
+                    if isinstance(a, Ref) and a.node in chain[:n]:
+                        args.append(_Made(None, chain.index(a.node), a.pick))
+                    elif isinstance(a, Ref):
+                        f, at = made[a.node]
+                        args.append(_Made(ext.setdefault(f.key, (len(ext), f))[0], at, a.pick))
+                    elif isinstance(a, Here) or id(a) in scattered:
+                        if id(a) not in scattered:
+                            scattered[id(a)] = client.scatter(a.fn(*a.args), hash=False)
+                        f = scattered[id(a)]
+                        args.append(_Made(ext.setdefault(f.key, (len(ext), f))[0], None, None))
+                    else:
+                        args.append(a)
+                steps.append((nodes[k].fn, tuple(args)))
+                for d in deps[k]:  # given out: a result nobody reads any more is let go (its future)
+                    readers[d] -= 1
+                    if not readers[d] and d not in chain:
+                        made.pop(d, None)
+            fut = client.submit(_dask_chain, steps, *(f for _, f in ext.values()), pure=False,
+                                key=f"{key}-{chain[0]}", workers=[workers[w]], allow_other_workers=True)
+            for at, k in enumerate(chain):
+                if readers[k]:
+                    made[k] = (fut, at)
+            flight[w].append(fut)
+            chains[fut.key] = (w, chain)
+            pending.add(fut)
+
+        def hand_out() -> None:
+            for w in range(size):  # a worker with nothing first, then the second chains
+                if not flight[w]:
+                    give(w)
+            for w in range(size):
+                give(w)
+
+        hand_out()
+        for fut in pending:
+            w, chain = chains.pop(fut.key)
+            flight[w].remove(fut)
+            if fut.status == "error" or wanted is None or any(k in wanted for k in chain):
+                out = fut.result()  # its error raised here
+            else:
+                out = [None] * len(chain)
+            for k in chain:
+                sched.finished(k)
+            hand_out()
+            for k, r in zip(chain, out, strict=True):
+                got(k, r if wanted is None or k in wanted else None)
+            del fut, out
 
     def _start_pool(self, upto: int | None = None) -> None:
         """The pool's workers forked, up to ``upto`` of them (None: all)."""
@@ -600,6 +694,32 @@ def _dask_start(hosts: dict, threads: int | None, dask_worker=None) -> None:
     tune_malloc()
     here = hosts.get(_host(dask_worker.address), 1) if dask_worker is not None else 1
     native.set_threads(threads if threads is not None else max(1, native.cores() // here))
+
+
+@record(frozen=True)
+class _Made:
+    """In a chain's args sent to a Dask worker (_dask_chain): the future at ``arg`` of the task's args (None:
+    this chain's results), its result ``at`` (None: the whole), ``pick`` of it when given."""
+
+    arg: int | None
+    at: int | None
+    pick: Callable | None = None
+
+
+def _dask_chain(steps: list, *made):
+    """A chain of nodes on a Dask worker (Runner._dask_chains): each (fn, args) in turn, a _Made in args
+    one of ``made`` (the futures' results) or of this chain's results; their results as a list."""
+    out: list = []
+    for fn, args in steps:
+        vals = []
+        for a in args:
+            if isinstance(a, _Made):
+                v = out if a.arg is None else made[a.arg]
+                v = v if a.at is None else v[a.at]
+                a = a.pick(v) if a.pick else v
+            vals.append(a)
+        out.append(fn(*vals))
+    return out
 
 
 def _dask_call(fn: Callable, picks: tuple, *args):
