@@ -411,7 +411,9 @@ class Runner:
         let go once it is done (Dask keeps a result until the nodes that read it are done)."""
         client = self.client
         key = f"wavemesh-{self.run_id}-{self.n_maps}"
-        where = _dask_homes(client, homes) if DASK_HOMES and homes else {}
+        workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
+        where = {t: [workers[w]] for t, w in _blocks(homes, len(workers)).items()} \
+            if DASK_HOMES and homes and workers else {}
         order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
         priority = [0] * len(nodes)
         for p, i in enumerate(order):
@@ -449,11 +451,11 @@ class Runner:
     def _dask_chains(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
                      homes: dict | None, workers: list[str]) -> None:
         """_dask_graph as the pool gives out its nodes: the Dask worker ``w`` (of ``workers``) is given
-        _Schedule.chain's nodes as one task (its first node's tiles its own: the tiles' ``homes``), asked of
-        that worker (another takes it only if it leaves: Dask's loose restrictions), with the futures of
-        the chains whose results it reads; while it runs one, its next chain (ahead).  A chain's results
-        stay on its worker until every node that reads them has been given out, and come back here only
-        for the nodes the caller reads (``wanted``)."""
+        _Schedule.chain's nodes as one task (its first node's tiles its own: _blocks of ``homes``), asked of
+        that worker (Dask's loose restrictions: another may still take it, by work stealing or when that
+        one leaves), with the futures of the chains whose results it reads; while it runs one, its next
+        chain (ahead).  A chain's results stay on its worker until every node that reads them has been
+        given out, and come back here only for the nodes the caller reads (``wanted``)."""
         from distributed import as_completed  # with connect's package
 
         client, size = self.client, len(workers)
@@ -463,7 +465,7 @@ class Runner:
         for ds in deps:
             for d in ds:
                 readers[d] += 1
-        sched = _Schedule(nodes, {t: int(h * size) for t, h in (homes or {}).items()}, deps)
+        sched = _Schedule(nodes, _blocks(homes or {}, size), deps)
         made: dict = {}  # node -> (the future of the chain that made it, its place in the chain)
         flight: list[list] = [[] for _ in range(size)]  # each worker's chains given out, not yet done
         chains: dict = {}  # a chain's key -> (worker, its nodes)
@@ -675,13 +677,12 @@ def _host(address: str) -> str:
     return address.rsplit("://", 1)[-1].rsplit(":", 1)[0]
 
 
-def _dask_homes(client, homes: dict) -> dict:
-    """Tile -> the Dask worker (its address) whose tasks its nodes are: the tiles in the order of their
-    ``homes`` (Runner.graph's; columns of tiles), an equal block of them a worker, the workers in the order
-    of their addresses (a host's together)."""
-    workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
+def _blocks(homes: dict, workers: int) -> dict:
+    """Tile -> the Dask worker (of ``workers``) whose tasks its nodes are: the tiles in the order of their
+    ``homes`` (Runner.graph's; columns of tiles), an equal block of them a worker (with more workers than
+    columns of tiles, parts of columns: every worker has tiles of its own)."""
     tiles = sorted(homes, key=lambda t: (homes[t], t))
-    return {t: [workers[p * len(workers) // len(tiles)]] for p, t in enumerate(tiles)} if workers else {}
+    return {t: p * workers // len(tiles) for p, t in enumerate(tiles)}
 
 
 def _dask_start(hosts: dict, threads: int | None, dask_worker=None) -> None:
