@@ -44,6 +44,9 @@ DASK_HOMES = True
 # on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead), a chain a task, rather than
 # every node submitted at once as a task of its own
 DASK_CHAINS = True
+# and up to DASK_CHAIN nodes a chain (CHAIN's rules): a Dask task costs the scheduler and the worker some
+# milliseconds of CPU more than a pool's round trip
+DASK_CHAIN = 16
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
 # kept up to 1 GiB
@@ -472,7 +475,7 @@ class Runner:
         pending = as_completed()
 
         def give(w: int) -> None:
-            if len(flight[w]) > 1 or not (chain := sched.chain(w, size, bool(flight[w]))):
+            if len(flight[w]) > 1 or not (chain := sched.chain(w, size, bool(flight[w]), DASK_CHAIN)):
                 return
             ext: dict = {}  # key of a future the chain reads -> (its place in the task's args, the future)
             steps = []
@@ -621,9 +624,9 @@ class _Schedule:
         self.left -= 1
         return self.ready.pop(k)[1]
 
-    def chain(self, worker: int, workers: int, ahead: bool = False) -> list[int]:
+    def chain(self, worker: int, workers: int, ahead: bool = False, most: int | None = None) -> list[int]:
         """The nodes ``worker`` (of ``workers``) is given next, in order (Runner.graph): the node take gives
-        it, the node that waits for it alone (follower), and so on, up to CHAIN; while more than
+        it, the node that waits for it alone (follower), and so on, up to CHAIN (``most``); while more than
         BATCH_READY nodes a worker are ready, after a node without a follower the next ready node of its
         own.  ``ahead``: the worker is running a chain: none unless AHEAD, its first node one of its own,
         the batch only of tiles it has read already.  Empty: nothing to give."""
@@ -632,7 +635,7 @@ class _Schedule:
         if (i := self.take(worker, own=ahead)) is None:
             return []
         chain = [i]
-        while len(chain) < CHAIN:
+        while len(chain) < (CHAIN if most is None else most):
             j = self.follower(chain[-1], worker)
             if j is None and len(self.ready) > BATCH_READY * workers:
                 j = self.take(worker, own=True, held=ahead)  # another of its own, while there are plenty
