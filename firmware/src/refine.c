@@ -210,6 +210,19 @@ static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
     return WM_NARROW_DIV && rq < 65536u ? wm_udiv_small(num << 16, (uint32_t)rq, &rem) : (num << 16) / rq;
 }
 
+/* 65536 > den_max(alpha, ra, num), without its divisions: den_max is 0 (R_A alone refuses, or R > 2^32 -
+ * 1), else floor(2^16 num / R) with R = ceil(t / a), a = 2^16 - alpha, t = 65537 2^16 - alpha ra > 0,
+ * which is below 2^16 iff num < R; and R > m iff t > m a for an integer m, so the answer is
+ * t > min(num, 2^32 - 1) a (below 2^48 2^16).  The test of most swaps R_A's bound refuses (try_swap). */
+static int den_below_one(uint32_t alpha, uint32_t ra, uint64_t num)
+{
+    int64_t t;
+    if (alpha == 65536u) return ra <= 65536u;
+    t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
+    if (t <= 0) return 0;
+    return (uint64_t)t > (num < 0xFFFFFFFFu ? num : 0xFFFFFFFFu) * (65536u - alpha);
+}
+
 /* The largest E with wm_scale_mul(p, E, 1, 0, cap) <= X (cap = 2^40), saturated at 2^32 - 1: that
  * product is min(cap, floor(E m / 2^e)) (m = scale_m < 2^16), and floor(E m / 2^e) <= X iff
  * E m <= (X + 1) 2^e - 1; every E below 2^32 has it when (X + 1) 2^e >= 2^48. */
@@ -318,8 +331,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
          * point error is tested as it comes.  dmax grows with R_A, so these first take R_A's bound
          * from above (wm_min_angle_above, no CORDIC): a swap they refuse with it is refused with R_A
          * itself (most swaps end here); then the new angles, and the same tests on their R_A. */
+        if (den_below_one(alpha, ra, o1 + o2 + one)) return 0; /* one > dmax */
         dmax = den_max(alpha, ra, o1 + o2 + one);
-        if (one > dmax) return 0;
+        WM_ASSERT(one <= dmax);
         s1 = s2 = 0;
         for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
             int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1], sx = s % r->field.width,
