@@ -400,21 +400,20 @@ class Runner:
         for obj in shared:
             scattered[id(obj)] = client.scatter(obj, broadcast=True, hash=False)
         wanted = None if keep is None or seen is None else keep | set(seen)
-        workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
+        workers = _dask_threads(client)
         if DASK_CHAINS and workers:
             self._dask_chains(nodes, got, scattered, wanted, homes, workers)
         else:
-            self._dask_nodes(nodes, got, scattered, wanted, homes)
+            self._dask_nodes(nodes, got, scattered, wanted, homes, workers)
 
     def _dask_nodes(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
-                    homes: dict | None) -> None:
+                    homes: dict | None, workers: list[str]) -> None:
         """_dask_graph with one task a node, each submitted at once with the futures of the nodes it reads
         (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's (Dask's
         priority: the least rank first), each tile's asked of one worker (DASK_HOMES); each node's future
         let go once it is done (Dask keeps a result until the nodes that read it are done)."""
         client = self.client
         key = f"wavemesh-{self.run_id}-{self.n_maps}"
-        workers = sorted(client.scheduler_info().get("workers", {}), key=lambda a: (_host(a), a))
         where = {t: [workers[w]] for t, w in _blocks(homes, len(workers)).items()} \
             if DASK_HOMES and homes and workers else {}
         order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
@@ -453,7 +452,7 @@ class Runner:
 
     def _dask_chains(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
                      homes: dict | None, workers: list[str]) -> None:
-        """_dask_graph as the pool gives out its nodes: the Dask worker ``w`` (of ``workers``) is given
+        """_dask_graph as the pool gives out its nodes: the Dask worker thread ``w`` (of ``workers``) is given
         _Schedule.chain's nodes as one task (its first node's tiles its own: _blocks of ``homes``), asked of
         that worker (Dask's loose restrictions: another may still take it, by work stealing or when that
         one leaves), with the futures of the chains whose results it reads; while it runs one, its next
@@ -678,6 +677,13 @@ class _Schedule:
 def _host(address: str) -> str:
     """The host of a Dask worker's address (tcp://10.0.0.5:40123 -> 10.0.0.5)."""
     return address.rsplit("://", 1)[-1].rsplit(":", 1)[0]
+
+
+def _dask_threads(client) -> list[str]:
+    """The Dask workers' addresses, one a thread (a worker of n threads named n times: each thread is
+    given chains as a pool worker is), a host's together."""
+    info = client.scheduler_info().get("workers", {})
+    return [a for a in sorted(info, key=lambda a: (_host(a), a)) for _ in range(info[a].get("nthreads") or 1)]
 
 
 def _blocks(homes: dict, workers: int) -> dict:
