@@ -38,12 +38,13 @@ PIN = True
 # a pool worker keeps each result it made that other nodes read, until the parent has given out every one of
 # them: a node given to that worker names it (_Held) instead of carrying it down the pipe again
 HOLD = True
-# on Dask, each tile's tasks are asked of one worker (Runner.graph's homes: a block of tiles a worker), which
-# reads the tile once; another takes them when that one is busy (Dask's loose restrictions: its work stealing)
-DASK_HOMES = True
-# on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead), a chain a task, rather than
-# every node submitted at once as a task of its own
+# on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead; each worker thread a pool
+# worker, its own tiles a block of them), a chain a task, rather than every node submitted at once as a task
+# of its own
 DASK_CHAINS = True
+# with DASK_CHAINS False: each tile's tasks asked of one worker (a block of tiles a worker), which reads the
+# tile once; another takes them when that one is busy (Dask's loose restrictions: its work stealing)
+DASK_HOMES = True
 # and up to DASK_CHAIN nodes a chain (CHAIN's rules): a Dask task costs the scheduler and the worker some
 # milliseconds of CPU more than a pool's round trip
 DASK_CHAIN = 16
