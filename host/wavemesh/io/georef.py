@@ -138,10 +138,18 @@ class Ground:
         return f"cell {dx:.6g} x {dy:.6g} {self.ground_unit}: {self.how}"
 
 
+_GRID_GROUNDS: dict = {}  # grid_ground's answers by size: a Ground is frozen (one made: 2 us a refine call)
+
+
 def grid_ground(width: int, height: int) -> Ground:
     """The Ground of a grid without a georeference: grid steps."""
-    return Ground(width, height, GRID, None, "grid step", (1.0, 1.0), "grid step",
-                  "no georeference: 1 grid step")
+    g = _GRID_GROUNDS.get((width, height))
+    if g is None:
+        if len(_GRID_GROUNDS) >= 64:
+            _GRID_GROUNDS.clear()
+        g = _GRID_GROUNDS[(width, height)] = Ground(width, height, GRID, None, "grid step", (1.0, 1.0),
+                                                    "grid step", "no georeference: 1 grid step")
+    return g
 
 
 def parse_pair(text: str, what: str, *, positive: bool, one_ok: bool) -> tuple[float, float]:
