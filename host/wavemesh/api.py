@@ -50,7 +50,6 @@ from wavemesh.io.load import (
     parse_crop,
     shape_heightfield,
 )
-from wavemesh.io.meshread import read_mesh
 from wavemesh.io.results import (
     PICTURE_SUFFIXES,
     MeshFiles,
@@ -67,9 +66,8 @@ from wavemesh.mesh import Mesh
 from wavemesh.model.haar import WAVELETS, decompose, default_levels
 from wavemesh.model.initial import InitialResult, assemble, initial_triangulation
 from wavemesh.model.label import Labelling, tau_counts
-from wavemesh.model.roi import mask_details, parse_roi, roi_errors, roi_report
 from wavemesh.record import record
-from wavemesh.refine import cover, native
+from wavemesh.refine import native
 from wavemesh.refine.native import RefineOutput, RefineParams, fixed_params
 
 __all__ = [  # the public API (io.load's and io.results' functions are offered here too)
@@ -88,10 +86,19 @@ __all__ = [  # the public API (io.load's and io.results' functions are offered h
 
 # Imported where used, for their start-up cost (tests/host/test_mesh_costs.py: `wavemesh mesh` does not
 # load them): the device path (wavemesh.device: protocol, link, stream, about 16 ms), tqdm; pictures
-# (wavemesh.check.render: matplotlib, about 270 ms) in wavemesh.io.results.
+# (wavemesh.check.render: matplotlib, about 270 ms) in wavemesh.io.results; and what a plain run does not
+# call: the mesh reader (wavemesh.io.meshread: `check`, `render`), the ROI (wavemesh.model.roi: --roi) and
+# the cover of holes (wavemesh.refine.cover: --nodata hole), with bisect under it (about 0.8 ms together).
 if TYPE_CHECKING:
     from wavemesh.device.link import LinkStats
     from wavemesh.device.stream import Device, DeviceInfo, Timeouts
+
+def _roi():
+    """wavemesh.model.roi, imported on the first use (start-up: see the top)."""
+    from wavemesh.model import roi  # start-up: only with an ROI (see the top)
+
+    return roi
+
 
 MAX_LEVELS = limits.MAX_LEVELS  # the model's limit (wavemesh.limits: the refiner's header, the one statement)
 DEFAULT_TAU_FRACTION = 0.01  # default tau_M: this fraction of the height range (docs/model.md)
@@ -202,7 +209,7 @@ def bound_excess(hf: HeightField, rjob: RefineJob, errors: ErrorReport) -> str |
         quantised = hf.offset + hf.scale * hf.samples.astype(np.float64)
         sp = ground(hf).spacing
         e = getattr(mesh_errors(rjob.mesh, quantised, spacing=sp) if rjob.roi is None
-                    else roi_errors(rjob.mesh, quantised, rjob.roi, spacing=sp), metric)
+                    else _roi().roi_errors(rjob.mesh, quantised, rjob.roi, spacing=sp), metric)
         zeta, on = rjob.zeta_used, "the 16-bit samples"
     if e <= zeta + eps:
         return None
@@ -231,7 +238,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     details = job.levels  # the library's filter bank makes them (native.refine)
     if roi is not None:
         # 5.6: no detail energy outside the ROI
-        details = mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
+        details = _roi().mask_details(decompose(hf.samples, job.levels, job.wavelet), roi)
     out = native.refine(hf.samples, details, job.mesh, params, scale=hf.scale, zeta=zeta, spacing=spacing,
                         roi=roi, mask=hf.mask, wavelet=job.wavelet,
                         details=job.details if roi is None else None)
@@ -244,7 +251,7 @@ def refine(hf: HeightField, levels: int | None = None, tau: float | None = None,
     rjob = RefineJob(job, params, zeta, out, seconds, roi=roi, holes=hole_check)
     rjob.errors = mesh_errors(rjob.mesh, hf.values, rms=rms, spacing=spacing)
     if roi is not None:
-        rjob.roi_errors = roi_errors(rjob.mesh, hf.values, roi, rms=rms, spacing=spacing)
+        rjob.roi_errors = _roi().roi_errors(rjob.mesh, hf.values, roi, rms=rms, spacing=spacing)
     excess = bound_excess(hf, rjob, rjob.errors if roi is None else rjob.roi_errors)
     if excess:
         raise MeshInvalid(excess, hint=BUG_HINT)
@@ -266,6 +273,8 @@ def drop_holes(levels: list, hf: HeightField, min_area: float = 0.0, within=None
         if min_area > 0:
             raise InputError("--min-area drops pieces of a mesh with holes", hint="use it with --nodata hole")
         return None
+    from wavemesh.refine import cover  # start-up: only with holes (see the top)
+
     final = levels[-1]
     for lv in levels:  # the final mesh's thin rim triangles flipped where a valid one comes of it
         lv.mesh = cover.drop(cover.flip_thin(lv.mesh, hf.mask) if lv is final else lv.mesh, hf.mask)
@@ -460,7 +469,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
     m, t = _levels_and_tau(hf, params.levels, params.tau)
     roi = None
     if params.roi is not None:
-        roi = parse_roi(params.roi, hf.width, hf.height)
+        roi = _roi().parse_roi(params.roi, hf.width, hf.height)
     if roi is not None and (params.initial_only or not params.refine.bound):
         raise InputError("--roi selects where the refiner works and bounds the error",
                          hint="use it with --stage full and --bound on")
@@ -508,7 +517,7 @@ def mesh(hf: HeightField, params: MeshParams | None = None, labelling: Labelling
         report["holes"] = rjob.holes.to_report()
     if roi is not None:
         parameters["roi"] = [str(s) for s in params.roi] if isinstance(params.roi, (tuple, list)) else "array"
-        report["roi"] = roi_report(rjob.mesh, roi, rjob.roi_errors, rjob.errors, p.metric)
+        report["roi"] = _roi().roi_report(rjob.mesh, roi, rjob.roi_errors, rjob.errors, p.metric)
     return MeshResult(heightfield=hf, params=params, refine_params=p, levels=m, tau=t, mesh=rjob.mesh,
                       errors=rjob.errors, level_meshes=LevelMeshes(rjob.output.levels),
                       rows=rows, bound_met=rjob.bound_met, comment=_comment(m, t, p), report=report,
@@ -811,7 +820,9 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
     if min_area > 0 and hf.mask is None:
         raise InputError("--min-area checks a mesh with holes", hint="use it with --nodata hole")
     if roi is not None:
-        roi = parse_roi(roi, hf.width, hf.height)
+        roi = _roi().parse_roi(roi, hf.width, hf.height)
+    from wavemesh.io.meshread import read_mesh  # start-up: only `check` reads a mesh (see the top)
+
     placed = read_sidecar(path)
     g = placed[0] if placed else ground(hf)
     mesh, z = read_mesh(path, hf.width, hf.height, to_grid=to_grid(*placed) if placed else None)
@@ -846,7 +857,7 @@ def check_file(path: str, hf: HeightField, roi=None, min_area: float = 0.0) -> d
         else:
             report["errors"] = mesh_errors(mesh, hf.values, spacing=g.spacing).to_report()
             if roi is not None:
-                report["roi_errors"] = roi_errors(mesh, hf.values, roi, spacing=g.spacing).to_report()
+                report["roi_errors"] = _roi().roi_errors(mesh, hf.values, roi, spacing=g.spacing).to_report()
     return report
 
 

@@ -21,7 +21,6 @@ from wavemesh.errors import MeshInvalid, WavemeshError
 from wavemesh.io.georef import sidecar_path
 from wavemesh.io.meshio import formats_help, suffixes
 from wavemesh.io.outputs import Inputs, Terminated, check_path, handle_termination
-from wavemesh.io.synth import ALIASES, DATASETS
 from wavemesh.limits import MAX_SIDE
 from wavemesh.model.haar import WAVELETS
 from wavemesh.refine import native
@@ -394,6 +393,8 @@ def _devices_parser(sub) -> None:
 
 
 def _synth_parser(sub) -> None:
+    from wavemesh.io.synth import ALIASES, DATASETS  # start-up: only `synth`'s parser (or the whole one)
+
     names = sorted(DATASETS) + sorted(ALIASES)
     p = sub.add_parser("synth", help="write one of the dissertation's synthetic data sets", description=(
         "Write a synthetic height field rebuilt from the dissertation (see docs/model.md)."))

@@ -186,16 +186,18 @@ def test_help_documents_check_levels():
     assert "--check-levels" in commands["stream"].format_help()  # stream takes mesh's options
 
 
-@pytest.mark.parametrize("tiled", [False, True])
-def test_mesh_imports_only_what_it_runs(tmp_path, ball, tiled):
+@pytest.mark.parametrize("tiled, out", [(False, "m.obj"), (True, "m.ply")])
+def test_mesh_imports_only_what_it_runs(tmp_path, ball, tiled, out):
     """A plain `wavemesh mesh` imports neither the wire protocol, the device session, pictures nor tiles
     (start-up is most of a short run's time; api.py and cli.py import them where used, for the cost each
     comment states; the model's limits come from wavemesh.limits), nor the optional readers' libraries;
-    nor numpy.ma (47M instructions), which a plain np.unique imports on its first call.  A tiled run
-    (its tiles here in this process, as --workers 1 runs them) the same, but the tiles."""
+    nor numpy.ma (47M instructions), which a plain np.unique imports on its first call; nor what only
+    other commands or options call: the mesh reader (`check`, `render`), the ROI (--roi), the cover of
+    holes (--nodata hole), the synthetic sets (`synth`), json (a report, a sidecar, --tiles-dir).  A tiled
+    run (its tiles here in this process, as --workers 1 runs them) the same, but the tiles."""
     extra = ", '--tile', '32', '--workers', '1'" if tiled else ""
     code = ("import sys; from wavemesh.cli import main; "
-            f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q'{extra}]); "
+            f"status = main(['mesh', {str(ball)!r}, '-o', {str(tmp_path / out)!r}, '-q'{extra}]); "
             "print(status, *sorted(sys.modules))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
@@ -204,9 +206,24 @@ def test_mesh_imports_only_what_it_runs(tmp_path, ball, tiled):
     assert ("wavemesh.tiles.jobs" in modules) == tiled
     unused = ("wavemesh.device.protocol", "wavemesh.device.stream", "wavemesh.device.link",
               "wavemesh.device.devices", "wavemesh.check.render", "serial", "matplotlib", "numpy.ma",
-              "tqdm", "PIL", "rasterio", "scipy", "trimesh", "secrets", "zipfile")
+              "tqdm", "PIL", "rasterio", "scipy", "trimesh", "secrets", "zipfile", "json",
+              "wavemesh.io.meshread", "wavemesh.model.roi", "wavemesh.refine.cover", "wavemesh.io.synth")
     unused += () if tiled else ("wavemesh.tiles",)
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
+
+
+def test_cli_imports_only_the_mesh_path():
+    """`import wavemesh.cli` (every command's start) loads none of what only other commands or options
+    call (api.py, cli.py and io/results.py import them where used): a module moved back to the top of
+    one of them fails here."""
+    code = "import sys, wavemesh.cli; print(*sorted(sys.modules))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    modules = set(r.stdout.split())
+    assert "wavemesh.api" in modules and "wavemesh.io.load" in modules  # it did import the command
+    unused = {"wavemesh.io.meshread", "wavemesh.model.roi", "wavemesh.refine.cover", "wavemesh.io.synth",
+              "wavemesh.tiles", "wavemesh.device.stream", "wavemesh.check.render", "json", "bisect"}
+    assert sorted(modules & unused) == []
 
 
 # ---------------------------------------------------------------------------------------------

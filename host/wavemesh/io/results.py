@@ -21,9 +21,7 @@ from wavemesh.io.georef import (
     to_grid,
 )
 from wavemesh.io.meshio import MESH_SUFFIXES, check_options, write_mesh, write_normal_map
-from wavemesh.io.meshread import read_mesh
 from wavemesh.io.outputs import Inputs, Outputs, as_inputs, check_path, distinct
-from wavemesh.io.synth import make
 from wavemesh.mesh import Mesh
 from wavemesh.record import record
 
@@ -176,6 +174,8 @@ def write_synth(name: str, output: str, size: int | None = None) -> Path:
     out = _check_output(output, (".npy",), "height field")
     if size is not None and not 2 <= size <= 16384:
         raise WavemeshError(f"--size {size} is out of range", hint="use 2..16384")
+    from wavemesh.io.synth import make  # start-up: only `synth`
+
     with Outputs() as staged:
         np.save(staged.path(out), make(name, size))
     return out
@@ -188,6 +188,8 @@ def render_file(mesh_path: str, output: str, *, view: str = "3d", wireframe: boo
     inputs = Inputs([mesh_path, sidecar_path(mesh_path)])
     _check_output(output, PICTURE_SUFFIXES, "picture", inputs)
     check_exaggeration(zscale, "vertical exaggeration")
+    from wavemesh.io.meshread import read_mesh  # start-up: only `render` reads a mesh here
+
     placed = read_sidecar(mesh_path)
     m, z = read_mesh(mesh_path, to_grid=to_grid(*placed) if placed else None)
     g = placed[0] if placed else grid_ground(m.width, m.height)

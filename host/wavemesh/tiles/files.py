@@ -3,7 +3,6 @@ the picture."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -135,10 +134,14 @@ class TiledFiles:
             write_mesh(str(self.mesh_path), self.mesh, self.z, comment=self.comment, base=self.files.base,
                        normals=self.files.normals, **self.opts)
         if self.folder is not None:
+            import json  # start-up: json (about 1 ms) only where index.json or a report is written
+
             self.staged.path(self.folder / "index.json", what="--tiles-dir").write_text(
                 json.dumps(self.index, indent=1) + "\n")
         self.report = tiled_report(plan, self.reports, order.vertices, order.triangles)
         if self.report_path:
+            import json  # the same
+
             self.staged.path(self.report_path, what="report").write_text(
                 json.dumps(self.report | {"output": str(self.out)}, indent=2) + "\n")
         if self.render:
