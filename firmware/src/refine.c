@@ -446,11 +446,14 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
-            if (me->hv[3 * t] < 0 || !(me->tflag[t] & WM_F_SWAP)) continue;
+            if (!(me->tflag[t] & WM_F_SWAP) || me->hv[3 * t] < 0) continue;
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
-                if (o < 0 || WM_TRI(o) < t || !(me->tflag[WM_TRI(o)] & WM_F_SWAP)) continue;
-                u = WM_TRI(o);
+                /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose turn took it;
+                 * else o >= 0 and its triangle an unsigned division */
+                if (o < 3 * t) continue;
+                u = (int32_t)((uint32_t)o / 3u);
+                if (!(me->tflag[u] & WM_F_SWAP)) continue;
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
                 if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) continue; /* a swap back: "no" */
                 if (try_swap(r, e, alpha, emax)) {
