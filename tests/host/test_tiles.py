@@ -191,6 +191,69 @@ def test_dask_equals_local(dem, tmp_path, monkeypatch):
     assert here == one == pool == dask == nodes
 
 
+def foreign_error(err: str, who: str) -> bool:
+    """One error line naming the cluster and the problem, and the hint: the same wavemesh everywhere."""
+    lines = err.splitlines()
+    return (len(lines) == 2 and lines[0].startswith(f"error: the Dask {who} at tcp://")
+            and "cannot load this wavemesh's tasks" in lines[0]
+            and lines[1].startswith("hint: run the same wavemesh as here") and "Traceback" not in err)
+
+
+def test_dask_workers_of_another_wavemesh(dem, tmp_path):
+    """Dask workers whose wavemesh lacks the runner's functions (another version there): one error line
+    naming the workers, not Dask's traceback; no output written."""
+    distributed = pytest.importorskip("distributed")
+    out = tmp_path / "m.obj"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, distributed.Client(c) as client:
+        client.run(exec, "import wavemesh.tiles.runner as r; del r._dask_start, r._dask_chain, r._dask_call")
+        rc, _, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64",
+                             "--scheduler", c.scheduler_address)
+    assert rc == 2 and foreign_error(err, "workers"), err
+    assert "_dask_start" in err and not out.exists()
+
+
+def test_dask_scheduler_of_another_wavemesh(dem, tmp_path):
+    """A Dask scheduler whose Python has another wavemesh (a package tree without the runner's functions),
+    which cannot read the task graph: one error line naming the scheduler, not Dask's RuntimeError."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import time
+
+    distributed = pytest.importorskip("distributed")
+    other = tmp_path / "other" / "host" / "wavemesh"
+    (other / "tiles").mkdir(parents=True)
+    (other / "__init__.py").write_text('__version__ = "0.0.0"\n')
+    (other / "tiles" / "__init__.py").write_text("")
+    (other / "tiles" / "runner.py").write_text("")
+    info = tmp_path / "scheduler.json"
+    env = dict(os.environ, PYTHONPATH=str(other.parent))  # the venv's .pth then leaves sys.path alone
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", "0", "--no-dashboard", "--scheduler-file", str(info)],
+                              env=env, stderr=subprocess.DEVNULL)]
+    out = tmp_path / "m.obj"
+    try:
+        end = time.monotonic() + 60
+        while not info.exists() and time.monotonic() < end:
+            time.sleep(0.05)
+        time.sleep(0.2)  # written whole
+        address = json.loads(info.read_text())["address"]
+        procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                       "--nthreads", "1", "--no-nanny", "--no-dashboard"],
+                                      stderr=subprocess.DEVNULL))
+        with distributed.Client(address) as client:
+            client.wait_for_workers(1, timeout=60)
+        rc, _, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64", "--scheduler", address)
+    finally:
+        for p in procs:
+            p.terminate()
+            p.wait(timeout=30)
+    assert rc == 2 and foreign_error(err, "scheduler"), err
+    assert "deserialization of the task graph" in err and not out.exists()
+
+
 @pytest.fixture(scope="module")
 def tiled_dem(dem):
     """The dem's 4 x 3 tiles of 64 (every tile's result, the plan) and their stitched mesh."""

@@ -95,6 +95,29 @@ def connect(address: str):
             from None
 
 
+# The scheduler's words (distributed.Scheduler.update_graph) for a graph it cannot unpickle: a task's
+# function or argument named by a module or class its Python does not have as this process has it
+GRAPH_UNREAD = "Error during deserialization of the task graph"
+
+
+def foreign_cluster(client, who: str, e: BaseException) -> WavemeshError:
+    """The error of a Dask cluster whose scheduler or workers (``who``) could not load this wavemesh's tasks
+    (the task functions are sent by name: another wavemesh version or package tree there, or none): its
+    address, what failed there, and the fix."""
+    import wavemesh  # start-up: only for this error (the package is loaded: its path for the hint)
+
+    detail = " ".join(str(e).split())
+    if detail.startswith(GRAPH_UNREAD):
+        detail = GRAPH_UNREAD.lower()  # the rest is Dask's advice, which the hint gives
+    if len(detail) > 200:
+        detail = detail[:197] + "..."
+    address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+    here = os.path.dirname(os.path.dirname(wavemesh.__file__))
+    return WavemeshError(f"the Dask {who} at {address} cannot load this wavemesh's tasks ({detail})",
+                         hint=f"run the same wavemesh as here (version {wavemesh.__version__}, from {here}) "
+                              "on the scheduler and every worker, then start them again")
+
+
 @record(frozen=True)
 class Ref:
     """In a Node's args: node ``node``'s result (``pick`` of it when given: a module-level function)."""
@@ -396,16 +419,26 @@ class Runner:
             for addr, w in client.scheduler_info().get("workers", {}).items():
                 host = _host(addr)
                 hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
-            client.run(_dask_start, hosts, native.threads_set())
+            try:
+                client.run(_dask_start, hosts, native.threads_set())
+            except (OSError, TimeoutError):  # the connection (distributed's CommClosedError is an OSError)
+                raise
+            except Exception as e:  # a worker that cannot load _dask_start (or the tasks' modules)
+                raise foreign_cluster(client, "workers", e) from None
         scattered: dict = {}  # id of a shared arg or a Here (the nodes share one per tile) -> its future
         for obj in shared:
             scattered[id(obj)] = client.scatter(obj, broadcast=True, hash=False)
         wanted = None if keep is None or seen is None else keep | set(seen)
         workers = _dask_threads(client)
-        if DASK_CHAINS and workers:
-            self._dask_chains(nodes, got, scattered, wanted, homes, workers)
-        else:
-            self._dask_nodes(nodes, got, scattered, wanted, homes, workers)
+        try:
+            if DASK_CHAINS and workers:
+                self._dask_chains(nodes, got, scattered, wanted, homes, workers)
+            else:
+                self._dask_nodes(nodes, got, scattered, wanted, homes, workers)
+        except RuntimeError as e:  # the scheduler could not read the graph: every task erred with it
+            if not str(e).startswith(GRAPH_UNREAD):
+                raise
+            raise foreign_cluster(client, "scheduler", e) from None
 
     def _dask_nodes(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
                     homes: dict | None, workers: list[str]) -> None:
