@@ -5,6 +5,7 @@ from __future__ import annotations
 import bisect
 import ctypes
 import gc
+import importlib
 import multiprocessing
 import os
 import select
@@ -22,6 +23,9 @@ from wavemesh.refine import native
 from wavemesh.tiles.plan import default_workers
 
 DASK_CONNECT_S = 10  # how long --scheduler ADDRESS may take to answer
+# The modules of the tiled run's task functions, which each Dask worker imports before its first task
+# (_dask_start), by name: wavemesh.tiles.jobs imports this module
+DASK_TASK_MODULES = ("wavemesh.tiles.jobs",)
 # a node sent to a pool worker takes with it the next node that waits for it alone and whose tiles are that
 # worker's (its result goes on to it in the worker), and so on, up to CHAIN nodes: one round trip of the
 # parent for them all (1: none)
@@ -420,7 +424,7 @@ class Runner:
                 host = _host(addr)
                 hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
             try:
-                client.run(_dask_start, hosts, native.threads_set())
+                client.run(_dask_start, hosts, native.threads_set(), DASK_TASK_MODULES)
             except (OSError, TimeoutError):  # the connection (distributed's CommClosedError is an OSError)
                 raise
             except Exception as e:  # a worker that cannot load _dask_start (or the tasks' modules)
@@ -728,12 +732,13 @@ def _blocks(homes: dict, workers: int) -> dict:
     return {t: p * workers // len(tiles) for p, t in enumerate(tiles)}
 
 
-def _dask_start(hosts: dict, threads: int | None, dask_worker=None) -> None:
+def _dask_start(hosts: dict, threads: int | None, modules: tuple[str, ...] = (), dask_worker=None) -> None:
     """A Dask worker set up for a tiled run's tasks, as a pool worker is (_worker_start): its memory
     (tune_malloc: Dask's MALLOC_TRIM_THRESHOLD_ maps and unmaps every tile's arrays again), its host
     stages' threads (the run's --threads, else its share of the host's CPUs: ``hosts``, each host's
-    worker threads), and the tiles' modules imported before its first task."""
-    import wavemesh.tiles.jobs  # noqa: F401  (the tasks' functions)
+    worker threads), and the tasks' ``modules`` imported before its first task."""
+    for name in modules:
+        importlib.import_module(name)
 
     tune_malloc()
     here = hosts.get(_host(dask_worker.address), 1) if dask_worker is not None else 1
