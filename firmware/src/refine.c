@@ -291,12 +291,18 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     int back = 1;                    /* whether the swap back would be made */
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
-    if (!wm_edge_swappable(me, e)) return 0;
     /* new triangles (a, d, c) and (d, b, c) */
     n1x[0] = me->vx[a], n1y[0] = me->vy[a], n1x[1] = me->vx[d], n1y[1] = me->vy[d];
     n1x[2] = me->vx[c], n1y[2] = me->vy[c];
     qx[0] = me->vx[d], qy[0] = me->vy[d], qx[1] = me->vx[b], qy[1] = me->vy[b];
     qx[2] = me->vx[c], qy[2] = me->vy[c];
+    { /* wm_edge_swappable(me, e) from the corners at hand (regularise's e is a live triangle's, with one
+       * across): a and b strictly on opposite sides of the line c-d */
+        int64_t s1 = wm_orient(n1x[2], n1y[2], qx[0], qy[0], n1x[0], n1y[0]);
+        int64_t s2 = wm_orient(n1x[2], n1y[2], qx[0], qy[0], qx[1], qy[1]);
+        WM_ASSERT(((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0)) == wm_edge_swappable(me, e));
+        if (!((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0))) return 0;
+    }
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
         ang_old = slot_angle(r, t1);
@@ -399,7 +405,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
             back = alpha == 65536u ? rb > 65536u : o1 + o2 + one <= den_max(alpha, rb, sn + one);
         }
     }
-    wm_edge_swap_convex(me, e, NULL, NULL); /* wm_edge_swappable above */
+    wm_edge_swap_convex(me, e, NULL, NULL); /* swappable: tested above */
     /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
     set_angle(r, t1, an1);
     set_angle(r, t2, an2);
