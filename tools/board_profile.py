@@ -159,6 +159,20 @@ def _refiner_struct_bytes() -> int:
     return int(out.split()[1], 16)
 
 
+def _native(name: str, *args: int) -> int:
+    """A layout function of firmware/src/mesh.c (wm_tri_cap_skewed: the board's capacity clamp;
+    wm_mesh_xy_gap: the bytes from vx to vy and from vy to tflag) from the native library, the same source
+    the board's firmware is built from."""
+    import ctypes
+
+    from wavemesh.refine import native
+
+    fn = getattr(native.load(), name)
+    fn.restype = ctypes.c_size_t if name == "wm_mesh_xy_gap" else ctypes.c_int32
+    fn.argtypes = [ctypes.c_int32] * len(args)
+    return int(fn(*args))
+
+
 def _ibus_report(ibus: list[tuple[int, int]], syms: list[tuple[int, str]], addrs: list[int], total: int,
                  top: int) -> None:
     """The cycles instruction fetches waited (the VexRiscv's cache refills), by the function fetched."""
@@ -184,11 +198,11 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
             syms[parts[2]] = int(parts[0], 16)
     w, h = rep["input"]["width"], rep["input"]["height"]
     cap = rep["device"]["tri_capacity"]
-    grid = 2 * (w - 1) * (h - 1)  # board_job.c's clamp (wm_tri_cap_max), skewed as its skewed_capacity
+    grid = 2 * (w - 1) * (h - 1)  # board_job.c's clamp (wm_tri_cap_max), skewed
     if 2 <= grid < cap:
-        cap = next((c for c in range(grid, min(cap, grid + 8192) + 1, 2)
-                    if 1024 <= a8(2 * (c // 2 + w + h + 2)) % 8192 <= 8192 - 1024), grid)
+        cap = _native("wm_tri_cap_skewed", w, h, grid, cap)
     vc = cap // 2 + w + h + 2  # wm_vert_cap_for
+    xy_gap = _native("wm_mesh_xy_gap", vc)
     items = max(cap, vc)
     out = [(mm.FW_RAM.base, "firmware RAM: code, rodata"), (syms["__data_start"], "firmware RAM: data, bss"),
            (syms["__bss_end"], "firmware RAM: free"), (syms["__stack_bottom"], "firmware RAM: stack"),
@@ -199,7 +213,7 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
                        ("tflag", cap), ("err", 4 * cap), ("worst", 4 * cap), ("list", 4 * items),
                        ("pos", 4 * items), ("vkey", 4 * vc), ("vapex", vc)):
         out.append((q, f"heap: {name}"))
-        q += a8(size) if name not in ("err", "list") else size
+        q += xy_gap if name in ("vx", "vy") else a8(size) if name not in ("err", "list") else size
     out.append((q, "heap: above the refiner (staging, hole mask)"))
     return out
 

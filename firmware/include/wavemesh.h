@@ -97,9 +97,20 @@ static inline int32_t wm_prev_he(int32_t e) { return e - 3 * wm_div3(e) == 0 ? e
 /* Bytes of storage wm_mesh_init needs for tri_cap triangles and vert_cap vertices (0 if too big). */
 size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap);
 
+/* Bytes from a mesh's vertex x array to its y array, and from its y array to the triangle flags (mesh.c:
+ * padded so that the three never share lines of a direct-mapped cache of 8 KiB or more in step). */
+size_t wm_mesh_xy_gap(int32_t vert_cap);
+
 /* Vertex slots enough for any triangulation of the W x H rectangle with tri_cap triangles
  * (Euler: V = (T + B + 2) / 2 with B <= 2(W + H) - 4 border vertices). */
 int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap);
+
+/* A triangle capacity for a W x H grid's storage, from cap (the grid's own, wm_tri_cap_max) up to limit:
+ * the smallest whose unpadded vertex arrays would lie 1 to 7 KiB past a multiple of 8 KiB apart, which
+ * moves every array of the storage off the round offsets a power-of-two grid's own capacity gives them
+ * (the board's clamp, app/board_job.c; wm_mesh_xy_gap keeps x, y and the flags apart at any capacity);
+ * cap when none within 8192 more.  The refiner cannot reach it, so the mesh is the same. */
+int32_t wm_tri_cap_skewed(int32_t width, int32_t height, int32_t cap, int32_t limit);
 
 /* Lays out an empty mesh of a W x H grid in mem (bytes >= wm_mesh_bound).
  * WM_ERR_ARG: W or H outside 2..WM_MAX_SIDE or a capacity < 1; WM_ERR_MEMORY: bytes too small. */

@@ -18,10 +18,28 @@ const char *wm_strerror(int code)
 
 #define ALIGN8(n) (((n) + 7u) & ~(uint64_t)7u)
 
+/* The bytes from vx to vy and from vy to tflag: ALIGN8(2 vert_cap), padded to 1 to 3 KiB past a multiple
+ * of 8 KiB.  A vertex's x and y are read together everywhere, and with its triangles' flags often (a split
+ * adds a vertex and two triangles, so vy[v] and tflag[t] advance by 2 bytes a vertex alike); in a
+ * direct-mapped cache of 8 KiB or any larger power of two (the board's SDRAM port, 8 KiB, and the
+ * VexRiscv's 32 KiB data cache) two addresses a multiple of its size apart share a line and evict each
+ * other.  Unpadded, the three arrays of a power-of-two grid's storage lay a multiple of 8 KiB plus 8 bytes
+ * apart (2 W H + 8 for W x H with its own capacity); padded, any two of them lie 1 to 6 KiB apart modulo
+ * 8 KiB, whatever the capacity.  At most 7 KiB more; the mesh is the same. */
+static uint64_t xy_gap(uint64_t v)
+{
+    uint64_t d = ALIGN8(2 * v), r = d % 8192u;
+    if (r < 1024u) return d + 1024u - r;
+    if (r > 3072u) return d + 8192u + 1024u - r;
+    return d;
+}
+
+size_t wm_mesh_xy_gap(int32_t vert_cap) { return vert_cap < 0 ? 0 : (size_t)xy_gap((uint64_t)vert_cap); }
+
 static uint64_t mesh_bytes(int32_t tri_cap, int32_t vert_cap)
 {
     uint64_t t = (uint64_t)tri_cap, v = (uint64_t)vert_cap, w = sizeof(wm_index);
-    return ALIGN8(3 * w * t) + ALIGN8(3 * w * t) + ALIGN8(w * v) + ALIGN8(2 * v) + ALIGN8(2 * v) + ALIGN8(t);
+    return ALIGN8(3 * w * t) + ALIGN8(3 * w * t) + ALIGN8(w * v) + 2 * xy_gap(v) + ALIGN8(t);
 }
 
 size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap)
@@ -40,6 +58,15 @@ int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap)
 {
     int64_t v = (int64_t)tri_cap / 2 + (int64_t)width + (int64_t)height + 2;
     return v > 0x3FFFFFFF ? 0x3FFFFFFF : (int32_t)v;
+}
+
+int32_t wm_tri_cap_skewed(int32_t width, int32_t height, int32_t cap, int32_t limit)
+{
+    for (int32_t c = cap; c <= limit && c - cap <= 8192; c += 2) {
+        uint64_t r = ALIGN8(2 * (uint64_t)wm_vert_cap_for(width, height, c)) % 8192u;
+        if (r >= 1024u && r <= 8192u - 1024u) return c;
+    }
+    return cap;
 }
 
 int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t height, int32_t tri_cap,
@@ -64,9 +91,9 @@ int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t hei
     m->vh = (wm_index *)(void *)p;
     p += ALIGN8(sizeof(wm_index) * (uint64_t)vert_cap);
     m->vx = (uint16_t *)(void *)p;
-    p += ALIGN8(2 * (uint64_t)vert_cap);
+    p += xy_gap((uint64_t)vert_cap);
     m->vy = (uint16_t *)(void *)p;
-    p += ALIGN8(2 * (uint64_t)vert_cap);
+    p += xy_gap((uint64_t)vert_cap);
     m->tflag = p;
     return WM_OK;
 }

@@ -669,9 +669,43 @@ static void test_reduce_plane(void)
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 9, tris, 8, 600) == WM_ERR_ARG);
 }
 
+/* A vertex's x, its y and the triangle flags never share lines of a direct-mapped cache of 8 KiB or more
+ * in step (mesh.c's xy_gap): vy lies 1 to 3 KiB past a multiple of 8 KiB after vx and tflag as far after
+ * vy, so any two of the three 1 to 6 KiB apart modulo 8 KiB, for every vertex capacity up to the board's
+ * (its 420k-triangle storage and the power-of-two grids, whose unpadded arrays lay a multiple of 8 KiB
+ * plus 8 apart), at most 7 KiB more than the array; the laid-out mesh uses that gap.  And the board's
+ * clamp, wm_tri_cap_skewed: the smallest capacity from the grid's whose unpadded vy would lie 1 to 7 KiB
+ * past a multiple of 8 KiB after vx, never above its limit. */
+static void test_xy_apart(void)
+{
+    static const int32_t sides[] = {2, 3, 64, 100, 128, 255};
+    wm_mesh m;
+    for (int32_t v = 3; v <= 1 << 20; v += v < 70000 ? 1 : 997) {
+        size_t g = wm_mesh_xy_gap(v), a = ((size_t)2 * (size_t)v + 7u) & ~(size_t)7u;
+        CHECK(g >= a && g - a <= 7168u && g % 8u == 0);
+        CHECK(g % 8192u >= 1024u && g % 8192u <= 3072u && (2 * g) % 8192u >= 1024u && (2 * g) % 8192u <= 7168u);
+    }
+    for (size_t i = 0; i < sizeof sides / sizeof sides[0]; i++) {
+        int32_t w = sides[i], cap = wm_tri_cap_max(w, w), vc = wm_vert_cap_for(w, w, cap);
+        int32_t c = wm_tri_cap_skewed(w, w, cap, cap + 10000);
+        size_t r = (((size_t)2 * (size_t)wm_vert_cap_for(w, w, c) + 7u) & ~(size_t)7u) % 8192u;
+        CHECK(c >= cap && c - cap <= 8192 && c % 2 == cap % 2 && r >= 1024u && r <= 8192u - 1024u);
+        for (int32_t d = cap; d < c; d += 2) { /* the smallest such */
+            size_t q = (((size_t)2 * (size_t)wm_vert_cap_for(w, w, d) + 7u) & ~(size_t)7u) % 8192u;
+            CHECK(q < 1024u || q > 8192u - 1024u);
+        }
+        CHECK(wm_tri_cap_skewed(w, w, cap, cap) == cap); /* never above limit */
+        if (wm_mesh_bound(cap, vc) == 0) continue; /* beyond 16-bit indices */
+        CHECK(wm_mesh_init(&m, mem, sizeof mem, w, w, cap, vc) == WM_OK);
+        CHECK((size_t)((const uint8_t *)m.vy - (const uint8_t *)m.vx) == wm_mesh_xy_gap(vc));
+        CHECK((size_t)((const uint8_t *)(const void *)m.tflag - (const uint8_t *)m.vy) == wm_mesh_xy_gap(vc));
+    }
+}
+
 int main(void)
 {
     test_build();
+    test_xy_apart();
     test_edge_split();
     test_tri_split();
     test_edge_swap();

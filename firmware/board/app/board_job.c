@@ -71,22 +71,6 @@ static int run_stage(const wm_proto_job *j)
 
 #define TOUT ((volatile const uint32_t *)WM_TOUT_BASE)
 
-/* The refiner's storage puts a vertex's y ALIGN8(2 vert_cap) bytes after its x (mesh.c: vx, then vy).
- * With the grid's own capacity that is 2 W H + 8 for a W x H grid with W H a multiple of 4: for a
- * power-of-two grid a multiple of 8 KiB plus 8, so in the direct-mapped caches (the CPU's data cache, the
- * SDRAM port's 8 KiB) x and y of a vertex share a line index and evict each other at every read of both.
- * A capacity a few hundred triangles larger (the refiner never reaches it: no triangulation of the grid
- * has more than `cap`) moves vy at least 1 KiB away from that within every 8 KiB; `limit` is the job's
- * own capacity, whose storage fits the heap. */
-static int32_t skewed_capacity(int32_t width, int32_t height, int32_t cap, int32_t limit)
-{
-    for (int32_t c = cap; c <= limit && c - cap <= 8192; c += 2) {
-        size_t r = ALIGN8(2u * (size_t)wm_vert_cap_for(width, height, c)) % 8192u;
-        if (r >= 1024u && r <= 8192u - 1024u) return c;
-    }
-    return cap;
-}
-
 int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
 {
     /* The refiner's storage holds no more triangles than a triangulation of all the grid's samples
@@ -102,7 +86,7 @@ int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
     size_t main_bytes;
     int32_t grid_cap = wm_tri_cap_max(j->width, j->height);
     if (grid_cap >= 2 && grid_cap < jc.capacity)
-        jc.capacity = skewed_capacity(j->width, j->height, grid_cap, jc.capacity);
+        jc.capacity = wm_tri_cap_skewed(j->width, j->height, grid_cap, jc.capacity);
     main_bytes = initial_only ? 0 : wm_refine_bound(j->width, j->height, j->capacity);
     wm_job_blocks b;
     wm_job_initial_mesh init;
