@@ -6,7 +6,9 @@
   (firmware RAM, the cache, the filter bank) stays well below an LFE5U-85F's;
 - the generated C header, compiled with the host's gcc, and the Verilog include, elaborated by
   Verilator, give the same numbers as the Python module;
-- docs/soc.md embeds the current generated tables.
+- docs/soc.md embeds the current generated tables;
+- the ULX3S PLL's dividers (ecp5_pll) give each clock exactly within the ECP5 data sheet's limits, on
+  the feedback path and with the VCO a brute force of its own finds, and are Project Trellis' ecppll's.
 """
 
 from __future__ import annotations
