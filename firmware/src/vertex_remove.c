@@ -22,24 +22,29 @@
  * vertices p_i = dest(e_i), plus the last triangle's third vertex on a side.  n or an error. */
 static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING])
 {
+    const wm_index *hv = m->hv, *ho = m->ho; /* held: e[] and ring[] are stored to as the fan goes round */
     int32_t first, h, n = 0;
     if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
     {
         int32_t x = m->vx[v], y = m->vy[v];
         if ((x == 0 || x == m->width - 1) && (y == 0 || y == m->height - 1)) return WM_ERR_REFUSED;
+        /* wm_fan_first: any half-edge of an interior vertex's full fan */
+        first = wm_on_border(m, x, y) ? wm_fan_first(m, v) : m->vh[v];
     }
-    first = wm_fan_first(m, v);
     h = first;
     do {
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
+        /* WM_NEXT and WM_PREV by the corner's number as arithmetic, not branches (h % 3 is as
+         * likely one number as another) */
+        int32_t c3 = h - 3 * wm_div3(h);
         e[n] = h;
-        ring[n++] = wm_dest(m, h);
-        h = wm_rot_ccw(m, h);
+        ring[n++] = hv[h + 1 - 3 * (c3 >> 1)];                     /* wm_dest: c3 >> 1 is c3 == 2 */
+        h = ho[h - 1 + 3 * (int32_t)((uint32_t)(c3 - 1) >> 31)]; /* wm_rot_ccw: (c3 - 1) < 0 is c3 == 0 */
     } while (h >= 0 && h != first);
     *k = n;
     if (h < 0) { /* on a side: the last triangle's far corner closes the ring */
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        ring[n] = m->hv[WM_PREV(e[n - 1])];
+        ring[n] = hv[WM_PREV(e[n - 1])];
         n++;
     }
     return n;
