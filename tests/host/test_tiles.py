@@ -199,18 +199,24 @@ def foreign_error(err: str, who: str) -> bool:
             and lines[1].startswith("hint: run the same wavemesh as here") and "Traceback" not in err)
 
 
-def test_dask_workers_of_another_wavemesh(dem, tmp_path):
-    """Dask workers whose wavemesh lacks the runner's functions (another version there): one error line
-    naming the workers, not Dask's traceback; no output written."""
+@pytest.mark.parametrize("other, says", [
+    ("del r._dask_start, r._dask_chain, r._dask_call", "Can't get attribute '_dask_start'"),
+    ("r._TREE[:] = ['0' * 16]", "another wavemesh there"),  # its files another's (its tasks' functions
+    # other, or missing: its process would end at its first task, and the run wait for ever)
+])
+def test_dask_workers_of_another_wavemesh(dem, tmp_path, other, says):
+    """Dask workers whose wavemesh is not this one (the runner's functions missing there, or its files
+    another's): one error line naming the workers before any task, not Dask's traceback nor a run that
+    waits for ever for a worker that died loading a task; no output written."""
     distributed = pytest.importorskip("distributed")
     out = tmp_path / "m.obj"
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as c, distributed.Client(c) as client:
-        client.run(exec, "import wavemesh.tiles.runner as r; del r._dask_start, r._dask_chain, r._dask_call")
+        client.run(exec, f"import wavemesh.tiles.runner as r; {other}")
         rc, _, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64",
                              "--scheduler", c.scheduler_address)
     assert rc == 2 and foreign_error(err, "workers"), err
-    assert "_dask_start" in err and not out.exists()
+    assert says in err and not out.exists()
 
 
 def test_dask_scheduler_of_another_wavemesh(dem, tmp_path):

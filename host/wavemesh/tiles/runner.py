@@ -122,6 +122,31 @@ def foreign_cluster(client, who: str, e: BaseException) -> WavemeshError:
                               "on the scheduler and every worker, then start them again")
 
 
+_TREE: list = []  # this process's tree_fingerprint, once made
+
+
+def tree_fingerprint() -> str:
+    """This wavemesh's version and the text of its Python files (their sha256, 16 hex digits), which each
+    Dask worker's _dask_start compares with the client's: the tasks are sent by name, and a worker with
+    another wavemesh would run other functions, or find none (its process then ends, and the run waited
+    for a worker for ever).  About 2 ms, once, and only for --scheduler."""
+    if not _TREE:
+        import hashlib  # start-up: only for --scheduler (see above)
+
+        import wavemesh  # the same: the package's folder
+
+        root = os.path.dirname(wavemesh.__file__)
+        h = hashlib.sha256(wavemesh.__version__.encode() + b"\0")
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(f for f in files if f.endswith(".py")):
+                path = os.path.join(folder, name)
+                with open(path, "rb") as f:
+                    h.update(os.path.relpath(path, root).encode() + b"\0" + f.read() + b"\0")
+        _TREE.append(h.hexdigest()[:16])
+    return _TREE[0]
+
+
 @record(frozen=True)
 class Ref:
     """In a Node's args: node ``node``'s result (``pick`` of it when given: a module-level function)."""
@@ -424,7 +449,7 @@ class Runner:
                 host = _host(addr)
                 hosts[host] = hosts.get(host, 0) + (w.get("nthreads") or 1)
             try:
-                client.run(_dask_start, hosts, native.threads_set(), DASK_TASK_MODULES)
+                client.run(_dask_start, hosts, native.threads_set(), DASK_TASK_MODULES, tree_fingerprint())
             except (OSError, TimeoutError):  # the connection (distributed's CommClosedError is an OSError)
                 raise
             except Exception as e:  # a worker that cannot load _dask_start (or the tasks' modules)
@@ -732,11 +757,19 @@ def _blocks(homes: dict, workers: int) -> dict:
     return {t: p * workers // len(tiles) for p, t in enumerate(tiles)}
 
 
-def _dask_start(hosts: dict, threads: int | None, modules: tuple[str, ...] = (), dask_worker=None) -> None:
+def _dask_start(hosts: dict, threads: int | None, modules: tuple[str, ...] = (), tree: str | None = None,
+                dask_worker=None) -> None:
     """A Dask worker set up for a tiled run's tasks, as a pool worker is (_worker_start): its memory
     (tune_malloc: Dask's MALLOC_TRIM_THRESHOLD_ maps and unmaps every tile's arrays again), its host
     stages' threads (the run's --threads, else its share of the host's CPUs: ``hosts``, each host's
-    worker threads), and the tasks' ``modules`` imported before its first task."""
+    worker threads), and the tasks' ``modules`` imported before its first task; RuntimeError when its
+    wavemesh is not the client's (``tree``: the client's tree_fingerprint)."""
+    if tree is not None and tree != tree_fingerprint():
+        import wavemesh  # start-up: only for this error (the package is loaded: its path)
+
+        raise RuntimeError(f"another wavemesh there: version {wavemesh.__version__} from "
+                           f"{os.path.dirname(os.path.dirname(wavemesh.__file__))}, whose files differ from "
+                           "this one's")
     for name in modules:
         importlib.import_module(name)
 
