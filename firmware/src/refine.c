@@ -308,8 +308,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         ang_old = slot_angle(r, t1);
         a1 = slot_angle(r, t2);
         if (a1 < ang_old) ang_old = a1;
-        wm_min_corner(n1x, n1y, &dot1, &cross1);
-        wm_min_corner(qx, qy, &dot2, &cross2);
+        wm_min_corner_in(n1x, n1y, &dot1, &cross1);
+        wm_min_corner_in(qx, qy, &dot2, &cross2);
         if (alpha < 65536u) { /* first a bound of R_A from above: the new angles below */
             ang_new = wm_angle_above(dot1, cross1);
             a1 = wm_angle_above(dot2, cross2);

@@ -281,6 +281,29 @@ int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
  * (wm_min_angle is wm_angle_q16 of them), and an upper bound of that angle without the CORDIC (the
  * tangent, with the CORDIC's error added; a counter-clockwise triangle: dot > 0). */
 void wm_min_corner(const int32_t x[3], const int32_t y[3], int64_t *dot, int64_t *cross);
+/* wm_min_corner inline, for the regularisation's swaps (two a swap examined) */
+static inline void wm_min_corner_in(const int32_t x[3], const int32_t y[3], int64_t *dot, int64_t *cross)
+{
+    /* The smallest angle is the one opposite the shortest side (law of sines), so one atan2 does.
+     * Two equally short sides have equal angles opposite them, and those corners have the same dot
+     * and cross products (the cross product is twice the area at every corner, the dot product
+     * |u||v| cos): the same integers, the same CORDIC result, whichever corner is taken.  With the
+     * sides s_k = p_k+2 - p_k+1 (opposite corner k), the corner's vectors are s_k+2 and -s_k+1, and in
+     * 32 bits: coordinates below 2^15 (WM_MAX_SIDE), so |s|^2, the dot and the cross product are at
+     * most 2 (2^15 - 1)^2 < 2^31. */
+    int32_t sx[3], sy[3], len[3], k = 0, c, d;
+    for (int i = 0; i < 3; i++) {
+        sx[i] = x[wm_k2(i)] - x[wm_k1(i)];
+        sy[i] = y[wm_k2(i)] - y[wm_k1(i)];
+        len[i] = sx[i] * sx[i] + sy[i] * sy[i];
+    }
+    if (len[1] < len[k]) k = 1;
+    if (len[2] < len[k]) k = 2;
+    c = wm_k2(k), d = wm_k1(k); /* u = p_k+1 - p_k = s_k+2, v = p_k+2 - p_k = -s_k+1 */
+    *dot = -(int64_t)(sx[c] * sx[d] + sy[c] * sy[d]);
+    c = sx[1] * sy[2] - sy[1] * sx[2]; /* at corner 0 (u = s_2, v = -s_1): u x v = s_1 x s_2 */
+    *cross = c < 0 ? -(int64_t)c : c;
+}
 int32_t wm_angle_above(int64_t dot, int64_t cross);
 /* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside
  * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
