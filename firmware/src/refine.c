@@ -267,12 +267,22 @@ static void set_angle(wm_refiner *r, int32_t t, int32_t angle)
     r->list[t] = angle >= 0 && angle < 65535 ? (wm_index)(angle - 32768) : ANGLE_UNKNOWN;
 }
 
-static int32_t slot_angle(wm_refiner *r, int32_t t)
+/* Triangle t's smallest angle, kept for the sweep; (x, y) its corners counter-clockwise from any one
+ * (a rotation of wm_tri_xy's: the same integers in wm_min_corner, so the same angle as wm_min_angle). */
+static int32_t slot_angle(wm_refiner *r, int32_t t, const int32_t x[3], const int32_t y[3])
 {
-    int32_t x[3], y[3], a;
+    int64_t dot, cross;
+    int32_t a;
     if (r->list[t] != ANGLE_UNKNOWN) return (int32_t)r->list[t] + 32768;
-    wm_tri_xy(&r->mesh, t, x, y);
-    a = wm_min_angle(x, y);
+    wm_min_corner_in(x, y, &dot, &cross);
+    a = wm_angle_q16(dot, cross);
+#if WM_CHECK
+    {
+        int32_t tx[3], ty[3];
+        wm_tri_xy(&r->mesh, t, tx, ty);
+        WM_ASSERT(a == wm_min_angle(tx, ty));
+    }
+#endif
     set_angle(r, t, a);
     return a;
 }
@@ -305,8 +315,11 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
     }
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
-        ang_old = slot_angle(r, t1);
-        a1 = slot_angle(r, t2);
+        /* the old triangles (a, b, c) and (b, a, d) from the corners at hand */
+        int32_t ox[3] = {n1x[0], qx[1], n1x[2]}, oy[3] = {n1y[0], qy[1], n1y[2]};
+        ang_old = slot_angle(r, t1, ox, oy);
+        ox[0] = qx[1], oy[0] = qy[1], ox[1] = n1x[0], oy[1] = n1y[0], ox[2] = qx[0], oy[2] = qy[0];
+        a1 = slot_angle(r, t2, ox, oy);
         if (a1 < ang_old) ang_old = a1;
         wm_min_corner_in(n1x, n1y, &dot1, &cross1);
         wm_min_corner_in(qx, qy, &dot2, &cross2);
