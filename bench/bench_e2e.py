@@ -4,8 +4,8 @@
 Board seconds = line time + job time.  Line time: the session's bytes both ways (the samples as the host
 codes them in DATA frames, every level's stream in MESH frames as the device codes them, the small frames:
 HELLO, CONFIG, RUN, ACKs, DONE; counted by the real encoder and framing, bench/bench_link.py's functions,
-on a clean line) x 10 bits / the rate the board reaches, clk_hz / round(clk_hz / baud) (at 30 and
-36 MHz 3 Mbaud exactly for 3,000,000).  The receive stage runs within it (the upload block checks and stores
+on a clean line) x 10 bits / the rate the board reaches, clk_hz / round(clk_hz / baud) (at 30, 36 and
+39 MHz 3 Mbaud exactly for 3,000,000).  The receive stage runs within it (the upload block checks and stores
 the samples as they arrive: about 13 cycles a sample, "The link" below), and so does sending the level
 streams.  Job time: the job's own cycles (filter, template, refine and emit: the FPGA stage, the refiner
 on the soft CPU, building the level streams) at the board clock, from the cost model of "The whole job on the

@@ -10,7 +10,7 @@ alone (some 20 s a run at 0.2 %) are twenty times the fault-free second.  A smal
 socket shows that floor.  The 3 Mbaud sets: wmdev paced at 115200 baud and switched by the host
 (`--link-baud 3000000`), and the simulated board (wmsim without --fast: every byte bit by bit over the
 UART pins, the upload block in the path) switched to the rate `--link-baud auto` takes on it, 3 Mbaud
-(divisor 12 at 36 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the
+(divisor 13 at 39 MHz), with a job it finishes in seconds of simulation (BOARD_OPTS: a 64 x 64 crop, the
 template stage alone; the simulator runs about a hundredth of the board's speed on a loaded machine) and
 the host's timeouts for the simulator (harness.simboard.SIM_TIMEOUTS).  A fault that hits the switch
 leaves the job at the start rate with one warning line (the run still counts by its mesh).  Each run
@@ -44,7 +44,7 @@ OPTS = ["--key", "elevation", "--crop", "0,0,200,200", "--zeta", "4"]
 DEVICE = ["--tri-capacity", "200000", "--quiet"]
 UART = 115200
 LINK_3M = ["--link-baud", "3000000"]
-# the board: the rate `--link-baud auto` takes on it (3,000,000 exactly at 36 MHz: _board_rate)
+# the board: the rate `--link-baud auto` takes on it (3,000,000 exactly at 39 MHz: _board_rate)
 BOARD_OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 DEADLINE = 300  # s: --deadline of the 1 % set
 GRACE = 5.0  # s past the deadline that still counts as "at the deadline" (the process's own ending)
@@ -95,7 +95,7 @@ def _one_set(index: int, shard: int, out: Path) -> None:
                      "message": r.message} for r in done]
             if board and rate == 0 and shard == 0:
                 # on a board that never switched: the one above keeps 3 Mbaud for BAUD_IDLE_MS after
-                # each run (108 million cycles at 36 MHz, minutes of simulation), which a line at 115200
+                # each run (117 million cycles at 39 MHz, minutes of simulation), which a line at 115200
                 # would not pass
                 dev.stop()
                 dev = _board()
@@ -153,7 +153,7 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
         div = (board.events("uart divisor") or [(start, 0)])[-1][0]
         return div == start or (f.type == P.FrameType.OK and f.fields()["request"] == P.FrameType.BAUD)
 
-    # the probe window is BAUD_PROBE_MS of the board's clock (36 million cycles at 36 MHz): minutes of
+    # the probe window is BAUD_PROBE_MS of the board's clock (39 million cycles at 39 MHz): minutes of
     # simulation alone, 10 or more beside the campaign's boards (40 kHz each on a loaded machine: 60 HELLOs
     # of 8 s were not enough); the run ends when it answers
     S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=250)
@@ -167,7 +167,7 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
     back = [d for d, _ in board.events("uart divisor")]
     ok = (rc == 0 and out.exists() and out.read_bytes() == ref.read_bytes() and len(warnings) == 1
           and json.loads((work / "switch.json").read_text())["transfer"]["line_baud"]
-          == P.divisor_baud(memmap.CLK_HZ, start)  # (115,385 at 36 MHz: the rate its divisor gives)
+          == P.divisor_baud(memmap.CLK_HZ, start)  # (115,385 at 39 MHz: the rate its divisor gives)
           and back[-2:] == [P.baud_divisor(memmap.CLK_HZ, _board_rate()), start])
     return {"seed": -1, "outcome": "identical" if ok else "different", "seconds": round(seconds, 3),
             "faults": 0, "frames": 0, "delay_s": 0.0, "switch": True,

@@ -200,7 +200,7 @@ def markdown(r: dict) -> str:
                 "cycles_receive, the host's turnaround included).  The upload block (rtl/upload_rx.v) checks "
                 "the frames and stores the samples, Rice-coded ones too, as they arrive, so the board takes "
                 "coded samples and a window of 4 at every rate; its nearest rate to 3 Mbaud is clk_hz / "
-                "round(clk_hz / 3,000,000) (3 Mbaud exactly at 36 MHz), the line time here is 3,000,000's.  "
+                "round(clk_hz / 3,000,000) (3 Mbaud exactly at 39 MHz), the line time here is 3,000,000's.  "
                 "The job's own cycles are in "
                 "\"End to end on the board\" above.",
                 "",

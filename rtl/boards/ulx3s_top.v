@@ -2,15 +2,15 @@
  * wavemesh: the ULX3S board top (Lattice ECP5-85F, CABGA381; 25 MHz oscillator)
  *
  * The whole SoC (rtl/soc_top.v: the CPU, firmware image in block RAM, FPGA stage) on the system clock
- * the ECP5's PLL makes from the board's 25 MHz oscillator (ecp5_pll: the memory map's CLK_HZ, 36 MHz;
+ * the ECP5's PLL makes from the board's 25 MHz oscillator (ecp5_pll: the memory map's CLK_HZ, 39 MHz;
  * the SoC stays in reset until the PLL locks); its UART on the FT231X's serial port (ftdi_txd in,
  * ftdi_rxd out: the names are the FTDI chip's), the eight LEDs, FIRE1 (btn[1]) as the reset button.
  * wifi_gpio0 is driven high: the ESP32 holds the board in reset or reconfigures it when this pin
  * floats low.
  * The SDRAM: the chip's clock is the inverted system clock, so it samples every command and datum
- * in the middle of its cycle (13.9 ns from either edge at 36 MHz: the inverter's and the pads' few ns
+ * in the middle of its cycle (12.8 ns from either edge at 39 MHz: the inverter's and the pads' few ns
  * of skew leave far more than the chip's 1.5 ns setup and 0.8 ns hold; a read datum, valid 6 ns after
- * the chip's edge, is sampled 13.9 ns after it); DQ through the pads' tristate buffers; every other
+ * the chip's edge, is sampled 12.8 ns after it); DQ through the pads' tristate buffers; every other
  * pin straight from the controller's registers.
  * Pins: ulx3s.lpf.  `make bitstream BOARD=ulx3s` builds it with the firmware image as FW_HEX.
  */

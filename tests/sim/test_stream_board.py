@@ -194,9 +194,9 @@ def test_pin_accurate_mode_gives_the_same_mesh_and_cycles(sim_exe, firmware_hex,
     # interval by interval: every stretch of a stage's clock between two switches is the same
     assert_same_trace(pin_trace, fast_trace)
     dev = pin["device"]
-    # the start rate as the board states it: its divisor's, rounded as after a switch (115,385 at 36 MHz)
+    # the start rate as the board states it: its divisor's, rounded as after a switch (115,385 at 39 MHz)
     assert dev["baud"] == P.divisor_baud(memmap.CLK_HZ, memmap.UART_DIV_RESET)
-    byte_cycles = 10 * P.baud_divisor(dev["clk_hz"], dev["baud"])  # 3120 at 36 MHz and 115200 baud
+    byte_cycles = 10 * P.baud_divisor(dev["clk_hz"], dev["baud"])  # 3380 at 39 MHz and 115200 baud
     mesh_bytes = pin["transfer"]["mesh_bytes"]
     assert pin["device_cycles"]["link"] >= byte_cycles * mesh_bytes
     assert fast["device_cycles"]["link"] < byte_cycles * mesh_bytes
@@ -205,13 +205,13 @@ def test_pin_accurate_mode_gives_the_same_mesh_and_cycles(sim_exe, firmware_hex,
 
 
 def test_pin_accurate_after_the_switch_to_3_mbaud(sim_exe, firmware_hex, inputs, tmp_path, sim_timeouts):
-    """The tiny job bit by bit after `--link-baud` to the board's nearest rate to 3 Mbaud (divisor 12 at
-    36 MHz: 3 Mbaud exactly): the same mesh as
+    """The tiny job bit by bit after `--link-baud` to the board's nearest rate to 3 Mbaud (divisor 13 at
+    39 MHz: 3 Mbaud exactly): the same mesh as
     `wavemesh mesh`, the same stage cycles as the fast mode's, and the link's cycles hold the line time
     of the mesh bytes at the new rate, less than a 115200-baud byte each.  Then, at that rate (the board
     keeps it for BAUD_IDLE_MS, tens of seconds of simulation): garbage on the line and a clean job again.
     (Faults at that rate: tests/sim/test_stream_board_3mbaud.py and make bench-faults.)"""
-    rate = fastest_rate()  # what --link-baud auto takes: 3,000,000 at 36 MHz
+    rate = fastest_rate()  # what --link-baud auto takes: 3,000,000 at 39 MHz
     link = ("--link-baud", str(rate))
     src = str(inputs / "tiny.npy")
     b = SimBoard(sim_exe, firmware_hex, "--port", "0")

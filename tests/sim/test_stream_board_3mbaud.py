@@ -2,7 +2,7 @@
 
 One board (wmsim without --fast: every byte goes bit by bit over the UART pins at the board's current
 divisor, through the upload block, rtl/upload_rx.v) is switched by `--link-baud` (or
-Device.change_baud) to its nearest rate to 3 Mbaud: divisor 12 at 36 MHz, 3 Mbaud exactly.  At that rate:
+Device.change_baud) to its nearest rate to 3 Mbaud: divisor 13 at 39 MHz, 3 Mbaud exactly.  At that rate:
 
 - seeded corruption, loss, duplication and delays both ways (wavemesh.harness.faultproxy): the
   reference mesh or one clear error line, the board serving a clean request afterwards;
@@ -38,7 +38,7 @@ from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, fastest_rate
 
 pytestmark = pytest.mark.sim
 
-RATE = fastest_rate()  # what --link-baud auto takes on the board: 3,000,000 at 36 MHz
+RATE = fastest_rate()  # what --link-baud auto takes on the board: 3,000,000 at 39 MHz
 OPTS = ["--key", "elevation", "--crop", "0,0,64,64", "--zeta", "4", "--stage", "initial"]
 LINK = ["--link-baud", str(RATE)]
 RUN_LIMIT = 600.0  # s: a run that takes longer counts as a hang

@@ -35,7 +35,7 @@
 #define STAGE_CLOCK 0x00020000u
 #define LED_ALIVE 1u
 #define WINDOW 4u            /* DATA frames in flight (the upload block takes them at line speed) */
-#define GETC_CHUNK_MS 1000u  /* longest single wait: 36 M cycles at 36 MHz, far below 2^31 */
+#define GETC_CHUNK_MS 1000u  /* longest single wait: 39 M cycles at 39 MHz, far below 2^31 */
 
 extern uint8_t __heap_start[], __heap_end[];
 
@@ -166,7 +166,7 @@ int main(void)
     caps.div_min = WM_UART_DIV_MIN;
     caps.div_max = WM_UART_DIV_MASK;
     /* the upload block takes the bytes at line speed but for the frame the engine is answering (some 2 k
-     * cycles for a DATA frame): the RX FIFO's 64 bytes (7.7 k cycles at 3 Mbaud, 36 MHz) absorb the
+     * cycles for a DATA frame): the RX FIFO's 64 bytes (8.3 k cycles at 3 Mbaud, 39 MHz) absorb the
      * next frame's meanwhile, so frames may come back to back at every rate */
     caps.switched_window = WINDOW;
     /* the upload block decodes CODING_RICE samples as fast as it stores raw ones: coded at every rate */

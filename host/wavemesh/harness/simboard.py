@@ -30,12 +30,12 @@ build = _load_sim_build()
 # Host timeouts for the simulated board: it runs at a tenth of the board's speed, far less on a loaded
 # machine, and a level of the refiner takes it minutes then (job: the longest silence, not a bound on
 # the job).  sync: in pin-accurate mode a HELLO and its answer are some 92 bytes on the line, 320 k
-# cycles at 40 MHz and 115200 baud (3470 cycles a byte; 288 k at 36 MHz), two seconds of a simulator
+# cycles at 40 MHz and 115200 baud (3470 cycles a byte; 312 k at 39 MHz), two seconds of a simulator
 # slowed to 170 kHz
 # by a loaded machine (measured), more with a CPU hog beside it (4 s each was not enough at a load of
 # 15 on two cores): 8 s each; reply likewise (RUN's answer did not come in 12 tries of 5 s there).
 # keepalive: the device repeats a LEVEL_END or DONE whose ACK was lost only after ACK_TIMEOUT_MS of its
-# own clock without any frame (18 million cycles at 36 MHz: one to several minutes of simulation, longer
+# own clock without any frame (19.5 million cycles at 39 MHz: one to several minutes of simulation, longer
 # than any keepalive here on a loaded machine); every KEEPALIVE postpones that, so after a silence of
 # keepalive with a level under way (or DONE due) the host sends RESUME instead (stream.Device.run).  The
 # host here stays silent about as long in real seconds as the board's KEEPALIVE_MS takes in simulated
@@ -47,7 +47,7 @@ SIM_TIMEOUTS = Timeouts(sync=8.0, sync_attempts=5, reply=10.0, attempts=3, ack=5
 def fastest_rate() -> int:
     """The rate `--link-baud auto` takes on the simulated board (and the ULX3S it models): the first of
     protocol.COMMON_BAUDS that the divisors its HELLO_REPLY states reach (memmap: CLK_HZ, UART_DIV_MIN up
-    to the largest the UART's DIV field holds; firmware/board/app/main.c); 3,000,000 at 36 MHz."""
+    to the largest the UART's DIV field holds; firmware/board/app/main.c); 3,000,000 at 39 MHz."""
     div = next(f for r in memmap.UART.registers if r.name == "DIV" for f in r.fields if f.name == "DIV")
     div_max = div.mask >> div.lsb
     return reachable(memmap.CLK_HZ, memmap.UART_DIV_MIN, div_max,
