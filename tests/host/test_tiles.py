@@ -219,6 +219,25 @@ def test_dask_workers_of_another_wavemesh(dem, tmp_path, other, says):
     assert says in err and not out.exists()
 
 
+def test_dask_workers_that_cannot_read_the_input(dem, tmp_path):
+    """A Dask worker that cannot read the input (its path not on a file system it shares with this
+    machine: here its reads made to fail) stops the run with one error line naming the cluster and what
+    failed, and the fix, not Dask's traceback of the worker's OSError; no output written."""
+    distributed = pytest.importorskip("distributed")
+    out = tmp_path / "m.obj"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as c, distributed.Client(c) as client:
+        client.run(exec, "import wavemesh.tiles.source as s\n"
+                         "def gone(path): raise FileNotFoundError(2, 'No such file', str(path))\n"
+                         "s.file_identity = gone")
+        rc, _, err = run_cli("mesh", str(dem), "-o", str(out), "--tile", "64",
+                             "--scheduler", c.scheduler_address)
+    lines = err.splitlines()
+    assert rc == 2 and len(lines) == 2 and "Traceback" not in err, err
+    assert lines[0].startswith("error: the Dask run at tcp://") and "FileNotFoundError" in lines[0], err
+    assert lines[1].startswith("hint: ") and "shared file system" in lines[1] and not out.exists()
+
+
 def test_dask_scheduler_of_another_wavemesh(dem, tmp_path):
     """A Dask scheduler whose Python has another wavemesh (a package tree without the runner's functions),
     which cannot read the task graph: one error line naming the scheduler, not Dask's RuntimeError."""

@@ -122,6 +122,19 @@ def foreign_cluster(client, who: str, e: BaseException) -> WavemeshError:
                               "on the scheduler and every worker, then start them again")
 
 
+def dask_stopped(client, e: BaseException) -> WavemeshError:
+    """The error of a Dask run that stopped on an OSError or a timeout: the connection to the cluster
+    lost, or a task's own (a worker that cannot read the input: its path not on a file system it shares
+    with this machine): the scheduler's address, what failed, and the fix."""
+    detail = " ".join(f"{type(e).__name__}: {e}".split())
+    if len(detail) > 200:
+        detail = detail[:197] + "..."
+    address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+    return WavemeshError(f"the Dask run at {address} stopped ({detail})",
+                         hint="check that the scheduler and its workers are running and that every worker "
+                              "reads the input at the same path (a shared file system), then run again")
+
+
 _TREE: list = []  # this process's tree_fingerprint, once made
 
 
@@ -302,7 +315,10 @@ class Runner:
 
         self.n_maps += 1
         if self.client is not None:
-            self._dask_graph(nodes, got, shared, kept_nodes, seen, homes)
+            try:
+                self._dask_graph(nodes, got, shared, kept_nodes, seen, homes)
+            except (OSError, TimeoutError) as e:  # the connection, or a task's own (the input unread there)
+                raise dask_stopped(self.client, e) from None
         elif self.workers == 1 or len(nodes) == 1:
             tune_malloc()
             sched = _Schedule(nodes, deps=deps)
