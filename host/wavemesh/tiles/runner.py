@@ -104,6 +104,13 @@ def connect(address: str):
 GRAPH_UNREAD = "Error during deserialization of the task graph"
 
 
+def _cluster_said(client, detail: str) -> tuple[str, str]:
+    """For a Dask error line: the scheduler's address ("?" when unknown) and ``detail`` cut to 200
+    characters."""
+    address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+    return address, detail if len(detail) <= 200 else detail[:197] + "..."
+
+
 def foreign_cluster(client, who: str, e: BaseException) -> WavemeshError:
     """The error of a Dask cluster whose scheduler or workers (``who``) could not load this wavemesh's tasks
     (the task functions are sent by name: another wavemesh version or package tree there, or none): its
@@ -113,9 +120,7 @@ def foreign_cluster(client, who: str, e: BaseException) -> WavemeshError:
     detail = " ".join(str(e).split())
     if detail.startswith(GRAPH_UNREAD):
         detail = GRAPH_UNREAD.lower()  # the rest is Dask's advice, which the hint gives
-    if len(detail) > 200:
-        detail = detail[:197] + "..."
-    address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+    address, detail = _cluster_said(client, detail)
     here = os.path.dirname(os.path.dirname(wavemesh.__file__))
     return WavemeshError(f"the Dask {who} at {address} cannot load this wavemesh's tasks ({detail})",
                          hint=f"run the same wavemesh as here (version {wavemesh.__version__}, from {here}) "
@@ -126,10 +131,7 @@ def dask_stopped(client, e: BaseException) -> WavemeshError:
     """The error of a Dask run that stopped on an OSError or a timeout: the connection to the cluster
     lost, or a task's own (a worker that cannot read the input: its path not on a file system it shares
     with this machine): the scheduler's address, what failed, and the fix."""
-    detail = " ".join(f"{type(e).__name__}: {e}".split())
-    if len(detail) > 200:
-        detail = detail[:197] + "..."
-    address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+    address, detail = _cluster_said(client, " ".join(f"{type(e).__name__}: {e}".split()))
     return WavemeshError(f"the Dask run at {address} stopped ({detail})",
                          hint="check that the scheduler and its workers are running and that every worker "
                               "reads the input at the same path (a shared file system), then run again")
