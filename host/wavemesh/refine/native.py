@@ -42,6 +42,8 @@ METRICS = {"normal": 0, "vertical": 1}
 NEIGHBOURHOODS = {"face": 0, "vertex": 1}
 U32 = (1 << 32) - 1
 U64 = (1 << 64) - 1
+_PLAIN = (float, int)  # RefineParams.check's fast path: the numbers' usual types (others: the full checks)
+_INF = float("inf")
 
 
 class NativeError(WavemeshError):
@@ -270,6 +272,20 @@ class RefineParams:
     extra: dict = field(default_factory=dict)
 
     def check(self) -> None:
+        # the usual case in one expression (a refine call checks its parameters inside its time: 1 us where
+        # the checks below take 4); anything else, an error included, takes the checks below
+        zeta, d_d, d_v, d_l, d_c, d_p, alpha, mt, cap = (
+            self.zeta, self.delta_d, self.delta_v, self.delta_lambda, self.delta_c, self.delta_p, self.alpha,
+            self.max_triangles, self.capacity)
+        if (type(zeta) in _PLAIN and type(d_d) in _PLAIN and type(d_v) in _PLAIN and type(d_l) in _PLAIN
+                and type(d_c) in _PLAIN and type(d_p) in _PLAIN and type(alpha) in _PLAIN
+                and 0 <= zeta < _INF and 0 <= d_d < _INF and 0 <= d_v < _INF and 0 <= d_l < 65536
+                and 0 <= d_c <= 1 and 0 <= d_p < 1 and 0 <= alpha <= 1 and self.metric in METRICS
+                and self.neighbourhood in NEIGHBOURHOODS and type(self.iterations) is int
+                and 0 <= self.iterations <= 3 and (mt is None or (type(mt) is int and 2 <= mt < 2**31))
+                and (cap is None or (type(cap) is int and 2 <= cap < 2**31))):
+            return
+
         def bad(name, value, want):
             raise WavemeshError(f"--{name.replace('_', '-')} {value} is out of range", hint=want)
 
@@ -427,8 +443,9 @@ class Level:
 
     @property
     def mesh(self) -> Mesh:
-        if isinstance(self._mesh, tuple):  # (width, height, xy, tris) as _export copied them
-            self._mesh = Mesh.from_slots(*self._mesh)
+        if isinstance(self._mesh, tuple):  # (width, height, slots, vertex slots) as _export copied them
+            width, height, buf, vert_end = self._mesh
+            self._mesh = Mesh.from_slots(width, height, buf[: 2 * vert_end], buf[2 * vert_end :])
         return self._mesh
 
     @mesh.setter
@@ -441,6 +458,9 @@ class RefineOutput:
     levels: list[Level]  # from the initial triangulation (level M-1) down to level 0
     capacity: int  # the triangle storage used
     params: Params
+
+    def __init__(self, levels: list[Level], capacity: int, params: Params):  # record's, without its loops
+        self.levels, self.capacity, self.params = levels, capacity, params
 
     @property
     def final(self) -> Level:
@@ -455,7 +475,7 @@ def _export(lib, hdr, mesh_ptr: int, width: int, height: int) -> tuple:
     addr = _addr(buf)
     n = lib.wm_mesh_export(mesh_ptr, addr, addr + 8 * vert_end)
     assert n == n_tri
-    return width, height, buf[: 2 * vert_end].reshape(vert_end, 2), buf[2 * vert_end :].reshape(n_tri, 3)
+    return width, height, buf, vert_end  # Level.mesh splits it when read
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, params: RefineParams,
@@ -498,9 +518,9 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
     fp = fixed_params(params, scale, zeta, spacing)
     xy = np.ascontiguousarray(initial.xy, dtype=np.int32)
     tris = np.ascontiguousarray(initial.tris, dtype=np.int32)
-    cap = params.capacity if params.capacity is not None else lib.wm_tri_cap_max(width, height)
+    cap, nbytes = _sizes(lib, width, height, params.capacity)
     rows = None if roi is None else roi_rows(roi)
-    out, code = _run_once(lib, fld, fp, xy, tris, cap, width, height, rows)
+    out, code = _run_once(lib, fld, fp, xy, tris, cap, nbytes, width, height, rows)
     if code != WM_OK:
         what = error_text(code)
         if code == WM_ERR_CAPACITY:
@@ -510,8 +530,24 @@ def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, pa
     return RefineOutput(out, cap, fp)
 
 
-def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[list[Level], int]:
-    nbytes = lib.wm_refine_bound(width, height, cap)
+_SIZES: dict = {}  # _sizes' answers by its arguments
+
+
+def _sizes(lib, width: int, height: int, capacity: int | None) -> tuple[int, int]:
+    """The triangle capacity (``capacity``, or by default wm_tri_cap_max's) and the refiner's storage in
+    bytes for it (wm_refine_bound's), each kept by the library and the arguments (two ctypes calls fewer
+    a refine call)."""
+    key = (lib, width, height, capacity)
+    out = _SIZES.get(key)
+    if out is None:
+        if len(_SIZES) >= 64:
+            _SIZES.clear()
+        cap = capacity if capacity is not None else lib.wm_tri_cap_max(width, height)
+        _SIZES[key] = out = (cap, lib.wm_refine_bound(width, height, cap))
+    return out
+
+
+def _run_once(lib, fld, fp, xy, tris, cap, nbytes, width, height, rows=None) -> tuple[list[Level], int]:
     if nbytes == 0:
         return [], -1
     # malloc: large blocks are mapped lazily, in transparent huge pages where the system makes them.  The
@@ -534,12 +570,14 @@ def _run_once(lib, fld, fp, xy, tris, cap, width, height, rows=None) -> tuple[li
     pst = ctypes.byref(st)
     lib.wm_refine_stats(handle, pst)
     levels = [Level(st.level, _export(lib, hdr, mesh_ptr, width, height), LevelStats.from_buffer_copy(st))]
-    while not lib.wm_refine_done(handle):
+    done = lib.wm_refine_done(handle)
+    while not done:
         code = lib.wm_refine_step(handle, pst)
         if code != WM_OK:
             return levels, code
         levels.append(Level(st.level, _export(lib, hdr, mesh_ptr, width, height),
                             LevelStats.from_buffer_copy(st)))
+        done = st.level == 0  # a step that succeeds is the last when it reaches level 0 (wm_refine_step)
     del mem
     return levels, WM_OK
 
