@@ -79,12 +79,12 @@ def terrain_file(n: int, grid: str = "terrain") -> Path:
 def one(
     n: int, tile: int, workers: int, untiled: bool = False, scheduler: str = "", grid: str = "terrain"
 ) -> dict:
-    """One run in this process (the child): the tiled mesh (on a Runner of ``workers`` local processes,
-    or through Dask: ``scheduler`` "local" for a LocalCluster of ``workers`` processes, or an address),
-    or the untiled one.  The parent's own CPU time (os.times: this process, its workers apart; with a
-    LocalCluster, its scheduler's too); on Dask the workers' CPU apart (each one's os.times before and
-    after: idle workers' counted too) and in cpu_seconds.  WAVEMESH_BENCH_RUNNER ("NAME=VALUE,..."):
-    tiles.runner's settings for the run (DASK_CHAINS=0, ...)."""
+    """One run in this process (the child): the tiled mesh (on a Runner of ``workers`` local workers, or
+    through Dask: ``scheduler`` "local" for a LocalCluster of ``workers`` processes, or an address), or the
+    untiled one.  The parent's own CPU time (os.times: this process, its forked workers and its worker
+    threads apart, Runner.threads_cpu; with a LocalCluster, its scheduler's too); on Dask the workers' CPU
+    apart (each one's os.times before and after: idle workers' counted too) and in cpu_seconds.
+    WAVEMESH_BENCH_RUNNER ("NAME=VALUE,..."): tiles.runner's settings for the run (THREADS=0, ...)."""
     from wavemesh import api, tiles
     from wavemesh.refine.native import RefineParams
 
@@ -131,11 +131,12 @@ def one(
         client.close()
     if cluster is not None:
         cluster.close()
-    parent = c1.user + c1.system - c0.user - c0.system
+    here = c1.user + c1.system - c0.user - c0.system
+    parent = here - (runner.threads_cpu if not untiled else 0.0)
     return out | {
         "seconds": seconds,
         "parent_cpu_seconds": parent,
-        "cpu_seconds": parent + c1.children_user + c1.children_system - c0.children_user - c0.children_system
+        "cpu_seconds": here + c1.children_user + c1.children_system - c0.children_user - c0.children_system
         + dask_cpu,
         "dask_workers_cpu_seconds": dask_cpu,
         "scheduler": via and ("dask" if cluster is not None else "dask " + via),

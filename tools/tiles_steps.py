@@ -29,17 +29,22 @@ settings for the run (CHAIN=2, AHEAD=0, PIN=0, ...).
 
 from __future__ import annotations
 
-import functools
-import gc
 import os
-import resource
-import sys
-import tempfile
-import time
-from multiprocessing import connection
 
-from wavemesh import cli
-from wavemesh.tiles import jobs, runner, source
+# as the command (wavemesh/__init__.py): numpy's OpenBLAS without its threads, which spin in this process
+# when a task that runs here (a pool's thread) calls it
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import functools  # noqa: E402
+import gc  # noqa: E402
+import resource  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from multiprocessing import connection  # noqa: E402
+
+from wavemesh import cli  # noqa: E402
+from wavemesh.tiles import jobs, runner, source  # noqa: E402
 
 READS = [0, 0]  # the reads tile_heightfield's cache missed; the samples of every window read
 # a pool worker's receives that found nothing in its pipe (it waited for the parent) and their seconds
@@ -95,14 +100,19 @@ jobs._tile_heightfield = _counted  # before the pool forks: the workers count th
 source.Source.read = _window_counted
 
 
+# the thread that runs the task (a pool's last worker is a thread of this process, beside the pool's loop)
+WHO = getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)
+
+
 def timed(fn, *args):
     """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads, the
     tiles this process holds after it, the samples read, and the process's waits for the parent so far:
     count, seconds)."""
-    u0, t0, r0, n0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter(), READS[0], READS[1]
+    u0, t0, r0, n0 = resource.getrusage(WHO), time.perf_counter(), READS[0], READS[1]
+    c0 = time.thread_time()
     out = fn(*args)
-    u1 = resource.getrusage(resource.RUSAGE_SELF)
-    cpu = u1.ru_utime - u0.ru_utime + u1.ru_stime - u0.ru_stime
+    cpu = time.thread_time() - c0
+    u1 = resource.getrusage(WHO)
     return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
                  u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE), READS[1] - n0, *STALLS)
 
@@ -233,9 +243,10 @@ def main(argv: list[str]) -> int:
     connection.Connection._recv_bytes = _recv_bytes_counted
     out = os.path.join(tempfile.mkdtemp(prefix="tiles-steps-"), "m.obj")
     gc.freeze()  # as the console script does (cli.main): the workers' collector leaves the imports' objects
-    t0, c0 = time.perf_counter(), os.times()
+    t0, c0, m0 = time.perf_counter(), os.times(), time.thread_time()
     rc = cli.main(["mesh", *argv[:1], "-o", out, "--quiet", *argv[1:]])
     end = time.perf_counter()  # CLOCK_MONOTONIC, as the workers' task times (timed)
+    main = time.thread_time() - m0  # this thread's: the loop (a pool's last worker is another thread)
     wall, exiting = end - t0, list(runner._EXITING)
     for proc in exiting:  # the pool's workers still exiting as the run ended (not waited for by it)
         proc.join()
@@ -245,7 +256,7 @@ def main(argv: list[str]) -> int:
     tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
     last = max((i[3] for *_, infos in LOG for _, i in infos), default=None)  # None: no task (untiled, failed)
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
-          f"{here - tasks_here:.2f}), the workers {there:.2f} s"
+          f"{here - tasks_here:.2f}; its main thread {main:.2f}), the workers {there:.2f} s"
           + (f" ({len(exiting)} still exiting as the run ended, for {1000 * after:.0f} ms more)" if exiting
              else "")
           + (f"; the run's end, from its last task's to the command's return: {1000 * (end - last):.0f} ms"

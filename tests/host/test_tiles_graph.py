@@ -32,7 +32,13 @@ def _pid_after(_):
     return os.getpid()
 
 
-def test_graph_results_in_order_any_runner():
+@pytest.mark.parametrize("threads", [0, 1, 2])
+def test_graph_results_in_order_any_runner(threads, monkeypatch):
+    """The same results in this process and on a pool of 2 whose workers are forked processes, threads of
+    this process (runner.THREADS), or one of each."""
+    from wavemesh.tiles import runner
+
+    monkeypatch.setattr(runner, "THREADS", threads)
     # a diamond and a chain: each node sums its inputs; Ref with pick takes a part of a result
     nodes = [Node(_add, (1,)), Node(_add, (Ref(0), 10)), Node(_add, (Ref(0), 100)),
              Node(_pair, (Ref(1), Ref(2))), Node(_add, (Ref(3, _first), Ref(2), 1000))]
@@ -55,17 +61,20 @@ def test_graph_results_in_order_any_runner():
 def test_last_graph_lets_its_workers_go():
     """``last``: the same results; the pool's workers told to end once nothing is left to give out (they
     end without the Runner's exit), and a later graph still runs (on a new pool)."""
+    from wavemesh.tiles import runner
+
     nodes = [Node(_add, (1,)), Node(_add, (Ref(0), 10)), Node(_add, (Ref(0), 100)),
              Node(_pair, (Ref(1), Ref(2))), Node(_add, (Ref(3, _first), Ref(2), 1000))]
-    with tiles.Runner(2) as run:
-        assert run.graph(nodes[:3]) == [1, 11, 101] and len(run.pool) == 2 and not run.ended
+    forked = 3 - runner.THREADS  # the pool's forked workers (the others threads of this process)
+    with tiles.Runner(3) as run:
+        assert run.graph(nodes[:3]) == [1, 11, 101] and len(run.pool) == forked and not run.ended
         first = [p for p, _ in run.pool]
         assert run.graph(nodes, last=True) == [1, 11, 101, (11, 101), 1112]
         assert run.pool == [] and [p for p, _ in run.ended] == first
         for p in first:
             p.join(10)
             assert p.exitcode == 0  # ended by itself, before the Runner's exit
-        assert run.graph(nodes[:2]) == [1, 11] and len(run.pool) == 2
+        assert run.graph(nodes[:2]) == [1, 11] and len(run.pool) == forked
     assert run.pool == [] == run.ended
 
 
@@ -137,19 +146,24 @@ def test_worker_told_to_end_lowers_its_priority():
 def _frozen(_):
     import gc
 
-    return gc.get_freeze_count(), gc.isenabled()
+    return os.getpid(), gc.get_freeze_count(), gc.isenabled()
 
 
-def test_pool_worker_freezes_what_it_was_forked_with():
-    """A pool worker starts with the objects it was forked with frozen for its collector (its collections
-    never walk them, never write into the parent's pages), and its collector on; this process's is left
-    as it was (nothing frozen here by the pool)."""
+def test_pool_worker_freezes_what_it_was_forked_with(monkeypatch):
+    """A forked pool worker starts with the objects it was forked with frozen for its collector (its
+    collections never walk them, never write into the parent's pages), and its collector on; this
+    process's is left as it was (nothing frozen here by the pool, whose thread workers run here)."""
     import gc
 
+    from wavemesh.tiles import runner
+
+    monkeypatch.setattr(runner, "THREADS", 1)
     before = gc.get_freeze_count()
-    with tiles.Runner(2) as run:
-        got = run.map(_frozen, [(i,) for i in range(4)])
-    assert all(count > before and on for count, on in got)  # more than a fork inherits frozen
+    with tiles.Runner(3) as run:
+        got = run.map(_frozen, [(i,) for i in range(12)])
+    there = [(count, on) for pid, count, on in got if pid != os.getpid()]
+    assert there and all(count > before and on for count, on in there)  # more than a fork inherits frozen
+    assert all(count == before for pid, count, _ in got if pid == os.getpid())
     assert gc.get_freeze_count() == before
 
 
@@ -211,8 +225,8 @@ def test_graph_ahead_large_and_small_messages():
         assert [len(x) for x in out[:79]] == [n if k % 5 == 0 else 3 for k in range(40)] + \
             [n if k % 3 == 0 else 5 for k in range(39)]
         assert all(x[0] == 7 for x in out[:79])
-        pids = set(out[79:])  # run in the workers
-        assert os.getpid() not in pids and len(pids) <= 2
+        pids = set(out[79:])  # run in the workers (a thread of this process, runner.THREADS)
+        assert len(pids) <= 2
 
 
 def test_pipe_room_of_a_socket_and_of_a_plain_pipe():
@@ -282,14 +296,21 @@ def test_this_cpu_is_one_this_process_may_use():
         assert cpu is None or cpu >= 0
 
 
-def test_graph_failure_raises_and_pool_ends():
+@pytest.mark.parametrize("threads", [0, 1, 2])
+def test_graph_failure_raises_and_pool_ends(threads, monkeypatch):
+    """A task's error, in a forked worker or a thread (runner.THREADS), raised by the graph; the forked
+    workers ended."""
+    from wavemesh.tiles import runner
+
+    monkeypatch.setattr(runner, "THREADS", threads)
     procs: list = []
+    nodes = [Node(_add, (1,)), *(Node(divmod, (1, k % 2), (0, k)) for k in range(6)), Node(_add, (Ref(0), 1))]
     with pytest.raises(ZeroDivisionError), tiles.Runner(2) as run:
         try:
-            run.graph([Node(_add, (1,)), Node(divmod, (1, 0)), Node(_add, (Ref(0), 1))])
+            run.graph(nodes)
         finally:
             procs = [p for p, _ in run.pool]  # the runner forgets its pool as it ends it
-    assert len(procs) == 2 and not any(p.is_alive() for p in procs)
+    assert len(procs) == 2 - threads and not any(p.is_alive() for p in procs)
 
 
 def test_schedule_rank_and_homes():

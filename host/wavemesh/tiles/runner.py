@@ -42,6 +42,10 @@ PIN = True
 # a pool worker keeps each result it made that other nodes read, until the parent has given out every one of
 # them: a node given to that worker names it (_Held) instead of carrying it down the pipe again
 HOLD = True
+# of a pool's K workers, the last THREADS (at most K) are threads of this process (_Local), the others forked
+# processes: with 1, K - 1 forks; the thread's tasks and results pass no pipe, its tiles are in this process's
+# heap (8192^2, tile 1025, 2 workers: 0.09-0.14 s of CPU less than 2 forked, docs/tiles.md)
+THREADS = 1
 # on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead; each worker thread a pool
 # worker, its own tiles a block of them), a chain a task, rather than every node submitted at once as a task
 # of its own
@@ -230,9 +234,9 @@ def _resolve(node: Node, results: list, prev: int | None = None, held: set | fro
 class Runner:
     """Where a tiled run's tasks run, as a context manager: ``scheduler`` (a Dask scheduler's address or
     a distributed.Client: a Dask task a chain of nodes, given out as the pool gives them; the workers read
-    their own windows), else ``workers`` forked local processes (default: the CPUs this process may use;
-    1: in this process), started at the first task and kept for every phase.  Leaving it early (an
-    error, Ctrl-C, SIGTERM) kills the workers."""
+    their own windows), else ``workers`` local workers (default: the CPUs this process may use; 1: in this
+    process), the last THREADS of them threads of this process, the others forked processes, started at the
+    first task and kept for every phase.  Leaving it early (an error, Ctrl-C, SIGTERM) kills the workers."""
 
     def __init__(self, workers: int | None = None, scheduler=None):
         workers = default_workers() if workers is None else workers
@@ -241,12 +245,13 @@ class Runner:
         self.workers, self.scheduler = workers, scheduler
         self.client = None
         self.own_client = scheduler is not None and not hasattr(scheduler, "submit")
-        self.pool: list[tuple] = []  # (process, pipe)
+        self.pool: list[tuple] = []  # (process, pipe) of each forked worker
         self.pinned: list[int | None] = []  # the CPU each worker of the pool is kept on (PIN), or None
         self.ended: list[tuple] = []  # workers let go by the last graph, reaped by __exit__
         self.run_id = f"{time.time_ns()}-{os.getpid()}"
         self.n_maps = 0
         self.dask_started = False  # _dask_start run on the cluster's workers
+        self.threads_cpu = 0.0  # the CPU seconds of the pool's workers that were threads of this process
 
     def __enter__(self) -> Runner:
         if self.scheduler is not None:
@@ -332,31 +337,43 @@ class Runner:
                 got(i, r)
                 del r
                 sched.finished(i)
-        else:  # each worker's tasks and results through its own pipe; the parent has no threads of its own
-            # for them: a run that ends early kills its workers and returns at once (concurrent.futures'
-            # pool could wait forever at exit for a result a killed worker had half sent)
+        else:  # a pool: forked workers, each through its own pipe, and the last THREADS workers threads of
+            # this process; the loop here (this thread) hands out and answers: a run that ends early kills its
+            # workers and returns at once (concurrent.futures' pool could wait forever at exit for a result
+            # a killed worker had half sent)
+            size = self.workers
+            forked = size - min(size, THREADS)  # the workers from forked on are threads of this process
             # a new pool's first worker is given its first chain before the others are forked: it starts its
             # tasks while they fork and start
             self._start_pool(1)
-            size = self.workers  # the pool's once every worker is forked
             sched = _Schedule(nodes, {t: int(h * size) for t, h in (homes or {}).items()}, deps)
             # each worker's chains, in the order sent: the first written to its pipe, a second one (decided
             # while the worker runs the first, so that it starts it without waiting for the parent) written
             # only while both fit in the pipe's buffer, else held here and written as the first one's result
             # comes (a message that could block the parent's send while the worker sends its result back
             # would block both ends: one of any size goes only to a worker that waits for it)
-            sent: list[list] = [[] for _ in range(size)]  # [chain, its bytes, written]
-            room = [_pipe_room(pipe) for _, pipe in self.pool] + [0] * (size - len(self.pool))
+            sent: list[list] = [[] for _ in range(size)]  # [chain, its bytes (the thread's: steps), written]
+            room = [_pipe_room(pipe) for _, pipe in self.pool] + [0] * (forked - len(self.pool))
             keys = {id(obj): _Kept(self.n_maps, k) for k, obj in enumerate(shared)}
-            holds[:] = [set() for _ in range(size)]
-            drops[:] = [[] for _ in range(size)]
-            kept: list[set] = [set() for _ in range(size)]  # the shared args each worker has
+            holds[:] = [set() for _ in range(forked)]
+            drops[:] = [[] for _ in range(forked)]
+            kept: list[set] = [set() for _ in range(forked)]  # the shared args each worker has
+            local = {w: _Local(self.pinned[w]) for w in range(forked, size)}
 
             def give(w: int, now: bool = True) -> None:
                 """Worker ``w``'s next chain (_Schedule.chain) when it has none, or its second while it runs
                 the first (AHEAD; a chain sent ahead takes at most one tile more than the worker would
                 otherwise hold: its batch only of tiles it has read already); ``now``: written at once."""
                 if len(sent[w]) > 1 or not (chain := sched.chain(w, size, bool(sent[w]))):
+                    return
+                if w >= forked:  # a thread: the args themselves, nothing pickled, nothing held for it
+                    steps = []
+                    for n, k in enumerate(chain):
+                        steps.append((nodes[k].fn, _resolve(nodes[k], results, chain[n - 1] if n else None)))
+                        given(k)
+                    sent[w].append([chain, steps, False])
+                    if now:
+                        write(w)
                     return
                 out = []
                 steps = []
@@ -379,9 +396,14 @@ class Runner:
                     write(w)
 
             def write(w: int) -> None:
-                """Worker ``w``'s chains not yet written that may be: the first, or a second that fits."""
+                """Worker ``w``'s chains not yet written that may be: the first, or a second that fits (the
+                thread's: both, to its queue)."""
                 for n, item in enumerate(sent[w]):
                     if item[2]:
+                        continue
+                    if w >= forked:
+                        local[w].put(item[1])
+                        item[2] = True
                         continue
                     size = sum(map(len, item[1]))
                     if n and size + sum(sum(map(len, x[1])) for x in sent[w][:n]) > room[w]:
@@ -403,8 +425,8 @@ class Runner:
             def hand_out(idle: Iterable[int], busy: Iterable[int] = ()) -> None:
                 """The ``idle`` workers' next chains, every one made before the first is written (a worker
                 its chain wakes may take the CPU this process makes the next one on: the other idle worker
-                would wait for it; the one kept on this process's CPU is written last), then the second
-                chains of ``busy`` ones."""
+                would wait for it; the thread, or a worker kept on this process's CPU, written last), then
+                the second chains of ``busy`` ones."""
                 idle = [w for w in dict.fromkeys(idle) if not sent[w]]
                 if len(idle) > 1:
                     cpu = _this_cpu()
@@ -417,37 +439,56 @@ class Runner:
                     give(w)
 
             ready = _Ready()
-            hand_out(range(len(self.pool)))
-            if len(self.pool) < size:  # the rest of a new pool, then their first chains
-                started = len(self.pool)
-                self._start_pool()
-                room[started:] = [_pipe_room(pipe) for _, pipe in self.pool[started:]]
-                hand_out(range(started, size))
-            while any(sent):
-                live = [w for w in range(len(self.pool)) if sent[w]]
-                fds = ready.wait([self.pool[w][1] for w in live] + [self.pool[w][0].sentinel for w in live])
-                came = []
-                for w in live:
-                    proc, pipe = self.pool[w]
-                    if pipe.fileno() in fds:
-                        chain = sent[w].pop(0)[0]
-                        reply = _reply(proc, pipe)
-                        write(w)  # a second chain held back: the worker waits for it
+            back = self._own_cpu() if local else None
+            try:
+                for t in local.values():
+                    t.start()
+                hand_out((*range(len(self.pool)), *local))
+                if len(self.pool) < forked:  # the rest of a new pool, then their first chains
+                    started = len(self.pool)
+                    self._start_pool()
+                    room[started:] = [_pipe_room(pipe) for _, pipe in self.pool[started:]]
+                    hand_out(range(started, forked))
+                workers = [*range(len(self.pool)), *local]
+                while any(sent):
+                    live = [w for w in workers if sent[w]]
+                    fds = ready.wait([self.pool[w][1] if w < forked else local[w].wake for w in live]
+                                     + [self.pool[w][0].sentinel for w in live if w < forked])
+                    came = []
+                    for w in live:
+                        if w >= forked:
+                            if local[w].wake not in fds:
+                                continue
+                            chain = sent[w].pop(0)[0]
+                            reply = local[w].reply()
+                        else:
+                            proc, pipe = self.pool[w]
+                            if pipe.fileno() not in fds:
+                                if proc.sentinel in fds and not pipe.poll():
+                                    _lost(proc)
+                                continue
+                            chain = sent[w].pop(0)[0]
+                            reply = _reply(proc, pipe)
+                            write(w)  # a second chain held back: the worker waits for it
                         let_go()  # before its results are handled
                         for i, r in zip(chain, reply, strict=True):
-                            if HOLD and readers[i]:  # as store said (only its chain gave a reader since)
-                                holds[w].add(i)
+                            if HOLD and w < forked and readers[i]:  # as store said (only its chain gave a
+                                holds[w].add(i)  # reader since)
                             got(i, r, False)
                             sched.finished(i)
                             came.append((i, r))
-                    elif proc.sentinel in fds and not pipe.poll():
-                        _lost(proc)
-                idle = [w for w in (*live, *range(len(self.pool))) if not sent[w]]  # answered first
-                hand_out(idle, (*idle, *live))  # a worker with nothing first, then the second chains
-                let_go()
-                if done:  # the results handled (a finished tile written) once the workers have their next
-                    for i, r in came:
-                        done(i, r)
+                    idle = [w for w in (*live, *workers) if not sent[w]]  # answered first
+                    hand_out(idle, (*idle, *live))  # a worker with nothing first, then the second chains
+                    let_go()
+                    if done:  # the results handled (a finished tile written) once the workers have their next
+                        for i, r in came:
+                            done(i, r)
+            finally:
+                for t in local.values():
+                    t.stop(not any(sent))
+                    self.threads_cpu += t.cpu_s
+                if back is not None:
+                    back()
             if gone:  # reaped when the Runner ends; a later graph forks a new pool
                 self.ended += self.pool
                 self.pool = []
@@ -610,9 +651,41 @@ class Runner:
                 got(k, r if wanted is None or k in wanted else None)
             del fut, out
 
+    def _own_cpu(self) -> Callable:
+        """This process set up for a graph whose workers include its threads, as _worker_start sets up a
+        forked one: its memory (tune_malloc) and its host stages on the workers' share of the CPUs (unless the
+        run gave --threads); returns what puts that back."""
+        tune_malloc()
+        threads = native.threads_set() is None
+        if threads:
+            native.set_threads(max(1, native.cores() // self.workers))
+
+        def back() -> None:
+            if threads:
+                native.set_threads(None)
+
+        return back
+
+    def _pins(self) -> None:
+        """The CPU each worker of the pool is kept on (PIN: one worker a CPU), else None each."""
+        cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
+        # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
+        # (_worker_start): set from here, the call waited while the new process, running on the
+        # other CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
+        if len(cpus) == self.workers:
+            now = _this_cpu()
+            # this process's CPU last: the first forked worker starts at once, a thread stays where it is
+            cpus.sort(key=lambda c: c == now)
+            self.pinned = cpus
+        else:
+            self.pinned = [None] * self.workers
+
     def _start_pool(self, upto: int | None = None) -> None:
-        """The pool's workers forked, up to ``upto`` of them (None: all)."""
-        upto = self.workers if upto is None else min(upto, self.workers)
+        """The pool's forked workers (all but the last THREADS), up to ``upto`` of them (None: all)."""
+        forked = self.workers - min(self.workers, THREADS)
+        upto = forked if upto is None else min(upto, forked)
+        if not self.pool:
+            self._pins()
         if len(self.pool) >= upto:
             return
         native.load()  # built once here, not by every worker at once
@@ -628,17 +701,6 @@ class Runner:
             # each worker's host stages (quantisation, error measure, checks) on its share of the CPUs, not
             # on every one as a process of its own would: one thread each with one worker a CPU
             share = max(1, native.cores() // self.workers)
-            if not self.pool:
-                cpus = sorted(os.sched_getaffinity(0)) if PIN and hasattr(os, "sched_getaffinity") else []
-                # one worker a CPU: each its own (PIN), kept there by the worker itself as it starts
-                # (_worker_start): set from here, the call waited while the new process, running on the
-                # other CPU, was moved (1.4-1.5 ms for the first worker, before any worker had its first task)
-                if len(cpus) == self.workers:
-                    now = _this_cpu()
-                    cpus.sort(key=lambda c: c == now)  # this process's CPU last: the first starts at once
-                    self.pinned = cpus
-                else:
-                    self.pinned = [None] * self.workers
             for k in range(len(self.pool), upto):
                 here, there = ctx.Pipe()
                 proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share, self.pinned[k]),
@@ -846,6 +908,76 @@ def _this_cpu() -> int | None:
 _GETCPU: list = []
 
 
+class _Local:
+    """A pool worker that is a thread of this process (THREADS): chains from a queue, run as a forked worker
+    runs them (_run_chain), each result put on a list and a byte written to ``wake``'s pipe, which the
+    pool's loop polls with the workers' pipes; kept on ``cpu`` (PIN).  Its nodes' args and results are the
+    objects themselves (nothing pickled, nothing forked); the loop, answering the forked workers, takes the
+    interpreter's lock from it only for that."""
+
+    def __init__(self, cpu: int | None = None):
+        import queue  # start-up: only for a pool
+        import threading  # the same
+
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.out: list = []
+        self.wake, self._wake_w = os.pipe()
+        self.cpu = cpu
+        self.cpu_s = 0.0  # the thread's CPU seconds, once it has ended
+        self.thread = threading.Thread(target=self._loop, name="wavemesh-tiles", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def put(self, steps: list) -> None:
+        self.inbox.put(steps)
+
+    def _loop(self) -> None:
+        if self.cpu is not None:  # this thread alone (PIN)
+            try:
+                os.sched_setaffinity(0, {self.cpu})
+            except OSError:
+                pass
+        while (steps := self.inbox.get()) is not None:
+            try:
+                reply = ("ok", _run_chain(steps), None)
+            except Exception as e:  # raised in the loop (WavemeshError with its hint)
+                reply = ("error", e, getattr(e, "hint", None))
+            self.out.append(reply)
+            os.write(self._wake_w, b"x")
+        self.cpu_s = time.thread_time()
+        os.close(self.wake)
+        os.close(self._wake_w)
+
+    def reply(self) -> list:
+        """The next chain's results (a byte read from ``wake``), or its error raised here."""
+        os.read(self.wake, 1)
+        kind, value, _ = self.out.pop(0)
+        if kind == "error":
+            raise value
+        return value
+
+    def stop(self, wait: bool) -> None:
+        """No more chains: the thread ends after the one it runs, if any (``wait``: waited for, the graph
+        done; else not: a run that failed returns at once), and closes its pipe."""
+        self.inbox.put(None)
+        if wait:
+            self.thread.join()
+
+
+def _run_chain(steps: list, kept: dict | None = None, held: dict | None = None) -> list:
+    """A chain's steps run in turn: a _Prev in args the previous step's result, a _Kept an arg in
+    ``kept``, a _Held a result in ``held``; the results as a list."""
+    out: list = []
+    for fn, args in steps:
+        args = tuple(kept[a] if isinstance(a, _Kept) else
+                     (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else
+                     (a.pick(held[a.node]) if a.pick else held[a.node]) if isinstance(a, _Held) else a
+                     for a in args)
+        out.append(fn(*args))
+    return out
+
+
 class _Ready:
     """What multiprocessing.connection.wait does for the pool's loop, with one poll object kept for the graph
     and only the changes registered (wait makes a selector and registers every pipe and sentinel anew at
@@ -855,17 +987,18 @@ class _Ready:
         self.poller = select.poll() if hasattr(select, "poll") else None
         self.fds: set[int] = set()
 
-    def wait(self, objs: list) -> set[int]:
-        """The file descriptors of ``objs`` (connections, sentinels) ready to read (or ended), once one is."""
+    def wait(self, objs: list, timeout: float | None = None) -> set[int]:
+        """The file descriptors of ``objs`` (connections, sentinels) ready to read (or ended), once one is
+        (``timeout``: at most that many seconds, 0: those ready now)."""
         if self.poller is None:
-            return {o if isinstance(o, int) else o.fileno() for o in wait(objs)}
+            return {o if isinstance(o, int) else o.fileno() for o in wait(objs, timeout)}
         fds = {o if isinstance(o, int) else o.fileno() for o in objs}
         for fd in self.fds - fds:
             self.poller.unregister(fd)
         for fd in fds - self.fds:
             self.poller.register(fd, select.POLLIN)
         self.fds = fds
-        return {fd for fd, _ in self.poller.poll()}
+        return {fd for fd, _ in self.poller.poll(None if timeout is None else 1000 * timeout)}
 
 
 _DUMPS = ForkingPickler.dumps  # as Connection.send pickles: Connection.recv reads it
@@ -953,13 +1086,7 @@ def _worker_loop(pipe, parent: int, threads: int | None = None, cpu: int | None 
             held.clear()
             held_graph = graph
         try:
-            out: list = []
-            for fn, args in steps:
-                args = tuple(kept[a] if isinstance(a, _Kept) else
-                             (a.pick(out[-1]) if a.pick else out[-1]) if isinstance(a, _Prev) else
-                             (a.pick(held[a.node]) if a.pick else held[a.node]) if isinstance(a, _Held) else a
-                             for a in args)
-                out.append(fn(*args))
+            out = _run_chain(steps, kept, held)
             for k, r in zip(store, out, strict=True):
                 if k >= 0:
                     held[k] = r
