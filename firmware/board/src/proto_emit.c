@@ -142,19 +142,20 @@ static void coded_reset(wm_proto *p)
     p->cbn = p->cbi = 0;
 }
 
-/* The next item of the body into cb (a vertex slot, then the live triangles); 0 when none is left. */
-static int coded_item(wm_proto *p)
+/* The next item of the body (a vertex slot, then the live triangles) into d (room for 16 bytes): its
+ * bytes, 0 when none is left. */
+static uint32_t code_item(wm_proto *p, uint8_t *d)
 {
     const wm_mesh *m = p->lm;
     uint32_t n = 0;
     if (p->cv < m->vert_end) {
         int32_t v = p->cv++;
         if (m->vx[v] == WM_FREE) {
-            p->cb[n++] = 0; /* a free slot */
+            d[n++] = 0; /* a free slot */
         } else {
             int32_t x = m->vx[v], y = m->vy[v];
-            n += put_varint(p->cb + n, zigzag32(x - p->cpx) + 1u);
-            n += put_varint(p->cb + n, zigzag32(y - p->cpy));
+            n += put_varint(d + n, zigzag32(x - p->cpx) + 1u);
+            n += put_varint(d + n, zigzag32(y - p->cpy));
             p->cpx = x;
             p->cpy = y;
         }
@@ -164,26 +165,57 @@ static int coded_item(wm_proto *p)
         while (m->hv[3 * p->cslot] < 0) p->cslot++;
         h = m->hv + 3 * p->cslot;
         a = h[0];
-        n += put_varint(p->cb + n, zigzag32(a - p->cpi));
-        n += put_varint(p->cb + n, zigzag32(h[1] - a));
-        n += put_varint(p->cb + n, zigzag32(h[2] - a));
+        n += put_varint(d + n, zigzag32(a - p->cpi));
+        n += put_varint(d + n, zigzag32(h[1] - a));
+        n += put_varint(d + n, zigzag32(h[2] - a));
         p->cpi = a;
         p->cslot++;
         p->ck++;
-    } else {
-        return 0;
     }
-    p->cbn = (uint8_t)n;
-    p->cbi = 0;
-    return 1;
+    return n;
 }
 
-/* The coded stream's length: the header and every item (the coder starts again). */
+/* The next item into cb; 0 when none is left. */
+static int coded_item(wm_proto *p)
+{
+    uint32_t n = code_item(p, p->cb);
+    p->cbn = (uint8_t)n;
+    p->cbi = 0;
+    return n != 0;
+}
+
+/* The bytes of v as a variable-length number (put_varint's count). */
+static uint32_t varint_len(uint32_t v)
+{
+    return 1u + (v >= 0x80u) + (v >= 0x4000u) + (v >= 0x200000u) + (v >= 0x10000000u);
+}
+
+/* The coded stream's length: the header and every item, counted as coded_item would write them (the
+ * same deltas and varint lengths) without writing them or the coder's state. */
 static uint32_t coded_total(wm_proto *p)
 {
+    const wm_mesh *m = p->lm;
+    const wm_index *hv = m->hv;
     uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
-    coded_reset(p);
-    while (coded_item(p)) total += p->cbn;
+    int32_t px = 0, py = 0, pi = 0, te = m->tri_end;
+    for (int32_t v = 0; v < m->vert_end; v++) {
+        int32_t x = m->vx[v], y;
+        if (x == WM_FREE) {
+            total++;
+            continue;
+        }
+        y = m->vy[v];
+        total += varint_len(zigzag32(x - px) + 1u) + varint_len(zigzag32(y - py));
+        px = x;
+        py = y;
+    }
+    for (int32_t t = 0; t < te; t++) {
+        const wm_index *h = hv + 3 * t;
+        int32_t a = h[0];
+        if (a < 0) continue;
+        total += varint_len(zigzag32(a - pi)) + varint_len(zigzag32(h[1] - a)) + varint_len(zigzag32(h[2] - a));
+        pi = a;
+    }
     coded_reset(p);
     return total;
 }
@@ -193,18 +225,40 @@ static uint32_t coded_total(wm_proto *p)
 static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
 {
     if (off < p->cpos) coded_reset(p);
-    while (n) {
-        uint8_t c;
-        if (p->cpos < WM_PROTO_LEVEL_HEADER_BYTES) {
-            c = p->lhdr[p->cpos];
-        } else {
-            if (p->cbi == p->cbn && !coded_item(p)) return; /* past the end: cannot happen (end <= ltotal) */
-            c = p->cb[p->cbi++];
-        }
+    while (n && p->cpos < WM_PROTO_LEVEL_HEADER_BYTES) { /* the header */
+        uint8_t c = p->lhdr[p->cpos];
         if (p->cpos++ >= off) {
             *dst++ = c;
             n--;
         }
+    }
+    while (n) { /* the body: whole items at a time (of the current one, the bytes not given yet) */
+        uint32_t a, skip;
+        if (p->cbi == p->cbn && p->cpos >= off && n >= sizeof p->cb) { /* the next item straight into dst */
+            a = code_item(p, dst);
+            if (a == 0) return;
+            p->cpos += a;
+            dst += a;
+            n -= a;
+            continue;
+        }
+        if (p->cbi == p->cbn && !coded_item(p)) return; /* past the end: cannot happen (end <= ltotal) */
+        a = (uint32_t)(p->cbn - p->cbi);
+        skip = p->cpos < off ? off - p->cpos : 0; /* bytes before off (a resend from within the stream) */
+        if (skip >= a) {
+            p->cpos += a;
+            p->cbi = p->cbn;
+            continue;
+        }
+        p->cbi += (uint8_t)skip;
+        p->cpos += skip;
+        a -= skip;
+        if (a > n) a = n;
+        for (uint32_t i = 0; i < a; i++) dst[i] = p->cb[p->cbi + i];
+        p->cbi += (uint8_t)a;
+        p->cpos += a;
+        dst += a;
+        n -= a;
     }
 }
 
