@@ -166,21 +166,42 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     }
 }
 
-/* floor(x / (k 2^26)) for 1 <= k <= WM_MAX_RING, as floor(floor(x / 2^26) / k) (and ceil likewise for
- * x < 0): the same integer as wm_floor_div(x, k << 26), with the division by k in 32-bit steps on the
- * soft CPU (wm_udiv_small), where a 64-bit one is a library call. */
+/* floor(n / k) for 1 <= k <= WM_MAX_RING and n < 2^36, by multiplication: with M = ceil(2^32 / k)
+ * (recip[k], k >= 2), floor(a M / 2^32) = floor(a / k) for every a < 2^27 (the error a (M k - 2^32) /
+ * (k 2^32) is below 2^27 k / (k 2^32) < 1 / k), so n in two 16-bit steps: floor(n / 2^16) < 2^20, then
+ * the remainder (below k <= 32) times 2^16 plus n's low 16 bits, below 2^21.  With WM_NARROW_DIV (the
+ * soft CPU) four multiplies where the division by k took one to three calls of its 33-cycle division;
+ * natively the division, one instruction. */
+#define RECIP(k) (uint32_t)((0xFFFFFFFFu / (k)) + 1u)
+#define RECIP8(k) \
+    RECIP(k), RECIP(k + 1), RECIP(k + 2), RECIP(k + 3), RECIP(k + 4), RECIP(k + 5), RECIP(k + 6), RECIP(k + 7)
+static const uint32_t recip[WM_MAX_RING + 1] = {0,        0,        RECIP(2),  RECIP(3),   RECIP(4),   RECIP(5),
+                                                RECIP(6), RECIP(7), RECIP8(8), RECIP8(16), RECIP8(24), RECIP(32)};
+typedef char recip_covers_the_ring[WM_MAX_RING == 32 ? 1 : -1]; /* recip[] has every k */
+
+static uint64_t div_k(uint64_t n, int32_t k)
+{
+    uint32_t m = recip[k], hi, q1, lo, q0;
+    if (k == 1) return n;
+    hi = (uint32_t)(n >> 16);
+    q1 = (uint32_t)(((uint64_t)hi * m) >> 32);
+    lo = (hi - q1 * (uint32_t)k) << 16 | (uint32_t)(n & 0xFFFFu);
+    q0 = (uint32_t)(((uint64_t)lo * m) >> 32);
+    WM_ASSERT(n < ((uint64_t)1 << 36) && ((uint64_t)q1 << 16) + q0 == n / (uint32_t)k);
+    return ((uint64_t)q1 << 16) + q0;
+}
+
+/* floor(x / (k 2^26)) for 1 <= k <= WM_MAX_RING and |x| < 2^62, as floor(floor(x / 2^26) / k) (and ceil
+ * likewise for x < 0): the same integer as wm_floor_div(x, k << 26). */
 static int64_t floor_div_k26(int64_t x, int32_t k)
 {
-    uint64_t m = x < 0 ? (uint64_t)0 - (uint64_t)x : (uint64_t)x, q;
-    uint32_t rem;
+    uint64_t m = x < 0 ? (uint64_t)0 - (uint64_t)x : (uint64_t)x;
     if (x >= 0) {
         m >>= 26;
-        q = WM_NARROW_DIV ? wm_udiv_small(m, (uint32_t)k, &rem) : m / (uint32_t)k;
-        return (int64_t)q;
+        return (int64_t)(WM_NARROW_DIV ? div_k(m, k) : m / (uint32_t)k);
     }
     m = ((m + ((uint64_t)1 << 26) - 1) >> 26) + (uint32_t)k - 1; /* ceil(|x| / 2^26), then ceil(. / k) */
-    q = WM_NARROW_DIV ? wm_udiv_small(m, (uint32_t)k, &rem) : m / (uint32_t)k;
-    return -(int64_t)q;
+    return -(int64_t)(WM_NARROW_DIV ? div_k(m, k) : m / (uint32_t)k);
 }
 
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],

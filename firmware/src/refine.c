@@ -248,6 +248,32 @@ static uint32_t swap_bound(const wm_refiner *r, uint32_t emax, uint32_t e1, uint
     return b;
 }
 
+/* A sample's row s / W (and column s - row W) without a division: every sample number s = y W + x is
+ * below 2^30 (W, H <= WM_MAX_SIDE), so with 2^l >= W and m = ceil(2^(30 + l) / W) (below 2^31 + 2),
+ * floor(s m / 2^(30 + l)) = floor(s / W) exactly (the error s (m W - 2^(30 + l)) / (W 2^(30 + l)) is
+ * below 2^-l <= 1 / W).  With WM_NARROW_DIV (the soft CPU) a multiply pair and a shift, where s / W and
+ * s % W were two calls of its 33-cycle division (the swaps' point tests and the error bound take a
+ * triangle's worst sample apart); natively the division. */
+struct sample_div {
+    uint32_t m;
+    int sh;
+};
+
+static struct sample_div sample_div_of(int32_t w)
+{
+    struct sample_div d;
+    int l = 0;
+    while (((int32_t)1 << l) < w) l++;
+    d.sh = 30 + l;
+    d.m = (uint32_t)((((uint64_t)1 << d.sh) + (uint32_t)w - 1u) / (uint32_t)w);
+    return d;
+}
+
+static inline int32_t sample_row(struct sample_div d, int32_t s, int32_t w)
+{
+    return WM_NARROW_DIV ? (int32_t)(((uint64_t)(uint32_t)s * d.m) >> d.sh) : s / w;
+}
+
 /* (px, py) in the closed counter-clockwise triangle. */
 static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
@@ -287,7 +313,7 @@ static int32_t slot_angle(wm_refiner *r, int32_t t, const int32_t x[3], const in
     return a;
 }
 
-static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
@@ -355,8 +381,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax)
         WM_ASSERT(one <= dmax);
         s1 = s2 = 0;
         for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
-            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1], sx = s % r->field.width,
-                    sy = s / r->field.width;
+            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1],
+                    sy = sample_row(wd, s, r->field.width), sx = s - sy * r->field.width;
+            WM_ASSERT(sy == s / r->field.width && sx == s % r->field.width);
             if (in_tri(n1x, n1y, sx, sy)) {
                 uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
                 if (v > lb1) {
@@ -452,6 +479,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
     int32_t first;     /* this sweep's first swap number */
+    struct sample_div wd = sample_div_of(r->field.width);
     for (int32_t t = 0; t < me->tri_end; t++) {
         r->list[t] = ANGLE_UNKNOWN;
         me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
@@ -475,7 +503,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 if (!(me->tflag[u] & WM_F_SWAP)) continue;
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
                 if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) continue; /* a swap back: "no" */
-                if (try_swap(r, e, alpha, emax)) {
+                if (try_swap(r, e, alpha, emax, wd)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;
                     swaps++;
@@ -499,6 +527,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
     int legal = !(r->params.flags & WM_FLAG_NO_LEGALISE);
+    struct sample_div wd = sample_div_of(r->field.width);
     /* Only the slots in use; a slot a split adds beyond them gets pos[] = -1 when it is made, so no
      * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
@@ -508,8 +537,9 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
         wm_tri_xy(me, t, x, y);
-        wx = r->worst[t] % r->field.width;
-        wy = r->worst[t] / r->field.width;
+        wy = sample_row(wd, r->worst[t], r->field.width);
+        wx = r->worst[t] - wy * r->field.width;
+        WM_ASSERT(wy == r->worst[t] / r->field.width && wx == r->worst[t] % r->field.width);
         /* Which edge holds the worst sample (E_k = 0: the edge from corner k+1 to k+2)?  Never a
          * corner: the distance is 0 there and E(T) > zeta >= 0. */
         for (k = 0; k < 3; k++) {
