@@ -152,7 +152,7 @@ def test_one_tile_is_the_untiled_mesh(tmp_path):
 
 def test_dask_equals_local(dem, tmp_path, monkeypatch):
     """The same tiles on a Dask LocalCluster of 2 worker processes (chains of nodes, as the pool gives them
-    out, and one task a node: runner.DASK_CHAINS), on the local pool of 2 processes and in this process:
+    out; DASK_CHAIN 16 and 1), on the local pool of 2 workers and in this process:
     the same files, byte for byte; a lossy quantisation's largest error found before the tiles
     (plan_tiles) or in their task graph beside the free meshes (defer_error): the same plan after."""
     distributed = pytest.importorskip("distributed")
@@ -184,7 +184,7 @@ def test_dask_equals_local(dem, tmp_path, monkeypatch):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as c, distributed.Client(c) as client:
         dask = files("dask", True, scheduler=client)
-        monkeypatch.setattr(tiles.runner, "DASK_CHAINS", False)
+        monkeypatch.setattr(tiles.runner, "DASK_CHAIN", 1)
         nodes = files("nodes", True, scheduler=client)
         assert len(client.scheduler_info()["workers"]) == 2
     assert len(here[0]) == 13 and here[1][0].q > 0 and here[1][1] < 3.0
@@ -200,7 +200,7 @@ def foreign_error(err: str, who: str) -> bool:
 
 
 @pytest.mark.parametrize("other, says", [
-    ("del r._dask_start, r._dask_chain, r._dask_call", "Can't get attribute '_dask_start'"),
+    ("del r._dask_start, r._dask_chain", "Can't get attribute '_dask_start'"),
     ("r._TREE[:] = ['0' * 16]", "another wavemesh there"),  # its files another's (its tasks' functions
     # other, or missing: its process would end at its first task, and the run wait for ever)
 ])

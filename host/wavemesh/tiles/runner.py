@@ -47,14 +47,8 @@ HOLD = True
 # heap (8192^2, tile 1025, 2 workers: 0.09-0.14 s of CPU less than 2 forked, docs/tiles.md)
 THREADS = 1
 # on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead; each worker thread a pool
-# worker, its own tiles a block of them), a chain a task, rather than every node submitted at once as a task
-# of its own
-DASK_CHAINS = True
-# with DASK_CHAINS False: each tile's tasks asked of one worker (a block of tiles a worker), which reads the
-# tile once; another takes them when that one is busy (Dask's loose restrictions: its work stealing)
-DASK_HOMES = True
-# and up to DASK_CHAIN nodes a chain (CHAIN's rules): a Dask task costs the scheduler and the worker some
-# milliseconds of CPU more than a pool's round trip
+# worker, its own tiles a block of them), a chain a task of up to DASK_CHAIN nodes (CHAIN's rules): a Dask
+# task costs the scheduler and the worker some milliseconds of CPU more than a pool's round trip
 DASK_CHAIN = 16
 _WORKER_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # blocked from a fork to _worker_start
 # glibc malloc for a process that runs tiles (tune_malloc): buffers up to 32 MiB from the heap, the heap's top
@@ -496,11 +490,14 @@ class Runner:
 
     def _dask_graph(self, nodes: list[Node], got: Callable, shared: tuple, keep: set | None,
                     seen: Iterable[int] | None, homes: dict | None) -> None:
-        """Runner.graph on a Dask cluster: as the pool, chains of nodes (DASK_CHAINS: _dask_chains), else one
-        task a node (_dask_nodes); ``shared`` args and each Here scattered once (the plan every task reads:
-        sent to every worker, not with each task); only the results the caller reads (``keep``, ``seen``)
-        come back to this process."""
+        """Runner.graph on a Dask cluster: as the pool, chains of nodes (_dask_chains); ``shared`` args and
+        each Here scattered once (the plan every task reads: sent to every worker, not with each task); only
+        the results the caller reads (``keep``, ``seen``) come back to this process.  A cluster without
+        workers yet: the run waits for the first (the workers the graph starts with are given its chains;
+        one that joins later may take them by Dask's work stealing)."""
         client = self.client
+        if not _dask_threads(client):
+            client.wait_for_workers(1)
         if not self.dask_started:  # each worker set up once, before its first task (_dask_start)
             self.dask_started = True
             hosts: dict = {}
@@ -519,58 +516,11 @@ class Runner:
         wanted = None if keep is None or seen is None else keep | set(seen)
         workers = _dask_threads(client)
         try:
-            if DASK_CHAINS and workers:
-                self._dask_chains(nodes, got, scattered, wanted, homes, workers)
-            else:
-                self._dask_nodes(nodes, got, scattered, wanted, homes, workers)
+            self._dask_chains(nodes, got, scattered, wanted, homes, workers)
         except RuntimeError as e:  # the scheduler could not read the graph: every task erred with it
             if not str(e).startswith(GRAPH_UNREAD):
                 raise
             raise foreign_cluster(client, "scheduler", e) from None
-
-    def _dask_nodes(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
-                    homes: dict | None, workers: list[str]) -> None:
-        """_dask_graph with one task a node, each submitted at once with the futures of the nodes it reads
-        (a Ref's pick done in the reading task, not a task of its own), ranked as the pool's (Dask's
-        priority: the least rank first), each tile's asked of one worker (DASK_HOMES); each node's future
-        let go once it is done (Dask keeps a result until the nodes that read it are done)."""
-        client = self.client
-        key = f"wavemesh-{self.run_id}-{self.n_maps}"
-        where = {t: [workers[w]] for t, w in _blocks(homes, len(workers)).items()} \
-            if DASK_HOMES and homes and workers else {}
-        order = sorted(range(len(nodes)), key=lambda i: (nodes[i].rank, i))
-        priority = [0] * len(nodes)
-        for p, i in enumerate(order):
-            priority[i] = len(nodes) - p
-        futures: list = []
-        for i, node in enumerate(nodes):
-            args, picks = [], []
-            for a in node.args:
-                if isinstance(a, Ref):
-                    if a.pick is not None:
-                        picks.append((len(args), a.pick))
-                    a = futures[a.node]
-                elif isinstance(a, Here):
-                    if id(a) not in scattered:
-                        scattered[id(a)] = client.scatter(a.fn(*a.args), hash=False)
-                    a = scattered[id(a)]
-                else:
-                    a = scattered.get(id(a), a)
-                args.append(a)
-            home = where.get(node.tiles[0]) if node.tiles else None
-            futures.append(client.submit(_dask_call, node.fn, tuple(picks), *args, pure=False,
-                                         key=f"{key}-{i}", priority=priority[i],
-                                         workers=home, allow_other_workers=home is not None))
-        from distributed import as_completed  # with connect's package
-
-        index = {f.key: i for i, f in enumerate(futures)}
-        pending = as_completed(futures)
-        futures.clear()
-        scattered.clear()
-        for fut in pending:
-            i = index[fut.key]
-            got(i, fut.result() if wanted is None or i in wanted or fut.status == "error" else None)
-            del fut
 
     def _dask_chains(self, nodes: list[Node], got: Callable, scattered: dict, wanted: set | None,
                      homes: dict | None, workers: list[str]) -> None:
@@ -882,16 +832,6 @@ def _dask_chain(steps: list, *made):
             vals.append(a)
         out.append(fn(*vals))
     return out
-
-
-def _dask_call(fn: Callable, picks: tuple, *args):
-    """A node's task on a Dask worker: fn(*args), each (position, pick) of ``picks`` applied to that arg
-    first (a Ref's pick, done here rather than in a task of its own)."""
-    if picks:
-        args = list(args)
-        for k, pick in picks:
-            args[k] = pick(args[k])
-    return fn(*args)
 
 
 def _this_cpu() -> int | None:
