@@ -204,13 +204,12 @@ static int64_t floor_div_k26(int64_t x, int32_t k)
     return -(int64_t)(WM_NARROW_DIV ? div_k(m, k) : m / (uint32_t)k);
 }
 
-int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
+int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
                 struct wm_normal_slot *kept, int32_t kept_mask)
 {
     int64_t sum[6] = {0, 0, 0, 0, 0, 0};
     int32_t first, h, k = 0;
     if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
-    mean[0] = mean[1] = mean[2] = 0;
     first = wm_fan_first(m, v);
     h = first;
     do {
@@ -235,7 +234,6 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
         sum[3] += (int64_t)n[1] * n[1];
         sum[4] += (int64_t)n[1] * n[2];
         sum[5] += (int64_t)n[2] * n[2];
-        for (int c = 0; c < 3; c++) mean[c] += n[c];
         k++;
         h = wm_rot_ccw(m, h);
     } while (h >= 0 && h != first);
@@ -247,8 +245,7 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
 int wm_vertex_autocorr(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
                        int64_t lambda[3], int64_t vec[9])
 {
-    int64_t mean[3];
-    int k = wm_vertex_r(m, f, p, v, r, mean, NULL, 0);
+    int k = wm_vertex_r(m, f, p, v, r, NULL, 0);
     if (k < 0) return k;
     wm_sym3_eigen(r, lambda, vec);
     return k;

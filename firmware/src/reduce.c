@@ -222,10 +222,8 @@ static int8_t class_of(const int64_t r[6], uint32_t delta_lambda)
  * eigenvector the collapse test compares (4.34). */
 static int8_t classify(wm_refiner *r, int32_t v, struct eig *g)
 {
-    int64_t mean[3];
     int8_t cls;
-    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, mean, r->normals, r->cache_mask) < 0)
-        return CLS_NONE;
+    if (wm_vertex_r(&r->mesh, &r->field, &r->params, v, g->r, r->normals, r->cache_mask) < 0) return CLS_NONE;
     cls = class_of(g->r, r->params.delta_lambda);
     if (cls == CLS_COLLAPSE) wm_sym3_eigen(g->r, g->lambda, g->vec);
     return cls;

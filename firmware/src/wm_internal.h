@@ -513,10 +513,9 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st);
  * collapse where 4.33 and 4.34 hold; each only when every new triangle's E(T) is at most
  * max(zeta, the largest E(T) of the triangles it replaces).  Returns the vertices removed. */
 int32_t wm_reduce(wm_refiner *r);
-/* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition, and the sum of the Q28 unit
- * normals around v (below 2^33); the triangle count or an error.  kept: NULL, or the normals' cache
- * of kept_mask + 1 slots (a power of two). */
-int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6], int64_t mean[3],
+/* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition; the triangle count or an error.
+ * kept: NULL, or the normals' cache of kept_mask + 1 slots (a power of two). */
+int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
                 struct wm_normal_slot *kept, int32_t kept_mask);
 /* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
  * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
