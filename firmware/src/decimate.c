@@ -215,11 +215,20 @@ static int is_fan(const int32_t *tris, int32_t nt)
     return 0;
 }
 
-static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
+/* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, v is the vertex
+ * and ring, tris its ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex
+ * (else v is -1).  Nothing but a removal changes the mesh here, so when that vertex is the next to go
+ * (most often: the one just evaluated, back at the top of the heap) its removal takes them instead of
+ * working them out again (f5 at 1 %: 191 of its 223 removals, Ball at 2 % 376 of 498). */
+struct last_plan {
+    int32_t v, nr, nt; /* v: -1 when none */
+    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
+};
+
+static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct last_plan *lp)
 {
     const wm_mesh *me = &r->mesh;
-    int32_t ring[WM_MAX_RING], rx[WM_MAX_RING], ry[WM_MAX_RING], tris[3 * WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt,
-        big;
+    int32_t *ring = lp->ring, *tris = lp->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
     uint32_t best = NONE;
     int32_t vx = me->vx[v], vy = me->vy[v];
     struct wm_plan_probe probe;
@@ -227,6 +236,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
     struct fans q;
     tested.r = r;
     probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested;
+    lp->v = -1;
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
     q.n = n;
@@ -285,6 +295,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex)
         }
         best = worst;
         *apex = a;
+        lp->v = v, lp->nr = n, lp->nt = nt;
+        for (int32_t k = 0; a >= 0 && k < 3 * nt; k++) tris[k] = ring[tp[k]];
         break;
     }
     return best;
@@ -367,10 +379,10 @@ static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 
 /* Re-files v with its current cost (out of the heap when it cannot go): in place when it is in the
  * heap (the order is total, by cost and slot, so where an entry sits does not change what comes out). */
-static void refile(wm_refiner *r, int32_t v, int32_t *n)
+static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
 {
     int32_t apex = -1, i = r->pos[v];
-    uint32_t cost = first_fit(r, v, &apex);
+    uint32_t cost = first_fit(r, v, &apex, lp);
     if (cost == NONE) {
         take_out(r, v, n);
         return;
@@ -417,22 +429,38 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
+    struct last_plan lp;
     (void)st;
+    lp.v = -1;
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
-        if (me->vx[v] != WM_FREE) refile(r, v, &n);
+        if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
     while (n > 0) {
-        int32_t v = r->list[0], ring[WM_MAX_RING], tris[3 * WM_MAX_RING], touched[WM_MAX_RING], nr, nt, k;
+        int32_t v = r->list[0], touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
         if (r->vapex[v] == STALE) {
-            refile(r, v, &n); /* evaluated now: back in the heap at its cost, or out */
+            refile(r, v, &n, &lp); /* evaluated now: back in the heap at its cost, or out */
             continue;
         }
         take_out(r, v, &n);
-        nr = wm_vertex_ring(me, v, ring);
-        if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK)
-            continue; /* cannot happen: the plan was made on this star */
+        if (lp.v == v) { /* the plan first_fit made on this star */
+            nr = lp.nr, nt = lp.nt;
+#if WM_CHECK
+            {
+                int32_t ring2[WM_MAX_RING], tris2[3 * WM_MAX_RING], nt2 = 0;
+                WM_ASSERT(wm_vertex_ring(me, v, ring2) == nr);
+                WM_ASSERT(wm_ring_plan(me, ring2, nr, r->vapex[v], tris2, &nt2) == WM_OK && nt2 == nt);
+                for (int32_t i = 0; i < nr; i++) WM_ASSERT(ring2[i] == ring[i]);
+                for (int32_t i = 0; i < 3 * nt; i++) WM_ASSERT(tris2[i] == tris[i]);
+            }
+#endif
+        } else {
+            nr = wm_vertex_ring(me, v, ring);
+            if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK)
+                continue; /* cannot happen: the plan was made on this star */
+        }
+        lp.v = -1; /* the mesh changes */
         if (r->field.mask && !wm_hole_keeps_cover(r, v, ring, nr, tris, nt)) {
-            refile(r, v, &n); /* holes.c: a removal beyond v's ring took a ring vertex's other cover since */
+            refile(r, v, &n, &lp); /* holes.c: a removal beyond v's ring took a ring vertex's other cover since */
             continue;
         }
         if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) continue; /* cannot happen, as above */
