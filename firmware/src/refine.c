@@ -223,6 +223,18 @@ static int den_below_one(uint32_t alpha, uint32_t ra, uint64_t num)
     return (uint64_t)t > (num < 0xFFFFFFFFu ? num : 0xFFFFFFFFu) * (65536u - alpha);
 }
 
+/* wm_scale_mul(p, e, 1, 0, 2^40) (the swaps' E(T) in height units) inline: floor(e m / 2^s) (m =
+ * scale_m < 2^16), at most 2^40; the same integer without the call and its general case's branches
+ * (on the soft CPU a multiply pair and a shift). */
+static inline uint64_t in_height(const wm_params *p, uint32_t e)
+{
+    uint64_t q = (uint64_t)e * p->scale_m, cap = (uint64_t)1 << 40;
+    q = p->scale_e >= 64 ? 0 : q >> p->scale_e;
+    q = q > cap ? cap : q;
+    WM_ASSERT(q == wm_scale_mul(p, e, 1, 0, cap));
+    return q;
+}
+
 /* The largest E with wm_scale_mul(p, E, 1, 0, cap) <= X (cap = 2^40), saturated at 2^32 - 1: that
  * product is min(cap, floor(E m / 2^e)) (m = scale_m < 2^16), and floor(E m / 2^e) <= X iff
  * E m <= (X + 1) 2^e - 1; every E below 2^32 has it when (X + 1) 2^e >= 2^48. */
@@ -322,7 +334,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
     int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
     int64_t dot1 = 0, cross1 = 0, dot2 = 0, cross2 = 0; /* the new triangles' smallest angles (fixed.c) */
     uint32_t e1 = 0, e2 = 0, ra, bnd, oe1 = r->err[t1], oe2 = r->err[t2];
-    const uint64_t one = 65536u, cap = (uint64_t)1 << 40;
+    const uint64_t one = 65536u;
     uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
     int back = 1;                    /* whether the swap back would be made */
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
@@ -367,8 +379,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
     bnd = swap_bound(r, emax, oe1, oe2);
     if (alpha < 65536u) {
         uint64_t dmax, s1, s2;
-        o1 = wm_scale_mul(&r->params, oe1, 1, 0, cap);
-        o2 = wm_scale_mul(&r->params, oe2, 1, 0, cap);
+        o1 = in_height(&r->params, oe1);
+        o2 = in_height(&r->params, oe2);
         uint32_t lb1 = 0, lb2 = 0, lim;
         /* xi > 1 iff den <= dmax (den_max), and den >= one: R_A alone may refuse the swap.  Then the
          * old triangles' worst samples, measured against the new triangle(s) holding them: they bound
@@ -388,7 +400,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                 uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
                 if (v > lb1) {
                     lb1 = v;
-                    s1 = wm_scale_mul(&r->params, lb1, 1, 0, cap);
+                    s1 = in_height(&r->params, lb1);
                     if (s1 + s2 + one > dmax) return 0;
                 }
             }
@@ -396,7 +408,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                 uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
                 if (v > lb2) {
                     lb2 = v;
-                    s2 = wm_scale_mul(&r->params, lb2, 1, 0, cap);
+                    s2 = in_height(&r->params, lb2);
                     if (s1 + s2 + one > dmax) return 0;
                 }
             }
@@ -417,13 +429,13 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
                     : wm_tri_error_within(&r->field, &r->params, n1x, n1y, lim, &w1x, &w1y, &r1);
         if (e1 > lim) return 0;
-        s1 = wm_scale_mul(&r->params, e1, 1, 0, cap);
+        s1 = in_height(&r->params, e1);
         lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - s1);
         if (lim > bnd) lim = bnd;
         e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
                     : wm_tri_error_within(&r->field, &r->params, qx, qy, lim, &w2x, &w2y, &r2);
         if (e2 > lim) return 0;
-        sn = s1 + wm_scale_mul(&r->params, e2, 1, 0, cap);
+        sn = s1 + in_height(&r->params, e2);
         WM_ASSERT(sn + one <= dmax);
     } else {
         if (ra <= 65536u) return 0; /* xi = R_A */
