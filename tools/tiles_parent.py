@@ -6,9 +6,10 @@
 
 Runs `wavemesh mesh INPUT ...` (as given: `--tile 1025 --workers 2 --metric vertical --zeta 0.1 -q`) in
 this process and prints one line of JSON: the parent's peak RSS (getrusage's ru_maxrss of this process:
-the pool's forked workers apart), its CPU (user + system) over the run, and the tail: its CPU and wall
-time from the moment the last task's result arrives (before the parent handles it) to the end of the run
-(writing what was left, the files moved into place, the workers ended).  ``--stitched``: the tiles as the
+the pool's workers apart, every one forked: runner.THREADS = 0), its CPU (user + system) over the run,
+and the tail: its CPU and wall time from the moment the last task's result arrives (before the parent
+handles it) to the end of the run (writing what was left, the files moved into place, the workers
+ended).  ``--stitched``: the tiles as the
 API's tiles.stitch takes them, every tile's last result kept until the last one, stitched into one mesh
 (checked whole), then written (docs/tiles.md, "Memory": against the mesh file written as the tiles
 finish).  CPU seconds and ru_maxrss hold on a loaded machine where wall times do not.
@@ -59,6 +60,7 @@ def _stitched_run(plan, *, sink=None, **kw):
 
 def main(argv: list[str]) -> int:
     runner.Runner.graph = _marked_graph
+    runner.THREADS = 0  # every worker forked: the parent's own memory, not a thread worker's tiles
     if argv and argv[0] == "--stitched":
         argv = argv[1:]
         tiles.run_tiles = _stitched_run

@@ -273,8 +273,9 @@ def main(argv: list[str]) -> int:
         per: dict = {}
         steps: dict = {}
         for step, (pid, cpu, s, e, sys_, flt, reads, held, samples, *stalls) in infos:
-            w = per.setdefault(pid, [0.0, 0.0, 0, 0, stalls, stalls])  # its waits at its first and last task
-            w[0], w[1], w[2], w[3] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held)
+            # its waits at its first and last task; its page faults
+            w = per.setdefault(pid, [0.0, 0.0, 0, 0, stalls, stalls, 0])
+            w[0], w[1], w[2], w[3], w[6] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held), w[6] + flt
             w[4], w[5] = min(w[4], stalls), max(w[5], stalls)
             x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0, 0])
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
@@ -282,9 +283,9 @@ def main(argv: list[str]) -> int:
         model += max(w[0] for w in per.values())
         firsts = [min(i[2] for _, i in infos if i[0] == pid) for pid in per]  # each worker's first start
         print(f"{part}: wall {b - a:.3f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
-              "per worker CPU / busy / waiting s (tasks, the most tiles held; the times it found no task "
-              "in its pipe between its first and last, and their ms): "
-              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]}; "
+              "per worker CPU / busy / waiting s (tasks, the most tiles held, page faults; the times it "
+              "found no task in its pipe between its first and last, and their ms): "
+              + ", ".join(f"{w[0]:.2f} / {w[1]:.2f} / {b - a - w[1]:.2f} ({w[2]}, {w[3]}, {w[6]}; "
                           f"{w[5][0] - w[4][0]}, {1000 * (w[5][1] - w[4][1]):.0f})" for w in per.values())
               + (f"; the workers' first tasks started within {1000 * (max(firsts) - min(firsts)):.1f} ms"
                  if len(firsts) > 1 else ""))

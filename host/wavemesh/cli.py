@@ -263,8 +263,9 @@ def _tile_options(p: argparse.ArgumentParser, *, local: bool) -> None:
                    help="with tiles: also each tile's mesh and index.json into DIR")
     if local:
         p.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="tiles in N local processes at once (default: one per CPU, at most one per tile; "
-                            "1: in this process, one core); the same mesh whatever N")
+                       help="tiles in N local workers at once, N - 1 processes and a thread of this one "
+                            "(default: one per CPU, at most one per tile; 1: in this process, one core); the "
+                            "same mesh whatever N")
         p.add_argument("--scheduler", metavar="ADDRESS",
                        help="run the tiles on a Dask cluster (dask.distributed) at ADDRESS")
 
