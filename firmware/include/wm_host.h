@@ -88,6 +88,19 @@ int64_t wm_host_obj_faces(const int64_t *tris, int64_t t, char *out);
 int64_t wm_host_obj_vertices(const int64_t *xy, const double *z, int64_t n, char *out, int64_t *left,
                              int64_t *n_left);
 
+/* native.refine's loop in one call: the refiner's mesh (wavemesh.h's wm_mesh_export) as it is and after
+ * each wm_refine_step, until wm_refine_done.  The levels exported are counted from 0: level k's
+ * statistics in stats[k], its export in buf after the levels before it (vertex slots then triangles, 2
+ * vert_end + 3 n_tri int32s), sizes[2 k] its vert_end and sizes[2 k + 1] its triangles.  mode 1: the
+ * first call (stats[0] from wm_refine_stats); 0: the mesh as it is is not exported yet, its statistics
+ * in stats[0]; 2: a step first.  Returns the levels exported, *code WM_OK when the refiner is done, a
+ * step's error (that level not exported), 1 when buf (cap int32s) has no room for the next level (call
+ * again with mode 0, stats[returned] moved to stats[0]) or 2 when stats (max_levels) has none (mode 2). */
+struct wm_refiner;
+struct wm_level_stats;
+int32_t wm_host_refine_levels(struct wm_refiner *r, int32_t fresh, struct wm_level_stats *stats,
+                              int32_t max_levels, int32_t *buf, int64_t cap, int32_t *sizes, int32_t *code);
+
 #ifdef __cplusplus
 }
 #endif

@@ -229,6 +229,7 @@ def _declare(lib: ctypes.CDLL) -> None:
         "wm_host_scan": (i32, [i32]),
         "wm_host_obj_faces": (i64, [pi64, i64, ctypes.c_char_p]),
         "wm_host_obj_vertices": (i64, [pi64, pf64, i64, ctypes.c_char_p, pi64, pi64]),
+        "wm_host_refine_levels": (i32, [vp, i32, vp, i32, vp, i64, pi32, pi32]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -444,7 +445,7 @@ class Level:
     @property
     def mesh(self) -> Mesh:
         if isinstance(self._mesh, tuple):  # (width, height, slots, vertex slots) as _export copied them
-            width, height, buf, vert_end = self._mesh
+            width, height, buf, vert_end = self._mesh  # buf: this level's slots, vertices then triangles
             self._mesh = Mesh.from_slots(width, height, buf[: 2 * vert_end], buf[2 * vert_end :])
         return self._mesh
 
@@ -467,15 +468,9 @@ class RefineOutput:
         return self.levels[-1]
 
 
-def _export(lib, hdr, mesh_ptr: int, width: int, height: int) -> tuple:
-    # hdr: wm_mesh's first eight int32 fields: width, height, tri_cap, vert_cap, tri_end, vert_end, n_tri,
-    # n_vert
-    vert_end, n_tri = hdr[5], hdr[6]
-    buf = np.empty(2 * vert_end + 3 * n_tri, dtype=np.int32)  # one allocation: the vertices, the triangles
-    addr = _addr(buf)
-    n = lib.wm_mesh_export(mesh_ptr, addr, addr + 8 * vert_end)
-    assert n == n_tri
-    return width, height, buf, vert_end  # Level.mesh splits it when read
+_EXPORT_ROOM = 1 << 14  # int32s: the least array _run_once's exports start in
+_EXPORT_AHEAD = 8  # and at least room for this many exports of the initial mesh's size
+_STATS_SIZE = ctypes.sizeof(LevelStats)
 
 
 def refine(samples: np.ndarray, levels: list[HaarLevel] | int, initial: Mesh, params: RefineParams,
@@ -564,22 +559,35 @@ def _run_once(lib, fld, fp, xy, tris, cap, nbytes, width, height, rows=None) -> 
         code = lib.wm_refine_set_roi(handle, _ptr(rows, ctypes.c_int32))
     if code != WM_OK:
         return [], code
-    mesh_ptr = lib.wm_refine_mesh(handle)  # the refiner's own mesh: the same one at every level
-    hdr = (ctypes.c_int32 * 8).from_address(mesh_ptr)
-    st = LevelStats()
-    pst = ctypes.byref(st)
-    lib.wm_refine_stats(handle, pst)
-    levels = [Level(st.level, _export(lib, hdr, mesh_ptr, width, height), LevelStats.from_buffer_copy(st))]
-    done = lib.wm_refine_done(handle)
-    while not done:
-        code = lib.wm_refine_step(handle, pst)
-        if code != WM_OK:
-            return levels, code
-        levels.append(Level(st.level, _export(lib, hdr, mesh_ptr, width, height),
-                            LevelStats.from_buffer_copy(st)))
-        done = st.level == 0  # a step that succeeds is the last when it reaches level 0 (wm_refine_step)
+    # The steps and each level's export in C (wm_host_refine_levels: one call, not a step, an export and
+    # their Python objects a level), into one array while it has room: every level's statistics (the
+    # refiner's levels count down from fld.levels - 1 to 0, two levels for one), and after a call that
+    # ran out of room the level it left pending in a larger one.
+    hdr = (ctypes.c_int32 * 8).from_address(lib.wm_refine_mesh(handle))  # wm_mesh's head: vert_end, n_tri
+    n_stats = fld.levels + 2
+    stats = (LevelStats * n_stats)()
+    sizes = (ctypes.c_int32 * (2 * n_stats))()
+    said = ctypes.c_int32()
+    room = max(_EXPORT_ROOM, _EXPORT_AHEAD * (2 * hdr[5] + 3 * hdr[6]))
+    levels, first, mode, base = [], 0, 1, ctypes.addressof(stats)
+    while True:
+        buf = np.empty(room, dtype=np.int32)
+        k = lib.wm_host_refine_levels(handle, mode, base + first * _STATS_SIZE, n_stats - first, _addr(buf),
+                                      room, sizes, ctypes.byref(said))
+        at = 0
+        for i in range(k):
+            vert_end = sizes[2 * i]
+            end = at + 2 * vert_end + 3 * sizes[2 * i + 1]
+            st = stats[first + i]
+            levels.append(Level(st.level, (width, height, buf[at:end], vert_end), st))
+            at = end
+        code = said.value
+        if code != 1:  # done (0), or a step's error; 2 (no room for statistics) cannot happen
+            break
+        first, mode = first + k, 0
+        room = max(2 * room, 4 * (2 * hdr[5] + 3 * hdr[6]))
     del mem
-    return levels, WM_OK
+    return levels, code
 
 
 def roi_rows(roi: np.ndarray) -> np.ndarray:
