@@ -426,6 +426,7 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
     }
     const __m256i lane = _mm256_set_epi32(7, 6, 5, 4, 3, 2, 1, 0), dv = _mm256_set1_epi32((int32_t)d);
     const __m256i Ld = _mm256_mullo_epi32(_mm256_set1_epi32((int32_t)dS), lane);
+    const __m256i S8 = _mm256_set1_epi32((int32_t)(8 * dS)), eight = _mm256_set1_epi32(8);
     /* V < 2^31: a limit at or above 2^31 - 1 stops no scan */
     const __m256i Lv = _mm256_set1_epi32((int32_t)(lim > 0x7FFFFFFFu ? 0x7FFFFFFFu : lim));
     /* each lane's largest V and the place (sample number) of its first sample: the largest of all is then
@@ -465,15 +466,17 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
         rows = last - py + 1;
         py = last + 1;
         for (;;) {
-            /* the row's samples lo.p .. hi.p (none when n <= 0: every lane cleared) */
+            /* the row's samples lo.p .. hi.p (none when n <= 0: every lane cleared); a block's S, the
+             * samples left from its first (a lane past them is cleared) and its places stepped in the
+             * lanes from block to block */
             int32_t n = (int32_t)(hi.p - lo.p) + 1;
             const uint16_t *q = lo.p;
-            uint32_t S = Sl;
+            __m256i Sv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)Sl), Ld), Nv = _mm256_set1_epi32(n);
+            __m256i Pv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)(q - h)), lane);
             do {
                 __m256i hv = load8(q, end);
-                __m256i Sv = _mm256_add_epi32(_mm256_set1_epi32((int32_t)S), Ld);
                 __m256i v = _mm256_abs_epi32(_mm256_sub_epi32(Sv, _mm256_mullo_epi32(hv, dv))); /* |V| < 2^31 */
-                v = _mm256_and_si256(v, _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lane));
+                v = _mm256_and_si256(v, _mm256_cmpgt_epi32(Nv, lane));
                 __m256i over = _mm256_cmpgt_epi32(v, Lv);
                 if (!_mm256_testz_si256(over, over)) { /* the first sample above the limit: the C scan stops */
                     uint32_t lanes[8];
@@ -484,12 +487,13 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
                     goto stop;
                 }
                 if (placed) /* each lane's first sample of its largest V */
-                    place = _mm256_blendv_epi8(place, _mm256_add_epi32(_mm256_set1_epi32((int32_t)(q - h)), lane),
-                                               _mm256_cmpgt_epi32(v, best));
+                    place = _mm256_blendv_epi8(place, Pv, _mm256_cmpgt_epi32(v, best));
                 best = _mm256_max_epi32(best, v);
                 q += 8;
-                S += 8 * dS;
                 n -= 8;
+                Sv = _mm256_add_epi32(Sv, S8);
+                Nv = _mm256_sub_epi32(Nv, eight);
+                Pv = _mm256_add_epi32(Pv, eight);
             } while (n > 0);
             if (--rows == 0) break;
             Sl += dSl + (dS & (0u - end_step(&lo)));
