@@ -35,10 +35,14 @@ def _pid_after(_):
 @pytest.mark.parametrize("threads", [0, 1, 2])
 def test_graph_results_in_order_any_runner(threads, monkeypatch):
     """The same results in this process and on a pool of 2 whose workers are forked processes, threads of
-    this process (runner.THREADS), or one of each."""
+    this process (runner.THREADS), or one of each; the interpreter's switch interval (runner.SWITCH_US while
+    a thread runs) as it was after."""
+    import sys
+
     from wavemesh.tiles import runner
 
     monkeypatch.setattr(runner, "THREADS", threads)
+    switch = sys.getswitchinterval()
     # a diamond and a chain: each node sums its inputs; Ref with pick takes a part of a result
     nodes = [Node(_add, (1,)), Node(_add, (Ref(0), 10)), Node(_add, (Ref(0), 100)),
              Node(_pair, (Ref(1), Ref(2))), Node(_add, (Ref(3, _first), Ref(2), 1000))]
@@ -54,6 +58,7 @@ def test_graph_results_in_order_any_runner(threads, monkeypatch):
             assert run.graph(kept[:2], shared=(ten,)) == [1, 11]
         assert sorted(seen) == list(range(len(nodes)))
         assert seen.index(0) < min(seen.index(1), seen.index(2)) and seen.index(3) < seen.index(4)
+        assert sys.getswitchinterval() == switch
     with pytest.raises(ValueError, match="only earlier nodes"):
         _Schedule([Node(_add, (Ref(1),)), Node(_add, (1,))])
 

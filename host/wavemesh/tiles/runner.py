@@ -46,6 +46,10 @@ HOLD = True
 # processes: with 1, K - 1 forks; the thread's tasks and results pass no pipe, its tiles are in this process's
 # heap (8192^2, tile 1025, 2 workers: 0.09-0.14 s of CPU less than 2 forked, docs/tiles.md)
 THREADS = 1
+# while a pool with a thread runs, the interpreter's switch interval (microseconds; 0: Python's 5 ms): how
+# long the loop, woken by a forked worker's result, may wait for the interpreter's lock while the thread runs
+# Python (8192^2, tile 1025, 4 workers on 2 CPUs: the graph 2.41 s against 2.82-3.03 s with 5 ms)
+SWITCH_US = 500
 # on Dask, the nodes given out as the pool gives them (_Schedule: chains, ahead; each worker thread a pool
 # worker, its own tiles a block of them), a chain a task of up to DASK_CHAIN nodes (CHAIN's rules): a Dask
 # task costs the scheduler and the worker some milliseconds of CPU more than a pool's round trip
@@ -604,15 +608,19 @@ class Runner:
     def _own_cpu(self) -> Callable:
         """This process set up for a graph whose workers include its threads, as _worker_start sets up a
         forked one: its memory (tune_malloc) and its host stages on the workers' share of the CPUs (unless the
-        run gave --threads); returns what puts that back."""
+        run gave --threads); and the interpreter's switch interval SWITCH_US; returns what puts them back."""
         tune_malloc()
         threads = native.threads_set() is None
         if threads:
             native.set_threads(max(1, native.cores() // self.workers))
+        switch = sys.getswitchinterval()
+        if SWITCH_US:
+            sys.setswitchinterval(SWITCH_US / 1e6)
 
         def back() -> None:
             if threads:
                 native.set_threads(None)
+            sys.setswitchinterval(switch)
 
         return back
 
