@@ -249,12 +249,16 @@ int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int3
 {
     /* Relative to d every difference is below 2^15 in magnitude, so each squared length is below
      * 2^31, each cross product below 2^31, each term below 2^62, the sum of two below 2^63: the
-     * sign of the third sum is a comparison, exact in 64 bits. */
-    int64_t adx = (int64_t)ax - dx, ady = (int64_t)ay - dy, bdx = (int64_t)bx - dx, bdy = (int64_t)by - dy;
-    int64_t cdx = (int64_t)cx - dx, cdy = (int64_t)cy - dy;
-    int64_t t1 = (adx * adx + ady * ady) * (bdx * cdy - cdx * bdy);
-    int64_t t2 = (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy);
-    int64_t t3 = (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
-    int64_t s = t1 + t2;
+     * sign of the third sum is a comparison, exact in 64 bits.  The lengths and cross products in 32
+     * bits, so each term is one 32 x 32 bit product (on the soft CPU a mul and a mulh, where 64-bit
+     * operands took four multiplies and their carries). */
+    int32_t adx = ax - dx, ady = ay - dy, bdx = bx - dx, bdy = by - dy, cdx = cx - dx, cdy = cy - dy;
+    int64_t t1 = (int64_t)(adx * adx + ady * ady) * (bdx * cdy - cdx * bdy);
+    int64_t t2 = (int64_t)(bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy);
+    int64_t t3 = (int64_t)(cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
+    int64_t s;
+    WM_ASSERT(adx > -32768 && adx < 32768 && ady > -32768 && ady < 32768 && bdx > -32768 && bdx < 32768 &&
+              bdy > -32768 && bdy < 32768 && cdx > -32768 && cdx < 32768 && cdy > -32768 && cdy < 32768);
+    s = t1 + t2;
     return s > -t3 ? 1 : (s < -t3 ? -1 : 0);
 }
