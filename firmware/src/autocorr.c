@@ -120,12 +120,14 @@ void wm_sym3_eigen(const int64_t in[6], int64_t lambda[3], int64_t vec[9])
 
 void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t n[3])
 {
+    /* The sample numbers, coordinate and height differences in 32 bits (below 2^30, 2^15 and 2^16 in
+     * magnitude), so each product below is one 32 x 32 bit multiply: the same integers. */
     const uint16_t *h = f->samples;
-    int64_t z0 = h[(int64_t)y[0] * f->width + x[0]], z1 = h[(int64_t)y[1] * f->width + x[1]];
-    int64_t z2 = h[(int64_t)y[2] * f->width + x[2]];
-    int64_t dx1 = (int64_t)x[1] - x[0], dy1 = (int64_t)y[1] - y[0], dz1 = z1 - z0;
-    int64_t dx2 = (int64_t)x[2] - x[0], dy2 = (int64_t)y[2] - y[0], dz2 = z2 - z0;
-    int64_t A = dy1 * dz2 - dz1 * dy2, B = dz1 * dx2 - dx1 * dz2, D = dx1 * dy2 - dx2 * dy1;
+    int32_t z0 = h[y[0] * f->width + x[0]], z1 = h[y[1] * f->width + x[1]], z2 = h[y[2] * f->width + x[2]];
+    int32_t dx1 = x[1] - x[0], dy1 = y[1] - y[0], dz1 = z1 - z0;
+    int32_t dx2 = x[2] - x[0], dy2 = y[2] - y[0], dz2 = z2 - z0;
+    int64_t A = (int64_t)dy1 * dz2 - (int64_t)dz1 * dy2, B = (int64_t)dz1 * dx2 - (int64_t)dx1 * dz2;
+    int64_t D = (int64_t)dx1 * dy2 - (int64_t)dx2 * dy1;
     uint64_t c[3], m, len;
     uint32_t mx, my;
     int32_t ex, ey;
@@ -153,7 +155,8 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     sh = wm_bit_length64(m) - 31; /* the least shift that brings m below 2^31 */
     if (sh > 0)
         for (int k = 0; k < 3; k++) c[k] >>= sh;
-    len = wm_isqrt64(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]); /* < 3 2^62 */
+    len = wm_isqrt64((uint64_t)(uint32_t)c[0] * (uint32_t)c[0] + (uint64_t)(uint32_t)c[1] * (uint32_t)c[1] +
+                     (uint64_t)(uint32_t)c[2] * (uint32_t)c[2]); /* each below 2^31: < 3 2^62 */
     if (len == 0) { /* a degenerate triangle (not in a valid mesh) */
         n[0] = n[1] = 0;
         n[2] = 1 << 28;
