@@ -439,14 +439,17 @@ class Runner:
             ready = _Ready()
             back = self._own_cpu() if local else None
             try:
-                for t in local.values():
-                    t.start()
                 hand_out((*range(len(self.pool)), *local))
                 if len(self.pool) < forked:  # the rest of a new pool, then their first chains
                     started = len(self.pool)
                     self._start_pool()
                     room[started:] = [_pipe_room(pipe) for _, pipe in self.pool[started:]]
                     hand_out(range(started, forked))
+                # the threads started once every fork is made: a fork while a thread of this process runs
+                # copies whatever lock that thread holds into the child (their first chains wait in their
+                # queues meanwhile; with 2 workers the one fork came before this graph's hand-out)
+                for t in local.values():
+                    t.start()
                 workers = [*range(len(self.pool)), *local]
                 while any(sent):
                     live = [w for w in workers if sent[w]]
@@ -908,6 +911,10 @@ class _Local:
     def stop(self, wait: bool) -> None:
         """No more chains: the thread ends after the one it runs, if any (``wait``: waited for, the graph
         done; else not: a run that failed returns at once), and closes its pipe."""
+        if not self.thread.is_alive() and self.thread.ident is None:  # never started (the forks failed)
+            os.close(self.wake)
+            os.close(self._wake_w)
+            return
         self.inbox.put(None)
         if wait:
             self.thread.join()
