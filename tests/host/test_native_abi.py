@@ -8,6 +8,7 @@ from __future__ import annotations
 import ctypes
 import re
 
+import pytest
 from wavemesh.device import protocol as P
 from wavemesh.refine import native
 
@@ -89,3 +90,36 @@ def test_fixed_params_kept_answer_follows_every_field():
     for name, value in other.items():
         p = RefineParams(**{name: value})
         assert bytes(native.fixed_params(p, *rest)) == bytes(native._fixed_params(p, *rest)), name
+
+
+def _levels(job):
+    return [(lv.level, lv.mesh.xy.tobytes(), lv.mesh.tris.tobytes(), lv.stats) for lv in job.output.levels]
+
+
+def test_levels_do_not_depend_on_the_export_array(monkeypatch):
+    """native.refine's levels come from wm_host_refine_levels into one array while it has room; a call that
+    runs out leaves its level pending for the next (mode 0, its statistics already written).  With no room
+    at all the first call exports nothing and every later one starts from a pending level: the same levels,
+    meshes and statistics as with the default room, and the same capacity error."""
+    from wavemesh import api
+    from wavemesh.errors import WavemeshError
+    from wavemesh.io import synth
+    from wavemesh.io.heightfield import from_array
+
+    hf = from_array(synth.f2(64))
+    params = native.RefineParams(zeta=0.002)
+    want = _levels(api.refine(hf, 5, None, params))
+    assert len(want) >= 4 and len({len(w[2]) for w in want}) == len(want)
+    monkeypatch.setattr(native, "_EXPORT_ROOM", 1)
+    monkeypatch.setattr(native, "_EXPORT_AHEAD", 0)
+    assert _levels(api.refine(hf, 5, None, params)) == want
+    errors = []
+    for room in (None, 1):
+        if room is None:
+            monkeypatch.undo()
+        with pytest.raises(WavemeshError) as e:
+            api.refine(hf, 5, None, native.RefineParams(zeta=0.002, capacity=len(want[-1][2]) // 12 - 1))
+        errors.append(str(e.value))
+        monkeypatch.setattr(native, "_EXPORT_ROOM", 1)
+        monkeypatch.setattr(native, "_EXPORT_AHEAD", 0)
+    assert errors[0] == errors[1]
