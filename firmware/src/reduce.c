@@ -295,8 +295,12 @@ static void known(wm_refiner *r, const int32_t *touched, int32_t k, const int32_
     for (int32_t i = 0; i < k; i++) {
         int32_t t = touched[i], j = nt, x[3], y[3];
         if (r->roi == NULL) {
+            /* from plan triangle i on (a removal makes touched[i] of tris' i-th triangle, so the first
+             * one tried is mostly it); a triangle's corners are in one plan triangle at most, so the
+             * one found is the one a search from 0 finds */
+            int32_t s;
             wm_tri_xy(me, t, x, y);
-            for (j = 0; j < nt; j++) {
+            for (s = 0, j = i < nt ? i : 0; s < nt; s++, j = j + 1 < nt ? j + 1 : 0) {
                 int c = 0, hit = 0;
                 for (c = 0; c < 3; c++) {
                     int32_t v = tris[3 * j + c];
@@ -309,6 +313,7 @@ static void known(wm_refiner *r, const int32_t *touched, int32_t k, const int32_
                 }
                 if (hit) break;
             }
+            if (s == nt) j = nt;
         }
         if (j == nt) {
             wm_touch(r, t);
