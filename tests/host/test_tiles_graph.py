@@ -639,3 +639,26 @@ def test_tiles_steps_tool_counts_every_task(tmp_path):
     assert graph and int(graph[1]) == len(nodes)
     assert sum(n for k, n in counts if k != "_strip_stats") == len(nodes), counts
     assert dict(counts)["free_tile"] == len(plan.tiles)
+
+
+def _switch(_):
+    import sys
+
+    return sys.getswitchinterval()
+
+
+@pytest.mark.parametrize("switch_us", [500, 0])
+def test_pool_with_a_thread_sets_the_switch_interval(switch_us, monkeypatch):
+    """While a pool with a thread worker runs a graph, the interpreter's switch interval is SWITCH_US (0:
+    the one it had), as the thread's tasks see it; the one it had again after."""
+    import sys
+
+    from wavemesh.tiles import runner
+
+    monkeypatch.setattr(runner, "THREADS", 2)  # both workers threads: every task runs in this process
+    monkeypatch.setattr(runner, "SWITCH_US", switch_us)
+    before = sys.getswitchinterval()
+    with tiles.Runner(2) as run:
+        got = run.graph([Node(_switch, (k,)) for k in range(4)])
+    assert got == [switch_us / 1e6 if switch_us else before] * 4
+    assert sys.getswitchinterval() == before
