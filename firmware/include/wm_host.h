@@ -98,8 +98,8 @@ int64_t wm_host_obj_vertices(const int64_t *xy, const double *z, int64_t n, char
  * again with mode 0, stats[returned] moved to stats[0]) or 2 when stats (max_levels) has none (mode 2). */
 struct wm_refiner;
 struct wm_level_stats;
-int32_t wm_host_refine_levels(struct wm_refiner *r, int32_t fresh, struct wm_level_stats *stats,
-                              int32_t max_levels, int32_t *buf, int64_t cap, int32_t *sizes, int32_t *code);
+int32_t wm_host_refine_levels(struct wm_refiner *r, int32_t mode, struct wm_level_stats *stats, int32_t max_levels,
+                              int32_t *buf, int64_t cap, int32_t *sizes, int32_t *code);
 
 #ifdef __cplusplus
 }
