@@ -123,3 +123,37 @@ def test_levels_do_not_depend_on_the_export_array(monkeypatch):
         monkeypatch.setattr(native, "_EXPORT_ROOM", 1)
         monkeypatch.setattr(native, "_EXPORT_AHEAD", 0)
     assert errors[0] == errors[1]
+
+
+def test_params_check_fast_path_answers_as_the_full_checks(monkeypatch):
+    """RefineParams.check takes the usual case in one expression and anything else through the full checks:
+    the fast path never passes what the full checks refuse.  Every field given alone, and in pairs, good,
+    bad, at its bounds and of odd types: the same answer (passed, or the same error) with the fast path
+    and without it (no type is _PLAIN)."""
+    import itertools
+
+    import numpy as np
+    from wavemesh.errors import WavemeshError
+
+    num = [0, 0.0, 0.5, 1, 1.0, 2, -1, -0.0, 1e-300, 65535, 65535.99, 65536, 1e300, float("inf"),
+           float("-inf"), float("nan"), True, False, np.float64(0.5), np.int32(2), np.float32(1.5)]
+    whole = [None, 0, 1, 2, 3, 4, -1, 2**31 - 1, 2**31, 2.0, 1.5, True, np.int64(5)]
+    values = {name: num for name in ("zeta", "delta_d", "delta_v", "delta_lambda", "delta_c", "delta_p",
+                                     "alpha")}
+    values |= {"iterations": [v for v in whole if v is not None], "max_triangles": whole, "capacity": whole,
+               "metric": ["normal", "vertical", "x", None], "neighbourhood": ["face", "vertex", "", 1]}
+
+    def answer(**kw):
+        try:
+            native.RefineParams(**kw).check()
+        except (WavemeshError, TypeError) as e:
+            return type(e).__name__, str(e)
+        return "ok"
+
+    cases = [{n: v} for n, vs in values.items() for v in vs]
+    cases += [{a: u, b: w} for (a, us), (b, ws) in itertools.combinations(values.items(), 2)
+              for u in us[::3] for w in ws[::3]]
+    fast = [answer(**kw) for kw in cases]
+    monkeypatch.setattr(native, "_PLAIN", ())
+    assert [answer(**kw) for kw in cases] == fast
+    assert fast.count("ok") > len(cases) // 10 and fast.count("ok") < len(cases)
