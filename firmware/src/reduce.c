@@ -191,11 +191,17 @@ static int64_t shift_round(int64_t a, int sh)
  * one made with R's exact eigenvalues only when one of them lies within a few 2^-19 of delta_lambda. */
 static int8_t class_of(const int64_t r[6], uint32_t delta_lambda)
 {
-    int64_t a = shift_round(r[0], 11), b = shift_round(r[1], 11), c = shift_round(r[2], 11); /* Q19 */
-    int64_t d = shift_round(r[3], 11), e = shift_round(r[4], 11), f = shift_round(r[5], 11);
-    int64_t t = (int64_t)delta_lambda << 3;                                                    /* Q19 */
-    int64_t T = a + d + f, S = a * d - b * b + a * f - c * c + d * f - e * e;                  /* Q19, Q38 */
-    int64_t det = a * (d * f - e * e) - b * (b * f - c * e) + c * (b * e - d * c);             /* Q57 */
+    /* R's entries in Q19 are within 2^19 + 1 in magnitude: 32-bit integers, so each product of two is
+     * one 32 x 32 bit multiply (on the soft CPU a mul and a mulh, not a 64-bit product's four) */
+    int32_t a = (int32_t)shift_round(r[0], 11), b = (int32_t)shift_round(r[1], 11); /* Q19 */
+    int32_t c = (int32_t)shift_round(r[2], 11), d = (int32_t)shift_round(r[3], 11);
+    int32_t e = (int32_t)shift_round(r[4], 11), f = (int32_t)shift_round(r[5], 11);
+    int64_t t = (int64_t)delta_lambda << 3; /* Q19 */
+    int64_t T = (int64_t)a + d + f;
+    int64_t S =
+        (int64_t)a * d - (int64_t)b * b + (int64_t)a * f - (int64_t)c * c + (int64_t)d * f - (int64_t)e * e;
+    int64_t det = a * ((int64_t)d * f - (int64_t)e * e) - b * ((int64_t)b * f - (int64_t)c * e) +
+                  c * ((int64_t)b * e - (int64_t)d * c); /* Q57 */
     int64_t k[4], prev = 1;
     int n = 4, above = 0, at = 0, below;
     if (delta_lambda >= 65536u) return CLS_REMOVE; /* every eigenvalue of R is at most 1 */
