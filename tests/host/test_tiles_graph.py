@@ -662,3 +662,28 @@ def test_pool_with_a_thread_sets_the_switch_interval(switch_us, monkeypatch):
         got = run.graph([Node(_switch, (k,)) for k in range(4)])
     assert got == [switch_us / 1e6 if switch_us else before] * 4
     assert sys.getswitchinterval() == before
+
+
+_RUNNER: list = []  # the Runner _pool_seen's tasks look at
+
+
+def _pool_seen(_):
+    import time
+
+    seen = len(_RUNNER[0].pool)  # as the task starts
+    time.sleep(0.005)
+    return os.getpid(), seen
+
+
+def test_thread_worker_starts_after_the_forks(monkeypatch):
+    """A new pool of 3 (2 forked, a thread): the thread runs no task before every worker is forked (a fork
+    while a thread of this process runs copies whatever lock it holds into the child)."""
+    from wavemesh.tiles import runner
+
+    monkeypatch.setattr(runner, "THREADS", 1)
+    with tiles.Runner(3) as run:
+        _RUNNER[:] = [run]
+        got = run.graph([Node(_pool_seen, (k,)) for k in range(9)])
+    _RUNNER.clear()
+    here = [n for pid, n in got if pid == os.getpid()]
+    assert here and set(here) == {2}, got
