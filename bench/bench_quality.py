@@ -8,7 +8,8 @@ synthetic sets, each whole.  Errors: fractions of each grid's height range, fine
 Per grid/error pair:
 
 - wavemesh in process: api.refine (defaults of `wavemesh mesh`, --metric vertical, --zeta E): its mesh,
-  the native refine time (RefineJob.seconds: the Haar details and the C refiner) and the whole call
+  the native refine time (RefineJob.seconds: native.refine, the C refiner and its ctypes calls; the filter
+  bank's details come with the initial triangulation, before it) and the whole call
   (filter bank, templates, refiner, the API's own checks);
 - pydelatin in process: Delatin(z, width, height, max_error=E) then .vertices and .triangles, timed;
   its output mapped with y_grid = (H - 1) - y (bench/peers.py);
@@ -340,13 +341,13 @@ def markdown(results: dict) -> str:
         P.code_line(results.get("code")),
         "",
         "*ratio* = wavemesh triangles / peer triangles (below 1: wavemesh is smaller).  *native refine / "
-        "pydelatin call*: RefineJob.seconds (Haar details + the C refiner) over Delatin(...) with .vertices "
-        "and .triangles, in one process; *`mesh` process / peer process*: `wavemesh mesh IN.npy -o x.obj "
-        "--metric vertical --zeta E` over a `python -c` that loads the same .npy, runs pydelatin and writes "
-        "an OBJ, run alternately (wall seconds; *CPU*: the same for each process's user + system seconds, "
-        "which a busy machine changes less).  Times are medians of up to 3 runs (a call slower than a few "
-        "seconds runs once) on a 2-core machine shared with other work: read the ratios, not the seconds (in "
-        "bench/results/quality.json).",
+        "pydelatin call*: RefineJob.seconds (the C refiner and its ctypes calls) over Delatin(...) with "
+        ".vertices and .triangles, in one process; *`mesh` process / peer process*: `wavemesh mesh IN.npy "
+        "-o x.obj --metric vertical --zeta E` over a `python -c` that loads the same .npy, runs pydelatin "
+        "and writes an OBJ, run alternately (wall seconds; *CPU*: the same for each process's user + "
+        "system seconds, which a busy machine changes less).  Times are medians of up to 3 runs (a call "
+        "slower than a few seconds runs once) on a 2-core machine shared with other work: read the ratios, "
+        "not the seconds (in bench/results/quality.json).",
         "",
         "**Summary** (the targets: median triangle ratio at most 1.0, no pair above 1.3, the held-out set "
         f"included; median native refine / pydelatin call at most {TARGET_NATIVE}, median process / process "
