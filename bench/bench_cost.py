@@ -111,7 +111,7 @@ def markdown(results: dict) -> str:
         "(vertical), in two series: *resolution* samples the same unit square finer (the surface is the "
         "same, so the triangles level off), *extent* keeps the sample spacing and grows the area (more of "
         "the same terrain: triangles grow with the samples).  wavemesh: api.refine in process, *native* = "
-        "RefineJob.seconds (Haar details + the C refiner), *call* = the whole api.refine (filter bank, "
+        "RefineJob.seconds (the C refiner and its ctypes calls), *call* = the whole api.refine (filter bank, "
         "templates, refiner, its checks); pydelatin: Delatin(...) with .vertices and .triangles.  Times "
         "are medians of up to 3 runs (slow calls run once) on a shared 2-core machine; every mesh checked "
         "by wavemesh.check (*checks*: wavemesh / pydelatin).  Slope: least-squares fit of log(time) on "
