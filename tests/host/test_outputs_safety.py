@@ -301,7 +301,8 @@ def test_sigterm_ends_a_tiled_runs_workers(tmp_path, how):
     # 2049^2 in tiles of 65: about 4 s of work on two idle cores (513^2 took 0.44 s, so an idle machine
     # could finish before the signal and exit 0)
     np.save(path, synth.make("ball", 2049) + synth.make("f2", 2049))
-    p = start("mesh", path, "-o", tmp_path / "t.obj", "--tile", "65", "--workers", "2", "--zeta", "0.02",
+    # 3 workers: two forked processes and a thread of the command (tiles.runner.THREADS)
+    p = start("mesh", path, "-o", tmp_path / "t.obj", "--tile", "65", "--workers", "3", "--zeta", "0.02",
               "-q")
     workers = set()
     try:
