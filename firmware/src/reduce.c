@@ -34,15 +34,79 @@
 /* ---------------------------------------------------------------------------------------------- */
 /* The hole of a removed vertex: ear clipping over a binary heap of ears, O(h log h) */
 
+#ifndef WM_ANGLE_ENGINE
+/* The ears' keys, measured lazily: the heap orders by the CORDIC's Q16 angle (wm_angle_q16, ties by
+ * position), but most of its comparisons are decided by a cheaper monotone proxy.  With t = cross / dot
+ * the tangent of the ear's smallest angle theta (in (0, 60] degrees, dot > 0), the proxy is
+ *
+ *     K = floor(2^16 t)              for t <= 1
+ *     K = 2^17 - floor(2^16 / t)     for t > 1        (one division; K in [0, 2^17], monotone in theta)
+ *
+ * 2^16 f(theta) less under 1, with f = tan below 45 degrees and 2 - cot above: f' = 1 + tan^2 or
+ * 1 + cot^2, within [1, 2].  So K_i - K_j >= KEY_MARGIN (80) gives theta_i - theta_j > 79 / 2^17 rad,
+ * 39.5 Q16 units, more than twice the CORDIC's error (within 10 of atan2, fixed.c; 16 taken): the
+ * CORDIC's angles are ordered as the proxies, strictly.  Closer proxies take both CORDIC angles (kept
+ * once measured): the heap's comparisons, so its order and the plan, are those of the Q16 keys. */
+#define KEY_MARGIN 80
+#define KEY_UNKNOWN INT32_MAX /* key[i] not measured yet (prox, dot, cross hold the ear) */
+#define KEY_OLD WM_MAX_RING   /* the slot of an ear's key before its update */
+#endif
+
+#ifndef WM_ANGLE_ENGINE
+#define EAR_KEYS (WM_MAX_RING + 1) /* and KEY_OLD */
+#else
+#define EAR_KEYS WM_MAX_RING
+#endif
+
 struct ears {
-    int32_t prev[WM_MAX_RING], next[WM_MAX_RING], key[WM_MAX_RING], heap[WM_MAX_RING], pos[WM_MAX_RING];
+    int32_t prev[WM_MAX_RING], next[WM_MAX_RING], key[EAR_KEYS], heap[WM_MAX_RING], pos[WM_MAX_RING];
+#ifndef WM_ANGLE_ENGINE
+    int32_t prox[EAR_KEYS], dot[EAR_KEYS], cross[EAR_KEYS];
+#endif
     int32_t n;
 };
 
+#ifndef WM_ANGLE_ENGINE
+static int32_t key_of(struct ears *s, int32_t i)
+{
+    if (s->key[i] == KEY_UNKNOWN) s->key[i] = wm_angle_q16(s->dot[i], s->cross[i]);
+    return s->key[i];
+}
+
+#if WM_CHECK
+static int32_t key_measured(const struct ears *s, int32_t i)
+{
+    return s->key[i] != KEY_UNKNOWN ? s->key[i] : wm_angle_q16(s->dot[i], s->cross[i]);
+}
+#endif
+
+/* The sign of key[i] - key[j] (KEY_OLD may be either) */
+static int key_cmp(struct ears *s, int32_t i, int32_t j)
+{
+    int32_t a, b;
+    if (s->key[i] == KEY_UNKNOWN || s->key[j] == KEY_UNKNOWN) {
+        int32_t d = s->prox[i] - s->prox[j];
+        /* checked builds: the proxy's order is the CORDIC's */
+        WM_ASSERT(d < KEY_MARGIN || key_measured(s, i) > key_measured(s, j));
+        WM_ASSERT(d > -KEY_MARGIN || key_measured(s, i) < key_measured(s, j));
+        if (d >= KEY_MARGIN) return 1;
+        if (d <= -KEY_MARGIN) return -1;
+    }
+    a = key_of(s, i), b = key_of(s, j);
+    return a > b ? 1 : a < b ? -1 : 0;
+}
+
+static int better(struct ears *s, int32_t i, int32_t j)
+{
+    int c = key_cmp(s, i, j);
+    return c > 0 || (c == 0 && i < j);
+}
+#else
 static int better(const struct ears *s, int32_t i, int32_t j)
 {
     return s->key[i] > s->key[j] || (s->key[i] == s->key[j] && i < j);
 }
+#endif
 
 static void ear_put(struct ears *s, int32_t at, int32_t i)
 {
@@ -86,6 +150,27 @@ static int32_t ear_key(const wm_mesh *m, const int32_t *ring, const struct ears 
     return angle ? wm_min_angle(x, y) : 0;
 }
 
+#ifndef WM_ANGLE_ENGINE
+/* ear_key's key into s (slot i): -1, or KEY_UNKNOWN with the proxy and the corner's products */
+static void ear_set(const wm_mesh *m, const int32_t *ring, struct ears *s, int32_t i, int32_t kx, int32_t ky)
+{
+    int64_t dot, cross;
+    int32_t a = ring[s->prev[i]], b = ring[i], c = ring[s->next[i]];
+    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
+    if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0 || wm_orient(x[0], y[0], x[2], y[2], kx, ky) < 0) {
+        s->key[i] = -1;
+        s->prox[i] = -(1 << 20); /* below every proxy by more than KEY_MARGIN */
+        return;
+    }
+    wm_min_corner(x, y, &dot, &cross); /* 0 < dot, cross < 2^31; the smallest angle is at most 60 degrees */
+    WM_ASSERT(dot > 0 && cross > 0);
+    s->key[i] = KEY_UNKNOWN;
+    s->dot[i] = (int32_t)dot, s->cross[i] = (int32_t)cross;
+    s->prox[i] = cross <= dot ? (int32_t)(((uint64_t)cross << 16) / (uint64_t)dot)
+                              : (1 << 17) - (int32_t)(((uint64_t)dot << 16) / (uint64_t)cross);
+}
+#endif
+
 /* The ear the heap would hold first once three ring positions are left (i, next, next of next): the
  * three ears are one triangle, so those that may be cut share one key (its smallest angle: the same
  * integers at any corner, wm_min_corner) and the others have -1; the heap's order (key, then the lower
@@ -114,7 +199,11 @@ int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, i
     }
     if (n > 3) {
         for (int32_t i = 0; i < n; i++) {
+#ifndef WM_ANGLE_ENGINE
+            ear_set(m, ring, &s, i, kx, ky);
+#else
             s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
+#endif
             s.heap[i] = i;
             s.pos[i] = i;
         }
@@ -137,10 +226,19 @@ int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, i
         ear_put(&s, 0, s.heap[s.n]);
         ear_down(&s, 0);
         for (int q = 0; q < 2; q++) {
+#ifndef WM_ANGLE_ENGINE
+            int32_t i = q == 0 ? a : c;
+            s.key[KEY_OLD] = s.key[i], s.prox[KEY_OLD] = s.prox[i];
+            s.dot[KEY_OLD] = s.dot[i], s.cross[KEY_OLD] = s.cross[i];
+            ear_set(m, ring, &s, i, kx, ky);
+            if (key_cmp(&s, i, KEY_OLD) > 0) ear_up(&s, s.pos[i]);
+            else ear_down(&s, s.pos[i]);
+#else
             int32_t i = q == 0 ? a : c, old = s.key[i];
             s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
             if (s.key[i] > old) ear_up(&s, s.pos[i]);
             else ear_down(&s, s.pos[i]);
+#endif
         }
     }
     {
