@@ -4,7 +4,7 @@ The height field is the seeded synthetic terrain of bench/datasets.py (terrain()
 plane waves, 0..1000 "m" on the unit square), sampled n x n over the same unit square (the "resolution"
 series of bench_cost: the same surface ever finer), written strip by strip into a float32 .npy that the
 run reads through a memmap, never whole.  Every run is `wavemesh.tiles` (plan_tiles, run_tiles on the
-local process pool, stitch: the stitched mesh checked proper) with --metric vertical --zeta 10 (1 % of the
+local pool, stitch: the stitched mesh checked proper) with --metric vertical --zeta 10 (1 % of the
 height range), in a process of its own; its peak RSS is that process tree's resident memory (itself and
 its pool workers, summed) sampled every 50 ms by psutil, the most it reached.
 

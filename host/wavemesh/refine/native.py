@@ -427,7 +427,7 @@ class Level:
     """One resolution level's mesh and the library's statistics for it.  The Mesh is made from the
     exported slot arrays when first read: a refine call exports every level (the library's mesh moves
     on), and most callers read only the final one (0.1 ms a call on a 128 x 128 grid); the statistics
-    likewise become a dict when first read (a copy of the library's struct until then)."""
+    likewise become a dict when first read (until then a view of the statistics array the library filled)."""
 
     def __init__(self, level: int, mesh: Mesh | tuple, stats: dict | LevelStats):
         self.level, self._stats, self._mesh = level, stats, mesh
@@ -444,7 +444,7 @@ class Level:
 
     @property
     def mesh(self) -> Mesh:
-        if isinstance(self._mesh, tuple):  # (width, height, slots, vertex slots) as _export copied them
+        if isinstance(self._mesh, tuple):  # (width, height, slots, vertex slots) as refine's export gave them
             width, height, buf, vert_end = self._mesh  # buf: this level's slots, vertices then triangles
             self._mesh = Mesh.from_slots(width, height, buf[: 2 * vert_end], buf[2 * vert_end :])
         return self._mesh

@@ -131,7 +131,7 @@ def plan_tiles(src: Source, params, tile: int | None = None, *, runner: Runner |
 
 
 # ---------------------------------------------------------------------------------------------------
-# Where the tasks run: in this process, on a local process pool, or on a Dask cluster
+# Where the tasks run: in this process, on a local pool (forked workers and a thread), or on a Dask cluster
 
 
 def available_memory() -> int:
