@@ -290,21 +290,6 @@ static AVX2 __attribute__((noinline)) int scan(const wm_field *f, const int32_t 
  * the row's end cleared), with no horizontal step a row: at the end the largest of all and the least
  * place holding it, the first sample in row order.  A block with a V above the limit gives its first
  * such lane, where the C scan stops. */
-/* wm_end_start at a corner's row, where the numerator is u = a x + r0 with 0 <= r0 < a (a - 1 + a x_c for a
- * left end, a x_c for a right one): its quotient x and remainder r0 without a division, the step's
- * alone divided. */
-static WM_ALWAYS_INLINE void end_at(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t x, int32_t r0,
-                                    int32_t du, int32_t a)
-{
-    e->q = x;
-    e->r = r0;
-    e->dq = wm_floor_div32(du, a);
-    e->dr = du - e->dq * a;
-    e->a = a;
-    e->p = row + x;
-    e->st = width + e->dq;
-}
-
 /* The end on the next row; the carry (1: the quotient one more than its step), without a branch. */
 static WM_ALWAYS_INLINE uint32_t end_step(struct wm_end32 *e)
 {
@@ -455,8 +440,9 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
         int32_t ks = y[t] == y[m] ? t : b, c = y[t] == y[m] ? m : t;
         int32_t kl = lm ? m : ks, kh = lm ? ks : m, cl = lm ? t : c, ch = lm ? c : t;
         const uint16_t *row = h + py * f->width;
-        end_at(&lo, row, f->width, x[cl], A[kl] - 1, -B[kl], A[kl]);
-        end_at(&hi, row, f->width, x[ch], 0, B[kh], -A[kh]);
+        /* at a corner's row u = a x_c + r0, 0 <= r0 < a: quotient x_c, remainder r0, no division */
+        wm_end_at(&lo, row, f->width, x[cl], A[kl] - 1, -B[kl], A[kl]);
+        wm_end_at(&hi, row, f->width, x[ch], 0, B[kh], -A[kh]);
         Sl = d * z[t] - dS * (uint32_t)x[t] + (uint32_t)lo.q * dS;
         dSl = dSy + (uint32_t)lo.dq * dS;
     }
@@ -469,10 +455,10 @@ static inline AVX2 __attribute__((always_inline)) int lanes_body(const wm_field 
                 const uint16_t *row = h + py * f->width;
                 if (lm) {
                     Sl += dSl + (dS & (0u - end_step(&lo)));
-                    end_at(&hi, row, f->width, x[m], 0, B[t], -A[t]);
+                    wm_end_at(&hi, row, f->width, x[m], 0, B[t], -A[t]);
                 } else {
                     end_step(&hi);
-                    end_at(&lo, row, f->width, x[m], A[t] - 1, -B[t], A[t]);
+                    wm_end_at(&lo, row, f->width, x[m], A[t] - 1, -B[t], A[t]);
                     Sl = d * z[m] - dS * (uint32_t)x[m] + (uint32_t)lo.q * dS;
                     dSl = dSy + (uint32_t)lo.dq * dS;
                 }

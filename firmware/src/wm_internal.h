@@ -143,17 +143,25 @@ struct wm_end32 {
     const uint16_t *p;
     int32_t r, dr, a, st, q, dq;
 };
-/* The end at a row (its first sample row): u and du, the numerator and its step a row. */
-static WM_ALWAYS_INLINE void wm_end_start(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t u,
-                                          int32_t du, int32_t a)
+/* The end at a row whose quotient q and remainder r (of its numerator by a) are known; du the numerator's
+ * step a row. */
+static WM_ALWAYS_INLINE void wm_end_at(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t q, int32_t r,
+                                       int32_t du, int32_t a)
 {
-    e->q = wm_floor_div32(u, a);
-    e->r = u - e->q * a;
+    e->q = q;
+    e->r = r;
     e->dq = wm_floor_div32(du, a);
     e->dr = du - e->dq * a;
     e->a = a;
     e->p = row + e->q;
     e->st = width + e->dq;
+}
+/* The end at a row (its first sample row): u and du, the numerator and its step a row. */
+static WM_ALWAYS_INLINE void wm_end_start(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t u,
+                                          int32_t du, int32_t a)
+{
+    int32_t q = wm_floor_div32(u, a);
+    wm_end_at(e, row, width, q, u - q * a, du, a);
 }
 /* A 32-bit scan's worst sample as its grid place, from its address at (NULL while no V beat 0: the first
  * corner), into whichever of wx, wy is not NULL: at the scan's end, once (tri_error.c's scan32, host_scan.c's
