@@ -1,0 +1,61 @@
+"""bench/bench_soc.py's full cases (`make bench-soc-full`) without the simulator: the case names, the
+results file the runs merge into, the table written from it."""
+
+from __future__ import annotations
+
+import json
+
+import bench_soc as B  # bench/ is on pytest's path (pytest.ini)
+
+
+def _case(name: str, work: int, samples: int = 65_536, tris: int = 424, **extra) -> dict:
+    budget = B.PER_SAMPLE * samples + B.PER_TRIANGLE * tris
+    cycles = {"receive": 5, "filter": 1_000_000, "template": 2_000_000, "refine": work - 3_500_000,
+              "emit": 500_000, "link": 7}
+    return {"name": name, "options": ["--zeta", "10"] if "Jacksboro" in name else [], "width": 256,
+            "height": samples // 256, "samples": samples, "initial_triangles": 124, "output_triangles": tris,
+            "cycles": cycles, "work_cycles": work, "budget_cycles": budget, "work_vs_budget": work / budget,
+            "work_cycles_per_sample": work / samples, "work_cycles_per_triangle": work / tris,
+            "board_seconds": 1.25, "same_as_mesh": True, "held_out": name in B.FULL_HELD_OUT,
+            "simulator": {"cycles": 1, "wall_seconds": 150.0, "rate_khz": 554, "cpu_seconds": 1.0},
+            "code": {"commit": "abc1234", "measured": "abc1234", "uncommitted": []}, "cpu": "vexriscv",
+            "date": "2026-11-29", **extra}
+
+
+def test_full_cases_by_name_or_first_word():
+    assert B.full_case("ball") == "Ball 256 x 256"
+    assert B.full_case("Jacksboro") == "Jacksboro, whole"
+    assert B.full_case("lidar_dem") == "lidar_dem, whole (held out)"
+    assert B.full_case("Box 256 x 256") == "Box 256 x 256"
+    assert B.full_case("ball 256") is None and B.full_case("nosuch") is None
+    # every held-out case is a case, and the budget's five inputs are there, each of >= 5,000 samples' kind
+    assert set(B.FULL_HELD_OUT) < set(B.FULL) and len(B.FULL) == 5
+
+
+def test_merge_keeps_every_case_once_in_full_order(tmp_path):
+    path, lock = tmp_path / "soc-full.json", tmp_path / "lock"
+    B._merge(path, _case("lidar_dem, whole (held out)", 40_000_000, samples=160_000), lock)
+    B._merge(path, _case("Ball 256 x 256", 50_000_000), lock)
+    B._merge(path, _case("Ball 256 x 256", 45_667_489), lock)  # a second run replaces the first
+    data = json.loads(path.read_text())
+    assert [c["name"] for c in data["cases"]] == ["Ball 256 x 256", "lidar_dem, whole (held out)"]
+    assert data["cases"][0]["work_cycles"] == 45_667_489
+    assert data["budget"] == {"per_sample": 200, "per_output_triangle": 3_000}
+
+
+def test_full_markdown_tables_held_out_apart_failures_and_missing():
+    data = {"cases": [_case("Ball 256 x 256", 45_667_489),
+                      _case("lidar_dem, whole (held out)", 40_000_000, samples=160_000, tris=550),
+                      {"name": "Box 256 x 256", "options": [], "error": "error: timed out\nerror: the job"}]}
+    text = "\n".join(B.full_markdown(data))
+    tuned, held = text.split("Held out:")
+    # Ball: work 45.7 M against 200 x 65,536 + 3,000 x 424 = 14.4 M
+    assert "| Ball 256 x 256 | 256 x 256 | 65,536 | defaults | 124 -> 424 |" in tuned
+    assert "| 45.7 M | 14.4 M | 3.2 x | 697 | 107,706 | 1.2 | 2.5 min (554 kHz) | yes |" in tuned
+    assert "lidar_dem" not in tuned.split("|", 1)[1] and "| lidar_dem, whole (held out) | 256 x 625 |" in held
+    assert "Box 256 x 256: the run failed: `error: the job`" in held
+    assert "Not run yet: Jacksboro, whole; motorcycle, whole (held out)." in held
+    assert "code measured: commit abc1234" in tuned
+    # nothing run yet: the description and the list of what is missing, no table
+    empty = "\n".join(B.full_markdown(None))
+    assert "| input |" not in empty and "Not run yet: Ball 256 x 256; Box 256 x 256;" in empty
