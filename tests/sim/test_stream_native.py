@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from wavemesh.device import protocol as P
 from wavemesh.device import stream as S
+from wavemesh.device.coding import decode_level_body, encode_level_body, varints
 from wavemesh.device.link import Link, SlipDecoder, encode_frame, parse_frame
 from wavemesh.harness import jacksboro, run_cli
 from wavemesh.harness.nativedev import NativeDevice, build_wmdev
@@ -124,6 +125,40 @@ def test_budget_stops_both_the_same_way(device, inputs, tmp_path):
     assert rc1 == rc2 == 3
     assert "error bound is not met" in err1 and "error bound is not met" in err2
     assert filecmp.cmp(tmp_path / "m.obj", tmp_path / "s.obj", shallow=False)
+
+
+def test_delta_coding_of_big_numbers_in_small_frames(wmdev_exe, tmp_path, monkeypatch):
+    """LEVEL_DELTA's coder (proto_emit.c's code_item) against the host's (wavemesh.device.coding): a
+    random 128 x 128 field meshed at zeta 1 has some 10,000 vertex slots, so index deltas need 3-byte
+    numbers, and the smallest MESH frames (72 bytes of stream) cut items, 3-byte numbers among them.
+    Each level's body is what encode_level_body writes for its numbers, the length the device counted
+    (LEVEL_END's total) is the body's, and the meshes equal `wavemesh mesh`'s."""
+    z = np.random.default_rng(7).integers(0, 1000, (128, 128)).astype(np.uint16)
+    np.save(tmp_path / "noise.npy", z)
+    levels = []
+    parse = S.parse_level
+    monkeypatch.setattr(S, "parse_level", lambda buf, w, h: levels.append(buf) or parse(buf, w, h))
+    dev = NativeDevice(wmdev_exe, "--max-payload", str(P.MIN_PAYLOAD))
+    try:
+        opts = [str(tmp_path / "noise.npy"), "--zeta", "1", "--levels", "2", "-q"]
+        rc, _, err = run_cli("stream", *opts, "--port", dev.url, "-o", str(tmp_path / "s.obj"))
+        assert rc == 0, err
+    finally:
+        dev.stop()
+    rc, _, err = run_cli("mesh", *opts, "-o", str(tmp_path / "m.obj"))
+    assert rc == 0, err
+    assert filecmp.cmp(tmp_path / "m.obj", tmp_path / "s.obj", shallow=False)
+    assert len(levels) == 2
+    widths = []
+    for buf in levels:
+        h = P.LEVEL_HEADER.unpack(buf)
+        raw = P.level_stream_size(h["vertex_slots"], h["triangles"], h["index_bytes"])
+        assert h["coding"] == P.LEVEL_DELTA and len(buf) < raw
+        body = buf[P.LEVEL_HEADER.size:]
+        xy, tris = decode_level_body(body, h["vertex_slots"], h["triangles"])
+        assert encode_level_body(xy, tris) == body
+        widths += [1 + (v >= 0x80) + (v >= 0x4000) + (v >= 0x200000) for v in varints(body).tolist()]
+    assert max(widths) == 3 and widths.count(3) > 100  # 652
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -121,9 +121,13 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
 
 /* --- LEVEL_DELTA (docs/protocol.md, "Level coding"): the body as variable-length numbers --- */
 
-static uint32_t put_varint(uint8_t *d, uint32_t v)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+
+/* v as a variable-length number at d + n (7 bits a byte, low first, the top bit set on all but the
+ * last), or with d NULL only counted; n plus its bytes. */
+static ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
 {
-    uint32_t n = 0;
+    if (!d) return n + 1u + (v >= 0x80u) + (v >= 0x4000u) + (v >= 0x200000u) + (v >= 0x10000000u);
     while (v >= 0x80u) {
         d[n++] = (uint8_t)(v | 0x80u);
         v >>= 7;
@@ -134,6 +138,35 @@ static uint32_t put_varint(uint8_t *d, uint32_t v)
 
 static uint32_t zigzag32(int32_t v) { return ((uint32_t)v << 1) ^ (uint32_t)(0 - (int32_t)((uint32_t)v >> 31)); }
 
+/* The coder's place in the body (wm_proto's cv .. cpi while a level is sent; a local copy while it
+ * runs, so that its state stays in registers). */
+typedef struct coder {
+    const wm_mesh *m;
+    int32_t v, k, slot; /* next vertex slot; next live triangle, the slot to look for it from */
+    int32_t px, py, pi; /* the previous live vertex's x, y; the previous triangle's first index */
+} coder;
+
+static void coder_load(const wm_proto *p, coder *c)
+{
+    c->m = p->lm;
+    c->v = p->cv;
+    c->k = p->ck;
+    c->slot = p->cslot;
+    c->px = p->cpx;
+    c->py = p->cpy;
+    c->pi = p->cpi;
+}
+
+static void coder_save(wm_proto *p, const coder *c)
+{
+    p->cv = c->v;
+    p->ck = c->k;
+    p->cslot = c->slot;
+    p->cpx = c->px;
+    p->cpy = c->py;
+    p->cpi = c->pi;
+}
+
 static void coded_reset(wm_proto *p)
 {
     p->cpos = 0;
@@ -142,81 +175,52 @@ static void coded_reset(wm_proto *p)
     p->cbn = p->cbi = 0;
 }
 
-/* The next item of the body (a vertex slot, then the live triangles) into d (room for 16 bytes): its
- * bytes, 0 when none is left. */
-static uint32_t code_item(wm_proto *p, uint8_t *d)
+/* The body's next item (docs/protocol.md, "Level coding"; the engine's one coder of it, for the count
+ * and the bytes): a vertex slot, then the live triangles.  Its bytes into d (room for 16), or with d
+ * NULL only counted (coded_total); 0 when no item is left. */
+static ALWAYS_INLINE uint32_t code_item(coder *c, uint8_t *d)
 {
-    const wm_mesh *m = p->lm;
-    uint32_t n = 0;
-    if (p->cv < m->vert_end) {
-        int32_t v = p->cv++;
-        if (m->vx[v] == WM_FREE) {
-            d[n++] = 0; /* a free slot */
-        } else {
-            int32_t x = m->vx[v], y = m->vy[v];
-            n += put_varint(d + n, zigzag32(x - p->cpx) + 1u);
-            n += put_varint(d + n, zigzag32(y - p->cpy));
-            p->cpx = x;
-            p->cpy = y;
-        }
-    } else if (p->ck < m->n_tri) {
-        const wm_index *h;
-        int32_t a;
-        while (m->hv[3 * p->cslot] < 0) p->cslot++;
-        h = m->hv + 3 * p->cslot;
-        a = h[0];
-        n += put_varint(d + n, zigzag32(a - p->cpi));
-        n += put_varint(d + n, zigzag32(h[1] - a));
-        n += put_varint(d + n, zigzag32(h[2] - a));
-        p->cpi = a;
-        p->cslot++;
-        p->ck++;
-    }
-    return n;
-}
-
-/* The next item into cb; 0 when none is left. */
-static int coded_item(wm_proto *p)
-{
-    uint32_t n = code_item(p, p->cb);
-    p->cbn = (uint8_t)n;
-    p->cbi = 0;
-    return n != 0;
-}
-
-/* The bytes of v as a variable-length number (put_varint's count). */
-static uint32_t varint_len(uint32_t v)
-{
-    return 1u + (v >= 0x80u) + (v >= 0x4000u) + (v >= 0x200000u) + (v >= 0x10000000u);
-}
-
-/* The coded stream's length: the header and every item, counted as coded_item would write them (the
- * same deltas and varint lengths) without writing them or the coder's state. */
-static uint32_t coded_total(wm_proto *p)
-{
-    const wm_mesh *m = p->lm;
-    const wm_index *hv = m->hv;
-    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
-    int32_t px = 0, py = 0, pi = 0, te = m->tri_end;
-    for (int32_t v = 0; v < m->vert_end; v++) {
-        int32_t x = m->vx[v], y;
+    const wm_mesh *m = c->m;
+    uint32_t n;
+    if (c->v < m->vert_end) {
+        int32_t v = c->v++, x = m->vx[v], y;
         if (x == WM_FREE) {
-            total++;
-            continue;
+            if (d) d[0] = 0;
+            return 1;
         }
         y = m->vy[v];
-        total += varint_len(zigzag32(x - px) + 1u) + varint_len(zigzag32(y - py));
-        px = x;
-        py = y;
+        n = put_varint(d, 0, zigzag32(x - c->px) + 1u);
+        n = put_varint(d, n, zigzag32(y - c->py));
+        c->px = x;
+        c->py = y;
+        return n;
     }
-    for (int32_t t = 0; t < te; t++) {
-        const wm_index *h = hv + 3 * t;
-        int32_t a = h[0];
-        if (a < 0) continue;
-        total += varint_len(zigzag32(a - pi)) + varint_len(zigzag32(h[1] - a)) + varint_len(zigzag32(h[2] - a));
-        pi = a;
+    if (c->k < m->n_tri) {
+        const wm_index *h;
+        int32_t t = c->slot, a;
+        while (m->hv[3 * t] < 0) t++; /* a free triangle slot */
+        h = m->hv + 3 * t;
+        a = h[0];
+        n = put_varint(d, 0, zigzag32(a - c->pi));
+        n = put_varint(d, n, zigzag32(h[1] - a));
+        n = put_varint(d, n, zigzag32(h[2] - a));
+        c->pi = a;
+        c->slot = t + 1;
+        c->k++;
+        return n;
     }
+    return 0;
+}
+
+/* The coded stream's length: the header and every item, the coder run without writing (its state
+ * a local one, p's left at the start). */
+static uint32_t coded_total(wm_proto *p)
+{
+    coder c;
+    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES, n;
     coded_reset(p);
+    coder_load(p, &c);
+    while ((n = code_item(&c, NULL)) != 0) total += n;
     return total;
 }
 
@@ -224,42 +228,52 @@ static uint32_t coded_total(wm_proto *p)
  * but the new bytes; from before it: the coder runs again from the start). */
 static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
 {
+    coder c;
+    uint32_t pos;
     if (off < p->cpos) coded_reset(p);
-    while (n && p->cpos < WM_PROTO_LEVEL_HEADER_BYTES) { /* the header */
-        uint8_t c = p->lhdr[p->cpos];
-        if (p->cpos++ >= off) {
-            *dst++ = c;
+    pos = p->cpos;
+    for (; n && pos < WM_PROTO_LEVEL_HEADER_BYTES; pos++) { /* the header */
+        if (pos >= off) {
+            *dst++ = p->lhdr[pos];
             n--;
         }
     }
+    coder_load(p, &c);
     while (n) { /* the body: whole items at a time (of the current one, the bytes not given yet) */
         uint32_t a, skip;
-        if (p->cbi == p->cbn && p->cpos >= off && n >= sizeof p->cb) { /* the next item straight into dst */
-            a = code_item(p, dst);
-            if (a == 0) return;
-            p->cpos += a;
-            dst += a;
-            n -= a;
-            continue;
+        if (p->cbi == p->cbn) { /* no item under way */
+            if (pos >= off && n >= sizeof p->cb) { /* the next item straight into dst */
+                a = code_item(&c, dst);
+                if (a == 0) break;
+                pos += a;
+                dst += a;
+                n -= a;
+                continue;
+            }
+            a = code_item(&c, p->cb); /* into cb, to be given in parts */
+            if (a == 0) break;        /* past the end: cannot happen (end <= ltotal) */
+            p->cbn = (uint8_t)a;
+            p->cbi = 0;
         }
-        if (p->cbi == p->cbn && !coded_item(p)) return; /* past the end: cannot happen (end <= ltotal) */
         a = (uint32_t)(p->cbn - p->cbi);
-        skip = p->cpos < off ? off - p->cpos : 0; /* bytes before off (a resend from within the stream) */
+        skip = pos < off ? off - pos : 0; /* bytes before off (a resend from within the stream) */
         if (skip >= a) {
-            p->cpos += a;
+            pos += a;
             p->cbi = p->cbn;
             continue;
         }
         p->cbi += (uint8_t)skip;
-        p->cpos += skip;
+        pos += skip;
         a -= skip;
         if (a > n) a = n;
         for (uint32_t i = 0; i < a; i++) dst[i] = p->cb[p->cbi + i];
         p->cbi += (uint8_t)a;
-        p->cpos += a;
+        pos += a;
         dst += a;
         n -= a;
     }
+    coder_save(p, &c);
+    p->cpos = pos;
 }
 
 /* MESH frames of p->chunk bytes for bytes [from, end) (end <= ltotal).  The first sending (first: from
