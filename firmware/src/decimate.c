@@ -61,6 +61,12 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
  * zeta: that fan cannot go, valid or not; else 1 (also when no triangle holds v, which only an invalid
  * fan allows: wm_ring_plan then refuses it).  D < 2^31 (the grid's sides are below 2^15): its
  * products are 32 by 32 bits. */
+/* The normal metric's slope scales (wm_slope_scale), once for the decimation. */
+struct slopes {
+    uint32_t sx, sy;
+    int32_t ex, ey;
+};
+
 struct fans {
     int32_t n, k;                             /* ring size; the pointer, unwrapped */
     int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
@@ -68,6 +74,7 @@ struct fans {
     int32_t vx, vy;                           /* v */
     int64_t D;                                /* the fan triangle's, for normal_above */
     uint64_t av;                              /* v's |V| against it */
+    const struct slopes *sl;                  /* the slope scales, for far_above */
 };
 
 /* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
@@ -81,18 +88,34 @@ struct fans {
 static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_t j, int32_t k, int64_t D,
                      uint64_t av)
 {
-    uint32_t sx, sy;
-    int32_t ex, ey;
     int64_t dz1 = (int64_t)q->z[j] - q->z[a], dz2 = (int64_t)q->z[k] - q->z[a];
-    int64_t Na = dz1 * ((int64_t)q->dy[k] - q->dy[a]) - dz2 * ((int64_t)q->dy[j] - q->dy[a]);
-    int64_t Nb = ((int64_t)q->dx[j] - q->dx[a]) * dz2 - ((int64_t)q->dx[k] - q->dx[a]) * dz1;
-    uint64_t T;
-    wm_slope_scale(p, 0, &sx, &ex);
-    wm_slope_scale(p, 1, &sy, &ey);
-    if (ex < 0 || ey < 0) return 0; /* not in wm_frac_mul's range */
-    T = wm_hypot_up(wm_hypot_up(wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex),
-                                wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey)),
-                    (uint64_t)D);
+    int32_t jx = q->dx[j] - q->dx[a], kx = q->dx[k] - q->dx[a], jy = q->dy[j] - q->dy[a], ky = q->dy[k] - q->dy[a];
+    int64_t Na, Nb;
+    uint64_t A, B, T;
+    const struct slopes *sl = q->sl;
+    if (sl->ex < 0 || sl->ey < 0) return 0; /* not in wm_frac_mul's range */
+    if (dz1 == (int32_t)dz1 && dz2 == (int32_t)dz2) { /* the same products, each 32 by 32 bits */
+        int32_t z1 = (int32_t)dz1, z2 = (int32_t)dz2;
+        Na = (int64_t)z1 * ky - (int64_t)z2 * jy;
+        Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
+    } else {
+        Na = dz1 * ky - dz2 * jy;
+        Nb = jx * dz2 - kx * dz1;
+    }
+    A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sl->sx, sl->ex);
+    B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sl->sy, sl->ey);
+    if ((A | B) < ((uint64_t)1 << 31)) {
+        /* wm_hypot_up twice in 32-bit operands (the same integers): A, B and D below 2^31, so the first
+         * is below 2^32, and T is at least the larger operand of the second */
+        uint32_t hi = (uint32_t)(A > B ? A : B), lo = (uint32_t)(A > B ? B : A), h, d = (uint32_t)D;
+        h = hi + (uint32_t)(((uint64_t)lo * 107u + 255u) >> 8);
+        hi = h > d ? h : d, lo = h > d ? d : h;
+        if (hi >= (1u << 31)) return 0;
+        T = hi + (((uint64_t)lo * 107u + 255u) >> 8);
+        WM_ASSERT(T == wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D));
+    } else {
+        T = wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D);
+    }
     return T < ((uint64_t)1 << 31) && (uint64_t)p->zeta * T < (av << 16);
 }
 
@@ -116,8 +139,8 @@ WM_NOINLINE_32 static int normal_above(const struct fans *q, struct tested *t, i
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
     int above;
-    fan_corners(q, a, j, k, x, y);
     if (far_above(q, &r->params, a, j, k, q->D, q->av)) return 1;
+    fan_corners(q, a, j, k, x, y);
     above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
         for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
@@ -221,6 +244,7 @@ static int is_fan(const int32_t *tris, int32_t nt)
  * (most often: the one just evaluated, back at the top of the heap) its removal takes them instead of
  * working them out again (f5 at 1 %: 191 of its 223 removals, Ball at 2 % 376 of 498). */
 struct last_plan {
+    struct slopes sl;  /* (not the plan: the decimation's slope scales, for first_fit's fans) */
     int32_t v, nr, nt; /* v: -1 when none */
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
 };
@@ -243,6 +267,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     q.k = 0;
     q.zv = r->field.samples[(int64_t)vy * r->field.width + vx];
     q.vx = vx, q.vy = vy;
+    q.sl = &lp->sl;
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
@@ -432,6 +457,8 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     struct last_plan lp;
     (void)st;
     lp.v = -1;
+    wm_slope_scale(&r->params, 0, &lp.sl.sx, &lp.sl.ex);
+    wm_slope_scale(&r->params, 1, &lp.sl.sy, &lp.sl.ey);
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
         if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);

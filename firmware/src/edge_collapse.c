@@ -56,17 +56,12 @@ static int32_t star(const wm_mesh *m, int32_t v, int32_t nb[WM_MAX_RING], int32_
     return n;
 }
 
-int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t tris[6 * WM_MAX_RING],
-                          int32_t *n_tris)
+/* (x, y) for the edge v1 -> v2: WM_ERR_ARG unless an end or strictly inside the edge, WM_ERR_REFUSED
+ * when the border would not stay; else WM_OK. */
+static int point_check(const wm_mesh *m, const int32_t v[2], int32_t x, int32_t y)
 {
-    int32_t v[2], nb[2][WM_MAX_RING], out[2][WM_MAX_RING], k[2], n[2], common = 0, nt = 0;
-    int64_t dx, dy, px, py;
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
-    v[0] = m->hv[e];
-    v[1] = wm_dest(m, e);
-    /* (x, y): an end, or strictly inside the edge */
-    dx = (int64_t)m->vx[v[1]] - m->vx[v[0]], dy = (int64_t)m->vy[v[1]] - m->vy[v[0]];
-    px = (int64_t)x - m->vx[v[0]], py = (int64_t)y - m->vy[v[0]];
+    int64_t dx = (int64_t)m->vx[v[1]] - m->vx[v[0]], dy = (int64_t)m->vy[v[1]] - m->vy[v[0]];
+    int64_t px = (int64_t)x - m->vx[v[0]], py = (int64_t)y - m->vy[v[0]];
     if (px * dy - py * dx != 0 || px * dx + py * dy < 0 || px * dx + py * dy > dx * dx + dy * dy)
         return WM_ERR_ARG;
     /* the border stays */
@@ -75,21 +70,38 @@ int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int
         if (wm_on_border(m, m->vx[v[i]], m->vy[v[i]]) && (corner(m, v[i]) || !same_side(m, v[i], x, y)))
             return WM_ERR_REFUSED;
     }
+    return WM_OK;
+}
+
+int wm_collapse_stars(const wm_mesh *m, int32_t e, struct wm_collapse_stars *s)
+{
+    int32_t common = 0;
+    s->v[0] = m->hv[e];
+    s->v[1] = wm_dest(m, e);
     for (int i = 0; i < 2; i++) {
-        n[i] = star(m, v[i], nb[i], out[i], &k[i]);
-        if (n[i] < 0) return (int)n[i];
+        s->n[i] = star(m, s->v[i], s->nb[i], s->out[i], &s->k[i]);
+        if (s->n[i] < 0) return (int)s->n[i];
     }
     /* the link condition */
-    for (int32_t i = 0; i < n[0]; i++)
-        for (int32_t j = 0; j < n[1]; j++)
-            if (nb[0][i] == nb[1][j]) common++;
-    if (common != (m->ho[e] >= 0 ? 2 : 1)) return WM_ERR_REFUSED;
+    for (int32_t i = 0; i < s->n[0]; i++)
+        for (int32_t j = 0; j < s->n[1]; j++)
+            if (s->nb[0][i] == s->nb[1][j]) common++;
+    return common != (m->ho[e] >= 0 ? 2 : 1) ? WM_ERR_REFUSED : WM_OK;
+}
+
+int wm_collapse_plan_at(const wm_mesh *m, const struct wm_collapse_stars *s, int32_t x, int32_t y,
+                        int32_t tris[6 * WM_MAX_RING], int32_t *n_tris)
+{
+    const int32_t *v = s->v;
+    int32_t nt = 0;
+    int rc = point_check(m, v, x, y);
+    if (rc != WM_OK) return rc;
     /* the triangles around v1, then v2, that do not hold the edge, with p for v1 or v2 (those around
      * an end that stays where it is do not change: a half-edge collapse plans only the other end's) */
     for (int i = 0; i < 2; i++) {
         if (m->vx[v[i]] == x && m->vy[v[i]] == y) continue;
-        for (int32_t j = 0; j < k[i]; j++) {
-            int32_t t = WM_TRI(out[i][j]), c[3], cx[3], cy[3], other = 0;
+        for (int32_t j = 0; j < s->k[i]; j++) {
+            int32_t t = WM_TRI(s->out[i][j]), c[3], cx[3], cy[3], other = 0;
             for (int q = 0; q < 3; q++) {
                 int32_t w = m->hv[3 * t + q];
                 if (w == v[1 - i]) other = 1;
@@ -105,6 +117,20 @@ int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int
     }
     *n_tris = nt;
     return WM_OK;
+}
+
+int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t tris[6 * WM_MAX_RING],
+                          int32_t *n_tris)
+{
+    struct wm_collapse_stars s;
+    int32_t v[2];
+    int rc;
+    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    v[0] = m->hv[e];
+    v[1] = wm_dest(m, e);
+    rc = point_check(m, v, x, y);
+    if (rc == WM_OK) rc = wm_collapse_stars(m, e, &s);
+    return rc == WM_OK ? wm_collapse_plan_at(m, &s, x, y, tris, n_tris) : rc;
 }
 
 /* Removes v by the fan from its neighbour p (a half-edge collapse of v into p). */

@@ -453,6 +453,7 @@ static int try_collapse(wm_refiner *r, int32_t e)
     int32_t v = me->hv[e], w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
     int32_t ws[6 * WM_MAX_RING];
     uint32_t es[6 * WM_MAX_RING];
+    struct wm_collapse_stars stars;
     int32_t ax = me->vx[v], ay = me->vy[v], bx = me->vx[w], by = me->vy[w];
     int32_t dx = bx - ax, dy = by - ay, g = wm_gcd(dx, dy), cx[4], cy[4], nc = 0;
     uint32_t bound = star_bound(r, w, star_bound(r, v, 0));
@@ -463,8 +464,11 @@ static int try_collapse(wm_refiner *r, int32_t e)
     }
     cx[nc] = ax, cy[nc++] = ay;
     cx[nc] = bx, cy[nc++] = by;
+    /* the stars and the link condition once for every point (a failure there fails every point) */
+    if (wm_collapse_stars(me, e, &stars) != WM_OK) return 0;
     for (int32_t i = 0; i < nc; i++) {
-        if (wm_edge_collapse_plan(me, e, cx[i], cy[i], tris, &nt) != WM_OK) continue;
+        if (wm_collapse_plan_at(me, &stars, cx[i], cy[i], tris, &nt) != WM_OK) continue;
+        WM_ASSERT(wm_edge_collapse_plan(me, e, cx[i], cy[i], ws, &k) == WM_OK && k == nt);
         if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0)) continue;
         if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return 0; /* capacity */
         known(r, touched, k, tris, nt, cx[i], cy[i], es, ws);

@@ -145,8 +145,8 @@ struct wm_end32 {
 };
 /* The end at a row whose quotient q and remainder r (of its numerator by a) are known; du the numerator's
  * step a row. */
-static WM_ALWAYS_INLINE void wm_end_at(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t q, int32_t r,
-                                       int32_t du, int32_t a)
+static WM_ALWAYS_INLINE void wm_end_at(struct wm_end32 *e, const uint16_t *row, int32_t width, int32_t q,
+                                       int32_t r, int32_t du, int32_t a)
 {
     e->q = q;
     e->r = r;
@@ -521,6 +521,16 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st);
  * collapse where 4.33 and 4.34 hold; each only when every new triangle's E(T) is at most
  * max(zeta, the largest E(T) of the triangles it replaces).  Returns the vertices removed. */
 int32_t wm_reduce(wm_refiner *r);
+/* wm_edge_collapse_plan in two parts (edge_collapse.c), for a reduction that tries several collapse
+ * points of one edge: the ends' stars and the link condition, which do not depend on the point
+ * (WM_OK, the star's error or WM_ERR_REFUSED; e a live triangle's half-edge), then the plan at (x, y)
+ * from them (wm_edge_collapse_plan's checks of the point and its triangles; the mesh unchanged since). */
+struct wm_collapse_stars {
+    int32_t v[2], nb[2][WM_MAX_RING], out[2][WM_MAX_RING], k[2], n[2];
+};
+int wm_collapse_stars(const wm_mesh *m, int32_t e, struct wm_collapse_stars *s);
+int wm_collapse_plan_at(const wm_mesh *m, const struct wm_collapse_stars *s, int32_t x, int32_t y,
+                        int32_t tris[6 * WM_MAX_RING], int32_t *n_tris);
 /* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition; the triangle count or an error.
  * kept: NULL, or the normals' cache of kept_mask + 1 slots (a power of two). */
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
