@@ -125,11 +125,11 @@ def test_levels_do_not_depend_on_the_export_array(monkeypatch):
     assert errors[0] == errors[1]
 
 
-def test_params_check_fast_path_answers_as_the_full_checks(monkeypatch):
-    """RefineParams.check takes the usual case in one expression and anything else through the full checks:
-    the fast path never passes what the full checks refuse.  Every field given alone, and in pairs, good,
-    bad, at its bounds and of odd types: the same answer (passed, or the same error) with the fast path
-    and without it (no type is _PLAIN)."""
+def test_params_check_passes_once_until_a_field_is_assigned(monkeypatch):
+    """RefineParams.check runs its checks once for an object that passes them and again after any field is
+    assigned.  Every field given alone, and in pairs, good, bad, at its bounds and of odd types: asked twice,
+    the same answer (passed, or the same error), the second asking of a pass without the checks; and each
+    field assigned on an object that passed answers as a new object with that field."""
     import itertools
 
     import numpy as np
@@ -143,17 +143,31 @@ def test_params_check_fast_path_answers_as_the_full_checks(monkeypatch):
     values |= {"iterations": [v for v in whole if v is not None], "max_triangles": whole, "capacity": whole,
                "metric": ["normal", "vertical", "x", None], "neighbourhood": ["face", "vertex", "", 1]}
 
-    def answer(**kw):
+    def answer(p):
         try:
-            native.RefineParams(**kw).check()
+            p.check()
         except (WavemeshError, TypeError) as e:
-            return type(e).__name__, str(e)
+            return type(e).__name__, str(e), e.hint if isinstance(e, WavemeshError) else None
         return "ok"
 
     cases = [{n: v} for n, vs in values.items() for v in vs]
     cases += [{a: u, b: w} for (a, us), (b, ws) in itertools.combinations(values.items(), 2)
               for u in us[::3] for w in ws[::3]]
-    fast = [answer(**kw) for kw in cases]
-    monkeypatch.setattr(native, "_PLAIN", ())
-    assert [answer(**kw) for kw in cases] == fast
-    assert fast.count("ok") > len(cases) // 10 and fast.count("ok") < len(cases)
+    checks = []
+    inner = native.RefineParams._check
+    monkeypatch.setattr(native.RefineParams, "_check", lambda p: checks.append(1) or inner(p))
+    first, again = [], []
+    for kw in cases:
+        p = native.RefineParams(**kw)
+        first.append(answer(p))
+        again.append(answer(p))
+    assert again == first
+    assert first.count("ok") > len(cases) // 10 and first.count("ok") < len(cases)
+    assert len(checks) == 2 * len(cases) - first.count("ok")
+    for kw, want in zip(cases, first, strict=True):
+        if len(kw) == 1:
+            p = native.RefineParams()
+            assert answer(p) == "ok"
+            (name, v), = kw.items()
+            setattr(p, name, v)
+            assert answer(p) == want, kw

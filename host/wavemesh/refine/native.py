@@ -42,7 +42,6 @@ METRICS = {"normal": 0, "vertical": 1}
 NEIGHBOURHOODS = {"face": 0, "vertex": 1}
 U32 = (1 << 32) - 1
 U64 = (1 << 64) - 1
-_PLAIN = (float, int)  # RefineParams.check's fast path: the numbers' usual types (others: the full checks)
 _INF = float("inf")
 
 
@@ -272,27 +271,28 @@ class RefineParams:
     capacity: int | None = None  # triangle storage, as on a device (default: 2 (W-1)(H-1), never short)
     extra: dict = field(default_factory=dict)
 
-    def check(self) -> None:
-        # the usual case in one expression (a refine call checks its parameters inside its time: 1 us where
-        # the checks below take 4); anything else, an error included, takes the checks below
-        zeta, d_d, d_v, d_l, d_c, d_p, alpha, mt, cap = (
-            self.zeta, self.delta_d, self.delta_v, self.delta_lambda, self.delta_c, self.delta_p, self.alpha,
-            self.max_triangles, self.capacity)
-        if (type(zeta) in _PLAIN and type(d_d) in _PLAIN and type(d_v) in _PLAIN and type(d_l) in _PLAIN
-                and type(d_c) in _PLAIN and type(d_p) in _PLAIN and type(alpha) in _PLAIN
-                and 0 <= zeta < _INF and 0 <= d_d < _INF and 0 <= d_v < _INF and 0 <= d_l < 65536
-                and 0 <= d_c <= 1 and 0 <= d_p < 1 and 0 <= alpha <= 1 and self.metric in METRICS
-                and self.neighbourhood in NEIGHBOURHOODS and type(self.iterations) is int
-                and 0 <= self.iterations <= 3 and (mt is None or (type(mt) is int and 2 <= mt < 2**31))
-                and (cap is None or (type(cap) is int and 2 <= cap < 2**31))):
-            return
+    _passed = False  # check passed, and no field was assigned since (__setattr__)
 
+    def __setattr__(self, name, value):
+        object.__setattr__(self, "_passed", False)
+        object.__setattr__(self, name, value)
+
+    def check(self) -> None:
+        """WavemeshError (the option, a hint) when a field is out of its range.  The checks run once for an
+        object that passes them, and again after any assignment to it (a refine call checks its parameters
+        inside its time: 0.05 us, where the checks take 1.5)."""
+        if self._passed:
+            return
+        self._check()
+        object.__setattr__(self, "_passed", True)
+
+    def _check(self) -> None:
         def bad(name, value, want):
             raise WavemeshError(f"--{name.replace('_', '-')} {value} is out of range", hint=want)
 
         for name in ("zeta", "delta_d", "delta_v", "delta_lambda", "delta_c", "delta_p", "alpha"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or v != v or v in (float("inf"), float("-inf")) or v < 0:
+            if not (isinstance(v, (int, float)) and 0 <= v < _INF):  # NaN and infinities too
                 bad(name, v, "give a finite number >= 0")
         if not 0 <= self.delta_p < 1:
             bad("delta_p", self.delta_p, "use 0 <= delta_p < 1 (the dissertation: 0.5 < delta_p < 1)")
