@@ -125,6 +125,24 @@ def test_levels_do_not_depend_on_the_export_array(monkeypatch):
     assert errors[0] == errors[1]
 
 
+def test_an_unexpected_code_of_the_levels_call_names_it(monkeypatch):
+    """wm_host_refine_levels' code 2 (no room for the statistics: native.refine has room for every level the
+    refiner makes, so only a bug gets it) ends in one NativeError that names the function and the code, not
+    in wm_strerror's text of 2.  Reached for real: the library called with room for one level's statistics."""
+    from wavemesh import api
+    from wavemesh.io import synth
+    from wavemesh.io.heightfield import from_array
+
+    lib = native.load()
+    real = lib.wm_host_refine_levels
+    monkeypatch.setattr(lib, "wm_host_refine_levels",
+                        lambda r, mode, stats, n, *rest: real(r, mode, stats, min(n, 1), *rest))
+    with pytest.raises(native.NativeError) as e:
+        api.refine(from_array(synth.f2(64)), 5, None, native.RefineParams())
+    assert str(e.value) == ("wm_host_refine_levels returned the unexpected code 2 (levels exported: 1, "
+                            "room for statistics: 7)")
+
+
 def test_params_check_passes_once_until_a_field_is_assigned(monkeypatch):
     """RefineParams.check runs its checks once for an object that passes them and again after any field is
     assigned.  Every field given alone, and in pairs, good, bad, at its bounds and of odd types: asked twice,

@@ -582,7 +582,10 @@ def _run_once(lib, fld, fp, xy, tris, cap, nbytes, width, height, rows=None) -> 
             levels.append(Level(st.level, (width, height, buf[at:end], vert_end), st))
             at = end
         code = said.value
-        if code != 1:  # done (0), or a step's error; 2 (no room for statistics) cannot happen
+        if code > 1:  # 2: no room in stats, sized for every level the refiner makes (a bug, if ever)
+            raise NativeError(f"wm_host_refine_levels returned the unexpected code {code} (levels exported: "
+                              f"{first + k}, room for statistics: {n_stats})")
+        if code != 1:  # done (0), or a step's error
             break
         first, mode = first + k, 0
         room = max(2 * room, 4 * (2 * hdr[5] + 3 * hdr[6]))
