@@ -40,15 +40,23 @@ import gc  # noqa: E402
 import resource  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
 from multiprocessing import connection  # noqa: E402
 
 from wavemesh import cli  # noqa: E402
 from wavemesh.tiles import jobs, runner, source  # noqa: E402
 
-READS = [0, 0]  # the reads tile_heightfield's cache missed; the samples of every window read
-# a pool worker's receives that found nothing in its pipe (it waited for the parent) and their seconds
-STALLS = [0, 0.0]
+
+class _Counts(threading.local):
+    """A thread's counts (a pool's workers that are threads of this process count apart): the reads
+    tile_heightfield's cache missed, the samples of every window read; a pool worker's receives that found
+    nothing in its pipe (it waited for the parent) and their seconds."""
+
+    reads, samples, stalls, stall_s = 0, 0, 0, 0.0
+
+
+COUNTS = _Counts()
 _recv = connection.Connection.recv
 
 
@@ -81,18 +89,18 @@ def _recv_counted(conn):
     try:
         return _recv(conn)
     finally:
-        STALLS[0] += 1
-        STALLS[1] += time.perf_counter() - t0
+        COUNTS.stalls += 1
+        COUNTS.stall_s += time.perf_counter() - t0
 _read, _window = jobs._tile_heightfield, source.Source.read
 
 
 def _counted(*args):
-    READS[0] += 1
+    COUNTS.reads += 1
     return _read(*args)
 
 
 def _window_counted(src, x, y, w, h):
-    READS[1] += w * h
+    COUNTS.samples += w * h
     return _window(src, x, y, w, h)
 
 
@@ -105,16 +113,19 @@ WHO = getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)
 
 
 def timed(fn, *args):
-    """fn(*args) and what it cost this process: (pid, CPU s, start, end, system s, minor faults, reads, the
-    tiles this process holds after it, the samples read, and the process's waits for the parent so far:
-    count, seconds)."""
-    u0, t0, r0, n0 = resource.getrusage(WHO), time.perf_counter(), READS[0], READS[1]
+    """fn(*args) and what it cost this worker: (the worker, CPU s, start, end, system s, minor faults, reads,
+    the tiles this process holds after it, the samples read, and the worker's waits for the parent so far:
+    count, seconds).  The worker is (pid, thread id): a pool's workers that are threads of this process
+    (runner.THREADS) are apart."""
+    u0, t0, r0, n0 = resource.getrusage(WHO), time.perf_counter(), COUNTS.reads, COUNTS.samples
     c0 = time.thread_time()
     out = fn(*args)
     cpu = time.thread_time() - c0
     u1 = resource.getrusage(WHO)
-    return out, (os.getpid(), cpu, t0, time.perf_counter(), u1.ru_stime - u0.ru_stime,
-                 u1.ru_minflt - u0.ru_minflt, READS[0] - r0, len(jobs._TILE_CACHE), READS[1] - n0, *STALLS)
+    c = COUNTS
+    return out, ((os.getpid(), threading.get_native_id()), cpu, t0, time.perf_counter(),
+                 u1.ru_stime - u0.ru_stime, u1.ru_minflt - u0.ru_minflt, c.reads - r0, len(jobs._TILE_CACHE),
+                 c.samples - n0, c.stalls, c.stall_s)
 
 
 def _result(r):
@@ -253,7 +264,7 @@ def main(argv: list[str]) -> int:
     after, c1 = time.perf_counter() - t0 - wall, os.times()
     here = c1.user + c1.system - c0.user - c0.system
     there = c1.children_user + c1.children_system - c0.children_user - c0.children_system
-    tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0] == os.getpid())
+    tasks_here = sum(i[1] for *_, infos in LOG for _, i in infos if i[0][0] == os.getpid())
     last = max((i[3] for *_, infos in LOG for _, i in infos), default=None)  # None: no task (untiled, failed)
     print(f"wall {wall:.2f} s; CPU: this process {here:.2f} s (its own, outside the tasks: "
           f"{here - tasks_here:.2f}; its main thread {main:.2f}), the workers {there:.2f} s"
@@ -272,16 +283,16 @@ def main(argv: list[str]) -> int:
     for part, a, b, trips, infos in LOG:
         per: dict = {}
         steps: dict = {}
-        for step, (pid, cpu, s, e, sys_, flt, reads, held, samples, *stalls) in infos:
+        for step, (who, cpu, s, e, sys_, flt, reads, held, samples, *stalls) in infos:
             # its waits at its first and last task; its page faults
-            w = per.setdefault(pid, [0.0, 0.0, 0, 0, stalls, stalls, 0])
+            w = per.setdefault(who, [0.0, 0.0, 0, 0, stalls, stalls, 0])
             w[0], w[1], w[2], w[3], w[6] = w[0] + cpu, w[1] + e - s, w[2] + 1, max(w[3], held), w[6] + flt
             w[4], w[5] = min(w[4], stalls), max(w[5], stalls)
             x = steps.setdefault(step, [0, 0.0, 0.0, 0, 0, 0])
             x[0], x[1], x[2], x[3], x[4] = x[0] + 1, x[1] + cpu, x[2] + sys_, x[3] + flt, x[4] + reads
             x[5] += samples
         model += max(w[0] for w in per.values())
-        firsts = [min(i[2] for _, i in infos if i[0] == pid) for pid in per]  # each worker's first start
+        firsts = [min(i[2] for _, i in infos if i[0] == who) for who in per]  # each worker's first start
         print(f"{part}: wall {b - a:.3f} s; {len(infos)} tasks in {trips} round trips to the pool (0: none); "
               "per worker CPU / busy / waiting s (tasks, the most tiles held, page faults; the times it "
               "found no task in its pipe between its first and last, and their ms): "

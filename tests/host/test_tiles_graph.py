@@ -615,9 +615,11 @@ def test_pool_worker_keeps_no_result_only_its_chain_reads():
     assert max(_held_counts(nodes)) <= 1
 
 
-def test_tiles_steps_tool_counts_every_task(tmp_path):
+@pytest.mark.parametrize("threads", [1, 2])
+def test_tiles_steps_tool_counts_every_task(threads, tmp_path):
     """tools/tiles_steps.py (where a tiled run's time goes) runs `wavemesh mesh --tile` with every task
-    of the graph counted once in its worker: the steps it lists add up to tile_graph's nodes."""
+    of the graph counted once in its worker: the steps it lists add up to tile_graph's nodes, and each of
+    the 2 workers has its line, threads of the command's process too (runner.THREADS, one or both)."""
     import re
     import subprocess
     import sys
@@ -627,7 +629,8 @@ def test_tiles_steps_tool_counts_every_task(tmp_path):
     v = np.random.default_rng(8).normal(0, 30, (150, 170)).cumsum(axis=0).cumsum(axis=1)
     np.save(tmp_path / "h.npy", v.astype(np.float32))
     out = subprocess.run([sys.executable, str(root / "tools" / "tiles_steps.py"), str(tmp_path / "h.npy"),
-                          "--workers", "2", "--tile", "65", "--metric", "vertical", "--zeta", "5"],
+                          "--workers", "2", "--tile", "65", "--metric", "vertical", "--zeta", "5",
+                          "--runner", f"THREADS={threads}"],
                          capture_output=True, text=True, cwd=root, timeout=120)
     assert out.returncode == 0, out.stderr
     graph = re.search(r"^graph: wall [\d.]+ s; (\d+) tasks", out.stdout, re.M)
@@ -637,6 +640,9 @@ def test_tiles_steps_tool_counts_every_task(tmp_path):
                             defer_error=True, runner=tiles.Runner(1))
     nodes, _ = tiles.tile_graph(plan)
     assert graph and int(graph[1]) == len(nodes)
+    line = out.stdout[graph.start():].split("\n", 1)[0]  # each worker's CPU / busy / waiting (tasks, ...)
+    tasks = [int(n) for n in re.findall(r"[\d.]+ / [\d.]+ / -?[\d.]+ \((\d+), ", line)]
+    assert len(tasks) == 2 and sum(tasks) == len(nodes), line
     assert sum(n for k, n in counts if k != "_strip_stats") == len(nodes), counts
     assert dict(counts)["free_tile"] == len(plan.tiles)
 
