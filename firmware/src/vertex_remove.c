@@ -64,26 +64,35 @@ int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING])
  * exactly (the same integer with the sign turned), so the three products per point replace the
  * predicate's eleven.  Differences are below 2^15 (WM_MAX_SIDE): |d'|^2 and |k0| < 2^31, |k1|, |k2| <
  * 2^47, each term below 2^62 and the sum of two below 2^63; the third is compared, as wm_incircle does. */
+/* The differences, |b'|^2, |c'|^2, |d'|^2 and k0 fit 32 bits: on a 32-bit CPU (and in the checked builds)
+ * they are held in 32-bit integers, so that each product is one 32 x 32 bit multiply (on rv32 a mul and
+ * a mulh); natively in 64 bits, which the x86-64 code takes without sign extensions.  The same integers. */
+#if WM_NARROW_DIV
+typedef int32_t circ_int;
+#else
+typedef int64_t circ_int;
+#endif
+
 struct circle {
-    int64_t k0, k1, k2;
-    int32_t ax, ay;
+    int64_t k1, k2;
+    circ_int k0, ax, ay;
 };
 
 static void circle_of(struct circle *q, int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy)
 {
-    int64_t ux = (int64_t)bx - ax, uy = (int64_t)by - ay, vx = (int64_t)cx - ax, vy = (int64_t)cy - ay;
-    int64_t u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
+    circ_int ux = (circ_int)bx - ax, uy = (circ_int)by - ay, vx = (circ_int)cx - ax, vy = (circ_int)cy - ay;
+    circ_int u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
     q->k0 = ux * vy - uy * vx;
-    q->k1 = uy * v2 - u2 * vy;
-    q->k2 = u2 * vx - ux * v2;
+    q->k1 = (int64_t)uy * v2 - (int64_t)u2 * vy;
+    q->k2 = (int64_t)u2 * vx - (int64_t)ux * v2;
     q->ax = ax;
     q->ay = ay;
 }
 
 static int in_circle(const struct circle *q, int32_t dx, int32_t dy)
 {
-    int64_t ex = (int64_t)dx - q->ax, ey = (int64_t)dy - q->ay;
-    int64_t s = q->k0 * (ex * ex + ey * ey) + q->k1 * ex;
+    circ_int ex = (circ_int)dx - q->ax, ey = (circ_int)dy - q->ay;
+    int64_t s = (int64_t)q->k0 * (ex * ex + ey * ey) + q->k1 * ex;
     return s < -(q->k2 * ey);
 }
 

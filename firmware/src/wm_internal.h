@@ -274,6 +274,15 @@ static inline void wm_slope_scale(const wm_params *p, int axis, uint32_t *m, int
 static inline uint64_t wm_scaled_up(uint64_t n, uint32_t m, int32_t e)
 {
     uint64_t t = n * m;
+    if (WM_NARROW_DIV && n >> 32 == 0 && e > 0 && e < 32) {
+        /* t + 2^e - 1 below 2^49, shifted word by word in 32-bit operations (the same integer; on rv32 the
+         * 64-bit variable shift's branches otherwise) */
+        uint64_t u = (uint64_t)(uint32_t)n * m + ((1u << e) - 1u);
+        uint32_t lo = (uint32_t)u, hi = (uint32_t)(u >> 32);
+        u = ((uint64_t)(hi >> e) << 32) | (lo >> e) | (hi << (32 - e));
+        WM_ASSERT(u == (t + ((uint64_t)1 << e) - 1) >> e);
+        return u;
+    }
     return e >= 49 ? (t != 0) : (t + ((uint64_t)1 << e) - 1) >> e;
 }
 /* An upper bound of sqrt(a^2 + b^2) for a, b < 2^56: max + (sqrt 2 - 1) min rounded up (the chord of
