@@ -31,6 +31,18 @@
 #define WM_NARROW_DIV (UINTPTR_MAX <= 0xFFFFFFFFu || WM_CHECK)
 #endif
 
+/* 0 where one 64-bit division is cheaper than two or three 32-bit ones: the board's refiner
+ * (WM_DIV64_ENGINE, firmware/board/CMakeLists.txt), whose 64-bit division is the FPGA divider's (div64.c:
+ * one 32-bit division when both fit 32 bits, else the engine's 26 to 34 clocks) and each 32-bit one some
+ * 33 cycles and a call: there wm_ceil_q16_div and wm_udiv_small divide once (the same integers; wm_frac_mul
+ * keeps its two 32-bit divisions, which measured cheaper than the divider's call).  1 elsewhere:
+ * natively the 32-bit divisions are the quicker instructions. */
+#ifdef WM_DIV64_ENGINE
+#define WM_SPLIT_DIV 0
+#else
+#define WM_SPLIT_DIV 1
+#endif
+
 /* Inlining (GCC, Clang; other compilers choose for themselves), the three kinds the sources ask for:
  * WM_ALWAYS_INLINE: inlined wherever it is called, also where the compiler would not choose to.
  * WM_NEVER_INLINE: never inlined, on every CPU (a path few calls take, whose registers and saves would
@@ -183,14 +195,14 @@ uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
  * the next 16 bits of the quotient in one digit (2^16 rem < 2^32), rounded up when a remainder is left.
  * With WM_NARROW_DIV also for d < 2^24 (the slope factors of all but the steepest planes) in two 8-bit
- * digits (2^8 rem < 2^32). */
+ * digits (2^8 rem < 2^32).  On the board (WM_SPLIT_DIV 0) the one division. */
 static inline uint64_t wm_ceil_q16_div(uint64_t n, uint64_t d)
 {
-    if (n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 16)) {
+    if (WM_SPLIT_DIV && n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 16)) {
         uint32_t q = (uint32_t)n / (uint32_t)d, rem = (uint32_t)n - q * (uint32_t)d;
         return ((uint64_t)q << 16) + ((rem << 16) + (uint32_t)d - 1u) / (uint32_t)d;
     }
-    if (WM_NARROW_DIV && n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 24)) {
+    if (WM_SPLIT_DIV && WM_NARROW_DIV && n < ((uint64_t)1 << 32) && d < ((uint64_t)1 << 24)) {
         uint32_t d32 = (uint32_t)d, q = (uint32_t)n / d32, rem = (uint32_t)n - q * d32, q1, q0;
         q1 = (rem << 8) / d32;
         rem = (rem << 8) - q1 * d32;
@@ -211,6 +223,11 @@ static inline uint64_t wm_udiv_small(uint64_t n, uint32_t d, uint32_t *rem)
         q0 = (uint32_t)n / d;
         *rem = (uint32_t)n - q0 * d;
         return q0;
+    }
+    if (!WM_SPLIT_DIV) {
+        uint64_t q = n / d;
+        *rem = (uint32_t)n - (uint32_t)q * d; /* the remainder, below d: modulo 2^32 */
+        return q;
     }
     hi = (uint32_t)(n >> 32);
     q2 = hi / d;
