@@ -78,7 +78,7 @@ def test_a_real_dem_costs_under_a_byte_a_sample():
 
 def test_level_bodies_decode_to_their_numbers():
     """LEVEL_DELTA: the vertex slots (free ones too) and triangles come back as they went, and a damaged
-    body is refused (the device's coder, proto_emit.c's coded_item, is checked end to end by the stream
+    body is refused (the device's coder, proto_emit.c's code_item, is checked end to end by the stream
     tests)."""
     rng = np.random.default_rng(5)
     xy = rng.integers(0, 1024, (300, 2))

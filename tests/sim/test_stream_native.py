@@ -149,7 +149,7 @@ def test_delta_coding_of_big_numbers_in_small_frames(wmdev_exe, tmp_path, monkey
     assert rc == 0, err
     assert filecmp.cmp(tmp_path / "m.obj", tmp_path / "s.obj", shallow=False)
     assert len(levels) == 2
-    widths = []
+    widths, free = [], 0
     for buf in levels:
         h = P.LEVEL_HEADER.unpack(buf)
         raw = P.level_stream_size(h["vertex_slots"], h["triangles"], h["index_bytes"])
@@ -158,7 +158,10 @@ def test_delta_coding_of_big_numbers_in_small_frames(wmdev_exe, tmp_path, monkey
         xy, tris = decode_level_body(body, h["vertex_slots"], h["triangles"])
         assert encode_level_body(xy, tris) == body
         widths += [1 + (v >= 0x80) + (v >= 0x4000) + (v >= 0x200000) for v in varints(body).tolist()]
+        free += int(np.count_nonzero(xy[:, 0] == P.FREE_VERTEX))
     assert max(widths) == 3 and widths.count(3) > 100  # 652
+    # every kind of item the coder counts and writes: free vertex slots (one byte), live ones, triangles
+    assert free > 0 and all(P.LEVEL_HEADER.unpack(b)["triangles"] > 0 for b in levels), free
 
 
 # ---------------------------------------------------------------------------------------------------

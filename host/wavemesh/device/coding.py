@@ -156,7 +156,7 @@ def decode(tail: bytes, start: int, count: int, stored: np.ndarray, width: int) 
 
 
 # ---------------------------------------------------------------------------------------------------
-# Level streams (docs/protocol.md, "Level coding"): the device's coder is proto_emit.c's coded_item
+# Level streams (docs/protocol.md, "Level coding"): the device's coder is proto_emit.c's code_item
 
 
 def varints(buf: bytes) -> np.ndarray:
