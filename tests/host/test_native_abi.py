@@ -143,6 +143,38 @@ def test_an_unexpected_code_of_the_levels_call_names_it(monkeypatch):
                             "room for statistics: 7)")
 
 
+def test_params_check_pass_goes_only_with_the_same_fields(monkeypatch):
+    """The kept pass of RefineParams.check is no field (not in repr, equality, fields or asdict), and goes
+    with an object only where its fields go unchanged: a copy, a deep copy and a pickled copy (a tile
+    worker's) of an object that passed pass without the checks, each answers as a new object once a field
+    is assigned, and dataclasses.replace makes a new object that is checked (a NaN zeta refused)."""
+    import copy
+    import dataclasses
+    import pickle
+
+    from wavemesh.errors import WavemeshError
+
+    p = native.RefineParams(zeta=2.0)
+    p.check()
+    assert "_passed" not in repr(p) and "_passed" not in dataclasses.asdict(p)
+    assert "_passed" not in {f.name for f in dataclasses.fields(p)} and p == native.RefineParams(zeta=2.0)
+    checks = []
+    inner = native.RefineParams._check
+    monkeypatch.setattr(native.RefineParams, "_check", lambda q: checks.append(1) or inner(q))
+    for q in (copy.copy(p), copy.deepcopy(p), pickle.loads(pickle.dumps(p))):
+        assert q == p
+        q.check()
+        assert checks == []
+        q.zeta = float("inf")
+        with pytest.raises(WavemeshError, match="--zeta inf is out of range"):
+            q.check()
+        checks.clear()
+    with pytest.raises(WavemeshError, match="--zeta nan is out of range"):
+        dataclasses.replace(p, zeta=float("nan")).check()
+    dataclasses.replace(p, zeta=3.0).check()
+    assert len(checks) == 2
+
+
 def test_params_check_passes_once_until_a_field_is_assigned(monkeypatch):
     """RefineParams.check runs its checks once for an object that passes them and again after any field is
     assigned.  Every field given alone, and in pairs, good, bad, at its bounds and of odd types: asked twice,
