@@ -47,8 +47,8 @@ help:
 	@echo "make bench-NAME     one benchmark, bench/bench_NAME.py (e.g. make bench-rtl)"
 	@echo "make bench-big      whole processes at 2048^2 and 4096^2 against pydelatin: time, memory (minutes; not in make bench)"
 	@echo "make bench-board1024  1024 x 1024, 100k+ triangles, through the simulated board (hours; not in make bench)"
-	@echo "make bench-soc-full the budget's own inputs through the simulated board, whole (up to an hour each; not in"
-	@echo "                    make bench; SOC_FULL='ball box jacksboro lidar_dem motorcycle' picks cases)"
+	@echo "make bench-soc-full the budget's own inputs through the simulated board, whole (not in make bench;"
+	@echo "                    SOC_FULL='ball box jacksboro lidar_dem motorcycle' picks cases)"
 	@echo "make bench-e2e      end-to-end board seconds at 115200 / 921600 / 3M baud (line time + bench-soc's cycle model)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
