@@ -299,7 +299,8 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
                          cpu=soc_cpu.selected().name, date=datetime.date.today().isoformat(),
                          machine=f"{platform.machine()}, {platform.node()}")
                 _merge(results, c)
-                _write_doc()
+                if results == FULL_RESULTS:
+                    _write_doc()
                 failed += "error" in c
                 print(f"soc-full: {name}: " + (f"FAILED: {c['error']}" if "error" in c else
                       f"work {c['work_cycles']:,} / budget {c['budget_cycles']:,} = "
@@ -513,6 +514,8 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"run these cases of FULL (default all: {'; '.join(FULL)}; a name or its first "
                          "word: ball, jacksboro), merge each into bench/results/soc-full.json and rewrite "
                          "docs/benchmarks.md")
+    ap.add_argument("--out", type=Path, default=None, metavar="FILE",
+                    help="merge into FILE instead (docs/benchmarks.md then left alone): a trial run")
     args = ap.parse_args(argv)
     if args.full is None:
         ap.error("give --full [NAME ...] (the decimated cases: make bench-soc)")
@@ -522,9 +525,9 @@ def main(argv: list[str] | None = None) -> int:
         (names if name else unknown).append(name or arg)
     if unknown:
         ap.error(f"unknown case {', '.join(unknown)}; have: {'; '.join(FULL)}")
-    failed = run_full(names)
-    print(f"soc-full: {len(names) - failed} of {len(names)} cases done; results in "
-          f"{FULL_RESULTS.relative_to(ROOT)}", file=sys.stderr)
+    out = args.out.resolve() if args.out else FULL_RESULTS
+    failed = run_full(names, out)
+    print(f"soc-full: {len(names) - failed} of {len(names)} cases done; results in {out}", file=sys.stderr)
     return 1 if failed else 0
 
 
