@@ -22,7 +22,7 @@ there): how much of the cost is the algorithm's work rather than the soft CPU's.
 floor: the receive stage alone per output triangle, in fast mode and at the board's baud rate.
 
 The budget's own inputs, whole (FULL: Ball and Box at 256 x 256, the whole Jacksboro DEM at zeta 10 m,
-held out the lidar DEM and the Motorcycle range image), take minutes to tens of minutes of simulation
+held out the lidar DEM and the Motorcycle range image), take minutes to an hour of simulation
 each, so `make bench-soc` does not run them:
 
     make bench-soc-full [SOC_FULL='ball jacksboro']       all of them, or the named ones
@@ -176,7 +176,7 @@ def run() -> dict:
 
 # The budget's own inputs, run for real (`make bench-soc-full`, `bench_soc.py --full [NAME ...]`): each at
 # least 5,000 samples and whole, `wavemesh stream`'s defaults but Jacksboro's key and zeta (the issue's demo
-# job, 10 m).  Minutes to tens of minutes of simulation each, so not part of `make bench-soc`; every finished
+# job, 10 m).  Minutes to an hour of simulation each, so not part of `make bench-soc`; every finished
 # case is merged into FULL_RESULTS at once (a run cut short keeps what it measured), and the section of
 # docs/benchmarks.md is rewritten from it.  name -> (input, options of `wavemesh stream` and `wavemesh mesh`)
 FULL = {
@@ -386,11 +386,11 @@ def markdown(results: dict) -> str:
     ]
     lines += full_markdown(_load_full())
     lines += [
-        "**The upload and the algorithm's share, per output triangle** (the same cases): *receive* alone, "
-        f"in fast mode and on a board at {BAUD} baud (the upload's bytes x 10 bits at the board's clock); "
-        "and the refiner's job natively (*native*: x86-64 instructions of the same job in tests/firmware/"
-        "wm_run.c under callgrind, the C scan there), which says how much of the cost is the algorithm's "
-        "work whatever the CPU, and the soft CPU's refine cycles per native instruction.",
+        "**The upload and the algorithm's share, per output triangle** (the decimated cases): *receive* "
+        f"alone, in fast mode and on a board at {BAUD} baud (the upload's bytes x 10 bits at the board's "
+        "clock); and the refiner's job natively (*native*: x86-64 instructions of the same job in "
+        "tests/firmware/wm_run.c under callgrind, the C scan there), which says how much of the cost is the "
+        "algorithm's work whatever the CPU, and the soft CPU's refine cycles per native instruction.",
         "",
         "| input | output triangles | receive per triangle (fast) | upload per triangle at "
         f"{BAUD} baud | native instructions per triangle | refine cycles per native instruction |",
@@ -463,7 +463,7 @@ def full_markdown(data: dict | None) -> list[str]:
     """The budget's own inputs (`make bench-soc-full`'s results) as lines of docs/benchmarks.md."""
     lines = [
         "**The budget's own inputs** (`make bench-soc-full`: `bench/bench_soc.py --full [NAME ...]`, results "
-        "in bench/results/soc-full.json; minutes to tens of minutes of simulation each, not part of "
+        "in bench/results/soc-full.json; minutes to an hour of simulation each, not part of "
         "`make bench-soc`): each at least 5,000 samples and whole, streamed and compared as above with "
         "`wavemesh stream`'s defaults (the normal metric, zeta 1 height unit, M = log2(max(W, H)) - 3), "
         "but the whole Jacksboro DEM with `--key elevation --zeta 10` (metres; the issue's demo job); held "
