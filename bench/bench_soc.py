@@ -22,8 +22,8 @@ there): how much of the cost is the algorithm's work rather than the soft CPU's.
 floor: the receive stage alone per output triangle, in fast mode and at the board's baud rate.
 
 The budget's own inputs, whole (FULL: Ball and Box at 256 x 256, the whole Jacksboro DEM at zeta 10 m,
-held out the lidar DEM and the Motorcycle range image), take minutes to an hour of simulation
-each, so `make bench-soc` does not run them:
+held out the lidar DEM and the Motorcycle range image), take long simulations (docs/benchmarks.md gives
+each case's), so `make bench-soc` does not run them:
 
     make bench-soc-full [SOC_FULL='ball jacksboro']       all of them, or the named ones
     .venv/bin/python bench/bench_soc.py --full [NAME ...]  the same
@@ -176,7 +176,7 @@ def run() -> dict:
 
 # The budget's own inputs, run for real (`make bench-soc-full`, `bench_soc.py --full [NAME ...]`): each at
 # least 5,000 samples and whole, `wavemesh stream`'s defaults but Jacksboro's key and zeta (the issue's demo
-# job, 10 m).  Minutes to an hour of simulation each, so not part of `make bench-soc`; every finished
+# job, 10 m).  Long simulations, so not part of `make bench-soc`; every finished
 # case is merged into FULL_RESULTS at once (a run cut short keeps what it measured), and the section of
 # docs/benchmarks.md is rewritten from it.  name -> (input, options of `wavemesh stream` and `wavemesh mesh`)
 FULL = {
