@@ -29,7 +29,6 @@ import contextlib
 import dataclasses
 import json
 import re
-import shutil
 import sys
 import tempfile
 import threading
@@ -124,10 +123,7 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
             "code": code_state(), "cpu": soc_cpu.selected().name}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        exe = Path(shutil.copy2(build.build_sim(), tmp / "wmsim"))
-        image = build.build_firmware()
-        with build.locked(image.parent):  # (the firmware build writes the image in place, under this lock)
-            fw = Path(shutil.copy2(image, tmp / image.name))
+        exe, fw = build.copies(tmp)
         src = tmp / "ball.npy"
         np.save(src, ball(side))
 

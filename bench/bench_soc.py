@@ -244,7 +244,6 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
     the run outlasts other work in the tree that rebuilds them.  Returns the number of failed cases."""
     import datetime
     import platform
-    import shutil
     import sys
     import threading
 
@@ -258,10 +257,7 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
     failed = 0
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        exe = Path(shutil.copy2(build.build_sim(), tmp / "wmsim"))
-        image = build.build_firmware()
-        with build.locked(image.parent):  # (the firmware build writes the image in place, under this lock)
-            fw = Path(shutil.copy2(image, tmp / image.name))
+        exe, fw = build.copies(tmp)
         files = {FULL[n][0] for n in names}
         import datasets
         from wavemesh.io.synth import ball, box

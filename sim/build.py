@@ -266,6 +266,18 @@ def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
     return out / "wavemesh_board.hex"
 
 
+def copies(folder: Path, cpu_name: str | None = None) -> tuple[Path, Path]:
+    """(simulator, firmware image) of the CPU `cpu_name`, built if needed and copied into `folder`: a run
+    that uses the copies is unaffected by a build that another session starts meanwhile.  build_sim
+    renames a new simulator over the old one, so its copy is one or the other; the firmware build writes
+    the image in place, so its copy is taken under the build's lock."""
+    folder.mkdir(parents=True, exist_ok=True)
+    exe = Path(shutil.copy2(build_sim(cpu_name=cpu_name), folder / "wmsim"))
+    image = build_firmware(cpu_name=cpu_name)
+    with locked(image.parent):
+        return exe, Path(shutil.copy2(image, folder / image.name))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")

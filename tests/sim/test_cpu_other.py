@@ -9,9 +9,6 @@ accounting").
 
 from __future__ import annotations
 
-import shutil
-from pathlib import Path
-
 import numpy as np
 import pytest
 from test_stream_board import LEAN, assert_same_work, job_cycles, stream_and_mesh
@@ -28,14 +25,9 @@ OTHERS = [name for name in soc_cpu.CPUS if name != soc_cpu.CPU]
 @pytest.fixture(params=OTHERS)
 def other_board(request, verilator, tmp_path_factory):
     try:
-        exe = build.build_sim(cpu_name=request.param)
-        image = build.build_firmware(cpu_name=request.param)
+        exe, image = build.copies(tmp_path_factory.mktemp(request.param), request.param)
     except RuntimeError as e:
         pytest.fail(str(e))
-    d = tmp_path_factory.mktemp(request.param)
-    exe = Path(shutil.copy2(exe, d / exe.name))
-    with build.locked(image.parent):
-        image = Path(shutil.copy2(image, d / image.name))
     b = SimBoard(exe, image, "--port", "0", "--fast", "--quiet")
     yield b
     b.stop()
