@@ -165,6 +165,12 @@ struct wm_proto;
  * (stop at once), or an error code of its own (WM_PROTO_E_CAPACITY, WM_PROTO_E_JOB) with *detail. */
 typedef int (*wm_proto_job_fn)(void *ctx, const wm_proto_job *job, struct wm_proto *p, uint32_t *detail);
 
+/* LEVEL_DELTA's coder (proto_emit.c's code_item): where it stands in a level's body. */
+typedef struct wm_proto_coder {
+    int32_t v, k, slot; /* next vertex slot; next live triangle, the slot to look for it from */
+    int32_t px, py, pi; /* the previous live vertex's x, y; the previous triangle's first index */
+} wm_proto_coder;
+
 /* The engine's state.  Opaque: use the functions below.  (About 3 KiB: buffers inside.) */
 typedef struct wm_proto {
     wm_proto_io io;
@@ -249,8 +255,7 @@ typedef struct wm_proto {
     uint8_t lcoded;
     uint8_t cb[16], cbn, cbi; /* the current item's bytes, cbi of them given */
     uint32_t cpos;            /* stream position of the next byte */
-    int32_t cv, ck, cslot;    /* next vertex slot; next live triangle, its slot */
-    int32_t cpx, cpy, cpi;    /* the previous vertex's x, y; the previous triangle's first index */
+    wm_proto_coder coder;     /* where the coder stands at cpos */
 } wm_proto;
 
 /* Sets up the engine.  heights must hold caps->max_samples samples.  Nothing is sent. */

@@ -138,49 +138,20 @@ static ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
 
 static uint32_t zigzag32(int32_t v) { return ((uint32_t)v << 1) ^ (uint32_t)(0 - (int32_t)((uint32_t)v >> 31)); }
 
-/* The coder's place in the body (wm_proto's cv .. cpi while a level is sent; a local copy while it
- * runs, so that its state stays in registers). */
-typedef struct coder {
-    const wm_mesh *m;
-    int32_t v, k, slot; /* next vertex slot; next live triangle, the slot to look for it from */
-    int32_t px, py, pi; /* the previous live vertex's x, y; the previous triangle's first index */
-} coder;
-
-static void coder_load(const wm_proto *p, coder *c)
-{
-    c->m = p->lm;
-    c->v = p->cv;
-    c->k = p->ck;
-    c->slot = p->cslot;
-    c->px = p->cpx;
-    c->py = p->cpy;
-    c->pi = p->cpi;
-}
-
-static void coder_save(wm_proto *p, const coder *c)
-{
-    p->cv = c->v;
-    p->ck = c->k;
-    p->cslot = c->slot;
-    p->cpx = c->px;
-    p->cpy = c->py;
-    p->cpi = c->pi;
-}
-
 static void coded_reset(wm_proto *p)
 {
+    static const wm_proto_coder start;
     p->cpos = 0;
-    p->cv = p->ck = p->cslot = 0;
-    p->cpx = p->cpy = p->cpi = 0;
+    p->coder = start;
     p->cbn = p->cbi = 0;
 }
 
 /* The body's next item (docs/protocol.md, "Level coding"; the engine's one coder of it, for the count
  * and the bytes): a vertex slot, then the live triangles.  Its bytes into d (room for 16), or with d
- * NULL only counted (coded_total); 0 when no item is left. */
-static ALWAYS_INLINE uint32_t code_item(coder *c, uint8_t *d)
+ * NULL only counted (coded_total); 0 when no item is left.  The callers run it on a local copy of
+ * p->coder, so that its state stays in registers. */
+static ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
 {
-    const wm_mesh *m = c->m;
     uint32_t n;
     if (c->v < m->vert_end) {
         int32_t v = c->v++, x = m->vx[v], y;
@@ -216,11 +187,12 @@ static ALWAYS_INLINE uint32_t code_item(coder *c, uint8_t *d)
  * a local one, p's left at the start). */
 static uint32_t coded_total(wm_proto *p)
 {
-    coder c;
+    const wm_mesh *m = p->lm;
+    wm_proto_coder c;
     uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES, n;
     coded_reset(p);
-    coder_load(p, &c);
-    while ((n = code_item(&c, NULL)) != 0) total += n;
+    c = p->coder;
+    while ((n = code_item(m, &c, NULL)) != 0) total += n;
     return total;
 }
 
@@ -228,7 +200,8 @@ static uint32_t coded_total(wm_proto *p)
  * but the new bytes; from before it: the coder runs again from the start). */
 static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
 {
-    coder c;
+    const wm_mesh *m = p->lm;
+    wm_proto_coder c;
     uint32_t pos;
     if (off < p->cpos) coded_reset(p);
     pos = p->cpos;
@@ -238,19 +211,19 @@ static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
             n--;
         }
     }
-    coder_load(p, &c);
+    c = p->coder;
     while (n) { /* the body: whole items at a time (of the current one, the bytes not given yet) */
         uint32_t a, skip;
         if (p->cbi == p->cbn) { /* no item under way */
             if (pos >= off && n >= sizeof p->cb) { /* the next item straight into dst */
-                a = code_item(&c, dst);
+                a = code_item(m, &c, dst);
                 if (a == 0) break;
                 pos += a;
                 dst += a;
                 n -= a;
                 continue;
             }
-            a = code_item(&c, p->cb); /* into cb, to be given in parts */
+            a = code_item(m, &c, p->cb); /* into cb, to be given in parts */
             if (a == 0) break;        /* past the end: cannot happen (end <= ltotal) */
             p->cbn = (uint8_t)a;
             p->cbi = 0;
@@ -272,7 +245,7 @@ static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
         dst += a;
         n -= a;
     }
-    coder_save(p, &c);
+    p->coder = c;
     p->cpos = pos;
 }
 
