@@ -49,7 +49,7 @@ help:
 	@echo "make bench-board1024  1024 x 1024, 100k+ triangles, through the simulated board (hours; not in make bench)"
 	@echo "make bench-soc-full the budget's own inputs through the simulated board, whole (not in make bench;"
 	@echo "                    SOC_FULL='ball box jacksboro lidar_dem motorcycle' picks cases)"
-	@echo "make bench-e2e      end-to-end board seconds at 115200 / 921600 / 3M baud (line time + bench-soc's cycle model)"
+	@echo "make bench-e2e      end-to-end board seconds at 115200 / 921600 / 3M baud (line time + a model fitted to bench-soc-full)"
 	@echo "make clean          remove build/ and $(OUT)/ (distclean: also .venv)"
 
 setup: $(SETUP_STAMP)
