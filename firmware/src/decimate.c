@@ -61,12 +61,6 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
  * zeta: that fan cannot go, valid or not; else 1 (also when no triangle holds v, which only an invalid
  * fan allows: wm_ring_plan then refuses it).  D < 2^31 (the grid's sides are below 2^15): its
  * products are 32 by 32 bits. */
-/* The normal metric's slope scales (wm_slope_scale), once for the decimation. */
-struct slopes {
-    uint32_t sx, sy;
-    int32_t ex, ey;
-};
-
 struct fans {
     int32_t n, k;                             /* ring size; the pointer, unwrapped */
     int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
@@ -74,7 +68,8 @@ struct fans {
     int32_t vx, vy;                           /* v */
     int64_t D;                                /* the fan triangle's, for normal_above */
     uint64_t av;                              /* v's |V| against it */
-    const struct slopes *sl;                  /* the slope scales, for far_above */
+    uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
+    int32_t ex, ey;
 };
 
 /* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
@@ -92,8 +87,7 @@ static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_
     int32_t jx = q->dx[j] - q->dx[a], kx = q->dx[k] - q->dx[a], jy = q->dy[j] - q->dy[a], ky = q->dy[k] - q->dy[a];
     int64_t Na, Nb;
     uint64_t A, B, T;
-    const struct slopes *sl = q->sl;
-    if (sl->ex < 0 || sl->ey < 0) return 0; /* not in wm_frac_mul's range */
+    if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
     if (dz1 == (int32_t)dz1 && dz2 == (int32_t)dz2) { /* the same products, each 32 by 32 bits */
         int32_t z1 = (int32_t)dz1, z2 = (int32_t)dz2;
         Na = (int64_t)z1 * ky - (int64_t)z2 * jy;
@@ -102,8 +96,8 @@ static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_
         Na = dz1 * ky - dz2 * jy;
         Nb = jx * dz2 - kx * dz1;
     }
-    A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sl->sx, sl->ex);
-    B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sl->sy, sl->ey);
+    A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), q->sx, q->ex);
+    B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), q->sy, q->ey);
     if ((A | B) < ((uint64_t)1 << 31)) {
         /* wm_hypot_up twice in 32-bit operands (the same integers): A, B and D below 2^31, so the first
          * is below 2^32, and T is at least the larger operand of the second */
@@ -244,7 +238,6 @@ static int is_fan(const int32_t *tris, int32_t nt)
  * (most often: the one just evaluated, back at the top of the heap) its removal takes them instead of
  * working them out again (f5 at 1 %: 191 of its 223 removals, Ball at 2 % 376 of 498). */
 struct last_plan {
-    struct slopes sl;  /* (not the plan: the decimation's slope scales, for first_fit's fans) */
     int32_t v, nr, nt; /* v: -1 when none */
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
 };
@@ -267,7 +260,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     q.k = 0;
     q.zv = r->field.samples[(int64_t)vy * r->field.width + vx];
     q.vx = vx, q.vy = vy;
-    q.sl = &lp->sl;
+    wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
+    wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
@@ -457,8 +451,6 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     struct last_plan lp;
     (void)st;
     lp.v = -1;
-    wm_slope_scale(&r->params, 0, &lp.sl.sx, &lp.sl.ex);
-    wm_slope_scale(&r->params, 1, &lp.sl.sy, &lp.sl.ey);
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
         if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
