@@ -176,8 +176,7 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
         same = (tmp / "board.obj").read_bytes() == (tmp / "soft.obj").read_bytes()
         obj_bytes = (tmp / "board.obj").stat().st_size
 
-    summary = re.search(r"summary cycles (\d+) wall ([\d.]+) s rate (\d+) kHz .* cpu ([\d.]+) s",
-                        "\n".join(board.lines))
+    summary = board.summary()
     cyc = rep["device_cycles"]
     levels = rep["refiner"]["levels"]
     result = {
@@ -193,8 +192,8 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
         "stream_wall_s": round(wall, 1), "stages_started": monitor.state()["stages_started"],
     }
     if summary:
-        cycles, cpu = int(summary.group(1)), float(summary.group(4))
-        result["simulator"] = {"cycles": cycles, "wall_s": float(summary.group(2)), "cpu_s": cpu,
+        cycles, cpu = summary["cycles"], summary["cpu_seconds"]
+        result["simulator"] = {"cycles": cycles, "wall_s": summary["wall_seconds"], "cpu_s": cpu,
                                "khz_per_cpu_s": round(cycles / cpu / 1e3, 1)}
     monitor.write("done", result=result)
     return result

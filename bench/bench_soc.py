@@ -138,7 +138,6 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
 
 
 def run() -> dict:
-    import re
 
     from peers import code_state
     from wavemesh.device import stream as S
@@ -164,10 +163,7 @@ def run() -> dict:
     finally:
         S.DEFAULT_TIMEOUTS = saved
         board.stop()
-    m = re.search(r"summary cycles (\d+) wall ([\d.]+) s rate (\d+) kHz", "\n".join(board.lines))
-    sim = {}
-    if m:
-        sim = {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3))}
+    sim = board.summary()
     from wavemesh.device import soc_cpu
 
     return {"budget": {"per_sample": PER_SAMPLE, "per_output_triangle": PER_TRIANGLE}, "cases": cases,
@@ -201,17 +197,6 @@ def _measured_commit() -> str | None:
     r = subprocess.run(["git", "log", "-1", "--format=%h", "--", "host", "firmware", "rtl", "sim"], cwd=ROOT,
                        capture_output=True, text=True)
     return r.stdout.strip() or None if r.returncode == 0 else None
-
-
-def _summary(lines: list[str]) -> dict:
-    """The simulator's summary line (cycles, wall and CPU seconds, rate), {} without one."""
-    import re
-
-    m = re.search(r"summary cycles (\d+) wall ([\d.]+) s rate (\d+) kHz .* cpu ([\d.]+) s", "\n".join(lines))
-    if not m:
-        return {}
-    return {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3)),
-            "cpu_seconds": float(m.group(4))}
 
 
 def _merge(path: Path, case: dict, lock_path: Path = ROOT / "build" / "soc-full.lock") -> dict:
@@ -291,7 +276,7 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
                 finally:
                     done.set()
                     board.stop()
-                c.update(held_out=name in FULL_HELD_OUT, simulator=_summary(board.lines), code=code,
+                c.update(held_out=name in FULL_HELD_OUT, simulator=board.summary(), code=code,
                          cpu=soc_cpu.selected().name, date=datetime.date.today().isoformat(),
                          machine=f"{platform.machine()}, {platform.node()}")
                 _merge(results, c)

@@ -59,3 +59,15 @@ def test_full_markdown_tables_held_out_apart_failures_and_missing():
     # nothing run yet: the description and the list of what is missing, no table
     empty = "\n".join(B.full_markdown(None))
     assert "| input |" not in empty and "Not run yet: Ball 256 x 256; Box 256 x 256;" in empty
+
+
+def test_simboard_summary_parses_the_simulators_line():
+    """SimBoard.summary reads the line sim/sim_main.h prints as it stops (the benches' one parser of it)."""
+    from types import SimpleNamespace
+
+    from wavemesh.harness.simboard import SimBoard
+
+    line = "wmsim: summary cycles 45667489 wall 115.900 s rate 394 kHz bytes-in 12 bytes-out 34 cpu 110.250 s"
+    got = SimBoard.summary(SimpleNamespace(lines=["wmsim: stage 0x1 cycle 5", line]))
+    assert got == {"cycles": 45667489, "wall_seconds": 115.9, "rate_khz": 394, "cpu_seconds": 110.25}
+    assert SimBoard.summary(SimpleNamespace(lines=["wmsim: stage 0x1 cycle 5"])) == {}

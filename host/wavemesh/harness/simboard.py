@@ -62,6 +62,16 @@ class SimBoard(DeviceProcess):
     def __init__(self, exe: Path, firmware: Path, *args: str):
         super().__init__([str(exe), "--firmware", str(firmware), *args], listen="--no-socket" not in args)
 
+    def summary(self) -> dict:
+        """The simulator's summary line as it stopped (`wmsim: summary cycles N wall S s rate K kHz ...
+        cpu C s`): cycles, wall_seconds, rate_khz, cpu_seconds; {} without one."""
+        m = re.search(r"summary cycles (\d+) wall ([\d.]+) s rate (\d+) kHz .* cpu ([\d.]+) s",
+                      "\n".join(self.lines))
+        if not m:
+            return {}
+        return {"cycles": int(m.group(1)), "wall_seconds": float(m.group(2)), "rate_khz": int(m.group(3)),
+                "cpu_seconds": float(m.group(4))}
+
     def events(self, kind: str) -> list[tuple[int, int]]:
         """(value, cycle) of every `wmsim: KIND 0xVALUE cycle N` line (stage, leds, halt)."""
         out = []
