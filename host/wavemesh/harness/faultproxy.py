@@ -10,7 +10,8 @@ seeded random generator that, byte by byte with probability ``rate``, corrupts a
 non-zero mask), drops a run of 1..``run`` bytes, duplicates a run of 1..``run`` bytes, or holds the
 stream back at that byte for up to ``max_delay`` seconds; at most ``limit`` faults per direction and
 connection (``limit=None``: no bound, as on a real lossy line).  ``log`` records every fault injected,
-``frames`` counts the frames that came to the proxy (SLIP delimiters / 2, before any fault).
+``frames`` counts the frames that came to the proxy (SLIP delimiters / 2, before any fault) and
+``bytes`` their bytes: ``rate * bytes`` is the number of faults to expect with no ``limit``.
 Closing the proxy (or the client leaving) closes both sides.
 
 :func:`campaign` runs `wavemesh stream` (in this process, on a thread, with the host's default
@@ -210,6 +211,11 @@ class FaultProxy:
         """Frames that came to the proxy, both ways (before the faults)."""
         return sum(p.ends for p in self.pumps) // 2
 
+    @property
+    def bytes(self) -> int:
+        """Bytes that came to the proxy, both ways (before the faults)."""
+        return sum(p.pos for p in self.pumps)
+
 
 class FrameTap:
     """A proxy that forwards whole frames, each after ``on_frame(direction, frame)`` (direction "up":
@@ -299,6 +305,7 @@ class Run:
     frames: int  # frames through the proxy, both ways
     message: str = ""  # the error line, or what was wrong
     delay_s: float = 0.0  # seconds the injected delays held the line, both ways added
+    bytes: int = 0  # bytes through the proxy, both ways (before the faults)
 
 
 def stream_once(argv: list[str], out: Path, ref: Path, run_limit: float) -> tuple[str, float, str]:
@@ -348,7 +355,7 @@ def campaign(upstream: tuple[str, int], src: Path, opts: list[str], ref: Path, f
             argv = ["stream", str(src), *opts, "--port", proxy.url, "-o", str(out), "-q"]
             outcome, t, msg = stream_once(argv, out, ref, run_limit)
             delay = sum(i.size for i in proxy.log if i.kind == "delay") / 1000
-            run = Run(f, outcome, t, len(proxy.log), proxy.frames, msg, delay)
+            run = Run(f, outcome, t, len(proxy.log), proxy.frames, msg, delay, proxy.bytes)
         runs.append(run)
         if on_run:
             on_run(run)
@@ -361,6 +368,7 @@ class Tally:
     outcomes: dict = field(default_factory=lambda: {k: 0 for k in OUTCOMES})
     injected: int = 0
     frames: int = 0
+    bytes: int = 0
     faulted_runs: int = 0  # runs with at least one fault injected
     slowest: float = 0.0
     slowest_error: float = 0.0
@@ -374,6 +382,7 @@ class Tally:
             t.outcomes[r.outcome] += 1
             t.injected += r.injected
             t.frames += r.frames
+            t.bytes += r.bytes
             t.faulted_runs += r.injected > 0
             t.slowest = max(t.slowest, r.seconds)
             if r.outcome == "error":
@@ -383,8 +392,8 @@ class Tally:
         return t
 
     def line(self) -> str:
-        return (f"{self.runs} runs, {self.frames} frames, {self.injected} faults in {self.faulted_runs} "
-                "runs: " + ", ".join(f"{v} {k}" for k, v in self.outcomes.items())
+        return (f"{self.runs} runs, {self.frames} frames ({self.bytes} bytes), {self.injected} faults in "
+                f"{self.faulted_runs} runs: " + ", ".join(f"{v} {k}" for k, v in self.outcomes.items())
                 + f"; slowest run {self.slowest:.1f} s, slowest error {self.slowest_error:.1f} s")
 
 
