@@ -181,6 +181,7 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
     levels = rep["refiner"]["levels"]
     result = {
         **head, "width": rep["input"]["width"], "height": rep["input"]["height"],
+        # the templates' triangulation (DONE's initial_triangles), not the first level the board sent
         "initial_triangles": rep["initial"]["triangles"], "output_triangles": levels[-1]["triangles"],
         "meets_triangles": levels[-1]["triangles"] >= BAR_TRIANGLES, "same_as_mesh": same,
         "obj_bytes": obj_bytes,
@@ -223,7 +224,8 @@ def markdown(results: dict) -> str:
     bar = "met" if r["meets_triangles"] and r["same_as_mesh"] else "NOT met"
     lines += [
         f"**Bar ({side} x {side}, at least {BAR_TRIANGLES:,} triangles, bit-exact): {bar}.**  "
-        f"{r['initial_triangles']:,} initial and {r['output_triangles']:,} output triangles; the board's OBJ "
+        f"{r['initial_triangles']:,} triangles in the initial triangulation (the templates') and "
+        f"{r['output_triangles']:,} in the output; the board's OBJ "
         f"file ({r['obj_bytes']:,} bytes) {'equals' if r['same_as_mesh'] else 'DIFFERS from'} "
         "`wavemesh mesh`'s "
         f"({r['mesh_triangles']:,} triangles in {r['mesh_seconds']:.1f} s on the host).",

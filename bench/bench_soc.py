@@ -100,6 +100,7 @@ def _case(board, name: str, tmp: Path, spec: tuple[str, list[str]] | None = None
     return {
         "name": name, "options": opts, "width": rep["input"]["width"], "height": rep["input"]["height"],
         "levels": rep["parameters"]["levels"], "zeta": rep["parameters"]["zeta"],
+        # the templates' triangulation (DONE's initial_triangles), not the first level the board sent
         "samples": samples, "initial_triangles": rep["initial"]["triangles"], "output_triangles": out_tris,
         "cycles": {k: cyc[k] for k in STAGES}, "total_cycles": total, "work_cycles": work,
         "budget_cycles": budget, "work_vs_budget": work / budget,
@@ -295,8 +296,8 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
 
 def _table(cases: list[dict], per_sample: int, per_tri: int) -> list[str]:
     lines = [
-        "| input | grid | samples | M | triangles (initial -> output) | receive | filter | template | refine "
-        "| emit | link | work | budget | work / budget | work per sample | work per output triangle "
+        "| input | grid | samples | M | triangles (templates -> output) | receive | filter | template "
+        "| refine | emit | link | work | budget | work / budget | work per sample | work per output triangle "
         "| board s | = `mesh` |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -360,7 +361,9 @@ def markdown(results: dict) -> str:
         "upload: fast-mode figures here (bytes go straight into and out of the UART FIFOs), which "
         f"depend on the host; on a board the {BAUD} baud line ({10 * round(clk / BAUD):,} cycles per byte) "
         "sets their pace.  "
-        "*board s* = all six stages / clock.  *= `mesh`*: the board's mesh file equals `wavemesh mesh`'s "
+        "*board s* = all six stages / clock.  *triangles*: the initial triangulation's, the templates' "
+        "(`initial.triangles` of `--report`, as `wavemesh mesh`'s: DONE states it), then the output mesh's.  "
+        "*= `mesh`*: the board's mesh file equals `wavemesh mesh`'s "
         "byte for byte.  The counts are those of this firmware image: moving code (any change to the "
         "firmware) can shift them by about 1 % (docs/soc.md, \"Cycle accounting\").",
         "",
@@ -419,7 +422,7 @@ def _write_doc() -> None:
 
 def _full_table(cases: list[dict]) -> list[str]:
     lines = [
-        "| input | grid | samples | options | triangles (initial -> output) | filter | template | refine "
+        "| input | grid | samples | options | triangles (templates -> output) | filter | template | refine "
         "| emit | work | budget | work / budget | work per sample | work per output triangle | board s "
         "| simulation | = `mesh` |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",

@@ -134,13 +134,14 @@ def _print_top(per: dict[str, int], total: int, top: int) -> None:
 
 def _per_unit(rep: dict) -> list[tuple[str, float, str]]:
     """Each stage's cycles over what it scales with (docs/soc.md's 1024 x 1024 extrapolation): samples,
-    initial triangles, output triangles, level-stream bytes."""
+    the initial triangulation's triangles (the templates': the report's initial.triangles, DONE's), output
+    triangles, level-stream bytes."""
     c = rep["device_cycles"]
     samples = rep["input"]["width"] * rep["input"]["height"]
     stream = rep["transfer"]["mesh_bytes"]
     out = rep["refiner"]["levels"][-1]["triangles"] if "refiner" in rep else rep["initial"]["triangles"]
     return [("receive", c["receive"] / samples, "sample"), ("filter", c["filter"] / samples, "sample"),
-            ("template", c["template"] / rep["initial"]["triangles"], "initial triangle"),
+            ("template", c["template"] / rep["initial"]["triangles"], "template triangle"),
             ("refine", c["refine"] / out, "output triangle"), ("emit", c["emit"] / stream, "stream byte"),
             ("link", c["link"] / stream, "stream byte")]
 

@@ -718,8 +718,10 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         "input": hf.to_report(),
         "ground": ground(hf).to_report(),
         "parameters": parameters,
+        # the templates' triangulation, as mesh()'s report (DONE states it: the first level sent is the
+        # refiner's level M-1, reduced)
         "initial": {"levels": m, "block_size": 1 << m, "tau_counts": tau_q,
-                    "vertices": levels[0].mesh.n_vertices, "triangles": levels[0].mesh.n_triangles},
+                    "vertices": done["initial_vertices"], "triangles": done["initial_triangles"]},
         "errors": errors.to_report(),
         "device": info.to_report(),
         "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},

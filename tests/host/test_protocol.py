@@ -79,10 +79,12 @@ def test_every_frame_type_has_a_payload_and_fits():
 
 
 def test_pack_unpack_round_trip_and_checks():
-    b = P.DONE.pack(status=0, levels=5, detail=0, e_max=123, triangles=7, vertices=6, cycles_receive=1,
-                    cycles_filter=2, cycles_template=3, cycles_refine=4, cycles_emit=2**40)
+    b = P.DONE.pack(status=0, levels=5, detail=0, e_max=123, triangles=7, vertices=6, initial_triangles=9,
+                    initial_vertices=8, cycles_receive=1, cycles_filter=2, cycles_template=3, cycles_refine=4,
+                    cycles_emit=2**40)
     f = P.DONE.unpack(b)
     assert f["cycles_emit"] == 2**40 and f["levels"] == 5 and f["reserved"] == 0
+    assert f["initial_triangles"] == 9 and f["initial_vertices"] == 8
     with pytest.raises(TypeError):
         P.DONE.pack(status=0)  # missing fields
     with pytest.raises(TypeError):

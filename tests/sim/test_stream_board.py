@@ -83,20 +83,25 @@ def sim_timeouts(monkeypatch):
 
 def stream_and_mesh(src: str, opts: list[str], url: str, tmp: Path, link: tuple[str, ...] = ()) -> dict:
     """`wavemesh stream` on the board and `wavemesh mesh` with the same options: the same files, a
-    proper mesh; returns the stream's report.  ``link``: options of the stream alone (--link-baud)."""
+    proper mesh, the same initial triangulation in both reports; returns the stream's report.  ``link``:
+    options of the stream alone (--link-baud)."""
     rc, _, err = run_cli("stream", src, *opts, *link, "--port", url, "-o", str(tmp / "board.obj"),
                          "--report", str(tmp / "board.json"), "--quiet")
     assert rc == 0, err
-    rc, _, err = run_cli("mesh", src, *opts, "-o", str(tmp / "soft.obj"), "-q")
+    rc, _, err = run_cli("mesh", src, *opts, "-o", str(tmp / "soft.obj"), "--report", str(tmp / "soft.json"),
+                         "-q")
     assert rc == 0, err
     assert (tmp / "board.obj").read_bytes() == (tmp / "soft.obj").read_bytes()
+    report, soft = (json.loads((tmp / f"{n}.json").read_text()) for n in ("board", "soft"))
+    # the initial triangulation is the templates' (DONE's initial_*), not the first level the board sent
+    assert report["initial"] == {k: soft["initial"][k] for k in report["initial"]}
     check_args = ["check", str(tmp / "board.obj"), "--against", src]
     check_args += [o for o in opts if o in ("--key", "elevation")]
     if "--decimate" in opts:
         check_args += ["--decimate", opts[opts.index("--decimate") + 1]]
     rc, out, err = run_cli(*check_args)
     assert rc == 0, out + err
-    return json.loads((tmp / "board.json").read_text())
+    return report
 
 
 def job_cycles(report: dict) -> dict:

@@ -233,6 +233,7 @@ typedef struct wm_proto {
     uint64_t work_mark;      /* filter + template + refine cycles when the last level was sent */
     uint8_t level, levels_sent;
     uint32_t e_max, triangles, vertices;
+    uint32_t initial_triangles, initial_vertices; /* the templates' triangulation (wm_proto_initial) */
     uint8_t done[WM_PROTO_DONE_BYTES]; /* the DONE payload, kept for its repeats */
 
     /* the line's rate: the divisor now; after a BAUD, until a valid frame proves it, the one to go back to */
@@ -288,6 +289,10 @@ size_t wm_proto_busy_frame(uint8_t *dst, size_t cap);
  * Accounts the cycles since the previous stage to that stage, then sends a PROGRESS frame (link I/O:
  * its cycles count as link cycles, not the stage's). */
 void wm_proto_stage(wm_proto *p, int stage, int level);
+
+/* For the job: the initial triangulation (the templates', before the refiner) has nv vertices and nt
+ * triangles; DONE states them (initial_vertices, initial_triangles; 0 until the job calls this). */
+void wm_proto_initial(wm_proto *p, int32_t nv, int32_t nt);
 
 /* For the job: sends a level's mesh (wm_mesh_export's order: vertex slots, live triangles in slot
  * order) with the refiner's statistics, and waits until the host has all of it.  The mesh must not

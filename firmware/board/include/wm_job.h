@@ -74,8 +74,9 @@ size_t wm_job_mesh_bound(int32_t nv, int32_t nt);
 
 /*
  * The initial triangulation alone, as a level (CONFIG_INITIAL_ONLY): built in mem[0..bytes), which is
- * cleared first, and sent.  Returns wm_proto_emit_level's code, or WM_PROTO_E_CAPACITY (detail M - 1)
- * when bytes < wm_job_mesh_bound, WM_PROTO_E_JOB (detail: the library's code) when it is not a mesh.
+ * cleared first, and sent (its counts stated for DONE: wm_proto_initial).  Returns wm_proto_emit_level's
+ * code, or WM_PROTO_E_CAPACITY (detail M - 1) when bytes < wm_job_mesh_bound, WM_PROTO_E_JOB (detail: the
+ * library's code) when it is not a mesh.
  */
 int wm_job_emit_initial(wm_proto *p, const wm_proto_job *j, const wm_job_initial_mesh *init, void *mem,
                         size_t bytes, uint32_t *detail);
@@ -84,7 +85,8 @@ int wm_job_emit_initial(wm_proto *p, const wm_proto_job *j, const wm_job_initial
  * The refine-and-emit loop: the refiner (firmware/src) from the initial triangulation in mem[0..bytes)
  * (wm_refine_bound(W, H, j->capacity) bytes, not cleared: the refiner writes every entry before it reads
  * it, so what an earlier job left there never reaches this one), each level sent through
- * wm_proto_emit_level as soon as it is made, the initial first.
+ * wm_proto_emit_level as soon as it is made, the refiner's level M-1 first (the initial
+ * triangulation's counts stated for DONE: wm_proto_initial).
  * Returns wm_proto_emit_level's code when it asks to stop, WM_PROTO_E_NONE when every level went out,
  * WM_PROTO_E_CAPACITY (detail: the level) when the storage ran out, WM_PROTO_E_JOB (detail: the
  * library's code) on any other refiner error.

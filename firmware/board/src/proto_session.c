@@ -421,6 +421,12 @@ int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, 
     }
 }
 
+void wm_proto_initial(wm_proto *p, int32_t nv, int32_t nt)
+{
+    p->initial_vertices = (uint32_t)nv;
+    p->initial_triangles = (uint32_t)nt;
+}
+
 static void send_done(wm_proto *p)
 {
     wm_proto_send_own(p, WM_PROTO_T_DONE, p->done, sizeof p->done);
@@ -438,6 +444,7 @@ static void run_job(wm_proto *p)
     p->levels_sent = 0;
     p->chunk = (uint16_t)(p->caps.max_payload - WM_PROTO_MESH_BYTES); /* until the host asks for less */
     p->e_max = p->triangles = p->vertices = 0;
+    p->initial_triangles = p->initial_vertices = 0;
     p->level = (uint8_t)(p->job.levels - 1);
     p->run_t0 = now(p);
     p->link = 0;
@@ -463,6 +470,8 @@ static void run_job(wm_proto *p)
     put32(b + WM_PROTO_DONE_E_MAX, p->e_max);
     put32(b + WM_PROTO_DONE_TRIANGLES, p->triangles);
     put32(b + WM_PROTO_DONE_VERTICES, p->vertices);
+    put32(b + WM_PROTO_DONE_INITIAL_TRIANGLES, p->initial_triangles);
+    put32(b + WM_PROTO_DONE_INITIAL_VERTICES, p->initial_vertices);
     put64(b + WM_PROTO_DONE_CYCLES_RECEIVE, p->cycles[WM_PROTO_STAGE_RECEIVE]);
     put64(b + WM_PROTO_DONE_CYCLES_FILTER, p->cycles[WM_PROTO_STAGE_FILTER]);
     put64(b + WM_PROTO_DONE_CYCLES_TEMPLATE, p->cycles[WM_PROTO_STAGE_TEMPLATE]);

@@ -320,6 +320,7 @@ int wm_job_emit_initial(wm_proto *p, const wm_proto_job *j, const wm_job_initial
     wm_level_stats st;
     size_t need = wm_job_mesh_bound(init->nv, init->nt);
     int rc;
+    wm_proto_initial(p, init->nv, init->nt);
     if (need == 0 || need > bytes) {
         *detail = (uint32_t)(j->levels - 1);
         return WM_PROTO_E_CAPACITY;
@@ -353,6 +354,7 @@ int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const w
     wm_refiner *r = NULL;
     wm_level_stats st;
     int rc, lib;
+    wm_proto_initial(p, init->nv, init->nt);
     wm_proto_stage(p, WM_PROTO_STAGE_REFINE, j->levels - 1);
     lib = wm_refine_init(&r, mem, bytes, f, &j->params, init->xy, init->nv, init->tris, init->nt, j->capacity);
     if (lib != WM_OK) return refiner_error(lib, j->levels - 1, detail);
