@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import re
 import sys
@@ -111,9 +110,8 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
     import numpy as np
     from peers import code_state
     from wavemesh import cli
-    from wavemesh.device import stream as S
     from wavemesh.harness import run_cli
-    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+    from wavemesh.harness.simboard import SimBoard, build, host_timeouts
     from wavemesh.io.synth import ball
 
     partial = partial or RESULTS / f"board{side}.partial.json"
@@ -145,14 +143,12 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
         monitor = _Monitor(board, partial, head)
         monitor.write("running")
         monitor.start()
-        saved = S.DEFAULT_TIMEOUTS
-        # read when the CLI opens the device: the simulator runs at 1/30 of the board or far less on a
-        # loaded machine, and a level of the refiner takes it an hour (no device cycle depends on them)
-        S.DEFAULT_TIMEOUTS = dataclasses.replace(SIM_TIMEOUTS, sync=20.0, reply=120.0, ack=120.0,
-                                                 job=JOB_TIMEOUT)
+        # the simulator runs at 1/30 of the board or far less on a loaded machine, and a level of the
+        # refiner takes it an hour (no device cycle depends on these waits)
         t0 = time.monotonic()
         try:
-            with open(tmp / "stream.err", "w") as err_file, contextlib.redirect_stderr(err_file):
+            with (host_timeouts(sync=20.0, reply=120.0, ack=120.0, job=JOB_TIMEOUT),
+                  open(tmp / "stream.err", "w") as err_file, contextlib.redirect_stderr(err_file)):
                 rc = cli.main(["stream", str(src), *OPTIONS, "--port", board.url,
                                "-o", str(tmp / "board.obj"), "--report", str(tmp / "board.json")])
             wall = time.monotonic() - t0
@@ -162,7 +158,6 @@ def run(side: int = SIDE, partial: Path | None = None) -> dict:
             monitor.write("failed", error=repr(e))
             raise
         finally:
-            S.DEFAULT_TIMEOUTS = saved
             board.stop()
             monitor.done.set()
         err = (tmp / "stream.err").read_text()

@@ -32,6 +32,7 @@ with --deadline, no run past the deadline and every failure one clear line.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import statistics
 import subprocess
@@ -77,7 +78,7 @@ def _one_set(index: int, shard: int, out: Path) -> None:
     dev = _board() if board else _native(baud)
     opts = BOARD_OPTS if board else OPTS
     try:
-        with tempfile.TemporaryDirectory() as tmp:
+        with tempfile.TemporaryDirectory() as tmp, _timeouts(board):
             work = Path(tmp)
             src = Path(jacksboro())
             ref = work / "ref.obj"
@@ -116,12 +117,20 @@ def _native(baud: int):
 
 
 def _board():
-    """The pin-accurate simulated board, and the host's timeouts for it (this process's runs)."""
-    from wavemesh.device import stream as S
-    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+    """The pin-accurate simulated board."""
+    from wavemesh.harness.simboard import SimBoard, build
 
-    S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS
     return SimBoard(build.build_sim(), build.build_firmware(), "--port", "0")
+
+
+def _timeouts(board: bool):
+    """The host's timeouts for a set's runs: the simulated board's (harness.simboard.host_timeouts), else
+    the defaults."""
+    if not board:
+        return contextlib.nullcontext()
+    from wavemesh.harness.simboard import host_timeouts
+
+    return host_timeouts()
 
 
 def _board_rate() -> int:
@@ -143,9 +152,9 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
 
     from wavemesh.device import memmap
     from wavemesh.device import protocol as P
-    from wavemesh.device import stream as S
     from wavemesh.harness import run_cli
     from wavemesh.harness.faultproxy import FrameTap
+    from wavemesh.harness.simboard import host_timeouts
 
     start = P.baud_divisor(memmap.CLK_HZ, UART)
 
@@ -156,9 +165,8 @@ def _failed_switch(board, src: Path, ref: Path, work: Path) -> dict:
     # the probe window is BAUD_PROBE_MS of the board's clock (39 million cycles at 39 MHz): minutes of
     # simulation alone, 10 or more beside the campaign's boards (40 kHz each on a loaded machine: 60 HELLOs
     # of 8 s were not enough); the run ends when it answers
-    S.DEFAULT_TIMEOUTS = S.with_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=250)
     out = work / "switch.obj"
-    with FrameTap(("127.0.0.1", board.port), on_frame) as tap:
+    with host_timeouts(sync_attempts=250), FrameTap(("127.0.0.1", board.port), on_frame) as tap:
         t0 = time.monotonic()
         rc, _, err = run_cli("stream", str(src), *BOARD_OPTS, "--link-baud", str(_board_rate()), "--port",
                              tap.url, "-o", str(out), "--report", str(work / "switch.json"), "-q")

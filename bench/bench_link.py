@@ -81,18 +81,17 @@ def board_receive() -> dict:
     import datasets
     from wavemesh.device import stream as S
     from wavemesh.harness import run_cli
-    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+    from wavemesh.harness.simboard import SimBoard, build, host_timeouts
 
     out = {}
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, host_timeouts():
         src = Path(tmp) / "t128.npy"
         np.save(src, datasets.terrain(SIDE_RX).astype(np.float32))
-        saved = S.DEFAULT_TIMEOUTS, S.Device.upload
-        S.DEFAULT_TIMEOUTS = SIM_TIMEOUTS
+        upload = S.Device.upload
         board = SimBoard(build.build_sim(), build.build_firmware(), "--port", "0", "--fast", "--quiet")
         try:
             for coded in (True, False):
-                def forced(self, *args, _want=coded, _orig=saved[1], **kw):  # api.stream passes coded= too
+                def forced(self, *args, _want=coded, _orig=upload, **kw):  # api.stream passes coded= too
                     kw.pop("coded", None)
                     return _orig(self, *args, coded=_want, **kw)
 
@@ -105,7 +104,7 @@ def board_receive() -> dict:
                 out["coded" if coded else "raw"] = r["device_cycles"]["receive"] / SIDE_RX**2
                 out["clk_hz"] = r["device"]["clk_hz"]
         finally:
-            S.DEFAULT_TIMEOUTS, S.Device.upload = saved
+            S.Device.upload = upload
             board.stop()
     return out
 

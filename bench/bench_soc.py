@@ -35,7 +35,6 @@ docs/benchmarks.md, whose section of this benchmark shows them beside the decima
 
 from __future__ import annotations
 
-import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -141,18 +140,15 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
 def run() -> dict:
 
     from peers import code_state
-    from wavemesh.device import stream as S
-    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+    from wavemesh.harness.simboard import SimBoard, build, host_timeouts
 
     code = code_state()  # the work tree is shared: what the firmware was built from
     exe, fw = build.build_sim(), build.build_firmware()
-    saved = S.DEFAULT_TIMEOUTS
-    # read when the CLI opens the device; longer waits than the tests' (a benchmark runs at nice 19
-    # beside other work, where the simulator may get a tenth of a core): no device cycle depends on them
-    S.DEFAULT_TIMEOUTS = dataclasses.replace(SIM_TIMEOUTS, sync=20.0, reply=60.0, ack=30.0, job=3600.0)
     board = SimBoard(exe, fw, "--port", "0", "--fast", "--quiet")
     try:
-        with tempfile.TemporaryDirectory() as tmp:
+        # longer waits than the tests' (a benchmark runs at nice 19 beside other work, where the simulator
+        # may get a tenth of a core): no device cycle depends on them
+        with host_timeouts(sync=20.0, reply=60.0, ack=30.0, job=3600.0), tempfile.TemporaryDirectory() as tmp:
             _inputs(Path(tmp))
             cases = [_case(board, name, Path(tmp)) for name in CASES]
             for c in cases:
@@ -162,7 +158,6 @@ def run() -> dict:
                     c["native_instructions"] = ins if tris == c["output_triangles"] else None
                     c["native_triangles"] = tris
     finally:
-        S.DEFAULT_TIMEOUTS = saved
         board.stop()
     sim = board.summary()
     from wavemesh.device import soc_cpu
@@ -236,8 +231,7 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
     import numpy as np
     from peers import code_state
     from wavemesh.device import soc_cpu
-    from wavemesh.device import stream as S
-    from wavemesh.harness.simboard import SIM_TIMEOUTS, SimBoard, build
+    from wavemesh.harness.simboard import SimBoard, build, host_timeouts
 
     code = {**code_state(), "measured": _measured_commit()}
     failed = 0
@@ -253,12 +247,8 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
                            ("motorcycle.npy", lambda: datasets.load("motorcycle").values)):
             if file in files:
                 np.save(tmp / file, make())
-        saved = S.DEFAULT_TIMEOUTS
-        # read when the CLI opens the device: long waits for a loaded machine (no device cycle depends on
-        # them)
-        S.DEFAULT_TIMEOUTS = dataclasses.replace(SIM_TIMEOUTS, sync=20.0, reply=120.0, ack=120.0,
-                                                 job=FULL_JOB_TIMEOUT)
-        try:
+        # long waits for a loaded machine (no device cycle depends on them)
+        with host_timeouts(sync=20.0, reply=120.0, ack=120.0, job=FULL_JOB_TIMEOUT):
             for name in names:
                 board = SimBoard(exe, fw, "--port", "0", "--fast", "--quiet", "--progress", str(PROGRESS_S))
                 done = threading.Event()
@@ -289,8 +279,6 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
                       f"{c['work_vs_budget']:.1f} x, "
                       f"{c['output_triangles']:,} triangles, = mesh: {c['same_as_mesh']}, "
                       f"stream {c['wall_seconds'] / 60:.1f} min"), flush=True)
-        finally:
-            S.DEFAULT_TIMEOUTS = saved
     return failed
 
 

@@ -71,3 +71,26 @@ def test_simboard_summary_parses_the_simulators_line():
     got = SimBoard.summary(SimpleNamespace(lines=["wmsim: stage 0x1 cycle 5", line]))
     assert got == {"cycles": 45667489, "wall_seconds": 115.9, "rate_khz": 394, "cpu_seconds": 110.25}
     assert SimBoard.summary(SimpleNamespace(lines=["wmsim: stage 0x1 cycle 5"])) == {}
+
+
+def test_host_timeouts_set_for_the_block_and_restored_on_exception_too():
+    """harness.simboard.host_timeouts, the benches' one way to give `wavemesh stream` the simulated
+    board's timeouts: inside the block stream.DEFAULT_TIMEOUTS is SIM_TIMEOUTS (with the changes asked
+    for, over another base too, nested), after it what it was, also when the block raises."""
+    import pytest
+    from wavemesh.device import stream as S
+    from wavemesh.harness.simboard import SIM_TIMEOUTS, host_timeouts
+
+    before = S.DEFAULT_TIMEOUTS
+    assert before != SIM_TIMEOUTS
+    with host_timeouts() as t:
+        assert S.DEFAULT_TIMEOUTS is t and t == SIM_TIMEOUTS
+    assert S.DEFAULT_TIMEOUTS is before
+    with pytest.raises(KeyError), host_timeouts(job=3600.0, sync=20.0):
+        assert S.DEFAULT_TIMEOUTS.job == 3600.0 and S.DEFAULT_TIMEOUTS.sync == 20.0
+        assert S.DEFAULT_TIMEOUTS.reply == SIM_TIMEOUTS.reply
+        with host_timeouts(S.DEFAULT_TIMEOUTS, sync_attempts=250):
+            assert S.DEFAULT_TIMEOUTS.sync_attempts == 250 and S.DEFAULT_TIMEOUTS.job == 3600.0
+        assert S.DEFAULT_TIMEOUTS.sync_attempts == SIM_TIMEOUTS.sync_attempts
+        raise KeyError("the block fails")
+    assert S.DEFAULT_TIMEOUTS is before

@@ -2,16 +2,20 @@
 wmsim processes.
 
 ``build`` is sim/build.py as a module (``build_sim()``, ``build_firmware()``); ``SimBoard`` runs one
-simulator and collects its log lines; ``SIM_TIMEOUTS`` are the host's timeouts for it.
+simulator and collects its log lines; ``SIM_TIMEOUTS`` are the host's timeouts for it, and
+``host_timeouts`` makes them (or longer ones) the host's default for a block.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import importlib.util
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
-from wavemesh.device import memmap
+from wavemesh.device import memmap, stream
 from wavemesh.device.stream import Timeouts, auto_rate, reachable
 from wavemesh.harness.devproc import DeviceProcess
 
@@ -42,6 +46,19 @@ build = _load_sim_build()
 # ones (its link timeout, 30 s of the board's clock, is hours of simulation).
 SIM_TIMEOUTS = Timeouts(sync=8.0, sync_attempts=5, reply=10.0, attempts=3, ack=5.0, job=900.0,
                         keepalive=120.0)
+
+
+@contextlib.contextmanager
+def host_timeouts(base: Timeouts = SIM_TIMEOUTS, **changes: float) -> Iterator[Timeouts]:
+    """Inside the block, ``base`` with ``changes`` (fields of Timeouts) is the host's default
+    (wavemesh.device.stream.DEFAULT_TIMEOUTS: what `wavemesh stream` and api.stream run with when given
+    none, read when they open the device); after it, on an exception too, the default it replaced."""
+    saved = stream.DEFAULT_TIMEOUTS
+    stream.DEFAULT_TIMEOUTS = dataclasses.replace(base, **changes)
+    try:
+        yield stream.DEFAULT_TIMEOUTS
+    finally:
+        stream.DEFAULT_TIMEOUTS = saved
 
 
 def fastest_rate() -> int:
