@@ -257,7 +257,7 @@ def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
                 if p.name != ".lock":
                     shutil.rmtree(p) if p.is_dir() else p.unlink()
         # (configured once; cmake --build re-runs it when needed)
-        steps = ([] if cache.exists() else [configure]) + [["cmake", "--build", str(out)]]
+        steps = ([] if cache.exists() else [configure]) + [["cmake", "--build", str(out), "-j2"]]
         for cmd in steps:
             r = subprocess.run(cmd, capture_output=quiet, text=True)
             if r.returncode != 0:

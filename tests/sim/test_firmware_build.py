@@ -26,7 +26,7 @@ def cmake_build(tmp_path: Path, gendir: Path) -> subprocess.CompletedProcess:
     cfg = subprocess.run(["cmake", "-S", str(SRC), "-B", str(out), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}",
                           f"-DWM_GEN_DIR={gendir}"], capture_output=True, text=True)
     assert cfg.returncode == 0, cfg.stdout + cfg.stderr
-    return subprocess.run(["cmake", "--build", str(out)], capture_output=True, text=True)
+    return subprocess.run(["cmake", "--build", str(out), "-j2"], capture_output=True, text=True)
 
 
 def test_build_reports_size_and_writes_the_image(tmp_path):
