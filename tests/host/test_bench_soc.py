@@ -30,6 +30,8 @@ def test_full_cases_by_name_or_first_word():
     assert B.full_case("ball 256") is None and B.full_case("nosuch") is None
     # every held-out case is a case, and the budget's five inputs are there, each of >= 5,000 samples' kind
     assert set(B.FULL_HELD_OUT) < set(B.FULL) and len(B.FULL) == 5
+    assert B.FULL_HELD_OUT == ("lidar_dem, whole (held out)", "motorcycle, whole (held out)")
+    assert B.HELD_OUT == ("lidar_dem / 8 (held out)",)
 
 
 def test_merge_keeps_every_case_once_in_full_order(tmp_path):
