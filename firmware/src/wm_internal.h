@@ -3,6 +3,7 @@
 #define WM_INTERNAL_H
 
 #include "wavemesh.h"
+#include "wm_inline.h"
 
 /* Asserts: on with WM_CHECK=1 (debug and sanitizer builds), off otherwise.  A hosted build uses
  * <assert.h>; a freestanding one (the soft CPU) traps. */
@@ -43,25 +44,6 @@
 #define WM_SPLIT_DIV 1
 #endif
 
-/* Inlining (GCC, Clang; other compilers choose for themselves), the three kinds the sources ask for:
- * WM_ALWAYS_INLINE: inlined wherever it is called, also where the compiler would not choose to.
- * WM_NEVER_INLINE: never inlined, on every CPU (a path few calls take, whose registers and saves would
- *   cost its caller's common path).
- * WM_NOINLINE_32: never inlined on a 32-bit CPU, the compiler's choice on a 64-bit one: a small hot
- *   function whose loop gets the registers out of its caller there (the soft CPU); a 64-bit host has
- *   registers enough and saves the call. */
-#if defined(__GNUC__)
-#define WM_ALWAYS_INLINE inline __attribute__((always_inline))
-#define WM_NEVER_INLINE __attribute__((noinline))
-#else
-#define WM_ALWAYS_INLINE inline
-#define WM_NEVER_INLINE
-#endif
-#if UINTPTR_MAX == 0xFFFFFFFFu
-#define WM_NOINLINE_32 WM_NEVER_INLINE
-#else
-#define WM_NOINLINE_32
-#endif
 
 #define WM_TRI(e) ((e) / 3)
 
@@ -215,7 +197,8 @@ static inline uint64_t wm_ceil_q16_div(uint64_t n, uint64_t d)
 /* n / d and its remainder (*rem) for 0 < d < 2^16, by long division in 16-bit digits: each partial
  * dividend, remainder (< d) times 2^16 plus the next digit, is below 2^32, so every step is one 32-bit
  * division (one for n < 2^32, three above) where a 64-bit division is a library call on the soft CPU
- * (some 300 cycles).  The same quotient and remainder as n / d, n % d. */
+ * (some 300 cycles).  On the board (WM_SPLIT_DIV 0) n >= 2^32 takes the one 64-bit division instead,
+ * the FPGA divider's.  The same quotient and remainder as n / d, n % d. */
 static inline uint64_t wm_udiv_small(uint64_t n, uint32_t d, uint32_t *rem)
 {
     uint32_t hi, mid, lo, q2, q1, q0;

@@ -96,6 +96,7 @@ def test_div64_against_python(tmp_path):
         "-Werror",
         "-DWM_DIV64_UDIV=wm_udiv64",
         "-DWM_DIV64_SDIV=wm_sdiv64",
+        f"-I{ROOT / 'firmware' / 'include'}",
         str(DIV64),
         str(main),
         "-o",

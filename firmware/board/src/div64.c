@@ -23,6 +23,8 @@
  * four register writes, 16 to 64 steps two a clock, the quotient's two words), and keeps the 32 / 32
  * division and the n < d answer here. */
 #include <stdint.h>
+
+#include "wm_inline.h"
 #ifdef WM_DIV64_ENGINE
 #include "wm_memmap.h"
 #endif
@@ -35,11 +37,9 @@
 uint64_t WM_DIV64_UDIV(uint64_t n, uint64_t d);
 int64_t WM_DIV64_SDIV(int64_t n, int64_t d);
 
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-
 /* The leading zeros of v != 0, without branches (rv32imc has no clz; libgcc's __clzsi2 is a call and a
  * table lookup). */
-static ALWAYS_INLINE int clz32(uint32_t v)
+static WM_ALWAYS_INLINE int clz32(uint32_t v)
 {
     int n, s;
     s = (v < 0x10000u) << 4;
@@ -59,7 +59,7 @@ static ALWAYS_INLINE int clz32(uint32_t v)
 
 /* The value of q, hidden from the optimiser: x - (x / y) * y stays a multiply and a subtraction (the
  * compiler would make it a remainder instruction, another 33 cycles of the divider). */
-static ALWAYS_INLINE uint32_t opaque(uint32_t q)
+static WM_ALWAYS_INLINE uint32_t opaque(uint32_t q)
 {
     __asm__("" : "+r"(q));
     return q;
@@ -67,7 +67,7 @@ static ALWAYS_INLINE uint32_t opaque(uint32_t q)
 
 /* One 16-bit digit of the quotient (divlu's step): (un * 2^16 + next) / (vn1 * 2^16 + vn0), the divisor
  * normalised and the quotient below 2^16, estimated from vn1 and corrected at most twice. */
-static ALWAYS_INLINE uint32_t digit(uint32_t un, uint32_t next, uint32_t vn1, uint32_t vn0)
+static WM_ALWAYS_INLINE uint32_t digit(uint32_t un, uint32_t next, uint32_t vn1, uint32_t vn0)
 {
     const uint32_t b = 0x10000u;
     uint32_t q = opaque(un / vn1), rhat = un - q * vn1;
@@ -80,7 +80,7 @@ static ALWAYS_INLINE uint32_t digit(uint32_t un, uint32_t next, uint32_t vn1, ui
 }
 
 /* (u1 * 2^32 + u0) / v for u1 < v (so the quotient fits in 32 bits). */
-static ALWAYS_INLINE uint32_t div_64_32(uint32_t u1, uint32_t u0, uint32_t v)
+static WM_ALWAYS_INLINE uint32_t div_64_32(uint32_t u1, uint32_t u0, uint32_t v)
 {
     const uint32_t b = 0x10000u;
     uint32_t vn1, vn0, un32, un10, un1, un0, un21, q1, q0;

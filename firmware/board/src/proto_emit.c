@@ -5,6 +5,7 @@
  * Building the stream once is the EMIT stage's work; framing, writing and waiting are link I/O.
  */
 #include "proto_int.h"
+#include "wm_inline.h"
 
 /* --- the level stream: LEVEL_HEADER, vertex slots, triangles --- */
 
@@ -121,11 +122,9 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
 
 /* --- LEVEL_DELTA (docs/protocol.md, "Level coding"): the body as variable-length numbers --- */
 
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-
 /* v as a variable-length number at d + n (7 bits a byte, low first, the top bit set on all but the
  * last), or with d NULL only counted; n plus its bytes. */
-static ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
+static WM_ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
 {
     if (!d) return n + 1u + (v >= 0x80u) + (v >= 0x4000u) + (v >= 0x200000u) + (v >= 0x10000000u);
     while (v >= 0x80u) {
@@ -150,7 +149,7 @@ static void coded_reset(wm_proto *p)
  * and the bytes): a vertex slot, then the live triangles.  Its bytes into d (room for 16), or with d
  * NULL only counted (coded_total); 0 when no item is left.  The callers run it on a local copy of
  * p->coder, so that its state stays in registers. */
-static ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
+static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
 {
     uint32_t n;
     if (c->v < m->vert_end) {

@@ -1,0 +1,27 @@
+/* Inlining (GCC, Clang; other compilers choose for themselves), the three kinds the firmware's sources ask
+ * for: the refiner's (src/, through wm_internal.h) and the board's (board/src: div64.c, proto_emit.c).
+ * WM_ALWAYS_INLINE: inlined wherever it is called, also where the compiler would not choose to.
+ * WM_NEVER_INLINE: never inlined, on every CPU (a path few calls take, whose registers and saves would
+ *   cost its caller's common path).
+ * WM_NOINLINE_32: never inlined on a 32-bit CPU, the compiler's choice on a 64-bit one: a small hot
+ *   function whose loop gets the registers out of its caller there (the soft CPU); a 64-bit host has
+ *   registers enough and saves the call. */
+#ifndef WM_INLINE_H
+#define WM_INLINE_H
+
+#include <stdint.h>
+
+#if defined(__GNUC__)
+#define WM_ALWAYS_INLINE inline __attribute__((always_inline))
+#define WM_NEVER_INLINE __attribute__((noinline))
+#else
+#define WM_ALWAYS_INLINE inline
+#define WM_NEVER_INLINE
+#endif
+#if UINTPTR_MAX == 0xFFFFFFFFu
+#define WM_NOINLINE_32 WM_NEVER_INLINE
+#else
+#define WM_NOINLINE_32
+#endif
+
+#endif /* WM_INLINE_H */
