@@ -77,7 +77,7 @@ def test_fixed_params_kept_are_the_same_and_a_copy():
 def test_fixed_params_kept_answer_follows_every_field():
     """A kept answer is never another parameter set's: every field of RefineParams changed alone (all of
     them, so a field fixed_params comes to read is in its cache key or fails here) gives the answer worked
-    out anew, with the default's kept."""
+    out anew, with the default's kept; so does one object with its fields assigned one after another."""
     from wavemesh.api import RefineParams
 
     other = {"zeta": 2.5, "metric": "vertical", "delta_d": 0.3, "delta_p": 0.7, "delta_v": 3.0, "alpha": 0.4,
@@ -90,6 +90,12 @@ def test_fixed_params_kept_answer_follows_every_field():
     for name, value in other.items():
         p = RefineParams(**{name: value})
         assert bytes(native.fixed_params(p, *rest)) == bytes(native._fixed_params(p, *rest)), name
+    # one object changed field by field after each answer: its values are read again after an assignment
+    q = RefineParams()
+    native.fixed_params(q, *rest)
+    for name, value in other.items():
+        setattr(q, name, value)
+        assert bytes(native.fixed_params(q, *rest)) == bytes(native._fixed_params(q, *rest)), name
 
 
 def _levels(job):

@@ -272,9 +272,11 @@ class RefineParams:
     extra: dict = field(default_factory=dict)
 
     _passed = False  # check passed, and no field was assigned since (__setattr__)
+    _fixed_key = None  # the fields fixed_params reads, once per state (None: not made since an assignment)
 
     def __setattr__(self, name, value):
         object.__setattr__(self, "_passed", False)
+        object.__setattr__(self, "_fixed_key", None)
         object.__setattr__(self, name, value)
 
     def check(self) -> None:
@@ -340,7 +342,7 @@ def scale_fixed(scale: float | Fraction) -> tuple[int, int]:
 
 
 _FIXED: dict = {}  # fixed_params' answers by its arguments (a tiled run asks 8 times a tile, the same)
-# every field _fixed_params reads: its cache key (a repr of p took 3 us)
+# every field _fixed_params reads: its cache key, made once per state of a RefineParams (_fixed_key)
 _fixed_fields = attrgetter("zeta", "metric", "delta_d", "delta_p", "delta_v", "alpha", "delta_lambda",
                            "delta_c", "iterations", "neighbourhood", "bound", "legalise", "decimate",
                            "reduce", "max_triangles")
@@ -351,8 +353,13 @@ def fixed_params(p: RefineParams, scale: float, zeta: float | None = None,
     """The library's wm_params for p, the height scale and the cell size ``spacing`` = (dx, dy), the
     ground distance between neighbouring samples in height units (docs/refiner.md, "Fixed-point
     formats").  Each answer is kept (by the values of the fields it reads, equal values giving equal
-    answers, and the other arguments: about 0.1 ms of Fraction arithmetic each) and a copy of it returned."""
-    key = (_fixed_fields(p), scale, zeta, tuple(spacing))
+    answers, and the other arguments: about 0.1 ms of Fraction arithmetic each) and a copy of it returned.
+    The fields' values are read once per state of p (RefineParams.__setattr__ drops them)."""
+    values = p._fixed_key
+    if values is None:
+        values = _fixed_fields(p)
+        object.__setattr__(p, "_fixed_key", values)
+    key = (values, scale, zeta, tuple(spacing))
     out = _FIXED.get(key)
     if out is None:
         if len(_FIXED) >= 64:
