@@ -483,23 +483,16 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             continue;
         }
         if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) continue; /* cannot happen, as above */
-        for (int32_t i = 0; i < k; i++) me->tflag[touched[i]] |= WM_F_MEASURE;
+        for (int32_t i = 0; i < k; i++) { /* E(T) <= v's cost (first_fit's largest), measured at the end */
+            me->tflag[touched[i]] |= WM_F_MEASURE;
+            r->err[touched[i]] = r->vkey[v];
+        }
         r->removals++;
         for (int32_t i = 0; i < nr; i++) mark_stale(r, ring[i], &n);
     }
-    /* E(T) and the worst sample of the triangles the removals made, once, at the end: nothing above
-     * reads them (first_fit measures its candidates itself), and most of them go again in a later
-     * removal.  As wm_touch, without forgetting the corners' classes (vapex holds the decimation's
-     * plans, which a touch at each removal left as they were: its ring vertices were marked stale). */
-    for (int32_t t = 0; t < me->tri_end; t++) {
-        int32_t x[3], y[3], wx, wy;
-        if (!(me->tflag[t] & WM_F_MEASURE)) continue;
-        me->tflag[t] &= (uint8_t)~WM_F_MEASURE;
-        if (me->hv[3 * t] < 0) continue;
-        wm_tri_xy(me, t, x, y);
-        r->err[t] = r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
-        r->worst[t] = wy * r->field.width + wx;
-        me->tflag[t] |= WM_F_NEW;
-    }
+    /* The triangles the removals made (and those the error bound left unmeasured) are measured once, at
+     * the end, for those still there and as far as E_max needs them (wm_settle): nothing above reads
+     * them (first_fit measures its candidates itself), and most of them go again in a later removal. */
+    wm_settle(r);
     return WM_OK;
 }

@@ -15,6 +15,60 @@ void wm_touch(wm_refiner *r, int32_t t)
     wm_forget_class(r, t);
 }
 
+/* wm_touch in the error bound (its legalisation's slots): a triangle that the scan's Vmax alone shows
+ * within zeta leaves the heap without its exact E(T) (no slope factor): err[t] = its vertical ev, an
+ * upper bound, and WM_F_MEASURE.  Nothing in the bound or the decimation reads the E(T) of a triangle
+ * within zeta, and most of them go again in a later split's flips or a removal; wm_settle measures
+ * those left at the end as far as E_max needs them.  With a holes mask or a region of interest, wm_touch. */
+static void touch_bound(wm_refiner *r, int32_t t)
+{
+    int32_t x[3], y[3], wx, wy;
+    int exact;
+    if (r->roi || r->field.mask) {
+        wm_touch(r, t);
+        return;
+    }
+    wm_tri_xy(&r->mesh, t, x, y);
+    r->err[t] = wm_tri_error_over(&r->field, &r->params, x, y, r->params.zeta, &wx, &wy, &exact);
+    r->worst[t] = wy * r->field.width + wx;
+    r->mesh.tflag[t] = (uint8_t)((r->mesh.tflag[t] & ~WM_F_MEASURE) | WM_F_NEW | (exact ? 0 : WM_F_MEASURE));
+    wm_forget_class(r, t);
+}
+
+void wm_settle(wm_refiner *r)
+{
+    wm_mesh *me = &r->mesh;
+    uint32_t known = 0;
+    /* E_max is the largest E(T).  In slot order: known, the largest E(T) so far, and each flagged
+     * triangle whose upper bound is above it measured only as far as that (wm_tri_error_upto: E(T)
+     * when above it, else at most it), one pass.  So err[] holds E(T) or an upper bound at most E_max,
+     * their largest is E_max, and the count over zeta is unchanged (every flagged triangle is within
+     * zeta). */
+    for (int32_t t = 0; t < me->tri_end; t++) {
+        int32_t x[3], y[3], wx, wy;
+        if (!(me->tflag[t] & WM_F_MEASURE)) {
+            if (me->hv[3 * t] >= 0 && r->err[t] > known) known = r->err[t];
+            continue;
+        }
+        me->tflag[t] &= (uint8_t)~WM_F_MEASURE;
+        if (me->hv[3 * t] < 0) continue;
+        me->tflag[t] |= WM_F_NEW;
+        wm_tri_xy(me, t, x, y);
+        if (r->roi || r->field.mask) { /* as wm_touch, without forgetting the corners' classes */
+            r->err[t] =
+                r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+            r->worst[t] = wy * r->field.width + wx;
+        } else if (r->err[t] > known) {
+            WM_ASSERT(r->err[t] <= r->params.zeta);
+            r->err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
+            if (r->err[t] > known) known = r->err[t];
+        }
+#if WM_CHECK
+        if (!r->roi && !r->field.mask) WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+#endif
+    }
+}
+
 int wm_room(wm_refiner *r, int32_t added)
 {
     if (r->mesh.n_tri + added <= r->limit) return 0;
@@ -157,7 +211,11 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     /* The heap orders by (E(T), slot), a total order, so filing the slots now rather than flip by
      * flip pops the same triangles in the same order. */
     for (int32_t i = 0; i < ns; i++) {
-        wm_touch(r, slots[i]);
-        if (heap_n) wm_heap_update(r, slots[i], heap_n);
+        if (heap_n) {
+            touch_bound(r, slots[i]);
+            wm_heap_update(r, slots[i], heap_n);
+        } else {
+            wm_touch(r, slots[i]);
+        }
     }
 }

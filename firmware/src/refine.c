@@ -676,6 +676,7 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
              * fewer than asked for, at the same E_max. */
             WM_PROF_SET(WM_PH_DECIMATE);
             if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE)) rc = wm_decimate(r, st);
+            else wm_settle(r); /* the E(T) the bound left unmeasured (wm_decimate settles its own and those) */
             WM_PROF_SET(WM_PH_LEVELS);
         }
         r->done = 1;

@@ -350,6 +350,12 @@ uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t 
 /* wm_tri_error_upto, and while E(T) <= bound also the worst sample as wm_tri_error finds it. */
 uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                              uint32_t bound, int32_t *wx, int32_t *wy, uint64_t *kept);
+/* wm_tri_error's scan, and E(T) with its worst sample when E(T) may be above bound; when the scan's
+ * Vmax alone shows E(T) <= bound (2^16 Vmax <= bound D), ev = ceil(2^16 Vmax / D) instead, an upper
+ * bound of E(T) at most bound without the normal metric's slope factor, with *exact = 0 (the worst
+ * sample is still the scan's).  Else *exact = 1 and the value is wm_tri_error's. */
+uint32_t wm_tri_error_over(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                           uint32_t bound, int32_t *wx, int32_t *wy, int *exact);
 /* For a candidate triangulation whose largest E(T) so far is least (<= bound): some value above bound
  * when E(T) is above it, found with the scan stopped early; else E(T) when it is above least, and
  * otherwise some value at most least (E(T) itself or more).  The decimation's tests need no more, and
@@ -506,6 +512,9 @@ static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t 
  * wm_heap_update; the phases call them, they call no phase. */
 /* Recomputes E(T) of t (and its worst sample) and marks it new; forgets its corners' classes. */
 void wm_touch(wm_refiner *r, int32_t t);
+/* After the error bound and the final decimation: E(T) of every triangle flagged WM_F_MEASURE (err[t]
+ * then an upper bound of it, not E(T) itself), as far as the level's E_max needs it (mesh_state.c). */
+void wm_settle(wm_refiner *r);
 /* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
  * small; 1 when the budget forbids it (and records that). */
 int wm_room(wm_refiner *r, int32_t added);
