@@ -81,13 +81,29 @@ def locked(folder: Path):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+def proto_inputs() -> list[Path]:
+    """The engine's sources and every header they include ("...", found where the compiler finds it: the
+    including file's folder, then PROTO_INCLUDES), and the headers those include: proto.o's share of a
+    simulator's stamp (GEN written first: wm_protocol.h is one)."""
+    found: list[Path] = []
+    todo = list(PROTO_C)
+    while todo:
+        src = todo.pop()
+        for name in re.findall(r'^\s*#\s*include\s*"([^"]+)"', src.read_text(), re.M):
+            path = next((d / name for d in [src.parent, *PROTO_INCLUDES] if (d / name).exists()), None)
+            if path is None:
+                raise FileNotFoundError(f"{name}, which {src.name} includes, is in none of {PROTO_INCLUDES}")
+            if path not in found:
+                found.append(path)
+                todo.append(path)
+    return [*PROTO_C, *sorted(found)]
+
+
 def sources(core) -> list[Path]:
     rtl = sorted(RTL.glob("*.v")) + sorted((RTL / "boards").glob("*.v"))
     return [SIM / "board_sim.v", SIM / "board_sim.vlt", SIM / "sdram_chip.v", *rtl, core.verilog_file(),
             RTL / "lint.vlt", *(SIM / c for c in CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
-            SIM / "sim_main.h",
-            GEN / "wm_memmap.vh", *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
-            PROTO_INCLUDES[1] / "wavemesh.h", GEN / "wm_protocol.h"]
+            SIM / "sim_main.h", GEN / "wm_memmap.vh", *proto_inputs()]
 
 
 def _proto_object(outdir: Path) -> Path:
@@ -199,9 +215,7 @@ def build_icebreaker_sim(jobs: int = 2, quiet: bool = True) -> Path:
     ]
     inputs = [SIM / "icebreaker_sim.v", *sorted(RTL.glob("*.v")), *sorted((RTL / "boards").glob("*.v")),
               RTL / "lint.vlt", *(SIM / c for c in ICEBREAKER_CPP), SIM / "tcp_bridge.h", SIM / "uart_line.h",
-              SIM / "sim_main.h",
-              *sorted(GEN.glob("*.vh")), *PROTO_C, PROTO_SRC / "proto_int.h", PROTO_INCLUDES[0] / "proto.h",
-              GEN / "wm_protocol.h"]
+              SIM / "sim_main.h", *sorted(GEN.glob("*.vh")), *proto_inputs()]
     return _build(args, env, inputs, outdir, exe, "the iCEBreaker simulator", quiet)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from wavemesh.harness import rtl_runner, toolchain
@@ -34,3 +35,21 @@ def test_cocotb_runs_get_the_cache_once(monkeypatch):
     assert flags.count(rtl_runner.PCH_FLAG) == 1
     assert flags.count(toolchain.objcache()[0]) == 1
     assert Path(os.environ["CCACHE_DIR"]) == ROOT / "build" / "ccache"
+
+
+def test_a_simulators_stamp_holds_every_header_of_the_protocol_engine():
+    """sim/build.py links the protocol engine (proto.o) into each simulator and rebuilds one when its stamp,
+    a hash of its inputs, changes: the inputs hold the engine's sources and every header they include,
+    found from the includes themselves, so that a header the engine comes to include needs no list kept."""
+    from wavemesh.device.gen import write_all
+    from wavemesh.harness.simboard import build
+
+    write_all(build.GEN)  # wm_protocol.h, one of the headers
+    inputs = build.proto_inputs()
+    names = {p.name for p in inputs}
+    assert {"proto.h", "proto_int.h", "wavemesh.h", "wm_inline.h", "wm_protocol.h"} <= names
+    assert set(build.PROTO_C) <= set(inputs)
+    for path in inputs:
+        for name in re.findall(r'^\s*#\s*include\s*"([^"]+)"', path.read_text(), re.M):
+            assert name in names, (path.name, name)
+    assert set(inputs) <= set(build.sources(build.cpu()))
