@@ -260,11 +260,13 @@ def test_dask_scheduler_of_another_wavemesh(dem, tmp_path):
                               env=env, stderr=subprocess.DEVNULL)]
     out = tmp_path / "m.obj"
     try:
-        end = time.monotonic() + 60
-        while not info.exists() and time.monotonic() < end:
-            time.sleep(0.05)
-        time.sleep(0.2)  # written whole
-        address = json.loads(info.read_text())["address"]
+        end, address = time.monotonic() + 60, None
+        while address is None and time.monotonic() < end:
+            try:  # the file is there and written whole (not only created)
+                address = json.loads(info.read_text())["address"]
+            except (OSError, ValueError, KeyError):
+                time.sleep(0.05)
+        assert address, "the scheduler wrote no scheduler file within 60 s"
         procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
                                        "--nthreads", "1", "--no-nanny", "--no-dashboard"],
                                       stderr=subprocess.DEVNULL))
