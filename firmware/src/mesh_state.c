@@ -162,6 +162,19 @@ void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
  * that does not fit is simply left as it is (the mesh stays proper either way). */
 #define LEGAL_STACK 64
 
+/* A slot legalisation changed, measured: in the error bound (heap_n) touch_bound and the heap, else
+ * wm_touch.  Every such slot takes this one path, so none that touch_bound left flagged is measured
+ * exactly with its flag kept (wm_settle would take an E(T) over zeta there for a bound within it). */
+static void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
+{
+    if (heap_n) {
+        touch_bound(r, t);
+        wm_heap_update(r, t, heap_n);
+    } else {
+        wm_touch(r, t);
+    }
+}
+
 /* A slot legalisation changed: E(T) is measured once, at the end, for the triangle the slot then
  * holds (a split's triangle that a flip replaces at once was scanned for nothing: a third of the error
  * bound's scans).  Past the list's room, at once. */
@@ -173,8 +186,7 @@ static void changed(wm_refiner *r, int32_t *list, int32_t *n, int32_t t, int32_t
         list[(*n)++] = t;
         return;
     }
-    wm_touch(r, t);
-    if (heap_n) wm_heap_update(r, t, heap_n);
+    measure_slot(r, t, heap_n);
 }
 
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
@@ -210,12 +222,5 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     }
     /* The heap orders by (E(T), slot), a total order, so filing the slots now rather than flip by
      * flip pops the same triangles in the same order. */
-    for (int32_t i = 0; i < ns; i++) {
-        if (heap_n) {
-            touch_bound(r, slots[i]);
-            wm_heap_update(r, slots[i], heap_n);
-        } else {
-            wm_touch(r, slots[i]);
-        }
-    }
+    for (int32_t i = 0; i < ns; i++) measure_slot(r, slots[i], heap_n);
 }

@@ -354,6 +354,26 @@ static void test_haar(void)
 
 /* A field with a step and a bump, refined from two triangles with zeta = 0: every sample ends
  * exactly on the mesh. */
+/* A finished refiner's statistics against its mesh measured afresh: E_max the largest E(T) and over the
+ * triangles above zeta (the error bound and the decimation keep upper bounds of E(T) within zeta, and
+ * wm_settle makes the level's E_max from them: it must be the exact one). */
+static void check_final_stats(const wm_refiner *r, const wm_field *f, const wm_params *p, const wm_level_stats *st)
+{
+    const wm_mesh *m = wm_refine_mesh(r);
+    uint32_t emax = 0;
+    int32_t over = 0;
+    for (int32_t t = 0; t < m->tri_end; t++) {
+        int32_t x[3], y[3], wx, wy;
+        uint32_t e;
+        if (m->hv[3 * t] < 0) continue;
+        wm_tri_xy(m, t, x, y);
+        e = wm_tri_error(f, p, x, y, &wx, &wy);
+        if (e > emax) emax = e;
+        if (e > p->zeta) over++;
+    }
+    CHECK(st->e_max == emax && st->over == over);
+}
+
 static void test_refine(void)
 {
     enum { W = 17, H = 13, M = 3 };
@@ -387,12 +407,27 @@ static void test_refine(void)
         levels++;
     }
     CHECK(levels == M - 1 && st.level == 0 && st.e_max == 0 && st.over == 0);
+    check_final_stats(r, &f, &p, &st);
     CHECK(wm_refine_step(r, &st) == WM_ERR_STATE);
     /* the budget stops the error bound early */
     p.max_triangles = 20;
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
     while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
     CHECK(st.triangles <= 20 && st.budget_hit == 1 && st.over > 0);
+    check_final_stats(r, &f, &p, &st);
+    /* zeta above 0 in the normal metric: the bound's upper bounds and the final decimation's removals */
+    p.max_triangles = 0;
+    p.zeta = 2u << 16;
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
+    while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
+    CHECK(st.over == 0 && st.e_max <= p.zeta && st.removals > 0);
+    check_final_stats(r, &f, &p, &st);
+    p.max_triangles = 24; /* and a budget that stops it */
+    CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
+    while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
+    CHECK(st.budget_hit == 1);
+    check_final_stats(r, &f, &p, &st);
+    p.zeta = 0;
     /* a capacity too small is a return code, and the mesh stays valid */
     p.max_triangles = 0;
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, 12) == WM_OK);
@@ -409,6 +444,7 @@ static void test_refine(void)
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_OK);
     while (!wm_refine_done(r)) CHECK(wm_refine_step(r, &st) == WM_OK);
     CHECK(st.over == 0 && st.e_max <= p.zeta && wm_mesh_check(wm_refine_mesh(r)) == WM_OK);
+    check_final_stats(r, &f, &p, &st);
     /* bad parameters */
     p.iterations = 4;
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 4, tris, 2, cap) == WM_ERR_ARG);
