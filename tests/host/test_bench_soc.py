@@ -96,3 +96,28 @@ def test_host_timeouts_set_for_the_block_and_restored_on_exception_too():
         assert S.DEFAULT_TIMEOUTS.sync_attempts == SIM_TIMEOUTS.sync_attempts
         raise KeyError("the block fails")
     assert S.DEFAULT_TIMEOUTS is before
+
+
+def test_devices_opened_in_the_block_take_its_timeouts(monkeypatch):
+    """Device() without timeouts and `wavemesh devices`' probe read DEFAULT_TIMEOUTS when they open the
+    port, not when their module was imported: host_timeouts reaches them."""
+    from wavemesh.device import devices
+    from wavemesh.device import stream as S
+    from wavemesh.errors import WavemeshError
+    from wavemesh.harness.simboard import host_timeouts
+
+    seen = []
+
+    class Probe:  # stands in for Device in the probe: records its timeouts, answers nothing
+        def __init__(self, url, baud, timeouts):
+            seen.append(timeouts)
+            raise WavemeshError("no device answers")
+
+    monkeypatch.setattr(devices, "Device", Probe)
+    with host_timeouts(job=1234.0, reply=7.5):
+        with S.Device("loop://") as dev:
+            assert dev.t == S.DEFAULT_TIMEOUTS and dev.t.job == 1234.0
+        devices.probe(devices.PortReport("loop://"))
+    assert seen and seen[0].reply == 7.5 and seen[0].sync == devices.PROBE_SYNC_S
+    with S.Device("loop://") as dev:
+        assert dev.t is S.DEFAULT_TIMEOUTS and dev.t.job != 1234.0

@@ -79,7 +79,9 @@ def test_a_lossy_line_without_a_bound_recovers(device, reference, tmp_path):
     tally = run_campaign(device, reference, tmp_path, [Faults(seed=300 + s, rate=rate, limit=None)
                                                        for s in range(3)])
     expected = rate * tally.bytes
-    assert expected >= 3 * 12, tally.bytes  # ~18 faults a run to expect: a lossy line, not a few faults
+    # a lossy line: more bytes than three fault-free streams (12.5 kB: 25 faults to expect), as the resends
+    # of the frames the faults hit add (27-31 kB seen: 54-62)
+    assert expected >= 3 * 10, tally.bytes
     assert abs(tally.injected - expected) <= 4 * math.sqrt(expected), (tally.injected, expected)
     assert tally.outcomes["identical"] == 3
 

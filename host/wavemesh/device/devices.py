@@ -15,7 +15,8 @@ from dataclasses import dataclass, replace
 
 from serial.tools import list_ports as lp
 
-from wavemesh.device.stream import DEFAULT_TIMEOUTS, Device
+from wavemesh.device import stream
+from wavemesh.device.stream import Device
 from wavemesh.errors import WavemeshError
 
 # one HELLO, answered within half a second, twice: a board answers in a few milliseconds
@@ -53,7 +54,7 @@ def list_ports() -> list[PortReport]:
 
 def probe(report: PortReport, baud: int = 115200) -> PortReport:
     """Send HELLO on `report.url`; fill in the answer or the problem."""
-    timeouts = replace(DEFAULT_TIMEOUTS, sync=PROBE_SYNC_S, sync_attempts=PROBE_ATTEMPTS)
+    timeouts = replace(stream.DEFAULT_TIMEOUTS, sync=PROBE_SYNC_S, sync_attempts=PROBE_ATTEMPTS)
     try:
         with Device(report.url, baud, timeouts=timeouts) as dev:
             info = dev.sync()

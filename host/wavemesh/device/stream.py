@@ -330,8 +330,10 @@ def device_error(code: int, detail: int, request: int = 0) -> DeviceError:
 class Device:
     """A wavemesh device behind a pyserial URL or an open port object."""
 
-    def __init__(self, port, baud: int = DEFAULT_BAUD, trace=None, timeouts: Timeouts = DEFAULT_TIMEOUTS):
+    def __init__(self, port, baud: int = DEFAULT_BAUD, trace=None, timeouts: Timeouts | None = None):
+        """``timeouts``: DEFAULT_TIMEOUTS as it is when the device opens (None), else these."""
         self.link = Link(port, baud, trace)
+        timeouts = DEFAULT_TIMEOUTS if timeouts is None else timeouts
         self.t = timeouts
         self.seq = random.randrange(256)  # a fresh session never looks like a repeat of the last one
         self.info: DeviceInfo | None = None
