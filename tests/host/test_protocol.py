@@ -210,3 +210,21 @@ def test_docs_timeouts_table_states_the_defaults():
     assert set(rows) == set(defaults)
     stated = {k: None if v.strip() == "None" else float(v) for k, v in rows.items()}
     assert {k: (stated[k], v) for k, v in defaults.items() if stated[k] != v} == {}
+
+
+def test_done_must_state_the_last_level_that_arrived():
+    """Device.run's last check (stream.check_done): DONE's triangles, vertices and E_max against the
+    last level that arrived; any one of them off is a ProtocolError naming both, none arrived: nothing
+    to check."""
+    from wavemesh.device.stream import LevelResult, ProtocolError, check_done
+    from wavemesh.mesh import Mesh
+
+    mesh = Mesh(3, 2, [(0, 0), (2, 0), (2, 1), (0, 1)], [(0, 1, 2), (0, 2, 3)])
+    last = LevelResult(level=0, index=1, mesh=mesh, stats={"e_max_q16": 70000}, cycles=0, nbytes=0, seconds=0)
+    done = {"triangles": 2, "vertices": 4, "e_max": 70000}
+    check_done(done, [last])
+    check_done(done | {"triangles": 9}, [])
+    for field, wrong in (("triangles", 3), ("vertices", 5), ("e_max", 69999)):
+        with pytest.raises(ProtocolError, match=r"DONE says the last level has .* level 0 arrived with 2, 4 "
+                                                r"and 70000"):
+            check_done(done | {field: wrong}, [last])

@@ -858,11 +858,26 @@ class Device:
                         raise device_error(x["status"], x["detail"])
                     if x["levels"] != len(levels):
                         raise ProtocolError(f"DONE says {x['levels']} levels, {len(levels)} arrived")
+                    check_done(x, levels)
                     return levels, x
             except LinkTimeout:
                 raise
             except LinkError as e:  # writing an ACK or a KEEPALIVE found the connection gone
                 last = resume_after(e)
+
+
+def check_done(done: dict, levels: list[LevelResult]) -> None:
+    """DONE states the last level's triangles, vertices and E_max: they must be those of the last level
+    that arrived (each level stream is checked frame by frame; this checks the job's end as a whole)."""
+    if not levels:
+        return
+    last = levels[-1]
+    said = (done["triangles"], done["vertices"], done["e_max"])
+    got = (last.mesh.n_triangles, last.mesh.n_vertices, last.stats["e_max_q16"])
+    if said != got:
+        raise ProtocolError(f"DONE says the last level has {said[0]} triangles, {said[1]} vertices and E_max "
+                            f"{said[2]} (Q16.16), but level {last.level} arrived with {got[0]}, {got[1]} "
+                            f"and {got[2]}")
 
 
 def with_timeouts(t: Timeouts, **kw) -> Timeouts:
