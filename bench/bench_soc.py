@@ -139,7 +139,6 @@ def _native_instructions(name: str, tmp: Path) -> tuple[int, int] | None:
 
 
 def run() -> dict:
-
     from peers import code_state
     from wavemesh.harness.simboard import SimBoard, build, host_timeouts
 

@@ -44,7 +44,6 @@
 #define WM_SPLIT_DIV 1
 #endif
 
-
 #define WM_TRI(e) ((e) / 3)
 
 /* Profiling counters (WM_PROFILE=1: the profile build, firmware/CMakeLists.txt's WM_PROFILE option, for

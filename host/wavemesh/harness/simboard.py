@@ -9,7 +9,6 @@ simulator and collects its log lines; ``SIM_TIMEOUTS`` are the host's timeouts f
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import importlib.util
 import re
 from collections.abc import Iterator
@@ -54,7 +53,7 @@ def host_timeouts(base: Timeouts = SIM_TIMEOUTS, **changes: float) -> Iterator[T
     (wavemesh.device.stream.DEFAULT_TIMEOUTS: what `wavemesh stream` and api.stream run with when given
     none, read when they open the device); after it, on an exception too, the default it replaced."""
     saved = stream.DEFAULT_TIMEOUTS
-    stream.DEFAULT_TIMEOUTS = dataclasses.replace(base, **changes)
+    stream.DEFAULT_TIMEOUTS = stream.with_timeouts(base, **changes)
     try:
         yield stream.DEFAULT_TIMEOUTS
     finally:
