@@ -352,8 +352,6 @@ static void test_haar(void)
     CHECK(d[12] == 3 && d[13] == 9 && d[14] == -1);
 }
 
-/* A field with a step and a bump, refined from two triangles with zeta = 0: every sample ends
- * exactly on the mesh. */
 /* A finished refiner's statistics against its mesh measured afresh: E_max the largest E(T) and over the
  * triangles above zeta (the error bound and the decimation keep upper bounds of E(T) within zeta, and
  * wm_settle makes the level's E_max from them: it must be the exact one). */
@@ -374,6 +372,8 @@ static void check_final_stats(const wm_refiner *r, const wm_field *f, const wm_p
     CHECK(st->e_max == emax && st->over == over);
 }
 
+/* A field with a step and a bump, refined from two triangles with zeta = 0: every sample ends
+ * exactly on the mesh. */
 static void test_refine(void)
 {
     enum { W = 17, H = 13, M = 3 };
