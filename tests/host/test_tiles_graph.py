@@ -647,6 +647,44 @@ def test_tiles_steps_tool_counts_every_task(threads, tmp_path):
     assert dict(counts)["free_tile"] == len(plan.tiles)
 
 
+def test_tiles_timeline_tool_accounts_for_the_whole_run(tmp_path):
+    """tools/tiles_timeline.py (where a tiled process's wall time goes) runs whole `wavemesh mesh --tile`
+    processes with 1 and 2 workers: every task of the strips and of tile_graph timed once, in both runs;
+    the parent's phases add up to the process's wall time; the time not every worker is busy within it; two
+    workers' tasks on two workers; the same bytes."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from wavemesh.tiles import source
+
+    root = Path(__file__).resolve().parents[2]
+    v = np.random.default_rng(8).normal(0, 30, (150, 170)).cumsum(axis=0).cumsum(axis=1)
+    np.save(tmp_path / "h.npy", v.astype(np.float32))
+    out = subprocess.run([sys.executable, str(root / "tools" / "tiles_timeline.py"), str(tmp_path / "h.npy"),
+                          "--workers", "1,2", "--runs", "1", "--json", str(tmp_path / "t.json"),
+                          "--tile", "65", "--metric", "vertical", "--zeta", "5"],
+                         capture_output=True, text=True, cwd=root, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    got = json.loads((tmp_path / "t.json").read_text())
+    src = tiles.open_source(str(tmp_path / "h.npy"))
+    plan = tiles.plan_tiles(src, api.MeshParams(refine=RefineParams(metric="vertical", zeta=5.0)), 65,
+                            defer_error=True, runner=tiles.Runner(1))
+    nodes, _ = tiles.tile_graph(plan)
+    strips = len(source.strip_tasks(src))
+    assert got["same"]
+    for w, (run,) in got["runs"].items():
+        assert run["tasks"] == len(nodes) + strips, w
+        assert sum(d for d, _ in run["rows"].values()) == pytest.approx(run["wall"], abs=1e-6)
+        assert all(0 <= i <= d + 1e-9 for d, i in run["rows"].values()), run["rows"]
+        assert 0 < run["idle"] < run["wall"]
+        assert run["rows"]["import wavemesh.cli"][0] > 0
+        assert run["rows"]["graph: to the last free tile's end"][0] > 0
+        assert len(run["levels"]) == int(w) + 2
+        assert (len(run["per_worker"]) > 1) == (w == "2")  # a thread of each graph apart: the same one
+
+
 def _switch(_):
     import sys
 
