@@ -70,6 +70,7 @@ struct fans {
     uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
     int32_t ex, ey;
+    int32_t j;                                /* the fan triangle v lies in: (p_a, p_j, p_j+1) */
 };
 
 /* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
@@ -164,6 +165,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
         q->k++;
     }
     j = k == 0 ? n - 1 : k - 1;
+    q->j = j;
     fj = cross(q, a, j);
     e0 = cross(q, j, k);
     D = (int64_t)e0 - fk + fj;
@@ -190,7 +192,10 @@ static int fan_plan(const struct fans *q, int32_t a, int32_t *tp, int32_t *nt, i
     for (int32_t j = 1; j + 1 < n; j++) {
         int32_t c = b + 1 == n ? 0 : b + 1;
         int32_t d = (q->dx[b] - q->dx[a]) * (q->dy[c] - q->dy[a]) - (q->dy[b] - q->dy[a]) * (q->dx[c] - q->dx[a]);
-        if (d <= 0) return 0;
+        if (d <= 0) {
+            *big = b; /* the triangle (a, b, c) */
+            return 0;
+        }
         if (d > most) most = d, at = k;
         tp[3 * k] = a, tp[3 * k + 1] = b, tp[3 * k + 2] = c;
         k++;
@@ -232,6 +237,21 @@ static int is_fan(const int32_t *tris, int32_t nt)
     return 0;
 }
 
+/* first_fit's record of the triangles that refused a candidate of this evaluation, as ring positions:
+ * bit y of bad[x] is the fan triangle (p_x, p_y, p_y+1).  Whether a triangle refuses a candidate that
+ * holds it is a property of its three corners alone (an E(T) over zeta, which v's own sample above it
+ * shows, or not counter-clockwise), so every later candidate that holds one is refused for certain. */
+static void mark_bad(uint32_t *bad, int32_t x, int32_t y) { bad[x] |= 1u << y; }
+
+/* 1 when the fan from p_a holds a triangle in bad[] (n ring vertices): one from p_a itself, or the fan
+ * triangle (p_a-2, p_a-1, p_a) of the fan from p_a-2 (this fan's last) or (p_a+2, p_a, p_a+1) of that
+ * from p_a+2 (this fan's first; evaluated before it only when a + 2 wraps round): no other triangle of a
+ * fan has two consecutive ring vertices as it is seen from another corner. */
+static int fan_refused(const uint32_t *bad, int32_t n, int32_t a)
+{
+    return bad[a] || (a >= 2 && (bad[a - 2] >> (a - 1) & 1)) || (a >= n - 2 && (bad[a + 2 - n] >> a & 1));
+}
+
 /* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, v is the vertex
  * and ring, tris its ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex
  * (else v is -1).  Nothing but a removal changes the mesh here, so when that vertex is the next to go
@@ -246,13 +266,13 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 {
     const wm_mesh *me = &r->mesh;
     int32_t *ring = lp->ring, *tris = lp->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
-    uint32_t best = NONE;
+    uint32_t best = NONE, bad[WM_MAX_RING];
     int32_t vx = me->vx[v], vy = me->vy[v];
     struct wm_plan_probe probe;
     struct tested tested;
     struct fans q;
     tested.r = r;
-    probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested;
+    probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested, probe.bad = WM_CHECK ? NULL : bad;
     lp->v = -1;
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return NONE;
@@ -268,6 +288,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
         q.dx[i] = rx[i] - vx;
         q.dy[i] = ry[i] - vy;
         q.z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]];
+        bad[i] = 0;
     }
     /* Three ring vertices have one triangulation, four have two (the fans from 0 and 2 are the same,
      * and those from 1 and 3): the duplicates are not tried again.  The fans first, then the ear
@@ -287,7 +308,15 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 #if WM_CHECK
             check_fan_plan(&q, me, ring, a);
 #endif
-            if (!fan_may_fit(&q, &tested, a) || !fan_plan(&q, a, tp, &nt, &big)) continue;
+            if (!WM_CHECK && fan_refused(bad, n, a)) continue; /* the checking build tries it and asserts */
+            if (!fan_may_fit(&q, &tested, a)) {
+                mark_bad(bad, a, q.j);
+                continue;
+            }
+            if (!fan_plan(&q, a, tp, &nt, &big)) {
+                mark_bad(bad, a, big);
+                continue;
+            }
         } else {
             if (wm_ring_plan_probe(me, ring, n, a, tris, &nt, &probe, &big) != WM_OK) continue;
             if (n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
@@ -307,11 +336,25 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }
-        if (j < nt) continue;
+        if (j < nt) {
+            if (a >= 0) mark_bad(bad, a, tp[3 * (j == 0 ? big : j == big ? 0 : j) + 1]);
+            continue;
+        }
         if (r->field.mask) { /* holes.c */
             for (int32_t k = 0; a >= 0 && k < 3 * nt; k++) tris[k] = ring[tp[k]];
             if (!wm_hole_keeps_cover(r, v, ring, n, tris, nt)) continue;
         }
+#if WM_CHECK
+        if (a >= 0) /* a candidate holding a triangle that refused another is refused */
+            WM_ASSERT(!fan_refused(bad, n, a));
+        else
+            for (int32_t k = 0; k < nt; k++) {
+                int32_t at[3];
+                for (int c = 0; c < 3; c++)
+                    for (at[c] = 0; ring[at[c]] != tris[3 * k + c]; at[c]++) {}
+                WM_ASSERT(!wm_tri_bad(bad, n, at[0], at[1], at[2]));
+            }
+#endif
         best = worst;
         *apex = a;
         lp->v = v, lp->nr = n, lp->nt = nt;

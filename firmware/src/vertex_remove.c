@@ -229,6 +229,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             tris[3 * nt] = ring[pv[best]], tris[3 * nt + 1] = ring[best], tris[3 * nt + 2] = ring[nx[best]];
             if (area[best] > most) most = area[best], at = nt;
             nt++;
+            if (pr && pr->bad && wm_tri_bad(pr->bad, n, pv[best], best, nx[best])) return WM_ERR_REFUSED;
             if (probed(pr, &done, px[pv[best]], py[pv[best]], px[best], py[best], px[nx[best]], py[nx[best]]))
                 return WM_ERR_REFUSED;
             ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
@@ -238,6 +239,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             left--;
         }
         while (!alive[i0]) i0++;
+        if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, nx[i0], nx[nx[i0]])) return WM_ERR_REFUSED;
         poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
     }
     d = orient3(m, poly[0], poly[1], poly[2]);

@@ -554,14 +554,25 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
                 struct wm_normal_slot *kept, int32_t kept_mask);
 /* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
  * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
- * 1 the plan is refused at once (WM_ERR_REFUSED) without working out the rest.  pr may be NULL.  *big
+ * 1, or a planned triangle is one of bad's, the plan is refused at once (WM_ERR_REFUSED) without working out
+ * the rest.  pr may be NULL.  *big
  * (when big is not NULL) gets the index of the plan's largest triangle (the first of them): the plan
  * works out every triangle's area anyway. */
 struct wm_plan_probe {
     int32_t px, py;
     int (*above)(void *ctx, const int32_t x[3], const int32_t y[3], int32_t px, int32_t py);
     void *ctx;
+    const uint32_t *bad; /* NULL, or triangles that refuse any plan holding them (bit b of bad[a]: ring
+                            positions (a, b, b + 1)) */
 };
+/* 1 when the triangle of ring positions (i, j, k) (counter-clockwise, n ring vertices) is one of bad's:
+ * as (x, y, y + 1) from whichever of its corners sees two consecutive ring vertices. */
+static inline int wm_tri_bad(const uint32_t *bad, int32_t n, int32_t i, int32_t j, int32_t k)
+{
+    return ((j + 1 == n ? 0 : j + 1) == k && (bad[i] >> j & 1)) ||
+           ((k + 1 == n ? 0 : k + 1) == i && (bad[j] >> k & 1)) ||
+           ((i + 1 == n ? 0 : i + 1) == j && (bad[k] >> i & 1));
+}
 int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                        int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr,
                        int32_t *big);
