@@ -177,7 +177,9 @@ static void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
 
 /* A slot legalisation changed: E(T) is measured once, at the end, for the triangle the slot then
  * holds (a split's triangle that a flip replaces at once was scanned for nothing: a third of the error
- * bound's scans).  Past the list's room, at once. */
+ * bound's scans).  Past the list's room, at once.  The list's slots hold p's triangles (the split's, then
+ * each flip's two), so while it has room a flip's first slot is in it already (it held p) and its second
+ * is not (it did not): wm_legalise appends that one without a search. */
 static void changed(wm_refiner *r, int32_t *list, int32_t *n, int32_t t, int32_t *heap_n)
 {
     for (int32_t i = 0; i < *n; i++)
@@ -195,12 +197,13 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
-        changed(r, slots, &ns, t, heap_n);
+        slots[ns++] = t; /* a split's slots: distinct, fewer than LEGAL_STACK */
         for (int32_t e = 3 * t; e < 3 * t + 3; e++)
             if (me->hv[e] != p && wm_dest(me, e) != p && top < LEGAL_STACK) stack[top++] = e;
     }
     while (top > 0) {
         int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
+        int64_t sa, sb;
         if (o < 0 || me->hv[WM_PREV(e)] != p) continue;
         a = me->hv[e];
         b = me->hv[o];
@@ -208,12 +211,24 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
         if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
             0)
             continue;
-        if (wm_edge_swap(me, e, NULL, NULL) != WM_OK) continue; /* not strictly convex */
-        /* wm_edge_swap: T1 = (a, d, p), T2 = (d, b, p) in the same slots. */
+        /* strictly convex (wm_edge_swappable): a and b strictly on either side of p-d */
+        sa = wm_orient(me->vx[p], me->vy[p], me->vx[d], me->vy[d], me->vx[a], me->vy[a]);
+        sb = wm_orient(me->vx[p], me->vy[p], me->vx[d], me->vy[d], me->vx[b], me->vy[b]);
+        if (!((sa > 0 && sb < 0) || (sa < 0 && sb > 0))) continue;
+        wm_edge_flip(me, e, o, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
         t1 = WM_TRI(e);
         t2 = WM_TRI(o);
-        changed(r, slots, &ns, t1, heap_n);
-        changed(r, slots, &ns, t2, heap_n);
+        if (ns < LEGAL_STACK) {
+#if WM_CHECK
+            int in1 = 0, in2 = 0;
+            for (int32_t i = 0; i < ns; i++) in1 |= slots[i] == t1, in2 |= slots[i] == t2;
+            WM_ASSERT(in1 && !in2);
+#endif
+            slots[ns++] = t2;
+        } else {
+            changed(r, slots, &ns, t1, heap_n);
+            changed(r, slots, &ns, t2, heap_n);
+        }
         r->flips++;
         if (top + 2 <= LEGAL_STACK) {
             stack[top++] = 3 * t1;

@@ -227,8 +227,8 @@ static WM_ALWAYS_INLINE int end_step(struct wm_end32 *e)
  * allocation and spills in its set-up; bench/refiner_instructions.py, callgrind, against the copies:
  * JACKSBORO --zeta 10 +0.05 % to +0.5 % in three forms, ball.npy --decimate 2 +0.2 %), so each keeps
  * its copy. */
-static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d, uint64_t limit,
-                       int32_t *wx, int32_t *wy)
+WM_NEVER_INLINE static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d,
+                                       uint64_t limit, int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     int32_t A[3], B[3], t = 0, b = 0, m, py, lm;
@@ -318,13 +318,116 @@ done:
     return vm;
 }
 
+/* The samples of a small triangle (scan_tiny) in row order, at most three: each one's place and
+ * V = |S - d h| (S = sum E_k z_k there). */
+struct tiny {
+    int32_t n, x[3], y[3];
+    uint32_t v[3];
+};
+
+static WM_ALWAYS_INLINE void tiny_add(struct tiny *s, const wm_field *f, int32_t px, int32_t py, uint32_t S,
+                                      uint32_t d)
+{
+    uint32_t dh = d * f->samples[py * f->width + px];
+    int32_t i = s->n++;
+    for (; i > 0 && (s->y[i - 1] > py || (s->y[i - 1] == py && s->x[i - 1] > px)); i--) {
+        s->x[i] = s->x[i - 1];
+        s->y[i] = s->y[i - 1];
+        s->v[i] = s->v[i - 1];
+    }
+    s->x[i] = px;
+    s->y[i] = py;
+    s->v[i] = S > dh ? S - dh : dh - S;
+}
+
+/* The points j / g of the way along the edge a -> b (g = 2, 3, 4: a constant once inlined), whose
+ * coordinate differences are multiples of g, for j = 1 .. g - 1: E_a = (d / g) (g - j), E_b = (d / g) j. */
+static WM_ALWAYS_INLINE void tiny_edge(struct tiny *s, const wm_field *f, const int32_t x[3], const int32_t y[3],
+                                       const uint32_t z[3], int a, uint32_t d, int32_t g)
+{
+    int b = wm_k1(a);
+    int32_t sx = (x[b] - x[a]) / g, sy = (y[b] - y[a]) / g;
+    for (int32_t j = 1; j < g; j++)
+        tiny_add(s, f, x[a] + j * sx, y[a] + j * sy,
+                 d / (uint32_t)g * ((uint32_t)(g - j) * z[a] + (uint32_t)j * z[b]), d);
+}
+
+/* E(T)'s scan of a triangle of D <= 4, without the scan's set-up.  By Pick (D = 2I + B - 2, B >= 3; an
+ * edge's gcd divides D) its samples besides the corners, with their edge functions:
+ *   D = 1: none;
+ *   D = 2: the middle of its one edge whose coordinate differences are both even (gcds 2, 1, 1);
+ *   D = 3: the centroid (E = 1, 1, 1) when it is a sample (I = 1), else the thirds of its one edge whose
+ *          differences are multiples of 3 (gcds 3, 1, 1);
+ *   D = 4: with three even edges their middles (gcds 2, 2, 2); with one, a -> b opposite c, its quarters
+ *          when its differences are multiples of 4 (gcds 4, 1, 1), else its middle and
+ *          (a + b + 2 c) / 4 (E_a = E_b = 1, E_c = 2: I = 1; gcds 2, 1, 1).
+ * V is 0 at a corner (S = D z_k).  The samples in row order, each V above the largest so far taking its
+ * place, the first above the limit stopping: the scan's Vmax and sample, (x[0], y[0]) for Vmax = 0.
+ * Checked builds compare it with the scan (scan_any). */
+WM_NEVER_INLINE static uint64_t scan_tiny(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t d,
+                                          uint64_t limit, int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    struct tiny s;
+    uint32_t z[3], vm = 0;
+    int32_t bx = x[0], by = y[0];
+    int c = 0, n_even = 0; /* the edges c -> c + 1 whose differences are both even */
+    s.n = 0;
+    if (d > 1) {
+        for (int k = 0; k < 3; k++) {
+            int k1 = wm_k1(k);
+            z[k] = h[y[k] * f->width + x[k]];
+            if ((((x[k1] - x[k]) | (y[k1] - y[k])) & 1) == 0) c = k, n_even++;
+        }
+        if (d == 2) {
+            tiny_edge(&s, f, x, y, z, c, 2, 2);
+        } else if (d == 3) {
+            int32_t sx = x[0] + x[1] + x[2], sy = y[0] + y[1] + y[2];
+            if (sx % 3 == 0 && sy % 3 == 0) {
+                tiny_add(&s, f, sx / 3, sy / 3, z[0] + z[1] + z[2], 3);
+            } else {
+                for (c = 0; c < 2; c++)
+                    if ((x[wm_k1(c)] - x[c]) % 3 == 0 && (y[wm_k1(c)] - y[c]) % 3 == 0) break;
+                tiny_edge(&s, f, x, y, z, c, 3, 3);
+            }
+        } else if (n_even == 3) {
+            for (c = 0; c < 3; c++) tiny_edge(&s, f, x, y, z, c, 4, 2);
+        } else if ((((x[wm_k1(c)] - x[c]) | (y[wm_k1(c)] - y[c])) & 3) == 0) {
+            tiny_edge(&s, f, x, y, z, c, 4, 4);
+        } else {
+            int b = wm_k1(c), o = wm_k2(c);
+            tiny_edge(&s, f, x, y, z, c, 4, 2);
+            tiny_add(&s, f, (x[c] + x[b] + 2 * x[o]) / 4, (y[c] + y[b] + 2 * y[o]) / 4, z[c] + z[b] + 2 * z[o], 4);
+        }
+    }
+    WM_PROF_ADD(WM_PC_SAMPLES, s.n);
+    for (int32_t i = 0; i < s.n; i++)
+        if (s.v[i] > vm) {
+            vm = s.v[i];
+            bx = s.x[i];
+            by = s.y[i];
+            if (vm > limit) break;
+        }
+    if (wx) *wx = bx;
+    if (wy) *wy = by;
+    return vm;
+}
+
 /* The scan that fits the triangle (the same result either way).  The board's refiner (WM_TRI_ENGINE)
  * hands it to the FPGA's triangle error engine, which returns the same Vmax and sample; the holes
- * mask's cover test (holes.c) has run before, on the CPU. */
+ * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D <= 4 takes scan_tiny. */
 static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
                          int32_t *wx, int32_t *wy)
 {
     WM_PROF_ADD(WM_PC_SCANS, 1);
+    if (D <= 4) {
+#if WM_CHECK
+        int32_t cx, cy, tx, ty;
+        uint64_t v = scan(f, x, y, D, limit, &cx, &cy), t = scan_tiny(f, x, y, (int32_t)D, limit, &tx, &ty);
+        WM_ASSERT(v == t && cx == tx && cy == ty);
+#endif
+        return scan_tiny(f, x, y, (int32_t)D, limit, wx, wy);
+    }
 #ifdef WM_TRI_ENGINE
     uint64_t v;
     if (wm_tri_engine_scan(f, x, y, limit, &v, wx, wy)) return v;

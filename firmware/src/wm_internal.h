@@ -111,6 +111,8 @@ static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
 void wm_tri_claim(wm_mesh *m, int32_t t);
 /* wm_edge_swap of an edge the caller has found wm_edge_swappable (the mesh unchanged since). */
 void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched);
+/* The same with its half-edges and corners known: e = a->b in (a, b, c), f = ho[e] in (b, a, d). */
+void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t a, int32_t b, int32_t c, int32_t d);
 
 /* Rotation around a vertex: e is a half-edge leaving v.  Counter-clockwise: the next half-edge
  * leaving v, or -1 at the border.  wm_fan_first: the most clockwise half-edge leaving v (vh[v] for an
