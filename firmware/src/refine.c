@@ -300,10 +300,12 @@ static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py
  * each time); ANGLE_UNKNOWN (angle 2^16 - 1) is none kept. */
 #define ANGLE_UNKNOWN ((wm_index)32767)
 
-static void set_angle(wm_refiner *r, int32_t t, int32_t angle)
+static wm_index angle_code(int32_t angle)
 {
-    r->list[t] = angle >= 0 && angle < 65535 ? (wm_index)(angle - 32768) : ANGLE_UNKNOWN;
+    return angle >= 0 && angle < 65535 ? (wm_index)(angle - 32768) : ANGLE_UNKNOWN;
 }
+
+static void set_angle(wm_refiner *r, int32_t t, int32_t angle) { r->list[t] = angle_code(angle); }
 
 /* Triangle t's smallest angle, kept for the sweep; (x, y) its corners counter-clockwise from any one
  * (a rotation of wm_tri_xy's: the same integers in wm_min_corner, so the same angle as wm_min_angle). */
@@ -325,6 +327,136 @@ static int32_t slot_angle(wm_refiner *r, int32_t t, const int32_t x[3], const in
     return a;
 }
 
+/* A swap whose swap back would be made keeps what the swap back needs in a record: the two triangles it
+ * replaced (their E(T), worst samples and kept angles), so that the swap back, when its two triangles
+ * are still the swap's, is made without a test (try_swap's answer is known: yes) and without a scan:
+ * its triangles are the replaced ones.  The records lie in vkey (the decimation's, free while the
+ * levels run), REC_WORDS words each, a power of two of them, the one of swap number s at (s / 2) mod
+ * their count; a record taken by a later swap is not found (its tag is that swap's number) and the
+ * swap back is then tested as any edge is.  Such a swap's number is even, a swap whose swap back is
+ * refused has an odd one (pos[] of both triangles).  Words: the tag s, the vertex c of the replaced
+ * triangle (a, b, c), then of (a, b, c) and (b, a, d): E(T), E(T), worst, worst, both kept angles. */
+#define REC_WORDS 7
+
+/* The records' count - 1 (wm_refiner.swap_recs), for vert_cap vertex slots: 0 when there are none, and so
+ * with a region of interest or holes, whose E(T) of a flat triangle places no worst sample as the
+ * scan's (swap_back). */
+static uint32_t rec_mask(int32_t vert_cap, int special)
+{
+    uint32_t n = (uint32_t)vert_cap / REC_WORDS, m = 1;
+    if (n < 2 || special) return 0;
+    while (2 * m <= n) m *= 2;
+    return m - 1;
+}
+
+/* The next swap number of the parity given (1: its swap back is refused; 0: made, with a record), or -1
+ * when they ran out (then none: the swap's edge is tested again as any). */
+static int32_t next_stamp(wm_refiner *r, int32_t odd)
+{
+    int32_t s = r->swap_stamp + 1;
+    if ((s & 1) != odd) s++;
+    if (!r->swept || s > WM_INDEX_MAX - 1) return -1;
+    r->swap_stamp = s;
+    return s;
+}
+
+/* The swap of e's quadrilateral made: the new triangles t1 = (a, d, c), t2 = (d, b, c) get their E(T)
+ * e1, e2, worst samples w1, w2 and kept angles k1, k2 (list[] entries); back: whether the swap back
+ * would be made (then a record of the replaced triangles, read before the swap). */
+static void make_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t e1, uint32_t e2, int32_t w1, int32_t w2,
+                      wm_index k1, wm_index k2, int back)
+{
+    wm_mesh *me = &r->mesh;
+    int32_t t1 = WM_TRI(e), t2 = WM_TRI(me->ho[e]), c = me->hv[WM_PREV(e)], s;
+    uint32_t rec[REC_WORDS] = {0,
+                               (uint32_t)c,
+                               r->err[t1],
+                               r->err[t2],
+                               (uint32_t)r->worst[t1],
+                               (uint32_t)r->worst[t2],
+                               (uint32_t)(uint16_t)r->list[t1] | (uint32_t)(uint16_t)r->list[t2] << 16};
+    wm_edge_swap_convex(me, e, NULL, NULL); /* swappable: tested by the caller */
+    /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
+    r->list[t1] = k1;
+    r->list[t2] = k2;
+    if (alpha < 65536u) {
+        r->err[t1] = e1;
+        r->err[t2] = e2;
+        r->worst[t1] = w1;
+        r->worst[t2] = w2;
+        me->tflag[t1] |= WM_F_NEW;
+        me->tflag[t2] |= WM_F_NEW;
+        wm_forget_class(r, t1);
+        wm_forget_class(r, t2);
+    } else {
+        wm_touch(r, t1);
+        wm_touch(r, t2);
+    }
+    s = next_stamp(r, !back);
+    if (s < 0) return;
+    r->pos[t1] = r->pos[t2] = (wm_index)s;
+    if (back && r->swap_recs) {
+        uint32_t *q = r->vkey + REC_WORDS * (((uint32_t)s >> 1) & r->swap_recs);
+        rec[0] = (uint32_t)s;
+        for (int i = 0; i < REC_WORDS; i++) q[i] = rec[i];
+    }
+}
+
+/* A kept angle's list[] entry (-32768 .. 32767) from its record's 16 bits. */
+static wm_index rec_angle(uint32_t w) { return (wm_index)((int32_t)((w & 0xFFFFu) ^ 0x8000u) - 32768); }
+
+/* The swap back of the swap numbered s (even) across e, whose triangles are still the swap's: made from
+ * its record, 1; 0 when the record was taken by a later swap (the caller tests the edge). */
+static int swap_back(wm_refiner *r, int32_t e, uint32_t alpha, int32_t s)
+{
+    wm_mesh *me = &r->mesh;
+    const uint32_t *q = r->vkey + REC_WORDS * (((uint32_t)s >> 1) & r->swap_recs);
+    int32_t tt[2] = {WM_TRI(e), WM_TRI(me->ho[e])};
+    int j;
+    if (r->swap_recs == 0 || q[0] != (uint32_t)s) return 0;
+    /* the swap back's t1 = (a', d', c') holds a' = hv[e], which is the record's c or d */
+    j = (uint32_t)me->hv[e] != q[1];
+    make_swap(r, e, alpha, q[2 + j], q[3 - j], (int32_t)q[4 + j], (int32_t)q[5 - j], rec_angle(q[6] >> 16 * j),
+              rec_angle(q[6] >> 16 * (1 - j)), 1);
+    /* a flat triangle's (E(T) = 0) worst sample is the scan's first corner (wm_place_at): the slot's */
+    for (int k = 0; k < 2 && alpha < 65536u; k++) {
+        int32_t t = tt[k], v = me->hv[3 * t];
+        if (r->err[t] == 0) r->worst[t] = me->vy[v] * r->field.width + me->vx[v];
+    }
+#if WM_CHECK
+    for (int k = 0; k < 2 && alpha < 65536u; k++) { /* what try_swap would have measured */
+        int32_t t = tt[k], x[3], y[3], wx, wy;
+        uint32_t ev;
+        wm_tri_xy(me, t, x, y);
+        ev = wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
+        WM_ASSERT(r->err[t] == ev && r->worst[t] == wy * r->field.width + wx);
+        WM_ASSERT(r->list[t] == ANGLE_UNKNOWN || (int32_t)r->list[t] + 32768 == wm_min_angle(x, y));
+        (void)ev;
+    }
+#endif
+    return 1;
+}
+
+/* try_swap's dmax with R_A exact: the new triangles' smallest angles (the CORDIC, into *an1 and *an2) over
+ * the old pair's, ang_old.  Natively it is taken after the scans (ANGLES_LATE), whose bounds then come
+ * from R_A's bound from above (dmax grows with R_A; a scan that stays within its bound is the whole
+ * scan, so the answer is the same), and the smaller new triangle is scanned first: the two CORDICs of a
+ * swap a scan refuses are saved, and a refusing scan is most often the shorter.  On the board the angle
+ * unit (WM_ANGLE_ENGINE) and the scan engine make both cost more cycles than they save: the angles
+ * before the scans, (a, d, c) first. */
+#ifdef WM_ANGLE_ENGINE
+#define ANGLES_LATE 0
+#else
+#define ANGLES_LATE 1
+#endif
+
+static inline uint64_t exact_dmax(uint32_t alpha, int64_t dot1, int64_t cross1, int64_t dot2, int64_t cross2,
+                                  int32_t ang_old, uint64_t num, int32_t *an1, int32_t *an2)
+{
+    int32_t a = *an1 = wm_angle_q16(dot1, cross1), a2 = *an2 = wm_angle_q16(dot2, cross2);
+    return den_max(alpha, ratio_q16((uint64_t)(a2 < a ? a2 : a), (uint64_t)ang_old), num);
+}
+
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
@@ -337,6 +469,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
     const uint64_t one = 65536u;
     uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
     int back = 1;                    /* whether the swap back would be made */
+    int first;                       /* the new triangle scanned first: 0 (a, d, c), 1 (d, b, c) */
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
     /* new triangles (a, d, c) and (d, b, c) */
@@ -350,6 +483,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         int64_t s2 = wm_orient(n1x[2], n1y[2], qx[0], qy[0], qx[1], qy[1]);
         WM_ASSERT(((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0)) == wm_edge_swappable(me, e));
         if (!((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0))) return 0;
+        first = ANGLES_LATE && s2 < -s1; /* twice the new triangles' areas: -s1 (a, d, c), s2 (d, b, c) */
     }
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
@@ -413,29 +547,40 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                 }
             }
         }
-        if (alpha > 0) {
-            ang_new = an1 = wm_angle_q16(dot1, cross1);
-            a1 = an2 = wm_angle_q16(dot2, cross2);
-            if (a1 < ang_new) ang_new = a1;
-            ra = ratio_q16((uint64_t)ang_new, (uint64_t)ang_old);
-            dmax = den_max(alpha, ra, o1 + o2 + one);
+        if (alpha > 0 && !ANGLES_LATE) {
+            dmax = exact_dmax(alpha, dot1, cross1, dot2, cross2, ang_old, o1 + o2 + one, &an1, &an2);
             if (s1 + s2 + one > dmax) return 0; /* one > dmax with it */
         }
-        /* Then each scan stops as soon as its E(T) is too large for the swap (the bound, or den over
-         * dmax with the other triangle's lower bound, then its measure): the E(T) and worst sample of
-         * a scan that stays within are the whole scan's. */
-        lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - s2);
-        if (lim > bnd) lim = bnd;
-        e1 = r->roi ? wm_roi_error(r, n1x, n1y, &w1x, &w1y)
-                    : wm_tri_error_within(&r->field, &r->params, n1x, n1y, lim, &w1x, &w1y, &r1);
-        if (e1 > lim) return 0;
-        s1 = in_height(&r->params, e1);
-        lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - s1);
-        if (lim > bnd) lim = bnd;
-        e2 = r->roi ? wm_roi_error(r, qx, qy, &w2x, &w2y)
-                    : wm_tri_error_within(&r->field, &r->params, qx, qy, lim, &w2x, &w2y, &r2);
-        if (e2 > lim) return 0;
-        sn = s1 + in_height(&r->params, e2);
+        /* Then the scans, the smaller new triangle's first (a swap that one of them refuses is most
+         * often refused for fewer samples), each stopping as soon as its E(T) is too large for the swap
+         * (the bound, or den over dmax with the other triangle's lower bound, then its measure): the E(T)
+         * and worst sample of a scan that stays within are the whole scan's, so the order changes no
+         * answer. */
+        {
+            const int32_t *fx = first ? qx : n1x, *fy = first ? qy : n1y, *gx = first ? n1x : qx,
+                          *gy = first ? n1y : qy;
+            uint64_t *fk = first ? &r2 : &r1, *gk = first ? &r1 : &r2, sf;
+            int32_t *fwx = first ? &w2x : &w1x, *fwy = first ? &w2y : &w1y, *gwx = first ? &w1x : &w2x,
+                    *gwy = first ? &w1y : &w2y;
+            uint32_t ef, eg;
+            lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - (first ? s1 : s2));
+            if (lim > bnd) lim = bnd;
+            ef = r->roi ? wm_roi_error(r, fx, fy, fwx, fwy)
+                        : wm_tri_error_within(&r->field, &r->params, fx, fy, lim, fwx, fwy, fk);
+            if (ef > lim) return 0;
+            sf = in_height(&r->params, ef);
+            lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - sf);
+            if (lim > bnd) lim = bnd;
+            eg = r->roi ? wm_roi_error(r, gx, gy, gwx, gwy)
+                        : wm_tri_error_within(&r->field, &r->params, gx, gy, lim, gwx, gwy, gk);
+            if (eg > lim) return 0;
+            e1 = first ? eg : ef, e2 = first ? ef : eg;
+            sn = sf + in_height(&r->params, eg);
+        }
+        if (alpha > 0 && ANGLES_LATE) {
+            dmax = exact_dmax(alpha, dot1, cross1, dot2, cross2, ang_old, o1 + o2 + one, &an1, &an2);
+            if (sn + one > dmax) return 0;
+        }
         WM_ASSERT(sn + one <= dmax);
     } else {
         if (ra <= 65536u) return 0; /* xi = R_A */
@@ -457,27 +602,8 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
             back = alpha == 65536u ? rb > 65536u : o1 + o2 + one <= den_max(alpha, rb, sn + one);
         }
     }
-    wm_edge_swap_convex(me, e, NULL, NULL); /* swappable: tested above */
-    /* wm_edge_swap keeps the slots: t1 = (a, d, c), t2 = (d, b, c). */
-    set_angle(r, t1, an1);
-    set_angle(r, t2, an2);
-    if (alpha < 65536u) {
-        r->err[t1] = e1;
-        r->err[t2] = e2;
-        r->worst[t1] = w1y * r->field.width + w1x;
-        r->worst[t2] = w2y * r->field.width + w2x;
-        me->tflag[t1] |= WM_F_NEW;
-        me->tflag[t2] |= WM_F_NEW;
-        wm_forget_class(r, t1);
-        wm_forget_class(r, t2);
-    } else {
-        wm_touch(r, t1);
-        wm_touch(r, t2);
-    }
-    if (!back && r->swept && r->swap_stamp < WM_INDEX_MAX - 1) {
-        r->swap_stamp++;
-        r->pos[t1] = r->pos[t2] = (wm_index)r->swap_stamp;
-    }
+    make_swap(r, e, alpha, e1, e2, w1y * r->field.width + w1x, w2y * r->field.width + w2x, angle_code(an1),
+              angle_code(an2), back);
     return 1;
 }
 
@@ -502,6 +628,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
         r->swap_stamp = 0;
     }
     first = r->swap_stamp + 1;
+    r->swap_recs = rec_mask(me->vert_cap, r->roi != NULL || r->field.mask != NULL);
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
@@ -514,7 +641,15 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 u = (int32_t)((uint32_t)o / 3u);
                 if (!(me->tflag[u] & WM_F_SWAP)) continue;
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) continue; /* a swap back: "no" */
+                if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) { /* a swap back */
+                    if (r->pos[t] & 1) continue;                                  /* refused */
+                    if (swap_back(r, e, alpha, r->pos[t])) {                      /* made */
+                        me->tflag[t] |= WM_F_CHANGED;
+                        me->tflag[u] |= WM_F_CHANGED;
+                        swaps++;
+                        continue;
+                    }
+                }
                 if (try_swap(r, e, alpha, emax, wd)) {
                     me->tflag[t] |= WM_F_CHANGED;
                     me->tflag[u] |= WM_F_CHANGED;

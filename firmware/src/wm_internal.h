@@ -449,22 +449,25 @@ struct wm_refiner {
     int32_t budget_hit;  /* set when the budget stopped an operation (this step) */
     int32_t failed;      /* a WM_ERR_* code that ended the refinement, or 0 */
     int32_t flips, removals; /* this step's legalisation flips and vertex removals */
-    /* The regularisation's swaps whose swap back is known to be refused (refine.c): while the levels run
-     * (swept = 1; pos[] is free then) pos[t] of both triangles a swap made holds its number (swap_stamp
-     * counts them), until either changes (wm_forget_class sets pos[t] = -1). */
+    /* The regularisation's swaps, whose swap back is known (refine.c): while the levels run (swept = 1;
+     * pos[] is free then) pos[t] of both triangles a swap made holds its number (swap_stamp counts them;
+     * odd: the swap back is refused, even: made, from the swap's record in vkey), until either changes
+     * (wm_forget_class sets pos[t] = -1). */
     int32_t swept, swap_stamp;
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
     wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the regularisation's
                             smallest angles (refine.c), the heaps */
     wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
-    uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex */
+    uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex; the levels: the
+                            regularisation's records (refine.c) */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
                             changed); decimation: the triangulation that cost belongs to */
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
     struct wm_normal_slot *normals; /* [cache_mask + 1] reduce.c's unit normals, kept */
     struct wm_ecache_slot *ecache;  /* [cache_mask + 1] reduce.c's middle eigenvectors, kept */
     int32_t cache_mask;             /* wm_cache_slots(vert_cap) - 1 */
+    uint32_t swap_recs;             /* the regularisation's records in vkey: their count - 1 (refine.c) */
 };
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
