@@ -14,9 +14,9 @@ pytestmark = pytest.mark.skipif(shutil.which("valgrind") is None,
                                 reason="valgrind is not installed (tools/debian-packages.txt)")
 
 
-@pytest.mark.parametrize("name,make,levels,params", CASES, ids=[c[0] for c in CASES])
-def test_no_storage_read_before_written(name, make, levels, params, release_build, tmp_path):
-    write_case(make, levels, params, tmp_path / "in.bin")
+@pytest.mark.parametrize("name,make,levels,params,cap", CASES, ids=[c[0] for c in CASES])
+def test_no_storage_read_before_written(name, make, levels, params, cap, release_build, tmp_path):
+    write_case(make, levels, params, tmp_path / "in.bin", cap)
     r = subprocess.run(["valgrind", "--tool=memcheck", "--error-exitcode=99", "--track-origins=yes",
                         str(release_build / "wm_run"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
                        capture_output=True, text=True, timeout=300)
