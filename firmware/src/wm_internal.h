@@ -570,6 +570,9 @@ struct wm_plan_probe {
     const uint32_t *bad; /* NULL, or triangles that refuse any plan holding them (bit b of bad[a]: ring
                             positions (a, b, b + 1)) */
 };
+#if WM_MAX_RING > 32 /* bad's ring positions are the bits of a 32-bit word (1u << b, b < WM_MAX_RING) */
+#error "wm_plan_probe.bad and first_fit's bad[] need WM_MAX_RING <= 32"
+#endif
 /* 1 when the triangle of ring positions (i, j, k) (counter-clockwise, n ring vertices) is one of bad's:
  * as (x, y, y + 1) from whichever of its corners sees two consecutive ring vertices. */
 static inline int wm_tri_bad(const uint32_t *bad, int32_t n, int32_t i, int32_t j, int32_t k)
