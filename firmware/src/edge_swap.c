@@ -16,20 +16,11 @@
 
 int wm_edge_swappable(const wm_mesh *m, int32_t e)
 {
-    int32_t f, a, b, c, d;
-    int64_t s1, s2;
+    int32_t f;
     if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return 0;
     f = m->ho[e];
     if (f < 0) return 0;
-    a = m->hv[e];
-    b = m->hv[f];
-    c = m->hv[WM_PREV(e)];
-    d = m->hv[WM_PREV(f)];
-    /* a and b strictly on opposite sides of the line c-d (c and d are on opposite sides of a-b,
-     * strictly, because both triangles are counter-clockwise). */
-    s1 = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[a], m->vy[a]);
-    s2 = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[b], m->vy[b]);
-    return (s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0);
+    return wm_quad_convex(m, m->hv[e], m->hv[f], m->hv[WM_PREV(e)], m->hv[WM_PREV(f)]);
 }
 
 int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)

@@ -203,7 +203,6 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     }
     while (top > 0) {
         int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
-        int64_t sa, sb;
         if (o < 0 || me->hv[WM_PREV(e)] != p) continue;
         a = me->hv[e];
         b = me->hv[o];
@@ -211,10 +210,7 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
         if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
             0)
             continue;
-        /* strictly convex (wm_edge_swappable): a and b strictly on either side of p-d */
-        sa = wm_orient(me->vx[p], me->vy[p], me->vx[d], me->vy[d], me->vx[a], me->vy[a]);
-        sb = wm_orient(me->vx[p], me->vy[p], me->vx[d], me->vy[d], me->vx[b], me->vy[b]);
-        if (!((sa > 0 && sb < 0) || (sa < 0 && sb > 0))) continue;
+        if (!wm_quad_convex(me, a, b, p, d)) continue; /* wm_edge_swappable's test, its corners at hand */
         wm_edge_flip(me, e, o, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
         t1 = WM_TRI(e);
         t2 = WM_TRI(o);

@@ -86,6 +86,16 @@ static inline int64_t wm_orient(int32_t ax, int32_t ay, int32_t bx, int32_t by, 
 
 static inline int32_t wm_dest(const wm_mesh *m, int32_t e) { return m->hv[WM_NEXT(e)]; }
 
+/* 1 when a and b lie strictly on opposite sides of the line c-d: for the edge a-b between the
+ * counter-clockwise (a, b, c) and (b, a, d), whose c and d lie strictly on opposite sides of a-b, the
+ * quadrilateral a-d-b-c is strictly convex (wm_edge_swappable; the legalisation's flips). */
+static inline int wm_quad_convex(const wm_mesh *m, int32_t a, int32_t b, int32_t c, int32_t d)
+{
+    int64_t sa = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[a], m->vy[a]);
+    int64_t sb = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[b], m->vy[b]);
+    return (sa > 0 && sb < 0) || (sa < 0 && sb > 0);
+}
+
 static inline int wm_tri_live(const wm_mesh *m, int32_t t)
 {
     return t >= 0 && t < m->tri_end && m->hv[3 * t] >= 0;
