@@ -457,6 +457,20 @@ static inline uint64_t exact_dmax(uint32_t alpha, int64_t dot1, int64_t cross1, 
     return den_max(alpha, ratio_q16((uint64_t)(a2 < a ? a2 : a), (uint64_t)ang_old), num);
 }
 
+/* try_swap's measure of a new triangle (x, y) within its limit: the bound bnd, or, with dmax, den over dmax
+ * given the other triangle's part of it (below: its lower bound, or its measure); 0 when E(T) is over the
+ * limit (the swap is refused; the scan stopped there), else 1 with E(T) in *e. */
+static WM_ALWAYS_INLINE int scan_new(wm_refiner *r, const int32_t x[3], const int32_t y[3], uint64_t dmax,
+                                     uint32_t bnd, uint64_t below, uint32_t *e, int32_t *wx, int32_t *wy,
+                                     uint64_t *kept)
+{
+    uint32_t lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - 65536u - below);
+    if (lim > bnd) lim = bnd;
+    *e = r->roi ? wm_roi_error(r, x, y, wx, wy)
+                : wm_tri_error_within(&r->field, &r->params, x, y, lim, wx, wy, kept);
+    return *e <= lim;
+}
+
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
@@ -515,7 +529,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         uint64_t dmax, s1, s2;
         o1 = in_height(&r->params, oe1);
         o2 = in_height(&r->params, oe2);
-        uint32_t lb1 = 0, lb2 = 0, lim;
+        uint32_t lb1 = 0, lb2 = 0;
         /* xi > 1 iff den <= dmax (den_max), and den >= one: R_A alone may refuse the swap.  Then the
          * old triangles' worst samples, measured against the new triangle(s) holding them: they bound
          * the new E(T) from below (rounded as E(T) is), so den from below, without a scan; each
@@ -557,25 +571,16 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
          * and worst sample of a scan that stays within are the whole scan's, so the order changes no
          * answer. */
         {
-            const int32_t *fx = first ? qx : n1x, *fy = first ? qy : n1y, *gx = first ? n1x : qx,
-                          *gy = first ? n1y : qy;
-            uint64_t *fk = first ? &r2 : &r1, *gk = first ? &r1 : &r2, sf;
-            int32_t *fwx = first ? &w2x : &w1x, *fwy = first ? &w2y : &w1y, *gwx = first ? &w1x : &w2x,
-                    *gwy = first ? &w1y : &w2y;
-            uint32_t ef, eg;
-            lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - (first ? s1 : s2));
-            if (lim > bnd) lim = bnd;
-            ef = r->roi ? wm_roi_error(r, fx, fy, fwx, fwy)
-                        : wm_tri_error_within(&r->field, &r->params, fx, fy, lim, fwx, fwy, fk);
-            if (ef > lim) return 0;
-            sf = in_height(&r->params, ef);
-            lim = dmax == UINT64_MAX ? bnd : scale_inv(&r->params, dmax - one - sf);
-            if (lim > bnd) lim = bnd;
-            eg = r->roi ? wm_roi_error(r, gx, gy, gwx, gwy)
-                        : wm_tri_error_within(&r->field, &r->params, gx, gy, lim, gwx, gwy, gk);
-            if (eg > lim) return 0;
-            e1 = first ? eg : ef, e2 = first ? ef : eg;
-            sn = sf + in_height(&r->params, eg);
+            const int32_t *tx[2] = {n1x, qx}, *ty[2] = {n1y, qy};
+            int32_t *twx[2] = {&w1x, &w2x}, *twy[2] = {&w1y, &w2y};
+            uint64_t *tk[2] = {&r1, &r2};
+            uint32_t et[2];
+            int p = first, q = !first;
+            if (!scan_new(r, tx[p], ty[p], dmax, bnd, first ? s1 : s2, &et[p], twx[p], twy[p], tk[p])) return 0;
+            sn = in_height(&r->params, et[p]);
+            if (!scan_new(r, tx[q], ty[q], dmax, bnd, sn, &et[q], twx[q], twy[q], tk[q])) return 0;
+            sn += in_height(&r->params, et[q]);
+            e1 = et[0], e2 = et[1];
         }
         if (alpha > 0 && ANGLES_LATE) {
             dmax = exact_dmax(alpha, dot1, cross1, dot2, cross2, ang_old, o1 + o2 + one, &an1, &an2);
