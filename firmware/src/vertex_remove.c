@@ -108,6 +108,29 @@ static int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int
            wm_orient(cx, cy, ax, ay, px, py) >= 0;
 }
 
+/* 1 when no polygon vertex other than the ear's (ia, ib, ic) lies in the closed ear (the ear is strictly
+ * counter-clockwise): the ear is valid. */
+static int ear_holds_none(const int32_t *px, const int32_t *py, const int32_t *nx, int32_t ia, int32_t ib,
+                          int32_t ic)
+{
+    int32_t ax = px[ia], ay = py[ia], bx = px[ib], by = py[ib], cx = px[ic], cy = py[ic], x0, x1, y0, y1, j;
+    x0 = ax < bx ? ax : bx;
+    if (cx < x0) x0 = cx;
+    x1 = ax > bx ? ax : bx;
+    if (cx > x1) x1 = cx;
+    y0 = ay < by ? ay : by;
+    if (cy < y0) y0 = cy;
+    y1 = ay > by ? ay : by;
+    if (cy > y1) y1 = cy;
+    for (j = nx[ic]; j != ia; j = nx[j]) {
+        if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
+        if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 && wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
+            wm_orient(cx, cy, ax, ay, px[j], py[j]) >= 0)
+            return 0;
+    }
+    return 1;
+}
+
 /* The first of the ear clipping's triangles (in the order they are cut) that holds the probe's point
  * is handed to the probe; an answer of 1 refuses the plan at once (the rest is not worked out). */
 static int probed(const struct wm_plan_probe *pr, int *done, int32_t ax, int32_t ay, int32_t bx, int32_t by,
@@ -155,14 +178,17 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         return WM_OK;
     }
     /* The polygon as a list over the ring positions (nx, pv; cut ones not alive), walked in position
-     * order, which is polygon order from the lowest position left.  An ear's status only improves as
-     * other vertices go (fewer points to contain or to lie in its circle), so an ear once found valid
-     * stays valid and a Delaunay ear stays Delaunay until a neighbour of it is cut: ok[] keeps that (0
-     * unknown, 1 valid, 2 valid and Delaunay) and only unknown ears are tested again; a valid ear that
-     * is not Delaunay keeps the vertex in its circle (blk) and is tested again only when that vertex
-     * has been cut (the decimation plans a hole for every vertex it looks at: this was half the cost).
-     * The choice is the same as testing every ear each round: the first Delaunay ear in polygon order,
-     * else the first valid one. */
+     * order, which is polygon order from the lowest position left.  A strictly convex ear with no other
+     * polygon vertex strictly inside its circumcircle is valid too (every point of the closed triangle
+     * but its corners lies strictly inside that circle), so the in-circle test comes first, and the
+     * containment test (ear_holds_none) is taken only for an ear that fails it while no valid ear has
+     * come before it in the round.  An ear's status only improves as other vertices go (fewer points to
+     * contain or to lie in its circle), so an ear once found valid stays valid and a Delaunay ear stays
+     * Delaunay until a neighbour of it is cut: ok[] keeps that (0 unknown, 3 strictly convex, 1 valid,
+     * 2 Delaunay) and only unknown ears are tested again; an ear that is not Delaunay keeps the vertex
+     * in its circle (blk) and is tested again only when that vertex has been cut (the decimation plans
+     * a hole for every vertex it looks at: this was half the cost).  The choice is the same as testing
+     * every ear each round: the first Delaunay ear in polygon order, else the first valid one. */
     {
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
         int64_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
@@ -184,32 +210,14 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 if (!alive[i]) continue;
                 ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
-                    int32_t x0, x1, y0, y1;
                     area[i] = wm_orient(ax, ay, bx, by, cx, cy);
                     if (area[i] <= 0) continue;
-                    x0 = ax < bx ? ax : bx;
-                    if (cx < x0) x0 = cx;
-                    x1 = ax > bx ? ax : bx;
-                    if (cx > x1) x1 = cx;
-                    y0 = ay < by ? ay : by;
-                    if (cy < y0) y0 = cy;
-                    y1 = ay > by ? ay : by;
-                    if (cy > y1) y1 = cy;
-                    /* the other polygon vertices, after ic up to ia (either test's answer does not
-                     * depend on the order) */
-                    for (j = nx[ic]; j != ia; j = nx[j]) {
-                        if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
-                        if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 &&
-                            wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
-                            wm_orient(cx, cy, ax, ay, px[j], py[j]) >= 0)
-                            break;
-                    }
-                    if (j != ia) continue;
-                    ok[i] = 1;
+                    ok[i] = 3;
                     blk[i] = -1;
                 }
-                if (valid < 0) valid = i; /* the first valid ear, unless a Delaunay one follows */
-                if (ok[i] == 1 && (blk[i] < 0 || !alive[blk[i]])) {
+                /* the other polygon vertices, after ic up to ia (either test's answer does not depend on
+                 * the order) */
+                if (ok[i] != 2 && (blk[i] < 0 || !alive[blk[i]])) {
                     struct circle q;
                     circle_of(&q, ax, ay, bx, by, cx, cy);
                     for (j = nx[ic]; j != ia; j = nx[j])
@@ -218,9 +226,12 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                     else blk[i] = j;
                 }
                 if (ok[i] == 2) {
+                    WM_ASSERT(ear_holds_none(px, py, nx, ia, i, ic));
                     best = i;
                     break;
                 }
+                if (valid < 0 && ok[i] == 3 && ear_holds_none(px, py, nx, ia, i, ic)) ok[i] = 1;
+                if (valid < 0 && ok[i] == 1) valid = i; /* the first valid ear, unless a Delaunay one follows */
             }
             if (best < 0) best = valid;
             /* A simple polygon always has an ear (two, in fact). */
