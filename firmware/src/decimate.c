@@ -407,21 +407,28 @@ static void down(wm_refiner *r, int32_t i, int32_t n)
  * it passes are the ones down moves up, the order total), in about half the comparisons. */
 static void sink(wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t v = r->list[i], j = i;
+    wm_index *list = r->list, *pos = r->pos;
+    const uint32_t *key = r->vkey;
+    int32_t v = list[i], j = i;
+    uint32_t kv = key[v];
     for (;;) {
-        int32_t c = 2 * j + 1;
+        int32_t c = 2 * j + 1, u;
         if (c >= n) break;
-        if (c + 1 < n && before(r, r->list[c + 1], r->list[c])) c++;
-        put(r, j, r->list[c]);
+        u = list[c];
+        if (c + 1 < n) {
+            int32_t w = list[c + 1];
+            if (key[w] < key[u] || (key[w] == key[u] && w < u)) c++, u = w;
+        }
+        list[j] = u, pos[u] = j;
         j = c;
     }
     while (j > i) {
-        int32_t p = (j - 1) / 2;
-        if (!before(r, v, r->list[p])) break;
-        put(r, j, r->list[p]);
+        int32_t p = (j - 1) / 2, u = list[p];
+        if (!(kv < key[u] || (kv == key[u] && v < u))) break;
+        list[j] = u, pos[u] = j;
         j = p;
     }
-    put(r, j, v);
+    list[j] = v, pos[v] = j;
 }
 
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
@@ -471,20 +478,54 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
  * set, triangles -0.8 % to +2.3 % by pair (bench/refiner_instructions.py). */
 #define STALE INT8_MIN
 
-static void push(wm_refiner *r, int32_t v, uint32_t key, int8_t apex, int32_t *n)
+/* The stale vertices entered at zeta (above) are kept apart from the heap, in a min-heap of their slots alone
+ * (all their keys are zeta, so their order is their slots'), from the far end of r->list down (z[-i]
+ * is its i-th entry; the two never meet: together they hold at most the live vertices), their pos -2:
+ * its entries need no key loaded to be ordered, and the heap holds fewer.  The next vertex is the
+ * first of the two tops by (cost, slot), as one heap of both would give. */
+#define IN_Z (-2)
+
+struct zheap {
+    wm_index *z; /* its entry i is z[-i] */
+    int32_t n;
+};
+
+static void z_push(wm_refiner *r, struct zheap *h, int32_t v)
 {
-    r->vkey[v] = key;
-    r->vapex[v] = apex;
-    put(r, *n, v);
-    (*n)++;
-    up(r, *n - 1);
+    int32_t i = h->n++;
+    while (i > 0) {
+        int32_t p = (i - 1) / 2;
+        if (h->z[-p] <= v) break;
+        h->z[-i] = h->z[-p];
+        i = p;
+    }
+    h->z[-i] = (wm_index)v;
+    r->vkey[v] = r->params.zeta;
+    r->vapex[v] = STALE;
+    r->pos[v] = IN_Z;
 }
 
-static void mark_stale(wm_refiner *r, int32_t v, int32_t *n)
+static void z_pop(wm_refiner *r, struct zheap *h)
+{
+    int32_t v = h->z[0], last = h->z[-(--h->n)], i = 0;
+    r->pos[v] = -1;
+    for (;;) {
+        int32_t c = 2 * i + 1, u;
+        if (c >= h->n) break;
+        u = h->z[-c];
+        if (c + 1 < h->n && h->z[-(c + 1)] < u) u = h->z[-(++c)];
+        if (last <= u) break;
+        h->z[-i] = (wm_index)u;
+        i = c;
+    }
+    h->z[-i] = (wm_index)last;
+}
+
+static void mark_stale(wm_refiner *r, int32_t v, int32_t *n, struct zheap *h)
 {
     int32_t i = r->pos[v];
     if (i >= 0 && i < *n && r->list[i] == v) r->vapex[v] = STALE; /* in the heap: keep its place */
-    else push(r, v, r->params.zeta, STALE, n);
+    else if (i != IN_Z) z_push(r, h, v);
 }
 
 int wm_decimate(wm_refiner *r, wm_level_stats *st)
@@ -492,13 +533,22 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     wm_mesh *me = &r->mesh;
     int32_t n = 0;
     struct last_plan lp;
+    struct zheap zh;
     (void)st;
     lp.v = -1;
+    zh.z = r->list + ((me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap) - 1), zh.n = 0;
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
         if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
-    while (n > 0) {
-        int32_t v = r->list[0], touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
+    while (n > 0 || zh.n > 0) {
+        int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
+        if (zh.n > 0 && (n == 0 || before(r, zh.z[0], r->list[0]))) { /* a stale vertex entered at zeta */
+            v = zh.z[0];
+            z_pop(r, &zh);
+            refile(r, v, &n, &lp); /* into the heap at its cost, or nowhere */
+            continue;
+        }
+        v = r->list[0];
         if (r->vapex[v] == STALE) {
             refile(r, v, &n, &lp); /* evaluated now: back in the heap at its cost, or out */
             continue;
@@ -531,7 +581,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             r->err[touched[i]] = r->vkey[v];
         }
         r->removals++;
-        for (int32_t i = 0; i < nr; i++) mark_stale(r, ring[i], &n);
+        for (int32_t i = 0; i < nr; i++) mark_stale(r, ring[i], &n, &zh);
     }
     /* The triangles the removals made (and those the error bound left unmeasured) are measured once, at
      * the end, for those still there and as far as E_max needs them (wm_settle): nothing above reads

@@ -305,13 +305,14 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
      * its twin b -> a inside the hole, met before (pending) or later: each diagonal is cut once, so
      * both its directions are among the new triangles. */
     {
-        int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0;
+        int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0, from = 0;
         for (int32_t j = 0; j < n_tris; j++) {
             int32_t at[3]; /* the ring positions of the triangle's corners (hv[3 slot + c] = tris[3 j + c]) */
             /* The corners of a counter-clockwise triangle over the ring polygon come in ring order, so
-             * each is looked for from the one before it on, round the ring (found at once in a fan's
-             * (a, p_i, p_i+1) but the first); the ring's vertices are distinct. */
-            for (int32_t c = 0, i = 0; c < 3; c++) {
+             * each is looked for from the one before it on, round the ring, the first from the last
+             * triangle's first (found at once in a fan's (a, p_i, p_i+1)); the ring's vertices are
+             * distinct, so where a search starts does not change what it finds. */
+            for (int32_t c = 0, i = from; c < 3; c++) {
                 int32_t left = n;
                 while (left > 0 && ring[i] != tris[3 * j + c]) {
                     i = i + 1 == n ? 0 : i + 1;
@@ -320,6 +321,7 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
                 at[c] = left > 0 ? i : -1;
                 i = i + 1 == n ? 0 : i + 1;
             }
+            if (at[0] >= 0) from = at[0];
             for (int32_t c = 0; c < 3; c++) {
                 int32_t h = 3 * slot[j] + c, pa = at[c], pb = at[wm_k1(c)], f = -1, q;
                 WM_ASSERT(pa >= 0 && pb >= 0);
