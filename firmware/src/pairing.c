@@ -28,14 +28,21 @@ static void gradient(const wm_refiner *r, int32_t m, int32_t t, int64_t g[2])
 }
 
 /* Criterion (4.16) for one triangle: |g . c| > delta_p |g| |c|, exactly:
- * (g . c)^2 2^32 > delta_p^2 |g|^2 |c|^2 with delta_p in Q0.16. */
+ * (g . c)^2 2^32 > delta_p^2 |g|^2 |c|^2 with delta_p in Q0.16.  |g|'s parts are below 2^12 and c's
+ * below 2^15, so A = (g . c)^2 < 2^57 and B = |g|^2 |c|^2 < 2^56; with Q = delta_p^2 < 2^32 (delta_p <=
+ * 65535), Q B = H 2^32 + L with L < 2^32 and H = Q (B >> 32) + (Q (B mod 2^32) >> 32) < 2^57, so the test
+ * is A > H: two 32 x 32-bit products, not two 64 x 64 -> 128-bit ones. */
 static int consistent(const wm_refiner *r, const int64_t g[2], int64_t cx, int64_t cy)
 {
     int64_t dot = g[0] * cx + g[1] * cy;
-    uint64_t gg = (uint64_t)(g[0] * g[0] + g[1] * g[1]), cc = (uint64_t)(cx * cx + cy * cy);
-    uint64_t P = r->params.delta_p;
+    uint64_t gg = (uint64_t)(g[0] * g[0] + g[1] * g[1]), cc = (uint64_t)(cx * cx + cy * cy), a, b, h;
+    uint32_t q = r->params.delta_p * r->params.delta_p;
     if (gg == 0 || cc == 0) return 0;
-    return wm_cmp_mul((uint64_t)(dot * dot), (uint64_t)1 << 32, P * P, gg * cc) > 0;
+    a = (uint64_t)(dot * dot);
+    b = gg * cc;
+    h = (uint64_t)q * (uint32_t)(b >> 32) + (((uint64_t)q * (uint32_t)b) >> 32);
+    WM_ASSERT((a > h) == (wm_cmp_mul(a, (uint64_t)1 << 32, q, b) > 0));
+    return a > h;
 }
 
 static void edge_vec(const wm_mesh *me, int32_t e, int64_t *cx, int64_t *cy)
