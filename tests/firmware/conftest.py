@@ -8,7 +8,9 @@ from wavemesh.refine import native
 ROOT = Path(__file__).resolve().parents[2]
 # Debug (WM_CHECK: asserts and the invariant check after every operator) with AddressSanitizer and
 # UndefinedBehaviorSanitizer, and 16-bit indices as on the board: the tests that compare its meshes with
-# the release library's (32-bit indices) also prove the two index widths give the same mesh.
+# the release library's (32-bit indices) also prove the two index widths give the same mesh, and the
+# legalisation's path past its list of slots (a list of 4 in checked builds, mesh_state.c) the same as
+# the list's.
 CHECK_BUILD = ROOT / "build" / "firmware-check16"
 
 
