@@ -22,6 +22,14 @@
 #include "wm_internal.h"
 
 #define GCAP ((uint64_t)1 << 62)
+/* scan_lattice in the native builds; the board's small triangles are its engine's (WM_TRI_ENGINE on a
+ * 32-bit CPU: the board, whose firmware RAM has no room for it), and the profile build counts the
+ * samples the engine visits (the spans of scan32) */
+#if (defined(WM_TRI_ENGINE) && UINTPTR_MAX <= 0xFFFFFFFFu) || WM_PROFILE
+#define WM_SCAN_LATTICE 0
+#else
+#define WM_SCAN_LATTICE 1
+#endif
 /* upto_normal takes the slope factor after the scan for triangles of D below this; a larger one's
  * scan, which a looser limit would make longer, takes it before (Jacksboro at 10 m, the held-out
  * lidar_dem: each within 0.15 % from 64 to 1024). */
@@ -413,9 +421,116 @@ WM_NEVER_INLINE static uint64_t scan_tiny(const wm_field *f, const int32_t x[3],
     return vm;
 }
 
+#if WM_SCAN_LATTICE
+/* The largest D of the triangles scan_lattice takes (the ten pairs of bench/refiner_instructions.py at 8,
+ * 12, 16, 20: 0.982, 0.977, 0.975, 0.976 of their instructions with scan32). */
+#define WM_LATTICE_D 16
+
+/* E(T)'s scan of a triangle of 4 < d <= WM_LATTICE_D without its rows.  Name the corners o, j, i
+ * (counter-clockwise) so that the edge v = p_j - p_o is primitive (coprime coordinates: no sample inside
+ * it), with u = p_i - p_o.  A sample p has edge functions e_i, e_j (those vanishing on the edges opposite
+ * p_i, p_j) with p = p_o + (e_i u + e_j v) / d, and the (e_i, e_j) of the grid's samples, v being
+ * primitive, are those with e_j = c e_i mod d, c = -cross(u, w') mod d for any w' with cross(v, w') = 1
+ * (w' = (-v_y, 0) or (0, v_x) for an edge with a coordinate +-1, most; else from Euclid's extended
+ * algorithm).  The triangle's samples are those with e_i + e_j <= d: one step for each e_i = 1 .. d - 1,
+ * the sample moving by w = (u + c v) / d (an integer vector), less v where e_j wraps past d, and S by the
+ * same combination of the corners' heights (the corners, V = 0, left out).  They do not come in row
+ * order, but a sample's row order is its offset in the grid: the answer is the largest V at the smallest
+ * offset, or, when some V is above the limit, that of the smallest offset among those (the scan stops at
+ * the first such sample in row order, with its V); (x[0], y[0]) for Vmax = 0: scan32's Vmax and sample,
+ * in its 32-bit arithmetic (d < 2^15 on grids of at most 2^14 a side).  0 (the caller scans) when no edge
+ * is primitive: a prime divides every edge's coordinates (d a multiple of its square: 8, 9, 12, 16).
+ * Checked builds compare it with the scan (scan_any). */
+WM_NEVER_INLINE static int scan_lattice(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t d,
+                                        uint64_t limit, uint64_t *vmax, int32_t *wx, int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    int32_t W = f->width, o, j, i, vx = 0, vy = 0, ux, uy, cr = 0, c, gx, gy, ej = 0, off, offw, offv;
+    int32_t boff = INT32_MAX, ooff = INT32_MAX; /* the largest V's offset, the first above the limit */
+    uint32_t zo, si, sj, lim = limit >> 32 ? 0xFFFFFFFFu : (uint32_t)limit, vm = 0, over = 0, S, dSw, dSv;
+    for (o = 0; o < 3; o++) { /* cr = cross(u, w') */
+        j = wm_k1(o), i = wm_k2(o);
+        vx = x[j] - x[o], vy = y[j] - y[o];
+        if (vy == 1 || vy == -1) {
+            cr = (y[i] - y[o]) * vy;
+            break;
+        }
+        if (vx == 1 || vx == -1) {
+            cr = (x[i] - x[o]) * vx;
+            break;
+        }
+    }
+    if (o == 3) {
+        for (o = 0; o < 3; o++) {
+            int32_t a, b, s0 = 1, s1 = 0, t0 = 0, t1 = 1; /* s0 v_x + t0 v_y = a, the gcd up to its sign */
+            j = wm_k1(o), i = wm_k2(o);
+            vx = a = x[j] - x[o], vy = b = y[j] - y[o];
+            if (((a | b) & 1) == 0) continue;
+            while (b != 0) {
+                int32_t q = a / b, r = a - q * b, ns = s0 - q * s1, nt = t0 - q * t1;
+                a = b, b = r, s0 = s1, s1 = ns, t0 = t1, t1 = nt;
+            }
+            if (a == 1 || a == -1) { /* w' = (-a t0, a s0) */
+                cr = (int32_t)((((int64_t)(x[i] - x[o]) * s0 + (int64_t)(y[i] - y[o]) * t0) * a) % d);
+                break;
+            }
+        }
+        if (o == 3) return 0;
+    }
+    ux = x[i] - x[o], uy = y[i] - y[o];
+    c = -(cr % d);
+    if (c < 0) c += d;
+    gx = (ux + c * vx) / d; /* exact */
+    gy = (uy + c * vy) / d;
+    WM_ASSERT(gx * d == ux + c * vx && gy * d == uy + c * vy);
+    off = y[o] * W + x[o], offw = gy * W + gx, offv = vy * W + vx;
+    zo = h[off], si = h[y[i] * W + x[i]] - zo, sj = h[y[j] * W + x[j]] - zo;
+    S = (uint32_t)d * zo; /* e_o z_o + e_i z_i + e_j z_j modulo 2^32, e_o = d - e_i - e_j */
+    dSw = si + (uint32_t)c * sj;
+    dSv = (uint32_t)d * sj;
+    for (int32_t ei = 1; ei < d; ei++) {
+        off += offw;
+        S += dSw;
+        ej += c;
+        if (ej >= d) {
+            ej -= d;
+            off -= offv;
+            S -= dSv;
+        }
+        if (ei + ej <= d) {
+            uint32_t dh = (uint32_t)d * h[off], v = S > dh ? S - dh : dh - S;
+            if (v > vm || (v == vm && off < boff)) {
+                vm = v;
+                boff = off;
+            }
+            if (v > lim && off < ooff) {
+                ooff = off;
+                over = v;
+            }
+        }
+    }
+    if (ooff != INT32_MAX) vm = over, boff = ooff;
+    *vmax = vm;
+    if (vm == 0) {
+        if (wx) *wx = x[0];
+        if (wy) *wy = y[0];
+    } else if (wx || wy) {
+        int32_t py = boff / W;
+        if (wx) *wx = boff - py * W;
+        if (wy) *wy = py;
+    }
+    return 1;
+}
+#endif
+
 /* The scan that fits the triangle (the same result either way).  The board's refiner (WM_TRI_ENGINE)
  * hands it to the FPGA's triangle error engine, which returns the same Vmax and sample; the holes
- * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D <= 4 takes scan_tiny. */
+ * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D <= 4 takes scan_tiny, one of
+ * D <= WM_LATTICE_D scan_lattice in the native builds (where the hook declines), which inline it in each
+ * measure (out of line, its call cost 1.5 % of the refiner's instructions; the board's is as before). */
+#if WM_SCAN_LATTICE
+WM_ALWAYS_INLINE
+#endif
 static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D, uint64_t limit,
                          int32_t *wx, int32_t *wy)
 {
@@ -431,6 +546,17 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
 #ifdef WM_TRI_ENGINE
     uint64_t v;
     if (wm_tri_engine_scan(f, x, y, limit, &v, wx, wy)) return v;
+#endif
+#if WM_SCAN_LATTICE
+    if (D <= WM_LATTICE_D && f->width <= (1 << 14) && f->height <= (1 << 14)) {
+        uint64_t lv;
+#if WM_CHECK
+        int32_t cx, cy, tx, ty;
+        uint64_t sv = scan(f, x, y, D, limit, &cx, &cy);
+        if (scan_lattice(f, x, y, (int32_t)D, limit, &lv, &tx, &ty)) WM_ASSERT(lv == sv && cx == tx && cy == ty);
+#endif
+        if (scan_lattice(f, x, y, (int32_t)D, limit, &lv, wx, wy)) return lv;
+    }
 #endif
     if (f->width <= (1 << 14) && f->height <= (1 << 14) && D < (1 << 15))
         return scan32(f, x, y, (uint32_t)D, limit, wx, wy);
