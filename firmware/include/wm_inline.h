@@ -5,7 +5,10 @@
  *   cost its caller's common path).
  * WM_NOINLINE_32: never inlined on a 32-bit CPU, the compiler's choice on a 64-bit one: a small hot
  *   function whose loop gets the registers out of its caller there (the soft CPU); a 64-bit host has
- *   registers enough and saves the call. */
+ *   registers enough and saves the call.
+ * WM_ENGINE_FALLBACK: the C path that one of the board's FPGA units replaces (with WM_TRI_ENGINE: the C
+ *   E(T) scans, for fields the engine does not read), so cold there: GCC compiles it for size into
+ *   .text.unlikely, which the board's linker script keeps out of the hot code (firmware/board/board.ld). */
 #ifndef WM_INLINE_H
 #define WM_INLINE_H
 
@@ -22,6 +25,11 @@
 #define WM_NOINLINE_32 WM_NEVER_INLINE
 #else
 #define WM_NOINLINE_32
+#endif
+#if defined(__GNUC__) && defined(WM_TRI_ENGINE)
+#define WM_ENGINE_FALLBACK __attribute__((cold))
+#else
+#define WM_ENGINE_FALLBACK
 #endif
 
 #endif /* WM_INLINE_H */

@@ -136,8 +136,8 @@ WM_NOINLINE_32 static uint32_t row_max32(const uint16_t *q, const uint16_t *end,
  * arithmetic (the span of each row from 32-bit divisions on grids of at most 2^14 a side, where every
  * E_k fits 30 bits); scan32 below is the same scan for small triangles.  Out of line: the few large
  * triangles take it, and inlined in scan_any it cost every scan32 registers and saves. */
-WM_NEVER_INLINE static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3], int64_t D,
-                                     uint64_t limit, int32_t *wx, int32_t *wy)
+WM_NEVER_INLINE WM_ENGINE_FALLBACK static uint64_t scan(const wm_field *f, const int32_t x[3], const int32_t y[3],
+                                                        int64_t D, uint64_t limit, int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     struct tri_setup t;
@@ -235,8 +235,9 @@ static WM_ALWAYS_INLINE int end_step(struct wm_end32 *e)
  * allocation and spills in its set-up; bench/refiner_instructions.py, callgrind, against the copies:
  * JACKSBORO --zeta 10 +0.05 % to +0.5 % in three forms, ball.npy --decimate 2 +0.2 %), so each keeps
  * its copy. */
-WM_NEVER_INLINE static uint64_t scan32(const wm_field *f, const int32_t x[3], const int32_t y[3], uint32_t d,
-                                       uint64_t limit, int32_t *wx, int32_t *wy)
+WM_NEVER_INLINE WM_ENGINE_FALLBACK static uint64_t scan32(const wm_field *f, const int32_t x[3],
+                                                          const int32_t y[3], uint32_t d, uint64_t limit,
+                                                          int32_t *wx, int32_t *wy)
 {
     const uint16_t *h = f->samples;
     int32_t A[3], B[3], t = 0, b = 0, m, py, lm;

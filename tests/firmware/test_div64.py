@@ -1,12 +1,13 @@
-"""The board's 64-bit divisions (firmware/board/src/div64.c: the __udivdi3 and __divdi3 the rv32 build
-links before libgcc's) against Python's integers.
+"""The board's 64-bit divisions (firmware/board/src/div64.c: the __udivdi3, __divdi3 and __umoddi3 the rv32
+build links before libgcc's) against Python's integers.
 
-The file is compiled natively under other names (WM_DIV64_UDIV / WM_DIV64_SDIV), with the undefined
-behaviour sanitizer where the compiler has it, into a program that divides the pairs it reads; each
-quotient is checked against Python's (truncated towards zero for the signed one).  The pairs: every
-path of the routine (operands below 2^32, a 32-bit divisor with quotients of 32 and 64 bits, divisors of
-2^32 and more with every normalisation shift), the corrections' edges (divisors and dividends next to
-powers of two, all-ones halves) and random operands of every pair of bit lengths.
+The file is compiled natively under other names (WM_DIV64_UDIV / WM_DIV64_SDIV / WM_DIV64_UMOD), with
+the undefined behaviour sanitizer where the compiler has it, into a program that divides the pairs it
+reads; each quotient and the remainder are checked against Python's (truncated towards zero for the
+signed one).  The pairs: every path of the routine (operands below 2^32, a 32-bit divisor with
+quotients of 32 and 64 bits, divisors of 2^32 and more with every normalisation shift), the
+corrections' edges (divisors and dividends next to powers of two, all-ones halves) and random
+operands of every pair of bit lengths.
 """
 
 import random
@@ -26,11 +27,13 @@ MAIN = r"""
 #include <stdio.h>
 uint64_t wm_udiv64(uint64_t n, uint64_t d);
 int64_t wm_sdiv64(int64_t n, int64_t d);
+uint64_t wm_umod64(uint64_t n, uint64_t d);
 int main(void)
 {
     uint64_t n, d;
     while (scanf("%" SCNx64 " %" SCNx64, &n, &d) == 2) {
-        printf("%" PRIx64 " %" PRIx64 "\n", wm_udiv64(n, d), (uint64_t)wm_sdiv64((int64_t)n, (int64_t)d));
+        printf("%" PRIx64 " %" PRIx64 " %" PRIx64 "\n", wm_udiv64(n, d),
+               (uint64_t)wm_sdiv64((int64_t)n, (int64_t)d), wm_umod64(n, d));
     }
     return 0;
 }
@@ -96,6 +99,7 @@ def test_div64_against_python(tmp_path):
         "-Werror",
         "-DWM_DIV64_UDIV=wm_udiv64",
         "-DWM_DIV64_SDIV=wm_sdiv64",
+        "-DWM_DIV64_UMOD=wm_umod64",
         f"-I{ROOT / 'firmware' / 'include'}",
         str(DIV64),
         str(main),
@@ -115,7 +119,8 @@ def test_div64_against_python(tmp_path):
     ).stdout.split("\n")
     assert out[-1] == ""
     for (n, d), line in zip(pairs, out[:-1], strict=True):
-        uq, sq = (int(v, 16) for v in line.split())
+        uq, sq, ur = (int(v, 16) for v in line.split())
         assert uq == n // d, f"{n:#x} / {d:#x}: {uq:#x}, not {n // d:#x}"
+        assert ur == n % d, f"{n:#x} % {d:#x}: {ur:#x}, not {n % d:#x}"
         if _signed(d) != -1 or n != 1 << 63:  # INT64_MIN / -1 overflows in C
             assert sq == _sdiv(n, d), f"{_signed(n)} / {_signed(d)} (signed): {_signed(sq)}"

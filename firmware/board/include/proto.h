@@ -103,7 +103,8 @@ typedef struct wm_proto_io {
      * next good one: 1 (in *f), WM_PROTO_RX_TIMEOUT, WM_PROTO_RX_CLOSED.  upload: from the next frame on,
      * DATA frames of a session of width W, samples W H and total words are stored (samples > 0: a new
      * session, nothing stored yet) or not (samples 0).  upload_crc: the CRC-32 register (not inverted)
-     * of the samples stored in order.  All three or none. */
+     * of the samples stored in order.  All three or none; a build with WM_PROTO_WHOLE_FRAMES (the board's:
+     * firmware/board/CMakeLists.txt) has no byte deframer and its frame buffer, and needs them. */
     int (*frame)(void *ctx, uint32_t timeout_ms, wm_proto_frame_in *f);
     void (*upload)(void *ctx, uint32_t width, uint32_t samples, uint32_t total);
     uint32_t (*upload_crc)(void *ctx);
@@ -182,6 +183,7 @@ typedef struct wm_proto {
     void *job_ctx;
     uint32_t ms_cycles;      /* cycles per millisecond */
 
+#ifndef WM_PROTO_WHOLE_FRAMES
     /* reception (h, w: DATA's samples read as halfwords or pairs of them) */
     union {
         uint8_t b[WM_PROTO_MAX_FRAME];
@@ -191,6 +193,7 @@ typedef struct wm_proto {
     uint32_t rx_len;
     uint8_t rx_esc, rx_bad;
     uint64_t rx_last;        /* cycles of the last byte of the frame being received */
+#endif
     uint8_t f_type, f_seq;   /* the frame just received */
     uint16_t f_len;
     const uint8_t *f_pay;

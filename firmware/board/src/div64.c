@@ -16,7 +16,7 @@
  * The results are the C operators' (truncated quotients; a zero divisor is the caller's error, as
  * with libgcc's): tests/firmware/test_div64.py checks them natively against Python's integers, and
  * the board meshes against the native build's.  WM_DIV64_UDIV / WM_DIV64_SDIV rename the two for
- * that test (a native build calls no such helpers).
+ * that test (a native build calls no such helpers); WM_DIV64_UMOD, __umoddi3, the remainder, likewise.
  *
  * The board's program (WM_DIV64_ENGINE, firmware/board/CMakeLists.txt) hands every division that needs
  * more than one 32-bit division to the FPGA's 64-bit divider (rtl/udiv64.v behind the ENGINE registers:
@@ -32,10 +32,12 @@
 #ifndef WM_DIV64_UDIV
 #define WM_DIV64_UDIV __udivdi3
 #define WM_DIV64_SDIV __divdi3
+#define WM_DIV64_UMOD __umoddi3
 #endif
 
 uint64_t WM_DIV64_UDIV(uint64_t n, uint64_t d);
 int64_t WM_DIV64_SDIV(int64_t n, int64_t d);
+uint64_t WM_DIV64_UMOD(uint64_t n, uint64_t d);
 
 /* The leading zeros of v != 0, without branches (rv32imc has no clz; libgcc's __clzsi2 is a call and a
  * table lookup). */
@@ -137,3 +139,8 @@ int64_t WM_DIV64_SDIV(int64_t n, int64_t d)
     uint64_t q = WM_DIV64_UDIV(n < 0 ? -(uint64_t)n : (uint64_t)n, d < 0 ? -(uint64_t)d : (uint64_t)d);
     return (int64_t)((n < 0) != (d < 0) ? -q : q);
 }
+
+/* The remainder from the quotient (a multiply and a subtraction): the refiner's few 64-bit remainders
+ * (fixed.c's wm_scale_mul, the C slope factor's) would otherwise link libgcc's __umoddi3 and its
+ * __clz_tab, 1.2 KB of firmware RAM for code no board job runs often. */
+uint64_t WM_DIV64_UMOD(uint64_t n, uint64_t d) { return n - WM_DIV64_UDIV(n, d) * d; }

@@ -146,7 +146,7 @@ void wm_proto_do_data(wm_proto *p)
     } else if (off <= p->next) {
         /* in order, or a repeat that may reach beyond what is stored */
         s = p->f_pay + WM_PROTO_DATA_BYTES;
-#if WM_LITTLE_ENDIAN
+#if WM_LITTLE_ENDIAN && !defined(WM_PROTO_WHOLE_FRAMES)
         if (off + n <= (uint32_t)p->job.width * (uint32_t)p->job.height) {
             /* samples only, straight (the wire's byte order is the CPU's): two a step when the
              * destination is word-aligned (the source is: an even offset in a word-aligned buffer) */

@@ -128,9 +128,13 @@ static inline void frame_head(uint8_t head[WM_PROTO_HEADER_BYTES], uint8_t type,
 
 static inline void rx_reset(wm_proto *p)
 {
+#ifdef WM_PROTO_WHOLE_FRAMES
+    (void)p; /* the transport deframes */
+#else
     p->rx_len = 0;
     p->rx_esc = 0;
     p->rx_bad = 0;
+#endif
 }
 
 /* One frame: header, payload (two pieces, either may be empty), CRC (of the header and payload). */

@@ -92,6 +92,7 @@ void wm_proto_send_frame(wm_proto *p, uint8_t type, uint8_t seq, const uint8_t *
 /* ---------------------------------------------------------------------------------------------- */
 /* Receiving */
 
+#ifndef WM_PROTO_WHOLE_FRAMES
 /* The bytes between two delimiters: a frame with the right length field and CRC?  (The CRC in one
  * go at the end: on a UART, the RX FIFO's 64 bytes are some 140 k cycles at 115200 baud, a 1 KB frame's
  * CRC some 30 k.) */
@@ -190,6 +191,8 @@ static int rx_burst(wm_proto *p, int c)
     return 0;
 }
 
+#endif
+
 /* A transport that receives frames whole (io.frame): it stores DATA's samples while a session receives,
  * for the session's CONFIG (told before the next frame comes in, so every DATA frame of the session is
  * stored and none outside it). */
@@ -222,6 +225,9 @@ static int rx_frame_whole(wm_proto *p, uint32_t wait_ms)
 
 int wm_proto_rx_frame(wm_proto *p, uint32_t wait_ms)
 {
+#ifdef WM_PROTO_WHOLE_FRAMES
+    return rx_frame_whole(p, wait_ms);
+#else
     uint64_t t0, limit, bt;
     if (p->io.frame) return rx_frame_whole(p, wait_ms);
     t0 = now(p);
@@ -251,6 +257,7 @@ int wm_proto_rx_frame(wm_proto *p, uint32_t wait_ms)
         p->rx_last = now(p);
         if (c != 0) return c;
     }
+#endif
 }
 
 /* A frame with at most WM_PROTO_ERROR_BYTES of payload, SLIP-encoded into dst (for a connection the
