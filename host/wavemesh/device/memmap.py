@@ -110,7 +110,9 @@ def ecp5_pll(f_in: int = OSC_HZ, f_out: int = CLK_HZ) -> dict[str, int]:
 # --- what the default configuration supports ---------------------------------------------------
 GRID_MAX_W = 1024  # largest height field, columns
 GRID_MAX_H = 1024  # largest height field, rows
-STACK_BYTES = 8 * 1024  # stack the linker script reserves at the top of firmware RAM
+# the stack the linker script reserves at the top of firmware RAM: half as much again as the deepest call
+# chain needs (some 7.9 KB, docs/soc.md "What the firmware RAM holds"); nothing checks it at run time
+STACK_BYTES = 12 * 1024
 # The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
 # (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
 # triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
