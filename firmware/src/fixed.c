@@ -244,21 +244,3 @@ uint64_t wm_scale_mul(const wm_params *p, uint64_t n, uint64_t d, int sh, uint64
     else q <<= k;
     return q > cap ? cap : q;
 }
-
-int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy)
-{
-    /* Relative to d every difference is below 2^15 in magnitude, so each squared length is below
-     * 2^31, each cross product below 2^31, each term below 2^62, the sum of two below 2^63: the
-     * sign of the third sum is a comparison, exact in 64 bits.  The lengths and cross products in 32
-     * bits, so each term is one 32 x 32 bit product (on the soft CPU a mul and a mulh, where 64-bit
-     * operands took four multiplies and their carries). */
-    int32_t adx = ax - dx, ady = ay - dy, bdx = bx - dx, bdy = by - dy, cdx = cx - dx, cdy = cy - dy;
-    int64_t t1 = (int64_t)(adx * adx + ady * ady) * (bdx * cdy - cdx * bdy);
-    int64_t t2 = (int64_t)(bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy);
-    int64_t t3 = (int64_t)(cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
-    int64_t s;
-    WM_ASSERT(adx > -32768 && adx < 32768 && ady > -32768 && ady < 32768 && bdx > -32768 && bdx < 32768 &&
-              bdy > -32768 && bdy < 32768 && cdx > -32768 && cdx < 32768 && cdy > -32768 && cdy < 32768);
-    s = t1 + t2;
-    return s > -t3 ? 1 : (s < -t3 ? -1 : 0);
-}

@@ -335,7 +335,24 @@ static inline void wm_min_corner_in(const int32_t x[3], const int32_t y[3], int6
 int32_t wm_angle_above(int64_t dot, int64_t cross);
 /* In-circle predicate, exact for coordinates in 0..WM_MAX_SIDE-1: > 0 when d lies strictly inside
  * the circle through the counter-clockwise a, b, c; 0 on it; < 0 outside. */
-int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx, int32_t dy);
+static inline int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t dx,
+                              int32_t dy)
+{
+    /* Relative to d every difference is below 2^15 in magnitude, so each squared length is below
+     * 2^31, each cross product below 2^31, each term below 2^62, the sum of two below 2^63: the
+     * sign of the third sum is a comparison, exact in 64 bits.  The lengths and cross products in 32
+     * bits, so each term is one 32 x 32 bit product (on the soft CPU a mul and a mulh, where 64-bit
+     * operands took four multiplies and their carries). */
+    int32_t adx = ax - dx, ady = ay - dy, bdx = bx - dx, bdy = by - dy, cdx = cx - dx, cdy = cy - dy;
+    int64_t t1 = (int64_t)(adx * adx + ady * ady) * (bdx * cdy - cdx * bdy);
+    int64_t t2 = (int64_t)(bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy);
+    int64_t t3 = (int64_t)(cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
+    int64_t s;
+    WM_ASSERT(adx > -32768 && adx < 32768 && ady > -32768 && ady < 32768 && bdx > -32768 && bdx < 32768 &&
+              bdy > -32768 && bdy < 32768 && cdx > -32768 && cdx < 32768 && cdy > -32768 && cdy < 32768);
+    s = t1 + t2;
+    return s > -t3 ? 1 : (s < -t3 ? -1 : 0);
+}
 
 /* The normal metric's slope factor r of a triangle (sqrt(1 + g^2) in Q16.16: tri_error.c) is the same
  * for every measure of the triangle.  A caller that measures one triangle more than once (a point test,
