@@ -286,12 +286,14 @@ static inline int32_t sample_row(struct sample_div d, int32_t s, int32_t w)
     return WM_NARROW_DIV ? (int32_t)(((uint64_t)(uint32_t)s * d.m) >> d.sh) : s / w;
 }
 
-/* (px, py) in the closed counter-clockwise triangle. */
+#if WM_CHECK
+/* (px, py) in the closed counter-clockwise triangle (the checking build's test of try_swap's sides). */
 static int in_tri(const int32_t x[3], const int32_t y[3], int32_t px, int32_t py)
 {
     return wm_orient(x[0], y[0], x[1], y[1], px, py) >= 0 && wm_orient(x[1], y[1], x[2], y[2], px, py) >= 0 &&
            wm_orient(x[2], y[2], x[0], y[0], px, py) >= 0;
 }
+#endif
 
 /* The smallest angle of triangle slot t, kept in r->list[t] for one regularisation (the iteration's
  * plan is done by then; emptied when it begins): nothing but its own swaps changes a triangle while it
@@ -543,8 +545,13 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
             int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1],
                     sy = sample_row(wd, s, r->field.width), sx = s - sy * r->field.width;
+            /* the sample lies in the old triangle (its scan's), so in the strictly convex quad (a, d, b, c)
+             * (a and b on either side of c-d, c and d of a-b): in (a, d, c) iff on its side of d-c, in
+             * (d, b, c) iff on the other's (both on the diagonal) */
+            int64_t side = wm_orient(n1x[1], n1y[1], n1x[2], n1y[2], sx, sy);
+            WM_ASSERT(in_tri(n1x, n1y, sx, sy) == (side >= 0) && in_tri(qx, qy, sx, sy) == (side <= 0));
             WM_ASSERT(sy == s / r->field.width && sx == s % r->field.width);
-            if (in_tri(n1x, n1y, sx, sy)) {
+            if (side >= 0) {
                 uint32_t v = wm_point_error(&r->field, &r->params, n1x, n1y, sx, sy, &r1);
                 if (v > lb1) {
                     lb1 = v;
@@ -552,7 +559,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                     if (s1 + s2 + one > dmax) return 0;
                 }
             }
-            if (in_tri(qx, qy, sx, sy)) {
+            if (side <= 0) {
                 uint32_t v = wm_point_error(&r->field, &r->params, qx, qy, sx, sy, &r2);
                 if (v > lb2) {
                     lb2 = v;
