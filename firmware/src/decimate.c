@@ -364,10 +364,13 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     return best;
 }
 
-static int before(const wm_refiner *r, int32_t a, int32_t b)
+/* The heap's order: by key, ties by slot (a total order). */
+static WM_ALWAYS_INLINE int key_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
 {
-    return r->vkey[a] < r->vkey[b] || (r->vkey[a] == r->vkey[b] && a < b);
+    return ka < kb || (ka == kb && a < b);
 }
+
+static int before(const wm_refiner *r, int32_t a, int32_t b) { return key_before(r->vkey[a], a, r->vkey[b], b); }
 
 static void put(wm_refiner *r, int32_t i, int32_t v)
 {
@@ -417,14 +420,14 @@ static void sink(wm_refiner *r, int32_t i, int32_t n)
         u = list[c];
         if (c + 1 < n) {
             int32_t w = list[c + 1];
-            if (key[w] < key[u] || (key[w] == key[u] && w < u)) c++, u = w;
+            if (key_before(key[w], w, key[u], u)) c++, u = w;
         }
         list[j] = u, pos[u] = j;
         j = c;
     }
     while (j > i) {
         int32_t p = (j - 1) / 2, u = list[p];
-        if (!(kv < key[u] || (kv == key[u] && v < u))) break;
+        if (!key_before(kv, v, key[u], u)) break;
         list[j] = u, pos[u] = j;
         j = p;
     }

@@ -102,7 +102,8 @@ static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
 }
 
 /* 1 when (px, py) lies in the closed counter-clockwise triangle. */
-static int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy, int32_t px, int32_t py)
+static WM_ALWAYS_INLINE int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy,
+                                  int32_t px, int32_t py)
 {
     return wm_orient(ax, ay, bx, by, px, py) >= 0 && wm_orient(bx, by, cx, cy, px, py) >= 0 &&
            wm_orient(cx, cy, ax, ay, px, py) >= 0;
@@ -124,9 +125,7 @@ static int ear_holds_none(const int32_t *px, const int32_t *py, const int32_t *n
     if (cy > y1) y1 = cy;
     for (j = nx[ic]; j != ia; j = nx[j]) {
         if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
-        if (wm_orient(ax, ay, bx, by, px[j], py[j]) >= 0 && wm_orient(bx, by, cx, cy, px[j], py[j]) >= 0 &&
-            wm_orient(cx, cy, ax, ay, px[j], py[j]) >= 0)
-            return 0;
+        if (holds(ax, ay, bx, by, cx, cy, px[j], py[j])) return 0;
     }
     return 1;
 }
