@@ -4,6 +4,7 @@ the meshes are identical, slot for slot, to the release library's (-O0 and -O2 a
 so do 16-bit indices, the checking build's, and 32-bit ones).  And the host library's own AVX2 scans
 (firmware/host/host_scan.c) in that build, against the C scan (tests/firmware/wm_scan_check.c)."""
 
+import os
 import re
 import shutil
 import subprocess
@@ -89,3 +90,25 @@ def test_host_scans_under_sanitizers(check_build, tmp_path):
     checked, narrow = (int(v) for v in re.fullmatch(r"(\d+) triangles \((\d+) at most 8 samples wide\), 0 "
                                                      r"differences\n", r.stdout).groups())
     assert checked > 50000 and narrow > 20000, r.stdout
+
+
+@pytest.mark.parametrize("cap,fails_at", [(40, "init"), (120, "level")])
+def test_capacity_error_frees_everything(cap, fails_at, check_build, tmp_path):
+    """A job that runs out of triangle slots, in the checking build with LeakSanitizer on: refused at
+    wm_refine_init (40 slots, fewer than the initial mesh's triangles: no output) or at a level (120: the
+    mesh kept is written), the runner reports the capacity error and leaks nothing; and a truncated input
+    (exit status 2) leaks nothing either."""
+    write_case(lambda rng: synth.ball(48), 3, native.RefineParams(zeta=0.5, iterations=3),
+               tmp_path / "in.bin", cap)
+    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1")
+    r = subprocess.run([str(check_build / "wm_run"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+                       capture_output=True, text=True, timeout=300, env=env)
+    assert "Sanitizer" not in r.stderr and "runtime error" not in r.stderr, r.stderr
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert f"error {native.WM_ERR_CAPACITY} " in r.stdout, r.stdout
+    assert (tmp_path / "out.bin").exists() == (fails_at == "level")
+    data = (tmp_path / "in.bin").read_bytes()
+    (tmp_path / "short.bin").write_bytes(data[:len(data) // 2])
+    r = subprocess.run([str(check_build / "wm_run"), str(tmp_path / "short.bin"), str(tmp_path / "o2.bin")],
+                       capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 2 and "Sanitizer" not in r.stderr, r.stdout + r.stderr
