@@ -10,13 +10,13 @@
  * empties the rows outside it.  The row's samples go 8 (32-bit lanes, where the C scan's scan32 takes
  * the triangle: V is exact modulo 2^32 there) or 4 (64-bit lanes) at a time: each lane's V against the
  * largest so far, and only a block holding a larger one is taken again one sample at a time, which finds
- * the first one and stops at the limit as the C scan does.  On grids under 2^20 samples (below) this
- * scan is left to the C scan, and only scan32's small triangles are taken, in lanes without a branch a
- * row (scan_lanes; a triangle at most 8 samples wide over its box's rows, scan_box; each without the
- * worst sample's place when the caller asks for none).  Processors without AVX2 (and other compilers)
- * answer 0: the C scan runs.
- * wm_host_scan(0) turns both off, (2) puts the blocks on every grid, (3) the lanes on every grid (the
- * tests compare each with the C scan). */
+ * the first one and stops at the limit as the C scan does.  scan32's small triangles are taken on every
+ * grid in lanes without a branch a row instead (scan_lanes; a triangle at most 8 samples wide over its
+ * box's rows, scan_box; each without the worst sample's place when the caller asks for none), and on
+ * grids under 2^20 samples (below) the other triangles are left to the C scan.  Processors without AVX2
+ * (and other compilers) answer 0: the C scan runs.
+ * wm_host_scan(0) turns both off, (2) puts the blocks on every triangle of every grid, (3) leaves every
+ * triangle the lanes do not take to the C scan (the tests compare each with the C scan). */
 #define _POSIX_C_SOURCE 200809L
 #include "wm_host.h"
 #include "wm_internal.h"
@@ -37,14 +37,15 @@ uint32_t wm_tri_engine_root(uint64_t x)
     return (uint32_t)r;
 }
 
-/* Grids of fewer samples keep the C scan for all but scan32's triangles (wm_host_scan(1)): their samples
- * stay in a core's cache, where the blocks' set-up costs more than their lanes and prefetches save
+/* Grids of fewer samples keep the C scan for the triangles the lanes do not take (wm_host_scan(1)): their
+ * samples stay in a core's cache, where the blocks' set-up costs more than their lanes and prefetches save
  * (in-process refine and check, CPU, against the C scan: Jacksboro 403 x 344 1.08 - 1.10 x, terrain 724^2
- * 1.04 x, 1024^2 0.97 x, 2048^2 0.72 x). */
+ * 1.04 x, 1024^2 0.97 x, 2048^2 0.72 x).  The small triangles go to the lanes on every grid: on a tile of
+ * 1025^2 they take 0.8 x the blocks' CPU. */
 #define SCAN_MIN_SAMPLES ((int64_t)1 << 20)
 
-/* 0: off, 1: the blocks on grids of SCAN_MIN_SAMPLES or more, the lanes on smaller ones, 2: the blocks on
- * every grid, 3: the lanes on every grid */
+/* 0: off, 1: the lanes for scan32's triangles, the blocks for the others on grids of SCAN_MIN_SAMPLES or
+ * more, 2: the blocks for every triangle, 3: the lanes for scan32's triangles and nothing else */
 static int32_t enabled = 1;
 
 int32_t wm_host_scan(int32_t on)
@@ -547,12 +548,15 @@ static AVX2 __attribute__((noinline, aligned(64))) int scan_lanes_max(const wm_f
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy)
 {
-    if (!enabled) return 0;
-    if (enabled == 3 || (enabled == 1 && (int64_t)f->width * f->height < SCAN_MIN_SAMPLES)) {
-        /* scan32's triangles in lanes (the rest: the C scan) */
+    if (!enabled || !have_avx2()) return 0;
+    if (enabled != 2) {
+        /* scan32's triangles in lanes; the others in the blocks on a large grid (mode 1), else the C scan */
         int64_t D =
             ((int64_t)y[1] - y[2]) * ((int64_t)x[0] - x[1]) + ((int64_t)x[2] - x[1]) * ((int64_t)y[0] - y[1]);
-        if (f->width > (1 << 14) || f->height > (1 << 14) || D <= 0 || D >= (1 << 15) || !have_avx2()) return 0;
+        if (f->width > (1 << 14) || f->height > (1 << 14) || D <= 0 || D >= (1 << 15))
+            return enabled == 1 && (int64_t)f->width * f->height >= SCAN_MIN_SAMPLES
+                       ? scan(f, x, y, limit, vmax, wx, wy)
+                       : 0;
         int32_t x0 = x[0] < x[1] ? x[0] : x[1], x1 = x[0] < x[1] ? x[1] : x[0];
         x0 = x[2] < x0 ? x[2] : x0;
         x1 = x[2] > x1 ? x[2] : x1;
@@ -562,7 +566,7 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
         if (x1 - x0 < 8) return scan_box(f, x, y, (uint32_t)D, x0, limit, vmax, wx, wy); /* a row a block */
         return scan_lanes(f, x, y, (uint32_t)D, limit, vmax, wx, wy);
     }
-    return have_avx2() ? scan(f, x, y, limit, vmax, wx, wy) : 0;
+    return scan(f, x, y, limit, vmax, wx, wy);
 }
 #else
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,

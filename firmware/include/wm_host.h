@@ -26,9 +26,10 @@ extern "C" {
 int64_t wm_host_part_min(int64_t n);
 
 /* Whether the refiner's E(T) scans run in host_scan.c's AVX2 scans where the processor has AVX2 (1, the
- * default: its blocks on grids of 2^20 samples or more, its lanes for the small triangles of smaller
- * grids; 2: the blocks on every grid; 3: the lanes on every grid) or in tri_error.c's C scan (0): the
- * same results (tests/host/test_host_stages.py).  on: 0 to 3 sets it, -1 only asks; returns what it was. */
+ * default: its lanes for the small triangles on every grid, its blocks for the others on grids of 2^20
+ * samples or more; 2: the blocks for every triangle; 3: the lanes for the small triangles, the C scan
+ * for the others) or in tri_error.c's C scan (0): the same results (tests/host/test_host_stages.py).
+ * on: 0 to 3 sets it, -1 only asks; returns what it was. */
 int32_t wm_host_scan(int32_t on);
 
 /* quantise(): n finite heights v to 16-bit samples.  out[0] = scale, out[1] = offset, out[2] = the

@@ -376,6 +376,25 @@ def test_refiner_scan_in_avx2_equals_the_c_scan(name, mode, c_scan):
             assert got[0] == got[1], (metric, zeta, budget)
 
 
+def test_refiner_default_scan_on_a_large_grid_equals_the_c_scan(c_scan):
+    """The default (wm_host_scan(1)) on a grid of 2^20 samples or more, where host_scan.c takes every
+    triangle: the small ones in its lanes, the others in its blocks (Jacksboro mirrored to 1024 x 1024):
+    the same meshes and statistics at every level as the C scan's, in both metrics."""
+    v = ALL["jacksboro"]
+    v = np.pad(v, ((0, 1024 - v.shape[0]), (0, 1024 - v.shape[1])), mode="symmetric")
+    assert v.size >= 1 << 20  # host_scan.c's SCAN_MIN_SAMPLES: the blocks' grids
+    hf = from_array(v)
+    span = float(v.max() - v.min())
+    for metric in ("vertical", "normal"):
+        params = api.MeshParams(refine=native.RefineParams(zeta=0.01 * span, metric=metric))
+        got = []
+        for on in (0, 1):
+            c_scan.wm_host_scan(on)
+            r = api.mesh(hf, params)
+            got.append((r.mesh.xy.tolist(), r.mesh.tris.tolist(), r.rows))
+        assert got[0] == got[1], metric
+
+
 def test_triangle_scan_in_avx2_equals_the_c_scan(c_scan):
     """E(T) of random triangles, small (the 32-bit lanes) and large or on a grid wider than 2^14 (the
     64-bit lanes), by both scans: the same value, bit for bit."""
