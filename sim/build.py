@@ -229,12 +229,13 @@ class MissingToolchain(RuntimeError):
 
 
 def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
-                   cpu_name: str | None = None) -> Path:
+                   cpu_name: str | None = None, stack_bytes: int = 0) -> Path:
     """Configure (once) and build firmware/board with its CMake toolchain file; returns the .hex image.
 
     For the CPU `cpu_name` (else $WM_CPU's, else the default): its -march and WM_CPU_<NAME> macro, into
     FIRMWARE_OUT (the default CPU's) or FIRMWARE_OUT-<name>; a folder configured for another CPU (the
-    default changed) is configured again.
+    default changed) is configured again.  stack_bytes > 0: a test build whose stack has that reserve
+    instead of memmap.STACK_BYTES (firmware/board/CMakeLists.txt, WM_STACK_BYTES), in FOLDER-stackN.
 
     Raises MissingToolchain when riscv64-unknown-elf-gcc is not installed, RuntimeError when the
     build fails (the message holds the compiler's or the size check's complaint).
@@ -250,14 +251,17 @@ def build_firmware(out: Path | None = None, gen: Path = GEN, quiet: bool = True,
 
     core = cpu(cpu_name)
     if out is None:
-        out = FIRMWARE_OUT.with_name(FIRMWARE_OUT.name + soc_cpu.suffix(core))
+        out = FIRMWARE_OUT.with_name(FIRMWARE_OUT.name + soc_cpu.suffix(core)
+                                     + (f"-stack{stack_bytes}" if stack_bytes else ""))
     write_all(gen)
     toolchain = FIRMWARE_SRC / "riscv32-toolchain.cmake"
     configure = ["cmake", "-S", str(FIRMWARE_SRC), "-B", str(out), f"-DCMAKE_TOOLCHAIN_FILE={toolchain}",
-                 f"-DWM_GEN_DIR={gen}", f"-DWM_CPU={core.name}", f"-DWM_RISCV_MARCH={core.march}"]
+                 f"-DWM_GEN_DIR={gen}", f"-DWM_CPU={core.name}", f"-DWM_RISCV_MARCH={core.march}",
+                 f"-DWM_STACK_BYTES={stack_bytes}"]
     with locked(out):
         cache = out / "CMakeCache.txt"
-        wanted = {f"WM_CPU:STRING={core.name}", f"WM_RISCV_MARCH:STRING={core.march}"}
+        wanted = {f"WM_CPU:STRING={core.name}", f"WM_RISCV_MARCH:STRING={core.march}",
+                  f"WM_STACK_BYTES:STRING={stack_bytes}"}
         if cache.exists() and not wanted <= set(cache.read_text().splitlines()):
             # configured for another CPU or -march (in the cached flags): configure afresh
             for p in out.iterdir():

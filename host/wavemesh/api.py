@@ -725,6 +725,8 @@ def stream(hf: HeightField, port, params: MeshParams | None = None, *, baud: int
         "errors": errors.to_report(),
         "device": info.to_report(),
         "device_cycles": cycles | {"seconds": {k: v / clk for k, v in cycles.items()}},
+        # the stack's reserve and high-water mark after the job (DONE; 0, 0: the device does not measure it)
+        "device_stack": {"bytes": done["stack_bytes"], "peak": done["stack_peak"]},
         "transfer": {"port": port if isinstance(port, str) else repr(port), "baud": baud,
                      "line_baud": info.baud, "height_bytes": 2 * hf.width * hf.height, "bytes_sent": sent,
                      "upload_seconds": upload_s,

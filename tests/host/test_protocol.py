@@ -83,7 +83,7 @@ def test_pack_unpack_round_trip_and_checks():
                     initial_vertices=8, cycles_receive=1, cycles_filter=2, cycles_template=3, cycles_refine=4,
                     cycles_emit=2**40)
     f = P.DONE.unpack(b)
-    assert f["cycles_emit"] == 2**40 and f["levels"] == 5 and f["reserved"] == 0
+    assert f["cycles_emit"] == 2**40 and f["levels"] == 5 and f["stack_bytes"] == f["stack_peak"] == 0
     assert f["initial_triangles"] == 9 and f["initial_vertices"] == 8
     with pytest.raises(TypeError):
         P.DONE.pack(status=0)  # missing fields
@@ -228,3 +228,21 @@ def test_done_must_state_the_last_level_that_arrived():
         with pytest.raises(ProtocolError, match=r"DONE says the last level has .* level 0 arrived with 2, 4 "
                                                 r"and 70000"):
             check_done(done | {field: wrong}, [last])
+
+
+def test_a_stack_at_its_guard_is_an_error():
+    """DONE's stack mark (tests/sim/test_stack.py: on the board): within STACK_GUARD_BYTES of the reserve,
+    or past it, the host refuses the job and names the stack; a device that does not measure it states 0."""
+    from wavemesh.device import memmap
+    from wavemesh.device.stream import DeviceError, check_stack
+
+    assert memmap.STACK_BYTES < 1 << 16  # DONE.stack_bytes is a u16
+    size = 12288
+    check_stack({"stack_bytes": 0, "stack_peak": 0})
+    check_stack({"stack_bytes": size, "stack_peak": size - P.STACK_GUARD_BYTES})
+    g = P.STACK_GUARD_BYTES
+    near = f"stack reached {size - g + 4} bytes: it came within {g - 4} bytes"
+    with pytest.raises(DeviceError, match=near):
+        check_stack({"stack_bytes": size, "stack_peak": size - P.STACK_GUARD_BYTES + 4})
+    with pytest.raises(DeviceError, match=f"overflowed its {size}-byte reserve by 8 bytes"):
+        check_stack({"stack_bytes": size, "stack_peak": size + 8})

@@ -126,6 +126,13 @@ static uint64_t io_cycles(void *ctx)
     return board_cycles();
 }
 
+/* DONE.stack_peak and stack_bytes (include/proto.h, WM_PROTO_STACK; between jobs: board.ld's .wm_tail) */
+__attribute__((section(".wm_tail"))) uint32_t wm_proto_stack_peak(uint32_t *stack_bytes)
+{
+    *stack_bytes = board_stack_bytes();
+    return board_stack_peak();
+}
+
 static void io_mark(void *ctx, uint32_t clock)
 {
     (void)ctx;

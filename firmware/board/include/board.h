@@ -144,6 +144,22 @@ static inline void board_stage(uint32_t marker)
 /* Halt with an exit code: the simulator exits (status 0 for code 0); on a board the CPU spins. */
 void board_halt(uint32_t code) __attribute__((noreturn));
 
+/* ---- the stack ------------------------------------------------------------------------------- */
+
+/* The stack's reserve in bytes (board.ld: memmap.STACK_BYTES, or a test build's WM_STACK_BYTES). */
+uint32_t board_stack_bytes(void);
+
+/*
+ * The stack's high-water mark: bytes from its top (__stack_top) to the deepest word that is no longer
+ * crt0's paint (WM_STACK_PAINT), searched from the end of the image (board.ld's __wm_tail_end) up, since
+ * start-up or the previous call; then every word below the caller's frame painted again, so the next call
+ * measures from here.  Above board_stack_bytes(): the stack overflowed its reserve into the free RAM (or
+ * further: from the image's end on, the mark is at least the reserve and the free RAM).  A word written with the paint's value, or
+ * a frame's bytes never written, look unused: the mark is the deepest word written.  A loop of a load
+ * and a compare a word over the painted RAM (some 18 KB: 20 k cycles), run between jobs.
+ */
+uint32_t board_stack_peak(void);
+
 /* ---- configuration ---------------------------------------------------------------------------- */
 
 /* The sizes the hardware was built with (SYS block read-only registers). */

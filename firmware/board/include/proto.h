@@ -110,6 +110,15 @@ typedef struct wm_proto_io {
     uint32_t (*upload_crc)(void *ctx);
 } wm_proto_io;
 
+#ifdef WM_PROTO_STACK
+/* A device that measures its stack (built with WM_PROTO_STACK: the board, firmware/board/CMakeLists.txt)
+ * defines this: the stack's high-water mark, bytes from its top to the deepest word written since the
+ * previous call (since start-up for the first), the mark reset for the next, and its reserve in
+ * *stack_bytes.  The engine calls it after each job, while no clock runs (DONE.stack_peak,
+ * DONE.stack_bytes; without WM_PROTO_STACK both are 0). */
+uint32_t wm_proto_stack_peak(uint32_t *stack_bytes);
+#endif
+
 /* What the device states in HELLO_REPLY (docs/protocol.md, HELLO_REPLY). */
 typedef struct wm_proto_caps {
     char name[8];            /* e.g. "wm-board", NUL-padded */

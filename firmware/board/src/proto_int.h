@@ -36,6 +36,14 @@ typedef char proto_halfword_payloads[(WM_PROTO_HEADER_BYTES + WM_PROTO_DATA_BYTE
                                          ? 1
                                          : -1];
 
+/* Code that runs between jobs, on the board after the image's code and data (board.ld's .wm_tail), so
+ * that what it takes moves nothing else; the board is the engine's one rv32 build */
+#ifdef __riscv
+#define WM_PROTO_BETWEEN_JOBS __attribute__((section(".wm_tail"), noinline))
+#else
+#define WM_PROTO_BETWEEN_JOBS
+#endif
+
 /* Why a job stops (wm_proto.abort) */
 #define ABORT_HOST 1u   /* ABORT or HELLO: already answered, no DONE */
 #define ABORT_NO_ACK 2u /* the host stopped answering */

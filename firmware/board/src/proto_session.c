@@ -427,6 +427,17 @@ void wm_proto_initial(wm_proto *p, int32_t nv, int32_t nt)
     p->initial_triangles = (uint32_t)nt;
 }
 
+#ifdef WM_PROTO_STACK
+/* DONE's stack fields (wm_proto_stack_peak), after the job: no clock runs, the scan is no stage's and not
+ * the link's */
+WM_PROTO_BETWEEN_JOBS static void done_stack(uint8_t *b)
+{
+    uint32_t bytes = 0;
+    put32(b + WM_PROTO_DONE_STACK_PEAK, wm_proto_stack_peak(&bytes));
+    put16(b + WM_PROTO_DONE_STACK_BYTES, bytes);
+}
+#endif
+
 static void send_done(wm_proto *p)
 {
     wm_proto_send_own(p, WM_PROTO_T_DONE, p->done, sizeof p->done);
@@ -478,6 +489,9 @@ static void run_job(wm_proto *p)
     put64(b + WM_PROTO_DONE_CYCLES_REFINE, p->cycles[WM_PROTO_STAGE_REFINE]);
     put64(b + WM_PROTO_DONE_CYCLES_EMIT, p->cycles[WM_PROTO_STAGE_EMIT]);
     put64(b + WM_PROTO_DONE_CYCLES_LINK, p->link);
+#ifdef WM_PROTO_STACK
+    done_stack(b);
+#endif
     if (rc) {
         p->last_error = (uint8_t)rc;
         p->last_detail = detail;

@@ -1,5 +1,7 @@
-/* wavemesh board firmware: cycle counter, timer, LEDs, halt, configuration (see board.h). */
+/* wavemesh board firmware: cycle counter, timer, LEDs, halt, the stack's mark, configuration (see board.h). */
 #include "board.h"
+
+extern uint32_t __wm_tail_end[], __stack_bottom[], __stack_top[]; /* board.ld */
 
 uint64_t board_cycles(void)
 {
@@ -39,4 +41,20 @@ void board_read_config(struct board_config *config)
     config->height_samples = WM_SYS_HEIGHT_SAMPLES;
     config->coef_entries = WM_SYS_COEF_ENTRIES;
     config->tout_entries = WM_SYS_TOUT_ENTRIES;
+}
+
+/* In .wm_tail, after .bss (board.ld): what runs between jobs moves no other code or data */
+__attribute__((section(".wm_tail"))) uint32_t board_stack_bytes(void)
+{
+    return (uint32_t)((uintptr_t)__stack_top - (uintptr_t)__stack_bottom);
+}
+
+__attribute__((section(".wm_tail"))) uint32_t board_stack_peak(void)
+{
+    volatile uint32_t *w = __wm_tail_end, *sp;
+    __asm__ volatile("mv %0, sp" : "=r"(sp));
+    while (w < sp && *w == WM_STACK_PAINT) w++;
+    uint32_t peak = (uint32_t)((uintptr_t)__stack_top - (uintptr_t)w);
+    for (; w < sp; w++) *w = WM_STACK_PAINT; /* below this frame: the next job's to write */
+    return peak;
 }

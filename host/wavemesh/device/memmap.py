@@ -111,8 +111,12 @@ def ecp5_pll(f_in: int = OSC_HZ, f_out: int = CLK_HZ) -> dict[str, int]:
 GRID_MAX_W = 1024  # largest height field, columns
 GRID_MAX_H = 1024  # largest height field, rows
 # the stack the linker script reserves at the top of firmware RAM: half as much again as the deepest call
-# chain needs (some 7.9 KB, docs/soc.md "What the firmware RAM holds"); nothing checks it at run time
+# chain needs (some 7.9 KB, docs/soc.md "What the firmware RAM holds"); checked at run time by its
+# high-water mark (DONE.stack_peak: docs/soc.md, "The stack's high-water mark")
 STACK_BYTES = 12 * 1024
+# the word crt0 paints the free firmware RAM and the stack with at start-up (not one byte repeated, so no
+# compiler makes the repaint a memset); the deepest word no longer painted is the stack's high-water mark
+STACK_PAINT = 0x57AC57AC
 # The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
 # (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
 # triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
@@ -585,6 +589,7 @@ def c_header() -> str:
         num("WM_STAGING_TRI_BYTES", STAGING_TRI_BYTES),
         num("WM_STAGING_GRID_BYTES", STAGING_GRID_BYTES),
         num("WM_STACK_BYTES", STACK_BYTES),
+        num("WM_STACK_PAINT", f"0x{STACK_PAINT:08X}"),
         num("WM_ENGINE_COORD_BITS", ENGINE_COORD_BITS),
         num("WM_UPLOAD_BUF_BASE", f"0x{IO_CODE << REGION_SHIFT | UPLOAD_BUF_BLOCK << IO_BLOCK_SHIFT:08X}"),
         num("WM_UPLOAD_BUF_BYTES", UPLOAD_BUF_BYTES),

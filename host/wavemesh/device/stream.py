@@ -859,6 +859,7 @@ class Device:
                     if x["levels"] != len(levels):
                         raise ProtocolError(f"DONE says {x['levels']} levels, {len(levels)} arrived")
                     check_done(x, levels)
+                    check_stack(x)
                     return levels, x
             except LinkTimeout:
                 raise
@@ -878,6 +879,21 @@ def check_done(done: dict, levels: list[LevelResult]) -> None:
         raise ProtocolError(f"DONE says the last level has {said[0]} triangles, {said[1]} vertices and E_max "
                             f"{said[2]} (Q16.16), but level {last.level} arrived with {got[0]}, {got[1]} "
                             f"and {got[2]}")
+
+
+def check_stack(done: dict) -> None:
+    """DONE's stack_peak, the device's stack's high-water mark, against its stack_bytes: a job whose stack
+    came within protocol.STACK_GUARD_BYTES of the reserve, or went past it into the RAM below, is an
+    error, whatever it sent (a device that states stack_bytes 0 does not measure its stack)."""
+    size, peak = done["stack_bytes"], done["stack_peak"]
+    if size and peak > size - P.STACK_GUARD_BYTES:
+        what = (f"overflowed its {size}-byte reserve by {peak - size} bytes" if peak > size else
+                f"came within {size - peak} bytes of its {size}-byte reserve (the guard: "
+                f"{P.STACK_GUARD_BYTES})")
+        raise DeviceError(f"the device's stack reached {peak} bytes: it {what}; the job's results are not "
+                          "trusted", "the firmware's stack is too small for this job (memmap.STACK_BYTES, "
+                          "docs/soc.md \"The stack's high-water mark\"); reset the device before the next "
+                          "job")
 
 
 def with_timeouts(t: Timeouts, **kw) -> Timeouts:
