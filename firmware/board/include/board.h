@@ -156,7 +156,7 @@ uint32_t board_stack_bytes(void);
  * measures from here.  Above board_stack_bytes(): the stack overflowed its reserve into the free RAM (or
  * further: from the image's end on, the mark is at least the reserve and the free RAM).  A word written with the paint's value, or
  * a frame's bytes never written, look unused: the mark is the deepest word written.  A loop of a load
- * and a compare a word over the painted RAM (some 18 KB: 20 k cycles), run between jobs.
+ * and a compare a word over the painted RAM (up to 25 KB: some 60 k cycles), run between jobs.
  */
 uint32_t board_stack_peak(void);
 
