@@ -64,8 +64,10 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
 struct fans {
     int32_t n, k;                             /* ring size; the pointer, unwrapped */
     int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
-    int32_t z[WM_MAX_RING], zv;               /* the samples of p_i and of v */
+    int32_t z[WM_MAX_RING];                   /* the samples of p_i less v's (16-bit samples) */
     int32_t vx, vy;                           /* v */
+    int32_t quick;                            /* 1: no holes mask and a bound (zeta): the test applies */
+    uint32_t zeta;
     int64_t D;                                /* the fan triangle's, for normal_above */
     uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
@@ -81,22 +83,26 @@ struct fans {
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_t j, int32_t k, int64_t D,
-                     uint64_t av)
+#if WM_NARROW_DIV
+typedef int32_t far_prod; /* on a 32-bit CPU (and in the checked builds) a 32-bit multiply, not a pair */
+#else
+typedef int64_t far_prod; /* natively in 64 bits, which x86-64 takes without sign extensions */
+#endif
+
+WM_NOINLINE_32 static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
 {
-    int64_t dz1 = (int64_t)q->z[j] - q->z[a], dz2 = (int64_t)q->z[k] - q->z[a];
+    int64_t D = q->D;
+    uint64_t av = q->av;
+    int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
     int32_t jx = q->dx[j] - q->dx[a], kx = q->dx[k] - q->dx[a], jy = q->dy[j] - q->dy[a], ky = q->dy[k] - q->dy[a];
     int64_t Na, Nb;
     uint64_t A, B, T;
     if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
-    if (dz1 == (int32_t)dz1 && dz2 == (int32_t)dz2) { /* the same products, each 32 by 32 bits */
-        int32_t z1 = (int32_t)dz1, z2 = (int32_t)dz2;
-        Na = (int64_t)z1 * ky - (int64_t)z2 * jy;
-        Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
-    } else {
-        Na = dz1 * ky - dz2 * jy;
-        Nb = jx * dz2 - kx * dz1;
-    }
+    /* differences of 16-bit samples times differences of grid coordinates (at most 32766): |z| <= 65535,
+     * so each product is below 2^31 (far_prod) */
+    Na = (int64_t)((far_prod)z1 * ky) - (int64_t)((far_prod)z2 * jy);
+    Nb = (int64_t)((far_prod)jx * z2) - (int64_t)((far_prod)kx * z1);
+    WM_ASSERT(Na == (int64_t)z1 * ky - (int64_t)z2 * jy && Nb == (int64_t)jx * z2 - (int64_t)kx * z1);
     A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), q->sx, q->ex);
     B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), q->sy, q->ey);
     if ((A | B) < ((uint64_t)1 << 31)) {
@@ -111,7 +117,7 @@ static int far_above(const struct fans *q, const wm_params *p, int32_t a, int32_
     } else {
         T = wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D);
     }
-    return T < ((uint64_t)1 << 31) && (uint64_t)p->zeta * T < (av << 16);
+    return T < ((uint64_t)1 << 31) && (uint64_t)q->zeta * T < (av << 16);
 }
 
 /* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64, for the soft CPU a multiply pair). */
@@ -134,7 +140,7 @@ WM_NOINLINE_32 static int normal_above(const struct fans *q, struct tested *t, i
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
     int above;
-    if (far_above(q, &r->params, a, j, k, q->D, q->av)) return 1;
+    if (far_above(q, a, j, k)) return 1;
     fan_corners(q, a, j, k, x, y);
     above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
@@ -153,8 +159,8 @@ WM_NOINLINE_32 static int other_above(const struct fans *q, struct tested *t, in
 static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
 {
     const wm_refiner *r = t->r;
-    int32_t n = q->n, k, j, fk, fj, e0;
-    int64_t D, V;
+    int32_t n = q->n, k, j, fk, fj, e0, D;
+    int64_t V;
     uint64_t av = 0;
     if (q->k < a + 2) q->k = a + 2;
     for (;;) {
@@ -168,13 +174,17 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     q->j = j;
     fj = cross(q, a, j);
     e0 = cross(q, j, k);
-    D = (int64_t)e0 - fk + fj;
-    if (D > 0 && r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu) {
-        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k] - (int64_t)(int32_t)D * q->zv;
+    /* D = (p_j - p_a) x (p_k - p_a), twice the signed area of a triangle of grid points: |D| <= (W - 1)(H - 1)
+     * < 2^30, so the sum is taken modulo 2^32 (on rv32 no carries, one branch for D > 0) */
+    D = (int32_t)((uint32_t)e0 - (uint32_t)fk + (uint32_t)fj);
+    WM_ASSERT((int64_t)D == (int64_t)e0 - fk + fj);
+    if (D > 0 && q->quick) {
+        /* e0 z_a - fk z_j + fj z_k - D z_v with the z_i taken less z_v (q->z): one product fewer */
+        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
         av = (uint64_t)(V < 0 ? -V : V);
         WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
-        if (av * 65536u <= (uint64_t)r->params.zeta * (uint32_t)D) return 1;
+        if (av * 65536u <= (uint64_t)q->zeta * (uint32_t)D) return 1;
         if (r->params.metric == WM_METRIC_VERTICAL) return 0;
         q->D = D, q->av = av;
         return !normal_above(q, t, a, j, k);
@@ -243,13 +253,14 @@ static int is_fan(const int32_t *tris, int32_t nt)
  * shows, or not counter-clockwise), so every later candidate that holds one is refused for certain. */
 static void mark_bad(uint32_t *bad, int32_t x, int32_t y) { bad[x] |= 1u << y; }
 
-/* 1 when the fan from p_a holds a triangle in bad[] (n ring vertices): one from p_a itself, or the fan
- * triangle (p_a-2, p_a-1, p_a) of the fan from p_a-2 (this fan's last) or (p_a+2, p_a, p_a+1) of that
- * from p_a+2 (this fan's first; evaluated before it only when a + 2 wraps round): no other triangle of a
- * fan has two consecutive ring vertices as it is seen from another corner. */
+/* 1 when the fan from p_a holds a triangle in bad[] (n ring vertices), asked before that fan is tried:
+ * the fan triangle (p_a-2, p_a-1, p_a) of the fan from p_a-2 (this fan's last) or (p_a+2, p_a, p_a+1) of
+ * that from p_a+2 (this fan's first; evaluated before it only when a + 2 wraps round): no other triangle
+ * of a fan has two consecutive ring vertices as it is seen from another corner, and bad[a], the fan's
+ * own, is still empty (only the fan from p_a marks it, when refused). */
 static int fan_refused(const uint32_t *bad, int32_t n, int32_t a)
 {
-    return bad[a] || (a >= 2 && (bad[a - 2] >> (a - 1) & 1)) || (a >= n - 2 && (bad[a + 2 - n] >> a & 1));
+    return (a >= 2 && (bad[a - 2] >> (a - 1) & 1)) || (a >= n - 2 && (bad[a + 2 - n] >> a & 1));
 }
 
 /* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, v is the vertex
@@ -267,7 +278,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     const wm_mesh *me = &r->mesh;
     int32_t *ring = lp->ring, *tris = lp->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
     uint32_t best = NONE, bad[WM_MAX_RING];
-    int32_t vx = me->vx[v], vy = me->vy[v];
+    int32_t vx = me->vx[v], vy = me->vy[v], zv;
     struct wm_plan_probe probe;
     struct tested tested;
     struct fans q;
@@ -278,8 +289,10 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     if (n < 0) return NONE;
     q.n = n;
     q.k = 0;
-    q.zv = r->field.samples[(int64_t)vy * r->field.width + vx];
+    zv = r->field.samples[(int64_t)vy * r->field.width + vx];
     q.vx = vx, q.vy = vy;
+    q.quick = r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu;
+    q.zeta = r->params.zeta;
     wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
     wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
     for (int32_t i = 0; i < n; i++) {
@@ -287,7 +300,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
         ry[i] = me->vy[ring[i]];
         q.dx[i] = rx[i] - vx;
         q.dy[i] = ry[i] - vy;
-        q.z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]];
+        q.z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
         bad[i] = 0;
     }
     /* Three ring vertices have one triangulation, four have two (the fans from 0 and 2 are the same,
