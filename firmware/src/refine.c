@@ -190,24 +190,71 @@ static uint32_t ratio_q16(uint64_t num, uint64_t den)
     return q > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)q;
 }
 
-/* The largest den > 0 with xi = alpha R_A + (1 - alpha) R_E > 1, R_A = ra and R_E = ratio_q16(num, den)
- * (num below 2^42), as the swap rounds it: 0 when there is none,
+/* The largest den > 0 with xi = alpha R_A + (1 - alpha) R_E > 1 for alpha < 2^16, R_A = ra and R_E =
+ * ratio_q16(num, den) (num below 2^42), as the swap rounds it: 0 when there is none,
  * UINT64_MAX when every den has it.  xi > 1 iff alpha ra + (2^16 - alpha) re >= 65537 2^16 iff
  * re >= R = ceil((65537 2^16 - alpha ra) / (2^16 - alpha)), and re = min(floor(2^16 num / den),
  * 2^32 - 1) >= R (R < 2^32) iff 2^16 num >= R den; at alpha = 0, R = 65537.  So a swap's test is a
- * comparison of den with this, and bounds each new E(T) before it is scanned (try_swap). */
-static uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num)
+ * comparison of den with this, and bounds each new E(T) before it is scanned (try_swap).  R into *rq
+ * (0 when every den, UINT64_MAX when none), and without need only R (0 returned): den_of takes the
+ * rest when it is needed, den_over a test against it. */
+static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num, int need, uint64_t *rq)
 {
     int64_t t;
-    uint64_t rq;
+    uint64_t R;
     uint32_t rem;
-    if (alpha == 65536u) return ra > 65536u ? UINT64_MAX : 0;
+    WM_ASSERT(alpha < 65536u);
     t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
-    if (t <= 0) return UINT64_MAX;
-    rq = (uint64_t)t + (65535u - alpha);
-    rq = rq >> 32 ? rq / (65536u - alpha) : (uint32_t)rq / (65536u - alpha); /* 32 bits unless ra < 2 */
-    if (rq > 0xFFFFFFFFu) return 0;
+    if (t <= 0) {
+        *rq = 0;
+        return UINT64_MAX;
+    }
+    R = (uint64_t)t + (65535u - alpha);
+    R = R >> 32 ? R / (65536u - alpha) : (uint32_t)R / (65536u - alpha); /* 32 bits unless ra < 2 */
+    if (R > 0xFFFFFFFFu) {
+        *rq = UINT64_MAX;
+        return 0;
+    }
+    *rq = R;
+    if (!need) return 0;
+    return WM_NARROW_DIV && R < 65536u ? wm_udiv_small(num << 16, (uint32_t)R, &rem) : (num << 16) / R;
+}
+
+/* den_max from its R (den_max's *rq). */
+static uint64_t den_of(uint64_t rq, uint64_t num)
+{
+    uint32_t rem;
+    if (rq == 0) return UINT64_MAX;
+    if (rq == UINT64_MAX) return 0;
     return WM_NARROW_DIV && rq < 65536u ? wm_udiv_small(num << 16, (uint32_t)rq, &rem) : (num << 16) / rq;
+}
+
+/* x > den_of(rq, num) without its division, for the soft CPU (WM_NARROW_DIV), where that division is a
+ * library call (some 80 cycles): x > floor(2^16 num / R) iff x R > 2^16 num (integers), the product below
+ * 2^64 when x < 2^32 (R < 2^32, 2^16 num < 2^58; a larger x divides). */
+static inline int den_over(uint64_t rq, uint64_t num, uint64_t x)
+{
+    int over;
+    if (rq == 0) return 0; /* den_max = UINT64_MAX */
+    if (rq == UINT64_MAX) return x > 0;
+    over = x >> 32 ? x > den_of(rq, num) : x * rq > (num << 16);
+    WM_ASSERT(over == (x > den_of(rq, num)));
+    return over;
+}
+
+/* x > dmax, dmax = den_max(alpha, ra, num, !WM_NARROW_DIV, &rq): with WM_NARROW_DIV by den_over. */
+static WM_ALWAYS_INLINE int over_dmax(uint64_t rq, uint64_t num, uint64_t dmax, uint64_t x)
+{
+    return WM_NARROW_DIV ? den_over(rq, num, x) : x > dmax;
+}
+
+/* x > den_max(alpha, ra, num), for the tests whose den_max is not needed as a bound (try_swap's exact R_A
+ * after the scans, its swap back's): with WM_NARROW_DIV by den_over, natively by the division (one
+ * instruction: den_over's products and branches took more). */
+static WM_ALWAYS_INLINE int over_den_max(uint32_t alpha, uint32_t ra, uint64_t num, uint64_t x)
+{
+    uint64_t rq, d = den_max(alpha, ra, num, !WM_NARROW_DIV, &rq);
+    return over_dmax(rq, num, d, x);
 }
 
 /* 65536 > den_max(alpha, ra, num), without its divisions: den_max is 0 (R_A alone refuses, or R > 2^32 -
@@ -439,8 +486,8 @@ static int swap_back(wm_refiner *r, int32_t e, uint32_t alpha, int32_t s)
     return 1;
 }
 
-/* try_swap's dmax with R_A exact: the new triangles' smallest angles (the CORDIC, into *an1 and *an2) over
- * the old pair's, ang_old.  Natively it is taken after the scans (ANGLES_LATE), whose bounds then come
+/* try_swap's R_A exact (for its dmax): the new triangles' smallest angles (the CORDIC, into *an1 and *an2)
+ * over the old pair's, ang_old.  Natively it is taken after the scans (ANGLES_LATE), whose bounds then come
  * from R_A's bound from above (dmax grows with R_A; a scan that stays within its bound is the whole
  * scan, so the answer is the same), and the smaller new triangle is scanned first: the two CORDICs of a
  * swap a scan refuses are saved, and a refusing scan is most often the shorter.  On the board the angle
@@ -452,11 +499,11 @@ static int swap_back(wm_refiner *r, int32_t e, uint32_t alpha, int32_t s)
 #define ANGLES_LATE 1
 #endif
 
-static inline uint64_t exact_dmax(uint32_t alpha, int64_t dot1, int64_t cross1, int64_t dot2, int64_t cross2,
-                                  int32_t ang_old, uint64_t num, int32_t *an1, int32_t *an2)
+static inline uint32_t exact_ra(int64_t dot1, int64_t cross1, int64_t dot2, int64_t cross2, int32_t ang_old,
+                                int32_t *an1, int32_t *an2)
 {
     int32_t a = *an1 = wm_angle_q16(dot1, cross1), a2 = *an2 = wm_angle_q16(dot2, cross2);
-    return den_max(alpha, ratio_q16((uint64_t)(a2 < a ? a2 : a), (uint64_t)ang_old), num);
+    return ratio_q16((uint64_t)(a2 < a ? a2 : a), (uint64_t)ang_old);
 }
 
 /* try_swap's measure of a new triangle (x, y) within its limit: the bound bnd, or, with dmax, den over dmax
@@ -528,7 +575,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
      * max(zeta, the pair's E(T)), the reduction's bound (docs/refiner.md). */
     bnd = swap_bound(r, emax, oe1, oe2);
     if (alpha < 65536u) {
-        uint64_t dmax, s1, s2;
+        uint64_t dmax, rq, s1, s2;
         o1 = in_height(&r->params, oe1);
         o2 = in_height(&r->params, oe2);
         uint32_t lb1 = 0, lb2 = 0;
@@ -539,8 +586,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
          * from above (wm_min_angle_above, no CORDIC): a swap they refuse with it is refused with R_A
          * itself (most swaps end here); then the new angles, and the same tests on their R_A. */
         if (den_below_one(alpha, ra, o1 + o2 + one)) return 0; /* one > dmax */
-        dmax = den_max(alpha, ra, o1 + o2 + one);
-        WM_ASSERT(one <= dmax);
+        /* with WM_NARROW_DIV dmax = den_of(rq, o1 + o2 + one) is taken when the scans need it (den_over) */
+        dmax = den_max(alpha, ra, o1 + o2 + one, !WM_NARROW_DIV, &rq);
+        WM_ASSERT(one <= den_of(rq, o1 + o2 + one));
         s1 = s2 = 0;
         for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
             int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1],
@@ -556,7 +604,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                 if (v > lb1) {
                     lb1 = v;
                     s1 = in_height(&r->params, lb1);
-                    if (s1 + s2 + one > dmax) return 0;
+                    if (over_dmax(rq, o1 + o2 + one, dmax, s1 + s2 + one)) return 0;
                 }
             }
             if (side <= 0) {
@@ -564,13 +612,17 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
                 if (v > lb2) {
                     lb2 = v;
                     s2 = in_height(&r->params, lb2);
-                    if (s1 + s2 + one > dmax) return 0;
+                    if (over_dmax(rq, o1 + o2 + one, dmax, s1 + s2 + one)) return 0;
                 }
             }
         }
         if (alpha > 0 && !ANGLES_LATE) {
-            dmax = exact_dmax(alpha, dot1, cross1, dot2, cross2, ang_old, o1 + o2 + one, &an1, &an2);
-            if (s1 + s2 + one > dmax) return 0; /* one > dmax with it */
+            dmax = den_max(alpha, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
+                           !WM_NARROW_DIV, &rq);
+            if (over_dmax(rq, o1 + o2 + one, dmax, s1 + s2 + one)) return 0; /* one > dmax with it */
+            if (WM_NARROW_DIV) dmax = den_of(rq, o1 + o2 + one);
+        } else if (WM_NARROW_DIV) {
+            dmax = den_of(rq, o1 + o2 + one);
         }
         /* Then the scans, the smaller new triangle's first (a swap that one of them refuses is most
          * often refused for fewer samples), each stopping as soon as its E(T) is too large for the swap
@@ -590,8 +642,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
             e1 = et[0], e2 = et[1];
         }
         if (alpha > 0 && ANGLES_LATE) {
-            dmax = exact_dmax(alpha, dot1, cross1, dot2, cross2, ang_old, o1 + o2 + one, &an1, &an2);
-            if (sn + one > dmax) return 0;
+            if (over_den_max(alpha, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
+                             sn + one))
+                return 0;
         }
         WM_ASSERT(sn + one <= dmax);
     } else {
@@ -611,7 +664,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         if (oe1 > bb || oe2 > bb) back = 0;
         else {
             if (alpha > 0) rb = ratio_q16((uint64_t)ang_old, (uint64_t)(an1 < an2 ? an1 : an2));
-            back = alpha == 65536u ? rb > 65536u : o1 + o2 + one <= den_max(alpha, rb, sn + one);
+            back = alpha == 65536u ? rb > 65536u : !over_den_max(alpha, rb, sn + one, o1 + o2 + one);
         }
     }
     make_swap(r, e, alpha, e1, e2, w1y * r->field.width + w1x, w2y * r->field.width + w2x, angle_code(an1),
@@ -628,7 +681,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     wm_mesh *me = &r->mesh;
     const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
-    int32_t first;     /* this sweep's first swap number */
+    int32_t first; /* this sweep's first swap number */
     struct sample_div wd = sample_div_of(r->field.width);
     for (int32_t t = 0; t < me->tri_end; t++) {
         r->list[t] = ANGLE_UNKNOWN;
@@ -654,8 +707,8 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 if (!(me->tflag[u] & WM_F_SWAP)) continue;
                 if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
                 if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) { /* a swap back */
-                    if (r->pos[t] & 1) continue;                                  /* refused */
-                    if (swap_back(r, e, alpha, r->pos[t])) {                      /* made */
+                    if (r->pos[t] & 1) continue; /* refused */
+                    if (swap_back(r, e, alpha, r->pos[t])) { /* made */
                         me->tflag[t] |= WM_F_CHANGED;
                         me->tflag[u] |= WM_F_CHANGED;
                         swaps++;
