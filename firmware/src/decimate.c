@@ -269,8 +269,9 @@ static int fan_refused(const uint32_t *bad, int32_t n, int32_t a)
  * (most often: the one just evaluated, back at the top of the heap) its removal takes them instead of
  * working them out again (f5 at 1 %: 191 of its 223 removals, Ball at 2 % 376 of 498). */
 struct last_plan {
-    int32_t v, nr, nt; /* v: -1 when none */
+    int32_t v, nr, nt, k; /* v: -1 when none */
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
+    int32_t e[WM_MAX_RING]; /* and v's fan (wm_vertex_fan), k half-edges, for wm_vertex_remove_fan */
 };
 
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct last_plan *lp)
@@ -285,7 +286,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     tested.r = r;
     probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested, probe.bad = WM_CHECK ? NULL : bad;
     lp->v = -1;
-    n = wm_vertex_ring(me, v, ring);
+    n = wm_vertex_fan(me, v, lp->e, &lp->k, ring);
     if (n < 0) return NONE;
     q.n = n;
     q.k = 0;
@@ -582,7 +583,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             }
 #endif
         } else {
-            nr = wm_vertex_ring(me, v, ring);
+            nr = wm_vertex_fan(me, v, lp.e, &lp.k, ring);
             if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK)
                 continue; /* cannot happen: the plan was made on this star */
         }
@@ -591,7 +592,8 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             refile(r, v, &n, &lp); /* holes.c: a removal beyond v's ring took a ring vertex's other cover since */
             continue;
         }
-        if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) continue; /* cannot happen, as above */
+        if (wm_vertex_remove_fan(me, v, lp.e, lp.k, ring, nr, tris, nt, touched, &k) != WM_OK)
+            continue; /* cannot happen, as above */
         for (int32_t i = 0; i < k; i++) { /* E(T) <= v's cost (first_fit's largest), measured at the end */
             me->tflag[touched[i]] |= WM_F_MEASURE;
             r->err[touched[i]] = r->vkey[v];

@@ -56,6 +56,11 @@ int wm_vertex_ring(const wm_mesh *m, int32_t v, int32_t ring[WM_MAX_RING])
     return (int)fan(m, v, e, &k, ring);
 }
 
+int32_t wm_vertex_fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING])
+{
+    return fan(m, v, e, k, ring);
+}
+
 /* wm_incircle(a, b, c, d) > 0 for one triangle and many d (an ear against the polygon's other
  * vertices): relative to a, with b' = b - a, c' = c - a, d' = d - a, the in-circle determinant is
  *
@@ -276,9 +281,23 @@ int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tri
 int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
                      int32_t *n_touched)
 {
-    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], slot[WM_MAX_RING], out[WM_MAX_RING], k, n;
+    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], k, n;
     n = fan(m, v, e, &k, ring);
     if (n < 0) return (int)n;
+    return wm_vertex_remove_fan(m, v, e, k, ring, n, tris, n_tris, touched, n_touched);
+}
+
+int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, const int32_t *ring, int32_t n,
+                         const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING], int32_t *n_touched)
+{
+    int32_t slot[WM_MAX_RING], out[WM_MAX_RING];
+#if WM_CHECK
+    {
+        int32_t e2[WM_MAX_RING], ring2[WM_MAX_RING], k2;
+        WM_ASSERT(fan(m, v, e2, &k2, ring2) == n && k2 == k);
+        for (int32_t i = 0; i < n; i++) WM_ASSERT(ring2[i] == ring[i] && (i >= k || e2[i] == e[i]));
+    }
+#endif
     if (n_tris != n - 2) return WM_ERR_ARG;
     /* Remember the outside: out[i] is the half-edge across ring edge p_i -> p_i+1 of fan triangle i. */
     for (int32_t i = 0; i < k; i++) {
