@@ -526,9 +526,11 @@ WM_NEVER_INLINE static int scan_lattice(const wm_field *f, const int32_t x[3], c
 
 /* The scan that fits the triangle (the same result either way).  The board's refiner (WM_TRI_ENGINE)
  * hands it to the FPGA's triangle error engine, which returns the same Vmax and sample; the holes
- * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D <= 4 takes scan_tiny, one of
- * D <= WM_LATTICE_D scan_lattice in the native builds (where the hook declines), which inline it in each
- * measure (out of line, its call cost 1.5 % of the refiner's instructions; the board's is as before). */
+ * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D = 1 has no sample but its
+ * corners (Vmax 0 at corner 0, answered here without scan_tiny's call: a quarter of the scans on
+ * Jacksboro / 4), one of D <= 4 takes scan_tiny, one of D <= WM_LATTICE_D scan_lattice in the native
+ * builds (where the hook declines), which inline it in each measure (out of line, its call cost 1.5 % of
+ * the refiner's instructions; the board's is as before). */
 #if WM_SCAN_LATTICE
 WM_ALWAYS_INLINE
 #endif
@@ -541,7 +543,13 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
         int32_t cx, cy, tx, ty;
         uint64_t v = scan(f, x, y, D, limit, &cx, &cy), t = scan_tiny(f, x, y, (int32_t)D, limit, &tx, &ty);
         WM_ASSERT(v == t && cx == tx && cy == ty);
+        WM_ASSERT(D != 1 || (v == 0 && cx == x[0] && cy == y[0])); /* the shortcut below */
 #endif
+        if (D == 1) { /* no sample but the corners (Pick: I = 0, B = 3): scan_tiny's answer without its call */
+            if (wx) *wx = x[0];
+            if (wy) *wy = y[0];
+            return 0;
+        }
         return scan_tiny(f, x, y, (int32_t)D, limit, wx, wy);
     }
 #ifdef WM_TRI_ENGINE
@@ -633,7 +641,9 @@ static uint64_t slope_factor(const wm_field *f, const wm_params *p, const int32_
 /* ev = ceil(2^16 vmax / D), saturated at 2^32 - 1: E(T) in the vertical metric. */
 static uint32_t vertical(uint64_t vmax, int64_t D)
 {
-    uint64_t ev = wm_ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
+    uint64_t ev;
+    if (!WM_SPLIT_DIV && vmax == 0) return 0; /* flat (every D = 1): the board skips its divider call */
+    ev = wm_ceil_q16_div(vmax, (uint64_t)D); /* vmax < 2^47 */
     return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
 }
 
