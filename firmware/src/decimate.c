@@ -392,9 +392,9 @@ static void put(wm_refiner *r, int32_t i, int32_t v)
     r->pos[v] = i;
 }
 
-static void up(wm_refiner *r, int32_t i)
+static int up(wm_refiner *r, int32_t i)
 {
-    int32_t v = r->list[i];
+    int32_t v = r->list[i], i0 = i;
     while (i > 0) {
         int32_t p = (i - 1) / 2;
         if (!before(r, v, r->list[p])) break;
@@ -402,6 +402,7 @@ static void up(wm_refiner *r, int32_t i)
         i = p;
     }
     put(r, i, v);
+    return i != i0;
 }
 
 static void down(wm_refiner *r, int32_t i, int32_t n)
@@ -448,6 +449,18 @@ static void sink(wm_refiner *r, int32_t i, int32_t n)
     list[j] = v, pos[v] = j;
 }
 
+#if WM_CHECK
+/* The order holds around the entry at i: its parent is before it, it is before its children. */
+static int holds_at(const wm_refiner *r, int32_t i, int32_t n)
+{
+    int32_t v = r->list[i];
+    if (r->pos[v] != i || (i > 0 && !before(r, r->list[(i - 1) / 2], v))) return 0;
+    for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
+        if (!before(r, v, r->list[c])) return 0;
+    return 1;
+}
+#endif
+
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 {
     int32_t i = r->pos[v];
@@ -456,10 +469,10 @@ static void take_out(wm_refiner *r, int32_t v, int32_t *n)
     (*n)--;
     if (i == *n) return;
     {
-        int32_t moved = r->list[*n];
-        put(r, i, moved);
-        up(r, i);
-        if (r->pos[moved] == i) sink(r, i, *n);
+        int32_t moved = r->list[i] = r->list[*n];
+        if (i == 0 || !up(r, i)) sink(r, i, *n);
+        WM_ASSERT(holds_at(r, r->pos[moved], *n));
+        (void)moved;
     }
 }
 
@@ -475,9 +488,9 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
     }
     r->vkey[v] = cost;
     r->vapex[v] = (int8_t)apex;
-    if (i >= 0 && i < *n && r->list[i] == v) {
-        up(r, i);
-        down(r, r->pos[v], *n);
+    if (i >= 0 && i < *n && r->list[i] == v) { /* in place: up, else down (its key may be the same) */
+        if (i == 0 || !up(r, i)) down(r, i, *n); /* moved up: no child is before it */
+        WM_ASSERT(holds_at(r, r->pos[v], *n));
         return;
     }
     put(r, *n, v);
@@ -522,20 +535,32 @@ static void z_push(wm_refiner *r, struct zheap *h, int32_t v)
     r->pos[v] = IN_Z;
 }
 
+/* The top out: the hole goes down the smaller children to a leaf, then the last entry comes up from
+ * there into it (as sink above: it most likely belongs at the bottom). */
 static void z_pop(wm_refiner *r, struct zheap *h)
 {
-    int32_t v = h->z[0], last = h->z[-(--h->n)], i = 0;
+    wm_index *z = h->z;
+    int32_t v = z[0], last = z[-(--h->n)], n = h->n, i = 0;
     r->pos[v] = -1;
     for (;;) {
         int32_t c = 2 * i + 1, u;
-        if (c >= h->n) break;
-        u = h->z[-c];
-        if (c + 1 < h->n && h->z[-(c + 1)] < u) u = h->z[-(++c)];
-        if (last <= u) break;
-        h->z[-i] = (wm_index)u;
+        if (c >= n) break;
+        u = z[-c];
+        if (c + 1 < n && z[-(c + 1)] < u) u = z[-(++c)];
+        z[-i] = (wm_index)u;
         i = c;
     }
-    h->z[-i] = (wm_index)last;
+    while (i > 0) {
+        int32_t p = (i - 1) / 2, u = z[-p];
+        if (u <= last) break;
+        z[-i] = (wm_index)u;
+        i = p;
+    }
+    z[-i] = (wm_index)last;
+#if WM_CHECK
+    WM_ASSERT(i == 0 || z[-((i - 1) / 2)] <= last);
+    for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++) WM_ASSERT(last <= z[-c]);
+#endif
 }
 
 static void mark_stale(wm_refiner *r, int32_t v, int32_t *n, struct zheap *h)

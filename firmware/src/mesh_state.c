@@ -79,44 +79,100 @@ int wm_room(wm_refiner *r, int32_t added)
     return WM_ERR_CAPACITY;
 }
 
-/* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot. */
+/* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot (a total
+ * order: any heap pops them in the same order).  Its loops keep the item's key in a register and load
+ * each other entry's key once. */
 
-static int heap_before(const wm_refiner *r, int32_t a, int32_t b)
+static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
 {
-    return r->err[a] > r->err[b] || (r->err[a] == r->err[b] && a < b);
+    return ea > eb || (ea == eb && a < b);
 }
 
-static void heap_put(wm_refiner *r, int32_t i, int32_t t)
+/* The entry at i up past the parents it is before; 1 when it moved. */
+static int heap_up(wm_refiner *r, int32_t i)
 {
-    r->list[i] = t;
-    r->pos[t] = i;
-}
-
-static void heap_up(wm_refiner *r, int32_t i)
-{
-    int32_t t = r->list[i];
+    wm_index *list = r->list, *pos = r->pos;
+    const uint32_t *err = r->err;
+    int32_t t = list[i], i0 = i;
+    uint32_t e = err[t];
     while (i > 0) {
-        int32_t p = (i - 1) / 2;
-        if (!heap_before(r, t, r->list[p])) break;
-        heap_put(r, i, r->list[p]);
+        int32_t p = (i - 1) / 2, u = list[p];
+        if (!heap_before(e, t, err[u], u)) break;
+        list[i] = u, pos[u] = i;
         i = p;
     }
-    heap_put(r, i, t);
+    list[i] = t, pos[t] = i;
+    return i != i0;
 }
 
+/* The entry at i (no parent it is before) down past the children before it. */
 static void heap_down(wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t t = r->list[i];
+    wm_index *list = r->list, *pos = r->pos;
+    const uint32_t *err = r->err;
+    int32_t t = list[i];
+    uint32_t e = err[t];
     for (;;) {
-        int32_t c = 2 * i + 1;
+        int32_t c = 2 * i + 1, u;
+        uint32_t eu;
         if (c >= n) break;
-        if (c + 1 < n && heap_before(r, r->list[c + 1], r->list[c])) c++;
-        if (!heap_before(r, r->list[c], t)) break;
-        heap_put(r, i, r->list[c]);
+        u = list[c], eu = err[u];
+        if (c + 1 < n) {
+            int32_t w = list[c + 1];
+            uint32_t ew = err[w];
+            if (heap_before(ew, w, eu, u)) c++, u = w, eu = ew;
+        }
+        if (!heap_before(eu, u, e, t)) break;
+        list[i] = u, pos[u] = i;
         i = c;
     }
-    heap_put(r, i, t);
+    list[i] = t, pos[t] = i;
 }
+
+/* heap_down for an entry that most likely sinks to the bottom (the heap's last one, moved into the
+ * place of one removed): the hole first goes down the larger children to a leaf, one comparison a
+ * level, then the entry comes up from there past what it is before (decimate.c's sink).  The same
+ * places as heap_down's (the children the hole passes are those heap_down moves up, the order
+ * total), in about half its comparisons. */
+static void heap_sink(wm_refiner *r, int32_t i, int32_t n)
+{
+    wm_index *list = r->list, *pos = r->pos;
+    const uint32_t *err = r->err;
+    int32_t t = list[i], j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
+    uint32_t e = err[t];
+    while (j < m) {
+        int32_t c = 2 * j + 1, u = list[c], w = list[c + 1];
+        if (heap_before(err[w], w, err[u], u)) c++, u = w;
+        list[j] = u, pos[u] = j;
+        j = c;
+    }
+    if (2 * j + 1 < n) { /* an only child */
+        int32_t u = list[2 * j + 1];
+        list[j] = u, pos[u] = j;
+        j = 2 * j + 1;
+    }
+    while (j > i) {
+        int32_t p = (j - 1) / 2, u = list[p];
+        if (!heap_before(e, t, err[u], u)) break;
+        list[j] = u, pos[u] = j;
+        j = p;
+    }
+    list[j] = t, pos[t] = j;
+}
+
+#if WM_CHECK
+/* The order holds around the entry at i: its parent is before it, it is before its children. */
+static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
+{
+    const wm_index *list = r->list;
+    const uint32_t *err = r->err;
+    int32_t t = list[i], p = (i - 1) / 2;
+    if (r->pos[t] != i || (i > 0 && !heap_before(err[list[p]], list[p], err[t], t))) return 0;
+    for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
+        if (!heap_before(err[t], t, err[list[c]], list[c])) return 0;
+    return 1;
+}
+#endif
 
 static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
 {
@@ -126,10 +182,10 @@ static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
     (*n)--;
     if (i == *n) return;
     {
-        int32_t moved = r->list[*n];
-        heap_put(r, i, moved);
-        heap_up(r, i);
-        heap_down(r, r->pos[moved], *n);
+        int32_t moved = r->list[i] = r->list[*n];
+        if (i == 0 || !heap_up(r, i)) heap_sink(r, i, *n);
+        WM_ASSERT(heap_holds_at(r, r->pos[moved], *n));
+        (void)moved;
     }
 }
 
@@ -139,12 +195,12 @@ void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
     if (r->err[t] <= r->params.zeta) {
         heap_remove(r, t, n);
     } else if (i >= 0 && i < *n && r->list[i] == t) { /* in place: (E(T), slot) orders totally */
-        heap_up(r, i);
-        heap_down(r, r->pos[t], *n);
+        if (i == 0 || !heap_up(r, i)) heap_down(r, i, *n); /* moved up: no child is before it */
+        WM_ASSERT(heap_holds_at(r, r->pos[t], *n));
     } else {
-        r->pos[t] = *n;
-        r->list[(*n)++] = t;
-        heap_up(r, *n - 1);
+        r->list[*n] = t;
+        heap_up(r, (*n)++);
+        WM_ASSERT(heap_holds_at(r, r->pos[t], *n));
     }
 }
 
