@@ -126,7 +126,8 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
  * last), or with d NULL only counted; n plus its bytes. */
 static WM_ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
 {
-    if (!d) return n + 1u + (v >= 0x80u) + (v >= 0x4000u) + (v >= 0x200000u) + (v >= 0x10000000u);
+    if (!d) /* one or two bytes first: nearly every delta of a level's items */
+        return n + (v < 0x4000u ? 1u + (v >= 0x80u) : 3u + (v >= 0x200000u) + (v >= 0x10000000u));
     while (v >= 0x80u) {
         d[n++] = (uint8_t)(v | 0x80u);
         v >>= 7;
