@@ -740,7 +740,7 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
     gradient(f, x, y, &Na, &Nb);
     Ga = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex);
     Gb = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey);
-    T = wm_hypot_up(wm_hypot_up(Ga, Gb), (uint64_t)D);
+    T = wm_hypot3_up(Ga, Gb, (uint64_t)D);
     if (T >= ((uint64_t)1 << 31)) return wm_tri_error_within(f, p, x, y, bound, NULL, NULL, kept);
     vmax = scan_any(f, x, y, D, ((uint64_t)bound * T) >> 16, NULL, NULL);
     if ((vmax << 16) > (uint64_t)bound * T) return bound + 1;          /* E(T) > bound */

@@ -303,6 +303,24 @@ static inline uint64_t wm_hypot_up(uint64_t a, uint64_t b)
     uint64_t hi = a > b ? a : b, lo = a > b ? b : a;
     return hi + ((lo * 107 + 255) >> 8);
 }
+/* wm_hypot_up(wm_hypot_up(a, b), d), an upper bound of sqrt(a^2 + b^2 + d^2) (the normal metric's
+ * D sqrt(1 + g^2) from D and the scaled gradient numerators), in 32-bit operands when a, b and d are
+ * below 2^31 (the same integer: the first bound is then below 2^32, the second's operands too): on the
+ * soft CPU (WM_NARROW_DIV) a multiply pair each where the 64-bit operands took three multiplies and
+ * their carries, and comparisons of one word; natively the 64-bit ones (fewer instructions there). */
+static inline uint64_t wm_hypot3_up(uint64_t a, uint64_t b, uint64_t d)
+{
+    if (WM_NARROW_DIV && (a | b | d) < ((uint64_t)1 << 31)) {
+        uint32_t hi = (uint32_t)(a > b ? a : b), lo = (uint32_t)(a > b ? b : a), h, d32 = (uint32_t)d;
+        uint64_t T;
+        h = hi + (uint32_t)(((uint64_t)lo * 107u + 255u) >> 8);
+        hi = h > d32 ? h : d32, lo = h > d32 ? d32 : h;
+        T = hi + (((uint64_t)lo * 107u + 255u) >> 8);
+        WM_ASSERT(T == wm_hypot_up(wm_hypot_up(a, b), d));
+        return T;
+    }
+    return wm_hypot_up(wm_hypot_up(a, b), d);
+}
 /* The smallest angle of a triangle, Q16 radians. */
 int32_t wm_min_angle(const int32_t x[3], const int32_t y[3]);
 /* wm_min_angle in two steps: the dot and |cross| products at the corner opposite the shortest side
