@@ -276,8 +276,15 @@ static int den_below_one(uint32_t alpha, uint32_t ra, uint64_t num)
 static inline uint64_t in_height(const wm_params *p, uint32_t e)
 {
     uint64_t q = (uint64_t)e * p->scale_m, cap = (uint64_t)1 << 40;
-    q = p->scale_e >= 64 ? 0 : q >> p->scale_e;
-    q = q > cap ? cap : q;
+    int s = p->scale_e;
+    if (WM_NARROW_DIV && s >= 8 && s < 32) {
+        /* e m < 2^48 shifted word by word (below 2^40: no cap), where rv32's 64-bit shift branches */
+        uint32_t lo = (uint32_t)q, hi = (uint32_t)(q >> 32);
+        q = ((uint64_t)(hi >> s) << 32) | (lo >> s | hi << (32 - s));
+    } else {
+        q = s >= 64 ? 0 : q >> s;
+        q = q > cap ? cap : q;
+    }
     WM_ASSERT(q == wm_scale_mul(p, e, 1, 0, cap));
     return q;
 }
