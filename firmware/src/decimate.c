@@ -381,7 +381,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 /* The heap's order: by key, ties by slot (a total order). */
 static WM_ALWAYS_INLINE int key_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
 {
-    return ka < kb || (ka == kb && a < b);
+    return wm_heap_before(ka, a, kb, b, 0);
 }
 
 static int before(const wm_refiner *r, int32_t a, int32_t b) { return key_before(r->vkey[a], a, r->vkey[b], b); }
@@ -420,34 +420,8 @@ static void down(wm_refiner *r, int32_t i, int32_t n)
 }
 
 /* down(r, i, n) for an entry that most likely sinks to the bottom (the heap's last one, moved into a
- * hole): the hole first goes down the smaller children to a leaf, one comparison a level, then the
- * entry comes up from there, past what it is not before.  The same places as down's (the children
- * it passes are the ones down moves up, the order total), in about half the comparisons. */
-static void sink(wm_refiner *r, int32_t i, int32_t n)
-{
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *key = r->vkey;
-    int32_t v = list[i], j = i;
-    uint32_t kv = key[v];
-    for (;;) {
-        int32_t c = 2 * j + 1, u;
-        if (c >= n) break;
-        u = list[c];
-        if (c + 1 < n) {
-            int32_t w = list[c + 1];
-            if (key_before(key[w], w, key[u], u)) c++, u = w;
-        }
-        list[j] = u, pos[u] = j;
-        j = c;
-    }
-    while (j > i) {
-        int32_t p = (j - 1) / 2, u = list[p];
-        if (!key_before(kv, v, key[u], u)) break;
-        list[j] = u, pos[u] = j;
-        j = p;
-    }
-    list[j] = v, pos[v] = j;
-}
+ * hole): wm_heap_sink. */
+static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->vkey, i, n, 0); }
 
 #if WM_CHECK
 /* The order holds around the entry at i: its parent is before it, it is before its children. */

@@ -85,7 +85,7 @@ int wm_room(wm_refiner *r, int32_t added)
 
 static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
 {
-    return ea > eb || (ea == eb && a < b);
+    return wm_heap_before(ea, a, eb, b, 1);
 }
 
 /* The entry at i up past the parents it is before; 1 when it moved. */
@@ -130,35 +130,8 @@ static void heap_down(wm_refiner *r, int32_t i, int32_t n)
 }
 
 /* heap_down for an entry that most likely sinks to the bottom (the heap's last one, moved into the
- * place of one removed): the hole first goes down the larger children to a leaf, one comparison a
- * level, then the entry comes up from there past what it is before (decimate.c's sink).  The same
- * places as heap_down's (the children the hole passes are those heap_down moves up, the order
- * total), in about half its comparisons. */
-static void heap_sink(wm_refiner *r, int32_t i, int32_t n)
-{
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *err = r->err;
-    int32_t t = list[i], j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
-    uint32_t e = err[t];
-    while (j < m) {
-        int32_t c = 2 * j + 1, u = list[c], w = list[c + 1];
-        if (heap_before(err[w], w, err[u], u)) c++, u = w;
-        list[j] = u, pos[u] = j;
-        j = c;
-    }
-    if (2 * j + 1 < n) { /* an only child */
-        int32_t u = list[2 * j + 1];
-        list[j] = u, pos[u] = j;
-        j = 2 * j + 1;
-    }
-    while (j > i) {
-        int32_t p = (j - 1) / 2, u = list[p];
-        if (!heap_before(e, t, err[u], u)) break;
-        list[j] = u, pos[u] = j;
-        j = p;
-    }
-    list[j] = t, pos[t] = j;
-}
+ * place of one removed): wm_heap_sink. */
+static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->err, i, n, 1); }
 
 #if WM_CHECK
 /* The order holds around the entry at i: its parent is before it, it is before its children. */

@@ -183,6 +183,43 @@ static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, 
         if (wy) *wy = y[0];
     }
 }
+/* The refiner's two heaps of slots, list[] with each slot's place in pos[] (mesh_state.c's error bound,
+ * the largest key first; decimate.c's, the least key first): ties go to the lower slot, so the order is
+ * total and any heap pops the same sequence. */
+static WM_ALWAYS_INLINE int wm_heap_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b, int largest)
+{
+    return (largest ? ka > kb : ka < kb) || (ka == kb && a < b);
+}
+
+/* The entry at i sifted down when it most likely sinks to the bottom (the heap's last one, moved into
+ * the place of one taken out): the hole first goes down the children that come first to a leaf, one
+ * comparison a level, then the entry comes up from there past what it is before.  The same places as
+ * a plain sift-down's (the children the hole passes are those it moves up, the order total), in about
+ * half its comparisons. */
+static WM_ALWAYS_INLINE void wm_heap_sink(wm_index *list, wm_index *pos, const uint32_t *key, int32_t i, int32_t n,
+                                          int largest)
+{
+    int32_t t = list[i], j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
+    uint32_t k = key[t];
+    while (j < m) {
+        int32_t c = 2 * j + 1, u = list[c], w = list[c + 1];
+        if (wm_heap_before(key[w], w, key[u], u, largest)) c++, u = w;
+        list[j] = u, pos[u] = j;
+        j = c;
+    }
+    if (2 * j + 1 < n) { /* an only child */
+        int32_t u = list[2 * j + 1];
+        list[j] = u, pos[u] = j;
+        j = 2 * j + 1;
+    }
+    while (j > i) {
+        int32_t p = (j - 1) / 2, u = list[p];
+        if (!wm_heap_before(k, t, key[u], u, largest)) break;
+        list[j] = u, pos[u] = j;
+        j = p;
+    }
+    list[j] = t, pos[t] = j;
+}
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
