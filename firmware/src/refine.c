@@ -198,11 +198,17 @@ static uint32_t ratio_q16(uint64_t num, uint64_t den)
  * comparison of den with this, and bounds each new E(T) before it is scanned (try_swap).  R into *rq
  * (0 when every den, UINT64_MAX when none), and without need only R (0 returned): den_of takes the
  * rest when it is needed, den_over a test against it. */
+/* floor(2^16 num / R) for 0 < R < 2^32: den_max's last step, its divisor R (den_max's *rq). */
+static WM_ALWAYS_INLINE uint64_t den_from(uint64_t num, uint64_t R)
+{
+    uint32_t rem;
+    return WM_NARROW_DIV && R < 65536u ? wm_udiv_small(num << 16, (uint32_t)R, &rem) : (num << 16) / R;
+}
+
 static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num, int need, uint64_t *rq)
 {
     int64_t t;
     uint64_t R;
-    uint32_t rem;
     WM_ASSERT(alpha < 65536u);
     t = ((int64_t)65537 << 16) - (int64_t)alpha * ra;
     if (t <= 0) {
@@ -217,16 +223,15 @@ static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t n
     }
     *rq = R;
     if (!need) return 0;
-    return WM_NARROW_DIV && R < 65536u ? wm_udiv_small(num << 16, (uint32_t)R, &rem) : (num << 16) / R;
+    return den_from(num, R);
 }
 
 /* den_max from its R (den_max's *rq). */
 static uint64_t den_of(uint64_t rq, uint64_t num)
 {
-    uint32_t rem;
     if (rq == 0) return UINT64_MAX;
     if (rq == UINT64_MAX) return 0;
-    return WM_NARROW_DIV && rq < 65536u ? wm_udiv_small(num << 16, (uint32_t)rq, &rem) : (num << 16) / rq;
+    return den_from(num, rq);
 }
 
 /* x > den_of(rq, num) without its division, for the soft CPU (WM_NARROW_DIV), where that division is a
