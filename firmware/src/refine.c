@@ -205,7 +205,24 @@ static WM_ALWAYS_INLINE uint64_t den_from(uint64_t num, uint64_t R)
     return WM_NARROW_DIV && R < 65536u ? wm_udiv_small(num << 16, (uint32_t)R, &rem) : (num << 16) / R;
 }
 
-static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t num, int need, uint64_t *rq)
+/* floor(n / (2^16 - alpha)) for alpha < 2^16, am = alpha_recip(alpha) (den_max's R): on the soft CPU a
+ * multiply-high by am = floor((2^32 - 1) / a), a = 2^16 - alpha, and one correction (2^32 / a - am <= 1, so
+ * n am / 2^32 > n / a - 1 for n < 2^32: the quotient or one less), where the division took some 40 cycles
+ * (regularise takes am once a sweep); natively the division. */
+static uint32_t alpha_recip(uint32_t alpha) { return alpha < 65536u ? 0xFFFFFFFFu / (65536u - alpha) : 0; }
+
+static WM_ALWAYS_INLINE uint32_t div_by_a(uint32_t n, uint32_t alpha, uint32_t am)
+{
+    uint32_t a = 65536u - alpha, q;
+    if (!WM_NARROW_DIV) return n / a;
+    q = (uint32_t)(((uint64_t)n * am) >> 32);
+    if (n - q * a >= a) q++;
+    WM_ASSERT(q == n / a);
+    return q;
+}
+
+static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t am, uint32_t ra, uint64_t num, int need,
+                                         uint64_t *rq)
 {
     int64_t t;
     uint64_t R;
@@ -216,7 +233,7 @@ static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t ra, uint64_t n
         return UINT64_MAX;
     }
     R = (uint64_t)t + (65535u - alpha);
-    R = R >> 32 ? R / (65536u - alpha) : (uint32_t)R / (65536u - alpha); /* 32 bits unless ra < 2 */
+    R = R >> 32 ? R / (65536u - alpha) : div_by_a((uint32_t)R, alpha, am); /* 32 bits unless ra < 2 */
     if (R > 0xFFFFFFFFu) {
         *rq = UINT64_MAX;
         return 0;
@@ -256,9 +273,9 @@ static WM_ALWAYS_INLINE int over_dmax(uint64_t rq, uint64_t num, uint64_t dmax, 
 /* x > den_max(alpha, ra, num), for the tests whose den_max is not needed as a bound (try_swap's exact R_A
  * after the scans, its swap back's): with WM_NARROW_DIV by den_over, natively by the division (one
  * instruction: den_over's products and branches took more). */
-static WM_ALWAYS_INLINE int over_den_max(uint32_t alpha, uint32_t ra, uint64_t num, uint64_t x)
+static WM_ALWAYS_INLINE int over_den_max(uint32_t alpha, uint32_t am, uint32_t ra, uint64_t num, uint64_t x)
 {
-    uint64_t rq, d = den_max(alpha, ra, num, !WM_NARROW_DIV, &rq);
+    uint64_t rq, d = den_max(alpha, am, ra, num, !WM_NARROW_DIV, &rq);
     return over_dmax(rq, num, d, x);
 }
 
@@ -532,7 +549,7 @@ static WM_ALWAYS_INLINE int scan_new(wm_refiner *r, const int32_t x[3], const in
     return *e <= lim;
 }
 
-static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, struct sample_div wd)
+static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
     int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
@@ -599,12 +616,14 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
          * itself (most swaps end here); then the new angles, and the same tests on their R_A. */
         if (den_below_one(alpha, ra, o1 + o2 + one)) return 0; /* one > dmax */
         /* with WM_NARROW_DIV dmax = den_of(rq, o1 + o2 + one) is taken when the scans need it (den_over) */
-        dmax = den_max(alpha, ra, o1 + o2 + one, !WM_NARROW_DIV, &rq);
+        dmax = den_max(alpha, am, ra, o1 + o2 + one, !WM_NARROW_DIV, &rq);
         WM_ASSERT(one <= den_of(rq, o1 + o2 + one));
         s1 = s2 = 0;
-        for (int k = 0; k < 2; k++) { /* the worse old triangle's sample first */
-            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1],
-                    sy = sample_row(wd, s, r->field.width), sx = s - sy * r->field.width;
+        for (int k = 0, s0 = -1; k < 2; k++) { /* the worse old triangle's sample first */
+            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1], sy, sx;
+            if (s == s0) break; /* both old triangles' (on a-b): the same point errors again, no new bound */
+            s0 = s;
+            sy = sample_row(wd, s, r->field.width), sx = s - sy * r->field.width;
             /* the sample lies in the old triangle (its scan's), so in the strictly convex quad (a, d, b, c)
              * (a and b on either side of c-d, c and d of a-b): in (a, d, c) iff on its side of d-c, in
              * (d, b, c) iff on the other's (both on the diagonal) */
@@ -629,7 +648,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
             }
         }
         if (alpha > 0 && !ANGLES_LATE) {
-            dmax = den_max(alpha, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
+            dmax = den_max(alpha, am, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
                            !WM_NARROW_DIV, &rq);
             if (over_dmax(rq, o1 + o2 + one, dmax, s1 + s2 + one)) return 0; /* one > dmax with it */
             if (WM_NARROW_DIV) dmax = den_of(rq, o1 + o2 + one);
@@ -654,7 +673,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
             e1 = et[0], e2 = et[1];
         }
         if (alpha > 0 && ANGLES_LATE) {
-            if (over_den_max(alpha, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
+            if (over_den_max(alpha, am, exact_ra(dot1, cross1, dot2, cross2, ang_old, &an1, &an2), o1 + o2 + one,
                              sn + one))
                 return 0;
         }
@@ -676,13 +695,18 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t emax, str
         if (oe1 > bb || oe2 > bb) back = 0;
         else {
             if (alpha > 0) rb = ratio_q16((uint64_t)ang_old, (uint64_t)(an1 < an2 ? an1 : an2));
-            back = alpha == 65536u ? rb > 65536u : !over_den_max(alpha, rb, sn + one, o1 + o2 + one);
+            back = alpha == 65536u ? rb > 65536u : !over_den_max(alpha, am, rb, sn + one, o1 + o2 + one);
         }
     }
     make_swap(r, e, alpha, e1, e2, w1y * r->field.width + w1x, w2y * r->field.width + w2x, angle_code(an1),
               angle_code(an2), back);
     return 1;
 }
+
+/* regularise keeps t's flags and swap number (ft, pt) from one of its edges to the next, where only a
+ * swap of t changes them, on the soft CPU (their loads wait for the SDRAM); natively it loads them again
+ * (kept, they cost more instructions than they save: registers spilled around the inlined try_swap). */
+#define KEEP_T WM_NARROW_DIV
 
 /* try_swap's answer depends on the two triangles alone (corners, E(T)), so an edge whose triangles
  * did not change since it was last examined is skipped: it would give the same "no".  A triangle is
@@ -695,9 +719,11 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
     int32_t first; /* this sweep's first swap number */
     struct sample_div wd = sample_div_of(r->field.width);
-    for (int32_t t = 0; t < me->tri_end; t++) {
+    const int32_t swept = r->swept;
+    const uint32_t am = alpha_recip(alpha); /* den_max's divisor's reciprocal */
+    for (int32_t t = 0; t < me->tri_end; t++) { /* and the iteration's WM_F_UNPAIRED marks cleared */
         r->list[t] = ANGLE_UNKNOWN;
-        me->tflag[t] = (uint8_t)((me->tflag[t] & ~WM_F_CHANGED) | WM_F_CHANGED0);
+        me->tflag[t] = (uint8_t)((me->tflag[t] & ~(WM_F_CHANGED | WM_F_UNPAIRED)) | WM_F_CHANGED0);
         if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
     }
     if (r->swap_stamp > WM_INDEX_MAX / 2) { /* stamps of earlier sweeps are never trusted: start again */
@@ -709,33 +735,41 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
-            if (!(me->tflag[t] & WM_F_SWAP) || me->hv[3 * t] < 0) continue;
+            uint8_t ft = me->tflag[t];
+            int32_t pt = -1; /* -1 < first: no swap back */
+            if (!(ft & WM_F_SWAP) || me->hv[3 * t] < 0) continue;
+            if (KEEP_T && swept) pt = r->pos[t];
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
+                uint8_t fu;
                 /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose turn took it;
                  * else o >= 0 and its triangle an unsigned division */
                 if (o < 3 * t) continue;
                 u = (int32_t)((uint32_t)o / 3u);
-                if (!(me->tflag[u] & WM_F_SWAP)) continue;
-                if (!((me->tflag[t] | me->tflag[u]) & changed)) continue;
-                if (r->swept && r->pos[t] >= first && r->pos[t] == r->pos[u]) { /* a swap back */
-                    if (r->pos[t] & 1) continue; /* refused */
-                    if (swap_back(r, e, alpha, r->pos[t])) { /* made */
-                        me->tflag[t] |= WM_F_CHANGED;
+                fu = me->tflag[u];
+                if (!(fu & WM_F_SWAP)) continue;
+                if (!(((KEEP_T ? ft : me->tflag[t]) | fu) & changed)) continue;
+                if (!KEEP_T && swept) pt = r->pos[t];
+                if (pt >= first && pt == r->pos[u]) { /* a swap back */
+                    if (pt & 1) continue; /* refused */
+                    if (swap_back(r, e, alpha, pt)) { /* made */
+                        ft = me->tflag[t] = (uint8_t)(me->tflag[t] | WM_F_CHANGED);
                         me->tflag[u] |= WM_F_CHANGED;
+                        if (KEEP_T && swept) pt = r->pos[t];
                         swaps++;
                         continue;
                     }
                 }
-                if (try_swap(r, e, alpha, emax, wd)) {
-                    me->tflag[t] |= WM_F_CHANGED;
+                if (try_swap(r, e, alpha, am, emax, wd)) {
+                    ft = me->tflag[t] = (uint8_t)(me->tflag[t] | WM_F_CHANGED);
                     me->tflag[u] |= WM_F_CHANGED;
+                    if (KEEP_T && swept) pt = r->pos[t];
                     swaps++;
                 }
             }
         }
         if (st) st->swaps += swaps;
-        if (swaps == 0) break;
+        if (swaps == 0 || pass == SWAP_PASSES - 1) break; /* the marks are read by the next pass alone */
         for (int32_t t = 0; t < me->tri_end; t++) {
             uint8_t f = me->tflag[t];
             me->tflag[t] = (uint8_t)((f & ~changed) | ((f & WM_F_CHANGED) ? WM_F_CHANGED0 : 0));
@@ -835,8 +869,7 @@ static int iterate(wm_refiner *r, int32_t m, wm_level_stats *st)
         int rc = wm_execute(r, m, r->list[i], st);
         if (rc != WM_OK) return rc;
     }
-    for (int32_t t = 0; t < r->mesh.tri_end; t++) r->mesh.tflag[t] &= (uint8_t)~WM_F_UNPAIRED;
-    regularise(r, st, r->params.alpha);
+    regularise(r, st, r->params.alpha); /* which clears the plan's WM_F_UNPAIRED */
     return 0;
 }
 
