@@ -647,13 +647,40 @@ static uint32_t vertical(uint64_t vmax, int64_t D)
     return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
 }
 
+#ifdef WM_SLOPE_ENGINE
+/* The board: E(T) in the normal metric with the slope unit started before ev's division, which runs beside
+ * it (the same ev, the same r = root << k as slope_factor's): 1 and E(T) in *e, or 0 when the unit cannot
+ * take the field (nothing done). */
+static WM_ALWAYS_INLINE int normal_beside(const wm_field *f, const wm_params *p, const int32_t x[3],
+                                          const int32_t y[3], int64_t D, uint64_t vmax, uint64_t *kept,
+                                          uint32_t *e)
+{
+    uint32_t ev;
+    uint64_t r;
+    int k;
+    if (!wm_tri_engine_slope_go(f, p, x, y)) return 0;
+    ev = vertical(vmax, D);
+    r = (uint64_t)wm_tri_engine_slope_take(&k) << k;
+    if (kept) *kept = r;
+    *e = (uint32_t)wm_ceil_q16_div(ev, r); /* <= ev (r >= 2^16) */
+    return 1;
+}
+#endif
+
 /* E(T) from Vmax (the rounding of the file's head comment): monotone in vmax.  kept: as slope_factor's.
  * This and point_v, the small steps every measure takes, are inlined in each, as one copy was before they
  * were shared (a call and its spills cost the native build some 1 % of the refiner's instructions). */
 static WM_ALWAYS_INLINE uint32_t finish(const wm_field *f, const wm_params *p, const int32_t x[3],
                                         const int32_t y[3], int64_t D, uint64_t vmax, uint64_t *kept)
 {
-    uint32_t ev = vertical(vmax, D);
+    uint32_t ev;
+#ifdef WM_SLOPE_ENGINE
+    /* a slope factor to find (ev > 0 iff vmax > 0): the slope unit beside ev's division */
+    if (p->metric != WM_METRIC_VERTICAL && vmax != 0 && !(kept && *kept) &&
+        normal_beside(f, p, x, y, D, vmax, kept, &ev))
+        return ev;
+#endif
+    ev = vertical(vmax, D);
     if (p->metric == WM_METRIC_VERTICAL || ev == 0) return ev;
     return (uint32_t)wm_ceil_q16_div(ev, slope_factor(f, p, x, y, D, kept)); /* <= ev (r >= 2^16) */
 }
@@ -730,6 +757,9 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
     int64_t D, Na, Nb;
     uint64_t Ga, Gb, T, vmax, X, r;
     uint32_t sx, sy, root;
+#ifdef WM_SLOPE_ENGINE
+    uint32_t e;
+#endif
     int32_t ex, ey;
     int k;
     wm_slope_scale(p, 0, &sx, &ex);
@@ -745,6 +775,9 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
     vmax = scan_any(f, x, y, D, ((uint64_t)bound * T) >> 16, NULL, NULL);
     if ((vmax << 16) > (uint64_t)bound * T) return bound + 1;          /* E(T) > bound */
     if ((vmax << 16) <= (uint64_t)least * (uint64_t)D) return least; /* E(T) <= ev <= least */
+#ifdef WM_SLOPE_ENGINE
+    if (normal_beside(f, p, x, y, D, vmax, kept, &e)) return e; /* vmax > 0 here */
+#endif
     X = slope_square_n(f, p, x, y, D, 1, Na, Nb, &k, &root);
     r = (uint64_t)(root ? root : wm_isqrt64(X)) << k;
     if (kept) *kept = r;
@@ -817,7 +850,14 @@ int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], 
     uint64_t c, X;
     uint32_t ev, root;
     int k;
+#ifdef WM_SLOPE_ENGINE
+    int go;
+#endif
     if (p->metric == WM_METRIC_VERTICAL) return 1;
+#ifdef WM_SLOPE_ENGINE
+    /* the board: the slope unit started first, beside the two divisions below */
+    go = bound != 0 && !(kept && *kept) && wm_tri_engine_slope_go(f, p, x, y);
+#endif
     ev = vertical(av, D); /* > bound */
     if (bound == 0) return 1;  /* E >= 1: r is finite */
     if (kept && *kept) return wm_ceil_q16_div(ev, *kept) > bound;
@@ -825,7 +865,13 @@ int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], 
      * r < c = ceil(2^16 ev / bound) (r an integer), and with r = floor(sqrt(X)) 2^k iff
      * floor(sqrt(X)) < c' = ceil(c / 2^k) iff X < c'^2 (X < 2^64 <= c'^2 when c' >= 2^32). */
     c = wm_ceil_q16_div(ev, bound); /* < 2^48 */
-    X = slope_square(f, p, x, y, D, &k, &root);
+#ifdef WM_SLOPE_ENGINE
+    if (go) {
+        root = wm_tri_engine_slope_take(&k);
+        X = 0;
+    } else
+#endif
+        X = slope_square(f, p, x, y, D, &k, &root);
     c = (c + ((uint64_t)1 << k) - 1) >> k;
     if (root ? root >= c : c >> 32 == 0 && X >= c * c) { /* floor(sqrt(X)) >= c' iff X >= c'^2 */
         if (kept) *kept = (uint64_t)(root ? root : wm_isqrt64(X)) << k; /* within: the caller measures it */

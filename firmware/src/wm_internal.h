@@ -482,6 +482,14 @@ uint32_t wm_tri_engine_root(uint64_t x);
  * slope factor is *root << *k); 0 when it cannot take the field (the C computes it). */
 int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                         uint32_t *root, int *k);
+/* The same in two halves, so that the CPU works beside the unit: _go starts it on the triangle (0: it cannot
+ * take the field, and nothing started), _take waits for it, returns the root and sets *k; nothing else
+ * may use the slope unit between them. */
+int wm_tri_engine_slope_go(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3]);
+uint32_t wm_tri_engine_slope_take(int *k);
+/* Clears what the engine's hooks know the registers hold (the field, the params, the staged triangle):
+ * each board job calls it before its refiner's first (app/board_job.c), as HEIGHT's samples are new. */
+void wm_tri_engine_forget(void);
 #endif
 
 /* The detail cell (d1, d2, d3) of level m containing grid point (x, y) (x, y in 0..W-1, 0..H-1). */

@@ -25,6 +25,8 @@
 #include "wm_job.h"
 #include "wm_memmap.h"
 
+void wm_tri_engine_forget(void); /* src/tri_engine.c (the refiner's library) */
+
 extern uint8_t __heap_start[], __heap_end[];
 
 #define ALIGN8(n) (((n) + 7u) & ~(size_t)7u)
@@ -116,6 +118,7 @@ int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
     {
         wm_field f = {j->width, j->height, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE,
                       j->mask};
+        wm_tri_engine_forget(); /* the engine's registers hold the last job's triangle: HEIGHT is new */
         return wm_job_refine(p, j, &f, &init, heap, main_bytes, detail);
     }
 }

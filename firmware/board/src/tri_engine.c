@@ -7,20 +7,61 @@
  *
  * The engine reads HEIGHT, so it takes the triangles of a field whose samples are the height memory
  * (the board job's: app/board_job.c) on a grid of at most 2^WM_ENGINE_COORD_BITS a side; for any other it
- * answers 0 and the C scans.  One triangle at a time: the grid's width, the corners, their heights (read
- * here through the cache, as the C scan reads them) and the limit into the staging registers (all of
- * them each time: no state carries from one job to the next, so a job's cycles depend on it alone),
- * PUSH, then the result once STATUS says it is there.  The result is the C scan's,
- * Vmax and the first sample reaching it (or the first V above limit): tests/rtl/test_tri_engine.py. */
+ * answers 0 and the C scans.  One triangle at a time: the corners, their heights (read here through the
+ * cache, as the C scan reads them) and the limit into the staging registers, PUSH, then the result once
+ * STATUS says it is there.  The result is the C scan's, Vmax and the first sample reaching it (or the
+ * first V above limit): tests/rtl/test_tri_engine.py.
+ *
+ * The registers keep what was written (rtl/soc_engine.v), so each job's calls write only what changed:
+ * the field (which the refiner keeps for the job: its width into WIDTH) and the params (the slope scales
+ * into SLOPE_X, SLOPE_Y) when a call gives others than the last, the corners and their heights when
+ * they are not the triangle staged last (the slope factor after the scan of the same triangle, or the
+ * scan after it, the point errors of one triangle).  `held` says what the registers hold; a job starts
+ * with it cleared (wm_tri_engine_forget, app/board_job.c: HEIGHT and the refiner's storage are new), so
+ * no state carries from one job to the next and a job's cycles depend on it alone. */
 #include "wm_internal.h"
 #include "wm_memmap.h"
 
-/* Whether the units read this field's samples: the height memory's (HEIGHT), on a grid of at most
- * 2^WM_ENGINE_COORD_BITS a side (the coordinate registers' width). */
-static int on_engine(const wm_field *f)
+/* What the registers hold in this job: the field and the params the last call gave (pointers into the
+ * refiner's storage, whose field and params stay for the job) and what they told (the width; whether
+ * the units take the field, ON, and without a holes mask, BARE; the vertical metric, VERTICAL; WIDTH,
+ * SLOPE_X and SLOPE_Y written from them) and the corners V0..V2 hold (their heights in Z01, Z2), V0's
+ * with bit 31 set (STAGED; none when clear: no place word has it, y < 2^15).  All zeros is nothing known
+ * (and keeps it out of .data); one cache line (a call's first load brings the rest). */
+#define STAGED 0x80000000u
+#define ON 1
+#define BARE 2
+#define VERTICAL 4
+static struct {
+    const wm_field *f;
+    const wm_params *p;
+    int32_t w;
+    uint32_t flags;
+    uint32_t v0, v1, v2;
+} held __attribute__((aligned(32)));
+
+void wm_tri_engine_forget(void)
 {
-    return f->samples == (const uint16_t *)WM_HEIGHT_BASE && f->width <= (1 << WM_ENGINE_COORD_BITS) &&
-           f->height <= (1 << WM_ENGINE_COORD_BITS);
+    held.f = NULL;
+    held.p = NULL;
+    held.v0 = 0;
+}
+
+/* Whether the units read this field's samples: the height memory's (HEIGHT), on a grid of at most
+ * 2^WM_ENGINE_COORD_BITS a side (the coordinate registers' width); a new field's width into WIDTH. */
+static WM_ALWAYS_INLINE int on_engine(const wm_field *f)
+{
+    if (f != held.f) {
+        held.f = f;
+        held.w = f->width;
+        held.flags &= ~(uint32_t)(ON | BARE);
+        if (f->samples == (const uint16_t *)WM_HEIGHT_BASE && f->width <= (1 << WM_ENGINE_COORD_BITS) &&
+            f->height <= (1 << WM_ENGINE_COORD_BITS)) {
+            held.flags |= ON | (f->mask ? 0 : BARE);
+            WM_ENGINE_WIDTH = (uint32_t)f->width;
+        }
+    }
+    return held.flags & ON;
 }
 
 /* A grid place as the V0..V2 and POINT_P words hold it. */
@@ -29,13 +70,43 @@ static WM_ALWAYS_INLINE uint32_t place_word(int32_t x, int32_t y)
     return (uint32_t)x << WM_ENGINE_V0_X_SHIFT | (uint32_t)y << WM_ENGINE_V0_Y_SHIFT;
 }
 
-/* The triangle's corners and their heights (read here through the cache, as the C reads them) into the
- * staging registers V0, V1, V2, Z01 and Z2, which every unit takes. */
-static WM_ALWAYS_INLINE void stage(const uint16_t *h, int32_t w, const int32_t x[3], const int32_t y[3])
+/* The params' slope scales (wm_slope_scale) into SLOPE_X, SLOPE_Y, which the slope unit takes (and the
+ * point-error unit's mode 2), and their metric, when they are not the last call's params; the scales'
+ * exponents fit 7 bits. */
+static WM_ALWAYS_INLINE void scales(const wm_params *p)
 {
-    WM_ENGINE_V0 = place_word(x[0], y[0]);
-    WM_ENGINE_V1 = place_word(x[1], y[1]);
-    WM_ENGINE_V2 = place_word(x[2], y[2]);
+    uint32_t mx, my;
+    int32_t ex, ey;
+    if (p == held.p) return;
+    held.p = p;
+    held.flags = (held.flags & ~(uint32_t)VERTICAL) | (p->metric == WM_METRIC_VERTICAL ? VERTICAL : 0);
+    wm_slope_scale(p, 0, &mx, &ex);
+    wm_slope_scale(p, 1, &my, &ey);
+    WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
+    WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
+}
+
+/* The triangle's corners and their heights (read here through the cache, as the C reads them) into the
+ * staging registers V0, V1, V2, Z01 and Z2, which every unit takes, unless they hold them already. */
+static WM_ALWAYS_INLINE void stage(int32_t w, const int32_t x[3], const int32_t y[3])
+{
+    const uint16_t *h = (const uint16_t *)WM_HEIGHT_BASE; /* on_engine's */
+    uint32_t v0 = place_word(x[0], y[0]), v1 = place_word(x[1], y[1]), v2 = place_word(x[2], y[2]);
+    if ((v0 | STAGED) == held.v0 && v1 == held.v1 && v2 == held.v2) {
+#if WM_CHECK
+        WM_ASSERT(WM_ENGINE_V0 == v0 && WM_ENGINE_V1 == v1 && WM_ENGINE_V2 == v2 &&
+                  WM_ENGINE_Z2 == h[y[2] * w + x[2]] &&
+                  WM_ENGINE_Z01 == (((uint32_t)h[y[0] * w + x[0]] << WM_ENGINE_Z01_Z0_SHIFT) |
+                                    ((uint32_t)h[y[1] * w + x[1]] << WM_ENGINE_Z01_Z1_SHIFT)));
+#endif
+        return;
+    }
+    held.v0 = v0 | STAGED;
+    held.v1 = v1;
+    held.v2 = v2;
+    WM_ENGINE_V0 = v0;
+    WM_ENGINE_V1 = v1;
+    WM_ENGINE_V2 = v2;
     WM_ENGINE_Z01 = ((uint32_t)h[y[0] * w + x[0]] << WM_ENGINE_Z01_Z0_SHIFT) |
                     ((uint32_t)h[y[1] * w + x[1]] << WM_ENGINE_Z01_Z1_SHIFT);
     WM_ENGINE_Z2 = h[y[2] * w + x[2]];
@@ -44,14 +115,11 @@ static WM_ALWAYS_INLINE void stage(const uint16_t *h, int32_t w, const int32_t x
 int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3], uint64_t limit, uint64_t *vmax,
                        int32_t *wx, int32_t *wy)
 {
-    const uint16_t *h = f->samples;
-    int32_t w = f->width;
     uint32_t at, lo, hi;
     if (!on_engine(f)) return 0;
-    WM_ENGINE_WIDTH = (uint32_t)w;
     WM_ENGINE_LIMIT_LO = (uint32_t)limit;
     WM_ENGINE_LIMIT_HI = (uint32_t)(limit >> 32);
-    stage(h, w, x, y);
+    stage(held.w, x, y);
     WM_ENGINE_PUSH = 1;
     while (!(WM_ENGINE_STATUS & WM_ENGINE_STATUS_RES_VALID)) {
         /* the engine scans */
@@ -66,27 +134,36 @@ int wm_tri_engine_scan(const wm_field *f, const int32_t x[3], const int32_t y[3]
 }
 
 /* The slope unit: the corners, their heights (through the cache, as the C reads them) and the two slope
- * scales (wm_slope_scale) into the staging registers, SLOPE_GO, then floor(sqrt(X)) and k once
- * SLOPE_STATUS says DONE: the C's slope_square and wm_isqrt64 (tests/rtl/test_tri_slope.py).  The same
- * fields as the scan (HEIGHT, at most 2^WM_ENGINE_COORD_BITS a side); the scales' exponents fit 7 bits. */
-int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                        uint32_t *root, int *k)
+ * scales (wm_slope_scale) into the staging registers (what they do not hold already), SLOPE_GO, then
+ * floor(sqrt(X)) and k once SLOPE_STATUS says DONE: the C's slope_square and wm_isqrt64
+ * (tests/rtl/test_tri_slope.py).  The same fields as the scan (HEIGHT, at most 2^WM_ENGINE_COORD_BITS a
+ * side).  In two halves, so that the CPU works beside the unit (tri_error.c: the division for ev): _go
+ * starts it (0: it cannot take the field, and the C computes the slope factor), _take waits for its
+ * root, and no other command starts the slope unit between them (SLOPE_GO is ignored while it is busy). */
+int wm_tri_engine_slope_go(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3])
 {
-    const uint16_t *h = f->samples;
-    int32_t w = f->width, ex, ey;
-    uint32_t mx, my, st;
     if (!on_engine(f)) return 0;
-    wm_slope_scale(p, 0, &mx, &ex);
-    wm_slope_scale(p, 1, &my, &ey);
-    stage(h, w, x, y);
-    WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
-    WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
+    scales(p);
+    stage(held.w, x, y);
     WM_ENGINE_SLOPE_GO = 1;
+    return 1;
+}
+
+uint32_t wm_tri_engine_slope_take(int *k)
+{
+    uint32_t st;
     do {
         st = WM_ENGINE_SLOPE_STATUS; /* the unit divides and takes the root */
     } while (!(st & WM_ENGINE_SLOPE_STATUS_DONE));
-    *root = WM_ENGINE_SLOPE_ROOT;
     *k = (int)((st & WM_ENGINE_SLOPE_STATUS_K_MASK) >> WM_ENGINE_SLOPE_STATUS_K_SHIFT);
+    return WM_ENGINE_SLOPE_ROOT;
+}
+
+int wm_tri_engine_slope(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
+                        uint32_t *root, int *k)
+{
+    if (!wm_tri_engine_slope_go(f, p, x, y)) return 0;
+    *root = wm_tri_engine_slope_take(k);
     return 1;
 }
 
@@ -125,24 +202,22 @@ uint32_t wm_tri_engine_root(uint64_t x)
 int wm_tri_engine_point(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int32_t px,
                         int32_t py, uint64_t *kept, uint32_t *e)
 {
-    const uint16_t *h = f->samples;
-    int32_t w = f->width, ex, ey;
-    uint32_t mode, mx, my, st;
-    if (!on_engine(f) || f->mask) return 0;
-    stage(h, w, x, y);
+    const uint16_t *h = (const uint16_t *)WM_HEIGHT_BASE; /* on_engine's */
+    int32_t w;
+    uint32_t mode, st;
+    if (!on_engine(f) || !(held.flags & BARE)) return 0;
+    w = held.w;
+    scales(p);
+    stage(w, x, y);
     WM_ENGINE_POINT_P = place_word(px, py);
-    if (p->metric == WM_METRIC_VERTICAL) {
+    if (held.flags & VERTICAL) {
         mode = 0;
     } else if (kept && *kept) {
         WM_ENGINE_POINT_R_LO = (uint32_t)*kept;
         WM_ENGINE_POINT_R_HI = (uint32_t)(*kept >> 32);
         mode = 1;
     } else {
-        wm_slope_scale(p, 0, &mx, &ex);
-        wm_slope_scale(p, 1, &my, &ey);
-        WM_ENGINE_SLOPE_X = mx | (uint32_t)ex << WM_ENGINE_SLOPE_X_E_SHIFT;
-        WM_ENGINE_SLOPE_Y = my | (uint32_t)ey << WM_ENGINE_SLOPE_X_E_SHIFT;
-        mode = 2;
+        mode = 2; /* SLOPE_X, SLOPE_Y: scales() */
     }
     WM_ENGINE_POINT_GO = (uint32_t)h[py * w + px] | mode << WM_ENGINE_POINT_GO_MODE_SHIFT;
     while (!(WM_ENGINE_POINT_STATUS & WM_ENGINE_POINT_STATUS_DONE)) {
