@@ -72,8 +72,23 @@ struct fans {
     uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
     int32_t ex, ey;
+    int32_t words;                            /* 1: 0 < ex, ey < 32 (far_above's 32-bit path) */
     int32_t j;                                /* the fan triangle v lies in: (p_a, p_j, p_j+1) */
 };
+
+/* ceil(107 lo / 256), wm_hypot_up's term, for lo < 2^32: on a 32-bit CPU (and in the checked builds) in
+ * 32-bit operations, lo = 256 h + l giving 107 h + ceil(107 l / 256) (the same integer: 256 * 107 h is a
+ * multiple of 256), where the 64-bit product was a multiply pair and a carry; natively the product. */
+static WM_ALWAYS_INLINE uint32_t chord(uint32_t lo)
+{
+#if WM_NARROW_DIV
+    uint32_t c = (lo >> 8) * 107u + (((lo & 255u) * 107u + 255u) >> 8);
+    WM_ASSERT((uint64_t)c == (((uint64_t)lo * 107u + 255u) >> 8));
+    return c;
+#else
+    return (uint32_t)(((uint64_t)lo * 107u + 255u) >> 8);
+#endif
+}
 
 /* 1 when v's normal distance to the fan triangle (p_a, p_j, p_k) is above zeta for certain, from its
  * |V| (av, above zeta D / 2^16: the vertical test failed) and the plane's gradient numerators Na, Nb
@@ -83,36 +98,66 @@ struct fans {
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-#if WM_NARROW_DIV
-typedef int32_t far_prod; /* on a 32-bit CPU (and in the checked builds) a 32-bit multiply, not a pair */
-#else
-typedef int64_t far_prod; /* natively in 64 bits, which x86-64 takes without sign extensions */
-#endif
-
 WM_NOINLINE_32 static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
 {
     int64_t D = q->D;
     uint64_t av = q->av;
     int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
     int32_t jx = q->dx[j] - q->dx[a], kx = q->dx[k] - q->dx[a], jy = q->dy[j] - q->dy[a], ky = q->dy[k] - q->dy[a];
-    int64_t Na, Nb;
     uint64_t A, B, T;
     if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
-    /* differences of 16-bit samples times differences of grid coordinates (at most 32766): |z| <= 65535,
-     * so each product is below 2^31 (far_prod) */
-    Na = (int64_t)((far_prod)z1 * ky) - (int64_t)((far_prod)z2 * jy);
-    Nb = (int64_t)((far_prod)jx * z2) - (int64_t)((far_prod)kx * z1);
-    WM_ASSERT(Na == (int64_t)z1 * ky - (int64_t)z2 * jy && Nb == (int64_t)jx * z2 - (int64_t)kx * z1);
-    A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), q->sx, q->ex);
-    B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), q->sy, q->ey);
+#if WM_NARROW_DIV
+    {
+        /* differences of 16-bit samples times differences of grid coordinates (at most 32766): |z| <= 65535,
+         * so each product is below 2^31, and |Na| = |z1 ky - z2 jy|, |Nb| = |jx z2 - kx z1| below 2^32: one
+         * 32-bit multiply each and the difference taken the larger less the smaller (on a 32-bit CPU
+         * the 64-bit products, differences and absolute values were carries and branches) */
+        int32_t p1 = z1 * ky, p2 = z2 * jy, p3 = jx * z2, p4 = kx * z1;
+        uint32_t na = p1 >= p2 ? (uint32_t)p1 - (uint32_t)p2 : (uint32_t)p2 - (uint32_t)p1;
+        uint32_t nb = p3 >= p4 ? (uint32_t)p3 - (uint32_t)p4 : (uint32_t)p4 - (uint32_t)p3;
+#if WM_CHECK
+        {
+            int64_t Na = (int64_t)z1 * ky - (int64_t)z2 * jy, Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
+            WM_ASSERT(na == (uint64_t)(Na < 0 ? -Na : Na) && nb == (uint64_t)(Nb < 0 ? -Nb : Nb));
+        }
+#endif
+        if (q->words) {
+            /* wm_scaled_up's word-by-word shifts with 0 < e < 32 known (first_fit), and A, B below 2^31
+             * (their high words 0, the low ones below 2^31) for the 32-bit bound below */
+            uint64_t u = (uint64_t)na * q->sx + ((1u << q->ex) - 1u),
+                     w = (uint64_t)nb * q->sy + ((1u << q->ey) - 1u);
+            uint32_t ulo = (uint32_t)u, uhi = (uint32_t)(u >> 32), wlo = (uint32_t)w, whi = (uint32_t)(w >> 32);
+            uint32_t a32 = (ulo >> q->ex) | (uhi << (32 - q->ex)), b32 = (wlo >> q->ey) | (whi << (32 - q->ey));
+            WM_ASSERT(q->ex > 0 && q->ex < 32 && q->ey > 0 && q->ey < 32);
+            if (((uhi >> q->ex) | (whi >> q->ey)) == 0 && (a32 | b32) < (1u << 31)) {
+                uint32_t hi = a32 > b32 ? a32 : b32, lo = a32 > b32 ? b32 : a32, h, d = (uint32_t)D;
+                WM_ASSERT(a32 == wm_scaled_up(na, q->sx, q->ex) && b32 == wm_scaled_up(nb, q->sy, q->ey));
+                h = hi + chord(lo);
+                hi = h > d ? h : d, lo = h > d ? d : h;
+                if (hi >= (1u << 31)) return 0;
+                T = (uint64_t)hi + chord(lo);
+                WM_ASSERT(T == wm_hypot_up(wm_hypot_up(a32, b32), (uint64_t)D));
+                return T < ((uint64_t)1 << 31) && (uint64_t)q->zeta * T < (av << 16);
+            }
+        }
+        A = wm_scaled_up(na, q->sx, q->ex);
+        B = wm_scaled_up(nb, q->sy, q->ey);
+    }
+#else
+    {
+        int64_t Na = (int64_t)z1 * ky - (int64_t)z2 * jy, Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
+        A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), q->sx, q->ex);
+        B = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), q->sy, q->ey);
+    }
+#endif
     if ((A | B) < ((uint64_t)1 << 31)) {
         /* wm_hypot_up twice in 32-bit operands (the same integers): A, B and D below 2^31, so the first
          * is below 2^32, and T is at least the larger operand of the second */
         uint32_t hi = (uint32_t)(A > B ? A : B), lo = (uint32_t)(A > B ? B : A), h, d = (uint32_t)D;
-        h = hi + (uint32_t)(((uint64_t)lo * 107u + 255u) >> 8);
+        h = hi + chord(lo);
         hi = h > d ? h : d, lo = h > d ? d : h;
         if (hi >= (1u << 31)) return 0;
-        T = hi + (((uint64_t)lo * 107u + 255u) >> 8);
+        T = (uint64_t)hi + chord(lo);
         WM_ASSERT(T == wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D));
     } else {
         T = wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D);
@@ -296,6 +341,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     q.zeta = r->params.zeta;
     wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
     wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
+    q.words = WM_NARROW_DIV && q.ex > 0 && q.ex < 32 && q.ey > 0 && q.ey < 32;
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
