@@ -101,6 +101,32 @@ static int in_circle(const struct circle *q, int32_t dx, int32_t dy)
     return s < -(q->k2 * ey);
 }
 
+/* The same test in 32-bit integers for a polygon within a 128 x 128 box (every difference |d| <= 127, the
+ * ring of most vertices the decimation plans for): |b'|^2, |c'|^2, |d'|^2 and |k0| <= 2 * 127^2 < 2^15,
+ * |k1|, |k2| <= 2 * 127 * 2 * 127^2 < 2^23, so each term is at most 2 * 127^2 * 2 * 127^2 < 2^30 and
+ * the sum of two below 2^31: the same integers, one 32-bit multiply each where the 64-bit products on
+ * a 32-bit CPU took a multiply pair or three multiplies and their carries.  On the soft CPU (and in the
+ * checked builds, which assert the answer equals in_circle's); natively in_circle's 64-bit integers. */
+struct circle32 {
+    int32_t k0, k1, k2, ax, ay;
+};
+
+static void circle_of32(struct circle32 *q, int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy)
+{
+    int32_t ux = bx - ax, uy = by - ay, vx = cx - ax, vy = cy - ay, u2 = ux * ux + uy * uy, v2 = vx * vx + vy * vy;
+    q->k0 = ux * vy - uy * vx;
+    q->k1 = uy * v2 - u2 * vy;
+    q->k2 = u2 * vx - ux * v2;
+    q->ax = ax;
+    q->ay = ay;
+}
+
+static int in_circle32(const struct circle32 *q, int32_t dx, int32_t dy)
+{
+    int32_t ex = dx - q->ax, ey = dy - q->ay;
+    return q->k0 * (ex * ex + ey * ey) + q->k1 * ex < -(q->k2 * ey);
+}
+
 static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
 {
     return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
@@ -197,15 +223,19 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
         int64_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
-        int32_t left = n, i0 = 0;
+        int32_t left = n, i0 = 0, x0, x1, y0, y1, small;
+        x0 = x1 = m->vx[ring[0]], y0 = y1 = m->vy[ring[0]];
         for (int32_t i = 0; i < n; i++) {
             px[i] = m->vx[ring[i]];
             py[i] = m->vy[ring[i]];
+            x0 = px[i] < x0 ? px[i] : x0, x1 = px[i] > x1 ? px[i] : x1;
+            y0 = py[i] < y0 ? py[i] : y0, y1 = py[i] > y1 ? py[i] : y1;
             nx[i] = i + 1 == n ? 0 : i + 1;
             pv[i] = i == 0 ? n - 1 : i - 1;
             ok[i] = 0;
             alive[i] = 1;
         }
+        small = x1 - x0 < 128 && y1 - y0 < 128; /* in_circle32's range */
         while (left > 3) {
             int32_t best = -1, valid = -1;
             for (int32_t i = 0; i < n; i++) {
@@ -222,10 +252,27 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 /* the other polygon vertices, after ic up to ia (either test's answer does not depend on
                  * the order) */
                 if (ok[i] != 2 && (blk[i] < 0 || !alive[blk[i]])) {
-                    struct circle q;
-                    circle_of(&q, ax, ay, bx, by, cx, cy);
-                    for (j = nx[ic]; j != ia; j = nx[j])
-                        if (in_circle(&q, px[j], py[j])) break;
+                    if (WM_NARROW_DIV && small) {
+                        struct circle32 q;
+                        circle_of32(&q, ax, ay, bx, by, cx, cy);
+                        for (j = nx[ic]; j != ia; j = nx[j])
+                            if (in_circle32(&q, px[j], py[j])) break;
+#if WM_CHECK
+                        {
+                            struct circle q2;
+                            int32_t j2;
+                            circle_of(&q2, ax, ay, bx, by, cx, cy);
+                            for (j2 = nx[ic]; j2 != ia; j2 = nx[j2])
+                                if (in_circle(&q2, px[j2], py[j2])) break;
+                            WM_ASSERT(j2 == j);
+                        }
+#endif
+                    } else {
+                        struct circle q;
+                        circle_of(&q, ax, ay, bx, by, cx, cy);
+                        for (j = nx[ic]; j != ia; j = nx[j])
+                            if (in_circle(&q, px[j], py[j])) break;
+                    }
                     if (j == ia) ok[i] = 2;
                     else blk[i] = j;
                 }
