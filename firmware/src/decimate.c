@@ -165,11 +165,13 @@ WM_NOINLINE_32 static int far_above(const struct fans *q, int32_t a, int32_t j, 
     return T < ((uint64_t)1 << 31) && (uint64_t)q->zeta * T < (av << 16);
 }
 
+#if WM_CHECK || !WM_NARROW_DIV
 /* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64, for the soft CPU a multiply pair). */
 static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 {
     return (int32_t)((int64_t)q->dx[i] * q->dy[j] - (int64_t)q->dx[j] * q->dy[i]);
 }
+#endif
 
 /* fan_may_fit's test of v against the fan triangle (p_a, p_j, p_k) in the normal metric, its |V| (av)
  * above zeta D / 2^16: far_above, else wm_point_above_v (which keeps the slope factor when v is within). */
@@ -207,6 +209,33 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     int32_t n = q->n, k, j, fk, fj, e0, D;
     int64_t V;
     uint64_t av = 0;
+#if WM_NARROW_DIV
+    {
+        /* on a 32-bit CPU (and in the checked builds): the pointer u unwrapped and k its ring position
+         * stepped together, d_a held, the orientations in 32-bit products (|d| < 2^15: each below 2^30)
+         * (the soft CPU's job Jacksboro / 16: first_fit 4 % fewer cycles; natively 0.4 % more
+         * instructions than cross's loop below) */
+        const int32_t *dx = q->dx, *dy = q->dy;
+        int32_t ax = dx[a], ay = dy[a], u = q->k < a + 2 ? a + 2 : q->k;
+        k = u < n ? u : u - n;
+        for (;;) {
+            if (u > a + n - 1) {
+                q->k = u;
+                return 1;
+            }
+            fk = ax * dy[k] - dx[k] * ay;
+            WM_ASSERT(fk == cross(q, a, k));
+            if (fk <= 0) break;
+            u++;
+            k = k + 1 == n ? 0 : k + 1;
+        }
+        q->k = u;
+        j = k == 0 ? n - 1 : k - 1;
+        fj = ax * dy[j] - dx[j] * ay;
+        e0 = dx[j] * dy[k] - dx[k] * dy[j];
+        WM_ASSERT(fj == cross(q, a, j) && e0 == cross(q, j, k));
+    }
+#else
     if (q->k < a + 2) q->k = a + 2;
     for (;;) {
         if (q->k > a + n - 1) return 1;
@@ -216,9 +245,10 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
         q->k++;
     }
     j = k == 0 ? n - 1 : k - 1;
-    q->j = j;
     fj = cross(q, a, j);
     e0 = cross(q, j, k);
+#endif
+    q->j = j;
     /* D = (p_j - p_a) x (p_k - p_a), twice the signed area of a triangle of grid points: |D| <= (W - 1)(H - 1)
      * < 2^30, so the sum is taken modulo 2^32 (on rv32 no carries, one branch for D > 0) */
     D = (int32_t)((uint32_t)e0 - (uint32_t)fk + (uint32_t)fj);
