@@ -15,7 +15,7 @@ void wm_touch(wm_refiner *r, int32_t t)
     wm_forget_class(r, t);
 }
 
-/* wm_touch in the error bound (its legalisation's slots): a triangle that the scan's Vmax alone shows
+/* wm_touch in the error bound (its legalisation's slots), without forgetting classes: a triangle that the scan's Vmax alone shows
  * within zeta leaves the heap without its exact E(T) (no slope factor): err[t] = its vertical ev, an
  * upper bound, and WM_F_MEASURE.  Nothing in the bound or the decimation reads the E(T) of a triangle
  * within zeta, and most of them go again in a later split's flips or a removal; wm_settle measures
@@ -32,7 +32,8 @@ static void touch_bound(wm_refiner *r, int32_t t)
     r->err[t] = wm_tri_error_over(&r->field, &r->params, x, y, r->params.zeta, &wx, &wy, &exact);
     r->worst[t] = wy * r->field.width + wx;
     r->mesh.tflag[t] = (uint8_t)((r->mesh.tflag[t] & ~WM_F_MEASURE) | WM_F_NEW | (exact ? 0 : WM_F_MEASURE));
-    wm_forget_class(r, t);
+    /* Not wm_forget_class: no reduction follows the bound (level 0's comes before it), the decimation
+     * writes a vertex's vapex before it reads it, and pos[] is the heap's (swept is 0). */
 }
 
 void wm_settle(wm_refiner *r)
@@ -237,8 +238,9 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
         slots[ns++] = t; /* a split's slots: distinct, at most 4 = LEGAL_SLOTS at the least */
-        for (int32_t e = 3 * t; e < 3 * t + 3; e++)
-            if (me->hv[e] != p && wm_dest(me, e) != p && top < LEGAL_STACK) stack[top++] = e;
+        for (int32_t k = 0; k < 3; k++) /* edge 3 t + k, from corner k to corner k + 1 (wm_dest) */
+            if (me->hv[3 * t + k] != p && me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p && top < LEGAL_STACK)
+                stack[top++] = 3 * t + k;
     }
     while (top > 0) {
         int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
