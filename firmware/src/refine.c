@@ -549,6 +549,28 @@ static WM_ALWAYS_INLINE int scan_new(wm_refiner *r, const int32_t x[3], const in
     return *e <= lim;
 }
 
+/* min(wm_angle_above(dot1, cross1), wm_angle_above(dot2, cross2)) (try_swap's bound of R_A).  On the soft
+ * CPU with one division, where each took one: the bound is min(cap, floor(2^16 cross / dot) + slack),
+ * which grows with cross / dot (dot > 0), so the smaller quotient's is the smaller bound, and
+ * cross1 / dot1 <= cross2 / dot2 iff cross1 dot2 <= cross2 dot1 (each below 2^31: 32 x 32 bit products). */
+static WM_ALWAYS_INLINE int32_t angle_above_min(int64_t dot1, int64_t cross1, int64_t dot2, int64_t cross2)
+{
+    int32_t a1, a2;
+    if (WM_NARROW_DIV && dot1 > 0 && dot2 > 0) {
+        int first = (uint64_t)(uint32_t)cross1 * (uint32_t)dot2 <= (uint64_t)(uint32_t)cross2 * (uint32_t)dot1;
+        a1 = first ? wm_angle_above(dot1, cross1) : wm_angle_above(dot2, cross2);
+        WM_ASSERT(dot1 < ((int64_t)1 << 31) && dot2 < ((int64_t)1 << 31) && cross1 >= 0 &&
+                  cross1 < ((int64_t)1 << 31) && cross2 >= 0 && cross2 < ((int64_t)1 << 31));
+        WM_ASSERT(a1 == (wm_angle_above(dot1, cross1) < wm_angle_above(dot2, cross2)
+                             ? wm_angle_above(dot1, cross1)
+                             : wm_angle_above(dot2, cross2)));
+        return a1;
+    }
+    a1 = wm_angle_above(dot1, cross1);
+    a2 = wm_angle_above(dot2, cross2);
+    return a2 < a1 ? a2 : a1;
+}
+
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
@@ -588,9 +610,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
         wm_min_corner_in(n1x, n1y, &dot1, &cross1);
         wm_min_corner_in(qx, qy, &dot2, &cross2);
         if (alpha < 65536u) { /* first a bound of R_A from above: the new angles below */
-            ang_new = wm_angle_above(dot1, cross1);
-            a1 = wm_angle_above(dot2, cross2);
-            if (a1 < ang_new) ang_new = a1;
+            ang_new = angle_above_min(dot1, cross1, dot2, cross2);
         } else {
             ang_new = an1 = wm_angle_q16(dot1, cross1);
             a1 = an2 = wm_angle_q16(dot2, cross2);
