@@ -56,3 +56,35 @@ def test_build_fails_when_the_firmware_does_not_fit(tmp_path):
     assert r.returncode != 0
     # the linker's count names the bytes (board.ld's .stack reserve): not a bare assertion
     assert "region `FW_RAM' overflowed by" in r.stdout + r.stderr
+
+
+def test_every_section_but_data_loads_where_it_runs(tmp_path):
+    """board.ld: $readmemh loads the image at address 0, so every loaded section but .data (crt0 copies
+    it from its load image) must load where it runs, however large .data is.  A tiny program with 12
+    bytes of .data, linked by board.ld; .wm_tail (the start-up paint, after .bss) once inherited .data's
+    load offset and was loaded 12 bytes before where it runs."""
+    if shutil.which("riscv64-unknown-elf-gcc") is None:
+        pytest.fail("riscv64-unknown-elf-gcc not found: run `make setup`")
+    gendir = tmp_path / "gen"
+    gen.write_all(gendir)
+    (tmp_path / "wm_cold.ld").write_text("")  # CMake writes the cold objects' list; none here
+    src = tmp_path / "tiny.S"
+    src.write_text(".section .text.start, \"ax\"\n.globl _start\n_start: j _start\n"
+                   ".section .data\n.word 1, 2, 3\n"
+                   ".section .wm_tail, \"ax\"\n.globl board_start\nboard_start: ret\n")
+    elf = tmp_path / "tiny.elf"
+    r = subprocess.run(["riscv64-unknown-elf-gcc", "-march=rv32imc", "-mabi=ilp32", "-nostdlib",
+                        "-nostartfiles", "-T", str(SRC / "board.ld"), f"-L{gendir}", f"-L{tmp_path}",
+                        str(src), "-o", str(elf)], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    dump = subprocess.run(["riscv64-unknown-elf-objdump", "-h", str(elf)], capture_output=True, text=True,
+                          check=True).stdout.splitlines()
+    sections = {}
+    for head, flags in zip(dump, dump[1:], strict=False):
+        f = head.split()
+        if len(f) == 7 and f[0].isdigit():  # Idx Name Size VMA LMA File-off Algn, then its flags
+            sections[f[1]] = (int(f[2], 16), int(f[3], 16), int(f[4], 16), "LOAD" in flags)
+    assert sections[".data"][0] == 12 and sections[".data"][1] == sections[".data"][2] + 12
+    assert sections[".wm_tail"][3]
+    moved = {n: s for n, s in sections.items() if s[3] and n != ".data" and s[1] != s[2]}
+    assert not moved, f"loaded elsewhere than they run (size, VMA, LMA): {moved}"
