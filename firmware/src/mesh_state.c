@@ -15,11 +15,12 @@ void wm_touch(wm_refiner *r, int32_t t)
     wm_forget_class(r, t);
 }
 
-/* wm_touch in the error bound (its legalisation's slots), without forgetting classes: a triangle that the scan's Vmax alone shows
- * within zeta leaves the heap without its exact E(T) (no slope factor): err[t] = its vertical ev, an
- * upper bound, and WM_F_MEASURE.  Nothing in the bound or the decimation reads the E(T) of a triangle
- * within zeta, and most of them go again in a later split's flips or a removal; wm_settle measures
- * those left at the end as far as E_max needs them.  With a holes mask or a region of interest, wm_touch. */
+/* wm_touch in the error bound (its legalisation's slots), without forgetting classes: a triangle that
+ * the scan's Vmax alone shows within zeta leaves the heap without its exact E(T) (no slope factor):
+ * err[t] = its vertical ev, an upper bound, and WM_F_MEASURE.  Nothing in the bound or the decimation
+ * reads the E(T) of a triangle within zeta, and most of them go again in a later split's flips or a
+ * removal; wm_settle measures those left at the end as far as E_max needs them.  With a holes mask or a
+ * region of interest, wm_touch. */
 static void touch_bound(wm_refiner *r, int32_t t)
 {
     int32_t x[3], y[3], wx, wy;
@@ -31,9 +32,11 @@ static void touch_bound(wm_refiner *r, int32_t t)
     wm_tri_xy(&r->mesh, t, x, y);
     r->err[t] = wm_tri_error_over(&r->field, &r->params, x, y, r->params.zeta, &wx, &wy, &exact);
     r->worst[t] = wy * r->field.width + wx;
-    r->mesh.tflag[t] = (uint8_t)((r->mesh.tflag[t] & ~WM_F_MEASURE) | WM_F_NEW | (exact ? 0 : WM_F_MEASURE));
-    /* Not wm_forget_class: no reduction follows the bound (level 0's comes before it), the decimation
-     * writes a vertex's vapex before it reads it, and pos[] is the heap's (swept is 0). */
+    /* The flags written, not read first: after the levels no flag but WM_F_MEASURE is read (wm_settle;
+     * the decimation sets it), so the levels' marks go.  Not wm_forget_class: no reduction follows the
+     * bound (level 0's comes before it), the decimation writes a vertex's vapex before it reads it, and
+     * pos[] is the heap's (swept is 0). */
+    r->mesh.tflag[t] = (uint8_t)(WM_F_NEW | (exact ? 0 : WM_F_MEASURE));
 }
 
 void wm_settle(wm_refiner *r)
