@@ -98,7 +98,7 @@ static WM_ALWAYS_INLINE uint32_t chord(uint32_t lo)
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-WM_NOINLINE_32 static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
+static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
 {
     int64_t D = q->D;
     uint64_t av = q->av;
@@ -182,7 +182,7 @@ static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, i
     y[0] = q->vy + q->dy[a], y[1] = q->vy + q->dy[j], y[2] = q->vy + q->dy[k];
 }
 
-WM_NOINLINE_32 static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
 {
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
