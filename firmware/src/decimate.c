@@ -115,6 +115,7 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
         int32_t p1 = z1 * ky, p2 = z2 * jy, p3 = jx * z2, p4 = kx * z1;
         uint32_t na = p1 >= p2 ? (uint32_t)p1 - (uint32_t)p2 : (uint32_t)p2 - (uint32_t)p1;
         uint32_t nb = p3 >= p4 ? (uint32_t)p3 - (uint32_t)p4 : (uint32_t)p4 - (uint32_t)p3;
+        int have = 0; /* A, B taken by the word shifts */
 #if WM_CHECK
         {
             int64_t Na = (int64_t)z1 * ky - (int64_t)z2 * jy, Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
@@ -122,26 +123,23 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
         }
 #endif
         if (q->words) {
-            /* wm_scaled_up's word-by-word shifts with 0 < e < 32 known (first_fit), and A, B below 2^31
-             * (their high words 0, the low ones below 2^31) for the 32-bit bound below */
+            /* wm_scaled_up's word-by-word shifts with 0 < e < 32 known (first_fit), when A and B are below
+             * 2^31 (their high words 0, the low ones below 2^31) */
             uint64_t u = (uint64_t)na * q->sx + ((1u << q->ex) - 1u),
                      w = (uint64_t)nb * q->sy + ((1u << q->ey) - 1u);
             uint32_t ulo = (uint32_t)u, uhi = (uint32_t)(u >> 32), wlo = (uint32_t)w, whi = (uint32_t)(w >> 32);
             uint32_t a32 = (ulo >> q->ex) | (uhi << (32 - q->ex)), b32 = (wlo >> q->ey) | (whi << (32 - q->ey));
             WM_ASSERT(q->ex > 0 && q->ex < 32 && q->ey > 0 && q->ey < 32);
             if (((uhi >> q->ex) | (whi >> q->ey)) == 0 && (a32 | b32) < (1u << 31)) {
-                uint32_t hi = a32 > b32 ? a32 : b32, lo = a32 > b32 ? b32 : a32, h, d = (uint32_t)D;
                 WM_ASSERT(a32 == wm_scaled_up(na, q->sx, q->ex) && b32 == wm_scaled_up(nb, q->sy, q->ey));
-                h = hi + chord(lo);
-                hi = h > d ? h : d, lo = h > d ? d : h;
-                if (hi >= (1u << 31)) return 0;
-                T = (uint64_t)hi + chord(lo);
-                WM_ASSERT(T == wm_hypot_up(wm_hypot_up(a32, b32), (uint64_t)D));
-                return T < ((uint64_t)1 << 31) && (uint64_t)q->zeta * T < (av << 16);
+                A = a32, B = b32; /* the 32-bit bound below */
+                have = 1;
             }
         }
-        A = wm_scaled_up(na, q->sx, q->ex);
-        B = wm_scaled_up(nb, q->sy, q->ey);
+        if (!have) {
+            A = wm_scaled_up(na, q->sx, q->ex);
+            B = wm_scaled_up(nb, q->sy, q->ey);
+        }
     }
 #else
     {
