@@ -67,7 +67,8 @@ def test_every_section_but_data_loads_where_it_runs(tmp_path):
         pytest.fail("riscv64-unknown-elf-gcc not found: run `make setup`")
     gendir = tmp_path / "gen"
     gen.write_all(gendir)
-    (tmp_path / "wm_cold.ld").write_text("")  # CMake writes the cold objects' list; none here
+    for name in ("wm_cold.ld", "wm_hot.ld"):  # CMake writes the cold objects' list, the hot order; none here
+        (tmp_path / name).write_text("")
     src = tmp_path / "tiny.S"
     src.write_text(".section .text.start, \"ax\"\n.globl _start\n_start: j _start\n"
                    ".section .data\n.word 1, 2, 3\n"
