@@ -437,12 +437,32 @@ end
  */
 wire bank_busy_unused, bank_frame_done_unused;
 
+`ifdef WM_SIM_STAGE_GATE
+// The simulator's clock gate (sim/build.py defines WM_SIM_STAGE_GATE; the bitstream has no gate and
+// clocks both units at every edge): an edge reaches haar_bank and tlut_stage only while the stage runs
+// (SETUP, RUN) or resets.  Outside a frame neither unit takes a beat (their valids and readies are low)
+// and what their registers would load there is never read (docs/soc.md, "The simulated board":
+// why this is exact, and the test that compares the cycles and the meshes with the ungated build).  The
+// enable is latched while the clock is low, so that the gated edge comes in the same evaluation as clk's
+// and sees the values from before the edge, as every other register does.
+wire stage_clk_en = state_reg != STATE_IDLE || rst;
+reg stage_clk_en_latch;
+always @* begin
+    if (!clk) begin
+        stage_clk_en_latch = stage_clk_en;
+    end
+end
+wire stage_clk = clk && stage_clk_en_latch;
+`else
+wire stage_clk = clk;
+`endif
+
 haar_bank #(
     .MAX_WIDTH(MAX_WIDTH),
     .MAX_HEIGHT(MAX_HEIGHT),
     .MAX_LEVELS(MAX_LEVELS)
 ) bank_inst (
-    .clk(clk),
+    .clk(stage_clk),
     .rst(rst),
     .cfg_width(width_reg),
     .cfg_height(height_reg),
@@ -470,7 +490,7 @@ tlut_stage #(
     .MAX_COLS(MAX_COLS),
     .EXPAND(0)
 ) stage_inst (
-    .clk(clk),
+    .clk(stage_clk),
     .rst(rst),
     .s_axis_tdata(buf_data_reg),
     .s_axis_tuser(buf_user_reg),

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Build the simulated boards (Verilator models of the board tops + sim/*.cpp) into build/sim/.
 
-    python sim/build.py [--trace] [--jobs N]     the ULX3S (wmsim); prints the simulator's path
+    python sim/build.py [--trace|--ungated] [--jobs N]   the ULX3S (wmsim); prints the simulator's path
     python sim/build.py --board icebreaker       the iCEBreaker (wmsim-icebreaker)
     python sim/build.py --firmware               builds firmware/board, prints the image's path
 
@@ -11,8 +11,10 @@ pythondata-cpu-picorv32 package unless WM_CPU says another; the simulator and fi
 than the default go to build folders named after it: build/sim/default-vexriscv,
 build/firmware-board-vexriscv).  A build is skipped when
 the sources and options have not changed since the last one (a stamp of their hashes).  The default
-build has no tracing (faster to build and to run); --trace builds a separate simulator with FST
-tracing into build/sim/trace/ for `wmsim --trace FILE.fst`.
+build has no tracing (faster to build and to run) and gates the FPGA stage's clock outside its frames
+(STAGE_GATE); --trace builds a separate simulator with FST tracing into build/sim/trace/ for `wmsim
+--trace FILE.fst`, --ungated one without the gate into build/sim/ungated/ (both clock every unit at
+every edge, as the bitstream does).
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ MAKEFLAGS = ["OPT_FAST=-O3", "OPT_SLOW=-O1", "OPT_GLOBAL=-O1", "CFG_CXXFLAGS_PCH
 # job on the simulated board") and builds in less time; both compile the same model, so the cycles do not
 # change.  Its Verilator runtime needs libatomic, which g++ links by itself.
 CLANG = "clang++"
+# The simulator's clock gate of the FPGA stage (rtl/soc_accel.v): haar_bank and tlut_stage get no edge
+# while the stage is idle, the largest share of an idle cycle's host instructions (docs/soc.md, "The
+# simulated board", Speed).  Defined in the default build only; the tracing and ungated builds and the
+# bitstream clock them at every edge.
+STAGE_GATE = "WM_SIM_STAGE_GATE"
 
 
 def compiler() -> tuple[list[str], list[str]]:
@@ -159,15 +166,21 @@ def _build(args: list[str], env: dict, inputs: list[Path], outdir: Path, exe: Pa
     return exe
 
 
-def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: str | None = None) -> Path:
-    """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's)."""
+def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: str | None = None,
+              ungated: bool = False) -> Path:
+    """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's).
+
+    The default build gates the FPGA stage's clock outside its frames (STAGE_GATE, rtl/soc_accel.v); the
+    tracing build and `ungated` (build/sim/ungated/, the tests' reference) clock every unit at every
+    edge, as the bitstream does."""
     from wavemesh.device import soc_cpu
     from wavemesh.device.gen import write_all
     from wavemesh.harness.toolchain import objcache, verilator_env
 
     core = cpu(cpu_name)
     write_all(GEN)
-    variant = ("trace" if trace else "default") + soc_cpu.suffix(core)
+    variant = ("trace" if trace else "ungated" if ungated else "default") + soc_cpu.suffix(core)
+    gate = not (trace or ungated)
     outdir = OUT / variant
     exe = outdir / "wmsim"
     verilator, env = verilator_env()
@@ -177,6 +190,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
         f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         *([f"+define+{core.define}"] if core.define else []),
+        *([f"+define+{STAGE_GATE}"] if gate else []),
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
         "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS + objcache()),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
@@ -292,6 +306,8 @@ def copies(folder: Path, cpu_name: str | None = None) -> tuple[Path, Path]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
+    ap.add_argument("--ungated", action="store_true",
+                    help="build the variant without the FPGA stage's clock gate (build/sim/ungated/)")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
     ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
     ap.add_argument("--cpu",
@@ -305,7 +321,8 @@ def main(argv=None) -> int:
         elif args.board == "icebreaker":
             print(build_icebreaker_sim(jobs=args.jobs, quiet=False))
         else:
-            print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False, cpu_name=args.cpu))
+            print(build_sim(trace=args.trace, jobs=args.jobs, quiet=False, cpu_name=args.cpu,
+                            ungated=args.ungated))
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1

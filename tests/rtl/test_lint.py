@@ -32,6 +32,12 @@ def test_lint_clean(source: Path, verilator):
     assert r.returncode == 0, r.stderr
 
 
+def test_lint_clean_with_the_simulators_stage_gate(verilator):
+    """soc_accel as the simulator builds it, its stage clock gated (sim/build.py, STAGE_GATE)."""
+    r = lint(RTL / "soc_accel.v", verilator, "WM_SIM_STAGE_GATE")
+    assert r.returncode == 0, r.stderr
+
+
 def test_lint_clean_every_cpu(verilator):
     """soc_top with each CPU host/wavemesh/device/soc_cpu.py offers (the default one is linted above)."""
     from wavemesh.device import soc_cpu

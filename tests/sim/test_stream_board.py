@@ -287,3 +287,54 @@ def test_garbage_then_a_valid_request(fast_board, inputs, tmp_path, sim_timeouts
     time.sleep(0.2)
     src = str(inputs / "tiny.npy")
     stream_and_mesh(src, ["--levels", "2", *LEAN], fast_board.url, tmp_path)  # LEAN: the link is under test
+
+
+@pytest.fixture(scope="module")
+def ungated_exe(verilator, tmp_path_factory) -> Path:
+    """The simulator without its clock gate of the FPGA stage (sim/build.py, ungated: every unit clocked
+    at every edge, as in the bitstream), copied as conftest.py's sim_exe is."""
+    import shutil
+
+    from wavemesh.harness.simboard import build
+
+    try:
+        exe = build.build_sim(ungated=True)
+    except RuntimeError as e:
+        pytest.fail(str(e))
+    return Path(shutil.copy2(exe, tmp_path_factory.mktemp("ungated") / exe.name))
+
+
+GATE_JOBS = ("ball-20x17", "jacksboro-13x11")  # two frames of the stage on one board: the second after idle
+
+
+def test_the_stage_clock_gate_changes_no_cycle(sim_exe, ungated_exe, firmware_hex, inputs, tmp_path,
+                                               sim_timeouts):
+    """The default simulator gates the FPGA stage's clock outside its frames (rtl/soc_accel.v,
+    WM_SIM_STAGE_GATE); the ungated build clocks it at every edge, as the bitstream does.  Two jobs on a
+    fresh board of each (the stage, the upload block, the error engine, the levels; the second frame
+    starts from what the stage kept through the idle stretch between them): the same mesh bytes, the
+    same cycles of every stage and level, of every stretch of a stage's clock, and the same counts in
+    DONE."""
+    runs = {}
+    for kind, exe in (("gated", sim_exe), ("ungated", ungated_exe)):
+        b = SimBoard(exe, firmware_hex, "--port", "0", "--fast")
+        out = []
+        try:
+            for case in GATE_JOBS:
+                name, opts = CASES[case]
+                d = tmp_path / kind / case
+                d.mkdir(parents=True)
+                report = stream_and_mesh(source(inputs, name), opts, b.url, d)
+                # DONE's counts (the levels' vertices, triangles, E_max, splits, swaps), not when they arrived
+                levels = report["refiner"]["levels"]
+                done = [{k: v for k, v in lv.items() if k != "arrived_s"} for lv in levels]
+                out.append((job_cycles(report), done, (d / "board.obj").read_bytes()))
+        finally:
+            b.stop()
+        runs[kind] = (out, clock_trace(b))
+    (gated, gated_trace), (ungated, ungated_trace) = runs["gated"], runs["ungated"]
+    for (cyc_a, ref_a, obj_a), (cyc_b, ref_b, obj_b) in zip(gated, ungated, strict=True):
+        assert obj_a == obj_b
+        assert_same_work(cyc_a, cyc_b)
+        assert ref_a == ref_b
+    assert_same_trace(gated_trace, ungated_trace)
