@@ -1,7 +1,7 @@
 // wavemesh simulated board: the Verilator model of soc_top with its UART bridged to TCP.
 //
 //   wmsim --firmware FILE.hex [--port N] [--fast] [--exit-on-close] [--no-socket]
-//         [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--progress S] [--quiet]
+//         [--max-cycles N] [--trace FILE.fst] [--profile FILE [--pc-trace FILE]] [--progress S] [--quiet]
 //
 // A host talks to it as to a board: pyserial's serial_for_url("socket://127.0.0.1:N").  Bytes
 // from the client are driven onto the UART RX pin bit by bit at the board's current baud divisor,
@@ -29,6 +29,10 @@
 // FILE.ibus gets the cycles instruction fetches waited for memory, by the 32-byte line fetched:
 // "LINE CYCLES" (the VexRiscv's instruction cache refills from the firmware RAM's port B; every fetch
 // of the PicoRV32, on the memory bus).
+// --pc-trace FILE (with --profile) writes the PC of every cycle that starts another instruction than the
+// cycle before, as 32-bit little-endian words, and 0xffffffff at every SYS.STAGE write (the firmware
+// flushes both caches there): the instruction stream tools/code_layout.py replays through a model of the
+// instruction cache to choose the hot code's order (firmware/board/hot_order.txt).
 //
 // Exit status: 0 halt with code 0; 1 halt with another code; 2 CPU trap; the others sim_main.h's.
 #include <cinttypes>
@@ -144,6 +148,8 @@ public:
         }
         if (profiling_) {
             if (top_->prof_fetch) pc_ = top_->prof_fetch_pc;
+            if (pc_trace_ && pc_ != traced_pc_) trace_pc(traced_pc_ = pc_);
+            if (pc_trace_ && top_->stage_valid) trace_pc(traced_pc_ = PC_TRACE_FLUSH);
             if (pc_ / 2 < profile_fw_.size())
                 ++profile_fw_[pc_ / 2];  // the firmware RAM: an array (a map lookup a cycle halved the rate)
             else
@@ -188,8 +194,17 @@ public:
 
     uint64_t cycles() const { return cycles_; }
 
-    // At exit: the --profile files; false when they cannot be written.
-    bool finish() { return opt_.profile.empty() || write_profile(opt_.profile); }
+    // At exit: the --profile files and the PC trace; false when they cannot be written.
+    bool finish() {
+        bool ok = pc_trace_ok_;
+        if (pc_trace_) {
+            ok = fwrite(pc_buf_.data(), 4, pc_buf_.size(), pc_trace_) == pc_buf_.size() && pc_trace_ok_;
+            ok = fclose(pc_trace_) == 0 && ok;
+            pc_trace_ = nullptr;
+        }
+        if (!ok) fprintf(stderr, "wmsim: error: cannot write the PC trace '%s'\n", opt_.pc_trace.c_str());
+        return (opt_.profile.empty() || write_profile(opt_.profile)) && ok;
+    }
 
     const char *mode() const { return opt_.fast ? "fast mode" : "pin mode"; }
 
@@ -249,7 +264,20 @@ private:
         uint64_t wait = 0, reads = 0, writes = 0;
     };
     uint64_t data_wait_ = 0;  // cycles the current data access has waited
-    std::map<uint32_t, uint64_t> ibus_;  // by 32-byte line: cycles instruction fetches waited
+    std::map<uint32_t, uint64_t> ibus_;
+    // --pc-trace: the PCs, buffered; 0xffffffff marks a stage write (the caches' flush)
+    static constexpr uint32_t PC_TRACE_FLUSH = 0xffffffffu;
+    FILE *pc_trace_ = opt_.pc_trace.empty() ? nullptr : fopen(opt_.pc_trace.c_str(), "wb");
+    bool pc_trace_ok_ = opt_.pc_trace.empty() || pc_trace_ != nullptr;
+    uint32_t traced_pc_ = PC_TRACE_FLUSH;
+    std::vector<uint32_t> pc_buf_;
+    void trace_pc(uint32_t pc) {
+        pc_buf_.push_back(pc);  // little-endian hosts (x86-64, arm64) write the words as the file holds them
+        if (pc_buf_.size() == (1u << 16)) {
+            pc_trace_ok_ = fwrite(pc_buf_.data(), 4, pc_buf_.size(), pc_trace_) == pc_buf_.size() && pc_trace_ok_;
+            pc_buf_.clear();
+        }
+    }  // by 32-byte line: cycles instruction fetches waited
     std::map<uint32_t, DataBlock> data_;
 };
 

@@ -36,8 +36,8 @@ void sim_usage(const char *argv0, const SimBoardInfo &info) {
     if (info.soc)
         fprintf(stderr,
                 "usage: %s --firmware FILE.hex [--port N (default %d, 0 = any)] [--fast] [--exit-on-close]\n"
-                "          [--no-socket] [--max-cycles N] [--trace FILE.fst] [--profile FILE] [--progress S]\n"
-                "          [--quiet]\n",
+                "          [--no-socket] [--max-cycles N] [--trace FILE.fst] [--profile FILE [--pc-trace FILE]]\n"
+                "          [--progress S] [--quiet]\n",
                 argv0, info.default_port);
     else
         fprintf(stderr, "usage: %s [--port N (default %d, 0 = any)] [--exit-on-close] [--max-cycles N] [--quiet]\n",
@@ -54,16 +54,17 @@ bool sim_parse(int argc, char **argv, const SimBoardInfo &info, SimOptions *o) {
             }
             return argv[++i];
         };
-        bool soc_only = a == "--firmware" || a == "--trace" || a == "--profile" || a == "--progress" ||
+        bool soc_only = a == "--firmware" || a == "--trace" || a == "--profile" || a == "--pc-trace" ||
+                        a == "--progress" ||
                         a == "--fast" || a == "--no-socket";
         if (soc_only && !info.soc) {
             fprintf(stderr, "wmsim: error: unknown option '%s'\n", a.c_str());
             return false;
         }
-        if (a == "--firmware" || a == "--trace" || a == "--profile") {
+        if (a == "--firmware" || a == "--trace" || a == "--profile" || a == "--pc-trace") {
             const char *v = value(a.c_str());
             if (!v) return false;
-            (a == "--firmware" ? o->firmware : a == "--trace" ? o->trace : o->profile) = v;
+            (a == "--firmware" ? o->firmware : a == "--trace" ? o->trace : a == "--profile" ? o->profile : o->pc_trace) = v;
         } else if (a == "--port") {
             const char *v = value("--port");
             if (!v) return false;
@@ -117,6 +118,10 @@ bool sim_parse(int argc, char **argv, const SimBoardInfo &info, SimOptions *o) {
         return false;
     }
 #endif
+    if (!o->pc_trace.empty() && o->profile.empty()) {
+        fprintf(stderr, "wmsim: error: --pc-trace needs --profile (it traces the profile's PCs)\n");
+        return false;
+    }
     if (o->firmware.empty()) {
         fprintf(stderr, "wmsim: error: --firmware FILE.hex is required\n");
         return false;

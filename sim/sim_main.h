@@ -34,6 +34,7 @@ struct SimOptions {
     std::string firmware;
     std::string trace;
     std::string profile;
+    std::string pc_trace;  // --pc-trace: every executed PC change (with --profile)
     bool fast = false;
     bool exit_on_close = false;
     bool no_socket = false;
@@ -45,7 +46,7 @@ struct SimOptions {
 // What a board's simulator is and takes.
 struct SimBoardInfo {
     int default_port;
-    bool soc;  // the SoC: --firmware (required), --fast, --no-socket, --trace, --profile, --progress
+    bool soc;  // the SoC: --firmware (required), --fast, --no-socket, --trace, --profile, --pc-trace, --progress
 };
 
 constexpr uint64_t SIM_SOCKET_EVERY = 256;  // cycles between socket services

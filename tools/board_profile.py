@@ -2,6 +2,7 @@
 """Where the soft CPU spends its cycles: one `wavemesh stream` job through the simulated board, profiled.
 
     .venv/bin/python tools/board_profile.py INPUT [wavemesh stream options ...] [--top N] [--raw FILE]
+        [--data] [--firmware FILE.hex] [--check] [--pc-trace FILE]
 
 Builds the board firmware and the simulator and starts `wmsim --fast --profile` (both through
 wavemesh.harness.simboard, as the tests and benchmarks do), streams INPUT with the options given (e.g.
@@ -51,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--raw", help="also keep the raw PC histogram here")
     ap.add_argument("--data", action="store_true", help="also the data accesses' waits by area and array")
     ap.add_argument("--firmware", help="profile this image (FILE.hex, FILE.elf beside it), not a new build")
+    ap.add_argument("--pc-trace", help="also write wmsim's trace of executed PCs here (tools/code_layout.py)")
     ap.add_argument("--check", action="store_true",
                     help="also run `wavemesh mesh` with the same options: are the meshes equal?")
     args, stream_opts = ap.parse_known_args(argv)
@@ -64,7 +66,8 @@ def main(argv: list[str] | None = None) -> int:
         hexfile = elf.with_suffix(".hex")
         prof = Path(args.raw) if args.raw else Path(tmp) / "profile.txt"
         board = simboard.SimBoard(sim, hexfile, "--port", "0", "--fast", "--exit-on-close", "--quiet",
-                                  "--profile", str(prof))
+                                  "--profile", str(prof),
+                                  *(["--pc-trace", args.pc_trace] if args.pc_trace else []))
         report = Path(tmp) / "report.json"
         cmd = [str(VENV_BIN / "wavemesh"), "stream", args.input, *stream_opts, "--port", board.url, "-o",
                str(Path(tmp) / "out.obj"), "--quiet", "--report", str(report),

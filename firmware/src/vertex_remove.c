@@ -230,18 +230,20 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             py[i] = m->vy[ring[i]];
             x0 = px[i] < x0 ? px[i] : x0, x1 = px[i] > x1 ? px[i] : x1;
             y0 = py[i] < y0 ? py[i] : y0, y1 = py[i] > y1 ? py[i] : y1;
-            nx[i] = i + 1 == n ? 0 : i + 1;
-            pv[i] = i == 0 ? n - 1 : i - 1;
+            nx[i] = i + 1;
+            pv[i] = i - 1;
             ok[i] = 0;
             alive[i] = 1;
         }
+        nx[n - 1] = 0, pv[0] = n - 1;
         small = x1 - x0 < 128 && y1 - y0 < 128; /* in_circle32's range */
         while (left > 3) {
             int32_t best = -1, valid = -1;
-            for (int32_t i = 0; i < n; i++) {
+            /* the polygon's vertices in position order: from the lowest left (i0), round the list */
+            for (int32_t i = i0, c = 0; c < left; i = nx[i], c++) {
                 int32_t ia = pv[i], ic = nx[i], j;
                 int32_t ax, ay, bx, by, cx, cy;
-                if (!alive[i]) continue;
+                WM_ASSERT(alive[i] && (c == 0 || i > pv[i]));
                 ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
                     area[i] = wm_orient(ax, ay, bx, by, cx, cy);
@@ -298,9 +300,10 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             nx[pv[best]] = nx[best];
             pv[nx[best]] = pv[best];
             alive[best] = 0;
+            if (best == i0) i0 = nx[best]; /* the next position left, the lowest now */
             left--;
         }
-        while (!alive[i0]) i0++;
+        WM_ASSERT(alive[i0] && nx[i0] > i0 && nx[nx[i0]] > nx[i0]);
         if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, nx[i0], nx[nx[i0]])) return WM_ERR_REFUSED;
         poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
     }

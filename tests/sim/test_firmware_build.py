@@ -67,7 +67,8 @@ def test_every_section_but_data_loads_where_it_runs(tmp_path):
         pytest.fail("riscv64-unknown-elf-gcc not found: run `make setup`")
     gendir = tmp_path / "gen"
     gen.write_all(gendir)
-    (tmp_path / "wm_cold.ld").write_text("")  # CMake writes the cold objects' list; none here
+    for name in ("wm_cold.ld", "wm_hot.ld"):  # CMake writes the cold objects' list, the hot order; none here
+        (tmp_path / name).write_text("")
     src = tmp_path / "tiny.S"
     src.write_text(".section .text.start, \"ax\"\n.globl _start\n_start: j _start\n"
                    ".section .data\n.word 1, 2, 3\n"
@@ -88,3 +89,32 @@ def test_every_section_but_data_loads_where_it_runs(tmp_path):
     assert sections[".wm_tail"][3]
     moved = {n: s for n, s in sections.items() if s[3] and n != ".data" and s[1] != s[2]}
     assert not moved, f"loaded elsewhere than they run (size, VMA, LMA): {moved}"
+
+
+def test_hot_code_follows_hot_order(tmp_path):
+    """hot_order.txt's functions (each with its clones) start the hot code, in its order, and each is in
+    the image: a name the code lost means the order is stale (rerun tools/code_layout.py --write)."""
+    from wavemesh.harness.simboard import build
+
+    image = build.build_firmware()
+    with build.locked(image.parent):
+        elf = Path(shutil.copy2(image.with_suffix(".elf"), tmp_path / "fw.elf"))
+    names = [ln.strip() for ln in (SRC / "hot_order.txt").read_text().splitlines()
+             if ln.strip() and not ln.startswith("#")]
+    assert len(names) == len(set(names))
+    out = subprocess.run(["riscv64-unknown-elf-nm", "-n", str(elf)], capture_output=True, text=True,
+                         check=True).stdout
+    first: dict[str, int] = {}
+    hot_start = None
+    for line in out.splitlines():
+        addr, kind, name = line.split()
+        if name == "__wm_hot_start":
+            hot_start = int(addr, 16)
+        elif kind in "tTwW":
+            first.setdefault(name.split(".")[0], int(addr, 16))
+    missing = [n for n in names if n not in first]
+    assert not missing, f"hot_order.txt names functions the image lacks: {missing}"
+    if names:
+        addrs = [first[n] for n in names]
+        assert addrs[0] == hot_start
+        assert addrs == sorted(addrs)

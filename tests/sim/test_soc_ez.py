@@ -11,6 +11,9 @@ number of cycles once the SDRAM is initialised, until then for the initialisatio
 
 from __future__ import annotations
 
+import subprocess
+
+import numpy as np
 import pytest
 from rv32 import Program, addi, beq, bne, hex_words, jal, lhu, li, lw, sh, sw
 from wavemesh.device import memmap
@@ -169,6 +172,43 @@ def test_fst_trace(tmp_path, verilator):
         return [ln for ln in b.lines if "summary" not in ln]
 
     assert log(board) == log(plain)
+
+
+def test_profile_and_pc_trace(tmp_path, start_sim):
+    """--profile counts every cycle against a PC and --pc-trace lists the PCs as they run (with a mark at
+    every stage write): the same PCs, the loop's 100 turns, and the run's log as without them."""
+    words = program()
+    hexfile = tmp_path / "ez.hex"
+    hexfile.write_text(hex_words(words))
+    prof, trace = tmp_path / "ez.prof", tmp_path / "ez.pc"
+    board = start_sim(hexfile, "--no-socket", "--max-cycles", MAX_CYCLES, "--profile", str(prof),
+                      "--pc-trace", str(trace))
+    assert board.wait() == 0
+    plain = start_sim(hexfile, "--no-socket", "--max-cycles", MAX_CYCLES)
+    assert plain.wait() == 0
+    def log(b):
+        return [ln for ln in b.lines if "summary" not in ln]
+
+    assert log(board) == log(plain)
+    pcs = np.fromfile(trace, dtype="<u4")
+    flush = pcs == 0xFFFFFFFF
+    assert flush.sum() == len(board.events("stage")) == 3
+    hist = {int(a, 16): int(c) for a, c in (ln.split() for ln in prof.read_text().splitlines())}
+    assert set(pcs[~flush].tolist()) == {a for a, c in hist.items() if c}
+    assert all(a < 4 * len(words) for a in hist)
+    loop = 4 * words.index(addi(4, 4, -1))  # the first loop: 100 turns between stage writes 1 and 2
+    assert (pcs == loop).sum() == 100
+    first, second = np.flatnonzero(flush)[:2]
+    assert (pcs[first:second] == loop).sum() == 100
+
+
+def test_pc_trace_needs_profile(tmp_path, sim_exe):
+    hexfile = tmp_path / "ez.hex"
+    hexfile.write_text(hex_words(program()))
+    r = subprocess.run([str(sim_exe), "--firmware", str(hexfile), "--no-socket", "--pc-trace",
+                        str(tmp_path / "t.pc")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 64
+    assert "--pc-trace needs --profile" in r.stderr
 
 
 def test_trap_and_cycle_limit_end_the_run(tmp_path, start_sim):
