@@ -21,22 +21,24 @@ void wm_touch(wm_refiner *r, int32_t t)
  * reads the E(T) of a triangle within zeta, and most of them go again in a later split's flips or a
  * removal; wm_settle measures those left at the end as far as E_max needs them.  With a holes mask or a
  * region of interest, wm_touch. */
-static void touch_bound(wm_refiner *r, int32_t t)
+static uint32_t touch_bound(wm_refiner *r, int32_t t)
 {
     int32_t x[3], y[3], wx, wy;
     int exact;
+    uint32_t e;
     if (r->roi || r->field.mask) {
         wm_touch(r, t);
-        return;
+        return r->err[t];
     }
     wm_tri_xy(&r->mesh, t, x, y);
-    r->err[t] = wm_tri_error_over(&r->field, &r->params, x, y, r->params.zeta, &wx, &wy, &exact);
+    r->err[t] = e = wm_tri_error_over(&r->field, &r->params, x, y, r->params.zeta, &wx, &wy, &exact);
     r->worst[t] = wy * r->field.width + wx;
     /* The flags written, not read first: after the levels no flag but WM_F_MEASURE is read (wm_settle;
      * the decimation sets it), so the levels' marks go.  Not wm_forget_class: no reduction follows the
      * bound (level 0's comes before it), the decimation writes a vertex's vapex before it reads it, and
      * pos[] is the heap's (swept is 0). */
     r->mesh.tflag[t] = (uint8_t)(WM_F_NEW | (exact ? 0 : WM_F_MEASURE));
+    return e;
 }
 
 void wm_settle(wm_refiner *r)
@@ -85,20 +87,23 @@ int wm_room(wm_refiner *r, int32_t added)
 
 /* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot (a total
  * order: any heap pops them in the same order).  Its loops keep the item's key in a register and load
- * each other entry's key once. */
+ * each other entry's key once; the item filed comes with its key (its E(T), just measured: on the board
+ * the load of err[] after its store waits for the SDRAM, the data cache not allocating on a write).
+ * pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so pos[t] alone
+ * says whether t is in the heap. */
 
 static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
 {
     return wm_heap_before(ea, a, eb, b, 1);
 }
 
-/* The entry at i up past the parents it is before; 1 when it moved. */
-static int heap_up(wm_refiner *r, int32_t i)
+/* Entry t, key e, at i (list[i] itself not read) up past the parents it is before; 1 when it moved. */
+static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)
 {
     wm_index *list = r->list, *pos = r->pos;
     const uint32_t *err = r->err;
-    int32_t t = list[i], i0 = i;
-    uint32_t e = err[t];
+    int32_t i0 = i;
+    WM_ASSERT(e == err[t]);
     while (i > 0) {
         int32_t p = (i - 1) / 2, u = list[p];
         if (!heap_before(e, t, err[u], u)) break;
@@ -109,13 +114,12 @@ static int heap_up(wm_refiner *r, int32_t i)
     return i != i0;
 }
 
-/* The entry at i (no parent it is before) down past the children before it. */
-static void heap_down(wm_refiner *r, int32_t i, int32_t n)
+/* Entry t, key e, at i (no parent it is before) down past the children before it. */
+static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e)
 {
     wm_index *list = r->list, *pos = r->pos;
     const uint32_t *err = r->err;
-    int32_t t = list[i];
-    uint32_t e = err[t];
+    WM_ASSERT(e == err[t]);
     for (;;) {
         int32_t c = 2 * i + 1, u;
         uint32_t eu;
@@ -151,32 +155,30 @@ static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 }
 #endif
 
-static void heap_remove(wm_refiner *r, int32_t t, int32_t *n)
+/* Entry t, at i, out of the heap. */
+static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
 {
-    int32_t i = r->pos[t];
-    if (i < 0 || i >= *n || r->list[i] != t) return; /* not in the heap (pos may be stale) */
     r->pos[t] = -1;
     (*n)--;
     if (i == *n) return;
     {
         int32_t moved = r->list[i] = r->list[*n];
-        if (i == 0 || !heap_up(r, i)) heap_sink(r, i, *n);
+        if (i == 0 || !heap_up(r, i, moved, r->err[moved])) heap_sink(r, i, *n);
         WM_ASSERT(heap_holds_at(r, r->pos[moved], *n));
-        (void)moved;
     }
 }
 
-void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
+void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
 {
     int32_t i = r->pos[t];
-    if (r->err[t] <= r->params.zeta) {
-        heap_remove(r, t, n);
-    } else if (i >= 0 && i < *n && r->list[i] == t) { /* in place: (E(T), slot) orders totally */
-        if (i == 0 || !heap_up(r, i)) heap_down(r, i, *n); /* moved up: no child is before it */
+    WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && r->list[i] == t)));
+    if (e <= r->params.zeta) {
+        if (i >= 0) heap_remove(r, t, i, n);
+    } else if (i >= 0) {                                      /* in place: (E(T), slot) orders totally */
+        if (i == 0 || !heap_up(r, i, t, e)) heap_down(r, i, *n, t, e); /* moved up: no child is before it */
         WM_ASSERT(heap_holds_at(r, r->pos[t], *n));
     } else {
-        r->list[*n] = t;
-        heap_up(r, (*n)++);
+        heap_up(r, (*n)++, t, e);
         WM_ASSERT(heap_holds_at(r, r->pos[t], *n));
     }
 }
@@ -211,8 +213,8 @@ void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n)
 static void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
 {
     if (heap_n) {
-        touch_bound(r, t);
-        wm_heap_update(r, t, heap_n);
+        uint32_t e = touch_bound(r, t);
+        wm_heap_update(r, t, e, heap_n);
     } else {
         wm_touch(r, t);
     }

@@ -810,7 +810,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
      * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
-        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, &n);
+        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], &n);
     while (n > 0) {
         int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
@@ -836,7 +836,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         if (!legal)
             for (int32_t i = 0; i < nt; i++) {
                 wm_touch(r, touched[i]);
-                wm_heap_update(r, touched[i], &n);
+                wm_heap_update(r, touched[i], r->err[touched[i]], &n);
             }
         /* the new vertex: the corner of touched[0] at (wx, wy) */
         for (k = 0; k < 3; k++) {

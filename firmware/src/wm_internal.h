@@ -626,8 +626,8 @@ static inline void wm_forget_class(wm_refiner *r, int32_t t)
  * touched[0..n) until every such edge is locally Delaunay (hmm's design), then E(T) of touched[] and
  * of every flipped triangle, once each, as wm_touch.  heap_n: the error bound's heap (updated), or NULL. */
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n);
-/* The error bound's heap (mesh_state.c): re-files t after its E(T) changed. */
-void wm_heap_update(wm_refiner *r, int32_t t, int32_t *n);
+/* The error bound's heap (mesh_state.c): re-files t after its E(T) changed to e (err[t]). */
+void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n);
 /* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
  * E(T) <= zeta; returns WM_OK. */
 int wm_decimate(wm_refiner *r, wm_level_stats *st);
