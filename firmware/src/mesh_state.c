@@ -239,27 +239,33 @@ static void changed(wm_refiner *r, int32_t *list, int32_t *n, int32_t t, int32_t
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
 {
     wm_mesh *me = &r->mesh;
+    /* the stack's edges as triangle and corner (edge 3 t + k): its triangle and the half-edge before it
+     * without a division by 3 (on the soft CPU a multiply-high and its fix-ups, each time) */
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
+    int8_t corner[LEGAL_STACK];
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
         slots[ns++] = t; /* a split's slots: distinct, at most 4 = LEGAL_SLOTS at the least */
         for (int32_t k = 0; k < 3; k++) /* edge 3 t + k, from corner k to corner k + 1 (wm_dest) */
             if (me->hv[3 * t + k] != p && me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p && top < LEGAL_STACK)
-                stack[top++] = 3 * t + k;
+                stack[top] = t, corner[top++] = (int8_t)k;
     }
     while (top > 0) {
-        int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2;
-        if (o < 0 || me->hv[WM_PREV(e)] != p) continue;
+        int32_t t1 = stack[--top], k = corner[top], e = 3 * t1 + k, o = me->ho[e], a, b, d, t2, ko;
+        WM_ASSERT(WM_PREV(e) == (k == 0 ? e + 2 : e - 1));
+        if (o < 0 || me->hv[k == 0 ? e + 2 : e - 1] != p) continue;
+        t2 = (int32_t)((uint32_t)o / 3u); /* WM_TRI(o), o >= 0: unsigned */
+        ko = o - 3 * t2;
         a = me->hv[e];
         b = me->hv[o];
-        d = me->hv[WM_PREV(o)];
+        WM_ASSERT(WM_PREV(o) == (ko == 0 ? o + 2 : o - 1));
+        d = me->hv[ko == 0 ? o + 2 : o - 1];
         if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
             0)
             continue;
         if (!wm_quad_convex(me, a, b, p, d)) continue; /* wm_edge_swappable's test, its corners at hand */
         wm_edge_flip(me, e, o, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
-        t1 = WM_TRI(e);
-        t2 = WM_TRI(o);
+        WM_ASSERT(t1 == WM_TRI(e) && t2 == WM_TRI(o));
         if (ns < LEGAL_SLOTS) {
 #if WM_CHECK
             int in1 = 0, in2 = 0;
@@ -272,9 +278,9 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
             changed(r, slots, &ns, t2, heap_n);
         }
         r->flips++;
-        if (top + 2 <= LEGAL_STACK) {
-            stack[top++] = 3 * t1;
-            stack[top++] = 3 * t2;
+        if (top + 2 <= LEGAL_STACK) { /* edges 3 t1 and 3 t2: a -> d and d -> b, opposite p */
+            stack[top] = t1, corner[top++] = 0;
+            stack[top] = t2, corner[top++] = 0;
         }
     }
     /* The heap orders by (E(T), slot), a total order, so filing the slots now rather than flip by
