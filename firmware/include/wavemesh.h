@@ -144,11 +144,12 @@ int64_t wm_tri_area2(const wm_mesh *m, int32_t t);
  * *n_touched when it is not NULL. */
 
 /* Splits edge e at grid point (x, y), which must lie strictly inside the edge (4.4, fig. 2.7(c)):
- * the two triangles at the edge become four (two on the border). */
+ * the two triangles at the edge become four (two on the border); the new vertex is corner 1 of
+ * touched[0]. */
 int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched);
 
 /* Ternary subdivision (fig. 4.15): triangle t becomes three around the grid point (x, y), which must
- * lie strictly inside t. */
+ * lie strictly inside t; the new vertex is corner 2 of each, touched[0] = t. */
 int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched);
 
 /* 1 when the quadrilateral of the two triangles at e is strictly convex (no three corners collinear),

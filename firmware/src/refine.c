@@ -832,17 +832,14 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         rc = on < 0 ? wm_tri_split(me, t, wx, wy, touched, &nt) : wm_edge_split(me, on, wx, wy, touched, &nt);
         if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH; /* cannot happen */
         while (te < me->tri_end) r->pos[te++] = -1; /* slots new to the mesh: in no heap */
-        p = -1;
         if (!legal)
             for (int32_t i = 0; i < nt; i++) {
                 wm_touch(r, touched[i]);
                 wm_heap_update(r, touched[i], r->err[touched[i]], &n);
             }
-        /* the new vertex: the corner of touched[0] at (wx, wy) */
-        for (k = 0; k < 3; k++) {
-            int32_t v = me->hv[3 * touched[0] + k];
-            if (me->vx[v] == wx && me->vy[v] == wy) p = v;
-        }
+        /* the new vertex: corner 2 of touched[0] after a triangle's split, corner 1 after an edge's */
+        p = me->hv[3 * touched[0] + (on < 0 ? 2 : 1)];
+        WM_ASSERT(me->vx[p] == wx && me->vy[p] == wy);
         if (legal) wm_legalise(r, p, touched, nt, &n); /* and measures touched[] and what it flips */
         if (st) st->bound_splits++;
     }
