@@ -161,16 +161,23 @@ static int ear_holds_none(const int32_t *px, const int32_t *py, const int32_t *n
     return 1;
 }
 
+/* The probe's answer for the triangle (a, b, c), the first that holds its point. */
+static int ask(const struct wm_plan_probe *pr, int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx,
+               int32_t cy)
+{
+    int32_t x[3], y[3];
+    x[0] = ax, x[1] = bx, x[2] = cx, y[0] = ay, y[1] = by, y[2] = cy;
+    return pr->above(pr->ctx, x, y, pr->px, pr->py);
+}
+
 /* The first of the ear clipping's triangles (in the order they are cut) that holds the probe's point
  * is handed to the probe; an answer of 1 refuses the plan at once (the rest is not worked out). */
 static int probed(const struct wm_plan_probe *pr, int *done, int32_t ax, int32_t ay, int32_t bx, int32_t by,
                   int32_t cx, int32_t cy)
 {
-    int32_t x[3], y[3];
     if (pr == NULL || *done || !holds(ax, ay, bx, by, cx, cy, pr->px, pr->py)) return 0;
     *done = 1;
-    x[0] = ax, x[1] = bx, x[2] = cx, y[0] = ay, y[1] = by, y[2] = cy;
-    return pr->above(pr->ctx, x, y, pr->px, pr->py);
+    return ask(pr, ax, ay, bx, by, cx, cy);
 }
 
 int wm_ring_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex, int32_t tris[3 * WM_MAX_RING],
@@ -224,6 +231,11 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         int64_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
         int32_t left = n, i0 = 0, x0, x1, y0, y1, small;
+        /* bit i: the probe's point is not on the outer side of the polygon's edge from position i to nx[i],
+         * while no cut triangle has held it: so an ear holds it iff the side of its diagonal c-a (one
+         * orientation) and its two edges' bits say so, and the cut sets the new edge's bit from that
+         * orientation.  All set at first: the point is the vertex whose ring this is (wm_plan_probe). */
+        uint32_t side = ~0u;
         x0 = x1 = m->vx[ring[0]], y0 = y1 = m->vy[ring[0]];
         for (int32_t i = 0; i < n; i++) {
             px[i] = m->vx[ring[i]];
@@ -237,6 +249,10 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         }
         nx[n - 1] = 0, pv[0] = n - 1;
         small = x1 - x0 < 128 && y1 - y0 < 128; /* in_circle32's range */
+#if WM_CHECK
+        for (int32_t i = 0; pr && i < n; i++)
+            WM_ASSERT(wm_orient(px[i], py[i], px[nx[i]], py[nx[i]], pr->px, pr->py) >= 0);
+#endif
         while (left > 3) {
             int32_t best = -1, valid = -1;
             /* the polygon's vertices in position order: from the lowest left (i0), round the list */
@@ -294,8 +310,18 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             if (area[best] > most) most = area[best], at = nt;
             nt++;
             if (pr && pr->bad && wm_tri_bad(pr->bad, n, pv[best], best, nx[best])) return WM_ERR_REFUSED;
-            if (probed(pr, &done, px[pv[best]], py[pv[best]], px[best], py[best], px[nx[best]], py[nx[best]]))
-                return WM_ERR_REFUSED;
+            if (pr && !done) {
+                int32_t ia = pv[best], ic = nx[best];
+                int64_t o = wm_orient(px[ic], py[ic], px[ia], py[ia], pr->px, pr->py);
+                int in = (side >> ia & 1) && (side >> best & 1) && o >= 0;
+                WM_ASSERT(in == holds(px[ia], py[ia], px[best], py[best], px[ic], py[ic], pr->px, pr->py));
+                if (in) {
+                    done = 1;
+                    if (ask(pr, px[ia], py[ia], px[best], py[best], px[ic], py[ic])) return WM_ERR_REFUSED;
+                } else if (o > 0) {
+                    side &= ~(1u << ia); /* the new edge a-c has the point on its outer side */
+                }
+            }
             ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
             nx[pv[best]] = nx[best];
             pv[nx[best]] = pv[best];

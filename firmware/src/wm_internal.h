@@ -653,7 +653,7 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
 /* wm_ring_plan with a probe (the decimation's cheap test, vertex_remove.c): the first planned triangle,
  * in plan order, that holds (px, py) in its closed interior goes to above(ctx, x, y, px, py); when that answers
  * 1, or a planned triangle is one of bad's, the plan is refused at once (WM_ERR_REFUSED) without working out
- * the rest.  pr may be NULL.  *big
+ * the rest.  (px, py) is the vertex whose ring this is (on no ring edge's outer side).  pr may be NULL.  *big
  * (when big is not NULL) gets the index of the plan's largest triangle (the first of them): the plan
  * works out every triangle's area anyway. */
 struct wm_plan_probe {
