@@ -439,12 +439,12 @@ wire bank_busy_unused, bank_frame_done_unused;
 
 `ifdef WM_SIM_STAGE_GATE
 // The simulator's clock gate (sim/build.py defines WM_SIM_STAGE_GATE; the bitstream has no gate and
-// clocks both units at every edge): an edge reaches haar_bank and tlut_stage only while the stage runs
-// (SETUP, RUN) or resets.  Outside a frame neither unit takes a beat (their valids and readies are low)
-// and what their registers would load there is never read (docs/soc.md, "The simulated board":
-// why this is exact, and the test that compares the cycles and the meshes with the ungated build).  The
-// enable is latched while the clock is low, so that the gated edge comes in the same evaluation as clk's
-// and sees the values from before the edge, as every other register does.
+// clocks both units with clk itself, no other net): an edge reaches haar_bank and tlut_stage only
+// while the stage runs (SETUP, RUN) or resets.  Outside a frame neither unit takes a beat (their
+// valids and readies are low) and what their registers would load there is never read (docs/soc.md,
+// "The simulated board": why this is exact, and the test that compares the cycles and the meshes with
+// the ungated build).  The enable is latched while the clock is low, so that the gated edge comes in
+// the same evaluation as clk's and sees the values from before the edge, as every other register does.
 wire stage_clk_en = state_reg != STATE_IDLE || rst;
 reg stage_clk_en_latch;
 always @* begin
@@ -453,8 +453,6 @@ always @* begin
     end
 end
 wire stage_clk = clk && stage_clk_en_latch;
-`else
-wire stage_clk = clk;
 `endif
 
 haar_bank #(
@@ -462,7 +460,11 @@ haar_bank #(
     .MAX_HEIGHT(MAX_HEIGHT),
     .MAX_LEVELS(MAX_LEVELS)
 ) bank_inst (
+`ifdef WM_SIM_STAGE_GATE
     .clk(stage_clk),
+`else
+    .clk(clk),
+`endif
     .rst(rst),
     .cfg_width(width_reg),
     .cfg_height(height_reg),
@@ -490,7 +492,11 @@ tlut_stage #(
     .MAX_COLS(MAX_COLS),
     .EXPAND(0)
 ) stage_inst (
+`ifdef WM_SIM_STAGE_GATE
     .clk(stage_clk),
+`else
+    .clk(clk),
+`endif
     .rst(rst),
     .s_axis_tdata(buf_data_reg),
     .s_axis_tuser(buf_user_reg),
