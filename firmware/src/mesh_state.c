@@ -210,7 +210,7 @@ void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
 /* A slot legalisation changed, measured: in the error bound (heap_n) touch_bound and the heap, else
  * wm_touch.  Every such slot takes this one path, so none that touch_bound left flagged is measured
  * exactly with its flag kept (wm_settle would take an E(T) over zeta there for a bound within it). */
-static void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
+static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
 {
     if (heap_n) {
         uint32_t e = touch_bound(r, t);
