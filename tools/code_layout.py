@@ -25,6 +25,7 @@ code's order (firmware/board/CMakeLists.txt, wm_hot.ld).  Rerun it when the fetc
 from __future__ import annotations
 
 import argparse
+import hashlib
 import random
 import subprocess
 import sys
@@ -37,6 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 import bench_soc  # noqa: E402  (bench/: the jobs)
+import board_profile  # noqa: E402  (tools/: its profile files' reader)
 
 ORDER_FILE = ROOT / "firmware" / "board" / "hot_order.txt"
 LINE_BYTES = 32  # the VexRiscv's cache lines (docs/soc.md, "CPU")
@@ -142,8 +144,15 @@ def hot_range(elf: Path) -> tuple[int, int]:
     return syms["__wm_hot_start"], int(text[i + 2], 16) + int(text[i + 4], 16)
 
 
-def run_jobs(folder: Path, cases: list[str]) -> None:
-    """Each case through tools/board_profile.py --pc-trace, into folder/NAME.pc (kept if there)."""
+def run_jobs(folder: Path, cases: list[str], elf: Path) -> None:
+    """Each case through tools/board_profile.py --pc-trace, into folder/NAME.pc (kept if there, when they
+    are of this image: folder/image.sha256 says which image they are of)."""
+    digest = hashlib.sha256(elf.read_bytes()).hexdigest()
+    stamp = folder / "image.sha256"
+    if stamp.exists() and stamp.read_text().strip() != digest:
+        raise SystemExit(f"error: the traces in {folder} are of another firmware image: remove them or give "
+                         "another --traces folder")
+    stamp.write_text(digest + "\n")
     bench_soc._inputs(folder)
     from wavemesh.harness import jacksboro
 
@@ -155,6 +164,7 @@ def run_jobs(folder: Path, cases: list[str]) -> None:
         src = jacksboro() if file == "JACKSBORO" else str(folder / file)
         print(f"code_layout: tracing {name}", flush=True)
         subprocess.run([sys.executable, str(ROOT / "tools" / "board_profile.py"), src, *opts, "--top", "0",
+                        "--firmware", str(elf.with_suffix(".hex")),
                         "--raw", str(folder / (_slug(name) + ".prof")), "--pc-trace", str(out)],
                        check=True, stdout=subprocess.DEVNULL)
 
@@ -165,8 +175,7 @@ def _slug(name: str) -> str:
 
 def fetch_waits(folder: Path, name: str) -> int:
     """The cycles the job's instruction fetches waited (wmsim's FILE.ibus)."""
-    ibus = folder / (_slug(name) + ".prof.ibus")
-    return sum(int(ln.split()[1]) for ln in ibus.read_text().splitlines())
+    return sum(c for _, c in board_profile._histogram(folder / (_slug(name) + ".prof.ibus")))
 
 
 def search(layout: Layout, traces: list[Trace], sets: int, order: list[str], seconds: float,
@@ -217,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         folder = Path(args.traces) if args.traces else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         elf = simboard.build.build_firmware().with_suffix(".elf")
-        run_jobs(folder, list(bench_soc.CASES))
+        run_jobs(folder, list(bench_soc.CASES), elf)
         starts, sizes, names = functions(elf)
         hot_start, hot_end = hot_range(elf)
         layout = Layout(starts, sizes, names, hot_start, hot_end,

@@ -93,3 +93,14 @@ def test_own_sections_reads_the_map(tmp_path):
                  "                0x00004040      0x100 libwm_refiner.a(decimate.c.obj)\n"
                  " .text          0x00018280       0x38 libgcc.a(_lshrdi3.o)\n")
     assert CL.own_sections(m) == {"fan", "first_fit"}
+
+
+def test_traces_of_another_image_are_refused(tmp_path):
+    """--traces DIR reuses the traces there only when they are of the image being laid out."""
+    elf = tmp_path / "fw.elf"
+    elf.write_bytes(b"image one")
+    folder = tmp_path / "traces"
+    folder.mkdir()
+    (folder / "image.sha256").write_text("0" * 64 + "\n")
+    with pytest.raises(SystemExit, match="of another firmware image"):
+        CL.run_jobs(folder, [], elf)
