@@ -214,7 +214,8 @@ static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *hea
 {
     if (heap_n) {
         uint32_t e = touch_bound(r, t);
-        wm_heap_update(r, t, e, heap_n);
+        /* within zeta and in no heap (most new triangles): wm_heap_update would do nothing */
+        if (e > r->params.zeta || r->pos[t] >= 0) wm_heap_update(r, t, e, heap_n);
     } else {
         wm_touch(r, t);
     }
@@ -244,11 +245,14 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
     int8_t corner[LEGAL_STACK];
     for (int32_t i = 0; i < n; i++) {
-        int32_t t = touched[i];
+        int32_t t = touched[i], k;
         slots[ns++] = t; /* a split's slots: distinct, at most 4 = LEGAL_SLOTS at the least */
-        for (int32_t k = 0; k < 3; k++) /* edge 3 t + k, from corner k to corner k + 1 (wm_dest) */
-            if (me->hv[3 * t + k] != p && me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p && top < LEGAL_STACK)
-                stack[top] = t, corner[top++] = (int8_t)k;
+        /* p is a corner of each (a split's triangles hold it): the edge opposite it, 3 t + k from corner
+         * k to corner k + 1 (wm_dest), is the one after p's corner */
+        k = me->hv[3 * t] == p ? 1 : (me->hv[3 * t + 1] == p ? 2 : 0);
+        WM_ASSERT(me->hv[3 * t + (k == 0 ? 2 : k - 1)] == p && me->hv[3 * t + k] != p &&
+                  me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p);
+        stack[top] = t, corner[top++] = (int8_t)k; /* n <= 4 < LEGAL_STACK */
     }
     while (top > 0) {
         int32_t t1 = stack[--top], k = corner[top], e = 3 * t1 + k, o = me->ho[e], a, b, d, t2, ko;
