@@ -271,7 +271,21 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     WM_ASSERT((int64_t)D == (int64_t)e0 - fk + fj);
     if (D > 0 && q->quick) {
         /* e0 z_a - fk z_j + fj z_k - D z_v with the z_i taken less z_v (q->z): one product fewer */
+#if WM_NARROW_DIV
+        if (D < (1 << 15) && (e0 | fj) >= 0 && fk <= 0) {
+            /* on a 32-bit CPU (and in the checked builds): e0, -fk and fj are v's edge functions, each
+             * at least 0 and their sum D, and |z_i| <= 65535 (16-bit samples), so every partial sum
+             * is at most D 65535 < 2^31 in magnitude: 32-bit products and sums, where the 64-bit ones
+             * were a multiply pair and carries each (v in the closed fan triangle, the usual case) */
+            int32_t v32 = e0 * q->z[a] - fk * q->z[j] + fj * q->z[k];
+            V = v32;
+            WM_ASSERT(V == (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k]);
+        } else {
+            V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
+        }
+#else
         V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
+#endif
         av = (uint64_t)(V < 0 ? -V : V);
         WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
