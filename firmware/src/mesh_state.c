@@ -86,71 +86,106 @@ int wm_room(wm_refiner *r, int32_t added)
 }
 
 /* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot (a total
- * order: any heap pops them in the same order).  Its loops keep the item's key in a register and load
- * each other entry's key once; the item filed comes with its key (its E(T), just measured: on the board
- * the load of err[] after its store waits for the SDRAM, the data cache not allocating on a write).
- * pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so pos[t] alone
- * says whether t is in the heap. */
+ * order: any heap pops them in the same order).  Each entry holds its slot's key (wm_hent: E(T), equal
+ * to err[t] at every step, since every E(T) the error bound measures is filed at once), so a sift reads
+ * the entries alone, both children in one line; the item filed comes with its key (just measured: on
+ * the board the load of err[] after its store would wait for the SDRAM, the data cache not allocating
+ * on a write).  pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so
+ * pos[t] alone says whether t is in the heap. */
 
 static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
 {
     return wm_heap_before(ea, a, eb, b, 1);
 }
 
-/* Entry t, key e, at i (list[i] itself not read) up past the parents it is before; 1 when it moved. */
+static WM_ALWAYS_INLINE void heap_put(wm_hent *h, wm_index *pos, int32_t i, uint32_t e, int32_t t)
+{
+    h[i].key = e, h[i].t = (wm_index)t, pos[t] = (wm_index)i;
+}
+
+/* Entry t, key e, at i (h[i] itself not read) up past the parents it is before; 1 when it moved. */
 static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)
 {
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *err = r->err;
+    wm_hent *h = wm_heap_entries(r);
+    wm_index *pos = r->pos;
     int32_t i0 = i;
-    WM_ASSERT(e == err[t]);
+    WM_ASSERT(e == r->err[t]);
     while (i > 0) {
-        int32_t p = (i - 1) / 2, u = list[p];
-        if (!heap_before(e, t, err[u], u)) break;
-        list[i] = u, pos[u] = i;
+        int32_t p = (i - 1) / 2;
+        wm_hent u = h[p];
+        if (!heap_before(e, t, u.key, u.t)) break;
+        heap_put(h, pos, i, u.key, u.t);
         i = p;
     }
-    list[i] = t, pos[t] = i;
+    heap_put(h, pos, i, e, t);
     return i != i0;
 }
 
 /* Entry t, key e, at i (no parent it is before) down past the children before it. */
 static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e)
 {
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *err = r->err;
-    WM_ASSERT(e == err[t]);
+    wm_hent *h = wm_heap_entries(r);
+    wm_index *pos = r->pos;
+    WM_ASSERT(e == r->err[t]);
     for (;;) {
-        int32_t c = 2 * i + 1, u;
-        uint32_t eu;
+        int32_t c = 2 * i + 1;
+        wm_hent u;
         if (c >= n) break;
-        u = list[c], eu = err[u];
+        u = h[c];
         if (c + 1 < n) {
-            int32_t w = list[c + 1];
-            uint32_t ew = err[w];
-            if (heap_before(ew, w, eu, u)) c++, u = w, eu = ew;
+            wm_hent w = h[c + 1];
+            if (heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
         }
-        if (!heap_before(eu, u, e, t)) break;
-        list[i] = u, pos[u] = i;
+        if (!heap_before(u.key, u.t, e, t)) break;
+        heap_put(h, pos, i, u.key, u.t);
         i = c;
     }
-    list[i] = t, pos[t] = i;
+    heap_put(h, pos, i, e, t);
 }
 
-/* heap_down for an entry that most likely sinks to the bottom (the heap's last one, moved into the
- * place of one removed): wm_heap_sink. */
-static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->err, i, n, 1); }
+/* heap_down for the entry at i when it most likely sinks to the bottom (the heap's last one, moved
+ * into the place of one removed): the hole first goes down the children that come first to a leaf, one
+ * comparison a level, then the entry comes up from there past what it is before.  The same places as
+ * heap_down's (the children the hole passes are those it moves up, the order total), in about half its
+ * comparisons (wm_heap_sink, the decimation's, is the same on list[] and its keys). */
+static void heap_sink(wm_refiner *r, int32_t i, int32_t n)
+{
+    wm_hent *h = wm_heap_entries(r), x = h[i];
+    wm_index *pos = r->pos;
+    int32_t j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
+    while (j < m) {
+        int32_t c = 2 * j + 1;
+        wm_hent u = h[c], w = h[c + 1];
+        if (heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
+        heap_put(h, pos, j, u.key, u.t);
+        j = c;
+    }
+    if (2 * j + 1 < n) { /* an only child */
+        wm_hent u = h[2 * j + 1];
+        heap_put(h, pos, j, u.key, u.t);
+        j = 2 * j + 1;
+    }
+    while (j > i) {
+        int32_t p = (j - 1) / 2;
+        wm_hent u = h[p];
+        if (!heap_before(x.key, x.t, u.key, u.t)) break;
+        heap_put(h, pos, j, u.key, u.t);
+        j = p;
+    }
+    heap_put(h, pos, j, x.key, x.t);
+}
 
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children. */
+/* The order holds around the entry at i: its parent is before it, it is before its children; its key
+ * is its slot's E(T). */
 static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 {
-    const wm_index *list = r->list;
-    const uint32_t *err = r->err;
-    int32_t t = list[i], p = (i - 1) / 2;
-    if (r->pos[t] != i || (i > 0 && !heap_before(err[list[p]], list[p], err[t], t))) return 0;
+    const wm_hent *h = wm_heap_entries(r);
+    int32_t t = h[i].t, p = (i - 1) / 2;
+    if (r->pos[t] != i || h[i].key != r->err[t]) return 0;
+    if (i > 0 && !heap_before(h[p].key, h[p].t, h[i].key, t)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!heap_before(err[t], t, err[list[c]], list[c])) return 0;
+        if (!heap_before(h[i].key, t, h[c].key, h[c].t) || h[c].key != r->err[h[c].t]) return 0;
     return 1;
 }
 #endif
@@ -158,20 +193,24 @@ static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 /* Entry t, at i, out of the heap. */
 static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
 {
+    wm_hent *h = wm_heap_entries(r);
     r->pos[t] = -1;
     (*n)--;
     if (i == *n) return;
     {
-        int32_t moved = r->list[i] = r->list[*n];
-        if (i == 0 || !heap_up(r, i, moved, r->err[moved])) heap_sink(r, i, *n);
-        WM_ASSERT(heap_holds_at(r, r->pos[moved], *n));
+        wm_hent moved = h[*n];
+        if (i == 0 || !heap_up(r, i, moved.t, moved.key)) {
+            h[i] = moved;
+            heap_sink(r, i, *n);
+        }
+        WM_ASSERT(heap_holds_at(r, r->pos[moved.t], *n));
     }
 }
 
 void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
 {
     int32_t i = r->pos[t];
-    WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && r->list[i] == t)));
+    WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && wm_heap_entries(r)[i].t == t)));
     if (e <= r->params.zeta) {
         if (i >= 0) heap_remove(r, t, i, n);
     } else if (i >= 0) {                                      /* in place: (E(T), slot) orders totally */

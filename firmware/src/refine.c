@@ -32,11 +32,15 @@ static int32_t cache_slots(int32_t vert_cap)
 }
 
 /* Storage after the mesh: err and worst (per triangle slot), list and pos (per triangle or vertex
- * slot, whichever is more), vkey and vapex (per vertex slot), the reduction's caches. */
+ * slot, whichever is more; list's room holds as many error bound heap entries, wm_hent), vkey and vapex
+ * (per vertex slot), the reduction's caches. */
+static uint64_t list_bytes(uint64_t items) { return ALIGN8(sizeof(wm_hent) * items); }
+
 static uint64_t state_bytes(int32_t tri_cap, int32_t vert_cap)
 {
     uint64_t items = (uint64_t)(tri_cap > vert_cap ? tri_cap : vert_cap);
-    return ALIGN8(8 * (uint64_t)tri_cap) + ALIGN8(2 * sizeof(wm_index) * items) + ALIGN8(5 * (uint64_t)vert_cap) +
+    return ALIGN8(8 * (uint64_t)tri_cap) + list_bytes(items) + ALIGN8(sizeof(wm_index) * items) +
+           ALIGN8(5 * (uint64_t)vert_cap) +
            (uint64_t)cache_slots(vert_cap) * (sizeof(struct wm_normal_slot) + sizeof(struct wm_ecache_slot));
 }
 
@@ -130,8 +134,9 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->worst = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
         q += ALIGN8(8 * (uint64_t)tri_cap);
         r->list = (wm_index *)(void *)q;
-        r->pos = (wm_index *)(void *)(q + sizeof(wm_index) * items);
-        q += ALIGN8(2 * sizeof(wm_index) * items);
+        q += list_bytes(items);
+        r->pos = (wm_index *)(void *)q;
+        q += ALIGN8(sizeof(wm_index) * items);
         r->vkey = (uint32_t *)(void *)q;
         r->vapex = (int8_t *)(void *)(q + 4 * (uint64_t)vc);
         q += ALIGN8(5 * (uint64_t)vc);
@@ -814,7 +819,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
     for (int32_t t = 0; t < me->tri_end; t++)
         if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], &n);
     while (n > 0) {
-        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
+        int32_t t = wm_heap_entries(r)[0].t, x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
         wm_tri_xy(me, t, x, y);
         wy = sample_row(wd, r->worst[t], r->field.width);

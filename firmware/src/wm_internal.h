@@ -183,9 +183,9 @@ static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, 
         if (wy) *wy = y[0];
     }
 }
-/* The refiner's two heaps of slots, list[] with each slot's place in pos[] (mesh_state.c's error bound,
- * the largest key first; decimate.c's, the least key first): ties go to the lower slot, so the order is
- * total and any heap pops the same sequence. */
+/* The refiner's two heaps of slots, each slot's place in pos[] (mesh_state.c's error bound, the largest
+ * key first, its entries wm_hent with their keys; decimate.c's, the least key first, list[] with the keys
+ * in vkey[]): ties go to the lower slot, so the order is total and any heap pops the same sequence. */
 static WM_ALWAYS_INLINE int wm_heap_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b, int largest)
 {
     return (largest ? ka > kb : ka < kb) || (ka == kb && a < b);
@@ -531,6 +531,16 @@ struct wm_ecache_slot {
     int32_t e2[3];
 };
 
+/* An entry of the error bound's heap (mesh_state.c): a slot with its key, E(T), so that a sift reads
+ * the entries' lines alone (two children share one) instead of err[] at every slot it compares, a line
+ * each on the board, where err[] of a large mesh is far beyond the data cache.  They live in list[]'s
+ * storage (sized for max(tri_cap, vert_cap) of them: refine.c), which the other phases use as wm_index
+ * words; WM_MAY_ALIAS tells the compiler so. */
+typedef struct WM_MAY_ALIAS wm_hent {
+    uint32_t key;
+    wm_index t;
+} wm_hent;
+
 struct wm_refiner {
     wm_mesh mesh;
     wm_field field;
@@ -550,7 +560,8 @@ struct wm_refiner {
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
     wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the regularisation's
-                            smallest angles (refine.c), the heaps */
+                            smallest angles (refine.c), the decimation's heap; its storage holds as
+                            many wm_hent, the error bound's heap (wm_heap_entries) */
     wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex; the levels: the
                             regularisation's records (refine.c) */
@@ -562,6 +573,8 @@ struct wm_refiner {
     int32_t cache_mask;             /* wm_cache_slots(vert_cap) - 1 */
     uint32_t swap_recs;             /* the regularisation's records in vkey: their count - 1 (refine.c) */
 };
+
+static inline wm_hent *wm_heap_entries(const wm_refiner *r) { return (wm_hent *)(void *)r->list; }
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
  * {xmin, xmax, ymin, ymax}, in 64 bits (tri_error.c), for roi.c and holes.c. */
