@@ -68,6 +68,7 @@ struct fans {
     int32_t vx, vy;                           /* v */
     int32_t quick;                            /* 1: no holes mask and a bound (zeta): the test applies */
     uint32_t zeta;
+    uint32_t zh, zl;                          /* zeta's high and low 16 bits (the 32-bit V's test) */
     int64_t D;                                /* the fan triangle's, for normal_above */
     uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
@@ -278,18 +279,29 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
              * is at most D 65535 < 2^31 in magnitude: 32-bit products and sums, where the 64-bit ones
              * were a multiply pair and carries each (v in the closed fan triangle, the usual case) */
             int32_t v32 = e0 * q->z[a] - fk * q->z[j] + fj * q->z[k];
-            V = v32;
-            WM_ASSERT(V == (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k]);
-        } else {
-            V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
+            uint32_t a32 = v32 < 0 ? 0u - (uint32_t)v32 : (uint32_t)v32;
+            WM_ASSERT((int64_t)v32 == (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k]);
+            av = a32;
+            WM_PROF_ADD(WM_PC_POINTS, 1);
+            t->kept = 0;
+            /* 2^16 av <= zeta D with zeta = 2^16 zh + zl: av <= zh D + floor(zl D / 2^16) (av and zh D
+             * integers), each product below 2^31 (zh, zl < 2^16, D < 2^15) and their sum below 2^32 */
+            if (a32 <= q->zh * (uint32_t)D + ((q->zl * (uint32_t)D) >> 16)) {
+                WM_ASSERT(av * 65536u <= (uint64_t)q->zeta * (uint32_t)D);
+                return 1;
+            }
+            WM_ASSERT(av * 65536u > (uint64_t)q->zeta * (uint32_t)D);
+            goto above;
         }
-#else
-        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
 #endif
+        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
         av = (uint64_t)(V < 0 ? -V : V);
         WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
         if (av * 65536u <= (uint64_t)q->zeta * (uint32_t)D) return 1;
+#if WM_NARROW_DIV
+    above:
+#endif
         if (r->params.metric == WM_METRIC_VERTICAL) return 0;
         q->D = D, q->av = av;
         return !normal_above(q, t, a, j, k, &c);
@@ -399,6 +411,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     q.vx = vx, q.vy = vy;
     q.quick = r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu;
     q.zeta = r->params.zeta;
+    q.zh = q.zeta >> 16, q.zl = q.zeta & 0xFFFFu;
     wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
     wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
     q.words = WM_NARROW_DIV && q.ex > 0 && q.ex < 32 && q.ey > 0 && q.ey < 32;
