@@ -66,6 +66,12 @@ STAGE_GATE = "WM_SIM_STAGE_GATE"
 # beside STAGE_GATE, in the default build only.
 ENGINE_GATE = "WM_SIM_ENGINE_GATE"
 GATES = (STAGE_GATE, ENGINE_GATE)
+# Every build: the CPU's `/* verilator public */` signals (the VexRiscv of pythondata-cpu-vexriscv marks its
+# PCs, pipeline state and register-file write port so) are not made public.  A public register may be
+# written from outside the model between evaluations, so Verilator evaluated the CPU's fetch and decode
+# logic that reads them at every evaluation, twice a cycle (some 900 host instructions a cycle, docs/soc.md,
+# "The simulated board", Speed); board_sim.v reads the signals it needs by hierarchical reference.
+PUBLIC_IGNORE = "--public-ignore"
 
 
 def compiler() -> tuple[list[str], list[str]]:
@@ -197,7 +203,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
         f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         *([f"+define+{core.define}"] if core.define else []),
-        *([f"+define+{g}" for g in GATES] if gate else []),
+        *([f"+define+{g}" for g in GATES] if gate else []), PUBLIC_IGNORE,
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
         "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS + objcache()),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
