@@ -7,7 +7,8 @@
  *           the costs of its ring vertices change (their stars did), nothing else's
  *
  * Every new triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes
- * one or two triangles away.  The heap is a binary min-heap on (cost, slot) over r->list/r->pos;
+ * one or two triangles away.  The heap is a binary min-heap on (cost, slot) (wm_internal.h's: entries
+ * with their keys in list[]'s storage, places in r->pos);
  * all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
 #include "wm_internal.h"
 
@@ -497,76 +498,61 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     return best;
 }
 
-/* The heap's order: by key, ties by slot (a total order). */
+/* The heap (wm_internal.h's operations, the least key first; its keys vkey[], as the entries hold them). */
 static WM_ALWAYS_INLINE int key_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
 {
     return wm_heap_before(ka, a, kb, b, 0);
 }
 
-static int before(const wm_refiner *r, int32_t a, int32_t b) { return key_before(r->vkey[a], a, r->vkey[b], b); }
-
-static void put(wm_refiner *r, int32_t i, int32_t v)
-{
-    r->list[i] = v;
-    r->pos[v] = i;
-}
-
+/* The entry at i up past the parents it is before; 1 when it moved. */
 static int up(wm_refiner *r, int32_t i)
 {
-    int32_t v = r->list[i], i0 = i;
-    while (i > 0) {
-        int32_t p = (i - 1) / 2;
-        if (!before(r, v, r->list[p])) break;
-        put(r, i, r->list[p]);
-        i = p;
-    }
-    put(r, i, v);
-    return i != i0;
+    wm_hent *h = wm_heap_entries(r), x = h[i];
+    return wm_heap_up(h, r->pos, i, x.key, x.t, 0);
 }
 
 static void down(wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t v = r->list[i];
-    for (;;) {
-        int32_t c = 2 * i + 1;
-        if (c >= n) break;
-        if (c + 1 < n && before(r, r->list[c + 1], r->list[c])) c++;
-        if (!before(r, r->list[c], v)) break;
-        put(r, i, r->list[c]);
-        i = c;
-    }
-    put(r, i, v);
+    wm_hent *h = wm_heap_entries(r), x = h[i];
+    wm_heap_down(h, r->pos, i, n, x.key, x.t, 0);
 }
 
 /* down(r, i, n) for an entry that most likely sinks to the bottom (the heap's last one, moved into a
- * hole): wm_heap_sink. */
-static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->vkey, i, n, 0); }
+ * hole). */
+static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 0); }
+
+/* v is in the heap (its place in pos[], i, within the n entries and holding v). */
+static WM_ALWAYS_INLINE int in_heap(const wm_refiner *r, int32_t v, int32_t i, int32_t n)
+{
+    return i >= 0 && i < n && wm_heap_entries(r)[i].t == v;
+}
 
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children. */
+/* The order holds around the entry at i: its parent is before it, it is before its children; the keys
+ * are their vertices' costs. */
 static int holds_at(const wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t v = r->list[i];
-    if (r->pos[v] != i || (i > 0 && !before(r, r->list[(i - 1) / 2], v))) return 0;
+    const wm_hent *h = wm_heap_entries(r);
+    int32_t v = h[i].t, p = (i - 1) / 2;
+    if (r->pos[v] != i || h[i].key != r->vkey[v]) return 0;
+    if (i > 0 && !key_before(h[p].key, h[p].t, h[i].key, v)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!before(r, v, r->list[c])) return 0;
+        if (!key_before(h[i].key, v, h[c].key, h[c].t) || h[c].key != r->vkey[h[c].t]) return 0;
     return 1;
 }
 #endif
 
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 {
+    wm_hent *h = wm_heap_entries(r);
     int32_t i = r->pos[v];
-    if (i < 0 || i >= *n || r->list[i] != v) return;
+    if (!in_heap(r, v, i, *n)) return;
     r->pos[v] = -1;
     (*n)--;
     if (i == *n) return;
-    {
-        int32_t moved = r->list[i] = r->list[*n];
-        if (i == 0 || !up(r, i)) sink(r, i, *n);
-        WM_ASSERT(holds_at(r, r->pos[moved], *n));
-        (void)moved;
-    }
+    h[i] = h[*n];
+    if (i == 0 || !up(r, i)) sink(r, i, *n);
+    WM_ASSERT(holds_at(r, r->pos[h[i].t], *n) && holds_at(r, 0, *n));
 }
 
 /* Re-files v with its current cost (out of the heap when it cannot go): in place when it is in the
@@ -581,14 +567,14 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
     }
     r->vkey[v] = cost;
     r->vapex[v] = (int8_t)apex;
-    if (i >= 0 && i < *n && r->list[i] == v) { /* in place: up, else down (its key may be the same) */
+    if (in_heap(r, v, i, *n)) { /* in place: up, else down (its key may be the same) */
+        wm_heap_entries(r)[i].key = cost;
         if (i == 0 || !up(r, i)) down(r, i, *n); /* moved up: no child is before it */
         WM_ASSERT(holds_at(r, r->pos[v], *n));
         return;
     }
-    put(r, *n, v);
-    (*n)++;
-    up(r, *n - 1);
+    wm_heap_up(wm_heap_entries(r), r->pos, (*n)++, cost, v, 0);
+    WM_ASSERT(holds_at(r, r->pos[v], *n));
 }
 
 /* Lazy re-evaluation: a removal marks its ring vertices stale (their stars changed) instead of
@@ -602,7 +588,7 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
 #define STALE INT8_MIN
 
 /* The stale vertices entered at zeta (above) are kept apart from the heap, in a min-heap of their slots alone
- * (all their keys are zeta, so their order is their slots'), from the far end of r->list down (z[-i]
+ * (all their keys are zeta, so their order is their slots'), from the far end of list[]'s storage down (z[-i]
  * is its i-th entry; the two never meet: together they hold at most the live vertices), their pos -2:
  * its entries need no key loaded to be ordered, and the heap holds fewer.  The next vertex is the
  * first of the two tops by (cost, slot), as one heap of both would give. */
@@ -659,7 +645,7 @@ static void z_pop(wm_refiner *r, struct zheap *h)
 static void mark_stale(wm_refiner *r, int32_t v, int32_t *n, struct zheap *h)
 {
     int32_t i = r->pos[v];
-    if (i >= 0 && i < *n && r->list[i] == v) r->vapex[v] = STALE; /* in the heap: keep its place */
+    if (in_heap(r, v, i, *n)) r->vapex[v] = STALE; /* in the heap: keep its place */
     else if (i != IN_Z) z_push(r, h, v);
 }
 
@@ -671,19 +657,24 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     struct zheap zh;
     (void)st;
     lp.v = -1;
-    zh.z = r->list + ((me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap) - 1), zh.n = 0;
+    /* the last wm_index word of list[]'s storage (wm_heap_entries: as many wm_hent as items) */
+    zh.z = (wm_index *)(void *)(wm_heap_entries(r) + (me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap));
+    zh.z--;
+    zh.n = 0;
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
         if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
     while (n > 0 || zh.n > 0) {
         int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
-        if (zh.n > 0 && (n == 0 || before(r, zh.z[0], r->list[0]))) { /* a stale vertex entered at zeta */
+        const wm_hent *top = wm_heap_entries(r);
+        if (zh.n > 0 &&
+            (n == 0 || key_before(r->vkey[zh.z[0]], zh.z[0], top->key, top->t))) { /* entered at zeta */
             v = zh.z[0];
             z_pop(r, &zh);
             refile(r, v, &n, &lp); /* into the heap at its cost, or nowhere */
             continue;
         }
-        v = r->list[0];
+        v = top->t;
         if (r->vapex[v] == STALE) {
             refile(r, v, &n, &lp); /* evaluated now: back in the heap at its cost, or out */
             continue;

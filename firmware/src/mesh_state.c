@@ -93,99 +93,32 @@ int wm_room(wm_refiner *r, int32_t added)
  * on a write).  pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so
  * pos[t] alone says whether t is in the heap. */
 
-static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
-{
-    return wm_heap_before(ea, a, eb, b, 1);
-}
-
-static WM_ALWAYS_INLINE void heap_put(wm_hent *h, wm_index *pos, int32_t i, uint32_t e, int32_t t)
-{
-    h[i].key = e, h[i].t = (wm_index)t, pos[t] = (wm_index)i;
-}
-
-/* Entry t, key e, at i (h[i] itself not read) up past the parents it is before; 1 when it moved. */
+/* The heap's operations (wm_internal.h), the largest key first. */
 static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)
 {
-    wm_hent *h = wm_heap_entries(r);
-    wm_index *pos = r->pos;
-    int32_t i0 = i;
     WM_ASSERT(e == r->err[t]);
-    while (i > 0) {
-        int32_t p = (i - 1) / 2;
-        wm_hent u = h[p];
-        if (!heap_before(e, t, u.key, u.t)) break;
-        heap_put(h, pos, i, u.key, u.t);
-        i = p;
-    }
-    heap_put(h, pos, i, e, t);
-    return i != i0;
+    return wm_heap_up(wm_heap_entries(r), r->pos, i, e, t, 1);
 }
 
-/* Entry t, key e, at i (no parent it is before) down past the children before it. */
 static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e)
 {
-    wm_hent *h = wm_heap_entries(r);
-    wm_index *pos = r->pos;
     WM_ASSERT(e == r->err[t]);
-    for (;;) {
-        int32_t c = 2 * i + 1;
-        wm_hent u;
-        if (c >= n) break;
-        u = h[c];
-        if (c + 1 < n) {
-            wm_hent w = h[c + 1];
-            if (heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
-        }
-        if (!heap_before(u.key, u.t, e, t)) break;
-        heap_put(h, pos, i, u.key, u.t);
-        i = c;
-    }
-    heap_put(h, pos, i, e, t);
+    wm_heap_down(wm_heap_entries(r), r->pos, i, n, e, t, 1);
 }
 
-/* heap_down for the entry at i when it most likely sinks to the bottom (the heap's last one, moved
- * into the place of one removed): the hole first goes down the children that come first to a leaf, one
- * comparison a level, then the entry comes up from there past what it is before.  The same places as
- * heap_down's (the children the hole passes are those it moves up, the order total), in about half its
- * comparisons (wm_heap_sink, the decimation's, is the same on list[] and its keys). */
-static void heap_sink(wm_refiner *r, int32_t i, int32_t n)
-{
-    wm_hent *h = wm_heap_entries(r), x = h[i];
-    wm_index *pos = r->pos;
-    int32_t j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
-    while (j < m) {
-        int32_t c = 2 * j + 1;
-        wm_hent u = h[c], w = h[c + 1];
-        if (heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
-        heap_put(h, pos, j, u.key, u.t);
-        j = c;
-    }
-    if (2 * j + 1 < n) { /* an only child */
-        wm_hent u = h[2 * j + 1];
-        heap_put(h, pos, j, u.key, u.t);
-        j = 2 * j + 1;
-    }
-    while (j > i) {
-        int32_t p = (j - 1) / 2;
-        wm_hent u = h[p];
-        if (!heap_before(x.key, x.t, u.key, u.t)) break;
-        heap_put(h, pos, j, u.key, u.t);
-        j = p;
-    }
-    heap_put(h, pos, j, x.key, x.t);
-}
+static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 1); }
 
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children; its key
- * is its slot's E(T). */
+/* The order holds around the entry at i: its parent is before it, it is before its children; the keys
+ * are their slots' E(T). */
 static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 {
     const wm_hent *h = wm_heap_entries(r);
     int32_t t = h[i].t, p = (i - 1) / 2;
     if (r->pos[t] != i || h[i].key != r->err[t]) return 0;
-    if (i > 0 && !heap_before(h[p].key, h[p].t, h[i].key, t)) return 0;
+    if (i > 0 && !wm_heap_before(h[p].key, h[p].t, h[i].key, t, 1)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!heap_before(h[i].key, t, h[c].key, h[c].t) || h[c].key != r->err[h[c].t]) return 0;
+        if (!wm_heap_before(h[i].key, t, h[c].key, h[c].t, 1) || h[c].key != r->err[h[c].t]) return 0;
     return 1;
 }
 #endif
