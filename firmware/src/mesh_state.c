@@ -52,25 +52,35 @@ void wm_settle(wm_refiner *r)
      * zeta). */
     for (int32_t t = 0; t < me->tri_end; t++) {
         int32_t x[3], y[3], wx, wy;
-        if (!(me->tflag[t] & WM_F_MEASURE)) {
+        uint8_t f = me->tflag[t];
+        if (!(f & WM_F_MEASURE)) {
             if (me->hv[3 * t] >= 0 && r->err[t] > known) known = r->err[t];
             continue;
         }
-        me->tflag[t] &= (uint8_t)~WM_F_MEASURE;
-        if (me->hv[3 * t] < 0) continue;
-        me->tflag[t] |= WM_F_NEW;
-        wm_tri_xy(me, t, x, y);
+        f &= (uint8_t)~WM_F_MEASURE;
+        if (me->hv[3 * t] < 0) {
+            me->tflag[t] = f;
+            continue;
+        }
+        me->tflag[t] = (uint8_t)(f | WM_F_NEW);
+        /* the corners read only for a scan: most flagged triangles are within known and keep their bound
+         * (on the board each corner's vx[] and vy[] is likely an SDRAM refill: random vertices) */
         if (r->roi || r->field.mask) { /* as wm_touch, without forgetting the corners' classes */
+            wm_tri_xy(me, t, x, y);
             r->err[t] =
                 r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
             r->worst[t] = wy * r->field.width + wx;
         } else if (r->err[t] > known) {
             WM_ASSERT(r->err[t] <= r->params.zeta);
+            wm_tri_xy(me, t, x, y);
             r->err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
             if (r->err[t] > known) known = r->err[t];
         }
 #if WM_CHECK
-        if (!r->roi && !r->field.mask) WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+        if (!r->roi && !r->field.mask) {
+            wm_tri_xy(me, t, x, y);
+            WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+        }
 #endif
     }
 }

@@ -586,7 +586,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
     int32_t qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
     int64_t dot1 = 0, cross1 = 0, dot2 = 0, cross2 = 0; /* the new triangles' smallest angles (fixed.c) */
-    uint32_t e1 = 0, e2 = 0, ra, bnd, oe1 = r->err[t1], oe2 = r->err[t2];
+    uint32_t e1 = 0, e2 = 0, ra, bnd, oe1, oe2;
     const uint64_t one = 65536u;
     uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
     int back = 1;                    /* whether the swap back would be made */
@@ -606,6 +606,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
         if (!((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0))) return 0;
         first = ANGLES_LATE && s2 < -s1; /* twice the new triangles' areas: -s1 (a, d, c), s2 (d, b, c) */
     }
+    /* read once the quad is convex: a third of the edges end above, and err[t2] (a neighbour's slot) is
+     * an SDRAM refill on the board */
+    oe1 = r->err[t1], oe2 = r->err[t2];
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
         /* the old triangles (a, b, c) and (b, a, d) from the corners at hand */
