@@ -179,16 +179,11 @@ wire slope_busy, div_busy, angle_busy, point_busy;
 // the meshes with the ungated build).  One gate for the five: each gated clock costs the model a
 // trigger at every evaluation, and the units are seldom busy.  The enable is latched while the clock is
 // low, so that the gated edge comes in the same evaluation as clk's and sees the values from before
-// it, as every other register does (soc_accel's stage gate likewise).
+// it, as every other register does (sim_clock_gate; soc_accel's stage gate likewise).
 wire engine_clk_en = busy || push || slope_busy || slope_go || sqrt_go || div_busy || div_go || angle_busy
     || angle_go || point_busy || point_go || rst;
-reg engine_clk_en_latch;
-always @* begin
-    if (!clk) begin
-        engine_clk_en_latch = engine_clk_en;
-    end
-end
-wire engine_clk = clk && engine_clk_en_latch;
+wire engine_clk;
+sim_clock_gate engine_gate_inst (.clk(clk), .en(engine_clk_en), .gclk(engine_clk));
 `endif
 
 tri_engine #(

@@ -240,7 +240,8 @@ static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t am, uint32_t r
     R = (uint64_t)t + (65535u - alpha);
     /* 32 bits unless ra < 2 or alpha = 0 (step 2(d)'s swaps, whose R is t / 2^16 = 65537: on the soft CPU a
      * shift, where the 64-bit division was a library call every try) */
-    R = R >> 32 ? (WM_NARROW_DIV && alpha == 0 ? R >> 16 : R / (65536u - alpha)) : div_by_a((uint32_t)R, alpha, am);
+    R = R >> 32 ? (WM_NARROW_DIV && alpha == 0 ? R >> 16 : R / (65536u - alpha))
+                : div_by_a((uint32_t)R, alpha, am);
     if (R > 0xFFFFFFFFu) {
         *rq = UINT64_MAX;
         return 0;
