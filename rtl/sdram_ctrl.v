@@ -38,9 +38,10 @@
  * Stage sync: a `sync` pulse (the SoC's SYS.STAGE write, with the CPU held) brings the controller to
  * one fixed state in a fixed time, so that what the CPU and the streams do next takes the same
  * cycles whatever ran before.  The engine lets the CPU port finish its fill or posted write, grants
- * no stream, precharges all banks and refreshes; `sync_busy` stays high for exactly C_SYNC + 1
- * cycles (the longest that can take), and at its end every timing counter is zero, every bank
- * idle, the arbitration as after reset, the CPU port's cache empty, and the refresh counter set as
+ * no stream, precharges all banks and refreshes, and empties the CPU port's cache at the pulse (a
+ * new epoch, and its sweep of C_SWEEP entries meanwhile); `sync_busy` stays high for exactly
+ * C_SYNC + 1 cycles (the longest that can take), and at its end every timing counter is zero, every
+ * bank idle, the arbitration as after reset, the CPU port's cache empty, and the refresh counter set as
  * if that REFRESH had been at the pulse (it came later, so every gap stays within tREFI and the
  * next refresh comes a fixed number of cycles after the sync).  A sync before the initialisation
  * is done lasts until the chip is ready (in the same state).
@@ -202,7 +203,12 @@ localparam C_REF_DUE = C_REFI - 1 - C_REF_SLACK;
 // WRITE turnaround, and a cycle of arbitration or state change between each (checked in simulation
 // and by tests/rtl/sdram_tb.py, test_stage_sync)
 localparam C_ROW = (C_RAS > C_WR ? C_RAS : C_WR) + C_RP + C_RC + C_RCD;
-localparam C_SYNC = 2 * (C_REF_SLACK + C_RFC) + C_ROW + 2 * LINE_WORDS + CAS_LATENCY + C_RD_TO_WR + 8;
+// The CPU port's cache is emptied at the pulse (a new epoch) and clears C_SWEEP of its entries
+// meanwhile, a cycle each (sdram_cache, "Flush"), well within the window
+localparam CACHE_EPOCH_BITS = 7;
+localparam C_SWEEP = (CACHE_LINES + (1 << CACHE_EPOCH_BITS) - 2) / ((1 << CACHE_EPOCH_BITS) - 1);
+localparam C_SYNC_WORK = 2 * (C_REF_SLACK + C_RFC) + C_ROW + 2 * LINE_WORDS + CAS_LATENCY + C_RD_TO_WR + 8;
+localparam C_SYNC = C_SYNC_WORK > C_SWEEP + 2 ? C_SYNC_WORK : C_SWEEP + 2;
 
 localparam CNT_BITS = 6;                                      // per-bank and tRRD/turnaround counters
 localparam WAIT_BITS = $clog2(C_INIT + C_RFC + C_MRD + 1);
@@ -306,8 +312,8 @@ wire [63:0] wdata;
 wire [7:0] wmask;
 reg [3:0] ack;
 reg do_act, do_pre, do_write;   // the engine's command for the granted bank this cycle
-reg flush;                      // the stage sync ends: empty the CPU port's cache
 wire cache_idle;                // the CPU port has no fill and no posted write under way
+wire cache_flushing;            // the CPU port's cache sweeps its entries (after a sync's pulse)
 wire rvalid = rd_pipe_reg[RL];
 reg [ADDR_BITS-1:0] wr_addr_reg = {ADDR_BITS{1'b0}};           // the stream writer's next halfword
 wire [ADDR_BITS-1:0] wa_fifo_addr;                              // the addressed writer's next one
@@ -317,7 +323,9 @@ wire [1:0] rclient = rd_client_reg[2*RL +: 2];
 sdram_cache #(
     .HW_ADDR_BITS(ADDR_BITS),
     .LINES(CACHE_LINES),
-    .LINE_WORDS(LINE_WORDS)
+    .LINE_WORDS(LINE_WORDS),
+    .EPOCH_BITS(CACHE_EPOCH_BITS),
+    .SWEEP(C_SWEEP)
 ) cache_inst (
     .clk(clk),
     .rst(rst),
@@ -329,7 +337,8 @@ sdram_cache #(
     .cpu_rdata(cpu_rdata),
     .snoop_valid(ack[2] || ack[3]),
     .snoop_addr(ack[3] ? wa_fifo_addr : wr_addr_reg),
-    .flush(flush),
+    .flush(sync),
+    .flushing(cache_flushing),
     .idle(cache_idle),
     .m_req(req[0]),
     .m_we(we[0]),
@@ -518,7 +527,8 @@ wire all_ref_ok = &(rp_ok & rc_ok);
 // the state a stage sync ends in: no command may wait for anything
 wire quiet = state_reg == S_RUN && wait_reg == {WAIT_BITS{1'b0}} && open_reg == 4'b0000
              && &(rcd_ok & ras_ok & rc_ok & rp_ok & wr_ok) && rrd_reg == {CNT_BITS{1'b0}}
-             && turn_reg == {CNT_BITS{1'b0}} && rd_pipe_reg == {(RL+1){1'b0}} && cache_idle;
+             && turn_reg == {CNT_BITS{1'b0}} && rd_pipe_reg == {(RL+1){1'b0}} && cache_idle
+             && !cache_flushing;
 wire sync_end = sync_reg && sync_left_reg == {SYNC_BITS{1'b0}} && sync_refd_reg && quiet;
 wire wait_ok = wait_reg == {WAIT_BITS{1'b0}};
 wire ref_due = since_ref_reg >= N_REF_DUE;
@@ -555,7 +565,6 @@ always @* begin
     sync_next = sync_reg;
     sync_left_next = sync_left_reg == {SYNC_BITS{1'b0}} ? sync_left_reg : sync_left_reg - 1'b1;
     sync_refd_next = sync_refd_reg;
-    flush = 1'b0;
     open_next = open_reg;
     row_next = row_reg;
     for (k = 0; k < 4; k = k + 1) begin
@@ -724,7 +733,6 @@ always @* begin
         grant_next = 2'd0;
         last_next = 2'd3;
         run_next = 8'd0;
-        flush = 1'b1;
     end
     if (sync) begin
         sync_next = 1'b1;

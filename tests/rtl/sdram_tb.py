@@ -511,7 +511,8 @@ def random_region(rng: random.Random, n: int, rows: int = 3) -> list[int]:
 @cocotb.test()
 async def test_cpu_port(dut):
     """Power-up and initialisation; CPU words, halfwords and bytes written and read back through the
-    cache: hits in 2 cycles, misses, lines evicted by conflicts, rows of every bank opened and closed."""
+    cache: hits in 2 cycles in the last line that hit or was filled and 3 in another (its entry looked
+    up), misses, lines evicted by conflicts, rows of every bank opened and closed."""
     tb = TB(dut)
     await tb.start()
     region = random_region(tb.rng, 40)
@@ -534,8 +535,13 @@ async def test_cpu_port(dut):
     # interval met the second first-word miss: 15 cycles, the others 9): the middle of three
     assert sorted(first[1:])[1] + 4 <= sorted(last[1:])[1], (first, last)
     await tb.cycles(LINE_HW + 4)
+    # the first line again, after others: its entry looked up once (3 cycles), then the same line (2)
     hits = [(await tb.cpu((join(5, 2, 64) + 2 * w) << 1))[1] for w in range(4)]
-    assert hits == [2, 2, 2, 2], hits
+    assert hits == [3, 2, 2, 2], hits
+    # two cached lines in turn: each access a look-up
+    other = join(5, 2, 64 + LINE_HW)
+    turns = [(await tb.cpu((join(5, 2, 64) if k % 2 else other) << 1))[1] for k in range(4)]
+    assert turns == [3, 3, 3, 3], turns
     await tb.finish()
 
 
@@ -630,6 +636,46 @@ async def test_coherence(dut):
         await read
         for k in range(LINE_HW // 2):
             await tb.cpu((hw + 2 * k) << 1)
+    await tb.finish()
+
+
+@cocotb.test()
+async def test_flush_epochs(dut):
+    """The flush (each stage sync, and reset) empties the cache by starting a new epoch (sdram_cache,
+    "Flush"): a line cached before it misses after it, and one whose word the CPU wrote meanwhile (a
+    write that missed, so the line's old copy kept the old word) is never seen again when its epoch
+    comes round (the sweep cleared its entry); checked at each of the epoch's returns in 300
+    flushes.  Between the flushes the CPU fills a line of another index, so that every epoch is
+    used; sync_busy keeps its length."""
+    tb = TB(dut, SEED + 8)
+    await tb.start()
+    cache = dut.cache_inst
+    stale = [join(1500, 0, LINE_HW * (j + 1)) for j in range(4)]  # indices 1..4
+    for hw in stale:
+        await tb.cpu(hw << 1)                                     # cached in this epoch
+    await tb.cycles(LINE_HW + 4)
+    epoch = int(cache.epoch_reg.value)
+    await tb.sync()
+    for hw in stale:
+        await tb.cpu(hw << 1, 0b1111, tb.rng.getrandbits(32))    # missed: the old copy stays
+    busy, returns = set(), 0
+    for k in range(300):
+        await tb.cpu(join(32 * (1 + k % 7), 0, 0) << 1)           # index 0: a fill, the epoch used
+        await tb.cycles(LINE_HW + 4)                              # (a fill the flush cuts is not)
+        if k % 37 == 36:
+            await tb.start()                                      # a reset flushes too
+        else:
+            busy.add((await tb.sync())[0])
+        if int(cache.epoch_reg.value) == epoch:
+            # the stale copies' epoch again: one of them read (checked), the others stay for later
+            _, n = await tb.cpu(stale[returns] << 1)
+            assert n > 3, f"a line cached {k + 2} flushes ago hit ({n} cycles)"
+            returns += 1
+    assert returns >= 2 and len(busy) == 1, (returns, busy)
+    await tb.sync()
+    for hw in stale:
+        _, n = await tb.cpu(hw << 1)
+        assert n > 3, f"a line read before a sync hit after it ({n} cycles)"
     await tb.finish()
 
 

@@ -14,7 +14,8 @@ from wavemesh.harness.rtl_runner import RTL, run
 
 SOURCES = [RTL / "sdram_ctrl.v", RTL / "sdram_cache.v", RTL / "wm_fifo.v"]
 # (CLK_HZ, CAS_LATENCY, CACHE_LINES, LINE_WORDS)
-CONFIGS = [(memmap.CLK_HZ, memmap.SDRAM_CAS_LATENCY, 16, 4), (125_000_000, 3, 64, 8)]
+CONFIGS = [(memmap.CLK_HZ, memmap.SDRAM_CAS_LATENCY, 16, 4), (125_000_000, 3, 64, 8),
+           (memmap.CLK_HZ, memmap.SDRAM_CAS_LATENCY, memmap.SDRAM_CACHE_LINES, memmap.SDRAM_LINE_WORDS)]
 
 
 @pytest.mark.parametrize("clk_hz,cl,lines,words", CONFIGS,

@@ -93,7 +93,9 @@ def test_triangle_capacity_fits_the_refiner():
 
 def test_fits_the_ecp5_with_room_to_spare():
     total = sum(memmap.ebr_estimate().values())  # firmware RAM, cache, the FPGA stage (rtl/soc_accel.v)
-    assert total <= memmap.ECP5_85F_EBR // 2  # the heights, details and mesh live in the SDRAM
+    # the heights, details and mesh live in the SDRAM; the port's cache (128 KB) and the CPU's own caches
+    # (not counted here: docs/boards.md has the build's figure) take most of the rest
+    assert total <= memmap.ECP5_85F_EBR * 3 // 4
 
 
 def pll_check(f_in: int, s: dict) -> int:

@@ -119,11 +119,10 @@ STACK_BYTES = 12 * 1024
 STACK_PAINT = 0x57AC57AC
 # The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
 # (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
-# triangle half-edges, error, worst sample, heap entries (the error bound's with their keys: 8 B),
-# flags and its share of the vertex arrays (51.9 B); per grid the vertex arrays' fixed part and the
-# refiner's state (about 32 KB at 1024^2).
+# triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
+# (47.5 B); per grid the vertex arrays' fixed part and the refiner's state (about 32 KB at 1024^2).
 # tests/sim/test_memmap.py checks the capacity below against a native build of wm_refine_bound.
-REFINER_TRI_BYTES = 52
+REFINER_TRI_BYTES = 48
 REFINER_GRID_BYTES = 32 * 1024  # for the largest grid
 # The board job stages the initial triangulation in the heap beside the refiner's storage
 # (firmware/board/app/board_job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
@@ -158,10 +157,11 @@ SDRAM_TIMING = {
     "T_OH_NS": 3,  # read datum held after the next clock edge
     "T_REFI_NS": 7812,  # 8192 refreshes per 64 ms
 }
-# The CPU port's cache (rtl/sdram_cache.v): lines of words; 256 x 8 words (8 KB) uses 4 DP16KD.  A line is
-# the VexRiscv's data cache line (32 bytes): its refill misses here once, not twice (docs/soc.md, "What the
-# board adds, and what was cut").
-SDRAM_CACHE_LINES = 256
+# The CPU port's cache (rtl/sdram_cache.v), a second level behind the CPU's 32 KiB data cache: lines of
+# words; 4096 x 8 words (128 KB) uses 64 DP16KD for the data and 4 for the tags (SDRAM_CACHE_EBR below); a
+# cache of the CPU's size (1024 lines) gains nothing.  A line is the VexRiscv's data cache line (32
+# bytes): its refill misses here once, not twice (docs/soc.md, "What the board adds, and what was cut").
+SDRAM_CACHE_LINES = 4096
 SDRAM_LINE_WORDS = 8
 
 # --- regions ------------------------------------------------------------------------------------
@@ -215,7 +215,7 @@ FW_RAM = Region(
 SDRAM = Region(
     "SDRAM", 0x5, SDRAM_BYTES // 4, 32, 4, "rw, byte/half/word, cached",
     "SDRAM through the CPU port's cache (rtl/sdram_cache.v, write-through): the areas below; a miss "
-    "takes 9-25 cycles")
+    "takes 10-26 cycles, a hit 2 or 3")
 # Areas of the SDRAM (offsets in bytes from its base), laid out in this order from offset 0.
 HEIGHT = Region(
     "HEIGHT", 0x5, GRID_MAX_W * GRID_MAX_H, 16, 2, "rw, byte/half/word",
@@ -524,9 +524,21 @@ def ebr_blocks(region: Region) -> int:
 # RAM), tlut_stage's triangle ROM (512 x 12 bit: one) and its row buffer, doubled for the tools'
 # choices.
 ACCEL_EBR = 8
-# The CPU port's cache: SDRAM_CACHE_LINES x SDRAM_LINE_WORDS words of data (512 x 36 per DP16KD),
-# the tags beside them in LUT RAM; one more pair for the tools' choices.
-SDRAM_CACHE_EBR = 2 * -(-SDRAM_CACHE_LINES * SDRAM_LINE_WORDS // 512)
+# The CPU port's cache (rtl/sdram_cache.v): four byte lanes of SDRAM_CACHE_LINES x SDRAM_LINE_WORDS
+# bytes (2048 x 9 per DP16KD), and one entry per line in block RAM too ({valid, epoch, tag}: 1 + 7 + the
+# tag's bits, both ports used: at most 18 bits wide).
+SDRAM_CACHE_ENTRY_BITS = (1 + 7 + SDRAM_ROW_BITS + 2 + SDRAM_COL_BITS - 1
+                          - (SDRAM_LINE_WORDS.bit_length() - 1) - (SDRAM_CACHE_LINES.bit_length() - 1))
+
+
+def _dp16kd_blocks(depth: int, bits: int) -> int:
+    """DP16KD blocks for a depth x bits memory, the best of the true-dual-port shapes."""
+    shapes = ((16384, 1), (8192, 2), (4096, 4), (2048, 9), (1024, 18))
+    return min(-(-depth // d) * -(-bits // w) for d, w in shapes)
+
+
+SDRAM_CACHE_EBR = (4 * _dp16kd_blocks(SDRAM_CACHE_LINES * SDRAM_LINE_WORDS, 8)
+                   + _dp16kd_blocks(SDRAM_CACHE_LINES, SDRAM_CACHE_ENTRY_BITS))
 
 
 # The upload block: the payload buffer (four byte lanes of UPLOAD_BUF_BYTES / 4) and the line buffer
