@@ -444,15 +444,11 @@ wire bank_busy_unused, bank_frame_done_unused;
 // valids and readies are low) and what their registers would load there is never read (docs/soc.md,
 // "The simulated board": why this is exact, and the test that compares the cycles and the meshes with
 // the ungated build).  The enable is latched while the clock is low, so that the gated edge comes in
-// the same evaluation as clk's and sees the values from before the edge, as every other register does.
+// the same evaluation as clk's and sees the values from before the edge, as every other register does
+// (sim_clock_gate).
 wire stage_clk_en = state_reg != STATE_IDLE || rst;
-reg stage_clk_en_latch;
-always @* begin
-    if (!clk) begin
-        stage_clk_en_latch = stage_clk_en;
-    end
-end
-wire stage_clk = clk && stage_clk_en_latch;
+wire stage_clk;
+sim_clock_gate stage_gate_inst (.clk(clk), .en(stage_clk_en), .gclk(stage_clk));
 `endif
 
 haar_bank #(

@@ -167,13 +167,35 @@ wire res_valid;
 wire [63:0] res_vmax64 = {{(64-VW){1'b0}}, res_vmax};
 wire [15:0] res_x16 = {{(16-CB){1'b0}}, res_x};
 wire [15:0] res_y16 = {{(16-CB){1'b0}}, res_y};
+wire slope_busy, div_busy, angle_busy, point_busy;
+
+`ifdef WM_SIM_ENGINE_GATE
+// The simulator's clock gate of the units (sim/build.py defines WM_SIM_ENGINE_GATE; the bitstream has no
+// gate and clocks every unit with clk itself, no other net): an edge reaches tri_engine, tri_slope,
+// udiv64, tri_angle and tri_point only while one of them has work (busy: a command queued or in work, a
+// result not yet handed out), while a command is written to one of them, or at reset.  An idle unit
+// that is offered no command loads nothing that is read before its next command overwrites it
+// (docs/soc.md, "The simulated board": why this is exact, and the test that compares the cycles and
+// the meshes with the ungated build).  One gate for the five: each gated clock costs the model a
+// trigger at every evaluation, and the units are seldom busy.  The enable is latched while the clock is
+// low, so that the gated edge comes in the same evaluation as clk's and sees the values from before
+// it, as every other register does (sim_clock_gate; soc_accel's stage gate likewise).
+wire engine_clk_en = busy || push || slope_busy || slope_go || sqrt_go || div_busy || div_go || angle_busy
+    || angle_go || point_busy || point_go || rst;
+wire engine_clk;
+sim_clock_gate engine_gate_inst (.clk(clk), .en(engine_clk_en), .gclk(engine_clk));
+`endif
 
 tri_engine #(
     .COORD_BITS(CB),
     .ADDR_BITS(ADDR_BITS),
     .CMD_DEPTH(CMD_DEPTH)
 ) engine_inst (
+`ifdef WM_SIM_ENGINE_GATE
+    .clk(engine_clk),
+`else
     .clk(clk),
+`endif
     .rst(rst),
     .cfg_base(HEIGHT_BASE),
     .cfg_width(width_reg),
@@ -201,7 +223,7 @@ tri_engine #(
 /*
  * The slope unit: the staging registers and the scales at SLOPE_GO; its result into SLOPE_ROOT, K
  */
-wire slope_res_valid, slope_busy;
+wire slope_res_valid;
 wire [31:0] slope_res_root;
 wire [5:0] slope_res_k;
 
@@ -210,7 +232,11 @@ generate
         tri_slope #(
             .COORD_BITS(CB)
         ) slope_inst (
+`ifdef WM_SIM_ENGINE_GATE
+            .clk(engine_clk),
+`else
             .clk(clk),
+`endif
             .rst(rst),
             .s_cmd_x(corners_x),
             .s_cmd_y(corners_y),
@@ -239,13 +265,17 @@ endgenerate
 /*
  * The divider: n and d at the DIV_D_HI write; its quotient and remainder into DIV_Q, DIV_R
  */
-wire div_ready, div_res_valid, div_busy;
+wire div_ready, div_res_valid;
 wire [63:0] div_res_q, div_res_r;
 
 generate
     if (DIV != 0) begin : g_div
         udiv64 div_inst (
+`ifdef WM_SIM_ENGINE_GATE
+            .clk(engine_clk),
+`else
             .clk(clk),
+`endif
             .rst(rst),
             .s_n(div_n_reg),
             .s_d({bus_wdata, div_d_lo_reg}),
@@ -283,13 +313,17 @@ end
 /*
  * The angle unit: x and y at the ANGLE_Y write; its result into ANGLE.Z
  */
-wire angle_ready, angle_res_valid, angle_busy;
+wire angle_ready, angle_res_valid;
 wire [17:0] angle_res_z;
 
 generate
     if (ANGLE != 0) begin : g_angle
         tri_angle angle_inst (
+`ifdef WM_SIM_ENGINE_GATE
+            .clk(engine_clk),
+`else
             .clk(clk),
+`endif
             .rst(rst),
             .s_cmd_x(angle_x_reg),
             .s_cmd_y(bus_wdata[30:0]),
@@ -325,7 +359,7 @@ end
  * The point-error unit: the staging registers, POINT_P and the height and mode at the POINT_GO write; mode
  * 2's r is the slope unit's result once SLOPE_STATUS.DONE (cleared as the command is taken); e into POINT
  */
-wire point_res_valid, point_busy;
+wire point_res_valid;
 wire [31:0] point_res_e;
 
 generate
@@ -333,7 +367,11 @@ generate
         tri_point #(
             .COORD_BITS(CB)
         ) point_inst (
+`ifdef WM_SIM_ENGINE_GATE
+            .clk(engine_clk),
+`else
             .clk(clk),
+`endif
             .rst(rst),
             .s_cmd_x(corners_x),
             .s_cmd_y(corners_y),

@@ -128,7 +128,10 @@ public:
             if (r < 0) sim_log(opt_.quiet, "tx framing error cycle %" PRIu64, cycles_);
         }
         int status = -1;
-        if (top_->stage_valid) sim_log(opt_.quiet, "stage 0x%08x cycle %" PRIu64, top_->stage, cycles_);
+        if (top_->stage_valid) {
+            sim_log(opt_.quiet, "stage 0x%08x cycle %" PRIu64, top_->stage, cycles_);
+            ready_ = true;  // the firmware's first marker (app/main.c: STAGE_SERVE, the engine serves)
+        }
         if (top_->led != leds_) {
             leds_ = top_->led;
             sim_log(opt_.quiet, "leds 0x%02x cycle %" PRIu64, leds_, cycles_);
@@ -193,6 +196,8 @@ public:
     }
 
     uint64_t cycles() const { return cycles_; }
+    // The boot is over at the firmware's first SYS.STAGE write (sim_main.h runs it without a host).
+    bool ready() const { return ready_; }
 
     // At exit: the --profile files and the PC trace; false when they cannot be written.
     bool finish() {
@@ -253,6 +258,7 @@ private:
     UartLineDriver line_out_;
     UartLineSampler line_in_;
     uint64_t cycles_ = 0;
+    bool ready_ = false;  // a SYS.STAGE write seen
     uint32_t leds_ = 0;
     uint32_t div_ = 0;  // the UART divisor last logged
     bool rx_valid_ = false;

@@ -11,10 +11,11 @@ pythondata-cpu-picorv32 package unless WM_CPU says another; the simulator and fi
 than the default go to build folders named after it: build/sim/default-vexriscv,
 build/firmware-board-vexriscv).  A build is skipped when
 the sources and options have not changed since the last one (a stamp of their hashes).  The default
-build has no tracing (faster to build and to run) and gates the FPGA stage's clock outside its frames
-(STAGE_GATE); --trace builds a separate simulator with FST tracing into build/sim/trace/ for `wmsim
---trace FILE.fst`, --ungated one without the gate into build/sim/ungated/ (both clock every unit at
-every edge, as the bitstream does).
+build has no tracing (faster to build and to run), gates the FPGA stage's clock outside its frames
+(STAGE_GATE) and the error engine's units' while none has work (ENGINE_GATE); --trace builds a
+separate simulator with FST tracing into build/sim/trace/ for `wmsim --trace FILE.fst`, --ungated one
+without the gates into build/sim/ungated/ (both clock every unit at every edge, as the bitstream
+does).
 """
 
 from __future__ import annotations
@@ -60,6 +61,17 @@ CLANG = "clang++"
 # simulated board", Speed).  Defined in the default build only; the tracing and ungated builds and the
 # bitstream clock them at every edge.
 STAGE_GATE = "WM_SIM_STAGE_GATE"
+# The simulator's clock gates of the error engine's units (rtl/soc_engine.v): tri_engine, tri_slope, udiv64,
+# tri_angle and tri_point get an edge only while they have work or a command is offered to them; defined
+# beside STAGE_GATE, in the default build only.
+ENGINE_GATE = "WM_SIM_ENGINE_GATE"
+GATES = (STAGE_GATE, ENGINE_GATE)
+# Every build: the CPU's `/* verilator public */` signals (the VexRiscv of pythondata-cpu-vexriscv marks its
+# PCs, pipeline state and register-file write port so) are not made public.  A public register may be
+# written from outside the model between evaluations, so Verilator evaluated the CPU's fetch and decode
+# logic that reads them at every evaluation, twice a cycle (some 900 host instructions a cycle, docs/soc.md,
+# "The simulated board", Speed); board_sim.v reads the signals it needs by hierarchical reference.
+PUBLIC_IGNORE = "--public-ignore"
 
 
 def compiler() -> tuple[list[str], list[str]]:
@@ -170,9 +182,10 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
               ungated: bool = False) -> Path:
     """Build (if needed) and return the simulator executable (of the CPU `cpu_name`, else $WM_CPU's).
 
-    The default build gates the FPGA stage's clock outside its frames (STAGE_GATE, rtl/soc_accel.v); the
-    tracing build and `ungated` (build/sim/ungated/, the tests' reference) clock every unit at every
-    edge, as the bitstream does."""
+    The default build gates the FPGA stage's clock outside its frames (STAGE_GATE, rtl/soc_accel.v) and
+    the error engine's units' while none has work (ENGINE_GATE, rtl/soc_engine.v); the tracing build
+    and `ungated` (build/sim/ungated/, the tests' reference) clock every unit at every edge, as the
+    bitstream does."""
     from wavemesh.device import soc_cpu
     from wavemesh.device.gen import write_all
     from wavemesh.harness.toolchain import objcache, verilator_env
@@ -190,7 +203,7 @@ def build_sim(trace: bool = False, jobs: int = 2, quiet: bool = True, cpu_name: 
         "--top-module", "board_sim", "-Wno-fatal", "-Wno-lint", "-Wno-style",
         f"-I{GEN}", "-y", str(RTL), "-y", str(RTL / "boards"),
         *([f"+define+{core.define}"] if core.define else []),
-        *([f"+define+{STAGE_GATE}"] if gate else []),
+        *([f"+define+{g}" for g in GATES] if gate else []), PUBLIC_IGNORE,
         "--Mdir", str(outdir / "obj"), "-o", str(_new(exe)),
         "-MAKEFLAGS", " ".join(cxx + MAKEFLAGS + objcache()),
         "-CFLAGS", " ".join(f"-I{d}" for d in [SIM, *PROTO_INCLUDES]),
@@ -307,7 +320,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trace", action="store_true", help="build the FST-tracing variant")
     ap.add_argument("--ungated", action="store_true",
-                    help="build the variant without the FPGA stage's clock gate (build/sim/ungated/)")
+                    help="build the variant without the simulator's clock gates (build/sim/ungated/)")
     ap.add_argument("--jobs", type=int, default=2, help="parallel C++ compiles (default 2)")
     ap.add_argument("--firmware", action="store_true", help="build firmware/board instead")
     ap.add_argument("--cpu",

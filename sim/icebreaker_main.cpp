@@ -62,6 +62,7 @@ public:
     }
 
     uint64_t cycles() const { return cycles_; }
+    bool ready() const { return true; }  // no firmware: it waits for its host from cycle 0
     bool finish() { return true; }
     const char *mode() const { return "iCEBreaker, pin mode"; }
     static std::vector<std::string> plusargs(const SimOptions &, int argc, char **argv) {

@@ -2,8 +2,10 @@
 // (sim/icebreaker_main.cpp, the iCEBreaker's FPGA stage) differ only in their Board class; the
 // options, the socket loop and the lines on stdout are these.
 //
-// The clock stops while no client is connected (a board waits for its host; cycle counts do not depend
-// on when the host connects).  One client at a time (TcpBridge); when it leaves, the model waits for
+// The board boots from reset without a host until it is ready to serve (Board::ready: the ULX3S at the
+// firmware's first SYS.STAGE write, the iCEBreaker at once), the socket unserved meanwhile (a client's
+// connection and first bytes wait in the kernel's queue); from then on the clock stops while no client
+// is connected (a board waits for its host; cycle counts do not depend on when the host connects).  One client at a time (TcpBridge); when it leaves, the model waits for
 // the next one, or exits with --exit-on-close.
 //
 // Lines on stdout, all starting with "wmsim: " (a board adds its own, Board::cycle):
@@ -63,7 +65,7 @@ void sim_signals();
 
 // Board: Board(const SimOptions &, VerilatedContext *); int cycle(TcpBridge *) (one clock cycle with
 // the UART bridged, nullptr: no host; an exit status when the run ends, else -1); uint64_t cycles();
-// bool finish() (at exit: false when its files cannot be written); const char *mode() (the listening
+// bool ready() (the boot is over: it serves its UART); bool finish() (at exit: false when its files cannot be written); const char *mode() (the listening
 // line's); static std::vector<std::string> plusargs(const SimOptions &, int argc, char **argv) (what
 // Verilator's context sees).
 template <class Board>
@@ -95,6 +97,7 @@ int sim_main(int argc, char **argv, const SimBoardInfo &info) {
     auto next_progress = t0 + std::chrono::duration<double>(opt.progress);
     double waited = 0;  // seconds spent waiting for a client (not simulating)
     bool was_connected = false;
+    bool booted = false;  // (never with --no-socket)
     int status = -1;
     while (status < 0) {
         if (g_sim_stop) {
@@ -109,7 +112,8 @@ int sim_main(int argc, char **argv, const SimBoardInfo &info) {
             fflush(stdout);
             next_progress = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.progress);
         }
-        if (!opt.no_socket && (board->cycles() % SIM_SOCKET_EVERY) == 0) {
+        if (!opt.no_socket && !booted) booted = board->ready();  // until then: no host, no socket
+        if (booted && (board->cycles() % SIM_SOCKET_EVERY) == 0) {
             if (!bridge.service() && was_connected) {
                 was_connected = false;
                 sim_log(opt.quiet, "client left cycle %" PRIu64, board->cycles());
@@ -127,7 +131,7 @@ int sim_main(int argc, char **argv, const SimBoardInfo &info) {
             if (!was_connected && bridge.connected()) sim_log(opt.quiet, "client connected cycle %" PRIu64, board->cycles());
             was_connected = bridge.connected();
         }
-        status = board->cycle(opt.no_socket ? nullptr : &bridge);
+        status = board->cycle(bridge.connected() ? &bridge : nullptr);
         if (status < 0 && opt.max_cycles && board->cycles() >= opt.max_cycles) {
             sim_log(opt.quiet, "max cycles %" PRIu64 " reached", opt.max_cycles);
             status = 3;

@@ -214,7 +214,7 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
            (mm.TOUT.base, "SDRAM TOUT"), (mm.HEAP.base, "heap: struct wm_refiner")]
     q = mm.HEAP.base + a8(_refiner_struct_bytes())
     for name, size in (("hv", 12 * cap), ("ho", 12 * cap), ("vh", 4 * vc), ("vx", 2 * vc), ("vy", 2 * vc),
-                       ("tflag", cap), ("err", 4 * cap), ("worst", 4 * cap), ("list", 4 * items),
+                       ("tflag", cap), ("err", 4 * cap), ("worst", 4 * cap), ("list", 8 * items),
                        ("pos", 4 * items), ("vkey", 4 * vc), ("vapex", vc)):
         out.append((q, f"heap: {name}"))
         q += xy_gap if name in ("vx", "vy") else a8(size) if name not in ("err", "list") else size

@@ -7,7 +7,8 @@
  *           the costs of its ring vertices change (their stars did), nothing else's
  *
  * Every new triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes
- * one or two triangles away.  The heap is a binary min-heap on (cost, slot) over r->list/r->pos;
+ * one or two triangles away.  The heap is a binary min-heap on (cost, slot) (wm_internal.h's: entries
+ * with their keys in list[]'s storage, places in r->pos);
  * all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
 #include "wm_internal.h"
 
@@ -68,12 +69,20 @@ struct fans {
     int32_t vx, vy;                           /* v */
     int32_t quick;                            /* 1: no holes mask and a bound (zeta): the test applies */
     uint32_t zeta;
+    uint32_t zh, zl;                          /* zeta's high and low 16 bits (the 32-bit V's test) */
     int64_t D;                                /* the fan triangle's, for normal_above */
     uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
     int32_t ex, ey;
     int32_t words;                            /* 1: 0 < ex, ey < 32 (far_above's 32-bit path) */
     int32_t j;                                /* the fan triangle v lies in: (p_a, p_j, p_j+1) */
+};
+
+/* fan_may_fit's fan triangle (p_a, p_j, p_k) as v's differences d_a, d_j, d_k, loaded once for its
+ * orientations and handed on to far_above (on the soft CPU far_above's own loads of them from q were
+ * 6 % of first_fit's cycles on Jacksboro / 16). */
+struct corners {
+    int32_t ax, ay, jx, jy, kx, ky;
 };
 
 /* ceil(107 lo / 256), wm_hypot_up's term, for lo < 2^32: on a 32-bit CPU (and in the checked builds) in
@@ -98,12 +107,12 @@ static WM_ALWAYS_INLINE uint32_t chord(uint32_t lo)
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
+static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, const struct corners *co)
 {
     int64_t D = q->D;
     uint64_t av = q->av;
     int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
-    int32_t jx = q->dx[j] - q->dx[a], kx = q->dx[k] - q->dx[a], jy = q->dy[j] - q->dy[a], ky = q->dy[k] - q->dy[a];
+    int32_t jx = co->jx - co->ax, kx = co->kx - co->ax, jy = co->jy - co->ay, ky = co->ky - co->ay;
     uint64_t A, B, T;
     if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
 #if WM_NARROW_DIV
@@ -151,7 +160,14 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k)
     if ((A | B) < ((uint64_t)1 << 31)) {
         /* wm_hypot_up twice in 32-bit operands (the same integers): A, B and D below 2^31, so the first
          * is below 2^32, and T is at least the larger operand of the second */
-        uint32_t hi = (uint32_t)(A > B ? A : B), lo = (uint32_t)(A > B ? B : A), h, d = (uint32_t)D;
+        uint32_t hi = (uint32_t)(A > B ? A : B), lo = (uint32_t)(A > B ? B : A), h, d = (uint32_t)D, s = hi + lo;
+        /* first the bound A + B + D >= T (wm_hypot_up(x, y) = max + ceil(107 min / 256) <= x + y): when
+         * it is below 2^31 and zeta times it below 2^16 av, so is T, and the answer is 1 without the
+         * roots' chords (most calls: v is far above) */
+        if (s < (1u << 31) && s + d < (1u << 31) && (uint64_t)q->zeta * (s + d) < (av << 16)) {
+            WM_ASSERT(wm_hypot_up(wm_hypot_up(A, B), (uint64_t)D) <= (uint64_t)s + d);
+            return 1;
+        }
         h = hi + chord(lo);
         hi = h > d ? h : d, lo = h > d ? d : h;
         if (hi >= (1u << 31)) return 0;
@@ -180,12 +196,13 @@ static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, i
     y[0] = q->vy + q->dy[a], y[1] = q->vy + q->dy[j], y[2] = q->vy + q->dy[k];
 }
 
-static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k)
+static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k,
+                        const struct corners *co)
 {
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
     int above;
-    if (far_above(q, a, j, k)) return 1;
+    if (far_above(q, a, j, k, co)) return 1;
     fan_corners(q, a, j, k, x, y);
     above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
@@ -207,6 +224,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     int32_t n = q->n, k, j, fk, fj, e0, D;
     int64_t V;
     uint64_t av = 0;
+    struct corners c;
 #if WM_NARROW_DIV
     {
         /* on a 32-bit CPU (and in the checked builds): the pointer u unwrapped and k its ring position
@@ -229,8 +247,9 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
         }
         q->k = u;
         j = k == 0 ? n - 1 : k - 1;
-        fj = ax * dy[j] - dx[j] * ay;
-        e0 = dx[j] * dy[k] - dx[k] * dy[j];
+        c.ax = ax, c.ay = ay, c.jx = dx[j], c.jy = dy[j], c.kx = dx[k], c.ky = dy[k];
+        fj = ax * c.jy - c.jx * ay;
+        e0 = c.jx * c.ky - c.kx * c.jy;
         WM_ASSERT(fj == cross(q, a, j) && e0 == cross(q, j, k));
     }
 #else
@@ -245,6 +264,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     j = k == 0 ? n - 1 : k - 1;
     fj = cross(q, a, j);
     e0 = cross(q, j, k);
+    c.ax = q->dx[a], c.ay = q->dy[a], c.jx = q->dx[j], c.jy = q->dy[j], c.kx = q->dx[k], c.ky = q->dy[k];
 #endif
     q->j = j;
     /* D = (p_j - p_a) x (p_k - p_a), twice the signed area of a triangle of grid points: |D| <= (W - 1)(H - 1)
@@ -253,14 +273,39 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     WM_ASSERT((int64_t)D == (int64_t)e0 - fk + fj);
     if (D > 0 && q->quick) {
         /* e0 z_a - fk z_j + fj z_k - D z_v with the z_i taken less z_v (q->z): one product fewer */
+#if WM_NARROW_DIV
+        if (D < (1 << 15) && (e0 | fj) >= 0 && fk <= 0) {
+            /* on a 32-bit CPU (and in the checked builds): e0, -fk and fj are v's edge functions, each
+             * at least 0 and their sum D, and |z_i| <= 65535 (16-bit samples), so every partial sum
+             * is at most D 65535 < 2^31 in magnitude: 32-bit products and sums, where the 64-bit ones
+             * were a multiply pair and carries each (v in the closed fan triangle, the usual case) */
+            int32_t v32 = e0 * q->z[a] - fk * q->z[j] + fj * q->z[k];
+            uint32_t a32 = v32 < 0 ? 0u - (uint32_t)v32 : (uint32_t)v32;
+            WM_ASSERT((int64_t)v32 == (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k]);
+            av = a32;
+            WM_PROF_ADD(WM_PC_POINTS, 1);
+            t->kept = 0;
+            /* 2^16 av <= zeta D with zeta = 2^16 zh + zl: av <= zh D + floor(zl D / 2^16) (av and zh D
+             * integers), each product below 2^31 (zh, zl < 2^16, D < 2^15) and their sum below 2^32 */
+            if (a32 <= q->zh * (uint32_t)D + ((q->zl * (uint32_t)D) >> 16)) {
+                WM_ASSERT(av * 65536u <= (uint64_t)q->zeta * (uint32_t)D);
+                return 1;
+            }
+            WM_ASSERT(av * 65536u > (uint64_t)q->zeta * (uint32_t)D);
+            goto above;
+        }
+#endif
         V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
         av = (uint64_t)(V < 0 ? -V : V);
         WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
         if (av * 65536u <= (uint64_t)q->zeta * (uint32_t)D) return 1;
+#if WM_NARROW_DIV
+    above:
+#endif
         if (r->params.metric == WM_METRIC_VERTICAL) return 0;
         q->D = D, q->av = av;
-        return !normal_above(q, t, a, j, k);
+        return !normal_above(q, t, a, j, k, &c);
     }
     return !other_above(q, t, a, j, k);
 }
@@ -367,6 +412,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     q.vx = vx, q.vy = vy;
     q.quick = r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu;
     q.zeta = r->params.zeta;
+    q.zh = q.zeta >> 16, q.zl = q.zeta & 0xFFFFu;
     wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
     wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
     q.words = WM_NARROW_DIV && q.ex > 0 && q.ex < 32 && q.ey > 0 && q.ey < 32;
@@ -452,76 +498,61 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     return best;
 }
 
-/* The heap's order: by key, ties by slot (a total order). */
+/* The heap (wm_internal.h's operations, the least key first; its keys vkey[], as the entries hold them). */
 static WM_ALWAYS_INLINE int key_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
 {
     return wm_heap_before(ka, a, kb, b, 0);
 }
 
-static int before(const wm_refiner *r, int32_t a, int32_t b) { return key_before(r->vkey[a], a, r->vkey[b], b); }
-
-static void put(wm_refiner *r, int32_t i, int32_t v)
-{
-    r->list[i] = v;
-    r->pos[v] = i;
-}
-
+/* The entry at i up past the parents it is before; 1 when it moved. */
 static int up(wm_refiner *r, int32_t i)
 {
-    int32_t v = r->list[i], i0 = i;
-    while (i > 0) {
-        int32_t p = (i - 1) / 2;
-        if (!before(r, v, r->list[p])) break;
-        put(r, i, r->list[p]);
-        i = p;
-    }
-    put(r, i, v);
-    return i != i0;
+    wm_hent *h = wm_heap_entries(r), x = h[i];
+    return wm_heap_up(h, r->pos, i, x.key, x.t, 0);
 }
 
 static void down(wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t v = r->list[i];
-    for (;;) {
-        int32_t c = 2 * i + 1;
-        if (c >= n) break;
-        if (c + 1 < n && before(r, r->list[c + 1], r->list[c])) c++;
-        if (!before(r, r->list[c], v)) break;
-        put(r, i, r->list[c]);
-        i = c;
-    }
-    put(r, i, v);
+    wm_hent *h = wm_heap_entries(r), x = h[i];
+    wm_heap_down(h, r->pos, i, n, x.key, x.t, 0);
 }
 
 /* down(r, i, n) for an entry that most likely sinks to the bottom (the heap's last one, moved into a
- * hole): wm_heap_sink. */
-static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->vkey, i, n, 0); }
+ * hole). */
+static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 0); }
+
+/* v is in the heap (its place in pos[], i, within the n entries and holding v). */
+static WM_ALWAYS_INLINE int in_heap(const wm_refiner *r, int32_t v, int32_t i, int32_t n)
+{
+    return i >= 0 && i < n && wm_heap_entries(r)[i].t == v;
+}
 
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children. */
+/* The order holds around the entry at i: its parent is before it, it is before its children; the keys
+ * are their vertices' costs. */
 static int holds_at(const wm_refiner *r, int32_t i, int32_t n)
 {
-    int32_t v = r->list[i];
-    if (r->pos[v] != i || (i > 0 && !before(r, r->list[(i - 1) / 2], v))) return 0;
+    const wm_hent *h = wm_heap_entries(r);
+    int32_t v = h[i].t, p = (i - 1) / 2;
+    if (r->pos[v] != i || h[i].key != r->vkey[v]) return 0;
+    if (i > 0 && !key_before(h[p].key, h[p].t, h[i].key, v)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!before(r, v, r->list[c])) return 0;
+        if (!key_before(h[i].key, v, h[c].key, h[c].t) || h[c].key != r->vkey[h[c].t]) return 0;
     return 1;
 }
 #endif
 
 static void take_out(wm_refiner *r, int32_t v, int32_t *n)
 {
+    wm_hent *h = wm_heap_entries(r);
     int32_t i = r->pos[v];
-    if (i < 0 || i >= *n || r->list[i] != v) return;
+    if (!in_heap(r, v, i, *n)) return;
     r->pos[v] = -1;
     (*n)--;
     if (i == *n) return;
-    {
-        int32_t moved = r->list[i] = r->list[*n];
-        if (i == 0 || !up(r, i)) sink(r, i, *n);
-        WM_ASSERT(holds_at(r, r->pos[moved], *n));
-        (void)moved;
-    }
+    h[i] = h[*n];
+    if (i == 0 || !up(r, i)) sink(r, i, *n);
+    WM_ASSERT(holds_at(r, r->pos[h[i].t], *n) && holds_at(r, 0, *n));
 }
 
 /* Re-files v with its current cost (out of the heap when it cannot go): in place when it is in the
@@ -536,14 +567,14 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
     }
     r->vkey[v] = cost;
     r->vapex[v] = (int8_t)apex;
-    if (i >= 0 && i < *n && r->list[i] == v) { /* in place: up, else down (its key may be the same) */
+    if (in_heap(r, v, i, *n)) { /* in place: up, else down (its key may be the same) */
+        wm_heap_entries(r)[i].key = cost;
         if (i == 0 || !up(r, i)) down(r, i, *n); /* moved up: no child is before it */
         WM_ASSERT(holds_at(r, r->pos[v], *n));
         return;
     }
-    put(r, *n, v);
-    (*n)++;
-    up(r, *n - 1);
+    wm_heap_up(wm_heap_entries(r), r->pos, (*n)++, cost, v, 0);
+    WM_ASSERT(holds_at(r, r->pos[v], *n));
 }
 
 /* Lazy re-evaluation: a removal marks its ring vertices stale (their stars changed) instead of
@@ -557,7 +588,7 @@ static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
 #define STALE INT8_MIN
 
 /* The stale vertices entered at zeta (above) are kept apart from the heap, in a min-heap of their slots alone
- * (all their keys are zeta, so their order is their slots'), from the far end of r->list down (z[-i]
+ * (all their keys are zeta, so their order is their slots'), from the far end of list[]'s storage down (z[-i]
  * is its i-th entry; the two never meet: together they hold at most the live vertices), their pos -2:
  * its entries need no key loaded to be ordered, and the heap holds fewer.  The next vertex is the
  * first of the two tops by (cost, slot), as one heap of both would give. */
@@ -614,7 +645,7 @@ static void z_pop(wm_refiner *r, struct zheap *h)
 static void mark_stale(wm_refiner *r, int32_t v, int32_t *n, struct zheap *h)
 {
     int32_t i = r->pos[v];
-    if (i >= 0 && i < *n && r->list[i] == v) r->vapex[v] = STALE; /* in the heap: keep its place */
+    if (in_heap(r, v, i, *n)) r->vapex[v] = STALE; /* in the heap: keep its place */
     else if (i != IN_Z) z_push(r, h, v);
 }
 
@@ -626,19 +657,24 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     struct zheap zh;
     (void)st;
     lp.v = -1;
-    zh.z = r->list + ((me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap) - 1), zh.n = 0;
+    /* the last wm_index word of list[]'s storage (wm_heap_entries: as many wm_hent as items) */
+    zh.z = (wm_index *)(void *)(wm_heap_entries(r) + (me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap));
+    zh.z--;
+    zh.n = 0;
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
         if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
     while (n > 0 || zh.n > 0) {
         int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
-        if (zh.n > 0 && (n == 0 || before(r, zh.z[0], r->list[0]))) { /* a stale vertex entered at zeta */
+        const wm_hent *top = wm_heap_entries(r);
+        if (zh.n > 0 &&
+            (n == 0 || key_before(r->vkey[zh.z[0]], zh.z[0], top->key, top->t))) { /* entered at zeta */
             v = zh.z[0];
             z_pop(r, &zh);
             refile(r, v, &n, &lp); /* into the heap at its cost, or nowhere */
             continue;
         }
-        v = r->list[0];
+        v = top->t;
         if (r->vapex[v] == STALE) {
             refile(r, v, &n, &lp); /* evaluated now: back in the heap at its cost, or out */
             continue;

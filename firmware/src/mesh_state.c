@@ -52,25 +52,35 @@ void wm_settle(wm_refiner *r)
      * zeta). */
     for (int32_t t = 0; t < me->tri_end; t++) {
         int32_t x[3], y[3], wx, wy;
-        if (!(me->tflag[t] & WM_F_MEASURE)) {
+        uint8_t f = me->tflag[t];
+        if (!(f & WM_F_MEASURE)) {
             if (me->hv[3 * t] >= 0 && r->err[t] > known) known = r->err[t];
             continue;
         }
-        me->tflag[t] &= (uint8_t)~WM_F_MEASURE;
-        if (me->hv[3 * t] < 0) continue;
-        me->tflag[t] |= WM_F_NEW;
-        wm_tri_xy(me, t, x, y);
+        f &= (uint8_t)~WM_F_MEASURE;
+        if (me->hv[3 * t] < 0) {
+            me->tflag[t] = f;
+            continue;
+        }
+        me->tflag[t] = (uint8_t)(f | WM_F_NEW);
+        /* the corners read only for a scan: most flagged triangles are within known and keep their bound
+         * (on the board each corner's vx[] and vy[] is likely an SDRAM refill: random vertices) */
         if (r->roi || r->field.mask) { /* as wm_touch, without forgetting the corners' classes */
+            wm_tri_xy(me, t, x, y);
             r->err[t] =
                 r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
             r->worst[t] = wy * r->field.width + wx;
         } else if (r->err[t] > known) {
             WM_ASSERT(r->err[t] <= r->params.zeta);
+            wm_tri_xy(me, t, x, y);
             r->err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
             if (r->err[t] > known) known = r->err[t];
         }
 #if WM_CHECK
-        if (!r->roi && !r->field.mask) WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+        if (!r->roi && !r->field.mask) {
+            wm_tri_xy(me, t, x, y);
+            WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+        }
 #endif
     }
 }
@@ -86,71 +96,39 @@ int wm_room(wm_refiner *r, int32_t added)
 }
 
 /* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot (a total
- * order: any heap pops them in the same order).  Its loops keep the item's key in a register and load
- * each other entry's key once; the item filed comes with its key (its E(T), just measured: on the board
- * the load of err[] after its store waits for the SDRAM, the data cache not allocating on a write).
- * pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so pos[t] alone
- * says whether t is in the heap. */
+ * order: any heap pops them in the same order).  Each entry holds its slot's key (wm_hent: E(T), equal
+ * to err[t] at every step, since every E(T) the error bound measures is filed at once), so a sift reads
+ * the entries alone, both children in one line; the item filed comes with its key (just measured: on
+ * the board the load of err[] after its store would wait for the SDRAM, the data cache not allocating
+ * on a write).  pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so
+ * pos[t] alone says whether t is in the heap. */
 
-static WM_ALWAYS_INLINE int heap_before(uint32_t ea, int32_t a, uint32_t eb, int32_t b)
-{
-    return wm_heap_before(ea, a, eb, b, 1);
-}
-
-/* Entry t, key e, at i (list[i] itself not read) up past the parents it is before; 1 when it moved. */
+/* The heap's operations (wm_internal.h), the largest key first. */
 static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)
 {
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *err = r->err;
-    int32_t i0 = i;
-    WM_ASSERT(e == err[t]);
-    while (i > 0) {
-        int32_t p = (i - 1) / 2, u = list[p];
-        if (!heap_before(e, t, err[u], u)) break;
-        list[i] = u, pos[u] = i;
-        i = p;
-    }
-    list[i] = t, pos[t] = i;
-    return i != i0;
+    WM_ASSERT(e == r->err[t]);
+    return wm_heap_up(wm_heap_entries(r), r->pos, i, e, t, 1);
 }
 
-/* Entry t, key e, at i (no parent it is before) down past the children before it. */
 static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e)
 {
-    wm_index *list = r->list, *pos = r->pos;
-    const uint32_t *err = r->err;
-    WM_ASSERT(e == err[t]);
-    for (;;) {
-        int32_t c = 2 * i + 1, u;
-        uint32_t eu;
-        if (c >= n) break;
-        u = list[c], eu = err[u];
-        if (c + 1 < n) {
-            int32_t w = list[c + 1];
-            uint32_t ew = err[w];
-            if (heap_before(ew, w, eu, u)) c++, u = w, eu = ew;
-        }
-        if (!heap_before(eu, u, e, t)) break;
-        list[i] = u, pos[u] = i;
-        i = c;
-    }
-    list[i] = t, pos[t] = i;
+    WM_ASSERT(e == r->err[t]);
+    wm_heap_down(wm_heap_entries(r), r->pos, i, n, e, t, 1);
 }
 
-/* heap_down for an entry that most likely sinks to the bottom (the heap's last one, moved into the
- * place of one removed): wm_heap_sink. */
-static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(r->list, r->pos, r->err, i, n, 1); }
+static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 1); }
 
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children. */
+/* The order holds around the entry at i: its parent is before it, it is before its children; the keys
+ * are their slots' E(T). */
 static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 {
-    const wm_index *list = r->list;
-    const uint32_t *err = r->err;
-    int32_t t = list[i], p = (i - 1) / 2;
-    if (r->pos[t] != i || (i > 0 && !heap_before(err[list[p]], list[p], err[t], t))) return 0;
+    const wm_hent *h = wm_heap_entries(r);
+    int32_t t = h[i].t, p = (i - 1) / 2;
+    if (r->pos[t] != i || h[i].key != r->err[t]) return 0;
+    if (i > 0 && !wm_heap_before(h[p].key, h[p].t, h[i].key, t, 1)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!heap_before(err[t], t, err[list[c]], list[c])) return 0;
+        if (!wm_heap_before(h[i].key, t, h[c].key, h[c].t, 1) || h[c].key != r->err[h[c].t]) return 0;
     return 1;
 }
 #endif
@@ -158,20 +136,24 @@ static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 /* Entry t, at i, out of the heap. */
 static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
 {
+    wm_hent *h = wm_heap_entries(r);
     r->pos[t] = -1;
     (*n)--;
     if (i == *n) return;
     {
-        int32_t moved = r->list[i] = r->list[*n];
-        if (i == 0 || !heap_up(r, i, moved, r->err[moved])) heap_sink(r, i, *n);
-        WM_ASSERT(heap_holds_at(r, r->pos[moved], *n));
+        wm_hent moved = h[*n];
+        if (i == 0 || !heap_up(r, i, moved.t, moved.key)) {
+            h[i] = moved;
+            heap_sink(r, i, *n);
+        }
+        WM_ASSERT(heap_holds_at(r, r->pos[moved.t], *n));
     }
 }
 
 void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
 {
     int32_t i = r->pos[t];
-    WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && r->list[i] == t)));
+    WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && wm_heap_entries(r)[i].t == t)));
     if (e <= r->params.zeta) {
         if (i >= 0) heap_remove(r, t, i, n);
     } else if (i >= 0) {                                      /* in place: (E(T), slot) orders totally */
@@ -214,7 +196,8 @@ static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *hea
 {
     if (heap_n) {
         uint32_t e = touch_bound(r, t);
-        wm_heap_update(r, t, e, heap_n);
+        /* within zeta and in no heap (most new triangles): wm_heap_update would do nothing */
+        if (e > r->params.zeta || r->pos[t] >= 0) wm_heap_update(r, t, e, heap_n);
     } else {
         wm_touch(r, t);
     }
@@ -244,11 +227,14 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
     int8_t corner[LEGAL_STACK];
     for (int32_t i = 0; i < n; i++) {
-        int32_t t = touched[i];
+        int32_t t = touched[i], k;
         slots[ns++] = t; /* a split's slots: distinct, at most 4 = LEGAL_SLOTS at the least */
-        for (int32_t k = 0; k < 3; k++) /* edge 3 t + k, from corner k to corner k + 1 (wm_dest) */
-            if (me->hv[3 * t + k] != p && me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p && top < LEGAL_STACK)
-                stack[top] = t, corner[top++] = (int8_t)k;
+        /* p is a corner of each (a split's triangles hold it): the edge opposite it, 3 t + k from corner
+         * k to corner k + 1 (wm_dest), is the one after p's corner */
+        k = me->hv[3 * t] == p ? 1 : (me->hv[3 * t + 1] == p ? 2 : 0);
+        WM_ASSERT(me->hv[3 * t + (k == 0 ? 2 : k - 1)] == p && me->hv[3 * t + k] != p &&
+                  me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p);
+        stack[top] = t, corner[top++] = (int8_t)k; /* n <= 4 < LEGAL_STACK */
     }
     while (top > 0) {
         int32_t t1 = stack[--top], k = corner[top], e = 3 * t1 + k, o = me->ho[e], a, b, d, t2, ko;

@@ -32,11 +32,15 @@ static int32_t cache_slots(int32_t vert_cap)
 }
 
 /* Storage after the mesh: err and worst (per triangle slot), list and pos (per triangle or vertex
- * slot, whichever is more), vkey and vapex (per vertex slot), the reduction's caches. */
+ * slot, whichever is more; list's room holds as many error bound heap entries, wm_hent), vkey and vapex
+ * (per vertex slot), the reduction's caches. */
+static uint64_t list_bytes(uint64_t items) { return ALIGN8(sizeof(wm_hent) * items); }
+
 static uint64_t state_bytes(int32_t tri_cap, int32_t vert_cap)
 {
     uint64_t items = (uint64_t)(tri_cap > vert_cap ? tri_cap : vert_cap);
-    return ALIGN8(8 * (uint64_t)tri_cap) + ALIGN8(2 * sizeof(wm_index) * items) + ALIGN8(5 * (uint64_t)vert_cap) +
+    return ALIGN8(8 * (uint64_t)tri_cap) + list_bytes(items) + ALIGN8(sizeof(wm_index) * items) +
+           ALIGN8(5 * (uint64_t)vert_cap) +
            (uint64_t)cache_slots(vert_cap) * (sizeof(struct wm_normal_slot) + sizeof(struct wm_ecache_slot));
 }
 
@@ -130,8 +134,9 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
         r->worst = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
         q += ALIGN8(8 * (uint64_t)tri_cap);
         r->list = (wm_index *)(void *)q;
-        r->pos = (wm_index *)(void *)(q + sizeof(wm_index) * items);
-        q += ALIGN8(2 * sizeof(wm_index) * items);
+        q += list_bytes(items);
+        r->pos = (wm_index *)(void *)q;
+        q += ALIGN8(sizeof(wm_index) * items);
         r->vkey = (uint32_t *)(void *)q;
         r->vapex = (int8_t *)(void *)(q + 4 * (uint64_t)vc);
         q += ALIGN8(5 * (uint64_t)vc);
@@ -233,7 +238,10 @@ static WM_ALWAYS_INLINE uint64_t den_max(uint32_t alpha, uint32_t am, uint32_t r
         return UINT64_MAX;
     }
     R = (uint64_t)t + (65535u - alpha);
-    R = R >> 32 ? R / (65536u - alpha) : div_by_a((uint32_t)R, alpha, am); /* 32 bits unless ra < 2 */
+    /* 32 bits unless ra < 2 or alpha = 0 (step 2(d)'s swaps, whose R is t / 2^16 = 65537: on the soft CPU a
+     * shift, where the 64-bit division was a library call every try) */
+    R = R >> 32 ? (WM_NARROW_DIV && alpha == 0 ? R >> 16 : R / (65536u - alpha))
+                : div_by_a((uint32_t)R, alpha, am);
     if (R > 0xFFFFFFFFu) {
         *rq = UINT64_MAX;
         return 0;
@@ -579,7 +587,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
     int32_t qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
     int64_t dot1 = 0, cross1 = 0, dot2 = 0, cross2 = 0; /* the new triangles' smallest angles (fixed.c) */
-    uint32_t e1 = 0, e2 = 0, ra, bnd, oe1 = r->err[t1], oe2 = r->err[t2];
+    uint32_t e1 = 0, e2 = 0, ra, bnd, oe1, oe2;
     const uint64_t one = 65536u;
     uint64_t o1 = 0, o2 = 0, sn = 0; /* old and new E(T) in height units (alpha < 1) */
     int back = 1;                    /* whether the swap back would be made */
@@ -599,6 +607,9 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
         if (!((s1 > 0 && s2 < 0) || (s1 < 0 && s2 > 0))) return 0;
         first = ANGLES_LATE && s2 < -s1; /* twice the new triangles' areas: -s1 (a, d, c), s2 (d, b, c) */
     }
+    /* read once the quad is convex: a third of the edges end above, and err[t2] (a neighbour's slot) is
+     * an SDRAM refill on the board */
+    oe1 = r->err[t1], oe2 = r->err[t2];
     ra = 0; /* alpha = 0 (step 2(d)'s swaps): xi = R_E, no angle needed */
     if (alpha > 0) {
         /* the old triangles (a, b, c) and (b, a, d) from the corners at hand */
@@ -812,7 +823,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
     for (int32_t t = 0; t < me->tri_end; t++)
         if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], &n);
     while (n > 0) {
-        int32_t t = r->list[0], x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
+        int32_t t = wm_heap_entries(r)[0].t, x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
         wm_tri_xy(me, t, x, y);
         wy = sample_row(wd, r->worst[t], r->field.width);

@@ -183,43 +183,95 @@ static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, 
         if (wy) *wy = y[0];
     }
 }
-/* The refiner's two heaps of slots, list[] with each slot's place in pos[] (mesh_state.c's error bound,
- * the largest key first; decimate.c's, the least key first): ties go to the lower slot, so the order is
- * total and any heap pops the same sequence. */
+/* The refiner's two heaps of slots (mesh_state.c's error bound, the largest key first; decimate.c's, the
+ * least key first): ties go to the lower slot, so the order is total and any heap pops the same
+ * sequence.  An entry holds its slot with the slot's key (E(T), the removal's cost), equal to err[] or
+ * vkey[] at every step, so a sift compares entries it has loaded, both children in one line, instead of
+ * reading the keys' array at every slot it passes (a random line each: on the board, err[] and vkey[]
+ * of a large mesh are far beyond the data cache).  Each slot's place is in pos[].  The entries live in
+ * list[]'s storage (sized for max(tri_cap, vert_cap) of them: refine.c), which the other phases use as
+ * wm_index words; WM_MAY_ALIAS tells the compiler so. */
+typedef struct WM_MAY_ALIAS wm_hent {
+    uint32_t key;
+    wm_index t;
+} wm_hent;
+
 static WM_ALWAYS_INLINE int wm_heap_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b, int largest)
 {
     return (largest ? ka > kb : ka < kb) || (ka == kb && a < b);
 }
 
+static WM_ALWAYS_INLINE void wm_heap_put(wm_hent *h, wm_index *pos, int32_t i, uint32_t key, int32_t t)
+{
+    h[i].key = key, h[i].t = (wm_index)t, pos[t] = (wm_index)i;
+}
+
+/* Entry (key, t) at i (h[i] itself not read) up past the parents it is before; 1 when it moved. */
+static WM_ALWAYS_INLINE int wm_heap_up(wm_hent *h, wm_index *pos, int32_t i, uint32_t key, int32_t t, int largest)
+{
+    int32_t i0 = i;
+    while (i > 0) {
+        int32_t p = (i - 1) / 2;
+        wm_hent u = h[p];
+        if (!wm_heap_before(key, t, u.key, u.t, largest)) break;
+        wm_heap_put(h, pos, i, u.key, u.t);
+        i = p;
+    }
+    wm_heap_put(h, pos, i, key, t);
+    return i != i0;
+}
+
+/* Entry (key, t) at i (no parent it is before) down past the children before it. */
+static WM_ALWAYS_INLINE void wm_heap_down(wm_hent *h, wm_index *pos, int32_t i, int32_t n, uint32_t key, int32_t t,
+                                          int largest)
+{
+    for (;;) {
+        int32_t c = 2 * i + 1;
+        wm_hent u;
+        if (c >= n) break;
+        u = h[c];
+        if (c + 1 < n) {
+            wm_hent w = h[c + 1];
+            if (wm_heap_before(w.key, w.t, u.key, u.t, largest)) c++, u = w;
+        }
+        if (!wm_heap_before(u.key, u.t, key, t, largest)) break;
+        wm_heap_put(h, pos, i, u.key, u.t);
+        i = c;
+    }
+    wm_heap_put(h, pos, i, key, t);
+}
+
 /* The entry at i sifted down when it most likely sinks to the bottom (the heap's last one, moved into
  * the place of one taken out): the hole first goes down the children that come first to a leaf, one
  * comparison a level, then the entry comes up from there past what it is before.  The same places as
- * a plain sift-down's (the children the hole passes are those it moves up, the order total), in about
- * half its comparisons. */
-static WM_ALWAYS_INLINE void wm_heap_sink(wm_index *list, wm_index *pos, const uint32_t *key, int32_t i, int32_t n,
-                                          int largest)
+ * wm_heap_down's (the children the hole passes are those it moves up, the order total), in about half
+ * its comparisons. */
+static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, int32_t n, int largest)
 {
-    int32_t t = list[i], j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
-    uint32_t k = key[t];
+    wm_hent x = h[i];
+    int32_t j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
     while (j < m) {
-        int32_t c = 2 * j + 1, u = list[c], w = list[c + 1];
-        if (wm_heap_before(key[w], w, key[u], u, largest)) c++, u = w;
-        list[j] = u, pos[u] = j;
+        int32_t c = 2 * j + 1;
+        wm_hent u = h[c], w = h[c + 1];
+        if (wm_heap_before(w.key, w.t, u.key, u.t, largest)) c++, u = w;
+        wm_heap_put(h, pos, j, u.key, u.t);
         j = c;
     }
     if (2 * j + 1 < n) { /* an only child */
-        int32_t u = list[2 * j + 1];
-        list[j] = u, pos[u] = j;
+        wm_hent u = h[2 * j + 1];
+        wm_heap_put(h, pos, j, u.key, u.t);
         j = 2 * j + 1;
     }
     while (j > i) {
-        int32_t p = (j - 1) / 2, u = list[p];
-        if (!wm_heap_before(k, t, key[u], u, largest)) break;
-        list[j] = u, pos[u] = j;
+        int32_t p = (j - 1) / 2;
+        wm_hent u = h[p];
+        if (!wm_heap_before(x.key, x.t, u.key, u.t, largest)) break;
+        wm_heap_put(h, pos, j, u.key, u.t);
         j = p;
     }
-    list[j] = t, pos[t] = j;
+    wm_heap_put(h, pos, j, x.key, x.t);
 }
+
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
@@ -550,7 +602,8 @@ struct wm_refiner {
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
     wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the regularisation's
-                            smallest angles (refine.c), the heaps */
+                            smallest angles (refine.c); its storage holds as many wm_hent, the heaps'
+                            (wm_heap_entries), and the decimation's stale vertices at its far end */
     wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex; the levels: the
                             regularisation's records (refine.c) */
@@ -562,6 +615,8 @@ struct wm_refiner {
     int32_t cache_mask;             /* wm_cache_slots(vert_cap) - 1 */
     uint32_t swap_recs;             /* the regularisation's records in vkey: their count - 1 (refine.c) */
 };
+
+static inline wm_hent *wm_heap_entries(const wm_refiner *r) { return (wm_hent *)(void *)r->list; }
 
 /* A triangle's edge functions E_k(px, py) = A_k px + B_k py + C_k (>= 0 inside) and its bounding box
  * {xmin, xmax, ymin, ymax}, in 64 bits (tri_error.c), for roi.c and holes.c. */

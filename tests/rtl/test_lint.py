@@ -38,6 +38,12 @@ def test_lint_clean_with_the_simulators_stage_gate(verilator):
     assert r.returncode == 0, r.stderr
 
 
+def test_lint_clean_with_the_simulators_engine_gates(verilator):
+    """soc_engine as the simulator builds it, its units' clocks gated (sim/build.py, ENGINE_GATE)."""
+    r = lint(RTL / "soc_engine.v", verilator, "WM_SIM_ENGINE_GATE")
+    assert r.returncode == 0, r.stderr
+
+
 def test_lint_clean_every_cpu(verilator):
     """soc_top with each CPU host/wavemesh/device/soc_cpu.py offers (the default one is linted above)."""
     from wavemesh.device import soc_cpu

@@ -55,6 +55,25 @@ def test_hello_reports_capabilities(fast_board):
     assert e.value.code == P.ErrorCode.BAD_VALUE
 
 
+def test_a_fresh_board_answers_the_first_hello(start_sim, firmware_hex):
+    """The board boots before its first client (sim/sim_main.h: the clock runs from reset to the firmware's
+    first SYS.STAGE write without a host): a fresh board's first HELLO is answered, one attempt and well
+    inside its timeout (a board that booted only once the client came lost that HELLO to its boot, and
+    the host waited the sync timeout before it tried again)."""
+    board = start_sim(firmware_hex, "--fast")
+    t0 = time.monotonic()
+    with S.Device(board.url, timeouts=TIMEOUTS) as dev:
+        info = dev.sync(attempts=1, timeout=5.0)
+    took = time.monotonic() - t0
+    assert info.name == "wm-board"
+    assert took < 1.0, took
+    # the boot ran before the client: it connected after the serving marker (at the next socket service)
+    serve = board.events("stage")[0]
+    assert serve[0] == STAGE_SERVE
+    connected = [ln for ln in board.lines if "client connected cycle" in ln]
+    assert int(connected[0].split()[-1]) >= serve[1]
+
+
 def upload(url: str, a: np.ndarray) -> dict:
     with S.Device(url, timeouts=TIMEOUTS) as dev:
         dev.sync()

@@ -50,6 +50,16 @@ def inputs(tmp_path_factory):
     return d
 
 
+def jacksboro_holes(folder: Path) -> Path:
+    """An 18 x 16 crop of the Jacksboro DEM with a hole of 3 x 3 samples and one of a sample (NaN), for
+    `--nodata hole`: the error engine scans against the validity mask."""
+    z = np.load(jacksboro())["elevation"].astype(np.float64)[120:136, 200:218]
+    z[6:9, 4:7] = np.nan
+    z[12, 14] = np.nan
+    np.save(folder / "jacksboro-holes.npy", z)
+    return folder / "jacksboro-holes.npy"
+
+
 # name -> (input, options of both commands).  The soft CPU runs the reduction (64-bit eigen
 # arithmetic) and the final decimation at some 100 million cycles per job on these inputs, minutes
 # of simulation each: the three larger inputs run without them (the levels and the error bound, as
@@ -97,8 +107,9 @@ def stream_and_mesh(src: str, opts: list[str], url: str, tmp: Path, link: tuple[
     assert report["initial"] == {k: soft["initial"][k] for k in report["initial"]}
     check_args = ["check", str(tmp / "board.obj"), "--against", src]
     check_args += [o for o in opts if o in ("--key", "elevation")]
-    if "--decimate" in opts:
-        check_args += ["--decimate", opts[opts.index("--decimate") + 1]]
+    for o in ("--decimate", "--nodata"):  # the input's options that check takes
+        if o in opts:
+            check_args += [o, opts[opts.index(o) + 1]]
     rc, out, err = run_cli(*check_args)
     assert rc == 0, out + err
     return report
@@ -291,8 +302,8 @@ def test_garbage_then_a_valid_request(fast_board, inputs, tmp_path, sim_timeouts
 
 @pytest.fixture(scope="module")
 def ungated_exe(verilator, tmp_path_factory) -> Path:
-    """The simulator without its clock gate of the FPGA stage (sim/build.py, ungated: every unit clocked
-    at every edge, as in the bitstream), copied as conftest.py's sim_exe is."""
+    """The simulator without its clock gates of the FPGA stage and the error engine's units (sim/build.py,
+    ungated: every unit clocked at every edge, as in the bitstream), copied as conftest.py's sim_exe is."""
     import shutil
 
     from wavemesh.harness.simboard import build
@@ -304,24 +315,33 @@ def ungated_exe(verilator, tmp_path_factory) -> Path:
     return Path(shutil.copy2(exe, tmp_path_factory.mktemp("ungated") / exe.name))
 
 
-GATE_JOBS = ("ball-20x17", "jacksboro-13x11")  # two frames of the stage on one board: the second after idle
+# The jobs of the clock gates' test, on one board in this order: the stage's frames (the second and later
+# after idle), and every unit of the error engine: scans (PUSH), the slope unit (SLOPE_GO, mode 2 of
+# POINT_GO, root commands), the divider, the angle unit (the swaps' angles with --alpha above 0, the
+# reduction's ears) and the point-error unit (the reduction; not with holes), idle between commands.
+GATE_JOBS = {
+    "ball-20x17-reduce": ("ball.npy", ["--simplify", "off", "--alpha", "0.8"]),
+    "jacksboro-13x11": CASES["jacksboro-13x11"],
+    "jacksboro-holes": ("jacksboro-holes.npy", ["--nodata", "hole", "--simplify", "off", "--alpha", "0.8",
+                                                "--zeta", "5"]),
+}
 
 
-def test_the_stage_clock_gate_changes_no_cycle(sim_exe, ungated_exe, firmware_hex, inputs, tmp_path,
-                                               sim_timeouts):
+def test_the_clock_gates_change_no_cycle(sim_exe, ungated_exe, firmware_hex, inputs, tmp_path, sim_timeouts):
     """The default simulator gates the FPGA stage's clock outside its frames (rtl/soc_accel.v,
-    WM_SIM_STAGE_GATE); the ungated build clocks it at every edge, as the bitstream does.  Two jobs on a
-    fresh board of each (the stage, the upload block, the error engine, the levels; the second frame
-    starts from what the stage kept through the idle stretch between them): the same mesh bytes, the
-    same cycles of every stage and level, of every stretch of a stage's clock, and the same counts in
-    DONE."""
+    WM_SIM_STAGE_GATE) and the error engine's units' while none has work (rtl/soc_engine.v,
+    WM_SIM_ENGINE_GATE); the ungated build clocks them at every edge, as the bitstream does.  The jobs of
+    GATE_JOBS on a fresh board of each (the stage, the upload block, every unit of the error engine, the
+    levels; each frame and command starts from what the units kept through the idle stretch before it):
+    the same mesh bytes, the same cycles of every stage and level, of every stretch of a stage's clock,
+    and the same counts in DONE."""
+    jacksboro_holes(inputs)
     runs = {}
     for kind, exe in (("gated", sim_exe), ("ungated", ungated_exe)):
         b = SimBoard(exe, firmware_hex, "--port", "0", "--fast")
         out = []
         try:
-            for case in GATE_JOBS:
-                name, opts = CASES[case]
+            for case, (name, opts) in GATE_JOBS.items():
                 d = tmp_path / kind / case
                 d.mkdir(parents=True)
                 report = stream_and_mesh(source(inputs, name), opts, b.url, d)

@@ -119,10 +119,11 @@ STACK_BYTES = 12 * 1024
 STACK_PAINT = 0x57AC57AC
 # The refiner's storage (firmware/src, wm_refine_bound) with the board's 32-bit indices
 # (WM_INDEX_BITS=32, firmware/board/CMakeLists.txt: 16-bit ones stop at 10,922 triangles): per
-# triangle half-edges, error, worst sample, heap entries, flags and its share of the vertex arrays
-# (47.5 B); per grid the vertex arrays' fixed part and the refiner's state (about 32 KB at 1024^2).
+# triangle half-edges, error, worst sample, heap entries (the error bound's with their keys: 8 B),
+# flags and its share of the vertex arrays (51.9 B); per grid the vertex arrays' fixed part and the
+# refiner's state (about 32 KB at 1024^2).
 # tests/sim/test_memmap.py checks the capacity below against a native build of wm_refine_bound.
-REFINER_TRI_BYTES = 48
+REFINER_TRI_BYTES = 52
 REFINER_GRID_BYTES = 32 * 1024  # for the largest grid
 # The board job stages the initial triangulation in the heap beside the refiner's storage
 # (firmware/board/app/board_job.c, job_stage_bound): per triangle 12 B of indices, 4 B of vertex
