@@ -5,8 +5,9 @@
 // The board boots from reset without a host until it is ready to serve (Board::ready: the ULX3S at the
 // firmware's first SYS.STAGE write, the iCEBreaker at once), the socket unserved meanwhile (a client's
 // connection and first bytes wait in the kernel's queue); from then on the clock stops while no client
-// is connected (a board waits for its host; cycle counts do not depend on when the host connects).  One client at a time (TcpBridge); when it leaves, the model waits for
-// the next one, or exits with --exit-on-close.
+// is connected (a board waits for its host; cycle counts do not depend on when the host connects).  One
+// client at a time (TcpBridge); when it leaves, the model waits for the next one, or exits with
+// --exit-on-close.
 //
 // Lines on stdout, all starting with "wmsim: " (a board adds its own, Board::cycle):
 //   wmsim: listening on 127.0.0.1:PORT (MODE)  wmsim: client connected / client left cycle N
@@ -65,9 +66,9 @@ void sim_signals();
 
 // Board: Board(const SimOptions &, VerilatedContext *); int cycle(TcpBridge *) (one clock cycle with
 // the UART bridged, nullptr: no host; an exit status when the run ends, else -1); uint64_t cycles();
-// bool ready() (the boot is over: it serves its UART); bool finish() (at exit: false when its files cannot be written); const char *mode() (the listening
-// line's); static std::vector<std::string> plusargs(const SimOptions &, int argc, char **argv) (what
-// Verilator's context sees).
+// bool ready() (the boot is over: it serves its UART); bool finish() (at exit: false when its files
+// cannot be written); const char *mode() (the listening line's); static std::vector<std::string>
+// plusargs(const SimOptions &, int argc, char **argv) (what Verilator's context sees).
 template <class Board>
 int sim_main(int argc, char **argv, const SimBoardInfo &info) {
     SimOptions opt;
