@@ -517,10 +517,6 @@ static void down(wm_refiner *r, int32_t i, int32_t n)
     wm_heap_down(h, r->pos, i, n, x.key, x.t, 0);
 }
 
-/* down(r, i, n) for an entry that most likely sinks to the bottom (the heap's last one, moved into a
- * hole). */
-static void sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 0); }
-
 /* v is in the heap (its place in pos[], i, within the n entries and holding v). */
 static WM_ALWAYS_INLINE int in_heap(const wm_refiner *r, int32_t v, int32_t i, int32_t n)
 {
@@ -547,12 +543,10 @@ static void take_out(wm_refiner *r, int32_t v, int32_t *n)
     wm_hent *h = wm_heap_entries(r);
     int32_t i = r->pos[v];
     if (!in_heap(r, v, i, *n)) return;
-    r->pos[v] = -1;
-    (*n)--;
-    if (i == *n) return;
-    h[i] = h[*n];
-    if (i == 0 || !up(r, i)) sink(r, i, *n);
-    WM_ASSERT(holds_at(r, r->pos[h[i].t], *n) && holds_at(r, 0, *n));
+    int32_t moved = h[--(*n)].t; /* the last entry, moved into i's place */
+    wm_heap_remove(h, r->pos, i, *n, 0);
+    WM_ASSERT(i == *n || (holds_at(r, r->pos[moved], *n) && holds_at(r, 0, *n)));
+    (void)moved;
 }
 
 /* Re-files v with its current cost (out of the heap when it cannot go): in place when it is in the

@@ -116,8 +116,6 @@ static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e
     wm_heap_down(wm_heap_entries(r), r->pos, i, n, e, t, 1);
 }
 
-static void heap_sink(wm_refiner *r, int32_t i, int32_t n) { wm_heap_sink(wm_heap_entries(r), r->pos, i, n, 1); }
-
 #if WM_CHECK
 /* The order holds around the entry at i: its parent is before it, it is before its children; the keys
  * are their slots' E(T). */
@@ -137,17 +135,12 @@ static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
 static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
 {
     wm_hent *h = wm_heap_entries(r);
-    r->pos[t] = -1;
-    (*n)--;
-    if (i == *n) return;
-    {
-        wm_hent moved = h[*n];
-        if (i == 0 || !heap_up(r, i, moved.t, moved.key)) {
-            h[i] = moved;
-            heap_sink(r, i, *n);
-        }
-        WM_ASSERT(heap_holds_at(r, r->pos[moved.t], *n));
-    }
+    int32_t moved = h[--(*n)].t; /* the last entry, moved into i's place */
+    WM_ASSERT(h[i].t == t);
+    (void)t;
+    wm_heap_remove(h, r->pos, i, *n, 1);
+    WM_ASSERT(i == *n || heap_holds_at(r, r->pos[moved], *n));
+    (void)moved;
 }
 
 void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)

@@ -272,6 +272,16 @@ static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, 
     wm_heap_put(h, pos, j, x.key, x.t);
 }
 
+/* The entry at i out of a heap of n + 1 entries (n: the count after it): its slot's place -1, the last
+ * entry moved into its place, up past the parents it is before, else sunk. */
+static WM_ALWAYS_INLINE void wm_heap_remove(wm_hent *h, wm_index *pos, int32_t i, int32_t n, int largest)
+{
+    pos[h[i].t] = -1;
+    if (i == n) return;
+    h[i] = h[n];
+    if (i == 0 || !wm_heap_up(h, pos, i, h[i].key, h[i].t, largest)) wm_heap_sink(h, pos, i, n, largest);
+}
+
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
 /* ceil(2^16 n / d) for d > 0, n < 2^48 (the result may exceed 32 bits): in 32-bit divisions when
  * n < 2^32 and d < 2^16, as on the board's grids, by long division: n = q d + rem with rem < d, then
