@@ -579,6 +579,10 @@ static WM_ALWAYS_INLINE int32_t angle_above_min(int64_t dot1, int64_t cross1, in
     return a2 < a1 ? a2 : a1;
 }
 
+#if WM_CHECK
+static int check_dry; /* try_swap answers without making the swap (swap_made) */
+#endif
+
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
@@ -729,33 +733,71 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
             back = alpha == 65536u ? rb > 65536u : !over_den_max(alpha, am, rb, sn + one, o1 + o2 + one);
         }
     }
+#if WM_CHECK
+    if (check_dry) return 1;
+#endif
     make_swap(r, e, alpha, e1, e2, w1y * r->field.width + w1x, w2y * r->field.width + w2x, angle_code(an1),
               angle_code(an2), back);
     return 1;
 }
 
-/* regularise keeps t's flags and swap number (ft, pt) from one of its edges to the next, where only a
- * swap of t changes them, on the soft CPU (their loads wait for the SDRAM); natively it loads them again
- * (kept, they cost more instructions than they save: registers spilled around the inlined try_swap). */
+/* regularise keeps t's swap number (pt) from one of its edges to the next, where only a swap of t changes
+ * it, on the soft CPU (its load waits for the SDRAM); natively it loads it again (kept, it costs more
+ * instructions than it saves: registers spilled around the inlined try_swap). */
 #define KEEP_T WM_NARROW_DIV
 
-/* try_swap's answer depends on the two triangles alone (corners, E(T)), so an edge whose triangles
- * did not change since it was last examined is skipped: it would give the same "no".  A triangle is
- * marked when it is swapped; the marks of this pass and the one before decide (an edge examined in
- * pass p is examined again in p + 1 only if a triangle of it changed after that, in p or p + 1). */
+#if WM_CHECK
+/* Whether try_swap would make the swap of e, without making it (the checking build's test of an edge
+ * regularise passes over). */
+static int swap_made(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint32_t emax, struct sample_div wd)
+{
+    int made;
+    check_dry = 1;
+    made = try_swap(r, e, alpha, am, emax, wd);
+    check_dry = 0;
+    return made;
+}
+#endif
+
+/* After a swap of t's: every edge of t (one of the swap's two triangles) to be examined, its mark on the
+ * edge's lower triangle, if that one is swept at all (WM_F_SWAP; t is). */
+static WM_ALWAYS_INLINE void mark_edges(wm_mesh *me, int32_t t)
+{
+    for (int32_t i = 0; i < 3; i++) {
+        int32_t h = 3 * t + i, o = me->ho[h], x;
+        if (o < 0) continue;
+        if (h < o) {
+            me->tflag[t] |= (uint8_t)(WM_F_EXAMINE0 << i);
+            continue;
+        }
+        x = (int32_t)((uint32_t)o / 3u);
+        if (me->tflag[x] & WM_F_SWAP) me->tflag[x] |= (uint8_t)(WM_F_EXAMINE0 << (o - 3 * x));
+    }
+}
+
+/* try_swap's answer depends on the two triangles alone (corners, E(T)), so an edge whose triangles did
+ * not change since it was last examined is passed over: it would give the same "no".  Each edge has a
+ * mark on its lower triangle (WM_F_EXAMINE): set on every edge of the sweep at its start, taken when the
+ * edge is examined, set again on each edge of a swap's two triangles.  The same edges are examined in the
+ * same order as with a triangle's mark for "swapped in this pass or the one before", but none again whose
+ * triangles all changed before its examination in the pass before. */
 static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
 {
     wm_mesh *me = &r->mesh;
-    const uint8_t changed = WM_F_CHANGED | WM_F_CHANGED0;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
     int32_t first; /* this sweep's first swap number */
+    int32_t swaps = 0;
     struct sample_div wd = sample_div_of(r->field.width);
     const int32_t swept = r->swept;
     const uint32_t am = alpha_recip(alpha); /* den_max's divisor's reciprocal */
     for (int32_t t = 0; t < me->tri_end; t++) { /* and the iteration's WM_F_UNPAIRED marks cleared */
+        uint8_t f = (uint8_t)(me->tflag[t] & ~WM_F_EXAMINE);
         r->list[t] = ANGLE_UNKNOWN;
-        me->tflag[t] = (uint8_t)((me->tflag[t] & ~(WM_F_CHANGED | WM_F_UNPAIRED)) | WM_F_CHANGED0);
-        if (me->hv[3 * t] >= 0 && r->err[t] > emax) emax = r->err[t];
+        if (me->hv[3 * t] >= 0) {
+            if (r->err[t] > emax) emax = r->err[t];
+            if (f & WM_F_SWAP) f |= WM_F_EXAMINE;
+        }
+        me->tflag[t] = f;
     }
     if (r->swap_stamp > WM_INDEX_MAX / 2) { /* stamps of earlier sweeps are never trusted: start again */
         for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
@@ -764,48 +806,45 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     first = r->swap_stamp + 1;
     r->swap_recs = rec_mask(me->vert_cap, r->roi != NULL || r->field.mask != NULL);
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
-        int32_t swaps = 0;
+        swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
-            uint8_t ft = me->tflag[t];
-            int32_t pt = -1; /* -1 < first: no swap back */
-            if (!(ft & WM_F_SWAP) || me->hv[3 * t] < 0) continue;
+            uint8_t ft = me->tflag[t]; /* its edges to be examined: taken */
+            int32_t pt = -1;           /* -1 < first: no swap back */
+            if (!(ft & WM_F_EXAMINE)) continue;
+            me->tflag[t] = (uint8_t)(ft & ~WM_F_EXAMINE);
             if (KEEP_T && swept) pt = r->pos[t];
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
-                uint8_t fu;
-                /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose turn took it;
+                /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose mark it is;
                  * else o >= 0 and its triangle an unsigned division */
                 if (o < 3 * t) continue;
                 u = (int32_t)((uint32_t)o / 3u);
-                fu = me->tflag[u];
-                if (!(fu & WM_F_SWAP)) continue;
-                if (!(((KEEP_T ? ft : me->tflag[t]) | fu) & changed)) continue;
+                if (!(me->tflag[u] & WM_F_SWAP)) continue;
+                if (!(ft & (WM_F_EXAMINE0 << i))) {
+                    WM_ASSERT(!swap_made(r, e, alpha, am, emax, wd)); /* refused as it stands */
+                    continue;
+                }
                 if (!KEEP_T && swept) pt = r->pos[t];
                 if (pt >= first && pt == r->pos[u]) { /* a swap back */
-                    if (pt & 1) continue; /* refused */
-                    if (swap_back(r, e, alpha, pt)) { /* made */
-                        ft = me->tflag[t] = (uint8_t)(me->tflag[t] | WM_F_CHANGED);
-                        me->tflag[u] |= WM_F_CHANGED;
-                        if (KEEP_T && swept) pt = r->pos[t];
-                        swaps++;
-                        continue;
-                    }
+                    if (pt & 1) continue;             /* refused */
+                    if (swap_back(r, e, alpha, pt)) goto made;
                 }
-                if (try_swap(r, e, alpha, am, emax, wd)) {
-                    ft = me->tflag[t] = (uint8_t)(me->tflag[t] | WM_F_CHANGED);
-                    me->tflag[u] |= WM_F_CHANGED;
-                    if (KEEP_T && swept) pt = r->pos[t];
-                    swaps++;
-                }
+                if (!try_swap(r, e, alpha, am, emax, wd)) continue;
+            made:
+                /* t's edges after i are examined now, those up to it (new ones) in the next pass */
+                mark_edges(me, t);
+                mark_edges(me, u);
+                ft = me->tflag[t];
+                me->tflag[t] = (uint8_t)(ft & ~((WM_F_EXAMINE0 << (i + 1)) & WM_F_EXAMINE));
+                if (KEEP_T && swept) pt = r->pos[t];
+                swaps++;
             }
         }
         if (st) st->swaps += swaps;
-        if (swaps == 0 || pass == SWAP_PASSES - 1) break; /* the marks are read by the next pass alone */
-        for (int32_t t = 0; t < me->tri_end; t++) {
-            uint8_t f = me->tflag[t];
-            me->tflag[t] = (uint8_t)((f & ~changed) | ((f & WM_F_CHANGED) ? WM_F_CHANGED0 : 0));
-        }
+        if (swaps == 0) break; /* every mark taken */
     }
+    if (swaps) /* the last pass's swaps left marks (WM_F_UNPAIRED's bit among them) */
+        for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] &= (uint8_t)~WM_F_EXAMINE;
 }
 
 /* ---------------------------------------------------------------------------------------------- */

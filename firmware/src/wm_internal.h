@@ -567,13 +567,15 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 #define WM_F_PLAN 8u   /* belongs to a planned operation of this iteration */
 #define WM_F_NEW 16u   /* created or changed by this iteration (counts as N0 for the swaps) */
 #define WM_F_SWAP (WM_F_ACTIVE | WM_F_DEP | WM_F_NEAR | WM_F_NEW)
-#define WM_F_CHANGED 32u  /* regularisation: swapped in this pass */
-#define WM_F_CHANGED0 \
-    64u /* regularisation: swapped in the pass before (or the first pass); both marks
-                           * are read by regularise alone, which sets them afresh, and left after it */
 #define WM_F_MEASURE 128u /* error bound, decimation: err[] an upper bound of E(T) within zeta (wm_settle) */
 #define WM_F_UNPAIRED \
     WM_F_MEASURE /* levels: planned as unpaired (the regularisation after the splits clears it) */
+/* regularisation: WM_F_EXAMINE0 << i, edge i of the triangle (half-edge 3 t + i, the other triangle's
+ * slot above t's) is to be examined: not yet in this sweep, or a triangle of it changed since; the three
+ * marks (the last one WM_F_UNPAIRED's bit) are set and read by regularise alone, which clears them
+ * before it returns */
+#define WM_F_EXAMINE0 32u
+#define WM_F_EXAMINE (WM_F_EXAMINE0 * 7u)
 
 /* The reduction's unit normals by triangle slot (direct-mapped, slot modulo the cache's size), each with
  * its triangle's corners (y W + x, in the slot's order; key[0] = -1: empty): a normal depends on its
