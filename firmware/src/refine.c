@@ -655,7 +655,7 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
         WM_ASSERT(one <= den_of(rq, o1 + o2 + one));
         s1 = s2 = 0;
         for (int k = 0, s0 = -1; k < 2; k++) { /* the worse old triangle's sample first */
-            int32_t s = r->worst[(k ^ (r->err[t2] > r->err[t1])) ? t2 : t1], sy, sx;
+            int32_t s = r->worst[(k ^ (oe2 > oe1)) ? t2 : t1], sy, sx;
             if (s == s0) break; /* both old triangles' (on a-b): the same point errors again, no new bound */
             s0 = s;
             sy = sample_row(wd, s, r->field.width), sx = s - sy * r->field.width;
@@ -786,12 +786,11 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     wm_mesh *me = &r->mesh;
     uint32_t emax = 0; /* the mesh's E_max: the bound of every swap (try_swap) */
     int32_t first; /* this sweep's first swap number */
-    int32_t swaps = 0;
     struct sample_div wd = sample_div_of(r->field.width);
     const int32_t swept = r->swept;
     const uint32_t am = alpha_recip(alpha); /* den_max's divisor's reciprocal */
     for (int32_t t = 0; t < me->tri_end; t++) { /* and the iteration's WM_F_UNPAIRED marks cleared */
-        uint8_t f = (uint8_t)(me->tflag[t] & ~WM_F_EXAMINE);
+        uint8_t f = (uint8_t)(me->tflag[t] & ~(WM_F_EXAMINE | WM_F_UNPAIRED));
         r->list[t] = ANGLE_UNKNOWN;
         if (me->hv[3 * t] >= 0) {
             if (r->err[t] > emax) emax = r->err[t];
@@ -806,10 +805,10 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     first = r->swap_stamp + 1;
     r->swap_recs = rec_mask(me->vert_cap, r->roi != NULL || r->field.mask != NULL);
     for (int pass = 0; pass < SWAP_PASSES; pass++) {
-        swaps = 0;
+        int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
             uint8_t ft = me->tflag[t]; /* its edges to be examined: taken */
-            int32_t pt = -1;           /* -1 < first: no swap back */
+            int32_t pt = -1; /* -1 < first: no swap back */
             if (!(ft & WM_F_EXAMINE)) continue;
             me->tflag[t] = (uint8_t)(ft & ~WM_F_EXAMINE);
             if (KEEP_T && swept) pt = r->pos[t];
@@ -826,7 +825,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 }
                 if (!KEEP_T && swept) pt = r->pos[t];
                 if (pt >= first && pt == r->pos[u]) { /* a swap back */
-                    if (pt & 1) continue;             /* refused */
+                    if (pt & 1) continue; /* refused */
                     if (swap_back(r, e, alpha, pt)) goto made;
                 }
                 if (!try_swap(r, e, alpha, am, emax, wd)) continue;
@@ -841,10 +840,8 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
             }
         }
         if (st) st->swaps += swaps;
-        if (swaps == 0) break; /* every mark taken */
+        if (swaps == 0) break; /* every mark taken (the last pass's swaps leave some, read by no one) */
     }
-    if (swaps) /* the last pass's swaps left marks (WM_F_UNPAIRED's bit among them) */
-        for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] &= (uint8_t)~WM_F_EXAMINE;
 }
 
 /* ---------------------------------------------------------------------------------------------- */

@@ -564,17 +564,17 @@ const int32_t *wm_detail_at(const wm_field *f, int32_t m, int32_t x, int32_t y);
 #define WM_F_ACTIVE 1u /* in the active region, union of N0 (4.3.1) */
 #define WM_F_DEP 2u    /* in the dependent region, union of N1 */
 #define WM_F_NEAR 4u   /* in the union of N2: only regularised */
-#define WM_F_PLAN 8u   /* belongs to a planned operation of this iteration */
-#define WM_F_NEW 16u   /* created or changed by this iteration (counts as N0 for the swaps) */
+#define WM_F_NEW 8u    /* created or changed by this iteration (counts as N0 for the swaps) */
+#define WM_F_PLAN 16u  /* belongs to a planned operation of this iteration (the plan, its execution) */
 #define WM_F_SWAP (WM_F_ACTIVE | WM_F_DEP | WM_F_NEAR | WM_F_NEW)
 #define WM_F_MEASURE 128u /* error bound, decimation: err[] an upper bound of E(T) within zeta (wm_settle) */
 #define WM_F_UNPAIRED \
     WM_F_MEASURE /* levels: planned as unpaired (the regularisation after the splits clears it) */
 /* regularisation: WM_F_EXAMINE0 << i, edge i of the triangle (half-edge 3 t + i, the other triangle's
- * slot above t's) is to be examined: not yet in this sweep, or a triangle of it changed since; the three
- * marks (the last one WM_F_UNPAIRED's bit) are set and read by regularise alone, which clears them
- * before it returns */
-#define WM_F_EXAMINE0 32u
+ * slot above t's) is to be examined: not yet in this sweep, or a triangle of it changed since.  Set and
+ * read by regularise alone, which takes the plan's bit (WM_F_PLAN, read no more after the execution;
+ * the next iteration's wm_select clears every flag) and leaves them as they are when it returns. */
+#define WM_F_EXAMINE0 WM_F_PLAN
 #define WM_F_EXAMINE (WM_F_EXAMINE0 * 7u)
 
 /* The reduction's unit normals by triangle slot (direct-mapped, slot modulo the cache's size), each with
