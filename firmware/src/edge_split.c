@@ -13,28 +13,14 @@
  * T1 becomes T1 and T3.  T1 and T2 keep their slots; T3 and T4 are new. */
 #include "wm_internal.h"
 
-int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
+/* The split of e at (x, y), strictly inside the edge, with room for it (f = ho[e]).  Each corner's
+ * half-edge (vh) is the one wm_tri_claim of T2, T4, T1 and then T3 would leave it, stored once (no load
+ * of hv[] back). */
+static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, int32_t y, int32_t touched[4],
+                                   int32_t *n_touched)
 {
-    int32_t t1, t2, t3, t4 = -1, f, a, b, c, d = -1, p;
-    int32_t o_bc, o_ca, o_ad = -1, o_db = -1;
-    int32_t ax, ay, bx, by;
-    int64_t dx, dy, px, py;
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
-    a = m->hv[e];
-    b = wm_dest(m, e);
-    ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
-    /* (x, y) strictly between a and b on the segment. */
-    dx = (int64_t)bx - ax, dy = (int64_t)by - ay, px = (int64_t)x - ax, py = (int64_t)y - ay;
-    if (px * dy - py * dx != 0) return WM_ERR_REFUSED;
-    if (px * dx + py * dy <= 0 || px * dx + py * dy >= dx * dx + dy * dy) return WM_ERR_REFUSED;
-    f = m->ho[e];
-    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < (f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
-    if (m->n_vert >= m->vert_cap) return WM_ERR_CAPACITY;
-
-    t1 = WM_TRI(e);
-    c = m->hv[WM_PREV(e)];
-    o_bc = m->ho[WM_NEXT(e)];
-    o_ca = m->ho[WM_PREV(e)];
+    int32_t t1 = WM_TRI(e), t2, t3, t4 = -1, a = m->hv[e], b = wm_dest(m, e), c = m->hv[WM_PREV(e)], d = -1, p;
+    int32_t o_bc = m->ho[WM_NEXT(e)], o_ca = m->ho[WM_PREV(e)], o_ad = -1, o_db = -1;
     if (f >= 0) {
         d = m->hv[WM_PREV(f)];
         o_ad = m->ho[WM_NEXT(f)];
@@ -61,15 +47,16 @@ int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4
         wm_link(m, 3 * t2 + 2, o_db);       /* d->b */
         wm_link(m, 3 * t4 + 0, 3 * t1 + 0); /* p->a with a->p */
         wm_link(m, 3 * t4 + 1, o_ad);       /* a->d */
-        wm_tri_claim(m, t2);
-        wm_tri_claim(m, t4);
+        m->vh[d] = 3 * t4 + 2;
     } else {
         t2 = -1;
         wm_link(m, 3 * t1 + 0, -1);
         wm_link(m, 3 * t3 + 0, -1);
     }
-    wm_tri_claim(m, t1);
-    wm_tri_claim(m, t3);
+    m->vh[a] = 3 * t1;
+    m->vh[p] = 3 * t3;
+    m->vh[b] = 3 * t3 + 1;
+    m->vh[c] = 3 * t3 + 2;
     if (touched) {
         touched[0] = t1;
         touched[1] = t3;
@@ -80,5 +67,44 @@ int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4
     }
     if (n_touched) *n_touched = f >= 0 ? 4 : 2;
     WM_CHECK_MESH(m);
+}
+
+static int room(const wm_mesh *m, int32_t f)
+{
+    return m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) >= (f >= 0 ? 2 : 1) && m->n_vert < m->vert_cap;
+}
+
+int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
+{
+    int32_t f, a, b;
+    int32_t ax, ay, bx, by;
+    int64_t dx, dy, px, py;
+    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    a = m->hv[e];
+    b = wm_dest(m, e);
+    ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
+    /* (x, y) strictly between a and b on the segment. */
+    dx = (int64_t)bx - ax, dy = (int64_t)by - ay, px = (int64_t)x - ax, py = (int64_t)y - ay;
+    if (px * dy - py * dx != 0) return WM_ERR_REFUSED;
+    if (px * dx + py * dy <= 0 || px * dx + py * dy >= dx * dx + dy * dy) return WM_ERR_REFUSED;
+    f = m->ho[e];
+    if (!room(m, f)) return WM_ERR_CAPACITY;
+    split(m, e, f, x, y, touched, n_touched);
+    return WM_OK;
+}
+
+int wm_edge_split_inside(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
+{
+    int32_t f = m->ho[e];
+    WM_ASSERT(e >= 0 && e < 3 * m->tri_end && m->hv[3 * WM_TRI(e)] >= 0);
+#if WM_CHECK
+    {
+        int64_t ax = m->vx[m->hv[e]], ay = m->vy[m->hv[e]], dx = m->vx[wm_dest(m, e)] - ax,
+                dy = m->vy[wm_dest(m, e)] - ay, px = x - ax, py = y - ay;
+        WM_ASSERT(px * dy - py * dx == 0 && px * dx + py * dy > 0 && px * dx + py * dy < dx * dx + dy * dy);
+    }
+#endif
+    if (!room(m, f)) return WM_ERR_CAPACITY;
+    split(m, e, f, x, y, touched, n_touched);
     return WM_OK;
 }

@@ -34,9 +34,10 @@ int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
 /* The swap itself, e = a->b in T1 = (a, b, c), f = b->a in T2 = (b, a, d): the triangles (a, d, c) and
  * (d, b, c) in the same slots, their outer edges linked as before, and each corner's half-edge (vh) the
  * one of the new triangles wm_tri_claim of T1 and then T2 leaves it.  Inlined in both callers. */
-static WM_ALWAYS_INLINE void flip(wm_mesh *m, int32_t e, int32_t f, int32_t a, int32_t b, int32_t c, int32_t d)
+static WM_ALWAYS_INLINE void flip(wm_mesh *m, int32_t e, int32_t f, int32_t t1, int32_t t2, int32_t a, int32_t b,
+                                  int32_t c, int32_t d)
 {
-    int32_t t1 = WM_TRI(e), t2 = WM_TRI(f), e1 = 3 * t1, e2 = 3 * t2;
+    int32_t e1 = 3 * t1, e2 = 3 * t2;
     int32_t o_bc = m->ho[WM_NEXT(e)], o_ca = m->ho[WM_PREV(e)], o_ad = m->ho[WM_NEXT(f)], o_db = m->ho[WM_PREV(f)];
     m->hv[e1] = a;
     m->hv[e1 + 1] = d;
@@ -55,11 +56,12 @@ static WM_ALWAYS_INLINE void flip(wm_mesh *m, int32_t e, int32_t f, int32_t a, i
     m->vh[c] = e2 + 2;
 }
 
-void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t a, int32_t b, int32_t c, int32_t d)
+void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t t1, int32_t t2, int32_t a, int32_t b, int32_t c,
+                  int32_t d)
 {
     WM_ASSERT(wm_edge_swappable(m, e) && m->ho[e] == f && m->hv[e] == a && m->hv[f] == b &&
-              m->hv[WM_PREV(e)] == c && m->hv[WM_PREV(f)] == d);
-    flip(m, e, f, a, b, c, d);
+              m->hv[WM_PREV(e)] == c && m->hv[WM_PREV(f)] == d && t1 == WM_TRI(e) && t2 == WM_TRI(f));
+    flip(m, e, f, t1, t2, a, b, c, d);
     WM_CHECK_MESH(m);
 }
 
@@ -68,7 +70,7 @@ void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_t
     int32_t f;
     WM_ASSERT(wm_edge_swappable(m, e));
     f = m->ho[e];
-    flip(m, e, f, m->hv[e], m->hv[f], m->hv[WM_PREV(e)], m->hv[WM_PREV(f)]);
+    flip(m, e, f, WM_TRI(e), WM_TRI(f), m->hv[e], m->hv[f], m->hv[WM_PREV(e)], m->hv[WM_PREV(f)]);
     if (touched) {
         touched[0] = WM_TRI(e);
         touched[1] = WM_TRI(f);

@@ -143,9 +143,9 @@ static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
     (void)moved;
 }
 
-void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
+void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n)
 {
-    int32_t i = r->pos[t];
+    WM_ASSERT(i == r->pos[t]);
     WM_ASSERT(e == r->err[t] && (i == -1 || (i >= 0 && i < *n && wm_heap_entries(r)[i].t == t)));
     if (e <= r->params.zeta) {
         if (i >= 0) heap_remove(r, t, i, n);
@@ -185,12 +185,16 @@ void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n)
 /* A slot legalisation changed, measured: in the error bound (heap_n) touch_bound and the heap, else
  * wm_touch.  Every such slot takes this one path, so none that touch_bound left flagged is measured
  * exactly with its flag kept (wm_settle would take an E(T) over zeta there for a bound within it). */
-static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n)
+#define PLACE_UNKNOWN (-2)
+static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n, int32_t place)
 {
     if (heap_n) {
         uint32_t e = touch_bound(r, t);
+        /* t's heap place (pos[t]) when the caller does not know it: on the board a load of pos[] is most
+         * often a refill, and a split's new slots are in no heap and its first is the top */
+        int32_t i = place == PLACE_UNKNOWN ? r->pos[t] : place;
         /* within zeta and in no heap (most new triangles): wm_heap_update would do nothing */
-        if (e > r->params.zeta || r->pos[t] >= 0) wm_heap_update(r, t, e, heap_n);
+        if (e > r->params.zeta || i >= 0) wm_heap_update(r, t, e, i, heap_n);
     } else {
         wm_touch(r, t);
     }
@@ -198,71 +202,85 @@ static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *hea
 
 /* A slot legalisation changed: E(T) is measured once, at the end, for the triangle the slot then
  * holds (a split's triangle that a flip replaces at once was scanned for nothing: a third of the error
- * bound's scans).  Past the list's room, at once.  The list's slots hold p's triangles (the split's, then
- * each flip's two), so while it has room a flip's first slot is in it already (it held p) and its second
- * is not (it did not): wm_legalise appends that one without a search. */
-static void changed(wm_refiner *r, int32_t *list, int32_t *n, int32_t t, int32_t *heap_n)
+ * bound's scans).  Past the list's room, at once.  The list is the split's slots (touched[0..n)) and
+ * then each flip's second (list[0..*ns)): they hold p's triangles, so while it has room a flip's first
+ * slot is in it already (it held p) and its second is not (it did not), and wm_legalise appends that one
+ * without a search. */
+static void changed(wm_refiner *r, const int32_t *touched, int32_t n, int32_t *list, int32_t *ns, int32_t t,
+                    int32_t *heap_n)
 {
-    for (int32_t i = 0; i < *n; i++)
+    for (int32_t i = 0; i < n; i++)
+        if (touched[i] == t) return;
+    for (int32_t i = 0; i < *ns; i++)
         if (list[i] == t) return;
-    if (*n < LEGAL_SLOTS) {
-        list[(*n)++] = t;
+    if (n + *ns < LEGAL_SLOTS) {
+        list[(*ns)++] = t;
         return;
     }
-    measure_slot(r, t, heap_n);
+    measure_slot(r, t, heap_n, PLACE_UNKNOWN);
 }
 
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
 {
     wm_mesh *me = &r->mesh;
-    /* the stack's edges as triangle and corner (edge 3 t + k): its triangle and the half-edge before it
-     * without a division by 3 (on the soft CPU a multiply-high and its fix-ups, each time) */
-    int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0;
-    int8_t corner[LEGAL_STACK];
+    /* the stack's edges (half-edges opposite p), their triangle divided out only for a flip; slots[] the
+     * flips' second slots, after the split's (touched[], distinct, at most 4 = LEGAL_SLOTS at the least)
+     * in the list of slots to measure */
+    int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0, early = 0;
+    WM_ASSERT(n == 2 || n == 3 || n == 4);
     for (int32_t i = 0; i < n; i++) {
-        int32_t t = touched[i], k;
-        slots[ns++] = t; /* a split's slots: distinct, at most 4 = LEGAL_SLOTS at the least */
-        /* p is a corner of each (a split's triangles hold it): the edge opposite it, 3 t + k from corner
-         * k to corner k + 1 (wm_dest), is the one after p's corner */
-        k = me->hv[3 * t] == p ? 1 : (me->hv[3 * t + 1] == p ? 2 : 0);
+        int32_t t = touched[i];
+        /* p's corner in a split's triangles (wm_tri_split: 2 in each; wm_edge_split: 1, 0, 1, 0), and the
+         * edge opposite it, 3 t + k from corner k to corner k + 1 (wm_dest), the one after p's corner */
+        int32_t k = n == 3 ? 0 : (i & 1 ? 1 : 2);
         WM_ASSERT(me->hv[3 * t + (k == 0 ? 2 : k - 1)] == p && me->hv[3 * t + k] != p &&
                   me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p);
-        stack[top] = t, corner[top++] = (int8_t)k; /* n <= 4 < LEGAL_STACK */
+        stack[top++] = 3 * t + k; /* n <= 4 < LEGAL_STACK */
     }
     while (top > 0) {
-        int32_t t1 = stack[--top], k = corner[top], e = 3 * t1 + k, o = me->ho[e], a, b, d, t2, ko;
-        WM_ASSERT(WM_PREV(e) == (k == 0 ? e + 2 : e - 1));
-        if (o < 0 || me->hv[k == 0 ? e + 2 : e - 1] != p) continue;
+        int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2, ko;
+        /* e's triangle still holds p: a flip changes the popped triangle and the one across its edge, which
+         * does not hold p (two triangles of the same three corners cannot both be counter-clockwise), and
+         * a stacked triangle holds p, each on the stack once */
+        WM_ASSERT(me->hv[WM_PREV(e)] == p);
+        if (o < 0) continue;
         t2 = (int32_t)((uint32_t)o / 3u); /* WM_TRI(o), o >= 0: unsigned */
         ko = o - 3 * t2;
         a = me->hv[e];
         b = me->hv[o];
         WM_ASSERT(WM_PREV(o) == (ko == 0 ? o + 2 : o - 1));
         d = me->hv[ko == 0 ? o + 2 : o - 1];
-        if (wm_incircle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d], me->vy[d]) <=
-            0)
+        if (!wm_flip_circle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d],
+                            me->vy[d]))
             continue;
         if (!wm_quad_convex(me, a, b, p, d)) continue; /* wm_edge_swappable's test, its corners at hand */
-        wm_edge_flip(me, e, o, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
-        WM_ASSERT(t1 == WM_TRI(e) && t2 == WM_TRI(o));
-        if (ns < LEGAL_SLOTS) {
+        t1 = (int32_t)((uint32_t)e / 3u);
+        wm_edge_flip(me, e, o, t1, t2, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
+        if (n + ns < LEGAL_SLOTS) {
 #if WM_CHECK
             int in1 = 0, in2 = 0;
+            for (int32_t i = 0; i < n; i++) in1 |= touched[i] == t1, in2 |= touched[i] == t2;
             for (int32_t i = 0; i < ns; i++) in1 |= slots[i] == t1, in2 |= slots[i] == t2;
             WM_ASSERT(in1 && !in2);
 #endif
             slots[ns++] = t2;
         } else {
-            changed(r, slots, &ns, t1, heap_n);
-            changed(r, slots, &ns, t2, heap_n);
+            changed(r, touched, n, slots, &ns, t1, heap_n);
+            changed(r, touched, n, slots, &ns, t2, heap_n);
+            early = 1;
         }
         r->flips++;
         if (top + 2 <= LEGAL_STACK) { /* edges 3 t1 and 3 t2: a -> d and d -> b, opposite p */
-            stack[top] = t1, corner[top++] = 0;
-            stack[top] = t2, corner[top++] = 0;
+            stack[top++] = 3 * t1;
+            stack[top++] = 3 * t2;
         }
     }
     /* The heap orders by (E(T), slot), a total order, so filing the slots now rather than flip by
-     * flip pops the same triangles in the same order. */
-    for (int32_t i = 0; i < ns; i++) measure_slot(r, slots[i], heap_n);
+     * flip pops the same triangles in the same order.  Of the split's slots the first is the error
+     * bound's top (place 0), unless a slot past the list's room was filed already (changed), and the
+     * others are new (pos[] -1, error_bound) but wm_edge_split's T2 (the third). */
+    for (int32_t i = 0; i < n + ns; i++) {
+        int32_t place = i >= n || (i == 2 && n == 4) ? PLACE_UNKNOWN : (i > 0 ? -1 : (early ? PLACE_UNKNOWN : 0));
+        measure_slot(r, i < n ? touched[i] : slots[i - n], heap_n, place);
+    }
 }

@@ -857,7 +857,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
      * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
-        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], &n);
+        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], r->pos[t], &n);
     while (n > 0) {
         int32_t t = wm_heap_entries(r)[0].t, x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
@@ -876,13 +876,16 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
         if (room < 0) return room;
         if (room > 0) break; /* the budget: stop with E_max > zeta */
         te = me->tri_end;
-        rc = on < 0 ? wm_tri_split(me, t, wx, wy, touched, &nt) : wm_edge_split(me, on, wx, wy, touched, &nt);
+        /* the worst sample strictly inside t (every E[k] > 0) or strictly inside edge on (a grid point of
+         * the closed triangle, no corner) */
+        rc = on < 0 ? wm_tri_split_inside(me, t, wx, wy, touched, &nt)
+                    : wm_edge_split_inside(me, on, wx, wy, touched, &nt);
         if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_ERR_MESH; /* cannot happen */
         while (te < me->tri_end) r->pos[te++] = -1; /* slots new to the mesh: in no heap */
         if (!legal)
             for (int32_t i = 0; i < nt; i++) {
                 wm_touch(r, touched[i]);
-                wm_heap_update(r, touched[i], r->err[touched[i]], &n);
+                wm_heap_update(r, touched[i], r->err[touched[i]], r->pos[touched[i]], &n);
             }
         /* the new vertex: corner 2 of touched[0] after a triangle's split, corner 1 after an edge's */
         p = me->hv[3 * touched[0] + (on < 0 ? 2 : 1)];

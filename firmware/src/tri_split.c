@@ -10,20 +10,12 @@
  * T keeps its slot as (a, b, p); N1 = (b, c, p) and N2 = (c, a, p) are new. */
 #include "wm_internal.h"
 
-int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
+/* The split of live t at (x, y), strictly inside it, with room for it.  Each corner's half-edge (vh) is the
+ * one wm_tri_claim of t, N1 and then N2 would leave it, stored once (no load of hv[] back). */
+static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3],
+                                   int32_t *n_touched)
 {
-    int32_t a, b, c, p, n1, n2, o_ab, o_bc, o_ca;
-    if (!wm_tri_live(m, t)) return WM_ERR_ARG;
-    a = m->hv[3 * t];
-    b = m->hv[3 * t + 1];
-    c = m->hv[3 * t + 2];
-    /* a point off the grid is in no triangle, and wm_orient is exact for grid points only */
-    if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_REFUSED;
-    if (wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) <= 0 ||
-        wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
-        wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)
-        return WM_ERR_REFUSED;
-    if (m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) < 2 || m->n_vert >= m->vert_cap) return WM_ERR_CAPACITY;
+    int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2], p, n1, n2, o_ab, o_bc, o_ca;
     o_ab = m->ho[3 * t];
     o_bc = m->ho[3 * t + 1];
     o_ca = m->ho[3 * t + 2];
@@ -40,9 +32,10 @@ int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3]
     wm_link(m, 3 * t + 1, 3 * n1 + 2);  /* b->p with p->b */
     wm_link(m, 3 * n1 + 1, 3 * n2 + 2); /* c->p with p->c */
     wm_link(m, 3 * n2 + 1, 3 * t + 2);  /* a->p with p->a */
-    wm_tri_claim(m, t);
-    wm_tri_claim(m, n1);
-    wm_tri_claim(m, n2);
+    m->vh[a] = 3 * n2 + 1;              /* the claims of t, N1, N2 in turn */
+    m->vh[b] = 3 * n1;
+    m->vh[c] = 3 * n2;
+    m->vh[p] = 3 * n2 + 2;
     if (touched) {
         touched[0] = t;
         touched[1] = n1;
@@ -50,5 +43,43 @@ int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3]
     }
     if (n_touched) *n_touched = 3;
     WM_CHECK_MESH(m);
+}
+
+static int room(const wm_mesh *m)
+{
+    return m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) >= 2 && m->n_vert < m->vert_cap;
+}
+
+int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
+{
+    int32_t a, b, c;
+    if (!wm_tri_live(m, t)) return WM_ERR_ARG;
+    a = m->hv[3 * t];
+    b = m->hv[3 * t + 1];
+    c = m->hv[3 * t + 2];
+    /* a point off the grid is in no triangle, and wm_orient is exact for grid points only */
+    if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_REFUSED;
+    if (wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) <= 0 ||
+        wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
+        wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)
+        return WM_ERR_REFUSED;
+    if (!room(m)) return WM_ERR_CAPACITY;
+    split(m, t, x, y, touched, n_touched);
+    return WM_OK;
+}
+
+int wm_tri_split_inside(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
+{
+    WM_ASSERT(wm_tri_live(m, t) && x >= 0 && y >= 0 && x < m->width && y < m->height);
+#if WM_CHECK
+    {
+        int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2];
+        WM_ASSERT(wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) > 0 &&
+                  wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) > 0 &&
+                  wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) > 0);
+    }
+#endif
+    if (!room(m)) return WM_ERR_CAPACITY;
+    split(m, t, x, y, touched, n_touched);
     return WM_OK;
 }

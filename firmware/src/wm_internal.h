@@ -121,8 +121,16 @@ static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
 void wm_tri_claim(wm_mesh *m, int32_t t);
 /* wm_edge_swap of an edge the caller has found wm_edge_swappable (the mesh unchanged since). */
 void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched);
-/* The same with its half-edges and corners known: e = a->b in (a, b, c), f = ho[e] in (b, a, d). */
-void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t a, int32_t b, int32_t c, int32_t d);
+/* The same with its half-edges, triangles and corners known: e = a->b in (a, b, c), slot t1 = WM_TRI(e),
+ * f = ho[e] in (b, a, d), slot t2 = WM_TRI(f). */
+void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t t1, int32_t t2, int32_t a, int32_t b, int32_t c,
+                  int32_t d);
+
+/* wm_tri_split of a point (x, y) the caller knows strictly inside live t, and wm_edge_split of one it knows
+ * strictly inside edge e (the error bound's worst samples): the same, without the tests of the point
+ * (WM_ERR_CAPACITY still). */
+int wm_tri_split_inside(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched);
+int wm_edge_split_inside(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched);
 
 /* Rotation around a vertex: e is a half-edge leaving v.  Counter-clockwise: the next half-edge
  * leaving v, or -1 at the border.  wm_fan_first: the most clockwise half-edge leaving v (vh[v] for an
@@ -471,6 +479,36 @@ static inline int wm_incircle(int32_t ax, int32_t ay, int32_t bx, int32_t by, in
     return s > -t3 ? 1 : (s < -t3 ? -1 : 0);
 }
 
+/* wm_incircle(a, b, p, d) > 0 for the edge a-b between the counter-clockwise (a, b, p) and (b, a, d) (the
+ * legalisation's test), by the angles at p and d (Lawson's: d lies strictly inside the circle through a,
+ * b, p iff they sum to more than pi, as p and d lie on either side of a-b).  With cos and sin of each
+ * times its two sides' lengths (dot and cross products, all below 2^31: differences below 2^15), the sum
+ * is more than pi iff sin(alpha + beta) < 0: decided by the two dot products alone when they have the
+ * same sign (both angles at most pi / 2: not; both above it: inside), else by the sign of
+ * sin_p cos_d + cos_p sin_d in 64 bits (each product below 2^62).  Most edges are refused by the dot
+ * products: four products, where the determinant takes twelve and three 64-bit ones. */
+static inline int wm_flip_circle(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t px, int32_t py,
+                                 int32_t dx, int32_t dy)
+{
+    int32_t pax = ax - px, pay = ay - py, pbx = bx - px, pby = by - py;
+    int32_t dax = ax - dx, day = ay - dy, dbx = bx - dx, dby = by - dy;
+    int32_t cp = pax * pbx + pay * pby, cd = dax * dbx + day * dby, r;
+    int64_t sin_sum; /* sin(alpha + beta) times the four sides' lengths */
+    WM_ASSERT(pax > -32768 && pax < 32768 && pay > -32768 && pay < 32768 && pbx > -32768 && pbx < 32768 &&
+              pby > -32768 && pby < 32768 && dax > -32768 && dax < 32768 && day > -32768 && day < 32768 &&
+              dbx > -32768 && dbx < 32768 && dby > -32768 && dby < 32768);
+    /* (a, b, p) and (b, a, d) counter-clockwise */
+    WM_ASSERT(pax * pby - pay * pbx > 0 && dbx * day - dby * dax > 0);
+    if ((cp ^ cd) >= 0) { /* the same sign: both at most pi / 2, or both above it */
+        r = cp < 0;
+    } else {
+        sin_sum = (int64_t)(pax * pby - pay * pbx) * cd + (int64_t)cp * (dbx * day - dby * dax);
+        r = sin_sum < 0;
+    }
+    WM_ASSERT(r == (wm_incircle(ax, ay, bx, by, px, py, dx, dy) > 0));
+    return r;
+}
+
 /* The normal metric's slope factor r of a triangle (sqrt(1 + g^2) in Q16.16: tri_error.c) is the same
  * for every measure of the triangle.  A caller that measures one triangle more than once (a point test,
  * then its scan) hands each the same kept word, 0 at first: the first measure that needs r leaves it
@@ -691,10 +729,13 @@ static inline void wm_forget_class(wm_refiner *r, int32_t t)
 }
 /* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles
  * touched[0..n) until every such edge is locally Delaunay (hmm's design), then E(T) of touched[] and
- * of every flipped triangle, once each, as wm_touch.  heap_n: the error bound's heap (updated), or NULL. */
+ * of every flipped triangle, once each, as wm_touch.  touched[] and n as wm_tri_split or wm_edge_split
+ * left them, p the split's vertex.  heap_n: the error bound's heap (updated; touched[0] its top, the
+ * others but wm_edge_split's third new slots), or NULL. */
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n);
-/* The error bound's heap (mesh_state.c): re-files t after its E(T) changed to e (err[t]). */
-void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t *n);
+/* The error bound's heap (mesh_state.c): re-files t after its E(T) changed to e (err[t]); i = pos[t], its
+ * place (-1: in no heap). */
+void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n);
 /* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
  * E(T) <= zeta; returns WM_OK. */
 int wm_decimate(wm_refiner *r, wm_level_stats *st);
