@@ -259,12 +259,28 @@ int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, i
 /* A vertex's class, kept in r->vapex from pass to pass: wm_touch forgets it (CLS_UNKNOWN) for the
  * three vertices of every triangle an operator makes or changes, so a class that is still there
  * belongs to the star the vertex has now.  A removal that failed fails again on the same star (its
- * plan and its bound depend on nothing else): CLS_REMOVE_FAILED skips it until the star changes. */
+ * plan and its bound depend on nothing else): CLS_REMOVE_FAILED skips it until the star changes.
+ *
+ * A collapse of v - u depends on the stars of v and u alone (their classes, e2's test, the candidates
+ * and the bound), and is the same from either end: the test |e2(v) . e2(u)| is symmetric, the
+ * candidates are the same points (the inner ones nearest the midpoint, then both ends) and a candidate
+ * is taken when its plan is valid and every one of its triangles within the bound, whatever their
+ * order.  So a 4.33 vertex u whose visit saw every neighbour and had every collapse refused by the
+ * stars (not the storage) is CLS_COLLAPSE_FAILED: while it stays so, the pair u - v is refused with
+ * the stars u and v have now, and v's visit skips u (no class, test or collapse), unless v's own star
+ * may have changed since u's visit:
+ *   - v's class forgotten and found again at v's own visit (was CLS_UNKNOWN there): no skips in that
+ *     visit, which tries every pair itself;
+ *   - v's class found again by a neighbour's visit (the loop below): unfail_ring makes v's
+ *     CLS_COLLAPSE_FAILED neighbours CLS_COLLAPSE.
+ * A CLS_COLLAPSE_FAILED vertex's own visit is a 4.33 vertex's (its neighbours' stars may have changed;
+ * its class is still its star's). */
 #define CLS_UNKNOWN WM_CLASS_UNKNOWN
 #define CLS_NONE 0
-#define CLS_REMOVE 1        /* 4.32 */
-#define CLS_COLLAPSE 2      /* 4.33 */
-#define CLS_REMOVE_FAILED 3 /* 4.32, and its removal was refused on this star */
+#define CLS_REMOVE 1          /* 4.32 */
+#define CLS_COLLAPSE 2        /* 4.33 */
+#define CLS_REMOVE_FAILED 3   /* 4.32, and its removal was refused on this star */
+#define CLS_COLLAPSE_FAILED 4 /* 4.33, and its visit's collapses were refused (above) */
 
 struct eig {
     int64_t r[6], lambda[3], vec[9];
@@ -446,7 +462,8 @@ static int try_remove(wm_refiner *r, int32_t v)
     return 1;
 }
 
-/* Collapses the edge e = v -> w (see the head of this file for the collapse point). */
+/* Collapses the edge e = v -> w (see the head of this file for the collapse point): 1 when it did, 0
+ * when the stars of v and w refused it (their plans or their bound), -1 when the storage did. */
 static int try_collapse(wm_refiner *r, int32_t e)
 {
     wm_mesh *me = &r->mesh;
@@ -470,7 +487,7 @@ static int try_collapse(wm_refiner *r, int32_t e)
         if (wm_collapse_plan_at(me, &stars, cx[i], cy[i], tris, &nt) != WM_OK) continue;
         WM_ASSERT(wm_edge_collapse_plan(me, e, cx[i], cy[i], ws, &k) == WM_OK && k == nt);
         if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0)) continue;
-        if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return 0; /* capacity */
+        if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return -1; /* capacity */
         known(r, touched, k, tris, nt, cx[i], cy[i], es, ws);
         return 1;
     }
@@ -487,7 +504,7 @@ static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g)
 {
     struct wm_ecache_slot *c = &r->ecache[v & r->cache_mask];
     int8_t cls;
-    if (r->vapex[v] == CLS_COLLAPSE && c->v == v) {
+    if ((r->vapex[v] == CLS_COLLAPSE || r->vapex[v] == CLS_COLLAPSE_FAILED) && c->v == v) {
         for (int i = 0; i < 3; i++) g->vec[3 + i] = c->e2[i];
         return CLS_COLLAPSE;
     }
@@ -502,6 +519,42 @@ static int8_t classify_cached(wm_refiner *r, int32_t v, struct eig *g)
     return cls;
 }
 
+/* v has a class again, found by a neighbour's visit, after its star changed: a neighbour of v whose
+ * collapses were refused with v's old star (CLS_COLLAPSE_FAILED) is a plain 4.33 vertex again. */
+static void unfail_ring(wm_refiner *r, int32_t v)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t first = wm_fan_first(me, v), h = first, last = first;
+    do {
+        int32_t u = wm_dest(me, h);
+        if (r->vapex[u] == CLS_COLLAPSE_FAILED) r->vapex[u] = CLS_COLLAPSE;
+        last = h;
+        h = wm_rot_ccw(me, h);
+    } while (h >= 0 && h != first);
+    last = me->hv[WM_PREV(last)]; /* on a side: the last neighbour, whose edge arrives at v */
+    if (h < 0 && r->vapex[last] == CLS_COLLAPSE_FAILED) r->vapex[last] = CLS_COLLAPSE;
+}
+
+#if WM_CHECK
+/* Checked builds: the pair v - u (edge e) that v's visit skips is refused again: u is 4.33 and either
+ * e2's test or every collapse candidate refuses it (a collapse made here fails the assert). */
+static int refused_again(wm_refiner *r, int32_t e, int32_t u, const struct eig *gv, uint64_t dc)
+{
+    struct eig gw;
+    int64_t dot = 0;
+    if (classify(r, u, &gw) != CLS_COLLAPSE) return 0;
+    for (int c = 0; c < 3; c++) dot += gv->vec[3 + c] * gw.vec[3 + c];
+    if ((dot < 0 ? (uint64_t)0 - (uint64_t)dot : (uint64_t)dot) <= dc) return 1;
+    return try_collapse(r, e) <= 0;
+}
+#endif
+
+void wm_reduce_forget_refusals(wm_refiner *r)
+{
+    for (int32_t v = 0; v < r->mesh.vert_end; v++)
+        if (r->vapex[v] == CLS_COLLAPSE_FAILED) r->vapex[v] = CLS_COLLAPSE;
+}
+
 int32_t wm_reduce(wm_refiner *r)
 {
     wm_mesh *me = &r->mesh;
@@ -509,13 +562,14 @@ int32_t wm_reduce(wm_refiner *r)
     uint64_t dc = (uint64_t)r->params.delta_c << 44; /* Q16.16 -> Q60, the scale of e21 . e22 */
     for (int32_t v = 0; v < me->vert_end; v++) {
         struct eig gv, gw;
-        int32_t out[WM_MAX_RING + 1], k = 0, first, h;
-        int8_t cls;
-        if (me->vx[v] == WM_FREE || r->vapex[v] == CLS_NONE || r->vapex[v] == CLS_REMOVE_FAILED) continue;
+        int32_t out[WM_MAX_RING + 1], k = 0, first, h, refused = 1, whole;
+        int8_t cls, was = r->vapex[v];
+        if (me->vx[v] == WM_FREE || was == CLS_NONE || was == CLS_REMOVE_FAILED) continue;
+        if (was == CLS_COLLAPSE_FAILED) r->vapex[v] = CLS_COLLAPSE;
         /* a 4.32 class still there is its current star's (a neighbour's test below found it; the
          * removal needs no eigenvectors) */
-        cls = r->vapex[v] == CLS_REMOVE ? CLS_REMOVE : classify_cached(r, v, &gv);
-        r->vapex[v] = cls;
+        cls = was == CLS_REMOVE ? CLS_REMOVE : classify_cached(r, v, &gv);
+        if (was == CLS_UNKNOWN) r->vapex[v] = cls;
         if (cls == CLS_REMOVE) {
             if (try_remove(r, v)) removed++;
             else r->vapex[v] = CLS_REMOVE_FAILED;
@@ -529,6 +583,7 @@ int32_t wm_reduce(wm_refiner *r)
             out[k++] = h;
             h = wm_rot_ccw(me, h);
         } while (h >= 0 && h != first && k < WM_MAX_RING);
+        whole = h < 0 || h == first; /* every neighbour, none left out by WM_MAX_RING */
         if (h < 0) {
             out[k] = WM_PREV(out[k - 1]);
             k++;
@@ -537,17 +592,33 @@ int32_t wm_reduce(wm_refiner *r)
             int32_t e = out[i], u = me->hv[e] == v ? wm_dest(me, e) : me->hv[e];
             int64_t dot = 0;
             uint64_t adot;
-            if (r->vapex[u] == CLS_NONE || r->vapex[u] == CLS_REMOVE || r->vapex[u] == CLS_REMOVE_FAILED) continue;
+            int8_t a = r->vapex[u];
+            int done;
+            if (a == CLS_NONE || a == CLS_REMOVE || a == CLS_REMOVE_FAILED) continue;
+            if (a == CLS_COLLAPSE_FAILED && was != CLS_UNKNOWN) {
+                WM_ASSERT(refused_again(r, e, u, &gv, dc)); /* refused from u's end */
+                continue;
+            }
             cls = classify_cached(r, u, &gw);
-            r->vapex[u] = cls;
+            if (a == CLS_UNKNOWN) {
+                r->vapex[u] = cls;
+                if (cls == CLS_COLLAPSE) unfail_ring(r, u);
+            }
             if (cls != CLS_COLLAPSE) continue;
             for (int c = 0; c < 3; c++) dot += gv.vec[3 + c] * gw.vec[3 + c]; /* Q60, below 3 2^60 */
             adot = dot < 0 ? (uint64_t)0 - (uint64_t)dot : (uint64_t)dot;
             if (adot <= dc) continue;
-            if (try_collapse(r, e)) {
+            done = try_collapse(r, e);
+            if (done > 0) {
                 removed++;
+                refused = 0;
                 break;
             }
+            if (done < 0) refused = 0;
+        }
+        /* every neighbour seen and every collapse refused by the stars */
+        if (r->vapex[v] == CLS_COLLAPSE && refused && whole) {
+            r->vapex[v] = CLS_COLLAPSE_FAILED;
         }
     }
     r->removals += removed;

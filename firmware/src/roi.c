@@ -82,6 +82,7 @@ int wm_refine_set_roi(wm_refiner *r, const int32_t *rows)
             if (row[px + 1] - row[px] != 0 && row[px + 1] - row[px] != 1) return WM_ERR_ARG;
     }
     r->roi = rows;
+    wm_reduce_forget_refusals(r);
     for (int32_t t = 0; t < me->tri_end; t++) {
         int32_t x[3], y[3], wx, wy;
         if (me->hv[3 * t] < 0) continue;
