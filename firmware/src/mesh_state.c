@@ -20,13 +20,14 @@ void wm_touch(wm_refiner *r, int32_t t)
  * err[t] = its vertical ev, an upper bound, and WM_F_MEASURE.  Nothing in the bound or the decimation
  * reads the E(T) of a triangle within zeta, and most of them go again in a later split's flips or a
  * removal; wm_settle measures those left at the end as far as E_max needs them.  With a holes mask or a
- * region of interest, wm_touch. */
-static uint32_t touch_bound(wm_refiner *r, int32_t t)
+ * region of interest (masked: the caller's r->roi || r->field.mask), wm_touch. */
+static uint32_t touch_bound(wm_refiner *r, int32_t t, int masked)
 {
     int32_t x[3], y[3], wx, wy;
     int exact;
     uint32_t e;
-    if (r->roi || r->field.mask) {
+    WM_ASSERT(masked == (r->roi || r->field.mask));
+    if (masked) {
         wm_touch(r, t);
         return r->err[t];
     }
@@ -184,12 +185,15 @@ void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n)
 
 /* A slot legalisation changed, measured: in the error bound (heap_n) touch_bound and the heap, else
  * wm_touch.  Every such slot takes this one path, so none that touch_bound left flagged is measured
- * exactly with its flag kept (wm_settle would take an E(T) over zeta there for a bound within it). */
+ * exactly with its flag kept (wm_settle would take an E(T) over zeta there for a bound within it).
+ * masked: r->roi || r->field.mask, taken once a legalisation (on the board the two loads and the branch
+ * on them stalled every slot: a store to err[] or tflag[] might have changed them, for all the compiler
+ * knew). */
 #define PLACE_UNKNOWN (-2)
-static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n, int32_t place)
+static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *heap_n, int masked, int32_t place)
 {
     if (heap_n) {
-        uint32_t e = touch_bound(r, t);
+        uint32_t e = touch_bound(r, t, masked);
         /* t's heap place (pos[t]) when the caller does not know it: on the board a load of pos[] is most
          * often a refill, and a split's new slots are in no heap and its first is the top */
         int32_t i = place == PLACE_UNKNOWN ? r->pos[t] : place;
@@ -207,7 +211,7 @@ static WM_ALWAYS_INLINE void measure_slot(wm_refiner *r, int32_t t, int32_t *hea
  * slot is in it already (it held p) and its second is not (it did not), and wm_legalise appends that one
  * without a search. */
 static void changed(wm_refiner *r, const int32_t *touched, int32_t n, int32_t *list, int32_t *ns, int32_t t,
-                    int32_t *heap_n)
+                    int32_t *heap_n, int masked)
 {
     for (int32_t i = 0; i < n; i++)
         if (touched[i] == t) return;
@@ -217,7 +221,7 @@ static void changed(wm_refiner *r, const int32_t *touched, int32_t n, int32_t *l
         list[(*ns)++] = t;
         return;
     }
-    measure_slot(r, t, heap_n, PLACE_UNKNOWN);
+    measure_slot(r, t, heap_n, masked, PLACE_UNKNOWN);
 }
 
 void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, int32_t *heap_n)
@@ -227,6 +231,7 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
      * flips' second slots, after the split's (touched[], distinct, at most 4 = LEGAL_SLOTS at the least)
      * in the list of slots to measure */
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0, early = 0;
+    int masked = r->roi || r->field.mask;
     WM_ASSERT(n == 2 || n == 3 || n == 4);
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
@@ -265,8 +270,8 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
 #endif
             slots[ns++] = t2;
         } else {
-            changed(r, touched, n, slots, &ns, t1, heap_n);
-            changed(r, touched, n, slots, &ns, t2, heap_n);
+            changed(r, touched, n, slots, &ns, t1, heap_n, masked);
+            changed(r, touched, n, slots, &ns, t2, heap_n, masked);
             early = 1;
         }
         r->flips++;
@@ -281,6 +286,6 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
      * others are new (pos[] -1, error_bound) but wm_edge_split's T2 (the third). */
     for (int32_t i = 0; i < n + ns; i++) {
         int32_t place = i >= n || (i == 2 && n == 4) ? PLACE_UNKNOWN : (i > 0 ? -1 : (early ? PLACE_UNKNOWN : 0));
-        measure_slot(r, i < n ? touched[i] : slots[i - n], heap_n, place);
+        measure_slot(r, i < n ? touched[i] : slots[i - n], heap_n, masked, place);
     }
 }
