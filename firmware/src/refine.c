@@ -741,11 +741,6 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
     return 1;
 }
 
-/* regularise keeps t's swap number (pt) from one of its edges to the next, where only a swap of t changes
- * it, on the soft CPU (its load waits for the SDRAM); natively it loads it again (kept, it costs more
- * instructions than it saves: registers spilled around the inlined try_swap). */
-#define KEEP_T WM_NARROW_DIV
-
 #if WM_CHECK
 /* Whether try_swap would make the swap of e, without making it (the checking build's test of an edge
  * regularise passes over). */
@@ -808,10 +803,8 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
         int32_t swaps = 0;
         for (int32_t t = 0; t < me->tri_end; t++) {
             uint8_t ft = me->tflag[t]; /* its edges to be examined: taken */
-            int32_t pt = -1; /* -1 < first: no swap back */
             if (!(ft & WM_F_EXAMINE)) continue;
             me->tflag[t] = (uint8_t)(ft & ~WM_F_EXAMINE);
-            if (KEEP_T && swept) pt = r->pos[t];
             for (int32_t i = 0; i < 3; i++) {
                 int32_t e = 3 * t + i, o = me->ho[e], u;
                 /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose mark it is;
@@ -823,10 +816,16 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                     WM_ASSERT(!swap_made(r, e, alpha, am, emax, wd)); /* refused as it stands */
                     continue;
                 }
-                if (!KEEP_T && swept) pt = r->pos[t];
-                if (pt >= first && pt == r->pos[u]) { /* a swap back */
-                    if (pt & 1) continue; /* refused */
-                    if (swap_back(r, e, alpha, pt)) goto made;
+                /* A swap back: t and u both still the swap's (its number in pos[], while the levels run),
+                 * t its lower slot (the turn's), so the edge is t's edge 1 (make_swap's d->c): the one
+                 * edge the two share, and pos[] is read for it alone. */
+                WM_ASSERT(i == 1 || !swept || r->pos[t] < first || r->pos[t] != r->pos[u]);
+                if (i == 1 && swept) {
+                    int32_t pt = r->pos[t];
+                    if (pt >= first && pt == r->pos[u]) {
+                        if (pt & 1) continue; /* refused */
+                        if (swap_back(r, e, alpha, pt)) goto made;
+                    }
                 }
                 if (!try_swap(r, e, alpha, am, emax, wd)) continue;
             made:
@@ -835,7 +834,6 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
                 mark_edges(me, u);
                 ft = me->tflag[t];
                 me->tflag[t] = (uint8_t)(ft & ~((WM_F_EXAMINE0 << (i + 1)) & WM_F_EXAMINE));
-                if (KEEP_T && swept) pt = r->pos[t];
                 swaps++;
             }
         }
