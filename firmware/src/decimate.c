@@ -75,6 +75,8 @@ struct fans {
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
     int32_t ex, ey;
     int32_t words;                            /* 1: 0 < ex, ey < 32 (far_above's 32-bit path) */
+    uint32_t mx, my;                          /* then 2^ex - 1, 2^ey - 1 (wm_scaled_up's rounding terms) */
+    int32_t vertical;                         /* 1: the vertical metric */
     int32_t j;                                /* the fan triangle v lies in: (p_a, p_j, p_j+1) */
 };
 
@@ -114,7 +116,6 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, cons
     int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
     int32_t jx = co->jx - co->ax, kx = co->kx - co->ax, jy = co->jy - co->ay, ky = co->ky - co->ay;
     uint64_t A, B, T;
-    if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
 #if WM_NARROW_DIV
     {
         /* differences of 16-bit samples times differences of grid coordinates (at most 32766): |z| <= 65535,
@@ -134,23 +135,41 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, cons
         if (q->words) {
             /* wm_scaled_up's word-by-word shifts with 0 < e < 32 known (first_fit), when A and B are below
              * 2^31 (their high words 0, the low ones below 2^31) */
-            uint64_t u = (uint64_t)na * q->sx + ((1u << q->ex) - 1u),
-                     w = (uint64_t)nb * q->sy + ((1u << q->ey) - 1u);
+            uint64_t u = (uint64_t)na * q->sx + q->mx, w = (uint64_t)nb * q->sy + q->my;
             uint32_t ulo = (uint32_t)u, uhi = (uint32_t)(u >> 32), wlo = (uint32_t)w, whi = (uint32_t)(w >> 32);
             uint32_t a32 = (ulo >> q->ex) | (uhi << (32 - q->ex)), b32 = (wlo >> q->ey) | (whi << (32 - q->ey));
             WM_ASSERT(q->ex > 0 && q->ex < 32 && q->ey > 0 && q->ey < 32);
+            WM_ASSERT(q->mx == (1u << q->ex) - 1u && q->my == (1u << q->ey) - 1u);
             if (((uhi >> q->ex) | (whi >> q->ey)) == 0 && (a32 | b32) < (1u << 31)) {
+                /* the bound A + B + D >= T below, here at once (most calls end in it): s = A + B below
+                 * 2^32, and zeta S < 2^16 av for S = s + D < 2^31 by words, with av < 2^46 (v in the
+                 * closed triangle: av <= (2^16 - 1) D, D < 2^30), so its high word
+                 * av >> 16 < 2^30: X < Y for X = 2^32 hx + lx, Y = 2^32 hy + ly is hx < hy + (lx < ly) */
+                uint32_t s = a32 + b32, S = s + (uint32_t)D;
                 WM_ASSERT(a32 == wm_scaled_up(na, q->sx, q->ex) && b32 == wm_scaled_up(nb, q->sy, q->ey));
+                if (s < (1u << 31) && S < (1u << 31)) {
+                    uint64_t p = (uint64_t)q->zeta * S;
+                    uint32_t hx = (uint32_t)(p >> 32), lx = (uint32_t)p;
+                    uint32_t hy = (uint32_t)(av >> 16), ly = (uint32_t)av << 16;
+                    WM_ASSERT(av >> 46 == 0);
+                    WM_ASSERT((hx < hy + (lx < ly)) == (p < (av << 16)));
+                    if (hx < hy + (lx < ly)) {
+                        WM_ASSERT(wm_hypot_up(wm_hypot_up(a32, b32), (uint64_t)D) <= S);
+                        return 1;
+                    }
+                }
                 A = a32, B = b32; /* the 32-bit bound below */
                 have = 1;
             }
         }
         if (!have) {
+            if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
             A = wm_scaled_up(na, q->sx, q->ex);
             B = wm_scaled_up(nb, q->sy, q->ey);
         }
     }
 #else
+    if (q->ex < 0 || q->ey < 0) return 0; /* not in wm_frac_mul's range */
     {
         int64_t Na = (int64_t)z1 * ky - (int64_t)z2 * jy, Nb = (int64_t)jx * z2 - (int64_t)kx * z1;
         A = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), q->sx, q->ex);
@@ -220,7 +239,6 @@ WM_NOINLINE_32 static int other_above(const struct fans *q, struct tested *t, in
 
 static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
 {
-    const wm_refiner *r = t->r;
     int32_t n = q->n, k, j, fk, fj, e0, D;
     int64_t V;
     uint64_t av = 0;
@@ -303,7 +321,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
 #if WM_NARROW_DIV
     above:
 #endif
-        if (r->params.metric == WM_METRIC_VERTICAL) return 0;
+        if (q->vertical) return 0;
         q->D = D, q->av = av;
         return !normal_above(q, t, a, j, k, &c);
     }
@@ -416,6 +434,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
     wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
     q.words = WM_NARROW_DIV && q.ex > 0 && q.ex < 32 && q.ey > 0 && q.ey < 32;
+    q.mx = q.words ? (1u << q.ex) - 1u : 0, q.my = q.words ? (1u << q.ey) - 1u : 0;
+    q.vertical = r->params.metric == WM_METRIC_VERTICAL;
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
