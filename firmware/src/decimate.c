@@ -70,8 +70,6 @@ struct fans {
     int32_t quick;                            /* 1: no holes mask and a bound (zeta): the test applies */
     uint32_t zeta;
     uint32_t zh, zl;                          /* zeta's high and low 16 bits (the 32-bit V's test) */
-    int64_t D;                                /* the fan triangle's, for normal_above */
-    uint64_t av;                              /* v's |V| against it */
     uint32_t sx, sy;                          /* the normal metric's slope scales (wm_slope_scale) */
     int32_t ex, ey;
     int32_t words;                            /* 1: 0 < ex, ey < 32 (far_above's 32-bit path) */
@@ -109,10 +107,9 @@ static WM_ALWAYS_INLINE uint32_t chord(uint32_t lo)
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, const struct corners *co)
+static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, const struct corners *co, int64_t D,
+                     uint64_t av)
 {
-    int64_t D = q->D;
-    uint64_t av = q->av;
     int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
     int32_t jx = co->jx - co->ax, kx = co->kx - co->ax, jy = co->jy - co->ay, ky = co->ky - co->ay;
     uint64_t A, B, T;
@@ -216,14 +213,14 @@ static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, i
 }
 
 static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k,
-                        const struct corners *co)
+                        const struct corners *co, int64_t D, uint64_t av)
 {
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
     int above;
-    if (far_above(q, a, j, k, co)) return 1;
+    if (far_above(q, a, j, k, co, D, av)) return 1;
     fan_corners(q, a, j, k, x, y);
-    above = wm_point_above_v(&r->field, &r->params, x, y, q->D, q->av, r->params.zeta, &t->kept);
+    above = wm_point_above_v(&r->field, &r->params, x, y, D, av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
         for (int c = 0; c < 3; c++) t->x[c] = x[c], t->y[c] = y[c];
     return above;
@@ -322,8 +319,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     above:
 #endif
         if (q->vertical) return 0;
-        q->D = D, q->av = av;
-        return !normal_above(q, t, a, j, k, &c);
+        return !normal_above(q, t, a, j, k, &c, D, av);
     }
     return !other_above(q, t, a, j, k);
 }
