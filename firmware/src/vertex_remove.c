@@ -127,9 +127,9 @@ static int in_circle32(const struct circle32 *q, int32_t dx, int32_t dy)
     return q->k0 * (ex * ex + ey * ey) + q->k1 * ex < -(q->k2 * ey);
 }
 
-static int64_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
+static int32_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
 {
-    return wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
+    return (int32_t)wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
 }
 
 /* 1 when (px, py) lies in the closed counter-clockwise triangle. */
@@ -191,7 +191,10 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                        int32_t *big)
 {
     int32_t poly[WM_MAX_RING], nt = 0, at = 0;
-    int64_t most = -1, d;
+    /* twice a triangle's area in 32 bits, as wm_orient works it out (below 2^31: coordinates below
+     * WM_MAX_SIDE): the largest so far (most), each ear's (area[]) and the probe's side (o) compared and
+     * stored as one word on the soft CPU, not a pair */
+    int32_t most = -1, d;
     int done = 0;
     if (n < 3 || n > WM_MAX_RING || apex >= n) return WM_ERR_ARG;
     if (apex >= 0) {
@@ -203,7 +206,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             int32_t c, cx, cy;
             i = i + 1 == n ? 0 : i + 1;
             c = ring[i], cx = m->vx[c], cy = m->vy[c];
-            d = wm_orient(ax, ay, bx, by, cx, cy);
+            d = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
             if (d <= 0) return WM_ERR_REFUSED;
             if (d > most) most = d, at = nt;
             tris[3 * nt] = a, tris[3 * nt + 1] = b, tris[3 * nt + 2] = c;
@@ -228,7 +231,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
      * every ear each round: the first Delaunay ear in polygon order, else the first valid one. */
     {
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
-        int64_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
+        int32_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
         int32_t left = n, i0 = 0, x0, x1, y0, y1, small;
         /* bit i: the probe's point is not on the outer side of the polygon's edge from position i to nx[i],
@@ -262,7 +265,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 WM_ASSERT(alive[i] && (c == 0 || i > pv[i]));
                 ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
-                    area[i] = wm_orient(ax, ay, bx, by, cx, cy);
+                    area[i] = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
                     if (area[i] <= 0) continue;
                     ok[i] = 3;
                     blk[i] = -1;
@@ -312,7 +315,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             if (pr && pr->bad && wm_tri_bad(pr->bad, n, pv[best], best, nx[best])) return WM_ERR_REFUSED;
             if (pr && !done) {
                 int32_t ia = pv[best], ic = nx[best];
-                int64_t o = wm_orient(px[ic], py[ic], px[ia], py[ia], pr->px, pr->py);
+                int32_t o = (int32_t)wm_orient(px[ic], py[ic], px[ia], py[ia], pr->px, pr->py);
                 int in = (side >> ia & 1) && (side >> best & 1) && o >= 0;
                 WM_ASSERT(in == holds(px[ia], py[ia], px[best], py[best], px[ic], py[ic], pr->px, pr->py));
                 if (in) {
