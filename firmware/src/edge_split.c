@@ -69,26 +69,21 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, 
     WM_CHECK_MESH(m);
 }
 
-static int room(const wm_mesh *m, int32_t f)
+/* (x, y) strictly between e's ends a and b on the segment. */
+static int strictly_inside(const wm_mesh *m, int32_t e, int32_t x, int32_t y)
 {
-    return m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) >= (f >= 0 ? 2 : 1) && m->n_vert < m->vert_cap;
+    int32_t a = m->hv[e], b = wm_dest(m, e);
+    int64_t ax = m->vx[a], ay = m->vy[a], dx = m->vx[b] - ax, dy = m->vy[b] - ay, px = x - ax, py = y - ay;
+    return px * dy - py * dx == 0 && px * dx + py * dy > 0 && px * dx + py * dy < dx * dx + dy * dy;
 }
 
 int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
 {
-    int32_t f, a, b;
-    int32_t ax, ay, bx, by;
-    int64_t dx, dy, px, py;
+    int32_t f;
     if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
-    a = m->hv[e];
-    b = wm_dest(m, e);
-    ax = m->vx[a], ay = m->vy[a], bx = m->vx[b], by = m->vy[b];
-    /* (x, y) strictly between a and b on the segment. */
-    dx = (int64_t)bx - ax, dy = (int64_t)by - ay, px = (int64_t)x - ax, py = (int64_t)y - ay;
-    if (px * dy - py * dx != 0) return WM_ERR_REFUSED;
-    if (px * dx + py * dy <= 0 || px * dx + py * dy >= dx * dx + dy * dy) return WM_ERR_REFUSED;
+    if (!strictly_inside(m, e, x, y)) return WM_ERR_REFUSED;
     f = m->ho[e];
-    if (!room(m, f)) return WM_ERR_CAPACITY;
+    if (!wm_room_for_split(m, f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
     split(m, e, f, x, y, touched, n_touched);
     return WM_OK;
 }
@@ -96,15 +91,8 @@ int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4
 int wm_edge_split_inside(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
 {
     int32_t f = m->ho[e];
-    WM_ASSERT(e >= 0 && e < 3 * m->tri_end && m->hv[3 * WM_TRI(e)] >= 0);
-#if WM_CHECK
-    {
-        int64_t ax = m->vx[m->hv[e]], ay = m->vy[m->hv[e]], dx = m->vx[wm_dest(m, e)] - ax,
-                dy = m->vy[wm_dest(m, e)] - ay, px = x - ax, py = y - ay;
-        WM_ASSERT(px * dy - py * dx == 0 && px * dx + py * dy > 0 && px * dx + py * dy < dx * dx + dy * dy);
-    }
-#endif
-    if (!room(m, f)) return WM_ERR_CAPACITY;
+    WM_ASSERT(e >= 0 && e < 3 * m->tri_end && m->hv[3 * WM_TRI(e)] >= 0 && strictly_inside(m, e, x, y));
+    if (!wm_room_for_split(m, f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
     split(m, e, f, x, y, touched, n_touched);
     return WM_OK;
 }

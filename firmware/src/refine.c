@@ -855,7 +855,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
      * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
-        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], r->pos[t], &n);
+        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], -1, &n); /* pos[t] */
     while (n > 0) {
         int32_t t = wm_heap_entries(r)[0].t, x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];

@@ -45,41 +45,29 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t t, int32_t x, int32_t y, 
     WM_CHECK_MESH(m);
 }
 
-static int room(const wm_mesh *m)
+/* (x, y) strictly inside live t (a grid point: wm_orient is exact for grid points only). */
+static int strictly_inside(const wm_mesh *m, int32_t t, int32_t x, int32_t y)
 {
-    return m->tri_end - m->n_tri + (m->tri_cap - m->tri_end) >= 2 && m->n_vert < m->vert_cap;
+    int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2];
+    return x >= 0 && y >= 0 && x < m->width && y < m->height &&
+           wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) > 0 &&
+           wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) > 0 &&
+           wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) > 0;
 }
 
 int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
 {
-    int32_t a, b, c;
     if (!wm_tri_live(m, t)) return WM_ERR_ARG;
-    a = m->hv[3 * t];
-    b = m->hv[3 * t + 1];
-    c = m->hv[3 * t + 2];
-    /* a point off the grid is in no triangle, and wm_orient is exact for grid points only */
-    if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_REFUSED;
-    if (wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) <= 0 ||
-        wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) <= 0 ||
-        wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) <= 0)
-        return WM_ERR_REFUSED;
-    if (!room(m)) return WM_ERR_CAPACITY;
+    if (!strictly_inside(m, t, x, y)) return WM_ERR_REFUSED;
+    if (!wm_room_for_split(m, 2)) return WM_ERR_CAPACITY;
     split(m, t, x, y, touched, n_touched);
     return WM_OK;
 }
 
 int wm_tri_split_inside(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)
 {
-    WM_ASSERT(wm_tri_live(m, t) && x >= 0 && y >= 0 && x < m->width && y < m->height);
-#if WM_CHECK
-    {
-        int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2];
-        WM_ASSERT(wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) > 0 &&
-                  wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) > 0 &&
-                  wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) > 0);
-    }
-#endif
-    if (!room(m)) return WM_ERR_CAPACITY;
+    WM_ASSERT(wm_tri_live(m, t) && strictly_inside(m, t, x, y));
+    if (!wm_room_for_split(m, 2)) return WM_ERR_CAPACITY;
     split(m, t, x, y, touched, n_touched);
     return WM_OK;
 }

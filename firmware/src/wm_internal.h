@@ -106,6 +106,13 @@ static inline int wm_on_border(const wm_mesh *m, int32_t x, int32_t y)
     return x == 0 || y == 0 || x == m->width - 1 || y == m->height - 1;
 }
 
+/* Room for an operator that adds `tris` triangles and one vertex (the splits): free triangle slots (the
+ * free list's and those past tri_end) and a vertex slot. */
+static inline int wm_room_for_split(const wm_mesh *m, int32_t tris)
+{
+    return m->tri_cap - m->n_tri >= tris && m->n_vert < m->vert_cap;
+}
+
 /* Allocation of slots (free list first, then the end); -1 when full. */
 int32_t wm_tri_alloc(wm_mesh *m);
 int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
