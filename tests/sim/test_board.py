@@ -57,16 +57,14 @@ def test_hello_reports_capabilities(fast_board):
 
 def test_a_fresh_board_answers_the_first_hello(start_sim, firmware_hex):
     """The board boots before its first client (sim/sim_main.h: the clock runs from reset to the firmware's
-    first SYS.STAGE write without a host): a fresh board's first HELLO is answered, one attempt and well
-    inside its timeout (a board that booted only once the client came lost that HELLO to its boot, and
-    the host waited the sync timeout before it tried again)."""
+    first SYS.STAGE write without a host): a fresh board's first HELLO is answered at the first attempt (a
+    board that booted only once the client came lost that HELLO to its boot, and the host waited the sync
+    timeout before it tried again).  The proof is in simulated cycles, not wall time: the client connected
+    after the firmware's serving marker."""
     board = start_sim(firmware_hex, "--fast")
-    t0 = time.monotonic()
     with S.Device(board.url, timeouts=TIMEOUTS) as dev:
         info = dev.sync(attempts=1, timeout=5.0)
-    took = time.monotonic() - t0
     assert info.name == "wm-board"
-    assert took < 1.0, took
     # the boot ran before the client: it connected after the serving marker (at the next socket service)
     serve = board.events("stage")[0]
     assert serve[0] == STAGE_SERVE
