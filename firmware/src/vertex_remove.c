@@ -23,7 +23,7 @@
 static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING])
 {
     const wm_index *hv = m->hv, *ho = m->ho; /* held: e[] and ring[] are stored to as the fan goes round */
-    int32_t first, h, n = 0;
+    int32_t first, h, d, n = 0;
     if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
     {
         int32_t x = m->vx[v], y = m->vy[v];
@@ -31,21 +31,29 @@ static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t 
         /* wm_fan_first: any half-edge of an interior vertex's full fan */
         first = wm_on_border(m, x, y) ? wm_fan_first(m, v) : m->vh[v];
     }
+    /* Each step takes one corner of its triangle, prev(h) (the half-edge into v): its twin is the next
+     * half-edge leaving v, and its origin that half-edge's end, the next ring vertex (or, on a side,
+     * the last triangle's far corner, which closes the ring).  So a step loads hv[] and ho[] at one
+     * index, where dest(h) = hv[next(h)] took a second corner's index; prev(h) by the corner's number
+     * as arithmetic, not branches (h % 3 is as likely one number as another). */
     h = first;
+    d = hv[WM_NEXT(first)]; /* wm_dest(first) */
     do {
+        int32_t c3, p;
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        /* WM_NEXT and WM_PREV by the corner's number as arithmetic, not branches (h % 3 is as
-         * likely one number as another) */
-        int32_t c3 = h - 3 * wm_div3(h);
+        c3 = h - 3 * wm_div3(h);
+        p = h - 1 + 3 * (int32_t)((uint32_t)(c3 - 1) >> 31); /* prev(h): (c3 - 1) < 0 is c3 == 0 */
+        WM_ASSERT(p == WM_PREV(h) && d == hv[WM_NEXT(h)]);
         e[n] = h;
-        ring[n++] = hv[h + 1 - 3 * (c3 >> 1)];                     /* wm_dest: c3 >> 1 is c3 == 2 */
-        h = ho[h - 1 + 3 * (int32_t)((uint32_t)(c3 - 1) >> 31)]; /* wm_rot_ccw: (c3 - 1) < 0 is c3 == 0 */
+        ring[n++] = d;
+        d = hv[p];
+        h = ho[p]; /* wm_rot_ccw */
     } while (h >= 0 && h != first);
     *k = n;
     if (h < 0) { /* on a side: the last triangle's far corner closes the ring */
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        ring[n] = hv[WM_PREV(e[n - 1])];
-        n++;
+        WM_ASSERT(d == hv[WM_PREV(e[n - 1])]);
+        ring[n++] = d;
     }
     return n;
 }
