@@ -273,7 +273,8 @@ int wm_tri_cover(const wm_field *f, const int32_t x[3], const int32_t y[3], int3
 typedef struct wm_params {
     int32_t metric;         /* WM_METRIC_* */
     int32_t neighbourhood;  /* WM_NEIGHBOURHOOD_* */
-    int32_t iterations;     /* k: refinement iterations per level, 0..3 (0: only the error bound) */
+    int32_t iterations;     /* k: refinement iterations per level, 0..3 (0: only the error bound; none at
+                               level 0 when the error bound and the final decimation follow) */
     int32_t max_triangles;  /* triangle budget, 0 = none (the storage is the only limit) */
     uint32_t zeta;          /* zeta in sample counts, Q16.16, rounded down (conservative) */
     uint32_t scale_m;       /* height scale s (height units per sample count) = scale_m / 2^scale_e, */
@@ -398,7 +399,8 @@ int wm_refine_set_roi(wm_refiner *r, const int32_t *rows);
 /* Runs the next resolution level: level m = current - 1 with k iterations of region selection,
  * pairing, shape-preserving split and regularisation on the details of decomposition level m + 1;
  * at level 0 it then refines every triangle with E(T) > zeta until none is left (or the budget
- * stops it).  With M = 1 the only step is the error bound at level 0.  Fills *st (may be NULL).
+ * stops it).  Level 0 takes no iterations when the error bound and the final decimation follow
+ * (neither WM_FLAG_NO_BOUND nor WM_FLAG_NO_DECIMATE).  With M = 1 the only step is the error bound at level 0.  Fills *st (may be NULL).
  * Returns WM_OK, WM_ERR_STATE when already done, WM_ERR_CAPACITY when the storage ran out (the mesh
  * is valid and can be exported; the refiner is then done). */
 int wm_refine_step(wm_refiner *r, wm_level_stats *st);

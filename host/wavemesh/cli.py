@@ -158,7 +158,8 @@ def _mesh_options(p: argparse.ArgumentParser) -> None:
                         "or vertical")
     p.add_argument("--iterations", "-k", type=int, default=d.iterations,
                    help=f"refinement iterations per level, 1..3 (0: only the error bound; "
-                        f"default {d.iterations})")
+                        f"default {d.iterations}); level 0 takes none when the error bound and "
+                        f"--simplify follow")
     p.add_argument("--neighbourhood", choices=("face", "vertex"), default=d.neighbourhood,
                    help="region selection by face- (default) or vertex-based neighbourhoods (4.3.1)")
     p.add_argument("--delta-d", type=_number, default=d.delta_d,
