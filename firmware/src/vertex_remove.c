@@ -241,25 +241,39 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
         int32_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
-        int32_t left = n, i0 = 0, x0, x1, y0, y1, small;
+        int32_t left = n, i0 = 0, ox, oy, small;
+        uint32_t far = 0;
         /* bit i: the probe's point is not on the outer side of the polygon's edge from position i to nx[i],
          * while no cut triangle has held it: so an ear holds it iff the side of its diagonal c-a (one
          * orientation) and its two edges' bits say so, and the cut sets the new edge's bit from that
          * orientation.  All set at first: the point is the vertex whose ring this is (wm_plan_probe). */
         uint32_t side = ~0u;
-        x0 = x1 = m->vx[ring[0]], y0 = y1 = m->vy[ring[0]];
+        /* in_circle32's range (the polygon within a 128 x 128 box): first whether every vertex is
+         * within [-63, 64] of p0 in x and in y, as an OR of the offsets p - p0 + 63 (each in [0, 127]
+         * then, any other as an unsigned word at least 128: the OR below 128 says all are), and only
+         * when not the box's bounds (the same answer: such a polygon is within the box; on the soft
+         * CPU four branches a vertex were most of this loop) */
+        ox = m->vx[ring[0]] - 63, oy = m->vy[ring[0]] - 63;
         for (int32_t i = 0; i < n; i++) {
             px[i] = m->vx[ring[i]];
             py[i] = m->vy[ring[i]];
-            x0 = px[i] < x0 ? px[i] : x0, x1 = px[i] > x1 ? px[i] : x1;
-            y0 = py[i] < y0 ? py[i] : y0, y1 = py[i] > y1 ? py[i] : y1;
+            far |= (uint32_t)(px[i] - ox) | (uint32_t)(py[i] - oy);
             nx[i] = i + 1;
             pv[i] = i - 1;
             ok[i] = 0;
             alive[i] = 1;
         }
         nx[n - 1] = 0, pv[0] = n - 1;
-        small = x1 - x0 < 128 && y1 - y0 < 128; /* in_circle32's range */
+        small = far < 128;
+        if (!small || WM_CHECK) {
+            int32_t x0 = px[0], x1 = px[0], y0 = py[0], y1 = py[0];
+            for (int32_t i = 1; i < n; i++) {
+                x0 = px[i] < x0 ? px[i] : x0, x1 = px[i] > x1 ? px[i] : x1;
+                y0 = py[i] < y0 ? py[i] : y0, y1 = py[i] > y1 ? py[i] : y1;
+            }
+            WM_ASSERT(!small || (x1 - x0 < 128 && y1 - y0 < 128));
+            small = x1 - x0 < 128 && y1 - y0 < 128;
+        }
 #if WM_CHECK
         for (int32_t i = 0; pr && i < n; i++)
             WM_ASSERT(wm_orient(px[i], py[i], px[nx[i]], py[nx[i]], pr->px, pr->py) >= 0);
