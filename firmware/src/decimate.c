@@ -404,7 +404,23 @@ struct last_plan {
     int32_t v, nr, nt, k; /* v: -1 when none */
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
     int32_t e[WM_MAX_RING]; /* and v's fan (wm_vertex_fan), k half-edges, for wm_vertex_remove_fan */
+    struct fans q;          /* first_fit's fans: the job's terms set once (fans_setup), v's per call */
 };
+
+/* The terms of fan_may_fit and far_above that are the job's, not a vertex's (the metric, zeta, the slope
+ * scales and their rounding terms): set once for the decimation, where each evaluation worked them out
+ * again (on the soft CPU a dozen loads through the refiner's pointer a call, most of them the SDRAM's). */
+static void fans_setup(const wm_refiner *r, struct fans *q)
+{
+    q->quick = r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu;
+    q->zeta = r->params.zeta;
+    q->zh = q->zeta >> 16, q->zl = q->zeta & 0xFFFFu;
+    wm_slope_scale(&r->params, 0, &q->sx, &q->ex);
+    wm_slope_scale(&r->params, 1, &q->sy, &q->ey);
+    q->words = WM_NARROW_DIV && q->ex > 0 && q->ex < 32 && q->ey > 0 && q->ey < 32;
+    q->mx = q->words ? (1u << q->ex) - 1u : 0, q->my = q->words ? (1u << q->ey) - 1u : 0;
+    q->vertical = r->params.metric == WM_METRIC_VERTICAL;
+}
 
 static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct last_plan *lp)
 {
@@ -414,30 +430,22 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     int32_t vx = me->vx[v], vy = me->vy[v], zv;
     struct wm_plan_probe probe;
     struct tested tested;
-    struct fans q;
+    struct fans *q = &lp->q;
     tested.r = r;
     probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested, probe.bad = WM_CHECK ? NULL : bad;
     lp->v = -1;
     n = wm_vertex_fan(me, v, lp->e, &lp->k, ring);
     if (n < 0) return NONE;
-    q.n = n;
-    q.k = 0;
+    q->n = n;
+    q->k = 0;
     zv = r->field.samples[(int64_t)vy * r->field.width + vx];
-    q.vx = vx, q.vy = vy;
-    q.quick = r->field.mask == NULL && r->params.zeta != 0xFFFFFFFFu;
-    q.zeta = r->params.zeta;
-    q.zh = q.zeta >> 16, q.zl = q.zeta & 0xFFFFu;
-    wm_slope_scale(&r->params, 0, &q.sx, &q.ex);
-    wm_slope_scale(&r->params, 1, &q.sy, &q.ey);
-    q.words = WM_NARROW_DIV && q.ex > 0 && q.ex < 32 && q.ey > 0 && q.ey < 32;
-    q.mx = q.words ? (1u << q.ex) - 1u : 0, q.my = q.words ? (1u << q.ey) - 1u : 0;
-    q.vertical = r->params.metric == WM_METRIC_VERTICAL;
+    q->vx = vx, q->vy = vy;
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vx[ring[i]];
         ry[i] = me->vy[ring[i]];
-        q.dx[i] = rx[i] - vx;
-        q.dy[i] = ry[i] - vy;
-        q.z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
+        q->dx[i] = rx[i] - vx;
+        q->dy[i] = ry[i] - vy;
+        q->z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
         bad[i] = 0;
     }
     /* Three ring vertices have one triangulation, four have two (the fans from 0 and 2 are the same,
@@ -456,14 +464,14 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
          * it is built (fan_may_fit), the ear clipping's as soon as that triangle is cut (the probe). */
         if (a >= 0) {
 #if WM_CHECK
-            check_fan_plan(&q, me, ring, a);
+            check_fan_plan(q, me, ring, a);
 #endif
             if (!WM_CHECK && fan_refused(bad, n, a)) continue; /* the checking build tries it and asserts */
-            if (!fan_may_fit(&q, &tested, a)) {
-                mark_bad(bad, a, q.j);
+            if (!fan_may_fit(q, &tested, a)) {
+                mark_bad(bad, a, q->j);
                 continue;
             }
-            if (!fan_plan(&q, a, tp, &nt, &big)) {
+            if (!fan_plan(q, a, tp, &nt, &big)) {
                 mark_bad(bad, a, big);
                 continue;
             }
@@ -479,8 +487,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
             int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
             for (int c = 0; c < 3; c++) {
-                x[c] = a >= 0 ? vx + q.dx[tp[3 * t + c]] : me->vx[tris[3 * t + c]];
-                y[c] = a >= 0 ? vy + q.dy[tp[3 * t + c]] : me->vy[tris[3 * t + c]];
+                x[c] = a >= 0 ? vx + q->dx[tp[3 * t + c]] : me->vx[tris[3 * t + c]];
+                y[c] = a >= 0 ? vy + q->dy[tp[3 * t + c]] : me->vy[tris[3 * t + c]];
             }
             e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, worst, kept_for(&tested, x, y));
             if (e > worst) worst = e;
@@ -667,6 +675,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     struct zheap zh;
     (void)st;
     lp.v = -1;
+    fans_setup(r, &lp.q);
     /* the last wm_index word of list[]'s storage (wm_heap_entries: as many wm_hent as items) */
     zh.z = (wm_index *)(void *)(wm_heap_entries(r) + (me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap));
     zh.z--;
