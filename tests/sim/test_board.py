@@ -114,37 +114,35 @@ def test_cycle_log_is_deterministic(start_sim, firmware_hex):
     assert logs[0] == logs[1] and logs[0]
 
 
-def busy_answer(port: int, send: bytes) -> tuple[list, float]:
-    """Connect while another client is served, send `send`: the frames until the board closes, and
-    how long the first took."""
+def busy_answer(port: int, send: bytes) -> list:
+    """Connect while another client is served, send `send`: the frames until the board closes.  A
+    board that held the connection open (queued it behind the first client) raises the socket's
+    timeout instead, a wait no answer needs: the bridge answers at once."""
     with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
         s.settimeout(5)
-        t0 = time.monotonic()
         s.sendall(send)
-        dec, frames, took = SlipDecoder(), [], None
+        dec, frames = SlipDecoder(), []
         while chunk := s.recv(64):
             frames += dec.feed(chunk)
-            if frames and took is None:
-                took = time.monotonic() - t0
-    return [parse_frame(f) for f in frames], took
+    return [parse_frame(f) for f in frames]
 
 
 def test_one_client_at_a_time(start_sim, firmware_hex):
-    """A second client gets ERROR BUSY within a second and is closed, as from the native device (the
-    bridge sends proto_slip.c's frame); the first is still served; later clients are served in turn."""
+    """A second client gets ERROR BUSY and is closed, as from the native device (the bridge sends
+    proto_slip.c's frame), without waiting for the first to leave; the first is still served; later
+    clients are served in turn.  No wall-clock bound: a loaded machine may take a while to answer, a
+    board that queued the second client would not answer before the socket's timeout."""
     board = start_sim(firmware_hex, "--fast")
     with S.Device(board.url, timeouts=TIMEOUTS) as first:
         first.sync()
         hello = encode_frame(P.FrameType.HELLO, 1)
         for send in (hello, b""):  # a host's HELLO; a connection that sends nothing
-            frames, took = busy_answer(board.port, send)
+            frames = busy_answer(board.port, send)
             assert [(f.type, f.fields()["code"]) for f in frames] == [(P.FrameType.ERROR, P.ErrorCode.BUSY)]
-            assert took < 1.0
             board.wait_for_line("second client refused (busy)")
-        t0 = time.monotonic()
         with S.Device(board.url, timeouts=TIMEOUTS) as second, pytest.raises(S.DeviceError) as e:
             second.sync()
-        assert e.value.code == P.ErrorCode.BUSY and time.monotonic() - t0 < 1.0
+        assert e.value.code == P.ErrorCode.BUSY
         assert first.sync().name == "wm-board"
     board.wait_for_line("client left")
     for _ in range(2):  # later clients, one after the other
