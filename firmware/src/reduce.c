@@ -551,8 +551,10 @@ static int refused_again(wm_refiner *r, int32_t e, int32_t u, const struct eig *
 
 void wm_reduce_forget_refusals(wm_refiner *r)
 {
-    for (int32_t v = 0; v < r->mesh.vert_end; v++)
+    for (int32_t v = 0; v < r->mesh.vert_end; v++) {
         if (r->vapex[v] == CLS_COLLAPSE_FAILED) r->vapex[v] = CLS_COLLAPSE;
+        if (r->vapex[v] == CLS_REMOVE_FAILED) r->vapex[v] = CLS_REMOVE;
+    }
 }
 
 int32_t wm_reduce(wm_refiner *r)

@@ -751,8 +751,8 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st);
  * collapse where 4.33 and 4.34 hold; each only when every new triangle's E(T) is at most
  * max(zeta, the largest E(T) of the triangles it replaces).  Returns the vertices removed. */
 int32_t wm_reduce(wm_refiner *r);
-/* The region of interest changes every E(T) and the bound: the reduction's refused collapses are
- * tried again (reduce.c). */
+/* The region of interest changes every E(T) and the bound: the reduction's refused removals and
+ * collapses are tried again (reduce.c). */
 void wm_reduce_forget_refusals(wm_refiner *r);
 /* wm_edge_collapse_plan in two parts (edge_collapse.c), for a reduction that tries several collapse
  * points of one edge: the ends' stars and the link condition, which do not depend on the point
