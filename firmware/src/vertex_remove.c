@@ -34,15 +34,18 @@ static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t 
     /* Each step takes one corner of its triangle, prev(h) (the half-edge into v): its twin is the next
      * half-edge leaving v, and its origin that half-edge's end, the next ring vertex (or, on a side,
      * the last triangle's far corner, which closes the ring).  So a step loads hv[] and ho[] at one
-     * index, where dest(h) = hv[next(h)] took a second corner's index; prev(h) by the corner's number
-     * as arithmetic, not branches (h % 3 is as likely one number as another). */
+     * index, where dest(h) = hv[next(h)] took a second corner's index; prev(h) by whether h is its
+     * triangle's first corner as arithmetic, not branches (h % 3 is as likely one number as another),
+     * and that by one multiply: 3 divides h (0 <= h < 2^32) iff h times 3's inverse modulo 2^32
+     * (0xAAAAAAAB) is at most (2^32 - 1) / 3, where h - 3 floor(h / 3) took a multiply-high, shifts
+     * and a subtraction. */
     h = first;
     d = hv[WM_NEXT(first)]; /* wm_dest(first) */
     do {
-        int32_t c3, p;
+        int32_t corner0, p;
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        c3 = h - 3 * wm_div3(h);
-        p = h - 1 + 3 * (int32_t)((uint32_t)(c3 - 1) >> 31); /* prev(h): (c3 - 1) < 0 is c3 == 0 */
+        corner0 = (uint32_t)h * 0xAAAAAAABu <= 0x55555555u; /* h % 3 == 0 */
+        p = h - 1 + 3 * corner0;                           /* prev(h) */
         WM_ASSERT(p == WM_PREV(h) && d == hv[WM_NEXT(h)]);
         e[n] = h;
         ring[n++] = d;
