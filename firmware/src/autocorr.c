@@ -162,6 +162,25 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
         n[2] = 1 << 28;
         return;
     }
+    if (WM_NARROW_DIV && len >> 31 == 0) {
+        /* The three quotients by one reciprocal (wm_q28_div_recip: one division where three were, on the
+         * soft CPU each a library call or the FPGA divider's), with len and the c[k] brought up by 2^t to L
+         * in [2^29, 2^31): for sh < 0, m 2^t is in [2^29, 2^30) for t = -sh - 1, and m <= len < 2 m; else m
+         * is in [2^30, 2^31) and t = 0 (len >= 2^31, rare, divides).  The same quotients: for t >= 1,
+         * (2^28 c 2^t + floor(L / 2)) / L is (2^28 c + len / 2) / len exactly, which for an odd len is
+         * a half more than the integer a = 2^28 c + floor(len / 2) over len: no multiple of len lies in
+         * (a, a + 1/2], so the floors agree. */
+        int t = sh < 0 ? -sh - 1 : 0;
+        uint32_t L = (uint32_t)len << t, inv = (uint32_t)((((uint64_t)1 << 61) - 1) / L);
+        for (int k = 0; k < 3; k++) {
+            uint32_t q = wm_q28_div_recip((uint32_t)c[k] << t, L, inv);
+            int neg = k == 0 ? A < 0 : k == 1 ? B < 0 : D < 0;
+            WM_ASSERT(L >> 29 == 1 || L >> 29 == 2 || L >> 29 == 3);
+            WM_ASSERT(q == ((c[k] << 28) + len / 2) / len);
+            n[k] = (int32_t)(neg ? -(int32_t)q : (int32_t)q);
+        }
+        return;
+    }
     for (int k = 0; k < 3; k++) {
         int64_t q = (int64_t)(((c[k] << 28) + len / 2) / len);
         int neg = k == 0 ? A < 0 : k == 1 ? B < 0 : D < 0;

@@ -844,34 +844,51 @@ int wm_point_above(const wm_field *f, const wm_params *p, const int32_t x[3], co
     return wm_point_above_v(f, p, x, y, D, av, bound, kept);
 }
 
+/* E(T) > bound for the point error of |V| = av (2^16 av > bound D: its vertical ev is above bound) on the
+ * triangle of D = twice its area, with the slope factor r (r < 2^32), without a division: E = ceil(2^16 ev
+ * / r) > bound iff 2^16 ev > bound r iff ev > F = floor(bound r / 2^16), and with F < 2^32 - 1 (ev is
+ * saturated there) ev = ceil(2^16 av / D) > F iff 2^16 av > F D (F D < 2^63, 2^16 av < 2^63); with F >=
+ * 2^32 - 1, ev <= F. */
+static WM_ALWAYS_INLINE int above_r(uint64_t av, int64_t D, uint32_t bound, uint64_t r)
+{
+    uint64_t F = ((uint64_t)bound * r) >> 16;
+    int above = F < 0xFFFFFFFFu && (av << 16) > F * (uint64_t)D;
+    WM_ASSERT(r >> 32 == 0 && above == (wm_ceil_q16_div(vertical(av, D), r) > bound));
+    return above;
+}
+
 int wm_point_above_v(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3], int64_t D,
                      uint64_t av, uint32_t bound, uint64_t *kept)
 {
     uint64_t c, X;
     uint32_t ev, root;
     int k;
-#ifdef WM_SLOPE_ENGINE
-    int go;
-#endif
     if (p->metric == WM_METRIC_VERTICAL) return 1;
+    /* On the soft CPU with a slope factor at hand (kept, or on the board the slope unit's root) the test
+     * takes no division (above_r); natively, and without one, the divisions below (one instruction each) */
+    if (WM_NARROW_DIV && bound != 0) {
+        if (kept && *kept) {
+            if (*kept >> 32 == 0) return above_r(av, D, bound, *kept);
+        }
 #ifdef WM_SLOPE_ENGINE
-    /* the board: the slope unit started first, beside the two divisions below */
-    go = bound != 0 && !(kept && *kept) && wm_tri_engine_slope_go(f, p, x, y);
+        else if (wm_tri_engine_slope_go(f, p, x, y)) {
+            uint64_t r;
+            root = wm_tri_engine_slope_take(&k);
+            r = (uint64_t)root << k;
+            if (r >> 32 ? wm_ceil_q16_div(vertical(av, D), r) > bound : above_r(av, D, bound, r)) return 1;
+            if (kept) *kept = r; /* within: the caller measures it */
+            return 0;
+        }
 #endif
+    }
     ev = vertical(av, D); /* > bound */
-    if (bound == 0) return 1;  /* E >= 1: r is finite */
+    if (bound == 0) return 1; /* E >= 1: r is finite */
     if (kept && *kept) return wm_ceil_q16_div(ev, *kept) > bound;
     /* The normal metric without the root: E = ceil(2^16 ev / r) > bound iff 2^16 ev > bound r iff
      * r < c = ceil(2^16 ev / bound) (r an integer), and with r = floor(sqrt(X)) 2^k iff
      * floor(sqrt(X)) < c' = ceil(c / 2^k) iff X < c'^2 (X < 2^64 <= c'^2 when c' >= 2^32). */
     c = wm_ceil_q16_div(ev, bound); /* < 2^48 */
-#ifdef WM_SLOPE_ENGINE
-    if (go) {
-        root = wm_tri_engine_slope_take(&k);
-        X = 0;
-    } else
-#endif
-        X = slope_square(f, p, x, y, D, &k, &root);
+    X = slope_square(f, p, x, y, D, &k, &root);
     c = (c + ((uint64_t)1 << k) - 1) >> k;
     if (root ? root >= c : c >> 32 == 0 && X >= c * c) { /* floor(sqrt(X)) >= c' iff X >= c'^2 */
         if (kept) *kept = (uint64_t)(root ? root : wm_isqrt64(X)) << k; /* within: the caller measures it */

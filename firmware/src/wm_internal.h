@@ -346,6 +346,19 @@ static inline uint64_t wm_udiv_small(uint64_t n, uint32_t d, uint32_t *rem)
     *rem = lo - q0 * d;
     return ((uint64_t)q2 << 32) + ((uint64_t)q1 << 16) + q0;
 }
+/* round(2^28 C / L) as the unit normals round it, floor((2^28 C + floor(L / 2)) / L), for 2^29 <= L < 2^31
+ * and C <= L, with inv = floor((2^61 - 1) / L) (< 2^32): for the soft CPU (WM_NARROW_DIV), where each
+ * 64-bit division is a library call (on the board the FPGA divider's, some 80 cycles with its call), the
+ * three components' quotients by one reciprocal.  inv >= 2^61 / L - 1, so C inv / 2^33 lies in
+ * (2^28 C / L - 1/4, 2^28 C / L], within 3/4 below the dividend over L, and its floor is the quotient or
+ * one less; the remainder, below 2 L < 2^32, is taken modulo 2^32.  A multiply-high and a multiply where
+ * the division was (tests/firmware/test_split_div.py). */
+static inline uint32_t wm_q28_div_recip(uint32_t C, uint32_t L, uint32_t inv)
+{
+    uint32_t q = (uint32_t)(((uint64_t)C * inv) >> 33);
+    if ((C << 28) + (L >> 1) - q * L >= L) q++;
+    return q;
+}
 int wm_bit_length64(uint64_t x);                        /* bits of x: 0 for 0, 64 for 2^63 and above */
 int32_t wm_gcd(int32_t a, int32_t b);                   /* gcd(|a|, |b|), gcd(0, 0) = 0 */
 int64_t wm_floor_div(int64_t a, int64_t b);             /* floor(a / b), b > 0 */

@@ -86,3 +86,51 @@ def test_division_helpers_against_python(build, tmp_path):
         assert (q, rem) == divmod(n, d), f"wm_udiv_small({n:#x}, {d}): {q:#x} rem {rem}"
         assert ceil == -(-((n >> 17) << 16) // fd), f"wm_ceil_q16_div({n >> 17:#x}, {fd:#x}): {ceil:#x}"
         assert frac == _frac_mul(n >> 17, fd, m, e, sh), f"wm_frac_mul({n >> 17:#x}, {fd:#x}, {m}, {e}, {sh})"
+
+
+RECIP_MAIN = r"""
+#include "wm_internal.h"
+#include <inttypes.h>
+#include <stdio.h>
+int main(void)
+{
+    unsigned c, l;
+    while (scanf("%x %x", &c, &l) == 2)
+        printf("%" PRIx32 "\n", wm_q28_div_recip(c, l, (uint32_t)((((uint64_t)1 << 61) - 1) / l)));
+    return 0;
+}
+"""
+
+
+def _recip_inputs() -> list[tuple[int, int]]:
+    """The unit normals' quotients: L at [2^29, 2^31)'s ends and random, C at 0, 1, L - 1, L and random."""
+    rng = random.Random(20261130)
+    ls = [1 << 29, (1 << 29) + 1, (1 << 30) - 1, 1 << 30, (1 << 31) - 2, (1 << 31) - 1]
+    out = []
+    for i in range(20000):
+        L = ls[i % len(ls)] if i < 600 else rng.randrange(1 << 29, 1 << 31)
+        C = (0, L, L - 1, 1)[i % 4] if i < 1200 else rng.randint(0, L)
+        out.append((C, L))
+    return out
+
+
+@pytest.mark.skipif(CC is None, reason="no native C compiler")
+@pytest.mark.parametrize("build", list(BUILDS))
+def test_reciprocal_divisions_against_python(build, tmp_path):
+    """wm_q28_div_recip (the unit normals' three quotients by one reciprocal) equals the division, in each
+    build."""
+    main = tmp_path / "main.c"
+    main.write_text(RECIP_MAIN)
+    exe = tmp_path / "recip_div"
+    base = [CC, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", *BUILDS[build],
+            f"-I{ROOT / 'firmware' / 'include'}", f"-I{ROOT / 'firmware' / 'src'}", str(main), "-o", str(exe)]
+    ubsan = ["-fsanitize=undefined", "-fno-sanitize-recover=all"]
+    if subprocess.run(base + ubsan, capture_output=True).returncode != 0:
+        subprocess.run(base, check=True)
+    inputs = _recip_inputs()
+    out = subprocess.run([str(exe)], input="".join(" ".join(f"{v:x}" for v in t) + "\n" for t in inputs),
+                         capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[-1] == "" and len(out) == len(inputs) + 1
+    for (c, len_), line in zip(inputs, out[:-1], strict=True):
+        want = ((c << 28) + (len_ >> 1)) // len_
+        assert int(line, 16) == want, f"wm_q28_div_recip({c:#x}, {len_:#x}): {line}"
