@@ -185,54 +185,59 @@ static int split_edge_at(wm_refiner *r, int32_t e, int32_t x, int32_t y, wm_leve
 int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
-    int32_t x[3], y[3], bx = -1, by = -1, ymin, ymax, best_e = -1;
-    int64_t A[3], B[3], C[3], sx, sy, best = -1, best_len = -1;
+    int32_t x[3], y[3], bx = -1, by = -1, ymin, ymax, best_e = -1, A[3], B[3], C[3], sx, sy, px0;
+    int64_t best = -1, best_len = -1;
     wm_tri_xy(me, t, x, y);
-    sx = (int64_t)x[0] + x[1] + x[2];
-    sy = (int64_t)y[0] + y[1] + y[2];
+    sx = x[0] + x[1] + x[2];
+    sy = y[0] + y[1] + y[2];
     ymin = ymax = y[0];
+    /* In 32 bits (grid sides at most WM_MAX_SIDE: coordinates below 2^15 - 1): |A|, |B| < 2^15, |C| and
+     * every row's B py + C = E_k(0, py) = B (py - y_k1) - A x_k1 below 2^31 - 2^17, so the divisions below
+     * are 32-bit ones (on the soft CPU the hardware's, where the 64-bit ones were library calls) */
     for (int k = 0; k < 3; k++) {
         int k1 = wm_k1(k), k2 = wm_k2(k);
-        A[k] = -((int64_t)y[k2] - y[k1]);
-        B[k] = (int64_t)x[k2] - x[k1];
+        A[k] = -(y[k2] - y[k1]);
+        B[k] = x[k2] - x[k1];
         C[k] = -(B[k] * y[k1]) - A[k] * x[k1];
         if (y[k] < ymin) ymin = y[k];
         if (y[k] > ymax) ymax = y[k];
     }
+    px0 = wm_floor_div32(sx, 3);
+    if (sx - 3 * px0 > 1) px0++; /* nearest to sx / 3, the smaller on a tie (never: thirds) */
     /* The interior grid point nearest the barycentre: |3p - (v0 + v1 + v2)|^2 smallest, the first
      * row and then the smaller x on ties.  Per row the interior run is E_k >= 1 for all k.  The rows
      * are taken outward from the barycentre's, each way until the row's own term (3 py - sy)^2 alone
      * exceeds the best so far: no row beyond can do better, so the point is the one a scan of every
      * row finds (a tie goes to the smaller row). */
     for (int dir = 0; dir < 2; dir++) {
-        int32_t pc = (int32_t)wm_floor_div(sy, 3), py = dir == 0 ? pc : pc + 1, step = dir == 0 ? -1 : 1;
+        int32_t pc = wm_floor_div32(sy, 3), py = dir == 0 ? pc : pc + 1, step = dir == 0 ? -1 : 1;
         if (py > ymax) py = ymax + (dir == 0 ? 0 : 1);
         if (py < ymin) py = ymin - (dir == 0 ? 1 : 0);
         for (; py >= ymin && py <= ymax; py += step) {
-            int64_t lo = INT64_MIN / 4, hi = INT64_MAX / 4, px, d, ry = 3 * (int64_t)py - sy;
+            int32_t lo = INT32_MIN, hi = INT32_MAX, px; /* a triangle has an A_k > 0 and an A_k < 0 */
+            int64_t d, ry = 3 * (int64_t)py - sy;
             int empty = 0;
             if (best >= 0 && ry * ry > best) break;
             for (int k = 0; k < 3; k++) {
-                int64_t num = B[k] * py + C[k] - 1; /* A x + num >= 0 */
+                int32_t num = B[k] * py + C[k] - 1; /* A x + num >= 0 */
                 if (A[k] > 0) {
-                    int64_t l = wm_ceil_div(-num, A[k]);
+                    int32_t l = wm_ceil_div32(-num, A[k]);
                     if (l > lo) lo = l;
                 } else if (A[k] < 0) {
-                    int64_t h = wm_floor_div(num, -A[k]);
+                    int32_t h = wm_floor_div32(num, -A[k]);
                     if (h < hi) hi = h;
                 } else if (num < 0) {
                     empty = 1;
                 }
             }
             if (empty || lo > hi) continue;
-            px = wm_floor_div(sx, 3);
-            if (sx - 3 * px > 1) px++; /* nearest to sx / 3, the smaller on a tie (never: thirds) */
+            px = px0;
             if (px < lo) px = lo;
             if (px > hi) px = hi;
-            d = (3 * px - sx) * (3 * px - sx) + ry * ry;
+            d = (int64_t)(3 * px - sx) * (3 * px - sx) + ry * ry;
             if (best < 0 || d < best || (d == best && py < by)) {
                 best = d;
-                bx = (int32_t)px;
+                bx = px;
                 by = py;
             }
         }

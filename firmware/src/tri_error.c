@@ -104,9 +104,6 @@ static void setup(const wm_field *f, const int32_t x[3], const int32_t y[3], str
     t->dS = t->A[0] * t->z[0] + t->A[1] * t->z[1] + t->A[2] * t->z[2];
 }
 
-/* ceil(a / b) for b > 0 in 32 bits (wm_floor_div32's twin). */
-static int32_t ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
-
 /* One row of the 32-bit path (scan): the largest V = |S - d h| over the samples [q, end) with S
  * growing by dS per sample, above vm, and where it is first reached (*at; untouched when no sample
  * beats vm); it stops at the first sample above limit.  A function of its own so that the few values of
@@ -152,7 +149,7 @@ WM_NEVER_INLINE WM_ENGINE_FALLBACK static uint64_t scan(const wm_field *f, const
         for (int k = 0; k < 3; k++) {
             int64_t num = t.B[k] * py + t.C[k]; /* E_k = A x + num >= 0 */
             if (t.A[k] > 0) {
-                int64_t l = small ? ceil_div32((int32_t)-num, (int32_t)t.A[k]) : wm_ceil_div(-num, t.A[k]);
+                int64_t l = small ? wm_ceil_div32((int32_t)-num, (int32_t)t.A[k]) : wm_ceil_div(-num, t.A[k]);
                 if (l > lo) lo = l;
             } else if (t.A[k] < 0) {
                 int64_t r = small ? wm_floor_div32((int32_t)num, (int32_t)-t.A[k]) : wm_floor_div(num, -t.A[k]);

@@ -156,6 +156,8 @@ int32_t wm_fan_first(const wm_mesh *m, int32_t v);
 /* floor(a / b) for b > 0 in 32 bits (the soft CPU divides 32-bit numbers in hardware, 64-bit ones in a
  * library routine many times slower). */
 static inline int32_t wm_floor_div32(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+/* ceil(a / b) for b > 0 in 32 bits (wm_floor_div32's twin). */
+static inline int32_t wm_ceil_div32(int32_t a, int32_t b) { return a >= 0 ? (a + b - 1) / b : -((-a) / b); }
 /* One end of a 32-bit scan's rows (tri_error.c's scan32, host_scan.c's scan_lanes): floor(u / a) stepped
  * row by row (the remainder r, its step dr), as a pointer into the samples (p, stepped by a row and the
  * quotient's step, st).  Each scan steps it its own way (scan32 with a branch, scan_lanes without). */
