@@ -87,10 +87,14 @@ typedef struct wm_mesh {
 
 /* Half-edge e's successor and predecessor in its triangle (e >= 0), without a division: e / 3 is a
  * multiply-high by ceil(2^33 / 3) (exact for every 0 <= e < 2^32).  -Os compiles `% 3` to the division
- * instruction, some 40 cycles on the soft CPU, and every mesh walk takes these. */
+ * instruction, some 40 cycles on the soft CPU, and every mesh walk takes these.  Which corner e is needs
+ * less: 3 divides u (0 <= u < 2^32) iff u times 3's inverse modulo 2^32 (0xAAAAAAAB) is at most
+ * (2^32 - 1) / 3 (wm_div3_exact: one multiply and a comparison, where e - 3 (e / 3) took a multiply-high,
+ * shifts and a subtraction): e is a triangle's last corner iff 3 divides e + 1, its first iff 3 divides e. */
 static inline int32_t wm_div3(int32_t e) { return (int32_t)(((uint64_t)(uint32_t)e * 0xAAAAAAABu) >> 33); }
-static inline int32_t wm_next_he(int32_t e) { return e - 3 * wm_div3(e) == 2 ? e - 2 : e + 1; }
-static inline int32_t wm_prev_he(int32_t e) { return e - 3 * wm_div3(e) == 0 ? e + 2 : e - 1; }
+static inline int wm_div3_exact(uint32_t u) { return u * 0xAAAAAAABu <= 0x55555555u; }
+static inline int32_t wm_next_he(int32_t e) { return wm_div3_exact((uint32_t)e + 1u) ? e - 2 : e + 1; }
+static inline int32_t wm_prev_he(int32_t e) { return wm_div3_exact((uint32_t)e) ? e + 2 : e - 1; }
 #define WM_NEXT(e) wm_next_he(e)
 #define WM_PREV(e) wm_prev_he(e)
 

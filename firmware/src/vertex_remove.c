@@ -44,7 +44,7 @@ static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t 
     do {
         int32_t corner0, p;
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        corner0 = (uint32_t)h * 0xAAAAAAABu <= 0x55555555u; /* h % 3 == 0 */
+        corner0 = wm_div3_exact((uint32_t)h); /* h % 3 == 0 */
         p = h - 1 + 3 * corner0;                           /* prev(h) */
         WM_ASSERT(p == WM_PREV(h) && d == hv[WM_NEXT(h)]);
         e[n] = h;
