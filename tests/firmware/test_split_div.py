@@ -66,22 +66,28 @@ def _inputs() -> list[tuple[int, int, int, int, int, int]]:
     return out
 
 
-@pytest.mark.skipif(CC is None, reason="no native C compiler")
-@pytest.mark.parametrize("build", list(BUILDS))
-def test_division_helpers_against_python(build, tmp_path):
+def _run_c(source: str, build: str, tmp_path, inputs: list[tuple[int, ...]]) -> list[str]:
+    """Compiles `source` (a main over wm_internal.h's helpers) for `build` (with UBSan where the compiler
+    has it), feeds it `inputs` a line each in hex, and returns its output lines, one per input."""
     main = tmp_path / "main.c"
-    main.write_text(MAIN)
-    exe = tmp_path / "split_div"
+    main.write_text(source)
+    exe = tmp_path / "main"
     base = [CC, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", *BUILDS[build],
             f"-I{ROOT / 'firmware' / 'include'}", f"-I{ROOT / 'firmware' / 'src'}", str(main), "-o", str(exe)]
     ubsan = ["-fsanitize=undefined", "-fno-sanitize-recover=all"]
     if subprocess.run(base + ubsan, capture_output=True).returncode != 0:
         subprocess.run(base, check=True)
-    inputs = _inputs()
     out = subprocess.run([str(exe)], input="".join(" ".join(f"{v:x}" for v in t) + "\n" for t in inputs),
                          capture_output=True, text=True, check=True).stdout.split("\n")
     assert out[-1] == "" and len(out) == len(inputs) + 1
-    for (n, d, fd, m, e, sh), line in zip(inputs, out[:-1], strict=True):
+    return out[:-1]
+
+
+@pytest.mark.skipif(CC is None, reason="no native C compiler")
+@pytest.mark.parametrize("build", list(BUILDS))
+def test_division_helpers_against_python(build, tmp_path):
+    inputs = _inputs()
+    for (n, d, fd, m, e, sh), line in zip(inputs, _run_c(MAIN, build, tmp_path, inputs), strict=True):
         q, rem, ceil, frac = (int(v, 16) for v in line.split())
         assert (q, rem) == divmod(n, d), f"wm_udiv_small({n:#x}, {d}): {q:#x} rem {rem}"
         assert ceil == -(-((n >> 17) << 16) // fd), f"wm_ceil_q16_div({n >> 17:#x}, {fd:#x}): {ceil:#x}"
@@ -119,18 +125,7 @@ def _recip_inputs() -> list[tuple[int, int]]:
 def test_reciprocal_divisions_against_python(build, tmp_path):
     """wm_q28_div_recip (the unit normals' three quotients by one reciprocal) equals the division, in each
     build."""
-    main = tmp_path / "main.c"
-    main.write_text(RECIP_MAIN)
-    exe = tmp_path / "recip_div"
-    base = [CC, "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", *BUILDS[build],
-            f"-I{ROOT / 'firmware' / 'include'}", f"-I{ROOT / 'firmware' / 'src'}", str(main), "-o", str(exe)]
-    ubsan = ["-fsanitize=undefined", "-fno-sanitize-recover=all"]
-    if subprocess.run(base + ubsan, capture_output=True).returncode != 0:
-        subprocess.run(base, check=True)
     inputs = _recip_inputs()
-    out = subprocess.run([str(exe)], input="".join(" ".join(f"{v:x}" for v in t) + "\n" for t in inputs),
-                         capture_output=True, text=True, check=True).stdout.split("\n")
-    assert out[-1] == "" and len(out) == len(inputs) + 1
-    for (c, len_), line in zip(inputs, out[:-1], strict=True):
+    for (c, len_), line in zip(inputs, _run_c(RECIP_MAIN, build, tmp_path, inputs), strict=True):
         want = ((c << 28) + (len_ >> 1)) // len_
         assert int(line, 16) == want, f"wm_q28_div_recip({c:#x}, {len_:#x}): {line}"
