@@ -404,7 +404,8 @@ int wm_refine_set_roi(wm_refiner *r, const int32_t *rows);
  * pairing, shape-preserving split and regularisation on the details of decomposition level m + 1;
  * at level 0 it then refines every triangle with E(T) > zeta until none is left (or the budget
  * stops it).  Level 0 takes no iterations when the error bound and the final decimation follow
- * (neither WM_FLAG_NO_BOUND nor WM_FLAG_NO_DECIMATE).  With M = 1 the only step is the error bound at level 0.  Fills *st (may be NULL).
+ * (neither WM_FLAG_NO_BOUND nor WM_FLAG_NO_DECIMATE).  With M = 1 the only step is the error bound
+ * at level 0.  Fills *st (may be NULL).
  * Returns WM_OK, WM_ERR_STATE when already done, WM_ERR_CAPACITY when the storage ran out (the mesh
  * is valid and can be exported; the refiner is then done). */
 int wm_refine_step(wm_refiner *r, wm_level_stats *st);

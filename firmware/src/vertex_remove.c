@@ -35,10 +35,8 @@ static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t 
      * half-edge leaving v, and its origin that half-edge's end, the next ring vertex (or, on a side,
      * the last triangle's far corner, which closes the ring).  So a step loads hv[] and ho[] at one
      * index, where dest(h) = hv[next(h)] took a second corner's index; prev(h) by whether h is its
-     * triangle's first corner as arithmetic, not branches (h % 3 is as likely one number as another),
-     * and that by one multiply: 3 divides h (0 <= h < 2^32) iff h times 3's inverse modulo 2^32
-     * (0xAAAAAAAB) is at most (2^32 - 1) / 3, where h - 3 floor(h / 3) took a multiply-high, shifts
-     * and a subtraction. */
+     * triangle's first corner (wm_div3_exact, wavemesh.h) as arithmetic, not branches (h % 3 is as
+     * likely one number as another). */
     h = first;
     d = hv[WM_NEXT(first)]; /* wm_dest(first) */
     do {
