@@ -764,7 +764,30 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
     D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     if ((kept && *kept) || ex < 0 || ey < 0 || D <= 0 || D >= WM_SLOPE_LATER_D) /* ex, ey: wm_scaled_up's */
         return wm_tri_error_within(f, p, x, y, bound, NULL, NULL, kept);
+#if WM_NARROW_DIV
+    {
+        /* on a 32-bit CPU (and in the checked builds) |Na|, |Nb| in 32-bit products, as first_fit's
+         * far_above: differences of 16-bit samples (|dz| <= 65535) times differences of grid coordinates
+         * (at most 32766) are below 2^31, and each numerator, the larger product less the smaller, below
+         * 2^32 (the 64-bit products were a multiply triple and carries each); only their absolute values
+         * are taken below (slope_square_n's too) */
+        int32_t z0 = f->samples[y[0] * f->width + x[0]];
+        int32_t dz1 = f->samples[y[1] * f->width + x[1]] - z0, dz2 = f->samples[y[2] * f->width + x[2]] - z0;
+        int32_t p1 = dz1 * (y[2] - y[0]), p2 = dz2 * (y[1] - y[0]), p3 = (x[1] - x[0]) * dz2,
+                p4 = (x[2] - x[0]) * dz1;
+        Na = p1 >= p2 ? (uint32_t)p1 - (uint32_t)p2 : (uint32_t)p2 - (uint32_t)p1;
+        Nb = p3 >= p4 ? (uint32_t)p3 - (uint32_t)p4 : (uint32_t)p4 - (uint32_t)p3;
+#if WM_CHECK
+        {
+            int64_t Na64, Nb64;
+            gradient(f, x, y, &Na64, &Nb64);
+            WM_ASSERT(Na == (Na64 < 0 ? -Na64 : Na64) && Nb == (Nb64 < 0 ? -Nb64 : Nb64));
+        }
+#endif
+    }
+#else
     gradient(f, x, y, &Na, &Nb);
+#endif
     Ga = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex);
     Gb = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey);
     T = wm_hypot3_up(Ga, Gb, (uint64_t)D);
