@@ -657,6 +657,9 @@ static WM_ALWAYS_INLINE int normal_beside(const wm_field *f, const wm_params *p,
     int k;
     if (!wm_tri_engine_slope_go(f, p, x, y)) return 0;
     ev = vertical(vmax, D);
+    /* ev here, before _take's wait: the compiler takes the division's library call for one without side
+     * effects and put it after _take's call (the CPU waited for the unit, then divided) */
+    __asm__ volatile("" : "+r"(ev) : : "memory");
     r = (uint64_t)wm_tri_engine_slope_take(&k) << k;
     if (kept) *kept = r;
     *e = (uint32_t)wm_ceil_q16_div(ev, r); /* <= ev (r >= 2^16) */
