@@ -232,6 +232,12 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
      * in the list of slots to measure */
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0, early = 0;
     int masked = r->roi || r->field.mask;
+    /* the arrays and p's corner in registers: a flip stores through me's arrays, so the compiler (for
+     * all it knew, the stores might change them) loaded the four pointers and vx[p], vy[p] again at
+     * every edge; a flip changes no vertex and no pointer */
+    const wm_index *hv = me->hv, *ho = me->ho;
+    const uint16_t *vx = me->vx, *vy = me->vy;
+    int32_t px = vx[p], py = vy[p];
     WM_ASSERT(n == 2 || n == 3 || n == 4);
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
@@ -243,22 +249,26 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
         stack[top++] = 3 * t + k; /* n <= 4 < LEGAL_STACK */
     }
     while (top > 0) {
-        int32_t e = stack[--top], o = me->ho[e], a, b, d, t1, t2, ko;
+        int32_t e = stack[--top], o = ho[e], a, b, d, t1, t2, ko, ax, ay, bx, by, dx, dy;
+        int64_t sa, sb;
         /* e's triangle still holds p: a flip changes the popped triangle and the one across its edge, which
          * does not hold p (two triangles of the same three corners cannot both be counter-clockwise), and
          * a stacked triangle holds p, each on the stack once */
-        WM_ASSERT(me->hv[WM_PREV(e)] == p);
+        WM_ASSERT(hv[WM_PREV(e)] == p);
         if (o < 0) continue;
         t2 = (int32_t)((uint32_t)o / 3u); /* WM_TRI(o), o >= 0: unsigned */
         ko = o - 3 * t2;
-        a = me->hv[e];
-        b = me->hv[o];
+        a = hv[e];
+        b = hv[o];
         WM_ASSERT(WM_PREV(o) == (ko == 0 ? o + 2 : o - 1));
-        d = me->hv[ko == 0 ? o + 2 : o - 1];
-        if (!wm_flip_circle(me->vx[a], me->vy[a], me->vx[b], me->vy[b], me->vx[p], me->vy[p], me->vx[d],
-                            me->vy[d]))
-            continue;
-        if (!wm_quad_convex(me, a, b, p, d)) continue; /* wm_edge_swappable's test, its corners at hand */
+        d = hv[ko == 0 ? o + 2 : o - 1];
+        ax = vx[a], ay = vy[a], bx = vx[b], by = vy[b], dx = vx[d], dy = vy[d];
+        if (!wm_flip_circle(ax, ay, bx, by, px, py, dx, dy)) continue;
+        /* wm_quad_convex(me, a, b, p, d) (wm_edge_swappable's test) from the corners at hand */
+        sa = wm_orient(px, py, dx, dy, ax, ay);
+        sb = wm_orient(px, py, dx, dy, bx, by);
+        WM_ASSERT(((sa > 0 && sb < 0) || (sa < 0 && sb > 0)) == wm_quad_convex(me, a, b, p, d));
+        if (!((sa > 0 && sb < 0) || (sa < 0 && sb > 0))) continue;
         t1 = (int32_t)((uint32_t)e / 3u);
         wm_edge_flip(me, e, o, t1, t2, a, b, p, d); /* T1 = (a, d, p), T2 = (d, b, p) in the same slots */
         if (n + ns < LEGAL_SLOTS) {
