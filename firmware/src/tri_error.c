@@ -703,20 +703,19 @@ uint32_t wm_tri_error(const wm_field *f, const wm_params *p, const int32_t x[3],
 }
 
 uint32_t wm_tri_error_over(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound, int32_t *wx, int32_t *wy, int *exact)
+                           int32_t D, int32_t *wx, int32_t *wy, int *exact)
 {
-    int64_t D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     uint64_t vmax;
-    uint32_t e;
-    WM_ASSERT(D > 0);
+    uint32_t e, bound = p->zeta;
+    WM_ASSERT(D == wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) && D > 0);
     *exact = 1;
     if (D <= 0) return 0xFFFFFFFFu;
     if (f->mask && wm_hole_error(f, x, y, &e, wx, wy)) return e; /* holes.c */
     vmax = scan_any(f, x, y, D, UINT64_MAX, wx, wy);
-    /* ev = ceil(2^16 Vmax / D) <= bound iff 2^16 Vmax <= bound D (vmax < 2^47; bound D < 2^63), and
-     * then E(T) <= ev <= bound in either metric (the normal one's r >= 2^16): ev without the slope
+    /* ev = ceil(2^16 Vmax / D) <= bound iff 2^16 Vmax <= bound D (vmax < 2^47; D < 2^31, bound D < 2^63),
+     * and then E(T) <= ev <= bound in either metric (the normal one's r >= 2^16): ev without the slope
      * factor (in the vertical metric ev is E(T), but not said to be) */
-    if (D < ((int64_t)1 << 31) && (vmax << 16) <= (uint64_t)bound * (uint64_t)D) {
+    if ((vmax << 16) <= (uint64_t)bound * (uint64_t)D) {
         *exact = 0;
         return vertical(vmax, D);
     }

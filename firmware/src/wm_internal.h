@@ -555,12 +555,13 @@ uint32_t wm_tri_error_kept(const wm_field *f, const wm_params *p, const int32_t 
 /* wm_tri_error_upto, and while E(T) <= bound also the worst sample as wm_tri_error finds it. */
 uint32_t wm_tri_error_within(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
                              uint32_t bound, int32_t *wx, int32_t *wy, uint64_t *kept);
-/* wm_tri_error's scan, and E(T) with its worst sample when E(T) may be above bound; when the scan's
- * Vmax alone shows E(T) <= bound (2^16 Vmax <= bound D), ev = ceil(2^16 Vmax / D) instead, an upper
- * bound of E(T) at most bound without the normal metric's slope factor, with *exact = 0 (the worst
- * sample is still the scan's).  Else *exact = 1 and the value is wm_tri_error's. */
+/* wm_tri_error's scan, and E(T) with its worst sample when E(T) may be above bound = p->zeta; when the
+ * scan's Vmax alone shows E(T) <= bound (2^16 Vmax <= bound D), ev = ceil(2^16 Vmax / D) instead, an
+ * upper bound of E(T) at most bound without the normal metric's slope factor, with *exact = 0 (the worst
+ * sample is still the scan's).  Else *exact = 1 and the value is wm_tri_error's.  D: twice the area
+ * (wm_orient of the corners, > 0), which the caller has worked out (the error bound's, for D = 1). */
 uint32_t wm_tri_error_over(const wm_field *f, const wm_params *p, const int32_t x[3], const int32_t y[3],
-                           uint32_t bound, int32_t *wx, int32_t *wy, int *exact);
+                           int32_t D, int32_t *wx, int32_t *wy, int *exact);
 /* For a candidate triangulation whose largest E(T) so far is least (<= bound): some value above bound
  * when E(T) is above it, found with the scan stopped early; else E(T) when it is above least, and
  * otherwise some value at most least (E(T) itself or more).  The decimation's tests need no more, and
