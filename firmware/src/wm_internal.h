@@ -118,6 +118,29 @@ int32_t wm_tri_alloc(wm_mesh *m);
 int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
 /* Writes triangle t's three vertices (its half-edges' origins). */
 void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c);
+/* The splits' wm_tri_alloc and wm_tri_set, inline: the slot taken without its six placeholder stores to
+ * hv[] and ho[], which the split then writes every one of (on the board each a store the write buffer
+ * waited on, and the two calls a split's largest cost after its loads).  -1 when full. */
+static inline int32_t wm_tri_take(wm_mesh *m)
+{
+    int32_t t;
+    if (m->tri_free >= 0) {
+        t = m->tri_free;
+        m->tri_free = m->ho[3 * t];
+    } else {
+        if (m->tri_end >= m->tri_cap) return -1;
+        t = m->tri_end++;
+    }
+    m->n_tri++;
+    m->tflag[t] = 0;
+    return t;
+}
+static inline void wm_tri_put(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
+{
+    m->hv[3 * t] = a;
+    m->hv[3 * t + 1] = b;
+    m->hv[3 * t + 2] = c;
+}
 /* Makes e and f opposite (f may be -1: e on the border). */
 static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
 {
