@@ -136,11 +136,6 @@ static int in_circle32(const struct circle32 *q, int32_t dx, int32_t dy)
     return q->k0 * (ex * ex + ey * ey) + q->k1 * ex < -(q->k2 * ey);
 }
 
-static int32_t orient3(const wm_mesh *m, int32_t a, int32_t b, int32_t c)
-{
-    return (int32_t)wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], m->vx[c], m->vy[c]);
-}
-
 /* 1 when (px, py) lies in the closed counter-clockwise triangle. */
 static WM_ALWAYS_INLINE int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by, int32_t cx, int32_t cy,
                                   int32_t px, int32_t py)
@@ -199,7 +194,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                        int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr,
                        int32_t *big)
 {
-    int32_t poly[WM_MAX_RING], nt = 0, at = 0;
+    int32_t nt = 0, at = 0;
     /* twice a triangle's area in 32 bits, as wm_orient works it out (below 2^31: coordinates below
      * WM_MAX_SIDE): the largest so far (most), each ear's (area[]) and the probe's side (o) compared and
      * stored as one word on the soft CPU, not a pair */
@@ -242,9 +237,16 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
     {
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
         int32_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
+        int32_t cut[3 * WM_MAX_RING]; /* the cut ears as ring positions (tris[] once the plan is made) */
         int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
-        int32_t left = n, i0 = 0, ox, oy, small;
+        int32_t left = n, i0 = 0, i1, i2, ox, oy, small;
         uint32_t far = 0;
+        /* bit i: the polygon's edge from position i is the ring's edge i -> i + 1 (no position between
+         * them cut), so that a cut ear (a, b, c) is one of bad's (wm_tri_bad: (a, b, b + 1) or (c, a, a +
+         * 1); c -> a is no ring edge while a vertex is left between them) from two bits of this word and
+         * one of bad[a] and of bad[c], where wm_tri_bad's wrapped positions and compares took some 20
+         * instructions (on the board 7 % of the plan's cycles) */
+        uint32_t edge = ~0u;
         /* bit i: the probe's point is not on the outer side of the polygon's edge from position i to nx[i],
          * while no cut triangle has held it: so an ear holds it iff the side of its diagonal c-a (one
          * orientation) and its two edges' bits say so, and the cut sets the new edge's bit from that
@@ -344,10 +346,16 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             /* A simple polygon always has an ear (two, in fact). */
             WM_ASSERT(best >= 0);
             if (best < 0) return WM_ERR_REFUSED;
-            tris[3 * nt] = ring[pv[best]], tris[3 * nt + 1] = ring[best], tris[3 * nt + 2] = ring[nx[best]];
+            cut[3 * nt] = pv[best], cut[3 * nt + 1] = best, cut[3 * nt + 2] = nx[best];
             if (area[best] > most) most = area[best], at = nt;
             nt++;
-            if (pr && pr->bad && wm_tri_bad(pr->bad, n, pv[best], best, nx[best])) return WM_ERR_REFUSED;
+            if (pr && pr->bad) {
+                const uint32_t *bad = pr->bad;
+                int32_t ia = pv[best], ic = nx[best];
+                uint32_t bd = ((edge & bad[ia]) >> best | (edge & bad[ic]) >> ia) & 1u;
+                WM_ASSERT((int)bd == wm_tri_bad(bad, n, ia, best, ic) && (ic + 1 == n ? 0 : ic + 1) != ia);
+                if (bd) return WM_ERR_REFUSED;
+            }
             if (pr && !done) {
                 int32_t ia = pv[best], ic = nx[best];
                 int32_t o = (int32_t)wm_orient(px[ic], py[ic], px[ia], py[ia], pr->px, pr->py);
@@ -361,23 +369,24 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 }
             }
             ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
+            edge &= ~(1u << pv[best]);
             nx[pv[best]] = nx[best];
             pv[nx[best]] = pv[best];
             alive[best] = 0;
             if (best == i0) i0 = nx[best]; /* the next position left, the lowest now */
             left--;
         }
-        WM_ASSERT(alive[i0] && nx[i0] > i0 && nx[nx[i0]] > nx[i0]);
-        if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, nx[i0], nx[nx[i0]])) return WM_ERR_REFUSED;
-        poly[0] = ring[i0], poly[1] = ring[nx[i0]], poly[2] = ring[nx[nx[i0]]];
+        i1 = nx[i0], i2 = nx[i1];
+        WM_ASSERT(alive[i0] && i1 > i0 && i2 > i1);
+        if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, i1, i2)) return WM_ERR_REFUSED;
+        /* the last triangle, from the polygon's coordinates; then the plan as ring vertices */
+        d = (int32_t)wm_orient(px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]);
+        if (d <= 0) return WM_ERR_REFUSED;
+        if (d > most) at = nt;
+        if (probed(pr, &done, px[i0], py[i0], px[i1], py[i1], px[i2], py[i2])) return WM_ERR_REFUSED;
+        cut[3 * nt] = i0, cut[3 * nt + 1] = i1, cut[3 * nt + 2] = i2;
+        for (int32_t k = 0; k < 3 * nt + 3; k++) tris[k] = ring[cut[k]];
     }
-    d = orient3(m, poly[0], poly[1], poly[2]);
-    if (d <= 0) return WM_ERR_REFUSED;
-    if (d > most) at = nt;
-    if (probed(pr, &done, m->vx[poly[0]], m->vy[poly[0]], m->vx[poly[1]], m->vy[poly[1]], m->vx[poly[2]],
-               m->vy[poly[2]]))
-        return WM_ERR_REFUSED;
-    tris[3 * nt] = poly[0], tris[3 * nt + 1] = poly[1], tris[3 * nt + 2] = poly[2];
     *n_tris = nt + 1;
     if (big) *big = at;
     return WM_OK;
