@@ -667,10 +667,14 @@ static void z_pop(wm_refiner *r, struct zheap *h)
     wm_index *z = h->z;
     int32_t v = z[0], last = z[-(--h->n)], n = h->n, i = 0;
     r->pos[v] = -1;
-    for (;;) {
-        int32_t c = 2 * i + 1, u;
-        if (c >= n) break;
-        u = z[-c];
+    for (int32_t m = (n - 1) / 2; i < m;) { /* i < m: both children in the heap */
+        int32_t c = 2 * i + 1, u = z[-c], w = z[-(c + 1)];
+        if (w < u) c++, u = w;
+        z[-i] = (wm_index)u;
+        i = c;
+    }
+    if (2 * i + 1 < n) { /* one child or two, at the last parent */
+        int32_t c = 2 * i + 1, u = z[-c];
         if (c + 1 < n && z[-(c + 1)] < u) u = z[-(++c)];
         z[-i] = (wm_index)u;
         i = c;
@@ -701,6 +705,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     int32_t n = 0;
     struct last_plan lp;
     struct zheap zh;
+    uint32_t zeta = r->params.zeta; /* the stale ones' key */
     (void)st;
     lp.v = -1;
     fans_setup(r, &lp.q);
@@ -714,8 +719,8 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     while (n > 0 || zh.n > 0) {
         int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
         const wm_hent *top = wm_heap_entries(r);
-        if (zh.n > 0 &&
-            (n == 0 || key_before(r->vkey[zh.z[0]], zh.z[0], top->key, top->t))) { /* entered at zeta */
+        WM_ASSERT(zh.n == 0 || r->vkey[zh.z[0]] == zeta);
+        if (zh.n > 0 && (n == 0 || key_before(zeta, zh.z[0], top->key, top->t))) { /* entered at zeta: its key */
             v = zh.z[0];
             z_pop(r, &zh);
             refile(r, v, &n, &lp); /* into the heap at its cost, or nowhere */
