@@ -418,11 +418,25 @@ static WM_ALWAYS_INLINE int fan_refused(const uint32_t *bad, uint32_t skip, int3
 #endif
 }
 
+/* The fan from ring position a's triangles as ring vertices (n - 2 of them), as fan_plan and
+ * wm_ring_plan make them: (p_a, p_a+k, p_a+k+1) for k = 1 .. n - 2.  first_fit leaves them to the removal:
+ * many plans it finds are not the next to go (a stale vertex's new cost puts it behind others). */
+static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
+{
+    int32_t b = a + 1 == n ? 0 : a + 1;
+    for (int32_t k = 0; k < n - 2; k++) {
+        int32_t c = b + 1 == n ? 0 : b + 1;
+        tris[3 * k] = ring[a], tris[3 * k + 1] = ring[b], tris[3 * k + 2] = ring[c];
+        b = c;
+    }
+}
+
 /* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, v is the vertex
  * and ring, tris its ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex
- * (else v is -1).  Nothing but a removal changes the mesh here, so when that vertex is the next to go
- * (most often: the one just evaluated, back at the top of the heap) its removal takes them instead of
- * working them out again (f5 at 1 %: 191 of its 223 removals, Ball at 2 % 376 of 498). */
+ * (else v is -1; a fan's triangles are left to its removal: fan_tris).  Nothing but a removal changes
+ * the mesh here, so when that vertex is the next to go (most often: the one just evaluated, back at the
+ * top of the heap) its removal takes them instead of working them out again (f5 at 1 %: 191 of its 223
+ * removals, Ball at 2 % 376 of 498). */
 struct last_plan {
     int32_t v, nr, nt, k; /* v: -1 when none */
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
@@ -538,8 +552,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 #endif
         best = worst;
         *apex = a;
-        lp->v = v, lp->nr = n, lp->nt = nt;
-        for (int32_t k = 0; a >= 0 && k < 3 * nt; k++) tris[k] = ring[tp[k]];
+        lp->v = v, lp->nr = n, lp->nt = nt; /* a fan's triangles: fan_tris, when it goes */
         break;
     }
     return best;
@@ -654,8 +667,7 @@ static void z_push(wm_refiner *r, struct zheap *h, int32_t v)
         h->z[-i] = h->z[-p];
         i = p;
     }
-    h->z[-i] = (wm_index)v;
-    r->vkey[v] = r->params.zeta;
+    h->z[-i] = (wm_index)v; /* its key, zeta, is not stored: nothing reads it (wm_decimate compares by zeta) */
     r->vapex[v] = STALE;
     r->pos[v] = IN_Z;
 }
@@ -719,7 +731,6 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     while (n > 0 || zh.n > 0) {
         int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
         const wm_hent *top = wm_heap_entries(r);
-        WM_ASSERT(zh.n == 0 || r->vkey[zh.z[0]] == zeta);
         if (zh.n > 0 && (n == 0 || key_before(zeta, zh.z[0], top->key, top->t))) { /* entered at zeta: its key */
             v = zh.z[0];
             z_pop(r, &zh);
@@ -734,6 +745,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
         take_out(r, v, &n);
         if (lp.v == v) { /* the plan first_fit made on this star */
             nr = lp.nr, nt = lp.nt;
+            if (r->vapex[v] >= 0) fan_tris(ring, nr, r->vapex[v], tris);
 #if WM_CHECK
             {
                 int32_t ring2[WM_MAX_RING], tris2[3 * WM_MAX_RING], nt2 = 0;
