@@ -59,40 +59,46 @@ static WM_ALWAYS_INLINE uint32_t touch_bound(wm_refiner *r, int32_t t, int maske
 void wm_settle(wm_refiner *r)
 {
     wm_mesh *me = &r->mesh;
-    uint32_t known = 0;
+    uint32_t known = 0, *err = r->err;
+    const wm_index *hv = me->hv;
+    uint8_t *tflag = me->tflag;
+    /* taken once, not at each slot: a store to tflag[] might have changed them, for all the compiler
+     * knew (on the board four loads and two branches a slot) */
+    int masked = r->roi || r->field.mask;
+    int32_t end = me->tri_end;
     /* E_max is the largest E(T).  In slot order: known, the largest E(T) so far, and each flagged
      * triangle whose upper bound is above it measured only as far as that (wm_tri_error_upto: E(T)
      * when above it, else at most it), one pass.  So err[] holds E(T) or an upper bound at most E_max,
      * their largest is E_max, and the count over zeta is unchanged (every flagged triangle is within
      * zeta). */
-    for (int32_t t = 0; t < me->tri_end; t++) {
+    for (int32_t t = 0; t < end; t++) {
         int32_t x[3], y[3], wx, wy;
-        uint8_t f = me->tflag[t];
+        uint8_t f = tflag[t];
         if (!(f & WM_F_MEASURE)) {
-            if (me->hv[3 * t] >= 0 && r->err[t] > known) known = r->err[t];
+            if (hv[3 * t] >= 0 && err[t] > known) known = err[t];
             continue;
         }
         f &= (uint8_t)~WM_F_MEASURE;
-        if (me->hv[3 * t] < 0) {
-            me->tflag[t] = f;
+        if (hv[3 * t] < 0) {
+            tflag[t] = f;
             continue;
         }
-        me->tflag[t] = (uint8_t)(f | WM_F_NEW);
+        tflag[t] = (uint8_t)(f | WM_F_NEW);
         /* the corners read only for a scan: most flagged triangles are within known and keep their bound
          * (on the board each corner's vx[] and vy[] is likely an SDRAM refill: random vertices) */
-        if (r->roi || r->field.mask) { /* as wm_touch, without forgetting the corners' classes */
+        if (masked) { /* as wm_touch, without forgetting the corners' classes */
             wm_tri_xy(me, t, x, y);
-            r->err[t] =
+            err[t] =
                 r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
             r->worst[t] = wy * r->field.width + wx;
-        } else if (r->err[t] > known) {
-            WM_ASSERT(r->err[t] <= r->params.zeta);
+        } else if (err[t] > known) {
+            WM_ASSERT(err[t] <= r->params.zeta);
             wm_tri_xy(me, t, x, y);
-            r->err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
-            if (r->err[t] > known) known = r->err[t];
+            err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
+            if (err[t] > known) known = err[t];
         }
 #if WM_CHECK
-        if (!r->roi && !r->field.mask) {
+        if (!masked) {
             wm_tri_xy(me, t, x, y);
             WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
         }
