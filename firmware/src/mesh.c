@@ -100,16 +100,8 @@ int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t hei
 
 int32_t wm_tri_alloc(wm_mesh *m)
 {
-    int32_t t;
-    if (m->tri_free >= 0) {
-        t = m->tri_free;
-        m->tri_free = m->ho[3 * t];
-    } else {
-        if (m->tri_end >= m->tri_cap) return -1;
-        t = m->tri_end++;
-    }
-    m->n_tri++;
-    m->tflag[t] = 0;
+    int32_t t = wm_tri_take(m);
+    if (t < 0) return -1;
     m->hv[3 * t] = m->hv[3 * t + 1] = m->hv[3 * t + 2] = 0;
     m->ho[3 * t] = m->ho[3 * t + 1] = m->ho[3 * t + 2] = -1;
     return t;

@@ -120,7 +120,8 @@ int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
 void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c);
 /* The splits' wm_tri_alloc and wm_tri_set, inline: the slot taken without its six placeholder stores to
  * hv[] and ho[], which the split then writes every one of (on the board each a store the write buffer
- * waited on, and the two calls a split's largest cost after its loads).  -1 when full. */
+ * waited on, and the two calls a split's largest cost after its loads).  -1 when full.  wm_tri_alloc is
+ * this and the placeholders. */
 static inline int32_t wm_tri_take(wm_mesh *m)
 {
     int32_t t;
