@@ -30,8 +30,8 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, 
     t3 = wm_tri_take(m);
     WM_ASSERT(p >= 0 && t3 >= 0);
     /* T1 = (a, p, c), T3 = (p, b, c) */
-    wm_tri_put(m, t1, a, p, c);
-    wm_tri_put(m, t3, p, b, c);
+    wm_tri_set(m, t1, a, p, c);
+    wm_tri_set(m, t3, p, b, c);
     wm_link(m, 3 * t1 + 1, 3 * t3 + 2); /* p->c with c->p */
     wm_link(m, 3 * t1 + 2, o_ca);       /* c->a */
     wm_link(m, 3 * t3 + 1, o_bc);       /* b->c */
@@ -40,8 +40,8 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, 
         t4 = wm_tri_take(m);
         WM_ASSERT(t4 >= 0);
         /* T2 = (b, p, d), T4 = (p, a, d) */
-        wm_tri_put(m, t2, b, p, d);
-        wm_tri_put(m, t4, p, a, d);
+        wm_tri_set(m, t2, b, p, d);
+        wm_tri_set(m, t4, p, a, d);
         wm_link(m, 3 * t2 + 0, 3 * t3 + 0); /* b->p with p->b */
         wm_link(m, 3 * t2 + 1, 3 * t4 + 2); /* p->d with d->p */
         wm_link(m, 3 * t2 + 2, o_db);       /* d->b */

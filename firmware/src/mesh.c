@@ -98,15 +98,6 @@ int wm_mesh_init(wm_mesh *m, void *mem, size_t bytes, int32_t width, int32_t hei
     return WM_OK;
 }
 
-int32_t wm_tri_alloc(wm_mesh *m)
-{
-    int32_t t = wm_tri_take(m);
-    if (t < 0) return -1;
-    m->hv[3 * t] = m->hv[3 * t + 1] = m->hv[3 * t + 2] = 0;
-    m->ho[3 * t] = m->ho[3 * t + 1] = m->ho[3 * t + 2] = -1;
-    return t;
-}
-
 int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y)
 {
     int32_t v;
@@ -122,13 +113,6 @@ int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y)
     m->vy[v] = (uint16_t)y;
     m->vh[v] = -1;
     return v;
-}
-
-void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
-{
-    m->hv[3 * t] = a;
-    m->hv[3 * t + 1] = b;
-    m->hv[3 * t + 2] = c;
 }
 
 void wm_tri_claim(wm_mesh *m, int32_t t)

@@ -23,9 +23,9 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t t, int32_t x, int32_t y, 
     n1 = wm_tri_take(m);
     n2 = wm_tri_take(m);
     WM_ASSERT(p >= 0 && n1 >= 0 && n2 >= 0);
-    wm_tri_put(m, t, a, b, p);
-    wm_tri_put(m, n1, b, c, p);
-    wm_tri_put(m, n2, c, a, p);
+    wm_tri_set(m, t, a, b, p);
+    wm_tri_set(m, n1, b, c, p);
+    wm_tri_set(m, n2, c, a, p);
     wm_link(m, 3 * t + 0, o_ab);
     wm_link(m, 3 * n1 + 0, o_bc);
     wm_link(m, 3 * n2 + 0, o_ca);

@@ -114,14 +114,10 @@ static inline int wm_room_for_split(const wm_mesh *m, int32_t tris)
 }
 
 /* Allocation of slots (free list first, then the end); -1 when full. */
-int32_t wm_tri_alloc(wm_mesh *m);
 int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
-/* Writes triangle t's three vertices (its half-edges' origins). */
-void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c);
-/* The splits' wm_tri_alloc and wm_tri_set, inline: the slot taken without its six placeholder stores to
- * hv[] and ho[], which the split then writes every one of (on the board each a store the write buffer
- * waited on, and the two calls a split's largest cost after its loads).  -1 when full.  wm_tri_alloc is
- * this and the placeholders. */
+/* A triangle slot, inline and without placeholder stores to hv[] and ho[]: its callers (the splits) write
+ * every one of them (on the board each a store the write buffer waited on, and the call a split's
+ * largest cost after its loads).  -1 when full. */
 static inline int32_t wm_tri_take(wm_mesh *m)
 {
     int32_t t;
@@ -136,7 +132,8 @@ static inline int32_t wm_tri_take(wm_mesh *m)
     m->tflag[t] = 0;
     return t;
 }
-static inline void wm_tri_put(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
+/* Writes triangle t's three vertices (its half-edges' origins). */
+static inline void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
 {
     m->hv[3 * t] = a;
     m->hv[3 * t + 1] = b;
