@@ -42,7 +42,8 @@ static uint64_t umul(uint64_t x, uint64_t y)
     return (uint64_t)(uint32_t)x * (uint32_t)y;
 }
 
-/* round(a b / 2^30), half away from zero, for |a|, |b| < 2^31 (every matrix entry, t, c and s is
+#if WM_CHECK
+/* round(a b / 2^30), half away from zero (the checked builds' reference for mulq32, below), for |a|, |b| < 2^31 (every matrix entry, t, c and s is
  * within [-1, 1] in Q30, above, but for a few units of rounding): p = a b + 2^29 - [a b < 0], below
  * 2^62 + 2^29 in magnitude, and floor(p / 2^30) by an unsigned shift of p + 2^63 (no shift of a
  * negative number, which C99 leaves to the implementation).  The same integer as rounding the
@@ -54,10 +55,43 @@ static int64_t mulq(int64_t a, int64_t b)
     uint64_t p = (uint64_t)ab + ((uint64_t)1 << 29) - (uint64_t)(ab < 0);
     return (int64_t)((p ^ ((uint64_t)1 << 63)) >> 30) - ((int64_t)1 << 33);
 }
+#endif
 
-static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
+/* mulq when the result fits 32 bits (every matrix entry, t, c and s below; the checked builds test it):
+ * its low 32 bits are bits 30 .. 61 of p, whatever p's sign, so the 64-bit floor (mulq's shift of
+ * p + 2^63 and the subtraction of 2^33) is not needed.  With WM_NARROW_DIV (32-bit CPUs, and the
+ * checked builds) p = a b + k with k = 2^29 - [a b < 0] is one 64-bit addition of a 32-bit number in
+ * 32-bit words (the low word's carry into the high one): on rv32 ten instructions where mulq took
+ * sixteen.  Natively the 64-bit sum, fewer instructions there. */
+static WM_ALWAYS_INLINE int32_t mulq32(int32_t a, int32_t b)
 {
-    int64_t apq = a[p][q], num = a[q][q] - a[p][p], t, c, s;
+    uint64_t ab = (uint64_t)((int64_t)a * b);
+    uint32_t q;
+    if (WM_NARROW_DIV) {
+        uint32_t lo = (uint32_t)ab, hi = (uint32_t)(ab >> 32), k = ((uint32_t)1 << 29) - (hi >> 31);
+        lo += k;
+        hi += lo < k;
+        q = lo >> 30 | hi << 2;
+    } else {
+        q = (uint32_t)((ab + ((uint64_t)1 << 29) - (ab >> 63)) >> 30);
+    }
+    WM_ASSERT((int32_t)q == mulq(a, b));
+    return (int32_t)q;
+}
+
+/* The difference and the sum of two mulq32, which also fit 32 bits (the entries of the rotated
+ * matrices): taken modulo 2^32, the same integers. */
+static WM_ALWAYS_INLINE int32_t sub32(int32_t x, int32_t y) { return (int32_t)((uint32_t)x - (uint32_t)y); }
+static WM_ALWAYS_INLINE int32_t add32(int32_t x, int32_t y) { return (int32_t)((uint32_t)x + (uint32_t)y); }
+
+/* The rotations' matrices are kept in 32 bits: every entry is within [-1, 1] in Q30 but for a few units
+ * of rounding (above), so the same integers as in 64 bits, where on rv32 each load, store, add and
+ * product of one took two or more instructions (the rotations were most of the reduction's
+ * eigen-decompositions on the board). */
+static void rotate(int32_t a[3][3], int32_t v[3][3], int p, int q)
+{
+    int32_t apq = a[p][q], t, c, s;
+    int64_t num = (int64_t)a[q][q] - a[p][p];
     uint64_t den = 2 * mag(apq), sq, tt;
     int neg;
     if (mag(apq) <= SETTLED) return;
@@ -65,38 +99,46 @@ static void rotate(int64_t a[3][3], int64_t v[3][3], int p, int q)
     sq = wm_isqrt64(umul(mag(num), mag(num)) + umul(den, den));
     tt = (den << 30) / (mag(num) + sq);
     neg = (num < 0) != (apq < 0);
-    t = neg ? -(int64_t)tt : (int64_t)tt;
+    WM_ASSERT(tt <= (uint64_t)ONE30);
+    t = neg ? -(int32_t)tt : (int32_t)tt;
     /* c = 1 / sqrt(1 + t^2), s = t c */
     sq = wm_isqrt64(((uint64_t)1 << 60) + umul(tt, tt));
-    c = (int64_t)((((uint64_t)1 << 60) + sq / 2) / sq);
-    s = mulq(t, c);
+    c = (int32_t)((((uint64_t)1 << 60) + sq / 2) / sq);
+    s = mulq32(t, c);
     {
-        int64_t tq = mulq(t, apq);
-        a[p][p] -= tq;
-        a[q][q] += tq;
+        int32_t tq = mulq32(t, apq);
+        WM_ASSERT(a[p][p] - (int64_t)tq == (int64_t)sub32(a[p][p], tq) &&
+                  a[q][q] + (int64_t)tq == (int64_t)add32(a[q][q], tq));
+        a[p][p] = sub32(a[p][p], tq);
+        a[q][q] = add32(a[q][q], tq);
         a[p][q] = a[q][p] = 0;
     }
     for (int r = 0; r < 3; r++) {
-        int64_t g, h;
+        int32_t g, h;
         if (r != p && r != q) {
             g = a[r][p];
             h = a[r][q];
-            a[r][p] = a[p][r] = mulq(c, g) - mulq(s, h);
-            a[r][q] = a[q][r] = mulq(s, g) + mulq(c, h);
+            WM_ASSERT(mulq(c, g) - mulq(s, h) == (int64_t)sub32(mulq32(c, g), mulq32(s, h)) &&
+                      mulq(s, g) + mulq(c, h) == (int64_t)add32(mulq32(s, g), mulq32(c, h)));
+            a[r][p] = a[p][r] = sub32(mulq32(c, g), mulq32(s, h));
+            a[r][q] = a[q][r] = add32(mulq32(s, g), mulq32(c, h));
         }
         g = v[r][p];
         h = v[r][q];
-        v[r][p] = mulq(c, g) - mulq(s, h);
-        v[r][q] = mulq(s, g) + mulq(c, h);
+        WM_ASSERT(mulq(c, g) - mulq(s, h) == (int64_t)sub32(mulq32(c, g), mulq32(s, h)) &&
+                  mulq(s, g) + mulq(c, h) == (int64_t)add32(mulq32(s, g), mulq32(c, h)));
+        v[r][p] = sub32(mulq32(c, g), mulq32(s, h));
+        v[r][q] = add32(mulq32(s, g), mulq32(c, h));
     }
 }
 
 void wm_sym3_eigen(const int64_t in[6], int64_t lambda[3], int64_t vec[9])
 {
-    int64_t a[3][3], v[3][3];
+    int32_t a[3][3], v[3][3];
     int order[3] = {0, 1, 2};
-    a[0][0] = in[0], a[0][1] = a[1][0] = in[1], a[0][2] = a[2][0] = in[2];
-    a[1][1] = in[3], a[1][2] = a[2][1] = in[4], a[2][2] = in[5];
+    for (int i = 0; i < 6; i++) WM_ASSERT(in[i] >= -ONE30 - 64 && in[i] <= ONE30 + 64); /* R's: within [-1, 1] */
+    a[0][0] = (int32_t)in[0], a[0][1] = a[1][0] = (int32_t)in[1], a[0][2] = a[2][0] = (int32_t)in[2];
+    a[1][1] = (int32_t)in[3], a[1][2] = a[2][1] = (int32_t)in[4], a[2][2] = (int32_t)in[5];
     for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) v[i][j] = i == j ? ONE30 : 0;
     for (int sweep = 0; sweep < JACOBI_SWEEPS; sweep++) {
