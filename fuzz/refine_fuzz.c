@@ -305,10 +305,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             for (int32_t t = 0; t < m->tri_end; t++) {
                 int32_t x[3], y[3];
                 double e;
-                if (m->hv[3 * t] < 0) continue;
+                if (m->he[3 * t].v < 0) continue;
                 for (int k = 0; k < 3; k++) {
-                    x[k] = m->vx[m->hv[3 * t + k]];
-                    y[k] = m->vy[m->hv[3 * t + k]];
+                    x[k] = m->vxy[m->he[3 * t + k].v].x;
+                    y[k] = m->vxy[m->he[3 * t + k].v].y;
                 }
                 e = exact_error(hs, w, x, y, p.metric == WM_METRIC_NORMAL, sc);
                 if (e > worst) worst = e;

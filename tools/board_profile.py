@@ -164,15 +164,14 @@ def _refiner_struct_bytes() -> int:
 
 
 def _native(name: str, *args: int) -> int:
-    """A layout function of firmware/src/mesh.c (wm_tri_cap_skewed: the board's capacity clamp;
-    wm_mesh_xy_gap: the bytes from vx to vy and from vy to tflag) from the native library, the same source
-    the board's firmware is built from."""
+    """A layout function of firmware/src/mesh.c (wm_tri_cap_skewed: the board's capacity clamp) from the
+    native library, the same source the board's firmware is built from."""
     import ctypes
 
     from wavemesh.refine import native
 
     fn = getattr(native.load(), name)
-    fn.restype = ctypes.c_size_t if name == "wm_mesh_xy_gap" else ctypes.c_int32
+    fn.restype = ctypes.c_int32
     fn.argtypes = [ctypes.c_int32] * len(args)
     return int(fn(*args))
 
@@ -206,18 +205,17 @@ def _areas(rep: dict, elf: Path) -> list[tuple[int, str]]:
     if 2 <= grid < cap:
         cap = _native("wm_tri_cap_skewed", w, h, grid, cap)
     vc = cap // 2 + w + h + 2  # wm_vert_cap_for
-    xy_gap = _native("wm_mesh_xy_gap", vc)
     items = max(cap, vc)
     out = [(mm.FW_RAM.base, "firmware RAM: code, rodata"), (syms["__data_start"], "firmware RAM: data, bss"),
            (syms["__bss_end"], "firmware RAM: free"), (syms["__stack_bottom"], "firmware RAM: stack"),
            (mm.HEIGHT.base, "SDRAM HEIGHT (samples)"), (mm.COEF.base, "SDRAM COEF (details)"),
            (mm.TOUT.base, "SDRAM TOUT"), (mm.HEAP.base, "heap: struct wm_refiner")]
     q = mm.HEAP.base + a8(_refiner_struct_bytes())
-    for name, size in (("hv", 12 * cap), ("ho", 12 * cap), ("vh", 4 * vc), ("vx", 2 * vc), ("vy", 2 * vc),
+    for name, size in (("he", 24 * cap), ("vh", 4 * vc), ("vxy", 4 * vc),
                        ("tflag", cap), ("err", 4 * cap), ("worst", 4 * cap), ("list", 8 * items),
                        ("pos", 4 * items), ("vkey", 4 * vc), ("vapex", vc)):
         out.append((q, f"heap: {name}"))
-        q += xy_gap if name in ("vx", "vy") else a8(size) if name not in ("err", "list") else size
+        q += a8(size) if name not in ("err", "list") else size
     out.append((q, "heap: above the refiner (staging, hole mask)"))
     return out
 

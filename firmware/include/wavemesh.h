@@ -19,9 +19,12 @@
  * sample, triangles are counter-clockwise: (x1-x0)(y2-y0) - (x2-x0)(y1-y0) > 0.
  *
  * Half-edge mesh (hmm style): triangle t owns half-edges 3t, 3t+1, 3t+2; half-edge e starts at vertex
- * hv[e] and ends at hv[next(e)], next(e) = e - e%3 + (e+1)%3; ho[e] is the opposite half-edge or -1
- * on the border of the rectangle.  Free triangle slots have hv[3t] = -1 and are chained through
- * ho[3t]; free vertex slots have vx = WM_FREE and are chained through vh (vertex removal frees both).
+ * he[e].v and ends at he[next(e)].v, next(e) = e - e%3 + (e+1)%3; he[e].o is the opposite half-edge or
+ * -1 on the border of the rectangle.  A half-edge's origin and opposite lie side by side (wm_he), as do
+ * a vertex's x and y (wm_xy, vxy[]): the routines that read one nearly always read the other, and on the
+ * board each separate array was a cache line of its own to refill (docs/soc.md, "What the SDRAM costs
+ * the job").  Free triangle slots have he[3t].v = -1 and are chained through he[3t].o; free vertex slots
+ * have vxy[].x = WM_FREE and are chained through vh (vertex removal frees both).
  */
 #ifndef WAVEMESH_H
 #define WAVEMESH_H
@@ -46,7 +49,7 @@ extern "C" {
 
 #define WM_MAX_SIDE 32767  /* largest W or H: keeps every exact product within 64 bits */
 #define WM_MAX_LEVELS 12   /* largest M, as the reference model */
-#define WM_FREE 0xFFFFu    /* vx[] of a free vertex slot */
+#define WM_FREE 0xFFFFu    /* vxy[].x of a free vertex slot */
 
 /* Index storage: vertex and half-edge numbers in the mesh and the refiner's lists are wm_index.
  * 32-bit by default; a device with little memory builds with -DWM_INDEX_BITS=16 (the board does), which
@@ -71,17 +74,24 @@ const char *wm_strerror(int code);
 /* ---------------------------------------------------------------------------------------------- */
 /* The half-edge mesh */
 
+typedef struct wm_xy {
+    uint16_t x, y;
+} wm_xy;
+
+typedef struct wm_he {
+    wm_index v, o;
+} wm_he;
+
 typedef struct wm_mesh {
     int32_t width, height;     /* W, H of the grid */
     int32_t tri_cap, vert_cap; /* slots in the arrays */
     int32_t tri_end, vert_end; /* slots in use (live or free) are 0 .. end-1 */
     int32_t n_tri, n_vert;     /* live triangles and vertices */
     int32_t tri_free, vert_free; /* heads of the free lists, -1 when empty */
-    wm_index *hv;   /* [3 tri_cap] origin vertex of each half-edge; hv[3t] = -1: free slot */
-    wm_index *ho;   /* [3 tri_cap] opposite half-edge, -1 on the border */
+    wm_he *he;      /* [3 tri_cap] each half-edge's origin vertex v (he[3t].v = -1: free slot) and its opposite
+                     * half-edge o (-1 on the border), side by side */
     uint8_t *tflag; /* [tri_cap] scratch flags for the algorithms (region, pairing) */
-    uint16_t *vx;   /* [vert_cap] column of each vertex; WM_FREE: free slot */
-    uint16_t *vy;   /* [vert_cap] row */
+    wm_xy *vxy;     /* [vert_cap] column x (WM_FREE: free slot) and row y of each vertex, side by side */
     wm_index *vh;   /* [vert_cap] one half-edge leaving the vertex */
 } wm_mesh;
 
@@ -101,19 +111,17 @@ static inline int32_t wm_prev_he(int32_t e) { return wm_div3_exact((uint32_t)e) 
 /* Bytes of storage wm_mesh_init needs for tri_cap triangles and vert_cap vertices (0 if too big). */
 size_t wm_mesh_bound(int32_t tri_cap, int32_t vert_cap);
 
-/* Bytes from a mesh's vertex x array to its y array, and from its y array to the triangle flags (mesh.c:
- * padded so that the three never share lines of a direct-mapped cache of 8 KiB or more in step). */
-size_t wm_mesh_xy_gap(int32_t vert_cap);
-
 /* Vertex slots enough for any triangulation of the W x H rectangle with tri_cap triangles
  * (Euler: V = (T + B + 2) / 2 with B <= 2(W + H) - 4 border vertices). */
 int32_t wm_vert_cap_for(int32_t width, int32_t height, int32_t tri_cap);
 
 /* A triangle capacity for a W x H grid's storage, from cap (the grid's own, wm_tri_cap_max) up to limit:
- * the smallest whose unpadded vertex arrays would lie 1 to 7 KiB past a multiple of 8 KiB apart, which
- * moves every array of the storage off the round offsets a power-of-two grid's own capacity gives them
- * (the board's clamp, app/board_job.c; wm_mesh_xy_gap keeps x, y and the flags apart at any capacity);
- * cap when none within 8192 more.  The refiner cannot reach it, so the mesh is the same. */
+ * the smallest for which 2 vert_cap rounded up to 8 bytes lies 1 to 7 KiB past a multiple of 8 KiB; cap
+ * when none within 8192 more.  The board's clamp (app/board_job.c): with a power-of-two grid's own
+ * capacity the vertex arrays vh and vxy (4 bytes a vertex each with 32-bit indices, read together by the
+ * fan walks) lie a multiple of 8 KiB plus 16 bytes apart, and a vertex's two fall on the same or the
+ * next line index of the board's direct-mapped caches; for the grids it moves, about 2 KiB apart (mesh.c).  The refiner
+ * cannot reach it, so the mesh is the same. */
 int32_t wm_tri_cap_skewed(int32_t width, int32_t height, int32_t cap, int32_t limit);
 
 /* Lays out an empty mesh of a W x H grid in mem (bytes >= wm_mesh_bound).

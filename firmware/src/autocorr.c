@@ -273,7 +273,7 @@ int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t
 {
     int64_t sum[6] = {0, 0, 0, 0, 0, 0};
     int32_t first, h, k = 0;
-    if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
+    if (v < 0 || v >= m->vert_end || m->vxy[v].x == WM_FREE) return WM_ERR_ARG;
     first = wm_fan_first(m, v);
     h = first;
     do {

@@ -464,7 +464,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     const wm_mesh *me = &r->mesh;
     int32_t *ring = lp->ring, *tris = lp->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
     uint32_t best = NONE, bad[WM_MAX_RING], skip = 0;
-    int32_t vx = me->vx[v], vy = me->vy[v], zv;
+    int32_t vx = me->vxy[v].x, vy = me->vxy[v].y, zv;
     struct wm_plan_probe probe;
     struct tested tested;
     struct fans *q = &lp->q;
@@ -478,8 +478,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     zv = r->field.samples[(int64_t)vy * r->field.width + vx];
     q->vx = vx, q->vy = vy;
     for (int32_t i = 0; i < n; i++) {
-        rx[i] = me->vx[ring[i]];
-        ry[i] = me->vy[ring[i]];
+        rx[i] = me->vxy[ring[i]].x;
+        ry[i] = me->vxy[ring[i]].y;
         q->dx[i] = rx[i] - vx;
         q->dy[i] = ry[i] - vy;
         q->z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
@@ -524,8 +524,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
             int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
             for (int c = 0; c < 3; c++) {
-                x[c] = a >= 0 ? vx + q->dx[tp[3 * t + c]] : me->vx[tris[3 * t + c]];
-                y[c] = a >= 0 ? vy + q->dy[tp[3 * t + c]] : me->vy[tris[3 * t + c]];
+                x[c] = a >= 0 ? vx + q->dx[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].x;
+                y[c] = a >= 0 ? vy + q->dy[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].y;
             }
             e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, worst, kept_for(&tested, x, y));
             if (e > worst) worst = e;
@@ -727,7 +727,7 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     zh.n = 0;
     for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
     for (int32_t v = 0; v < me->vert_end; v++)
-        if (me->vx[v] != WM_FREE) refile(r, v, &n, &lp);
+        if (me->vxy[v].x != WM_FREE) refile(r, v, &n, &lp);
     while (n > 0 || zh.n > 0) {
         int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
         const wm_hent *top = wm_heap_entries(r);

@@ -25,14 +25,14 @@
 
 static int same_side(const wm_mesh *m, int32_t v, int32_t x, int32_t y)
 {
-    int32_t vx = m->vx[v], vy = m->vy[v];
+    int32_t vx = m->vxy[v].x, vy = m->vxy[v].y;
     return (vx == 0 && x == 0) || (vx == m->width - 1 && x == m->width - 1) || (vy == 0 && y == 0) ||
            (vy == m->height - 1 && y == m->height - 1);
 }
 
 static int corner(const wm_mesh *m, int32_t v)
 {
-    int32_t vx = m->vx[v], vy = m->vy[v];
+    int32_t vx = m->vxy[v].x, vy = m->vxy[v].y;
     return (vx == 0 || vx == m->width - 1) && (vy == 0 || vy == m->height - 1);
 }
 
@@ -50,7 +50,7 @@ static int32_t star(const wm_mesh *m, int32_t v, int32_t nb[WM_MAX_RING], int32_
     *k = n;
     if (h < 0) {
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        nb[n] = m->hv[WM_PREV(out[n - 1])];
+        nb[n] = m->he[WM_PREV(out[n - 1])].v;
         n++;
     }
     return n;
@@ -60,14 +60,14 @@ static int32_t star(const wm_mesh *m, int32_t v, int32_t nb[WM_MAX_RING], int32_
  * when the border would not stay; else WM_OK. */
 static int point_check(const wm_mesh *m, const int32_t v[2], int32_t x, int32_t y)
 {
-    int64_t dx = (int64_t)m->vx[v[1]] - m->vx[v[0]], dy = (int64_t)m->vy[v[1]] - m->vy[v[0]];
-    int64_t px = (int64_t)x - m->vx[v[0]], py = (int64_t)y - m->vy[v[0]];
+    int64_t dx = (int64_t)m->vxy[v[1]].x - m->vxy[v[0]].x, dy = (int64_t)m->vxy[v[1]].y - m->vxy[v[0]].y;
+    int64_t px = (int64_t)x - m->vxy[v[0]].x, py = (int64_t)y - m->vxy[v[0]].y;
     if (px * dy - py * dx != 0 || px * dx + py * dy < 0 || px * dx + py * dy > dx * dx + dy * dy)
         return WM_ERR_ARG;
     /* the border stays */
     for (int i = 0; i < 2; i++) {
-        if (m->vx[v[i]] == x && m->vy[v[i]] == y) continue;
-        if (wm_on_border(m, m->vx[v[i]], m->vy[v[i]]) && (corner(m, v[i]) || !same_side(m, v[i], x, y)))
+        if (m->vxy[v[i]].x == x && m->vxy[v[i]].y == y) continue;
+        if (wm_on_border(m, m->vxy[v[i]].x, m->vxy[v[i]].y) && (corner(m, v[i]) || !same_side(m, v[i], x, y)))
             return WM_ERR_REFUSED;
     }
     return WM_OK;
@@ -76,7 +76,7 @@ static int point_check(const wm_mesh *m, const int32_t v[2], int32_t x, int32_t 
 int wm_collapse_stars(const wm_mesh *m, int32_t e, struct wm_collapse_stars *s)
 {
     int32_t common = 0;
-    s->v[0] = m->hv[e];
+    s->v[0] = m->he[e].v;
     s->v[1] = wm_dest(m, e);
     for (int i = 0; i < 2; i++) {
         s->n[i] = star(m, s->v[i], s->nb[i], s->out[i], &s->k[i]);
@@ -86,7 +86,7 @@ int wm_collapse_stars(const wm_mesh *m, int32_t e, struct wm_collapse_stars *s)
     for (int32_t i = 0; i < s->n[0]; i++)
         for (int32_t j = 0; j < s->n[1]; j++)
             if (s->nb[0][i] == s->nb[1][j]) common++;
-    return common != (m->ho[e] >= 0 ? 2 : 1) ? WM_ERR_REFUSED : WM_OK;
+    return common != (m->he[e].o >= 0 ? 2 : 1) ? WM_ERR_REFUSED : WM_OK;
 }
 
 int wm_collapse_plan_at(const wm_mesh *m, const struct wm_collapse_stars *s, int32_t x, int32_t y,
@@ -99,15 +99,15 @@ int wm_collapse_plan_at(const wm_mesh *m, const struct wm_collapse_stars *s, int
     /* the triangles around v1, then v2, that do not hold the edge, with p for v1 or v2 (those around
      * an end that stays where it is do not change: a half-edge collapse plans only the other end's) */
     for (int i = 0; i < 2; i++) {
-        if (m->vx[v[i]] == x && m->vy[v[i]] == y) continue;
+        if (m->vxy[v[i]].x == x && m->vxy[v[i]].y == y) continue;
         for (int32_t j = 0; j < s->k[i]; j++) {
             int32_t t = WM_TRI(s->out[i][j]), c[3], cx[3], cy[3], other = 0;
             for (int q = 0; q < 3; q++) {
-                int32_t w = m->hv[3 * t + q];
+                int32_t w = m->he[3 * t + q].v;
                 if (w == v[1 - i]) other = 1;
                 c[q] = (w == v[0] || w == v[1]) ? WM_COLLAPSE_POINT : w;
-                cx[q] = c[q] < 0 ? x : m->vx[w];
-                cy[q] = c[q] < 0 ? y : m->vy[w];
+                cx[q] = c[q] < 0 ? x : m->vxy[w].x;
+                cy[q] = c[q] < 0 ? y : m->vxy[w].y;
             }
             if (other) continue;
             if (wm_orient(cx[0], cy[0], cx[1], cy[1], cx[2], cy[2]) <= 0) return WM_ERR_REFUSED;
@@ -125,8 +125,8 @@ int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int
     struct wm_collapse_stars s;
     int32_t v[2];
     int rc;
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
-    v[0] = m->hv[e];
+    if (e < 0 || e >= 3 * m->tri_end || m->he[3 * WM_TRI(e)].v < 0) return WM_ERR_ARG;
+    v[0] = m->he[e].v;
     v[1] = wm_dest(m, e);
     rc = point_check(m, v, x, y);
     if (rc == WM_OK) rc = wm_collapse_stars(m, e, &s);
@@ -152,12 +152,12 @@ int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touche
     int32_t tris[6 * WM_MAX_RING], nt, v1, v2, p = -1, na = 0, nb = 0, rc;
     rc = wm_edge_collapse_plan(m, e, x, y, tris, &nt);
     if (rc != WM_OK) return rc;
-    v1 = m->hv[e];
+    v1 = m->he[e].v;
     v2 = wm_dest(m, e);
-    if (m->vx[v1] == x && m->vy[v1] == y) {
+    if (m->vxy[v1].x == x && m->vxy[v1].y == y) {
         p = v1;
         rc = fan_into(m, v2, v1, touched, &na);
-    } else if (m->vx[v2] == x && m->vy[v2] == y) {
+    } else if (m->vxy[v2].x == x && m->vxy[v2].y == y) {
         p = v2;
         rc = fan_into(m, v1, v2, touched, &na);
     } else {
@@ -165,8 +165,8 @@ int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touche
         rc = wm_edge_split(m, e, x, y, split, &ns);
         if (rc != WM_OK) return rc; /* nothing changed (capacity) */
         for (int q = 0; q < 3; q++) {
-            int32_t w = m->hv[3 * split[0] + q];
-            if (m->vx[w] == x && m->vy[w] == y) p = w;
+            int32_t w = m->he[3 * split[0] + q].v;
+            if (m->vxy[w].x == x && m->vxy[w].y == y) p = w;
         }
         rc = fan_into(m, v1, p, touched, &na);
         if (rc == WM_OK) rc = fan_into(m, v2, p, touched + na, &nb);

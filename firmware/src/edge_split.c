@@ -13,18 +13,18 @@
  * T1 becomes T1 and T3.  T1 and T2 keep their slots; T3 and T4 are new. */
 #include "wm_internal.h"
 
-/* The split of e at (x, y), strictly inside the edge, with room for it (f = ho[e]).  Each corner's
+/* The split of e at (x, y), strictly inside the edge, with room for it (f = he[e].o).  Each corner's
  * half-edge (vh) is the one wm_tri_claim of T2, T4, T1 and then T3 would leave it, stored once (no load
- * of hv[] back). */
+ * of he[].v back). */
 static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, int32_t y, int32_t touched[4],
                                    int32_t *n_touched)
 {
-    int32_t t1 = WM_TRI(e), t2, t3, t4 = -1, a = m->hv[e], b = wm_dest(m, e), c = m->hv[WM_PREV(e)], d = -1, p;
-    int32_t o_bc = m->ho[WM_NEXT(e)], o_ca = m->ho[WM_PREV(e)], o_ad = -1, o_db = -1;
+    int32_t t1 = WM_TRI(e), t2, t3, t4 = -1, a = m->he[e].v, b = wm_dest(m, e), c = m->he[WM_PREV(e)].v, d = -1, p;
+    int32_t o_bc = m->he[WM_NEXT(e)].o, o_ca = m->he[WM_PREV(e)].o, o_ad = -1, o_db = -1;
     if (f >= 0) {
-        d = m->hv[WM_PREV(f)];
-        o_ad = m->ho[WM_NEXT(f)];
-        o_db = m->ho[WM_PREV(f)];
+        d = m->he[WM_PREV(f)].v;
+        o_ad = m->he[WM_NEXT(f)].o;
+        o_db = m->he[WM_PREV(f)].o;
     }
     p = wm_vert_alloc(m, x, y);
     t3 = wm_tri_take(m);
@@ -72,17 +72,18 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t e, int32_t f, int32_t x, 
 /* (x, y) strictly between e's ends a and b on the segment. */
 static int strictly_inside(const wm_mesh *m, int32_t e, int32_t x, int32_t y)
 {
-    int32_t a = m->hv[e], b = wm_dest(m, e);
-    int64_t ax = m->vx[a], ay = m->vy[a], dx = m->vx[b] - ax, dy = m->vy[b] - ay, px = x - ax, py = y - ay;
+    int32_t a = m->he[e].v, b = wm_dest(m, e);
+    int64_t ax = m->vxy[a].x, ay = m->vxy[a].y, dx = m->vxy[b].x - ax, dy = m->vxy[b].y - ay, px = x - ax,
+            py = y - ay;
     return px * dy - py * dx == 0 && px * dx + py * dy > 0 && px * dx + py * dy < dx * dx + dy * dy;
 }
 
 int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
 {
     int32_t f;
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    if (e < 0 || e >= 3 * m->tri_end || m->he[3 * WM_TRI(e)].v < 0) return WM_ERR_ARG;
     if (!strictly_inside(m, e, x, y)) return WM_ERR_REFUSED;
-    f = m->ho[e];
+    f = m->he[e].o;
     if (!wm_room_for_split(m, f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
     split(m, e, f, x, y, touched, n_touched);
     return WM_OK;
@@ -90,8 +91,8 @@ int wm_edge_split(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4
 
 int wm_edge_split_inside(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[4], int32_t *n_touched)
 {
-    int32_t f = m->ho[e];
-    WM_ASSERT(e >= 0 && e < 3 * m->tri_end && m->hv[3 * WM_TRI(e)] >= 0 && strictly_inside(m, e, x, y));
+    int32_t f = m->he[e].o;
+    WM_ASSERT(e >= 0 && e < 3 * m->tri_end && m->he[3 * WM_TRI(e)].v >= 0 && strictly_inside(m, e, x, y));
     if (!wm_room_for_split(m, f >= 0 ? 2 : 1)) return WM_ERR_CAPACITY;
     split(m, e, f, x, y, touched, n_touched);
     return WM_OK;

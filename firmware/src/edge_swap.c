@@ -17,15 +17,15 @@
 int wm_edge_swappable(const wm_mesh *m, int32_t e)
 {
     int32_t f;
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return 0;
-    f = m->ho[e];
+    if (e < 0 || e >= 3 * m->tri_end || m->he[3 * WM_TRI(e)].v < 0) return 0;
+    f = m->he[e].o;
     if (f < 0) return 0;
-    return wm_quad_convex(m, m->hv[e], m->hv[f], m->hv[WM_PREV(e)], m->hv[WM_PREV(f)]);
+    return wm_quad_convex(m, m->he[e].v, m->he[f].v, m->he[WM_PREV(e)].v, m->he[WM_PREV(f)].v);
 }
 
 int wm_edge_swap(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_touched)
 {
-    if (e < 0 || e >= 3 * m->tri_end || m->hv[3 * WM_TRI(e)] < 0) return WM_ERR_ARG;
+    if (e < 0 || e >= 3 * m->tri_end || m->he[3 * WM_TRI(e)].v < 0) return WM_ERR_ARG;
     if (!wm_edge_swappable(m, e)) return WM_ERR_REFUSED;
     wm_edge_swap_convex(m, e, touched, n_touched);
     return WM_OK;
@@ -35,8 +35,8 @@ void wm_edge_swap_convex(wm_mesh *m, int32_t e, int32_t touched[2], int32_t *n_t
 {
     int32_t f;
     WM_ASSERT(wm_edge_swappable(m, e));
-    f = m->ho[e];
-    wm_flip(m, e, f, WM_TRI(e), WM_TRI(f), m->hv[e], m->hv[f], m->hv[WM_PREV(e)], m->hv[WM_PREV(f)]);
+    f = m->he[e].o;
+    wm_flip(m, e, f, WM_TRI(e), WM_TRI(f), m->he[e].v, m->he[f].v, m->he[WM_PREV(e)].v, m->he[WM_PREV(f)].v);
     if (touched) {
         touched[0] = WM_TRI(e);
         touched[1] = WM_TRI(f);

@@ -106,10 +106,11 @@ static int kept_at(const wm_mesh *me, const wm_field *f, int32_t c, int32_t v)
 {
     int32_t first = wm_fan_first(me, c), e = first, out = 0;
     do {
-        const wm_index *t = me->hv + 3 * WM_TRI(e);
-        if (!invalid_at(f, me->vx[t[0]], me->vy[t[0]]) && !invalid_at(f, me->vx[t[1]], me->vy[t[1]]) &&
-            !invalid_at(f, me->vx[t[2]], me->vy[t[2]]))
-            out |= (t[0] == v || t[1] == v || t[2] == v) ? 1 : 2;
+        const wm_he *t = me->he + 3 * WM_TRI(e);
+        if (!invalid_at(f, me->vxy[t[0].v].x, me->vxy[t[0].v].y) &&
+            !invalid_at(f, me->vxy[t[1].v].x, me->vxy[t[1].v].y) &&
+            !invalid_at(f, me->vxy[t[2].v].x, me->vxy[t[2].v].y))
+            out |= (t[0].v == v || t[1].v == v || t[2].v == v) ? 1 : 2;
         e = wm_rot_ccw(me, e);
     } while (e >= 0 && e != first);
     return out;
@@ -123,11 +124,12 @@ int wm_hole_keeps_cover(const wm_refiner *r, int32_t v, const int32_t *ring, int
     for (int32_t i = 0; i < n; i++) {
         int32_t c = ring[i], j;
         /* a valid ring vertex whose kept triangles all go with v must get one of the new ones */
-        if (invalid_at(f, me->vx[c], me->vy[c]) || kept_at(me, f, c, v) != 1) continue;
+        if (invalid_at(f, me->vxy[c].x, me->vxy[c].y) || kept_at(me, f, c, v) != 1) continue;
         for (j = 0; j < nt; j++) {
             const int32_t *t = tris + 3 * j;
-            if ((t[0] == c || t[1] == c || t[2] == c) && !invalid_at(f, me->vx[t[0]], me->vy[t[0]]) &&
-                !invalid_at(f, me->vx[t[1]], me->vy[t[1]]) && !invalid_at(f, me->vx[t[2]], me->vy[t[2]]))
+            if ((t[0] == c || t[1] == c || t[2] == c) && !invalid_at(f, me->vxy[t[0]].x, me->vxy[t[0]].y) &&
+                !invalid_at(f, me->vxy[t[1]].x, me->vxy[t[1]].y) &&
+                !invalid_at(f, me->vxy[t[2]].x, me->vxy[t[2]].y))
                 break;
         }
         if (j == nt) return 0;
@@ -140,11 +142,11 @@ int wm_hole_keeps_cover(const wm_refiner *r, int32_t v, const int32_t *ring, int
  * -1 when the walk does not end (it cannot in a proper mesh: a safeguard). */
 static int32_t locate(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay, int32_t *on)
 {
-    int32_t sx = me->vx[s], sy = me->vy[s], first = wm_fan_first(me, s), e = first, t = -1, in = -1;
+    int32_t sx = me->vxy[s].x, sy = me->vxy[s].y, first = wm_fan_first(me, s), e = first, t = -1, in = -1;
     do { /* the triangle of s's fan whose corner at s holds the direction to a */
-        int32_t p = me->hv[WM_NEXT(e)], q = me->hv[WM_PREV(e)];
-        if (wm_orient(sx, sy, me->vx[p], me->vy[p], ax, ay) >= 0 &&
-            wm_orient(me->vx[q], me->vy[q], sx, sy, ax, ay) >= 0) {
+        int32_t p = me->he[WM_NEXT(e)].v, q = me->he[WM_PREV(e)].v;
+        if (wm_orient(sx, sy, me->vxy[p].x, me->vxy[p].y, ax, ay) >= 0 &&
+            wm_orient(me->vxy[q].x, me->vxy[q].y, sx, sy, ax, ay) >= 0) {
             t = WM_TRI(e);
             break;
         }
@@ -154,19 +156,19 @@ static int32_t locate(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay, int3
         int32_t out = -1, outside = 0, k;
         *on = -1;
         for (k = 0; k < 3; k++) {
-            int32_t h = 3 * t + k, u = me->hv[h], v = me->hv[WM_NEXT(h)];
-            int64_t o = wm_orient(me->vx[u], me->vy[u], me->vx[v], me->vy[v], ax, ay);
+            int32_t h = 3 * t + k, u = me->he[h].v, v = me->he[WM_NEXT(h)].v;
+            int64_t o = wm_orient(me->vxy[u].x, me->vxy[u].y, me->vxy[v].x, me->vxy[v].y, ax, ay);
             if (o == 0) *on = h;
             outside |= o < 0;
             if (o < 0 && h != in) {
                 /* leave through the edge the segment s-a crosses: its ends on both sides of the line */
-                int64_t ou = wm_orient(sx, sy, ax, ay, me->vx[u], me->vy[u]);
-                int64_t ov = wm_orient(sx, sy, ax, ay, me->vx[v], me->vy[v]);
+                int64_t ou = wm_orient(sx, sy, ax, ay, me->vxy[u].x, me->vxy[u].y);
+                int64_t ov = wm_orient(sx, sy, ax, ay, me->vxy[v].x, me->vxy[v].y);
                 if ((ou <= 0 && ov >= 0) || (ou >= 0 && ov <= 0)) out = h;
             }
         }
         if (out < 0) return outside ? -1 : t; /* a in t (on edge *on, or a corner: two edges hold it) */
-        in = me->ho[out];
+        in = me->he[out].o;
         if (in < 0) return -1;
         t = WM_TRI(in);
     }
@@ -178,7 +180,8 @@ static int32_t vertex_at(const wm_mesh *me, int32_t s, int32_t ax, int32_t ay)
 {
     int32_t on, t = locate(me, s, ax, ay, &on);
     for (int32_t j = 0; t >= 0 && j < 3; j++)
-        if (me->vx[me->hv[3 * t + j]] == ax && me->vy[me->hv[3 * t + j]] == ay) return me->hv[3 * t + j];
+        if (me->vxy[me->he[3 * t + j].v].x == ax && me->vxy[me->he[3 * t + j].v].y == ay)
+            return me->he[3 * t + j].v;
     return -1;
 }
 
@@ -196,11 +199,11 @@ static int swap_cell(wm_refiner *r, int32_t s, int32_t cx, int32_t cy)
     first = wm_fan_first(me, c);
     e = first;
     do { /* the half-edge from c to the opposite corner, with the cell's two other corners beside it */
-        int32_t o = me->hv[WM_NEXT(e)], f = me->ho[e];
-        if (me->vx[o] == cx + 1 - (bad & 1) && me->vy[o] == cy + 1 - (bad >> 1) && f >= 0) {
-            int32_t p = me->hv[WM_PREV(e)], q = me->hv[WM_PREV(f)];
-            if (me->vx[p] < cx || me->vx[p] > cx + 1 || me->vy[p] < cy || me->vy[p] > cy + 1 || me->vx[q] < cx ||
-                me->vx[q] > cx + 1 || me->vy[q] < cy || me->vy[q] > cy + 1 ||
+        int32_t o = me->he[WM_NEXT(e)].v, f = me->he[e].o;
+        if (me->vxy[o].x == cx + 1 - (bad & 1) && me->vxy[o].y == cy + 1 - (bad >> 1) && f >= 0) {
+            int32_t p = me->he[WM_PREV(e)].v, q = me->he[WM_PREV(f)].v;
+            if (me->vxy[p].x < cx || me->vxy[p].x > cx + 1 || me->vxy[p].y < cy || me->vxy[p].y > cy + 1 ||
+                me->vxy[q].x < cx || me->vxy[q].x > cx + 1 || me->vxy[q].y < cy || me->vxy[q].y > cy + 1 ||
                 wm_edge_swap(me, e, touched, &n) != WM_OK)
                 return 0;
             for (int32_t i = 0; i < n; i++) wm_touch(r, touched[i]);
@@ -213,12 +216,13 @@ static int swap_cell(wm_refiner *r, int32_t s, int32_t cx, int32_t cy)
 
 static int mixed_thin(const wm_mesh *me, const wm_field *f, int32_t t)
 {
-    const wm_index *c = me->hv + 3 * t;
+    const wm_he *c = me->he + 3 * t;
     int32_t x[3], y[3];
     wm_tri_xy(me, t, x, y);
     return wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) == 1 &&
-           (invalid_at(f, me->vx[c[0]], me->vy[c[0]]) || invalid_at(f, me->vx[c[1]], me->vy[c[1]]) ||
-            invalid_at(f, me->vx[c[2]], me->vy[c[2]]));
+           (invalid_at(f, me->vxy[c[0].v].x, me->vxy[c[0].v].y) ||
+            invalid_at(f, me->vxy[c[1].v].x, me->vxy[c[1].v].y) ||
+            invalid_at(f, me->vxy[c[2].v].x, me->vxy[c[2].v].y));
 }
 
 /* The edge from vertex u to vertex w (a grid neighbour) made by swapping the edges that cross it, while
@@ -227,19 +231,19 @@ static int mixed_thin(const wm_mesh *me, const wm_field *f, int32_t t)
 static int recover_edge(wm_refiner *r, int32_t u, int32_t w)
 {
     wm_mesh *me = &r->mesh;
-    int32_t ux = me->vx[u], uy = me->vy[u], wx = me->vx[w], wy = me->vy[w], swaps = 0;
+    int32_t ux = me->vxy[u].x, uy = me->vxy[u].y, wx = me->vxy[w].x, wy = me->vxy[w].y, swaps = 0;
     for (int32_t step = 0; step < 8; step++) {
         int32_t first = wm_fan_first(me, u), e = first, h = -1, touched[2], n;
         do {
-            int32_t p = me->hv[WM_NEXT(e)], q = me->hv[WM_PREV(e)];
+            int32_t p = me->he[WM_NEXT(e)].v, q = me->he[WM_PREV(e)].v;
             if (p == w || q == w) return swaps;
-            if (wm_orient(ux, uy, me->vx[p], me->vy[p], wx, wy) > 0 &&
-                wm_orient(me->vx[q], me->vy[q], ux, uy, wx, wy) > 0)
+            if (wm_orient(ux, uy, me->vxy[p].x, me->vxy[p].y, wx, wy) > 0 &&
+                wm_orient(me->vxy[q].x, me->vxy[q].y, ux, uy, wx, wy) > 0)
                 h = WM_NEXT(e); /* the edge p-q opposite u crosses u-w */
             e = wm_rot_ccw(me, e);
         } while (e >= 0 && e != first);
-        if (h < 0 || me->ho[h] < 0 || !mixed_thin(me, &r->field, WM_TRI(h)) ||
-            !mixed_thin(me, &r->field, WM_TRI(me->ho[h])) || wm_edge_swap(me, h, touched, &n) != WM_OK)
+        if (h < 0 || me->he[h].o < 0 || !mixed_thin(me, &r->field, WM_TRI(h)) ||
+            !mixed_thin(me, &r->field, WM_TRI(me->he[h].o)) || wm_edge_swap(me, h, touched, &n) != WM_OK)
             return swaps;
         for (int32_t i = 0; i < n; i++) wm_touch(r, touched[i]);
         swaps++;
@@ -253,7 +257,7 @@ int wm_hole_cover(wm_refiner *r)
     const wm_field *f = &r->field;
     int32_t added = 0, end = me->vert_end;
     for (int32_t s = 0; s < end; s++) {
-        int32_t x = me->vx[s], y = me->vy[s], done = 0;
+        int32_t x = me->vxy[s].x, y = me->vxy[s].y, done = 0;
         if (x == WM_FREE || invalid_at(f, x, y) || kept_at(me, f, s, -1)) continue;
         /* the grid cells with corner s and three valid corners (s among them): their valid corners */
         for (int32_t c = 0; c < 4 && !done; c++) {
@@ -267,7 +271,7 @@ int wm_hole_cover(wm_refiner *r)
                 t = locate(me, s, ax, ay, &on);
                 if (t < 0) continue;
                 for (int32_t j = 0; j < 3; j++)
-                    if (me->vx[me->hv[3 * t + j]] == ax && me->vy[me->hv[3 * t + j]] == ay) p = j;
+                    if (me->vxy[me->he[3 * t + j].v].x == ax && me->vxy[me->he[3 * t + j].v].y == ay) p = j;
                 if (p >= 0) continue; /* a vertex already */
                 rc = wm_room(r, 2);
                 if (rc != 0) return rc < 0 ? rc : added; /* the budget: as the bound stops */
@@ -278,8 +282,9 @@ int wm_hole_cover(wm_refiner *r)
                 if (!legal) /* wm_legalise measures touched[] itself, after its flips */
                     for (int32_t i = 0; i < nt; i++) wm_touch(r, touched[i]);
                 for (int32_t j = 0; j < 3; j++)
-                    if (me->vx[me->hv[3 * touched[0] + j]] == ax && me->vy[me->hv[3 * touched[0] + j]] == ay)
-                        p = me->hv[3 * touched[0] + j];
+                    if (me->vxy[me->he[3 * touched[0] + j].v].x == ax &&
+                        me->vxy[me->he[3 * touched[0] + j].v].y == ay)
+                        p = me->he[3 * touched[0] + j].v;
                 if (legal) wm_legalise(r, p, touched, nt, NULL);
                 added++;
                 done = 1;

@@ -60,7 +60,7 @@ void wm_settle(wm_refiner *r)
 {
     wm_mesh *me = &r->mesh;
     uint32_t known = 0, *err = r->err;
-    const wm_index *hv = me->hv;
+    const wm_he *he = me->he;
     uint8_t *tflag = me->tflag;
     /* taken once, not at each slot: a store to tflag[] might have changed them, for all the compiler
      * knew (on the board four loads and two branches a slot) */
@@ -75,17 +75,17 @@ void wm_settle(wm_refiner *r)
         int32_t x[3], y[3], wx, wy;
         uint8_t f = tflag[t];
         if (!(f & WM_F_MEASURE)) {
-            if (hv[3 * t] >= 0 && err[t] > known) known = err[t];
+            if (he[3 * t].v >= 0 && err[t] > known) known = err[t];
             continue;
         }
         f &= (uint8_t)~WM_F_MEASURE;
-        if (hv[3 * t] < 0) {
+        if (he[3 * t].v < 0) {
             tflag[t] = f;
             continue;
         }
         tflag[t] = (uint8_t)(f | WM_F_NEW);
         /* the corners read only for a scan: most flagged triangles are within known and keep their bound
-         * (on the board each corner's vx[] and vy[] is likely an SDRAM refill: random vertices) */
+         * (on the board each corner's vxy[] is likely an SDRAM refill: random vertices) */
         if (masked) { /* as wm_touch, without forgetting the corners' classes */
             wm_tri_xy(me, t, x, y);
             err[t] =
@@ -253,36 +253,36 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
     int32_t stack[LEGAL_STACK], top = 0, slots[LEGAL_STACK], ns = 0, early = 0;
     int masked = r->roi || r->field.mask;
     /* the arrays and p's corner in registers: a flip stores through me's arrays, so the compiler (for
-     * all it knew, the stores might change them) loaded the four pointers and vx[p], vy[p] again at
+     * all it knew, the stores might change them) loaded the four pointers and xy[p].x, xy[p].y again at
      * every edge; a flip changes no vertex and no pointer */
-    const wm_index *hv = me->hv, *ho = me->ho;
-    const uint16_t *vx = me->vx, *vy = me->vy;
-    int32_t px = vx[p], py = vy[p];
+    const wm_he *he = me->he;
+    const wm_xy *xy = me->vxy;
+    int32_t px = xy[p].x, py = xy[p].y;
     WM_ASSERT(n == 2 || n == 3 || n == 4);
     for (int32_t i = 0; i < n; i++) {
         int32_t t = touched[i];
         /* p's corner in a split's triangles (wm_tri_split: 2 in each; wm_edge_split: 1, 0, 1, 0), and the
          * edge opposite it, 3 t + k from corner k to corner k + 1 (wm_dest), the one after p's corner */
         int32_t k = n == 3 ? 0 : (i & 1 ? 1 : 2);
-        WM_ASSERT(me->hv[3 * t + (k == 0 ? 2 : k - 1)] == p && me->hv[3 * t + k] != p &&
-                  me->hv[3 * t + (k == 2 ? 0 : k + 1)] != p);
+        WM_ASSERT(me->he[3 * t + (k == 0 ? 2 : k - 1)].v == p && me->he[3 * t + k].v != p &&
+                  me->he[3 * t + (k == 2 ? 0 : k + 1)].v != p);
         stack[top++] = 3 * t + k; /* n <= 4 < LEGAL_STACK */
     }
     while (top > 0) {
-        int32_t e = stack[--top], o = ho[e], a, b, d, t1, t2, ko, ax, ay, bx, by, dx, dy;
+        int32_t e = stack[--top], o = he[e].o, a, b, d, t1, t2, ko, ax, ay, bx, by, dx, dy;
         int64_t sa, sb;
         /* e's triangle still holds p: a flip changes the popped triangle and the one across its edge, which
          * does not hold p (two triangles of the same three corners cannot both be counter-clockwise), and
          * a stacked triangle holds p, each on the stack once */
-        WM_ASSERT(hv[WM_PREV(e)] == p);
+        WM_ASSERT(he[WM_PREV(e)].v == p);
         if (o < 0) continue;
         t2 = (int32_t)((uint32_t)o / 3u); /* WM_TRI(o), o >= 0: unsigned */
         ko = o - 3 * t2;
-        a = hv[e];
-        b = hv[o];
+        a = he[e].v;
+        b = he[o].v;
         WM_ASSERT(WM_PREV(o) == (ko == 0 ? o + 2 : o - 1));
-        d = hv[ko == 0 ? o + 2 : o - 1];
-        ax = vx[a], ay = vy[a], bx = vx[b], by = vy[b], dx = vx[d], dy = vy[d];
+        d = he[ko == 0 ? o + 2 : o - 1].v;
+        ax = xy[a].x, ay = xy[a].y, bx = xy[b].x, by = xy[b].y, dx = xy[d].x, dy = xy[d].y;
         if (!wm_flip_circle(ax, ay, bx, by, px, py, dx, dy)) continue;
         /* wm_quad_convex(me, a, b, p, d) (wm_edge_swappable's test) from the corners at hand */
         sa = wm_orient(px, py, dx, dy, ax, ay);

@@ -47,17 +47,17 @@ static int consistent(const wm_refiner *r, const int64_t g[2], int64_t cx, int64
 
 static void edge_vec(const wm_mesh *me, int32_t e, int64_t *cx, int64_t *cy)
 {
-    int32_t a = me->hv[e], b = wm_dest(me, e);
-    *cx = (int64_t)me->vx[b] - me->vx[a];
-    *cy = (int64_t)me->vy[b] - me->vy[a];
+    int32_t a = me->he[e].v, b = wm_dest(me, e);
+    *cx = (int64_t)me->vxy[b].x - me->vxy[a].x;
+    *cy = (int64_t)me->vxy[b].y - me->vxy[a].y;
 }
 
 /* Quadrilateral a-d-b-c of the two triangles at e convex (strictly or not, fig. 4.10). */
 static int convex(const wm_mesh *me, int32_t e)
 {
-    int32_t f = me->ho[e], a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
-    int64_t s1 = wm_orient(me->vx[c], me->vy[c], me->vx[d], me->vy[d], me->vx[a], me->vy[a]);
-    int64_t s2 = wm_orient(me->vx[c], me->vy[c], me->vx[d], me->vy[d], me->vx[b], me->vy[b]);
+    int32_t f = me->he[e].o, a = me->he[e].v, b = me->he[f].v, c = me->he[WM_PREV(e)].v, d = me->he[WM_PREV(f)].v;
+    int64_t s1 = wm_orient(me->vxy[c].x, me->vxy[c].y, me->vxy[d].x, me->vxy[d].y, me->vxy[a].x, me->vxy[a].y);
+    int64_t s2 = wm_orient(me->vxy[c].x, me->vxy[c].y, me->vxy[d].x, me->vxy[d].y, me->vxy[b].x, me->vxy[b].y);
     return !((s1 > 0 && s2 > 0) || (s1 < 0 && s2 < 0));
 }
 
@@ -71,7 +71,7 @@ static int32_t best_edge(const wm_refiner *r, int32_t m, int32_t t, uint8_t want
     int32_t best = -1;
     gradient(r, m, t, g);
     for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
-        int32_t o = me->ho[e];
+        int32_t o = me->he[e].o;
         int64_t cx, cy, len;
         edge_vec(me, e, &cx, &cy);
         len = cx * cx + cy * cy;
@@ -107,7 +107,7 @@ int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
             e = best_edge(r, m, t, partner[pass]);
             if (e < 0) continue;
             me->tflag[t] |= WM_F_PLAN;
-            if (me->ho[e] >= 0) me->tflag[WM_TRI(me->ho[e])] |= WM_F_PLAN;
+            if (me->he[e].o >= 0) me->tflag[WM_TRI(me->he[e].o)] |= WM_F_PLAN;
             r->list[n++] = e;
             if (st) {
                 if (pass < 2) st->pairs++;
@@ -130,13 +130,13 @@ int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
 static int64_t crossing(const wm_refiner *r, int32_t m, int32_t t, int32_t e)
 {
     const wm_mesh *me = &r->mesh;
-    int32_t x[3], y[3], a = me->hv[e];
+    int32_t x[3], y[3], a = me->he[e].v;
     int64_t g[2], cx, cy, num, den;
     gradient(r, m, t, g);
     wm_tri_xy(me, t, x, y);
     edge_vec(me, e, &cx, &cy);
-    num = g[0] * ((int64_t)x[0] + x[1] + x[2] - 3 * (int64_t)me->vx[a]) +
-          g[1] * ((int64_t)y[0] + y[1] + y[2] - 3 * (int64_t)me->vy[a]);
+    num = g[0] * ((int64_t)x[0] + x[1] + x[2] - 3 * (int64_t)me->vxy[a].x) +
+          g[1] * ((int64_t)y[0] + y[1] + y[2] - 3 * (int64_t)me->vxy[a].y);
     den = 3 * (g[0] * cx + g[1] * cy);
     if (den == 0) return 32768;
     if (den < 0) {
@@ -173,7 +173,7 @@ static void touch_fan(wm_refiner *r, int32_t v)
 static int split_edge_at(wm_refiner *r, int32_t e, int32_t x, int32_t y, wm_level_stats *st)
 {
     int32_t touched[4], nt = 0;
-    int room = wm_room(r, r->mesh.ho[e] >= 0 ? 2 : 1), rc;
+    int room = wm_room(r, r->mesh.he[e].o >= 0 ? 2 : 1), rc;
     if (room != 0) return room < 0 ? room : WM_OK;
     rc = wm_edge_split(&r->mesh, e, x, y, touched, &nt);
     if (rc != WM_OK) return rc == WM_ERR_CAPACITY ? rc : WM_OK;
@@ -257,7 +257,7 @@ int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
      * when twice the area exceeds 1), at the grid point nearest its middle, unless the triangle on
      * the other side belongs to another planned operation. */
     for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
-        int32_t o = me->ho[e];
+        int32_t o = me->he[e].o;
         int64_t cx, cy, len;
         edge_vec(me, e, &cx, &cy);
         len = cx * cx + cy * cy;
@@ -268,12 +268,12 @@ int wm_split_unpaired(wm_refiner *r, int32_t t, wm_level_stats *st)
     }
     if (best_e >= 0) {
         int64_t cx, cy;
-        int32_t a = me->hv[best_e], G, k;
+        int32_t a = me->he[best_e].v, G, k;
         edge_vec(me, best_e, &cx, &cy);
         G = wm_gcd((int32_t)cx, (int32_t)cy);
         k = G / 2;
-        return split_edge_at(r, best_e, me->vx[a] + (int32_t)(k * (cx / G)), me->vy[a] + (int32_t)(k * (cy / G)),
-                             st);
+        return split_edge_at(r, best_e, me->vxy[a].x + (int32_t)(k * (cx / G)),
+                             me->vxy[a].y + (int32_t)(k * (cy / G)), st);
     }
     return WM_OK;
 }
@@ -289,8 +289,8 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
         if ((me->tflag[t] & WM_F_NEW) && (r->err[t] <= r->params.zeta || wm_tri_area2(me, t) <= 1)) return WM_OK;
         return wm_split_unpaired(r, t, st);
     }
-    f = me->ho[e];
-    a = me->hv[e];
+    f = me->he[e].o;
+    a = me->he[e].v;
     b = wm_dest(me, e);
     edge_vec(me, e, &cx, &cy);
     G = wm_gcd((int32_t)cx, (int32_t)cy);
@@ -309,13 +309,13 @@ int wm_execute(wm_refiner *r, int32_t m, int32_t op, wm_level_stats *st)
     k = (int32_t)((tq * G + 32768) >> 16);
     if (k < 1) k = 1;
     if (k > G - 1) k = G - 1;
-    px = me->vx[a] + (int32_t)(k * (cx / G));
-    py = me->vy[a] + (int32_t)(k * (cy / G));
+    px = me->vxy[a].x + (int32_t)(k * (cx / G));
+    py = me->vxy[a].y + (int32_t)(k * (cy / G));
     /* Vertex movement (4.21): when the split point is within delta_v (3-D) of an end of the edge,
      * move that end (the nearer, a on ties) there instead, if the mesh stays proper. */
     lim = (uint64_t)r->params.delta_v * r->params.delta_v;
-    da = dist2_q32(r, px, py, me->vx[a], me->vy[a]);
-    db = dist2_q32(r, px, py, me->vx[b], me->vy[b]);
+    da = dist2_q32(r, px, py, me->vxy[a].x, me->vxy[a].y);
+    db = dist2_q32(r, px, py, me->vxy[b].x, me->vxy[b].y);
     if (da < lim || db < lim) {
         int32_t v = da <= db ? a : b;
         if (wm_vertex_move(me, v, px, py) == WM_OK) {

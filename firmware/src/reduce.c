@@ -144,7 +144,7 @@ static int32_t ear_key(const wm_mesh *m, const int32_t *ring, const struct ears 
                        int32_t ky, int angle)
 {
     int32_t a = ring[s->prev[i]], b = ring[i], c = ring[s->next[i]];
-    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
+    int32_t x[3] = {m->vxy[a].x, m->vxy[b].x, m->vxy[c].x}, y[3] = {m->vxy[a].y, m->vxy[b].y, m->vxy[c].y};
     if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0) return -1;
     if (wm_orient(x[0], y[0], x[2], y[2], kx, ky) < 0) return -1; /* k strictly on b's side of a-c */
     return angle ? wm_min_angle(x, y) : 0;
@@ -156,7 +156,7 @@ static void ear_set(const wm_mesh *m, const int32_t *ring, struct ears *s, int32
 {
     int64_t dot, cross;
     int32_t a = ring[s->prev[i]], b = ring[i], c = ring[s->next[i]];
-    int32_t x[3] = {m->vx[a], m->vx[b], m->vx[c]}, y[3] = {m->vy[a], m->vy[b], m->vy[c]};
+    int32_t x[3] = {m->vxy[a].x, m->vxy[b].x, m->vxy[c].x}, y[3] = {m->vxy[a].y, m->vxy[b].y, m->vxy[c].y};
     if (wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]) <= 0 || wm_orient(x[0], y[0], x[2], y[2], kx, ky) < 0) {
         s->key[i] = -1;
         s->prox[i] = -(1 << 20); /* below every proxy by more than KEY_MARGIN */
@@ -243,8 +243,8 @@ int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, i
     }
     {
         int32_t b = last_ear(m, ring, &s, last, kx, ky), a = s.prev[b], c = s.next[b];
-        if (wm_orient(m->vx[ring[a]], m->vy[ring[a]], m->vx[ring[b]], m->vy[ring[b]], m->vx[ring[c]],
-                      m->vy[ring[c]]) <= 0)
+        if (wm_orient(m->vxy[ring[a]].x, m->vxy[ring[a]].y, m->vxy[ring[b]].x, m->vxy[ring[b]].y,
+                      m->vxy[ring[c]].x, m->vxy[ring[c]].y) <= 0)
             return WM_ERR_REFUSED;
         tris[3 * nt] = ring[a], tris[3 * nt + 1] = ring[b], tris[3 * nt + 2] = ring[c];
         nt++;
@@ -375,13 +375,13 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
      * triangle holding each (a lower bound of its E(T), rounded as E(T) is): a failed operation
      * mostly stops here, without a scan. */
     for (int g = 0; g < ngone; g++) {
-        int32_t gx = me->vx[gone[g]], gy = me->vy[gone[g]];
+        int32_t gx = me->vxy[gone[g]].x, gy = me->vxy[gone[g]].y;
         for (int32_t j = 0; j < nt; j++) {
             int32_t x[3], y[3];
             for (int c = 0; c < 3; c++) {
                 int32_t v = tris[3 * j + c];
-                x[c] = v < 0 ? px : me->vx[v];
-                y[c] = v < 0 ? py : me->vy[v];
+                x[c] = v < 0 ? px : me->vxy[v].x;
+                y[c] = v < 0 ? py : me->vxy[v].y;
             }
             if (wm_orient(x[0], y[0], x[1], y[1], gx, gy) < 0 || wm_orient(x[1], y[1], x[2], y[2], gx, gy) < 0 ||
                 wm_orient(x[2], y[2], x[0], y[0], gx, gy) < 0)
@@ -395,8 +395,8 @@ static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t 
         int32_t x[3], y[3], wx = 0, wy = 0;
         for (int c = 0; c < 3; c++) {
             int32_t v = tris[3 * j + c];
-            x[c] = v < 0 ? px : me->vx[v];
-            y[c] = v < 0 ? py : me->vy[v];
+            x[c] = v < 0 ? px : me->vxy[v].x;
+            y[c] = v < 0 ? py : me->vxy[v].y;
         }
         e[j] = wm_tri_error_within(&r->field, &r->params, x, y, bound, &wx, &wy, j == jk ? &kept : NULL);
         if (e[j] > bound) return 0;
@@ -424,12 +424,12 @@ static void known(wm_refiner *r, const int32_t *touched, int32_t k, const int32_
                 int c = 0, hit = 0;
                 for (c = 0; c < 3; c++) {
                     int32_t v = tris[3 * j + c];
-                    if ((v < 0 ? px : me->vx[v]) == x[0] && (v < 0 ? py : me->vy[v]) == y[0]) break;
+                    if ((v < 0 ? px : me->vxy[v].x) == x[0] && (v < 0 ? py : me->vxy[v].y) == y[0]) break;
                 }
                 if (c < 3) {
                     int32_t v1 = tris[3 * j + wm_k1(c)], v2 = tris[3 * j + wm_k2(c)];
-                    hit = (v1 < 0 ? px : me->vx[v1]) == x[1] && (v1 < 0 ? py : me->vy[v1]) == y[1] &&
-                          (v2 < 0 ? px : me->vx[v2]) == x[2] && (v2 < 0 ? py : me->vy[v2]) == y[2];
+                    hit = (v1 < 0 ? px : me->vxy[v1].x) == x[1] && (v1 < 0 ? py : me->vxy[v1].y) == y[1] &&
+                          (v2 < 0 ? px : me->vxy[v2].x) == x[2] && (v2 < 0 ? py : me->vxy[v2].y) == y[2];
                 }
                 if (hit) break;
             }
@@ -453,7 +453,7 @@ static int try_remove(wm_refiner *r, int32_t v)
     uint32_t e[WM_MAX_RING];
     n = wm_vertex_ring(me, v, ring);
     if (n < 0) return 0; /* a corner, or too many neighbours */
-    if (wm_star_plan(me, ring, n, me->vx[v], me->vy[v], tris, &nt) != WM_OK &&
+    if (wm_star_plan(me, ring, n, me->vxy[v].x, me->vxy[v].y, tris, &nt) != WM_OK &&
         wm_vertex_remove_plan(me, v, -1, tris, &nt) != WM_OK)
         return 0;
     if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0), e, w, &v, 1)) return 0;
@@ -467,11 +467,11 @@ static int try_remove(wm_refiner *r, int32_t v)
 static int try_collapse(wm_refiner *r, int32_t e)
 {
     wm_mesh *me = &r->mesh;
-    int32_t v = me->hv[e], w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
+    int32_t v = me->he[e].v, w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
     int32_t ws[6 * WM_MAX_RING];
     uint32_t es[6 * WM_MAX_RING];
     struct wm_collapse_stars stars;
-    int32_t ax = me->vx[v], ay = me->vy[v], bx = me->vx[w], by = me->vy[w];
+    int32_t ax = me->vxy[v].x, ay = me->vxy[v].y, bx = me->vxy[w].x, by = me->vxy[w].y;
     int32_t dx = bx - ax, dy = by - ay, g = wm_gcd(dx, dy), cx[4], cy[4], nc = 0;
     uint32_t bound = star_bound(r, w, star_bound(r, v, 0));
     if (g >= 2) {
@@ -531,7 +531,7 @@ static void unfail_ring(wm_refiner *r, int32_t v)
         last = h;
         h = wm_rot_ccw(me, h);
     } while (h >= 0 && h != first);
-    last = me->hv[WM_PREV(last)]; /* on a side: the last neighbour, whose edge arrives at v */
+    last = me->he[WM_PREV(last)].v; /* on a side: the last neighbour, whose edge arrives at v */
     if (h < 0 && r->vapex[last] == CLS_COLLAPSE_FAILED) r->vapex[last] = CLS_COLLAPSE;
 }
 
@@ -566,7 +566,7 @@ int32_t wm_reduce(wm_refiner *r)
         struct eig gv, gw;
         int32_t out[WM_MAX_RING + 1], k = 0, first, h, refused = 1, whole;
         int8_t cls, was = r->vapex[v];
-        if (me->vx[v] == WM_FREE || was == CLS_NONE || was == CLS_REMOVE_FAILED) continue;
+        if (me->vxy[v].x == WM_FREE || was == CLS_NONE || was == CLS_REMOVE_FAILED) continue;
         if (was == CLS_COLLAPSE_FAILED) r->vapex[v] = CLS_COLLAPSE;
         /* a 4.32 class still there is its current star's (a neighbour's test below found it; the
          * removal needs no eigenvectors) */
@@ -591,7 +591,7 @@ int32_t wm_reduce(wm_refiner *r)
             k++;
         }
         for (int32_t i = 0; i < k; i++) {
-            int32_t e = out[i], u = me->hv[e] == v ? wm_dest(me, e) : me->hv[e];
+            int32_t e = out[i], u = me->he[e].v == v ? wm_dest(me, e) : me->he[e].v;
             int64_t dot = 0;
             uint64_t adot;
             int8_t a = r->vapex[u];

@@ -453,7 +453,7 @@ static void make_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t e1, uin
                       wm_index k1, wm_index k2, int back)
 {
     wm_mesh *me = &r->mesh;
-    int32_t t1 = WM_TRI(e), t2 = WM_TRI(me->ho[e]), c = me->hv[WM_PREV(e)], s;
+    int32_t t1 = WM_TRI(e), t2 = WM_TRI(me->he[e].o), c = me->he[WM_PREV(e)].v, s;
     uint32_t rec[REC_WORDS] = {0,
                                (uint32_t)c,
                                r->err[t1],
@@ -497,17 +497,17 @@ static int swap_back(wm_refiner *r, int32_t e, uint32_t alpha, int32_t s)
 {
     wm_mesh *me = &r->mesh;
     const uint32_t *q = r->vkey + REC_WORDS * (((uint32_t)s >> 1) & r->swap_recs);
-    int32_t tt[2] = {WM_TRI(e), WM_TRI(me->ho[e])};
+    int32_t tt[2] = {WM_TRI(e), WM_TRI(me->he[e].o)};
     int j;
     if (r->swap_recs == 0 || q[0] != (uint32_t)s) return 0;
-    /* the swap back's t1 = (a', d', c') holds a' = hv[e], which is the record's c or d */
-    j = (uint32_t)me->hv[e] != q[1];
+    /* the swap back's t1 = (a', d', c') holds a' = he[e].v, which is the record's c or d */
+    j = (uint32_t)me->he[e].v != q[1];
     make_swap(r, e, alpha, q[2 + j], q[3 - j], (int32_t)q[4 + j], (int32_t)q[5 - j], rec_angle(q[6] >> 16 * j),
               rec_angle(q[6] >> 16 * (1 - j)), 1);
     /* a flat triangle's (E(T) = 0) worst sample is the scan's first corner (wm_place_at): the slot's */
     for (int k = 0; k < 2 && alpha < 65536u; k++) {
-        int32_t t = tt[k], v = me->hv[3 * t];
-        if (r->err[t] == 0) r->worst[t] = me->vy[v] * r->field.width + me->vx[v];
+        int32_t t = tt[k], v = me->he[3 * t].v;
+        if (r->err[t] == 0) r->worst[t] = me->vxy[v].y * r->field.width + me->vxy[v].x;
     }
 #if WM_CHECK
     for (int k = 0; k < 2 && alpha < 65536u; k++) { /* what try_swap would have measured */
@@ -586,8 +586,8 @@ static int check_dry; /* try_swap answers without making the swap (swap_made) */
 static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint32_t emax, struct sample_div wd)
 {
     wm_mesh *me = &r->mesh;
-    int32_t f = me->ho[e], t1 = WM_TRI(e), t2 = WM_TRI(f);
-    int32_t a = me->hv[e], b = me->hv[f], c = me->hv[WM_PREV(e)], d = me->hv[WM_PREV(f)];
+    int32_t f = me->he[e].o, t1 = WM_TRI(e), t2 = WM_TRI(f);
+    int32_t a = me->he[e].v, b = me->he[f].v, c = me->he[WM_PREV(e)].v, d = me->he[WM_PREV(f)].v;
     int32_t qx[3], qy[3], n1x[3], n1y[3];
     int32_t ang_old = 0, ang_new, a1, an1 = -1, an2 = -1;
     int64_t dot1 = 0, cross1 = 0, dot2 = 0, cross2 = 0; /* the new triangles' smallest angles (fixed.c) */
@@ -599,10 +599,10 @@ static int try_swap(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint3
     int32_t w1x = 0, w1y = 0, w2x = 0, w2y = 0;
     uint64_t r1 = 0, r2 = 0;             /* the new triangles' slope factors, kept (wm_internal.h) */
     /* new triangles (a, d, c) and (d, b, c) */
-    n1x[0] = me->vx[a], n1y[0] = me->vy[a], n1x[1] = me->vx[d], n1y[1] = me->vy[d];
-    n1x[2] = me->vx[c], n1y[2] = me->vy[c];
-    qx[0] = me->vx[d], qy[0] = me->vy[d], qx[1] = me->vx[b], qy[1] = me->vy[b];
-    qx[2] = me->vx[c], qy[2] = me->vy[c];
+    n1x[0] = me->vxy[a].x, n1y[0] = me->vxy[a].y, n1x[1] = me->vxy[d].x, n1y[1] = me->vxy[d].y;
+    n1x[2] = me->vxy[c].x, n1y[2] = me->vxy[c].y;
+    qx[0] = me->vxy[d].x, qy[0] = me->vxy[d].y, qx[1] = me->vxy[b].x, qy[1] = me->vxy[b].y;
+    qx[2] = me->vxy[c].x, qy[2] = me->vxy[c].y;
     { /* wm_edge_swappable(me, e) from the corners at hand (regularise's e is a live triangle's, with one
        * across): a and b strictly on opposite sides of the line c-d */
         int64_t s1 = wm_orient(n1x[2], n1y[2], qx[0], qy[0], n1x[0], n1y[0]);
@@ -759,7 +759,7 @@ static int swap_made(wm_refiner *r, int32_t e, uint32_t alpha, uint32_t am, uint
 static WM_ALWAYS_INLINE void mark_edges(wm_mesh *me, int32_t t)
 {
     for (int32_t i = 0; i < 3; i++) {
-        int32_t h = 3 * t + i, o = me->ho[h], x;
+        int32_t h = 3 * t + i, o = me->he[h].o, x;
         if (o < 0) continue;
         if (h < o) {
             me->tflag[t] |= (uint8_t)(WM_F_EXAMINE0 << i);
@@ -787,7 +787,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
     for (int32_t t = 0; t < me->tri_end; t++) { /* and the iteration's WM_F_UNPAIRED marks cleared */
         uint8_t f = (uint8_t)(me->tflag[t] & ~(WM_F_EXAMINE | WM_F_UNPAIRED));
         r->list[t] = ANGLE_UNKNOWN;
-        if (me->hv[3 * t] >= 0) {
+        if (me->he[3 * t].v >= 0) {
             if (r->err[t] > emax) emax = r->err[t];
             if (f & WM_F_SWAP) f |= WM_F_EXAMINE;
         }
@@ -806,7 +806,7 @@ static void regularise(wm_refiner *r, wm_level_stats *st, uint32_t alpha)
             if (!(ft & WM_F_EXAMINE)) continue;
             me->tflag[t] = (uint8_t)(ft & ~WM_F_EXAMINE);
             for (int32_t i = 0; i < 3; i++) {
-                int32_t e = 3 * t + i, o = me->ho[e], u;
+                int32_t e = 3 * t + i, o = me->he[e].o, u;
                 /* o < 3 t: on the border (o < 0) or across to a triangle below t, whose mark it is;
                  * else o >= 0 and its triangle an unsigned division */
                 if (o < 3 * t) continue;
@@ -855,7 +855,8 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
      * entry is read before it is written (the board does not clear the storage, wm_job_refine). */
     for (int32_t t = 0; t < me->tri_end; t++) r->pos[t] = -1;
     for (int32_t t = 0; t < me->tri_end; t++)
-        if (me->hv[3 * t] >= 0 && r->err[t] > r->params.zeta) wm_heap_update(r, t, r->err[t], -1, &n); /* pos[t] */
+        if (me->he[3 * t].v >= 0 && r->err[t] > r->params.zeta)
+            wm_heap_update(r, t, r->err[t], -1, &n); /* pos[t] */
     while (n > 0) {
         int32_t t = wm_heap_entries(r)[0].t, x[3], y[3], wx, wy, touched[4], nt = 0, k, on = -1, rc, room, p, te;
         int64_t E[3];
@@ -870,7 +871,7 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
             E[k] = wm_orient(x[k1], y[k1], x[k2], y[k2], wx, wy);
             if (E[k] == 0) on = 3 * t + k1;
         }
-        room = wm_room(r, on < 0 ? 2 : (me->ho[on] >= 0 ? 2 : 1));
+        room = wm_room(r, on < 0 ? 2 : (me->he[on].o >= 0 ? 2 : 1));
         if (room < 0) return room;
         if (room > 0) break; /* the budget: stop with E_max > zeta */
         te = me->tri_end;
@@ -886,8 +887,8 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
                 wm_heap_update(r, touched[i], r->err[touched[i]], r->pos[touched[i]], &n);
             }
         /* the new vertex: corner 2 of touched[0] after a triangle's split, corner 1 after an edge's */
-        p = me->hv[3 * touched[0] + (on < 0 ? 2 : 1)];
-        WM_ASSERT(me->vx[p] == wx && me->vy[p] == wy);
+        p = me->he[3 * touched[0] + (on < 0 ? 2 : 1)].v;
+        WM_ASSERT(me->vxy[p].x == wx && me->vxy[p].y == wy);
         if (legal) wm_legalise(r, p, touched, nt, &n); /* and measures touched[] and what it flips */
         if (st) st->bound_splits++;
     }
@@ -902,7 +903,7 @@ void wm_refine_stats(const wm_refiner *r, wm_level_stats *st)
     uint32_t emax = 0;
     int32_t over = 0;
     for (int32_t t = 0; t < me->tri_end; t++) {
-        if (me->hv[3 * t] < 0) continue;
+        if (me->he[3 * t].v < 0) continue;
         if (r->err[t] > emax) emax = r->err[t];
         if (r->err[t] > r->params.zeta) over++;
     }

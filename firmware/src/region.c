@@ -95,14 +95,14 @@ int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)
     int32_t active = 0, dep = 0;
     for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = 0;
     for (int32_t t = 0; t < me->tri_end; t++) {
-        if (me->hv[3 * t] < 0 || !candidate(r, m, t)) continue;
+        if (me->he[3 * t].v < 0 || !candidate(r, m, t)) continue;
         me->tflag[t] = WM_F_ACTIVE;
         active++;
     }
     for (int32_t t = 0; t < me->tri_end; t++) {
         if (!(me->tflag[t] & WM_F_ACTIVE)) continue;
         for (int32_t e = 3 * t; e < 3 * t + 3; e++) { /* N1: across an edge */
-            int32_t o = me->ho[e];
+            int32_t o = me->he[e].o;
             if (o >= 0 && !(me->tflag[WM_TRI(o)] & (WM_F_ACTIVE | WM_F_DEP))) {
                 me->tflag[WM_TRI(o)] |= WM_F_DEP;
                 dep++;
@@ -112,7 +112,7 @@ int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)
     for (int32_t t = 0; t < me->tri_end; t++) {
         if (!(me->tflag[t] & WM_F_ACTIVE)) continue;
         for (int32_t k = 0; k < 3; k++) { /* N2: around a corner only */
-            int32_t v = me->hv[3 * t + k], first = wm_fan_first(me, v), e = first;
+            int32_t v = me->he[3 * t + k].v, first = wm_fan_first(me, v), e = first;
             do {
                 uint8_t *fl = &me->tflag[WM_TRI(e)];
                 if (!(*fl & (WM_F_ACTIVE | WM_F_DEP))) *fl |= WM_F_NEAR;

@@ -85,7 +85,7 @@ int wm_refine_set_roi(wm_refiner *r, const int32_t *rows)
     wm_reduce_forget_refusals(r);
     for (int32_t t = 0; t < me->tri_end; t++) {
         int32_t x[3], y[3], wx, wy;
-        if (me->hv[3 * t] < 0) continue;
+        if (me->he[3 * t].v < 0) continue;
         wm_tri_xy(me, t, x, y);
         r->err[t] = wm_roi_error(r, x, y, &wx, &wy);
         r->worst[t] = wy * w + wx;

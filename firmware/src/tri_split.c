@@ -11,14 +11,14 @@
 #include "wm_internal.h"
 
 /* The split of live t at (x, y), strictly inside it, with room for it.  Each corner's half-edge (vh) is the
- * one wm_tri_claim of t, N1 and then N2 would leave it, stored once (no load of hv[] back). */
+ * one wm_tri_claim of t, N1 and then N2 would leave it, stored once (no load of he[].v back). */
 static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3],
                                    int32_t *n_touched)
 {
-    int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2], p, n1, n2, o_ab, o_bc, o_ca;
-    o_ab = m->ho[3 * t];
-    o_bc = m->ho[3 * t + 1];
-    o_ca = m->ho[3 * t + 2];
+    int32_t a = m->he[3 * t].v, b = m->he[3 * t + 1].v, c = m->he[3 * t + 2].v, p, n1, n2, o_ab, o_bc, o_ca;
+    o_ab = m->he[3 * t].o;
+    o_bc = m->he[3 * t + 1].o;
+    o_ca = m->he[3 * t + 2].o;
     p = wm_vert_alloc(m, x, y);
     n1 = wm_tri_take(m);
     n2 = wm_tri_take(m);
@@ -48,11 +48,11 @@ static WM_ALWAYS_INLINE void split(wm_mesh *m, int32_t t, int32_t x, int32_t y, 
 /* (x, y) strictly inside live t (a grid point: wm_orient is exact for grid points only). */
 static int strictly_inside(const wm_mesh *m, int32_t t, int32_t x, int32_t y)
 {
-    int32_t a = m->hv[3 * t], b = m->hv[3 * t + 1], c = m->hv[3 * t + 2];
+    int32_t a = m->he[3 * t].v, b = m->he[3 * t + 1].v, c = m->he[3 * t + 2].v;
     return x >= 0 && y >= 0 && x < m->width && y < m->height &&
-           wm_orient(m->vx[a], m->vy[a], m->vx[b], m->vy[b], x, y) > 0 &&
-           wm_orient(m->vx[b], m->vy[b], m->vx[c], m->vy[c], x, y) > 0 &&
-           wm_orient(m->vx[c], m->vy[c], m->vx[a], m->vy[a], x, y) > 0;
+           wm_orient(m->vxy[a].x, m->vxy[a].y, m->vxy[b].x, m->vxy[b].y, x, y) > 0 &&
+           wm_orient(m->vxy[b].x, m->vxy[b].y, m->vxy[c].x, m->vxy[c].y, x, y) > 0 &&
+           wm_orient(m->vxy[c].x, m->vxy[c].y, m->vxy[a].x, m->vxy[a].y, x, y) > 0;
 }
 
 int wm_tri_split(wm_mesh *m, int32_t t, int32_t x, int32_t y, int32_t touched[3], int32_t *n_touched)

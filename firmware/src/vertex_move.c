@@ -13,10 +13,10 @@
 int wm_vertex_move(wm_mesh *m, int32_t v, int32_t x, int32_t y)
 {
     int32_t ox, oy, first, e;
-    if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
+    if (v < 0 || v >= m->vert_end || m->vxy[v].x == WM_FREE) return WM_ERR_ARG;
     if (x < 0 || y < 0 || x >= m->width || y >= m->height) return WM_ERR_REFUSED;
-    ox = m->vx[v];
-    oy = m->vy[v];
+    ox = m->vxy[v].x;
+    oy = m->vxy[v].y;
     if (x == ox && y == oy) return WM_OK;
     if (wm_on_border(m, ox, oy)) {
         int vert_side = ox == 0 || ox == m->width - 1, horz_side = oy == 0 || oy == m->height - 1;
@@ -27,12 +27,12 @@ int wm_vertex_move(wm_mesh *m, int32_t v, int32_t x, int32_t y)
     first = wm_fan_first(m, v);
     e = first;
     do {
-        int32_t b = wm_dest(m, e), c = m->hv[WM_PREV(e)];
-        if (wm_orient(x, y, m->vx[b], m->vy[b], m->vx[c], m->vy[c]) <= 0) return WM_ERR_REFUSED;
+        int32_t b = wm_dest(m, e), c = m->he[WM_PREV(e)].v;
+        if (wm_orient(x, y, m->vxy[b].x, m->vxy[b].y, m->vxy[c].x, m->vxy[c].y) <= 0) return WM_ERR_REFUSED;
         e = wm_rot_ccw(m, e);
     } while (e >= 0 && e != first);
-    m->vx[v] = (uint16_t)x;
-    m->vy[v] = (uint16_t)y;
+    m->vxy[v].x = (uint16_t)x;
+    m->vxy[v].y = (uint16_t)y;
     WM_CHECK_MESH(m);
     return WM_OK;
 }

@@ -22,38 +22,38 @@
  * vertices p_i = dest(e_i), plus the last triangle's third vertex on a side.  n or an error. */
 static int32_t fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING])
 {
-    const wm_index *hv = m->hv, *ho = m->ho; /* held: e[] and ring[] are stored to as the fan goes round */
+    const wm_he *he = m->he; /* held: e[] and ring[] are stored to as the fan goes round */
     int32_t first, h, d, n = 0;
-    if (v < 0 || v >= m->vert_end || m->vx[v] == WM_FREE) return WM_ERR_ARG;
+    if (v < 0 || v >= m->vert_end || m->vxy[v].x == WM_FREE) return WM_ERR_ARG;
     {
-        int32_t x = m->vx[v], y = m->vy[v];
+        int32_t x = m->vxy[v].x, y = m->vxy[v].y;
         if ((x == 0 || x == m->width - 1) && (y == 0 || y == m->height - 1)) return WM_ERR_REFUSED;
         /* wm_fan_first: any half-edge of an interior vertex's full fan */
         first = wm_on_border(m, x, y) ? wm_fan_first(m, v) : m->vh[v];
     }
     /* Each step takes one corner of its triangle, prev(h) (the half-edge into v): its twin is the next
      * half-edge leaving v, and its origin that half-edge's end, the next ring vertex (or, on a side,
-     * the last triangle's far corner, which closes the ring).  So a step loads hv[] and ho[] at one
-     * index, where dest(h) = hv[next(h)] took a second corner's index; prev(h) by whether h is its
+     * the last triangle's far corner, which closes the ring).  So a step loads he[].v and he[].o at one
+     * index, where dest(h) = he[next(h)].v took a second corner's index; prev(h) by whether h is its
      * triangle's first corner (wm_div3_exact, wavemesh.h) as arithmetic, not branches (h % 3 is as
      * likely one number as another). */
     h = first;
-    d = hv[WM_NEXT(first)]; /* wm_dest(first) */
+    d = he[WM_NEXT(first)].v; /* wm_dest(first) */
     do {
         int32_t corner0, p;
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
         corner0 = wm_div3_exact((uint32_t)h); /* h % 3 == 0 */
         p = h - 1 + 3 * corner0;                           /* prev(h) */
-        WM_ASSERT(p == WM_PREV(h) && d == hv[WM_NEXT(h)]);
+        WM_ASSERT(p == WM_PREV(h) && d == he[WM_NEXT(h)].v);
         e[n] = h;
         ring[n++] = d;
-        d = hv[p];
-        h = ho[p]; /* wm_rot_ccw */
+        d = he[p].v;
+        h = he[p].o; /* wm_rot_ccw */
     } while (h >= 0 && h != first);
     *k = n;
     if (h < 0) { /* on a side: the last triangle's far corner closes the ring */
         if (n >= WM_MAX_RING) return WM_ERR_REFUSED;
-        WM_ASSERT(d == hv[WM_PREV(e[n - 1])]);
+        WM_ASSERT(d == he[WM_PREV(e[n - 1])].v);
         ring[n++] = d;
     }
     return n;
@@ -204,12 +204,12 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
     if (apex >= 0) {
         /* the fan (a, p_i, p_i+1) for i = apex + 1 .. apex + n - 2 (mod n), positions wrapped by a
          * compare: the decimation tries every fan of every vertex it looks at */
-        int32_t a = ring[apex], ax = m->vx[a], ay = m->vy[a], i = apex + 1 == n ? 0 : apex + 1;
-        int32_t b = ring[i], bx = m->vx[b], by = m->vy[b];
+        int32_t a = ring[apex], ax = m->vxy[a].x, ay = m->vxy[a].y, i = apex + 1 == n ? 0 : apex + 1;
+        int32_t b = ring[i], bx = m->vxy[b].x, by = m->vxy[b].y;
         for (int32_t j = 1; j + 1 < n; j++) {
             int32_t c, cx, cy;
             i = i + 1 == n ? 0 : i + 1;
-            c = ring[i], cx = m->vx[c], cy = m->vy[c];
+            c = ring[i], cx = m->vxy[c].x, cy = m->vxy[c].y;
             d = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
             if (d <= 0) return WM_ERR_REFUSED;
             if (d > most) most = d, at = nt;
@@ -257,10 +257,10 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
          * then, any other as an unsigned word at least 128: the OR below 128 says all are), and only
          * when not the box's bounds (the same answer: such a polygon is within the box; on the soft
          * CPU four branches a vertex were most of this loop) */
-        ox = m->vx[ring[0]] - 63, oy = m->vy[ring[0]] - 63;
+        ox = m->vxy[ring[0]].x - 63, oy = m->vxy[ring[0]].y - 63;
         for (int32_t i = 0; i < n; i++) {
-            px[i] = m->vx[ring[i]];
-            py[i] = m->vy[ring[i]];
+            px[i] = m->vxy[ring[i]].x;
+            py[i] = m->vxy[ring[i]].y;
             far |= (uint32_t)(px[i] - ox) | (uint32_t)(py[i] - oy);
             nx[i] = i + 1;
             pv[i] = i - 1;
@@ -425,18 +425,18 @@ int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, con
     /* Remember the outside: out[i] is the half-edge across ring edge p_i -> p_i+1 of fan triangle i. */
     for (int32_t i = 0; i < k; i++) {
         slot[i] = WM_TRI(e[i]);
-        out[i] = m->ho[WM_NEXT(e[i])];
+        out[i] = m->he[WM_NEXT(e[i])].o;
     }
     /* Free what is not reused: fan slots n_tris .. k-1 and v. */
     for (int32_t i = n_tris; i < k; i++) {
         int32_t t = slot[i];
-        m->hv[3 * t] = m->hv[3 * t + 1] = m->hv[3 * t + 2] = -1;
-        m->ho[3 * t] = m->tri_free;
+        m->he[3 * t].v = m->he[3 * t + 1].v = m->he[3 * t + 2].v = -1;
+        m->he[3 * t].o = m->tri_free;
         m->tri_free = t;
         m->n_tri--;
     }
-    m->vx[v] = WM_FREE;
-    m->vy[v] = WM_FREE;
+    m->vxy[v].x = WM_FREE;
+    m->vxy[v].y = WM_FREE;
     m->vh[v] = m->vert_free;
     m->vert_free = v;
     m->n_vert--;
@@ -448,7 +448,7 @@ int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, con
     {
         int32_t pend_a[WM_MAX_RING], pend_b[WM_MAX_RING], pend_h[WM_MAX_RING], np = 0, from = 0;
         for (int32_t j = 0; j < n_tris; j++) {
-            int32_t at[3]; /* the ring positions of the triangle's corners (hv[3 slot + c] = tris[3 j + c]) */
+            int32_t at[3]; /* the ring positions of the triangle's corners (he[3 slot + c].v = tris[3 j + c]) */
             /* The corners of a counter-clockwise triangle over the ring polygon come in ring order, so
              * each is looked for from the one before it on, round the ring, the first from the last
              * triangle's first (found at once in a fan's (a, p_i, p_i+1)); the ring's vertices are

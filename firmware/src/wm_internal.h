@@ -84,21 +84,21 @@ static inline int64_t wm_orient(int32_t ax, int32_t ay, int32_t bx, int32_t by, 
     return (bx - ax) * (cy - ay) - (cx - ax) * (by - ay);
 }
 
-static inline int32_t wm_dest(const wm_mesh *m, int32_t e) { return m->hv[WM_NEXT(e)]; }
+static inline int32_t wm_dest(const wm_mesh *m, int32_t e) { return m->he[WM_NEXT(e)].v; }
 
 /* 1 when a and b lie strictly on opposite sides of the line c-d: for the edge a-b between the
  * counter-clockwise (a, b, c) and (b, a, d), whose c and d lie strictly on opposite sides of a-b, the
  * quadrilateral a-d-b-c is strictly convex (wm_edge_swappable; the legalisation's flips). */
 static inline int wm_quad_convex(const wm_mesh *m, int32_t a, int32_t b, int32_t c, int32_t d)
 {
-    int64_t sa = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[a], m->vy[a]);
-    int64_t sb = wm_orient(m->vx[c], m->vy[c], m->vx[d], m->vy[d], m->vx[b], m->vy[b]);
+    int64_t sa = wm_orient(m->vxy[c].x, m->vxy[c].y, m->vxy[d].x, m->vxy[d].y, m->vxy[a].x, m->vxy[a].y);
+    int64_t sb = wm_orient(m->vxy[c].x, m->vxy[c].y, m->vxy[d].x, m->vxy[d].y, m->vxy[b].x, m->vxy[b].y);
     return (sa > 0 && sb < 0) || (sa < 0 && sb > 0);
 }
 
 static inline int wm_tri_live(const wm_mesh *m, int32_t t)
 {
-    return t >= 0 && t < m->tri_end && m->hv[3 * t] >= 0;
+    return t >= 0 && t < m->tri_end && m->he[3 * t].v >= 0;
 }
 
 static inline int wm_on_border(const wm_mesh *m, int32_t x, int32_t y)
@@ -115,7 +115,7 @@ static inline int wm_room_for_split(const wm_mesh *m, int32_t tris)
 
 /* Allocation of slots (free list first, then the end); -1 when full. */
 int32_t wm_vert_alloc(wm_mesh *m, int32_t x, int32_t y);
-/* A triangle slot, inline and without placeholder stores to hv[] and ho[]: its callers (the splits) write
+/* A triangle slot, inline and without placeholder stores to he[]: its callers (the splits) write
  * every one of them (on the board each a store the write buffer waited on, and the call a split's
  * largest cost after its loads).  -1 when full. */
 static inline int32_t wm_tri_take(wm_mesh *m)
@@ -123,7 +123,7 @@ static inline int32_t wm_tri_take(wm_mesh *m)
     int32_t t;
     if (m->tri_free >= 0) {
         t = m->tri_free;
-        m->tri_free = m->ho[3 * t];
+        m->tri_free = m->he[3 * t].o;
     } else {
         if (m->tri_end >= m->tri_cap) return -1;
         t = m->tri_end++;
@@ -135,15 +135,15 @@ static inline int32_t wm_tri_take(wm_mesh *m)
 /* Writes triangle t's three vertices (its half-edges' origins). */
 static inline void wm_tri_set(wm_mesh *m, int32_t t, int32_t a, int32_t b, int32_t c)
 {
-    m->hv[3 * t] = a;
-    m->hv[3 * t + 1] = b;
-    m->hv[3 * t + 2] = c;
+    m->he[3 * t].v = a;
+    m->he[3 * t + 1].v = b;
+    m->he[3 * t + 2].v = c;
 }
 /* Makes e and f opposite (f may be -1: e on the border). */
 static inline void wm_link(wm_mesh *m, int32_t e, int32_t f)
 {
-    m->ho[e] = f;
-    if (f >= 0) m->ho[f] = e;
+    m->he[e].o = f;
+    if (f >= 0) m->he[f].o = e;
 }
 /* Points vh of triangle t's vertices at t's half-edges. */
 void wm_tri_claim(wm_mesh *m, int32_t t);
@@ -157,13 +157,14 @@ static WM_ALWAYS_INLINE void wm_flip(wm_mesh *m, int32_t e, int32_t f, int32_t t
                                      int32_t b, int32_t c, int32_t d)
 {
     int32_t e1 = 3 * t1, e2 = 3 * t2;
-    int32_t o_bc = m->ho[WM_NEXT(e)], o_ca = m->ho[WM_PREV(e)], o_ad = m->ho[WM_NEXT(f)], o_db = m->ho[WM_PREV(f)];
-    m->hv[e1] = a;
-    m->hv[e1 + 1] = d;
-    m->hv[e1 + 2] = c;
-    m->hv[e2] = d;
-    m->hv[e2 + 1] = b;
-    m->hv[e2 + 2] = c;
+    int32_t o_bc = m->he[WM_NEXT(e)].o, o_ca = m->he[WM_PREV(e)].o, o_ad = m->he[WM_NEXT(f)].o,
+            o_db = m->he[WM_PREV(f)].o;
+    m->he[e1].v = a;
+    m->he[e1 + 1].v = d;
+    m->he[e1 + 2].v = c;
+    m->he[e2].v = d;
+    m->he[e2 + 1].v = b;
+    m->he[e2 + 2].v = c;
     wm_link(m, e1, o_ad);       /* a->d */
     wm_link(m, e1 + 1, e2 + 2); /* d->c with c->d */
     wm_link(m, e1 + 2, o_ca);   /* c->a */
@@ -175,12 +176,12 @@ static WM_ALWAYS_INLINE void wm_flip(wm_mesh *m, int32_t e, int32_t f, int32_t t
     m->vh[c] = e2 + 2;
 }
 /* The same with its half-edges, triangles and corners known: e = a->b in (a, b, c), slot t1 = WM_TRI(e),
- * f = ho[e] in (b, a, d), slot t2 = WM_TRI(f). */
+ * f = he[e].o in (b, a, d), slot t2 = WM_TRI(f). */
 static WM_ALWAYS_INLINE void wm_edge_flip(wm_mesh *m, int32_t e, int32_t f, int32_t t1, int32_t t2, int32_t a,
                                           int32_t b, int32_t c, int32_t d)
 {
-    WM_ASSERT(wm_edge_swappable(m, e) && m->ho[e] == f && m->hv[e] == a && m->hv[f] == b &&
-              m->hv[WM_PREV(e)] == c && m->hv[WM_PREV(f)] == d && t1 == WM_TRI(e) && t2 == WM_TRI(f));
+    WM_ASSERT(wm_edge_swappable(m, e) && m->he[e].o == f && m->he[e].v == a && m->he[f].v == b &&
+              m->he[WM_PREV(e)].v == c && m->he[WM_PREV(f)].v == d && t1 == WM_TRI(e) && t2 == WM_TRI(f));
     wm_flip(m, e, f, t1, t2, a, b, c, d);
     WM_CHECK_MESH(m);
 }
@@ -194,10 +195,10 @@ int wm_edge_split_inside(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t to
 /* Rotation around a vertex: e is a half-edge leaving v.  Counter-clockwise: the next half-edge
  * leaving v, or -1 at the border.  wm_fan_first: the most clockwise half-edge leaving v (vh[v] for an
  * interior vertex). */
-static inline int32_t wm_rot_ccw(const wm_mesh *m, int32_t e) { return m->ho[WM_PREV(e)]; }
+static inline int32_t wm_rot_ccw(const wm_mesh *m, int32_t e) { return m->he[WM_PREV(e)].o; }
 static inline int32_t wm_rot_cw(const wm_mesh *m, int32_t e)
 {
-    int32_t o = m->ho[e];
+    int32_t o = m->he[e].o;
     return o < 0 ? -1 : WM_NEXT(o);
 }
 int32_t wm_fan_first(const wm_mesh *m, int32_t v);
@@ -779,9 +780,9 @@ int wm_hole_at(const wm_field *f, int32_t px, int32_t py);
 static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t y[3])
 {
     for (int k = 0; k < 3; k++) {
-        int32_t v = m->hv[3 * t + k];
-        x[k] = m->vx[v];
-        y[k] = m->vy[v];
+        int32_t v = m->he[3 * t + k].v;
+        x[k] = m->vxy[v].x;
+        y[k] = m->vxy[v].y;
     }
 }
 
@@ -799,7 +800,7 @@ int wm_room(wm_refiner *r, int32_t added);
  * vapex from pass to pass, is forgotten (reduce.c).  Every operator's new triangles come through here. */
 static inline void wm_forget_class(wm_refiner *r, int32_t t)
 {
-    for (int c = 0; c < 3; c++) r->vapex[r->mesh.hv[3 * t + c]] = WM_CLASS_UNKNOWN;
+    for (int c = 0; c < 3; c++) r->vapex[r->mesh.he[3 * t + c].v] = WM_CLASS_UNKNOWN;
     if (r->swept) r->pos[t] = -1; /* the regularisation's swaps (refine.c) */
 }
 /* The error bound's legalisation: Lawson flips of the edges opposite vertex p in the triangles

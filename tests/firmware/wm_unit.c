@@ -43,10 +43,10 @@ static int32_t find_edge(const wm_mesh *m, int32_t ax, int32_t ay, int32_t bx, i
 {
     for (int32_t e = 0; e < 3 * m->tri_end; e++) {
         int32_t a, b;
-        if (m->hv[3 * WM_TRI(e)] < 0) continue;
-        a = m->hv[e];
-        b = m->hv[WM_NEXT(e)];
-        if (m->vx[a] == ax && m->vy[a] == ay && m->vx[b] == bx && m->vy[b] == by) return e;
+        if (m->he[3 * WM_TRI(e)].v < 0) continue;
+        a = m->he[e].v;
+        b = m->he[WM_NEXT(e)].v;
+        if (m->vxy[a].x == ax && m->vxy[a].y == ay && m->vxy[b].x == bx && m->vxy[b].y == by) return e;
     }
     return -1;
 }
@@ -54,7 +54,7 @@ static int32_t find_edge(const wm_mesh *m, int32_t ax, int32_t ay, int32_t bx, i
 static int32_t find_vertex(const wm_mesh *m, int32_t x, int32_t y)
 {
     for (int32_t v = 0; v < m->vert_end; v++)
-        if (m->vx[v] == x && m->vy[v] == y) return v;
+        if (m->vxy[v].x == x && m->vxy[v].y == y) return v;
     return -1;
 }
 
@@ -69,8 +69,8 @@ static void test_build(void)
     CHECK(square(&m, 5, 5, 8) == WM_OK);
     CHECK(m.n_tri == 2 && m.n_vert == 4);
     CHECK(wm_mesh_check(&m) == WM_OK);
-    CHECK(m.ho[find_edge(&m, 0, 0, 4, 4)] == find_edge(&m, 4, 4, 0, 0));
-    CHECK(m.ho[find_edge(&m, 4, 0, 4, 4)] == -1);
+    CHECK(m.he[find_edge(&m, 0, 0, 4, 4)].o == find_edge(&m, 4, 4, 0, 0));
+    CHECK(m.he[find_edge(&m, 4, 0, 4, 4)].o == -1);
     CHECK(wm_mesh_export(&m, out_xy, out_t) == 2);
     CHECK(memcmp(out_xy, xy, sizeof xy) == 0 && out_t[0] == 0 && out_t[1] == 1 && out_t[5] == 2);
     CHECK(wm_mesh_init(&m, mem, sizeof mem, 5, 5, 8, 8) == WM_OK);
@@ -86,7 +86,7 @@ static void test_build(void)
     CHECK(wm_mesh_init(&m, mem, sizeof mem, WM_MAX_SIDE + 1, 5, 8, 8) == WM_ERR_ARG);
     /* a corrupted mesh fails the check */
     CHECK(square(&m, 5, 5, 8) == WM_OK);
-    m.vx[3] = 3;
+    m.vxy[3].x = 3;
     CHECK(wm_mesh_check(&m) == WM_ERR_MESH);
 }
 
@@ -363,7 +363,7 @@ static void check_final_stats(const wm_refiner *r, const wm_field *f, const wm_p
     for (int32_t t = 0; t < m->tri_end; t++) {
         int32_t x[3], y[3], wx, wy;
         uint32_t e;
-        if (m->hv[3 * t] < 0) continue;
+        if (m->he[3 * t].v < 0) continue;
         wm_tri_xy(m, t, x, y);
         e = wm_tri_error(f, p, x, y, &wx, &wy);
         if (e > emax) emax = e;
@@ -486,8 +486,8 @@ static void test_vertex_remove(void)
         if ((seed >> 20) % 3u != 0 || m.n_vert < 8) { /* split the triangle holding (x, y) */
             for (t = 0; t < m.tri_end; t++) {
                 int32_t tx[3], ty[3], s0, s1, s2;
-                if (m.hv[3 * t] < 0) continue;
-                for (int k = 0; k < 3; k++) tx[k] = m.vx[m.hv[3 * t + k]], ty[k] = m.vy[m.hv[3 * t + k]];
+                if (m.he[3 * t].v < 0) continue;
+                for (int k = 0; k < 3; k++) tx[k] = m.vxy[m.he[3 * t + k].v].x, ty[k] = m.vxy[m.he[3 * t + k].v].y;
                 s0 = (int32_t)wm_orient(tx[1], ty[1], tx[2], ty[2], x, y);
                 s1 = (int32_t)wm_orient(tx[2], ty[2], tx[0], ty[0], x, y);
                 s2 = (int32_t)wm_orient(tx[0], ty[0], tx[1], ty[1], x, y);
@@ -628,7 +628,7 @@ static void test_edge_collapse(void)
     CHECK(wm_edge_collapse_plan(&m, e, 5, 5, tris, &nt) == WM_OK && nt == 4);
     CHECK(wm_edge_collapse_plan(&m, e, 5, 4, tris, &nt) == WM_ERR_ARG); /* not on the edge */
     CHECK(wm_edge_collapse(&m, e, 5, 5, touched, &n, &p) == WM_OK && n == 4);
-    CHECK(m.n_tri == 4 && m.n_vert == 5 && m.vx[p] == 5 && m.vy[p] == 5 && wm_mesh_check(&m) == WM_OK);
+    CHECK(m.n_tri == 4 && m.n_vert == 5 && m.vxy[p].x == 5 && m.vxy[p].y == 5 && wm_mesh_check(&m) == WM_OK);
     CHECK(find_vertex(&m, 4, 4) < 0 && find_vertex(&m, 6, 6) < 0);
     /* (5, 5) - (8, 0): a corner does not move, so only the half-edge collapse into it */
     e = find_edge(&m, 5, 5, 8, 0);
@@ -654,13 +654,13 @@ static void test_star_plan(void)
     CHECK(wm_star_plan(&m, ring, n, 4, 4, tris, &nt) == WM_OK && nt == n - 2);
     for (int32_t j = 0; j < nt; j++) {
         int32_t a = tris[3 * j], b = tris[3 * j + 1], c = tris[3 * j + 2];
-        int64_t o = wm_orient(m.vx[a], m.vy[a], m.vx[b], m.vy[b], m.vx[c], m.vy[c]);
+        int64_t o = wm_orient(m.vxy[a].x, m.vxy[a].y, m.vxy[b].x, m.vxy[b].y, m.vxy[c].x, m.vxy[c].y);
         CHECK(o > 0);
         area += o;
     }
     for (int32_t i = 1; i + 1 < n; i++)
-        ring_area += wm_orient(m.vx[ring[0]], m.vy[ring[0]], m.vx[ring[i]], m.vy[ring[i]], m.vx[ring[i + 1]],
-                               m.vy[ring[i + 1]]);
+        ring_area += wm_orient(m.vxy[ring[0]].x, m.vxy[ring[0]].y, m.vxy[ring[i]].x, m.vxy[ring[i]].y,
+                               m.vxy[ring[i + 1]].x, m.vxy[ring[i + 1]].y);
     CHECK(area == ring_area);
     CHECK(wm_vertex_remove(&m, v, tris, nt, NULL, NULL) == WM_OK && wm_mesh_check(&m) == WM_OK);
 }
@@ -705,22 +705,15 @@ static void test_reduce_plane(void)
     CHECK(wm_refine_init(&r, mem, sizeof mem, &f, &p, xy, 9, tris, 8, 600) == WM_ERR_ARG);
 }
 
-/* A vertex's x, its y and the triangle flags never share lines of a direct-mapped cache of 8 KiB or more
- * in step (mesh.c's xy_gap): vy lies 1 to 3 KiB past a multiple of 8 KiB after vx and tflag as far after
- * vy, so any two of the three 1 to 6 KiB apart modulo 8 KiB, for every vertex capacity up to the board's
- * (its 420k-triangle storage and the power-of-two grids, whose unpadded arrays lay a multiple of 8 KiB
- * plus 8 apart), at most 7 KiB more than the array; the laid-out mesh uses that gap.  And the board's
- * clamp, wm_tri_cap_skewed: the smallest capacity from the grid's whose unpadded vy would lie 1 to 7 KiB
- * past a multiple of 8 KiB after vx, never above its limit. */
-static void test_xy_apart(void)
+/* The board's clamp, wm_tri_cap_skewed: the smallest capacity from the grid's for which 2 vert_cap rounded
+ * up to 8 bytes lies 1 to 7 KiB past a multiple of 8 KiB, never above its limit.  The laid-out mesh's vxy
+ * follows vh by vh's bytes rounded up to 8; on a power-of-two grid (32-bit indices) that is within 1 KiB
+ * of a multiple of 8 KiB with the grid's own capacity (a vertex's vh and vxy on one line index of a
+ * direct-mapped cache) and 1 to 7 KiB past one with the skewed capacity (the clamp's reason). */
+static void test_cap_skewed(void)
 {
     static const int32_t sides[] = {2, 3, 64, 100, 128, 255};
     wm_mesh m;
-    for (int32_t v = 3; v <= 1 << 20; v += v < 70000 ? 1 : 997) {
-        size_t g = wm_mesh_xy_gap(v), a = ((size_t)2 * (size_t)v + 7u) & ~(size_t)7u;
-        CHECK(g >= a && g - a <= 7168u && g % 8u == 0);
-        CHECK(g % 8192u >= 1024u && g % 8192u <= 3072u && (2 * g) % 8192u >= 1024u && (2 * g) % 8192u <= 7168u);
-    }
     for (size_t i = 0; i < sizeof sides / sizeof sides[0]; i++) {
         int32_t w = sides[i], cap = wm_tri_cap_max(w, w), vc = wm_vert_cap_for(w, w, cap);
         int32_t c = wm_tri_cap_skewed(w, w, cap, cap + 10000);
@@ -733,15 +726,21 @@ static void test_xy_apart(void)
         CHECK(wm_tri_cap_skewed(w, w, cap, cap) == cap); /* never above limit */
         if (wm_mesh_bound(cap, vc) == 0) continue; /* beyond 16-bit indices */
         CHECK(wm_mesh_init(&m, mem, sizeof mem, w, w, cap, vc) == WM_OK);
-        CHECK((size_t)((const uint8_t *)m.vy - (const uint8_t *)m.vx) == wm_mesh_xy_gap(vc));
-        CHECK((size_t)((const uint8_t *)(const void *)m.tflag - (const uint8_t *)m.vy) == wm_mesh_xy_gap(vc));
+        CHECK((size_t)((const uint8_t *)(const void *)m.vxy - (const uint8_t *)(const void *)m.vh) ==
+              (((size_t)sizeof(wm_index) * (size_t)vc + 7u) & ~(size_t)7u));
+        if (sizeof(wm_index) == 4 && (w & (w - 1)) == 0 && w >= 64) {
+            size_t d0 = (((size_t)4 * (size_t)vc + 7u) & ~(size_t)7u) % 8192u;
+            size_t d = (((size_t)4 * (size_t)wm_vert_cap_for(w, w, c) + 7u) & ~(size_t)7u) % 8192u;
+            CHECK(d0 < 1024u || d0 > 8192u - 1024u);
+            CHECK(d >= 1024u && d <= 8192u - 1024u);
+        }
     }
 }
 
 int main(void)
 {
     test_build();
-    test_xy_apart();
+    test_cap_skewed();
     test_edge_split();
     test_tri_split();
     test_edge_swap();

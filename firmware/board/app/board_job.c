@@ -77,8 +77,9 @@ int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
 {
     /* The refiner's storage holds no more triangles than a triangulation of all the grid's samples
      * (wm_tri_cap_max): with the SDRAM's heap the device's capacity is some 400k triangles, and a
-     * small job's storage is laid out for the grid's instead (the staging of the initial mesh above it
-     * starts lower).  The refiner cannot reach either limit, so the mesh is the same. */
+     * small job's storage is laid out for the grid's instead, a few hundred more by wm_tri_cap_skewed
+     * (the vertex arrays vh and vxy off a multiple of the caches' size apart; the staging of the initial
+     * mesh above it starts lower).  The refiner cannot reach either limit, so the mesh is the same. */
     wm_proto_job jc = *job;
     const wm_proto_job *j = &jc;
     int32_t m = j->levels, nt;

@@ -16,11 +16,11 @@ static int32_t tri_slot(wm_proto *p, int32_t k)
     if (k < p->cur_k) {
         p->cur_k = 0;
         p->cur_slot = 0;
-        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+        while (p->cur_slot < m->tri_end && m->he[3 * p->cur_slot].v < 0) p->cur_slot++;
     }
     while (p->cur_k < k) {
         p->cur_slot++;
-        while (p->cur_slot < m->tri_end && m->hv[3 * p->cur_slot] < 0) p->cur_slot++;
+        while (p->cur_slot < m->tri_end && m->he[3 * p->cur_slot].v < 0) p->cur_slot++;
         p->cur_k++;
     }
     return p->cur_slot;
@@ -37,15 +37,15 @@ static void level_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
     for (; i < n && off < hb; i++, off++) dst[i] = p->lhdr[off];
     for (; i < n && off < hb + vb; i++, off++) {
         uint32_t v = (off - hb) / 4, part = (off - hb) % 4;
-        uint32_t c = part < 2 ? m->vx[v] : m->vy[v];
-        if (m->vx[v] == WM_FREE) c = WM_PROTO_FREE_VERTEX;
+        uint32_t c = part < 2 ? m->vxy[v].x : m->vxy[v].y;
+        if (m->vxy[v].x == WM_FREE) c = WM_PROTO_FREE_VERTEX;
         dst[i] = (uint8_t)(c >> (8 * (part & 1)));
     }
     if (i < n) {
         uint32_t r = off - hb - vb, k = r / tb, q = r - k * tb;
         int32_t t = tri_slot(p, (int32_t)k);
         for (;;) {
-            uint32_t v = (uint32_t)m->hv[3 * t + (int32_t)(q >> lsh)];
+            uint32_t v = (uint32_t)m->he[3 * t + (int32_t)(q >> lsh)].v;
             dst[i++] = (uint8_t)(v >> (8 * (q & (p->lib - 1u))));
             if (i == n) break;
             if (++q == tb) {
@@ -65,36 +65,36 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
     uint32_t hb = WM_PROTO_LEVEL_HEADER_BYTES / 2, ve = hb + 2u * (uint32_t)m->vert_end;
     for (; pos < end && pos < hb; pos++) *d++ = (uint16_t)get16(p->lhdr + 2 * pos);
     if (pos < end && pos < ve) { /* vertex slots: x, y (a free one: WM_PROTO_FREE_VERTEX == WM_FREE twice) */
-        const uint16_t *vx = m->vx, *vy = m->vy;
+        const wm_xy *xy = m->vxy;
         uint32_t v = (pos - hb) >> 1;
         if ((pos - hb) & 1u) { /* the first slot's y */
-            *d++ = vx[v] == WM_FREE ? WM_FREE : vy[v];
+            *d++ = xy[v].x == WM_FREE ? WM_FREE : xy[v].y;
             pos++;
             v++;
         }
         for (; pos + 2u <= end && pos < ve; pos += 2u, v++, d += 2) {
-            uint16_t x = vx[v];
+            uint16_t x = xy[v].x;
             d[0] = x;
-            d[1] = x == WM_FREE ? x : vy[v];
+            d[1] = x == WM_FREE ? x : xy[v].y;
         }
         if (pos < end && pos < ve) { /* the last slot's x */
-            *d++ = vx[v];
+            *d++ = xy[v].x;
             pos++;
         }
     }
     if (pos < end) { /* the triangles, from the k-th live one's q-th halfword */
         uint32_t per = p->lib == 4 ? 6u : 3u, r = pos - ve, k = r / per, q = r - k * per;
         int32_t t = tri_slot(p, (int32_t)k), te = m->tri_end;
-        const wm_index *hv = m->hv;
+        const wm_he *he = m->he;
         for (;;) {
-            const wm_index *h = hv + 3 * t;
+            const wm_he *h = he + 3 * t;
             if (q == 0 && end - pos >= per) {
                 if (per == 3u) {
-                    d[0] = (uint16_t)h[0];
-                    d[1] = (uint16_t)h[1];
-                    d[2] = (uint16_t)h[2];
+                    d[0] = (uint16_t)h[0].v;
+                    d[1] = (uint16_t)h[1].v;
+                    d[2] = (uint16_t)h[2].v;
                 } else {
-                    uint32_t a = (uint32_t)h[0], b = (uint32_t)h[1], c = (uint32_t)h[2];
+                    uint32_t a = (uint32_t)h[0].v, b = (uint32_t)h[1].v, c = (uint32_t)h[2].v;
                     d[0] = (uint16_t)a;
                     d[1] = (uint16_t)(a >> 16);
                     d[2] = (uint16_t)b;
@@ -106,13 +106,13 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
                 pos += per;
             } else { /* part of one: the frame's first or last */
                 for (; q < per && pos < end; q++, pos++)
-                    *d++ = (uint16_t)(per == 6u ? (uint32_t)h[q >> 1] >> (16u * (q & 1u)) : (uint32_t)h[q]);
+                    *d++ = (uint16_t)(per == 6u ? (uint32_t)h[q >> 1].v >> (16u * (q & 1u)) : (uint32_t)h[q].v);
                 if (q < per) break;
                 q = 0;
             }
             if (pos == end) break;
             do t++;
-            while (t < te && hv[3 * t] < 0);
+            while (t < te && he[3 * t].v < 0);
             k++;
         }
         p->cur_k = (int32_t)k; /* the cursor where this frame ended */
@@ -154,12 +154,12 @@ static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, 
 {
     uint32_t n;
     if (c->v < m->vert_end) {
-        int32_t v = c->v++, x = m->vx[v], y;
+        int32_t v = c->v++, x = m->vxy[v].x, y;
         if (x == WM_FREE) {
             if (d) d[0] = 0;
             return 1;
         }
-        y = m->vy[v];
+        y = m->vxy[v].y;
         n = put_varint(d, 0, zigzag32(x - c->px) + 1u);
         n = put_varint(d, n, zigzag32(y - c->py));
         c->px = x;
@@ -167,14 +167,14 @@ static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, 
         return n;
     }
     if (c->k < m->n_tri) {
-        const wm_index *h;
+        const wm_he *h;
         int32_t t = c->slot, a;
-        while (m->hv[3 * t] < 0) t++; /* a free triangle slot */
-        h = m->hv + 3 * t;
-        a = h[0];
+        while (m->he[3 * t].v < 0) t++; /* a free triangle slot */
+        h = m->he + 3 * t;
+        a = h[0].v;
         n = put_varint(d, 0, zigzag32(a - c->pi));
-        n = put_varint(d, n, zigzag32(h[1] - a));
-        n = put_varint(d, n, zigzag32(h[2] - a));
+        n = put_varint(d, n, zigzag32(h[1].v - a));
+        n = put_varint(d, n, zigzag32(h[2].v - a));
         c->pi = a;
         c->slot = t + 1;
         c->k++;
