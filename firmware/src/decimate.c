@@ -1,15 +1,19 @@
 /* The final decimation, after the error bound (beyond the dissertation: docs/refiner.md).
  *
- *   cost(v) = the largest E(T) of the first triangulation of the hole v would leave that keeps
- *             every E(T) <= zeta, trying the fan from each ring vertex (the half-edge collapses
- *             of v) and then ear clipping; a vertex without one is not removable
- *   repeat: remove the vertex of least cost (ties: the lower slot), with its triangulation;
- *           the costs of its ring vertices change (their stars did), nothing else's
+ *   a vertex can go when its hole has a triangulation that keeps every E(T) <= zeta (the first one
+ *   found, trying the fan from each ring vertex, the half-edge collapses of v, then ear clipping)
+ *   a pass: each dirty vertex in slot order is evaluated (its flag cleared) and, when it can go,
+ *           removed at once with that triangulation, its ring vertices marked dirty (their stars
+ *           changed); every vertex is dirty at first, and the passes end when one leaves none dirty
  *
- * Every new triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes
- * one or two triangles away.  The heap is a binary min-heap on (cost, slot) (wm_internal.h's: entries
- * with their keys in list[]'s storage, places in r->pos);
- * all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
+ * The dirty flag (r->vapex, a byte a vertex slot) is what keeps the passes cheap: a vertex that cannot
+ * go is tried again only after a removal in its ring, the only thing that changes its hole.  The pass
+ * order is the slots' (each pass from the least slot marked behind the one before), so no order is kept
+ * and no cost measured: a candidate's triangles are scanned only as far as zeta (a bound at most zeta,
+ * which the removal leaves in err[] for wm_settle).  Removing the least-cost vertex first (a heap) took
+ * 46 % more of the decimation's instructions for as many triangles (docs/refiner.md).  Every new
+ * triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes one or two
+ * triangles away; all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
 #include "wm_internal.h"
 
 #define NONE 0xFFFFFFFFu
@@ -45,10 +49,10 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
 }
 
 /* The first triangulation of v's hole that keeps every E(T) <= zeta, in the order the fans from ring
- * vertex 0, 1, ..., then ear clipping (Delaunay ears first): its largest E(T) (the vertex's
- * cost) and its kind (apex, as wm_vertex_remove_plan takes it).  NONE when there is none.  Taking the
- * first rather than the cheapest of them measured as good (Jacksboro, Ball: 1-2 % fewer triangles)
- * at 9 % fewer instructions. */
+ * vertex 0, 1, ..., then ear clipping (Delaunay ears first): a bound at most zeta of its E(T) (each
+ * triangle scanned only as far as zeta) and its kind (apex, as wm_vertex_remove_plan takes it), its
+ * ring and triangles in lp; NONE when there is none.  Taking the first rather than the cheapest of them
+ * measured as good (Jacksboro, Ball: 1-2 % fewer triangles) at 9 % fewer instructions. */
 /* first_fit's cheap test for the fans, before a fan is built.  With d_i = p_i - v (v's star: the d_i
  * counter-clockwise, each step below a half turn, a side's two ends a half turn apart), v lies in the
  * fan triangle (p_a, p_k-1, p_k) where f(k) = orient(p_a, p_k, v) = d_a x d_k first falls to <= 0
@@ -440,8 +444,8 @@ static WM_ALWAYS_INLINE int fan_refused(const uint32_t *bad, uint32_t skip, int3
 }
 
 /* The fan from ring position a's triangles as ring vertices (n - 2 of them), as fan_plan and
- * wm_ring_plan make them: (p_a, p_a+k, p_a+k+1) for k = 1 .. n - 2.  first_fit leaves them to the removal:
- * many plans it finds are not the next to go (a stale vertex's new cost puts it behind others). */
+ * wm_ring_plan make them: (p_a, p_a+k, p_a+k+1) for k = 1 .. n - 2 (first_fit's scans take the fan's
+ * corners from v's differences; the removal takes them as vertices). */
 static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
 {
     int32_t b = a + 1 == n ? 0 : a + 1;
@@ -452,14 +456,12 @@ static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
     }
 }
 
-/* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, v is the vertex
- * and ring, tris its ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex
- * (else v is -1; a fan's triangles are left to its removal: fan_tris).  Nothing but a removal changes
- * the mesh here, so when that vertex is the next to go (most often: the one just evaluated, back at the
- * top of the heap) its removal takes them instead of working them out again (f5 at 1 %: 191 of its 223
- * removals, Ball at 2 % 376 of 498). */
+/* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, ring and tris are
+ * v's ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex (a fan's triangles
+ * are left to its removal: fan_tris), and the removal, which follows at once, takes them instead of
+ * working them out again. */
 struct last_plan {
-    int32_t v, nr, nt, k; /* v: -1 when none */
+    int32_t nr, nt, k;
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
     int32_t e[WM_MAX_RING]; /* and v's fan (wm_vertex_fan), k half-edges, for wm_vertex_remove_fan */
     struct fans q;          /* first_fit's fans: the job's terms set once (fans_setup), v's per call */
@@ -492,7 +494,6 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     struct fans *q = &lp->q;
     tested.r = r;
     probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested, probe.bad = WM_CHECK ? NULL : bad;
-    lp->v = -1;
     n = wm_vertex_fan(me, v, lp->e, &lp->k, ring);
     if (n < 0) return NONE;
     q->n = n;
@@ -539,9 +540,10 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
             if (n > 3 && is_fan(tris, nt)) continue; /* a fan refused above, the same triangles */
         }
         /* Then the scans, the plan's largest triangle first (the plan found it: big): a candidate is
-         * refused by any triangle over zeta and otherwise costs the largest E(T) of them all, so their
-         * order changes no result, and the triangle that refuses a candidate is most often its largest
-         * (it holds the most samples): scanned first, it saves the scans of the others. */
+         * refused by any triangle over zeta and otherwise goes, so their order changes no result, and
+         * the triangle that refuses a candidate is most often its largest (it holds the most samples):
+         * scanned first, it saves the scans of the others.  Each only as far as zeta: the passes need
+         * no cost, and in the normal metric a triangle within zeta needs no slope factor. */
         for (j = 0; j < nt; j++) {
             int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
@@ -549,7 +551,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
                 x[c] = a >= 0 ? vx + q->dx[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].x;
                 y[c] = a >= 0 ? vy + q->dy[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].y;
             }
-            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, worst, kept_for(&tested, x, y));
+            e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, r->params.zeta,
+                                  kept_for(&tested, x, y));
             if (e > worst) worst = e;
             if (worst > r->params.zeta) break;
         }
@@ -574,271 +577,67 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 #endif
         best = worst;
         *apex = a;
-        lp->v = v, lp->nr = n, lp->nt = nt; /* a fan's triangles: fan_tris, when it goes */
+        lp->nr = n, lp->nt = nt; /* a fan's triangles: fan_tris, when it goes */
         break;
     }
     return best;
 }
 
-/* The heap (wm_internal.h's operations, the least key first; its keys vkey[], as the entries hold them). */
-static WM_ALWAYS_INLINE int key_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
+/* v's removal with the plan first_fit just made on its star (lp: its ring, triangles and fan; apex its
+ * kind), which nothing has changed since; bound, first_fit's, is at least the E(T) of every new triangle
+ * (measured at the end: wm_settle).  Its ring size, or 0 when it did not go (cannot happen). */
+static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t bound, struct last_plan *lp)
 {
-    return wm_heap_before(ka, a, kb, b, 0);
-}
-
-/* The entry at i up past the parents it is before; 1 when it moved. */
-static int up(wm_refiner *r, int32_t i)
-{
-    wm_hent *h = wm_heap_entries(r), x = h[i];
-    return wm_heap_up(h, r->pos, i, x.key, x.t, 0);
-}
-
-static void down(wm_refiner *r, int32_t i, int32_t n)
-{
-    wm_hent *h = wm_heap_entries(r), x = h[i];
-    wm_heap_down(h, r->pos, i, n, x.key, x.t, 0);
-}
-
-/* v is in the heap (its place in pos[], i): pos[] holds every vertex's place exactly during the
- * decimation (-1 at first, a place from every put, -1 again when taken out or popped from the stale
- * ones' heap, IN_Z while there), so i >= 0 says it without loading the entry (on the soft CPU a likely
- * SDRAM refill at each ring vertex a removal marks stale); the checked builds assert the entry holds v. */
-static WM_ALWAYS_INLINE int in_heap(const wm_refiner *r, int32_t v, int32_t i, int32_t n)
-{
-    WM_ASSERT(i < 0 || (i < n && wm_heap_entries(r)[i].t == v));
-    (void)r, (void)v, (void)n;
-    return i >= 0;
-}
-
+    wm_mesh *me = &r->mesh;
+    int32_t touched[WM_MAX_RING], k, nr = lp->nr, nt = lp->nt, *ring = lp->ring, *tris = lp->tris;
+    if (apex >= 0) fan_tris(ring, nr, apex, tris);
 #if WM_CHECK
-/* The order holds around the entry at i: its parent is before it, it is before its children; the keys
- * are their vertices' costs. */
-static int holds_at(const wm_refiner *r, int32_t i, int32_t n)
-{
-    const wm_hent *h = wm_heap_entries(r);
-    int32_t v = h[i].t, p = (i - 1) / 2;
-    if (r->pos[v] != i || h[i].key != r->vkey[v]) return 0;
-    if (i > 0 && !key_before(h[p].key, h[p].t, h[i].key, v)) return 0;
-    for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!key_before(h[i].key, v, h[c].key, h[c].t) || h[c].key != r->vkey[h[c].t]) return 0;
-    return 1;
-}
+    {
+        int32_t ring2[WM_MAX_RING], tris2[3 * WM_MAX_RING], nt2 = 0;
+        WM_ASSERT(wm_vertex_ring(me, v, ring2) == nr);
+        WM_ASSERT(wm_ring_plan(me, ring2, nr, apex, tris2, &nt2) == WM_OK && nt2 == nt);
+        for (int32_t i = 0; i < nr; i++) WM_ASSERT(ring2[i] == ring[i]);
+        for (int32_t i = 0; i < 3 * nt; i++) WM_ASSERT(tris2[i] == tris[i]);
+    }
 #endif
-
-static void take_out(wm_refiner *r, int32_t v, int32_t *n)
-{
-    wm_hent *h = wm_heap_entries(r);
-    int32_t i = r->pos[v];
-    if (!in_heap(r, v, i, *n)) return;
-    int32_t moved = h[--(*n)].t; /* the last entry, moved into i's place */
-    wm_heap_remove(h, r->pos, i, *n, 0);
-    WM_ASSERT(i == *n || (holds_at(r, r->pos[moved], *n) && holds_at(r, 0, *n)));
-    (void)moved;
-}
-
-/* Re-files v with its current cost (out of the heap when it cannot go): in place when it is in the
- * heap (the order is total, by cost and slot, so where an entry sits does not change what comes out). */
-static void refile(wm_refiner *r, int32_t v, int32_t *n, struct last_plan *lp)
-{
-    int32_t apex = -1, i = r->pos[v];
-    uint32_t cost = first_fit(r, v, &apex, lp);
-    if (cost == NONE) {
-        take_out(r, v, n);
-        return;
+    if (wm_vertex_remove_fan(me, v, lp->e, lp->k, ring, nr, tris, nt, touched, &k) != WM_OK) return 0;
+    for (int32_t i = 0; i < k; i++) {
+        me->tflag[touched[i]] |= WM_F_MEASURE;
+        r->err[touched[i]] = bound;
     }
-    r->vkey[v] = cost;
-    r->vapex[v] = (int8_t)apex;
-    if (in_heap(r, v, i, *n)) { /* in place: up, else down (its key may be the same) */
-        wm_heap_entries(r)[i].key = cost;
-        if (i == 0 || !up(r, i)) down(r, i, *n); /* moved up: no child is before it */
-        WM_ASSERT(holds_at(r, r->pos[v], *n));
-        return;
-    }
-    wm_heap_up(wm_heap_entries(r), r->pos, (*n)++, cost, v, 0);
-    WM_ASSERT(holds_at(r, r->pos[v], *n));
-}
-
-/* Lazy re-evaluation: a removal marks its ring vertices stale (their stars changed) instead of
- * evaluating them at once; a stale vertex keeps its place in the heap (or, if it could not go before,
- * enters it with cost zeta: after every vertex already known to go, which no removable vertex's cost
- * exceeds) and is evaluated when it comes to the top.  A vertex is evaluated once per time it reaches
- * the top stale, not once per neighbour removed.  Entering at zeta rather than 0 lets the removals
- * of a neighbourhood finish before its non-removable vertices are looked at again, so several of them
- * share one evaluation: 11.5 % fewer instructions over ten pairs of the quality benchmark's tuning
- * set, triangles -0.8 % to +2.3 % by pair (bench/refiner_instructions.py). */
-#define STALE INT8_MIN
-
-/* The stale vertices entered at zeta (above) are kept apart from the heap, in a min-heap of their slots alone
- * (all their keys are zeta, so their order is their slots'), from the far end of list[]'s storage down (z[-i]
- * is its i-th entry; the two never meet: together they hold at most the live vertices), their pos -2:
- * its entries need no key loaded to be ordered, and the heap holds fewer.  The next vertex is the
- * first of the two tops by (cost, slot), as one heap of both would give. */
-#define IN_Z (-2)
-
-struct zheap {
-    wm_index *z; /* its entry i is z[-i] */
-    int32_t n;
-};
-
-static void z_push(wm_refiner *r, struct zheap *h, int32_t v)
-{
-    int32_t i = h->n++;
-    while (i > 0) {
-        int32_t p = (i - 1) / 2;
-        if (h->z[-p] <= v) break;
-        h->z[-i] = h->z[-p];
-        i = p;
-    }
-    h->z[-i] = (wm_index)v; /* its key, zeta, is not stored: nothing reads it (wm_decimate compares by zeta) */
-    r->vapex[v] = STALE;
-    r->pos[v] = IN_Z;
-}
-
-/* The top out: the hole goes down the smaller children to a leaf, then the last entry comes up from
- * there into it (as sink above: it most likely belongs at the bottom). */
-static void z_pop(wm_refiner *r, struct zheap *h)
-{
-    wm_index *z = h->z;
-    int32_t v = z[0], last = z[-(--h->n)], n = h->n, i = 0;
-    r->pos[v] = -1;
-    for (int32_t m = (n - 1) / 2; i < m;) { /* i < m: both children in the heap */
-        int32_t c = 2 * i + 1, u = z[-c], w = z[-(c + 1)];
-        if (w < u) c++, u = w;
-        z[-i] = (wm_index)u;
-        i = c;
-    }
-    if (2 * i + 1 < n) { /* one child or two, at the last parent */
-        int32_t c = 2 * i + 1, u = z[-c];
-        if (c + 1 < n && z[-(c + 1)] < u) u = z[-(++c)];
-        z[-i] = (wm_index)u;
-        i = c;
-    }
-    while (i > 0) {
-        int32_t p = (i - 1) / 2, u = z[-p];
-        if (u <= last) break;
-        z[-i] = (wm_index)u;
-        i = p;
-    }
-    z[-i] = (wm_index)last;
-#if WM_CHECK
-    WM_ASSERT(i == 0 || z[-((i - 1) / 2)] <= last);
-    for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++) WM_ASSERT(last <= z[-c]);
-#endif
-}
-
-static void mark_stale(wm_refiner *r, int32_t v, int32_t *n, struct zheap *h)
-{
-    int32_t i = r->pos[v];
-    if (in_heap(r, v, i, *n)) r->vapex[v] = STALE; /* in the heap: keep its place */
-    else if (i != IN_Z) z_push(r, h, v);
-}
-
-/* The first evaluation of every vertex in the grid's order (by y, then x), not in slot order: nothing but
- * the removals changes the mesh and the heap's order is total (cost, slot), so the order of these
- * evaluations changes nothing the decimation does (the last plan, lp, is only a cache), but the slots
- * follow the error bound's insertions, scattered over the grid, where a vertex shares its ring's
- * coordinates, samples and triangles with the vertices beside it, which the data cache then still
- * holds.  A counting sort by x, then a stable one by y, in list[]'s storage: the columns' and rows'
- * counts from its front (width + height + 2 words, both counted in one pass), the order by x after
- * them, the final order at its far end, where the stale vertices' heap comes later (zh).  Each
- * evaluation reads its vertex before it files one entry at the front, so the heap (at most i + 1
- * entries after the i-th) never reaches the order's words still to be read (V <= vert_cap entries).
- * Without room for the order by x (a vertex capacity nearly full), the vertices in slot order; so too
- * natively (WM_NARROW_DIV 0), where the caches hold these meshes and the sorts were 0.2 % more
- * instructions (the checked builds take the sorts: their meshes are compared with the native ones). */
-static void first_pass(wm_refiner *r, int32_t *n, struct last_plan *lp, int32_t cap)
-{
-    const wm_mesh *me = &r->mesh;
-    const wm_xy *p = me->vxy;
-    int32_t w = me->width, h = me->height, end = me->vert_end, nv = 0, *cx = (int32_t *)(void *)r->list,
-            *cy = cx + w + 1;
-    wm_index *byx = (wm_index *)(void *)(cy + h + 1), *order = (wm_index *)(void *)(wm_heap_entries(r) + cap);
-    if (!WM_NARROW_DIV || (char *)(byx + end) > (char *)(order - end)) { /* natively, or no room: slot order */
-        for (int32_t v = 0; v < end; v++)
-            if (p[v].x != WM_FREE) refile(r, v, n, lp);
-        return;
-    }
-    for (int32_t c = 0; c <= w; c++) cx[c] = 0;
-    for (int32_t c = 0; c <= h; c++) cy[c] = 0;
-    for (int32_t v = 0; v < end; v++)
-        if (p[v].x != WM_FREE) cx[p[v].x + 1]++, cy[p[v].y + 1]++, nv++;
-    for (int32_t c = 0; c < w; c++) cx[c + 1] += cx[c]; /* cx[c]: column c's first place */
-    for (int32_t c = 0; c < h; c++) cy[c + 1] += cy[c];
-    for (int32_t v = 0; v < end; v++)
-        if (p[v].x != WM_FREE) byx[cx[p[v].x]++] = (wm_index)v;
-    order -= nv;
-    for (int32_t i = 0; i < nv; i++) order[cy[p[byx[i]].y]++] = byx[i];
-    for (int32_t i = 0; i < nv; i++) {
-        int32_t v = order[i];
-        WM_ASSERT((size_t)(*n + 1) * sizeof(wm_hent) + (size_t)(nv - i - 1) * sizeof(wm_index) <=
-                  (size_t)cap * sizeof(wm_hent)); /* the entry refile may file, the order still to read */
-        WM_ASSERT(i == 0 || p[order[i - 1]].y < p[v].y ||
-                  (p[order[i - 1]].y == p[v].y && p[order[i - 1]].x < p[v].x));
-        refile(r, v, n, lp);
-    }
+    r->removals++;
+    return nr;
 }
 
 int wm_decimate(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
-    int32_t n = 0;
+    int8_t *dirty = r->vapex; /* the reduction's classes are not read after the levels */
+    int32_t end = me->vert_end, from = 0;
     struct last_plan lp;
-    struct zheap zh;
-    uint32_t zeta = r->params.zeta; /* the stale ones' key */
     (void)st;
-    lp.v = -1;
     fans_setup(r, &lp.q);
-    /* the last wm_index word of list[]'s storage (wm_heap_entries: as many wm_hent as items) */
-    zh.z = (wm_index *)(void *)(wm_heap_entries(r) + (me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap));
-    zh.z--;
-    zh.n = 0;
-    for (int32_t v = 0; v < me->vert_end; v++) r->pos[v] = -1;
-    first_pass(r, &n, &lp, me->tri_cap > me->vert_cap ? me->tri_cap : me->vert_cap);
-    while (n > 0 || zh.n > 0) {
-        int32_t v, touched[WM_MAX_RING], nr, nt, k, *ring = lp.ring, *tris = lp.tris;
-        const wm_hent *top = wm_heap_entries(r);
-        if (zh.n > 0 && (n == 0 || key_before(zeta, zh.z[0], top->key, top->t))) { /* entered at zeta: its key */
-            v = zh.z[0];
-            z_pop(r, &zh);
-            refile(r, v, &n, &lp); /* into the heap at its cost, or nowhere */
-            continue;
-        }
-        v = top->t;
-        if (r->vapex[v] == STALE) {
-            refile(r, v, &n, &lp); /* evaluated now: back in the heap at its cost, or out */
-            continue;
-        }
-        take_out(r, v, &n);
-        if (lp.v == v) { /* the plan first_fit made on this star */
-            nr = lp.nr, nt = lp.nt;
-            if (r->vapex[v] >= 0) fan_tris(ring, nr, r->vapex[v], tris);
-#if WM_CHECK
-            {
-                int32_t ring2[WM_MAX_RING], tris2[3 * WM_MAX_RING], nt2 = 0;
-                WM_ASSERT(wm_vertex_ring(me, v, ring2) == nr);
-                WM_ASSERT(wm_ring_plan(me, ring2, nr, r->vapex[v], tris2, &nt2) == WM_OK && nt2 == nt);
-                for (int32_t i = 0; i < nr; i++) WM_ASSERT(ring2[i] == ring[i]);
-                for (int32_t i = 0; i < 3 * nt; i++) WM_ASSERT(tris2[i] == tris[i]);
+    for (int32_t v = 0; v < end; v++) dirty[v] = me->vxy[v].x != WM_FREE;
+    /* the passes: each from the least slot marked dirty behind the one before (slots below it are clean),
+     * until a pass marks none behind its cursor (every slot marked ahead of it it has seen) */
+    while (from < end) {
+        int32_t v = from;
+        from = end;
+        for (; v < end; v++) {
+            int32_t apex = -1, nr;
+            uint32_t bound;
+            if (!dirty[v]) continue;
+            dirty[v] = 0;
+            WM_ASSERT(me->vxy[v].x != WM_FREE);
+            bound = first_fit(r, v, &apex, &lp);
+            if (bound == NONE) continue; /* tried again only when its ring changes */
+            nr = remove_planned(r, v, apex, bound, &lp);
+            for (int32_t i = 0; i < nr; i++) { /* their stars changed */
+                int32_t u = lp.ring[i];
+                dirty[u] = 1;
+                if (u < v && u < from) from = u;
             }
-#endif
-        } else {
-            nr = wm_vertex_fan(me, v, lp.e, &lp.k, ring);
-            if (nr < 0 || wm_ring_plan(me, ring, nr, r->vapex[v], tris, &nt) != WM_OK)
-                continue; /* cannot happen: the plan was made on this star */
         }
-        lp.v = -1; /* the mesh changes */
-        if (r->field.mask && !wm_hole_keeps_cover(r, v, ring, nr, tris, nt)) {
-            refile(r, v, &n, &lp); /* holes.c: a removal beyond v's ring took a ring vertex's other cover since */
-            continue;
-        }
-        if (wm_vertex_remove_fan(me, v, lp.e, lp.k, ring, nr, tris, nt, touched, &k) != WM_OK)
-            continue; /* cannot happen, as above */
-        for (int32_t i = 0; i < k; i++) { /* E(T) <= v's cost (first_fit's largest), measured at the end */
-            me->tflag[touched[i]] |= WM_F_MEASURE;
-            r->err[touched[i]] = r->vkey[v];
-        }
-        r->removals++;
-        for (int32_t i = 0; i < nr; i++) mark_stale(r, ring[i], &n, &zh);
     }
     /* The triangles the removals made (and those the error bound left unmeasured) are measured once, at
      * the end, for those still there and as far as E_max needs them (wm_settle): nothing above reads

@@ -128,13 +128,13 @@ int wm_room(wm_refiner *r, int32_t added)
 static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)
 {
     WM_ASSERT(e == r->err[t]);
-    return wm_heap_up(wm_heap_entries(r), r->pos, i, e, t, 1);
+    return wm_heap_up(wm_heap_entries(r), r->pos, i, e, t);
 }
 
 static void heap_down(wm_refiner *r, int32_t i, int32_t n, int32_t t, uint32_t e)
 {
     WM_ASSERT(e == r->err[t]);
-    wm_heap_down(wm_heap_entries(r), r->pos, i, n, e, t, 1);
+    wm_heap_down(wm_heap_entries(r), r->pos, i, n, e, t);
 }
 
 #if WM_CHECK
@@ -145,9 +145,9 @@ static int heap_holds_at(const wm_refiner *r, int32_t i, int32_t n)
     const wm_hent *h = wm_heap_entries(r);
     int32_t t = h[i].t, p = (i - 1) / 2;
     if (r->pos[t] != i || h[i].key != r->err[t]) return 0;
-    if (i > 0 && !wm_heap_before(h[p].key, h[p].t, h[i].key, t, 1)) return 0;
+    if (i > 0 && !wm_heap_before(h[p].key, h[p].t, h[i].key, t)) return 0;
     for (int32_t c = 2 * i + 1; c <= 2 * i + 2 && c < n; c++)
-        if (!wm_heap_before(h[i].key, t, h[c].key, h[c].t, 1) || h[c].key != r->err[h[c].t]) return 0;
+        if (!wm_heap_before(h[i].key, t, h[c].key, h[c].t) || h[c].key != r->err[h[c].t]) return 0;
     return 1;
 }
 #endif
@@ -159,7 +159,7 @@ static void heap_remove(wm_refiner *r, int32_t t, int32_t i, int32_t *n)
     int32_t moved = h[--(*n)].t; /* the last entry, moved into i's place */
     WM_ASSERT(h[i].t == t);
     (void)t;
-    wm_heap_remove(h, r->pos, i, *n, 1);
+    wm_heap_remove(h, r->pos, i, *n);
     WM_ASSERT(i == *n || heap_holds_at(r, r->pos[moved], *n));
     (void)moved;
 }

@@ -31,14 +31,13 @@ static int32_t cache_slots(int32_t vert_cap)
     return s;
 }
 
-/* Storage after the mesh: err and worst (per triangle slot), list and pos (per triangle or vertex
- * slot, whichever is more; list's room holds as many error bound heap entries, wm_hent), vkey and vapex
- * (per vertex slot), the reduction's caches. */
+/* Storage after the mesh: err and worst, list and pos (per triangle slot; list's room holds as many
+ * error bound heap entries, wm_hent), vkey and vapex (per vertex slot), the reduction's caches. */
 static uint64_t list_bytes(uint64_t items) { return ALIGN8(sizeof(wm_hent) * items); }
 
 static uint64_t state_bytes(int32_t tri_cap, int32_t vert_cap)
 {
-    uint64_t items = (uint64_t)(tri_cap > vert_cap ? tri_cap : vert_cap);
+    uint64_t items = (uint64_t)tri_cap;
     return ALIGN8(8 * (uint64_t)tri_cap) + list_bytes(items) + ALIGN8(sizeof(wm_index) * items) +
            ALIGN8(5 * (uint64_t)vert_cap) +
            (uint64_t)cache_slots(vert_cap) * (sizeof(struct wm_normal_slot) + sizeof(struct wm_ecache_slot));
@@ -129,7 +128,7 @@ int wm_refine_init(wm_refiner **out, void *mem, size_t bytes, const wm_field *f,
     if (rc != WM_OK) return rc;
     q += ALIGN8((uint64_t)mb);
     {
-        uint64_t items = (uint64_t)(tri_cap > vc ? tri_cap : vc);
+        uint64_t items = (uint64_t)tri_cap;
         r->err = (uint32_t *)(void *)q;
         r->worst = (int32_t *)(void *)(q + 4 * (uint64_t)tri_cap);
         q += ALIGN8(8 * (uint64_t)tri_cap);
@@ -416,11 +415,10 @@ static int32_t slot_angle(wm_refiner *r, int32_t t, const int32_t x[3], const in
 /* A swap whose swap back would be made keeps what the swap back needs in a record: the two triangles it
  * replaced (their E(T), worst samples and kept angles), so that the swap back, when its two triangles
  * are still the swap's, is made without a test (try_swap's answer is known: yes) and without a scan:
- * its triangles are the replaced ones.  The records lie in vkey (the decimation's, free while the
- * levels run), REC_WORDS words each, a power of two of them, the one of swap number s at (s / 2) mod
- * their count; a record taken by a later swap is not found (its tag is that swap's number) and the
- * swap back is then tested as any edge is.  Such a swap's number is even, a swap whose swap back is
- * refused has an odd one (pos[] of both triangles).  Words: the tag s, the vertex c of the replaced
+ * its triangles are the replaced ones.  The records lie in vkey, REC_WORDS words each, a power of two
+ * of them, the one of swap number s at (s / 2) mod their count; a record taken by a later swap is not
+ * found (its tag is that swap's number) and the swap back is then tested as any edge is.  Such a swap's
+ * number is even, a swap whose swap back is refused has an odd one (pos[] of both triangles).  Words: the tag s, the vertex c of the replaced
  * triangle (a, b, c), then of (a, b, c) and (b, a, d): E(T), E(T), worst, worst, both kept angles. */
 #define REC_WORDS 7
 

@@ -253,22 +253,21 @@ static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, 
         if (wy) *wy = y[0];
     }
 }
-/* The refiner's two heaps of slots (mesh_state.c's error bound, the largest key first; decimate.c's, the
- * least key first): ties go to the lower slot, so the order is total and any heap pops the same
- * sequence.  An entry holds its slot with the slot's key (E(T), the removal's cost), equal to err[] or
- * vkey[] at every step, so a sift compares entries it has loaded, both children in one line, instead of
- * reading the keys' array at every slot it passes (a random line each: on the board, err[] and vkey[]
- * of a large mesh are far beyond the data cache).  Each slot's place is in pos[].  The entries live in
- * list[]'s storage (sized for max(tri_cap, vert_cap) of them: refine.c), which the other phases use as
- * wm_index words; WM_MAY_ALIAS tells the compiler so. */
+/* The error bound's heap of triangle slots (mesh_state.c), the largest key first: ties go to the lower
+ * slot, so the order is total and any heap pops the same sequence.  An entry holds its slot with the
+ * slot's key (E(T)), equal to err[] at every step, so a sift compares entries it has loaded, both
+ * children in one line, instead of reading the keys' array at every slot it passes (a random line each:
+ * on the board, err[] of a large mesh is far beyond the data cache).  Each slot's place is in pos[].
+ * The entries live in list[]'s storage (sized for tri_cap of them: refine.c), which the
+ * other phases use as wm_index words; WM_MAY_ALIAS tells the compiler so. */
 typedef struct WM_MAY_ALIAS wm_hent {
     uint32_t key;
     wm_index t;
 } wm_hent;
 
-static WM_ALWAYS_INLINE int wm_heap_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b, int largest)
+static WM_ALWAYS_INLINE int wm_heap_before(uint32_t ka, int32_t a, uint32_t kb, int32_t b)
 {
-    return (largest ? ka > kb : ka < kb) || (ka == kb && a < b);
+    return ka > kb || (ka == kb && a < b);
 }
 
 static WM_ALWAYS_INLINE void wm_heap_put(wm_hent *h, wm_index *pos, int32_t i, uint32_t key, int32_t t)
@@ -277,13 +276,13 @@ static WM_ALWAYS_INLINE void wm_heap_put(wm_hent *h, wm_index *pos, int32_t i, u
 }
 
 /* Entry (key, t) at i (h[i] itself not read) up past the parents it is before; 1 when it moved. */
-static WM_ALWAYS_INLINE int wm_heap_up(wm_hent *h, wm_index *pos, int32_t i, uint32_t key, int32_t t, int largest)
+static WM_ALWAYS_INLINE int wm_heap_up(wm_hent *h, wm_index *pos, int32_t i, uint32_t key, int32_t t)
 {
     int32_t i0 = i;
     while (i > 0) {
         int32_t p = (i - 1) / 2;
         wm_hent u = h[p];
-        if (!wm_heap_before(key, t, u.key, u.t, largest)) break;
+        if (!wm_heap_before(key, t, u.key, u.t)) break;
         wm_heap_put(h, pos, i, u.key, u.t);
         i = p;
     }
@@ -292,8 +291,7 @@ static WM_ALWAYS_INLINE int wm_heap_up(wm_hent *h, wm_index *pos, int32_t i, uin
 }
 
 /* Entry (key, t) at i (no parent it is before) down past the children before it. */
-static WM_ALWAYS_INLINE void wm_heap_down(wm_hent *h, wm_index *pos, int32_t i, int32_t n, uint32_t key, int32_t t,
-                                          int largest)
+static WM_ALWAYS_INLINE void wm_heap_down(wm_hent *h, wm_index *pos, int32_t i, int32_t n, uint32_t key, int32_t t)
 {
     for (;;) {
         int32_t c = 2 * i + 1;
@@ -302,9 +300,9 @@ static WM_ALWAYS_INLINE void wm_heap_down(wm_hent *h, wm_index *pos, int32_t i, 
         u = h[c];
         if (c + 1 < n) {
             wm_hent w = h[c + 1];
-            if (wm_heap_before(w.key, w.t, u.key, u.t, largest)) c++, u = w;
+            if (wm_heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
         }
-        if (!wm_heap_before(u.key, u.t, key, t, largest)) break;
+        if (!wm_heap_before(u.key, u.t, key, t)) break;
         wm_heap_put(h, pos, i, u.key, u.t);
         i = c;
     }
@@ -316,14 +314,14 @@ static WM_ALWAYS_INLINE void wm_heap_down(wm_hent *h, wm_index *pos, int32_t i, 
  * comparison a level, then the entry comes up from there past what it is before.  The same places as
  * wm_heap_down's (the children the hole passes are those it moves up, the order total), in about half
  * its comparisons. */
-static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, int32_t n, int largest)
+static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, int32_t n)
 {
     wm_hent x = h[i];
     int32_t j = i, m = (n - 1) / 2; /* j < m: both children in the heap */
     while (j < m) {
         int32_t c = 2 * j + 1;
         wm_hent u = h[c], w = h[c + 1];
-        if (wm_heap_before(w.key, w.t, u.key, u.t, largest)) c++, u = w;
+        if (wm_heap_before(w.key, w.t, u.key, u.t)) c++, u = w;
         wm_heap_put(h, pos, j, u.key, u.t);
         j = c;
     }
@@ -335,7 +333,7 @@ static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, 
     while (j > i) {
         int32_t p = (j - 1) / 2;
         wm_hent u = h[p];
-        if (!wm_heap_before(x.key, x.t, u.key, u.t, largest)) break;
+        if (!wm_heap_before(x.key, x.t, u.key, u.t)) break;
         wm_heap_put(h, pos, j, u.key, u.t);
         j = p;
     }
@@ -344,12 +342,12 @@ static WM_ALWAYS_INLINE void wm_heap_sink(wm_hent *h, wm_index *pos, int32_t i, 
 
 /* The entry at i out of a heap of n + 1 entries (n: the count after it): its slot's place -1, the last
  * entry moved into its place, up past the parents it is before, else sunk. */
-static WM_ALWAYS_INLINE void wm_heap_remove(wm_hent *h, wm_index *pos, int32_t i, int32_t n, int largest)
+static WM_ALWAYS_INLINE void wm_heap_remove(wm_hent *h, wm_index *pos, int32_t i, int32_t n)
 {
     pos[h[i].t] = -1;
     if (i == n) return;
     h[i] = h[n];
-    if (i == 0 || !wm_heap_up(h, pos, i, h[i].key, h[i].t, largest)) wm_heap_sink(h, pos, i, n, largest);
+    if (i == 0 || !wm_heap_up(h, pos, i, h[i].key, h[i].t)) wm_heap_sink(h, pos, i, n);
 }
 
 uint64_t wm_isqrt64(uint64_t x);                        /* floor(sqrt(x)) */
@@ -727,14 +725,13 @@ struct wm_refiner {
     int32_t swept, swap_stamp;
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
-    wm_index *list;      /* [max(tri_cap, vert_cap)] the plan of an iteration, the regularisation's
+    wm_index *list;      /* [tri_cap] the plan of an iteration, the regularisation's
                             smallest angles (refine.c); its storage holds as many wm_hent, the heaps'
-                            (wm_heap_entries), and the decimation's stale vertices at its far end */
-    wm_index *pos;       /* [max(tri_cap, vert_cap)] heap position of each item, -1 when not in it */
-    uint32_t *vkey;      /* [vert_cap] decimation: the cost of removing each vertex; the levels: the
-                            regularisation's records (refine.c) */
+                            (wm_heap_entries) */
+    wm_index *pos;       /* [tri_cap] heap position of each triangle, -1 when not in it */
+    uint32_t *vkey;      /* [vert_cap] the levels: the regularisation's records (refine.c) */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
-                            changed); decimation: the triangulation that cost belongs to */
+                            changed); decimation: its dirty flag (decimate.c) */
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
     struct wm_normal_slot *normals; /* [cache_mask + 1] reduce.c's unit normals, kept */
     struct wm_ecache_slot *ecache;  /* [cache_mask + 1] reduce.c's middle eigenvectors, kept */
@@ -812,8 +809,8 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
 /* The error bound's heap (mesh_state.c): re-files t after its E(T) changed to e (err[t]); i = pos[t], its
  * place (-1: in no heap). */
 void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n);
-/* The final decimation (decimate.c): removes vertices best first while every new triangle keeps
- * E(T) <= zeta; returns WM_OK. */
+/* The final decimation (decimate.c): removes vertices, in passes over the slots, while every new
+ * triangle keeps E(T) <= zeta; returns WM_OK. */
 int wm_decimate(wm_refiner *r, wm_level_stats *st);
 /* The reduction of 4.6 steps 2(d) and 3(b) (reduce.c): one pass over the vertices in slot order,
  * vertex removal where both small eigenvalues of R(v) are below delta_lambda (4.32), else edge

@@ -574,11 +574,13 @@ def test_seam_reads_only_the_band_of_a_tile_it_does_not_hold(dem, monkeypatch):
     area = [plan.tiles[i].width * plan.tiles[i].height for i, _, _ in seams]
     assert len(reads) == 2 * len(seams) and sum(reads) < sum(area)  # two bands a seam, less than a tile each
     assert not jobs._TILE_CACHE  # nothing kept
-    ed = jobs._seam_editable(plan, done[0], None, "right")
+    # tile 0's bottom band (rows 36 to 56 of 57: its right one is the whole tile, a triangle at the right
+    # side reaching the top left corner)
+    ed = jobs._seam_editable(plan, done[0], None, "bottom")
     t = plan.tiles[0]
     with pytest.raises(MeshInvalid, match="off the band"):
-        ed.within([0, 1, 0], [0, 0, 1])  # the tile's top left corner: far from its right side
-    assert ed.within([t.width - 2, t.width - 1, t.width - 1], [0, 0, 1])
+        ed.within([0, 1, 0], [0, 0, 1])  # the tile's top left corner: far from its bottom side
+    assert ed.within([0, 1, 1], [t.height - 2, t.height - 2, t.height - 1])
 
 
 def test_seam_cut_carries_the_removals(dem, monkeypatch):
