@@ -10,12 +10,12 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 
 (the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples of 3 arc-seconds, 74.6 m x
 92.5 m, whose ridges the normal metric now sees in ground units.  The simulated board gets it
-decimated by 16 to 26 x 22 with zeta 10 m, about 815 triangles: some 12 M cycles of the soft CPU (0.32 s
+decimated by 16 to 26 x 22 with zeta 10 m, 817 triangles: some 12 M cycles of the soft CPU (0.32 s
 of the board at 39 MHz; the stream's `device:` line gives each stage's time), which the simulator
 runs in under a minute (its speed: docs/soc.md, "The simulated board").  The
 whole DEM through the simulated board is `make bench-soc-full SOC_FULL=jacksboro`: some 0.81 G cycles,
 about 12 minutes of the simulator's CPU (docs/benchmarks.md).  The native stand-in device, given storage for
-65536 triangles, gets it decimated by 2 to 202 x 172 with zeta 15 m, 14694 triangles.)  It writes the mesh,
+65536 triangles, gets it decimated by 2 to 202 x 172 with zeta 15 m, 14557 triangles.)  It writes the mesh,
 every level's mesh, a picture and a report into --out, checks the mesh, and stops the device.  Exit
 status: that of `wavemesh stream` (0, or 3 when the budget stopped it).
 """
@@ -38,7 +38,7 @@ VENV_BIN = Path(sys.executable).parent
 STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "16", "--zeta", "10"],
                "native": ["--key", "elevation", "--decimate", "2", "--zeta", "15"]}
 START_TIMEOUT = 20.0  # s for the device to say it is listening
-NATIVE_TRIANGLES = 65536  # the native stand-in's storage: Jacksboro / 2 at 15 m ends at 14694 triangles
+NATIVE_TRIANGLES = 65536  # the native stand-in's storage: Jacksboro / 2 at 15 m ends at 14557 triangles
 
 
 def device_command(kind: str, mode: str) -> list[str]:

@@ -26,10 +26,11 @@
  *       valid corner of such a cell, or the cell's diagonal swapped, or the thin triangles across the
  *       cell swapped away; the bound runs again;
  *   wm_hole_keeps_cover, in the final decimation: a removal may not take the last such triangle from a
- *       valid vertex (asked when a vertex's cost is found and again when it goes: another removal
- *       beyond its ring may have taken a ring vertex's other such triangle since).
- * Motorcycle at zeta 1 (bench/bench_holes.py): such samples in no kept triangle 533 -> 113 (the
- * decimation's rule) -> 20 (the cover step) -> 0 (the rule asked again), triangles 13,634 -> 14,280. */
+ *       valid vertex (asked of each candidate within zeta when a vertex is evaluated; the removal follows
+ *       at once, with the candidate that passed, so nothing changes the answer in between).
+ * Motorcycle at zeta 1 (bench/bench_holes.py, measured when the decimation removed the least-cost
+ * vertex first and asked the rule again as a vertex went): such samples in no kept triangle 533 -> 113
+ * (the decimation's rule) -> 20 (the cover step) -> 0 (the rule asked again), triangles 13,634 -> 14,280. */
 #include "wm_internal.h"
 
 static int invalid_at(const wm_field *f, int32_t px, int32_t py)

@@ -726,8 +726,8 @@ struct wm_refiner {
     uint32_t *err;       /* [tri_cap] E(T), Q16.16 sample counts, always current */
     int32_t *worst;      /* [tri_cap] the sample (y W + x) where E(T) is reached, always current */
     wm_index *list;      /* [tri_cap] the plan of an iteration, the regularisation's
-                            smallest angles (refine.c); its storage holds as many wm_hent, the heaps'
-                            (wm_heap_entries) */
+                            smallest angles (refine.c); its storage holds as many wm_hent, the error
+                            bound's heap (wm_heap_entries) */
     wm_index *pos;       /* [tri_cap] heap position of each triangle, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] the levels: the regularisation's records (refine.c) */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
