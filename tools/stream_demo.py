@@ -13,11 +13,12 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 decimated by 16 to 26 x 22 with zeta 10 m, 817 triangles: some 12 M cycles of the soft CPU (0.32 s
 of the board at 39 MHz; the stream's `device:` line gives each stage's time), which the simulator
 runs in under a minute (its speed: docs/soc.md, "The simulated board").  The
-whole DEM through the simulated board is `make bench-soc-full SOC_FULL=jacksboro`: some 0.81 G cycles,
-about 12 minutes of the simulator's CPU (docs/benchmarks.md).  The native stand-in device, given storage for
-65536 triangles, gets it decimated by 2 to 202 x 172 with zeta 15 m, 14557 triangles.)  It writes the mesh,
-every level's mesh, a picture and a report into --out, checks the mesh, and stops the device.  Exit
-status: that of `wavemesh stream` (0, or 3 when the budget stopped it).
+whole DEM through the simulated board is `make bench-soc-full SOC_FULL=jacksboro`: some 0.65 G cycles,
+about 9 to 11 minutes of the simulator's CPU (docs/soc.md, "The simulated board").  The native
+stand-in device, given storage for 65536 triangles, gets it decimated by 2 to 202 x 172 with zeta
+15 m, 14557 triangles.)  It writes the mesh, every level's mesh, a picture and a report into --out,
+checks the mesh, and stops the device.  Exit status: that of `wavemesh stream` (0, or 3 when the
+budget stopped it).
 """
 
 from __future__ import annotations
