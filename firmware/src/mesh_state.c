@@ -79,6 +79,21 @@ void wm_settle(wm_refiner *r)
             continue;
         }
         f &= (uint8_t)~WM_F_MEASURE;
+        /* A flagged slot's err[] was written with its flag (touch_bound, the decimation), live or dead
+         * since; one within known keeps its bound without reading he[] (whether it is live: on the board
+         * each slot's he[] was a refill of its own, 24 bytes a slot, err[] one for eight slots).  Its
+         * WM_F_NEW then also on a dead slot: the flags are scratch (wm_tri_take clears a slot's), and
+         * nothing reads them after this, the job's last step. */
+        if (!masked && err[t] <= known) {
+            tflag[t] = (uint8_t)(f | WM_F_NEW);
+#if WM_CHECK
+            if (he[3 * t].v >= 0) {
+                wm_tri_xy(me, t, x, y);
+                WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) <= known);
+            }
+#endif
+            continue;
+        }
         if (he[3 * t].v < 0) {
             tflag[t] = f;
             continue;

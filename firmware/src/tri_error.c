@@ -644,6 +644,27 @@ static uint32_t vertical(uint64_t vmax, int64_t D)
     return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
 }
 
+/* vertical(vmax, D) for a triangle of D <= 4 (scan_tiny's) without a division: D = 1, 2, 4 a shift, D = 3
+ * the quotient by 3 a multiply-high by ceil(2^33 / 3) (exact below 2^32; vmax < 2^16 D here) and
+ * ceil(2^16 r / 3) for its remainder r from a table.  Only where the division would not run beside
+ * the slope unit (wm_tri_error_over's triangles within zeta: normal_beside's division overlaps the
+ * unit's work, which the CPU would wait for instead). */
+static WM_ALWAYS_INLINE uint32_t vertical_tiny(uint64_t vmax, int32_t D)
+{
+    uint32_t v = (uint32_t)vmax, q, r;
+    uint64_t ev;
+    WM_ASSERT(D >= 1 && D <= 4 && vmax >> 32 == 0);
+    if (D == 3) {
+        q = (uint32_t)(((uint64_t)v * 0xAAAAAAABu) >> 33);
+        r = v - 3u * q;
+        ev = ((uint64_t)q << 16) + (r == 0 ? 0u : (r == 1 ? 21846u : 43691u));
+    } else {
+        ev = (uint64_t)v << (D == 4 ? 14 : (D == 2 ? 15 : 16));
+    }
+    WM_ASSERT(ev == wm_ceil_q16_div(vmax, (uint64_t)D));
+    return ev > 0xFFFFFFFFu ? 0xFFFFFFFFu : (uint32_t)ev;
+}
+
 #ifdef WM_SLOPE_ENGINE
 /* The board: E(T) in the normal metric with the slope unit started before ev's division, which runs beside
  * it (the same ev, the same r = root << k as slope_factor's): 1 and E(T) in *e, or 0 when the unit cannot
@@ -717,7 +738,7 @@ uint32_t wm_tri_error_over(const wm_field *f, const wm_params *p, const int32_t 
      * factor (in the vertical metric ev is E(T), but not said to be) */
     if ((vmax << 16) <= (uint64_t)bound * (uint64_t)D) {
         *exact = 0;
-        return vertical(vmax, D);
+        return D <= 4 && vmax >> 32 == 0 ? vertical_tiny(vmax, D) : vertical(vmax, D);
     }
     return finish(f, p, x, y, D, vmax, NULL);
 }
