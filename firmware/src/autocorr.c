@@ -174,6 +174,14 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     uint32_t mx, my;
     int32_t ex, ey;
     int e, sh = 0;
+    /* A level triangle (its corners at one height: Box's and Ball's ground, Box's top): (0, 0, D), whose
+     * unit normal below is (0, 0, 2^28) exactly (c[0] = c[1] = 0, len = c[2], each quotient exact), here
+     * without the scaling, the root and the division (checked builds take the path below and compare) */
+    if (!WM_CHECK && (A | B) == 0 && D > 0) {
+        n[0] = n[1] = 0;
+        n[2] = 1 << 28;
+        return;
+    }
     /* In ground units (cells dx x dy) the normal is (s A / dx, s B / dy, D): the slope scales of the
      * normal metric (wm_slope_scale; with a cell of 1 both are s, and nothing changes).  Brought to the
      * smaller exponent e: (sx A, sy B, D) 2^e = (mx A 2^(e - ex), my B 2^(e - ey), D 2^e), magnitudes
@@ -221,6 +229,7 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
             WM_ASSERT(q == ((c[k] << 28) + len / 2) / len);
             n[k] = (int32_t)(neg ? -(int32_t)q : (int32_t)q);
         }
+        WM_ASSERT((A | B) != 0 || D <= 0 || (n[0] == 0 && n[1] == 0 && n[2] == 1 << 28));
         return;
     }
     for (int k = 0; k < 3; k++) {
@@ -228,6 +237,7 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
         int neg = k == 0 ? A < 0 : k == 1 ? B < 0 : D < 0;
         n[k] = (int32_t)(neg ? -q : q);
     }
+    WM_ASSERT((A | B) != 0 || D <= 0 || (n[0] == 0 && n[1] == 0 && n[2] == 1 << 28));
 }
 
 /* floor(n / k) for 1 <= k <= WM_MAX_RING and n < 2^36, by multiplication: with M = ceil(2^32 / k)

@@ -349,28 +349,108 @@ static int8_t classify(wm_refiner *r, int32_t v, struct eig *g)
     return cls;
 }
 
-/* The largest E(T) around v, at least zeta. */
-static uint32_t star_bound(const wm_refiner *r, int32_t v, uint32_t b)
+/* The largest E(T) around v, at least zeta; *any gets the OR of those E(T) (0: every one is 0). */
+static uint32_t star_bound(const wm_refiner *r, int32_t v, uint32_t b, uint32_t *any)
 {
     const wm_mesh *me = &r->mesh;
     int32_t first = wm_fan_first(me, v), h = first;
+    uint32_t o = 0;
     if (b < r->params.zeta) b = r->params.zeta;
     do {
-        if (r->err[WM_TRI(h)] > b) b = r->err[WM_TRI(h)];
+        uint32_t e = r->err[WM_TRI(h)];
+        o |= e;
+        if (e > b) b = e;
         h = wm_rot_ccw(me, h);
     } while (h >= 0 && h != first);
+    *any |= o;
     return b;
 }
+
+/* A flat region: when every triangle an operation replaces has E(T) = 0 (each sample of it on its
+ * plane) and every corner of them lies on one plane P, every sample of the region lies on P, and so
+ * does every new triangle (its corners are the region's vertices, or a grid sample of it: the collapse
+ * point), which covers part of the region: its E(T) is 0, and its worst sample is the scan's for
+ * Vmax = 0, its corner 0 (wm_place_at).  Known without a scan (Box 256's enhancement: most of its
+ * reduction's scans).  Not with a holes mask or a region of interest, whose E(T) is over some samples
+ * only.  The plane through the corners of triangle t: (x, y, z) lies on it iff
+ * D (z - z0) = Na (x - x0) + Nb (y - y0) (|D| < 2^31, |Na|, |Nb| < 2^33: every term below 2^50). */
+struct plane {
+    int32_t x0, y0, z0;
+    int64_t d, na, nb;
+};
+
+static void plane_of(const wm_refiner *r, int32_t t, struct plane *pl)
+{
+    const wm_mesh *me = &r->mesh;
+    int32_t x[3], y[3], z[3];
+    for (int c = 0; c < 3; c++) {
+        int32_t v = me->he[3 * t + c].v;
+        x[c] = me->vxy[v].x, y[c] = me->vxy[v].y;
+        z[c] = r->field.samples[(int64_t)y[c] * r->field.width + x[c]];
+    }
+    pl->x0 = x[0], pl->y0 = y[0], pl->z0 = z[0];
+    pl->d = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
+    pl->na = (int64_t)(z[1] - z[0]) * (y[2] - y[0]) - (int64_t)(z[2] - z[0]) * (y[1] - y[0]);
+    pl->nb = (int64_t)(x[1] - x[0]) * (z[2] - z[0]) - (int64_t)(x[2] - x[0]) * (z[1] - z[0]);
+}
+
+static int on_plane(const wm_refiner *r, const struct plane *pl, const int32_t *vs, int32_t n)
+{
+    const wm_mesh *me = &r->mesh;
+    for (int32_t i = 0; i < n; i++) {
+        int32_t x = me->vxy[vs[i]].x, y = me->vxy[vs[i]].y;
+        int32_t z = r->field.samples[(int64_t)y * r->field.width + x];
+        if (pl->d * (z - pl->z0) != pl->na * (x - pl->x0) + pl->nb * (y - pl->y0)) return 0;
+    }
+    return 1;
+}
+
+/* Whether the vertices vs[0 .. n) and ws[0 .. m) lie on the plane of triangle t (out of line: few
+ * operations ask, and inline its terms grew the reduction's code by a kilobyte). */
+WM_NEVER_INLINE static int flat_region(const wm_refiner *r, int32_t t, const int32_t *vs, int32_t n,
+                                       const int32_t *ws, int32_t m)
+{
+    struct plane pl;
+    plane_of(r, t, &pl);
+    return on_plane(r, &pl, vs, n) && on_plane(r, &pl, ws, m);
+}
+
+/* within's answer for a flat region: every new triangle E(T) 0, its worst sample its corner 0. */
+WM_NEVER_INLINE static void flat_within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t px,
+                                        int32_t py, uint32_t *e, int32_t *w)
+{
+    const wm_mesh *me = &r->mesh;
+    for (int32_t j = 0; j < nt; j++) {
+        int32_t v = tris[3 * j];
+#if WM_CHECK
+        int32_t x[3], y[3], wx, wy;
+        for (int c = 0; c < 3; c++) {
+            int32_t u = tris[3 * j + c];
+            x[c] = u < 0 ? px : me->vxy[u].x;
+            y[c] = u < 0 ? py : me->vxy[u].y;
+        }
+        WM_ASSERT(wm_tri_error(&r->field, &r->params, x, y, &wx, &wy) == 0 && wx == x[0] && wy == y[0]);
+#endif
+        e[j] = 0;
+        w[j] = (v < 0 ? py : me->vxy[v].y) * r->field.width + (v < 0 ? px : me->vxy[v].x);
+    }
+}
+
+static int may_be_flat(const wm_refiner *r) { return r->field.mask == NULL && r->roi == NULL; }
 
 /* 1 when every triangle of tris (WM_COLLAPSE_POINT standing for (px, py)) has E(T) <= bound; then, without
  * an ROI (whose E(T) is over its samples only), each one's E(T) and worst sample in e[] and w[] (a scan
  * that never passes its bound is the whole scan, so these are wm_tri_error's values: known[] below). */
 static int within(const wm_refiner *r, const int32_t *tris, int32_t nt, int32_t px, int32_t py, uint32_t bound,
-                  uint32_t *e, int32_t *w, const int32_t *gone, int ngone)
+                  uint32_t *e, int32_t *w, const int32_t *gone, int ngone, int flat)
 {
     const wm_mesh *me = &r->mesh;
     uint64_t kept = 0; /* the slope factor of triangle jk, which the cheap test measured (wm_internal.h) */
     int32_t jk = -1;
+    if (flat) { /* a flat region (plane_of above): E(T) 0 at corner 0, without a scan */
+        flat_within(r, tris, nt, px, py, e, w);
+        return 1;
+    }
     /* First the cheap test: the samples of the vertices the operation takes away, against the new
      * triangle holding each (a lower bound of its E(T), rounded as E(T) is): a failed operation
      * mostly stops here, without a scan. */
@@ -456,7 +536,12 @@ static int try_remove(wm_refiner *r, int32_t v)
     if (wm_star_plan(me, ring, n, me->vxy[v].x, me->vxy[v].y, tris, &nt) != WM_OK &&
         wm_vertex_remove_plan(me, v, -1, tris, &nt) != WM_OK)
         return 0;
-    if (!within(r, tris, nt, 0, 0, star_bound(r, v, 0), e, w, &v, 1)) return 0;
+    {
+        uint32_t any = 0, bound = star_bound(r, v, 0, &any);
+        int flat = 0;
+        if (any == 0 && may_be_flat(r)) flat = flat_region(r, WM_TRI(wm_fan_first(me, v)), ring, n, ring, 0);
+        if (!within(r, tris, nt, 0, 0, bound, e, w, &v, 1, flat)) return 0;
+    }
     if (wm_vertex_remove(me, v, tris, nt, touched, &k) != WM_OK) return 0;
     known(r, touched, k, tris, nt, 0, 0, e, w);
     return 1;
@@ -473,7 +558,8 @@ static int try_collapse(wm_refiner *r, int32_t e)
     struct wm_collapse_stars stars;
     int32_t ax = me->vxy[v].x, ay = me->vxy[v].y, bx = me->vxy[w].x, by = me->vxy[w].y;
     int32_t dx = bx - ax, dy = by - ay, g = wm_gcd(dx, dy), cx[4], cy[4], nc = 0;
-    uint32_t bound = star_bound(r, w, star_bound(r, v, 0));
+    uint32_t any = 0, bound = star_bound(r, w, star_bound(r, v, 0, &any), &any);
+    int flat = 0;
     if (g >= 2) {
         int32_t k0 = g / 2, k1 = (g + 1) / 2; /* equal for an even g: the midpoint itself */
         cx[nc] = ax + dx / g * k0, cy[nc++] = ay + dy / g * k0;
@@ -483,10 +569,12 @@ static int try_collapse(wm_refiner *r, int32_t e)
     cx[nc] = bx, cy[nc++] = by;
     /* the stars and the link condition once for every point (a failure there fails every point) */
     if (wm_collapse_stars(me, e, &stars) != WM_OK) return 0;
+    if (any == 0 && may_be_flat(r)) /* both stars flat, in one plane */
+        flat = flat_region(r, WM_TRI(stars.out[0][0]), stars.nb[0], stars.n[0], stars.nb[1], stars.n[1]);
     for (int32_t i = 0; i < nc; i++) {
         if (wm_collapse_plan_at(me, &stars, cx[i], cy[i], tris, &nt) != WM_OK) continue;
         WM_ASSERT(wm_edge_collapse_plan(me, e, cx[i], cy[i], ws, &k) == WM_OK && k == nt);
-        if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0)) continue;
+        if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0, flat)) continue;
         if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return -1; /* capacity */
         known(r, touched, k, tris, nt, cx[i], cy[i], es, ws);
         return 1;
