@@ -11,14 +11,32 @@
  *          d      meets a-b at t1  (4.20); the split point is at t = (t1 + t2) / 2, snapped. */
 #include "wm_internal.h"
 
+/* The details of level m, located once a pass of the plan (wm_detail_at works out the level's offset
+ * in the details at every call: on the soft CPU a loop of 64-bit products). */
+struct level {
+    const int32_t *d;
+    int32_t cw, m;
+};
+
+static struct level level_of(const wm_refiner *r, int32_t m)
+{
+    struct level lv;
+    lv.d = r->field.details + wm_details_offset(r->field.width, r->field.height, m);
+    lv.cw = (r->field.width + (1 << m) - 1) >> m;
+    lv.m = m;
+    return lv;
+}
+
 /* (d1, d2) of triangle t's barycentre cell at level m, scaled down (toward zero) below 2^12 so
  * that every product below fits in 64 bits; (0, 0) when there is no gradient. */
-static void gradient(const wm_refiner *r, int32_t m, int32_t t, int64_t g[2])
+static void gradient(const wm_refiner *r, const struct level *lv, int32_t t, int64_t g[2])
 {
-    int32_t x[3], y[3];
+    int32_t x[3], y[3], bx, by;
     const int32_t *d;
     wm_tri_xy(&r->mesh, t, x, y);
-    d = wm_detail_at(&r->field, m, wm_div3(x[0] + x[1] + x[2]), wm_div3(y[0] + y[1] + y[2]));
+    bx = wm_div3(x[0] + x[1] + x[2]), by = wm_div3(y[0] + y[1] + y[2]);
+    d = lv->d + 3 * ((int64_t)(by >> lv->m) * lv->cw + (bx >> lv->m));
+    WM_ASSERT(d == wm_detail_at(&r->field, lv->m, bx, by));
     g[0] = d[0];
     g[1] = d[1];
     while (g[0] >= 4096 || g[0] <= -4096 || g[1] >= 4096 || g[1] <= -4096) {
@@ -64,12 +82,12 @@ static int convex(const wm_mesh *me, int32_t e)
 /* The best edge of active triangle t for a pair with a partner having flag `want` (0: the border,
  * a quasi-valid pair with an imaginary triangle of t's gradient): the longest consistent edge,
  * the first slot on ties.  -1 when none. */
-static int32_t best_edge(const wm_refiner *r, int32_t m, int32_t t, uint8_t want)
+static int32_t best_edge(const wm_refiner *r, const struct level *lv, int32_t t, uint8_t want)
 {
     const wm_mesh *me = &r->mesh;
     int64_t g[2], best_len = -1;
     int32_t best = -1;
-    gradient(r, m, t, g);
+    gradient(r, lv, t, g);
     for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
         int32_t o = me->he[e].o;
         int64_t cx, cy, len;
@@ -84,7 +102,7 @@ static int32_t best_edge(const wm_refiner *r, int32_t m, int32_t t, uint8_t want
             if (o < 0) continue;
             u = WM_TRI(o);
             if (!(me->tflag[u] & want) || (me->tflag[u] & WM_F_PLAN) || !convex(me, e)) continue;
-            gradient(r, m, u, g2);
+            gradient(r, lv, u, g2);
             if (!consistent(r, g2, cx, cy)) continue;
         }
         best = e;
@@ -100,11 +118,12 @@ int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
     /* Pass 1: active with active; pass 2: leftovers with the dependent region (N1); pass 3:
      * quasi-valid pairs on the border; pass 4: unpaired (ternary subdivision). */
     static const uint8_t partner[3] = {WM_F_ACTIVE, WM_F_DEP, 0};
+    struct level lv = level_of(r, m);
     for (int pass = 0; pass < 3; pass++) {
         for (int32_t t = 0; t < me->tri_end; t++) {
             int32_t e;
             if ((me->tflag[t] & (WM_F_ACTIVE | WM_F_PLAN)) != WM_F_ACTIVE) continue;
-            e = best_edge(r, m, t, partner[pass]);
+            e = best_edge(r, &lv, t, partner[pass]);
             if (e < 0) continue;
             me->tflag[t] |= WM_F_PLAN;
             if (me->he[e].o >= 0) me->tflag[WM_TRI(me->he[e].o)] |= WM_F_PLAN;
@@ -132,7 +151,8 @@ static int64_t crossing(const wm_refiner *r, int32_t m, int32_t t, int32_t e)
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3], a = me->he[e].v;
     int64_t g[2], cx, cy, num, den;
-    gradient(r, m, t, g);
+    struct level lv = level_of(r, m);
+    gradient(r, &lv, t, g);
     wm_tri_xy(me, t, x, y);
     edge_vec(me, e, &cx, &cy);
     num = g[0] * ((int64_t)x[0] + x[1] + x[2] - 3 * (int64_t)me->vxy[a].x) +
