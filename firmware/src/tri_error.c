@@ -419,6 +419,32 @@ WM_NEVER_INLINE static uint64_t scan_tiny(const wm_field *f, const int32_t x[3],
     return vm;
 }
 
+/* scan_tiny of a triangle of D = 2 (some three fifths of its calls on Jacksboro / 4), apart: its one
+ * sample besides the corners, the middle of its one edge a -> b whose coordinate differences are both
+ * even, V = |z_a + z_b - 2 h| there, Vmax 0 at corner 0 (its limit needs no test: one sample).  Two
+ * corners' heights, not three, and no registers to save (on the board scan_tiny's saves and restores
+ * of twelve took some 50 cycles a call).  Checked builds compare it with the scan (scan_any). */
+WM_NEVER_INLINE static uint64_t scan_two(const wm_field *f, const int32_t x[3], const int32_t y[3], int32_t *wx,
+                                         int32_t *wy)
+{
+    const uint16_t *h = f->samples;
+    int32_t W = f->width, a = 0, b = 1, mx, my;
+    uint32_t s, dh, v;
+    if (((x[1] - x[0]) | (y[1] - y[0])) & 1) {
+        a = 1, b = 2;
+        if (((x[2] - x[1]) | (y[2] - y[1])) & 1) a = 2, b = 0;
+    }
+    mx = (x[a] + x[b]) >> 1; /* the sums even, the coordinates not negative */
+    my = (y[a] + y[b]) >> 1;
+    s = (uint32_t)h[y[a] * W + x[a]] + h[y[b] * W + x[b]];
+    dh = 2u * h[my * W + mx];
+    v = s > dh ? s - dh : dh - s;
+    if (v == 0) mx = x[0], my = y[0];
+    if (wx) *wx = mx;
+    if (wy) *wy = my;
+    return v;
+}
+
 #if WM_SCAN_LATTICE
 /* The largest D of the triangles scan_lattice takes (the ten pairs of bench/refiner_instructions.py at 8,
  * 12, 16, 20: 0.982, 0.977, 0.975, 0.976 of their instructions with scan32). */
@@ -525,9 +551,9 @@ WM_NEVER_INLINE static int scan_lattice(const wm_field *f, const int32_t x[3], c
  * hands it to the FPGA's triangle error engine, which returns the same Vmax and sample; the holes
  * mask's cover test (holes.c) has run before, on the CPU.  A triangle of D = 1 has no sample but its
  * corners (Vmax 0 at corner 0, answered here without scan_tiny's call: a quarter of the scans on
- * Jacksboro / 4), one of D <= 4 takes scan_tiny, one of D <= WM_LATTICE_D scan_lattice in the native
- * builds (where the hook declines), which inline it in each measure (out of line, its call cost 1.5 % of
- * the refiner's instructions; the board's is as before). */
+ * Jacksboro / 4), one of D = 2 takes scan_two, one of D = 3 or 4 scan_tiny, one of D <= WM_LATTICE_D
+ * scan_lattice in the native builds (where the hook declines), which inline it in each measure (out of
+ * line, its call cost 1.5 % of the refiner's instructions; the board's is as before). */
 #if WM_SCAN_LATTICE
 WM_ALWAYS_INLINE
 #endif
@@ -540,6 +566,10 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
         int32_t cx, cy, tx, ty;
         uint64_t v = scan(f, x, y, D, limit, &cx, &cy), t = scan_tiny(f, x, y, (int32_t)D, limit, &tx, &ty);
         WM_ASSERT(v == t && cx == tx && cy == ty);
+        if (D == 2) {
+            t = scan_two(f, x, y, &tx, &ty);
+            WM_ASSERT(v == t && cx == tx && cy == ty);
+        }
         WM_ASSERT(D != 1 || (v == 0 && cx == x[0] && cy == y[0])); /* the shortcut below */
 #endif
         if (D == 1) { /* no sample but the corners (Pick: I = 0, B = 3): scan_tiny's answer without its call */
@@ -547,6 +577,7 @@ static uint64_t scan_any(const wm_field *f, const int32_t x[3], const int32_t y[
             if (wy) *wy = y[0];
             return 0;
         }
+        if (D == 2) return scan_two(f, x, y, wx, wy);
         return scan_tiny(f, x, y, (int32_t)D, limit, wx, wy);
     }
 #ifdef WM_TRI_ENGINE
