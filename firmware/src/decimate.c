@@ -2,16 +2,19 @@
  *
  *   a vertex can go when its hole has a triangulation that keeps every E(T) <= zeta (the first one
  *   found, trying the fan from each ring vertex, the half-edge collapses of v, then ear clipping)
- *   a pass: each dirty vertex in slot order is evaluated (its flag cleared) and, when it can go,
- *           removed at once with that triangulation, its ring vertices marked dirty (their stars
- *           changed); every vertex is dirty at first, and the passes end when one leaves none dirty
+ *   a pass: each dirty vertex in the grid's row order (by y, a row's vertices by slot) is evaluated
+ *           (its flag cleared) and, when it can go, removed at once with that triangulation, its ring
+ *           vertices marked dirty (their stars changed); every vertex is dirty at first, and the passes
+ *           end when one leaves none dirty
  *
  * The dirty flag (r->vapex, a byte a vertex slot) is what keeps the passes cheap: a vertex that cannot
  * go is tried again only after a removal in its ring, the only thing that changes its hole.  The pass
- * order is the slots' (each pass from the least slot marked behind the one before), so no order is kept
- * and no cost measured: a candidate's triangles are scanned only as far as zeta (a bound at most zeta,
- * which the removal leaves in err[] for wm_settle).  Removing the least-cost vertex first (a heap) took
- * 46 % more of the decimation's instructions for as many triangles (docs/refiner.md).  Every new
+ * order is fixed once, by a counting sort of the vertices by row (each pass from the least place marked
+ * behind the one before), and no cost is measured: a candidate's triangles are scanned only as far as
+ * zeta (a bound at most zeta, which the removal leaves in err[] for wm_settle).  The rows sweep the
+ * removals across the grid: fewer triangles than the slots' order (the error bound's insertion order)
+ * on nearly every job (docs/refiner.md, "The final decimation").  Removing the least-cost vertex first
+ * (a heap) took 46 % more of the decimation's instructions for as many triangles.  Every new
  * triangle has E(T) <= zeta, so the bound that held still holds, and each removal takes one or two
  * triangles away; all arithmetic is integer, the order of work fixed: the same mesh on every machine. */
 #include "wm_internal.h"
@@ -613,18 +616,31 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
     int8_t *dirty = r->vapex; /* the reduction's classes are not read after the levels */
-    int32_t end = me->vert_end, from = 0;
+    /* the vertices in the grid's rows, each row's in slot order (a counting sort by y): order[] in the
+     * error bound's heap storage (list[]: 2 tri_cap words at least, and vert_end <= tri_cap + 2, a mesh
+     * of V vertices having at least V - 2 triangles), place[] in vkey (first the rows' starts, H + 1 <=
+     * vert_cap words, then each vertex's place in order[]) */
+    int32_t *order = (int32_t *)(void *)r->list, end = me->vert_end, height = me->height, m = 0, from = 0;
+    uint32_t *place = r->vkey;
     struct last_plan lp;
     (void)st;
+    WM_ASSERT((uint64_t)end <= 2 * (uint64_t)me->tri_cap && height + 1 <= me->vert_cap);
     fans_setup(r, &lp.q);
-    for (int32_t v = 0; v < end; v++) dirty[v] = me->vxy[v].x != WM_FREE;
-    /* the passes: each from the least slot marked dirty behind the one before (slots below it are clean),
-     * until a pass marks none behind its cursor (every slot marked ahead of it it has seen) */
-    while (from < end) {
-        int32_t v = from;
-        from = end;
-        for (; v < end; v++) {
-            int32_t apex = -1, nr;
+    for (int32_t y = 0; y <= height; y++) place[y] = 0;
+    for (int32_t v = 0; v < end; v++)
+        if ((dirty[v] = me->vxy[v].x != WM_FREE)) place[me->vxy[v].y + 1]++;
+    for (int32_t y = 1; y <= height; y++) place[y] += place[y - 1];
+    for (int32_t v = 0; v < end; v++)
+        if (dirty[v]) order[place[me->vxy[v].y]++] = v;
+    m = (int32_t)place[height - 1];
+    for (int32_t i = 0; i < m; i++) place[order[i]] = (uint32_t)i;
+    /* the passes over order[]: each from the least place marked dirty behind the one before (places below
+     * it are clean), until a pass marks none behind its cursor (every place marked ahead of it it has seen) */
+    while (from < m) {
+        int32_t i = from;
+        from = m;
+        for (; i < m; i++) {
+            int32_t apex = -1, nr, v = order[i];
             uint32_t bound;
             if (!dirty[v]) continue;
             dirty[v] = 0;
@@ -632,10 +648,10 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             bound = first_fit(r, v, &apex, &lp);
             if (bound == NONE) continue; /* tried again only when its ring changes */
             nr = remove_planned(r, v, apex, bound, &lp);
-            for (int32_t i = 0; i < nr; i++) { /* their stars changed */
-                int32_t u = lp.ring[i];
+            for (int32_t h = 0; h < nr; h++) { /* their stars changed */
+                int32_t u = lp.ring[h], at = (int32_t)place[u];
                 dirty[u] = 1;
-                if (u < v && u < from) from = u;
+                if (at < i && at < from) from = at;
             }
         }
     }
