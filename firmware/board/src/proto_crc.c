@@ -55,9 +55,11 @@ uint32_t wm_proto_crc32(uint32_t crc, const uint8_t *data, size_t n)
  * wm_proto_init: crc_slice[k][i] is crc_table[i] followed by k + 1 zero bytes), some 27 cycles a byte
  * on the soft CPU against 48.  c is the register (inverted CRC). */
 static uint32_t crc_slice[3][256];
+static void x8pow_init(void);
 
 void wm_proto_crc_init(void)
 {
+    x8pow_init();
     for (int i = 0; i < 256; i++) {
         uint32_t c = wm_proto_crc_table[i];
         for (int k = 0; k < 3; k++) {
@@ -96,14 +98,27 @@ static uint32_t crc_mul(uint32_t a, uint32_t b)
     return r;
 }
 
+/* x^(8 2^k) modulo the CRC's polynomial, k = 0..31 (wm_proto_crc_init): x^(8 n) is the product of those
+ * of n's bits, one crc_mul a bit set, not the squarings as well (some 17 products for a frame of 1,010
+ * bytes, 7 now: the last frame of every level and the first of the next need their own). */
+static uint32_t x8pow[32];
+
+static void x8pow_init(void)
+{
+    uint32_t sq = 0x00800000u; /* x^8 */
+    for (int k = 0; k < 32; k++) {
+        x8pow[k] = sq;
+        sq = crc_mul(sq, sq);
+    }
+}
+
 uint32_t wm_proto_crc_combine(wm_proto *p, uint32_t crc_a, uint32_t crc_b, uint32_t nb)
 {
     if (p->x8n_n != nb) { /* x^(8 nb): one chunk size a level, mostly */
-        uint32_t r = 0x80000000u, sq = 0x00800000u; /* x^0, x^8 */
-        for (uint32_t k = nb; k; k >>= 1) {
-            if (k & 1u) r = crc_mul(sq, r);
-            sq = crc_mul(sq, sq);
-        }
+        uint32_t r = 0x80000000u; /* x^0 */
+        const uint32_t *pw = x8pow;
+        for (uint32_t k = nb; k; k >>= 1, pw++)
+            if (k & 1u) r = crc_mul(*pw, r);
         p->x8n_n = nb;
         p->x8n = r;
     }
