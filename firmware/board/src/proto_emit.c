@@ -122,12 +122,16 @@ static void level_halves(wm_proto *p, uint32_t pos, uint32_t end, uint16_t *d)
 
 /* --- LEVEL_DELTA (docs/protocol.md, "Level coding"): the body as variable-length numbers --- */
 
+/* The bytes of a variable-length number of v (put_varint's count). */
+static WM_ALWAYS_INLINE uint32_t varint_bytes(uint32_t v)
+{
+    return v < 0x4000u ? 1u + (v >= 0x80u) : 3u + (v >= 0x200000u) + (v >= 0x10000000u);
+}
+
 /* v as a variable-length number at d + n (7 bits a byte, low first, the top bit set on all but the
- * last), or with d NULL only counted; n plus its bytes. */
+ * last); n plus its bytes. */
 static WM_ALWAYS_INLINE uint32_t put_varint(uint8_t *d, uint32_t n, uint32_t v)
 {
-    if (!d) /* one or two bytes first: nearly every delta of a level's items */
-        return n + (v < 0x4000u ? 1u + (v >= 0x80u) : 3u + (v >= 0x200000u) + (v >= 0x10000000u));
     while (v >= 0x80u) {
         d[n++] = (uint8_t)(v | 0x80u);
         v >>= 7;
@@ -146,17 +150,16 @@ static void coded_reset(wm_proto *p)
     p->cbn = p->cbi = 0;
 }
 
-/* The body's next item (docs/protocol.md, "Level coding"; the engine's one coder of it, for the count
- * and the bytes): a vertex slot, then the live triangles.  Its bytes into d (room for 16), or with d
- * NULL only counted (coded_total); 0 when no item is left.  The callers run it on a local copy of
- * p->coder, so that its state stays in registers. */
+/* The body's next item (docs/protocol.md, "Level coding"): a vertex slot, then the live triangles
+ * (coded_total counts the same items in loops of its own).  Its bytes into d (room for 16); 0 when no
+ * item is left.  The callers run it on a local copy of p->coder, so that its state stays in registers. */
 static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
 {
     uint32_t n;
     if (c->v < m->vert_end) {
         int32_t v = c->v++, x = m->vxy[v].x, y;
         if (x == WM_FREE) {
-            if (d) d[0] = 0;
+            d[0] = 0;
             return 1;
         }
         y = m->vxy[v].y;
@@ -183,17 +186,98 @@ static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, 
     return 0;
 }
 
-/* The coded stream's length: the header and every item, the coder run without writing (its state
- * a local one, p's left at the start). */
+/* The coded stream's length: the header and every item, as code_item counts them from the coder's
+ * start (p's left there), in two loops of their own (the vertex slots, the live triangles) with
+ * pointers, not code_item's one loop (each item tests which part it is in and indexes its array). */
 static uint32_t coded_total(wm_proto *p)
 {
     const wm_mesh *m = p->lm;
-    wm_proto_coder c;
-    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES, n;
+    const wm_xy *xy = m->vxy, *xe = xy + m->vert_end;
+    const wm_he *h = m->he;
+    uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
+    int32_t px, py, pi, k;
+    uint32_t zx, zy, z0, z1, z2;
     coded_reset(p);
-    c = p->coder;
-    while ((n = code_item(m, &c, NULL)) != 0) total += n;
+    px = p->coder.px;
+    py = p->coder.py;
+    pi = p->coder.pi;
+    for (; xy < xe; xy++) {
+        int32_t x = xy->x, y;
+        if (x == WM_FREE) {
+            total++;
+            continue;
+        }
+        y = xy->y;
+        zx = zigzag32(x - px) + 1u;
+        zy = zigzag32(y - py);
+        if ((zx | zy) < 0x4000u) /* one test for the common case: each number one or two bytes */
+            total += 2u + (zx >= 0x80u) + (zy >= 0x80u);
+        else
+            total += varint_bytes(zx) + varint_bytes(zy);
+        px = x;
+        py = y;
+    }
+    for (k = m->n_tri; k > 0; k--, h += 3) {
+        int32_t a;
+        while (h->v < 0) h += 3; /* a free triangle slot */
+        a = h[0].v;
+        z0 = zigzag32(a - pi);
+        z1 = zigzag32(h[1].v - a);
+        z2 = zigzag32(h[2].v - a);
+        if ((z0 | z1 | z2) < 0x4000u)
+            total += 3u + (z0 >= 0x80u) + (z1 >= 0x80u) + (z2 >= 0x80u);
+        else
+            total += varint_bytes(z0) + varint_bytes(z1) + varint_bytes(z2);
+        pi = a;
+    }
     return total;
+}
+
+/* Whole items into d while n - (bytes given) >= 16 (code_item's room; n >= 16): the bytes given, 0
+ * when no item is left.  code_item's items and bytes, in a loop over the vertex slots and one over the
+ * live triangles with pointers (code_item tests which part it is in and indexes its array each item). */
+static uint32_t code_run(const wm_mesh *m, wm_proto_coder *c, uint8_t *d, uint32_t n)
+{
+    uint8_t *d0 = d, *de = d + n - 16u;
+    if (c->v < m->vert_end) {
+        const wm_xy *xy = m->vxy + c->v, *xe = m->vxy + m->vert_end;
+        int32_t px = c->px, py = c->py;
+        for (; xy < xe && d <= de; xy++) {
+            int32_t x = xy->x, y;
+            if (x == WM_FREE) {
+                *d++ = 0;
+                continue;
+            }
+            y = xy->y;
+            d += put_varint(d, 0, zigzag32(x - px) + 1u);
+            d += put_varint(d, 0, zigzag32(y - py));
+            px = x;
+            py = y;
+        }
+        c->v = (int32_t)(xy - m->vxy);
+        c->px = px;
+        c->py = py;
+    }
+    if (c->v >= m->vert_end) {
+        int32_t t = c->slot, k = c->k, kn = m->n_tri, pi = c->pi;
+        const wm_he *h = m->he + 3 * t;
+        for (; k < kn && d <= de; k++, t++, h += 3) {
+            int32_t a;
+            while (h->v < 0) { /* a free triangle slot */
+                h += 3;
+                t++;
+            }
+            a = h[0].v;
+            d += put_varint(d, 0, zigzag32(a - pi));
+            d += put_varint(d, 0, zigzag32(h[1].v - a));
+            d += put_varint(d, 0, zigzag32(h[2].v - a));
+            pi = a;
+        }
+        c->slot = t;
+        c->k = k;
+        c->pi = pi;
+    }
+    return (uint32_t)(d - d0);
 }
 
 /* Bytes [off, off + n) of the coded stream into dst (in order from where the last call ended: no work
@@ -215,8 +299,8 @@ static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
     while (n) { /* the body: whole items at a time (of the current one, the bytes not given yet) */
         uint32_t a, skip;
         if (p->cbi == p->cbn) { /* no item under way */
-            if (pos >= off && n >= sizeof p->cb) { /* the next item straight into dst */
-                a = code_item(m, &c, dst);
+            if (pos >= off && n >= sizeof p->cb) { /* the next items straight into dst */
+                a = code_run(m, &c, dst, n);
                 if (a == 0) break;
                 pos += a;
                 dst += a;
