@@ -16,7 +16,7 @@ runs in under a minute (its speed: docs/soc.md, "The simulated board").  The
 whole DEM through the simulated board is `make bench-soc-full SOC_FULL=jacksboro`: some 0.65 G cycles,
 about 9 to 11 minutes of the simulator's CPU (docs/soc.md, "The simulated board").  The native
 stand-in device, given storage for 65536 triangles, gets it decimated by 2 to 202 x 172 with zeta
-15 m, 14557 triangles.)  It writes the mesh, every level's mesh, a picture and a report into --out,
+15 m, 14376 triangles.)  It writes the mesh, every level's mesh, a picture and a report into --out,
 checks the mesh, and stops the device.  Exit status: that of `wavemesh stream` (0, or 3 when the
 budget stopped it).
 """
@@ -39,7 +39,7 @@ VENV_BIN = Path(sys.executable).parent
 STREAM_OPTS = {"sim": ["--key", "elevation", "--decimate", "16", "--zeta", "10"],
                "native": ["--key", "elevation", "--decimate", "2", "--zeta", "15"]}
 START_TIMEOUT = 20.0  # s for the device to say it is listening
-NATIVE_TRIANGLES = 65536  # the native stand-in's storage: Jacksboro / 2 at 15 m ends at 14557 triangles
+NATIVE_TRIANGLES = 65536  # the native stand-in's storage: Jacksboro / 2 at 15 m ends at 14376 triangles
 
 
 def device_command(kind: str, mode: str) -> list[str]:
