@@ -276,7 +276,7 @@ def run_full(names: list[str], results: Path = FULL_RESULTS) -> int:
                 failed += "error" in c
                 print(f"soc-full: {name}: " + (f"FAILED: {c['error']}" if "error" in c else
                       f"work {c['work_cycles']:,} / budget {c['budget_cycles']:,} = "
-                      f"{c['work_vs_budget']:.1f} x, "
+                      f"{c['work_vs_budget']:.2f} x, "
                       f"{c['output_triangles']:,} triangles, = mesh: {c['same_as_mesh']}, "
                       f"stream {c['wall_seconds'] / 60:.1f} min"), flush=True)
     return failed
@@ -297,7 +297,7 @@ def _table(cases: list[dict], per_sample: int, per_tri: int) -> list[str]:
             f"| {c['name']} | {c['width']} x {c['height']} | {n:,} | {c['levels']} "
             f"| {c['initial_triangles']} -> {tris} "
             + "".join(f"| {cy[k]:,} " for k in STAGES)
-            + f"| {c['work_cycles']:,} | {budget:,} | {c['work_cycles'] / budget:.1f} x "
+            + f"| {c['work_cycles']:,} | {budget:,} | {c['work_cycles'] / budget:.2f} x "
             f"| {c['work_cycles'] / n:,.0f} | {c['work_cycles'] / tris:,.0f} | {c['board_seconds']:.2f} "
             f"| {'yes' if c['same_as_mesh'] else 'NO'} |")
     return lines
@@ -325,7 +325,7 @@ def markdown(results: dict) -> str:
         "",
         f"**Budget: work cycles <= {per_sample} x input samples + {per_tri:,} x output triangles**, where "
         "*work* is the whole job's filter, template, refine and emit stages (receive and link excluded); "
-        "*work / budget* at most 1.0 x meets it.  The simulated clock is the board's, "
+        "*work / budget* at most 1.00 x meets it.  The simulated clock is the board's, "
         f"{clk / 1e6:g} MHz: 1,000,000 cycles = {1e6 / clk * 1e3:g} ms on a board.",
         "",
         *_table(tuned, per_sample, per_tri),
@@ -425,7 +425,7 @@ def _full_table(cases: list[dict]) -> list[str]:
             f"| {c['initial_triangles']:,} -> {c['output_triangles']:,} "
             + "".join(f"| {cy[k] / 1e6:,.1f} M " for k in WORK)
             + f"| {c['work_cycles'] / 1e6:,.1f} M | {c['budget_cycles'] / 1e6:,.1f} M "
-            f"| {c['work_vs_budget']:.1f} x "
+            f"| {c['work_vs_budget']:.2f} x "
             f"| {c['work_cycles_per_sample']:,.0f} | {c['work_cycles_per_triangle']:,.0f} "
             f"| {c['board_seconds']:.1f} | {simt} | {'yes' if c['same_as_mesh'] else 'NO'} |")
     return lines

@@ -53,7 +53,7 @@ def test_full_markdown_tables_held_out_apart_failures_and_missing():
     tuned, held = text.split("Held out:")
     # Ball: work 45.7 M against 200 x 65,536 + 3,000 x 424 = 14.4 M
     assert "| Ball 256 x 256 | 256 x 256 | 65,536 | defaults | 124 -> 424 |" in tuned
-    assert "| 45.7 M | 14.4 M | 3.2 x | 697 | 107,706 | 1.2 | 2.5 min (554 kHz) | yes |" in tuned
+    assert "| 45.7 M | 14.4 M | 3.18 x | 697 | 107,706 | 1.2 | 2.5 min (554 kHz) | yes |" in tuned
     assert "lidar_dem" not in tuned.split("|", 1)[1] and "| lidar_dem, whole (held out) | 256 x 625 |" in held
     assert "Box 256 x 256: the run failed: `error: the job`" in held
     assert "Not run yet: Jacksboro, whole; motorcycle, whole (held out)." in held
