@@ -212,8 +212,7 @@ static uint32_t coded_total(wm_proto *p)
         zy = zigzag32(y - py);
         if ((zx | zy) < 0x4000u) /* one test for the common case: each number one or two bytes */
             total += 2u + (zx >= 0x80u) + (zy >= 0x80u);
-        else
-            total += varint_bytes(zx) + varint_bytes(zy);
+        else total += varint_bytes(zx) + varint_bytes(zy);
         px = x;
         py = y;
     }
@@ -224,10 +223,8 @@ static uint32_t coded_total(wm_proto *p)
         z0 = zigzag32(a - pi);
         z1 = zigzag32(h[1].v - a);
         z2 = zigzag32(h[2].v - a);
-        if ((z0 | z1 | z2) < 0x4000u)
-            total += 3u + (z0 >= 0x80u) + (z1 >= 0x80u) + (z2 >= 0x80u);
-        else
-            total += varint_bytes(z0) + varint_bytes(z1) + varint_bytes(z2);
+        if ((z0 | z1 | z2) < 0x4000u) total += 3u + (z0 >= 0x80u) + (z1 >= 0x80u) + (z2 >= 0x80u);
+        else total += varint_bytes(z0) + varint_bytes(z1) + varint_bytes(z2);
         pi = a;
     }
     return total;
