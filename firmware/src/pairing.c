@@ -11,25 +11,9 @@
  *          d      meets a-b at t1  (4.20); the split point is at t = (t1 + t2) / 2, snapped. */
 #include "wm_internal.h"
 
-/* The details of level m, located once a pass of the plan (wm_detail_at works out the level's offset
- * in the details at every call: on the soft CPU a loop of 64-bit products). */
-struct level {
-    const int32_t *d;
-    int32_t cw, m;
-};
-
-static struct level level_of(const wm_refiner *r, int32_t m)
-{
-    struct level lv;
-    lv.d = r->field.details + wm_details_offset(r->field.width, r->field.height, m);
-    lv.cw = (r->field.width + (1 << m) - 1) >> m;
-    lv.m = m;
-    return lv;
-}
-
 /* (d1, d2) of triangle t's barycentre cell at level m, scaled down (toward zero) below 2^12 so
  * that every product below fits in 64 bits; (0, 0) when there is no gradient. */
-static void gradient(const wm_refiner *r, const struct level *lv, int32_t t, int64_t g[2])
+static void gradient(const wm_refiner *r, const wm_level_cells *lv, int32_t t, int64_t g[2])
 {
     int32_t x[3], y[3], bx, by;
     const int32_t *d;
@@ -82,7 +66,7 @@ static int convex(const wm_mesh *me, int32_t e)
 /* The best edge of active triangle t for a pair with a partner having flag `want` (0: the border,
  * a quasi-valid pair with an imaginary triangle of t's gradient): the longest consistent edge,
  * the first slot on ties.  -1 when none. */
-static int32_t best_edge(const wm_refiner *r, const struct level *lv, int32_t t, uint8_t want)
+static int32_t best_edge(const wm_refiner *r, const wm_level_cells *lv, int32_t t, uint8_t want)
 {
     const wm_mesh *me = &r->mesh;
     int64_t g[2], best_len = -1;
@@ -118,7 +102,7 @@ int32_t wm_plan(wm_refiner *r, int32_t m, wm_level_stats *st)
     /* Pass 1: active with active; pass 2: leftovers with the dependent region (N1); pass 3:
      * quasi-valid pairs on the border; pass 4: unpaired (ternary subdivision). */
     static const uint8_t partner[3] = {WM_F_ACTIVE, WM_F_DEP, 0};
-    struct level lv = level_of(r, m);
+    wm_level_cells lv = wm_level_cells_of(&r->field, m);
     for (int pass = 0; pass < 3; pass++) {
         for (int32_t t = 0; t < me->tri_end; t++) {
             int32_t e;
@@ -151,7 +135,7 @@ static int64_t crossing(const wm_refiner *r, int32_t m, int32_t t, int32_t e)
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3], a = me->he[e].v;
     int64_t g[2], cx, cy, num, den;
-    struct level lv = level_of(r, m);
+    wm_level_cells lv = wm_level_cells_of(&r->field, m);
     gradient(r, &lv, t, g);
     wm_tri_xy(me, t, x, y);
     edge_vec(me, e, &cx, &cy);

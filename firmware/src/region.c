@@ -14,24 +14,7 @@
  * cell tested once per row of cells; the first energetic cell ends it. */
 #include "wm_internal.h"
 
-/* The details of level m, located once a selection pass (wm_detail_at works out the level's offset in
- * the details at every call: on the soft CPU a loop of 64-bit products, some 1 % of Ball 256's refine
- * cycles with pairing.c's). */
-struct cells {
-    const int32_t *d;
-    int32_t cw, m;
-};
-
-static struct cells cells_of(const wm_refiner *r, int32_t m)
-{
-    struct cells c;
-    c.d = r->field.details + wm_details_offset(r->field.width, r->field.height, m);
-    c.cw = (r->field.width + (1 << m) - 1) >> m;
-    c.m = m;
-    return c;
-}
-
-static WM_ALWAYS_INLINE int energetic_at(const wm_refiner *r, const struct cells *c, int32_t x, int32_t y)
+static WM_ALWAYS_INLINE int energetic_at(const wm_refiner *r, const wm_level_cells *c, int32_t x, int32_t y)
 {
     const int32_t *d = c->d + 3 * ((int64_t)(y >> c->m) * c->cw + (x >> c->m));
     uint64_t e = 0;
@@ -67,7 +50,7 @@ static int32_t fdiv(int64_t a, int64_t b) /* floor(a / b), b > 0: 32-bit when it
 }
 
 /* 1 when a detail cell of level m holding a grid sample of the closed triangle (x, y) is energetic. */
-static int any_cell(const wm_refiner *r, const struct cells *cl, const int32_t x[3], const int32_t y[3])
+static int any_cell(const wm_refiner *r, const wm_level_cells *cl, const int32_t x[3], const int32_t y[3])
 {
     int64_t A[3], B[3], C[3];
     int32_t box[4], clo = 1, chi = 0, crow = -1, m = cl->m;
@@ -103,7 +86,7 @@ static int any_cell(const wm_refiner *r, const struct cells *cl, const int32_t x
     return 0;
 }
 
-static int candidate(const wm_refiner *r, const struct cells *cl, int32_t t)
+static int candidate(const wm_refiner *r, const wm_level_cells *cl, int32_t t)
 {
     const wm_mesh *me = &r->mesh;
     int32_t x[3], y[3];
@@ -122,7 +105,7 @@ int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
     int32_t active = 0, dep = 0;
-    struct cells cl = cells_of(r, m);
+    wm_level_cells cl = wm_level_cells_of(&r->field, m);
     for (int32_t t = 0; t < me->tri_end; t++) me->tflag[t] = 0;
     for (int32_t t = 0; t < me->tri_end; t++) {
         if (me->he[3 * t].v < 0 || !candidate(r, &cl, t)) continue;
