@@ -10,7 +10,7 @@ native stand-in device: CMake), starts it on a free port of 127.0.0.1, runs
 
 (the Jacksboro fault DEM that ships with matplotlib, 403 x 344 samples of 3 arc-seconds, 74.6 m x
 92.5 m, whose ridges the normal metric now sees in ground units.  The simulated board gets it
-decimated by 16 to 26 x 22 with zeta 10 m, 817 triangles: some 12 M cycles of the soft CPU (0.32 s
+decimated by 16 to 26 x 22 with zeta 10 m, 817 triangles: some 11 M cycles of the soft CPU (0.28 s
 of the board at 39 MHz; the stream's `device:` line gives each stage's time), which the simulator
 runs in under a minute (its speed: docs/soc.md, "The simulated board").  The
 whole DEM through the simulated board is `make bench-soc-full SOC_FULL=jacksboro`: some 0.65 G cycles,
