@@ -623,7 +623,6 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     int32_t *order = (int32_t *)(void *)r->list, end = me->vert_end, height = me->height, m = 0, from = 0;
     uint32_t *place = r->vkey;
     struct last_plan lp;
-    (void)st;
     WM_ASSERT((uint64_t)end <= 2 * (uint64_t)me->tri_cap && height + 1 <= me->vert_cap);
     fans_setup(r, &lp.q);
     for (int32_t y = 0; y <= height; y++) place[y] = 0;
@@ -658,6 +657,6 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     /* The triangles the removals made (and those the error bound left unmeasured) are measured once, at
      * the end, for those still there and as far as E_max needs them (wm_settle): nothing above reads
      * them (first_fit measures its candidates itself), and most of them go again in a later removal. */
-    wm_settle(r);
+    wm_settle(r, st);
     return WM_OK;
 }

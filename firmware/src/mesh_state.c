@@ -56,10 +56,11 @@ static WM_ALWAYS_INLINE uint32_t touch_bound(wm_refiner *r, int32_t t, int maske
     return e;
 }
 
-void wm_settle(wm_refiner *r)
+void wm_settle(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
-    uint32_t known = 0, *err = r->err;
+    uint32_t known = 0, *err = r->err, zeta = r->params.zeta;
+    int32_t over = 0; /* the live slots with err[] over zeta */
     const wm_he *he = me->he;
     uint8_t *tflag = me->tflag;
     /* taken once, not at each slot: a store to tflag[] might have changed them, for all the compiler
@@ -70,12 +71,18 @@ void wm_settle(wm_refiner *r)
      * triangle whose upper bound is above it measured only as far as that (wm_tri_error_upto: E(T)
      * when above it, else at most it), one pass.  So err[] holds E(T) or an upper bound at most E_max,
      * their largest is E_max, and the count over zeta is unchanged (every flagged triangle is within
-     * zeta). */
+     * zeta).  known ends as the largest err[] of a live slot, E_max, and over counts the live slots over
+     * zeta (only unflagged slots or a masked job's can be: a flagged slot's bound is within zeta), what
+     * wm_refine_stats would read every slot's he[] again for. */
     for (int32_t t = 0; t < end; t++) {
         int32_t x[3], y[3], wx, wy;
         uint8_t f = tflag[t];
         if (!(f & WM_F_MEASURE)) {
-            if (he[3 * t].v >= 0 && err[t] > known) known = err[t];
+            if (he[3 * t].v >= 0) {
+                uint32_t e = err[t];
+                if (e > known) known = e;
+                over += e > zeta;
+            }
             continue;
         }
         f &= (uint8_t)~WM_F_MEASURE;
@@ -85,6 +92,7 @@ void wm_settle(wm_refiner *r)
          * WM_F_NEW then also on a dead slot: the flags are scratch (wm_tri_take clears a slot's), and
          * nothing reads them after this, the job's last step. */
         if (!masked && err[t] <= known) {
+            WM_ASSERT(err[t] <= zeta);
             tflag[t] = (uint8_t)(f | WM_F_NEW);
 #if WM_CHECK
             if (he[3 * t].v >= 0) {
@@ -106,8 +114,10 @@ void wm_settle(wm_refiner *r)
             err[t] =
                 r->roi ? wm_roi_error(r, x, y, &wx, &wy) : wm_tri_error(&r->field, &r->params, x, y, &wx, &wy);
             r->worst[t] = wy * r->field.width + wx;
+            if (err[t] > known) known = err[t];
+            over += err[t] > zeta;
         } else if (err[t] > known) {
-            WM_ASSERT(err[t] <= r->params.zeta);
+            WM_ASSERT(err[t] <= zeta);
             wm_tri_xy(me, t, x, y);
             err[t] = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, known, NULL);
             if (err[t] > known) known = err[t];
@@ -119,6 +129,8 @@ void wm_settle(wm_refiner *r)
         }
 #endif
     }
+    st->e_max = known;
+    st->over = over;
 }
 
 int wm_room(wm_refiner *r, int32_t added)

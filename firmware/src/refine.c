@@ -895,6 +895,17 @@ static int error_bound(wm_refiner *r, wm_level_stats *st)
 
 /* ---------------------------------------------------------------------------------------------- */
 
+/* wm_refine_stats but E_max and the count over zeta */
+static void stats_counts(const wm_refiner *r, wm_level_stats *st)
+{
+    st->level = r->level;
+    st->vertices = r->mesh.n_vert;
+    st->triangles = r->mesh.n_tri;
+    st->budget_hit = r->budget_hit;
+    st->flips = r->flips;
+    st->removals = r->removals;
+}
+
 void wm_refine_stats(const wm_refiner *r, wm_level_stats *st)
 {
     const wm_mesh *me = &r->mesh;
@@ -905,14 +916,9 @@ void wm_refine_stats(const wm_refiner *r, wm_level_stats *st)
         if (r->err[t] > emax) emax = r->err[t];
         if (r->err[t] > r->params.zeta) over++;
     }
-    st->level = r->level;
-    st->vertices = me->n_vert;
-    st->triangles = me->n_tri;
     st->e_max = emax;
     st->over = over;
-    st->budget_hit = r->budget_hit;
-    st->flips = r->flips;
-    st->removals = r->removals;
+    stats_counts(r, st);
 }
 
 static void clear_stats(wm_level_stats *st)
@@ -945,7 +951,7 @@ static int decimates(const wm_refiner *r) { return !(r->params.flags & (WM_FLAG_
 int wm_refine_step(wm_refiner *r, wm_level_stats *st)
 {
     wm_level_stats local;
-    int rc = WM_OK;
+    int rc = WM_OK, settled = 0;
     if (st == NULL) st = &local;
     clear_stats(st);
     if (r == NULL || r->done) return WM_ERR_STATE;
@@ -989,7 +995,8 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
              * fewer than asked for, at the same E_max. */
             WM_PROF_SET(WM_PH_DECIMATE);
             if (rc == WM_OK && !r->budget_hit && !(r->params.flags & WM_FLAG_NO_DECIMATE)) rc = wm_decimate(r, st);
-            else wm_settle(r); /* the E(T) the bound left unmeasured (wm_decimate settles its own and those) */
+            else wm_settle(r, st); /* the E(T) the bound left unmeasured (wm_decimate settles its own and those) */
+            settled = 1; /* st->e_max and st->over: the job's last step, wm_settle's */
             WM_PROF_SET(WM_PH_LEVELS);
         }
         r->done = 1;
@@ -998,7 +1005,16 @@ int wm_refine_step(wm_refiner *r, wm_level_stats *st)
         r->done = 1;
         r->failed = rc;
     }
-    wm_refine_stats(r, st);
+    if (settled) {
+#if WM_CHECK
+        wm_level_stats all;
+        wm_refine_stats(r, &all);
+        WM_ASSERT(all.e_max == st->e_max && all.over == st->over);
+#endif
+        stats_counts(r, st);
+    } else {
+        wm_refine_stats(r, st);
+    }
     return rc;
 }
 

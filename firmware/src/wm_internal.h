@@ -805,8 +805,10 @@ static inline void wm_tri_xy(const wm_mesh *m, int32_t t, int32_t x[3], int32_t 
 /* Recomputes E(T) of t (and its worst sample) and marks it new; forgets its corners' classes. */
 void wm_touch(wm_refiner *r, int32_t t);
 /* After the error bound and the final decimation: E(T) of every triangle flagged WM_F_MEASURE (err[t]
- * then an upper bound of it, not E(T) itself), as far as the level's E_max needs it (mesh_state.c). */
-void wm_settle(wm_refiner *r);
+ * then an upper bound of it, not E(T) itself), as far as the level's E_max needs it (mesh_state.c).  It
+ * leaves the mesh's E_max and count over zeta in st->e_max and st->over (the job's last step: so
+ * wm_refine_step does not read every slot's he[] again for them, wm_refine_stats). */
+void wm_settle(wm_refiner *r, wm_level_stats *st);
 /* 0 when an operation adding `added` triangles fits; WM_ERR_CAPACITY when the storage is too
  * small; 1 when the budget forbids it (and records that). */
 int wm_room(wm_refiner *r, int32_t added);
