@@ -87,8 +87,9 @@ static WM_ALWAYS_INLINE int32_t add32(int32_t x, int32_t y) { return (int32_t)((
 /* The rotations' matrices are kept in 32 bits: every entry is within [-1, 1] in Q30 but for a few units
  * of rounding (above), so the same integers as in 64 bits, where on rv32 each load, store, add and
  * product of one took two or more instructions (the rotations were most of the reduction's
- * eigen-decompositions on the board). */
-static void rotate(int32_t a[3][3], int32_t v[3][3], int p, int q)
+ * eigen-decompositions on the board).  *ident: whether v is still the identity (cleared by the first rotation
+ * made). */
+static void rotate(int32_t a[3][3], int32_t v[3][3], int p, int q, int *ident)
 {
     int32_t apq = a[p][q], t, c, s;
     int64_t num = (int64_t)a[q][q] - a[p][p];
@@ -113,18 +114,26 @@ static void rotate(int32_t a[3][3], int32_t v[3][3], int p, int q)
         a[q][q] = add32(a[q][q], tq);
         a[p][q] = a[q][p] = 0;
     }
+    {
+        int r = 3 - p - q; /* the third row and column */
+        int32_t g = a[r][p], h = a[r][q];
+        WM_ASSERT(mulq(c, g) - mulq(s, h) == (int64_t)sub32(mulq32(c, g), mulq32(s, h)) &&
+                  mulq(s, g) + mulq(c, h) == (int64_t)add32(mulq32(s, g), mulq32(c, h)));
+        a[r][p] = a[p][r] = sub32(mulq32(c, g), mulq32(s, h));
+        a[r][q] = a[q][r] = add32(mulq32(s, g), mulq32(c, h));
+    }
+    if (*ident) {
+        /* v is the identity (no rotation made yet): its columns p and q become (c, -s) and (s, c) in rows
+         * p and q, the rest 0, exactly as the products below give them (mulq32(x, 2^30) = x, mulq32(x,
+         * 0) = 0), without their twelve products */
+        WM_ASSERT(mulq(c, ONE30) == c && mulq(s, ONE30) == s);
+        v[p][p] = c, v[p][q] = s;
+        v[q][p] = -s, v[q][q] = c;
+        *ident = 0;
+        return;
+    }
     for (int r = 0; r < 3; r++) {
-        int32_t g, h;
-        if (r != p && r != q) {
-            g = a[r][p];
-            h = a[r][q];
-            WM_ASSERT(mulq(c, g) - mulq(s, h) == (int64_t)sub32(mulq32(c, g), mulq32(s, h)) &&
-                      mulq(s, g) + mulq(c, h) == (int64_t)add32(mulq32(s, g), mulq32(c, h)));
-            a[r][p] = a[p][r] = sub32(mulq32(c, g), mulq32(s, h));
-            a[r][q] = a[q][r] = add32(mulq32(s, g), mulq32(c, h));
-        }
-        g = v[r][p];
-        h = v[r][q];
+        int32_t g = v[r][p], h = v[r][q];
         WM_ASSERT(mulq(c, g) - mulq(s, h) == (int64_t)sub32(mulq32(c, g), mulq32(s, h)) &&
                   mulq(s, g) + mulq(c, h) == (int64_t)add32(mulq32(s, g), mulq32(c, h)));
         v[r][p] = sub32(mulq32(c, g), mulq32(s, h));
@@ -135,7 +144,7 @@ static void rotate(int32_t a[3][3], int32_t v[3][3], int p, int q)
 void wm_sym3_eigen(const int64_t in[6], int64_t lambda[3], int64_t vec[9])
 {
     int32_t a[3][3], v[3][3];
-    int order[3] = {0, 1, 2};
+    int order[3] = {0, 1, 2}, ident = 1;
     for (int i = 0; i < 6; i++) WM_ASSERT(in[i] >= -ONE30 - 64 && in[i] <= ONE30 + 64); /* R's: within [-1, 1] */
     a[0][0] = (int32_t)in[0], a[0][1] = a[1][0] = (int32_t)in[1], a[0][2] = a[2][0] = (int32_t)in[2];
     a[1][1] = (int32_t)in[3], a[1][2] = a[2][1] = (int32_t)in[4], a[2][2] = (int32_t)in[5];
@@ -143,9 +152,9 @@ void wm_sym3_eigen(const int64_t in[6], int64_t lambda[3], int64_t vec[9])
         for (int j = 0; j < 3; j++) v[i][j] = i == j ? ONE30 : 0;
     for (int sweep = 0; sweep < JACOBI_SWEEPS; sweep++) {
         if (mag(a[0][1]) <= SETTLED && mag(a[0][2]) <= SETTLED && mag(a[1][2]) <= SETTLED) break;
-        rotate(a, v, 0, 1);
-        rotate(a, v, 0, 2);
-        rotate(a, v, 1, 2);
+        rotate(a, v, 0, 1, &ident);
+        rotate(a, v, 0, 2, &ident);
+        rotate(a, v, 1, 2, &ident);
     }
     /* ascending, ties in column order (a stable insertion sort) */
     for (int i = 1; i < 3; i++)

@@ -65,33 +65,67 @@ static int convex(const wm_mesh *me, int32_t e)
 
 /* The best edge of active triangle t for a pair with a partner having flag `want` (0: the border,
  * a quasi-valid pair with an imaginary triangle of t's gradient): the longest consistent edge,
- * the first slot on ties.  -1 when none. */
+ * the first slot on ties.  -1 when none.  An edge's tests are pure, so their order does not change the
+ * answer: the partner's flags first (a border edge, or an unplanned neighbour with `want`), then the
+ * length, and t's gradient only once an edge has come that far (passes 2 and 3 and most triangles of
+ * pass 1 have no such edge, and took the gradient and three criteria each). */
 static int32_t best_edge(const wm_refiner *r, const wm_level_cells *lv, int32_t t, uint8_t want)
 {
     const wm_mesh *me = &r->mesh;
     int64_t g[2], best_len = -1;
-    int32_t best = -1;
-    gradient(r, lv, t, g);
+    int32_t best = -1, have_g = 0;
     for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
-        int32_t o = me->he[e].o;
+        int32_t o = me->he[e].o, u = 0;
         int64_t cx, cy, len;
-        edge_vec(me, e, &cx, &cy);
-        len = cx * cx + cy * cy;
-        if (len <= best_len || !consistent(r, g, cx, cy)) continue;
         if (want == 0) {
             if (o >= 0) continue;
         } else {
-            int64_t g2[2];
-            int32_t u;
             if (o < 0) continue;
             u = WM_TRI(o);
-            if (!(me->tflag[u] & want) || (me->tflag[u] & WM_F_PLAN) || !convex(me, e)) continue;
+            if (!(me->tflag[u] & want) || (me->tflag[u] & WM_F_PLAN)) continue;
+        }
+        edge_vec(me, e, &cx, &cy);
+        len = cx * cx + cy * cy;
+        if (len <= best_len) continue;
+        if (!have_g) {
+            gradient(r, lv, t, g);
+            have_g = 1;
+        }
+        if (!consistent(r, g, cx, cy)) continue;
+        if (want != 0) {
+            int64_t g2[2];
+            if (!convex(me, e)) continue;
             gradient(r, lv, u, g2);
             if (!consistent(r, g2, cx, cy)) continue;
         }
         best = e;
         best_len = len;
     }
+#if WM_CHECK
+    { /* the same edge as every test of every edge in their first order */
+        int32_t full = -1;
+        int64_t full_len = -1;
+        gradient(r, lv, t, g);
+        for (int32_t e = 3 * t; e < 3 * t + 3; e++) {
+            int32_t o = me->he[e].o;
+            int64_t cx, cy, len, g2[2];
+            edge_vec(me, e, &cx, &cy);
+            len = cx * cx + cy * cy;
+            if (len <= full_len || !consistent(r, g, cx, cy)) continue;
+            if (want == 0 ? o >= 0
+                          : o < 0 || !(me->tflag[WM_TRI(o)] & want) || (me->tflag[WM_TRI(o)] & WM_F_PLAN) ||
+                                !convex(me, e))
+                continue;
+            if (want != 0) {
+                gradient(r, lv, WM_TRI(o), g2);
+                if (!consistent(r, g2, cx, cy)) continue;
+            }
+            full = e;
+            full_len = len;
+        }
+        WM_ASSERT(full == best);
+    }
+#endif
     return best;
 }
 

@@ -101,6 +101,27 @@ static int candidate(const wm_refiner *r, const wm_level_cells *cl, int32_t t)
     return any_cell(r, cl, x, y);
 }
 
+/* Whether the N2 walk round corner v of active triangle t (h = 3 t + k, its half-edge from v) was made
+ * already: an active triangle of a lower slot across either edge of t at v has v for a corner, and its
+ * walk came first.  A walk only marks WM_F_NEAR, read by no walk (they test ACTIVE and DEP, which are
+ * set by then), so a second one round the same vertex changes nothing. */
+static int walked(const wm_mesh *me, int32_t t, int32_t h)
+{
+    int32_t o1 = me->he[h].o, o2 = me->he[WM_PREV(h)].o;
+    int w = (o1 >= 0 && WM_TRI(o1) < t && (me->tflag[WM_TRI(o1)] & WM_F_ACTIVE)) ||
+            (o2 >= 0 && WM_TRI(o2) < t && (me->tflag[WM_TRI(o2)] & WM_F_ACTIVE));
+#if WM_CHECK
+    if (w) { /* every triangle round v is active, dependent or marked near already */
+        int32_t first = wm_fan_first(me, me->he[h].v), e = first;
+        do {
+            WM_ASSERT(me->tflag[WM_TRI(e)] & (WM_F_ACTIVE | WM_F_DEP | WM_F_NEAR));
+            e = wm_rot_ccw(me, e);
+        } while (e >= 0 && e != first);
+    }
+#endif
+    return w;
+}
+
 int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
@@ -125,7 +146,9 @@ int32_t wm_select(wm_refiner *r, int32_t m, wm_level_stats *st)
     for (int32_t t = 0; t < me->tri_end; t++) {
         if (!(me->tflag[t] & WM_F_ACTIVE)) continue;
         for (int32_t k = 0; k < 3; k++) { /* N2: around a corner only */
-            int32_t v = me->he[3 * t + k].v, first = wm_fan_first(me, v), e = first;
+            int32_t v = me->he[3 * t + k].v, first, e;
+            if (walked(me, t, 3 * t + k)) continue;
+            first = wm_fan_first(me, v), e = first;
             do {
                 uint8_t *fl = &me->tflag[WM_TRI(e)];
                 if (!(*fl & (WM_F_ACTIVE | WM_F_DEP))) *fl |= WM_F_NEAR;
