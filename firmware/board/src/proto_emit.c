@@ -150,130 +150,106 @@ static void coded_reset(wm_proto *p)
     p->cbn = p->cbi = 0;
 }
 
-/* The body's next item (docs/protocol.md, "Level coding"): a vertex slot, then the live triangles
- * (coded_total counts the same items in loops of its own).  Its bytes into d (room for 16); 0 when no
- * item is left.  The callers run it on a local copy of p->coder, so that its state stays in registers. */
-static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
+/* One item of the body (docs/protocol.md, "Level coding"), the coder's one statement of it for all its
+ * callers: the vertex slot at xy (tri 0) or the live triangle whose half-edges start at h (tri 1),
+ * coded against the previous live vertex (c->px, c->py) or triangle's first index (c->pi), which it
+ * then moves on.  Its bytes at d (room for 16), or with count set only their count (varint_bytes of
+ * the same numbers, one test for the common case: each number one or two bytes; d unused).  The
+ * callers pass tri and count as constants and c as a local, so that it inlines to the one case each
+ * needs, its state in registers. */
+static WM_ALWAYS_INLINE uint32_t code_one(wm_proto_coder *c, int tri, int count, const wm_xy *xy, const wm_he *h,
+                                          uint8_t *d)
 {
-    uint32_t n;
-    if (c->v < m->vert_end) {
-        int32_t v = c->v++, x = m->vxy[v].x, y;
-        if (x == WM_FREE) {
-            d[0] = 0;
+    uint32_t z0, z1, z2 = 0;
+    uint8_t *e;
+    if (!tri) {
+        int32_t x = xy->x, y;
+        if (x == WM_FREE) { /* a free slot: one 0 */
+            if (!count) d[0] = 0;
             return 1;
         }
-        y = m->vxy[v].y;
-        n = put_varint(d, 0, zigzag32(x - c->px) + 1u);
-        n = put_varint(d, n, zigzag32(y - c->py));
+        y = xy->y;
+        z0 = zigzag32(x - c->px) + 1u;
+        z1 = zigzag32(y - c->py);
         c->px = x;
         c->py = y;
-        return n;
-    }
-    if (c->k < m->n_tri) {
-        const wm_he *h;
-        int32_t t = c->slot, a;
-        while (m->he[3 * t].v < 0) t++; /* a free triangle slot */
-        h = m->he + 3 * t;
-        a = h[0].v;
-        n = put_varint(d, 0, zigzag32(a - c->pi));
-        n = put_varint(d, n, zigzag32(h[1].v - a));
-        n = put_varint(d, n, zigzag32(h[2].v - a));
+    } else {
+        int32_t a = h[0].v;
+        z0 = zigzag32(a - c->pi);
+        z1 = zigzag32(h[1].v - a);
+        z2 = zigzag32(h[2].v - a);
         c->pi = a;
+    }
+    if (count) {
+        if ((z0 | z1 | z2) < 0x4000u) return (tri ? 3u : 2u) + (z0 >= 0x80u) + (z1 >= 0x80u) + (z2 >= 0x80u);
+        return varint_bytes(z0) + varint_bytes(z1) + (tri ? varint_bytes(z2) : 0u);
+    }
+    e = d + put_varint(d, 0, z0); /* each number from its own pointer: no index to add to d a byte */
+    e += put_varint(e, 0, z1);
+    if (tri) e += put_varint(e, 0, z2);
+    return (uint32_t)(e - d);
+}
+
+/* The body's next item (code_one's bytes into d) from the coder's state alone: for an item a frame
+ * splits (coded_bytes gives it through cb).  0 when no item is left. */
+static WM_ALWAYS_INLINE uint32_t code_item(const wm_mesh *m, wm_proto_coder *c, uint8_t *d)
+{
+    if (c->v < m->vert_end) return code_one(c, 0, 0, m->vxy + c->v++, NULL, d);
+    if (c->k < m->n_tri) {
+        int32_t t = c->slot;
+        while (m->he[3 * t].v < 0) t++; /* a free triangle slot */
         c->slot = t + 1;
         c->k++;
-        return n;
+        return code_one(c, 1, 0, NULL, m->he + 3 * t, d);
     }
     return 0;
 }
 
-/* The coded stream's length: the header and every item, as code_item counts them from the coder's
- * start (p's left there), in two loops of their own (the vertex slots, the live triangles) with
- * pointers, not code_item's one loop (each item tests which part it is in and indexes its array). */
+/* The coded stream's length: the header and every item's count (code_one) from the coder's start
+ * (p's left there), in a loop over the vertex slots and one over the live triangles with pointers. */
 static uint32_t coded_total(wm_proto *p)
 {
     const wm_mesh *m = p->lm;
     const wm_xy *xy = m->vxy, *xe = xy + m->vert_end;
     const wm_he *h = m->he;
     uint32_t total = WM_PROTO_LEVEL_HEADER_BYTES;
-    int32_t px, py, pi, k;
-    uint32_t zx, zy, z0, z1, z2;
+    wm_proto_coder c;
     coded_reset(p);
-    px = p->coder.px;
-    py = p->coder.py;
-    pi = p->coder.pi;
-    for (; xy < xe; xy++) {
-        int32_t x = xy->x, y;
-        if (x == WM_FREE) {
-            total++;
-            continue;
-        }
-        y = xy->y;
-        zx = zigzag32(x - px) + 1u;
-        zy = zigzag32(y - py);
-        if ((zx | zy) < 0x4000u) /* one test for the common case: each number one or two bytes */
-            total += 2u + (zx >= 0x80u) + (zy >= 0x80u);
-        else total += varint_bytes(zx) + varint_bytes(zy);
-        px = x;
-        py = y;
-    }
-    for (k = m->n_tri; k > 0; k--, h += 3) {
-        int32_t a;
+    c = p->coder;
+    for (; xy < xe; xy++) total += code_one(&c, 0, 1, xy, NULL, NULL);
+    for (int32_t k = m->n_tri; k > 0; k--, h += 3) {
         while (h->v < 0) h += 3; /* a free triangle slot */
-        a = h[0].v;
-        z0 = zigzag32(a - pi);
-        z1 = zigzag32(h[1].v - a);
-        z2 = zigzag32(h[2].v - a);
-        if ((z0 | z1 | z2) < 0x4000u) total += 3u + (z0 >= 0x80u) + (z1 >= 0x80u) + (z2 >= 0x80u);
-        else total += varint_bytes(z0) + varint_bytes(z1) + varint_bytes(z2);
-        pi = a;
+        total += code_one(&c, 1, 1, NULL, h, NULL);
     }
     return total;
 }
 
-/* Whole items into d while n - (bytes given) >= 16 (code_item's room; n >= 16): the bytes given, 0
- * when no item is left.  code_item's items and bytes, in a loop over the vertex slots and one over the
- * live triangles with pointers (code_item tests which part it is in and indexes its array each item). */
-static uint32_t code_run(const wm_mesh *m, wm_proto_coder *c, uint8_t *d, uint32_t n)
+/* Whole items into d while n - (bytes given) >= 16 (code_one's room; n >= 16): the bytes given, 0 when
+ * no item is left.  code_item's items, in a loop over the vertex slots and one over the live triangles
+ * with pointers (code_item tests which part it is in and indexes its array each item). */
+static uint32_t code_run(const wm_mesh *m, wm_proto_coder *cp, uint8_t *d, uint32_t n)
 {
     uint8_t *d0 = d, *de = d + n - 16u;
-    if (c->v < m->vert_end) {
-        const wm_xy *xy = m->vxy + c->v, *xe = m->vxy + m->vert_end;
-        int32_t px = c->px, py = c->py;
-        for (; xy < xe && d <= de; xy++) {
-            int32_t x = xy->x, y;
-            if (x == WM_FREE) {
-                *d++ = 0;
-                continue;
-            }
-            y = xy->y;
-            d += put_varint(d, 0, zigzag32(x - px) + 1u);
-            d += put_varint(d, 0, zigzag32(y - py));
-            px = x;
-            py = y;
-        }
-        c->v = (int32_t)(xy - m->vxy);
-        c->px = px;
-        c->py = py;
+    wm_proto_coder c = *cp;
+    if (c.v < m->vert_end) {
+        const wm_xy *xy = m->vxy + c.v, *xe = m->vxy + m->vert_end;
+        for (; xy < xe && d <= de; xy++) d += code_one(&c, 0, 0, xy, NULL, d);
+        c.v = (int32_t)(xy - m->vxy);
     }
-    if (c->v >= m->vert_end) {
-        int32_t t = c->slot, k = c->k, kn = m->n_tri, pi = c->pi;
+    if (c.v >= m->vert_end) {
+        int32_t t = c.slot, k = c.k, kn = m->n_tri;
         const wm_he *h = m->he + 3 * t;
         for (; k < kn && d <= de; k++, t++, h += 3) {
-            int32_t a;
             while (h->v < 0) { /* a free triangle slot */
                 h += 3;
                 t++;
             }
-            a = h[0].v;
-            d += put_varint(d, 0, zigzag32(a - pi));
-            d += put_varint(d, 0, zigzag32(h[1].v - a));
-            d += put_varint(d, 0, zigzag32(h[2].v - a));
-            pi = a;
+            d += code_one(&c, 1, 0, NULL, h, d);
         }
-        c->slot = t;
-        c->k = k;
-        c->pi = pi;
+        c.slot = t;
+        c.k = k;
     }
+    *cp = c;
     return (uint32_t)(d - d0);
 }
 
