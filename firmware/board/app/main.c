@@ -133,10 +133,16 @@ __attribute__((section(".wm_tail"))) uint32_t wm_proto_stack_peak(uint32_t *stac
     return board_stack_peak();
 }
 
+/* Another clock starts: its marker (the stage sync) always, the caches' flush only where a stage's or
+ * no clock starts.  The link's clock (WM_PROTO_CLOCK_LINK) counts what the host's timing and the frame
+ * numbers move anyway, and no check compares it between runs; the stage's stretch after it starts with
+ * the flush again (docs/soc.md, "Cycle accounting").  Each frame the emit stage sends switches to the
+ * link and back: one flush a frame, not two. */
 static void io_mark(void *ctx, uint32_t clock)
 {
     (void)ctx;
-    board_stage(STAGE_CLOCK | clock);
+    if (clock & WM_PROTO_CLOCK_LINK) board_stage_sync(STAGE_CLOCK | clock);
+    else board_stage(STAGE_CLOCK | clock);
 }
 
 int main(void)

@@ -90,8 +90,8 @@ typedef struct wm_proto_io {
     void (*write_escaped)(void *ctx, const uint8_t *data, size_t n);
     /* A free-running counter at caps.clk_hz (wraps after 2^64). */
     uint64_t (*cycles)(void *ctx);
-    /* Optional: called whenever another clock starts to run (WM_PROTO_CLOCK_*), right after the
-     * engine read the counter, so that a trace of the calls shows what each clock counted. */
+    /* Optional: called whenever another clock starts to run (WM_PROTO_CLOCK_*), right before the
+     * engine reads the counter, so that a trace of the calls shows what each clock counted. */
     void (*mark)(void *ctx, uint32_t clock);
     /* Optional (NULL: the device cannot switch its rate; caps.div_max must then be 0): switch the line
      * to div clock cycles per bit (at caps.clk_hz) once every byte written so far has left the

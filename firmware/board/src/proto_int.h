@@ -182,11 +182,12 @@ int wm_proto_wait_ack(wm_proto *p, uint8_t kind, uint8_t index, uint32_t *have, 
 void wm_proto_charge(wm_proto *p);
 
 /* Tells the transport which clock runs from now on: `stage`'s, or the link's while link_depth > 0
- * (io.mark: on the board the stage marker, its sync and the CPU's cache flush).  Every switch marks
- * first and then reads the cycle counter (wm_proto_charge): the clock that ends pays the mark, and the
- * one that starts starts from the state the mark leaves (the SDRAM synced, the caches empty) whatever
- * the one before left behind; the other order left the few instructions between the counter read and
- * the flush to hit or miss a cache as the clock before had left it (docs/soc.md, "Cycle accounting"). */
+ * (io.mark: on the board the stage marker, its sync and, where a stage's clock starts, the CPU's cache
+ * flush).  Every switch marks first and then reads the cycle counter (wm_proto_charge): the clock that
+ * ends pays the mark, and the stage that starts starts from the state the mark leaves (the SDRAM
+ * synced, the caches empty) whatever the one before left behind; the other order left the few
+ * instructions between the counter read and the flush to hit or miss a cache as the clock before had
+ * left it (docs/soc.md, "Cycle accounting"). */
 static inline void mark(const wm_proto *p, int stage, int link_depth)
 {
     if (p->io.mark) {
