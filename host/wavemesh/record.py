@@ -66,6 +66,19 @@ def _make(cls, frozen: bool, kw_only: bool, eq: bool = True):
     setter = object.__setattr__
 
     def __init__(self, *args, **kwargs):
+        if not kwargs and len(args) <= len(names) == len(positional):  # by position alone: in one pass
+            for n, v in zip(names, args, strict=False):  # the first len(args) fields
+                setter(self, n, v)
+            for n in names[len(args):]:
+                if n in defaults:
+                    setter(self, n, defaults[n])
+                elif n in factories:
+                    setter(self, n, factories[n]())
+                else:
+                    raise TypeError(f"{qualname}.__init__() missing required argument: {n!r}")
+            if post_init:
+                self.__post_init__()
+            return
         if len(args) > len(positional):
             raise TypeError(f"{qualname}.__init__() takes {len(positional) + 1} positional arguments but "
                             f"{len(args) + 1} were given")

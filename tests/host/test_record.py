@@ -118,3 +118,27 @@ def test_classvar_refused():
         @record
         class Bad:
             n: ClassVar[int] = 1  # noqa: F821 - a string annotation, never evaluated
+
+
+def test_by_position_runs_post_init_and_factories():
+    """A record built by position alone (the one-pass path of __init__): its defaults, a new factory value
+    each time, __post_init__ run, and a missing field a TypeError, as dataclasses."""
+
+    def body():
+        class C:
+            a: int
+            b: int = 2
+            c: list = dataclasses.field(default_factory=list)
+
+            def __post_init__(self):
+                self.total = self.a + self.b + len(self.c)
+
+        return C
+
+    d, r = dataclasses.dataclass(body()), record(body())
+    for args in [(1,), (1, 5), (1, 5, [7, 8]), ()]:
+        a, b = same(d, *args), same(r, *args)
+        assert a[0] == b[0], (args, a, b)
+        if a[0] == "ok":
+            assert (b[1].a, b[1].b, b[1].c, b[1].total) == (a[1].a, a[1].b, a[1].c, a[1].total)
+    assert r(1).c is not r(1).c
