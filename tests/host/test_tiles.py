@@ -142,6 +142,70 @@ def test_conform_keeps_a_proper_mesh():
             assert set(got[side]) >= set(tiles.border_of(mesh)[side]) - {0}
 
 
+def test_decimate_inner_keeps_the_sides_and_zeta():
+    """decimate_inner on a real tile's mesh from every inner vertex: proper, every side vertex kept, every
+    new triangle within zeta by the refiner's E(T), the masks exactly the new triangles and those that
+    went, the mesh smaller; from no vertex the mesh as it was; from a few only vertices of their rings'
+    cascade go (never one of a triangle no removal touched)."""
+    from wavemesh.mesh import Mesh
+    from wavemesh.refine import native
+
+    hf = api.load_input(jacksboro(), key="elevation", crop="0,0,97,81")
+    p = RefineParams(zeta=1.0)
+    mesh = api.refine(hf, params=p).mesh
+    fp = fixed_params(p, hf.scale, hf.refiner_zeta(p.zeta))
+    within = native.error_within(hf.samples, fp)
+    out, new, went = tiles.decimate_inner(mesh, within, range(len(mesh.xy)))
+    assert check_mesh(out).valid and tiles.border_of(out) == tiles.border_of(mesh)
+    assert len(new) == out.n_triangles and len(went) == mesh.n_triangles
+    assert out.n_triangles == mesh.n_triangles - int(went.sum()) + int(new.sum()) < mesh.n_triangles
+    key = {tuple(sorted(map(tuple, mesh.xy[t].tolist()))) for t in mesh.tris}
+    for t, made in zip(out.tris, new, strict=True):
+        assert (tuple(sorted(map(tuple, out.xy[t].tolist()))) not in key) == made
+        if made:
+            assert within(out.xy[t, 0].tolist(), out.xy[t, 1].tolist())
+    same, new, went = tiles.decimate_inner(mesh, within, [])
+    assert same is mesh and not new.any() and not went.any()
+    out, new, went = tiles.decimate_inner(mesh, within, [int(np.flatnonzero(
+        (mesh.xy[:, 0] > 0) & (mesh.xy[:, 1] > 0) & (mesh.xy[:, 0] < 96) & (mesh.xy[:, 1] < 80))[0])])
+    kept = {tuple(q) for q in out.xy.tolist()}
+    lost = [v for v, q in enumerate(mesh.xy.tolist()) if tuple(q) not in kept]
+    assert lost and np.isin(lost, mesh.tris[went]).all()
+    assert isinstance(out, Mesh)
+
+
+def test_finish_decimates_the_changed_stars(dem, monkeypatch):
+    """finish_tile's pass after the error bound: it starts from the triangles the free mesh lacks (by their
+    slots: the same as by their corners), and takes triangles back on this input (fewer than without it,
+    every tile proper and within zeta: finish_tile checks it)."""
+    from wavemesh.tiles import jobs
+    from wavemesh.tiles.sides import FACING
+
+    plan = tiles.plan_tiles(tiles.open_source(str(dem)), api.MeshParams(refine=RefineParams(zeta=2.0)), 64)
+    frees = [tiles.free_tile(plan, i) for i in range(len(plan.tiles))]
+    facing = [{s: frees[k].sides[FACING[s]] for s, k in t.neighbours.items()} for t in plan.tiles]
+    seen = []
+    real = jobs._changed
+
+    def spy(conformed, made, final):
+        got = real(conformed, made, final)
+        seen.append((conformed, made, final, got))
+        return got
+
+    monkeypatch.setattr(jobs, "_changed", spy)
+    done = [tiles.finish_tile(plan, frees[i], facing[i]) for i in range(len(plan.tiles))]
+    assert len(seen) > 1
+    for conformed, made, final, got in seen:
+        kept = conformed.tris[: len(conformed.tris) - made]  # the free mesh's (conform made the others)
+        old = {tuple(sorted(map(tuple, conformed.xy[t].tolist()))) for t in kept}
+        want = [tuple(sorted(map(tuple, final.xy[t].tolist()))) not in old for t in final.tris]
+        assert got.tolist() == want
+    monkeypatch.setattr(jobs, "decimate_inner", lambda m, within, dirty: (m, None, None))
+    plain = [tiles.finish_tile(plan, frees[i], facing[i]) for i in range(len(plan.tiles))]
+    fewer = [len(a.tris) - len(b.tris) for a, b in zip(plain, done, strict=True)]
+    assert min(fewer) >= 0 and sum(fewer) > 0
+
+
 def test_one_tile_is_the_untiled_mesh(tmp_path):
     hf = api.load_input(jacksboro(), key="elevation", crop="100,80,200,150")
     untiled = api.mesh(hf, api.MeshParams(refine=RefineParams(zeta=2.0)))

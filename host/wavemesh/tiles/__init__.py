@@ -29,10 +29,14 @@ The steps (docs/tiles.md says why each is so); every one but the last runs in th
    by splitting the triangle on that border edge, and the refiner's error bound run once more on that
    mesh (levels 1, no reduction, no decimation): it splits only the triangles now above zeta, and never a
    border edge, since no border sample can be the worst of a triangle above zeta (step 4).  The tile's
-   border is then checked to be exactly the reconciled one, the tile proper and within zeta.
+   border is then checked to be exactly the reconciled one, the tile proper and within zeta.  The inner
+   vertices (off the tile's sides) of the triangles the free mesh lacks then go where they can, as the
+   refiner's final decimation would take them, their rings' vertices tried again after each removal
+   (:func:`decimate_inner`).
 6. **Each shared side, thinned** (:func:`thin_seam`, then :func:`thin_tile`): every vertex on it both
    neighbours can do without (its hole in each tile re-triangulated within zeta by the refiner's own E(T)
-   test, its ring off the tile's other sides) removed from both.
+   test, its ring off the tile's other sides) removed from both; each tile's inner vertices of the new
+   triangles then decimated again as in step 5.
 7. **Written as the tiles finish** (the parent, :class:`TiledFiles`): each tile, once every tile before it
    (row by row) is done, appended to the mesh file: its vertices not on a side an earlier tile wrote,
    numbered next, and its triangles (:class:`TileOrder`, which checks that each shared side has the same
@@ -75,7 +79,16 @@ from wavemesh.tiles.plan import (
     plan_tiles,
 )
 from wavemesh.tiles.runner import Node, Ref, Runner, connect
-from wavemesh.tiles.sides import SIDES, Editable, border_of, conform, reconcile, simplify_profile, thin_side
+from wavemesh.tiles.sides import (
+    SIDES,
+    Editable,
+    border_of,
+    conform,
+    decimate_inner,
+    reconcile,
+    simplify_profile,
+    thin_side,
+)
 from wavemesh.tiles.source import Quant, Source, open_source, scan
 
 __all__ = [
@@ -83,7 +96,8 @@ __all__ = [
     "TILE_BYTES_PER_SAMPLE", "TILE_CHOICES", "Tile", "TileOrder", "TilePlan", "TileResult", "TiledFiles",
     "TiledResult",
     "available_memory", "border_of", "check_tiled_outputs", "check_tiling", "conform", "connect", "cuts",
-    "dask_tile", "default_tile", "default_workers", "device_tile", "finish_tile", "free_tile", "hello",
+    "dask_tile", "decimate_inner", "default_tile", "default_workers", "device_tile", "finish_tile",
+    "free_tile", "hello",
     "mesh_tiled", "open_source", "plan_tiles", "reconcile", "run_tiles", "scan", "simplify_profile",
     "stitch", "stream_tile", "stream_tiles", "thin_seam", "thin_side", "thin_tile", "tile_graph",
     "tile_heightfield", "write_tiled",

@@ -30,6 +30,7 @@ from wavemesh.tiles.sides import (
     _on_sides,
     border_of,
     conform,
+    decimate_inner,
     reconcile,
     side_point,
     side_profile,
@@ -198,7 +199,8 @@ class _Levels:
 def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray | None = None) -> TileResult:
     """Steps 4 and 5 for one tile: each shared side reconciled with the neighbour's vertices on it
     (``facing``: side -> the neighbour's positions), the free mesh conformed to them, the error bound run
-    on it, the result checked (proper, the reconciled sides, within zeta) and measured."""
+    on it, the inner vertices of the triangles the free mesh lacks decimated again (decimate_inner), the
+    result checked (proper, the reconciled sides, within zeta) and measured."""
     t0 = time.perf_counter()
     t = plan.tiles[free.index]
     hf = tile_heightfield(plan, t, window)
@@ -209,8 +211,14 @@ def finish_tile(plan: TilePlan, free: FreeTile, facing: dict, window: np.ndarray
     out = _Levels(_Level(free.mesh, {"over": free.over, "bound_splits": free.bound_splits}))
     if any(sides[s] != free.sides[s] for s in sides):
         bound = replace(p, reduce=False, decimate=False, max_triangles=None, capacity=None)
-        out = native.refine(hf.samples, 1, conform(free.mesh, sides), bound,
+        conformed, made = conform(free.mesh, sides, made=True)
+        out = native.refine(hf.samples, 1, conformed, bound,
                             scale=hf.scale, zeta=plan.zeta_used, spacing=plan.spacing)
+        if not out.final.stats["over"]:  # the stars that changed decimated again
+            m = out.final.mesh
+            ch = _changed(conformed, made, m)
+            m, _, _ = decimate_inner(m, native.error_within(hf.samples, fp), _touched(m, ch))
+            out = _Levels(_Level(m, out.final.stats))
     if out.final.stats["over"]:
         raise MeshInvalid(f"{t.name}: {out.final.stats['over']} triangles above zeta after the border's "
                           "error bound", hint=api.BUG_HINT)
@@ -332,7 +340,7 @@ def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray |
     out, side by side (the sides' removals touch no common triangle), the result checked again.  A side
     given as thin_seam's Cut is taken out by the removals it found on this same mesh (each vertex's star
     there is its star here: the other sides' removals never touch it); plain positions are worked out
-    again."""
+    again.  Then the inner vertices of the triangles the removals made decimated again (_decimated)."""
     if not any(removed.values()):  # nothing to take out: the mesh as it was checked
         return replace(r, report=r.report | {"seam_removed": r.report.get("seam_removed", 0)})
     t0 = time.perf_counter()
@@ -350,12 +358,54 @@ def thin_tile(plan: TilePlan, r: TileResult, removed: dict, window: np.ndarray |
                 raise MeshInvalid(f"{t.name}: a seam vertex both tiles could do without could not be removed "
                                   f"({side} {pos})", hint=api.BUG_HINT)
             ed.apply(step)
+    final, new = ed.mesh(), ed.new()
+    inner = r.inner
+    final, new, inner = _decimated(plan, t, hf, final, new, inner, ed.within)
     before = border_of(ed.source)  # r's mesh in tile coordinates, as _editable made it
     gone = {s: set(removed.get(s, ())) for s in t.neighbours}
     sides = {s: tuple(q for q in before[s] if q not in gone[s]) for s in t.neighbours}
     report = r.report | {"seam_removed": r.report.get("seam_removed", 0) + sum(map(len, removed.values()))}
     seconds = r.report["seconds"] + time.perf_counter() - t0
-    return _checked(plan, r.index, hf, ed.mesh(), sides, report, seconds, plan.zeta_used, r.inner, ed.new())
+    return _checked(plan, r.index, hf, final, sides, report, seconds, plan.zeta_used, inner, new)
+
+
+def _touched(mesh: Mesh, which: np.ndarray) -> np.ndarray:
+    """The vertices of ``mesh``'s triangles ``which`` (a (T,) bool), sorted (no np.unique: sides.conform)."""
+    return np.flatnonzero(np.bincount(np.compress(which, mesh.tris, axis=0).ravel(), minlength=len(mesh.xy)))
+
+
+def _changed(conformed: Mesh, made: int, final: Mesh) -> np.ndarray:
+    """(T,) bool over the error bound's ``final`` mesh: the triangles that the conformed tile's free mesh
+    lacks (conform made its last ``made`` triangles).  The refiner keeps a mesh's vertices and triangles
+    in their slots (a split triangle's first child in its slot, the others and new vertices after them):
+    a triangle in the slot of the same triangle is the free mesh's, every other one is new."""
+    n, k = len(conformed.tris), min(len(conformed.tris), len(final.tris))
+    if len(final.xy) < len(conformed.xy) or not np.array_equal(final.xy[: len(conformed.xy)], conformed.xy):
+        return np.ones(len(final.tris), dtype=bool)  # not kept in their slots: all of them
+    out = np.ones(len(final.tris), dtype=bool)
+    out[:k] = np.any(final.tris[:k] != conformed.tris[:k], axis=1)
+    out[n - made : k] = True
+    return out
+
+
+def _decimated(plan: TilePlan, t: Tile, hf: HeightField, mesh: Mesh, new: np.ndarray, inner: tuple | None,
+               within) -> tuple[Mesh, np.ndarray, tuple | None]:
+    """thin_tile's mesh decimated again at the vertices of its new triangles (decimate_inner): the mesh,
+    its new triangles, and ``inner`` still the E_max of the others that touch no shared side (None: measure
+    the whole tile again, when a triangle that went held it)."""
+    out, made, went = decimate_inner(mesh, within, _touched(mesh, new))
+    if not went.any():
+        return mesh, new, inner
+    on = np.zeros(len(mesh.xy), dtype=bool)
+    for s, m in _on_sides(mesh.xy, mesh.width, mesh.height).items():
+        if s in t.neighbours:
+            on |= m
+    old = went & ~new & ~touching(on, mesh.tris)  # the triangles inner measured that went
+    if inner is not None and old.any():
+        per_v, per_n = _measured(mesh, hf, plan.spacing, old)
+        if _top(per_v) >= inner[0] or _top(per_n) >= inner[1]:
+            inner = None
+    return out, np.concatenate([np.compress(~went, new), np.ones(int(made.sum()), dtype=bool)]), inner
 
 
 def _window(plan: TilePlan, index: int) -> np.ndarray | None:
