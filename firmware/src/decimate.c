@@ -54,7 +54,7 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
 /* The first triangulation of v's hole that keeps every E(T) <= zeta, in the order the fans from ring
  * vertex 0, 1, ..., then ear clipping (Delaunay ears first): a bound at most zeta of its E(T) (each
  * triangle scanned only as far as zeta) and its kind (apex, as wm_vertex_remove_plan takes it), its
- * ring and triangles in lp; NONE when there is none.  Taking the first rather than the cheapest of them
+ * ring and triangles in vs; NONE when there is none.  Taking the first rather than the cheapest of them
  * measured as good (Jacksboro, Ball: 1-2 % fewer triangles) at 9 % fewer instructions. */
 /* first_fit's cheap test for the fans, before a fan is built.  With d_i = p_i - v (v's star: the d_i
  * counter-clockwise, each step below a half turn, a side's two ends a half turn apart), v lies in the
@@ -459,11 +459,12 @@ static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
     }
 }
 
-/* first_fit's ring and plan, in the caller's arrays: after a call that found a plan, ring and tris are
- * v's ring and triangles, as wm_vertex_ring and wm_ring_plan give them for its apex (a fan's triangles
- * are left to its removal: fan_tris), and the removal, which follows at once, takes them instead of
- * working them out again. */
-struct last_plan {
+/* One evaluation of a vertex v (first_fit) and the removal that follows it (remove_planned), kept by
+ * wm_decimate for the whole decimation: v's fan and ring (wm_vertex_fan) and, after a call that found a
+ * plan, its triangles as wm_ring_plan gives them for its apex (a fan's are left to its removal:
+ * fan_tris), which the removal, at once, takes instead of working them out again; and the fans' terms
+ * (the job's set once, v's each call). */
+struct evaluation {
     int32_t nr, nt, k;
     int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING];
     int32_t e[WM_MAX_RING]; /* and v's fan (wm_vertex_fan), k half-edges, for wm_vertex_remove_fan */
@@ -486,18 +487,18 @@ static void fans_setup(const wm_refiner *r, struct fans *q)
     q->vertical = r->params.metric == WM_METRIC_VERTICAL;
 }
 
-static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct last_plan *lp)
+static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct evaluation *vs)
 {
     const wm_mesh *me = &r->mesh;
-    int32_t *ring = lp->ring, *tris = lp->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
+    int32_t *ring = vs->ring, *tris = vs->tris, rx[WM_MAX_RING], ry[WM_MAX_RING], tp[3 * WM_MAX_RING], n, nt, big;
     uint32_t best = NONE, bad[WM_MAX_RING], skip = 0;
     int32_t vx = me->vxy[v].x, vy = me->vxy[v].y, zv;
     struct wm_plan_probe probe;
     struct tested tested;
-    struct fans *q = &lp->q;
+    struct fans *q = &vs->q;
     tested.r = r;
     probe.px = vx, probe.py = vy, probe.above = v_above, probe.ctx = &tested, probe.bad = WM_CHECK ? NULL : bad;
-    n = wm_vertex_fan(me, v, lp->e, &lp->k, ring);
+    n = wm_vertex_fan(me, v, vs->e, &vs->k, ring);
     if (n < 0) return NONE;
     q->n = n;
     q->k = 0;
@@ -580,19 +581,22 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 #endif
         best = worst;
         *apex = a;
-        lp->nr = n, lp->nt = nt; /* a fan's triangles: fan_tris, when it goes */
+        vs->nr = n, vs->nt = nt; /* a fan's triangles: fan_tris, when it goes */
         break;
     }
     return best;
 }
 
-/* v's removal with the plan first_fit just made on its star (lp: its ring, triangles and fan; apex its
+/* v's removal with the plan first_fit just made on its star (vs: its ring, triangles and fan; apex its
  * kind), which nothing has changed since; bound, first_fit's, is at least the E(T) of every new triangle
- * (measured at the end: wm_settle).  Its ring size, or 0 when it did not go (cannot happen). */
-static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t bound, struct last_plan *lp)
+ * (measured at the end: wm_settle).  Its ring size, or wm_vertex_remove_fan's error (it refuses only a
+ * plan that is not of this mesh, which cannot happen: the checked builds assert it, and wm_decimate
+ * stops the job with the error). */
+static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t bound, struct evaluation *vs)
 {
     wm_mesh *me = &r->mesh;
-    int32_t touched[WM_MAX_RING], k, nr = lp->nr, nt = lp->nt, *ring = lp->ring, *tris = lp->tris;
+    int32_t touched[WM_MAX_RING], k, nr = vs->nr, nt = vs->nt, *ring = vs->ring, *tris = vs->tris;
+    int rc;
     if (apex >= 0) fan_tris(ring, nr, apex, tris);
 #if WM_CHECK
     {
@@ -603,7 +607,9 @@ static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t b
         for (int32_t i = 0; i < 3 * nt; i++) WM_ASSERT(tris2[i] == tris[i]);
     }
 #endif
-    if (wm_vertex_remove_fan(me, v, lp->e, lp->k, ring, nr, tris, nt, touched, &k) != WM_OK) return 0;
+    rc = wm_vertex_remove_fan(me, v, vs->e, vs->k, ring, nr, tris, nt, touched, &k);
+    WM_ASSERT(rc == WM_OK);
+    if (rc != WM_OK) return rc;
     for (int32_t i = 0; i < k; i++) {
         me->tflag[touched[i]] |= WM_F_MEASURE;
         r->err[touched[i]] = bound;
@@ -622,9 +628,9 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
      * vert_cap words, then each vertex's place in order[]) */
     int32_t *order = (int32_t *)(void *)r->list, end = me->vert_end, height = me->height, m = 0, from = 0;
     uint32_t *place = r->vkey;
-    struct last_plan lp;
+    struct evaluation vs;
     WM_ASSERT((uint64_t)end <= 2 * (uint64_t)me->tri_cap && height + 1 <= me->vert_cap);
-    fans_setup(r, &lp.q);
+    fans_setup(r, &vs.q);
     for (int32_t y = 0; y <= height; y++) place[y] = 0;
     for (int32_t v = 0; v < end; v++)
         if ((dirty[v] = me->vxy[v].x != WM_FREE)) place[me->vxy[v].y + 1]++;
@@ -644,11 +650,12 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
             if (!dirty[v]) continue;
             dirty[v] = 0;
             WM_ASSERT(me->vxy[v].x != WM_FREE);
-            bound = first_fit(r, v, &apex, &lp);
+            bound = first_fit(r, v, &apex, &vs);
             if (bound == NONE) continue; /* tried again only when its ring changes */
-            nr = remove_planned(r, v, apex, bound, &lp);
+            nr = remove_planned(r, v, apex, bound, &vs);
+            if (nr < 0) return nr; /* cannot happen (remove_planned) */
             for (int32_t h = 0; h < nr; h++) { /* their stars changed */
-                int32_t u = lp.ring[h], at = (int32_t)place[u];
+                int32_t u = vs.ring[h], at = (int32_t)place[u];
                 dirty[u] = 1;
                 if (at < i && at < from) from = at;
             }

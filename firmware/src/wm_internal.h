@@ -829,7 +829,7 @@ void wm_legalise(wm_refiner *r, int32_t p, const int32_t *touched, int32_t n, in
  * place (-1: in no heap). */
 void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n);
 /* The final decimation (decimate.c): removes vertices, in passes over the slots, while every new
- * triangle keeps E(T) <= zeta; returns WM_OK. */
+ * triangle keeps E(T) <= zeta; returns WM_OK (or a removal's error, which cannot happen). */
 int wm_decimate(wm_refiner *r, wm_level_stats *st);
 /* The reduction of 4.6 steps 2(d) and 3(b) (reduce.c): one pass over the vertices in slot order,
  * vertex removal where both small eigenvalues of R(v) are below delta_lambda (4.32), else edge
