@@ -7,10 +7,11 @@
  *           vertices marked dirty (their stars changed); every vertex is dirty at first, and the passes
  *           end when one leaves none dirty
  *
- * The dirty flag (r->vapex, a byte a vertex slot) is what keeps the passes cheap: a vertex that cannot
- * go is tried again only after a removal in its ring, the only thing that changes its hole.  The pass
- * order is fixed once, by a counting sort of the vertices by row (each pass from the least place marked
- * behind the one before), and no cost is measured: a candidate's triangles are scanned only as far as
+ * The dirty flag (r->vapex, a byte a place in the pass order) is what keeps the passes cheap: a vertex
+ * that cannot go is tried again only after a removal in its ring, the only thing that changes its hole.
+ * The pass order is fixed once, by a counting sort of the vertices by row (each pass from the least place
+ * marked behind the one before; it reads the flags in that order, and a place's vertex only when it is
+ * marked), and no cost is measured: a candidate's triangles are scanned only as far as
  * zeta (a bound at most zeta, which the removal leaves in err[] for wm_settle).  The rows sweep the
  * removals across the grid: fewer triangles than the slots' order (the error bound's insertion order)
  * on nearly every job (docs/refiner.md, "The final decimation").  Removing the least-cost vertex first
@@ -274,21 +275,26 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
          * stepped together, d_a held, the orientations in 32-bit products (|d| < 2^15: each below 2^30)
          * (the soft CPU's job Jacksboro / 16: first_fit 4 % fewer cycles; natively 0.4 % more
          * instructions than cross's loop below) */
-        const int32_t *dx = q->dx, *dy = q->dy;
+        const int32_t *dx = q->dx, *dy = q->dy, *pk, *pky, *end = q->dx + n;
         int32_t ax = dx[a], ay = dy[a], u = q->k < a + 2 ? a + 2 : q->k;
+        /* d_k through pointers stepped with u, wrapped at the ring's end: on the soft CPU each array's
+         * place was worked out again every step */
         k = u < n ? u : u - n;
+        pk = dx + k, pky = dy + k;
         for (;;) {
             if (u > a + n - 1) {
                 q->k = u;
                 return 1;
             }
-            fk = ax * dy[k] - dx[k] * ay;
-            WM_ASSERT(fk == cross(q, a, k));
+            fk = ax * *pky - *pk * ay;
+            WM_ASSERT(fk == cross(q, a, (int32_t)(pk - dx)) && pky - dy == pk - dx);
             if (fk <= 0) break;
             u++;
-            k = k + 1 == n ? 0 : k + 1;
+            pky++;
+            if (++pk == end) pk = dx, pky = dy;
         }
         q->k = u;
+        k = (int32_t)(pk - dx);
         j = k == 0 ? n - 1 : k - 1;
         c.ax = ax, c.ay = ay, c.jx = dx[j], c.jy = dy[j], c.kx = dx[k], c.ky = dy[k];
         fj = ax * c.jy - c.jx * ay;
@@ -621,7 +627,7 @@ static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t b
 int wm_decimate(wm_refiner *r, wm_level_stats *st)
 {
     wm_mesh *me = &r->mesh;
-    int8_t *dirty = r->vapex; /* the reduction's classes are not read after the levels */
+    int8_t *dirty = r->vapex; /* by place in order[] (the reduction's classes are not read after the levels) */
     /* the vertices in the grid's rows, each row's in slot order (a counting sort by y): order[] in the
      * error bound's heap storage (list[]: 2 tri_cap words at least, and vert_end <= tri_cap + 2, a mesh
      * of V vertices having at least V - 2 triangles), place[] in vkey (first the rows' starts, H + 1 <=
@@ -633,30 +639,31 @@ int wm_decimate(wm_refiner *r, wm_level_stats *st)
     fans_setup(r, &vs.q);
     for (int32_t y = 0; y <= height; y++) place[y] = 0;
     for (int32_t v = 0; v < end; v++)
-        if ((dirty[v] = me->vxy[v].x != WM_FREE)) place[me->vxy[v].y + 1]++;
+        if (me->vxy[v].x != WM_FREE) place[me->vxy[v].y + 1]++;
     for (int32_t y = 1; y <= height; y++) place[y] += place[y - 1];
     for (int32_t v = 0; v < end; v++)
-        if (dirty[v]) order[place[me->vxy[v].y]++] = v;
+        if (me->vxy[v].x != WM_FREE) order[place[me->vxy[v].y]++] = v;
     m = (int32_t)place[height - 1];
-    for (int32_t i = 0; i < m; i++) place[order[i]] = (uint32_t)i;
+    for (int32_t i = 0; i < m; i++) place[order[i]] = (uint32_t)i, dirty[i] = 1; /* every vertex dirty at first */
     /* the passes over order[]: each from the least place marked dirty behind the one before (places below
      * it are clean), until a pass marks none behind its cursor (every place marked ahead of it it has seen) */
     while (from < m) {
         int32_t i = from;
         from = m;
         for (; i < m; i++) {
-            int32_t apex = -1, nr, v = order[i];
+            int32_t apex = -1, nr, v;
             uint32_t bound;
-            if (!dirty[v]) continue;
-            dirty[v] = 0;
+            if (!dirty[i]) continue;
+            dirty[i] = 0;
+            v = order[i];
             WM_ASSERT(me->vxy[v].x != WM_FREE);
             bound = first_fit(r, v, &apex, &vs);
             if (bound == NONE) continue; /* tried again only when its ring changes */
             nr = remove_planned(r, v, apex, bound, &vs);
             if (nr < 0) return nr; /* cannot happen (remove_planned) */
             for (int32_t h = 0; h < nr; h++) { /* their stars changed */
-                int32_t u = vs.ring[h], at = (int32_t)place[u];
-                dirty[u] = 1;
+                int32_t at = (int32_t)place[vs.ring[h]];
+                dirty[at] = 1;
                 if (at < i && at < from) from = at;
             }
         }

@@ -748,7 +748,7 @@ struct wm_refiner {
     wm_index *pos;       /* [tri_cap] heap position of each triangle, -1 when not in it */
     uint32_t *vkey;      /* [vert_cap] the levels: the regularisation's records (refine.c) */
     int8_t *vapex;       /* [vert_cap] reduction: the class of the vertex's star (WM_CLASS_UNKNOWN when it
-                            changed); decimation: its dirty flag (decimate.c) */
+                            changed); decimation: the dirty flags, by place in its order (decimate.c) */
     const int32_t *roi;  /* NULL, or the region of interest's row prefix counts (roi.c) */
     struct wm_normal_slot *normals; /* [cache_mask + 1] reduce.c's unit normals, kept */
     struct wm_ecache_slot *ecache;  /* [cache_mask + 1] reduce.c's middle eigenvectors, kept */
