@@ -65,17 +65,20 @@ def _make(cls, frozen: bool, kw_only: bool, eq: bool = True):
     qualname = cls.__qualname__
     setter = object.__setattr__
 
+    def default(self, n):  # a field not given: its default, its factory's value, or the error
+        if n in defaults:
+            setter(self, n, defaults[n])
+        elif n in factories:
+            setter(self, n, factories[n]())
+        else:
+            raise TypeError(f"{qualname}.__init__() missing required argument: {n!r}")
+
     def __init__(self, *args, **kwargs):
         if not kwargs and len(args) <= len(names) == len(positional):  # by position alone: in one pass
             for n, v in zip(names, args, strict=False):  # the first len(args) fields
                 setter(self, n, v)
             for n in names[len(args):]:
-                if n in defaults:
-                    setter(self, n, defaults[n])
-                elif n in factories:
-                    setter(self, n, factories[n]())
-                else:
-                    raise TypeError(f"{qualname}.__init__() missing required argument: {n!r}")
+                default(self, n)
             if post_init:
                 self.__post_init__()
             return
@@ -92,12 +95,8 @@ def _make(cls, frozen: bool, kw_only: bool, eq: bool = True):
         for n in names:
             if n in values:
                 setter(self, n, values[n])
-            elif n in defaults:
-                setter(self, n, defaults[n])
-            elif n in factories:
-                setter(self, n, factories[n]())
             else:
-                raise TypeError(f"{qualname}.__init__() missing required argument: {n!r}")
+                default(self, n)
         if post_init:
             self.__post_init__()
 
