@@ -220,3 +220,31 @@ def triangulate_within(pts: list, ok, limit: int = 16) -> list | None:
 
     out = solve(0, n - 1)
     return None if out is None else list(out)
+
+
+def fans(pts: list):
+    """The fans of the simple counter-clockwise polygon ``pts`` from each of its corners in turn (the
+    refiner's first tries, decimate.c), those whose every triangle turns counter-clockwise (then they tile
+    the polygon)."""
+    n = len(pts)
+    for a in range(n):
+        fan = [(a, (a + k) % n, (a + k + 1) % n) for k in range(1, n - 1)]
+        if all(orient(pts[i], pts[j], pts[m]) > 0 for i, j, m in fan):
+            yield fan
+
+
+def fill_hole(pts: list, ok, ears=(True, False), with_fans: bool = False, limit: int = 16) -> list | None:
+    """A triangulation (index triples into ``pts``) of the simple counter-clockwise polygon ``pts`` (a
+    removed vertex's hole) whose every triangle ``ok`` accepts, the first of: with ``with_fans`` the fans
+    (:func:`fans`); ear clipping, for each of ``ears`` its fattest or first ears (:func:`ear_clip`); every
+    triangulation of a polygon of at most ``limit`` corners (:func:`triangulate_within`).  None when none
+    is accepted.  The one order of tries of wavemesh.refine.cover's rims and wavemesh.tiles' seams."""
+    if with_fans:
+        cut = next((f for f in fans(pts) if all(map(ok, f))), None)
+        if cut is not None:
+            return cut
+    for fattest in ears:
+        cut = ear_clip(pts, fattest=fattest)
+        if cut is not None and all(map(ok, cut)):
+            return cut
+    return triangulate_within(pts, ok, limit)

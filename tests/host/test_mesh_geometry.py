@@ -120,3 +120,21 @@ def test_triangulations_of_random_polygons(seed):
         if tris is not None:
             _is_triangulation(pts, tris, ok)
     assert found > 300  # of some 380
+
+
+def test_fill_hole_tries_in_its_order():
+    """fill_hole: the fans first (with_fans), then the ears in the order asked, then the search; what ok
+    refuses never in the answer; None when ok refuses every triangulation or the polygon is over limit."""
+    hexagon = [(4, 0), (8, 2), (8, 6), (4, 8), (0, 6), (0, 2)]
+    every = lambda t: True  # noqa: E731
+    assert M.fill_hole(hexagon, every, with_fans=True) == next(M.fans(hexagon)) == [(0, 1, 2), (0, 2, 3),
+                                                                                     (0, 3, 4), (0, 4, 5)]
+    assert M.fill_hole(hexagon, every) == M.ear_clip(hexagon, fattest=True)
+    assert M.fill_hole(hexagon, every, ears=(False,)) == M.ear_clip(hexagon)
+    # only the triangulation with the middle triangle (1, 3, 5): no fan, no ear clipping's, the search's
+    want = {(1, 2, 3), (3, 4, 5), (5, 0, 1), (1, 3, 5)}
+    ok = lambda t: tuple(sorted(t)) in {tuple(sorted(w)) for w in want}  # noqa: E731
+    got = M.fill_hole(hexagon, ok, with_fans=True)
+    assert got is not None and {tuple(sorted(t)) for t in got} == {tuple(sorted(w)) for w in want}
+    assert M.fill_hole(hexagon, ok, with_fans=True, limit=5) is None
+    assert M.fill_hole(hexagon, lambda t: False, with_fans=True) is None

@@ -15,7 +15,7 @@ import bisect
 
 import numpy as np
 
-from wavemesh.mesh import Mesh, ear_clip, orient, triangulate_within
+from wavemesh.mesh import Mesh, fill_hole, orient
 from wavemesh.model.holemask import cover_counts
 
 
@@ -243,11 +243,9 @@ def simplify_rims(mesh: Mesh, within, mask: np.ndarray | None = None) -> Mesh:
             def ok(c, pts=pts):
                 return within([pts[i][0] for i in c], [pts[i][1] for i in c])
 
-            cut = ear_clip(pts)
-            if cut is None or not all(map(ok, cut)):
-                cut = triangulate_within(pts, ok)  # every triangulation: ear clipping's is not within
-                if cut is None:
-                    continue
+            cut = fill_hole(pts, ok, ears=(False,))  # the first ears, then every triangulation
+            if cut is None:
+                continue
             for k in fan:
                 for u in tris.pop(k):
                     if u != v:

@@ -12,7 +12,7 @@ import numpy as np
 
 from wavemesh import api
 from wavemesh.errors import MeshInvalid
-from wavemesh.mesh import Mesh, ear_clip, orient, triangulate_within
+from wavemesh.mesh import Mesh, ear_clip, fill_hole
 
 # The normal metric's 1-D border test keeps this margin below the refiner's zeta (relative, and in sample
 # counts), more than the refiner's E(T) rounding (at most about 2^-15 relative + 2^-16, docs/refiner.md).
@@ -122,18 +122,39 @@ def side_point(side: str, pos: int, w: int, h: int) -> tuple[int, int]:
 
 
 def _ring(v: int, fan: Iterable[tuple[int, int, int]]) -> list[int]:
-    """The link of a border vertex v's star (its triangles ``fan``, counter-clockwise), walked from the side
-    neighbour: edge (v -> n1) in a triangle (v, n1, n2) continues from n2; the start is the neighbour no
-    triangle ends at."""
+    """The link of v's star (its triangles ``fan``, counter-clockwise): edge (v -> n1) in a triangle (v, n1,
+    n2) continues from n2.  A border vertex's is open, walked from the side neighbour no triangle ends at;
+    an inner vertex's closed, walked once round from its least vertex."""
     nxt = {}
     for t in fan:
         k = t.index(v)
         nxt[t[(k + 1) % 3]] = t[(k + 2) % 3]
-    start = next(n for n in nxt if n not in nxt.values())
+    ends = set(nxt.values())
+    start = next((n for n in nxt if n not in ends), None)
+    if start is None:  # closed
+        ring = [min(nxt)]
+        while len(ring) < len(nxt):
+            ring.append(nxt[ring[-1]])
+        return ring
     ring = [start]
     while ring[-1] in nxt:
         ring.append(nxt[ring[-1]])
     return ring
+
+
+def _within_kept(within, tested: dict, pts: list):
+    """``within`` (the refiner's E(T) <= zeta) as a test of index triples into ``pts``, each answer kept in
+    ``tested`` by the triangle's corners (in that order) for every ring that meets the triangle again."""
+
+    def ok(t) -> bool:
+        key = (pts[t[0]], pts[t[1]], pts[t[2]])
+        good = tested.get(key)
+        if good is None:
+            a, b, c = key
+            tested[key] = good = within([a[0], b[0], c[0]], [a[1], b[1], c[1]])
+        return good
+
+    return ok
 
 
 def conform(mesh: Mesh, sides: dict, made: bool = False) -> Mesh | tuple[Mesh, int]:
@@ -294,21 +315,7 @@ class Editable:
         k, at = _line(FACING[side], w, h)  # a ring vertex on the facing side, off its corners
         if any(q[k] == at and len(_side_of(*q, w, h)) == 1 for q in pts):
             return None
-        tested = self._tested
-
-        def ok(t) -> bool:
-            key = (pts[t[0]], pts[t[1]], pts[t[2]])
-            good = tested.get(key)
-            if good is None:
-                a, b, c = key
-                tested[key] = good = self.within([a[0], b[0], c[0]], [a[1], b[1], c[1]])
-            return good
-
-        for fattest in (True, False):
-            cut = ear_clip(pts, fattest=fattest)
-            if cut is not None and all(ok(t) for t in cut):
-                return v, [tuple(ring[k] for k in t) for t in cut]
-        cut = triangulate_within(pts, ok)
+        cut = fill_hole(pts, _within_kept(self.within, self._tested, pts))
         if cut is not None:
             return v, [tuple(ring[k] for k in t) for t in cut]
         return None
@@ -401,19 +408,10 @@ def thin_side(a: Editable, b: Editable, side: str) -> Cut:
 
 
 # decimate_inner searches every triangulation of a ring of at most this many vertices (when no fan and no
-# ear clipping is within zeta): 8,192^2 terrain in tiles of 1,025, 8,610 triangles without the search, 8,584
-# with it to 8, 8,580 to 16; a Jacksboro tile's pass 32, 53 and 66 ms
+# ear clipping is within zeta): make bench-tiles' 8,192^2 terrain in tiles of 1,025 with 0 / 8 / 16 here,
+# 8,610 / 8,584 / 8,580 triangles; the pass on the Jacksboro tiles of 1,025 32 / 53 / 66 ms a tile (timed
+# at load 6 to 8)
 INNER_SEARCH = 8
-
-
-def _fans(pts: list):
-    """The fans of the ring ``pts`` from each of its corners in turn (the refiner's first tries, decimate.c),
-    those whose every triangle turns counter-clockwise (then they tile the polygon)."""
-    n = len(pts)
-    for a in range(n):
-        fan = [(a, (a + k) % n, (a + k + 1) % n) for k in range(1, n - 1)]
-        if all(orient(pts[i], pts[j], pts[m]) > 0 for i, j, m in fan):
-            yield fan
 
 
 def decimate_inner(mesh: Mesh, within, dirty: Iterable[int]) -> tuple[Mesh, np.ndarray, np.ndarray]:
@@ -422,7 +420,7 @@ def decimate_inner(mesh: Mesh, within, dirty: Iterable[int]) -> tuple[Mesh, np.n
     each dirty inner vertex in row order (by y, then x) whose ring has a triangulation every triangle of
     which ``within`` accepts (the fans from each ring vertex, the refiner's first tries; the fattest ears,
     the first ears, then every triangulation of a ring of at most INNER_SEARCH vertices:
-    mesh.triangulate_within) is removed with it, and its ring's inner vertices are dirty again.  Also
+    mesh.fill_hole) is removed with it, and its ring's inner vertices are dirty again.  Also
     (T',) bool: the result's triangles that are new, and (T,) bool: ``mesh``'s triangles that went.  Only
     the stars visited are held as Python objects, loaded a pass at a time (one gather over the mesh's
     triangles a pass)."""
@@ -440,6 +438,7 @@ def decimate_inner(mesh: Mesh, within, dirty: Iterable[int]) -> tuple[Mesh, np.n
     made: list[int] = []
     gone: list[int] = []
     todo = {v for v in dirty if is_inner[v]}
+    tested: dict = {}  # a triangle's corners -> within's answer (_within_kept)
     while todo:
         need = np.zeros(n_v, dtype=bool)
         need[[v for v in todo if not full[v]]] = True
@@ -455,30 +454,9 @@ def decimate_inner(mesh: Mesh, within, dirty: Iterable[int]) -> tuple[Mesh, np.n
         for v in sorted(todo, key=lambda v: (xy[v][1], xy[v][0])):
             todo.discard(v)
             fan = inc[v]
-            step = {}
-            for k in fan:
-                t = tris[k]
-                r = t.index(v)
-                step[t[(r + 1) % 3]] = t[(r + 2) % 3]
-            ring = [min(step)]
-            while len(ring) < len(fan):
-                ring.append(step[ring[-1]])
+            ring = _ring(v, (tris[k] for k in fan))
             pts = [xy[u] for u in ring]
-            tested: dict = {}
-
-            def ok(c, pts=pts, tested=tested) -> bool:
-                good = tested.get(c)
-                if good is None:
-                    tested[c] = good = within([pts[i][0] for i in c], [pts[i][1] for i in c])
-                return good
-
-            cut = next((f for f in _fans(pts) if all(map(ok, f))), None)
-            for fattest in (True, False):
-                if cut is None:
-                    c = ear_clip(pts, fattest=fattest)
-                    cut = c if c is not None and all(map(ok, c)) else None
-            if cut is None:
-                cut = triangulate_within(pts, ok, INNER_SEARCH)
+            cut = fill_hole(pts, _within_kept(within, tested, pts), with_fans=True, limit=INNER_SEARCH)
             if cut is None:
                 continue
             for k in list(fan):
