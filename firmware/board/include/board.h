@@ -131,22 +131,22 @@ void board_leds_set(uint32_t leds);
 uint32_t board_leds(void);
 
 /*
+ * A stage marker that leaves the caches as they are: the simulator's log and the stage sync as
+ * board_stage's, without the flush, for a stretch whose cycles no check compares between runs (the
+ * link I/O's, app/main.c's io_mark: the stage's stretch after it starts with board_stage's flush).
+ */
+static inline void board_stage_sync(uint32_t marker) { WM_SYS_STAGE = marker; }
+
+/*
  * Mark the start or end of a stage: the simulator logs `stage 0xMARKER cycle N`; on a board it
  * costs one store (the stage sync: docs/soc.md, "Cycle accounting"), and with the VexRiscv the
  * flush of its caches, so that the next stretch starts from the same state whatever ran before.
  */
 static inline void board_stage(uint32_t marker)
 {
-    WM_SYS_STAGE = marker;
+    board_stage_sync(marker);
     board_caches_flush();
 }
-
-/*
- * A stage marker that leaves the caches as they are: the simulator's log and the stage sync as
- * board_stage's, without the flush, for a stretch whose cycles no check compares between runs (the
- * link I/O's, app/main.c's io_mark: the stage's stretch after it starts with board_stage's flush).
- */
-static inline void board_stage_sync(uint32_t marker) { WM_SYS_STAGE = marker; }
 
 /* Halt with an exit code: the simulator exits (status 0 for code 0); on a board the CPU spins. */
 void board_halt(uint32_t code) __attribute__((noreturn));
