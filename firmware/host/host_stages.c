@@ -165,6 +165,7 @@ static CLONES void scan_part(void *ctx, int32_t part, int32_t parts)
 
 struct apply {
     const double *v;
+    const float *v32; /* the heights as float32 instead (wm_host_quantise_with32; v then NULL) */
     uint16_t *samples;
     int64_t n;
     double offset, scale;
@@ -180,36 +181,50 @@ struct apply {
  * clip the compiler does not vectorise without -ffast-math): a negative number's bits (sign set) are
  * below 0, a positive one's order as the numbers do (bits_of). */
 #define SAMPLE_MAX_BITS ((int64_t)0x40EFFFE000000000) /* bits_of(65535.0) */
+/* The three modes' loops over heights read as V(i): a double, or a float widened to the same double */
+#define APPLY_LOOPS                                                                                   \
+    if (a->mode == 0) {                                                                             \
+        for (int64_t i = lo; i < hi; i++) {                                                         \
+            uint16_t s = (uint16_t)(int32_t)(V(i) - offset);                                        \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                         \
+            samples[i] = s;                                                                         \
+            err = e > err ? e : err;                                                                \
+        }                                                                                           \
+    } else if (a->mode == 1) {                                                                      \
+        for (int64_t i = lo; i < hi; i++) {                                                         \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * 0.0)));                               \
+            samples[i] = 0;                                                                         \
+            err = e > err ? e : err;                                                                \
+        }                                                                                           \
+    } else {                                                                                        \
+        for (int64_t i = lo; i < hi; i++) {                                                         \
+            int64_t c = bits_of((V(i) - offset) / scale); /* clipped as bits (see clip_bits) */     \
+            c = c < 0 ? 0 : c;                                                                      \
+            c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;                                          \
+            uint16_t s = (uint16_t)(int32_t)((of_bits(c) + RINT_MAGIC) - RINT_MAGIC);               \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                         \
+            samples[i] = s;                                                                         \
+            err = e > err ? e : err;                                                                \
+        }                                                                                           \
+    }
+
 static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
 {
     struct apply *a = ctx;
     int64_t lo, hi, err = 0; /* the largest error's bits (bits_of) */
-    const double *v = a->v, offset = a->offset, scale = a->scale;
+    const double offset = a->offset, scale = a->scale;
     uint16_t *samples = a->samples;
     part_range(a->n, part, parts, &lo, &hi);
-    if (a->mode == 0) {
-        for (int64_t i = lo; i < hi; i++) {
-            uint16_t s = (uint16_t)(int32_t)(v[i] - offset);
-            int64_t e = bits_of(fabs(v[i] - (offset + scale * (double)s)));
-            samples[i] = s;
-            err = e > err ? e : err;
-        }
-    } else if (a->mode == 1) {
-        for (int64_t i = lo; i < hi; i++) {
-            int64_t e = bits_of(fabs(v[i] - (offset + scale * 0.0)));
-            samples[i] = 0;
-            err = e > err ? e : err;
-        }
+    if (a->v32 != NULL) {
+        const float *v32 = a->v32;
+#define V(i) ((double)v32[i])
+        APPLY_LOOPS
+#undef V
     } else {
-        for (int64_t i = lo; i < hi; i++) {
-            int64_t c = bits_of((v[i] - offset) / scale); /* clipped as bits (see clip_bits) */
-            c = c < 0 ? 0 : c;
-            c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;
-            uint16_t s = (uint16_t)(int32_t)((of_bits(c) + RINT_MAGIC) - RINT_MAGIC);
-            int64_t e = bits_of(fabs(v[i] - (offset + scale * (double)s)));
-            samples[i] = s;
-            err = e > err ? e : err;
-        }
+        const double *v = a->v;
+#define V(i) (v[i])
+        APPLY_LOOPS
+#undef V
     }
     a->err[part] = of_bits(err);
 }
@@ -247,6 +262,7 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
         goto done;
     }
     a->v = v;
+    a->v32 = NULL;
     a->samples = samples;
     a->n = n;
     if (span <= SAMPLE_MAX && integer) {
@@ -275,13 +291,14 @@ done:
     return code;
 }
 
-double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
-                             int32_t threads, uint16_t *samples)
+static double quantise_with(const double *v, const float *v32, int64_t n, double offset, double scale,
+                            int32_t exact, int32_t threads, uint16_t *samples)
 {
     struct apply a;
     int32_t parts = parts_for(threads, n);
     double err = 0.0;
     a.v = v;
+    a.v32 = v32;
     a.samples = samples;
     a.n = n;
     a.offset = offset;
@@ -291,6 +308,18 @@ double wm_host_quantise_with(const double *v, int64_t n, double offset, double s
     for (int32_t p = 0; p < parts; p++)
         if (a.err[p] > err) err = a.err[p];
     return err;
+}
+
+double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
+                             int32_t threads, uint16_t *samples)
+{
+    return quantise_with(v, NULL, n, offset, scale, exact, threads, samples);
+}
+
+double wm_host_quantise_with32(const float *v, int64_t n, double offset, double scale, int32_t exact,
+                               int32_t threads, uint16_t *samples)
+{
+    return quantise_with(NULL, v, n, offset, scale, exact, threads, samples);
 }
 
 struct qerr {
@@ -449,6 +478,7 @@ static int local_order(const int64_t *x, const int64_t *y, int64_t stride, const
 
 struct trimax {
     const double *h;
+    const float *h32; /* the heights as float32 instead (wm_host_tri_max32; h then NULL) */
     int64_t width, height;
     const int64_t *x, *y, *tris; /* vertex i at (x[i * stride], y[i * stride]) */
     int64_t stride;
@@ -508,7 +538,7 @@ static inline __attribute__((always_inline)) double tri_max(const struct trimax 
             if (a[k] == 0 && num[k] < 0) empty = 1;
         }
         if (empty || xr < xl) continue;
-        const double *row = m->h + yy * m->width + xl;
+        int64_t at = yy * m->width + xl; /* the row's first sample */
         int64_t e1l = a[1] * xl + num[1], e2l = a[2] * xl + num[2];
         int64_t e1r = a[1] * xr + num[1], e2r = a[2] * xr + num[2];
         if (ABS(e1l) < EXACT && ABS(e2l) < EXACT && ABS(e1r) < EXACT && ABS(e2r) < EXACT) {
@@ -517,12 +547,19 @@ static inline __attribute__((always_inline)) double tri_max(const struct trimax 
             double e1 = (double)e1l, e2 = (double)e2l, da1 = (double)a[1], da2 = (double)a[2];
             int32_t n = (int32_t)(xr - xl + 1);
             int64_t rb = 0; /* the row's largest |h - plane| as its bits (bits_of) */
-            for (int32_t k = 0; k < n; k++) {
-                double kd = (double)k;
-                double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;
-                int64_t v = bits_of(fabs(row[k] - plane));
-                rb = v > rb ? v : rb;
+#define ROW_BITS(ROW)                                                                                 \
+    for (int32_t k = 0; k < n; k++) {                                                               \
+        double kd = (double)k;                                                                      \
+        double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;                 \
+        int64_t v = bits_of(fabs((double)(ROW)[k] - plane)); /* a float widens to the same double */ \
+        rb = v > rb ? v : rb;                                                                       \
+    }
+            if (m->h32 != NULL) {
+                ROW_BITS(m->h32 + at)
+            } else {
+                ROW_BITS(m->h + at)
             }
+#undef ROW_BITS
             if (rb > NAN_BITS) return NAN; /* numpy's maximum keeps a NaN */
             best = of_bits(rb) > best ? of_bits(rb) : best;
             continue;
@@ -530,7 +567,8 @@ static inline __attribute__((always_inline)) double tri_max(const struct trimax 
         for (int64_t xx = xl; xx <= xr; xx++) {
             int64_t e1 = a[1] * xx + num[1], e2 = a[2] * xx + num[2];
             double plane = z0 + ((double)e1 * dz1 + (double)e2 * dz2) / absd;
-            double v = fabs(row[xx - xl] - plane);
+            int64_t i = at + xx - xl;
+            double v = fabs((m->h32 != NULL ? (double)m->h32[i] : m->h[i]) - plane);
             if (v > best || v != v) best = v;
             if (best != best) return best;
         }
@@ -557,14 +595,15 @@ static CLONES void trimax_part(void *ctx, int32_t part, int32_t parts)
     }
 }
 
-int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
-                    const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
-                    double sy, int32_t threads)
+static int tri_max_all(const double *h, const float *h32, int32_t width, int32_t height, const int64_t *x,
+                       const int64_t *y, const double *zv, const int64_t *tris, int64_t t, double *per_v,
+                       double *nfac, double sx, double sy, int32_t threads)
 {
     struct trimax m;
     int32_t parts = parts_for(threads, (int64_t)width * height); /* the triangles cover the grid once */
     if ((int64_t)parts > (t + TRI_CHUNK - 1) / TRI_CHUNK) parts = (int32_t)((t + TRI_CHUNK - 1) / TRI_CHUNK);
     m.h = h;
+    m.h32 = h32;
     m.width = width;
     m.height = height;
     struct local l;
@@ -586,6 +625,20 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
     if (parts > 1) pthread_mutex_destroy(&m.lock);
     if (local) local_free(&l);
     return WM_HOST_OK;
+}
+
+int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
+                    const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
+                    double sy, int32_t threads)
+{
+    return tri_max_all(h, NULL, width, height, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
+}
+
+int wm_host_tri_max32(const float *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
+                      const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
+                      double sy, int32_t threads)
+{
+    return tri_max_all(NULL, h, width, height, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
 }
 
 /* ---------------------------------------------------------------------------------------------- */

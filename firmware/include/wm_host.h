@@ -47,6 +47,10 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
  * |v - (offset + scale * sample)| (0 for none). */
 double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
                              int32_t threads, uint16_t *samples);
+/* The same of n float32 heights (each widened to its double: the same samples and error as of v cast
+ * to float64), a tiled job's float32 input held as it is (wavemesh.tiles.source.Source.read). */
+double wm_host_quantise_with32(const float *v, int64_t n, double offset, double scale, int32_t exact,
+                               int32_t threads, uint16_t *samples);
 
 /* The largest |v - (offset + scale * s)| over n heights and their samples (0 for none). */
 double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double offset, double scale,
@@ -62,6 +66,11 @@ double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double
 int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
                     const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
                     double sy, int32_t threads);
+/* The same on a float32 height field h (each sample widened to its double: the same maxima as of h cast
+ * to float64). */
+int wm_host_tri_max32(const float *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
+                      const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
+                      double sy, int32_t threads);
 
 /* check.py's check_mesh when the mesh is proper: 1 when every one of its checks passes (vertices in the
  * W x H rectangle, distinct and used; indices in range; every triangle counter-clockwise; the doubled

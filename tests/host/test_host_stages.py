@@ -114,6 +114,39 @@ def test_quantise_with_a_given_scale_equals_the_model(name):
                     assert np.float64(got[1]).view(np.int64) == np.float64(want[1]).view(np.int64)
 
 
+@pytest.mark.parametrize("name", ["floats", "halves", "big", "wide integers", "jacksboro", "topobathy"])
+def test_float32_heights_read_as_their_float64_copy(name):
+    """A tiled job's float32 input is held as it is (tiles.source.Source.read): the quantisation by a
+    given scale (wm_host_quantise_with32) and the error measure (wm_host_tri_max32) on float32 heights are
+    those of their float64 copy, bit for bit, whatever the threads."""
+    from wavemesh.io.heightfield import quant_rule
+    from wavemesh.tiles.source import Quant
+
+    v32 = ALL[name].astype(np.float32)
+    v = v32.astype(np.float64)
+    lo, hi = float(np.min(v)), float(np.max(v))
+    for scale, offset, exact in (quant_rule(lo, hi, bool(np.all(v == np.floor(v)))),
+                                 quant_rule((lo + hi) / 2, hi, False)):
+        quant = Quant(scale, offset, exact, None, lo, hi)
+        for window in (np.s_[:, :], np.s_[1:-1, 2:-1], np.s_[:, ::2]):
+            want = quant.quantised(v[window])
+            assert quant.quantised_model(v32[window])[1] == want[1]
+            for n in THREADS:
+                native.set_threads(n)
+                got = quant.quantised(v32[window])
+                assert np.array_equal(got[0], want[0]) and got[1] == want[1]
+    for mesh in meshes(name, v):
+        for spacing in ((1.0, 1.0), (30.0, 20.0)):
+            ref = mesh_errors(mesh, v, rms=False, spacing=spacing)
+            for n in THREADS:
+                native.set_threads(n)
+                got = mesh_errors(mesh, v32, rms=False, spacing=spacing)
+                assert np.array_equal(got.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
+                assert np.array_equal(got.per_triangle_normal, ref.per_triangle_normal, equal_nan=True)
+            slow = mesh_errors(mesh, v32, rms=False, spacing=spacing, native=False)  # numpy on the copy
+            assert np.array_equal(slow.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
+
+
 def test_quantise_refuses_what_the_model_refuses():
     for bad in (np.array([[1.0, np.nan], [0.0, 2.0]]), np.array([[1.0, np.inf], [0.0, 2.0]])):
         assert native.quantise(bad) == "non-finite"

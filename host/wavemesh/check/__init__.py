@@ -506,7 +506,11 @@ def mesh_errors(
     wm_host_tri_max when it loads (on every core; equal bit for bit) unless ``native`` is False.
     """
     W, H = int(mesh.width), int(mesh.height)
-    h = np.asarray(heights, dtype=np.float64)
+    h = np.asarray(heights)
+    # float32 heights (a tiled job's float32 input, held as it is) as they are for the C maxima, which widen
+    # each to its double; every other measure here on float64
+    fast_h = h if h.dtype == np.float32 and not rms and native else None
+    h = h if fast_h is not None else h.astype(np.float64, copy=False)
     if h.shape != (H, W):
         raise InputError(
             f"the height field has shape {h.shape} but the mesh is for a {W} x {H} grid (shape ({H}, {W}))"
@@ -523,7 +527,7 @@ def mesh_errors(
     if z is None:
         if ((X < 0) | (X >= W) | (Y < 0) | (Y >= H)).any():
             raise MeshInvalid("the mesh has vertices outside the grid, so they have no height")
-        zv = h[Y, X]
+        zv = h[Y, X].astype(np.float64, copy=False)
     else:
         zv = np.asarray(z, dtype=np.float64).reshape(-1)
         if len(zv) != V:
@@ -539,6 +543,8 @@ def mesh_errors(
         fast = lib.tri_max(h, X, Y, zv, tris, spacing)
         if fast is not None:
             (per_v, nfac), t_s = fast, T
+        elif fast_h is not None:
+            h = h.astype(np.float64)
     if per_v is None:
         i0, i1, i2 = tris[:, 0], tris[:, 1], tris[:, 2]
         x0, y0, x1, y1, x2, y2 = X[i0], Y[i0], X[i1], Y[i1], X[i2], Y[i2]

@@ -193,6 +193,7 @@ def _declare(lib: ctypes.CDLL) -> None:
     i32, u32, sz, vp = ctypes.c_int32, ctypes.c_uint32, ctypes.c_size_t, ctypes.c_void_p
     pi32, pi64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_int64)
     i64, pf64, pu16 = ctypes.c_int64, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_uint16)
+    pf32 = ctypes.POINTER(ctypes.c_float)
     sig = {
         "wm_abi_size": (sz, [ctypes.c_int]),
         "wm_strerror": (ctypes.c_char_p, [ctypes.c_int]),
@@ -223,6 +224,10 @@ def _declare(lib: ctypes.CDLL) -> None:
                                                     pu16]),
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
                                            ctypes.c_double, ctypes.c_double, i32]),
+        "wm_host_quantise_with32": (ctypes.c_double, [pf32, i64, ctypes.c_double, ctypes.c_double, i32, i32,
+                                                      pu16]),
+        "wm_host_tri_max32": (ctypes.c_int, [pf32, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
+                                             ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
         "wm_host_scan": (i32, [i32]),
@@ -731,11 +736,18 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float,
 
 def quantise_with(values: np.ndarray, scale: float, offset: float, exact: bool
                   ) -> tuple[np.ndarray, float] | None:
-    """wm_host_quantise_with on finite float64 heights (a tile's window) by a scale and offset found
-    before: (samples, their largest quantisation error), or None without the library."""
+    """wm_host_quantise_with on finite heights (a tile's window) by a scale and offset found before:
+    (samples, their largest quantisation error), or None without the library.  float32 heights are read
+    as they are (wm_host_quantise_with32: the same as of their float64 copy), others as float64."""
     lib = host_lib()
     if lib is None:
         return None
+    if np.asarray(values).dtype == np.float32:
+        v = np.ascontiguousarray(values)
+        samples = np.empty(v.shape, dtype=np.uint16)
+        err = lib.wm_host_quantise_with32(_ptr(v, ctypes.c_float), v.size, float(offset), float(scale),
+                                          int(bool(exact)), threads(), _ptr(samples, ctypes.c_uint16))
+        return samples, float(err)
     v = np.ascontiguousarray(values, dtype=np.float64)
     samples = np.empty(v.shape, dtype=np.uint16)
     err = lib.wm_host_quantise_with(_ptr(v, ctypes.c_double), v.size, float(offset), float(scale),
@@ -758,21 +770,24 @@ def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray, t
             spacing: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray | None] | None:
     """Per triangle, the largest |height - plane| over the samples in the closed triangle (-inf: none),
     as check.mesh_errors measures it (wm_host_tri_max), and with ``spacing`` (the cell size) the normal
-    factors sqrt(1 + a^2 + b^2) it computes (else None); None without the library."""
+    factors sqrt(1 + a^2 + b^2) it computes (else None); None without the library.  float32 heights are
+    read as they are (wm_host_tri_max32: the same maxima as of their float64 copy), others as float64."""
     lib = host_lib()
     if lib is None:
         return None
-    h = np.ascontiguousarray(heights, dtype=np.float64)
+    single = np.asarray(heights).dtype == np.float32
+    h = np.ascontiguousarray(heights, dtype=np.float32 if single else np.float64)
     x, y = np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(y, dtype=np.int64)
     zv = np.ascontiguousarray(zv, dtype=np.float64)
     tris = np.ascontiguousarray(tris, dtype=np.int64)
     out = np.empty(len(tris), dtype=np.float64)
     nfac = None if spacing is None else np.empty(len(tris), dtype=np.float64)
     sx, sy = (1.0, 1.0) if spacing is None else (float(spacing[0]), float(spacing[1]))
-    lib.wm_host_tri_max(_ptr(h, ctypes.c_double), h.shape[1], h.shape[0], _ptr(x, ctypes.c_int64),
-                        _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64),
-                        len(tris), _ptr(out, ctypes.c_double),
-                        None if nfac is None else _ptr(nfac, ctypes.c_double), sx, sy, threads())
+    fn, ptr = (lib.wm_host_tri_max32, _ptr(h, ctypes.c_float)) if single else \
+        (lib.wm_host_tri_max, _ptr(h, ctypes.c_double))
+    fn(ptr, h.shape[1], h.shape[0], _ptr(x, ctypes.c_int64), _ptr(y, ctypes.c_int64),
+       _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64), len(tris), _ptr(out, ctypes.c_double),
+       None if nfac is None else _ptr(nfac, ctypes.c_double), sx, sy, threads())
     return out, nfac
 
 
