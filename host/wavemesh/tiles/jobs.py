@@ -65,7 +65,7 @@ class TileResult:
     name: str
     xy: np.ndarray  # (V, 2) int64, whole-grid positions
     tris: np.ndarray  # (T, 3) int64 into xy
-    z: np.ndarray  # (V,) float64 heights
+    z: np.ndarray  # (V,) float64 heights (of a float32 tile too)
     report: dict
     device: str | None = None  # the port that made it (stream)
     # E_max (vertical, normal) of its triangles that touch none of its shared sides (_checked): thin_tile
@@ -73,9 +73,10 @@ class TileResult:
     inner: tuple[float, float] | None = None
 
 
-# a process's tiles kept by tile_heightfield (1025^2: 10.5 MiB each; a tile's steps wait for the next two rows
-# of tiles: 8192^2 in tiles of 1025, one worker, reads each tile once with 320 MiB, 136 reads with 256, 470
-# without), none above a sixth of it (4097^2: 168 MiB, read again)
+# a process's tiles kept by tile_heightfield (1025^2: 10.5 MiB each, 6.3 with float32 heights; a tile's
+# steps wait for the next two rows of tiles: 8192^2 in tiles of 1025, one worker, reads each tile once
+# with 320 MiB, 136 reads with 256, 470 without, as float64), none above a sixth of it (4097^2: 168 MiB,
+# read again)
 TILE_CACHE_BYTES = 320 << 20
 _TILE_CACHE: OrderedDict = OrderedDict()  # key -> HeightField, the last used last
 _TILE_LOCK = threading.Lock()  # stream's threads read tiles at once
@@ -285,7 +286,7 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
                        "border_vertices": {s: len(v) for s, v in sides.items()}, "seconds": seconds,
                        "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical}
     return TileResult(index, t.name, final.xy + np.array([t.x, t.y], dtype=np.int64),
-                      final.tris, final.z(hf.values), report, report.get("device"), inner)
+                      final.tris, final.z(hf.values).astype(np.float64), report, report.get("device"), inner)
 
 
 def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str], keep: bool = True

@@ -54,8 +54,10 @@ class Source:
     spacing: tuple[float, float] | None = None  # --spacing, when given
 
     def read(self, x: int, y: int, w: int, h: int) -> np.ndarray:
-        """Heights (float64) of the w x h window whose top-left sample is (x, y), non-finite ones filled
-        by --fill VALUE (left as they are without it)."""
+        """Heights of the w x h window whose top-left sample is (x, y), non-finite ones filled by --fill
+        VALUE (left as they are without it): float64, or float32 where a .npy input is float32 and the
+        fill (if any) a float32 (half the memory a tile holds; its every use widens each to the same
+        double: the C quantisation and error measure, check.mesh_errors, TileResult.z)."""
         s = self.step
         fx, fy = self.x0 + s * x, self.y0 + s * y
         cols = slice(fx, fx + s * (w - 1) + 1, s)
@@ -63,8 +65,11 @@ class Source:
         if self.kind == "array":
             v = np.array(self.array[rows, cols], dtype=np.float64)
         elif self.kind == "npy":
-            with np.errstate(invalid="ignore"):
-                v = np.array(_npy_map(self.path)[rows, cols], dtype=np.float64)
+            mm = _npy_map(self.path)
+            with np.errstate(invalid="ignore", over="ignore"):
+                single = mm.dtype == np.float32 and (self.fill is None
+                                                     or float(np.float32(self.fill)) == self.fill)
+                v = np.array(mm[rows, cols], dtype=np.float32 if single else np.float64)
         else:
             v = read_raster_window(self.path, fx, fy, s * (w - 1) + 1, s * (h - 1) + 1)[::s, ::s]
         if self.fill is not None:
@@ -166,7 +171,7 @@ class Quant:
         err = None if self.exact else 0.0
         step = max(1, BLOCK_SAMPLES // max(1, v.shape[1]))
         for b in range(0, v.shape[0], step):
-            block, s = v[b : b + step], out[b : b + step]
+            block, s = v[b : b + step].astype(np.float64, copy=False), out[b : b + step]
             s[...] = to_samples(block, self.scale, self.offset, self.exact)
             if err is not None:
                 recon = self.offset + self.scale * s.astype(np.float64)
