@@ -452,9 +452,11 @@ static WM_ALWAYS_INLINE int fan_refused(const uint32_t *bad, uint32_t skip, int3
 #endif
 }
 
+#if WM_CHECK
 /* The fan from ring position a's triangles as ring vertices (n - 2 of them), as fan_plan and
  * wm_ring_plan make them: (p_a, p_a+k, p_a+k+1) for k = 1 .. n - 2 (first_fit's scans take the fan's
- * corners from v's differences; the removal takes them as vertices). */
+ * corners from v's differences; the removal makes them from the ring and its apex, and the checked
+ * builds assert they are these). */
 static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
 {
     int32_t b = a + 1 == n ? 0 : a + 1;
@@ -464,11 +466,12 @@ static void fan_tris(const int32_t *ring, int32_t n, int32_t a, int32_t *tris)
         b = c;
     }
 }
+#endif
 
 /* One evaluation of a vertex v (first_fit) and the removal that follows it (remove_planned), kept by
  * wm_decimate for the whole decimation: v's fan and ring (wm_vertex_fan) and, after a call that found a
  * plan, its triangles as wm_ring_plan gives them for its apex (a fan's are left to its removal:
- * fan_tris), which the removal, at once, takes instead of working them out again; and the fans' terms
+ * wm_vertex_remove_fan makes them from the ring and the apex), which the removal, at once, takes instead of working them out again; and the fans' terms
  * (the job's set once, v's each call). */
 struct evaluation {
     int32_t nr, nt, k;
@@ -587,7 +590,7 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
 #endif
         best = worst;
         *apex = a;
-        vs->nr = n, vs->nt = nt; /* a fan's triangles: fan_tris, when it goes */
+        vs->nr = n, vs->nt = nt; /* a fan's triangles: its removal's, from the apex */
         break;
     }
     return best;
@@ -603,9 +606,9 @@ static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t b
     wm_mesh *me = &r->mesh;
     int32_t touched[WM_MAX_RING], k, nr = vs->nr, nt = vs->nt, *ring = vs->ring, *tris = vs->tris;
     int rc;
-    if (apex >= 0) fan_tris(ring, nr, apex, tris);
 #if WM_CHECK
     {
+        if (apex >= 0) fan_tris(ring, nr, apex, tris); /* what wm_vertex_remove_fan makes of a fan, asserted */
         int32_t ring2[WM_MAX_RING], tris2[3 * WM_MAX_RING], nt2 = 0;
         WM_ASSERT(wm_vertex_ring(me, v, ring2) == nr);
         WM_ASSERT(wm_ring_plan(me, ring2, nr, apex, tris2, &nt2) == WM_OK && nt2 == nt);
@@ -613,7 +616,8 @@ static int32_t remove_planned(wm_refiner *r, int32_t v, int32_t apex, uint32_t b
         for (int32_t i = 0; i < 3 * nt; i++) WM_ASSERT(tris2[i] == tris[i]);
     }
 #endif
-    rc = wm_vertex_remove_fan(me, v, vs->e, vs->k, ring, nr, tris, nt, touched, &k);
+    rc = wm_vertex_remove_fan(me, v, vs->e, vs->k, ring, nr, apex, WM_CHECK || apex < 0 ? tris : NULL, nt, touched,
+                              &k);
     WM_ASSERT(rc == WM_OK);
     if (rc != WM_OK) return rc;
     for (int32_t i = 0; i < k; i++) {

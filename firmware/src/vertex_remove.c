@@ -407,11 +407,12 @@ int wm_vertex_remove(wm_mesh *m, int32_t v, const int32_t *tris, int32_t n_tris,
     int32_t e[WM_MAX_RING], ring[WM_MAX_RING], k, n;
     n = fan(m, v, e, &k, ring);
     if (n < 0) return (int)n;
-    return wm_vertex_remove_fan(m, v, e, k, ring, n, tris, n_tris, touched, n_touched);
+    return wm_vertex_remove_fan(m, v, e, k, ring, n, -1, tris, n_tris, touched, n_touched);
 }
 
 int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, const int32_t *ring, int32_t n,
-                         const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING], int32_t *n_touched)
+                         int32_t apex, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
+                         int32_t *n_touched)
 {
     int32_t slot[WM_MAX_RING], out[WM_MAX_RING];
 #if WM_CHECK
@@ -440,6 +441,33 @@ int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, con
     m->vh[v] = m->vert_free;
     m->vert_free = v;
     m->n_vert--;
+    if (apex >= 0) {
+        /* The fan from ring position apex (a): triangle j is (p_a, p_b, p_b+1) with b = a + 1 + j, its
+         * corners' ring positions known, so no search: its edge a -> b is the ring's edge from a (j = 0)
+         * or the twin of the triangle before's edge b -> a, its edge b -> b+1 the ring's edge from b, and
+         * its edge b+1 -> a the ring's edge into a for the last (else the next's twin, linked there).  The
+         * same triangles in the same slots and the same links as the search below (most removals of the
+         * decimation are fans: the search walked a step a corner past the apex, then the pending list). */
+        int32_t pa = ring[apex], b = apex + 1 == n ? 0 : apex + 1, prev = -1;
+        for (int32_t j = 0; j < n_tris; j++) {
+            int32_t c = b + 1 == n ? 0 : b + 1, h = 3 * slot[j];
+            WM_ASSERT(tris == NULL ||
+                      (tris[3 * j] == pa && tris[3 * j + 1] == ring[b] && tris[3 * j + 2] == ring[c]));
+            wm_tri_set(m, slot[j], pa, ring[b], ring[c]);
+            wm_link(m, h, j == 0 ? (apex < k ? out[apex] : -1) : prev);
+            wm_link(m, h + 1, b < k ? out[b] : -1);
+            if (j == n_tris - 1) wm_link(m, h + 2, c < k ? out[c] : -1);
+            prev = h + 2;
+            b = c;
+        }
+        for (int32_t j = 0; j < n_tris; j++) {
+            wm_tri_claim(m, slot[j]);
+            if (touched) touched[j] = slot[j];
+        }
+        if (n_touched) *n_touched = n_tris;
+        WM_CHECK_MESH(m);
+        return WM_OK;
+    }
     for (int32_t j = 0; j < n_tris; j++) wm_tri_set(m, slot[j], tris[3 * j], tris[3 * j + 1], tris[3 * j + 2]);
     /* Link every new half-edge a -> b by the ring positions of its ends: across ring edge p_i -> p_i+1
      * to the outside, on the new border edge p(n-1) -> p0 (a side of the rectangle) to -1, else to

@@ -881,9 +881,12 @@ static inline int wm_tri_bad(const uint32_t *bad, int32_t n, int32_t i, int32_t 
  * for an interior vertex, n - 1 on a side), for wm_vertex_remove_fan. */
 int32_t wm_vertex_fan(const wm_mesh *m, int32_t v, int32_t e[WM_MAX_RING], int32_t *k, int32_t ring[WM_MAX_RING]);
 /* wm_vertex_remove with v's fan (e, k) and ring (n) as wm_vertex_fan gave them on this mesh as it is,
- * without walking the fan again (the decimation's removals: first_fit walked it for its plan). */
+ * without walking the fan again (the decimation's removals: first_fit walked it for its plan).  apex >= 0:
+ * the plan is the fan from that ring position (wm_ring_plan's for it), made here from the ring (tris may
+ * then be NULL; when given, checked builds assert it is that fan); -1: tris. */
 int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, const int32_t *ring, int32_t n,
-                         const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING], int32_t *n_touched);
+                         int32_t apex, const int32_t *tris, int32_t n_tris, int32_t touched[WM_MAX_RING],
+                         int32_t *n_touched);
 int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t apex,
                        int32_t tris[3 * WM_MAX_RING], int32_t *n_tris, const struct wm_plan_probe *pr,
                        int32_t *big);
