@@ -146,10 +146,10 @@ int wm_room(wm_refiner *r, int32_t added)
 /* The error bound: a max-heap of the triangles with E(T) > zeta, by E(T) and then by slot (a total
  * order: any heap pops them in the same order).  Each entry holds its slot's key (wm_hent: E(T), equal
  * to err[t] at every step, since every E(T) the error bound measures is filed at once), so a sift reads
- * the entries alone, both children in one line; the item filed comes with its key (just measured: on
- * the board the load of err[] after its store would wait for the SDRAM, the data cache not allocating
- * on a write).  pos[] is exact in the error bound (-1 for every slot out of the heap, error_bound), so
- * pos[t] alone says whether t is in the heap. */
+ * the entries alone, both children in 16 bytes (wm_internal.h); the item filed comes with its key
+ * (just measured: on the board the load of err[] after its store would wait for the SDRAM, the data
+ * cache not allocating on a write).  pos[] is exact in the error bound (-1 for every slot out of the
+ * heap, error_bound), so pos[t] alone says whether t is in the heap. */
 
 /* The heap's operations (wm_internal.h), the largest key first. */
 static int heap_up(wm_refiner *r, int32_t i, int32_t t, uint32_t e)

@@ -256,8 +256,10 @@ static WM_ALWAYS_INLINE void wm_place_at(const wm_field *f, const uint16_t *at, 
 /* The error bound's heap of triangle slots (mesh_state.c), the largest key first: ties go to the lower
  * slot, so the order is total and any heap pops the same sequence.  An entry holds its slot with the
  * slot's key (E(T)), equal to err[] at every step, so a sift compares entries it has loaded, both
- * children in one line, instead of reading the keys' array at every slot it passes (a random line each:
- * on the board, err[] of a large mesh is far beyond the data cache).  Each slot's place is in pos[].
+ * children in 16 bytes (one cache line when the entries start at 8 mod 16, else at every other node
+ * two: docs/refiner.md, "Tried and not kept"), instead of reading the keys' array at every slot it
+ * passes (a random line each: on the board, err[] of a large mesh is far beyond the data cache).  Each
+ * slot's place is in pos[].
  * The entries live in list[]'s storage (sized for tri_cap of them: refine.c), which the
  * other phases use as wm_index words; WM_MAY_ALIAS tells the compiler so. */
 typedef struct WM_MAY_ALIAS wm_hent {
