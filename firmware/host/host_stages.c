@@ -165,7 +165,8 @@ static CLONES void scan_part(void *ctx, int32_t part, int32_t parts)
 
 struct apply {
     const double *v;
-    const float *v32; /* the heights as float32 instead (wm_host_quantise_with32; v then NULL) */
+    const float *v32; /* the heights as float32 instead (wm_host_quantise_with32; v then NULL), */
+    int64_t width, pitch; /* rows of width heights, pitch floats apart (samples: rows of width) */
     uint16_t *samples;
     int64_t n;
     double offset, scale;
@@ -184,20 +185,20 @@ struct apply {
 /* The three modes' loops over heights read as V(i): a double, or a float widened to the same double */
 #define APPLY_LOOPS                                                                                   \
     if (a->mode == 0) {                                                                             \
-        for (int64_t i = lo; i < hi; i++) {                                                         \
+        for (int64_t i = i0; i < i1; i++) {                                                         \
             uint16_t s = (uint16_t)(int32_t)(V(i) - offset);                                        \
             int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                         \
             samples[i] = s;                                                                         \
             err = e > err ? e : err;                                                                \
         }                                                                                           \
     } else if (a->mode == 1) {                                                                      \
-        for (int64_t i = lo; i < hi; i++) {                                                         \
+        for (int64_t i = i0; i < i1; i++) {                                                         \
             int64_t e = bits_of(fabs(V(i) - (offset + scale * 0.0)));                               \
             samples[i] = 0;                                                                         \
             err = e > err ? e : err;                                                                \
         }                                                                                           \
     } else {                                                                                        \
-        for (int64_t i = lo; i < hi; i++) {                                                         \
+        for (int64_t i = i0; i < i1; i++) {                                                         \
             int64_t c = bits_of((V(i) - offset) / scale); /* clipped as bits (see clip_bits) */     \
             c = c < 0 ? 0 : c;                                                                      \
             c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;                                          \
@@ -216,12 +217,18 @@ static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
     uint16_t *samples = a->samples;
     part_range(a->n, part, parts, &lo, &hi);
     if (a->v32 != NULL) {
-        const float *v32 = a->v32;
+        int64_t w = a->width, gap = a->pitch - a->width;
+        for (int64_t i0 = lo, i1; i0 < hi; i0 = i1) { /* row by row: height i of row r at v32[i + r gap] */
+            int64_t r = i0 / w;
+            const float *v32 = a->v32 + r * gap;
+            i1 = (r + 1) * w < hi ? (r + 1) * w : hi;
 #define V(i) ((double)v32[i])
-        APPLY_LOOPS
+            APPLY_LOOPS
 #undef V
+        }
     } else {
         const double *v = a->v;
+        int64_t i0 = lo, i1 = hi;
 #define V(i) (v[i])
         APPLY_LOOPS
 #undef V
@@ -263,6 +270,7 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
     }
     a->v = v;
     a->v32 = NULL;
+    a->width = a->pitch = n;
     a->samples = samples;
     a->n = n;
     if (span <= SAMPLE_MAX && integer) {
@@ -291,14 +299,16 @@ done:
     return code;
 }
 
-static double quantise_with(const double *v, const float *v32, int64_t n, double offset, double scale,
-                            int32_t exact, int32_t threads, uint16_t *samples)
+static double quantise_with(const double *v, const float *v32, int64_t n, int64_t width, int64_t pitch,
+                            double offset, double scale, int32_t exact, int32_t threads, uint16_t *samples)
 {
     struct apply a;
     int32_t parts = parts_for(threads, n);
     double err = 0.0;
     a.v = v;
     a.v32 = v32;
+    a.width = width;
+    a.pitch = pitch;
     a.samples = samples;
     a.n = n;
     a.offset = offset;
@@ -313,13 +323,13 @@ static double quantise_with(const double *v, const float *v32, int64_t n, double
 double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
                              int32_t threads, uint16_t *samples)
 {
-    return quantise_with(v, NULL, n, offset, scale, exact, threads, samples);
+    return quantise_with(v, NULL, n, n, n, offset, scale, exact, threads, samples);
 }
 
-double wm_host_quantise_with32(const float *v, int64_t n, double offset, double scale, int32_t exact,
-                               int32_t threads, uint16_t *samples)
+double wm_host_quantise_with32(const float *v, int64_t rows, int64_t width, int64_t pitch, double offset,
+                               double scale, int32_t exact, int32_t threads, uint16_t *samples)
 {
-    return quantise_with(NULL, v, n, offset, scale, exact, threads, samples);
+    return quantise_with(NULL, v, rows * width, width, pitch, offset, scale, exact, threads, samples);
 }
 
 struct qerr {
@@ -479,7 +489,7 @@ static int local_order(const int64_t *x, const int64_t *y, int64_t stride, const
 struct trimax {
     const double *h;
     const float *h32; /* the heights as float32 instead (wm_host_tri_max32; h then NULL) */
-    int64_t width, height;
+    int64_t width, height, pitch; /* row y's heights from h[y pitch] (pitch: width, but for h32) */
     const int64_t *x, *y, *tris; /* vertex i at (x[i * stride], y[i * stride]) */
     int64_t stride;
     const double *zv;
@@ -538,7 +548,7 @@ static inline __attribute__((always_inline)) double tri_max(const struct trimax 
             if (a[k] == 0 && num[k] < 0) empty = 1;
         }
         if (empty || xr < xl) continue;
-        int64_t at = yy * m->width + xl; /* the row's first sample */
+        int64_t at = yy * m->pitch + xl; /* the row's first sample */
         int64_t e1l = a[1] * xl + num[1], e2l = a[2] * xl + num[2];
         int64_t e1r = a[1] * xr + num[1], e2r = a[2] * xr + num[2];
         if (ABS(e1l) < EXACT && ABS(e2l) < EXACT && ABS(e1r) < EXACT && ABS(e2r) < EXACT) {
@@ -595,15 +605,16 @@ static CLONES void trimax_part(void *ctx, int32_t part, int32_t parts)
     }
 }
 
-static int tri_max_all(const double *h, const float *h32, int32_t width, int32_t height, const int64_t *x,
-                       const int64_t *y, const double *zv, const int64_t *tris, int64_t t, double *per_v,
-                       double *nfac, double sx, double sy, int32_t threads)
+static int tri_max_all(const double *h, const float *h32, int32_t width, int32_t height, int64_t pitch,
+                       const int64_t *x, const int64_t *y, const double *zv, const int64_t *tris, int64_t t,
+                       double *per_v, double *nfac, double sx, double sy, int32_t threads)
 {
     struct trimax m;
     int32_t parts = parts_for(threads, (int64_t)width * height); /* the triangles cover the grid once */
     if ((int64_t)parts > (t + TRI_CHUNK - 1) / TRI_CHUNK) parts = (int32_t)((t + TRI_CHUNK - 1) / TRI_CHUNK);
     m.h = h;
     m.h32 = h32;
+    m.pitch = pitch;
     m.width = width;
     m.height = height;
     struct local l;
@@ -631,14 +642,14 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
                     const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
                     double sy, int32_t threads)
 {
-    return tri_max_all(h, NULL, width, height, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
+    return tri_max_all(h, NULL, width, height, width, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
 }
 
-int wm_host_tri_max32(const float *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
-                      const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
-                      double sy, int32_t threads)
+int wm_host_tri_max32(const float *h, int32_t width, int32_t height, int64_t pitch, const int64_t *x,
+                      const int64_t *y, const double *zv, const int64_t *tris, int64_t t, double *per_v,
+                      double *nfac, double sx, double sy, int32_t threads)
 {
-    return tri_max_all(NULL, h, width, height, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
+    return tri_max_all(NULL, h, width, height, pitch, x, y, zv, tris, t, per_v, nfac, sx, sy, threads);
 }
 
 /* ---------------------------------------------------------------------------------------------- */

@@ -47,10 +47,11 @@ int wm_host_quantise(const double *v, int64_t n, int32_t threads, uint16_t *samp
  * |v - (offset + scale * sample)| (0 for none). */
 double wm_host_quantise_with(const double *v, int64_t n, double offset, double scale, int32_t exact,
                              int32_t threads, uint16_t *samples);
-/* The same of n float32 heights (each widened to its double: the same samples and error as of v cast
- * to float64), a tiled job's float32 input held as it is (wavemesh.tiles.source.Source.read). */
-double wm_host_quantise_with32(const float *v, int64_t n, double offset, double scale, int32_t exact,
-                               int32_t threads, uint16_t *samples);
+/* The same of float32 heights (each widened to its double: the same samples and error as of v cast
+ * to float64), rows x width of them, row r's from v[r pitch] (a window of the input's memory map: a
+ * tiled job's float32 input read in place, wavemesh.tiles.source.Source.read); samples rows x width. */
+double wm_host_quantise_with32(const float *v, int64_t rows, int64_t width, int64_t pitch, double offset,
+                               double scale, int32_t exact, int32_t threads, uint16_t *samples);
 
 /* The largest |v - (offset + scale * s)| over n heights and their samples (0 for none). */
 double wm_host_quant_error(const double *v, const uint16_t *s, int64_t n, double offset, double scale,
@@ -67,10 +68,10 @@ int wm_host_tri_max(const double *h, int32_t width, int32_t height, const int64_
                     const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
                     double sy, int32_t threads);
 /* The same on a float32 height field h (each sample widened to its double: the same maxima as of h cast
- * to float64). */
-int wm_host_tri_max32(const float *h, int32_t width, int32_t height, const int64_t *x, const int64_t *y,
-                      const double *zv, const int64_t *tris, int64_t t, double *per_v, double *nfac, double sx,
-                      double sy, int32_t threads);
+ * to float64), row y's samples from h[y pitch] (pitch >= width: a window of a larger grid). */
+int wm_host_tri_max32(const float *h, int32_t width, int32_t height, int64_t pitch, const int64_t *x,
+                      const int64_t *y, const double *zv, const int64_t *tris, int64_t t, double *per_v,
+                      double *nfac, double sx, double sy, int32_t threads);
 
 /* check.py's check_mesh when the mesh is proper: 1 when every one of its checks passes (vertices in the
  * W x H rectangle, distinct and used; indices in range; every triangle counter-clockwise; the doubled

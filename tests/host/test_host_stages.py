@@ -116,33 +116,38 @@ def test_quantise_with_a_given_scale_equals_the_model(name):
 
 @pytest.mark.parametrize("name", ["floats", "halves", "big", "wide integers", "jacksboro", "topobathy"])
 def test_float32_heights_read_as_their_float64_copy(name):
-    """A tiled job's float32 input is held as it is (tiles.source.Source.read): the quantisation by a
-    given scale (wm_host_quantise_with32) and the error measure (wm_host_tri_max32) on float32 heights are
-    those of their float64 copy, bit for bit, whatever the threads."""
+    """A tiled job's float32 input is read in place (tiles.source.Source.read): the quantisation by a
+    given scale (wm_host_quantise_with32) and the error measure (wm_host_tri_max32) on float32 heights, a
+    grid or a window of a wider one, are those of their float64 copy, bit for bit, whatever the threads."""
     from wavemesh.io.heightfield import quant_rule
     from wavemesh.tiles.source import Quant
 
     v32 = ALL[name].astype(np.float32)
     v = v32.astype(np.float64)
+    # the grid as a window of a wider one, read in place (rows a pitch apart, as a memory map's window)
+    inside = np.pad(v32, ((2, 3), (5, 7)), constant_values=np.nan)[2:-3, 5:-7]
+    assert not inside.flags.c_contiguous and native._rows(inside)[0] is inside
     lo, hi = float(np.min(v)), float(np.max(v))
     for scale, offset, exact in (quant_rule(lo, hi, bool(np.all(v == np.floor(v)))),
                                  quant_rule((lo + hi) / 2, hi, False)):
         quant = Quant(scale, offset, exact, None, lo, hi)
-        for window in (np.s_[:, :], np.s_[1:-1, 2:-1], np.s_[:, ::2]):
+        for window in (np.s_[:, :], np.s_[1:-1, 2:-1], np.s_[:, ::2], np.s_[3:, 1:], np.s_[:1, :]):
             want = quant.quantised(v[window])
             assert quant.quantised_model(v32[window])[1] == want[1]
             for n in THREADS:
                 native.set_threads(n)
-                got = quant.quantised(v32[window])
-                assert np.array_equal(got[0], want[0]) and got[1] == want[1]
+                for h in (v32[window], inside[window]):
+                    got = quant.quantised(h)
+                    assert np.array_equal(got[0], want[0]) and got[1] == want[1]
     for mesh in meshes(name, v):
         for spacing in ((1.0, 1.0), (30.0, 20.0)):
             ref = mesh_errors(mesh, v, rms=False, spacing=spacing)
             for n in THREADS:
                 native.set_threads(n)
-                got = mesh_errors(mesh, v32, rms=False, spacing=spacing)
-                assert np.array_equal(got.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
-                assert np.array_equal(got.per_triangle_normal, ref.per_triangle_normal, equal_nan=True)
+                for h in (v32, inside):
+                    got = mesh_errors(mesh, h, rms=False, spacing=spacing)
+                    assert np.array_equal(got.per_triangle_vertical, ref.per_triangle_vertical, True)
+                    assert np.array_equal(got.per_triangle_normal, ref.per_triangle_normal, True)
             slow = mesh_errors(mesh, v32, rms=False, spacing=spacing, native=False)  # numpy on the copy
             assert np.array_equal(slow.per_triangle_vertical, ref.per_triangle_vertical, equal_nan=True)
 

@@ -224,9 +224,9 @@ def _declare(lib: ctypes.CDLL) -> None:
                                                     pu16]),
         "wm_host_tri_max": (ctypes.c_int, [pf64, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
                                            ctypes.c_double, ctypes.c_double, i32]),
-        "wm_host_quantise_with32": (ctypes.c_double, [pf32, i64, ctypes.c_double, ctypes.c_double, i32, i32,
-                                                      pu16]),
-        "wm_host_tri_max32": (ctypes.c_int, [pf32, i32, i32, pi64, pi64, pf64, pi64, i64, pf64, pf64,
+        "wm_host_quantise_with32": (ctypes.c_double, [pf32, i64, i64, i64, ctypes.c_double, ctypes.c_double,
+                                                      i32, i32, pu16]),
+        "wm_host_tri_max32": (ctypes.c_int, [pf32, i32, i32, i64, pi64, pi64, pf64, pi64, i64, pf64, pf64,
                                              ctypes.c_double, ctypes.c_double, i32]),
         "wm_host_check_mesh": (ctypes.c_int, [i64, i64, pi64, i64, pi64, i64, i32, pi64]),
         "wm_host_part_min": (i64, [i64]),
@@ -737,22 +737,33 @@ def quantise(values: np.ndarray) -> tuple[np.ndarray, float, float, bool, float,
 def quantise_with(values: np.ndarray, scale: float, offset: float, exact: bool
                   ) -> tuple[np.ndarray, float] | None:
     """wm_host_quantise_with on finite heights (a tile's window) by a scale and offset found before:
-    (samples, their largest quantisation error), or None without the library.  float32 heights are read
-    as they are (wm_host_quantise_with32: the same as of their float64 copy), others as float64."""
+    (samples, their largest quantisation error), or None without the library.  float32 heights (2-D) are
+    read as they are, a window of a larger grid in place (wm_host_quantise_with32: the same as of their
+    float64 copy), others as float64."""
     lib = host_lib()
     if lib is None:
         return None
-    if np.asarray(values).dtype == np.float32:
-        v = np.ascontiguousarray(values)
+    values = np.asarray(values)
+    if values.dtype == np.float32 and values.ndim == 2:
+        v, pitch = _rows(values)
         samples = np.empty(v.shape, dtype=np.uint16)
-        err = lib.wm_host_quantise_with32(_ptr(v, ctypes.c_float), v.size, float(offset), float(scale),
-                                          int(bool(exact)), threads(), _ptr(samples, ctypes.c_uint16))
+        err = lib.wm_host_quantise_with32(_ptr(v, ctypes.c_float), v.shape[0], v.shape[1], pitch,
+                                          float(offset), float(scale), int(bool(exact)), threads(),
+                                          _ptr(samples, ctypes.c_uint16))
         return samples, float(err)
     v = np.ascontiguousarray(values, dtype=np.float64)
     samples = np.empty(v.shape, dtype=np.uint16)
     err = lib.wm_host_quantise_with(_ptr(v, ctypes.c_double), v.size, float(offset), float(scale),
                                     int(bool(exact)), threads(), _ptr(samples, ctypes.c_uint16))
     return samples, float(err)
+
+
+def _rows(a: np.ndarray) -> tuple[np.ndarray, int]:
+    """A 2-D float32 array whose rows are each contiguous, a whole number of samples apart (a window of the
+    input's memory map, tiles.source.Source.read's) as it is, with that pitch; any other a contiguous copy."""
+    if a.size and a.strides[1] == 4 and a.strides[0] % 4 == 0 and a.strides[0] >= 4 * a.shape[1]:
+        return a, a.strides[0] // 4
+    return np.ascontiguousarray(a), a.shape[1]
 
 
 def quant_error(values: np.ndarray, samples: np.ndarray, offset: float, scale: float) -> float | None:
@@ -771,23 +782,26 @@ def tri_max(heights: np.ndarray, x: np.ndarray, y: np.ndarray, zv: np.ndarray, t
     """Per triangle, the largest |height - plane| over the samples in the closed triangle (-inf: none),
     as check.mesh_errors measures it (wm_host_tri_max), and with ``spacing`` (the cell size) the normal
     factors sqrt(1 + a^2 + b^2) it computes (else None); None without the library.  float32 heights are
-    read as they are (wm_host_tri_max32: the same maxima as of their float64 copy), others as float64."""
+    read as they are, a window of a larger grid in place (wm_host_tri_max32: the same maxima as of their
+    float64 copy), others as float64."""
     lib = host_lib()
     if lib is None:
         return None
-    single = np.asarray(heights).dtype == np.float32
-    h = np.ascontiguousarray(heights, dtype=np.float32 if single else np.float64)
+    heights = np.asarray(heights)
+    single = heights.dtype == np.float32 and heights.ndim == 2
+    h, pitch = _rows(heights) if single else (np.ascontiguousarray(heights, dtype=np.float64), 0)
     x, y = np.ascontiguousarray(x, dtype=np.int64), np.ascontiguousarray(y, dtype=np.int64)
     zv = np.ascontiguousarray(zv, dtype=np.float64)
     tris = np.ascontiguousarray(tris, dtype=np.int64)
     out = np.empty(len(tris), dtype=np.float64)
     nfac = None if spacing is None else np.empty(len(tris), dtype=np.float64)
     sx, sy = (1.0, 1.0) if spacing is None else (float(spacing[0]), float(spacing[1]))
-    fn, ptr = (lib.wm_host_tri_max32, _ptr(h, ctypes.c_float)) if single else \
-        (lib.wm_host_tri_max, _ptr(h, ctypes.c_double))
-    fn(ptr, h.shape[1], h.shape[0], _ptr(x, ctypes.c_int64), _ptr(y, ctypes.c_int64),
-       _ptr(zv, ctypes.c_double), _ptr(tris, ctypes.c_int64), len(tris), _ptr(out, ctypes.c_double),
-       None if nfac is None else _ptr(nfac, ctypes.c_double), sx, sy, threads())
+    grid = (_ptr(h, ctypes.c_float), h.shape[1], h.shape[0], pitch) if single else \
+        (_ptr(h, ctypes.c_double), h.shape[1], h.shape[0])
+    (lib.wm_host_tri_max32 if single else lib.wm_host_tri_max)(
+        *grid, _ptr(x, ctypes.c_int64), _ptr(y, ctypes.c_int64), _ptr(zv, ctypes.c_double),
+        _ptr(tris, ctypes.c_int64), len(tris), _ptr(out, ctypes.c_double),
+        None if nfac is None else _ptr(nfac, ctypes.c_double), sx, sy, threads())
     return out, nfac
 
 
