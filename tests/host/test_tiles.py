@@ -578,20 +578,22 @@ def test_float_input_within_zeta_on_the_input(tmp_path):
 
 @pytest.mark.parametrize("workers", [1, 2])
 def test_float32_input_held_as_float32(tmp_path, workers):
-    """A float32 .npy's tiles are held as float32 (half a float64 tile's memory) and mesh exactly as its
-    float64 copy: the same vertices, heights (float64) and triangles, lossy and lossless, with a --fill a
-    float32 holds; a fill it does not hold reads the tile as float64."""
+    """A float32 .npy's tiles are held as float32, without --fill in place (the file's memory map, no copy),
+    and mesh exactly as its float64 copy: the same vertices, heights (float64) and triangles, lossy and
+    lossless, with a --fill a float32 holds (a copy); a fill it does not hold reads the tile as float64."""
     v = (make("f3", 150) * 1000.0 + 0.123).astype(np.float32)
     v[7, 9] = np.nan
     params = api.MeshParams(refine=RefineParams(zeta=20.0, metric="vertical"))
-    for heights, fill in ((v, "-0.5"), (np.rint(v), "3"), (v, "0.1")):
+    for heights, fill in ((v, "-0.5"), (np.rint(v), "3"), (v, "0.1"), (np.nan_to_num(v), None)):
         got = []
         for dtype in (np.float32, np.float64):
             path = tmp_path / f"{np.dtype(dtype).name}.npy"
             np.save(path, heights.astype(dtype))
             src = tiles.open_source(str(path), fill=fill)
-            assert src.read(0, 0, 20, 10).dtype == (np.float32 if dtype == np.float32 and fill != "0.1"
-                                                    else np.float64)
+            window = src.read(3, 2, 20, 10)
+            assert window.dtype == (np.float32 if dtype == np.float32 and fill != "0.1" else np.float64)
+            assert window.flags.owndata == (dtype == np.float64 or fill is not None)
+            assert np.array_equal(window, heights.astype(dtype)[2:12, 3:23], equal_nan=True) or fill
             got.append(tiles.mesh_tiled(src, params, 64, workers=workers))
         (a, b) = got
         assert a.z.dtype == b.z.dtype == np.float64

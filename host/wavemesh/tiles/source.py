@@ -56,8 +56,9 @@ class Source:
     def read(self, x: int, y: int, w: int, h: int) -> np.ndarray:
         """Heights of the w x h window whose top-left sample is (x, y), non-finite ones filled by --fill
         VALUE (left as they are without it): float64, or float32 where a .npy input is float32 and the
-        fill (if any) a float32 (half the memory a tile holds; its every use widens each to the same
-        double: the C quantisation and error measure, check.mesh_errors, TileResult.z)."""
+        fill (if any) a float32, read-only and in place, the window of the file's memory map, without
+        --fill and --decimate (half a float64 copy's memory, or none; its every use widens each to the
+        same double: the C quantisation and error measure, check.mesh_errors, TileResult.z)."""
         s = self.step
         fx, fy = self.x0 + s * x, self.y0 + s * y
         cols = slice(fx, fx + s * (w - 1) + 1, s)
@@ -69,6 +70,8 @@ class Source:
             with np.errstate(invalid="ignore", over="ignore"):
                 single = mm.dtype == np.float32 and (self.fill is None
                                                      or float(np.float32(self.fill)) == self.fill)
+                if single and s == 1 and self.fill is None:
+                    return np.asarray(mm[rows, cols])  # in place (the file's pages this process maps)
                 v = np.array(mm[rows, cols], dtype=np.float32 if single else np.float64)
         else:
             v = read_raster_window(self.path, fx, fy, s * (w - 1) + 1, s * (h - 1) + 1)[::s, ::s]
