@@ -457,13 +457,26 @@ int wm_vertex_remove_fan(wm_mesh *m, int32_t v, const int32_t *e, int32_t k, con
             wm_link(m, h, j == 0 ? (apex < k ? out[apex] : -1) : prev);
             wm_link(m, h + 1, b < k ? out[b] : -1);
             if (j == n_tris - 1) wm_link(m, h + 2, c < k ? out[c] : -1);
+            /* what wm_tri_claim of each triangle in turn leaves in vh[] (the last half-edge claimed
+             * from each vertex), from the corners at hand, where the claims loaded the he[] just stored
+             * (on the board a store does not allocate: a refill): p_b's is triangle j's (triangle j - 1
+             * claimed it before), the apex's and the last corner's the last triangle's (below) */
+            m->vh[ring[b]] = h + 1;
+            if (touched) touched[j] = slot[j];
             prev = h + 2;
             b = c;
         }
-        for (int32_t j = 0; j < n_tris; j++) {
-            wm_tri_claim(m, slot[j]);
-            if (touched) touched[j] = slot[j];
-        }
+        m->vh[pa] = prev - 2, m->vh[ring[b]] = prev;
+#if WM_CHECK
+        for (int32_t j = 0; j < n_tris; j++)
+            for (int32_t c = 0; c < 3; c++) { /* the claims in turn leave these */
+                int32_t u = m->he[3 * slot[j] + c].v, last = -1;
+                for (int32_t j2 = 0; j2 < n_tris; j2++)
+                    for (int32_t c2 = 0; c2 < 3; c2++)
+                        if (m->he[3 * slot[j2] + c2].v == u) last = 3 * slot[j2] + c2;
+                WM_ASSERT(m->vh[u] == last);
+            }
+#endif
         if (n_touched) *n_touched = n_tris;
         WM_CHECK_MESH(m);
         return WM_OK;
