@@ -198,7 +198,12 @@ void wm_heap_update(wm_refiner *r, int32_t t, uint32_t e, int32_t i, int32_t *n)
     if (e <= r->params.zeta) {
         if (i >= 0) heap_remove(r, t, i, n);
     } else if (i >= 0) {                                      /* in place: (E(T), slot) orders totally */
-        if (i == 0 || !heap_up(r, i, t, e)) heap_down(r, i, *n, t, e); /* moved up: no child is before it */
+        /* the entry's own key says which way it moves: a smaller one cannot pass its parent (before the
+         * old key, so before the new), a larger one no child (after the old); an equal key stays (the
+         * same places as the sifts' both ways, without the parent's or the children's loads) */
+        uint32_t old = wm_heap_entries(r)[i].key;
+        if (e < old) heap_down(r, i, *n, t, e);
+        else if (e > old) heap_up(r, i, t, e);
         WM_ASSERT(heap_holds_at(r, r->pos[t], *n));
     } else {
         heap_up(r, (*n)++, t, e);

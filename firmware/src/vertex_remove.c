@@ -221,7 +221,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         if (big) *big = at;
         return WM_OK;
     }
-    /* The polygon as a list over the ring positions (nx, pv; cut ones not alive), walked in position
+    /* The polygon as a list over the ring positions (nx, pv; cut ones -1 in ok[]), walked in position
      * order, which is polygon order from the lowest position left.  A strictly convex ear with no other
      * polygon vertex strictly inside its circumcircle is valid too (every point of the closed triangle
      * but its corners lies strictly inside that circle), so the in-circle test comes first, and the
@@ -230,7 +230,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
      * decimation 0.4 % fewer instructions than taking it during the round).  An ear's status only improves as other vertices go (fewer points to
      * contain or to lie in its circle), so an ear once found valid stays valid and a Delaunay ear stays
      * Delaunay until a neighbour of it is cut: ok[] keeps that (0 unknown, 3 strictly convex, 1 valid,
-     * 2 Delaunay) and only unknown ears are tested again; an ear that is not Delaunay keeps the vertex
+     * 2 Delaunay, -1 cut) and only unknown ears are tested again; an ear that is not Delaunay keeps the vertex
      * in its circle (blk) and is tested again only when that vertex has been cut (the decimation plans
      * a hole for every vertex it looks at: this was half the cost).  The choice is the same as testing
      * every ear each round: the first Delaunay ear in polygon order, else the first valid one. */
@@ -238,7 +238,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
         int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
         int32_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
         int32_t cut[3 * WM_MAX_RING]; /* the cut ears as ring positions (tris[] once the plan is made) */
-        int8_t ok[WM_MAX_RING], alive[WM_MAX_RING];
+        int8_t ok[WM_MAX_RING]; /* a cut position's -1: no array of positions alive to set up */
         int32_t left = n, i0 = 0, i1, i2, ox, oy, small;
         uint32_t far = 0;
         /* bit i: the polygon's edge from position i is the ring's edge i -> i + 1 (no position between
@@ -265,7 +265,6 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             nx[i] = i + 1;
             pv[i] = i - 1;
             ok[i] = 0;
-            alive[i] = 1;
         }
         nx[n - 1] = 0, pv[0] = n - 1;
         small = far < 128;
@@ -288,7 +287,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             for (int32_t i = i0, c = 0; c < left; i = nx[i], c++) {
                 int32_t ia = pv[i], ic = nx[i], j;
                 int32_t ax, ay, bx, by, cx, cy;
-                WM_ASSERT(alive[i] && (c == 0 || i > pv[i]));
+                WM_ASSERT(ok[i] >= 0 && (c == 0 || i > pv[i]));
                 ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
                 if (ok[i] == 0) {
                     area[i] = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
@@ -298,7 +297,7 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
                 }
                 /* the other polygon vertices, after ic up to ia (either test's answer does not depend on
                  * the order) */
-                if (ok[i] != 2 && (blk[i] < 0 || !alive[blk[i]])) {
+                if (ok[i] != 2 && (blk[i] < 0 || ok[blk[i]] < 0)) {
                     if (WM_NARROW_DIV && small) {
                         struct circle32 q;
                         circle_of32(&q, ax, ay, bx, by, cx, cy);
@@ -372,12 +371,12 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             edge &= ~(1u << pv[best]);
             nx[pv[best]] = nx[best];
             pv[nx[best]] = pv[best];
-            alive[best] = 0;
+            ok[best] = -1;
             if (best == i0) i0 = nx[best]; /* the next position left, the lowest now */
             left--;
         }
         i1 = nx[i0], i2 = nx[i1];
-        WM_ASSERT(alive[i0] && i1 > i0 && i2 > i1);
+        WM_ASSERT(ok[i0] >= 0 && i1 > i0 && i2 > i1);
         if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, i1, i2)) return WM_ERR_REFUSED;
         /* the last triangle, from the polygon's coordinates; then the plan as ring vertices */
         d = (int32_t)wm_orient(px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]);
