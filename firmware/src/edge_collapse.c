@@ -133,27 +133,33 @@ int wm_edge_collapse_plan(const wm_mesh *m, int32_t e, int32_t x, int32_t y, int
     return rc == WM_OK ? wm_collapse_plan_at(m, &s, x, y, tris, n_tris) : rc;
 }
 
-/* Removes v by the fan from its neighbour p (a half-edge collapse of v into p). */
+/* Removes v by the fan from its neighbour p (a half-edge collapse of v into p), after the collapse's
+ * plan, whose triangles are this fan's (so strictly counter-clockwise): v's fan walked once, for its
+ * ring and the removal with the fan from p's ring position (wm_vertex_remove_fan with its apex), where
+ * wm_vertex_remove_plan and wm_vertex_remove walked it again each and planned the fan (checked builds
+ * plan it and compare). */
 static int fan_into(wm_mesh *m, int32_t v, int32_t p, int32_t *touched, int32_t *n_touched)
 {
-    int32_t ring[WM_MAX_RING], tris[3 * WM_MAX_RING], n, i, nt, rc;
-    n = wm_vertex_ring(m, v, ring);
+    int32_t e[WM_MAX_RING], ring[WM_MAX_RING], n, i, k;
+    const int32_t *plan = NULL;
+#if WM_CHECK
+    int32_t tris[3 * WM_MAX_RING], nt;
+#endif
+    n = wm_vertex_fan(m, v, e, &k, ring);
     if (n < 0) return (int)n;
     for (i = 0; i < n && ring[i] != p; i++) {}
     if (i == n) return WM_ERR_REFUSED;
-    rc = wm_vertex_remove_plan(m, v, i, tris, &nt);
-    if (rc != WM_OK) return rc;
-    return wm_vertex_remove(m, v, tris, nt, touched, n_touched);
+#if WM_CHECK
+    WM_ASSERT(wm_ring_plan(m, ring, n, i, tris, &nt) == WM_OK && nt == n - 2);
+    plan = tris;
+#endif
+    return wm_vertex_remove_fan(m, v, e, k, ring, n, i, plan, n - 2, touched, n_touched);
 }
 
-int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[6 * WM_MAX_RING],
-                     int32_t *n_touched, int32_t *vertex)
+int wm_edge_collapse_planned(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t nt,
+                             int32_t touched[6 * WM_MAX_RING], int32_t *n_touched, int32_t *vertex)
 {
-    int32_t tris[6 * WM_MAX_RING], nt, v1, v2, p = -1, na = 0, nb = 0, rc;
-    rc = wm_edge_collapse_plan(m, e, x, y, tris, &nt);
-    if (rc != WM_OK) return rc;
-    v1 = m->he[e].v;
-    v2 = wm_dest(m, e);
+    int32_t v1 = m->he[e].v, v2 = wm_dest(m, e), p = -1, na = 0, nb = 0, rc;
     if (m->vxy[v1].x == x && m->vxy[v1].y == y) {
         p = v1;
         rc = fan_into(m, v2, v1, touched, &na);
@@ -173,8 +179,17 @@ int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touche
     }
     /* Cannot fail after the plan: the fans are the planned triangles. */
     WM_ASSERT(rc == WM_OK && na + nb == nt);
+    (void)nt;
     if (n_touched) *n_touched = na + nb;
     if (vertex) *vertex = p;
     WM_CHECK_MESH(m);
     return rc == WM_OK ? WM_OK : WM_ERR_REFUSED;
+}
+
+int wm_edge_collapse(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t touched[6 * WM_MAX_RING],
+                     int32_t *n_touched, int32_t *vertex)
+{
+    int32_t tris[6 * WM_MAX_RING], nt;
+    int rc = wm_edge_collapse_plan(m, e, x, y, tris, &nt);
+    return rc == WM_OK ? wm_edge_collapse_planned(m, e, x, y, nt, touched, n_touched, vertex) : rc;
 }

@@ -552,7 +552,7 @@ static int try_remove(wm_refiner *r, int32_t v)
 static int try_collapse(wm_refiner *r, int32_t e)
 {
     wm_mesh *me = &r->mesh;
-    int32_t v = me->he[e].v, w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k, p;
+    int32_t v = me->he[e].v, w = wm_dest(me, e), tris[6 * WM_MAX_RING], touched[6 * WM_MAX_RING], nt, k;
     int32_t ws[6 * WM_MAX_RING];
     uint32_t es[6 * WM_MAX_RING];
     struct wm_collapse_stars stars;
@@ -575,7 +575,8 @@ static int try_collapse(wm_refiner *r, int32_t e)
         if (wm_collapse_plan_at(me, &stars, cx[i], cy[i], tris, &nt) != WM_OK) continue;
         WM_ASSERT(wm_edge_collapse_plan(me, e, cx[i], cy[i], ws, &k) == WM_OK && k == nt);
         if (!within(r, tris, nt, cx[i], cy[i], bound, es, ws, NULL, 0, flat)) continue;
-        if (wm_edge_collapse(me, e, cx[i], cy[i], touched, &k, &p) != WM_OK) return -1; /* capacity */
+        if (wm_edge_collapse_planned(me, e, cx[i], cy[i], nt, touched, &k, NULL) != WM_OK)
+            return -1; /* capacity */
         known(r, touched, k, tris, nt, cx[i], cy[i], es, ws);
         return 1;
     }

@@ -851,6 +851,12 @@ struct wm_collapse_stars {
 int wm_collapse_stars(const wm_mesh *m, int32_t e, struct wm_collapse_stars *s);
 int wm_collapse_plan_at(const wm_mesh *m, const struct wm_collapse_stars *s, int32_t x, int32_t y,
                         int32_t tris[6 * WM_MAX_RING], int32_t *n_tris);
+/* wm_edge_collapse carried out without planning it again: the collapse of e at (x, y) whose plan
+ * (wm_edge_collapse_plan, or wm_collapse_stars and wm_collapse_plan_at) was made on this mesh, WM_OK
+ * with nt triangles.  As wm_edge_collapse: WM_ERR_CAPACITY (nothing changed) when the split finds no
+ * free slot. */
+int wm_edge_collapse_planned(wm_mesh *m, int32_t e, int32_t x, int32_t y, int32_t nt,
+                             int32_t touched[6 * WM_MAX_RING], int32_t *n_touched, int32_t *vertex);
 /* R(v) (Q30, as wm_vertex_autocorr) without its eigen-decomposition; the triangle count or an error.
  * kept: NULL, or the normals' cache of kept_mask + 1 slots (a power of two). */
 int wm_vertex_r(const wm_mesh *m, const wm_field *f, const wm_params *p, int32_t v, int64_t r[6],
