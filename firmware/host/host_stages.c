@@ -183,30 +183,30 @@ struct apply {
  * below 0, a positive one's order as the numbers do (bits_of). */
 #define SAMPLE_MAX_BITS ((int64_t)0x40EFFFE000000000) /* bits_of(65535.0) */
 /* The three modes' loops over heights read as V(i): a double, or a float widened to the same double */
-#define APPLY_LOOPS                                                                                   \
-    if (a->mode == 0) {                                                                             \
-        for (int64_t i = i0; i < i1; i++) {                                                         \
-            uint16_t s = (uint16_t)(int32_t)(V(i) - offset);                                        \
-            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                         \
-            samples[i] = s;                                                                         \
-            err = e > err ? e : err;                                                                \
-        }                                                                                           \
-    } else if (a->mode == 1) {                                                                      \
-        for (int64_t i = i0; i < i1; i++) {                                                         \
-            int64_t e = bits_of(fabs(V(i) - (offset + scale * 0.0)));                               \
-            samples[i] = 0;                                                                         \
-            err = e > err ? e : err;                                                                \
-        }                                                                                           \
-    } else {                                                                                        \
-        for (int64_t i = i0; i < i1; i++) {                                                         \
-            int64_t c = bits_of((V(i) - offset) / scale); /* clipped as bits (see clip_bits) */     \
-            c = c < 0 ? 0 : c;                                                                      \
-            c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;                                          \
-            uint16_t s = (uint16_t)(int32_t)((of_bits(c) + RINT_MAGIC) - RINT_MAGIC);               \
-            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                         \
-            samples[i] = s;                                                                         \
-            err = e > err ? e : err;                                                                \
-        }                                                                                           \
+#define APPLY_LOOPS                                                                             \
+    if (a->mode == 0) {                                                                         \
+        for (int64_t i = i0; i < i1; i++) {                                                     \
+            uint16_t s = (uint16_t)(int32_t)(V(i) - offset);                                    \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                     \
+            samples[i] = s;                                                                     \
+            err = e > err ? e : err;                                                            \
+        }                                                                                       \
+    } else if (a->mode == 1) {                                                                  \
+        for (int64_t i = i0; i < i1; i++) {                                                     \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * 0.0)));                           \
+            samples[i] = 0;                                                                     \
+            err = e > err ? e : err;                                                            \
+        }                                                                                       \
+    } else {                                                                                    \
+        for (int64_t i = i0; i < i1; i++) {                                                     \
+            int64_t c = bits_of((V(i) - offset) / scale); /* clipped as bits (see clip_bits) */ \
+            c = c < 0 ? 0 : c;                                                                  \
+            c = c > SAMPLE_MAX_BITS ? SAMPLE_MAX_BITS : c;                                      \
+            uint16_t s = (uint16_t)(int32_t)((of_bits(c) + RINT_MAGIC) - RINT_MAGIC);           \
+            int64_t e = bits_of(fabs(V(i) - (offset + scale * (double)s)));                     \
+            samples[i] = s;                                                                     \
+            err = e > err ? e : err;                                                            \
+        }                                                                                       \
     }
 
 static CLONES void apply_part(void *ctx, int32_t part, int32_t parts)
@@ -557,12 +557,12 @@ static inline __attribute__((always_inline)) double tri_max(const struct trimax 
             double e1 = (double)e1l, e2 = (double)e2l, da1 = (double)a[1], da2 = (double)a[2];
             int32_t n = (int32_t)(xr - xl + 1);
             int64_t rb = 0; /* the row's largest |h - plane| as its bits (bits_of) */
-#define ROW_BITS(ROW)                                                                                 \
-    for (int32_t k = 0; k < n; k++) {                                                               \
-        double kd = (double)k;                                                                      \
-        double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;                 \
+#define ROW_BITS(ROW)                                                                                \
+    for (int32_t k = 0; k < n; k++) {                                                                \
+        double kd = (double)k;                                                                       \
+        double plane = z0 + ((e1 + da1 * kd) * dz1 + (e2 + da2 * kd) * dz2) / absd;                  \
         int64_t v = bits_of(fabs((double)(ROW)[k] - plane)); /* a float widens to the same double */ \
-        rb = v > rb ? v : rb;                                                                       \
+        rb = v > rb ? v : rb;                                                                        \
     }
             if (m->h32 != NULL) {
                 ROW_BITS(m->h32 + at)
