@@ -27,11 +27,15 @@
  *
  * Stream reader: a command (halfword address, length) starts it; it issues reads while its FIFO
  * has room for every read in flight (credits: the SDRAM cannot be stalled once a READ is out) and
- * hands the halfwords out in order, tlast on the command's last one.  Stream writer: a command
- * (address, length) takes the next `length` halfwords of the write stream, which may arrive before
- * or after it (they wait in a FIFO); each is written as it is issued, and every written halfword
- * clears its line in the CPU port's cache.  Each side takes a new command once the last one is done
- * (s_*_cmd_ready, *_busy).  Addressed writer: every beat carries its own halfword address (tuser),
+ * hands the halfwords out in order, tlast on each command's last one.  It holds two commands: the
+ * one whose halfwords go out and the next, taken as soon as no second one is held (s_rd_cmd_ready),
+ * whose reads follow the first's last READ in the next cycle, so back-to-back commands stream
+ * without a gap while the first's data are still on their way; a command of length 0 is taken and
+ * dropped; rd_busy while any halfword of a taken command is still to go out.  Stream writer: a
+ * command (address, length) takes the next `length` halfwords of the write stream, which may arrive
+ * before or after it (they wait in a FIFO); each is written as it is issued, and every written
+ * halfword clears its line in the CPU port's cache; it takes a new command once the last one is
+ * written (s_wr_cmd_ready, wr_busy).  Addressed writer: every beat carries its own halfword address (tuser),
  * for writers with several interleaved sequences (the filter bank's levels); the beats wait in a
  * FIFO and are written in order, each clearing its cache line too; wa_busy while any waits.
  *
@@ -355,11 +359,19 @@ localparam RD_CREDIT_BITS = $clog2(RD_FIFO_DEPTH + 1);
 localparam [RD_CREDIT_BITS-1:0] RD_CREDITS = RD_FIFO_DEPTH;
 reg [ADDR_BITS-1:0] rd_addr_reg = {ADDR_BITS{1'b0}};
 reg [LEN_BITS-1:0] rd_issue_reg = {LEN_BITS{1'b0}};          // reads still to issue
-reg [LEN_BITS-1:0] rd_out_reg = {LEN_BITS{1'b0}};            // halfwords still to hand out
+reg [LEN_BITS-1:0] rd_out_reg = {LEN_BITS{1'b0}};            // halfwords still to hand out (first command)
+reg [LEN_BITS-1:0] rd_next_reg = {LEN_BITS{1'b0}};           // the second command's length (0: none)
+reg [ADDR_BITS-1:0] rd_next_addr_reg = {ADDR_BITS{1'b0}};    // its address while it waits to issue
+reg rd_wait_reg = 1'b0;                                       // the second command waits to issue
 reg [RD_CREDIT_BITS-1:0] rd_credit_reg = RD_CREDITS;         // FIFO places not yet promised
 wire rd_fifo_in_ready;
 wire rd_beat = m_axis_rd_tvalid && m_axis_rd_tready;
 wire rd_cmd = s_rd_cmd_valid && s_rd_cmd_ready;
+wire rd_cmd_nz = rd_cmd && s_rd_cmd_len != {LEN_BITS{1'b0}};   // a length of 0 is taken and dropped
+// the first command's last halfword goes out this cycle
+wire rd_head_done = rd_beat && rd_out_reg == {{(LEN_BITS-1){1'b0}}, 1'b1};
+// the command issuing now has no read left after this cycle
+wire rd_issue_free = rd_issue_reg == {LEN_BITS{1'b0}} || (rd_issue_reg == {{(LEN_BITS-1){1'b0}}, 1'b1} && ack[1]);
 wire [RD_CREDIT_BITS-1:0] rd_count_unused;
 
 assign req[1] = rd_issue_reg != {LEN_BITS{1'b0}} && rd_credit_reg != {RD_CREDIT_BITS{1'b0}};
@@ -367,8 +379,10 @@ assign we[1] = 1'b0;
 assign addr[ADDR_BITS +: ADDR_BITS] = rd_addr_reg;
 assign wdata[16 +: 16] = 16'd0;
 assign wmask[2 +: 2] = 2'b00;
-assign s_rd_cmd_ready = rd_out_reg == {LEN_BITS{1'b0}};
-assign rd_busy = !s_rd_cmd_ready;
+// a queue of two commands: the next is taken while no second one is queued (rd_next_reg != 0 only
+// while rd_out_reg != 0); its reads follow the first's without a gap
+assign s_rd_cmd_ready = rd_next_reg == {LEN_BITS{1'b0}};
+assign rd_busy = rd_out_reg != {LEN_BITS{1'b0}};
 assign m_axis_rd_tlast = rd_out_reg == {{(LEN_BITS-1){1'b0}}, 1'b1};
 
 wm_fifo #(
@@ -387,18 +401,34 @@ wm_fifo #(
 );
 
 always @(posedge clk) begin
-    if (rd_cmd) begin
+    // the reads to issue: the new command's once the last one's are all issued, else it waits (then
+    // it follows in the cycle after the last one's last READ)
+    if (rd_cmd_nz && rd_issue_free) begin
         rd_addr_reg <= s_rd_cmd_addr;
         rd_issue_reg <= s_rd_cmd_len;
+    end else if (rd_wait_reg && rd_issue_free) begin
+        rd_addr_reg <= rd_next_addr_reg;
+        rd_issue_reg <= rd_next_reg;
+        rd_wait_reg <= 1'b0;
+    end else if (ack[1]) begin
+        rd_addr_reg <= rd_addr_reg + 1'b1;
+        rd_issue_reg <= rd_issue_reg - 1'b1;
+    end
+    if (rd_cmd_nz && !rd_issue_free) begin
+        rd_next_addr_reg <= s_rd_cmd_addr;
+        rd_wait_reg <= 1'b1;
+    end
+    // the halfwords to hand out: the first command's, then the second's
+    if (rd_cmd_nz && (rd_out_reg == {LEN_BITS{1'b0}} || rd_head_done)) begin
         rd_out_reg <= s_rd_cmd_len;
-    end else begin
-        if (ack[1]) begin
-            rd_addr_reg <= rd_addr_reg + 1'b1;
-            rd_issue_reg <= rd_issue_reg - 1'b1;
-        end
-        if (rd_beat) begin
-            rd_out_reg <= rd_out_reg - 1'b1;
-        end
+    end else if (rd_head_done) begin
+        rd_out_reg <= rd_next_reg;
+        rd_next_reg <= {LEN_BITS{1'b0}};
+    end else if (rd_beat) begin
+        rd_out_reg <= rd_out_reg - 1'b1;
+    end
+    if (rd_cmd_nz && rd_out_reg != {LEN_BITS{1'b0}} && !rd_head_done) begin
+        rd_next_reg <= s_rd_cmd_len;
     end
     rd_credit_reg <= rd_credit_reg - {{(RD_CREDIT_BITS-1){1'b0}}, ack[1]}
                      + {{(RD_CREDIT_BITS-1){1'b0}}, rd_beat};
@@ -406,6 +436,8 @@ always @(posedge clk) begin
     if (rst) begin
         rd_issue_reg <= {LEN_BITS{1'b0}};
         rd_out_reg <= {LEN_BITS{1'b0}};
+        rd_next_reg <= {LEN_BITS{1'b0}};
+        rd_wait_reg <= 1'b0;
         rd_credit_reg <= RD_CREDITS;
     end
 end

@@ -370,7 +370,7 @@ wire                accel_busy_unused;
 wire                height_start;
 wire [31:0]         height_count;
 wire [15:0]         height_tdata;
-wire                height_tvalid, height_tready, height_tlast_unused;
+wire                height_tvalid, height_tready;
 wire [17:0]         coef_tdata;
 wire [COEF_AW-1:0]  coef_tuser;
 wire                coef_tvalid, coef_tready;
@@ -433,9 +433,10 @@ localparam [HW_BITS-2:0] TOUT_WORD = TOUT_OFFSET / 4;
 localparam [HW_BITS-1:0] HEIGHT_HW = HEIGHT_OFFSET / 2;
 
 /*
- * The triangle error engine: its row spans through the same stream reader.  The reader takes a command
- * only when the last one's data are all out, so the data go to whoever's command was taken last; the
- * stage's command wins (the two never run together: the stage runs before the refiner).
+ * The triangle error engine: its row spans through the same stream reader.  The reader holds two
+ * commands (the one handing out its data and the next, whose reads follow the first's), so the data go
+ * to the commands' owners in the order they were taken (a queue of two, below); the stage's command wins
+ * (the two never run together: the stage runs before the refiner).
  */
 localparam ENGINE_CB = `WM_ENGINE_COORD_BITS;
 wire [HW_BITS-1:0]  eng_rd_addr;
@@ -445,7 +446,11 @@ wire                eng_data_valid, eng_data_ready;
 wire                engine_busy_unused;
 wire [15:0]         rd_tdata;
 wire                rd_tvalid, rd_tready;
-reg  [1:0]          rd_owner_reg = 2'd0;     // whose command was the last taken
+reg  [1:0]          rd_owner_reg = 2'd0;     // whose data the reader hands out now
+reg                 rd_owner_valid_reg = 1'b0;
+reg  [1:0]          rd_owner2_reg = 2'd0;    // the next command's owner, taken before those data are out
+reg                 rd_owner2_valid_reg = 1'b0;
+wire                rd_tlast;
 
 soc_engine #(
     .ADDR_BITS(HW_BITS),
@@ -516,7 +521,7 @@ soc_upload #(
 );
 
 // the stream reader's commands: the stage's first, then the engine's, then the upload's; the data go to
-// whoever's command was taken last (rd_owner_reg: 0 the stage, 1 the engine, 2 the upload)
+// the owner of the oldest command not yet done (rd_owner_reg: 0 the stage, 1 the engine, 2 the upload)
 localparam [1:0] OWN_STAGE = 2'd0, OWN_ENGINE = 2'd1, OWN_UPLOAD = 2'd2;
 wire [HW_BITS-1:0] rd_addr = rd_cmd_valid_reg ? HEIGHT_HW : eng_rd_valid ? eng_rd_addr : up_rd_addr;
 wire [HW_BITS:0] rd_len = rd_cmd_valid_reg ? rd_cmd_len_reg
@@ -531,12 +536,28 @@ assign up_data_valid = rd_tvalid && rd_owner_reg == OWN_UPLOAD;
 assign rd_tready = rd_owner_reg == OWN_ENGINE ? eng_data_ready
                  : rd_owner_reg == OWN_UPLOAD ? up_data_ready : height_tready;
 
+// the owners in the reader's order (it holds two commands: the one handing out its data and the next,
+// popped at each command's tlast); a command of length 0 hands out nothing and is not queued
+wire rd_push = rd_valid && rd_cmd_ready && rd_len != {(HW_BITS+1){1'b0}};
+wire rd_pop = rd_tvalid && rd_tready && rd_tlast;
+wire [1:0] rd_push_owner = rd_cmd_valid_reg ? OWN_STAGE : eng_rd_valid ? OWN_ENGINE : OWN_UPLOAD;
 always @(posedge clk) begin
-    if (rd_valid && rd_cmd_ready) begin
-        rd_owner_reg <= rd_cmd_valid_reg ? OWN_STAGE : eng_rd_valid ? OWN_ENGINE : OWN_UPLOAD;
+    if (rd_push && (!rd_owner_valid_reg || rd_pop)) begin
+        rd_owner_reg <= rd_push_owner;
+        rd_owner_valid_reg <= 1'b1;
+    end else if (rd_pop) begin
+        rd_owner_reg <= rd_owner2_reg;
+        rd_owner_valid_reg <= rd_owner2_valid_reg;
+        rd_owner2_valid_reg <= 1'b0;
+    end
+    if (rd_push && rd_owner_valid_reg && !rd_pop) begin
+        rd_owner2_reg <= rd_push_owner;
+        rd_owner2_valid_reg <= 1'b1;
     end
     if (rst) begin
         rd_owner_reg <= OWN_STAGE;
+        rd_owner_valid_reg <= 1'b0;
+        rd_owner2_valid_reg <= 1'b0;
     end
 end
 
@@ -615,7 +636,7 @@ sdram_ctrl #(
     .m_axis_rd_tdata(rd_tdata),
     .m_axis_rd_tvalid(rd_tvalid),
     .m_axis_rd_tready(rd_tready),
-    .m_axis_rd_tlast(height_tlast_unused),
+    .m_axis_rd_tlast(rd_tlast),
     .s_wr_cmd_addr({HW_BITS{1'b0}}),
     .s_wr_cmd_len({(HW_BITS+1){1'b0}}),
     .s_wr_cmd_valid(1'b0),

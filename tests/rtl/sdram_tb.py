@@ -420,6 +420,60 @@ class TB:
         d.m_axis_rd_tready.value = 0
         return start
 
+    async def stream_reads(self, cmds: list[tuple[int, int]],
+                           p_ready: float = 1.0) -> tuple[list[int], list[int | None]]:
+        """Commands (hw, n) back to back (each offered in the cycle after the last was taken) while the
+        data are taken with tready high with probability p_ready each cycle: checks every halfword, its
+        order and tlast (on each command's last only) and that rd_busy is high while a taken command's
+        data are not all out.  Returns (the cycle each command was taken, the cycle of each one's last
+        halfword; None for a length of 0)."""
+        d = self.dut
+        taken: list[int] = []
+        want = deque((k, i) for k, (_, n) in enumerate(cmds) for i in range(n))
+        last_out: list[int | None] = [None] * len(cmds)
+
+        async def commands():
+            for hw, n in cmds:
+                d.s_rd_cmd_addr.value, d.s_rd_cmd_len.value, d.s_rd_cmd_valid.value = hw, n, 1
+                while True:
+                    await ReadOnly()
+                    ok = int(d.s_rd_cmd_ready.value)
+                    if ok:
+                        taken.append(now_cycle())
+                    await FallingEdge(d.clk)
+                    if ok:
+                        break
+            d.s_rd_cmd_valid.value = 0
+
+        cmd = cocotb.start_soon(commands())
+        cycles, limit = 0, 100 * (len(want) + 50)
+        while want or len(taken) < len(cmds):
+            d.m_axis_rd_tready.value = int(self.rng.random() < p_ready)
+            await ReadOnly()
+            cycles += 1
+            assert cycles < limit, "stream reads never ended"
+            # a command taken before this cycle whose data are not all out keeps rd_busy high
+            if want and want[0][0] < len(taken) and taken[want[0][0]] < now_cycle():
+                assert int(d.rd_busy.value), f"rd_busy low with data of command {want[0][0]} to come"
+            if int(d.m_axis_rd_tvalid.value) and int(d.m_axis_rd_tready.value):
+                assert want, f"a halfword after the last command's: {int(d.m_axis_rd_tdata.value):#06x}"
+                k, i = want.popleft()
+                hw, n = cmds[k]
+                v, last = int(d.m_axis_rd_tdata.value), int(d.m_axis_rd_tlast.value)
+                assert last == (i == n - 1), f"stream read {k} ({hw:#x}+{i} of {n}): tlast {last}"
+                w = self.value(hw + i)
+                assert v == w, f"stream read {k} ({hw:#x}+{i} of {n}): {v:#06x}, want {w:#06x}"
+                if last:
+                    last_out[k] = now_cycle()
+            await FallingEdge(d.clk)
+        d.m_axis_rd_tready.value = 0
+        await cmd
+        await ReadOnly()
+        assert not int(d.rd_busy.value), "rd_busy after the last halfword"
+        assert not int(d.m_axis_rd_tvalid.value), "a halfword after the last command's"
+        await FallingEdge(d.clk)
+        return taken, last_out
+
     async def stream_write(self, hw: int, values: list[int], p_valid: float = 1.0) -> int:
         """Command (hw, len) and the halfwords, tvalid raised with probability p_valid and then held
         until the beat is taken; returns (cycles) when the writer is done (wr_busy low, all written);
@@ -572,6 +626,35 @@ async def test_streams_backpressure(dut):
         await tb.scatter_write(rand, p_valid)
         for hw, _ in rand[::10]:
             await tb.cpu((hw & ~1) << 1)
+    await tb.finish()
+
+
+@cocotb.test()
+async def test_stream_read_queue(dut):
+    """Stream read commands back to back, random lengths (0, 1, a few, more than the FIFO, across rows
+    and banks) under random back-pressure: every halfword in order, tlast on each command's last; the
+    reader takes the next command once the last one's reads are issued, before its data are all out."""
+    tb = TB(dut, SEED + 7)
+    await tb.start()
+    region = join(tb.rng.randrange(1 << ROW_BITS), 2, (1 << COL_BITS) - 40)
+    await tb.stream_write(region, [tb.rng.getrandbits(16) for _ in range(200)])
+    early = 0
+    for p_ready in (1.0, 0.8, 0.5, 0.15):
+        cmds = []
+        for _ in range(40):
+            n = tb.rng.choice((0, 1, 1, 2, 3, 5, 9, 17, 30, 64))
+            if tb.rng.random() < 0.5:
+                hw = region + tb.rng.randrange(200 - n + 1)                  # written, across banks
+            else:
+                hw = tb.rng.randrange(2, (1 << ADDR_BITS) - n)                # anywhere: other rows
+            cmds.append((hw, n))
+        taken, last_out = await tb.stream_reads(cmds, p_ready)
+        # command k + 1 taken before command k's last halfword was handed out
+        early += sum(1 for k in range(len(cmds) - 1)
+                     if last_out[k] is not None and taken[k + 1] < last_out[k])
+        if p_ready == 1.0:
+            assert early > 0, "every command waited for the last one's data"
+    assert early >= 40, f"only {early} commands taken before the last one's data were out"
     await tb.finish()
 
 
