@@ -288,26 +288,30 @@ async def every_triangle_of_a_small_grid(dut):
     tb.check(h, jobs, results, per_job)
 
 
+async def one_big_scan(dut, seed, **run):
+    """One big triangle, scanned with tb.run's options `run` and checked; returns (cycles, samples, rows)."""
+    tb = Bench(dut, random.Random(seed))
+    w, hh = min(1 << CB, 256), min(1 << CB, 64)
+    await tb.reset(w)
+    h = heights(tb.rng, w, hh)
+    tri = ccw([(0, 0), (w - 1, 0), (w // 2, hh - 1)])
+    jobs = [(tri, None)]
+    results, per_job, cycles = await tb.run(h, jobs, **run)
+    tb.check(h, jobs, results, per_job)
+    sp = spans([p[0] for p in tri], [p[1] for p in tri])
+    samples = sum(hi - lo + 1 for _, lo, hi in sp)
+    dut._log.info("%d samples in %d rows: %d cycles (%.2f per sample)", samples, len(sp), cycles,
+                  cycles / samples)
+    return cycles, samples, len(sp)
+
+
 @cocotb.test()
 async def full_rate(dut):
     """Nothing stalls: one big triangle; the engine takes one sample per clock within each row, and
     the whole scan costs the samples plus a few clocks per row."""
-    rng = random.Random(SEED + 2)
-    tb = Bench(dut, rng)
-    w, hh = min(1 << CB, 256), min(1 << CB, 64)
-    await tb.reset(w)
-    h = heights(rng, w, hh)
-    tri = ccw([(0, 0), (w - 1, 0), (w // 2, hh - 1)])
-    jobs = [(tri, None)]
-    results, per_job, cycles = await tb.run(h, jobs, latency=(2, 2))
-    tb.check(h, jobs, results, per_job)
-    x, y = [p[0] for p in tri], [p[1] for p in tri]
-    sp = spans(x, y)
-    samples = sum(hi - lo + 1 for _, lo, hi in sp)
-    dut._log.info("%d samples in %d rows: %d cycles (%.2f per sample)", samples, len(sp), cycles,
-                  cycles / samples)
+    cycles, samples, rows = await one_big_scan(dut, SEED + 2, latency=(2, 2))
     # per row: the memory's latency (2) and the span's open/close (2) beside one clock per sample
-    assert cycles <= samples + 5 * len(sp) + 40, f"{cycles} cycles for {samples} samples in {len(sp)} rows"
+    assert cycles <= samples + 5 * rows + 40, f"{cycles} cycles for {samples} samples in {rows} rows"
 
 
 @cocotb.test()
@@ -315,18 +319,5 @@ async def full_rate_back_to_back(dut):
     """A memory that takes a second request while the first one's samples stream (as soc_top's stream
     reader does) and answers it without a gap: the engine opens the next span in the clock of the last
     one's last sample, so the scan costs one clock per sample and no clock per row."""
-    rng = random.Random(SEED + 3)
-    tb = Bench(dut, rng)
-    w, hh = min(1 << CB, 256), min(1 << CB, 64)
-    await tb.reset(w)
-    h = heights(rng, w, hh)
-    tri = ccw([(0, 0), (w - 1, 0), (w // 2, hh - 1)])
-    jobs = [(tri, None)]
-    results, per_job, cycles = await tb.run(h, jobs, latency=(0, 0), queue=2)
-    tb.check(h, jobs, results, per_job)
-    x, y = [p[0] for p in tri], [p[1] for p in tri]
-    sp = spans(x, y)
-    samples = sum(hi - lo + 1 for _, lo, hi in sp)
-    dut._log.info("%d samples in %d rows: %d cycles (%.2f per sample)", samples, len(sp), cycles,
-                  cycles / samples)
-    assert cycles <= samples + 40, f"{cycles} cycles for {samples} samples in {len(sp)} rows"
+    cycles, samples, rows = await one_big_scan(dut, SEED + 3, latency=(0, 0), queue=2)
+    assert cycles <= samples + 40, f"{cycles} cycles for {samples} samples in {rows} rows"
