@@ -286,7 +286,8 @@ def _checked(plan: TilePlan, index: int, hf: HeightField, final: Mesh, sides: di
                        "border_vertices": {s: len(v) for s, v in sides.items()}, "seconds": seconds,
                        "e_max_normal": errors.e_max_normal, "e_max_vertical": errors.e_max_vertical}
     return TileResult(index, t.name, final.xy + np.array([t.x, t.y], dtype=np.int64),
-                      final.tris, final.z(hf.values).astype(np.float64), report, report.get("device"), inner)
+                      final.tris, final.z(hf.values).astype(np.float64, copy=False), report,
+                      report.get("device"), inner)
 
 
 def _editable(plan: TilePlan, r: TileResult, window: np.ndarray | None, sides: list[str], keep: bool = True
