@@ -217,3 +217,26 @@ def test_budget_exit_status_says_bound_not_met(tmp_path):
     assert "warning: the error bound is not met" in r.stderr and "Traceback" not in r.stderr
     mesh, _ = read_mesh(out)
     assert check_mesh(mesh).valid and 400 < mesh.n_triangles <= 500
+
+
+def test_tiled_command_leaves_without_the_teardown_its_output_whole(tmp_path):
+    """The process's own tiled `mesh` on local workers ends at once (os._exit, no interpreter teardown:
+    an atexit handler does not run) once its files are in place, its printed lines flushed into a pipe and
+    its mesh the one an in-process call writes; an untiled command ends as usual (the handler runs)."""
+    np.save(tmp_path / "h.npy", synth.ball(130).astype(np.float32))
+    code = ("import atexit, sys; atexit.register(print, 'teardown'); sys.argv = ['wavemesh', *sys.argv[1:]]; "
+            "from wavemesh.cli import main; sys.exit(main())")
+    runs = {}
+    for name, extra in (("tiled", ["--tile", "65", "--workers", "2"]), ("whole", [])):
+        out = tmp_path / f"{name}.obj"
+        r = subprocess.run([sys.executable, "-c", code, "mesh", str(tmp_path / "h.npy"), "-o", str(out),
+                            "--metric", "vertical", "--zeta", "0.5", *extra], capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, r.stderr
+        runs[name] = r.stdout
+        assert f"wrote {out}" in r.stdout
+    assert "teardown" not in runs["tiled"] and "the tiles' shared sides match" in runs["tiled"]
+    assert runs["whole"].rstrip().endswith("teardown")
+    assert main(["mesh", str(tmp_path / "h.npy"), "-o", str(tmp_path / "here.obj"), "-q", "--metric",
+                 "vertical", "--zeta", "0.5", "--tile", "65", "--workers", "2"]) == 0
+    assert (tmp_path / "here.obj").read_bytes() == (tmp_path / "tiled.obj").read_bytes()
