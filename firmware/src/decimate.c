@@ -70,10 +70,18 @@ static uint64_t *kept_for(struct tested *t, const int32_t x[3], const int32_t y[
  * zeta: that fan cannot go, valid or not; else 1 (also when no triangle holds v, which only an invalid
  * fan allows: wm_ring_plan then refuses it).  D < 2^31 (the grid's sides are below 2^15): its
  * products are 32 by 32 bits. */
+/* A ring vertex p_i as v sees it: d_i and its sample less v's, side by side (one base address for all
+ * three: on the soft CPU, with three arrays, each load of a z_i worked out its place on the stack
+ * again, five instructions; pad: a power of two apart). */
+struct ringd {
+    int32_t x, y; /* d_i */
+    int32_t z;    /* the sample of p_i less v's (16-bit samples) */
+    int32_t pad;
+};
+
 struct fans {
-    int32_t n, k;                             /* ring size; the pointer, unwrapped */
-    int32_t dx[WM_MAX_RING], dy[WM_MAX_RING]; /* d_i */
-    int32_t z[WM_MAX_RING];                   /* the samples of p_i less v's (16-bit samples) */
+    int32_t n, k;               /* ring size; the pointer, unwrapped */
+    struct ringd d[WM_MAX_RING]; /* d_i, z_i */
     int32_t vx, vy;                           /* v */
     int32_t quick;                            /* 1: no holes mask and a bound (zeta): the test applies */
     uint32_t zeta;
@@ -92,6 +100,7 @@ struct fans {
  * 6 % of first_fit's cycles on Jacksboro / 16). */
 struct corners {
     int32_t ax, ay, jx, jy, kx, ky;
+    int32_t az, jz, kz; /* and their z_i */
 };
 
 /* ceil(107 lo / 256), wm_hypot_up's term, for lo < 2^32: on a 32-bit CPU (and in the checked builds) in
@@ -116,10 +125,9 @@ static WM_ALWAYS_INLINE uint32_t chord(uint32_t lo)
  * closed triangle, so av <= (2^16 - 1) D), so zeta T < 2^16 av gives r < c, E > zeta
  * (wm_point_above_v's test).  0 says nothing: the exact test decides.  Most fans refused by v's point
  * are refused far above zeta, and this spares them the slope factor (the Jacksboro job: three in four). */
-static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, const struct corners *co, int64_t D,
-                     uint64_t av)
+static int far_above(const struct fans *q, const struct corners *co, int64_t D, uint64_t av)
 {
-    int32_t z1 = q->z[j] - q->z[a], z2 = q->z[k] - q->z[a];
+    int32_t z1 = co->jz - co->az, z2 = co->kz - co->az;
     int32_t jx = co->jx - co->ax, kx = co->kx - co->ax, jy = co->jy - co->ay, ky = co->ky - co->ay;
     uint64_t A, B, T;
 #if WM_NARROW_DIV
@@ -224,11 +232,12 @@ static int far_above(const struct fans *q, int32_t a, int32_t j, int32_t k, cons
     return T < ((uint64_t)1 << 31) && (uint64_t)q->zeta * T < (av << 16);
 }
 
-#if WM_CHECK || !WM_NARROW_DIV
-/* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64, for the soft CPU a multiply pair). */
+#if WM_CHECK
+/* d_i x d_j: |d| < 2^15, so it fits 32 bits (the products in 64): the checked builds' reference for
+ * fan_may_fit's 32-bit orientations. */
 static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 {
-    return (int32_t)((int64_t)q->dx[i] * q->dy[j] - (int64_t)q->dx[j] * q->dy[i]);
+    return (int32_t)((int64_t)q->d[i].x * q->d[j].y - (int64_t)q->d[j].x * q->d[i].y);
 }
 #endif
 
@@ -237,8 +246,8 @@ static int32_t cross(const struct fans *q, int32_t i, int32_t j)
 /* The fan triangle (p_a, p_j, p_k)'s corners. */
 static void fan_corners(const struct fans *q, int32_t a, int32_t j, int32_t k, int32_t x[3], int32_t y[3])
 {
-    x[0] = q->vx + q->dx[a], x[1] = q->vx + q->dx[j], x[2] = q->vx + q->dx[k];
-    y[0] = q->vy + q->dy[a], y[1] = q->vy + q->dy[j], y[2] = q->vy + q->dy[k];
+    x[0] = q->vx + q->d[a].x, x[1] = q->vx + q->d[j].x, x[2] = q->vx + q->d[k].x;
+    y[0] = q->vy + q->d[a].y, y[1] = q->vy + q->d[j].y, y[2] = q->vy + q->d[k].y;
 }
 
 static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32_t j, int32_t k,
@@ -247,7 +256,7 @@ static int normal_above(const struct fans *q, struct tested *t, int32_t a, int32
     const wm_refiner *r = t->r;
     int32_t x[3], y[3];
     int above;
-    if (far_above(q, a, j, k, co, D, av)) return 1;
+    if (far_above(q, co, D, av)) return 1;
     fan_corners(q, a, j, k, x, y);
     above = wm_point_above_v(&r->field, &r->params, x, y, D, av, r->params.zeta, &t->kept);
     if (t->kept) /* as test_point */
@@ -269,68 +278,55 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
     int64_t V;
     uint64_t av = 0;
     struct corners c;
-#if WM_NARROW_DIV
     {
-        /* on a 32-bit CPU (and in the checked builds): the pointer u unwrapped and k its ring position
-         * stepped together, d_a held, the orientations in 32-bit products (|d| < 2^15: each below 2^30)
-         * (the soft CPU's job Jacksboro / 16: first_fit 4 % fewer cycles; natively 0.4 % more
-         * instructions than cross's loop below) */
-        const int32_t *dx = q->dx, *dy = q->dy, *pk, *pky, *end = q->dx + n;
-        int32_t ax = dx[a], ay = dy[a], u = q->k < a + 2 ? a + 2 : q->k;
-        /* d_k through pointers stepped with u, wrapped at the ring's end: on the soft CPU each array's
-         * place was worked out again every step */
+        /* the pointer u unwrapped and k its ring position stepped together, d_a held, the orientations
+         * in 32-bit products (|d| < 2^15: each below 2^30) (the soft CPU's job Jacksboro / 16: first_fit
+         * 4 % fewer cycles; natively, with d_i in three arrays, 0.4 % more instructions than a loop of
+         * cross's by index, which with one array of struct ringd took the more) */
+        const struct ringd *d = q->d, *pa = d + a, *pj, *pk, *end = d + n;
+        int32_t ax = pa->x, ay = pa->y, u = q->k < a + 2 ? a + 2 : q->k;
+        /* d_k through a pointer stepped with u, wrapped at the ring's end (on the soft CPU each
+         * array's place was worked out again every step), p_j's beside it, and the z_i from the same
+         * three places */
         k = u < n ? u : u - n;
-        pk = dx + k, pky = dy + k;
+        pk = d + k;
         for (;;) {
             if (u > a + n - 1) {
                 q->k = u;
                 return 1;
             }
-            fk = ax * *pky - *pk * ay;
-            WM_ASSERT(fk == cross(q, a, (int32_t)(pk - dx)) && pky - dy == pk - dx);
+            fk = ax * pk->y - pk->x * ay;
+            WM_ASSERT(fk == cross(q, a, (int32_t)(pk - d)));
             if (fk <= 0) break;
             u++;
-            pky++;
-            if (++pk == end) pk = dx, pky = dy;
+            if (++pk == end) pk = d;
         }
         q->k = u;
-        k = (int32_t)(pk - dx);
+        k = (int32_t)(pk - d);
         j = k == 0 ? n - 1 : k - 1;
-        c.ax = ax, c.ay = ay, c.jx = dx[j], c.jy = dy[j], c.kx = dx[k], c.ky = dy[k];
+        pj = pk == d ? end - 1 : pk - 1;
+        c.ax = ax, c.ay = ay, c.jx = pj->x, c.jy = pj->y, c.kx = pk->x, c.ky = pk->y;
+        c.az = pa->z, c.jz = pj->z, c.kz = pk->z;
         fj = ax * c.jy - c.jx * ay;
         e0 = c.jx * c.ky - c.kx * c.jy;
         WM_ASSERT(fj == cross(q, a, j) && e0 == cross(q, j, k));
     }
-#else
-    if (q->k < a + 2) q->k = a + 2;
-    for (;;) {
-        if (q->k > a + n - 1) return 1;
-        k = q->k < n ? q->k : q->k - n;
-        fk = cross(q, a, k);
-        if (fk <= 0) break;
-        q->k++;
-    }
-    j = k == 0 ? n - 1 : k - 1;
-    fj = cross(q, a, j);
-    e0 = cross(q, j, k);
-    c.ax = q->dx[a], c.ay = q->dy[a], c.jx = q->dx[j], c.jy = q->dy[j], c.kx = q->dx[k], c.ky = q->dy[k];
-#endif
     q->j = j;
     /* D = (p_j - p_a) x (p_k - p_a), twice the signed area of a triangle of grid points: |D| <= (W - 1)(H - 1)
      * < 2^30, so the sum is taken modulo 2^32 (on rv32 no carries, one branch for D > 0) */
     D = (int32_t)((uint32_t)e0 - (uint32_t)fk + (uint32_t)fj);
     WM_ASSERT((int64_t)D == (int64_t)e0 - fk + fj);
     if (D > 0 && q->quick) {
-        /* e0 z_a - fk z_j + fj z_k - D z_v with the z_i taken less z_v (q->z): one product fewer */
+        /* e0 z_a - fk z_j + fj z_k - D z_v with the z_i taken less z_v (q->d, c): one product fewer */
 #if WM_NARROW_DIV
         if (D < (1 << 15) && (e0 | fj) >= 0 && fk <= 0) {
             /* on a 32-bit CPU (and in the checked builds): e0, -fk and fj are v's edge functions, each
              * at least 0 and their sum D, and |z_i| <= 65535 (16-bit samples), so every partial sum
              * is at most D 65535 < 2^31 in magnitude: 32-bit products and sums, where the 64-bit ones
              * were a multiply pair and carries each (v in the closed fan triangle, the usual case) */
-            int32_t v32 = e0 * q->z[a] - fk * q->z[j] + fj * q->z[k];
+            int32_t v32 = e0 * c.az - fk * c.jz + fj * c.kz;
             uint32_t a32 = v32 < 0 ? 0u - (uint32_t)v32 : (uint32_t)v32;
-            WM_ASSERT((int64_t)v32 == (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k]);
+            WM_ASSERT((int64_t)v32 == (int64_t)e0 * c.az - (int64_t)fk * c.jz + (int64_t)fj * c.kz);
             av = a32;
             WM_PROF_ADD(WM_PC_POINTS, 1);
             t->kept = 0;
@@ -344,7 +340,7 @@ static int fan_may_fit(struct fans *q, struct tested *t, int32_t a)
             goto above;
         }
 #endif
-        V = (int64_t)e0 * q->z[a] - (int64_t)fk * q->z[j] + (int64_t)fj * q->z[k];
+        V = (int64_t)e0 * c.az - (int64_t)fk * c.jz + (int64_t)fj * c.kz;
         av = (uint64_t)(V < 0 ? -V : V);
         WM_PROF_ADD(WM_PC_POINTS, 1);
         t->kept = 0;
@@ -367,7 +363,8 @@ static int fan_plan(const struct fans *q, int32_t a, int32_t *tp, int32_t *nt, i
     int32_t n = q->n, b = a + 1 == n ? 0 : a + 1, k = 0, at = 0, most = -1;
     for (int32_t j = 1; j + 1 < n; j++) {
         int32_t c = b + 1 == n ? 0 : b + 1;
-        int32_t d = (q->dx[b] - q->dx[a]) * (q->dy[c] - q->dy[a]) - (q->dy[b] - q->dy[a]) * (q->dx[c] - q->dx[a]);
+        int32_t d =
+            (q->d[b].x - q->d[a].x) * (q->d[c].y - q->d[a].y) - (q->d[b].y - q->d[a].y) * (q->d[c].x - q->d[a].x);
         if (d <= 0) {
             *big = b; /* the triangle (a, b, c) */
             return 0;
@@ -516,9 +513,9 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
     for (int32_t i = 0; i < n; i++) {
         rx[i] = me->vxy[ring[i]].x;
         ry[i] = me->vxy[ring[i]].y;
-        q->dx[i] = rx[i] - vx;
-        q->dy[i] = ry[i] - vy;
-        q->z[i] = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
+        q->d[i].x = rx[i] - vx;
+        q->d[i].y = ry[i] - vy;
+        q->d[i].z = r->field.samples[(int64_t)ry[i] * r->field.width + rx[i]] - zv;
         bad[i] = 0;
     }
     /* Three ring vertices have one triangulation, four have two (the fans from 0 and 2 are the same,
@@ -561,8 +558,8 @@ static uint32_t first_fit(const wm_refiner *r, int32_t v, int32_t *apex, struct 
             int32_t x[3], y[3], t = j == 0 ? big : j == big ? 0 : j;
             uint32_t e;
             for (int c = 0; c < 3; c++) {
-                x[c] = a >= 0 ? vx + q->dx[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].x;
-                y[c] = a >= 0 ? vy + q->dy[tp[3 * t + c]] : me->vxy[tris[3 * t + c]].y;
+                x[c] = a >= 0 ? vx + q->d[tp[3 * t + c]].x : me->vxy[tris[3 * t + c]].x;
+                y[c] = a >= 0 ? vy + q->d[tp[3 * t + c]].y : me->vxy[tris[3 * t + c]].y;
             }
             e = wm_tri_error_upto(&r->field, &r->params, x, y, r->params.zeta, r->params.zeta,
                                   kept_for(&tested, x, y));
