@@ -190,59 +190,67 @@ static int32_t last_ear(const wm_mesh *m, const int32_t *ring, const struct ears
 int wm_star_plan(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t kx, int32_t ky,
                  int32_t tris[3 * WM_MAX_RING], int32_t *n_tris)
 {
-    struct ears s;
+    struct ears s_, *s = &s_;
     int32_t left = n, nt = 0, last = 0;
+#if WM_NARROW_DIV
+    /* s a register, not the stack pointer and an offset: GCC formed each element's address from the stack
+     * pointer in four or five instructions (sll, add, add sp, add, the load's offset) */
+    __asm__("" : "+r"(s));
+#endif
     if (n < 3 || n > WM_MAX_RING) return WM_ERR_ARG;
+    /* the list's ends wrapped once, not by a remainder a position (on the board each remainder a call of
+     * __modsi3 and the CPU's 33-cycle division) */
     for (int32_t i = 0; i < n; i++) {
-        s.prev[i] = (i + n - 1) % n;
-        s.next[i] = (i + 1) % n;
+        s->prev[i] = i - 1;
+        s->next[i] = i + 1;
     }
+    s->prev[0] = n - 1, s->next[n - 1] = 0;
     if (n > 3) {
         for (int32_t i = 0; i < n; i++) {
 #ifndef WM_ANGLE_ENGINE
-            ear_set(m, ring, &s, i, kx, ky);
+            ear_set(m, ring, s, i, kx, ky);
 #else
-            s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
+            s->key[i] = ear_key(m, ring, s, i, kx, ky, 1);
 #endif
-            s.heap[i] = i;
-            s.pos[i] = i;
+            s->heap[i] = i;
+            s->pos[i] = i;
         }
-        s.n = n;
-        for (int32_t at = n / 2 - 1; at >= 0; at--) ear_down(&s, at);
+        s->n = n;
+        for (int32_t at = n / 2 - 1; at >= 0; at--) ear_down(s, at);
     }
     while (left > 3) {
-        int32_t b = s.heap[0], a = s.prev[b], c = s.next[b];
-        if (s.key[b] < 0) return WM_ERR_REFUSED; /* no ear may be cut */
+        int32_t b = s->heap[0], a = s->prev[b], c = s->next[b];
+        if (s->key[b] < 0) return WM_ERR_REFUSED; /* no ear may be cut */
         tris[3 * nt] = ring[a], tris[3 * nt + 1] = ring[b], tris[3 * nt + 2] = ring[c];
         nt++;
         /* b leaves the polygon and the heap (the last entry takes its place) */
-        s.next[a] = c;
-        s.prev[c] = a;
+        s->next[a] = c;
+        s->prev[c] = a;
         if (--left == 3) {
             last = a; /* last_ear finds the first of the three without the heap */
             break;
         }
-        s.n--;
-        ear_put(&s, 0, s.heap[s.n]);
-        ear_down(&s, 0);
+        s->n--;
+        ear_put(s, 0, s->heap[s->n]);
+        ear_down(s, 0);
         for (int q = 0; q < 2; q++) {
 #ifndef WM_ANGLE_ENGINE
             int32_t i = q == 0 ? a : c;
-            s.key[KEY_OLD] = s.key[i], s.prox[KEY_OLD] = s.prox[i];
-            s.dot[KEY_OLD] = s.dot[i], s.cross[KEY_OLD] = s.cross[i];
-            ear_set(m, ring, &s, i, kx, ky);
-            if (key_cmp(&s, i, KEY_OLD) > 0) ear_up(&s, s.pos[i]);
-            else ear_down(&s, s.pos[i]);
+            s->key[KEY_OLD] = s->key[i], s->prox[KEY_OLD] = s->prox[i];
+            s->dot[KEY_OLD] = s->dot[i], s->cross[KEY_OLD] = s->cross[i];
+            ear_set(m, ring, s, i, kx, ky);
+            if (key_cmp(s, i, KEY_OLD) > 0) ear_up(s, s->pos[i]);
+            else ear_down(s, s->pos[i]);
 #else
-            int32_t i = q == 0 ? a : c, old = s.key[i];
-            s.key[i] = ear_key(m, ring, &s, i, kx, ky, 1);
-            if (s.key[i] > old) ear_up(&s, s.pos[i]);
-            else ear_down(&s, s.pos[i]);
+            int32_t i = q == 0 ? a : c, old = s->key[i];
+            s->key[i] = ear_key(m, ring, s, i, kx, ky, 1);
+            if (s->key[i] > old) ear_up(s, s->pos[i]);
+            else ear_down(s, s->pos[i]);
 #endif
         }
     }
     {
-        int32_t b = last_ear(m, ring, &s, last, kx, ky), a = s.prev[b], c = s.next[b];
+        int32_t b = last_ear(m, ring, s, last, kx, ky), a = s->prev[b], c = s->next[b];
         if (wm_orient(m->vxy[ring[a]].x, m->vxy[ring[a]].y, m->vxy[ring[b]].x, m->vxy[ring[b]].y,
                       m->vxy[ring[c]].x, m->vxy[ring[c]].y) <= 0)
             return WM_ERR_REFUSED;

@@ -144,12 +144,44 @@ static WM_ALWAYS_INLINE int holds(int32_t ax, int32_t ay, int32_t bx, int32_t by
            wm_orient(cx, cy, ax, ay, px, py) >= 0;
 }
 
+/* The ear clipping's polygon (wm_ring_plan_probe): its positions' coordinates (px, py), the list (nx,
+ * pv), each ear's blocking vertex (blk), twice its area and its state (ok).  On a 32-bit CPU (and in the
+ * checked builds) a record of 32 bytes a position, reached through a pointer that GCC is not shown to be
+ * the stack's: one shift and one add give an element's fields, where GCC formed each of seven arrays'
+ * element from the stack pointer in four instructions (sll, add, add, and the load's offset; the frame
+ * is over 1 KB); natively seven arrays, which x86-64 indexes in the load itself. */
+#if WM_NARROW_DIV
+struct ring_pt {
+    int32_t x, y, nx, pv, blk, area, ok, pad;
+};
+#define PX(i) P[i].x
+#define PY(i) P[i].y
+#define NX(i) P[i].nx
+#define PV(i) P[i].pv
+#define BLK(i) P[i].blk
+#define AREA(i) P[i].area
+#define OK(i) P[i].ok
+typedef struct ring_pt *polygon;
+#else
+struct ring_arrays {
+    int32_t x[WM_MAX_RING], y[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING], area[WM_MAX_RING];
+    int8_t ok[WM_MAX_RING];
+};
+#define PX(i) P->x[i]
+#define PY(i) P->y[i]
+#define NX(i) P->nx[i]
+#define PV(i) P->pv[i]
+#define BLK(i) P->blk[i]
+#define AREA(i) P->area[i]
+#define OK(i) P->ok[i]
+typedef struct ring_arrays *polygon;
+#endif
+
 /* 1 when no polygon vertex other than the ear's (ia, ib, ic) lies in the closed ear (the ear is strictly
  * counter-clockwise): the ear is valid. */
-static int ear_holds_none(const int32_t *px, const int32_t *py, const int32_t *nx, int32_t ia, int32_t ib,
-                          int32_t ic)
+static int ear_holds_none(const polygon P, int32_t ia, int32_t ib, int32_t ic)
 {
-    int32_t ax = px[ia], ay = py[ia], bx = px[ib], by = py[ib], cx = px[ic], cy = py[ic], x0, x1, y0, y1, j;
+    int32_t ax = PX(ia), ay = PY(ia), bx = PX(ib), by = PY(ib), cx = PX(ic), cy = PY(ic), x0, x1, y0, y1, j;
     x0 = ax < bx ? ax : bx;
     if (cx < x0) x0 = cx;
     x1 = ax > bx ? ax : bx;
@@ -158,9 +190,9 @@ static int ear_holds_none(const int32_t *px, const int32_t *py, const int32_t *n
     if (cy < y0) y0 = cy;
     y1 = ay > by ? ay : by;
     if (cy > y1) y1 = cy;
-    for (j = nx[ic]; j != ia; j = nx[j]) {
-        if (px[j] < x0 || px[j] > x1 || py[j] < y0 || py[j] > y1) continue; /* outside */
-        if (holds(ax, ay, bx, by, cx, cy, px[j], py[j])) return 0;
+    for (j = NX(ic); j != ia; j = NX(j)) {
+        if (PX(j) < x0 || PX(j) > x1 || PY(j) < y0 || PY(j) > y1) continue; /* outside */
+        if (holds(ax, ay, bx, by, cx, cy, PX(j), PY(j))) return 0;
     }
     return 1;
 }
@@ -235,10 +267,14 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
      * a hole for every vertex it looks at: this was half the cost).  The choice is the same as testing
      * every ear each round: the first Delaunay ear in polygon order, else the first valid one. */
     {
-        int32_t px[WM_MAX_RING], py[WM_MAX_RING], nx[WM_MAX_RING], pv[WM_MAX_RING], blk[WM_MAX_RING];
-        int32_t area[WM_MAX_RING]; /* twice the ear's area, set with ok[] */
+#if WM_NARROW_DIV
+        struct ring_pt at_[WM_MAX_RING];
+        polygon P = at_; /* a cut position's ok -1: no array of positions alive to set up */
+#else
+        struct ring_arrays at_;
+        polygon P = &at_;
+#endif
         int32_t cut[3 * WM_MAX_RING]; /* the cut ears as ring positions (tris[] once the plan is made) */
-        int8_t ok[WM_MAX_RING]; /* a cut position's -1: no array of positions alive to set up */
         int32_t left = n, i0 = 0, i1, i2, ox, oy, small;
         uint32_t far = 0;
         /* bit i: the polygon's edge from position i is the ring's edge i -> i + 1 (no position between
@@ -257,73 +293,76 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
          * then, any other as an unsigned word at least 128: the OR below 128 says all are), and only
          * when not the box's bounds (the same answer: such a polygon is within the box; on the soft
          * CPU four branches a vertex were most of this loop) */
+#if WM_NARROW_DIV
+        __asm__("" : "+r"(P)); /* P a register, not the stack pointer and an offset (polygon) */
+#endif
         ox = m->vxy[ring[0]].x - 63, oy = m->vxy[ring[0]].y - 63;
         for (int32_t i = 0; i < n; i++) {
-            px[i] = m->vxy[ring[i]].x;
-            py[i] = m->vxy[ring[i]].y;
-            far |= (uint32_t)(px[i] - ox) | (uint32_t)(py[i] - oy);
-            nx[i] = i + 1;
-            pv[i] = i - 1;
-            ok[i] = 0;
+            PX(i) = m->vxy[ring[i]].x;
+            PY(i) = m->vxy[ring[i]].y;
+            far |= (uint32_t)(PX(i) - ox) | (uint32_t)(PY(i) - oy);
+            NX(i) = i + 1;
+            PV(i) = i - 1;
+            OK(i) = 0;
         }
-        nx[n - 1] = 0, pv[0] = n - 1;
+        NX(n - 1) = 0, PV(0) = n - 1;
         small = far < 128;
         if (!small || WM_CHECK) {
-            int32_t x0 = px[0], x1 = px[0], y0 = py[0], y1 = py[0];
+            int32_t x0 = PX(0), x1 = PX(0), y0 = PY(0), y1 = PY(0);
             for (int32_t i = 1; i < n; i++) {
-                x0 = px[i] < x0 ? px[i] : x0, x1 = px[i] > x1 ? px[i] : x1;
-                y0 = py[i] < y0 ? py[i] : y0, y1 = py[i] > y1 ? py[i] : y1;
+                x0 = PX(i) < x0 ? PX(i) : x0, x1 = PX(i) > x1 ? PX(i) : x1;
+                y0 = PY(i) < y0 ? PY(i) : y0, y1 = PY(i) > y1 ? PY(i) : y1;
             }
             WM_ASSERT(!small || (x1 - x0 < 128 && y1 - y0 < 128));
             small = x1 - x0 < 128 && y1 - y0 < 128;
         }
 #if WM_CHECK
         for (int32_t i = 0; pr && i < n; i++)
-            WM_ASSERT(wm_orient(px[i], py[i], px[nx[i]], py[nx[i]], pr->px, pr->py) >= 0);
+            WM_ASSERT(wm_orient(PX(i), PY(i), PX(NX(i)), PY(NX(i)), pr->px, pr->py) >= 0);
 #endif
         while (left > 3) {
             int32_t best = -1, first = -1; /* first: the round's first strictly convex ear */
             /* the polygon's vertices in position order: from the lowest left (i0), round the list */
-            for (int32_t i = i0, c = 0; c < left; i = nx[i], c++) {
-                int32_t ia = pv[i], ic = nx[i], j;
+            for (int32_t i = i0, c = 0; c < left; i = NX(i), c++) {
+                int32_t ia = PV(i), ic = NX(i), j;
                 int32_t ax, ay, bx, by, cx, cy;
-                WM_ASSERT(ok[i] >= 0 && (c == 0 || i > pv[i]));
-                ax = px[ia], ay = py[ia], bx = px[i], by = py[i], cx = px[ic], cy = py[ic];
-                if (ok[i] == 0) {
-                    area[i] = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
-                    if (area[i] <= 0) continue;
-                    ok[i] = 3;
-                    blk[i] = -1;
+                WM_ASSERT(OK(i) >= 0 && (c == 0 || i > PV(i)));
+                ax = PX(ia), ay = PY(ia), bx = PX(i), by = PY(i), cx = PX(ic), cy = PY(ic);
+                if (OK(i) == 0) {
+                    AREA(i) = (int32_t)wm_orient(ax, ay, bx, by, cx, cy);
+                    if (AREA(i) <= 0) continue;
+                    OK(i) = 3;
+                    BLK(i) = -1;
                 }
                 /* the other polygon vertices, after ic up to ia (either test's answer does not depend on
                  * the order) */
-                if (ok[i] != 2 && (blk[i] < 0 || ok[blk[i]] < 0)) {
+                if (OK(i) != 2 && (BLK(i) < 0 || OK(BLK(i)) < 0)) {
                     if (WM_NARROW_DIV && small) {
                         struct circle32 q;
                         circle_of32(&q, ax, ay, bx, by, cx, cy);
-                        for (j = nx[ic]; j != ia; j = nx[j])
-                            if (in_circle32(&q, px[j], py[j])) break;
+                        for (j = NX(ic); j != ia; j = NX(j))
+                            if (in_circle32(&q, PX(j), PY(j))) break;
 #if WM_CHECK
                         {
                             struct circle q2;
                             int32_t j2;
                             circle_of(&q2, ax, ay, bx, by, cx, cy);
-                            for (j2 = nx[ic]; j2 != ia; j2 = nx[j2])
-                                if (in_circle(&q2, px[j2], py[j2])) break;
+                            for (j2 = NX(ic); j2 != ia; j2 = NX(j2))
+                                if (in_circle(&q2, PX(j2), PY(j2))) break;
                             WM_ASSERT(j2 == j);
                         }
 #endif
                     } else {
                         struct circle q;
                         circle_of(&q, ax, ay, bx, by, cx, cy);
-                        for (j = nx[ic]; j != ia; j = nx[j])
-                            if (in_circle(&q, px[j], py[j])) break;
+                        for (j = NX(ic); j != ia; j = NX(j))
+                            if (in_circle(&q, PX(j), PY(j))) break;
                     }
-                    if (j == ia) ok[i] = 2;
-                    else blk[i] = j;
+                    if (j == ia) OK(i) = 2;
+                    else BLK(i) = j;
                 }
-                if (ok[i] == 2) {
-                    WM_ASSERT(ear_holds_none(px, py, nx, ia, i, ic));
+                if (OK(i) == 2) {
+                    WM_ASSERT(ear_holds_none(P, ia, i, ic));
                     best = i;
                     break;
                 }
@@ -331,58 +370,58 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
             }
             /* No Delaunay ear: the first valid one, from the first strictly convex ear on to the round's end
              * (the containment test only here, where it decides: most rounds find a Delaunay ear) */
-            for (int32_t i = first; best < 0 && i >= 0; i = nx[i] == i0 ? -1 : nx[i]) {
-                if (ok[i] == 3 && ear_holds_none(px, py, nx, pv[i], i, nx[i])) ok[i] = 1;
-                if (ok[i] == 1) best = i;
+            for (int32_t i = first; best < 0 && i >= 0; i = NX(i) == i0 ? -1 : NX(i)) {
+                if (OK(i) == 3 && ear_holds_none(P, PV(i), i, NX(i))) OK(i) = 1;
+                if (OK(i) == 1) best = i;
             }
 #if WM_CHECK
-            if (best >= 0 && ok[best] != 2) { /* the round's first valid ear in polygon order, as taken before */
+            if (best >= 0 && OK(best) != 2) { /* the round's first valid ear in polygon order, as taken before */
                 int32_t i = i0, c = 0;
-                while (c++ < left && !(ok[i] != 0 && ear_holds_none(px, py, nx, pv[i], i, nx[i]))) i = nx[i];
+                while (c++ < left && !(OK(i) != 0 && ear_holds_none(P, PV(i), i, NX(i)))) i = NX(i);
                 WM_ASSERT(i == best);
             }
 #endif
             /* A simple polygon always has an ear (two, in fact). */
             WM_ASSERT(best >= 0);
             if (best < 0) return WM_ERR_REFUSED;
-            cut[3 * nt] = pv[best], cut[3 * nt + 1] = best, cut[3 * nt + 2] = nx[best];
-            if (area[best] > most) most = area[best], at = nt;
+            cut[3 * nt] = PV(best), cut[3 * nt + 1] = best, cut[3 * nt + 2] = NX(best);
+            if (AREA(best) > most) most = AREA(best), at = nt;
             nt++;
             if (pr && pr->bad) {
                 const uint32_t *bad = pr->bad;
-                int32_t ia = pv[best], ic = nx[best];
+                int32_t ia = PV(best), ic = NX(best);
                 uint32_t bd = ((edge & bad[ia]) >> best | (edge & bad[ic]) >> ia) & 1u;
                 WM_ASSERT((int)bd == wm_tri_bad(bad, n, ia, best, ic) && (ic + 1 == n ? 0 : ic + 1) != ia);
                 if (bd) return WM_ERR_REFUSED;
             }
             if (pr && !done) {
-                int32_t ia = pv[best], ic = nx[best];
-                int32_t o = (int32_t)wm_orient(px[ic], py[ic], px[ia], py[ia], pr->px, pr->py);
+                int32_t ia = PV(best), ic = NX(best);
+                int32_t o = (int32_t)wm_orient(PX(ic), PY(ic), PX(ia), PY(ia), pr->px, pr->py);
                 int in = (side >> ia & 1) && (side >> best & 1) && o >= 0;
-                WM_ASSERT(in == holds(px[ia], py[ia], px[best], py[best], px[ic], py[ic], pr->px, pr->py));
+                WM_ASSERT(in == holds(PX(ia), PY(ia), PX(best), PY(best), PX(ic), PY(ic), pr->px, pr->py));
                 if (in) {
                     done = 1;
-                    if (ask(pr, px[ia], py[ia], px[best], py[best], px[ic], py[ic])) return WM_ERR_REFUSED;
+                    if (ask(pr, PX(ia), PY(ia), PX(best), PY(best), PX(ic), PY(ic))) return WM_ERR_REFUSED;
                 } else if (o > 0) {
                     side &= ~(1u << ia); /* the new edge a-c has the point on its outer side */
                 }
             }
-            ok[pv[best]] = ok[nx[best]] = 0; /* its neighbours' ears changed shape */
-            edge &= ~(1u << pv[best]);
-            nx[pv[best]] = nx[best];
-            pv[nx[best]] = pv[best];
-            ok[best] = -1;
-            if (best == i0) i0 = nx[best]; /* the next position left, the lowest now */
+            OK(PV(best)) = OK(NX(best)) = 0; /* its neighbours' ears changed shape */
+            edge &= ~(1u << PV(best));
+            NX(PV(best)) = NX(best);
+            PV(NX(best)) = PV(best);
+            OK(best) = -1;
+            if (best == i0) i0 = NX(best); /* the next position left, the lowest now */
             left--;
         }
-        i1 = nx[i0], i2 = nx[i1];
-        WM_ASSERT(ok[i0] >= 0 && i1 > i0 && i2 > i1);
+        i1 = NX(i0), i2 = NX(i1);
+        WM_ASSERT(OK(i0) >= 0 && i1 > i0 && i2 > i1);
         if (pr && pr->bad && wm_tri_bad(pr->bad, n, i0, i1, i2)) return WM_ERR_REFUSED;
         /* the last triangle, from the polygon's coordinates; then the plan as ring vertices */
-        d = (int32_t)wm_orient(px[i0], py[i0], px[i1], py[i1], px[i2], py[i2]);
+        d = (int32_t)wm_orient(PX(i0), PY(i0), PX(i1), PY(i1), PX(i2), PY(i2));
         if (d <= 0) return WM_ERR_REFUSED;
         if (d > most) at = nt;
-        if (probed(pr, &done, px[i0], py[i0], px[i1], py[i1], px[i2], py[i2])) return WM_ERR_REFUSED;
+        if (probed(pr, &done, PX(i0), PY(i0), PX(i1), PY(i1), PX(i2), PY(i2))) return WM_ERR_REFUSED;
         cut[3 * nt] = i0, cut[3 * nt + 1] = i1, cut[3 * nt + 2] = i2;
         for (int32_t k = 0; k < 3 * nt + 3; k++) tris[k] = ring[cut[k]];
     }
@@ -390,6 +429,14 @@ int wm_ring_plan_probe(const wm_mesh *m, const int32_t *ring, int32_t n, int32_t
     if (big) *big = at;
     return WM_OK;
 }
+
+#undef PX
+#undef PY
+#undef NX
+#undef PV
+#undef BLK
+#undef AREA
+#undef OK
 
 int wm_vertex_remove_plan(const wm_mesh *m, int32_t v, int32_t apex, int32_t tris[3 * WM_MAX_RING],
                           int32_t *n_tris)
