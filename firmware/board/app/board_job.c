@@ -120,6 +120,7 @@ int board_job(void *ctx, const wm_proto_job *job, wm_proto *p, uint32_t *detail)
         wm_field f = {j->width, j->height, m, (const uint16_t *)WM_HEIGHT_BASE, (const int32_t *)WM_COEF_BASE,
                       j->mask};
         wm_tri_engine_forget(); /* the engine's registers hold the last job's triangle: HEIGHT is new */
-        return wm_job_refine(p, j, &f, &init, heap, main_bytes, detail);
+        return wm_job_refine(p, j, &f, &init, heap, main_bytes, heap + ALIGN8(main_bytes),
+                             heap_bytes - ALIGN8(main_bytes), detail);
     }
 }

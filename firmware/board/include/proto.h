@@ -269,6 +269,13 @@ typedef struct wm_proto {
     uint8_t cb[16], cbn, cbi; /* the current item's bytes, cbi of them given */
     uint32_t cpos;            /* stream position of the next byte */
     wm_proto_coder coder;     /* where the coder stands at cpos */
+    /* the level stream coded whole into storage (wm_proto_stream_buffer): one pass of the coder, its
+     * length the count, every MESH frame's payload (a resend's too) read from it */
+    uint8_t *sbuf;
+    uint32_t sbuf_cap;
+    uint8_t lbuf;             /* the level being sent is in sbuf[0 .. ltotal) */
+    const uint32_t *lpc;      /* in sbuf after it, or NULL: the CRC of each of its first sending's frames' */
+    uint32_t lpc_chunk;       /* payloads, lpc_chunk bytes each (the last the rest) */
 } wm_proto;
 
 /* Sets up the engine.  heights must hold caps->max_samples samples.  Nothing is sent. */
@@ -279,6 +286,12 @@ void wm_proto_init(wm_proto *p, const wm_proto_io *io, const wm_proto_caps *caps
  * the device.  Call it after wm_proto_init; caps.features should then state WM_PROTO_FEATURE_HOLES.  A
  * CONFIG with CONFIG_MASK is refused (BAD_VALUE, FLAGS) without it or when W H needs more. */
 void wm_proto_set_mask(wm_proto *p, uint8_t *mask, uint32_t bytes);
+
+/* Storage for a job's level streams (bytes of it; NULL: none), for wm_proto_emit_level until the next
+ * call: a delta-coded level that fits is coded into it once, its length then known without a counting
+ * pass of the coder; a level that does not fit goes as without it (the same bytes).  The job sets it
+ * (wm_job_refine: the initial mesh's staging, free once the refiner has taken the mesh) and clears it. */
+void wm_proto_stream_buffer(wm_proto *p, void *buf, uint32_t bytes);
 
 /* Serves requests until io->getc returns WM_PROTO_RX_CLOSED (WM_PROTO_SERVE_CLOSED) or, with
  * caps.idle_timeout_ms, until the connection was idle that long (WM_PROTO_SERVE_IDLE).  On a UART

@@ -87,12 +87,14 @@ int wm_job_emit_initial(wm_proto *p, const wm_proto_job *j, const wm_job_initial
  * it, so what an earlier job left there never reaches this one), each level sent through
  * wm_proto_emit_level as soon as it is made, the refiner's level M-1 first (the initial
  * triangulation's counts stated for DONE: wm_proto_initial).
+ * spare[0..spare_bytes) (the initial triangulation's staging, or NULL), free once the refiner has taken
+ * the initial mesh, holds the level streams (wm_proto_stream_buffer) until it returns.
  * Returns wm_proto_emit_level's code when it asks to stop, WM_PROTO_E_NONE when every level went out,
  * WM_PROTO_E_CAPACITY (detail: the level) when the storage ran out, WM_PROTO_E_JOB (detail: the
  * library's code) on any other refiner error.
  */
 int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const wm_job_initial_mesh *init,
-                  void *mem, size_t bytes, uint32_t *detail);
+                  void *mem, size_t bytes, void *spare, size_t spare_bytes, uint32_t *detail);
 
 /* Zero the words of [mem, mem + bytes) (word-aligned). */
 void wm_job_clear(void *mem, size_t bytes);

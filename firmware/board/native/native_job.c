@@ -67,7 +67,7 @@ int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detai
     wm_job_blocks b;
     wm_job_initial_mesh init;
     int rc = WM_PROTO_E_JOB, lib;
-    size_t bytes;
+    size_t bytes, staging_bytes;
     (void)ctx;
     *detail = (uint32_t)WM_ERR_MEMORY;
     if (!details || !scratch) goto out;
@@ -97,6 +97,7 @@ int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detai
     staging = malloc(bytes ? bytes : 1);
     if (!staging || wm_job_initial(&b, entries, init.nt, staging, bytes, 0, &init) != WM_OK) goto out;
 
+    staging_bytes = bytes;
     if (j->flags & WM_PROTO_CONFIG_INITIAL_ONLY) {
         bytes = wm_job_mesh_bound(init.nv, init.nt);
     } else {
@@ -108,7 +109,7 @@ int wm_native_job(void *ctx, const wm_proto_job *j, wm_proto *p, uint32_t *detai
         rc = wm_job_emit_initial(p, j, &init, mem, bytes, detail);
     } else {
         wm_field f = {w, h, m, j->heights, details, j->mask};
-        rc = wm_job_refine(p, j, &f, &init, mem, bytes, detail);
+        rc = wm_job_refine(p, j, &f, &init, mem, bytes, staging, staging_bytes, detail);
     }
 out:
     free(details);

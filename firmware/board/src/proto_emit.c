@@ -253,6 +253,44 @@ static uint32_t code_run(const wm_mesh *m, wm_proto_coder *cp, uint8_t *d, uint3
     return (uint32_t)(d - d0);
 }
 
+/* The level's coded stream whole into sbuf (wm_proto_stream_buffer), the header's place left for the
+ * caller: one pass of the coder (code_run's loops), its length the count that coded_total would make.
+ * Its length when every item went in within the raw stream's length and sbuf's (lbuf set when it is
+ * the shorter: it is the one sent), 0 when not (coded_total counts then, and the frames code again). */
+static uint32_t coded_into(wm_proto *p)
+{
+    const wm_mesh *m = p->lm;
+    uint32_t lim = p->ltotal < p->sbuf_cap ? p->ltotal : p->sbuf_cap, n;
+    wm_proto_coder c;
+    if (!p->sbuf || lim < WM_PROTO_LEVEL_HEADER_BYTES + 16u) return 0;
+    coded_reset(p);
+    c = p->coder;
+    n = WM_PROTO_LEVEL_HEADER_BYTES +
+        code_run(m, &c, p->sbuf + WM_PROTO_LEVEL_HEADER_BYTES, lim - WM_PROTO_LEVEL_HEADER_BYTES);
+    if (c.v < m->vert_end || c.k < m->n_tri) return 0; /* stopped short: it may not be the shorter */
+    p->lbuf = n < p->ltotal;
+    return n;
+}
+
+/* The CRCs of a level stream in sbuf (lbuf) for its first sending's frames (p->chunk bytes each), into
+ * sbuf after it (lpc) where they fit, and the stream's CRC (lcrc) from them: in one stretch of the emit
+ * stage, where each frame's would start with the caches just emptied (the link's clock ran between). */
+static void level_crcs(wm_proto *p)
+{
+    uint32_t chunk = p->chunk, total = p->ltotal, at = (total + 3u) & ~3u, crc = 0;
+    uint32_t *pc = (uint32_t *)(void *)(p->sbuf + at);
+    if (chunk == 0 || at > p->sbuf_cap || (p->sbuf_cap - at) / 4u < (total + chunk - 1u) / chunk)
+        return; /* send_level_from makes them */
+    for (uint32_t from = 0; from < total; from += chunk, pc++) {
+        uint32_t n = total - from < chunk ? total - from : chunk;
+        *pc = ~wm_proto_crc_run(~0u, p->sbuf + from, n);
+        crc = wm_proto_crc_combine(p, crc, *pc, n);
+    }
+    p->lcrc = crc;
+    p->lpc = (const uint32_t *)(void *)(p->sbuf + at);
+    p->lpc_chunk = chunk;
+}
+
 /* Bytes [off, off + n) of the coded stream into dst (in order from where the last call ended: no work
  * but the new bytes; from before it: the coder runs again from the start). */
 static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
@@ -313,24 +351,29 @@ static void coded_bytes(wm_proto *p, uint32_t off, uint8_t *dst, uint32_t n)
 static void send_level_from(wm_proto *p, uint32_t from, uint32_t end, int first)
 {
     uint32_t chunk = p->chunk;
-    if (first) p->lcrc = 0;
+    const uint32_t *lpc = first && p->lpc && p->lpc_chunk == chunk ? p->lpc : NULL; /* level_crcs' */
+    if (first && !lpc) p->lcrc = 0;
     while (from < end) {
         uint32_t n = end - from < chunk ? end - from : chunk, pc;
-        uint8_t *b = p->tx.b, head[WM_PROTO_HEADER_BYTES];
+        uint8_t *b = p->tx.b, *pay = b + WM_PROTO_MESH_BYTES, head[WM_PROTO_HEADER_BYTES];
         zero(b, WM_PROTO_MESH_BYTES);
         b[WM_PROTO_MESH_LEVEL] = p->level;
         b[WM_PROTO_MESH_INDEX] = p->levels_sent;
         put32(b + WM_PROTO_MESH_OFFSET, from);
-        if (p->lcoded) coded_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
+        if (p->lbuf) pay = p->sbuf + from; /* coded already (coded_into) */
+        else if (p->lcoded) coded_bytes(p, from, pay, n);
         else if (WM_LITTLE_ENDIAN && !((from | n) & 1u))
             level_halves(p, from / 2, (from + n) / 2, p->tx.h + WM_PROTO_MESH_BYTES / 2);
-        else level_bytes(p, from, b + WM_PROTO_MESH_BYTES, n);
-        pc = ~wm_proto_crc_run(~0u, b + WM_PROTO_MESH_BYTES, n);
-        if (first) p->lcrc = wm_proto_crc_combine(p, p->lcrc, pc, n);
+        else level_bytes(p, from, pay, n);
+        if (lpc) pc = *lpc++;
+        else {
+            pc = ~wm_proto_crc_run(~0u, pay, n);
+            if (first) p->lcrc = wm_proto_crc_combine(p, p->lcrc, pc, n);
+        }
         link_begin(p);
         frame_head(head, WM_PROTO_T_MESH, p->seq++, WM_PROTO_MESH_BYTES + n);
         wm_proto_send_encoded(
-            p, head, b, WM_PROTO_MESH_BYTES, b + WM_PROTO_MESH_BYTES, n,
+            p, head, b, WM_PROTO_MESH_BYTES, pay, n,
             wm_proto_crc_combine(
                 p, ~wm_proto_crc_run(wm_proto_crc_run(~0u, head, sizeof head), b, WM_PROTO_MESH_BYTES), pc, n));
         link_end(p);
@@ -388,11 +431,19 @@ int wm_proto_emit_level(wm_proto *p, const wm_mesh *m, const wm_level_stats *st,
     p->cur_k = 0x7FFFFFFF; /* the cursor starts again at the first live triangle */
     p->llast = (uint8_t)(last != 0);
     p->lresume = 0;
-    { /* delta-coded when that is shorter (a pass of the coder that only counts) */
-        uint32_t coded = coded_total(p);
+    p->lbuf = 0;
+    { /* delta-coded when that is shorter (coded into sbuf once where it fits, else a pass of the coder
+       * that only counts) */
+        uint32_t coded = coded_into(p);
+        if (coded == 0) coded = coded_total(p);
         p->lcoded = coded < p->ltotal;
         if (p->lcoded) p->ltotal = coded;
         p->lhdr[WM_PROTO_LEVEL_HEADER_CODING] = p->lcoded ? WM_PROTO_LEVEL_DELTA : WM_PROTO_LEVEL_RAW;
+    }
+    p->lpc = NULL;
+    if (p->lbuf) {
+        for (uint32_t i = 0; i < WM_PROTO_LEVEL_HEADER_BYTES; i++) p->sbuf[i] = p->lhdr[i];
+        level_crcs(p);
     }
 
     link_begin(p);

@@ -539,6 +539,12 @@ void wm_proto_set_mask(wm_proto *p, uint8_t *mask, uint32_t bytes)
     p->mask_bytes = mask ? bytes : 0;
 }
 
+void wm_proto_stream_buffer(wm_proto *p, void *buf, uint32_t bytes)
+{
+    p->sbuf = buf;
+    p->sbuf_cap = buf ? bytes : 0;
+}
+
 int wm_proto_serve(wm_proto *p)
 {
     for (;;) {

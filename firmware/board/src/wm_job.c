@@ -348,8 +348,8 @@ static int refiner_error(int lib, int32_t level, uint32_t *detail)
     return lib == WM_ERR_CAPACITY ? WM_PROTO_E_CAPACITY : WM_PROTO_E_JOB;
 }
 
-int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const wm_job_initial_mesh *init,
-                  void *mem, size_t bytes, uint32_t *detail)
+static int refine_levels(wm_proto *p, const wm_proto_job *j, const wm_field *f, const wm_job_initial_mesh *init,
+                         void *mem, size_t bytes, void *spare, uint32_t spare_bytes, uint32_t *detail)
 {
     wm_refiner *r = NULL;
     wm_level_stats st;
@@ -358,6 +358,8 @@ int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const w
     wm_proto_stage(p, WM_PROTO_STAGE_REFINE, j->levels - 1);
     lib = wm_refine_init(&r, mem, bytes, f, &j->params, init->xy, init->nv, init->tris, init->nt, j->capacity);
     if (lib != WM_OK) return refiner_error(lib, j->levels - 1, detail);
+    /* the initial mesh is the refiner's now: its staging holds the level streams */
+    wm_proto_stream_buffer(p, spare, spare_bytes);
     memset(&st, 0, sizeof st); /* wm_refine_stats fills only the counts it knows (as the host's ctypes) */
     wm_refine_stats(r, &st);
     rc = wm_proto_emit_level(p, wm_refine_mesh(r), &st, wm_refine_done(r));
@@ -369,5 +371,14 @@ int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const w
         if (lib != WM_OK) return refiner_error(lib, level, detail);
         rc = wm_proto_emit_level(p, wm_refine_mesh(r), &st, wm_refine_done(r));
     }
+    return rc;
+}
+
+int wm_job_refine(wm_proto *p, const wm_proto_job *j, const wm_field *f, const wm_job_initial_mesh *init,
+                  void *mem, size_t bytes, void *spare, size_t spare_bytes, uint32_t *detail)
+{
+    int rc = refine_levels(p, j, f, init, mem, bytes, spare,
+                           spare_bytes < 0xFFFFFFF0u ? (uint32_t)spare_bytes : 0xFFFFFFF0u, detail);
+    wm_proto_stream_buffer(p, NULL, 0); /* the storage is the caller's again */
     return rc;
 }
