@@ -842,9 +842,24 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
 #else
     gradient(f, x, y, &Na, &Nb);
 #endif
+#if WM_NARROW_DIV
+    /* the usual case first, falling through (on the board a forward branch taken costs some 3 cycles,
+     * and GCC put both scales' 32-bit path and the 32-bit chords out of line, each taken at every call):
+     * within it the inline functions' own tests are known and gone; the same integers either way */
+    if (__builtin_expect(ex > 0 && ex < 32 && ey > 0 && ey < 32, 1)) {
+        Ga = wm_scaled_up((uint64_t)Na, sx, ex);
+        Gb = wm_scaled_up((uint64_t)Nb, sy, ey);
+    } else {
+        Ga = wm_scaled_up((uint64_t)Na, sx, ex);
+        Gb = wm_scaled_up((uint64_t)Nb, sy, ey);
+    }
+    if (__builtin_expect((Ga | Gb | (uint64_t)D) < ((uint64_t)1 << 31), 1)) T = wm_hypot3_up(Ga, Gb, (uint64_t)D);
+    else T = wm_hypot3_up(Ga, Gb, (uint64_t)D);
+#else
     Ga = wm_scaled_up((uint64_t)(Na < 0 ? -Na : Na), sx, ex);
     Gb = wm_scaled_up((uint64_t)(Nb < 0 ? -Nb : Nb), sy, ey);
     T = wm_hypot3_up(Ga, Gb, (uint64_t)D);
+#endif
     if (T >= ((uint64_t)1 << 31)) return wm_tri_error_within(f, p, x, y, bound, NULL, NULL, kept);
     vmax = scan_any(f, x, y, D, ((uint64_t)bound * T) >> 16, NULL, NULL);
     if ((vmax << 16) > (uint64_t)bound * T) return bound + 1;          /* E(T) > bound */
