@@ -731,3 +731,72 @@ def test_thread_worker_starts_after_the_forks(monkeypatch):
     _RUNNER.clear()
     here = [n for pid, n in got if pid == os.getpid()]
     assert here and set(here) == {2}, got
+
+
+def test_pool_pipe_frames_as_multiprocessing_and_its_process_ends():
+    """runner._Pipe frames messages as multiprocessing's Connection does (either end may be one: small and
+    large messages, bytes and objects), EOFError once the other end is closed; runner._Forked runs its
+    target in a fork: its exit status, a raise's 1, join with a timeout, terminate."""
+    import multiprocessing.connection
+    import signal
+    import socket
+    import time
+
+    from wavemesh.tiles import runner
+
+    a, b = socket.socketpair()
+    ours, theirs = runner._Pipe(a.detach()), multiprocessing.connection.Connection(b.detach())
+    big = np.arange(4_000, dtype=np.float64)  # over the 16 KiB of a header sent apart, within the buffer
+    for msg in (None, ("ok", [1, 2.5], None), ("chain", big, "x" * 20_000)):
+        ours.send(msg)
+        got = theirs.recv()
+        theirs.send(msg)
+        back = ours.recv()
+        for m in (got, back):
+            if msg is not None and msg[0] == "chain":
+                assert m[0] == "chain" and np.array_equal(m[1], big) and m[2] == msg[2]
+            else:
+                assert m == msg
+    theirs.send_bytes(b"abc")
+    assert ours.poll(1) and ours.recv_bytes() == b"abc" and not ours.poll()
+    theirs.close()
+    with pytest.raises(EOFError):
+        ours.recv()
+    ours.close()
+    ours.close()  # twice: nothing
+
+    here, there = runner._pipe()
+    with here, there:
+        ok = runner._Forked(there.send, ("hello",))
+        ok.start()
+        assert here.recv() == "hello"
+        ok.join()
+        assert ok.exitcode == 0 and not ok.is_alive()
+    bad = runner._Forked(lambda: 1 / 0)
+    bad.start()
+    bad.join(30)
+    assert bad.exitcode == 1
+    slow = runner._Forked(time.sleep, (60,))
+    slow.start()
+    slow.join(0.05)
+    assert slow.exitcode is None and slow.is_alive()
+    slow.terminate()
+    slow.join(30)
+    assert slow.exitcode == -signal.SIGTERM
+
+
+def test_a_tiled_command_imports_no_multiprocessing(tmp_path):
+    """`wavemesh mesh --tile` with a pool of a forked worker and a thread imports neither multiprocessing nor
+    socket (the pool's own fork and pipes: 45 M instructions of the start, docs/tiles.md)."""
+    import subprocess
+    import sys
+
+    np.save(tmp_path / "h.npy", np.random.default_rng(3).normal(0, 9, (150, 170)).cumsum(axis=0))
+    code = ("import sys; sys.argv = ['wavemesh']; from wavemesh import cli; "
+            f"rc = cli.main(['mesh', {str(tmp_path / 'h.npy')!r}, '-o', {str(tmp_path / 'm.obj')!r}, '-q', "
+            "'--tile', '65', '--workers', '2', '--zeta', '5']); "
+            "print(rc, [m for m in ('multiprocessing', 'socket', 'tempfile') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["0", "[]"]
+    assert (tmp_path / "m.obj").stat().st_size > 0

@@ -6,16 +6,14 @@ import bisect
 import ctypes
 import gc
 import importlib
-import multiprocessing
 import os
+import pickle
 import select
 import signal
-import socket
+import struct
 import sys
 import time
 from collections.abc import Callable, Iterable
-from multiprocessing.connection import wait
-from multiprocessing.reduction import ForkingPickler
 
 from wavemesh.errors import WavemeshError
 from wavemesh.record import record
@@ -652,7 +650,6 @@ class Runner:
         native.load()  # built once here, not by every worker at once
         # fork: the workers start from this process as it is (the library loaded; a script that calls
         # this needs no `if __name__ == "__main__"` guard, which spawn and forkserver would ask of it)
-        ctx = multiprocessing.get_context("fork")
         # the signals held back over the forks: a worker starts with them blocked and unblocks them
         # once its own handlers are set (_worker_start), so a Ctrl-C just after the fork is not a
         # KeyboardInterrupt traceback in the worker; here they are raised after this call's last fork,
@@ -663,9 +660,8 @@ class Runner:
             # on every one as a process of its own would: one thread each with one worker a CPU
             share = max(1, native.cores() // self.workers)
             for k in range(len(self.pool), upto):
-                here, there = ctx.Pipe()
-                proc = ctx.Process(target=_worker_loop, args=(there, os.getpid(), share, self.pinned[k]),
-                                   daemon=True)
+                here, there = _pipe()
+                proc = _Forked(_worker_loop, (there, os.getpid(), share, self.pinned[k]))
                 proc.start()
                 there.close()
                 self.pool.append((proc, here))
@@ -946,6 +942,8 @@ class _Ready:
         """The file descriptors of ``objs`` (connections, sentinels) ready to read (or ended), once one is
         (``timeout``: at most that many seconds, 0: those ready now)."""
         if self.poller is None:
+            from multiprocessing.connection import wait  # start-up: only where there is no poll
+
             return {o if isinstance(o, int) else o.fileno() for o in wait(objs, timeout)}
         fds = {o if isinstance(o, int) else o.fileno() for o in objs}
         for fd in self.fds - fds:
@@ -956,24 +954,188 @@ class _Ready:
         return {fd for fd, _ in self.poller.poll(None if timeout is None else 1000 * timeout)}
 
 
-_DUMPS = ForkingPickler.dumps  # as Connection.send pickles: Connection.recv reads it
+_DUMPS = pickle.dumps  # a message's bytes, as _Pipe.send pickles it (_Pipe.recv, or a Connection, reads it)
+
+
+# The pool's processes and pipes are its own, not multiprocessing's: a fork and a Unix socket pair each, the
+# messages framed as multiprocessing.connection.Connection frames them (either end may be one).  Importing
+# multiprocessing.connection and .reduction (socket's enums, tempfile, subprocess) cost every tiled run
+# 45 M instructions of its serial start, a tenth of the interpreter's start and imports (docs/tiles.md,
+# "On 2 cores").
+def _pipe() -> tuple[_Pipe, _Pipe]:
+    """Both ends of a duplex pipe (a Unix stream socket pair, as multiprocessing.Pipe() makes)."""
+    import _socket
+
+    a, b = _socket.socketpair()
+    return _Pipe(a.detach()), _Pipe(b.detach())
+
+
+class _Pipe:
+    """One end of a pool worker's pipe: byte messages (send_bytes, recv_bytes) framed as multiprocessing's
+    Connection frames them (a 4-byte big-endian length, or -1 and an 8-byte one), objects pickled (send,
+    recv), poll, fileno, close."""
+
+    def __init__(self, fd: int):
+        self._fd: int | None = fd
+
+    def fileno(self) -> int:
+        if self._fd is None:
+            raise OSError("handle is closed")
+        return self._fd
+
+    def close(self) -> None:
+        if self._fd is not None:
+            fd, self._fd = self._fd, None
+            os.close(fd)
+
+    def __enter__(self) -> _Pipe:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        self.close()
+
+    def send_bytes(self, buf) -> None:
+        view = memoryview(buf).cast("B")
+        n = len(view)
+        head = struct.pack("!i", n) if n <= 0x7FFFFFFF else struct.pack("!iQ", -1, n)
+        if n > 16384:  # as Connection: a large message after its header, a small one with it
+            self._write(head)
+            self._write(view)
+        else:
+            self._write(head + view.tobytes())
+
+    def _write(self, buf) -> None:
+        fd, view = self.fileno(), memoryview(buf)
+        while view:
+            view = view[os.write(fd, view):]
+
+    def recv_bytes(self) -> bytearray:
+        (n,) = struct.unpack("!i", self._read(4, True))
+        if n == -1:
+            (n,) = struct.unpack("!Q", self._read(8))
+        return self._read(n)
+
+    def _read(self, n: int, first: bool = False) -> bytearray:
+        fd, buf = self.fileno(), bytearray(n)
+        view, got = memoryview(buf), 0
+        while got < n:
+            k = os.readv(fd, [view[got:]])
+            if not k:
+                if first and not got:
+                    raise EOFError
+                raise OSError("got end of file during message")
+            got += k
+        return buf
+
+    def send(self, obj) -> None:
+        self.send_bytes(_DUMPS(obj))
+
+    def recv(self):
+        return pickle.loads(self.recv_bytes())
+
+    def poll(self, timeout: float = 0.0) -> bool:
+        p = select.poll()
+        p.register(self.fileno(), select.POLLIN)
+        return bool(p.poll(None if timeout is None else 1000 * timeout))
+
+
+class _Forked:
+    """A pool worker process: ``target(*args)`` in a fork of this process, its exit status then, as
+    multiprocessing's fork context runs a Process (start, pid, sentinel: readable once it has ended, join,
+    exitcode, is_alive, terminate, kill); a traceback on stderr and status 1 if ``target`` raises."""
+
+    def __init__(self, target: Callable, args: tuple = ()):
+        self._target, self._args = target, args
+        self.pid: int | None = None
+        self.sentinel: int | None = None
+        self.exitcode: int | None = None
+
+    def start(self) -> None:
+        r, w = os.pipe()  # the child holds w: r reads its end once the child has ended
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            code = 1
+            try:
+                os.close(r)
+                self._target(*self._args)
+                code = 0
+            except SystemExit as e:
+                code = e.code if isinstance(e.code, int) else 0 if e.code is None else 1
+            except BaseException:
+                import traceback
+
+                traceback.print_exc()
+            finally:
+                for f in (sys.stdout, sys.stderr):
+                    try:
+                        f.flush()
+                    except Exception:  # noqa: S110 - its end comes anyway
+                        pass
+                os._exit(code)
+        os.close(w)
+        self.pid, self.sentinel = pid, r
+
+    def _reap(self, block: bool) -> None:
+        if self.exitcode is None:
+            try:
+                pid, status = os.waitpid(self.pid, 0 if block else os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere
+                return
+            if pid:
+                self.exitcode = os.waitstatus_to_exitcode(status)
+
+    def join(self, timeout: float | None = None) -> None:
+        if self.exitcode is None and timeout is not None:
+            p = select.poll()
+            p.register(self.sentinel, select.POLLIN)
+            if not p.poll(1000 * max(0.0, timeout)):
+                return
+        self._reap(True)
+
+    def is_alive(self) -> bool:
+        self._reap(False)
+        return self.exitcode is None
+
+    def terminate(self) -> None:
+        self._signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self._signal(signal.SIGKILL)
+
+    def _signal(self, sig: int) -> None:
+        if self.exitcode is None:
+            try:
+                os.kill(self.pid, sig)
+            except ProcessLookupError:
+                pass
+
+    def __del__(self) -> None:
+        if self.sentinel is not None:
+            os.close(self.sentinel)
+            self.sentinel = None
 
 
 def _pipe_room(pipe) -> int:
     """The bytes a second chain's messages may take in a worker's pipe with the first's: half its socket's
     send buffer (the parent's send never waits on them: the other half is for the kernel's own cost of each
     message, some 770 bytes, and two chains are a few messages), 0 where that is not known."""
+    import _socket
+
     fd = os.dup(pipe.fileno())
     try:
-        sock = socket.socket(fileno=fd)
+        sock = _socket.socket(fileno=fd)
     except OSError:  # not a socket: the duplicate closed here
         os.close(fd)
         return 0
-    with sock:
-        try:
-            return sock.getsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF) // 2
-        except OSError:
-            return 0
+    try:
+        return sock.getsockopt(_socket.SOL_SOCKET, _socket.SO_SNDBUF) // 2
+    except OSError:
+        return 0
+    finally:
+        sock.close()
 
 
 def _let_go(pipe) -> None:
@@ -1131,7 +1293,8 @@ def _end_workers(pool: list, gently: bool) -> None:
             proc.join(0)
             if proc.exitcode is None:
                 _EXITING.append(proc)
-                getattr(multiprocessing.process, "_children", set()).discard(proc)
+                # multiprocessing's exit handler waits for its own (a caller's Process given here)
+                getattr(sys.modules.get("multiprocessing.process"), "_children", set()).discard(proc)
         return
     deadline = time.monotonic() + 1.0
     for proc, pipe in pool:
