@@ -208,7 +208,8 @@ def test_mesh_imports_only_what_it_runs(tmp_path, ball, tiled, out):
               "wavemesh.device.devices", "wavemesh.check.render", "serial", "matplotlib", "numpy.ma",
               "tqdm", "PIL", "rasterio", "scipy", "trimesh", "secrets", "zipfile", "json",
               "wavemesh.io.meshread", "wavemesh.model.roi", "wavemesh.refine.cover", "wavemesh.io.synth")
-    unused += () if tiled else ("wavemesh.tiles", "zlib")  # zlib: the pool's multiprocessing loads it
+    # the pool forks and pipes without multiprocessing (its modules, socket's enums: 41M of the start)
+    unused += ("multiprocessing", "socket") + (() if tiled else ("wavemesh.tiles", "zlib"))
     assert [m for m in modules if m.split(".")[0] in unused or m in unused] == []
 
 
