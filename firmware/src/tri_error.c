@@ -813,8 +813,26 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
 #endif
     int32_t ex, ey;
     int k;
+#if WM_NARROW_DIV
+    /* wm_slope_scale's with the slope scales set (the usual case) falling through, where its choice was a
+     * forward branch taken each call and one back */
+    sx = p->slope_x_m, ex = p->slope_x_e, sy = p->slope_y_m, ey = p->slope_y_e;
+    if (__builtin_expect(sx == 0, 0)) sx = p->scale_m, ex = p->scale_e;
+    if (__builtin_expect(sy == 0, 0)) sy = p->scale_m, ey = p->scale_e;
+#if WM_CHECK
+    {
+        uint32_t m2;
+        int32_t e2;
+        wm_slope_scale(p, 0, &m2, &e2);
+        WM_ASSERT(m2 == sx && e2 == ex);
+        wm_slope_scale(p, 1, &m2, &e2);
+        WM_ASSERT(m2 == sy && e2 == ey);
+    }
+#endif
+#else
     wm_slope_scale(p, 0, &sx, &ex);
     wm_slope_scale(p, 1, &sy, &ey);
+#endif
     D = wm_orient(x[0], y[0], x[1], y[1], x[2], y[2]);
     if ((kept && *kept) || ex < 0 || ey < 0 || D <= 0 || D >= WM_SLOPE_LATER_D) /* ex, ey: wm_scaled_up's */
         return wm_tri_error_within(f, p, x, y, bound, NULL, NULL, kept);
@@ -829,8 +847,10 @@ WM_NEVER_INLINE static uint32_t upto_normal(const wm_field *f, const wm_params *
         int32_t dz1 = f->samples[y[1] * f->width + x[1]] - z0, dz2 = f->samples[y[2] * f->width + x[2]] - z0;
         int32_t p1 = dz1 * (y[2] - y[0]), p2 = dz2 * (y[1] - y[0]), p3 = (x[1] - x[0]) * dz2,
                 p4 = (x[2] - x[0]) * dz1;
-        Na = p1 >= p2 ? (uint32_t)p1 - (uint32_t)p2 : (uint32_t)p2 - (uint32_t)p1;
-        Nb = p3 >= p4 ? (uint32_t)p3 - (uint32_t)p4 : (uint32_t)p4 - (uint32_t)p3;
+        uint32_t da = (uint32_t)p1 - (uint32_t)p2, sa = -(uint32_t)(p1 < p2);
+        uint32_t db = (uint32_t)p3 - (uint32_t)p4, sb = -(uint32_t)(p3 < p4);
+        Na = (da ^ sa) - sa; /* |p1 - p2| without a branch (taken half the time) */
+        Nb = (db ^ sb) - sb;
 #if WM_CHECK
         {
             int64_t Na64, Nb64;
