@@ -199,15 +199,25 @@ void wm_unit_normal(const wm_field *f, const wm_params *p, const int32_t x[3], c
     wm_slope_scale(p, 0, &mx, &ex);
     wm_slope_scale(p, 1, &my, &ey);
     e = ex < ey ? ex : ey;
-    c[0] = ex - e >= 64 ? 0 : (mag(A) * mx) >> (ex - e);
-    c[1] = ey - e >= 64 ? 0 : (mag(B) * my) >> (ey - e);
-    c[2] = mag(D);
-    if (e <= 32) {
-        c[2] <<= e;
+    if (ex == ey && e < 32) {
+        /* One scale (a square cell, or a cell of 1: Ball's, Box's, the DEMs'): no finer scale to shift
+         * down, and D's shift below 32; |A|, |B| < 2^32 and |D| < 2^31 (above), so 32 x 32 bit products
+         * and a shift of a 32-bit word, the same integers as below (on the soft CPU without three 64-bit
+         * shifts by a variable, each a branch and some seven instructions). */
+        c[0] = (uint64_t)(uint32_t)mag(A) * mx;
+        c[1] = (uint64_t)(uint32_t)mag(B) * my;
+        c[2] = (uint64_t)(uint32_t)mag(D) << e;
     } else {
-        c[0] = e - 32 >= 64 ? 0 : c[0] >> (e - 32);
-        c[1] = e - 32 >= 64 ? 0 : c[1] >> (e - 32);
-        c[2] <<= 32;
+        c[0] = ex - e >= 64 ? 0 : (mag(A) * mx) >> (ex - e);
+        c[1] = ey - e >= 64 ? 0 : (mag(B) * my) >> (ey - e);
+        c[2] = mag(D);
+        if (e <= 32) {
+            c[2] <<= e;
+        } else {
+            c[0] = e - 32 >= 64 ? 0 : c[0] >> (e - 32);
+            c[1] = e - 32 >= 64 ? 0 : c[1] >> (e - 32);
+            c[2] <<= 32;
+        }
     }
     m = c[0] > c[1] ? c[0] : c[1];
     if (c[2] > m) m = c[2];
