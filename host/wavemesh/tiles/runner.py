@@ -964,7 +964,7 @@ _DUMPS = pickle.dumps  # a message's bytes, as _Pipe.send pickles it (_Pipe.recv
 # "On 2 cores").
 def _pipe() -> tuple[_Pipe, _Pipe]:
     """Both ends of a duplex pipe (a Unix stream socket pair, as multiprocessing.Pipe() makes)."""
-    import _socket
+    import _socket  # the C module alone: socket.py's enum tables cost the tiled start (docs/tiles.md)
 
     a, b = _socket.socketpair()
     return _Pipe(a.detach()), _Pipe(b.detach())
@@ -1065,7 +1065,7 @@ class _Forked:
             except SystemExit as e:
                 code = e.code if isinstance(e.code, int) else 0 if e.code is None else 1
             except BaseException:
-                import traceback
+                import traceback  # only a worker that failed prints one
 
                 traceback.print_exc()
             finally:
@@ -1122,7 +1122,7 @@ def _pipe_room(pipe) -> int:
     """The bytes a second chain's messages may take in a worker's pipe with the first's: half its socket's
     send buffer (the parent's send never waits on them: the other half is for the kernel's own cost of each
     message, some 770 bytes, and two chains are a few messages), 0 where that is not known."""
-    import _socket
+    import _socket  # the C module alone, as _pipe
 
     fd = os.dup(pipe.fileno())
     try:
